@@ -1,0 +1,135 @@
+"""Self-contained HTML reports: figures embedded as base64 SVG/PNG, no network.
+
+Every report of the package (demo, stability report, discrepancy report) is built
+from :class:`Report` so they look alike and print alike.
+"""
+
+from __future__ import annotations
+
+import base64
+import html
+import io
+import json
+import os
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+
+__all__ = ["Report", "figure_html", "table_html", "write_atomic", "write_json"]
+
+_CSS = """
+body { font-family: system-ui, -apple-system, Segoe UI, Roboto, sans-serif; margin: 2em auto;
+       max-width: 1100px; color: #222; line-height: 1.45; padding: 0 1em; }
+h1 { border-bottom: 2px solid #345; padding-bottom: .2em; }
+h2 { margin-top: 2em; border-bottom: 1px solid #ccc; }
+table { border-collapse: collapse; margin: 1em 0; font-size: 0.92em; }
+th, td { border: 1px solid #bbb; padding: 4px 8px; text-align: right; }
+th { background: #eef2f5; }
+td.l, th.l { text-align: left; }
+.pass { color: #11772d; font-weight: 600; }
+.fail { color: #b00020; font-weight: 600; }
+figure { margin: 1em 0; page-break-inside: avoid; }
+figure img { max-width: 100%; height: auto; }
+figcaption { font-size: 0.9em; color: #555; }
+.note { background: #f6f8fa; border-left: 4px solid #345; padding: .5em 1em; }
+@media print { body { max-width: none; margin: 0; } h2 { page-break-before: auto; } }
+"""
+
+
+def figure_html(fig, caption: str = "", *, fmt: str = "svg") -> str:
+    """Embed a matplotlib figure as a base64 ``<img>`` and close it."""
+    buf = io.BytesIO()
+    fig.savefig(buf, format=fmt, bbox_inches="tight", dpi=110)
+    plt.close(fig)
+    mime = "image/svg+xml" if fmt == "svg" else "image/png"
+    data = base64.b64encode(buf.getvalue()).decode("ascii")
+    cap = f"<figcaption>{html.escape(caption)}</figcaption>" if caption else ""
+    return f'<figure><img alt="{html.escape(caption)}" src="data:{mime};base64,{data}"/>{cap}</figure>'
+
+
+def _fmt(v) -> str:
+    if v is None:
+        return "&infin;"
+    if isinstance(v, float):
+        return f"{v:.4g}"
+    return html.escape(str(v))
+
+
+def table_html(rows: list[dict], columns: list[str] | None = None, *, classes=None) -> str:
+    """A table from a list of dicts (None prints as infinity); first column left-aligned."""
+    if not rows:
+        return "<p><em>(empty)</em></p>"
+    columns = columns or list(rows[0])
+    head = "".join(
+        f'<th class="{"l" if i == 0 else ""}">{html.escape(c)}</th>' for i, c in enumerate(columns)
+    )
+    body = []
+    for r in rows:
+        cells = []
+        for i, c in enumerate(columns):
+            v = r.get(c, "")
+            cls = "l" if i == 0 else ""
+            if isinstance(v, bool):
+                cls, v = ("pass", "pass") if v else ("fail", "FAIL")
+            cells.append(f'<td class="{cls}">{_fmt(v)}</td>')
+        body.append("<tr>" + "".join(cells) + "</tr>")
+    return f"<table><tr>{head}</tr>{''.join(body)}</table>"
+
+
+def write_atomic(path: str | os.PathLike, data: str | bytes) -> None:
+    """Write a file via a temporary file and rename, so no partial file is left on failure."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    mode = "wb" if isinstance(data, bytes) else "w"
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, mode) as fh:
+            fh.write(data)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def write_json(path, obj) -> None:
+    """Write ``obj`` as indented JSON atomically (NaN/inf are not allowed: use None)."""
+    write_atomic(path, json.dumps(obj, indent=2, allow_nan=False) + "\n")
+
+
+@dataclass
+class Report:
+    """An HTML report built section by section."""
+
+    title: str
+    parts: list[str] = field(default_factory=list)
+
+    def heading(self, text: str, level: int = 2) -> None:
+        self.parts.append(f"<h{level}>{html.escape(text)}</h{level}>")
+
+    def paragraph(self, text: str, *, note: bool = False) -> None:
+        cls = ' class="note"' if note else ""
+        self.parts.append(f"<p{cls}>{html.escape(text)}</p>")
+
+    def figure(self, fig, caption: str = "") -> None:
+        self.parts.append(figure_html(fig, caption))
+
+    def table(self, rows: list[dict], columns: list[str] | None = None) -> None:
+        self.parts.append(table_html(rows, columns))
+
+    def raw(self, fragment: str) -> None:
+        self.parts.append(fragment)
+
+    def html(self) -> str:
+        return (
+            "<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'/>"
+            f"<title>{html.escape(self.title)}</title><style>{_CSS}</style></head><body>"
+            f"<h1>{html.escape(self.title)}</h1>" + "\n".join(self.parts) + "</body></html>"
+        )
+
+    def write(self, path) -> None:
+        write_atomic(path, self.html())

@@ -1,0 +1,146 @@
+"""Standard runs: the seed-001 yaw slew and free oscillations of a platform."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+import numpy as np
+
+from airbearing.analysis.simulate import SimResult, simulate
+from airbearing.design.attitude import cmg_attitude_controller
+from airbearing.design.controller import constant_input
+from airbearing.errors import InputError
+from airbearing.io.testbed import Testbed
+from airbearing.models import quaternion as quat
+from airbearing.models.model import build_model
+
+__all__ = ["slew", "slew_summary", "free_oscillation", "free_summary"]
+
+
+def slew(
+    testbed: Testbed,
+    *,
+    angle_deg: float = 180.0,
+    axis=(0.0, 0.0, 1.0),
+    duration: float = 40.0,
+    seed: int = 0,
+    ideal: bool = False,
+    steering: str = "mp",
+    steering_options: dict | None = None,
+    rate_limit_mode: str = "scale",
+    form: str = "normalised",
+    effects: Mapping | None = None,
+    gains=None,
+) -> SimResult:
+    """A rest-to-rest slew of ``angle_deg`` about ``axis`` with the seed-001 attitude loop.
+
+    ``ideal=True`` removes sensor noise, disturbance torque and the gyro low-pass
+    (the "theoretical" runs of seed 001 Tables 7-8).
+    """
+    if testbed.kind != "cmg":
+        raise InputError(
+            f"{testbed.source}: the slew scenario needs a kind = 'cmg' testbed, got '{testbed.kind}'"
+        )
+    if duration <= 0:
+        raise InputError(f"--duration {duration}: expected a positive time in s")
+    model = build_model(testbed, effects)
+    kwargs = {} if gains is None else {"gains": gains}
+    ctl = cmg_attitude_controller(
+        model,
+        steering=steering,
+        steering_options=steering_options,
+        lowpass=1.0 if ideal else None,
+        rate_limit_mode=rate_limit_mode,
+        form=form,
+        **kwargs,
+    )
+    if testbed.body.dof == 1 and tuple(np.round(axis, 12)) != (0.0, 0.0, 1.0):
+        raise InputError("a dof = 1 testbed slews about body z only: leave the axis at 0 0 1")
+    q_c = quat.from_axis_angle(axis, np.deg2rad(angle_deg))
+    return simulate(model, ctl, duration=duration, x0=model.x0(), reference=q_c, seed=seed, noise=not ideal)
+
+
+def slew_summary(result: SimResult) -> dict:
+    """The numbers seed 001 reports for a slew (Tables 7-8), in degrees."""
+    m = result.model
+    w_idx = m.index(["wx", "wy", "wz"] if m.dof == 3 else ["wz"])
+    w = result.x[:, w_idx]
+    rate = np.linalg.norm(w, axis=1)
+    k = int(np.argmax(rate))
+    d = result.x[:, m.index(["d1", "d2", "d3", "d4"])]
+    t = np.append(result.t, result.t[-1] + m.testbed.sensors.dt)
+    q_end = result.x[-1, 0:4] if m.dof == 3 else quat.from_yaw(result.x[-1, 0])
+    err = quat.qmul(quat.qconj(quat.normalize(result.reference[-1, :4])), q_end)
+    final_err = float(np.rad2deg(2 * np.arccos(min(1.0, abs(err[0])))))
+    return {
+        "peak_rate_deg_s": float(np.rad2deg(rate[k])),
+        "t_peak_s": float(t[k]),
+        "gimbal_min_deg": np.rad2deg(d.min(axis=0)).tolist(),
+        "gimbal_max_deg": np.rad2deg(d.max(axis=0)).tolist(),
+        "gimbal_final_deg": np.rad2deg(d[-1]).tolist(),
+        "final_yaw_error_deg": final_err,
+        "final_yaw_deg": float(np.rad2deg(quat.yaw_of(q_end))),
+        "duration_s": float(t[-1]),
+    }
+
+
+def free_oscillation(
+    testbed: Testbed,
+    *,
+    initial_rate=(0.0, 0.0, 0.0),
+    q0=(1.0, 0.0, 0.0, 0.0),
+    sliders=(0.0, 0.0, 0.0),
+    effects: Mapping | None = None,
+    duration: float = 60.0,
+    seed: int = 0,
+    noise: bool = True,
+    attitude_noise: float = 0.0,
+) -> SimResult:
+    """Free motion with inputs held: sliders at ``sliders`` (m), no dipole, the cage field on.
+
+    The data that identification and the discrepancy workflow consume. ``effects``
+    (FORMATS.md names and units) act in the truth but are not written to any testbed.
+    """
+    if duration <= 0:
+        raise InputError(f"--duration {duration}: expected a positive time in s")
+    model = build_model(testbed, effects)
+    u = np.zeros(model.nu)
+    if testbed.kind == "platform":
+        s = np.asarray(sliders, dtype=float)
+        if s.shape != (3,):
+            raise InputError(f"--sliders: expected 3 positions in m, got {list(s)}")
+        travel = testbed.masses.travel if testbed.masses else 0.0
+        if np.any(np.abs(s) > travel):
+            raise InputError(f"--sliders {list(s)}: each must lie within +-{travel} m (masses.travel)")
+        u[model.index(["s1", "s2", "s3"], "u")] = s
+        if testbed.field is not None:
+            u[model.index(["bx_lab", "by_lab", "bz_lab"], "u")] = testbed.field.lab_vec
+    elif any(v != 0 for v in sliders):
+        raise InputError("--sliders applies to kind = 'platform' testbeds only")
+    w0 = np.asarray(initial_rate, dtype=float)
+    if w0.shape != (3,):
+        raise InputError(f"--initial-rate: expected 3 rates WX WY WZ in rad/s, got {list(w0)}")
+    x0 = model.x0(q=q0, w=w0) if model.dof == 3 else model.x0(w=w0[2])
+    return simulate(
+        model,
+        constant_input(model, u),
+        duration=duration,
+        x0=x0,
+        seed=seed,
+        noise=noise,
+        attitude_noise=attitude_noise,
+    )
+
+
+def free_summary(result: SimResult) -> dict:
+    """Peak rate, largest tilt and the run length of a free oscillation."""
+    m = result.model
+    w = result.x[:, m.index(["wx", "wy", "wz"] if m.dof == 3 else ["wz"])]
+    out = {
+        "peak_rate_deg_s": float(np.rad2deg(np.linalg.norm(w, axis=1).max())),
+        "duration_s": float(result.t[-1] + m.testbed.sensors.dt),
+        "samples": int(len(result.t)),
+    }
+    if m.dof == 3:
+        out["max_tilt_deg"] = float(np.rad2deg(quat.tilt_of(result.x[:, 0:4]).max()))
+    return out

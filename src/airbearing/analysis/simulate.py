@@ -1,0 +1,239 @@
+"""Closed-loop simulation at the sensor rate, compiled into one CasADi rollout.
+
+Each sample ``k``: the Model's measurement ``y(x_k)`` is corrupted by noise (gyro,
+accelerometer and attitude noise with an explicit seed), the controller turns it
+into an input ``u_k``, a disturbance torque is added, and the plant is integrated
+over ``[t_k, t_k + dt)`` with ``u_k`` held (zero-order hold) by fixed-step RK4.
+The loop over all samples is one CasADi ``mapaccum`` Function, evaluated in C++.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import lru_cache
+
+import casadi as ca
+import numpy as np
+import pandas as pd
+
+from airbearing.design.controller import Controller
+from airbearing.errors import InputError
+from airbearing.io.log import Log
+from airbearing.models import quaternion as quat
+from airbearing.models.model import Model
+
+__all__ = ["SimResult", "simulate", "closed_loop_rollout", "log_from_arrays"]
+
+
+@dataclass(frozen=True, eq=False)
+class SimResult:
+    """Everything a closed-loop run produced.
+
+    Attributes
+    ----------
+    log : Log
+        The run as a FORMATS.md log (plus ``true_*`` and controller columns).
+    t : ndarray (N,)
+        Sample times, s.
+    x : ndarray (N + 1, nx)
+        True states at ``t_0 .. t_N``.
+    y : ndarray (N, ny)
+        Noisy measurements the controller saw.
+    u : ndarray (N, nu)
+        Inputs held over each sample (disturbance torque included).
+    extra : ndarray (N, n_extra)
+        The controller's logged quantities (``controller.extra_names``).
+    reference : ndarray (N, n_ref)
+        The reference at each sample.
+    """
+
+    log: Log
+    t: np.ndarray
+    x: np.ndarray
+    y: np.ndarray
+    u: np.ndarray
+    extra: np.ndarray
+    model: Model
+    controller: Controller
+    reference: np.ndarray
+
+    def state(self, name: str) -> np.ndarray:
+        """True state ``name`` at the sample instants ``t`` (N,)."""
+        return self.x[:-1, self.model.index(name)[0]]
+
+
+def _measure(model: Model, y, noise):
+    """Noisy measurement: additive noise, except attitude, which is rotated by a small angle."""
+    if model.dof == 3:
+        q_meas = quat.qmul(y[0:4], quat.qexp(noise[0:3]))
+        return ca.vertcat(q_meas, y[4:] + noise[4:])
+    return y + noise
+
+
+@lru_cache(maxsize=32)
+def closed_loop_rollout(model: Model, controller: Controller, n: int, substeps: int = 4):
+    """The compiled closed loop over ``n`` samples.
+
+    Returns a CasADi Function
+    ``(z0, V[nv x n], p, gains) -> (Z[nz x n], ROWS[nr x n])`` where ``z = [x; c]``,
+    column ``k`` of ``V`` is ``[noise_k (ny); torque_k (3); ref_k; t_k]`` and a row is
+    ``[x_k; y_k; u_k; extra_k]``.
+    """
+    dt = model.testbed.sensors.dt
+    step = model.step(dt, substeps)
+    fn = controller.function
+    nx, nc = model.nx, controller.c0.size
+    nref = len(controller.ref_names)
+    z = ca.SX.sym("z", nx + nc)
+    v = ca.SX.sym("v", model.ny + 3 + nref + 1)
+    p = ca.SX.sym("p", model.n_p)
+    g = ca.SX.sym("gains", controller.gains.size)
+    x, c = z[:nx], z[nx:]
+    noise = v[: model.ny]
+    torque = v[model.ny : model.ny + 3]
+    ref = v[model.ny + 3 : model.ny + 3 + nref]
+    t = v[-1]
+    y = _measure(model, model.h(x, ca.DM.zeros(model.nu), p), noise)
+    u, c_next, extra = fn(y, c, ref, g, t)
+    tau_idx = model.index(["tau_x", "tau_y", "tau_z"], "u")
+    u_applied = ca.SX(u)
+    for j, i in enumerate(tau_idx):
+        u_applied[i] = u_applied[i] + torque[j]
+    x_next = step(x, u_applied, p)
+    one = ca.Function(
+        "closed_loop_step",
+        [z, v, p, g],
+        [ca.vertcat(x_next, c_next), ca.vertcat(x, y, u_applied, extra)],
+        ["z", "v", "p", "gains"],
+        ["z_next", "row"],
+    )
+    return one.mapaccum("closed_loop", n, [0], [0])
+
+
+def simulate(
+    model: Model,
+    controller: Controller,
+    *,
+    duration: float,
+    x0: np.ndarray,
+    p: np.ndarray | None = None,
+    reference=None,
+    c0: np.ndarray | None = None,
+    seed: int = 0,
+    noise: bool = True,
+    attitude_noise: float = 0.0,
+    torque_noise: float | None = None,
+    substeps: int = 4,
+) -> SimResult:
+    """Run the closed loop for ``duration`` seconds at the testbed's sensor rate.
+
+    Parameters
+    ----------
+    model, controller : Model, Controller
+        Plant and discrete controller (see :mod:`airbearing.design.controller`).
+    duration : float
+        Run length, s; ``round(duration * rate)`` samples.
+    x0 : ndarray
+        Initial true state (``model.x_names``).
+    p : ndarray, optional
+        Physical parameters (default ``model.p0``).
+    reference : ndarray, optional
+        ``(len(ref_names),)`` held for the whole run, or ``(N, len(ref_names))``.
+    seed : int
+        Seed of the noise generator; the same seed gives the same run.
+    noise : bool
+        False gives ideal sensors and no disturbance torque.
+    attitude_noise : float
+        1-sigma small-angle attitude measurement noise per axis, rad (dof 3), or yaw noise (dof 1).
+    torque_noise : float, optional
+        1-sigma disturbance torque per sample and axis, N m (default ``body.torque_noise``).
+    substeps : int
+        RK4 sub-steps per sample.
+    """
+    tb = model.testbed
+    dt = tb.sensors.dt
+    n = int(round(duration / dt))
+    if n < 1:
+        raise InputError(f"duration {duration} s is shorter than one sample ({dt} s)")
+    x0 = np.asarray(x0, dtype=float)
+    if x0.shape != (model.nx,):
+        raise InputError(f"x0 has shape {x0.shape}, expected ({model.nx},) for {model.x_names}")
+    p = model.p0 if p is None else np.asarray(p, dtype=float)
+    nref = len(controller.ref_names)
+    ref = np.zeros((n, nref)) if reference is None else np.asarray(reference, dtype=float)
+    if ref.ndim == 1:
+        ref = np.tile(ref, (n, 1))
+    if ref.shape != (n, nref):
+        raise InputError(f"reference has shape {ref.shape}, expected ({n}, {nref})")
+    t = np.arange(n) * dt
+
+    rng = np.random.default_rng(seed)
+    sig = np.zeros(model.ny)
+    tau_sig = tb.body.torque_noise if torque_noise is None else torque_noise
+    if noise:
+        for i, name in enumerate(model.y_names):
+            if name in ("wx", "wy", "wz"):
+                sig[i] = tb.sensors.gyro_noise
+            elif name in ("gx", "gy", "gz"):
+                sig[i] = tb.sensors.accel_noise
+            elif name in ("qw", "qx", "qy", "yaw"):  # qw..qy slots carry the rotation vector
+                sig[i] = attitude_noise
+    else:
+        tau_sig = 0.0
+    meas_noise = rng.standard_normal((n, model.ny)) * sig
+    tau = rng.standard_normal((n, 3)) * tau_sig
+    V = np.hstack([meas_noise, tau, ref, t[:, None]]).T
+
+    c0 = controller.c0 if c0 is None else np.asarray(c0, float)
+    F = closed_loop_rollout(model, controller, n, substeps)
+    Z, R = F(np.concatenate([x0, c0]), V, p, controller.gains)
+    Z, R = np.asarray(Z).T, np.asarray(R).T
+    nx, ny, nu = model.nx, model.ny, model.nu
+    x = np.vstack([x0, Z[:, :nx]])
+    y, u, extra = R[:, nx : nx + ny], R[:, nx + ny : nx + ny + nu], R[:, nx + ny + nu :]
+    log = log_from_arrays(model, t, x[:-1], y, u, extra, controller, ref)
+    return SimResult(log, t, x, y, u, extra, model, controller, ref)
+
+
+def log_from_arrays(model, t, x, y, u, extra, controller, ref) -> Log:
+    """Assemble a FORMATS.md log from a run's arrays (plus ``true_*`` columns)."""
+    tb = model.testbed
+    cols: dict[str, np.ndarray] = {"t": t}
+    Y = dict(zip(model.y_names, y.T, strict=True))
+    U = dict(zip(model.u_names, u.T, strict=True))
+    X = dict(zip(model.x_names, x.T, strict=True))
+    E = dict(zip(controller.extra_names, extra.T, strict=True))
+    if model.dof == 3:
+        for k in ("qw", "qx", "qy", "qz", "wx", "wy", "wz"):
+            cols[k] = Y[k]
+        if tb.sensors.accel_noise > 0 or model.kind == "platform":
+            for k in ("gx", "gy", "gz"):
+                cols[k] = Y[k]
+    else:
+        cols["yaw"] = E.get("yaw_est", Y["yaw"])
+        cols["wz"] = Y["wz"]
+    if model.kind == "platform":
+        for k in ("s1", "s2", "s3", "mx", "my", "mz"):
+            cols[k] = U[k]
+        b_lab = np.stack([U["bx_lab"], U["by_lab"], U["bz_lab"]], axis=1)
+        if np.any(b_lab != 0):
+            q = np.stack([X[k] for k in ("qw", "qx", "qy", "qz")], axis=1) if model.dof == 3 else (
+                quat.from_yaw(X["yaw"])
+            )
+            b_body = quat.rotate_inverse(q, b_lab)
+            cols.update(bx=b_body[:, 0], by=b_body[:, 1], bz=b_body[:, 2])
+    else:
+        for i in range(1, 5):
+            cols[f"d{i}"] = Y[f"d{i}"]
+        for i in range(1, 5):
+            cols[f"dd{i}"] = U[f"dd{i}"]
+        if model.dof == 1 and "qc_w" in controller.ref_names:
+            cols["yaw_ref"] = quat.yaw_of(ref[:, :4])
+    for k, v in X.items():
+        cols[f"true_{k}"] = v
+    for k in ("tau_x", "tau_y", "tau_z"):
+        if np.any(U[k] != 0):
+            cols[f"true_{k}"] = U[k]
+    for k, v in E.items():
+        cols.setdefault(k, v)
+    return Log(pd.DataFrame(cols), source="<simulation>", testbed=tb)

@@ -1,0 +1,578 @@
+"""Logs (FORMATS.md, "Log (CSV or Parquet)"): read, validate, write.
+
+A :class:`Log` holds one run's samples as a validated :class:`pandas.DataFrame`:
+one row per sample, the columns of FORMATS.md (SI units) as float64, and any
+other columns kept untouched. Validation never fills or drops anything: a
+missing column, an empty or non-numeric cell, a non-finite value, time that
+does not increase, a sampling gap or a non-unit quaternion raises
+:class:`~airbearing.errors.InputError` naming the file, the row (1-based data
+row; for CSV also the line of the file) and the column.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import os
+from collections.abc import Iterable, Sequence
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from airbearing.errors import InputError
+from airbearing.io.testbed import Testbed, _atomic_write_bytes
+
+__all__ = [
+    "COLUMN_GROUPS",
+    "GAP_FACTORS",
+    "LOG_COLUMNS",
+    "QUATERNION_NORM_TOL",
+    "REQUIRED_COLUMNS",
+    "Log",
+    "read_log",
+    "validate_log",
+    "write_log",
+]
+
+_QUATERNION = ("qw", "qx", "qy", "qz")
+_RATES = ("wx", "wy", "wz")
+_SLIDERS = ("s1", "s2", "s3")
+_DIPOLES = ("mx", "my", "mz")
+_FIELDS = ("bx", "by", "bz")
+_GIMBALS = ("d1", "d2", "d3", "d4")
+_GIMBAL_RATES = ("dd1", "dd2", "dd3", "dd4")
+
+#: Every column that FORMATS.md defines (all numeric, SI units).
+LOG_COLUMNS: tuple[str, ...] = (
+    "t",
+    *_QUATERNION,
+    "yaw",
+    *_RATES,
+    *_SLIDERS,
+    *_DIPOLES,
+    *_FIELDS,
+    *_GIMBALS,
+    *_GIMBAL_RATES,
+    "yaw_ref",
+)
+#: Columns that come together: if one of a group is present, all must be.
+COLUMN_GROUPS: tuple[tuple[str, ...], ...] = (
+    _QUATERNION,
+    _SLIDERS,
+    _DIPOLES,
+    _FIELDS,
+    _GIMBALS,
+    _GIMBAL_RATES,
+)
+#: Largest allowed ``abs(norm(q) - 1)`` of a logged quaternion.
+QUATERNION_NORM_TOL = 1e-3
+#: A sample interval must lie within these multiples of ``1 / sensors.rate``.
+GAP_FACTORS = (0.5, 1.5)
+_MIN_ROWS = 2
+_MEMORY = "<memory>"
+
+
+def REQUIRED_COLUMNS(testbed: Testbed | None = None) -> list[str]:  # noqa: N802 (contract name)
+    """Columns a log of ``testbed`` must have.
+
+    Parameters
+    ----------
+    testbed : Testbed or None
+        Without a testbed only ``t`` is required.
+
+    Returns
+    -------
+    list of str
+        ``t``; for dof 3 the quaternion ``qw, qx, qy, qz`` and the rates
+        ``wx, wy, wz``; for dof 1 ``wz`` and ``yaw``; for kind
+        ``"platform"`` the sliders ``s1, s2, s3``; for kind ``"cmg"`` the
+        gimbal angles ``d1 .. d4``.
+
+    Notes
+    -----
+    For dof 1 the quaternion ``qw, qx, qy, qz`` is accepted in place of
+    ``yaw`` (FORMATS.md); the list names ``yaw``, the form a writer should
+    produce.
+    """
+    columns = ["t"]
+    if testbed is None:
+        return columns
+    if testbed.body.dof == 3:
+        columns += [*_QUATERNION, *_RATES]
+    else:
+        columns += ["wz", "yaw"]
+    columns += list(_SLIDERS if testbed.kind == "platform" else _GIMBALS)
+    return columns
+
+
+# ----------------------------------------------------------------------------
+# validation
+
+
+def _at(row: int, lines: Sequence[int] | None) -> str:
+    """'row N' (1-based data row), with the file line for CSV."""
+    if lines is None:
+        return f"row {row}"
+    return f"row {row} (line {lines[row - 1]})"
+
+
+def _describe(value: object) -> str:
+    if isinstance(value, str):
+        return "an empty cell" if value.strip() == "" else repr(value)
+    if value is None or value is pd.NA:
+        return "a missing cell"
+    if isinstance(value, float) and np.isnan(value):
+        return "NaN (a missing or 'nan' cell)"
+    return repr(value)
+
+
+def _as_float(series: pd.Series, name: str, src: str) -> np.ndarray:
+    """A column as float64, NaN where a cell is not a number (booleans are not numbers)."""
+    dtype = series.dtype
+    if pd.api.types.is_bool_dtype(dtype):
+        return np.full(len(series), np.nan)
+    if pd.api.types.is_integer_dtype(dtype) or pd.api.types.is_float_dtype(dtype):
+        return series.to_numpy(dtype=float, na_value=np.nan)
+    if pd.api.types.is_numeric_dtype(dtype):  # complex and other numeric oddities
+        raise InputError(
+            f"{src}: column '{name}': expected real numbers, got values of type {dtype}"
+        )
+    cells = series.map(lambda v: v.strip() if isinstance(v, str) else v)
+    is_bool = cells.map(lambda v: isinstance(v, bool | np.bool_)).to_numpy(dtype=bool)
+    values = np.array(
+        pd.to_numeric(cells, errors="coerce").to_numpy(dtype=float, na_value=np.nan), dtype=float
+    )
+    values[is_bool] = np.nan
+    return values
+
+
+def _numeric(series: pd.Series, name: str, src: str, lines: Sequence[int] | None) -> np.ndarray:
+    """A column as float64; the first cell that is not a finite number is an error."""
+    values = _as_float(series, name, src)
+    bad = ~np.isfinite(values)
+    if bad.any():
+        raise _bad_cell(series, name, int(np.argmax(bad)), src, lines)
+    return values
+
+
+def _bad_cell(
+    series: pd.Series, name: str, i: int, src: str, lines: Sequence[int] | None
+) -> InputError:
+    return InputError(
+        f"{src}: {_at(i + 1, lines)}, column '{name}': expected a finite number, "
+        f"got {_describe(series.iloc[i])}"
+    )
+
+
+def _present(columns: Iterable[str]) -> str:
+    return ", ".join(str(c) for c in columns)
+
+
+def _check_required(df: pd.DataFrame, src: str, testbed: Testbed, columns: Sequence[str]) -> None:
+    who = f"testbed {testbed.name!r} (kind = {testbed.kind!r}, dof = {testbed.body.dof})"
+    for column in REQUIRED_COLUMNS(testbed):
+        if column in df.columns:
+            continue
+        if column == "yaw":
+            if all(q in df.columns for q in _QUATERNION):
+                continue
+            raise InputError(
+                f"{src}: missing column 'yaw' (rad; or the quaternion qw, qx, qy, qz), "
+                f"needed by {who}; columns present: {_present(columns)}"
+            )
+        raise InputError(
+            f"{src}: missing column {column!r}, needed by {who}; "
+            f"columns present: {_present(columns)}"
+        )
+
+
+def _validate(
+    data: pd.DataFrame,
+    src: str,
+    testbed: Testbed | None,
+    lines: Sequence[int] | None = None,
+) -> pd.DataFrame:
+    if not isinstance(data, pd.DataFrame):
+        raise InputError(f"{src}: expected a pandas DataFrame, got {type(data).__name__}")
+    if testbed is not None and not isinstance(testbed, Testbed):
+        raise InputError(f"{src}: expected a Testbed or None, got {type(testbed).__name__}")
+    columns = list(data.columns)
+    duplicated = data.columns[data.columns.duplicated()]
+    if len(duplicated):
+        raise InputError(f"{src}: column {duplicated[0]!r} appears more than once")
+    if "t" not in data.columns:
+        raise InputError(
+            f"{src}: missing column 't' (time, s), which every log needs; "
+            f"columns present: {_present(columns)}"
+        )
+    if len(data) < _MIN_ROWS:
+        raise InputError(f"{src}: a log needs at least {_MIN_ROWS} rows, got {len(data)}")
+    if testbed is not None:
+        _check_required(data, src, testbed, columns)
+    for group in COLUMN_GROUPS:
+        have = [c for c in group if c in data.columns]
+        if have and len(have) != len(group):
+            missing = [c for c in group if c not in data.columns]
+            raise InputError(
+                f"{src}: missing column(s) {_present(missing)}: the columns "
+                f"{_present(group)} come together (all or none), but only "
+                f"{_present(have)} given"
+            )
+
+    out = data.reset_index(drop=True).copy()
+    # Non-numeric and non-finite cells: report the earliest row over all known columns.
+    first_bad: tuple[int, str] | None = None
+    for name in [c for c in columns if c in LOG_COLUMNS]:
+        values = _as_float(out[name], name, src)
+        bad = ~np.isfinite(values)
+        if bad.any() and (first_bad is None or int(np.argmax(bad)) < first_bad[0]):
+            first_bad = (int(np.argmax(bad)), name)
+        out[name] = values
+    if first_bad is not None:
+        row, name = first_bad
+        raise _bad_cell(data[name], name, row, src, lines)
+
+    t = out["t"].to_numpy()
+    dt = np.diff(t)
+    not_increasing = ~(dt > 0.0)
+    if not_increasing.any():
+        i = int(np.argmax(not_increasing)) + 1  # 0-based index of the offending row
+        raise InputError(
+            f"{src}: {_at(i + 1, lines)}, column 't': time must be strictly increasing, "
+            f"but t = {float(t[i])!r} s follows t = {float(t[i - 1])!r} s of row {i}"
+        )
+    if testbed is not None:
+        period = testbed.sensors.dt
+        low, high = GAP_FACTORS[0] * period, GAP_FACTORS[1] * period
+        off = (dt < low) | (dt > high)
+        if off.any():
+            i = int(np.argmax(off)) + 1
+            raise InputError(
+                f"{src}: {_at(i + 1, lines)}, column 't': sample interval {dt[i - 1]:.6g} s "
+                f"(t = {float(t[i - 1])!r} -> {float(t[i])!r} s) "
+                f"is outside [{low:.6g}, {high:.6g}] s, "
+                f"expected 1 / sensors.rate = {period:.6g} s of testbed {testbed.name!r}; "
+                "gaps and jitter are not filled in"
+            )
+    if all(q in out.columns for q in _QUATERNION):
+        q = out[list(_QUATERNION)].to_numpy()
+        norm = np.sqrt(np.sum(q * q, axis=1))
+        off = np.abs(norm - 1.0) > QUATERNION_NORM_TOL
+        if off.any():
+            i = int(np.argmax(off))
+            raise InputError(
+                f"{src}: {_at(i + 1, lines)}, columns qw, qx, qy, qz: expected a unit "
+                f"quaternion (norm within {QUATERNION_NORM_TOL:g} of 1), got norm {norm[i]:.9g}"
+            )
+    return out
+
+
+def validate_log(
+    data: pd.DataFrame, source: str = _MEMORY, testbed: Testbed | None = None
+) -> pd.DataFrame:
+    """Check a table of samples against FORMATS.md and return it normalised.
+
+    Parameters
+    ----------
+    data : pandas.DataFrame
+        One row per sample. Columns of FORMATS.md in SI units (t in s, angles
+        in rad, rates in rad/s, sliders in m, dipoles in A m^2, fields in T);
+        other columns are kept and ignored.
+    source : str
+        Name of the origin, used in error messages.
+    testbed : Testbed or None
+        If given, the columns its kind and dof need are required and the
+        sample interval must lie within 0.5 to 1.5 periods of
+        ``sensors.rate``.
+
+    Returns
+    -------
+    pandas.DataFrame
+        A copy with a fresh RangeIndex and every FORMATS.md column as float64.
+
+    Raises
+    ------
+    InputError
+        On a missing column, fewer than 2 rows, an empty, non-numeric or
+        non-finite cell, time not strictly increasing, a sampling gap, an
+        incomplete column group (``mx, my, mz``; ``bx, by, bz``;
+        ``dd1 .. dd4``; and likewise the quaternion, sliders and gimbals), or
+        a quaternion whose norm is off 1 by more than 1e-3. The message names
+        ``source``, the row (1-based) and the column.
+    """
+    return _validate(data, str(source), testbed)
+
+
+# ----------------------------------------------------------------------------
+# the Log
+
+
+class Log:
+    """One run's samples, validated against FORMATS.md.
+
+    Parameters
+    ----------
+    data : pandas.DataFrame
+        The samples; validated by :func:`validate_log` and stored as a
+        normalised copy.
+    source : str
+        Where the samples came from (a path or ``"<memory>"``).
+    testbed : Testbed or None
+        The testbed the log belongs to; enables its column and sampling checks.
+
+    Attributes
+    ----------
+    data : pandas.DataFrame
+    source : str
+    testbed : Testbed or None
+
+    Notes
+    -----
+    The array accessors (:meth:`rates`, :meth:`quaternions`, ...) return
+    copies in SI units, or None when the log lacks those columns.
+    """
+
+    def __init__(
+        self, data: pd.DataFrame, source: str = _MEMORY, testbed: Testbed | None = None
+    ) -> None:
+        self.source = str(source)
+        self.testbed = testbed
+        self.data = _validate(data, self.source, testbed)
+
+    @classmethod
+    def _from_validated(cls, data: pd.DataFrame, source: str, testbed: Testbed | None) -> Log:
+        log = cls.__new__(cls)
+        log.source, log.testbed, log.data = source, testbed, data
+        return log
+
+    def __repr__(self) -> str:
+        tb = "None" if self.testbed is None else repr(self.testbed.name)
+        return (
+            f"Log(source={self.source!r}, n={self.n}, "
+            f"t=[{self.t[0]:g}, {self.t[-1]:g}] s, testbed={tb}, "
+            f"columns=[{_present(self.data.columns)}])"
+        )
+
+    def __len__(self) -> int:
+        return self.n
+
+    @property
+    def n(self) -> int:
+        """Number of samples (rows)."""
+        return len(self.data)
+
+    @property
+    def t(self) -> np.ndarray:
+        """Sample times, s, shape (n,)."""
+        return self.data["t"].to_numpy(dtype=float, copy=True)
+
+    @property
+    def dt(self) -> float:
+        """Median sample interval, s."""
+        return float(np.median(np.diff(self.data["t"].to_numpy(dtype=float))))
+
+    def has(self, *names: str) -> bool:
+        """True if every named column is present."""
+        return all(name in self.data.columns for name in names)
+
+    def column(self, name: str) -> np.ndarray:
+        """One column as a float array, shape (n,).
+
+        Raises
+        ------
+        InputError
+            If the column is absent or (for an extra column) not numeric.
+        """
+        if name not in self.data.columns:
+            raise InputError(
+                f"{self.source}: no column {name!r}; columns present: {_present(self.data.columns)}"
+            )
+        return _numeric(self.data[name], name, self.source, None).copy()
+
+    def columns(self, names: Sequence[str]) -> np.ndarray:
+        """Several columns as a float array, shape (n, len(names))."""
+        return np.column_stack([self.column(name) for name in names]).reshape(self.n, len(names))
+
+    def _optional(self, names: Sequence[str]) -> np.ndarray | None:
+        return self.columns(names) if self.has(*names) else None
+
+    def rates(self) -> np.ndarray | None:
+        """Measured angular rate, rad/s, body axes.
+
+        Returns
+        -------
+        numpy.ndarray or None
+            Shape (n, 3) ``wx, wy, wz`` for a dof-3 testbed (or, without a
+            testbed, when all three are present); shape (n, 1) ``wz`` for a
+            dof-1 testbed (or when only ``wz`` is present); None if absent.
+        """
+        dof = None if self.testbed is None else self.testbed.body.dof
+        if dof != 1 and self.has(*_RATES):
+            return self.columns(_RATES)
+        if dof != 3 and self.has("wz"):
+            return self.columns(["wz"])
+        return None
+
+    def quaternions(self) -> np.ndarray | None:
+        """Attitude quaternion body -> lab, scalar first, shape (n, 4), or None."""
+        return self._optional(_QUATERNION)
+
+    def yaw(self) -> np.ndarray | None:
+        """Logged yaw, rad, shape (n,), or None (not derived from the quaternion)."""
+        return self.column("yaw") if self.has("yaw") else None
+
+    def yaw_ref(self) -> np.ndarray | None:
+        """Commanded yaw, rad, shape (n,), or None."""
+        return self.column("yaw_ref") if self.has("yaw_ref") else None
+
+    def sliders(self) -> np.ndarray | None:
+        """Slider positions along their rails, m, shape (n, 3), or None."""
+        return self._optional(_SLIDERS)
+
+    def dipoles(self) -> np.ndarray | None:
+        """Commanded magnetorquer dipole, A m^2, body axes, shape (n, 3), or None."""
+        return self._optional(_DIPOLES)
+
+    def fields(self) -> np.ndarray | None:
+        """Logged magnetic field, T, body axes, shape (n, 3), or None."""
+        return self._optional(_FIELDS)
+
+    def gimbals(self) -> np.ndarray | None:
+        """Measured gimbal angles, rad, shape (n, 4), or None."""
+        return self._optional(_GIMBALS)
+
+    def gimbal_rates(self) -> np.ndarray | None:
+        """Commanded gimbal rates, rad/s, shape (n, 4), or None."""
+        return self._optional(_GIMBAL_RATES)
+
+
+# ----------------------------------------------------------------------------
+# files
+
+_CSV_SUFFIXES = (".csv",)
+_PARQUET_SUFFIXES = (".parquet", ".pq")
+
+
+def _format(path: Path) -> str:
+    suffix = path.suffix.lower()
+    if suffix in _CSV_SUFFIXES:
+        return "csv"
+    if suffix in _PARQUET_SUFFIXES:
+        return "parquet"
+    raise InputError(
+        f"{path}: unknown log format {path.suffix!r}; expected one of "
+        f"{', '.join(_CSV_SUFFIXES + _PARQUET_SUFFIXES)}"
+    )
+
+
+def _read_csv(path: Path, src: str) -> tuple[pd.DataFrame, list[int] | None]:
+    try:
+        text = path.read_text(encoding="utf-8")
+    except UnicodeDecodeError as e:
+        raise InputError(f"{src}: not a UTF-8 text file ({e})") from e
+    raw_lines = text.split("\n")
+    content = [i + 1 for i, line in enumerate(raw_lines) if line.strip()]
+    if not content:
+        raise InputError(f"{src}: the log is empty; expected a header row and data rows")
+    header = next(csv.reader([raw_lines[content[0] - 1]]))
+    names = [h.strip() for h in header]
+    seen: set[str] = set()
+    for name in names:
+        if name in seen:
+            raise InputError(f"{src}: line {content[0]}: column {name!r} appears more than once")
+        seen.add(name)
+    try:
+        # Every cell as text: nothing is turned into NaN behind our back.
+        df = pd.read_csv(io.StringIO(text), dtype=str, keep_default_na=False)
+    except (pd.errors.ParserError, ValueError) as e:
+        raise InputError(f"{src}: not a valid CSV log: {str(e).strip()}") from e
+    df.columns = names
+    lines = content[1:] if len(content) - 1 == len(df) else None
+    for name in df.columns:
+        if name not in LOG_COLUMNS:  # extra columns: numbers if they all parse, else text
+            cells = df[name].str.strip()
+            try:
+                df[name] = pd.to_numeric(cells.replace("", np.nan))
+            except (TypeError, ValueError):
+                pass  # not numeric: kept as text, as FORMATS.md keeps unknown columns
+    return df, lines
+
+
+def read_log(path: str | os.PathLike[str], testbed: Testbed | None = None) -> Log:
+    """Read and validate a log file.
+
+    Parameters
+    ----------
+    path : str or path-like
+        A ``.csv`` (header row, comma separated, ``.`` decimal point) or
+        ``.parquet`` file with the columns of FORMATS.md in SI units.
+    testbed : Testbed or None
+        The testbed the log belongs to; enables its column and sampling checks.
+
+    Returns
+    -------
+    Log
+
+    Raises
+    ------
+    InputError
+        If the suffix is not known, the file cannot be read, or the content
+        fails :func:`validate_log`; CSV messages give the row and the line.
+    """
+    p = Path(path)
+    src = str(path)
+    kind = _format(p)
+    if not p.is_file():
+        raise InputError(f"{src}: no such log file")
+    try:
+        if kind == "csv":
+            df, lines = _read_csv(p, src)
+        else:
+            df, lines = pd.read_parquet(p), None
+    except InputError:
+        raise
+    except (OSError, ValueError) as e:
+        raise InputError(f"{src}: cannot read the {kind} log: {e}") from e
+    data = _validate(df, src, testbed, lines)
+    return Log._from_validated(data, src, testbed)
+
+
+def write_log(log: Log | pd.DataFrame, path: str | os.PathLike[str]) -> Path:
+    """Write a log as CSV or Parquet (by suffix), atomically.
+
+    Parameters
+    ----------
+    log : Log or pandas.DataFrame
+        A DataFrame is validated first (without a testbed).
+    path : str or path-like
+        Destination, ``.csv`` or ``.parquet``; an existing file is replaced.
+        CSV floats are written with the shortest text that reads back to the
+        same float (exact round trip).
+
+    Returns
+    -------
+    pathlib.Path
+        The path written.
+
+    Raises
+    ------
+    InputError
+        If the suffix is unknown, the data is not a valid log, or the
+        directory cannot be written. No partial file is left behind.
+    """
+    p = Path(path)
+    kind = _format(p)
+    if isinstance(log, Log):
+        data = log.data
+    elif isinstance(log, pd.DataFrame):
+        data = _validate(log, str(path), None)
+    else:
+        raise InputError(f"{path}: expected a Log or a pandas DataFrame, got {type(log).__name__}")
+    if kind == "csv":
+        content = data.to_csv(index=False, lineterminator="\n").encode("utf-8")
+    else:
+        buffer = io.BytesIO()
+        data.to_parquet(buffer, index=False)
+        content = buffer.getvalue()
+    return _atomic_write_bytes(p, content)

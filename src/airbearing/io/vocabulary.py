@@ -1,0 +1,196 @@
+"""The effect vocabulary of FORMATS.md ("Effects: names and parameters") as data.
+
+An effect is a named physical or measurement phenomenon that the nominal model
+of a testbed lacks. The same names appear in the ``[effects]`` table of a
+testbed file, in the output of the discrepancy workflow and in the reports.
+This module only knows the names, units and value shapes; what an effect does
+to the dynamics is the business of ``airbearing.models``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Literal
+
+from airbearing.errors import InputError
+
+__all__ = ["EFFECTS", "EffectSpec", "EffectValue", "validate_effect_value"]
+
+Shape = Literal["scalar", "scalar_or_axes", "vector3"]
+EffectValue = float | tuple[float, float, float]
+
+_SHAPES: tuple[str, ...] = ("scalar", "scalar_or_axes", "vector3")
+
+
+@dataclass(frozen=True)
+class EffectSpec:
+    """Name, unit and value shape of one effect.
+
+    Attributes
+    ----------
+    name : str
+        The effect's name, as used in files and reports.
+    unit : str
+        SI unit of the value ("-" for dimensionless).
+    description : str
+        What the effect changes (torque or measurement), one line.
+    shape : {"scalar", "scalar_or_axes", "vector3"}
+        ``"scalar"``: one number. ``"scalar_or_axes"``: one number that applies
+        to every free body axis, or a list of three (one per body axis).
+        ``"vector3"``: a 3-vector in body axes.
+    lower : float or None
+        Smallest admissible value of each component, or None for no bound.
+    lower_strict : bool
+        True if the bound itself is excluded (``value > lower``).
+    """
+
+    name: str
+    unit: str
+    description: str
+    shape: Shape
+    lower: float | None = None
+    lower_strict: bool = False
+
+    def __post_init__(self) -> None:
+        if self.shape not in _SHAPES:
+            raise InputError(
+                f"effect {self.name!r}: shape must be one of {', '.join(_SHAPES)}, "
+                f"got {self.shape!r}"
+            )
+
+
+_SPECS: tuple[EffectSpec, ...] = (
+    EffectSpec(
+        "inertia_error",
+        "-",
+        "inertia is (1 + value) * inertia",
+        "scalar",
+        lower=-1.0,  # (1 + value) must stay > 0 to keep the inertia positive definite
+        lower_strict=True,
+    ),
+    EffectSpec(
+        "viscous_friction",
+        "N m s",
+        "tau_i = -c_i * w_i, per body axis",
+        "scalar_or_axes",
+    ),
+    EffectSpec(
+        "coulomb_friction",
+        "N m",
+        "tau_i = -f_i * sign(w_i), per body axis (smoothed near zero rate)",
+        "scalar_or_axes",
+    ),
+    EffectSpec(
+        "aero_drag",
+        "N m s^2",
+        "tau_i = -k_i * abs(w_i) * w_i, per body axis",
+        "scalar_or_axes",
+    ),
+    EffectSpec(
+        "spring_torque",
+        "N m / rad",
+        "tau_z = -k * yaw (cables, umbilical), dof = 1",
+        "scalar",
+    ),
+    EffectSpec(
+        "cm_offset_error",
+        "m",
+        "extra CR -> CM offset dr: tau = mass * dr x g_body",
+        "vector3",
+    ),
+    EffectSpec(
+        "residual_dipole",
+        "A m^2",
+        "tau = m_res x b_body",
+        "vector3",
+    ),
+    EffectSpec(
+        "gyro_bias",
+        "rad/s",
+        "measured w = true w + bias",
+        "scalar_or_axes",
+    ),
+    EffectSpec(
+        "sensor_lag",
+        "s",
+        "measured w passes a first-order lag of time constant tau",
+        "scalar",
+        lower=0.0,
+    ),
+    EffectSpec(
+        "gimbal_deadzone",
+        "rad/s",
+        "commanded gimbal rates below the value give no motion",
+        "scalar",
+        lower=0.0,
+    ),
+)
+
+#: Every effect name of FORMATS.md, in the order of its table.
+EFFECTS: dict[str, EffectSpec] = {spec.name: spec for spec in _SPECS}
+
+
+def _is_number(value: object) -> bool:
+    return isinstance(value, int | float) and not isinstance(value, bool)
+
+
+def _component(spec: EffectSpec, value: object, where: str) -> float:
+    if not _is_number(value):
+        raise InputError(f"{where}: expected a number ({spec.unit}), got {value!r}")
+    x = float(value)  # type: ignore[arg-type]
+    if not math.isfinite(x):
+        raise InputError(f"{where}: expected a finite number ({spec.unit}), got {value!r}")
+    if spec.lower is not None:
+        if spec.lower_strict and not x > spec.lower:
+            raise InputError(f"{where}: expected a value > {spec.lower:g}, got {value!r}")
+        if not spec.lower_strict and not x >= spec.lower:
+            raise InputError(f"{where}: expected a value >= {spec.lower:g}, got {value!r}")
+    return x
+
+
+def validate_effect_value(name: str, value: object, where: str) -> EffectValue:
+    """Check one effect value against the vocabulary and return it normalised.
+
+    Parameters
+    ----------
+    name : str
+        Effect name; must be a key of :data:`EFFECTS`.
+    value : object
+        The value as read (a number, or a sequence of three numbers).
+        Integers are accepted as floats; booleans are not numbers.
+    where : str
+        Location used as the prefix of error messages, for example
+        ``"bench.toml: key 'effects.viscous_friction'"``.
+
+    Returns
+    -------
+    float or tuple of 3 float
+        The value in the unit of :attr:`EffectSpec.unit`: a float for a single
+        number, a tuple of three floats (body axes x, y, z) for a list.
+
+    Raises
+    ------
+    InputError
+        If the name is not in the vocabulary (the message lists the valid
+        names), or the value has the wrong shape, is not finite, or is below
+        the effect's bound.
+    """
+    spec = EFFECTS.get(name)
+    if spec is None:
+        raise InputError(
+            f"{where}: unknown effect {name!r}; valid effects are: {', '.join(EFFECTS)}"
+        )
+    if spec.shape == "scalar":
+        return _component(spec, value, where)
+    if spec.shape == "scalar_or_axes" and _is_number(value):
+        return _component(spec, value, where)
+    expected = (
+        "a number or a list of 3 numbers (per body axis)"
+        if spec.shape == "scalar_or_axes"
+        else "a list of 3 numbers (body axes)"
+    )
+    if not isinstance(value, list | tuple) or len(value) != 3:
+        raise InputError(f"{where}: expected {expected}, got {value!r}")
+    x, y, z = (_component(spec, v, where) for v in value)
+    return (x, y, z)

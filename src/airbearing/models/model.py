@@ -1,0 +1,406 @@
+"""The Model of a testbed: named states, inputs and parameters, CasADi dynamics and measurement.
+
+Physical parameters are symbols ``p`` (not baked-in numbers) so one Model is
+simulated, linearised, fitted and differentiated without being rebuilt.
+
+States ``x``
+    platform, dof 3: ``qw qx qy qz wx wy wz``; dof 1: ``yaw wz``;
+    cmg adds ``d1 d2 d3 d4`` (gimbal angles); ``sensor_lag`` adds lagged rates.
+Inputs ``u`` (held constant over a sample, zero-order hold)
+    platform: ``s1 s2 s3`` slider positions (m), ``mx my mz`` dipole (A m^2, body),
+    ``bx_lab by_lab bz_lab`` cage field (T, lab frame), ``tau_x tau_y tau_z``
+    disturbance torque (N m, body);
+    cmg: ``dd1..dd4`` gimbal rates (rad/s), ``tau_x tau_y tau_z``.
+Measurement ``y`` (noise free; noise is added by the simulation)
+    dof 3: ``qw qx qy qz wx wy wz gx gy gz`` (``g`` the unit gravity direction in body axes);
+    dof 1: ``yaw wz``; cmg adds ``d1..d4``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+import casadi as ca
+import numpy as np
+
+from airbearing.errors import InputError
+from airbearing.io.testbed import Testbed
+from airbearing.models import quaternion as quat
+from airbearing.models.cmg import momentum_normalised
+from airbearing.models.effects import (
+    EffectContext,
+    effect_param_names,
+    get_effect,
+)
+
+__all__ = ["Model", "build_model", "inertia_from_params", "INERTIA_NAMES"]
+
+INERTIA_NAMES = ("J_xx", "J_yy", "J_zz", "J_xy", "J_xz", "J_yz")
+
+
+def inertia_from_params(j6):
+    """Symmetric 3x3 inertia from ``[Jxx, Jyy, Jzz, Jxy, Jxz, Jyz]`` (CasADi or NumPy)."""
+    if isinstance(j6, (ca.SX, ca.MX, ca.DM)):
+        return ca.vertcat(
+            ca.horzcat(j6[0], j6[3], j6[4]),
+            ca.horzcat(j6[3], j6[1], j6[5]),
+            ca.horzcat(j6[4], j6[5], j6[2]),
+        )
+    a = np.asarray(j6, dtype=float)
+    return np.array([[a[0], a[3], a[4]], [a[3], a[1], a[5]], [a[4], a[5], a[2]]])
+
+
+@dataclass(frozen=True, eq=False)
+class Model:
+    """Symbolic physics of one testbed plus a set of named effects.
+
+    Attributes
+    ----------
+    testbed : Testbed
+        The testbed it was built from.
+    effects : dict
+        Effect name -> value it was built with (the nominal parameter values).
+    x_names, u_names, p_names, y_names : tuple of str
+        Names of the state, input, parameter and measurement entries.
+    f : casadi.Function
+        ``f(x, u, p) -> xdot``, continuous dynamics.
+    h : casadi.Function
+        ``h(x, u, p) -> y``, noise-free measurement.
+    p0 : numpy.ndarray
+        Nominal parameter values from the testbed.
+    lag_index : tuple of int
+        Indices of ``sensor_lag`` filter states in ``x``.
+    """
+
+    testbed: Testbed
+    effects: dict
+    x_names: tuple
+    u_names: tuple
+    p_names: tuple
+    y_names: tuple
+    f: ca.Function
+    h: ca.Function
+    p0: np.ndarray
+    lag_index: tuple
+    _f_plant: ca.Function
+    _lag: ca.Function
+
+    @property
+    def nx(self) -> int:
+        return len(self.x_names)
+
+    @property
+    def nu(self) -> int:
+        return len(self.u_names)
+
+    @property
+    def n_p(self) -> int:
+        return len(self.p_names)
+
+    @property
+    def ny(self) -> int:
+        return len(self.y_names)
+
+    @property
+    def kind(self) -> str:
+        return self.testbed.kind
+
+    @property
+    def dof(self) -> int:
+        return self.testbed.body.dof
+
+    def index(self, names, which: str = "x") -> list[int]:
+        """Positions of ``names`` in the ``x``, ``u``, ``p`` or ``y`` vector."""
+        table = {"x": self.x_names, "u": self.u_names, "p": self.p_names, "y": self.y_names}[
+            which
+        ]
+        names = [names] if isinstance(names, str) else list(names)
+        missing = [n for n in names if n not in table]
+        if missing:
+            raise InputError(f"model has no {which} entries {missing}; it has {list(table)}")
+        return [table.index(n) for n in names]
+
+    def params(self, **values) -> np.ndarray:
+        """Nominal parameters with some entries replaced by name (SI units)."""
+        p = self.p0.copy()
+        for k, v in values.items():
+            p[self.index(k, "p")[0]] = v
+        return p
+
+    def x0(self, *, q=None, yaw=0.0, w=None, gimbals=None) -> np.ndarray:
+        """A state vector: attitude, rate (body, rad/s), gimbal angles (default: testbed's)."""
+        x = np.zeros(self.nx)
+        if self.dof == 3:
+            x[0:4] = [1, 0, 0, 0] if q is None else quat.normalize(np.asarray(q, float))
+            if w is not None:
+                x[4:7] = w
+        else:
+            x[0] = yaw
+            if w is not None:
+                x[1] = np.atleast_1d(w)[-1]
+        if self.kind == "cmg":
+            i = self.index("d1")[0]
+            g = self.testbed.cmg.gimbal_angles if gimbals is None else gimbals
+            x[i : i + 4] = g
+        for i in self.lag_index:  # the lagged gyro starts at the true rate
+            x[i] = x[self.index(self.x_names[i].replace("lag_", ""))[0]]
+        return x
+
+    def step(self, dt: float, substeps: int = 4) -> ca.Function:
+        """One sample: ``(x, u, p) -> x_next`` with ``u`` held over ``dt`` (s).
+
+        Fixed-step RK4 with ``substeps`` sub-intervals on the plant states, the
+        attitude quaternion renormalised at the end; ``sensor_lag`` states are
+        advanced with the exact exponential of a first-order lag driven by the
+        sub-interval mean rate, so any time constant >= 0 is stable.
+        """
+        x = ca.SX.sym("x", self.nx)
+        u = ca.SX.sym("u", self.nu)
+        p = ca.SX.sym("p", self.n_p)
+        plant = [i for i in range(self.nx) if i not in self.lag_index]
+        xp = x[plant]
+        lag = x[list(self.lag_index)] if self.lag_index else ca.SX(0, 1)
+        hs = dt / substeps
+        for _ in range(substeps):
+            k1 = self._f_plant(xp, u, p)
+            k2 = self._f_plant(xp + hs / 2 * k1, u, p)
+            k3 = self._f_plant(xp + hs / 2 * k2, u, p)
+            k4 = self._f_plant(xp + hs * k3, u, p)
+            xp_next = xp + hs / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+            if self.lag_index:
+                lag = self._lag(xp, xp_next, lag, p, hs)
+            xp = xp_next
+        if self.dof == 3:
+            xp[0:4] = xp[0:4] / ca.norm_2(xp[0:4])
+        out = ca.SX.zeros(self.nx)
+        out[plant] = xp
+        if self.lag_index:
+            out[list(self.lag_index)] = lag
+        return ca.Function("step", [x, u, p], [out], ["x", "u", "p"], ["x_next"])
+
+    def rollout(self, n: int, dt: float, substeps: int = 4) -> ca.Function:
+        """Open-loop rollout of ``n`` samples: ``(x0, U[nu x n], p) -> X[nx x n]``.
+
+        Column ``k`` of ``X`` is the state at the end of sample ``k`` (time ``(k+1) dt``).
+        One compiled ``mapaccum``: no Python loop per step.
+        """
+        step = self.step(dt, substeps)
+        return step.mapaccum("rollout", n, [0], [0])
+
+
+def _effects_of(testbed: Testbed, extra: Mapping | None) -> dict:
+    effects = dict(testbed.effects)
+    if extra:
+        effects.update(extra)
+    return effects
+
+
+def build_model(testbed: Testbed, effects: Mapping | None = None) -> Model:
+    """Build the symbolic Model of ``testbed`` with its ``[effects]`` plus ``effects``.
+
+    Parameters
+    ----------
+    testbed : Testbed
+        Validated testbed.
+    effects : mapping, optional
+        Extra effects ``name -> value`` (FORMATS.md units) added to (or replacing)
+        the testbed's own. A 3-list makes a per-axis effect with three parameters.
+    """
+    kind, dof = testbed.kind, testbed.body.dof
+    has_field = testbed.field is not None or kind == "platform"
+    effects = _effects_of(testbed, effects)
+
+    # ---- parameters
+    p_names: list[str] = []
+    p0: list[float] = []
+
+    def par(names, values):
+        p_names.extend(names)
+        p0.extend(np.atleast_1d(np.asarray(values, dtype=float)).tolist())
+
+    J = testbed.body.inertia_matrix
+    if dof == 3:
+        par(INERTIA_NAMES, [J[0, 0], J[1, 1], J[2, 2], J[0, 1], J[0, 2], J[1, 2]])
+        par(["r_x", "r_y", "r_z"], testbed.body.cm_offset_vec)
+    else:
+        par(["J_zz"], [testbed.body.yaw_inertia])
+    par(["mass", "gravity"], [testbed.body.mass, testbed.gravity])
+    if kind == "platform":
+        par(["m_1", "m_2", "m_3"], testbed.masses.mass_vec if testbed.masses else np.zeros(3))
+    else:
+        par(["h0", "beta"], [testbed.cmg.h0, testbed.cmg.skew])
+    effect_slices = {}
+    for name, value in effects.items():
+        eff = get_effect(name)
+        reason = eff.applies(kind, dof, has_field)
+        if reason:
+            raise InputError(f"effect '{name}' cannot act on testbed '{testbed.name}': {reason}")
+        per_axis = np.ndim(value) == 1 and len(value) == 3 and name not in (
+            "cm_offset_error",
+            "residual_dipole",
+        )
+        names = effect_param_names(name, dof, per_axis)
+        vals = np.atleast_1d(np.asarray(value, dtype=float))
+        if len(names) == 1 and vals.size == 3:  # per-axis value on a dof-1 bearing: z axis
+            vals = vals[2:]
+        effect_slices[name] = slice(len(p_names), len(p_names) + len(names))
+        par(names, vals)
+    p = ca.SX.sym("p", len(p_names))
+    P = {n: p[i] for i, n in enumerate(p_names)}
+
+    # ---- states and inputs
+    if dof == 3:
+        x_names = ["qw", "qx", "qy", "qz", "wx", "wy", "wz"]
+    else:
+        x_names = ["yaw", "wz"]
+    if kind == "cmg":
+        x_names += ["d1", "d2", "d3", "d4"]
+        u_names = ["dd1", "dd2", "dd3", "dd4", "tau_x", "tau_y", "tau_z"]
+    else:
+        u_names = ["s1", "s2", "s3", "mx", "my", "mz", "bx_lab", "by_lab", "bz_lab"]
+        u_names += ["tau_x", "tau_y", "tau_z"]
+    xp = ca.SX.sym("x", len(x_names))
+    u = ca.SX.sym("u", len(u_names))
+    U = {n: u[i] for i, n in enumerate(u_names)}
+    X = {n: xp[i] for i, n in enumerate(x_names)}
+    tau_d = ca.vertcat(U["tau_x"], U["tau_y"], U["tau_z"])
+
+    g_lab = ca.vertcat(0, 0, -P["gravity"])
+    if dof == 3:
+        q = xp[0:4]
+        w = xp[4:7]
+        g_body = quat.rotate_inverse(q, g_lab)
+        yaw = None
+    else:
+        yaw = X["yaw"]
+        w = ca.vertcat(X["wz"])
+        q = quat.from_yaw(yaw)
+        g_body = quat.rotate_inverse(q, g_lab)
+
+    # ---- inertia, offset and actuator torques of the nominal physics
+    if dof == 3:
+        J_cr = inertia_from_params(ca.vertcat(*[P[n] for n in INERTIA_NAMES]))
+        r_cm = ca.vertcat(P["r_x"], P["r_y"], P["r_z"])
+    else:
+        J_cr = P["J_zz"]
+        r_cm = ca.SX.zeros(3)
+    torque = ca.SX.zeros(3)
+    b_body = ca.SX.zeros(3)
+    if kind == "platform":
+        axes = testbed.masses.axes_matrix if testbed.masses else np.eye(3)
+        s = ca.vertcat(U["s1"], U["s2"], U["s3"])
+        for i in range(3):
+            ui = ca.DM(axes[i])
+            mi = P[f"m_{i + 1}"]
+            # seed 004 eqs. 4-7: each slider moves the CM and adds a point-mass inertia
+            r_cm = r_cm + mi * s[i] * ui / P["mass"]
+            dJ = mi * s[i] ** 2 * (ca.DM.eye(3) - ca.mtimes(ui, ui.T))
+            J_cr = J_cr + (dJ if dof == 3 else dJ[2, 2])
+        b_lab = ca.vertcat(U["bx_lab"], U["by_lab"], U["bz_lab"])
+        b_body = quat.rotate_inverse(q, b_lab)
+        m_dip = ca.vertcat(U["mx"], U["my"], U["mz"])
+        torque = torque + ca.cross(m_dip, b_body)  # magnetorquer torque d x b (seed 000 eq. 2)
+    # gravity torque of the CR -> CM offset (seed 004 eq. 11, seed 000 eq. 1)
+    torque = torque + P["mass"] * ca.cross(r_cm, g_body) + tau_d
+    if dof == 1:
+        torque = torque[2]
+
+    ctx = EffectContext(
+        kind=kind,
+        dof=dof,
+        has_field=has_field,
+        w=w,
+        yaw=yaw,
+        g_body=g_body,
+        b_body=b_body,
+        mass=P["mass"],
+        torque=torque,
+        gimbal_rates=ca.vertcat(*[U[f"dd{i}"] for i in range(1, 5)]) if kind == "cmg" else None,
+        rate_measured=w,
+    )
+    for name in effects:
+        eff = get_effect(name)
+        if eff.stage == "plant":
+            eff.apply(ctx, p[effect_slices[name]])
+    J_eff = ctx.inertia_scale * J_cr
+
+    # ---- dynamics
+    if kind == "cmg":
+        delta = ca.vertcat(*[X[f"d{i}"] for i in range(1, 5)])
+        dd = ctx.gimbal_rates
+        A = ca.jacobian(momentum_normalised(delta, P["beta"]), delta)
+        h_dot = P["h0"] * ca.mtimes(A, dd)  # seed 001 eq. 14
+        h = P["h0"] * momentum_normalised(delta, P["beta"])
+    if dof == 3:
+        rhs = ctx.torque - ca.cross(w, ca.mtimes(J_eff, w))  # seed 004 eq. 11
+        if kind == "cmg":
+            rhs = rhs - h_dot - ca.cross(w, h)  # seed 001 eq. 10
+        w_dot = ca.solve(J_eff, rhs)
+        x_dot = [quat.qdot(q, w), w_dot]
+    else:
+        rhs = ctx.torque
+        if kind == "cmg":
+            rhs = rhs - h_dot[2]  # seed 001 eq. 10, yaw row (w x h has no z part for w = wz z)
+        x_dot = [w, rhs / J_eff]
+    if kind == "cmg":
+        x_dot.append(dd)
+    f_plant = ca.Function("f_plant", [xp, u, p], [ca.vertcat(*x_dot)], ["x", "u", "p"], ["xdot"])
+
+    # ---- measurement effects (may add lag states)
+    for name in effects:
+        eff = get_effect(name)
+        if eff.stage == "sensor":
+            eff.apply(ctx, p[effect_slices[name]])
+    lag_syms = [s for s, _, _ in ctx.lag_states]
+    lag_names = []
+    for k, _ in enumerate(lag_syms):
+        axes_names = ["wx", "wy", "wz"] if dof == 3 else ["wz"]
+        lag_names += [f"lag_{a}" if k == 0 else f"lag{k}_{a}" for a in axes_names]
+    x_all = ca.vertcat(xp, *lag_syms)
+    lag_dot = [(src - s) / ca.fmax(tau, 1e-6) for s, src, tau in ctx.lag_states]
+    f = ca.Function(
+        "f",
+        [x_all, u, p],
+        [ca.vertcat(f_plant(xp, u, p), *lag_dot)],
+        ["x", "u", "p"],
+        ["xdot"],
+    )
+    # exact update of the lag states over one sub-interval h, driven by the mean source
+    xa, xb, hh = ca.SX.sym("xa", xp.shape[0]), ca.SX.sym("xb", xp.shape[0]), ca.SX.sym("h")
+    lag_in = ca.vertcat(*lag_syms) if lag_syms else ca.SX(0, 1)
+    lag_next = []
+    for s, src, tau in ctx.lag_states:
+        src_fn = ca.Function("src", [xp, p], [src])
+        mean = 0.5 * (src_fn(xa, p) + src_fn(xb, p))
+        decay = ca.if_else(tau > 0, ca.exp(-hh / ca.fmax(tau, 1e-12)), 0)
+        lag_next.append(mean + (s - mean) * decay)
+    lag_fn = ca.Function(
+        "lag", [xa, xb, lag_in, p, hh], [ca.vertcat(*lag_next) if lag_next else ca.SX(0, 1)]
+    )
+
+    if dof == 3:
+        y = [q, ctx.rate_measured, g_body / P["gravity"]]
+        y_names = ["qw", "qx", "qy", "qz", "wx", "wy", "wz", "gx", "gy", "gz"]
+    else:
+        y = [yaw, ctx.rate_measured]
+        y_names = ["yaw", "wz"]
+    if kind == "cmg":
+        y.append(delta)
+        y_names += ["d1", "d2", "d3", "d4"]
+    h_fn = ca.Function("h", [x_all, u, p], [ca.vertcat(*y)], ["x", "u", "p"], ["y"])
+    n_plant = len(x_names)
+    return Model(
+        testbed=testbed,
+        effects=effects,
+        x_names=tuple(x_names + lag_names),
+        u_names=tuple(u_names),
+        p_names=tuple(p_names),
+        y_names=tuple(y_names),
+        f=f,
+        h=h_fn,
+        p0=np.array(p0),
+        lag_index=tuple(range(n_plant, n_plant + len(lag_names))),
+        _f_plant=f_plant,
+        _lag=lag_fn,
+    )

@@ -1,0 +1,158 @@
+"""Quaternion algebra: the one module that owns it.
+
+Convention (FORMATS.md): ``q = [qw, qx, qy, qz]``, scalar first, unit norm,
+mapping body vectors to lab vectors, ``v_lab = R(q) v_body``. The product is the
+Hamilton product of seed 001 eq. 18, so kinematics read ``q_dot = 1/2 q (x) [0, w]``
+(seed 001 eq. 17) with ``w`` in body axes.
+
+Every function accepts CasADi symbols (SX/MX/DM column vectors) or NumPy arrays.
+NumPy inputs may be stacked along the first axis, shape ``(N, 4)`` / ``(N, 3)``.
+"""
+
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+
+__all__ = [
+    "qmul",
+    "qconj",
+    "rotation_matrix",
+    "rotate",
+    "rotate_inverse",
+    "qdot",
+    "qexp",
+    "from_axis_angle",
+    "from_yaw",
+    "yaw_of",
+    "tilt_of",
+    "normalize",
+]
+
+_CASADI = (ca.SX, ca.MX, ca.DM)
+
+
+def _is_ca(*xs) -> bool:
+    return any(isinstance(x, _CASADI) for x in xs)
+
+
+def _get(v, i):
+    return v[i] if _is_ca(v) else np.asarray(v)[..., i]
+
+
+def _stack(items, like):
+    if _is_ca(*like):
+        return ca.vertcat(*items)
+    return np.stack(np.broadcast_arrays(*items), axis=-1)
+
+
+def qmul(r, p):
+    """Hamilton product ``r (x) p`` (seed 001 eq. 18)."""
+    r0, r1, r2, r3 = (_get(r, i) for i in range(4))
+    p0, p1, p2, p3 = (_get(p, i) for i in range(4))
+    return _stack(
+        [
+            p0 * r0 - p1 * r1 - p2 * r2 - p3 * r3,
+            p0 * r1 + p1 * r0 - p2 * r3 + p3 * r2,
+            p0 * r2 + p2 * r0 + p1 * r3 - p3 * r1,
+            p0 * r3 - p1 * r2 + p2 * r1 + p3 * r0,
+        ],
+        (r, p),
+    )
+
+
+def qconj(q):
+    """Conjugate ``[qw, -qx, -qy, -qz]`` (the inverse of a unit quaternion)."""
+    return _stack([_get(q, 0), -_get(q, 1), -_get(q, 2), -_get(q, 3)], (q,))
+
+
+def normalize(q):
+    """Quaternion divided by its norm."""
+    if _is_ca(q):
+        return q / ca.norm_2(q)
+    q = np.asarray(q, dtype=float)
+    return q / np.linalg.norm(q, axis=-1, keepdims=True)
+
+
+def rotation_matrix(q):
+    """Body -> lab direction cosine matrix ``R(q)`` (3x3), ``v_lab = R v_body``.
+
+    For a CasADi ``q`` returns a CasADi 3x3; for NumPy ``(4,)`` a ``(3, 3)`` array,
+    for ``(N, 4)`` an ``(N, 3, 3)`` array.
+    """
+    w, x, y, z = (_get(q, i) for i in range(4))
+    rows = [
+        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+    ]
+    if _is_ca(q):
+        return ca.vertcat(*[ca.horzcat(*row) for row in rows])
+    return np.stack([np.stack(np.broadcast_arrays(*row), axis=-1) for row in rows], axis=-2)
+
+
+def rotate(q, v_body):
+    """Body vector to lab frame: ``R(q) v``."""
+    if _is_ca(q, v_body):
+        return ca.mtimes(rotation_matrix(q), v_body)
+    return np.einsum("...ij,...j->...i", rotation_matrix(q), np.asarray(v_body, dtype=float))
+
+
+def rotate_inverse(q, v_lab):
+    """Lab vector to body frame: ``R(q)^T v``."""
+    if _is_ca(q, v_lab):
+        return ca.mtimes(rotation_matrix(q).T, v_lab)
+    return np.einsum("...ji,...j->...i", rotation_matrix(q), np.asarray(v_lab, dtype=float))
+
+
+def qdot(q, w_body):
+    """Kinematics ``q_dot = 1/2 q (x) [0, w]`` (seed 001 eq. 17, seed 004 eq. 1)."""
+    zero = 0 * _get(w_body, 0)
+    wq = _stack([zero, _get(w_body, 0), _get(w_body, 1), _get(w_body, 2)], (w_body,))
+    return 0.5 * qmul(q, wq)
+
+
+def qexp(rotvec):
+    """Unit quaternion of a rotation vector ``theta * axis`` (rad).
+
+    Smooth at zero: uses ``sin(t/2)/t`` written with ``sinc`` for NumPy and a
+    Taylor-safe form for CasADi, so it can be differentiated at the origin.
+    """
+    if _is_ca(rotvec):
+        t2 = ca.sumsqr(rotvec)
+        t = ca.sqrt(t2 + 1e-300)
+        half = ca.if_else(t2 < 1e-12, 0.5 - t2 / 48.0, ca.sin(t / 2) / t)
+        return ca.vertcat(ca.cos(t / 2), half * rotvec)
+    v = np.asarray(rotvec, dtype=float)
+    t = np.linalg.norm(v, axis=-1, keepdims=True)
+    half = 0.5 * np.sinc(t / (2 * np.pi))  # sin(t/2)/t
+    return np.concatenate([np.cos(t / 2), half * v], axis=-1)
+
+
+def from_axis_angle(axis, angle):
+    """Unit quaternion for a rotation of ``angle`` (rad) about the unit ``axis``."""
+    axis = np.asarray(axis, dtype=float)
+    return np.concatenate([[np.cos(angle / 2)], np.sin(angle / 2) * axis / np.linalg.norm(axis)])
+
+
+def from_yaw(yaw):
+    """Quaternion of a rotation ``yaw`` (rad) about lab z."""
+    if _is_ca(yaw):
+        return ca.vertcat(ca.cos(yaw / 2), 0, 0, ca.sin(yaw / 2))
+    yaw = np.asarray(yaw, dtype=float)
+    zero = np.zeros_like(yaw)
+    return np.stack([np.cos(yaw / 2), zero, zero, np.sin(yaw / 2)], axis=-1)
+
+
+def yaw_of(q):
+    """Yaw (rad) of the 3-2-1 Euler sequence, as seed 001 reports attitude errors."""
+    w, x, y, z = (_get(q, i) for i in range(4))
+    num, den = 2 * (w * z + x * y), 1 - 2 * (y * y + z * z)
+    return ca.atan2(num, den) if _is_ca(q) else np.arctan2(num, den)
+
+
+def tilt_of(q):
+    """Angle (rad) between body z and lab z."""
+    x, y = _get(q, 1), _get(q, 2)
+    c = 1 - 2 * (x * x + y * y)
+    return ca.acos(ca.fmin(ca.fmax(c, -1), 1)) if _is_ca(q) else np.arccos(np.clip(c, -1, 1))

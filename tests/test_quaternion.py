@@ -1,0 +1,87 @@
+"""Quaternion algebra: group properties (hypothesis) and agreement between CasADi and NumPy."""
+
+import casadi as ca
+import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from numpy.testing import assert_allclose
+
+from airbearing.models import quaternion as quat
+
+finite = st.floats(-1.0, 1.0, allow_nan=False)
+vec3 = st.tuples(finite, finite, finite).map(np.array)
+unit_q = (
+    st.tuples(finite, finite, finite, finite)
+    .filter(lambda v: np.linalg.norm(v) > 0.1)
+    .map(lambda v: np.array(v) / np.linalg.norm(v))
+)
+
+
+@given(unit_q, unit_q, unit_q)
+def test_product_is_associative(a, b, c):
+    assert_allclose(quat.qmul(quat.qmul(a, b), c), quat.qmul(a, quat.qmul(b, c)), atol=1e-12)
+
+
+@given(unit_q)
+def test_conjugate_is_inverse(q):
+    assert_allclose(quat.qmul(q, quat.qconj(q)), [1, 0, 0, 0], atol=1e-12)
+
+
+@given(unit_q, unit_q)
+def test_rotation_matrix_is_a_homomorphism(a, b):
+    # R(a (x) b) = R(a) R(b): the Hamilton product composes body -> lab rotations
+    assert_allclose(
+        quat.rotation_matrix(quat.qmul(a, b)),
+        quat.rotation_matrix(a) @ quat.rotation_matrix(b),
+        atol=1e-12,
+    )
+
+
+@given(unit_q, vec3)
+def test_rotate_and_inverse(q, v):
+    R = quat.rotation_matrix(q)
+    assert_allclose(R @ R.T, np.eye(3), atol=1e-12)
+    assert_allclose(quat.rotate_inverse(q, quat.rotate(q, v)), v, atol=1e-12)
+
+
+@given(vec3)
+def test_exp_is_unit_and_matches_axis_angle(v):
+    q = quat.qexp(v)
+    assert_allclose(np.linalg.norm(q), 1.0, atol=1e-14)
+    angle = np.linalg.norm(v)
+    if angle > 1e-6:
+        assert_allclose(q, quat.from_axis_angle(v / angle, angle), atol=1e-12)
+
+
+@settings(max_examples=25)
+@given(unit_q, vec3)
+def test_casadi_and_numpy_agree(q, w):
+    qs, ws = ca.SX.sym("q", 4), ca.SX.sym("w", 3)
+    f = ca.Function("f", [qs, ws], [quat.qdot(qs, ws), quat.rotate(qs, ws), quat.qexp(ws)])
+    qd, rv, ex = (np.asarray(o).ravel() for o in f(q, w))
+    assert_allclose(qd, quat.qdot(q, w), atol=1e-14)
+    assert_allclose(rv, quat.rotate(q, w), atol=1e-14)
+    assert_allclose(ex, quat.qexp(w), atol=1e-14)
+
+
+def test_qdot_matches_seed004_eq1():
+    # seed 004 eq. 1 writes the kinematics scalar-last: d[q1..q4]/dt = 1/2 Omega(w) [q1..q4]
+    rng = np.random.default_rng(0)
+    q = rng.normal(size=4)
+    q /= np.linalg.norm(q)
+    wx, wy, wz = rng.normal(size=3)
+    omega = np.array(
+        [[0, wz, -wy, wx], [-wz, 0, wx, wy], [wy, -wx, 0, wz], [-wx, -wy, -wz, 0]]
+    )
+    q_last = np.r_[q[1:], q[0]]
+    expected = 0.5 * omega @ q_last
+    got = quat.qdot(q, [wx, wy, wz])
+    assert_allclose(np.r_[got[1:], got[0]], expected, atol=1e-14)
+
+
+def test_yaw_and_stacked_inputs():
+    yaws = np.linspace(-3, 3, 7)
+    q = quat.from_yaw(yaws)
+    assert q.shape == (7, 4)
+    assert_allclose(quat.yaw_of(q), yaws, atol=1e-12)
+    assert_allclose(quat.tilt_of(q), 0, atol=1e-7)
