@@ -40,8 +40,11 @@ def scipy_slew(tb, angle=np.pi, duration=40.0):
     def A(d):
         c, s = np.cos(d), np.sin(d)
         return np.array(
-            [[-cb * c[0], s[1], cb * c[2], -s[3]], [-s[0], -cb * c[1], s[2], cb * c[3]],
-             [sb * c[0], sb * c[1], sb * c[2], sb * c[3]]]
+            [
+                [-cb * c[0], s[1], cb * c[2], -s[3]],
+                [-s[0], -cb * c[1], s[2], cb * c[3]],
+                [sb * c[0], sb * c[1], sb * c[2], sb * c[3]],
+            ]
         )
 
     x = np.zeros(6)
@@ -75,15 +78,21 @@ def scipy_platform(tb, duration=300.0):
         q, w = z[:4], z[4:]
         qw, qx, qy, qz = q
         R = np.array(
-            [[1 - 2 * (qy * qy + qz * qz), 2 * (qx * qy - qw * qz), 2 * (qx * qz + qw * qy)],
-             [2 * (qx * qy + qw * qz), 1 - 2 * (qx * qx + qz * qz), 2 * (qy * qz - qw * qx)],
-             [2 * (qx * qz - qw * qy), 2 * (qy * qz + qw * qx), 1 - 2 * (qx * qx + qy * qy)]]
+            [
+                [1 - 2 * (qy * qy + qz * qz), 2 * (qx * qy - qw * qz), 2 * (qx * qz + qw * qy)],
+                [2 * (qx * qy + qw * qz), 1 - 2 * (qx * qx + qz * qz), 2 * (qy * qz - qw * qx)],
+                [2 * (qx * qz - qw * qy), 2 * (qy * qz + qw * qx), 1 - 2 * (qx * qx + qy * qy)],
+            ]
         )
         gb = R.T @ np.array([0, 0, -g])
         wd = Jinv @ (m * np.cross(r, gb) - np.cross(w, J @ w))
         qd = 0.5 * np.array(
-            [-qx * w[0] - qy * w[1] - qz * w[2], qw * w[0] + qy * w[2] - qz * w[1],
-             qw * w[1] - qx * w[2] + qz * w[0], qw * w[2] + qx * w[1] - qy * w[0]]
+            [
+                -qx * w[0] - qy * w[1] - qz * w[2],
+                qw * w[0] + qy * w[2] - qz * w[1],
+                qw * w[1] - qx * w[2] + qz * w[0],
+                qw * w[2] + qx * w[1] - qy * w[0],
+            ]
         )
         return np.r_[qd, wd]
 

@@ -22,12 +22,30 @@ def run(args):
 
 def test_simulate_slew_writes_log_and_summary(tmp_path):
     log, js = tmp_path / "log.csv", tmp_path / "summary.json"
-    rc = run(["simulate", "cmg-yaw", "--scenario", "slew", "--yaw-deg", "180", "--ideal",
-              "-o", str(log), "--json", str(js)])
+    rc = run(
+        [
+            "simulate",
+            "cmg-yaw",
+            "--scenario",
+            "slew",
+            "--yaw-deg",
+            "180",
+            "--ideal",
+            "-o",
+            str(log),
+            "--json",
+            str(js),
+        ]
+    )
     assert rc == 0
     s = json.loads(js.read_text())
-    for key in ("peak_rate_deg_s", "t_peak_s", "gimbal_min_deg", "gimbal_final_deg",
-                "final_yaw_error_deg"):
+    for key in (
+        "peak_rate_deg_s",
+        "t_peak_s",
+        "gimbal_min_deg",
+        "gimbal_final_deg",
+        "final_yaw_error_deg",
+    ):
         assert key in s
     assert len(s["gimbal_min_deg"]) == 4 and len(s["gimbal_final_deg"]) == 4
     assert s["peak_rate_deg_s"] == pytest.approx(51.38, rel=0.03)  # seed 001 Sec. 5
@@ -36,9 +54,30 @@ def test_simulate_slew_writes_log_and_summary(tmp_path):
 
 def test_simulate_free_with_effect(tmp_path):
     out = tmp_path / "free.parquet"
-    rc = run(["simulate", "platform-3dof", "--scenario", "free", "--initial-rate", "0.3", "0.1",
-              "-1.4", "--sliders", "0.003", "-0.002", "0.004", "--effect",
-              "viscous_friction=6e-6", "--duration", "5", "--seed", "3", "-o", str(out)])
+    rc = run(
+        [
+            "simulate",
+            "platform-3dof",
+            "--scenario",
+            "free",
+            "--initial-rate",
+            "0.3",
+            "0.1",
+            "-1.4",
+            "--sliders",
+            "0.003",
+            "-0.002",
+            "0.004",
+            "--effect",
+            "viscous_friction=6e-6",
+            "--duration",
+            "5",
+            "--seed",
+            "3",
+            "-o",
+            str(out),
+        ]
+    )
     assert rc == 0
     log = read_log(out, load_testbed("platform-3dof"))
     assert log.data["s1"].iloc[0] == pytest.approx(0.003)
@@ -57,8 +96,17 @@ def test_simulate_free_with_effect(tmp_path):
         (["simulate", "platform-3dof", "--scenario", "free", "--sliders", "1", "0", "0"], "travel"),
         (["simulate", "cmg-yaw", "--steering", "nope"], "--steering"),
     ],
-    ids=["unknown-testbed", "scenario", "effect-name", "effect-syntax", "negative-duration",
-         "non-number", "platform-slew", "slider-travel", "steering"],
+    ids=[
+        "unknown-testbed",
+        "scenario",
+        "effect-name",
+        "effect-syntax",
+        "negative-duration",
+        "non-number",
+        "platform-slew",
+        "slider-travel",
+        "steering",
+    ],
 )
 def test_bad_input_exits_2_with_one_line(tmp_path, capsys, args, fragment):
     out = tmp_path / "never.csv"
@@ -72,9 +120,15 @@ def test_bad_input_exits_2_with_one_line(tmp_path, capsys, args, fragment):
 
 def test_console_script_has_no_traceback(tmp_path):
     proc = subprocess.run(
-        [sys.executable, "-c", "from airbearing.cli import main; main()", "simulate",
-         str(tmp_path / "missing.toml")],
-        capture_output=True, text=True,
+        [
+            sys.executable,
+            "-c",
+            "from airbearing.cli import main; main()",
+            "simulate",
+            str(tmp_path / "missing.toml"),
+        ],
+        capture_output=True,
+        text=True,
     )
     assert proc.returncode == 2
     assert "Traceback" not in proc.stderr

@@ -47,8 +47,9 @@ def test_registry_names_the_whole_vocabulary():
 def test_gravity_torque_by_hand(platform):
     # tilt the platform 10 deg about body x; offset r = (0, 0, -2.6 mm):
     # tau = m r x g_body, |tau| = m g |r_z| sin(10 deg) about x, restoring (pendulous)
-    tb = platform.replace(body=Body(dof=3, mass=6.3, inertia=platform.body.inertia,
-                                    cm_offset=(0.0, 0.0, -0.0026)))
+    tb = platform.replace(
+        body=Body(dof=3, mass=6.3, inertia=platform.body.inertia, cm_offset=(0.0, 0.0, -0.0026))
+    )
     m = build_model(tb)
     q = quat.from_axis_angle([1, 0, 0], np.deg2rad(10))
     x = m.x0(q=q)

@@ -70,9 +70,7 @@ def test_qdot_matches_seed004_eq1():
     q = rng.normal(size=4)
     q /= np.linalg.norm(q)
     wx, wy, wz = rng.normal(size=3)
-    omega = np.array(
-        [[0, wz, -wy, wx], [-wz, 0, wx, wy], [wy, -wx, 0, wz], [-wx, -wy, -wz, 0]]
-    )
+    omega = np.array([[0, wz, -wy, wx], [-wz, 0, wx, wy], [wy, -wx, 0, wz], [-wx, -wy, -wz, 0]])
     q_last = np.r_[q[1:], q[0]]
     expected = 0.5 * omega @ q_last
     got = quat.qdot(q, [wx, wy, wz])

@@ -51,7 +51,9 @@ def foundation_section(report: Report, *, quick: bool = False) -> None:
         "-33.11 deg. With J = 0.00323 kg m^2 the gimbals go past -80 deg, as measured (Table 7)."
     )
     report.table(rows)
-    report.figure(fig, "Yaw rate and gimbal 1 angle of the seed-001 slews (all four gimbals coincide).")
+    report.figure(
+        fig, "Yaw rate and gimbal 1 angle of the seed-001 slews (all four gimbals coincide)."
+    )
 
     report.heading("Free oscillation of the seed-004 platform")
     tbp = load_testbed("platform-3dof")

@@ -49,7 +49,9 @@ def figure_html(fig, caption: str = "", *, fmt: str = "svg") -> str:
     mime = "image/svg+xml" if fmt == "svg" else "image/png"
     data = base64.b64encode(buf.getvalue()).decode("ascii")
     cap = f"<figcaption>{html.escape(caption)}</figcaption>" if caption else ""
-    return f'<figure><img alt="{html.escape(caption)}" src="data:{mime};base64,{data}"/>{cap}</figure>'
+    return (
+        f'<figure><img alt="{html.escape(caption)}" src="data:{mime};base64,{data}"/>{cap}</figure>'
+    )
 
 
 def _fmt(v) -> str:

@@ -39,7 +39,8 @@ def slew(
     """
     if testbed.kind != "cmg":
         raise InputError(
-            f"{testbed.source}: the slew scenario needs a kind = 'cmg' testbed, got '{testbed.kind}'"
+            f"{testbed.source}: the slew scenario needs a kind = 'cmg' testbed, "
+            f"got '{testbed.kind}'"
         )
     if duration <= 0:
         raise InputError(f"--duration {duration}: expected a positive time in s")
@@ -57,7 +58,9 @@ def slew(
     if testbed.body.dof == 1 and tuple(np.round(axis, 12)) != (0.0, 0.0, 1.0):
         raise InputError("a dof = 1 testbed slews about body z only: leave the axis at 0 0 1")
     q_c = quat.from_axis_angle(axis, np.deg2rad(angle_deg))
-    return simulate(model, ctl, duration=duration, x0=model.x0(), reference=q_c, seed=seed, noise=not ideal)
+    return simulate(
+        model, ctl, duration=duration, x0=model.x0(), reference=q_c, seed=seed, noise=not ideal
+    )
 
 
 def slew_summary(result: SimResult) -> dict:
@@ -111,7 +114,9 @@ def free_oscillation(
             raise InputError(f"--sliders: expected 3 positions in m, got {list(s)}")
         travel = testbed.masses.travel if testbed.masses else 0.0
         if np.any(np.abs(s) > travel):
-            raise InputError(f"--sliders {list(s)}: each must lie within +-{travel} m (masses.travel)")
+            raise InputError(
+                f"--sliders {list(s)}: each must lie within +-{travel} m (masses.travel)"
+            )
         u[model.index(["s1", "s2", "s3"], "u")] = s
         if testbed.field is not None:
             u[model.index(["bx_lab", "by_lab", "bz_lab"], "u")] = testbed.field.lab_vec

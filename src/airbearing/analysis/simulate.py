@@ -217,8 +217,10 @@ def log_from_arrays(model, t, x, y, u, extra, controller, ref) -> Log:
             cols[k] = U[k]
         b_lab = np.stack([U["bx_lab"], U["by_lab"], U["bz_lab"]], axis=1)
         if np.any(b_lab != 0):
-            q = np.stack([X[k] for k in ("qw", "qx", "qy", "qz")], axis=1) if model.dof == 3 else (
-                quat.from_yaw(X["yaw"])
+            q = (
+                np.stack([X[k] for k in ("qw", "qx", "qy", "qz")], axis=1)
+                if model.dof == 3
+                else (quat.from_yaw(X["yaw"]))
             )
             b_body = quat.rotate_inverse(q, b_lab)
             cols.update(bx=b_body[:, 0], by=b_body[:, 1], bz=b_body[:, 2])

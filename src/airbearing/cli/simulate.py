@@ -22,7 +22,9 @@ def simulate(
     scenario: Annotated[str, typer.Option(help="slew (CMG) or free (free oscillation).")] = "slew",
     yaw_deg: Annotated[float, typer.Option(help="Slew angle, deg.")] = 180.0,
     axis: Annotated[tuple[float, float, float], typer.Option(help="Slew axis, body.")] = (0, 0, 1),
-    duration: Annotated[float | None, typer.Option(help="Run length, s (slew 40, free 60).")] = None,
+    duration: Annotated[
+        float | None, typer.Option(help="Run length, s (slew 40, free 60).")
+    ] = None,
     seed: Annotated[int, typer.Option(help="Noise seed.")] = 0,
     steering: Annotated[str, typer.Option(help="Steering law.")] = "mp",
     rate_limit: Annotated[str, typer.Option(help="scale (seed 001 eq. 4) or clip.")] = "scale",
@@ -40,7 +42,9 @@ def simulate(
         list[str] | None, typer.Option(help="NAME=VALUE effect acting in the truth (repeatable).")
     ] = None,
     attitude_noise: Annotated[float, typer.Option(help="Attitude noise, rad (1 sigma).")] = 0.0,
-    output: Annotated[Path | None, typer.Option("-o", "--output", help="Log, .csv or .parquet.")] = None,
+    output: Annotated[
+        Path | None, typer.Option("-o", "--output", help="Log, .csv or .parquet.")
+    ] = None,
     json_out: Annotated[Path | None, typer.Option("--json", help="Summary JSON.")] = None,
 ) -> None:
     """Simulate a testbed and write the log (FORMATS.md) and a summary JSON."""

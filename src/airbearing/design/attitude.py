@@ -1,4 +1,4 @@
-"""The CMG attitude loop of seed 001: gyro filter, attitude propagation, quaternion PID, steering."""
+"""The CMG attitude loop of seed 001: gyro filter, attitude propagation, PID, steering."""
 
 from __future__ import annotations
 
@@ -59,7 +59,9 @@ def cmg_attitude_controller(
         ``K_p, K_i, K_w``.
     """
     if model.kind != "cmg":
-        raise InputError(f"the CMG attitude controller needs a kind = 'cmg' testbed, got '{model.kind}'")
+        raise InputError(
+            f"the CMG attitude controller needs a kind = 'cmg' testbed, got '{model.kind}'"
+        )
     if form not in ("normalised", "physical"):
         raise InputError(f"form '{form}': expected 'normalised' or 'physical'")
     if attitude not in ("gyro", "measured") or (attitude == "measured" and model.dof != 3):
@@ -110,8 +112,11 @@ def cmg_attitude_controller(
     c_next = ca.vertcat(G, q_est, integral_next)
     extra = ca.vertcat(q_est, G, T_c, quat.yaw_of(q_est))
     fn = ca.Function(
-        "cmg_attitude", [y, c, ref, g, t], [u, c_next, extra],
-        ["y", "c", "ref", "gains", "t"], ["u", "c_next", "extra"],
+        "cmg_attitude",
+        [y, c, ref, g, t],
+        [u, c_next, extra],
+        ["y", "c", "ref", "gains", "t"],
+        ["u", "c_next", "extra"],
     )
     c0 = np.zeros(10)
     c0[3] = 1.0
@@ -122,5 +127,17 @@ def cmg_attitude_controller(
         gains=np.asarray(gains, float),
         gain_names=("K_p", "K_i", "K_w"),
         ref_names=("qc_w", "qc_x", "qc_y", "qc_z"),
-        extra_names=("qe_w", "qe_x", "qe_y", "qe_z", "G_x", "G_y", "G_z", "Tc_x", "Tc_y", "Tc_z", "yaw_est"),
+        extra_names=(
+            "qe_w",
+            "qe_x",
+            "qe_y",
+            "qe_z",
+            "G_x",
+            "G_y",
+            "G_z",
+            "Tc_x",
+            "Tc_y",
+            "Tc_z",
+            "yaw_est",
+        ),
     )

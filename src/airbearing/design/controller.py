@@ -39,7 +39,12 @@ class Controller:
         for k, v in values.items():
             g[self.gain_names.index(k)] = v
         return Controller(
-            self.name, self.function, self.c0, g, self.gain_names, self.ref_names,
+            self.name,
+            self.function,
+            self.c0,
+            g,
+            self.gain_names,
+            self.ref_names,
             self.extra_names,
         )
 
@@ -55,7 +60,10 @@ def constant_input(model, u: np.ndarray) -> Controller:
     g = ca.SX.sym("u_const", model.nu)
     t = ca.SX.sym("t")
     fn = ca.Function(
-        "open_loop", [y, c, ref, g, t], [g, c, ca.SX(0, 1)],
-        ["y", "c", "ref", "gains", "t"], ["u", "c_next", "extra"],
+        "open_loop",
+        [y, c, ref, g, t],
+        [g, c, ca.SX(0, 1)],
+        ["y", "c", "ref", "gains", "t"],
+        ["u", "c_next", "extra"],
     )
     return Controller("open_loop", fn, np.zeros(0), np.asarray(u, float), tuple(model.u_names), ())

@@ -112,9 +112,7 @@ class Model:
 
     def index(self, names, which: str = "x") -> list[int]:
         """Positions of ``names`` in the ``x``, ``u``, ``p`` or ``y`` vector."""
-        table = {"x": self.x_names, "u": self.u_names, "p": self.p_names, "y": self.y_names}[
-            which
-        ]
+        table = {"x": self.x_names, "u": self.u_names, "p": self.p_names, "y": self.y_names}[which]
         names = [names] if isinstance(names, str) else list(names)
         missing = [n for n in names if n not in table]
         if missing:
@@ -236,9 +234,14 @@ def build_model(testbed: Testbed, effects: Mapping | None = None) -> Model:
         reason = eff.applies(kind, dof, has_field)
         if reason:
             raise InputError(f"effect '{name}' cannot act on testbed '{testbed.name}': {reason}")
-        per_axis = np.ndim(value) == 1 and len(value) == 3 and name not in (
-            "cm_offset_error",
-            "residual_dipole",
+        per_axis = (
+            np.ndim(value) == 1
+            and len(value) == 3
+            and name
+            not in (
+                "cm_offset_error",
+                "residual_dipole",
+            )
         )
         names = effect_param_names(name, dof, per_axis)
         vals = np.atleast_1d(np.asarray(value, dtype=float))
