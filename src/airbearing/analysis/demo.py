@@ -12,7 +12,7 @@ from pathlib import Path
 import matplotlib.pyplot as plt
 import numpy as np
 
-from airbearing.analysis import balancing
+from airbearing.analysis import balancing, cmg_study
 from airbearing.analysis.html import Report
 from airbearing.analysis.scenarios import free_oscillation, free_summary, slew, slew_summary
 from airbearing.io.testbed import load_testbed
@@ -77,6 +77,7 @@ def foundation_section(report: Report, *, quick: bool = False) -> None:
 #: The demo's sections, in order: (title, function).
 SECTIONS = [
     ("Foundation", foundation_section),
+    ("CMG cluster", cmg_study.demo_section),
     ("Balancing", balancing.demo_section),
 ]
 

@@ -72,7 +72,8 @@ def cmg_attitude_controller(
     if not 0 < fg <= 1:
         raise InputError(f"lowpass factor {fg}: expected 0 < f_g <= 1")
     beta, h0, limit = tb.cmg.skew, tb.cmg.h0, tb.cmg.max_gimbal_rate
-    steer = steering_function(steering, **(steering_options or {}))
+    opts = {"skew": beta, **(steering_options or {})}  # null motion needs the pyramid's skew
+    steer = steering_function(steering, **opts)
 
     y = ca.SX.sym("y", model.ny)
     c = ca.SX.sym("c", 10)  # filtered rate G (3), attitude estimate (4), PID integral (3)
