@@ -64,7 +64,15 @@ def mutated(kind: str, key: str, value: object) -> dict:
 
 
 def test_builtin_names():
-    assert BUILTIN_TESTBEDS == ("platform-3dof", "cmg-yaw")
+    assert BUILTIN_TESTBEDS == ("platform-3dof", "cmg-yaw", "cmg-3dof")
+
+
+def test_cmg_3dof_values():
+    tb = load_testbed("cmg-3dof")
+    assert tb.kind == "cmg" and tb.dof == 3
+    # seed 001 Table 5: J = 0.0033 kg m^2, the same for every axis
+    assert np.array_equal(tb.body.inertia_matrix, 0.0033 * np.eye(3))
+    assert tb.cmg == load_testbed("cmg-yaw").cmg
 
 
 def test_platform_3dof_values():

@@ -50,7 +50,7 @@ __all__ = [
 ]
 
 #: Names accepted by :func:`load_testbed` in place of a path.
-BUILTIN_TESTBEDS: tuple[str, ...] = ("platform-3dof", "cmg-yaw")
+BUILTIN_TESTBEDS: tuple[str, ...] = ("platform-3dof", "cmg-yaw", "cmg-3dof")
 #: Values of the top-level ``kind`` key.
 KINDS: tuple[str, ...] = ("platform", "cmg")
 #: m/s^2, default of the top-level ``gravity`` key (FORMATS.md).
