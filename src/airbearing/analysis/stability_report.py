@@ -1,0 +1,384 @@
+"""Linear stability report of a loop: HTML (self-contained) and the same numbers as JSON.
+
+Sections: gains and verdict; margins table (discrete loop, every actuator channel
+loop-at-a-time, the multi-loop disk margin, pass/fail against the specification) and
+the continuous design model; the worst case over the uncertainty box; Bode and Nyquist
+plots with the margins marked; the scenario responses, linear and nonlinear (the
+CasADi closed loop of :mod:`airbearing.analysis.simulate` with the same controller,
+ideal actuators and the same one-sample delay) overlaid; the closed-loop pole map.
+"""
+
+from __future__ import annotations
+
+import math
+
+import matplotlib.pyplot as plt
+import numpy as np
+
+from airbearing.analysis.html import Report, table_html
+from airbearing.analysis.margins import _response, analyse_loop, frequency_grid, json_number
+from airbearing.analysis.simulate import closed_loop_rollout
+from airbearing.design.loops import Loop, make_loop, with_delay
+from airbearing.design.tuning import Spec, evaluate, scenario_response, tune
+from airbearing.models import quaternion as quat
+
+__all__ = ["stability_report", "report_for_loop", "nonlinear_scenario", "demo_section"]
+
+_DIST_TORQUE = 7e-5  # N m, seed 000 Tables 1-2: residual torque after balancing (~7e-5 N m)
+
+
+def nonlinear_scenario(loop: Loop, t_end: float):
+    """The reference scenario in the nonlinear closed loop (ideal actuators, the delay).
+
+    Starts at the trim with the controller at its trim state; balancing: the gravity
+    torque of seed 000's 0.5 mm slider offset as a constant disturbance torque; attitude:
+    a 30 deg yaw step. Returns ``(t, dict)`` of the same signals as
+    :func:`~airbearing.design.tuning.scenario_response` (deviations from the trim).
+    """
+    m = loop.model
+    ctl = with_delay(loop.controller, m, loop.delay_samples, u_hold=loop.trim.u)
+    dt = loop.dt
+    n = int(round(t_end / dt))
+    c_trim = loop.controller_trim()
+    ctl = type(ctl)(
+        ctl.name,
+        ctl.function,
+        np.concatenate([c_trim, ctl.c0[c_trim.size :]]),
+        loop.gain_vector,
+        ctl.gain_names,
+        ctl.ref_names,
+        ctl.extra_names,
+    )
+    nref = len(ctl.ref_names)
+    V = np.zeros((m.ny + 3 + nref + 1, n))
+    V[-1] = np.arange(n) * dt
+    if loop.kind == "balancing":
+        tb = m.testbed
+        V[m.ny + 1] = tb.masses.mass_vec[0] * tb.gravity * 0.5e-3
+        V[m.ny + 0] = -tb.masses.mass_vec[1] * tb.gravity * 0.5e-3
+    else:
+        yaw0 = float(loop.trim.x[0]) if m.dof == 1 else 0.0
+        V[m.ny + 3 : m.ny + 3 + nref] = np.asarray(quat.from_yaw(yaw0 + math.radians(30.0)))[
+            :, None
+        ]
+    F = closed_loop_rollout(m, ctl, n, 4)
+    Z, R = F(np.concatenate([loop.trim.x, ctl.c0]), V, loop.p, ctl.gains)
+    R = np.asarray(R).T
+    x = R[:, : m.nx]
+    u = R[:, m.nx + m.ny : m.nx + m.ny + m.nu]
+    out = {}
+    for ch in loop.channels:
+        out[ch] = u[:, m.index(ch, "u")[0]] - loop.trim.value(ch)
+    if m.dof == 1:
+        out["true_yaw"] = x[:, 0] - loop.trim.x[0]
+        out["true_wz"] = x[:, 1]
+    else:
+        dq = quat.qmul(quat.qconj(loop.trim.x[0:4]), x[:, 0:4])
+        out["true_th_x"], out["true_th_y"], out["true_th_z"] = (2 * dq[:, 1:4]).T
+    return np.arange(n) * dt, out
+
+
+def _bode_nyquist(analysis, loop: Loop, discrete: bool):
+    figs = []
+    fig, (a1, a2) = plt.subplots(2, 1, figsize=(10, 6), sharex=True)
+    fig2, ax = plt.subplots(figsize=(6.5, 6))
+    for name, mg in analysis.channels.items():
+        L = (
+            loop.axis_loop(discrete=discrete)
+            if name == "yaw"
+            else loop.loop_transfer(name, discrete=discrete)
+        )
+        w = frequency_grid(L, 1500)
+        Lw = _response(L, w)
+        (line,) = a1.semilogx(w, 20 * np.log10(np.abs(Lw)), label=name)
+        a2.semilogx(w, np.degrees(np.unwrap(np.angle(Lw))), color=line.get_color())
+        for wc in mg.crossover_rad_s:
+            a1.plot(wc, 0, "o", color=line.get_color())
+        for wp in mg.phase_crossover_rad_s:
+            a2.plot(
+                wp,
+                np.degrees(np.angle(complex(_response(L, [wp])[0]))) % 360 - 360,
+                "s",
+                color=line.get_color(),
+            )
+        ax.plot(Lw.real, Lw.imag, color=line.get_color(), label=name)
+        ax.plot(Lw.real, -Lw.imag, color=line.get_color(), ls=":", lw=0.8)
+        for wc in mg.crossover_rad_s:
+            z = complex(_response(L, [wc])[0])
+            ax.plot([0, z.real], [0, z.imag], color=line.get_color(), lw=0.6)
+    a1.axhline(0, color="k", lw=0.6)
+    a2.axhline(-180, color="k", lw=0.6)
+    a1.set(ylabel="|L| (dB)", title="Loop at the actuator input (dots: gain crossovers)")
+    a2.set(xlabel="frequency (rad/s)", ylabel="phase (deg)")
+    a1.legend(fontsize=8)
+    figs.append(
+        (
+            fig,
+            "Bode plot of every loop-at-a-time transfer; dots mark gain crossovers "
+            "(phase margin), squares phase crossovers (gain margin).",
+        )
+    )
+    th = np.linspace(0, 2 * np.pi, 200)
+    ax.plot(np.cos(th), np.sin(th), "k--", lw=0.6, label="|L| = 1")
+    ms = max(m.sensitivity_peak for m in analysis.channels.values())
+    ax.plot(
+        -1 + np.cos(th) / ms, np.sin(th) / ms, "r:", lw=0.8, label=f"1/Ms circle (Ms = {ms:.2f})"
+    )
+    ax.plot(-1, 0, "r+", ms=12, mew=2)
+    ax.set(xlim=(-3, 1.5), ylim=(-2.25, 2.25), xlabel="Re L", ylabel="Im L", aspect="equal")
+    ax.legend(fontsize=8, loc="lower right")
+    figs.append(
+        (
+            fig2,
+            "Nyquist plot near -1 (solid: positive frequencies; rays: phase margin "
+            "at each gain crossover; red: the -1 point and the 1/Ms circle).",
+        )
+    )
+    return figs
+
+
+def _margin_rows(analysis, spec: Spec | None):
+    rows = []
+    for name, m in analysis.channels.items():
+        r = {
+            "loop": name,
+            "GM (dB)": json_number(m.gain_margin_db),
+            "PM (deg)": json_number(m.phase_margin_deg),
+            "delay margin (s)": json_number(m.delay_margin_s),
+            "disk margin": m.disk_margin,
+            "Ms": m.sensitivity_peak,
+            "Mt": m.complementary_peak,
+            "w_B (rad/s)": m.bandwidth_rad_s,
+            "stable": m.stable,
+        }
+        if spec is not None:
+            r["GM ok"] = m.gain_margin_db >= spec.gain_margin_db
+            r["PM ok"] = m.phase_margin_deg >= spec.phase_margin_deg
+            r["Ms ok"] = m.sensitivity_peak <= spec.max_sensitivity
+        rows.append(r)
+    return rows
+
+
+def report_for_loop(
+    loop: Loop,
+    spec: Spec | None = None,
+    *,
+    report: Report | None = None,
+    heading: str | None = None,
+    nonlinear: bool = True,
+):
+    """Add the stability analysis of ``loop`` to ``report`` and return its numbers (JSON-ready)."""
+    spec = Spec() if spec is None else spec
+    rep = (
+        report
+        if report is not None
+        else Report(f"Stability report: {loop.name} on {loop.model.testbed.name}")
+    )
+    rep.heading(heading or f"{loop.name} on {loop.model.testbed.name}")
+    gains = [{"gain": k, "value": v} for k, v in loop.gains.items()]
+    if loop.kind == "balancing":
+        gains.append(
+            {
+                "gain": "K_i = K_dK_i / K_d (1/s)",
+                "value": loop.gains["K_dK_i"] / max(loop.gains["K_d"], 1e-300),
+            }
+        )
+    rep.table(gains)
+    for note in loop.notes:
+        rep.paragraph(note, note=True)
+    d = analyse_loop(loop, discrete=True)
+    c = analyse_loop(loop, discrete=False)
+    checks, worst, per = evaluate(loop, spec)
+    met = all(ch.met for ch in checks)
+    rep.paragraph(
+        (
+            "PASS: the specification is met at every corner of the uncertainty box."
+            if met
+            else "FAIL: " + "; ".join(ch.name for ch in checks if not ch.met) + " not met."
+        ),
+        note=True,
+    )
+    rep.heading("Margins, discrete loop (ZOH, 1 sample delay, as implemented)", 3)
+    rep.table(_margin_rows(d, spec))
+    if d.multiloop:
+        ml = d.multiloop
+        rep.paragraph(
+            f"Multi-loop disk margin (all {len(ml['channels'])} channels perturbed at once): "
+            f"alpha = {ml['disk_margin']:.3g}, i.e. {ml['disk_gain_margin_db']:.3g} dB and "
+            f"{ml['disk_phase_margin_deg']:.3g} deg."
+        )
+    rep.heading("Margins, continuous design model (no sampling, no delay)", 3)
+    rep.table(_margin_rows(c, None))
+    rep.heading("Specification, worst case over the uncertainty box", 3)
+    rep.table([ch.to_dict() for ch in checks], ["name", "value", "limit", "sense", "met", "by"])
+    rep.table(
+        [
+            {
+                "corner": lbl,
+                **{k: (json_number(v) if isinstance(v, float) else v) for k, v in w.items()},
+            }
+            for lbl, w in per
+        ]
+    )
+    for fig, cap in _bode_nyquist(d, loop, True):
+        rep.figure(fig, cap)
+    # responses
+    t_lin, y_lin = scenario_response(loop)
+    t_end = float(t_lin[-1])
+    fig, axes = plt.subplots(1, 2, figsize=(11, 3.6))
+    state_keys = [k for k in y_lin if k.startswith("true_")][:2]
+    nl = None
+    if nonlinear:
+        t_nl, nl = nonlinear_scenario(loop, t_end)
+    for k in state_keys:
+        (ln,) = axes[0].plot(t_lin, np.degrees(y_lin[k]), label=f"{k} linear")
+        if nl is not None and k in nl:
+            axes[0].plot(
+                t_nl, np.degrees(nl[k]), "--", color=ln.get_color(), label=f"{k} nonlinear"
+            )
+    for ch in loop.channels:
+        (ln,) = axes[1].plot(t_lin, y_lin[ch], label=f"{ch} linear")
+        if nl is not None:
+            axes[1].plot(t_nl, nl[ch], "--", color=ln.get_color(), label=f"{ch} nonlinear")
+    axes[0].set(xlabel="t (s)", ylabel="deg (yaw rate: deg/s)")
+    axes[1].set(xlabel="t (s)", ylabel="actuator (m, A m^2 or rad/s)")
+    axes[0].legend(fontsize=7)
+    axes[1].legend(fontsize=7, ncol=2)
+    scen = (
+        "gravity torque of seed 000's 0.5 mm slider offset (step)"
+        if loop.kind == "balancing"
+        else "30 deg yaw step (seed 001 Table 5 manoeuvre)"
+    )
+    rep.figure(
+        fig,
+        f"Response to the {scen}: linear discrete model (solid) and the nonlinear "
+        "CasADi closed loop with the same controller, ideal actuators and one sample of "
+        "delay (dashed), as deviations from the trim.",
+    )
+    if loop.kind == "attitude":
+        import control as ct
+
+        cl = loop.closed_loop()
+        t = np.arange(0, min(t_end, 60.0), loop.dt)
+        U = np.zeros((cl.ninputs, t.size))
+        U[list(cl.input_labels).index(loop.disturbances[-1])] = _DIST_TORQUE
+        r = ct.forced_response(cl, t, U)
+        fig, ax = plt.subplots(figsize=(10, 3))
+        ax.plot(t, np.degrees(r.outputs[0]), label="yaw (deg)")
+        ax.set(xlabel="t (s)", ylabel="yaw deviation (deg)")
+        rep.figure(
+            fig,
+            f"Linear response to a {_DIST_TORQUE:g} N m disturbance torque step "
+            "(the residual torque of seed 000 Tables 1-2).",
+        )
+    # pole map
+    poles = d.closed_loop_poles
+    fig, ax = plt.subplots(figsize=(5.5, 5.5))
+    th = np.linspace(0, 2 * np.pi, 300)
+    ax.plot(np.cos(th), np.sin(th), "k-", lw=0.6)
+    ax.plot(poles.real, poles.imag, "x", ms=8, mew=2, label="closed-loop poles")
+    ax.set(aspect="equal", xlabel="Re z", ylabel="Im z", xlim=(-1.1, 1.1), ylim=(-1.1, 1.1))
+    ax.legend(fontsize=8)
+    rep.figure(
+        fig,
+        "Closed-loop poles of the discrete loop in the z-plane (inside the unit circle: stable).",
+    )
+    from airbearing.analysis.margins import pole_damping
+
+    wn, zeta = pole_damping(poles, loop.dt)
+    rep.table(
+        [
+            {
+                "pole (z)": f"{p.real:.6g} {p.imag:+.4g}j",
+                "w_n (rad/s)": float(a),
+                "damping": float(b),
+            }
+            for p, a, b in zip(poles, wn, zeta, strict=True)
+        ]
+    )
+    data = {
+        "testbed": loop.model.testbed.name,
+        "loop": loop.kind,
+        "name": loop.name,
+        "gains": dict(loop.gains),
+        "spec": spec.to_dict(),
+        "met": met,
+        "checks": [ch.to_dict() for ch in checks],
+        **d.to_dict(),
+        "continuous": c.to_dict(),
+        "worst_case": {
+            k: (json_number(v) if isinstance(v, float) else v) for k, v in worst.items()
+        },
+        "notes": list(loop.notes),
+    }
+    return rep, data
+
+
+def stability_report(
+    testbed, loop: str, *, gains=None, split: str = "mixed", spec: Spec | None = None
+):
+    """The report of ``loop`` (``"balancing"``/``"attitude"``) of ``testbed`` with ``gains``
+    (default the seed gains). Returns ``(Report, dict)``; write with ``Report.write`` and
+    :func:`airbearing.analysis.html.write_json`."""
+    opts = {"split": split} if loop == "balancing" else {}
+    lp = make_loop(testbed, loop, gains=gains, **opts)
+    rep = Report(f"Stability report: {lp.name} on {testbed.name}")
+    rep.paragraph(
+        "Loops broken at the actuator input; margins of the discrete loop (zero-order hold, "
+        "one sample of computation delay, the controller as implemented) and of the "
+        "continuous design model. Infinite margins print as the infinity sign and are null in JSON."
+    )
+    return report_for_loop(lp, spec, report=rep)
+
+
+def demo_section(report: Report, *, quick: bool = False) -> None:
+    """Seed gains against tuned gains, for the balancing and the CMG attitude loops."""
+    from airbearing.io.testbed import load_testbed
+
+    report.heading("Linear stability: seed gains and tuned gains")
+    spec = Spec()
+    report.paragraph(
+        f"Specification: phase margin >= {spec.phase_margin_deg} deg, gain margin >= "
+        f"{spec.gain_margin_db} dB, |S| <= {spec.max_sensitivity}, inertia +-15 %, testbed "
+        "actuator limits; the worst case over the uncertainty box counts."
+    )
+    if quick:
+        report.paragraph(
+            "Quick run: the seed-001 gains of the CMG attitude loop only; the full "
+            "demo adds the tuned gains and the balancing loop.",
+            note=True,
+        )
+        report_for_loop(
+            make_loop(load_testbed("cmg-yaw"), "attitude"),
+            spec,
+            report=report,
+            heading="attitude on cmg-yaw, seed 001 gains",
+            nonlinear=False,
+        )
+        return
+    cases = [
+        ("attitude", load_testbed("cmg-yaw"), {}),
+        ("balancing", load_testbed("platform-3dof"), {"split": "mixed"}),
+    ]
+    rows = []
+    for name, tb, opts in cases:
+        seed = make_loop(tb, name, **opts)
+        res = tune(tb, name, spec, **opts)
+        for label, lp in (("seed", seed), ("tuned", seed.with_gains(res.gains))):
+            checks, worst, _ = evaluate(lp, spec)
+            rows.append(
+                {
+                    "loop": f"{lp.name} ({label})",
+                    **{k: float(v) for k, v in lp.gains.items()},
+                    "worst PM (deg)": json_number(worst["phase_margin_deg"]),
+                    "worst GM (dB)": json_number(worst["gain_margin_db"]),
+                    "worst Ms": worst["sensitivity_peak"],
+                    "w_B (rad/s)": worst["bandwidth_rad_s"],
+                    "spec met": all(c.met for c in checks),
+                }
+            )
+        report.paragraph(f"{name}: {res.message}")
+        report_for_loop(
+            seed.with_gains(res.gains), spec, report=report, heading=f"{seed.name}, tuned gains"
+        )
+    report.raw(table_html(rows))

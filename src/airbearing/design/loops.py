@@ -1,0 +1,774 @@
+"""The two feedback loops of the package as python-control interconnections.
+
+* **Balancing loop** (seeds 000 and 004): the platform linearised about the balanced
+  point (a pendulum: torque ``mass g r_z`` per radian of tilt), the in-plane PID of seed
+  000 eq. 3 as implemented by :func:`airbearing.design.balancing.pid_balancing_controller`
+  with its split between sliders and magnetorquers (``mechanical``: seed 000 eq. 8, all
+  terms through the sliders; ``mixed``: eqs. 5 and 7, P and I through the sliders, D
+  through the magnetorquers).
+* **Attitude loop** (seed 001): the CMG testbed linearised at a gimbal set, the
+  quaternion PID of seed 001 eq. 19 with the gyro low-pass (eq. 3), the attitude
+  propagation (eq. 21) and the steering law (eq. 16), as implemented by
+  :func:`airbearing.design.attitude.cmg_attitude_controller`.
+
+The controllers are the very CasADi Functions the nonlinear simulation runs: their
+linear models are their exact Jacobians (``ca.jacobian``) about the trim, with the gains
+as an input of the Jacobian Function (built once, evaluated for any gains). For the
+linearisation the balancing actuators are ideal (no travel, speed, step or backlash
+limit, no dipole saturation): these are non-smooth and checked separately against the
+limits.
+
+Time bases
+    *discrete*: the plant sampled with a zero-order hold at the sensor rate, one sample of
+    computation delay on every actuator channel, the controller as implemented;
+    *continuous*: the design model without sampling or delay, the controller mapped to
+    continuous time by the inverse bilinear (Tustin) transform.
+
+Every loop is broken at the actuator input: :meth:`Loop.loop_transfer` gives the
+loop-at-a-time transfer ``L_j`` of one actuator channel with the others closed, or the
+MIMO ``L`` with all channels open (for multi-loop disk margins). The sign convention is
+negative feedback: the closed loop is stable iff ``1 + L`` has no unstable zeros, and
+``S = 1 / (1 + L)``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+from functools import lru_cache
+
+import casadi as ca
+import control as ct
+import numpy as np
+
+from airbearing.design.actuators import MagnetorquerActuator, SliderActuator
+from airbearing.design.attitude import SEED001_GAINS, cmg_attitude_controller
+from airbearing.design.balancing import (
+    MECHANICAL,
+    MIXED,
+    SEED000_GAINS,
+    pid_balancing_controller,
+)
+from airbearing.design.controller import Controller
+from airbearing.design.linearise import (
+    DISTURBANCE_INPUTS,
+    TrimPoint,
+    delay_system,
+    linearisation,
+    trim,
+)
+from airbearing.errors import InputError, SolverError
+from airbearing.io.testbed import Testbed
+from airbearing.models import quaternion as quat
+from airbearing.models.model import Model, build_model
+
+__all__ = [
+    "Loop",
+    "LOOPS",
+    "SPLITS",
+    "BALANCING_GAINS",
+    "ATTITUDE_GAINS",
+    "balancing_loop",
+    "attitude_loop",
+    "make_loop",
+    "with_delay",
+    "d2c_bilinear",
+    "prune_states",
+]
+
+#: Loop kinds the package builds.
+LOOPS = ("balancing", "attitude")
+#: PID splits of the balancing loop (seed 000 eq. 8 and eqs. 5, 7).
+SPLITS = {"mechanical": MECHANICAL, "mixed": MIXED}
+#: Gain names and seed values: seed 000 Tables 1-2 (K_p N m, K_d N m s, K_d K_i N m/s).
+BALANCING_GAINS = dict(zip(("K_p", "K_d", "K_dK_i"), SEED000_GAINS, strict=True))
+#: Seed 001 Table 6 (normalised form: torque = h0 times the command).
+ATTITUDE_GAINS = dict(zip(("K_p", "K_i", "K_w"), SEED001_GAINS, strict=True))
+_TRIM_TOL = 1e-9  # relative residual accepted for the controller's trim state
+
+
+@dataclass(frozen=True, eq=False)
+class _LinearController:
+    """Jacobians of a discrete Controller about its trim, with the gains as an input."""
+
+    fn: ca.Function  # (gains, c_trim) -> (A, B, C, D): x = c, inputs [y_used; ref], outputs u_ch
+    trim_fn: ca.Function  # gains -> (residual Jacobian, residual) to solve for c_trim
+    n_c: int
+    c0: np.ndarray  # the controller's initial state: the start of the trim solve
+    inputs: tuple  # measurement names used, then reference names
+    outputs: tuple  # channel names
+
+
+@dataclass(frozen=True, eq=False)
+class Loop:
+    """One feedback loop: plant, controller, trim, gains and the python-control models.
+
+    Build with :func:`balancing_loop` or :func:`attitude_loop`. A Loop is immutable;
+    :meth:`with_gains` and :meth:`with_params` give variants that share the compiled
+    Jacobian Functions.
+
+    Attributes
+    ----------
+    kind : {"balancing", "attitude"}
+    name : str
+        ``"balancing-mixed"``, ``"balancing-mechanical"`` or ``"attitude"``.
+    model : Model
+    trim : TrimPoint
+    controller : Controller
+        The nonlinear discrete controller (ideal actuators) the linear model comes from.
+    gains : dict
+        Gain name -> value.
+    channels : tuple of str
+        Actuator inputs the loop is broken at (``s1 s2``, ``mx my``, ``dd1..dd4``).
+    references : tuple of str
+        Reference inputs of the closed loop (``yaw_ref`` for the attitude loop).
+    disturbances : tuple of str
+        Disturbance torques entering the plant.
+    p : ndarray
+        Physical parameters of the plant (the controller keeps its nominal knowledge).
+    delay_samples : int
+        Computation delay of the discrete loop, samples.
+    """
+
+    kind: str
+    name: str
+    model: Model
+    trim: TrimPoint
+    controller: Controller
+    gains: dict
+    channels: tuple
+    references: tuple
+    disturbances: tuple
+    p: np.ndarray
+    delay_samples: int
+    _lin_ctrl: _LinearController = field(repr=False)
+    notes: tuple = ()
+
+    @property
+    def dt(self) -> float:
+        return self.model.testbed.sensors.dt
+
+    @property
+    def gain_vector(self) -> np.ndarray:
+        return np.array([self.gains[k] for k in self.controller.gain_names], dtype=float)
+
+    # ---------------------------------------------------------------- variants
+
+    def with_gains(self, gains) -> Loop:
+        """The same loop with other gains (a mapping by name or a sequence in order)."""
+        return replace(self, gains=_gain_dict(self.controller.gain_names, gains))
+
+    def with_params(self, p) -> Loop:
+        """The same loop on a plant with parameters ``p`` (the controller is unchanged)."""
+        p = np.asarray(p, dtype=float)
+        if p.shape != (self.model.n_p,):
+            raise InputError(f"parameters have shape {p.shape}, expected ({self.model.n_p},)")
+        return replace(self, p=p)
+
+    # ---------------------------------------------------------------- plant
+
+    def _plant_full(self) -> ct.StateSpace:
+        return linearisation(self.model).state_space(self.trim, self.p, name="plant")
+
+    def used_measurements(self) -> tuple:
+        return tuple(n for n in self._lin_ctrl.inputs if n not in self.references)
+
+    def plant(self, *, discrete: bool = True, outputs=None) -> ct.StateSpace:
+        """The linear plant from the actuator channels and disturbances.
+
+        States not seen by the controller's measurements nor by ``outputs`` are pruned
+        (e.g. the gimbal angles, or the yaw of a balancing platform: neutral modes the
+        loop does not act on). Discrete: zero-order hold and ``delay_samples`` of delay on
+        the channels, whose inputs are then named ``<channel>_cmd``.
+        """
+        full = self._plant_full()
+        keep_out = list(self.used_measurements()) + [
+            o for o in (outputs or []) if o not in self.used_measurements()
+        ]
+        ins = list(self.channels) + list(self.disturbances)
+        sys = prune_states(full, keep_out, ins)
+        sys = sys[[list(sys.output_labels).index(o) for o in keep_out], :]
+        idx = [list(full.input_labels).index(n) for n in ins]
+        sys = ct.ss(
+            sys.A,
+            sys.B[:, idx],
+            sys.C,
+            sys.D[:, idx],
+            states=list(sys.state_labels),
+            inputs=ins,
+            outputs=keep_out,
+            name="plant",
+        )
+        if not discrete:
+            return sys
+        sysd = ct.sample_system(sys, self.dt, method="zoh", name="plant")
+        return sysd
+
+    def delay(self) -> ct.StateSpace:
+        """``delay_samples`` of computation delay on each channel (``<ch>_cmd`` -> ``<ch>``)."""
+        return delay_system(self.channels, self.dt, self.delay_samples, suffix="_cmd")
+
+    # ---------------------------------------------------------------- controller
+
+    def controller_trim(self) -> np.ndarray:
+        """Controller state at the trim (e.g. the integral holding the sliders), solved."""
+        return _controller_trim(self._lin_ctrl, self.gain_vector)
+
+    def controller_ss(self, *, discrete: bool = True) -> ct.StateSpace:
+        """The linearised controller: inputs the used measurements and references,
+        outputs ``<channel>_cmd``."""
+        lc = self._lin_ctrl
+        A, B, C, D = (np.asarray(m) for m in lc.fn(self.gain_vector, self.controller_trim()))
+        ins = list(lc.inputs)
+        outs = [f"{c}_cmd" for c in lc.outputs]
+        states = [f"c{i}" for i in range(lc.n_c)]
+        sysd = ct.ss(
+            A, B, C, D, dt=self.dt, inputs=ins, outputs=outs, states=states, name="controller"
+        )
+        sysd = prune_states(sysd)
+        if discrete:
+            return sysd
+        return d2c_bilinear(sysd)
+
+    # ---------------------------------------------------------------- loops
+
+    def _parts(self, discrete: bool, outputs=None, open_channels=()):
+        plant = self.plant(discrete=discrete, outputs=outputs)
+        ctrl = self.controller_ss(discrete=discrete)
+        if discrete:
+            dly = self.delay()
+        else:
+            n = len(self.channels)
+            dly = ct.ss(
+                [],
+                [],
+                [],
+                np.eye(n),
+                inputs=[f"{c}_cmd" for c in self.channels],
+                outputs=list(self.channels),
+                name="delay",
+            )
+        if open_channels:
+            outs = [f"{c}_open" if c in open_channels else c for c in self.channels]
+            dly = ct.ss(
+                dly.A,
+                dly.B,
+                dly.C,
+                dly.D,
+                dt=dly.dt,
+                inputs=list(dly.input_labels),
+                outputs=outs,
+                states=list(dly.state_labels),
+                name="delay",
+            )
+        return plant, ctrl, dly
+
+    def loop_transfer(self, channel: str | None = None, *, discrete: bool = True) -> ct.StateSpace:
+        """Loop transfer at the actuator input, negative-feedback convention.
+
+        ``channel`` given: the SISO loop-at-a-time ``L_j`` (the other channels closed);
+        ``None``: the MIMO ``L`` with every channel open.
+        """
+        chans = list(self.channels) if channel is None else [channel]
+        if channel is not None and channel not in self.channels:
+            raise InputError(f"loop '{channel}': expected one of {', '.join(self.channels)}")
+        plant, ctrl, dly = self._parts(discrete, open_channels=chans)
+        refs = list(self.references)
+        sys = ct.interconnect(
+            [plant, ctrl, dly],
+            inplist=chans + refs + list(self.disturbances),
+            outlist=[f"{c}_open" for c in chans],
+            check_unused=False,
+            name="open_loop",
+        )
+        sys = sys[:, list(range(len(chans)))]
+        L = -sys
+        return ct.ss(
+            L.A, L.B, L.C, L.D, dt=L.dt, inputs=chans, outputs=chans, name=f"L_{channel or 'all'}"
+        )
+
+    def axis_loop(self, *, discrete: bool = True) -> ct.StateSpace | None:
+        """The single-axis loop of a yaw-only CMG testbed: ``trace L`` with all gimbals open.
+
+        On a dof-1 bearing every gimbal acts through the one yaw torque, so ``L`` has rank
+        one and its only non-zero eigenvalue, ``trace L``, is the loop seen by a
+        perturbation common to all gimbals (the loop broken at the torque command before
+        the steering law). None for other loops.
+        """
+        if self.kind != "attitude" or self.model.dof != 1:
+            return None
+        L = self.loop_transfer(None, discrete=discrete)
+        parts = [L[i, i] for i in range(L.ninputs)]
+        out = parts[0]
+        for q in parts[1:]:
+            out = ct.parallel(out, q)
+        return ct.ss(
+            out.A, out.B, out.C, out.D, dt=L.dt, inputs=["yaw"], outputs=["yaw"], name="L_yaw"
+        )
+
+    def closed_loop(self, *, discrete: bool = True, outputs=None) -> ct.StateSpace:
+        """The closed loop: inputs references and disturbances; outputs ``outputs``
+        (default the true attitude error and rate states) and the actuator channels."""
+        default = self.default_outputs()
+        outs = list(outputs or default)
+        plant, ctrl, dly = self._parts(discrete, outputs=outs)
+        return ct.interconnect(
+            [plant, ctrl, dly],
+            inplist=list(self.references) + list(self.disturbances),
+            outlist=outs + list(self.channels),
+            inputs=list(self.references) + list(self.disturbances),
+            outputs=outs + list(self.channels),
+            check_unused=False,
+            name=f"{self.name}_closed",
+        )
+
+    def default_outputs(self) -> list[str]:
+        if self.kind == "attitude":
+            return (
+                ["true_yaw", "true_wz"]
+                if self.model.dof == 1
+                else ["true_th_x", "true_th_y", "true_th_z"]
+            )
+        return ["true_th_x", "true_th_y"]
+
+    def stability_system(self, *, discrete: bool = True) -> ct.StateSpace:
+        """The closed loop restricted to the states the loop acts on (for its poles)."""
+        plant, ctrl, dly = self._parts(discrete)
+        return ct.interconnect(
+            [plant, ctrl, dly],
+            inplist=list(self.disturbances),
+            outlist=list(self.channels),
+            inputs=list(self.disturbances),
+            outputs=list(self.channels),
+            check_unused=False,
+            name=f"{self.name}_poles",
+        )
+
+
+def _gain_dict(names, gains) -> dict:
+    if isinstance(gains, dict):
+        unknown = [k for k in gains if k not in names]
+        if unknown:
+            raise InputError(f"gains {unknown} are not gains of this loop; expected {list(names)}")
+        missing = [k for k in names if k not in gains]
+        if missing:
+            raise InputError(f"gains: missing {missing}; expected {list(names)}")
+        out = {k: float(gains[k]) for k in names}
+    else:
+        vals = list(np.atleast_1d(np.asarray(gains, dtype=float)))
+        if len(vals) != len(names):
+            raise InputError(f"gains {vals}: expected {len(names)} values {list(names)}")
+        out = dict(zip(names, map(float, vals), strict=True))
+    bad = [k for k, v in out.items() if not (math.isfinite(v) and v >= 0)]
+    if bad:
+        raise InputError(f"gains {bad}: expected finite values >= 0, got {[out[k] for k in bad]}")
+    return out
+
+
+# ---------------------------------------------------------------------- helpers
+
+
+def prune_states(sys: ct.StateSpace, outputs=None, inputs=None) -> ct.StateSpace:
+    """Drop states the ``outputs`` never see or the ``inputs`` never reach (structural).
+
+    Structural means exact zeros of the evaluated ``A, B, C``: a state is observable when
+    it appears in a kept output or drives an observable state, reachable when a kept input
+    drives it or a reachable state does. The dropped blocks are neutral modes of a trim
+    that the loop does not act on (gimbal angles, the yaw of a balancing platform, the
+    vertical integral of a balancing law). ``None`` keeps all outputs / inputs.
+    """
+    A = np.asarray(sys.A)
+    n = A.shape[0]
+    out_idx = (
+        range(sys.noutputs)
+        if outputs is None
+        else [list(sys.output_labels).index(o) for o in outputs]
+    )
+    in_idx = (
+        range(sys.ninputs) if inputs is None else [list(sys.input_labels).index(i) for i in inputs]
+    )
+    C = np.asarray(sys.C)[list(out_idx)]
+    B = np.asarray(sys.B)[:, list(in_idx)]
+
+    def closure(start, forward):
+        keep = set(start)
+        todo = list(start)
+        while todo:
+            i = todo.pop()
+            nxt = np.nonzero(A[:, i] if forward else A[i, :])[0]
+            for j in nxt.tolist():
+                if j not in keep:
+                    keep.add(j)
+                    todo.append(j)
+        return keep
+
+    observable = closure(np.nonzero(np.any(C != 0, axis=0))[0].tolist(), forward=False)
+    reachable = closure(np.nonzero(np.any(B != 0, axis=1))[0].tolist(), forward=True)
+    k = sorted(observable & reachable) if n else []
+    names = [sys.state_labels[i] for i in k]
+    return ct.ss(
+        A[np.ix_(k, k)],
+        np.asarray(sys.B)[k],
+        np.asarray(sys.C)[:, k],
+        sys.D,
+        dt=sys.dt,
+        states=names,
+        inputs=list(sys.input_labels),
+        outputs=list(sys.output_labels),
+        name=sys.name,
+    )
+
+
+def d2c_bilinear(sysd: ct.StateSpace) -> ct.StateSpace:
+    """Continuous system whose Tustin (bilinear) discretisation is ``sysd``.
+
+    ``A_c = (2/T)(A - I)(A + I)^-1`` and matching ``B, C, D``; a discrete pole at ``-1``
+    has no continuous image.
+    """
+    T = sysd.dt
+    A, B, C, D = (np.asarray(m, float) for m in (sysd.A, sysd.B, sysd.C, sysd.D))
+    n = A.shape[0]
+    if n == 0:
+        return ct.ss(
+            [],
+            [],
+            [],
+            D,
+            inputs=list(sysd.input_labels),
+            outputs=list(sysd.output_labels),
+            name=sysd.name,
+        )
+    M = A + np.eye(n)
+    if np.linalg.cond(M) > 1e12:
+        raise SolverError(f"{sysd.name}: a discrete pole at z = -1 has no continuous equivalent")
+    Mi = np.linalg.inv(M)
+    # inverse of the bilinear map A_d = (I - T/2 A)^-1 (I + T/2 A), B_d = (I - T/2 A)^-1 T B,
+    # C_d = C (I - T/2 A)^-1, D_d = D + C B_d / 2 (scipy's "bilinear" convention)
+    Ac = 2 / T * (A - np.eye(n)) @ Mi
+    Bc = 2 / T * Mi @ B
+    Cc = 2 * C @ Mi
+    Dc = D - C @ Mi @ B
+    return ct.ss(
+        Ac,
+        Bc,
+        Cc,
+        Dc,
+        states=list(sysd.state_labels),
+        inputs=list(sysd.input_labels),
+        outputs=list(sysd.output_labels),
+        name=sysd.name,
+    )
+
+
+def with_delay(controller: Controller, model: Model, samples: int = 1, u_hold=None) -> Controller:
+    """The controller with ``samples`` of computation delay: its input reaches the plant later.
+
+    The delayed commands live in the controller state; before the first computed command
+    arrives the plant gets ``u_hold`` (default zeros). For nonlinear runs that match the
+    discrete linear loop.
+    """
+    if samples == 0:
+        return controller
+    nu = model.nu
+    fn = controller.function
+    nc = controller.c0.size
+    y = ca.SX.sym("y", model.ny)
+    c = ca.SX.sym("c", nc + nu * samples)
+    ref = ca.SX.sym("ref", len(controller.ref_names))
+    g = ca.SX.sym("gains", controller.gains.size)
+    t = ca.SX.sym("t")
+    u, c_next, extra = fn(y, c[:nc], ref, g, t)
+    buf = c[nc:]
+    u_out = buf[0:nu]
+    buf_next = ca.vertcat(buf[nu:], u)
+    f = ca.Function(
+        f"{controller.name}_delayed",
+        [y, c, ref, g, t],
+        [u_out, ca.vertcat(c_next, buf_next), extra],
+        ["y", "c", "ref", "gains", "t"],
+        ["u", "c_next", "extra"],
+    )
+    hold = np.zeros(nu) if u_hold is None else np.asarray(u_hold, float)
+    return Controller(
+        controller.name + "_delayed",
+        f,
+        np.concatenate([controller.c0, np.tile(hold, samples)]),
+        controller.gains,
+        controller.gain_names,
+        controller.ref_names,
+        controller.extra_names,
+    )
+
+
+# ---------------------------------------------------------------------- controller Jacobians
+
+
+def _linear_controller(
+    model: Model, controller: Controller, trim_point: TrimPoint, channels, ref_expr, ref_names
+) -> _LinearController:
+    """Jacobians of ``controller.function`` about the trim measurement, gains symbolic."""
+    y_star = np.asarray(model.h(trim_point.x, trim_point.u, trim_point.p)).ravel()
+    nc = controller.c0.size
+    c = ca.SX.sym("c", nc)
+    g = ca.SX.sym("gains", controller.gains.size)
+    y = ca.SX.sym("y", model.ny)
+    r = ca.SX.sym("r", len(ref_names))
+    ref = ref_expr(r)
+    u, c_next, _ = controller.function(y, c, ref, g, 0.0)
+    ch_idx = model.index(list(channels), "u")
+    u_ch = u[ch_idx]
+    at_y, at_r = ca.DM(y_star), ca.DM.zeros(len(ref_names))
+    # which measurements does the controller use at all? (structural)
+    # which measurements does the controller use at the trim? (numeric pattern, generic gains)
+    Jy = ca.Function("jy", [y, c, g, r], [ca.jacobian(ca.vertcat(u_ch, c_next), y)])
+    Jy = np.asarray(
+        Jy(y_star, controller.c0, np.ones(controller.gains.size), np.zeros(len(ref_names)))
+    )
+    used = [i for i in range(model.ny) if np.any(Jy[:, i] != 0)]
+    yin = y[used]
+    inputs = ca.vertcat(yin, r)
+    mats = [
+        ca.jacobian(c_next, c),
+        ca.jacobian(c_next, inputs),
+        ca.jacobian(u_ch, c),
+        ca.jacobian(u_ch, inputs),
+    ]
+    mats = ca.substitute(mats, [y, r], [at_y, at_r])
+    fn = ca.Function("lin_ctrl", [g, c], mats, ["gains", "c"], ["A", "B", "C", "D"])
+    u_trim = ca.DM(trim_point.u[ch_idx])
+    res = ca.vertcat(c_next - c, u_ch - u_trim)
+    res = ca.substitute(res, ca.vertcat(y, r), ca.vertcat(at_y, at_r))
+    trim_fn = ca.Function("ctrl_trim", [g, c], [ca.jacobian(res, c), res])
+    return _LinearController(
+        fn,
+        trim_fn,
+        nc,
+        np.asarray(controller.c0, float),
+        tuple(model.y_names[i] for i in used) + tuple(ref_names),
+        tuple(channels),
+    )
+
+
+def _controller_trim(lc: _LinearController, gains: np.ndarray, c0=None) -> np.ndarray:
+    """Controller state holding the trim: ``c_next = c`` and ``u = u_trim`` (Newton, exact)."""
+    c = np.array(lc.c0 if c0 is None else c0, dtype=float)
+    scale = 1.0
+    for _ in range(4):  # the equations are linear in c for these laws; a few steps at most
+        J, r = (np.asarray(v, float) for v in lc.trim_fn(gains, c))
+        r = r.ravel()
+        scale = max(np.abs(r).max(), 1e-12) if scale == 1.0 else scale
+        if np.abs(r).max() <= _TRIM_TOL * max(scale, 1.0):
+            return c
+        c = c - np.linalg.lstsq(J, r, rcond=None)[0]
+    r = np.asarray(lc.trim_fn(gains, c)[1]).ravel()
+    if np.abs(r).max() > 1e-7 * max(scale, 1.0):
+        raise InputError(
+            "the controller cannot hold the trim with these gains (residual "
+            f"{np.abs(r).max():.3g}): the balancing loop needs integral action (K_dK_i > 0)"
+        )
+    return c
+
+
+# ---------------------------------------------------------------------- builders
+
+
+def _as_model(testbed_or_model) -> Model:
+    if isinstance(testbed_or_model, Model):
+        return testbed_or_model
+    if isinstance(testbed_or_model, Testbed):
+        return _model_of(testbed_or_model)
+    raise InputError(f"expected a Testbed or a Model, got {type(testbed_or_model).__name__}")
+
+
+@lru_cache(maxsize=8)
+def _model_of(testbed: Testbed) -> Model:
+    return build_model(testbed)
+
+
+def _active_channels(model, trim_point, controller, candidates) -> tuple:
+    """Channels that both move the plant and are driven by the controller."""
+    A, B, C, D = linearisation(model).matrices(trim_point)
+    y_star = np.asarray(model.h(trim_point.x, trim_point.u, trim_point.p)).ravel()
+    y = ca.SX.sym("y", model.ny)
+    c = ca.SX.sym("c", controller.c0.size)
+    u, _, _ = controller.function(
+        y, c, ca.DM(controller_ref0(model, controller)), controller.gains, 0.0
+    )
+    Jy = ca.Function("jy", [y, c], [ca.jacobian(u, y)])(y_star, controller.c0)
+    Jy = np.asarray(Jy)
+    out = []
+    for name in candidates:
+        i = model.index(name, "u")[0]
+        if np.any(B[:, i] != 0) and np.any(Jy[i] != 0):
+            out.append(name)
+    return tuple(out)
+
+
+def controller_ref0(model, controller) -> np.ndarray:
+    return np.zeros(len(controller.ref_names)) if not controller.ref_names else quat.from_yaw(0.0)
+
+
+def balancing_loop(
+    testbed_or_model,
+    *,
+    split: str = "mixed",
+    gains=None,
+    p=None,
+    delay_samples: int = 1,
+) -> Loop:
+    """The balancing loop of seeds 000/004 about the balanced platform.
+
+    Parameters
+    ----------
+    testbed_or_model : Testbed or Model
+        A ``kind = "platform"``, dof 3 testbed.
+    split : {"mixed", "mechanical"}
+        Which actuator carries which PID term (seed 000 eqs. 5, 7 / eq. 8).
+    gains : mapping or sequence, optional
+        ``K_p`` (N m), ``K_d`` (N m s), ``K_dK_i`` (N m/s); default seed 000 Tables 1-2.
+    p : ndarray, optional
+        Plant parameters (default the nominal ones).
+    delay_samples : int
+        Computation delay of the discrete loop, samples (default 1).
+    """
+    model = _as_model(testbed_or_model)
+    tb = model.testbed
+    if model.kind != "platform" or model.dof != 3:
+        raise InputError(
+            f"{tb.source}: the balancing loop needs a kind = 'platform', dof = 3 testbed; "
+            f"'{tb.name}' is kind = '{model.kind}', dof = {model.dof}"
+        )
+    if split not in SPLITS:
+        raise InputError(f"split '{split}': expected one of {', '.join(SPLITS)}")
+    g = _gain_dict(tuple(BALANCING_GAINS), BALANCING_GAINS if gains is None else gains)
+    tp = trim(model, p)
+    ideal_sliders = SliderActuator(travel=math.inf)
+    kwargs = {"sliders": ideal_sliders}
+    if SPLITS[split].uses_magnetorquers:
+        kwargs["magnetorquers"] = MagnetorquerActuator()
+    ctl = pid_balancing_controller(model, split=SPLITS[split], gains=tuple(g.values()), **kwargs)
+    cands = ("s1", "s2", "s3") + (("mx", "my", "mz") if split == "mixed" else ())
+    channels = _active_channels(model, tp, ctl, cands)
+    lc = _lin_ctrl_cached(model, ctl, tp, channels, "balancing")
+    notes = tuple(f"trim: {v}" for v in tp.limit_violations)
+    return Loop(
+        kind="balancing",
+        name=f"balancing-{split}",
+        model=model,
+        trim=tp,
+        controller=ctl,
+        gains=g,
+        channels=channels,
+        references=(),
+        disturbances=("tau_x", "tau_y"),
+        p=tp.p,
+        delay_samples=delay_samples,
+        _lin_ctrl=lc,
+        notes=notes,
+    )
+
+
+def attitude_loop(
+    testbed_or_model,
+    *,
+    gains=None,
+    p=None,
+    gimbals=None,
+    steering: str = "mp",
+    delay_samples: int = 1,
+) -> Loop:
+    """The CMG attitude loop of seed 001 at a gimbal set.
+
+    Parameters
+    ----------
+    testbed_or_model : Testbed or Model
+        A ``kind = "cmg"`` testbed (dof 1 or 3).
+    gains : mapping or sequence, optional
+        ``K_p, K_i, K_w`` in the normalised form (torque = h0 times the command);
+        default seed 001 Table 6 (6, 0.001, 6).
+    p : ndarray, optional
+        Plant parameters.
+    gimbals : (4,) rad, optional
+        Gimbal set of the trim (default the testbed's).
+    steering : str
+        Steering law (:data:`airbearing.design.steering.STEERING_LAWS`).
+    delay_samples : int
+        Computation delay of the discrete loop, samples.
+    """
+    model = _as_model(testbed_or_model)
+    tb = model.testbed
+    if model.kind != "cmg":
+        raise InputError(
+            f"{tb.source}: the attitude loop needs a kind = 'cmg' testbed; '{tb.name}' is "
+            f"kind = '{model.kind}'"
+        )
+    g = _gain_dict(tuple(ATTITUDE_GAINS), ATTITUDE_GAINS if gains is None else gains)
+    tp = trim(model, p, gimbals=gimbals)
+    ctl = cmg_attitude_controller(model, steering=steering, gains=tuple(g.values()))
+    channels = _active_channels(model, tp, ctl, ("dd1", "dd2", "dd3", "dd4"))
+    lc = _lin_ctrl_cached(model, ctl, tp, channels, "attitude")
+    refs = ("yaw_ref",) if model.dof == 1 else ("ref_x", "ref_y", "ref_z")
+    dist = ("tau_z",) if model.dof == 1 else DISTURBANCE_INPUTS
+    return Loop(
+        kind="attitude",
+        name="attitude",
+        model=model,
+        trim=tp,
+        controller=ctl,
+        gains=g,
+        channels=channels,
+        references=refs,
+        disturbances=dist,
+        p=tp.p,
+        delay_samples=delay_samples,
+        _lin_ctrl=lc,
+    )
+
+
+_LC_CACHE: dict = {}
+
+
+def _lin_ctrl_cached(model, ctl, tp, channels, kind) -> _LinearController:
+    key = (
+        id(model),
+        kind,
+        ctl.name,
+        tuple(channels),
+        tuple(np.round(tp.x, 12)),
+        tuple(np.round(tp.u, 12)),
+    )
+    hit = _LC_CACHE.get(key)
+    if hit is not None and hit[0] is model:
+        return hit[1]
+    if kind == "attitude" and model.dof == 1:
+        names = ("yaw_ref",)
+        yaw0 = float(tp.x[0])
+
+        def ref_expr(r):
+            return quat.from_yaw(yaw0 + r[0])
+    elif kind == "attitude":
+        names = ("ref_x", "ref_y", "ref_z")
+        q0 = ca.DM(tp.x[0:4])
+
+        def ref_expr(r):
+            return quat.qmul(q0, quat.qexp(r))
+    else:
+        names = ()
+
+        def ref_expr(r):
+            return ca.SX(0, 1)
+
+    lc = _linear_controller(model, ctl, tp, channels, ref_expr, names)
+    if len(_LC_CACHE) > 32:
+        _LC_CACHE.clear()
+    _LC_CACHE[key] = (model, lc)
+    return lc
+
+
+def make_loop(testbed_or_model, loop: str, **options) -> Loop:
+    """:func:`balancing_loop` or :func:`attitude_loop` by name (``"balancing"``, ``"attitude"``)."""
+    if loop == "balancing":
+        return balancing_loop(testbed_or_model, **options)
+    if loop == "attitude":
+        return attitude_loop(testbed_or_model, **options)
+    raise InputError(f"--loop {loop}: expected one of {'|'.join(LOOPS)}")
