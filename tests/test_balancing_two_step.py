@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 
+import numpy as np
 import pytest
 
 from airbearing.io.testbed import load_testbed
@@ -11,13 +12,26 @@ from airbearing.io.testbed import load_testbed
 identify = pytest.importorskip("airbearing.analysis.identify")
 
 
-def test_two_step_reduces_kinetic_energy_spread():
+def _seed004_masses():
+    tb = load_testbed("platform-3dof")
+    # seed 004 simulation set-up (Sec. "Simulation results", eqs. 55-56): balance masses of
+    # 0.465 kg each; the 0.041 kg sliders of the built-in (seed 000) move the CM by at most
+    # 0.24 mm per rail, short of the built-in's 0.4/0.7/-2.6 mm offset
+    return tb.replace(masses=dataclasses.replace(tb.masses, mass=(0.465, 0.465, 0.465)))
+
+
+@pytest.mark.parametrize("seed", [0, 1], ids=["noise-seed-0", "noise-seed-1"])
+def test_two_step_reduces_kinetic_energy_spread(seed):
     from airbearing.analysis.balancing import two_step
 
-    tb = load_testbed("platform-3dof")
-    # seed 004 simulation set-up: balance masses of 0.465 kg each (the 0.041 kg sliders of
-    # the built-in cannot move the CM by the built-in's 0.4/0.7/-2.6 mm offset)
-    tb = tb.replace(masses=dataclasses.replace(tb.masses, mass=(0.465, 0.465, 0.465)))
-    out = two_step(tb, seed=0)
+    tb = _seed004_masses()
+    out = two_step(tb, seed=seed)
     # seed 004: 99.75 % in simulation; the issue asks for at least 99 %
     assert out["ke_reduction"] >= 0.99, out
+    # the vertical offset the KE spread needs: a residual of 2 um leaves a spread of about
+    # 7e-5 J against 8e-3 J before (the 99 % line); the identification must be well within it
+    r_true_z = tb.body.cm_offset_vec[2]
+    assert out["vertical_offset_identified_m"] == pytest.approx(r_true_z, abs=2e-6), out
+    # step 1 reaches seed 004's in-plane residual ("in the order of 1e-7 m"); the stepper's
+    # step (2 um of a 0.465 kg mass on 6.3 kg) quantises it to 0.15 um
+    assert np.all(np.abs(out["residual_offset_step1_m"][:2]) <= 3e-7), out

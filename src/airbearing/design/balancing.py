@@ -49,6 +49,7 @@ __all__ = [
     "MIXED",
     "PIDSplit",
     "SEED000_GAINS",
+    "TILT_INTEGRAL_RATE",
     "adaptive_balancing_controller",
     "balancing_controller",
     "dipole_for_torque",
@@ -65,6 +66,9 @@ __all__ = [
 
 #: ``K_p`` (N m), ``K_d`` (N m s), ``K_d K_i`` (N m/s): seed 000 Tables 1 and 2.
 SEED000_GAINS = (1e-3, 1.8e-3, 2e-5)
+#: 1/s, default integral pole of :func:`tilt_pid_gains`: the seed-000 ratio K_d K_i / K_p
+#: (2e-5 / 1e-3, seed 000 Tables 1-2); the slowest pole of the tilt loop (time constant 50 s).
+TILT_INTEGRAL_RATE = SEED000_GAINS[2] / SEED000_GAINS[0]
 
 #: ``K`` (N m), ``P`` (N m s), ``K_I`` (1/(N m s)) of seed 004 eq. 51. Seed 004 gives no
 #: numbers; these match the seed-000 PID at small tilt (``q4 q_ep ~ theta / 2``):
@@ -545,7 +549,11 @@ def balancing_controller(model, method: str, **options) -> Controller:
 
 
 def tilt_pid_gains(
-    testbed, *, frequency: float | None = None, damping: float = 0.7, integral_rate: float = 0.02
+    testbed,
+    *,
+    frequency: float | None = None,
+    damping: float = 0.7,
+    integral_rate: float = TILT_INTEGRAL_RATE,
 ) -> tuple[float, float, float]:
     """PID gains ``(K_p, K_d, K_d K_i)`` placing the poles of the linearised tilt loop.
 
