@@ -83,3 +83,14 @@ def test_yaw_and_stacked_inputs():
     assert q.shape == (7, 4)
     assert_allclose(quat.yaw_of(q), yaws, atol=1e-12)
     assert_allclose(quat.tilt_of(q), 0, atol=1e-7)
+
+
+def test_exp_has_finite_second_derivatives_at_zero():
+    # IPOPT needs the Hessian of qexp at the origin; if_else must not leak a NaN branch
+    v = ca.SX.sym("v", 3)
+    q = quat.qexp(v)
+    H = ca.Function("H", [v], [ca.hessian(q[0], v)[0], ca.jacobian(q, v)])
+    hess, jac = (np.asarray(o) for o in H(np.zeros(3)))
+    assert np.all(np.isfinite(hess)) and np.all(np.isfinite(jac))
+    assert_allclose(hess, -0.25 * np.eye(3), atol=1e-15)  # cos(t/2) = 1 - t^2/8 + ...
+    assert_allclose(jac[1:], 0.5 * np.eye(3), atol=1e-15)

@@ -12,7 +12,7 @@ from pathlib import Path
 import matplotlib.pyplot as plt
 import numpy as np
 
-from airbearing.analysis import balancing, cmg_study, stability_report
+from airbearing.analysis import balancing, cmg_study, identify, stability_report
 from airbearing.analysis.html import Report
 from airbearing.analysis.scenarios import free_oscillation, free_summary, slew, slew_summary
 from airbearing.io.testbed import load_testbed
@@ -80,6 +80,7 @@ SECTIONS = [
     ("CMG cluster", cmg_study.demo_section),
     ("Balancing", balancing.demo_section),
     ("Linear stability", stability_report.demo_section),
+    ("Identification", identify.demo_section),
 ]
 
 

@@ -120,9 +120,13 @@ def qexp(rotvec):
     """
     if _is_ca(rotvec):
         t2 = ca.sumsqr(rotvec)
-        t = ca.sqrt(t2 + 1e-300)
-        half = ca.if_else(t2 < 1e-12, 0.5 - t2 / 48.0, ca.sin(t / 2) / t)
-        return ca.vertcat(ca.cos(t / 2), half * rotvec)
+        small = t2 < 1e-8
+        # if_else evaluates both branches: keep sqrt away from 0 in the unused one so that
+        # first and second derivatives stay finite at the origin (Taylor to t^4 below)
+        t = ca.sqrt(ca.if_else(small, 1.0, t2))
+        half = ca.if_else(small, 0.5 - t2 / 48.0, ca.sin(t / 2) / t)
+        cos_half = ca.if_else(small, 1 - t2 / 8.0 + t2**2 / 384.0, ca.cos(t / 2))
+        return ca.vertcat(cos_half, half * rotvec)
     v = np.asarray(rotvec, dtype=float)
     t = np.linalg.norm(v, axis=-1, keepdims=True)
     half = 0.5 * np.sinc(t / (2 * np.pi))  # sin(t/2)/t

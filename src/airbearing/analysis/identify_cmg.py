@@ -1,0 +1,267 @@
+"""Yaw inertia of a CMG testbed (dof 1) from momentum exchange with its gimbals.
+
+On a yaw-only bearing with no external torque the angular momentum about the
+vertical, ``J_z w_z + h_z(delta)``, is conserved (seed 001 eq. 10, z row; the
+cluster momentum ``h_z = h0 sin(beta) sum sin(delta_i)`` of seed 001 eq. 12). With
+friction, ``d/dt (J_z w_z + h_z) = -c w_z - f sign(w_z)`` (FORMATS.md
+``viscous_friction``, ``coulomb_friction``). Integrated from the start of a log:
+
+    w_z(t_k) = alpha - (1/J_z) h_z(t_k) - (c/J_z) int w_z dt - (f/J_z) int sign(w_z) dt,
+
+linear in ``a = 1/J_z``, ``c a``, ``f a`` and one constant ``alpha`` per log. The
+measured rate is the dependent variable, so gyro noise does not bias the estimate
+(the gimbal encoders give ``h_z`` with little noise). Solved in cvxpy/Clarabel with
+``J_z > 0`` (``a > 0``) and non-negative friction as constraints; this answers
+seed 001's question (CAD ``J = 0.00283`` vs the ``0.00323 kg m^2`` that explained
+the measured slews).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import cvxpy as cp
+import numpy as np
+
+from airbearing.errors import InputError, SolverError
+from airbearing.io.log import Log
+from airbearing.io.testbed import Body, Testbed
+from airbearing.models.cmg import cmg_functions
+from airbearing.models.effects import COULOMB_SMOOTHING
+
+__all__ = ["CMGIdentification", "identify_cmg_inertia"]
+
+#: Friction models and the effect each identifies (FORMATS.md names).
+FRICTION = {None: (), "viscous": ("viscous_friction",), "coulomb": ("coulomb_friction",)}
+#: Smallest 1/J_z allowed, as a fraction of the testbed's 1/J_z (J_z at most 1e6 x nominal).
+INV_INERTIA_FLOOR = 1e-6
+#: Relative standard error of J_z above which it is called unidentified.
+RELATIVE_STD_WARN = 0.05
+
+
+@dataclass(eq=False)
+class CMGIdentification:
+    """Identified yaw inertia of a dof-1 CMG testbed.
+
+    Attributes
+    ----------
+    inertia : float
+        J_z, kg m^2, about the bearing axis.
+    std : float
+        1-sigma standard error of J_z, kg m^2.
+    friction : dict
+        Effect name -> identified value (N m s or N m), for the chosen friction model.
+    std_friction : dict
+        Effect name -> 1-sigma standard error.
+    condition_number : float
+        Of the column-scaled regressor.
+    active_constraints : list of str
+        ``"inertia_positive"``, ``"friction_nonnegative:<effect>"`` when they bind.
+    residual_rms : float
+        RMS of the rate residual, rad/s.
+    warnings : list of str
+    details : dict
+    """
+
+    inertia: float
+    std: float
+    friction: dict
+    std_friction: dict
+    condition_number: float
+    active_constraints: list
+    residual_rms: float
+    warnings: list
+    details: dict = field(default_factory=dict)
+
+    def to_json(self) -> dict:
+        """``inertia`` (J_z), ``std``, ``condition_number``, ``active_constraints``,
+        ``residual_rms`` and the friction terms."""
+        return {
+            "inertia": float(self.inertia),
+            "std": float(self.std),
+            "condition_number": float(self.condition_number),
+            "active_constraints": list(self.active_constraints),
+            "residual_rms": float(self.residual_rms),
+            "residual_rms_unit": "rad/s",
+            "friction": dict(self.friction),
+            "std_friction": dict(self.std_friction),
+            "method": "momentum-exchange",
+            "warnings": list(self.warnings),
+            "details": dict(self.details),
+        }
+
+    def to_testbed(self, testbed: Testbed) -> Testbed:
+        """``testbed`` with ``J_z`` as its yaw inertia and the identified friction as effects.
+
+        An ``inertia_error`` effect of the testbed is dropped: the identified J_z is
+        the effective inertia it stood for.
+        """
+        b = testbed.body
+        effects = {k: v for k, v in testbed.effects.items() if k != "inertia_error"}
+        effects.update(self.friction)
+        return testbed.replace(
+            body=Body(
+                dof=b.dof,
+                mass=b.mass,
+                inertia=float(self.inertia),
+                cm_offset=b.cm_offset,
+                torque_noise=b.torque_noise,
+            ),
+            effects=effects,
+        )
+
+
+def _log_arrays(testbed: Testbed, log: Log):
+    src = log.source
+    if not isinstance(log, Log):
+        raise InputError(f"identify: expected Log objects, got {type(log).__name__}")
+    if log.testbed is not None and (
+        log.testbed.kind != testbed.kind or log.testbed.body.dof != testbed.body.dof
+    ):
+        raise InputError(
+            f"{src}: the log belongs to testbed {log.testbed.name!r} (kind = {log.testbed.kind!r}, "
+            f"dof = {log.testbed.body.dof}), not to a kind = 'cmg', dof = 1 testbed"
+        )
+    for cols, what in (
+        (("wz",), "the yaw rate wz (rad/s)"),
+        (("d1", "d2", "d3", "d4"), "the measured gimbal angles d1..d4 (rad)"),
+    ):
+        if not log.has(*cols):
+            raise InputError(
+                f"{src}: missing {', '.join(c for c in cols if not log.has(c))}: "
+                f"CMG inertia identification needs {what}"
+            )
+    return log.t, log.column("wz"), log.columns(["d1", "d2", "d3", "d4"])
+
+
+def identify_cmg_inertia(
+    testbed: Testbed, logs, *, friction: str | None = None
+) -> CMGIdentification:
+    """Yaw inertia J_z of a dof-1 CMG testbed from slew logs (momentum exchange).
+
+    Parameters
+    ----------
+    testbed : Testbed
+        ``kind = "cmg"``, ``dof = 1``: supplies ``h0`` and the skew angle.
+    logs : list of Log
+        Runs with the yaw rate ``wz`` and the measured gimbal angles ``d1..d4``.
+    friction : {None, "viscous", "coulomb"}
+        Friction term identified with J_z (FORMATS.md ``viscous_friction`` N m s,
+        ``coulomb_friction`` N m).
+
+    Returns
+    -------
+    CMGIdentification
+
+    Raises
+    ------
+    InputError
+        Wrong testbed, missing columns, a log without gimbal motion.
+    SolverError
+        When Clarabel fails.
+    """
+    if testbed.kind != "cmg" or testbed.body.dof != 1:
+        raise InputError(
+            f"{testbed.source}: CMG inertia identification needs kind = 'cmg' and dof = 1, got "
+            f"kind = {testbed.kind!r}, dof = {testbed.body.dof}"
+        )
+    if friction not in FRICTION:
+        raise InputError(f"friction={friction!r}: expected None, 'viscous' or 'coulomb'")
+    logs = list(logs)
+    if not logs:
+        raise InputError("identify: expected at least one log, got none")
+    h0, beta = testbed.cmg.h0, testbed.cmg.skew
+    H = cmg_functions()["H"]
+    names = FRICTION[friction]
+    nfr = len(names)
+    nl = len(logs)
+    npar = 1 + nfr + nl  # a = 1/J_z, friction/J_z, alpha per log
+    R = None
+    rows = 0
+    sigma = testbed.sensors.gyro_noise
+    for li, log in enumerate(logs):
+        t, w, d = _log_arrays(testbed, log)
+        # seed 001 eq. 12, z component, in N m s
+        hz = h0 * np.asarray(H.map(len(t))(d.T, beta))[2]
+        if np.ptp(hz) <= 0:
+            raise InputError(f"{log.source}: the gimbals do not move: no momentum exchange to use")
+        dt = np.diff(t)
+        X = np.zeros((len(t), npar))
+        X[:, 0] = -hz
+        cols = []
+        if friction == "viscous":
+            cols.append(np.r_[0, np.cumsum(0.5 * dt * (w[1:] + w[:-1]))])  # int w dt
+        elif friction == "coulomb":
+            sg = np.tanh(w / COULOMB_SMOOTHING)  # as the model's coulomb_friction
+            cols.append(np.r_[0, np.cumsum(0.5 * dt * (sg[1:] + sg[:-1]))])
+        for k, c in enumerate(cols):
+            X[:, 1 + k] = -c
+        X[:, 1 + nfr + li] = 1.0
+        M = np.column_stack([X, w])
+        R = np.linalg.qr(M if R is None else np.vstack([R, M]), mode="r")
+        rows += len(t)
+    if rows <= npar:
+        raise InputError(f"identify: {rows} samples for {npar} unknowns; give longer logs")
+    Rm, z, e = R[:npar, :npar], R[:npar, npar], abs(R[npar, npar]) if R.shape[0] > npar else 0.0
+    # scale the unknowns to order one for Clarabel
+    col = np.linalg.norm(Rm, axis=0)
+    if np.any(col <= 0):
+        raise InputError("identify: the logs carry no information on J_z")
+    A = Rm / col
+    x = cp.Variable(npar)
+    cost = cp.sum_squares(A @ x - z)
+    a_nom = 1.0 / testbed.body.yaw_inertia
+    cons = [x[0] >= INV_INERTIA_FLOOR * a_nom * col[0]]
+    cons += [x[1 + k] >= 0 for k in range(nfr)]
+    prob = cp.Problem(cp.Minimize(cost), cons)
+    try:
+        prob.solve(solver=cp.CLARABEL)
+    except cp.error.SolverError as err:
+        raise SolverError(f"CMG inertia fit (cvxpy, Clarabel): {err}") from err
+    if prob.status not in (cp.OPTIMAL, cp.OPTIMAL_INACCURATE):
+        raise SolverError(f"CMG inertia fit (cvxpy, Clarabel): status {prob.status!r}")
+    beta_hat = np.asarray(x.value) / col
+    rss = float(np.sum((Rm @ beta_hat - z) ** 2) + e**2)
+    var = rss / max(rows - npar, 1)
+    cov = var * np.linalg.pinv(Rm.T @ Rm)
+    a = beta_hat[0]
+    J = 1.0 / a
+    # delta method: J = 1/a, friction_k = b_k / a
+    G = np.zeros((1 + nfr, npar))
+    G[0, 0] = -1.0 / a**2
+    for k in range(nfr):
+        G[1 + k, 0] = -beta_hat[1 + k] / a**2
+        G[1 + k, 1 + k] = 1.0 / a
+    cov_p = G @ cov @ G.T
+    std = np.sqrt(np.maximum(np.diag(cov_p), 0))
+    Fn = A.T @ A
+    ev = np.linalg.eigvalsh(Fn)
+    cond = float(np.sqrt(ev[-1] / max(ev[0], 1e-300)))
+    active, warnings = [], []
+    if x.value[0] <= INV_INERTIA_FLOOR * a_nom * col[0] * (1 + 1e-6):
+        active.append("inertia_positive")
+    for k, n in enumerate(names):
+        if beta_hat[1 + k] <= 1e-9 * max(abs(beta_hat[1 + k]), 1e-300) or x.value[1 + k] <= 1e-9:
+            active.append(f"friction_nonnegative:{n}")
+    if std[0] > RELATIVE_STD_WARN * abs(J) or "inertia_positive" in active:
+        warnings.append(
+            f"unidentifiable parameters: J_z = {J:.4g} +- {std[0]:.2g} kg m^2; the logs exchange "
+            "too little momentum with the gimbals (slew further or faster)"
+        )
+    rms = float(np.sqrt(rss / rows))
+    if sigma > 0 and rms > 3 * sigma:
+        warnings.append(
+            f"rate residual {rms:.3g} rad/s is {rms / sigma:.1f} gyro sigmas: the momentum "
+            "balance misses a torque (friction, cables: try friction='viscous' or 'coulomb')"
+        )
+    return CMGIdentification(
+        inertia=float(J),
+        std=float(std[0]),
+        friction={n: float(beta_hat[1 + k] / a) for k, n in enumerate(names)},
+        std_friction={n: float(std[1 + k]) for k, n in enumerate(names)},
+        condition_number=cond,
+        active_constraints=active,
+        residual_rms=rms,
+        warnings=warnings,
+        details={"samples": int(rows), "logs": nl, "h0": float(h0), "beta_rad": float(beta)},
+    )
