@@ -182,3 +182,32 @@ def test_parameters_stay_symbolic(platform):
     b = np.asarray(m.f(x, u, m.params(J_zz=2 * platform.body.inertia_matrix[2, 2]))).ravel()
     assert not np.allclose(a, b)
     assert isinstance(m.f, ca.Function)
+
+
+def test_sensor_lag_is_exact_for_a_ramp_and_transparent_at_zero(cmg):
+    """First-order lag of a rate ramp: the exact solution, and tau = 0 reads the true rate."""
+    m = build_model(cmg.replace(effects={}), {"sensor_lag": 0.2})
+    n, dt = 40, cmg.sensors.dt
+    torque = 1e-4  # N m about z: wz ramps at torque / J
+    U = np.zeros((m.nu, n))
+    U[m.index("tau_z", "u")[0]] = torque
+    x0 = m.x0()
+    X = np.asarray(m.rollout(n, dt)(x0, U, m.p0)).T
+    t = dt * np.arange(1, n + 1)
+    slope, tau = torque / cmg.body.yaw_inertia, 0.2
+    # y' = (slope t - y)/tau, y(0) = 0  ->  y = slope (t - tau (1 - exp(-t/tau)))
+    expected = slope * (t - tau * (1 - np.exp(-t / tau)))
+    assert_allclose(X[:, m.lag_index[0]], expected, rtol=1e-9, atol=1e-15)
+    m0 = build_model(cmg, {"sensor_lag": 0.0})
+    X0 = np.asarray(m0.rollout(n, dt)(m0.x0(), U, m0.p0)).T
+    assert_allclose(X0[:, m0.lag_index[0]], X0[:, 1], rtol=1e-12)
+
+
+def test_residual_dipole_acts_on_a_cmg_in_a_cage(cmg):
+    from airbearing.io.testbed import Field
+
+    tb = cmg.replace(field=Field(lab=(2e-4, 0.0, 0.0)))
+    m = build_model(tb, {"residual_dipole": (0.0, 0.05, 0.0)})
+    xdot = np.asarray(m.f(m.x0(), np.zeros(m.nu), m.p0)).ravel()
+    # tau_z = (m x b)_z = m_x b_y - m_y b_x = -0.05 * 2e-4
+    assert_allclose(xdot[1] * tb.body.yaw_inertia, -0.05 * 2e-4, rtol=1e-12)

@@ -12,7 +12,13 @@ from pathlib import Path
 import matplotlib.pyplot as plt
 import numpy as np
 
-from airbearing.analysis import balancing, cmg_study, identify, stability_report
+from airbearing.analysis import (
+    balancing,
+    cmg_study,
+    discrepancy_report,
+    identify,
+    stability_report,
+)
 from airbearing.analysis.html import Report
 from airbearing.analysis.scenarios import free_oscillation, free_summary, slew, slew_summary
 from airbearing.io.testbed import load_testbed
@@ -81,6 +87,7 @@ SECTIONS = [
     ("Balancing", balancing.demo_section),
     ("Linear stability", stability_report.demo_section),
     ("Identification", identify.demo_section),
+    ("Model discrepancy", discrepancy_report.demo_section),
 ]
 
 

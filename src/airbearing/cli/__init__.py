@@ -26,7 +26,15 @@ app = typer.Typer(
 
 def _register() -> None:
     # each command module adds its commands to `app` on import
-    from airbearing.cli import balance, cmg, demo, gains, identify, simulate  # noqa: F401
+    from airbearing.cli import (  # noqa: F401
+        balance,
+        cmg,
+        demo,
+        discrepancy,
+        gains,
+        identify,
+        simulate,
+    )
 
 
 def main(argv: list[str] | None = None) -> None:

@@ -71,6 +71,9 @@ class Model:
         Nominal parameter values from the testbed.
     lag_index : tuple of int
         Indices of ``sensor_lag`` filter states in ``x``.
+    lag_init : casadi.Function
+        ``(x_plant, u, p) -> lag states`` of a lag that has been following the rate
+        (ramp steady state ``src - tau d(src)/dt``); the start of a lag state in a window.
     """
 
     testbed: Testbed
@@ -85,6 +88,7 @@ class Model:
     lag_index: tuple
     _f_plant: ca.Function
     _lag: ca.Function
+    lag_init: ca.Function
 
     @property
     def nx(self) -> int:
@@ -206,7 +210,7 @@ def build_model(testbed: Testbed, effects: Mapping | None = None) -> Model:
         the testbed's own. A 3-list makes a per-axis effect with three parameters.
     """
     kind, dof = testbed.kind, testbed.body.dof
-    has_field = testbed.field is not None or kind == "platform"
+    has_field = testbed.field is not None or kind == "platform"  # platform: field is an input
     effects = _effects_of(testbed, effects)
 
     # ---- parameters
@@ -304,6 +308,8 @@ def build_model(testbed: Testbed, effects: Mapping | None = None) -> Model:
         b_body = quat.rotate_inverse(q, b_lab)
         m_dip = ca.vertcat(U["mx"], U["my"], U["mz"])
         torque = torque + ca.cross(m_dip, b_body)  # magnetorquer torque d x b (seed 000 eq. 2)
+    elif testbed.field is not None:  # a CMG testbed inside a cage: the field is a constant
+        b_body = quat.rotate_inverse(q, ca.DM(testbed.field.lab_vec))
     # gravity torque of the CR -> CM offset (seed 004 eq. 11, seed 000 eq. 1)
     torque = torque + P["mass"] * ca.cross(r_cm, g_body) + tau_d
     if dof == 1:
@@ -369,17 +375,34 @@ def build_model(testbed: Testbed, effects: Mapping | None = None) -> Model:
         ["x", "u", "p"],
         ["xdot"],
     )
-    # exact update of the lag states over one sub-interval h, driven by the mean source
+    # exact update of the lag states over one sub-interval h for a source varying linearly
+    # from a to b (first-order hold): y+ = b - tau s + (y - a + tau s) exp(-h/tau), s = (b-a)/h
     xa, xb, hh = ca.SX.sym("xa", xp.shape[0]), ca.SX.sym("xb", xp.shape[0]), ca.SX.sym("h")
     lag_in = ca.vertcat(*lag_syms) if lag_syms else ca.SX(0, 1)
     lag_next = []
     for s, src, tau in ctx.lag_states:
         src_fn = ca.Function("src", [xp, p], [src])
-        mean = 0.5 * (src_fn(xa, p) + src_fn(xb, p))
+        a, b = src_fn(xa, p), src_fn(xb, p)
+        tau_slope = tau * (b - a) / hh
         decay = ca.if_else(tau > 0, ca.exp(-hh / ca.fmax(tau, 1e-12)), 0)
-        lag_next.append(mean + (s - mean) * decay)
+        lag_next.append(b - tau_slope + (s - a + tau_slope) * decay)
     lag_fn = ca.Function(
         "lag", [xa, xb, lag_in, p, hh], [ca.vertcat(*lag_next) if lag_next else ca.SX(0, 1)]
+    )
+    # a lag that has followed the rate for a while: steady state of a ramp, y = src - tau src'
+    src_dot = [ca.jtimes(src, xp, f_plant(xp, u, p)) for _, src, _ in ctx.lag_states]
+    lag_init = ca.Function(
+        "lag_init",
+        [xp, u, p],
+        [
+            ca.vertcat(
+                *[src - tau * sd for (_, src, tau), sd in zip(ctx.lag_states, src_dot, strict=True)]
+            )
+            if lag_syms
+            else ca.SX(0, 1)
+        ],
+        ["x_plant", "u", "p"],
+        ["lag0"],
     )
 
     if dof == 3:
@@ -406,4 +429,5 @@ def build_model(testbed: Testbed, effects: Mapping | None = None) -> Model:
         lag_index=tuple(range(n_plant, n_plant + len(lag_names))),
         _f_plant=f_plant,
         _lag=lag_fn,
+        lag_init=lag_init,
     )
