@@ -94,3 +94,9 @@ def test_exp_has_finite_second_derivatives_at_zero():
     assert np.all(np.isfinite(hess)) and np.all(np.isfinite(jac))
     assert_allclose(hess, -0.25 * np.eye(3), atol=1e-15)  # cos(t/2) = 1 - t^2/8 + ...
     assert_allclose(jac[1:], 0.5 * np.eye(3), atol=1e-15)
+
+
+def test_continuous_branch_removes_sign_jumps():
+    q = quat.from_yaw(np.linspace(0, 6, 50))
+    flipped = q * np.where(np.arange(50) % 7 == 3, -1.0, 1.0)[:, None]
+    assert_allclose(quat.continuous_branch(flipped), q, atol=1e-15)

@@ -73,6 +73,7 @@ __all__ = [
     "EXPERIMENTS",
     "Candidate",
     "CandidateResult",
+    "format_value",
     "Discrepancy",
     "candidates_for",
     "discrepancy",
@@ -568,9 +569,12 @@ class _Search:
         return d
 
 
-def _fmt_value(v, std=None) -> str:
+def format_value(v, std=None) -> str:
+    """An effect value (number or 3-vector) with its standard error, for text and reports."""
+    if v is None:
+        return "-"
     if isinstance(v, tuple | list):
-        s = "[" + ", ".join(f"{x:.3g}" for x in v) + "]"
+        s = "[" + ", ".join(f"{x:.4g}" for x in v) + "]"
         if std is not None:
             s += " +- [" + ", ".join(f"{x:.2g}" for x in std) + "]"
         return s
@@ -685,7 +689,7 @@ def discrepancy(
         theta_chosen = pick.fit.theta.copy()
         current = pick.fit
         current_lag = current_lag or pick.candidate.lag
-        say(f"added {pick.name} = {_fmt_value(pick.value)}")
+        say(f"added {pick.name} = {format_value(pick.value)}")
     else:
         stop_reason = stop_reason or f"reached max_effects = {max_effects}"
 
@@ -702,7 +706,7 @@ def discrepancy(
     aug_model = build_model(augmented)
     final_problem = search.problem(current_lag)
     if effects:
-        parts = [f"{n} = {_fmt_value(v, effect_std[n])}" for n, v in effects.items()]
+        parts = [f"{n} = {format_value(v, effect_std[n])}" for n, v in effects.items()]
         verdict = "missing effect" + ("s" if len(effects) > 1 else "") + ": " + "; ".join(parts)
     else:
         verdict = "no missing effect: " + (stop_reason or "nothing to add")

@@ -11,7 +11,7 @@ from pathlib import Path
 import matplotlib.pyplot as plt
 import numpy as np
 
-from airbearing.analysis.discrepancy import Discrepancy, discrepancy
+from airbearing.analysis.discrepancy import Discrepancy, discrepancy, format_value
 from airbearing.analysis.html import Report
 from airbearing.io.log import read_log
 from airbearing.io.testbed import Sensors, load_testbed
@@ -20,17 +20,6 @@ __all__ = ["add_discrepancy", "demo_section", "discrepancy_report", "EXAMPLE_DIR
 
 #: The public example of the seed-001 story, beside the repository (read-only data).
 EXAMPLE_DIR = Path(__file__).resolve().parents[3] / ".." / "shared" / "data" / "examples"
-
-
-def _fmt(v, sd=None) -> str:
-    if v is None:
-        return "-"
-    if isinstance(v, tuple | list):
-        s = "[" + ", ".join(f"{x:.4g}" for x in v) + "]"
-        if sd is not None:
-            s += " +- [" + ", ".join(f"{x:.2g}" for x in sd) + "]"
-        return s
-    return f"{v:.4g}" + ("" if sd is None else f" +- {sd:.2g}")
 
 
 def _predictions(result: Discrepancy):
@@ -74,7 +63,7 @@ def add_discrepancy(report: Report, result: Discrepancy, *, level: int = 2) -> N
     )
     if result.effects:
         rows = [
-            {"effect": n, "value": _fmt(v, result.effect_std[n]), "unit": _unit(n)}
+            {"effect": n, "value": format_value(v, result.effect_std[n]), "unit": _unit(n)}
             for n, v in result.effects.items()
         ]
         report.heading("Named effects", level + 1)
@@ -136,7 +125,7 @@ def add_discrepancy(report: Report, result: Discrepancy, *, level: int = 2) -> N
         rows.append(
             {
                 "effect": c.name,
-                "value": _fmt(c.value, c.std) if c.value is not None else "-",
+                "value": format_value(c.value, c.std) if c.value is not None else "-",
                 "gap (rad/s)": c.gap if np.isfinite(c.gap) else None,
                 "dBIC": c.delta_bic if np.isfinite(c.delta_bic) else None,
                 "held-out gap (rad/s)": c.heldout_gap if np.isfinite(c.heldout_gap) else None,

@@ -98,14 +98,6 @@ class PlatformData:
         return len(self.t)
 
 
-def _continuous_branch(q: np.ndarray) -> np.ndarray:
-    """Flip quaternion signs so consecutive samples agree (q and -q are the same attitude)."""
-    q = q.copy()
-    flip = np.sum(q[1:] * q[:-1], axis=1) < 0
-    sign = np.concatenate([[1.0], np.where(np.cumsum(flip) % 2 == 1, -1.0, 1.0)])
-    return q * sign[:, None]
-
-
 def prepare_platform_logs(testbed: Testbed, logs) -> list[PlatformData]:
     """Check platform logs against ``testbed`` and extract the arrays identification needs.
 
@@ -165,7 +157,7 @@ def prepare_platform_logs(testbed: Testbed, logs) -> list[PlatformData]:
         t = log.t
         if len(t) < 10:
             raise InputError(f"{src}: {len(t)} samples; identification needs at least 10")
-        q = _continuous_branch(quat.normalize(log.columns(["qw", "qx", "qy", "qz"])))
+        q = quat.continuous_branch(quat.normalize(log.columns(["qw", "qx", "qy", "qz"])))
         w = log.columns(["wx", "wy", "wz"])
         s = log.columns(["s1", "s2", "s3"])
         spread = float(np.max(np.std(w, axis=0)))

@@ -181,15 +181,6 @@ class ReplayData:
         return self.x[:, self.x_names.index(name)]
 
 
-def _continuous_sign(q: np.ndarray) -> np.ndarray:
-    """Flip quaternion signs so consecutive samples lie on the same branch."""
-    q = q.copy()
-    for k in range(1, len(q)):
-        if np.dot(q[k], q[k - 1]) < 0:
-            q[k] = -q[k]
-    return q
-
-
 def replay_data(testbed: Testbed, log: Log) -> ReplayData:
     """Turn ``log`` into the inputs and measured states of ``testbed``'s Model.
 
@@ -224,7 +215,7 @@ def replay_data(testbed: Testbed, log: Log) -> ReplayData:
     rate_names = ("wx", "wy", "wz") if dof == 3 else ("wz",)
     w = log.columns(list(rate_names))
     if dof == 3:
-        q = _continuous_sign(quat.normalize(log.quaternions()))
+        q = quat.continuous_branch(quat.normalize(log.quaternions()))
         x_att = q
         q_att = q
     else:

@@ -27,6 +27,7 @@ __all__ = [
     "yaw_of",
     "tilt_of",
     "normalize",
+    "continuous_branch",
 ]
 
 _CASADI = (ca.SX, ca.MX, ca.DM)
@@ -160,3 +161,14 @@ def tilt_of(q):
     x, y = _get(q, 1), _get(q, 2)
     c = 1 - 2 * (x * x + y * y)
     return ca.acos(ca.fmin(ca.fmax(c, -1), 1)) if _is_ca(q) else np.arccos(np.clip(c, -1, 1))
+
+
+def continuous_branch(q):
+    """Flip signs of stacked quaternions ``(N, 4)`` so consecutive samples agree.
+
+    ``q`` and ``-q`` are the same attitude; a log may switch branch between samples.
+    """
+    q = np.array(q, dtype=float)
+    flip = np.sum(q[1:] * q[:-1], axis=1) < 0
+    sign = np.concatenate([[1.0], np.where(np.cumsum(flip) % 2 == 1, -1.0, 1.0)])
+    return q * sign[:, None]
