@@ -156,8 +156,12 @@ def test_lyapunov_law_drives_q_ep_to_zero_without_noise():
 @pytest.mark.parametrize("method", ["mechanical", "mixed", "adaptive", "lyapunov"])
 def test_methods_balance_in_plane_without_noise(method):
     tb = load_testbed("platform-3dof")
+    # a nearly neutral platform (one 0.02 mm motor accuracy of a 0.041 kg slider, 0.13 um)
+    # started level: the PID's integral pole is then at about 60 s, and the adaptive law,
+    # which learns r from the motion (Phi^T w), sees the platform swing
     run = run_balancing(tb, method, duration=300.0, noise=False, ideal_actuators=True,
-                        free_duration=None)  # fmt: skip
+                        free_duration=None, vertical_offset=-0.041 * 2e-5 / 6.3,
+                        start="level")  # fmt: skip
     # balanced position is the rail origin (see analysis.balancing): the in-plane sliders
     # come back from -0.5 mm; 10 % of the offset is a loose bound for a 300 s run
     s = np.asarray(run.metrics["slider_final_m"])
@@ -174,6 +178,73 @@ def test_gyro_noise_reaches_sliders_only_in_the_mechanical_split():
     # = 0.13 mm per sample (1 sigma), far above backlash; mixed sends it to the coils
     assert np.mean(t["mechanical"]["slider_std_m"][:2]) > 5e-5
     assert cmp["ratios"]["slider_p2p"] < 0.5
+
+
+def test_integral_time_constant_matches_the_linearised_loop():
+    from airbearing.analysis.balancing import integral_time_constant
+    from airbearing.design.balancing import SEED000_GAINS
+    from airbearing.design.loops import balancing_loop
+
+    tb = load_testbed("platform-3dof")
+    for r_z in (-52e-6, 0.0, -1e-3):
+        t = tb.replace(body=dataclasses.replace(tb.body, cm_offset=(0.0, 0.0, r_z)))
+        poles = (
+            balancing_loop(t, split="mechanical", delay_samples=0)
+            .closed_loop(discrete=False)
+            .poles()
+        )
+        poles = poles[np.abs(poles) > 1e-9]  # the yaw axis is not in the loop
+        # the per-axis cubic drops the products of inertia (J_xy = -0.001, J_yz = -0.004
+        # kg m^2), which move the slowest pole of the neutral platform by 1.8 %
+        assert integral_time_constant(t, SEED000_GAINS, r_z) == pytest.approx(
+            1.0 / np.min(-poles.real), rel=0.03
+        )
+
+
+def test_rest_attitude_is_an_equilibrium():
+    from airbearing.analysis.balancing import rest_attitude
+    from airbearing.design.controller import constant_input
+
+    tb = load_testbed("platform-3dof")
+    model = build_model(tb)
+    s0 = np.array([-0.5e-3, -0.5e-3, 0.0])
+    r = np.array([0.0, 0.0, -52e-6]) + tb.masses.mass_vec * s0 / tb.body.mass
+    q = rest_attitude(r)
+    # CM straight below the CR: gravity torque m r x g vanishes
+    assert np.allclose(quat.rotate(q, r / np.linalg.norm(r)), [0, 0, -1], atol=1e-12)
+    u = np.zeros(model.nu)
+    u[model.index(["s1", "s2", "s3"], "u")] = s0
+    res = simulate(model, constant_input(model, u), duration=20.0, x0=model.x0(q=q),
+                   p=model.params(r_x=0.0, r_y=0.0, r_z=-52e-6), noise=False)  # fmt: skip
+    assert np.abs(res.x[:, model.index(["wx", "wy", "wz"])]).max() < 1e-9
+    with pytest.raises(InputError, match="not below the CR"):
+        rest_attitude([1e-6, 0.0, 0.0])
+    with pytest.raises(InputError, match="45 deg"):
+        rest_attitude([3e-6, 3e-6, -1e-7])
+
+
+def test_seed000_comparison_at_300_s_reports_the_transient():
+    tb = load_testbed("platform-3dof")
+    cmp = compare_methods(tb, ("mechanical", "mixed"), offsets=(-0.5e-3,), seeds=(0,),
+                          free_duration=None)  # fmt: skip
+    st = cmp["steady"]
+    # tau = (K_p + k_g) / (K_d K_i) about: (1e-3 + 6.3 * 9.81 * 52e-6) / 2e-5 = 210 s
+    assert st["integral_time_constant_s"] == pytest.approx(210.0, rel=0.01)
+    assert not st["steady"] and st["transient_left"] == pytest.approx(np.exp(-200 / 210), 0.01)
+
+
+def test_seed000_advantage_of_the_mixed_split_at_steady_state():
+    """The issue's check (seed 000 Tables 1-2 conditions), once the integral transient
+    has passed: run for the steady duration (4.5 integral time constants, 945 s) instead
+    of 300 s, with the seed's backlash and the MTi-1 noise of the built-in."""
+    tb = load_testbed("platform-3dof")
+    cmp = compare_methods(tb, ("mechanical", "mixed"), duration=1000.0, seeds=(0, 1, 2, 3),
+                          free_duration=None)  # fmt: skip
+    assert cmp["steady"]["steady"]
+    # seed 000 measured 0.09 (peak-to-peak) and 0.54 (g_perp); the issue asks for at
+    # least 50 % lower peak-to-peak and a g_perp_rms no worse
+    assert cmp["ratios"]["slider_p2p"] <= 0.5, cmp["ratios"]
+    assert cmp["ratios"]["g_perp_rms"] <= 1.0, cmp["ratios"]
 
 
 # ------------------------------------------------------------------------------ bad input

@@ -10,6 +10,7 @@ from airbearing.models import quaternion as quat
 
 finite = st.floats(-1.0, 1.0, allow_nan=False)
 vec3 = st.tuples(finite, finite, finite).map(np.array)
+nonzero3 = vec3.filter(lambda v: np.linalg.norm(v) > 0.1)
 unit_q = (
     st.tuples(finite, finite, finite, finite)
     .filter(lambda v: np.linalg.norm(v) > 0.1)
@@ -42,6 +43,18 @@ def test_rotate_and_inverse(q, v):
     R = quat.rotation_matrix(q)
     assert_allclose(R @ R.T, np.eye(3), atol=1e-12)
     assert_allclose(quat.rotate_inverse(q, quat.rotate(q, v)), v, atol=1e-12)
+
+
+@given(nonzero3, nonzero3)
+def test_between_takes_a_to_b_by_the_shortest_arc(a, b):
+    ua, ub = a / np.linalg.norm(a), b / np.linalg.norm(b)
+    if ua @ ub < -0.999:
+        return  # opposite directions: no unique shortest arc
+    q = quat.between(a, b)
+    assert_allclose(quat.rotate(q, ua), ub, atol=1e-9)
+    # shortest arc: the rotation angle is the angle between the two directions
+    angle = 2 * np.arctan2(np.linalg.norm(q[1:]), q[0])
+    assert_allclose(angle, np.arccos(np.clip(ua @ ub, -1, 1)), atol=1e-7)
 
 
 @given(vec3)

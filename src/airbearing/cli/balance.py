@@ -8,7 +8,6 @@ from typing import Annotated
 import typer
 
 from airbearing.analysis.balancing import (
-    DEFAULT_VERTICAL_OFFSET,
     compare_methods,
     parse_sweep,
     run_balancing,
@@ -40,8 +39,15 @@ def balance(
         float, typer.Option(help="In-plane slider start, mm (seed 000: -0.5, +0.5).")
     ] = -0.5,
     vertical_offset: Annotated[
-        float, typer.Option(help="CR->CM vertical offset of the balanced platform, m.")
-    ] = DEFAULT_VERTICAL_OFFSET,
+        float | None,
+        typer.Option(
+            help="CR->CM vertical offset of the balanced platform, m "
+            "(default: 2 % of the testbed's, what seed 004's two-step leaves)."
+        ),
+    ] = None,
+    start: Annotated[
+        str, typer.Option(help="rest (seed 000: the offset platform's rest position) | level.")
+    ] = "rest",
     seed: Annotated[int, typer.Option(help="Noise seed.")] = 0,
     two_step_: Annotated[
         bool, typer.Option("--two-step", help="Seed 004's two-step procedure.")
@@ -75,18 +81,18 @@ def balance(
             name, values = parse_sweep(sweep)
             summary = sweep_comparison(
                 tb, name, values, methods, seeds=range(seeds), duration=duration,
-                vertical_offset=vertical_offset,
+                vertical_offset=vertical_offset, start=start,
             )  # fmt: skip
         else:
             summary = compare_methods(
                 tb, methods, seeds=range(seeds), duration=duration,
-                vertical_offset=vertical_offset,
+                vertical_offset=vertical_offset, start=start,
             )  # fmt: skip
         result = None
     else:
         run = run_balancing(
             tb, method, duration=duration, initial_offset=initial_offset_mm * 1e-3,
-            vertical_offset=vertical_offset, seed=seed,
+            vertical_offset=vertical_offset, start=start, seed=seed,
         )  # fmt: skip
         summary, result = {"testbed": tb.name, **run.metrics}, run.result
     summary = _jsonable(summary)

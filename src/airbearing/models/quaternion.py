@@ -24,6 +24,7 @@ __all__ = [
     "qexp",
     "from_axis_angle",
     "from_yaw",
+    "between",
     "yaw_of",
     "tilt_of",
     "normalize",
@@ -138,6 +139,20 @@ def from_axis_angle(axis, angle):
     """Unit quaternion for a rotation of ``angle`` (rad) about the unit ``axis``."""
     axis = np.asarray(axis, dtype=float)
     return np.concatenate([[np.cos(angle / 2)], np.sin(angle / 2) * axis / np.linalg.norm(axis)])
+
+
+def between(a, b):
+    """Unit quaternion of the shortest rotation taking the direction of ``a`` to that of ``b``.
+
+    ``R(q) a / |a| = b / |b|`` (NumPy, 3-vectors); ``a`` and ``b`` must not be opposite.
+    """
+    a = np.asarray(a, dtype=float) / np.linalg.norm(a)
+    b = np.asarray(b, dtype=float) / np.linalg.norm(b)
+    q = np.concatenate([[1.0 + a @ b], np.cross(a, b)])
+    n = np.linalg.norm(q)
+    if n < 1e-9:
+        raise ValueError(f"between: {a.tolist()} and {b.tolist()} are opposite")
+    return q / n
 
 
 def from_yaw(yaw):
