@@ -180,6 +180,28 @@ def test_gyro_noise_reaches_sliders_only_in_the_mechanical_split():
     assert cmp["ratios"]["slider_p2p"] < 0.5
 
 
+def test_adaptive_estimate_follows_the_gravity_direction():
+    from airbearing.design.balancing import ADAPTIVE_DEFAULT_GAINS
+
+    tb = load_testbed("platform-3dof")
+    run = run_balancing(tb, "adaptive", duration=100.0, noise=False, ideal_actuators=True,
+                        free_duration=None, vertical_offset=-1.3e-7, start="level")  # fmt: skip
+    r = run.result
+    names = r.controller.extra_names
+    r_hat = r.extra[:, [names.index(f"r_hat_{c}") for c in "xyz"]]
+    g_hat = r.y[:, r.model.index(["gx", "gy", "gz"], "y")]
+    # g' = g x w in body axes, so r_hat' = gamma m g x w integrates to
+    # r_hat - r_hat(0) = k_theta / (m |g|) (g_hat - g_hat(0)); the sampled law (explicit
+    # Euler at 20 Hz on ~0.02 rad/s swings) follows it to within a few per cent
+    expected = ADAPTIVE_DEFAULT_GAINS[1] / (tb.body.mass * tb.gravity) * (g_hat[-1] - g_hat[0])
+    assert np.linalg.norm(expected) > 1e-6
+    assert np.linalg.norm(r_hat[-1] - expected) < 0.05 * np.linalg.norm(expected)
+    # from the seed-000 rest position the platform is already an equilibrium of the law
+    rest = run_balancing(tb, "adaptive", duration=60.0, noise=False, free_duration=None)
+    assert "nothing is learnt" in rest.metrics["note"]
+    assert np.allclose(rest.metrics["slider_final_m"][:2], -0.5e-3, atol=2e-6)
+
+
 def test_integral_time_constant_matches_the_linearised_loop():
     from airbearing.analysis.balancing import integral_time_constant
     from airbearing.design.balancing import SEED000_GAINS
@@ -282,3 +304,22 @@ def test_cli_run_and_bad_input(tmp_path, capsys):
         cli.main(["balance", "cmg-yaw", "--method", "mixed", "--json", str(tmp_path / "x.json")])
     assert e.value.code == 2
     assert not (tmp_path / "x.json").exists()
+
+
+def test_cli_start_and_initial_rate(tmp_path):
+    import airbearing.cli as cli
+    import airbearing.cli.balance  # noqa: F401
+
+    out = tmp_path / "b.json"
+    cli.main(["balance", "platform-3dof", "--method", "adaptive", "--duration", "20", "--start",
+              "level", "--initial-rate", "0.01", "0", "0", "--json", str(out)])  # fmt: skip
+    data = json.loads(out.read_text())
+    assert data["start"] == "level" and "note" not in data
+    # default vertical offset: 2 % of the testbed's -2.6 mm; the z slider moves it a little
+    assert data["residual_offset_m"][2] == pytest.approx(0.02 * -2.6e-3, abs=1e-6)
+    for bad in (["--start", "upside-down"], ["--vertical-offset", "1e-5"]):
+        with pytest.raises(SystemExit) as e:
+            cli.main(["balance", "platform-3dof", "--duration", "20", "--json",
+                      str(tmp_path / "x.json"), *bad])  # fmt: skip
+        assert e.value.code == 2
+        assert not (tmp_path / "x.json").exists()

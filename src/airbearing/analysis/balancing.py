@@ -232,6 +232,7 @@ def run_balancing(
     initial_offset: float = -0.5e-3,
     vertical_offset: float | None = None,
     start: str = "rest",
+    initial_rate=(0.0, 0.0, 0.0),
     seed: int = 0,
     gains=None,
     lag: float = 0.0,
@@ -257,7 +258,10 @@ def run_balancing(
         :func:`balanced_vertical_offset` (see module notes).
     start : {"rest", "level"}
         Initial attitude: the rest position of the offset platform (seed 000 Sec. 3,
-        :func:`rest_attitude`) or level; at rest either way.
+        :func:`rest_attitude`) or level.
+    initial_rate : (3,) rad/s
+        Body rates at the start (seed 000: null; seed 004's in-plane balancing: a spin,
+        :data:`SEED004_RATES`). The adaptive law learns only from motion.
     seed : int
         Noise seed.
     gains : sequence, optional
@@ -286,7 +290,10 @@ def run_balancing(
     model = build_model(testbed, effects)
     s0 = np.array([initial_offset, initial_offset, 0.0])
     r0 = np.array([0.0, 0.0, vertical_offset]) + _mass_moment(testbed, s0) / testbed.body.mass
-    x0 = model.x0(q=rest_attitude(r0)) if start == "rest" else model.x0()
+    w0 = np.asarray(initial_rate, dtype=float).reshape(-1)
+    if w0.shape != (3,) or not np.all(np.isfinite(w0)):
+        raise InputError(f"initial rate {initial_rate!r}: expected three finite rates in rad/s")
+    x0 = model.x0(q=rest_attitude(r0) if start == "rest" else None, w=w0)
     options = {
         "slider_start": s0,
         "sliders": SliderActuator.from_testbed(testbed, ideal=ideal_actuators, lag=lag),
@@ -321,6 +328,13 @@ def run_balancing(
     pid_gains = None
     if method in ("mechanical", "mixed"):
         pid_gains = SEED000_GAINS if gains is None else gains
+    if method == "adaptive" and start == "rest" and not np.any(w0):
+        metrics["note"] = (
+            "the adaptive law learns from motion only (its estimate moves as "
+            "gamma m |g| (g_hat - g_hat(0))); started at rest in its rest position the "
+            "platform does not move and nothing is learnt: use --start level or an "
+            "--initial-rate"
+        )
     metrics.update(
         method=method,
         initial_offset_m=initial_offset,

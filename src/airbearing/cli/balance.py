@@ -48,6 +48,10 @@ def balance(
     start: Annotated[
         str, typer.Option(help="rest (seed 000: the offset platform's rest position) | level.")
     ] = "rest",
+    initial_rate: Annotated[
+        tuple[float, float, float],
+        typer.Option(help="Initial body rate, rad/s (seed 000: null; seed 004: a spin)."),
+    ] = (0.0, 0.0, 0.0),
     seed: Annotated[int, typer.Option(help="Noise seed.")] = 0,
     two_step_: Annotated[
         bool, typer.Option("--two-step", help="Seed 004's two-step procedure.")
@@ -81,18 +85,18 @@ def balance(
             name, values = parse_sweep(sweep)
             summary = sweep_comparison(
                 tb, name, values, methods, seeds=range(seeds), duration=duration,
-                vertical_offset=vertical_offset, start=start,
+                vertical_offset=vertical_offset, start=start, initial_rate=initial_rate,
             )  # fmt: skip
         else:
             summary = compare_methods(
                 tb, methods, seeds=range(seeds), duration=duration,
-                vertical_offset=vertical_offset, start=start,
+                vertical_offset=vertical_offset, start=start, initial_rate=initial_rate,
             )  # fmt: skip
         result = None
     else:
         run = run_balancing(
             tb, method, duration=duration, initial_offset=initial_offset_mm * 1e-3,
-            vertical_offset=vertical_offset, start=start, seed=seed,
+            vertical_offset=vertical_offset, start=start, initial_rate=initial_rate, seed=seed,
         )  # fmt: skip
         summary, result = {"testbed": tb.name, **run.metrics}, run.result
     summary = _jsonable(summary)

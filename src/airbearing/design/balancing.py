@@ -508,6 +508,12 @@ def adaptive_balancing_controller(
     -----
     State ``c``: ``r_hat`` (3, m, the offset with the sliders at their start) then sliders.
     Extra: ``r_hat_x..z``.
+
+    In body axes gravity turns as ``g' = g x w``, so ``Phi^T w = m g x w = m g'`` and the
+    estimate is ``r_hat(t) = r_hat(0) + gamma m (g(t) - g(0))``: the law learns only as
+    far as the platform's gravity direction moves. Near level it acts as a tilt
+    stiffness ``gamma m^2 |g|^2``; a platform at rest in its rest position (CM below the
+    CR) is already an equilibrium of it and stays there.
     """
     _check_platform(model)
     tb = model.testbed
