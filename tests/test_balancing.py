@@ -253,6 +253,7 @@ def test_seed000_comparison_at_300_s_reports_the_transient():
     # tau = (K_p + k_g) / (K_d K_i) about: (1e-3 + 6.3 * 9.81 * 52e-6) / 2e-5 = 210 s
     assert st["integral_time_constant_s"] == pytest.approx(210.0, rel=0.01)
     assert not st["steady"] and st["transient_left"] == pytest.approx(np.exp(-200 / 210), 0.01)
+    assert "--duration 945" in cmp["verdict"]
 
 
 def test_seed000_advantage_of_the_mixed_split_at_steady_state():

@@ -484,7 +484,30 @@ def compare_methods(
             taus += [r["integral_time_constant_s"] for r in rows]
     taus = [t for t in taus if t is not None]
     steady = steady_state(max(taus), duration) if taus else None
-    return {"tables": tables, "ratios": _ratios(tables, methods), "steady": steady}
+    ratios = _ratios(tables, methods)
+    out = {"tables": tables, "ratios": ratios, "steady": steady}
+    if ratios is not None and steady is not None:
+        out["verdict"] = _verdict(ratios, steady)
+    return out
+
+
+def _verdict(ratios: dict, steady: dict) -> str:
+    """One sentence: does the second method beat the first as seed 000's mixed split did?"""
+    pp, g = ratios["slider_p2p"], ratios["g_perp_rms"]
+    shown = pp <= 0.5 and g <= 1.0
+    text = (
+        f"{ratios['of']}: slider peak-to-peak ratio {pp:.2f} (at least 50 % lower: "
+        f"{'yes' if pp <= 0.5 else 'no'}), g_perp_rms ratio {g:.2f} (no worse: "
+        f"{'yes' if g <= 1.0 else 'no'}); "
+    )
+    if steady["steady"]:
+        return text + "the last third is steady."
+    return text + (
+        f"the last third still holds {steady['transient_left']:.0%} of the integral "
+        f"transient (time constant {steady['integral_time_constant_s']:.0f} s), common to "
+        f"both methods{'' if shown else ', which can hide a difference'}; steady needs "
+        f"--duration {math.ceil(steady['duration_for_steady_s'])}."
+    )
 
 
 def steady_state(time_constant: float, duration: float) -> dict:
