@@ -5,19 +5,10 @@ import subprocess
 import sys
 
 import pytest
+from cli_run import run
 
-from airbearing.cli import main
 from airbearing.io.log import read_log
 from airbearing.io.testbed import load_testbed
-
-
-def run(args):
-    """Run the CLI in-process; return (exit status, stdout+stderr captured by pytest)."""
-    try:
-        main(args)
-    except SystemExit as e:
-        return e.code
-    return 0
 
 
 def test_simulate_slew_writes_log_and_summary(tmp_path):

@@ -4,21 +4,13 @@ import json
 import math
 
 import pytest
+from cli_run import run
 
 import airbearing.cli.cmg  # noqa: F401  (registers `airbearing cmg` before the lead wires it)
-from airbearing.cli import main
 from airbearing.design.sizing import size_cluster
 from airbearing.errors import InputError
 
 TABLE5 = {"angle": math.radians(30.0), "time": 2.0, "inertia": 0.0033}  # seed 001 Table 5
-
-
-def run(args):
-    try:
-        main(args)
-    except SystemExit as e:
-        return e.code
-    return 0
 
 
 def test_table5_reproduced_to_the_printed_digits():
