@@ -231,7 +231,7 @@ def run_balancing(
     duration: float = 300.0,
     initial_offset: float = -0.5e-3,
     vertical_offset: float | None = None,
-    start: str = "rest",
+    start: str = "auto",
     initial_rate=(0.0, 0.0, 0.0),
     seed: int = 0,
     gains=None,
@@ -256,9 +256,10 @@ def run_balancing(
     vertical_offset : float, optional
         m, CR -> CM offset along body z of the balanced platform; default
         :func:`balanced_vertical_offset` (see module notes).
-    start : {"rest", "level"}
+    start : {"auto", "rest", "level"}
         Initial attitude: the rest position of the offset platform (seed 000 Sec. 3,
-        :func:`rest_attitude`) or level.
+        :func:`rest_attitude`; an error if it has none) or level; ``auto``: the rest
+        position if there is one, else level, with a ``note`` in the metrics saying why.
     initial_rate : (3,) rad/s
         Body rates at the start (seed 000: null; seed 004's in-plane balancing: a spin,
         :data:`SEED004_RATES`). The adaptive law learns only from motion.
@@ -285,15 +286,26 @@ def run_balancing(
         )
     if vertical_offset is None:
         vertical_offset = balanced_vertical_offset(testbed)
-    if start not in ("rest", "level"):
-        raise InputError(f"start '{start}': expected rest or level")
+    if start not in ("auto", "rest", "level"):
+        raise InputError(f"--start {start}: expected auto, rest or level")
     model = build_model(testbed, effects)
     s0 = np.array([initial_offset, initial_offset, 0.0])
     r0 = np.array([0.0, 0.0, vertical_offset]) + _mass_moment(testbed, s0) / testbed.body.mass
     w0 = np.asarray(initial_rate, dtype=float).reshape(-1)
     if w0.shape != (3,) or not np.all(np.isfinite(w0)):
         raise InputError(f"initial rate {initial_rate!r}: expected three finite rates in rad/s")
-    x0 = model.x0(q=rest_attitude(r0) if start == "rest" else None, w=w0)
+    notes = []
+    q0 = None
+    if start in ("auto", "rest"):
+        try:
+            q0 = rest_attitude(r0)
+            start = "rest"
+        except InputError as e:
+            if start == "rest":
+                raise
+            start = "level"
+            notes.append(f"started level: {e}")
+    x0 = model.x0(q=q0, w=w0)
     options = {
         "slider_start": s0,
         "sliders": SliderActuator.from_testbed(testbed, ideal=ideal_actuators, lag=lag),
@@ -329,12 +341,14 @@ def run_balancing(
     if method in ("mechanical", "mixed"):
         pid_gains = SEED000_GAINS if gains is None else gains
     if method == "adaptive" and start == "rest" and not np.any(w0):
-        metrics["note"] = (
+        notes.append(
             "the adaptive law learns from motion only (its estimate moves as "
             "gamma m |g| (g_hat - g_hat(0))); started at rest in its rest position the "
             "platform does not move and nothing is learnt: use --start level or an "
             "--initial-rate"
         )
+    if notes:
+        metrics["note"] = " ".join(notes)
     metrics.update(
         method=method,
         initial_offset_m=initial_offset,

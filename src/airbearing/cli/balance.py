@@ -46,8 +46,12 @@ def balance(
         ),
     ] = None,
     start: Annotated[
-        str, typer.Option(help="rest (seed 000: the offset platform's rest position) | level.")
-    ] = "rest",
+        str,
+        typer.Option(
+            help="rest (seed 000: the offset platform's rest position) | level | auto "
+            "(rest if the platform has one, else level)."
+        ),
+    ] = "auto",
     initial_rate: Annotated[
         tuple[float, float, float],
         typer.Option(help="Initial body rate, rad/s (seed 000: null; seed 004: a spin)."),
