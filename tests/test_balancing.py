@@ -256,6 +256,16 @@ def test_seed000_comparison_at_300_s_reports_the_transient():
     assert "--duration 945" in cmp["verdict"]
 
 
+def test_duration_sweep_marks_where_the_last_third_is_steady():
+    from airbearing.analysis.balancing import parse_sweep, sweep_comparison
+
+    name, values = parse_sweep("duration=300:1000:2")
+    sw = sweep_comparison(load_testbed("platform-3dof"), name, values, offsets=(-0.5e-3,),
+                          seeds=(0,))  # fmt: skip
+    assert [p["steady"]["steady"] for p in sw["points"]] == [False, True]
+    assert sw["points"][1]["ratios"]["slider_p2p"] < sw["points"][0]["ratios"]["slider_p2p"]
+
+
 def test_seed000_advantage_of_the_mixed_split_at_steady_state():
     """The issue's check (seed 000 Tables 1-2 conditions), once the integral transient
     has passed: run for the steady duration (4.5 integral time constants, 945 s) instead
