@@ -290,7 +290,8 @@ def run_balancing(
         raise InputError(f"--start {start}: expected auto, rest or level")
     model = build_model(testbed, effects)
     s0 = np.array([initial_offset, initial_offset, 0.0])
-    r0 = np.array([0.0, 0.0, vertical_offset]) + _mass_moment(testbed, s0) / testbed.body.mass
+    balanced = np.array([0.0, 0.0, vertical_offset])
+    r0 = _true_offset(testbed, s0, balanced)
     w0 = np.asarray(initial_rate, dtype=float).reshape(-1)
     if w0.shape != (3,) or not np.all(np.isfinite(w0)):
         raise InputError(f"initial rate {initial_rate!r}: expected three finite rates in rad/s")
@@ -334,9 +335,7 @@ def run_balancing(
         )
     metrics = balancing_metrics(result, free=free)
     s_end = np.asarray(metrics["slider_final_m"])
-    r_end = np.array([0.0, 0.0, vertical_offset]) + _mass_moment(testbed, s_end) / (
-        testbed.body.mass
-    )
+    r_end = _true_offset(testbed, s_end, balanced)
     pid_gains = None
     if method in ("mechanical", "mixed"):
         pid_gains = SEED000_GAINS if gains is None else gains
@@ -366,10 +365,12 @@ def run_balancing(
     return BalancingRun(method, result, free, metrics)
 
 
-def _mass_moment(testbed: Testbed, s) -> np.ndarray:
-    """kg m, mass moment of the sliders at ``s`` (m): ``sum m_i s_i u_i`` (seed 004 eq. 5)."""
+def _true_offset(testbed: Testbed, s, offset0) -> np.ndarray:
+    """m, CR -> CM offset with the sliders at ``s`` (m), ``offset0`` with them at zero:
+    ``offset0 + sum m_i s_i u_i / m`` (seed 004 eq. 5)."""
     m = testbed.masses
-    return (np.asarray(m.mass_vec) * np.asarray(s, dtype=float)) @ np.asarray(m.axes_matrix)
+    moment = (np.asarray(m.mass_vec) * np.asarray(s, dtype=float)) @ np.asarray(m.axes_matrix)
+    return np.asarray(offset0, dtype=float) + moment / testbed.body.mass
 
 
 def _last_third(a: np.ndarray) -> np.ndarray:
@@ -508,18 +509,18 @@ def compare_methods(
 def _verdict(ratios: dict, steady: dict) -> str:
     """One sentence: does the second method beat the first as seed 000's mixed split did?"""
     pp, g = ratios["slider_p2p"], ratios["g_perp_rms"]
-    shown = pp <= 0.5 and g <= 1.0
+    pp_ok, g_ok = pp <= 0.5, g <= 1.0
     text = (
         f"{ratios['of']}: slider peak-to-peak ratio {pp:.2f} (at least 50 % lower: "
-        f"{'yes' if pp <= 0.5 else 'no'}), g_perp_rms ratio {g:.2f} (no worse: "
-        f"{'yes' if g <= 1.0 else 'no'}); "
+        f"{'yes' if pp_ok else 'no'}), g_perp_rms ratio {g:.2f} (no worse: "
+        f"{'yes' if g_ok else 'no'}); "
     )
     if steady["steady"]:
         return text + "the last third is steady."
     return text + (
         f"the last third still holds {steady['transient_left']:.0%} of the integral "
         f"transient (time constant {steady['integral_time_constant_s']:.0f} s), common to "
-        f"both methods{'' if shown else ', which can hide a difference'}; steady needs "
+        f"both methods{'' if pp_ok and g_ok else ', which can hide a difference'}; steady needs "
         f"--duration {math.ceil(steady['duration_for_steady_s'])}."
     )
 
@@ -787,9 +788,6 @@ def two_step(
     travel = testbed.masses.travel
     r_true0 = testbed.body.cm_offset_vec
 
-    def true_offset(s):  # CR -> CM with the sliders at s, seed 004 eq. 5
-        return r_true0 + A.T @ (m_i * s) / mass
-
     # step 1: in-plane balancing (seed 004 eqs. 34/51)
     pid = tilt_pid_gains(testbed)
     gains = {"lyapunov": lyapunov_gains_from_pid(pid), "adaptive": (pid[1], pid[0])}.get(
@@ -866,8 +864,8 @@ def two_step(
         "in_plane_known": bool(in_plane_known),
         "sliders_step1_m": s1.tolist(),
         "sliders_final_m": s_final.tolist(),
-        "residual_offset_step1_m": true_offset(s1).tolist(),
-        "residual_offset_m": true_offset(s_final).tolist(),
+        "residual_offset_step1_m": _true_offset(testbed, s1, r_true0).tolist(),
+        "residual_offset_m": _true_offset(testbed, s_final, r_true0).tolist(),
         "g_perp_rms_step1": balancing_metrics(r1)["g_perp_rms"],
         "balance_duration_s": float(balance_duration),
         "seed": seed,
