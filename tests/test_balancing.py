@@ -161,9 +161,10 @@ def test_methods_balance_in_plane_without_noise(method):
     # which learns r from the motion (Phi^T w), sees the platform swing
     run = run_balancing(tb, method, duration=300.0, noise=False, ideal_actuators=True,
                         free_duration=None, vertical_offset=-0.041 * 2e-5 / 6.3,
-                        start="level")  # fmt: skip
-    # balanced position is the rail origin (see analysis.balancing): the in-plane sliders
-    # come back from -0.5 mm; 10 % of the offset is a loose bound for a 300 s run
+                        start="level", offset_stays=True)  # fmt: skip
+    # the offset stays, an imbalance the law must find: balanced is the rail origin (see
+    # analysis.balancing), so the in-plane sliders come back from -0.5 mm; 10 % of the
+    # offset is a loose bound for a 300 s run
     s = np.asarray(run.metrics["slider_final_m"])
     assert np.all(np.abs(s[:2]) < 0.05e-3), s
 
@@ -185,7 +186,8 @@ def test_adaptive_estimate_follows_the_gravity_direction():
 
     tb = load_testbed("platform-3dof")
     run = run_balancing(tb, "adaptive", duration=100.0, noise=False, ideal_actuators=True,
-                        free_duration=None, vertical_offset=-1.3e-7, start="level")  # fmt: skip
+                        free_duration=None, vertical_offset=-1.3e-7, start="level",
+                        offset_stays=True)  # fmt: skip
     r = run.result
     names = r.controller.extra_names
     r_hat = r.extra[:, [names.index(f"r_hat_{c}") for c in "xyz"]]
@@ -196,10 +198,17 @@ def test_adaptive_estimate_follows_the_gravity_direction():
     expected = ADAPTIVE_DEFAULT_GAINS[1] / (tb.body.mass * tb.gravity) * (g_hat[-1] - g_hat[0])
     assert np.linalg.norm(expected) > 1e-6
     assert np.linalg.norm(r_hat[-1] - expected) < 0.05 * np.linalg.norm(expected)
-    # from the seed-000 rest position the platform is already an equilibrium of the law
-    rest = run_balancing(tb, "adaptive", duration=60.0, noise=False, free_duration=None)
+    # from the seed-000 rest position, with the offset kept, the platform is already an
+    # equilibrium of the law
+    rest = run_balancing(tb, "adaptive", duration=60.0, noise=False, free_duration=None,
+                         offset_stays=True)  # fmt: skip
     assert "nothing is learnt" in rest.metrics["note"]
     assert np.allclose(rest.metrics["slider_final_m"][:2], -0.5e-3, atol=2e-6)
+    # with the offset removed (the sliders go back to the rail zero) the balanced but
+    # tilted platform swings and the law learns from that
+    moved = run_balancing(tb, "adaptive", duration=60.0, noise=False, free_duration=None)
+    assert "note" not in moved.metrics
+    assert np.abs(moved.result.x[:, 4:7]).max() > 1e-3
 
 
 def test_integral_time_constant_matches_the_linearised_loop():
@@ -245,15 +254,34 @@ def test_rest_attitude_is_an_equilibrium():
         rest_attitude([3e-6, 3e-6, -1e-7])
 
 
-def test_seed000_comparison_at_300_s_reports_the_transient():
+def test_settling_time_of_a_pd_loop_is_the_envelope_time():
+    """Without an integral term the tilt loop is J theta'' + K_d theta' + (K_p + k_g) theta
+    = 0: from rest at theta_r its |theta| last leaves 5 % of its peak within half a period
+    of where the envelope exp(-zeta w_n t) / sqrt(1 - zeta^2) reaches 5 %."""
+    from airbearing.analysis.balancing import settling_time
+
+    tb = load_testbed("platform-3dof")
+    kp, kd, r_z = 1e-3, 1.8e-3, -52e-6
+    k = kp - tb.body.mass * tb.gravity * r_z
+    J = tb.body.inertia_matrix[1, 1]  # the y axis: the larger inertia, the slower
+    wn, zeta = np.sqrt(k / J), kd / (2 * np.sqrt(k * J))
+    wd = wn * np.sqrt(1 - zeta**2)
+    envelope = np.log(20.0 / np.sqrt(1 - zeta**2)) / (zeta * wn)
+    t = settling_time(tb, (kp, kd, 0.0), r_z, start="rest")
+    assert envelope - np.pi / wd <= t <= envelope + 1e-6
+    assert settling_time(tb, (kp, kd, 2e-5), r_z, start="level") == 0.0
+    assert settling_time(tb, (kp, -kd, 2e-5), r_z, start="rest") == np.inf
+
+
+def test_seed000_comparison_with_the_offset_kept_reports_the_transient():
     tb = load_testbed("platform-3dof")
     cmp = compare_methods(tb, ("mechanical", "mixed"), offsets=(-0.5e-3,), seeds=(0,),
-                          free_duration=None)  # fmt: skip
+                          free_duration=None, offset_stays=True)  # fmt: skip
     st = cmp["steady"]
-    # tau = (K_p + k_g) / (K_d K_i) about: (1e-3 + 6.3 * 9.81 * 52e-6) / 2e-5 = 210 s
-    assert st["integral_time_constant_s"] == pytest.approx(210.0, rel=0.01)
-    assert not st["steady"] and st["transient_left"] == pytest.approx(np.exp(-200 / 210), 0.01)
-    assert "--duration 945" in cmp["verdict"]
+    # the integral has to find the offset: its pole, tau = (K_p + k_g) / (K_d K_i) about
+    # (1e-3 + 6.3 * 9.81 * 52e-6) / 2e-5 = 210 s, is not settled 200 s into the run
+    assert st["settling_time_s"] > 2 * 210.0 and not st["steady"]
+    assert f"--duration {np.ceil(st['duration_for_steady_s']):.0f}" in cmp["verdict"]
 
 
 def test_duration_sweep_marks_where_the_last_third_is_steady():
@@ -261,21 +289,40 @@ def test_duration_sweep_marks_where_the_last_third_is_steady():
 
     name, values = parse_sweep("duration=300:1000:2")
     sw = sweep_comparison(load_testbed("platform-3dof"), name, values, offsets=(-0.5e-3,),
-                          seeds=(0,))  # fmt: skip
+                          seeds=(0,), offset_stays=True)  # fmt: skip
     assert [p["steady"]["steady"] for p in sw["points"]] == [False, True]
     assert sw["points"][1]["ratios"]["slider_p2p"] < sw["points"][0]["ratios"]["slider_p2p"]
 
 
-def test_seed000_advantage_of_the_mixed_split_at_steady_state():
-    """The issue's check (seed 000 Tables 1-2 conditions), once the integral transient
-    has passed: run for the steady duration (4.5 integral time constants, 945 s) instead
-    of 300 s, with the seed's backlash and the MTi-1 noise of the built-in."""
+def test_seed000_advantage_of_the_mixed_split():
+    """The issue's check, at seed 000's conditions (Sec. 3, Tables 1-2): platform-3dof,
+    seed-000 gains, 300 s from the rest position of the -0.5 and +0.5 mm offsets, 4 noise
+    seeds each, 0.02 mm backlash, MTi-1 noise."""
+    from airbearing.analysis.balancing import SEED000_TABLES
+
     tb = load_testbed("platform-3dof")
-    cmp = compare_methods(tb, ("mechanical", "mixed"), duration=1000.0, seeds=(0, 1, 2, 3),
+    cmp = compare_methods(tb, ("mechanical", "mixed"), seeds=(0, 1, 2, 3),
                           free_duration=None)  # fmt: skip
     assert cmp["steady"]["steady"]
     # seed 000 measured 0.09 (peak-to-peak) and 0.54 (g_perp); the issue asks for at
     # least 50 % lower peak-to-peak and a g_perp_rms no worse
+    assert cmp["ratios"]["slider_p2p"] <= 0.5, cmp["ratios"]
+    assert cmp["ratios"]["g_perp_rms"] <= 1.0, cmp["ratios"]
+    # and the levels themselves: within a factor 2 of the seed's averages (four tests
+    # each; backlash, noise and the platform's vertical offset are not fully specified)
+    for off, table in cmp["tables"].items():
+        for method in ("mechanical", "mixed"):
+            ratio = table[method]["g_perp_rms"] / SEED000_TABLES[off][method]["g_perp_rms"]
+            assert 0.5 <= ratio <= 2.0, (off, method, ratio)
+
+
+def test_seed000_advantage_holds_with_the_offset_kept_at_steady_state():
+    """With the offset kept the integral has to find it; past its transient (the settling
+    time, 1.5 x for the last third) the mixed split keeps its advantage."""
+    tb = load_testbed("platform-3dof")
+    cmp = compare_methods(tb, ("mechanical", "mixed"), duration=900.0, seeds=(0, 1),
+                          free_duration=None, offset_stays=True)  # fmt: skip
+    assert cmp["steady"]["steady"]
     assert cmp["ratios"]["slider_p2p"] <= 0.5, cmp["ratios"]
     assert cmp["ratios"]["g_perp_rms"] <= 1.0, cmp["ratios"]
 
@@ -325,7 +372,11 @@ def test_cli_start_and_initial_rate(tmp_path):
     cli.main(["balance", "platform-3dof", "--method", "adaptive", "--duration", "20", "--start",
               "level", "--initial-rate", "0.01", "0", "0", "--json", str(out)])  # fmt: skip
     data = json.loads(out.read_text())
-    assert data["start"] == "level" and "note" not in data
+    assert data["start"] == "level" and "note" not in data and data["offset_stays"] is False
+    cli.main(["balance", "platform-3dof", "--method", "adaptive", "--duration", "20",
+              "--offset-stays", "--json", str(out)])  # fmt: skip
+    data = json.loads(out.read_text())
+    assert data["offset_stays"] is True and "nothing is learnt" in data["note"]
     # default vertical offset: 2 % of the testbed's -2.6 mm; the z slider moves it a little
     assert data["residual_offset_m"][2] == pytest.approx(0.02 * -2.6e-3, abs=1e-6)
     # a top-heavy platform has no rest position: auto starts it level and says so

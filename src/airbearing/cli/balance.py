@@ -56,6 +56,16 @@ def balance(
         tuple[float, float, float],
         typer.Option(help="Initial body rate, rad/s (seed 000: null; seed 004: a spin)."),
     ] = (0.0, 0.0, 0.0),
+    offset_stays: Annotated[
+        bool,
+        typer.Option(
+            "--offset-stays",
+            help="Keep the initial offset as an imbalance the law must find (its "
+            "displacements are added to the offset positions); default: the law commands "
+            "positions from the balanced rail zero, seed 000 eq. 5, and the offset only "
+            "sets the initial rest attitude.",
+        ),
+    ] = False,
     seed: Annotated[int, typer.Option(help="Noise seed.")] = 0,
     two_step_: Annotated[
         bool, typer.Option("--two-step", help="Seed 004's two-step procedure.")
@@ -90,17 +100,20 @@ def balance(
             summary = sweep_comparison(
                 tb, name, values, methods, seeds=range(seeds), duration=duration,
                 vertical_offset=vertical_offset, start=start, initial_rate=initial_rate,
+                offset_stays=offset_stays,
             )  # fmt: skip
         else:
             summary = compare_methods(
                 tb, methods, seeds=range(seeds), duration=duration,
                 vertical_offset=vertical_offset, start=start, initial_rate=initial_rate,
+                offset_stays=offset_stays,
             )  # fmt: skip
         result = None
     else:
         run = run_balancing(
             tb, method, duration=duration, initial_offset=initial_offset_mm * 1e-3,
             vertical_offset=vertical_offset, start=start, initial_rate=initial_rate, seed=seed,
+            offset_stays=offset_stays,
         )  # fmt: skip
         summary, result = {"testbed": tb.name, **run.metrics}, run.result
     summary = _jsonable(summary)

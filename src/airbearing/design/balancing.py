@@ -314,6 +314,7 @@ def _build(
     sliders: SliderActuator | None,
     magnetorquers: MagnetorquerActuator | None,
     slider_start,
+    slider_zero,
     extra_law_names,
 ) -> Controller:
     """Wrap a torque law into a Controller with the actuator blocks and the u layout."""
@@ -330,7 +331,9 @@ def _build(
                 f"'{tb.name}' has no [magnetorquers] table"
             )
         magnetorquers = magnetorquers or MagnetorquerActuator.from_testbed(tb)
-    s_start = np.zeros(3) if slider_start is None else np.asarray(slider_start, float)
+    s_zero = np.zeros(3) if slider_zero is None else np.asarray(slider_zero, float).reshape(3)
+    s_start = s_zero if slider_start is None else np.asarray(slider_start, float).reshape(3)
+    sliders.state0(s_zero)  # the law's reference must itself lie within the travel
     act0 = sliders.state0(s_start)
     nl = len(c_law0)
 
@@ -347,7 +350,7 @@ def _build(
     tau_sl, tau_mag, c_law_next, extra_law = law(q, w, g_hat, c[:nl], g, dt)
 
     ds = ca.mtimes(T, ca.cross(g_hat, tau_sl) / tb.gravity)  # seed 000 eq. 5, seed 004 eq. 13
-    s_cmd = ca.DM(s_start) + ds
+    s_cmd = ca.DM(s_zero) + ds
     s_held, act_next, motor = sliders.function(dt)(s_cmd, c[nl:])
     if uses_mag:
         b_body = field_in_body(b_lab, g_hat, q)
@@ -389,6 +392,7 @@ def pid_balancing_controller(
     sliders: SliderActuator | None = None,
     magnetorquers: MagnetorquerActuator | None = None,
     slider_start=None,
+    slider_zero=None,
 ) -> Controller:
     """The in-plane PID of seed 000 (eq. 3) with its terms shared as ``split`` says.
 
@@ -402,8 +406,10 @@ def pid_balancing_controller(
         Default seed 000 Tables 1-2.
     sliders, magnetorquers : actuator blocks
         Default: the testbed's real actuators (:mod:`airbearing.design.actuators`).
-    slider_start : (3,) m
-        Slider positions at the start; the controller's displacements are added to them.
+    slider_start, slider_zero : (3,) m
+        Where the sliders are at the start, and the positions the law's displacements are
+        measured from (default zero, the rail origin: seed 000 eq. 5 gives the slider
+        positions ``r_b`` themselves); ``slider_start`` defaults to ``slider_zero``.
 
     Notes
     -----
@@ -428,7 +434,7 @@ def pid_balancing_controller(
     return _build(
         model, name, law, np.zeros(3), gains, ("K_p", "K_d", "K_dK_i"),
         uses_mag=split.uses_magnetorquers, sliders=sliders, magnetorquers=magnetorquers,
-        slider_start=slider_start, extra_law_names=("e_x", "e_y", "e_z"),
+        slider_start=slider_start, slider_zero=slider_zero, extra_law_names=("e_x", "e_y", "e_z"),
     )  # fmt: skip
 
 
@@ -440,6 +446,7 @@ def lyapunov_balancing_controller(
     full: bool = False,
     sliders: SliderActuator | None = None,
     slider_start=None,
+    slider_zero=None,
 ) -> Controller:
     """The projected Lyapunov law of seed 004 (eq. 51, or eq. 34 with ``full=True``).
 
@@ -456,6 +463,8 @@ def lyapunov_balancing_controller(
         The controller's inertia for ``z``; default the testbed's nominal inertia.
     full : bool
         Keep the ``P_p (w x J w)`` term of eq. 34.
+    slider_start, slider_zero : (3,) m
+        As :func:`pid_balancing_controller` (seed 004 eq. 13 gives positions too).
 
     Notes
     -----
@@ -481,7 +490,7 @@ def lyapunov_balancing_controller(
     return _build(
         model, "lyapunov", law, np.zeros(3), gains, ("K", "P", "K_I"),
         uses_mag=False, sliders=sliders, magnetorquers=None, slider_start=slider_start,
-        extra_law_names=("q_ep_norm",),
+        slider_zero=slider_zero, extra_law_names=("q_ep_norm",),
     )  # fmt: skip
 
 
@@ -491,6 +500,7 @@ def adaptive_balancing_controller(
     gains=None,
     sliders: SliderActuator | None = None,
     slider_start=None,
+    slider_zero=None,
 ) -> Controller:
     """The adaptive balancing law of Chesi et al. 2014 (reference 12 of seed 000).
 
@@ -503,10 +513,12 @@ def adaptive_balancing_controller(
     ----------
     gains : (k_p N m s, k_theta N m/rad)
         ``gamma = k_theta / (m |g|)^2``; default :data:`ADAPTIVE_DEFAULT_GAINS`.
+    slider_start, slider_zero : (3,) m
+        As :func:`pid_balancing_controller`.
 
     Notes
     -----
-    State ``c``: ``r_hat`` (3, m, the offset with the sliders at their start) then sliders.
+    State ``c``: ``r_hat`` (3, m, the offset with the sliders at ``slider_zero``) then sliders.
     Extra: ``r_hat_x..z``.
 
     In body axes gravity turns as ``g' = g x w``, so ``Phi^T w = m g x w = m g'`` and the
@@ -533,7 +545,7 @@ def adaptive_balancing_controller(
     return _build(
         model, "adaptive", law, np.zeros(3), gains, ("k_p", "k_theta"),
         uses_mag=False, sliders=sliders, magnetorquers=None, slider_start=slider_start,
-        extra_law_names=("r_hat_x", "r_hat_y", "r_hat_z"),
+        slider_zero=slider_zero, extra_law_names=("r_hat_x", "r_hat_y", "r_hat_z"),
     )  # fmt: skip
 
 
