@@ -364,6 +364,13 @@ def run_balancing(
             "platform does not move and nothing is learnt: use --start level or an "
             "--initial-rate (or let the law take the sliders back: no --offset-stays)"
         )
+    elif method == "adaptive" and start == "rest":
+        notes.append(
+            "the adaptive law drives the rates to zero, not the tilt: its estimate moves as "
+            "gamma m |g| (g_hat - g_hat(0)), so started tilted it settles where that "
+            "estimate cancels the gravity torque, between the start attitude and level; "
+            "use --start level to balance in-plane"
+        )
     if notes:
         metrics["note"] = " ".join(notes)
     metrics.update(
