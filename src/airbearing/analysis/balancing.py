@@ -143,8 +143,8 @@ SWEEPS = {
     "duration": ("run length (the metrics use its last third)", "s"),
 }
 
-#: Remaining fraction of the integral transient at which the last third counts as steady:
-#: 5 %, the usual settling criterion (three time constants).
+#: Fraction of its peak within which the tilt transient counts as settled: 5 %, the usual
+#: settling criterion (three time constants of a first-order decay).
 STEADY_TRANSIENT = 0.05
 
 
