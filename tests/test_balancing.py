@@ -169,6 +169,23 @@ def test_methods_balance_in_plane_without_noise(method):
     assert np.all(np.abs(s[:2]) < 0.05e-3), s
 
 
+def test_law_positions_are_measured_from_the_balanced_zero():
+    """Seed 000 eq. 5 gives slider positions: the sliders leave the offset at once (5 mm/s
+    covers 0.5 mm in 0.1 s). With the offset kept they start from it and only the integral
+    term, slowly, brings them back."""
+    tb = load_testbed("platform-3dof")
+    kw = dict(duration=2.0, noise=False, free_duration=None, start="level")
+
+    def motors(run):  # stepper positions (the masses also carry the backlash)
+        names = run.result.controller.extra_names
+        return run.result.extra[-1, [names.index("motor1"), names.index("motor2")]]
+
+    s_removed = motors(run_balancing(tb, "mixed", **kw))
+    s_kept = motors(run_balancing(tb, "mixed", offset_stays=True, **kw))
+    assert np.all(np.abs(s_removed) <= tb.masses.step), s_removed
+    assert np.all(np.abs(s_kept + 0.5e-3) < 0.05e-3), s_kept
+
+
 def test_gyro_noise_reaches_sliders_only_in_the_mechanical_split():
     tb = load_testbed("platform-3dof")
     tb = tb.replace(sensors=dataclasses.replace(tb.sensors, gyro_noise=3e-2))
