@@ -10,9 +10,12 @@ The workflow (issue 7):
    angles) and in frequency, in words (:func:`localise`).
 3. **Name the missing effect**: every effect of the registry that can act on
    the testbed (:func:`airbearing.models.effects.applicable_effects`) is a
-   candidate. Its parameters start from a linear regression of the residual
-   torque ``J (w'_meas - w'_model)`` on the effect's torque regressor (exact
-   CasADi derivative of the Model's dynamics in the effect's parameters) and
+   candidate; on dof 3 an effect that FORMATS.md allows as one number or three
+   (friction, drag, gyro bias) is two candidates, one value for every axis and one
+   per body axis, and at most one form of an effect is added. Its parameters
+   start from a linear regression of the residual torque
+   ``J (w'_meas - w'_model)`` on the effect's torque regressor (exact CasADi
+   derivative of the Model's dynamics in the effect's parameters) and
    are then fitted by IPOPT to the output error, the windows' initial states
    free (:meth:`ReplayProblem.fit`). A candidate is scored by the gap it
    leaves, by ``BIC = n ln(RSS / n) + k ln(n)`` (``n`` weighted residuals,
@@ -155,6 +158,9 @@ class Candidate:
         False for an effect the output has no derivative in (profile scan).
     lag : bool
         True for ``sensor_lag`` (fitted with a Model that has lag states).
+    per_axis : bool
+        One value per body axis (a FORMATS.md list of three) for an effect that is one
+        number or three (``viscous_friction`` ... on dof 3); False: one value for all.
     """
 
     name: str
@@ -164,16 +170,22 @@ class Candidate:
     upper: tuple
     smooth: bool = True
     lag: bool = False
+    per_axis: bool = False
 
     @property
     def k(self) -> int:
         """Number of free parameters."""
         return self.tie.shape[1]
 
+    @property
+    def label(self) -> str:
+        """The effect name, with ``(per axis)`` for the three-value form."""
+        return f"{self.name} (per axis)" if self.per_axis else self.name
+
     def value(self, theta: np.ndarray):
-        """FORMATS.md value: a float, or a 3-tuple for a vector effect."""
+        """FORMATS.md value: a float, or a 3-tuple for a vector or per-axis effect."""
         theta = np.asarray(theta, dtype=float)
-        if VOCABULARY[self.name].shape == "vector3":
+        if self.per_axis or VOCABULARY[self.name].shape == "vector3":
             return tuple(float(x) for x in theta)
         return float(theta[0])
 
@@ -238,27 +250,32 @@ def candidates_for(testbed: Testbed, data: ReplayData | None = None, only=None) 
             continue
         spec = VOCABULARY[name]
         shape = spec.shape
-        per_axis = shape == "scalar_or_axes" and dof == 3
-        params = tuple(effect_param_names(name, dof, per_axis or shape == "vector3"))
+        axes = shape == "scalar_or_axes" and dof == 3
+        params = tuple(effect_param_names(name, dof, axes or shape == "vector3"))
         if shape == "vector3":
-            tie = np.eye(3)
+            forms = [(np.eye(3), False)]
+        elif axes:
+            # one value for every axis, and one per body axis (FORMATS.md allows both)
+            forms = [(np.ones((3, 1)), False), (np.eye(3), True)]
         else:
-            tie = np.ones((len(params), 1))
-        k = tie.shape[1]
+            forms = [(np.ones((len(params), 1)), False)]
         lo = -math.inf if spec.lower is None else spec.lower
         if name == "inertia_error":
             lo = -0.9  # (1 + value) > 0 with a margin
-        out.append(
-            Candidate(
-                name=name,
-                params=params,
-                tie=tie,
-                lower=(lo,) * k,
-                upper=(math.inf,) * k,
-                smooth=name != "gimbal_deadzone",
-                lag=name == "sensor_lag",
+        for tie, per_axis in forms:
+            k = tie.shape[1]
+            out.append(
+                Candidate(
+                    name=name,
+                    params=params,
+                    tie=tie,
+                    lower=(lo,) * k,
+                    upper=(math.inf,) * k,
+                    smooth=name != "gimbal_deadzone",
+                    lag=name == "sensor_lag",
+                    per_axis=per_axis,
+                )
             )
-        )
     return out
 
 
@@ -283,10 +300,16 @@ class CandidateResult:
     fit: Fit | None = None
     candidate: Candidate | None = None
 
+    @property
+    def label(self) -> str:
+        """The effect name, with ``(per axis)`` for the three-value form."""
+        return self.candidate.label if self.candidate is not None else self.name
+
     def row(self) -> dict:
         """A flat summary (JSON and report tables)."""
         return {
             "name": self.name,
+            "per_axis": bool(self.candidate is not None and self.candidate.per_axis),
             "value": _jsonable(self.value),
             "std": _jsonable(self.std),
             "gap": _finite(self.gap),
@@ -531,7 +554,7 @@ class _Search:
         self.testbed, self.data, self.windows, self.floor = testbed, data, windows, floor
         self.cands = cands
         self.jit = jit
-        names = [c.name for c in cands if not c.lag]
+        names = list(dict.fromkeys(c.name for c in cands if not c.lag))
         self.base_effects = _universal_effects(testbed, names)
         self.models = {False: model_for(testbed, self.base_effects)}
         if any(c.lag for c in cands):
@@ -654,7 +677,8 @@ def discrepancy(
 
     while len(chosen) < max_effects:
         results = []
-        remaining = [c for c in cands if c not in chosen]
+        taken = {c.name for c in chosen}  # one form per effect
+        remaining = [c for c in cands if c.name not in taken]
         if not remaining:
             stop_reason = "every candidate is in the model"
             break
@@ -663,7 +687,7 @@ def discrepancy(
                 search, cand, chosen, theta_chosen, current, current_lag, ln_n, starts
             )
             results.append(res)
-            say(f"{cand.name}: gap {res.gap:.3g} rad/s, dBIC {res.delta_bic:.1f}")
+            say(f"{cand.label}: gap {res.gap:.3g} rad/s, dBIC {res.delta_bic:.1f}")
         results.sort(key=lambda c: (not np.isfinite(c.delta_bic), c.delta_bic))
         rounds.append(results)
         good = [c for c in results if c.significant]
@@ -679,7 +703,9 @@ def discrepancy(
         order = {name: i for i, name in enumerate(REGISTRY)}
         group.sort(key=lambda c: (c.k, order[c.name]))
         pick = group[0]
-        for other in group[1:]:
+        # the per-axis form of the same effect within reach is not a confusion: the one
+        # value, with fewer parameters, is preferred
+        for other in (c for c in group[1:] if c.name != pick.name):
             pair = (pick.name, other.name)
             confounded.append(pair)
             experiments[f"{pick.name} + {other.name}"] = EXPERIMENTS.get(
@@ -689,7 +715,7 @@ def discrepancy(
         theta_chosen = pick.fit.theta.copy()
         current = pick.fit
         current_lag = current_lag or pick.candidate.lag
-        say(f"added {pick.name} = {format_value(pick.value)}")
+        say(f"added {pick.candidate.label} = {format_value(pick.value)}")
     else:
         stop_reason = stop_reason or f"reached max_effects = {max_effects}"
 
@@ -775,7 +801,7 @@ def _try_candidate(
                 th0 = np.array([_lag_start(search, problem, current, current_lag)])
                 note = "start: rate residual regressed on -w' (a lag delays the measured rate)"
             else:
-                key = (cand.name, len(chosen))
+                key = (cand.label, len(chosen))
                 if key not in starts:
                     tau, phi = residual_torque(model, search.data, p_cur, S_c)
                     starts[key] = _regression_start(tau, phi)
@@ -794,7 +820,7 @@ def _try_candidate(
                 lower=lower,
                 upper=upper,
                 delta0=delta0,
-                name=f"candidate {cand.name}",
+                name=f"candidate {cand.label}",
             )
             k = k_sel + cand.k
     except SolverError as e:

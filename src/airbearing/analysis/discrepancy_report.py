@@ -124,7 +124,7 @@ def add_discrepancy(report: Report, result: Discrepancy, *, level: int = 2) -> N
     for c in result.candidates:
         rows.append(
             {
-                "effect": c.name,
+                "effect": c.label,
                 "value": format_value(c.value, c.std) if c.value is not None else "-",
                 "gap (rad/s)": c.gap if np.isfinite(c.gap) else None,
                 "dBIC": c.delta_bic if np.isfinite(c.delta_bic) else None,
@@ -136,7 +136,7 @@ def add_discrepancy(report: Report, result: Discrepancy, *, level: int = 2) -> N
     report.table(rows)
     for i, rnd in enumerate(result.rounds[1:], start=2):
         report.paragraph(
-            f"Round {i}: " + ", ".join(f"{c.name} (dBIC {c.delta_bic:.1f})" for c in rnd[:4])
+            f"Round {i}: " + ", ".join(f"{c.label} (dBIC {c.delta_bic:.1f})" for c in rnd[:4])
         )
     report.paragraph(f"Search stopped: {result.stop_reason}.")
     if result.confounded:
