@@ -182,22 +182,37 @@ def rest_attitude(offset) -> np.ndarray:
     return q
 
 
-def integral_time_constant(testbed: Testbed, gains, vertical_offset: float) -> float:
-    """s, time constant of the slowest pole of the seed-000 tilt loop about level.
+def _tilt_loops(testbed: Testbed, gains, vertical_offset: float) -> list[tuple]:
+    """``(A, B)`` of the seed-000 tilt loop about body x and about y, linearised about level.
 
-    Linearised about level (seed 000 eq. 1 with eq. 3) a tilt about body x or y obeys
-    ``J s^3 + K_d s^2 + (K_p + k_g) s + K_d K_i = 0`` with ``k_g = -m |g| r_z`` and ``J``
-    that axis's inertia; the slowest root of the two axes (for the seed-000 gains on a
-    pendulous platform the integral pole, about ``-K_d K_i / (K_p + k_g)``). ``inf`` if
-    the loop is not stable.
+    States ``(xi, theta, theta')``, ``xi`` the integral of the tilt ``theta``, input a
+    torque ``tau``: seed 000 eq. 1 with eq. 3 gives ``J theta'' = -(K_p + k_g) theta -
+    K_d theta' - K_d K_i xi + tau``, ``k_g = -m |g| r_z`` and ``J`` that axis's inertia.
     """
     kp, kd, kdki = (float(v) for v in gains)
     J_cr = testbed.body.inertia_matrix
     k_g = -testbed.body.mass * testbed.gravity * vertical_offset
-    roots = np.concatenate([np.roots([J_cr[i, i], kd, kp + k_g, kdki]) for i in (0, 1)])
-    if np.any(roots.real >= 0):
+    return [
+        (
+            np.array([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [-kdki / J, -(kp + k_g) / J, -kd / J]]),
+            np.array([[0.0], [0.0], [1.0 / J]]),
+        )
+        for J in (J_cr[0, 0], J_cr[1, 1])
+    ]
+
+
+def integral_time_constant(testbed: Testbed, gains, vertical_offset: float) -> float:
+    """s, time constant of the slowest pole of the seed-000 tilt loop about level.
+
+    The poles of :func:`_tilt_loops`, roots of ``J s^3 + K_d s^2 + (K_p + k_g) s + K_d K_i``;
+    the slowest of the two axes (for the seed-000 gains on a pendulous platform the
+    integral pole, about ``-K_d K_i / (K_p + k_g)``). ``inf`` if the loop is not stable.
+    """
+    loops = _tilt_loops(testbed, gains, vertical_offset)
+    poles = np.concatenate([np.linalg.eigvals(A) for A, _ in loops])
+    if np.any(poles.real >= 0):
         return math.inf
-    return float(1.0 / np.min(-roots.real))
+    return float(1.0 / np.min(-poles.real))
 
 
 @dataclass(frozen=True, eq=False)
@@ -383,6 +398,8 @@ def run_balancing(
         duration_s=duration,
         residual_offset_m=r_end.tolist(),
     )
+    # the tilt-loop analysis is of the seed-000 PID; None for the other laws
+    metrics["integral_time_constant_s"] = metrics["settling_time_s"] = None
     if pid_gains is not None:
         metrics["integral_time_constant_s"] = integral_time_constant(
             testbed, pid_gains, vertical_offset
@@ -524,7 +541,7 @@ def compare_methods(
                 for s in seeds
             ]  # fmt: skip
             tables[off][method] = _mean_metrics(rows)
-            taus += [r["settling_time_s"] for r in rows if "settling_time_s" in r]
+            taus += [r["settling_time_s"] for r in rows if r["settling_time_s"] is not None]
     steady = steady_state(max(taus), duration) if taus else None
     ratios = _ratios(tables, methods)
     out = {"tables": tables, "ratios": ratios, "steady": steady}
@@ -563,29 +580,24 @@ def settling_time(
 ) -> float:
     """s, time after which a seed-000 balancing run's tilt transient has settled.
 
-    Linearised about level, the tilt ``theta`` about body x or y and its integral ``xi``
-    obey ``J theta'' = -(K_p + k_g) theta - K_d theta' - K_d K_i xi + tau`` (seed 000 eqs.
-    1 and 3, ``k_g = -m |g| r_z``). A run excites it through its start: from the rest
-    position ``theta(0) = theta_r``; an offset that stays is a constant torque, ``tau = k_g
-    theta_r`` (what holds the platform there), or any ``tau`` from level; an offset the law
-    removes, none. Settled: ``|theta|`` stays within :data:`STEADY_TRANSIENT` of its peak
-    (python-control's forced response), the later of the two axes; 0 when nothing is
-    excited (started level, offset removed), ``inf`` when the loop is unstable.
+    The tilt loop linearised about level (:func:`_tilt_loops`). A run excites it through
+    its start: from the rest position ``theta(0) = theta_r``; an offset that stays is a
+    constant torque, ``tau = k_g theta_r`` (what holds the platform there), or any ``tau``
+    from level; an offset the law removes, none. Settled: ``|theta|`` stays within
+    :data:`STEADY_TRANSIENT` of its peak (python-control's forced response), the later of
+    the two axes; 0 when nothing is excited (started level, offset removed), ``inf`` when
+    the loop is unstable.
     """
-    kp, kd, kdki = (float(v) for v in gains)
-    J_cr = testbed.body.inertia_matrix
-    k_g = -testbed.body.mass * testbed.gravity * vertical_offset
     if start == "level" and not offset_stays:
         return 0.0
+    kdki = float(gains[2])
+    k_g = -testbed.body.mass * testbed.gravity * vertical_offset
     theta0 = 1.0 if start == "rest" else 0.0
     tau = (k_g * theta0 if start == "rest" else 1.0) if offset_stays else 0.0
     worst = 0.0
-    for i in (0, 1):
-        J = J_cr[i, i]
-        # states (xi, theta, theta'); without an integral term xi does not act: drop it
-        A = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [-kdki / J, -(kp + k_g) / J, -kd / J]])
-        B, C, x0 = np.array([[0.0], [0.0], [1.0 / J]]), np.array([[0.0, 1.0, 0.0]]), [0, theta0, 0]
-        if kdki == 0.0:
+    for A, B in _tilt_loops(testbed, gains, vertical_offset):
+        C, x0 = np.array([[0.0, 1.0, 0.0]]), [0.0, theta0, 0.0]
+        if kdki == 0.0:  # without an integral term xi does not act: drop it
             A, B, C, x0 = A[1:, 1:], B[1:], C[:, 1:], x0[1:]
         poles = np.linalg.eigvals(A)
         if np.any(poles.real >= 0):
