@@ -10,8 +10,8 @@ from __future__ import annotations
 
 import time
 
-from airbearing.analysis.discrepancy import discrepancy
-from airbearing.analysis.scenarios import free_oscillation, slew
+from airbearing.analysis.discrepancy.search import discrepancy
+from airbearing.analysis.simulation.scenarios import free_oscillation, slew
 from airbearing.io.testbed import Sensors, load_testbed
 
 

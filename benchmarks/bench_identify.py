@@ -16,9 +16,13 @@ import time
 
 import numpy as np
 
-from airbearing.analysis import identify as idm
-from airbearing.analysis.identify import SEED004_TRUTH, identify_platform, seed004_testbed
-from airbearing.analysis.scenarios import free_oscillation
+from airbearing.analysis.identification import platform as idm
+from airbearing.analysis.identification.platform import (
+    SEED004_TRUTH,
+    identify_platform,
+    seed004_testbed,
+)
+from airbearing.analysis.simulation.scenarios import free_oscillation
 from airbearing.io.log import Log
 from airbearing.io.testbed import load_testbed
 

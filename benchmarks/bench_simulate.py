@@ -15,8 +15,8 @@ import time
 import numpy as np
 from scipy.integrate import solve_ivp
 
-from airbearing.analysis.scenarios import free_oscillation, slew
-from airbearing.analysis.simulate import simulate
+from airbearing.analysis.simulation.scenarios import free_oscillation, slew
+from airbearing.analysis.simulation.simulate import simulate
 from airbearing.design.attitude import cmg_attitude_controller
 from airbearing.io.testbed import load_testbed
 from airbearing.models import quaternion as quat

@@ -10,7 +10,7 @@ import time
 
 import numpy as np
 
-from airbearing.analysis.cmg_study import (
+from airbearing.analysis.cmg.steering_study import (
     cmg_3dof_testbed,
     compare_slews,
     internal_singularity_case,

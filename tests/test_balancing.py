@@ -9,8 +9,8 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from airbearing.analysis.balancing import compare_methods, run_balancing
-from airbearing.analysis.simulate import simulate
+from airbearing.analysis.balancing.runs import compare_methods, run_balancing
+from airbearing.analysis.simulation.simulate import simulate
 from airbearing.design.actuators import MagnetorquerActuator, SliderActuator
 from airbearing.design.balancing import (
     MECHANICAL,
@@ -229,7 +229,7 @@ def test_adaptive_estimate_follows_the_gravity_direction():
 
 
 def test_integral_time_constant_matches_the_linearised_loop():
-    from airbearing.analysis.balancing import integral_time_constant
+    from airbearing.analysis.balancing.runs import integral_time_constant
     from airbearing.design.balancing import SEED000_GAINS
     from airbearing.design.loops import balancing_loop
 
@@ -250,7 +250,7 @@ def test_integral_time_constant_matches_the_linearised_loop():
 
 
 def test_rest_attitude_is_an_equilibrium():
-    from airbearing.analysis.balancing import rest_attitude
+    from airbearing.analysis.balancing.runs import rest_attitude
     from airbearing.design.controller import constant_input
 
     tb = load_testbed("platform-3dof")
@@ -275,7 +275,7 @@ def test_settling_time_of_a_pd_loop_is_the_envelope_time():
     """Without an integral term the tilt loop is J theta'' + K_d theta' + (K_p + k_g) theta
     = 0: from rest at theta_r its |theta| last leaves 5 % of its peak within half a period
     of where the envelope exp(-zeta w_n t) / sqrt(1 - zeta^2) reaches 5 %."""
-    from airbearing.analysis.balancing import settling_time
+    from airbearing.analysis.balancing.runs import settling_time
 
     tb = load_testbed("platform-3dof")
     kp, kd, r_z = 1e-3, 1.8e-3, -52e-6
@@ -302,7 +302,7 @@ def test_seed000_comparison_with_the_offset_kept_reports_the_transient():
 
 
 def test_duration_sweep_marks_where_the_last_third_is_steady():
-    from airbearing.analysis.balancing import parse_sweep, sweep_comparison
+    from airbearing.analysis.balancing.runs import parse_sweep, sweep_comparison
 
     name, values = parse_sweep("duration=300:1000:2")
     sw = sweep_comparison(load_testbed("platform-3dof"), name, values, offsets=(-0.5e-3,),
@@ -315,7 +315,7 @@ def test_seed000_advantage_of_the_mixed_split():
     """The issue's check, at seed 000's conditions (Sec. 3, Tables 1-2): platform-3dof,
     seed-000 gains, 300 s from the rest position of the -0.5 and +0.5 mm offsets, 4 noise
     seeds each, 0.02 mm backlash, MTi-1 noise."""
-    from airbearing.analysis.balancing import SEED000_TABLES
+    from airbearing.analysis.balancing.runs import SEED000_TABLES
 
     tb = load_testbed("platform-3dof")
     cmp = compare_methods(tb, ("mechanical", "mixed"), seeds=(0, 1, 2, 3),

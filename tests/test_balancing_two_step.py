@@ -9,7 +9,7 @@ import pytest
 
 from airbearing.io.testbed import load_testbed
 
-identify = pytest.importorskip("airbearing.analysis.identify")
+identify = pytest.importorskip("airbearing.analysis.identification.platform")
 
 
 def _seed004_masses():
@@ -22,7 +22,7 @@ def _seed004_masses():
 
 @pytest.mark.parametrize("seed", [0, 1], ids=["noise-seed-0", "noise-seed-1"])
 def test_two_step_reduces_kinetic_energy_spread(seed):
-    from airbearing.analysis.balancing import two_step
+    from airbearing.analysis.balancing.runs import two_step
 
     tb = _seed004_masses()
     out = two_step(tb, seed=seed)

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 import airbearing.cli.cmg  # noqa: F401  (registers `airbearing cmg` before the lead wires it)
-from airbearing.analysis.cmg_study import (
+from airbearing.analysis.cmg.steering_study import (
     NEAR_SINGULAR,
     cmg_3dof_testbed,
     compare_slews,
@@ -21,10 +21,10 @@ from airbearing.analysis.cmg_study import (
     momentum_tracking,
     rate_limit_comparison,
 )
-from airbearing.analysis.html import Report
 from airbearing.cli import main
 from airbearing.design.steering import STEERING_LAWS
 from airbearing.errors import InputError
+from airbearing.reporting.html import Report
 
 BETA = np.deg2rad(53.13)
 BUDGET_S = 30.0  # time budget of the manoeuvre (nominal ramp: 10 s to 2.0 h0)
@@ -130,8 +130,8 @@ def test_demo_section_quick():
 
 def test_null_motion_escapes_hyperbolic_not_elliptic():
     """Null motion leaves a hyperbolic singular set but not an elliptic one (Wie 2004)."""
-    from airbearing.analysis.cmg_study import _null_motion_cases, null_motion_run
-    from airbearing.analysis.singularity import classify_singularity
+    from airbearing.analysis.cmg.singularity import classify_singularity
+    from airbearing.analysis.cmg.steering_study import _null_motion_cases, null_motion_run
 
     (_, d_h), (_, d_e) = _null_motion_cases()
     off = np.deg2rad([2.0, -1.0, 1.0, 0.5])
@@ -149,7 +149,7 @@ def test_null_motion_escapes_hyperbolic_not_elliptic():
 
 def test_normalised_and_physical_forms_agree(tb3):
     """Seed 001 steers with A without h0; with gains times h0 the physical form is the same loop."""
-    from airbearing.analysis.scenarios import slew
+    from airbearing.analysis.simulation.scenarios import slew
     from airbearing.design.attitude import SEED001_GAINS
 
     h0 = tb3.cmg.h0

@@ -16,8 +16,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from airbearing.analysis.discrepancy import candidates_for, discrepancy
-from airbearing.analysis.scenarios import free_oscillation, slew
+from airbearing.analysis.discrepancy.search import candidates_for, discrepancy
+from airbearing.analysis.simulation.scenarios import free_oscillation, slew
 from airbearing.errors import InputError
 from airbearing.io.log import read_log
 from airbearing.io.testbed import Field, Sensors, load_testbed

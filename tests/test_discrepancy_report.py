@@ -8,12 +8,12 @@ import pytest
 
 import airbearing.cli as cli
 import airbearing.cli.discrepancy  # noqa: F401  (registers the command)
-from airbearing.analysis.discrepancy import discrepancy
-from airbearing.analysis.discrepancy_report import demo_section, discrepancy_report
-from airbearing.analysis.html import Report
-from airbearing.analysis.scenarios import slew
+from airbearing.analysis.discrepancy.search import discrepancy
+from airbearing.analysis.simulation.scenarios import slew
 from airbearing.io.log import write_log
 from airbearing.io.testbed import Sensors, load_testbed, read_testbed, write_testbed
+from airbearing.reporting.discrepancy import demo_section, discrepancy_report
+from airbearing.reporting.html import Report
 
 _CMG = load_testbed("cmg-yaw")
 CMG = _CMG.replace(sensors=Sensors(rate=_CMG.sensors.rate, gyro_noise=5e-4, lowpass=1.0))

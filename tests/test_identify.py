@@ -16,15 +16,15 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from airbearing.analysis import identify_regression as ir
-from airbearing.analysis.identify import (
+from airbearing.analysis.identification import regression as ir
+from airbearing.analysis.identification.platform import (
     SEED004_TRUTH,
     Prior,
     identify_cmg_inertia,
     identify_platform,
     seed004_testbed,
 )
-from airbearing.analysis.scenarios import free_oscillation, slew
+from airbearing.analysis.simulation.scenarios import free_oscillation, slew
 from airbearing.errors import InputError
 from airbearing.io.log import Log, read_log
 from airbearing.io.testbed import Body, Sensors, load_testbed
@@ -154,7 +154,7 @@ def test_moving_sliders_within_a_log(truth_tb):
         truth_tb, initial_rate=RUNS[0][0], sliders=RUNS[0][1], duration=10, noise=False
     )
     x_mid = first.x[-1]
-    from airbearing.analysis.simulate import simulate
+    from airbearing.analysis.simulation.simulate import simulate
     from airbearing.design.controller import constant_input
 
     m = build_model(truth_tb)

@@ -6,12 +6,12 @@ import control as ct
 import numpy as np
 import pytest
 
-from airbearing.analysis.margins import (
+from airbearing.design.loops import attitude_loop, balancing_loop
+from airbearing.design.margins import (
     analyse_loop,
     loop_margins,
     multiloop_disk_margin,
 )
-from airbearing.design.loops import attitude_loop, balancing_loop
 from airbearing.io.testbed import load_testbed
 
 KP, KD = 1.0, 2.0

@@ -6,14 +6,14 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from airbearing.analysis.replay import (
+from airbearing.analysis.discrepancy.replay import (
     make_windows,
     noise_floor,
     open_loop,
     replay,
     replay_data,
 )
-from airbearing.analysis.scenarios import free_oscillation, slew
+from airbearing.analysis.simulation.scenarios import free_oscillation, slew
 from airbearing.errors import InputError
 from airbearing.io.log import Log
 from airbearing.io.testbed import Sensors, load_testbed

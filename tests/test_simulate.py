@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
-from airbearing.analysis.scenarios import free_oscillation, slew, slew_summary
+from airbearing.analysis.simulation.scenarios import free_oscillation, slew, slew_summary
 from airbearing.io.log import read_log, write_log
 from airbearing.io.testbed import Body, load_testbed
 

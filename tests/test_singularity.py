@@ -11,8 +11,7 @@ import numpy as np
 import pytest
 
 import airbearing.cli.cmg  # noqa: F401  (registers `airbearing cmg` before the lead wires it)
-from airbearing.analysis.scenarios import slew
-from airbearing.analysis.singularity import (
+from airbearing.analysis.cmg.singularity import (
     SURFACE_SIGNS,
     classify_singularity,
     measure,
@@ -23,6 +22,7 @@ from airbearing.analysis.singularity import (
     surface_slice,
     surfaces_table,
 )
+from airbearing.analysis.simulation.scenarios import slew
 from airbearing.cli import main
 from airbearing.errors import InputError
 from airbearing.io.testbed import load_testbed

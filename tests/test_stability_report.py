@@ -8,9 +8,9 @@ import pytest
 
 import airbearing.cli as cli
 import airbearing.cli.gains  # noqa: F401  (registers the commands)
-from airbearing.analysis.html import write_json
-from airbearing.analysis.stability_report import stability_report
 from airbearing.io.testbed import load_testbed
+from airbearing.reporting.html import write_json
+from airbearing.reporting.stability import stability_report
 
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 

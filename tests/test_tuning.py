@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from airbearing.analysis.scenarios import slew
+from airbearing.analysis.simulation.scenarios import slew
 from airbearing.design.loops import make_loop
 from airbearing.design.tuning import Spec, evaluate, tune
 from airbearing.errors import InputError

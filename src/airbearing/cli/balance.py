@@ -7,27 +7,19 @@ from typing import Annotated
 
 import typer
 
-from airbearing.analysis.balancing import (
+from airbearing.analysis.balancing.runs import (
     compare_methods,
     parse_sweep,
     run_balancing,
     sweep_comparison,
     two_step,
 )
-from airbearing.analysis.html import write_json
 from airbearing.cli import app
 from airbearing.cli.common import check_output_path, testbed_arg
 from airbearing.design.balancing import METHODS
 from airbearing.errors import InputError
 from airbearing.io.log import write_log
-
-
-def _jsonable(obj):
-    if isinstance(obj, dict):
-        return {str(k): _jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, list | tuple):
-        return [_jsonable(v) for v in obj]
-    return obj
+from airbearing.io.output import to_jsonable, write_json
 
 
 @app.command()
@@ -116,7 +108,7 @@ def balance(
             offset_stays=offset_stays,
         )  # fmt: skip
         summary, result = {"testbed": tb.name, **run.metrics}, run.result
-    summary = _jsonable(summary)
+    summary = to_jsonable(summary)
     if log is not None and result is not None:
         write_log(result.log, log)
     if json_out is not None:

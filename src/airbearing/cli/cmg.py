@@ -10,13 +10,13 @@ from typing import Annotated
 import matplotlib.pyplot as plt
 import typer
 
-from airbearing.analysis.html import write_atomic, write_json
-from airbearing.analysis.singularity import envelope_figure, surfaces_table
+from airbearing.analysis.cmg.singularity import envelope_figure, surfaces_table
 from airbearing.cli import app
 from airbearing.cli.common import check_output_path, testbed_arg
 from airbearing.design.sizing import TABLE5_DEFAULTS, size_cluster
 from airbearing.design.steering import check_skew
 from airbearing.errors import InputError
+from airbearing.io.output import write_atomic, write_json
 
 __all__ = ["cmg_app"]
 

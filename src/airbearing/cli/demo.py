@@ -7,8 +7,8 @@ from typing import Annotated
 
 import typer
 
-from airbearing.analysis.demo import run_demo
 from airbearing.cli import app
+from airbearing.reporting.demo import run_demo
 
 
 @app.command()

@@ -8,11 +8,11 @@ from typing import Annotated
 
 import typer
 
-from airbearing.analysis.html import write_json
 from airbearing.cli import app
 from airbearing.cli.common import check_output_path, testbed_arg
 from airbearing.errors import InputError
 from airbearing.io.log import read_log
+from airbearing.io.output import write_json
 from airbearing.io.testbed import write_testbed
 
 
@@ -35,8 +35,8 @@ def discrepancy(
     ] = None,
 ) -> None:
     """Replay LOG with TESTBED's model, localise the gap and name the missing effects."""
-    from airbearing.analysis.discrepancy import discrepancy as run
-    from airbearing.analysis.discrepancy_report import discrepancy_report
+    from airbearing.analysis.discrepancy.search import discrepancy as run
+    from airbearing.reporting.discrepancy import discrepancy_report
 
     check_output_path(json_out, "--json", (".json",))
     check_output_path(report, "--report", (".html",))

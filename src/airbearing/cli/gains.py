@@ -8,11 +8,11 @@ from typing import Annotated
 
 import typer
 
-from airbearing.analysis.html import write_json
 from airbearing.cli import app
 from airbearing.cli.common import check_output_path, testbed_arg
 from airbearing.design.loops import LOOPS, SPLITS
 from airbearing.errors import InputError
+from airbearing.io.output import write_json
 
 
 def _check_loop(loop: str, split: str) -> None:
@@ -101,8 +101,8 @@ def report(
     json_out: Annotated[Path | None, typer.Option("--json", help="Margins, JSON.")] = None,
 ) -> None:
     """Linear stability report (HTML) of a loop, with its margins as JSON."""
-    from airbearing.analysis.stability_report import stability_report
     from airbearing.design.tuning import Spec
+    from airbearing.reporting.stability import stability_report
 
     if output is None:
         raise InputError("-o/--output: the report needs an output file ending in .html")

@@ -7,12 +7,12 @@ from typing import Annotated
 
 import typer
 
-from airbearing.analysis.html import write_json
-from airbearing.analysis.identify import identify_cmg_inertia, identify_platform
+from airbearing.analysis.identification.platform import identify_cmg_inertia, identify_platform
 from airbearing.cli import app
 from airbearing.cli.common import check_output_path, testbed_arg
 from airbearing.errors import InputError
 from airbearing.io.log import read_log
+from airbearing.io.output import write_json
 from airbearing.io.testbed import write_testbed
 
 

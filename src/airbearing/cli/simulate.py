@@ -7,13 +7,18 @@ from typing import Annotated
 
 import typer
 
-from airbearing.analysis.html import write_json
-from airbearing.analysis.scenarios import free_oscillation, free_summary, slew, slew_summary
+from airbearing.analysis.simulation.scenarios import (
+    free_oscillation,
+    free_summary,
+    slew,
+    slew_summary,
+)
 from airbearing.cli import app
 from airbearing.cli.common import check_output_path, parse_effects, testbed_arg
 from airbearing.design.steering import STEERING_LAWS
 from airbearing.errors import InputError
 from airbearing.io.log import write_log
+from airbearing.io.output import write_json
 
 
 @app.command()

@@ -5,7 +5,7 @@ the per-axis design model (a pendulum ``J s^2 + k`` for balancing, a rigid body 
 driven by ``h0`` times the command for the CMG loop) at ``(s^2 + 2 zeta w s + w^2)(s + r w)``,
 which fixes all three PID gains from one speed ``w``. The check analyses the real
 discrete loop (zero-order hold, one sample of computation delay, the gyro low-pass,
-every actuator channel loop-at-a-time, :mod:`airbearing.analysis.margins`) at every
+every actuator channel loop-at-a-time, :mod:`airbearing.design.margins`) at every
 corner of the uncertainty box: inertia +-15 % and, for the platform, a range of the
 vertical CM offset. A bisection on ``log w`` finds the fastest design whose worst case
 meets the margins (or the one at the requested bandwidth), then the actuator limits are
@@ -194,7 +194,7 @@ def scenario_response(loop: Loop, *, discrete: bool = True, duration: float | No
 
 
 def _nominal_bandwidth(loop: Loop):
-    from airbearing.analysis.margins import analyse_loop
+    from airbearing.design.margins import analyse_loop
 
     a = analyse_loop(loop, multiloop=False)
     return a.worst()["bandwidth_rad_s"]
@@ -231,7 +231,7 @@ def evaluate(
     Returns ``(checks, worst_case, per_corner)``; margins are the discrete loop's,
     loop-at-a-time over every channel, worst over the corners.
     """
-    from airbearing.analysis.margins import analyse_loop
+    from airbearing.design.margins import analyse_loop
 
     per = []
     todo = corners(loop, spec) if corner_set is None else corner_set

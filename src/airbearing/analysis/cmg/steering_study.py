@@ -30,13 +30,13 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from airbearing.analysis.scenarios import slew  # noqa: E402
-from airbearing.analysis.singularity import (  # noqa: E402
+from airbearing.analysis.cmg.singularity import (  # noqa: E402
     envelope_figure,
     measure,
     singular_states,
     singularity_summary,
 )
+from airbearing.analysis.simulation.scenarios import slew  # noqa: E402
 from airbearing.design.steering import (  # noqa: E402
     STEERING_LAWS,
     check_skew,
@@ -351,7 +351,7 @@ def slew_metrics(result, *, settle_deg: float = 1.0) -> dict:
     Parameters
     ----------
     result : SimResult
-        A run of :func:`airbearing.analysis.scenarios.slew`.
+        A run of :func:`airbearing.analysis.simulation.scenarios.slew`.
     settle_deg : float
         Pointing error (deg) within which the slew counts as settled.
     """

@@ -245,7 +245,7 @@ def classify_singularity(delta, beta: float, *, tol: float = 1e-6) -> str:
 
 
 def measure_along(result) -> np.ndarray:
-    """``m(t)`` along a simulated run (:class:`airbearing.analysis.simulate.SimResult`)."""
+    """``m(t)`` along a simulated run (a :class:`~.simulation.simulate.SimResult`)."""
     model = result.model
     if model.kind != "cmg":
         raise InputError(f"singularity measure needs a kind = 'cmg' run, got '{model.kind}'")

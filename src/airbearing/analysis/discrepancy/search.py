@@ -2,7 +2,7 @@
 
 The workflow (issue 7):
 
-1. **Replay** the log with the nominal Model (:mod:`airbearing.analysis.replay`):
+1. **Replay** the log with the nominal Model (:mod:`airbearing.analysis.discrepancy.replay`):
    multiple-shooting windows, the gap (RMS rate output error, rad/s) and the
    noise floor estimated from the data.
 2. **Localise** the residual per axis, over time, against the state (rate
@@ -52,7 +52,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.signal import savgol_filter, welch
 
-from airbearing.analysis.replay import (
+from airbearing.analysis.discrepancy.replay import (
     Fit,
     NoiseFloor,
     ReplayData,

@@ -27,9 +27,9 @@ from dataclasses import dataclass, field
 import cvxpy as cp
 import numpy as np
 
-from airbearing.analysis.identify_cmg import CMGIdentification, identify_cmg_inertia
-from airbearing.analysis.identify_output_error import refine_output_error
-from airbearing.analysis.identify_regression import (
+from airbearing.analysis.identification.cmg_inertia import CMGIdentification, identify_cmg_inertia
+from airbearing.analysis.identification.output_error import refine_output_error
+from airbearing.analysis.identification.regression import (
     PARAM_NAMES,
     prepare_platform_logs,
     regression_statistics,
@@ -638,13 +638,13 @@ def demo_section(report, *, quick: bool) -> None:
 
     Parameters
     ----------
-    report : airbearing.analysis.html.Report
+    report : airbearing.reporting.html.Report
     quick : bool
         Shorter logs (a few seconds of work instead of about twenty).
     """
     import time
 
-    from airbearing.analysis.scenarios import free_oscillation, slew
+    from airbearing.analysis.simulation.scenarios import free_oscillation, slew
     from airbearing.io.testbed import load_testbed
 
     report.heading("Identification of mass properties (seed 004 eqs. 39-50; seed 001)")

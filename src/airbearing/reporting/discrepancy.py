@@ -1,6 +1,6 @@
 """The discrepancy report: measured vs nominal vs augmented, residuals, candidates, named effects.
 
-Self-contained HTML (:class:`airbearing.analysis.html.Report`): every figure is
+Self-contained HTML (:class:`airbearing.reporting.html.Report`): every figure is
 embedded, nothing is fetched.
 """
 
@@ -11,10 +11,10 @@ from pathlib import Path
 import matplotlib.pyplot as plt
 import numpy as np
 
-from airbearing.analysis.discrepancy import Discrepancy, discrepancy, format_value
-from airbearing.analysis.html import Report
+from airbearing.analysis.discrepancy.search import Discrepancy, discrepancy, format_value
 from airbearing.io.log import read_log
 from airbearing.io.testbed import Sensors, load_testbed
+from airbearing.reporting.html import Report
 
 __all__ = ["add_discrepancy", "demo_section", "discrepancy_report", "EXAMPLE_DIR"]
 
@@ -164,7 +164,7 @@ def _story_inputs(quick: bool):
     if folder.is_dir() and (folder / "testbed.toml").is_file() and (folder / "log.csv").is_file():
         tb = load_testbed(folder / "testbed.toml")
         return tb, read_log(folder / "log.csv", tb), f"public example {folder.name}"
-    from airbearing.analysis.scenarios import slew
+    from airbearing.analysis.simulation.scenarios import slew
 
     tb = load_testbed("cmg-yaw")
     tb = tb.replace(sensors=Sensors(rate=tb.sensors.rate, gyro_noise=5e-4, lowpass=1.0))

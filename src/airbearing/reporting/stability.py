@@ -4,7 +4,7 @@ Sections: gains and verdict; margins table (discrete loop, every actuator channe
 loop-at-a-time, the multi-loop disk margin, pass/fail against the specification) and
 the continuous design model; the worst case over the uncertainty box; Bode and Nyquist
 plots with the margins marked; the scenario responses, linear and nonlinear (the
-CasADi closed loop of :mod:`airbearing.analysis.simulate` with the same controller,
+CasADi closed loop of :mod:`airbearing.analysis.simulation.simulate` with the same controller,
 ideal actuators and the same one-sample delay) overlaid; the closed-loop pole map.
 """
 
@@ -15,12 +15,12 @@ import math
 import matplotlib.pyplot as plt
 import numpy as np
 
-from airbearing.analysis.html import Report, table_html
-from airbearing.analysis.margins import _response, analyse_loop, frequency_grid, json_number
-from airbearing.analysis.simulate import closed_loop_rollout
+from airbearing.analysis.simulation.simulate import closed_loop_rollout
 from airbearing.design.loops import Loop, make_loop, with_delay
+from airbearing.design.margins import _response, analyse_loop, frequency_grid, json_number
 from airbearing.design.tuning import Spec, evaluate, scenario_response, tune
 from airbearing.models import quaternion as quat
+from airbearing.reporting.html import Report, table_html
 
 __all__ = ["stability_report", "report_for_loop", "nonlinear_scenario", "demo_section"]
 
@@ -283,7 +283,7 @@ def report_for_loop(
         fig,
         "Closed-loop poles of the discrete loop in the z-plane (inside the unit circle: stable).",
     )
-    from airbearing.analysis.margins import pole_damping
+    from airbearing.design.margins import pole_damping
 
     wn, zeta = pole_damping(poles, loop.dt)
     rep.table(
@@ -319,7 +319,7 @@ def stability_report(
 ):
     """The report of ``loop`` (``"balancing"``/``"attitude"``) of ``testbed`` with ``gains``
     (default the seed gains). Returns ``(Report, dict)``; write with ``Report.write`` and
-    :func:`airbearing.analysis.html.write_json`."""
+    :func:`airbearing.reporting.html.write_json`."""
     opts = {"split": split} if loop == "balancing" else {}
     lp = make_loop(testbed, loop, gains=gains, **opts)
     rep = Report(f"Stability report: {lp.name} on {testbed.name}")

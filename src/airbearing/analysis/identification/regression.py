@@ -16,7 +16,7 @@ not change the least-squares answer; it only changes the numbers the solver sees
 The stacked regression of any number of samples is reduced to its sufficient
 statistics, one small triangular factor per body axis (a QR factor of
 ``[Phi | b]``), before any optimisation: the constrained fit in
-:mod:`airbearing.analysis.identify` (cvxpy, Clarabel) costs the same for 10^3 or
+:mod:`airbearing.analysis.identification.platform` (cvxpy, Clarabel) costs the same for 10^3 or
 10^6 samples.
 """
 

@@ -31,6 +31,7 @@ import numpy as np
 from scipy.optimize import brentq, minimize
 
 from airbearing.errors import InputError
+from airbearing.io.output import json_number
 
 __all__ = [
     "LoopMargins",
@@ -45,14 +46,6 @@ __all__ = [
 
 _N_GRID = 3000  # points of the logarithmic frequency grid
 _SQRT_HALF = 1 / math.sqrt(2)
-
-
-def json_number(v):
-    """A float for JSON: infinity and NaN become None."""
-    if v is None:
-        return None
-    v = float(v)
-    return v if math.isfinite(v) else None
 
 
 @dataclass

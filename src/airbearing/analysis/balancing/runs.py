@@ -50,7 +50,7 @@ import control
 import numpy as np
 from scipy.signal import savgol_filter
 
-from airbearing.analysis.simulate import SimResult, simulate
+from airbearing.analysis.simulation.simulate import SimResult, simulate
 from airbearing.design.actuators import SliderActuator
 from airbearing.design.balancing import (
     METHODS,
@@ -823,7 +823,7 @@ def two_step(
        20 Hz; "data sampled from different experiments are merged"): one with the sliders
        where step 1 left them, one after the known in-plane displacement
        ``known_displacement`` (m, per rail; seed 004: "a known unbalance vector is
-       introduced"). :func:`airbearing.analysis.identify.identify_platform` estimates the
+       introduced"). :func:`~.identification.platform.identify_platform` estimates the
        inertia and the offset (sliders at zero), with the in-plane offset that step 1 found
        as a constraint (seed 004: "used as constraints") when ``in_plane_known``. The
        sliders then cancel the identified offset: only its vertical part with
@@ -853,7 +853,7 @@ def two_step(
     if balance_duration is None:
         balance_duration = step1_duration(testbed)
     _check_inputs(testbed, method, balance_duration)
-    from airbearing.analysis.identify import identify_platform
+    from airbearing.analysis.identification.platform import identify_platform
 
     d = np.asarray(known_displacement, dtype=float).reshape(-1)
     if d.shape != (3,) or not np.all(np.isfinite(d)) or not np.any(d != 0):

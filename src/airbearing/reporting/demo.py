@@ -12,16 +12,19 @@ from pathlib import Path
 import matplotlib.pyplot as plt
 import numpy as np
 
-from airbearing.analysis import (
-    balancing,
-    cmg_study,
-    discrepancy_report,
-    identify,
-    stability_report,
+from airbearing.analysis.balancing import runs as balancing
+from airbearing.analysis.cmg import steering_study as cmg_study
+from airbearing.analysis.identification import platform as identify
+from airbearing.analysis.simulation.scenarios import (
+    free_oscillation,
+    free_summary,
+    slew,
+    slew_summary,
 )
-from airbearing.analysis.html import Report
-from airbearing.analysis.scenarios import free_oscillation, free_summary, slew, slew_summary
 from airbearing.io.testbed import load_testbed
+from airbearing.reporting import discrepancy as discrepancy_report
+from airbearing.reporting import stability as stability_report
+from airbearing.reporting.html import Report
 
 __all__ = ["run_demo", "SECTIONS", "foundation_section"]
 
@@ -107,5 +110,6 @@ def run_demo(out_dir: str | Path, *, quick: bool = False) -> Path:
     report.heading("Run times")
     report.table(timings)
     path = out_dir / "report.html"
+    out_dir.mkdir(parents=True, exist_ok=True)
     report.write(path)
     return path

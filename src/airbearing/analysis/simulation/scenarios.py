@@ -6,7 +6,7 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from airbearing.analysis.simulate import SimResult, simulate
+from airbearing.analysis.simulation.simulate import SimResult, simulate
 from airbearing.design.attitude import cmg_attitude_controller
 from airbearing.design.controller import constant_input
 from airbearing.errors import InputError

@@ -9,18 +9,17 @@ from __future__ import annotations
 import base64
 import html
 import io
-import json
-import os
-import tempfile
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import matplotlib
+
+from airbearing.io.output import write_atomic, write_json  # noqa: F401  (re-exported)
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
 __all__ = ["Report", "figure_html", "table_html", "write_atomic", "write_json"]
+
 
 _CSS = """
 body { font-family: system-ui, -apple-system, Segoe UI, Roboto, sans-serif; margin: 2em auto;
@@ -81,27 +80,6 @@ def table_html(rows: list[dict], columns: list[str] | None = None, *, classes=No
             cells.append(f'<td class="{cls}">{_fmt(v)}</td>')
         body.append("<tr>" + "".join(cells) + "</tr>")
     return f"<table><tr>{head}</tr>{''.join(body)}</table>"
-
-
-def write_atomic(path: str | os.PathLike, data: str | bytes) -> None:
-    """Write a file via a temporary file and rename, so no partial file is left on failure."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    mode = "wb" if isinstance(data, bytes) else "w"
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, mode) as fh:
-            fh.write(data)
-        os.chmod(tmp, 0o644)  # mkstemp makes 0600; outputs are ordinary files
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-
-
-def write_json(path, obj) -> None:
-    """Write ``obj`` as indented JSON atomically (NaN/inf are not allowed: use None)."""
-    write_atomic(path, json.dumps(obj, indent=2, allow_nan=False) + "\n")
 
 
 @dataclass

@@ -1,6 +1,6 @@
 """Output-error refinement of a platform's inertia and CM offset (CasADi, IPOPT).
 
-The equation-error estimate of :mod:`airbearing.analysis.identify_regression`
+The equation-error estimate of :mod:`airbearing.analysis.identification.regression`
 integrates sampled data with the trapezoidal rule, which biases it by about
 0.1-0.2 % on 20 Hz logs. Here the Model's own discrete dynamics
 (``Model.rollout``: RK4 with the inputs held over each sample, as the logs
@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from airbearing.analysis.identify_regression import PARAM_NAMES, PlatformData, theta_to_body
+from airbearing.analysis.identification.regression import PARAM_NAMES, PlatformData, theta_to_body
 from airbearing.errors import InputError, SolverError
 from airbearing.io.testbed import Body, Testbed
 from airbearing.models import quaternion as quat
@@ -606,7 +606,7 @@ def refine_output_error(
     testbed : Testbed
         Platform testbed (its sliders, field, sensors and known effects).
     data : list of PlatformData
-        The logs (:func:`~airbearing.analysis.identify_regression.prepare_platform_logs`).
+        The logs (:func:`~airbearing.analysis.identification.regression.prepare_platform_logs`).
     theta0 : array-like (9,)
         Start: ``J_xx .. J_yz`` (kg m^2, about CR, sliders at zero), ``r_x .. r_z`` (m);
         must satisfy the physical-consistency constraint.

@@ -1,0 +1,1 @@
+"""CMG studies: steering through singularities, singular surfaces and the envelope."""

@@ -1,0 +1,1 @@
+"""Discrepancy: replay a log through the model, localise the gap, name the missing effects."""

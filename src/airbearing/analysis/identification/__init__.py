@@ -1,0 +1,1 @@
+"""Identification: seed-004 regression, output-error refinement, CMG yaw inertia."""

@@ -1,0 +1,1 @@
+"""Closed-loop simulation: the compiled rollout and the standard scenarios."""

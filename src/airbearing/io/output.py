@@ -1,0 +1,79 @@
+"""Output files: one atomic writer and one JSON writer for every command.
+
+Every file the package writes goes through :func:`write_atomic` (a temporary file in
+the target folder, then a rename), so a failure never leaves a partial file. Every
+JSON document goes through :func:`to_jsonable`: NumPy scalars and arrays become plain
+numbers and lists, and a non-finite number becomes ``null`` (JSON has no infinity;
+an infinite margin or a time constant that does not exist is "none").
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import os
+import tempfile
+from collections.abc import Mapping
+from pathlib import Path
+
+__all__ = ["write_atomic", "write_json", "to_jsonable", "json_number"]
+
+
+def json_number(v):
+    """A float for JSON: ``None`` for infinity and NaN, else the float itself."""
+    if v is None:
+        return None
+    v = float(v)
+    return v if math.isfinite(v) else None
+
+
+def to_jsonable(obj):
+    """``obj`` with NumPy values made plain and non-finite floats made ``None``."""
+    if obj is None or isinstance(obj, bool | str):
+        return obj
+    if isinstance(obj, int) and not isinstance(obj, bool):
+        return obj
+    if isinstance(obj, float):
+        return json_number(obj)
+    if isinstance(obj, Mapping):
+        return {str(k): to_jsonable(v) for k, v in obj.items()}
+    if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
+        if hasattr(obj, "to_json"):
+            return to_jsonable(obj.to_json())
+        return to_jsonable(dataclasses.asdict(obj))
+    if isinstance(obj, list | tuple | set | frozenset):
+        return [to_jsonable(v) for v in obj]
+    if isinstance(obj, Path):
+        return str(obj)
+    # NumPy without importing it: scalars have .item(), arrays .tolist()
+    if hasattr(obj, "tolist"):
+        return to_jsonable(obj.tolist())
+    if hasattr(obj, "item"):
+        return to_jsonable(obj.item())
+    raise TypeError(f"cannot write {type(obj).__name__} to JSON")
+
+
+def write_atomic(path: str | os.PathLike, data: str | bytes) -> None:
+    """Write a file via a temporary file and rename, so no partial file is left on failure."""
+    path = Path(path)
+    mode = "wb" if isinstance(data, bytes) else "w"
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, mode) as fh:
+            fh.write(data)
+        os.chmod(tmp, 0o644)  # mkstemp makes 0600; outputs are ordinary files
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def dumps_json(obj) -> str:
+    """``obj`` as indented JSON text (see :func:`to_jsonable`)."""
+    return json.dumps(to_jsonable(obj), indent=2, allow_nan=False) + "\n"
+
+
+def write_json(path, obj) -> None:
+    """Write ``obj`` as indented JSON atomically, infinities and NaN as ``null``."""
+    write_atomic(path, dumps_json(obj))

@@ -1,0 +1,1 @@
+"""Reporting: self-contained HTML, figures, every demo section and the demo."""
