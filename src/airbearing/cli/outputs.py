@@ -1,0 +1,121 @@
+"""Output files of a command: checked before any work, written together at the end.
+
+A command declares every output first (:meth:`Outputs.plan`): the folder must exist
+and be writable and the extension must be one the option takes, else one
+:class:`~airbearing.errors.InputError` before anything is computed. Results are then
+built in memory and handed over (:meth:`Outputs.text`, :meth:`Outputs.file`), and
+:meth:`Outputs.commit` writes them all: each to a temporary file in its folder, then
+all renamed in place. If any write fails, the temporary files are removed and the
+outputs already renamed are taken back, so a failure leaves nothing new behind.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from collections.abc import Callable
+from pathlib import Path
+
+from airbearing.errors import InputError
+
+__all__ = ["Outputs"]
+
+
+class Outputs:
+    """The output files of one command run."""
+
+    def __init__(self) -> None:
+        self._planned: dict[Path, str] = {}
+        self._writers: list[tuple[Path, str, Callable[[Path], None]]] = []
+
+    def plan(self, path: Path | str | None, option: str, suffixes: tuple[str, ...]) -> Path | None:
+        """Check an output path before any work; returns it as a Path (``None`` passes).
+
+        Raises
+        ------
+        InputError
+            Wrong extension, a folder that does not exist or cannot be written, a path
+            that is a folder, or the same path given for two outputs.
+        """
+        if path is None:
+            return None
+        path = Path(path)
+        if suffixes and path.suffix.lower() not in suffixes:
+            raise InputError(f"{option} {path}: expected a file ending in {' or '.join(suffixes)}")
+        folder = path.parent
+        if not folder.exists():
+            raise InputError(f"{option} {path}: folder '{folder}' does not exist")
+        if not folder.is_dir():
+            raise InputError(f"{option} {path}: '{folder}' is not a folder")
+        if path.is_dir():
+            raise InputError(f"{option} {path}: is a folder, expected a file name")
+        if not os.access(folder, os.W_OK | os.X_OK) or (
+            path.exists() and not os.access(path, os.W_OK)
+        ):
+            raise InputError(f"{option} {path}: cannot write in folder '{folder}'")
+        key = path.resolve()
+        if key in self._planned:
+            raise InputError(f"{option} {path}: the same file is already the {self._planned[key]}")
+        self._planned[key] = option
+        return path
+
+    def file(self, path: Path | None, write: Callable[[Path], None]) -> None:
+        """Queue an output written by ``write(tmp_path)`` (a planned path; ``None`` skips)."""
+        if path is None:
+            return
+        if Path(path).resolve() not in self._planned:
+            raise RuntimeError(f"output {path} was not planned before the work")
+        self._writers.append((Path(path), self._planned[Path(path).resolve()], write))
+
+    def text(self, path: Path | None, data: str | bytes) -> None:
+        """Queue an output whose content is ``data``."""
+        mode = "wb" if isinstance(data, bytes) else "w"
+
+        def write(tmp: Path) -> None:
+            with open(tmp, mode) as fh:
+                fh.write(data)
+
+        self.file(path, write)
+
+    def json(self, path: Path | None, obj) -> None:
+        """Queue a JSON output (non-finite numbers as null, see :mod:`airbearing.io.output`)."""
+        from airbearing.io.output import dumps_json
+
+        if path is not None:
+            self.text(path, dumps_json(obj))
+
+    def commit(self) -> list[Path]:
+        """Write every queued output; all or nothing. Returns the paths written."""
+        temps: list[tuple[Path, Path]] = []
+        done: list[tuple[Path, Path | None]] = []
+        try:
+            for path, _option, write in self._writers:
+                fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+                os.close(fd)
+                temps.append((path, Path(tmp)))
+                write(Path(tmp))
+                os.chmod(tmp, 0o644)
+            for path, tmp in temps:
+                backup = None
+                if path.exists():
+                    fd, b = tempfile.mkstemp(
+                        dir=path.parent, prefix=f".{path.name}.", suffix=".bak"
+                    )
+                    os.close(fd)
+                    backup = Path(b)
+                    os.replace(path, backup)
+                os.replace(tmp, path)
+                done.append((path, backup))
+        except BaseException:
+            for path, backup in reversed(done):
+                if backup is not None:
+                    os.replace(backup, path)
+                else:
+                    path.unlink(missing_ok=True)
+            for _path, tmp in temps:
+                tmp.unlink(missing_ok=True)
+            raise
+        for _path, backup in done:
+            if backup is not None:
+                backup.unlink(missing_ok=True)
+        return [p for p, _ in done]
