@@ -274,7 +274,17 @@ def _norm_sensors(raw: Mapping[str, Any], src: str) -> dict[str, Any]:
         "gyro_noise": _number(raw["gyro_noise"], src, "sensors.gyro_noise", "rad/s", ge=0.0),
         "accel_noise": _number(raw["accel_noise"], src, "sensors.accel_noise", "-", ge=0.0),
         "lowpass": _number(raw["lowpass"], src, "sensors.lowpass", "-", gt=0.0, le=1.0),
+        "gyro": _boolean(raw["gyro"], src, "sensors.gyro"),
+        "attitude_noise": _number(
+            raw["attitude_noise"], src, "sensors.attitude_noise", "rad", ge=0.0
+        ),
     }
+
+
+def _boolean(value: Any, src: str, key: str) -> bool:
+    if not isinstance(value, bool):
+        raise _fail(src, key, "true or false", value)
+    return value
 
 
 def _apply(obj: object, normalised: Mapping[str, Any]) -> None:
@@ -467,12 +477,20 @@ class Sensors:
     lowpass : float
         -, smoothing factor f_g of the gyro filter (seed 001 eq. 3),
         0 < lowpass <= 1; 1 means no filter.
+    gyro : bool
+        ``False``: no rate sensor (attitude from motion capture only); logs carry
+        the attitude and no rate columns.
+    attitude_noise : float
+        rad, 1-sigma white noise per axis of the logged attitude (motion capture,
+        star tracker); >= 0.
     """
 
     rate: float = 20.0
     gyro_noise: float = 0.0
     accel_noise: float = 0.0
     lowpass: float = 1.0
+    gyro: bool = True
+    attitude_noise: float = 0.0
 
     def __post_init__(self) -> None:
         _apply(self, _norm_sensors(_fields_of(self), _MEMORY))
@@ -658,7 +676,7 @@ _TABLE_KEYS: dict[str, tuple[str, ...]] = {
         "max_gimbal_rate_deg",
         "gimbal_angles",
     ),
-    "sensors": ("rate", "gyro_noise", "accel_noise", "lowpass"),
+    "sensors": ("rate", "gyro_noise", "accel_noise", "lowpass", "gyro", "attitude_noise"),
 }
 _REQUIRED: dict[str, tuple[str, ...]] = {
     "body": ("mass", "inertia"),
@@ -926,6 +944,8 @@ def testbed_to_dict(testbed: Testbed) -> dict[str, Any]:
         "gyro_noise": s.gyro_noise,
         "accel_noise": s.accel_noise,
         "lowpass": s.lowpass,
+        "gyro": s.gyro,
+        "attitude_noise": s.attitude_noise,
     }
     if testbed.effects:
         out["effects"] = {
