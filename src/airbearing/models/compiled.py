@@ -1,0 +1,415 @@
+"""CasADi Functions compiled to C once per structure and cached on disk across processes.
+
+:func:`compiled` turns a ``casadi.Function`` into the same Function compiled to a
+shared library with the system C compiler, and keeps the library in the user
+cache folder so that the next process loads it (milliseconds) instead of
+compiling again (seconds):
+
+- folder: ``$AIRBEARING_CACHE_DIR`` if set, else ``$XDG_CACHE_HOME/airbearing``,
+  else ``~/.cache/airbearing``; the libraries live in its ``compiled/`` sub-folder
+  (:func:`cache_dir`). Clearing it is always safe: ``python -m
+  airbearing.models.compiled clear`` (or delete the folder).
+- key: SHA-256 of the generated C source (the Function's structure, numbers
+  included), the CasADi version, the compiler, its flags and the machine. Two
+  Models that differ only in parameter *values* passed as inputs share one library.
+- concurrency: a library is compiled in a private temporary folder, copied next
+  to its final name and moved there with ``os.replace`` (atomic), after its
+  SHA-256 sidecar; a lock file (``fcntl.flock``, POSIX) makes a second process
+  that wants the same key wait for the first one's library instead of
+  compiling it twice. A reader never loads a file whose content does not match
+  its sidecar (a half-written, truncated or corrupt file): it rebuilds it.
+- in memory: a bounded LRU of loaded Functions keyed by the SHA-256 of
+  ``Function.serialize()`` (the structure, not ``id()``).
+
+With no C compiler (or ``AIRBEARING_COMPILE=0``) the Function is returned
+unchanged and runs in CasADi's virtual machine: compiling changes how fast a
+Function runs, never what it computes. The compiled Function has no derivative
+information of its own: compile Functions whose outputs already contain the
+derivatives you need (e.g. a residual and its Jacobian).
+
+Compilation (not a cache hit) is announced once per structure through the
+``progress`` argument, through every sink registered with :func:`compile_notices`
+(the CLI's progress display) and as an ``INFO`` record of the
+``airbearing.compiled`` logger.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import logging
+import os
+import platform
+import shutil
+import subprocess
+import sys
+import tempfile
+import threading
+from collections import OrderedDict
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+__all__ = [
+    "CACHE_ENV",
+    "CacheInfo",
+    "cache_dir",
+    "cache_info",
+    "clear_cache",
+    "compile_notices",
+    "compiled",
+    "compiler",
+]
+
+#: Environment variable naming the airbearing cache folder.
+CACHE_ENV = "AIRBEARING_CACHE_DIR"
+#: Set to ``0`` to never compile (the virtual machine runs everything).
+COMPILE_ENV = "AIRBEARING_COMPILE"
+#: Flags given to the C compiler (``-O1``: most of ``-O2``'s speed on CasADi's
+#: straight-line code at a fraction of its compile time).
+FLAGS = ("-O1", "-fPIC", "-shared")
+#: Loaded Functions kept in memory per process.
+MEMORY_SIZE = 64
+
+log = logging.getLogger("airbearing.compiled")
+
+_lock = threading.Lock()
+_memory: OrderedDict[str, object] = OrderedDict()
+_key_locks: dict[str, threading.Lock] = {}
+_sinks: list[Callable] = []
+_counts = {"memory_hits": 0, "disk_hits": 0, "compiled": 0, "rebuilt": 0, "uncompiled": 0}
+
+
+@dataclass(frozen=True)
+class CacheInfo:
+    """What the compiled-function cache did in this process.
+
+    Attributes
+    ----------
+    memory_hits : int
+        Functions found already loaded in this process.
+    disk_hits : int
+        Libraries loaded from the cache folder (no compilation).
+    compiled : int
+        Libraries compiled (first use of a structure on this machine).
+    rebuilt : int
+        Of ``compiled``, those that replaced a corrupt or unreadable cache file.
+    uncompiled : int
+        Functions returned as they were (no compiler, or compiling switched off).
+    folder : str
+        The cache folder (:func:`cache_dir`).
+    last : str
+        What the last call did: ``"memory"``, ``"disk"``, ``"compiled"``, ``"rebuilt"``,
+        ``"uncompiled"`` or ``""`` before any call.
+    """
+
+    memory_hits: int
+    disk_hits: int
+    compiled: int
+    rebuilt: int
+    uncompiled: int
+    folder: str
+    last: str
+
+    def to_json(self) -> dict:
+        """The counters as a JSON object (same keys as the attributes)."""
+        return {
+            "memory_hits": self.memory_hits,
+            "disk_hits": self.disk_hits,
+            "compiled": self.compiled,
+            "rebuilt": self.rebuilt,
+            "uncompiled": self.uncompiled,
+            "folder": self.folder,
+            "last": self.last,
+        }
+
+
+_last = {"what": ""}
+
+
+def cache_info() -> CacheInfo:
+    """Counters of this process's calls to :func:`compiled` (see :class:`CacheInfo`)."""
+    with _lock:
+        return CacheInfo(**_counts, folder=str(cache_dir()), last=_last["what"])
+
+
+def _count(what: str) -> None:
+    with _lock:
+        _counts[{"memory": "memory_hits", "disk": "disk_hits"}.get(what, what)] += 1
+        if what == "rebuilt":
+            _counts["compiled"] += 1
+        _last["what"] = what
+
+
+def cache_dir() -> Path:
+    """The folder holding compiled libraries (not created here).
+
+    ``$AIRBEARING_CACHE_DIR/compiled`` when the variable is set and not empty, else
+    ``$XDG_CACHE_HOME/airbearing/compiled``, else ``~/.cache/airbearing/compiled``.
+    """
+    root = os.environ.get(CACHE_ENV)
+    if not root:
+        xdg = os.environ.get("XDG_CACHE_HOME")
+        base = Path(xdg) if xdg else Path.home() / ".cache"
+        root = str(base / "airbearing")
+    return Path(root).expanduser() / "compiled"
+
+
+def clear_cache() -> int:
+    """Delete every compiled library (and sidecar, lock) in :func:`cache_dir`; the count removed.
+
+    The in-memory cache of this process is emptied too; libraries already
+    loaded stay usable.
+    """
+    d = cache_dir()
+    n = 0
+    if d.is_dir():
+        for f in d.iterdir():
+            if f.is_file() and f.suffix in (".so", ".dll", ".dylib", ".sha256", ".lock", ".tmp"):
+                with contextlib.suppress(FileNotFoundError):
+                    f.unlink()
+                    n += 1
+    with _lock:
+        _memory.clear()
+    return n
+
+
+def compiler() -> str | None:
+    """Path of the C compiler (``$CC``, else ``gcc``, else ``cc``), or None when there is none."""
+    for cc in (os.environ.get("CC"), "gcc", "cc"):
+        if cc:
+            path = shutil.which(cc)
+            if path:
+                return path
+    return None
+
+
+@contextlib.contextmanager
+def compile_notices(progress: Callable | None) -> Iterator[None]:
+    """Send "compiling ..." notices to ``progress(what)`` while the block runs.
+
+    The CLI wraps a command in it so the user sees why a first run takes longer;
+    ``None`` does nothing.
+    """
+    if progress is None:
+        yield
+        return
+    with _lock:
+        _sinks.append(progress)
+    try:
+        yield
+    finally:
+        with _lock:
+            with contextlib.suppress(ValueError):
+                _sinks.remove(progress)
+
+
+def _announce(what: str, progress: Callable | None) -> None:
+    log.info(what)
+    with _lock:
+        sinks = list(_sinks)
+    if progress is not None and progress not in sinks:
+        sinks.append(progress)
+    for s in sinks:
+        s(what, None, None)
+
+
+def _suffix() -> str:
+    return {"win32": ".dll", "darwin": ".dylib"}.get(sys.platform, ".so")
+
+
+def _digest_file(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for chunk in iter(lambda: f.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()
+
+
+def _valid(lib: Path, side: Path) -> bool:
+    """True when ``lib`` exists and its content matches the SHA-256 in ``side``."""
+    try:
+        want = side.read_text().strip()
+        return bool(want) and _digest_file(lib) == want
+    except OSError:
+        return False
+
+
+@contextlib.contextmanager
+def _file_lock(path: Path) -> Iterator[None]:
+    """An exclusive lock between processes (POSIX ``flock``; elsewhere none)."""
+    try:
+        import fcntl
+    except ImportError:  # pragma: no cover - Windows: os.replace alone keeps loads whole
+        yield
+        return
+    with open(path, "a+") as f:
+        fcntl.flock(f.fileno(), fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(f.fileno(), fcntl.LOCK_UN)
+
+
+def _matches(f, fn) -> bool:
+    """The loaded Function has ``fn``'s inputs and outputs (number and sparsity)."""
+    if f.n_in() != fn.n_in() or f.n_out() != fn.n_out():
+        return False
+    return all(f.sparsity_in(i) == fn.sparsity_in(i) for i in range(fn.n_in())) and all(
+        f.sparsity_out(i) == fn.sparsity_out(i) for i in range(fn.n_out())
+    )
+
+
+def _load(name: str, lib: Path, fn):
+    import casadi as ca
+
+    f = ca.external(name, str(lib))
+    if not _matches(f, fn):
+        raise RuntimeError(f"{lib} does not hold {name} with the expected inputs and outputs")
+    return f
+
+
+def _build(cc: str, name: str, source: str, lib: Path, side: Path) -> None:
+    """Compile ``source`` and install it at ``lib`` (atomically, sidecar first)."""
+    with tempfile.TemporaryDirectory(prefix="airbearing-cc-") as tmp:
+        # a fixed source name keeps the library's bytes independent of the folder
+        src = Path(tmp) / f"{lib.stem}.c"
+        src.write_text(source)
+        out = Path(tmp) / f"{lib.stem}{_suffix()}"
+        cmd = [cc, *FLAGS, src.name, "-o", out.name, "-lm"]
+        res = subprocess.run(cmd, cwd=tmp, capture_output=True, text=True)
+        if res.returncode != 0 or not out.exists():
+            raise RuntimeError(f"C compiler failed on {name}: {res.stderr.strip()[:500]}")
+        digest = _digest_file(out)
+        # copy into the cache folder under a unique name, then rename into place
+        fd, part = tempfile.mkstemp(dir=lib.parent, prefix=f".{lib.stem}-", suffix=".tmp")
+        os.close(fd)
+        try:
+            shutil.copyfile(out, part)
+            side_part = part + ".sha256.tmp"
+            Path(side_part).write_text(digest + "\n")
+            os.replace(side_part, side)
+            os.replace(part, lib)
+        finally:
+            for leftover in (part, part + ".sha256.tmp"):
+                with contextlib.suppress(FileNotFoundError):
+                    os.unlink(leftover)
+
+
+def _source(fn) -> str:
+    import casadi as ca
+
+    cg = ca.CodeGenerator(fn.name())
+    cg.add(fn)
+    return cg.dump()
+
+
+def compiled(fn, *, key: str = "", progress: Callable | None = None):
+    """``fn`` compiled to C, from the on-disk cache when another process compiled it before.
+
+    Parameters
+    ----------
+    fn : casadi.Function
+        Any Function CasADi can generate C code for (SX, MX, map, mapaccum, ...).
+    key : str, optional
+        Extra text mixed into the cache key (e.g. a version of the code that built
+        ``fn``); the structure itself is always part of the key.
+    progress : callable, optional
+        ``progress(what, done, total)``; told when a compilation starts.
+
+    Returns
+    -------
+    casadi.Function
+        Same name, inputs, outputs and values as ``fn``; ``fn`` itself when no C
+        compiler is available or ``AIRBEARING_COMPILE=0``.
+
+    Raises
+    ------
+    RuntimeError
+        When the C compiler fails on the generated code.
+    """
+    import casadi as ca
+
+    cc = compiler()
+    if cc is None or os.environ.get(COMPILE_ENV, "1") == "0":
+        _count("uncompiled")
+        return fn
+    mem_key = hashlib.sha256((key + "\0" + fn.serialize()).encode()).hexdigest()
+    with _lock:
+        hit = _memory.get(mem_key)
+        if hit is not None:
+            _memory.move_to_end(mem_key)
+        key_lock = _key_locks.setdefault(mem_key, threading.Lock())
+    if hit is not None:
+        _count("memory")
+        return hit
+    with key_lock:  # one thread of this process builds a structure; the others wait for it
+        with _lock:
+            hit = _memory.get(mem_key)
+        if hit is not None:
+            _count("memory")
+            return hit
+        name = fn.name()
+        source = _source(fn)
+        ident = "\0".join(
+            (source, ca.__version__, cc, " ".join(FLAGS), platform.machine(), sys.platform, key)
+        )
+        digest = hashlib.sha256(ident.encode()).hexdigest()[:24]
+        folder = cache_dir()
+        folder.mkdir(parents=True, exist_ok=True)
+        lib = folder / f"{name}-{digest}{_suffix()}"
+        side = lib.with_name(lib.name + ".sha256")
+        f, what = None, "disk"
+        if _valid(lib, side):
+            f = _try_load(name, lib, fn)
+        if f is None:
+            with _file_lock(lib.with_name(lib.name + ".lock")):
+                # another process may have built it while we waited for the lock
+                if _valid(lib, side):
+                    f = _try_load(name, lib, fn)
+                if f is None:
+                    what = "rebuilt" if lib.exists() or side.exists() else "compiled"
+                    _announce(
+                        f"compiling {name} to C (once per model structure; cached in {folder})",
+                        progress,
+                    )
+                    for stale in (lib, side):
+                        with contextlib.suppress(FileNotFoundError):
+                            stale.unlink()
+                    _build(cc, name, source, lib, side)
+                    f = _load(name, lib, fn)
+        _count(what)
+        with _lock:
+            _memory[mem_key] = f
+            _memory.move_to_end(mem_key)
+            while len(_memory) > MEMORY_SIZE:
+                _memory.popitem(last=False)
+        return f
+
+
+def _try_load(name: str, lib: Path, fn):
+    try:
+        return _load(name, lib, fn)
+    except RuntimeError as e:
+        log.warning("ignoring unusable cache file %s (%s); rebuilding it", lib, e)
+        return None
+
+
+def _main(argv: list[str]) -> int:
+    """``python -m airbearing.models.compiled [info|clear]``."""
+    cmd = argv[0] if argv else "info"
+    d = cache_dir()
+    if cmd == "clear":
+        print(f"removed {clear_cache()} files from {d}")
+        return 0
+    if cmd == "info":
+        libs = sorted(d.glob(f"*{_suffix()}")) if d.is_dir() else []
+        size = sum(p.stat().st_size for p in libs)
+        print(f"{d}: {len(libs)} compiled functions, {size / 1e6:.1f} MB")
+        return 0
+    print("usage: python -m airbearing.models.compiled [info|clear]", file=sys.stderr)
+    return 2
+
+
+if __name__ == "__main__":
+    raise SystemExit(_main(sys.argv[1:]))
