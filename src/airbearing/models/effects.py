@@ -63,8 +63,17 @@ class Effect:
             return 3
         return 1
 
-    def applies(self, kind: str, dof: int, has_field: bool) -> str | None:
-        """None when the effect can act on this testbed, else the reason it cannot."""
+    def applies(self, kind: str, dof: int, has_field: bool, gyro: bool = True) -> str | None:
+        """None when the effect can act on this testbed, else the reason it cannot.
+
+        ``gyro`` is ``sensors.gyro``: without a rate sensor (attitude-only logs) the
+        rate-sensor effects ``gyro_bias`` and ``sensor_lag`` have nothing to act on.
+        """
+        if self.stage == "sensor" and not gyro:
+            return (
+                f"{self.name} changes the measured rate, and this testbed has no rate sensor "
+                "(sensors.gyro = false: attitude-only logs)"
+            )
         if self.name == "spring_torque" and dof != 1:
             return "spring_torque acts on the yaw angle of a dof = 1 bearing"
         if self.name == "cm_offset_error" and dof != 3:
@@ -169,6 +178,16 @@ def effect_param_names(name: str, dof: int, per_axis: bool) -> list[str]:
     return [name] if n == 1 else [f"{name}_{a}" for a in _AXES]
 
 
-def applicable_effects(kind: str, dof: int, has_field: bool) -> list[str]:
-    """Names of the registered effects that can act on a testbed of this kind."""
-    return [n for n, e in REGISTRY.items() if e.applies(kind, dof, has_field) is None]
+def applicable_effects(kind: str, dof: int, has_field: bool, gyro: bool = True) -> list[str]:
+    """Names of the registered effects that can act on a testbed of this kind.
+
+    Parameters
+    ----------
+    kind : {"platform", "cmg"}
+    dof : {1, 3}
+    has_field : bool
+        A magnetic field acts (a ``[field]`` table, or a platform whose log may carry one).
+    gyro : bool
+        ``sensors.gyro``; False drops ``gyro_bias`` and ``sensor_lag`` (no rate sensor).
+    """
+    return [n for n, e in REGISTRY.items() if e.applies(kind, dof, has_field, gyro) is None]

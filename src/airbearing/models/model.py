@@ -13,7 +13,16 @@ Inputs ``u`` (held constant over a sample, zero-order hold)
     cmg: ``dd1..dd4`` gimbal rates (rad/s), ``tau_x tau_y tau_z``.
 Measurement ``y`` (noise free; noise is added by the simulation)
     dof 3: ``qw qx qy qz wx wy wz gx gy gz`` (``g`` the unit gravity direction in body axes);
-    dof 1: ``yaw wz``; cmg adds ``d1..d4``.
+    dof 1: ``yaw wz``; cmg adds ``d1..d4``. ``y`` keeps the rates when ``sensors.gyro`` is
+    false (an attitude-only log simply has no rate columns); the rate-sensor effects
+    ``gyro_bias`` and ``sensor_lag`` are then refused.
+
+Passive platforms (kind ``"platform"`` without ``[masses]``, usually without
+``[magnetorquers]``): the input vector keeps its layout, so every caller indexes
+``s1 s2 s3 mx my mz`` as on any platform, but the dynamics do not depend on them: there
+are no slider parameters ``m_1 m_2 m_3`` in ``p`` and no slider terms without
+``[masses]``, and no commanded-dipole torque without ``[magnetorquers]``. A passive
+platform is a free rigid body (dof 3) or a yaw-only rotor (dof 1) under its effects.
 """
 
 from __future__ import annotations
@@ -160,6 +169,24 @@ class Model:
         x = ca.SX.sym("x", self.nx)
         u = ca.SX.sym("u", self.nu)
         p = ca.SX.sym("p", self.n_p)
+        out = self._rk4(x, u, p, dt, substeps)
+        return ca.Function("step", [x, u, p], [out], ["x", "u", "p"], ["x_next"])
+
+    def step_dt(self, substeps: int = 4) -> ca.Function:
+        """One interval of any length: ``(x, u, p, dt) -> x_next``, ``dt`` (s) an input.
+
+        The same arithmetic as :meth:`step` (RK4 with ``substeps`` sub-intervals, the
+        quaternion renormalised, exact lag update), with the interval length a symbol, so
+        one Function integrates a log on its own (jittered) sample times.
+        """
+        x = ca.SX.sym("x", self.nx)
+        u = ca.SX.sym("u", self.nu)
+        p = ca.SX.sym("p", self.n_p)
+        dt = ca.SX.sym("dt")
+        out = self._rk4(x, u, p, dt, substeps)
+        return ca.Function("step_dt", [x, u, p, dt], [out], ["x", "u", "p", "dt"], ["x_next"])
+
+    def _rk4(self, x, u, p, dt, substeps: int):
         plant = [i for i in range(self.nx) if i not in self.lag_index]
         xp = x[plant]
         lag = x[list(self.lag_index)] if self.lag_index else ca.SX(0, 1)
@@ -179,7 +206,7 @@ class Model:
         out[plant] = xp
         if self.lag_index:
             out[list(self.lag_index)] = lag
-        return ca.Function("step", [x, u, p], [out], ["x", "u", "p"], ["x_next"])
+        return out
 
     def rollout(self, n: int, dt: float, substeps: int = 4) -> ca.Function:
         """Open-loop rollout of ``n`` samples: ``(x0, U[nu x n], p) -> X[nx x n]``.
@@ -211,6 +238,9 @@ def build_model(testbed: Testbed, effects: Mapping | None = None) -> Model:
     """
     kind, dof = testbed.kind, testbed.body.dof
     has_field = testbed.field is not None or kind == "platform"  # platform: field is an input
+    gyro = testbed.sensors.gyro
+    sliders = kind == "platform" and testbed.masses is not None
+    dipole = kind == "platform" and testbed.magnetorquers is not None
     effects = _effects_of(testbed, effects)
 
     # ---- parameters
@@ -228,14 +258,14 @@ def build_model(testbed: Testbed, effects: Mapping | None = None) -> Model:
     else:
         par(["J_zz"], [testbed.body.yaw_inertia])
     par(["mass", "gravity"], [testbed.body.mass, testbed.gravity])
-    if kind == "platform":
-        par(["m_1", "m_2", "m_3"], testbed.masses.mass_vec if testbed.masses else np.zeros(3))
-    else:
+    if sliders:
+        par(["m_1", "m_2", "m_3"], testbed.masses.mass_vec)
+    elif kind == "cmg":
         par(["h0", "beta"], [testbed.cmg.h0, testbed.cmg.skew])
     effect_slices = {}
     for name, value in effects.items():
         eff = get_effect(name)
-        reason = eff.applies(kind, dof, has_field)
+        reason = eff.applies(kind, dof, has_field, gyro)
         if reason:
             raise InputError(f"effect '{name}' cannot act on testbed '{testbed.name}': {reason}")
         per_axis = (
@@ -294,8 +324,8 @@ def build_model(testbed: Testbed, effects: Mapping | None = None) -> Model:
         r_cm = ca.SX.zeros(3)
     torque = ca.SX.zeros(3)
     b_body = ca.SX.zeros(3)
-    if kind == "platform":
-        axes = testbed.masses.axes_matrix if testbed.masses else np.eye(3)
+    if sliders:
+        axes = testbed.masses.axes_matrix
         s = ca.vertcat(U["s1"], U["s2"], U["s3"])
         for i in range(3):
             ui = ca.DM(axes[i])
@@ -304,8 +334,10 @@ def build_model(testbed: Testbed, effects: Mapping | None = None) -> Model:
             r_cm = r_cm + mi * s[i] * ui / P["mass"]
             dJ = mi * s[i] ** 2 * (ca.DM.eye(3) - ca.mtimes(ui, ui.T))
             J_cr = J_cr + (dJ if dof == 3 else dJ[2, 2])
+    if kind == "platform":
         b_lab = ca.vertcat(U["bx_lab"], U["by_lab"], U["bz_lab"])
         b_body = quat.rotate_inverse(q, b_lab)
+    if dipole:
         m_dip = ca.vertcat(U["mx"], U["my"], U["mz"])
         torque = torque + ca.cross(m_dip, b_body)  # magnetorquer torque d x b (seed 000 eq. 2)
     elif testbed.field is not None:  # a CMG testbed inside a cage: the field is a constant

@@ -1,4 +1,4 @@
-"""Standard runs: the seed-001 yaw slew and free oscillations of a platform."""
+"""Standard runs: the seed-001 yaw slew, free oscillations and spin-downs of a platform."""
 
 from __future__ import annotations
 
@@ -14,7 +14,7 @@ from airbearing.io.testbed import Testbed
 from airbearing.models import quaternion as quat
 from airbearing.models.model import build_model
 
-__all__ = ["slew", "slew_summary", "free_oscillation", "free_summary"]
+__all__ = ["slew", "slew_summary", "free_oscillation", "free_summary", "spindown"]
 
 
 def slew(
@@ -97,12 +97,16 @@ def free_oscillation(
     duration: float = 60.0,
     seed: int = 0,
     noise: bool = True,
-    attitude_noise: float = 0.0,
+    attitude_noise: float | None = None,
 ) -> SimResult:
     """Free motion with inputs held: sliders at ``sliders`` (m), no dipole, the cage field on.
 
     The data that identification and the discrepancy workflow consume. ``effects``
     (FORMATS.md names and units) act in the truth but are not written to any testbed.
+    Works on passive platforms (no ``[masses]``: ``sliders`` must stay zero) and on
+    dof-1 bearings (only the z entry of ``initial_rate`` may be non-zero). The log
+    follows the testbed's sensors: ``sensors.gyro = false`` gives attitude only, with
+    ``attitude_noise`` (default ``sensors.attitude_noise``, rad).
     """
     if duration <= 0:
         raise InputError(f"--duration {duration}: expected a positive time in s")
@@ -112,6 +116,11 @@ def free_oscillation(
         s = np.asarray(sliders, dtype=float)
         if s.shape != (3,):
             raise InputError(f"--sliders: expected 3 positions in m, got {list(s)}")
+        if testbed.masses is None and np.any(s != 0):
+            raise InputError(
+                f"--sliders {list(s)}: testbed '{testbed.name}' has no [masses] table "
+                "(a passive platform); leave the sliders at 0"
+            )
         travel = testbed.masses.travel if testbed.masses else 0.0
         if np.any(np.abs(s) > travel):
             raise InputError(
@@ -125,6 +134,11 @@ def free_oscillation(
     w0 = np.asarray(initial_rate, dtype=float)
     if w0.shape != (3,):
         raise InputError(f"--initial-rate: expected 3 rates WX WY WZ in rad/s, got {list(w0)}")
+    if model.dof == 1 and np.any(w0[:2] != 0):
+        raise InputError(
+            f"--initial-rate {list(w0)}: a dof = 1 bearing turns about body z only; "
+            "give WX = WY = 0"
+        )
     x0 = model.x0(q=q0, w=w0) if model.dof == 3 else model.x0(w=w0[2])
     return simulate(
         model,
@@ -137,12 +151,46 @@ def free_oscillation(
     )
 
 
+def spindown(
+    testbed: Testbed,
+    *,
+    initial_rate: float = 2.0,
+    duration: float = 120.0,
+    effects: Mapping | None = None,
+    seed: int = 0,
+    noise: bool = True,
+    q0=(1.0, 0.0, 0.0, 0.0),
+    attitude_noise: float | None = None,
+) -> SimResult:
+    """A spin-down: the platform spun about body z at ``initial_rate`` (rad/s), coasting.
+
+    Nothing but its effects (friction, drag, ...) and, on a dof-3 bearing, gravity of the
+    CM offset act; sliders at zero, no dipole. The log follows the testbed's sensors
+    (attitude only when ``sensors.gyro = false``). A thin form of
+    :func:`free_oscillation` with ``initial_rate = (0, 0, initial_rate)``.
+    """
+    w = float(initial_rate)
+    if not np.isfinite(w):
+        raise InputError(f"--spin-rate {initial_rate}: expected a finite rate in rad/s")
+    return free_oscillation(
+        testbed,
+        initial_rate=(0.0, 0.0, w),
+        q0=q0,
+        effects=effects,
+        duration=duration,
+        seed=seed,
+        noise=noise,
+        attitude_noise=attitude_noise,
+    )
+
+
 def free_summary(result: SimResult) -> dict:
-    """Peak rate, largest tilt and the run length of a free oscillation."""
+    """Peak and final rate, largest tilt and the run length of a free oscillation."""
     m = result.model
     w = result.x[:, m.index(["wx", "wy", "wz"] if m.dof == 3 else ["wz"])]
     out = {
         "peak_rate_deg_s": float(np.rad2deg(np.linalg.norm(w, axis=1).max())),
+        "final_rate_deg_s": float(np.rad2deg(np.linalg.norm(w[-1]))),
         "duration_s": float(result.t[-1] + m.testbed.sensors.dt),
         "samples": int(len(result.t)),
     }

@@ -22,7 +22,15 @@ from airbearing.io.log import Log
 from airbearing.models import quaternion as quat
 from airbearing.models.model import Model
 
-__all__ = ["SimResult", "simulate", "closed_loop_rollout", "log_from_arrays"]
+__all__ = [
+    "SimResult",
+    "simulate",
+    "closed_loop_rollout",
+    "log_from_arrays",
+    "log_columns",
+    "noise_sigmas",
+    "add_noise",
+]
 
 
 @dataclass(frozen=True, eq=False)
@@ -60,6 +68,42 @@ class SimResult:
     def state(self, name: str) -> np.ndarray:
         """True state ``name`` at the sample instants ``t`` (N,)."""
         return self.x[:-1, self.model.index(name)[0]]
+
+
+def noise_sigmas(model: Model, attitude_noise: float | None = None) -> np.ndarray:
+    """1-sigma measurement noise per entry of ``model.y_names`` (SI units).
+
+    Rates get ``sensors.gyro_noise``, the gravity direction ``sensors.accel_noise``,
+    the attitude ``attitude_noise`` (default ``sensors.attitude_noise``, rad): for dof 3
+    the slots ``qw qx qy`` carry the three components of the small rotation vector
+    (``qz`` stays 0), for dof 1 the slot ``yaw``.
+    """
+    sensors = model.testbed.sensors
+    att = sensors.attitude_noise if attitude_noise is None else float(attitude_noise)
+    if not att >= 0:
+        raise InputError(f"attitude noise {attitude_noise}: expected a 1-sigma angle >= 0 in rad")
+    sig = np.zeros(model.ny)
+    for i, name in enumerate(model.y_names):
+        if name in ("wx", "wy", "wz"):
+            sig[i] = sensors.gyro_noise
+        elif name in ("gx", "gy", "gz"):
+            sig[i] = sensors.accel_noise
+        elif name in ("qw", "qx", "qy", "yaw"):  # qw..qy slots carry the rotation vector
+            sig[i] = att
+    return sig
+
+
+def add_noise(model: Model, y: np.ndarray, noise: np.ndarray) -> np.ndarray:
+    """NumPy twin of the compiled loop's measurement: ``y`` (N, ny) plus ``noise`` (N, ny).
+
+    Additive, except the dof-3 attitude, which is turned on the body side by the small
+    rotation ``exp(noise[:, 0:3])``: ``q_meas = q (x) exp(n)``.
+    """
+    y = np.array(y, dtype=float)
+    if model.dof == 3:
+        q = quat.qmul(y[:, 0:4], quat.qexp(noise[:, 0:3]))
+        return np.hstack([q, y[:, 4:] + noise[:, 4:]])
+    return y + noise
 
 
 def _measure(model: Model, y, noise):
@@ -121,7 +165,7 @@ def simulate(
     c0: np.ndarray | None = None,
     seed: int = 0,
     noise: bool = True,
-    attitude_noise: float = 0.0,
+    attitude_noise: float | None = None,
     torque_noise: float | None = None,
     substeps: int = 4,
 ) -> SimResult:
@@ -143,8 +187,10 @@ def simulate(
         Seed of the noise generator; the same seed gives the same run.
     noise : bool
         False gives ideal sensors and no disturbance torque.
-    attitude_noise : float
-        1-sigma small-angle attitude measurement noise per axis, rad (dof 3), or yaw noise (dof 1).
+    attitude_noise : float, optional
+        1-sigma small-angle attitude measurement noise per axis, rad (dof 3: a rotation
+        ``q (x) exp(n)`` on the body side), or yaw noise (dof 1); default
+        ``sensors.attitude_noise``.
     torque_noise : float, optional
         1-sigma disturbance torque per sample and axis, N m (default ``body.torque_noise``).
     substeps : int
@@ -168,17 +214,9 @@ def simulate(
     t = np.arange(n) * dt
 
     rng = np.random.default_rng(seed)
-    sig = np.zeros(model.ny)
+    sig = noise_sigmas(model, attitude_noise) if noise else np.zeros(model.ny)
     tau_sig = tb.body.torque_noise if torque_noise is None else torque_noise
-    if noise:
-        for i, name in enumerate(model.y_names):
-            if name in ("wx", "wy", "wz"):
-                sig[i] = tb.sensors.gyro_noise
-            elif name in ("gx", "gy", "gz"):
-                sig[i] = tb.sensors.accel_noise
-            elif name in ("qw", "qx", "qy", "yaw"):  # qw..qy slots carry the rotation vector
-                sig[i] = attitude_noise
-    else:
+    if not noise:
         tau_sig = 0.0
     meas_noise = rng.standard_normal((n, model.ny)) * sig
     tau = rng.standard_normal((n, 3)) * tau_sig
@@ -196,25 +234,69 @@ def simulate(
 
 
 def log_from_arrays(model, t, x, y, u, extra, controller, ref) -> Log:
-    """Assemble a FORMATS.md log from a run's arrays (plus ``true_*`` columns)."""
-    tb = model.testbed
-    cols: dict[str, np.ndarray] = {"t": t}
-    Y = dict(zip(model.y_names, y.T, strict=True))
-    U = dict(zip(model.u_names, u.T, strict=True))
-    X = dict(zip(model.x_names, x.T, strict=True))
+    """Assemble a FORMATS.md log from a run's arrays (plus ``true_*`` and controller columns)."""
     E = dict(zip(controller.extra_names, extra.T, strict=True))
+    cols = log_columns(model, t, x, y, u, yaw=E.get("yaw_est"))
+    if model.kind == "cmg" and model.dof == 1 and "qc_w" in controller.ref_names:
+        cols["yaw_ref"] = quat.yaw_of(ref[:, :4])
+    for k, v in E.items():
+        cols.setdefault(k, v)
+    return Log(pd.DataFrame(cols), source="<simulation>", testbed=model.testbed)
+
+
+def log_columns(model: Model, t, x, y, u, *, yaw=None) -> dict[str, np.ndarray]:
+    """The FORMATS.md columns of a run (plus ``true_<state>`` columns), by name.
+
+    Parameters
+    ----------
+    model : Model
+    t : ndarray (N,)
+        Sample times, s.
+    x : ndarray (N, nx)
+        True states at ``t``.
+    y : ndarray (N, ny)
+        Measurements (noise included) at ``t``.
+    u : ndarray (N, nu)
+        Inputs held from each sample (disturbance torque included).
+    yaw : ndarray (N,), optional
+        dof 1: the logged yaw when it is not the measured one (a controller's estimate).
+
+    Returns
+    -------
+    dict
+        ``t``; the attitude (``qw qx qy qz``, or ``yaw`` for dof 1); the rates (``wx wy wz``
+        or ``wz``) only when ``sensors.gyro`` (no rate columns in an attitude-only log);
+        ``gx gy gz`` with a gyro on a platform or with accelerometer noise (dof 3);
+        ``s1 s2 s3`` only with ``[masses]``, ``mx my mz`` only with ``[magnetorquers]``,
+        ``bx by bz`` when a field is applied; gimbals for a CMG; ``true_*`` states and any
+        non-zero disturbance torque ``true_tau_*``.
+    """
+    tb = model.testbed
+    gyro = tb.sensors.gyro
+    cols: dict[str, np.ndarray] = {"t": np.asarray(t, dtype=float)}
+    Y = dict(zip(model.y_names, np.asarray(y).T, strict=True))
+    U = dict(zip(model.u_names, np.asarray(u).T, strict=True))
+    X = dict(zip(model.x_names, np.asarray(x).T, strict=True))
     if model.dof == 3:
-        for k in ("qw", "qx", "qy", "qz", "wx", "wy", "wz"):
+        for k in ("qw", "qx", "qy", "qz"):
             cols[k] = Y[k]
-        if tb.sensors.accel_noise > 0 or model.kind == "platform":
-            for k in ("gx", "gy", "gz"):
+        if gyro:
+            for k in ("wx", "wy", "wz"):
                 cols[k] = Y[k]
+            if tb.sensors.accel_noise > 0 or model.kind == "platform":
+                for k in ("gx", "gy", "gz"):
+                    cols[k] = Y[k]
     else:
-        cols["yaw"] = E.get("yaw_est", Y["yaw"])
-        cols["wz"] = Y["wz"]
+        cols["yaw"] = Y["yaw"] if yaw is None else yaw
+        if gyro:
+            cols["wz"] = Y["wz"]
     if model.kind == "platform":
-        for k in ("s1", "s2", "s3", "mx", "my", "mz"):
-            cols[k] = U[k]
+        if tb.masses is not None:
+            for k in ("s1", "s2", "s3"):
+                cols[k] = U[k]
+        if tb.magnetorquers is not None:
+            for k in ("mx", "my", "mz"):
+                cols[k] = U[k]
         b_lab = np.stack([U["bx_lab"], U["by_lab"], U["bz_lab"]], axis=1)
         if np.any(b_lab != 0):
             q = (
@@ -229,13 +311,9 @@ def log_from_arrays(model, t, x, y, u, extra, controller, ref) -> Log:
             cols[f"d{i}"] = Y[f"d{i}"]
         for i in range(1, 5):
             cols[f"dd{i}"] = U[f"dd{i}"]
-        if model.dof == 1 and "qc_w" in controller.ref_names:
-            cols["yaw_ref"] = quat.yaw_of(ref[:, :4])
     for k, v in X.items():
         cols[f"true_{k}"] = v
     for k in ("tau_x", "tau_y", "tau_z"):
         if np.any(U[k] != 0):
             cols[f"true_{k}"] = U[k]
-    for k, v in E.items():
-        cols.setdefault(k, v)
-    return Log(pd.DataFrame(cols), source="<simulation>", testbed=tb)
+    return cols
