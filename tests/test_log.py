@@ -146,16 +146,16 @@ def test_too_few_rows():
     ids=["nan", "inf", "-inf", "text", "none"],
 )
 def test_non_finite_or_non_numeric_cell(value, got):
-    df = with_value(cmg_frame(), 6, "d3", value)  # 0-based index 6 is row 7
+    df = with_value(cmg_frame(), 6, "d3", value)  # rows are 0-based data rows (FORMATS.md)
     with pytest.raises(InputError) as e:
         validate_log(df, SRC)
-    assert "run.csv: row 7, column 'd3': expected a finite number" in message(e)
+    assert "run.csv: row 6, column 'd3': expected a finite number" in message(e)
     assert got in message(e)
 
 
 def test_first_bad_cell_over_all_columns_is_reported():
     df = with_value(with_value(cmg_frame(), 9, "wz", np.nan), 4, "dd4", np.nan)
-    with pytest.raises(InputError, match=r"row 5, column 'dd4'"):
+    with pytest.raises(InputError, match=r"row 4, column 'dd4'"):
         validate_log(df, SRC)
 
 
@@ -166,18 +166,18 @@ def test_bad_value_in_extra_column_is_ignored():
 
 def test_boolean_column_is_not_numbers():
     df = cmg_frame().assign(wz=True)
-    with pytest.raises(InputError, match=r"row 1, column 'wz': expected a finite number"):
+    with pytest.raises(InputError, match=r"row 0, column 'wz': expected a finite number"):
         validate_log(df, SRC)
 
 
 @pytest.mark.parametrize("later", [0.10, 0.05], ids=["backwards", "repeated"])
 def test_time_strictly_increasing(later):
     df = cmg_frame()
-    df.loc[3, "t"] = later  # row 4 follows row 3 at t = 0.10
+    df.loc[3, "t"] = later  # row 3 follows row 2 at t = 0.10
     with pytest.raises(InputError) as e:
         validate_log(df, SRC)
-    assert "run.csv: row 4, column 't': time must be strictly increasing" in message(e)
-    assert f"t = {later!r} s follows t = 0.1 s of row 3" in message(e)
+    assert "run.csv: row 3, column 't': time must be strictly increasing" in message(e)
+    assert f"t = {later!r} s follows t = 0.1 s of row 2" in message(e)
 
 
 @pytest.mark.parametrize(
@@ -219,15 +219,34 @@ def test_column_groups_all_or_none(extra, missing):
     assert "all or none" in message(e)
 
 
-@pytest.mark.parametrize(("step", "row"), [(0.2, 6), (0.01, 6)], ids=["gap", "too-fast"])
-def test_time_gap_with_testbed(step, row):
+@pytest.mark.parametrize(("step", "segments"), [(0.2, ((0, 5), (5, 20))), (0.01, ((0, 20),))])
+def test_gap_splits_into_segments_and_short_interval_is_used(step, segments):
+    # FORMATS.md: an interval > 1.5 / rate splits the log into segments, never an error;
+    # an interval < 0.5 / rate (documented in io.log) is used with its logged time.
     df = cmg_frame()
-    df.loc[5:, "t"] += step - 0.05  # the interval before row 6 (index 5) is off
-    validate_log(df, SRC)  # without a testbed only monotonicity is checked
+    df.loc[5:, "t"] += step - 0.05  # the interval before row 5 is off
+    log = Log(df, SRC, CMG_YAW)
+    assert log.segments == segments
+    np.testing.assert_array_equal(log.t, df["t"].to_numpy())
+
+
+def test_jitter_within_half_period_is_one_segment():
+    df = cmg_frame(n=200)
+    rng = np.random.default_rng(3)
+    df["t"] = np.cumsum(0.05 * (1 + rng.uniform(-0.49, 0.49, 200)))  # FORMATS.md: +-50 %
+    assert Log(df, SRC, CMG_YAW).segments == ((0, 200),)
+
+
+def test_all_gaps_is_one_error():
+    df = cmg_frame(n=5)
+    df["t"] = [0.0, 1.0, 2.0, 3.0, 4.0]  # every interval 20 periods at 20 Hz
     with pytest.raises(InputError) as e:
         validate_log(df, SRC, CMG_YAW)
-    assert f"run.csv: row {row}, column 't': sample interval" in message(e)
-    assert "sensors.rate" in message(e)
+    assert message(e).startswith("run.csv: the log is all gaps")
+    assert "\n" not in message(e)
+    validate_log(df, SRC)  # without a testbed there is no sample rate to judge gaps by
+    df.loc[4, "t"] = 3.05  # one segment of 2 samples is enough (io.log.MIN_SEGMENT_ROWS)
+    assert Log(df, SRC, CMG_YAW).segments == ((0, 1), (1, 2), (2, 3), (3, 5))
 
 
 def test_quaternion_norm():
@@ -235,7 +254,7 @@ def test_quaternion_norm():
     df.loc[11, "qw"] += 0.01
     with pytest.raises(InputError) as e:
         validate_log(df, SRC)
-    assert "run.csv: row 12, columns qw, qx, qy, qz: expected a unit quaternion" in message(e)
+    assert "run.csv: row 11, columns qw, qx, qy, qz: expected a unit quaternion" in message(e)
 
 
 def test_quaternion_norm_tolerance():
@@ -272,13 +291,13 @@ def csv_text(n: int = 5) -> str:
 @pytest.mark.parametrize(
     ("text", "fragments"),
     [
-        (HEADER + "0,0,0,0,0,0,0\n0.05,,0,0,0,0,0\n", ["row 2 (line 3), column 'wz'", "empty"]),
-        (HEADER + "0,0,0,0,0,0,0\n\n\n0.05,0,x1,0,0,0,0\n", ["row 2 (line 5), column 'yaw'"]),
-        (HEADER + "0,0,0,0,0,0,0\n0.05,0,nan,0,0,0,0\n", ["row 2 (line 3)", "'nan'"]),
-        (HEADER + "0,0,0,0,0,0,0\n0.05,0,0,0,0,0\n", ["row 2 (line 3), column 'd4'"]),
-        (HEADER + "0,0,0,0,0,0,0\n0.05,0,inf,0,0,0,0\n", ["row 2 (line 3)", "'inf'"]),
+        (HEADER + "0,0,0,0,0,0,0\n0.05,,0,0,0,0,0\n", ["row 1 (line 3), column 'wz'", "empty"]),
+        (HEADER + "0,0,0,0,0,0,0\n\n\n0.05,0,x1,0,0,0,0\n", ["row 1 (line 5), column 'yaw'"]),
+        (HEADER + "0,0,0,0,0,0,0\n0.05,0,nan,0,0,0,0\n", ["row 1 (line 3)", "'nan'"]),
+        (HEADER + "0,0,0,0,0,0,0\n0.05,0,0,0,0,0\n", ["row 1 (line 3), column 'd4'"]),
+        (HEADER + "0,0,0,0,0,0,0\n0.05,0,inf,0,0,0,0\n", ["row 1 (line 3)", "'inf'"]),
         (HEADER + "0,0,0,0,0,0,0\n0.05,0,0,0,0,0,0,0\n", ["not a valid CSV log"]),
-        (HEADER + "0.05,0,0,0,0,0,0\n0,0,0,0,0,0,0\n", ["row 2 (line 3), column 't'"]),
+        (HEADER + "0.05,0,0,0,0,0,0\n0,0,0,0,0,0,0\n", ["row 1 (line 3), column 't'"]),
         ("t,wz,wz\n0,0,0\n1,0,0\n", ["line 1: column 'wz' appears more than once"]),
         ("", ["the log is empty"]),
         ("t,wz\n0,0\n", ["at least 2 rows"]),
@@ -314,11 +333,10 @@ def test_csv_missing_column_names_testbed(tmp_path):
     assert "missing column 'd4'" in message(e) and "kind = 'cmg', dof = 1" in message(e)
 
 
-def test_csv_gap_names_row_and_line(tmp_path):
+def test_csv_gap_is_a_segment(tmp_path):
     path = tmp_path / "run.csv"
-    path.write_text(HEADER + "0,0,0,0,0,0,0\n0.05,0,0,0,0,0,0\n0.5,0,0,0,0,0,0\n")
-    with pytest.raises(InputError, match=r"row 3 \(line 4\), column 't': sample interval"):
-        read_log(path, CMG_YAW)
+    path.write_text(HEADER + "0,0,0,0,0,0,0\n0.05,0,0,0,0,0,0\n0.5,0,0,0,0,0,0\n0.55,0,0,0,0,0,0\n")
+    assert read_log(path, CMG_YAW).segments == ((0, 2), (2, 4))
 
 
 def test_csv_reads_spaces_and_extra_columns(tmp_path):
@@ -359,7 +377,7 @@ def test_round_trip(tmp_path, suffix, make):
 def test_parquet_nan_names_row(tmp_path):
     path = tmp_path / "run.parquet"
     with_value(cmg_frame(), 2, "wz", np.nan).to_parquet(path)
-    with pytest.raises(InputError, match=r"run\.parquet: row 3, column 'wz'"):
+    with pytest.raises(InputError, match=r"run\.parquet: row 2, column 'wz'"):
         read_log(path)
 
 
@@ -367,7 +385,7 @@ def test_write_log_validates_and_leaves_no_file(tmp_path):
     df = cmg_frame()
     df.loc[4, "t"] = 0.0
     path = tmp_path / "run.csv"
-    with pytest.raises(InputError, match=r"run\.csv: row 5, column 't'"):
+    with pytest.raises(InputError, match=r"run\.csv: row 4, column 't'"):
         write_log(df, path)
     assert list(tmp_path.iterdir()) == []
     write_log(cmg_frame(), path)

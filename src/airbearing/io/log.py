@@ -4,9 +4,26 @@ A :class:`Log` holds one run's samples as a validated :class:`pandas.DataFrame`:
 one row per sample, the columns of FORMATS.md (SI units) as float64, and any
 other columns kept untouched. Validation never fills or drops anything: a
 missing column, an empty or non-numeric cell, a non-finite value, time that
-does not increase, a sampling gap or a non-unit quaternion raises
-:class:`~airbearing.errors.InputError` naming the file, the row (1-based data
-row; for CSV also the line of the file) and the column.
+does not increase, a log that is all gaps or a non-unit quaternion raises
+:class:`~airbearing.errors.InputError` naming the file, the row and the column.
+
+Rows are 0-based data-row indices (the header is not counted), the same in a raw
+file, its imported log and every report; CSV messages add the line of the file.
+
+Sampling (FORMATS.md, "Real logs are not perfect"), with ``T = 1 / sensors.rate``:
+
+- an interval within ``[0.5 T, 1.5 T]`` is normal jitter: used with its logged times;
+- an interval longer than ``1.5 T`` is a **gap**: it splits the log into segments
+  (:func:`segments_of`); never an error;
+- an interval shorter than ``0.5 T`` is **irregular** (a duplicated or late
+  sample, a logger hiccup): used with its logged time like any other, not an
+  error, and reported by ``airbearing log check``;
+- a log in which no segment has at least 2 samples ("all gaps") is an error:
+  nothing can be integrated, differentiated or fitted on it.
+
+Files are read and written with pyarrow (``pyarrow.csv``, ``pyarrow.parquet``);
+a CSV that the fast reader refuses is read again cell by cell as text so that the
+error names the row, the line and the column.
 """
 
 from __future__ import annotations
@@ -16,6 +33,7 @@ import io
 import os
 from collections.abc import Iterable, Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pandas as pd
@@ -23,14 +41,20 @@ import pandas as pd
 from airbearing.errors import InputError
 from airbearing.io.testbed import Testbed, _atomic_write_bytes
 
+if TYPE_CHECKING:
+    from airbearing.io.quality import LogQuality
+
 __all__ = [
     "COLUMN_GROUPS",
     "GAP_FACTORS",
     "LOG_COLUMNS",
+    "MIN_SEGMENT_ROWS",
     "QUATERNION_NORM_TOL",
+    "RATE_COLUMNS",
     "REQUIRED_COLUMNS",
     "Log",
     "read_log",
+    "segments_of",
     "validate_log",
     "write_log",
 ]
@@ -56,6 +80,8 @@ LOG_COLUMNS: tuple[str, ...] = (
     *_GIMBAL_RATES,
     "yaw_ref",
 )
+#: The measured angular-rate columns (rad/s, body axes).
+RATE_COLUMNS: tuple[str, ...] = _RATES
 #: Columns that come together: if one of a group is present, all must be.
 COLUMN_GROUPS: tuple[tuple[str, ...], ...] = (
     _QUATERNION,
@@ -67,8 +93,12 @@ COLUMN_GROUPS: tuple[tuple[str, ...], ...] = (
 )
 #: Largest allowed ``abs(norm(q) - 1)`` of a logged quaternion.
 QUATERNION_NORM_TOL = 1e-3
-#: A sample interval must lie within these multiples of ``1 / sensors.rate``.
+#: Multiples of ``1 / sensors.rate``: an interval below the first is irregular
+#: (used, reported), above the second is a gap (splits the log into segments).
 GAP_FACTORS = (0.5, 1.5)
+#: A segment needs this many samples to give a rate or a fit; a log without one
+#: such segment is "all gaps" (an error).
+MIN_SEGMENT_ROWS = 2
 _MIN_ROWS = 2
 _MEMORY = "<memory>"
 
@@ -84,10 +114,12 @@ def REQUIRED_COLUMNS(testbed: Testbed | None = None) -> list[str]:  # noqa: N802
     Returns
     -------
     list of str
-        ``t``; for dof 3 the quaternion ``qw, qx, qy, qz`` and the rates
-        ``wx, wy, wz``; for dof 1 ``wz`` and ``yaw``; for kind
-        ``"platform"`` the sliders ``s1, s2, s3``; for kind ``"cmg"`` the
-        gimbal angles ``d1 .. d4``.
+        ``t``; the attitude: for dof 3 the quaternion ``qw, qx, qy, qz``, for
+        dof 1 ``yaw`` (or the quaternion, see Notes); the rates when
+        ``sensors.gyro`` is true (``wx, wy, wz`` for dof 3, ``wz`` for dof 1),
+        none when it is false (motion capture); the sliders ``s1, s2, s3`` for
+        kind ``"platform"`` with ``[masses]`` (none for a passive platform);
+        the gimbal angles ``d1 .. d4`` for kind ``"cmg"``.
 
     Notes
     -----
@@ -98,12 +130,42 @@ def REQUIRED_COLUMNS(testbed: Testbed | None = None) -> list[str]:  # noqa: N802
     columns = ["t"]
     if testbed is None:
         return columns
+    gyro = testbed.sensors.gyro
     if testbed.body.dof == 3:
-        columns += [*_QUATERNION, *_RATES]
+        columns += [*_QUATERNION, *(_RATES if gyro else ())]
     else:
-        columns += ["wz", "yaw"]
-    columns += list(_SLIDERS if testbed.kind == "platform" else _GIMBALS)
+        columns += [*(("wz",) if gyro else ()), "yaw"]
+    if testbed.kind == "platform":
+        columns += list(_SLIDERS if testbed.masses is not None else ())
+    else:
+        columns += list(_GIMBALS)
     return columns
+
+
+def segments_of(t: np.ndarray, period: float) -> tuple[tuple[int, int], ...]:
+    """Split sample times into segments at gaps.
+
+    Parameters
+    ----------
+    t : numpy.ndarray
+        Sample times, s, strictly increasing, shape (n,).
+    period : float
+        Nominal sample interval, s (``1 / sensors.rate``; the import map uses the
+        file's median interval). An interval longer than ``1.5 * period`` is a gap.
+
+    Returns
+    -------
+    tuple of (int, int)
+        ``(start, stop)`` row ranges (0-based, stop exclusive) covering every
+        row in order; a gap lies between ``stop - 1`` of one and ``start`` of the
+        next. One-sample segments are kept (they are rows of the log).
+    """
+    t = np.asarray(t, dtype=float)
+    if t.size == 0:
+        return ()
+    breaks = np.flatnonzero(np.diff(t) > GAP_FACTORS[1] * period) + 1
+    edges = [0, *breaks.tolist(), int(t.size)]
+    return tuple((edges[i], edges[i + 1]) for i in range(len(edges) - 1))
 
 
 # ----------------------------------------------------------------------------
@@ -111,10 +173,10 @@ def REQUIRED_COLUMNS(testbed: Testbed | None = None) -> list[str]:  # noqa: N802
 
 
 def _at(row: int, lines: Sequence[int] | None) -> str:
-    """'row N' (1-based data row), with the file line for CSV."""
+    """'row N' (0-based data row, header not counted), with the file line for CSV."""
     if lines is None:
         return f"row {row}"
-    return f"row {row} (line {lines[row - 1]})"
+    return f"row {row} (line {lines[row]})"
 
 
 def _describe(value: object) -> str:
@@ -160,7 +222,7 @@ def _bad_cell(
     series: pd.Series, name: str, i: int, src: str, lines: Sequence[int] | None
 ) -> InputError:
     return InputError(
-        f"{src}: {_at(i + 1, lines)}, column '{name}': expected a finite number, "
+        f"{src}: {_at(i, lines)}, column '{name}': expected a finite number, "
         f"got {_describe(series.iloc[i])}"
     )
 
@@ -239,21 +301,19 @@ def _validate(
     if not_increasing.any():
         i = int(np.argmax(not_increasing)) + 1  # 0-based index of the offending row
         raise InputError(
-            f"{src}: {_at(i + 1, lines)}, column 't': time must be strictly increasing, "
-            f"but t = {float(t[i])!r} s follows t = {float(t[i - 1])!r} s of row {i}"
+            f"{src}: {_at(i, lines)}, column 't': time must be strictly increasing, "
+            f"but t = {float(t[i])!r} s follows t = {float(t[i - 1])!r} s of row {i - 1}"
         )
     if testbed is not None:
         period = testbed.sensors.dt
-        low, high = GAP_FACTORS[0] * period, GAP_FACTORS[1] * period
-        off = (dt < low) | (dt > high)
-        if off.any():
-            i = int(np.argmax(off)) + 1
+        segments = segments_of(t, period)
+        if max(stop - start for start, stop in segments) < MIN_SEGMENT_ROWS:
             raise InputError(
-                f"{src}: {_at(i + 1, lines)}, column 't': sample interval {dt[i - 1]:.6g} s "
-                f"(t = {float(t[i - 1])!r} -> {float(t[i])!r} s) "
-                f"is outside [{low:.6g}, {high:.6g}] s, "
-                f"expected 1 / sensors.rate = {period:.6g} s of testbed {testbed.name!r}; "
-                "gaps and jitter are not filled in"
+                f"{src}: the log is all gaps: every one of its {len(t)} rows is more than "
+                f"{GAP_FACTORS[1]:g} / sensors.rate = {GAP_FACTORS[1] * period:.6g} s from its "
+                f"neighbours (testbed {testbed.name!r}, sensors.rate = {testbed.sensors.rate:g} "
+                f"Hz), so no segment has {MIN_SEGMENT_ROWS} samples; expected samples every "
+                f"{period:.6g} s"
             )
     if all(q in out.columns for q in _QUATERNION):
         q = out[list(_QUATERNION)].to_numpy()
@@ -262,7 +322,7 @@ def _validate(
         if off.any():
             i = int(np.argmax(off))
             raise InputError(
-                f"{src}: {_at(i + 1, lines)}, columns qw, qx, qy, qz: expected a unit "
+                f"{src}: {_at(i, lines)}, columns qw, qx, qy, qz: expected a unit "
                 f"quaternion (norm within {QUATERNION_NORM_TOL:g} of 1), got norm {norm[i]:.9g}"
             )
     return out
@@ -282,9 +342,10 @@ def validate_log(
     source : str
         Name of the origin, used in error messages.
     testbed : Testbed or None
-        If given, the columns its kind and dof need are required and the
-        sample interval must lie within 0.5 to 1.5 periods of
-        ``sensors.rate``.
+        If given, the columns its kind, dof, ``[masses]`` and
+        ``sensors.gyro`` need are required (:func:`REQUIRED_COLUMNS`), and at
+        least one segment (intervals up to ``1.5 / sensors.rate``) must have
+        2 samples. Gaps and jitter are not errors (see the module notes).
 
     Returns
     -------
@@ -295,11 +356,11 @@ def validate_log(
     ------
     InputError
         On a missing column, fewer than 2 rows, an empty, non-numeric or
-        non-finite cell, time not strictly increasing, a sampling gap, an
-        incomplete column group (``mx, my, mz``; ``bx, by, bz``;
+        non-finite cell, time not strictly increasing, a log that is all gaps,
+        an incomplete column group (``mx, my, mz``; ``bx, by, bz``;
         ``dd1 .. dd4``; and likewise the quaternion, sliders and gimbals), or
         a quaternion whose norm is off 1 by more than 1e-3. The message names
-        ``source``, the row (1-based) and the column.
+        ``source``, the row (0-based data row) and the column.
     """
     return _validate(data, str(source), testbed)
 
@@ -345,6 +406,57 @@ class Log:
         log = cls.__new__(cls)
         log.source, log.testbed, log.data = source, testbed, data
         return log
+
+    # -- sampling and quality (FORMATS.md, "Real logs are not perfect")
+
+    @property
+    def period(self) -> float:
+        """Nominal sample interval, s: ``1 / sensors.rate`` (without a testbed: the median)."""
+        return self.testbed.sensors.dt if self.testbed is not None else self.dt
+
+    @property
+    def segments(self) -> tuple[tuple[int, int], ...]:
+        """``(start, stop)`` row ranges between gaps (0-based, stop exclusive).
+
+        A gap is an interval longer than 1.5 periods (:attr:`period`). Nothing
+        may be integrated, differentiated or fitted across a gap.
+        """
+        cached = self.__dict__.get("_segments")
+        if cached is None:
+            cached = segments_of(self.data["t"].to_numpy(dtype=float), self.period)
+            self.__dict__["_segments"] = cached
+        return cached
+
+    @property
+    def quality(self) -> LogQuality:
+        """Segments, jitter and outliers of this log (:func:`airbearing.io.quality.assess`).
+
+        Computed once and cached. Needs the testbed (its sample rate says what a gap
+        is, its sensors which columns are measurements).
+
+        Raises
+        ------
+        InputError
+            If the log has no testbed.
+        """
+        cached = self.__dict__.get("_quality")
+        if cached is None:
+            if self.testbed is None:
+                raise InputError(
+                    f"{self.source}: the quality of a log (segments, outliers) needs its "
+                    "testbed; read it with read_log(path, testbed)"
+                )
+            from airbearing.io.quality import assess
+
+            cached = assess(self, self.testbed)
+            self.__dict__["_quality"] = cached
+        return cached
+
+    def usable_mask(self) -> np.ndarray:
+        """Rows every fit may use: False at :attr:`quality` outlier rows, shape (n,), bool."""
+        mask = np.ones(self.n, dtype=bool)
+        mask[list(self.quality.outlier_rows)] = False
+        return mask
 
     def __repr__(self) -> str:
         tb = "None" if self.testbed is None else repr(self.testbed.name)
@@ -405,8 +517,12 @@ class Log:
         numpy.ndarray or None
             Shape (n, 3) ``wx, wy, wz`` for a dof-3 testbed (or, without a
             testbed, when all three are present); shape (n, 1) ``wz`` for a
-            dof-1 testbed (or when only ``wz`` is present); None if absent.
+            dof-1 testbed (or when only ``wz`` is present); None if absent,
+            and None when the testbed has no rate sensor (``sensors.gyro =
+            false``: rate columns, if any, are not measurements and are ignored).
         """
+        if self.testbed is not None and not self.testbed.sensors.gyro:
+            return None
         dof = None if self.testbed is None else self.testbed.body.dof
         if dof != 1 and self.has(*_RATES):
             return self.columns(_RATES)
@@ -499,6 +615,28 @@ def _read_csv(path: Path, src: str) -> tuple[pd.DataFrame, list[int] | None]:
     return df, lines
 
 
+def _read_csv_fast(path: Path) -> pd.DataFrame:
+    """pyarrow's CSV reader: known columns as float64, others inferred (raises on any doubt)."""
+    import pyarrow as pa
+    import pyarrow.csv as pacsv
+
+    with path.open("rb") as fh:
+        header = next(csv.reader([fh.readline().decode("utf-8")]))
+    names = [h.strip() for h in header]
+    if len(set(names)) != len(names) or any(h != n for h, n in zip(header, names, strict=True)):
+        raise ValueError("header needs the careful reader")
+    types = {name: pa.float64() for name in names if name in LOG_COLUMNS}
+    table = pacsv.read_csv(
+        path,
+        convert_options=pacsv.ConvertOptions(
+            column_types=types, strings_can_be_null=False, quoted_strings_can_be_null=False
+        ),
+    )
+    if table.num_rows == 0 or any(table.column(n).null_count for n in types):
+        raise ValueError("empty or missing cells need the careful reader")
+    return table.to_pandas()
+
+
 def read_log(path: str | os.PathLike[str], testbed: Testbed | None = None) -> Log:
     """Read and validate a log file.
 
@@ -518,24 +656,60 @@ def read_log(path: str | os.PathLike[str], testbed: Testbed | None = None) -> Lo
     ------
     InputError
         If the suffix is not known, the file cannot be read, or the content
-        fails :func:`validate_log`; CSV messages give the row and the line.
+        fails :func:`validate_log`; CSV messages give the row (0-based data
+        row) and the line of the file.
+
+    Notes
+    -----
+    CSV is read by ``pyarrow.csv``; a file it refuses (or whose content is not
+    valid) is read again cell by cell as text, so that the message names the
+    row, the line and the column of the first bad cell.
     """
     p = Path(path)
     src = str(path)
     kind = _format(p)
     if not p.is_file():
         raise InputError(f"{src}: no such log file")
+    if kind == "csv":
+        try:
+            fast = _read_csv_fast(p)
+        except Exception:  # noqa: BLE001 (any doubt: the careful reader decides and explains)
+            fast = None
+        if fast is not None:
+            try:
+                return Log._from_validated(_validate(fast, src, testbed), src, testbed)
+            except InputError:
+                pass  # read again below, to name the line too
     try:
         if kind == "csv":
             df, lines = _read_csv(p, src)
         else:
-            df, lines = pd.read_parquet(p), None
+            import pyarrow.parquet as pq
+
+            df, lines = pq.read_table(p).to_pandas(), None
     except InputError:
         raise
-    except (OSError, ValueError) as e:
+    except Exception as e:  # pyarrow's errors (ArrowInvalid, OSError) on a bad file
         raise InputError(f"{src}: cannot read the {kind} log: {e}") from e
     data = _validate(df, src, testbed, lines)
     return Log._from_validated(data, src, testbed)
+
+
+def _csv_bytes(data: pd.DataFrame) -> bytes:
+    """CSV text by pyarrow (shortest round-trip floats); pandas for what arrow cannot type."""
+    import pyarrow as pa
+    import pyarrow.csv as pacsv
+
+    try:
+        table = pa.Table.from_pandas(data, preserve_index=False)
+    except (pa.ArrowInvalid, pa.ArrowTypeError, TypeError, ValueError):
+        return data.to_csv(index=False, lineterminator="\n").encode("utf-8")
+    header = io.StringIO()
+    csv.writer(header, lineterminator="\n").writerow([str(c) for c in data.columns])
+    sink = io.BytesIO()
+    sink.write(header.getvalue().encode("utf-8"))  # arrow would quote every name
+    pacsv.write_csv(table, sink, pacsv.WriteOptions(include_header=False, quoting_style="needed"))
+    return sink.getvalue()
 
 
 def write_log(log: Log | pd.DataFrame, path: str | os.PathLike[str]) -> Path:
@@ -547,8 +721,8 @@ def write_log(log: Log | pd.DataFrame, path: str | os.PathLike[str]) -> Path:
         A DataFrame is validated first (without a testbed).
     path : str or path-like
         Destination, ``.csv`` or ``.parquet``; an existing file is replaced.
-        CSV floats are written with the shortest text that reads back to the
-        same float (exact round trip).
+        Written by pyarrow; CSV floats are written with the shortest text that
+        reads back to the same float (exact round trip).
 
     Returns
     -------
@@ -570,9 +744,12 @@ def write_log(log: Log | pd.DataFrame, path: str | os.PathLike[str]) -> Path:
     else:
         raise InputError(f"{path}: expected a Log or a pandas DataFrame, got {type(log).__name__}")
     if kind == "csv":
-        content = data.to_csv(index=False, lineterminator="\n").encode("utf-8")
+        content = _csv_bytes(data)
     else:
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+
         buffer = io.BytesIO()
-        data.to_parquet(buffer, index=False)
+        pq.write_table(pa.Table.from_pandas(data, preserve_index=False), buffer)
         content = buffer.getvalue()
     return _atomic_write_bytes(p, content)
