@@ -1,0 +1,392 @@
+"""One run of each command, as the campaign calls it: the only module that knows the APIs.
+
+Each adapter takes the nominal testbed, the run's dispersed testbed, the campaign's
+``[args]`` and the run's seed, and returns the command's JSON summary, the same
+document the CLI writes with ``--json`` (simulate: ``{"testbed", "scenario", "seed",
+**slew_summary}``, built inline in ``cli/simulate.py``, rebuilt here the same way).
+
+Efficiency: a slew reuses, per worker process, the Model, the controller and the
+compiled closed loop of its *structure* (everything but the values that enter the
+loop as parameters ``p``, the initial state or the noise). A dispersed inertia, CM
+offset, mass, flywheel momentum, effect value, gyro or torque noise or initial gimbal
+angle is a new ``p`` vector (or new noise), never a new model.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import json
+from collections.abc import Callable
+
+import numpy as np
+
+from airbearing.errors import InputError
+from airbearing.io.testbed import Testbed, testbed_to_dict
+
+__all__ = ["ARGS", "check_args", "run_command", "params_of", "structure_stats"]
+
+
+def _floats(n: int) -> Callable:
+    def conv(v):
+        if not isinstance(v, list) or len(v) != n:
+            raise ValueError(f"expected a list of {n} numbers")
+        return tuple(float(x) for x in v)
+
+    conv.__doc__ = f"a list of {n} numbers"
+    return conv
+
+
+def _float(v):
+    if isinstance(v, bool) or not isinstance(v, int | float):
+        raise ValueError("expected a number")
+    return float(v)
+
+
+def _int(v):
+    if isinstance(v, bool) or not isinstance(v, int):
+        raise ValueError("expected an integer")
+    return v
+
+
+def _str(v):
+    if not isinstance(v, str):
+        raise ValueError("expected a string")
+    return v
+
+
+def _bool(v):
+    if not isinstance(v, bool):
+        raise ValueError("expected true or false")
+    return v
+
+
+def _strs(v):
+    if isinstance(v, str):
+        v = [v]
+    if not isinstance(v, list) or not all(isinstance(x, str) for x in v):
+        raise ValueError("expected a string or a list of strings")
+    return list(v)
+
+
+#: The options a campaign passes to each command, by CLI name: (python name, converter).
+ARGS: dict[str, dict[str, tuple[str, Callable]]] = {
+    "simulate": {
+        "scenario": ("scenario", _str),
+        "yaw-deg": ("yaw_deg", _float),
+        "axis": ("axis", _floats(3)),
+        "duration": ("duration", _float),
+        "steering": ("steering", _str),
+        "rate-limit": ("rate_limit", _str),
+        "ideal": ("ideal", _bool),
+        "initial-rate": ("initial_rate", _floats(3)),
+        "initial-quaternion": ("initial_quaternion", _floats(4)),
+        "sliders": ("sliders", _floats(3)),
+        "effect": ("effect", _strs),
+        "attitude-noise": ("attitude_noise", _float),
+    },
+    "balance": {
+        "method": ("method", _str),
+        "duration": ("duration", _float),
+        "initial-offset-mm": ("initial_offset_mm", _float),
+        "vertical-offset": ("vertical_offset", _float),
+        "start": ("start", _str),
+        "initial-rate": ("initial_rate", _floats(3)),
+        "offset-stays": ("offset_stays", _bool),
+    },
+    "identify": {
+        "known-offset-xy": ("known_offset_xy", _floats(2)),
+        "known-mass": ("known_mass", _float),
+        "method": ("method", _str),
+        "form": ("form", _str),
+        "friction": ("friction", _str),
+    },
+    "discrepancy": {
+        "max-effects": ("max_effects", _int),
+        "only": ("only", _strs),
+        "window": ("window", _float),
+    },
+}
+
+
+def _convert(src: str, command: str, args: dict, prefix: str = "") -> dict:
+    table = ARGS[command]
+    out = {}
+    for k, v in args.items():
+        if k == "seed":
+            raise InputError(
+                f"{src}: [args] '{prefix}seed': each run takes its own seed from the "
+                "campaign seed (SeedSequence(seed).spawn(runs)[i])"
+            )
+        if k not in table:
+            raise InputError(
+                f"{src}: [args] '{prefix}{k}': not an option of '{command}' in a campaign; "
+                f"expected one of {', '.join(prefix + n for n in table)}"
+            )
+        name, conv = table[k]
+        try:
+            out[name] = conv(v)
+        except ValueError as e:
+            raise InputError(f"{src}: [args] '{prefix}{k}': {e}, got {v!r}") from None
+    return out
+
+
+def _effects(src: str, items: list[str]) -> dict:
+    from airbearing.io.vocabulary import EFFECTS, validate_effect_value
+
+    out = {}
+    for item in items:
+        name, sep, value = item.partition("=")
+        name = name.strip()
+        where = f"{src}: [args] effect '{item}'"
+        if not sep or name not in EFFECTS:
+            raise InputError(f"{where}: expected NAME=VALUE with NAME one of {', '.join(EFFECTS)}")
+        try:
+            nums = [float(x) for x in value.split(",")]
+        except ValueError:
+            raise InputError(f"{where}: '{value}' is not a number or 3 numbers") from None
+        out[name] = validate_effect_value(name, nums[0] if len(nums) == 1 else nums, where)
+    return out
+
+
+def check_args(src: str, command: str, args: dict, truth: dict) -> None:
+    """Refuse an option the command does not take, or a value of the wrong type."""
+    from airbearing.design.steering import STEERING_LAWS
+
+    conv = _convert(src, command, args)
+    sim = _convert(src, "simulate", truth if command in ("identify", "discrepancy") else args,
+                   "simulate." if command != "simulate" else "")  # fmt: skip
+    if command in ("simulate", "identify", "discrepancy"):
+        if sim.get("scenario", "slew") not in ("slew", "free"):
+            raise InputError(f"{src}: [args] scenario {sim['scenario']!r}: expected slew or free")
+        if sim.get("steering", "mp") not in STEERING_LAWS:
+            raise InputError(
+                f"{src}: [args] steering {sim['steering']!r}: expected one of "
+                f"{', '.join(STEERING_LAWS)}"
+            )
+        if sim.get("rate_limit", "scale") not in ("scale", "clip"):
+            raise InputError(f"{src}: [args] rate-limit: expected scale or clip")
+        _effects(src, sim.get("effect", []))
+    if command == "identify":
+        if conv.get("method", "output-error") not in ("output-error", "equation-error"):
+            raise InputError(f"{src}: [args] method: expected output-error or equation-error")
+        if conv.get("form", "integrated") not in ("integrated", "acceleration"):
+            raise InputError(f"{src}: [args] form: expected integrated or acceleration")
+    if command == "balance":
+        from airbearing.design.balancing import METHODS
+
+        if conv.get("method", "mixed") not in METHODS:
+            raise InputError(f"{src}: [args] method: expected one of {'|'.join(METHODS)}")
+
+
+# ---------------------------------------------------------------- slew: structure reuse
+
+# parameters and per-run values: everything else in the testbed decides the structure
+_RUN_VALUES = {
+    "": ("gravity", "name"),
+    "body": ("mass", "inertia", "cm_offset", "torque_noise"),
+    "cmg": ("flywheel_inertia", "flywheel_speed", "gimbal_angles"),
+    "sensors": ("gyro_noise", "accel_noise", "attitude_noise"),
+}
+_STRUCTURES: dict = {}
+_STATS = {"built": 0, "reused": 0}
+
+
+def structure_stats() -> dict:
+    """How many slew structures this process built and how many runs reused one."""
+    return dict(_STATS)
+
+
+def _structure_key(tb: Testbed, extra) -> str:
+    doc = testbed_to_dict(tb)
+    for table, keys in _RUN_VALUES.items():
+        holder = doc if not table else doc.get(table, {})
+        for k in keys:
+            holder.pop(k, None)
+    doc["effects"] = {k: np.shape(v) for k, v in tb.effects.items()}  # names and shapes only
+    return json.dumps([doc, extra], sort_keys=True, default=str)
+
+
+def params_of(model, tb: Testbed) -> np.ndarray:
+    """The parameter vector ``p`` of ``tb`` for a Model of the same structure.
+
+    The same values :func:`airbearing.models.model.build_model` puts in ``p0``
+    (tests check they are identical), without building a model.
+    """
+    from airbearing.models.effects import effect_param_names
+    from airbearing.models.model import INERTIA_NAMES
+
+    dof = tb.body.dof
+    vals: dict[str, float] = {"mass": tb.body.mass, "gravity": tb.gravity}
+    if dof == 3:
+        J = tb.body.inertia_matrix
+        j6 = [J[0, 0], J[1, 1], J[2, 2], J[0, 1], J[0, 2], J[1, 2]]
+        vals.update(zip(INERTIA_NAMES, j6, strict=True))
+        vals.update(zip(("r_x", "r_y", "r_z"), tb.body.cm_offset_vec, strict=True))
+    else:
+        vals["J_zz"] = tb.body.yaw_inertia
+    if tb.kind == "platform":
+        m = tb.masses.mass_vec if tb.masses else np.zeros(3)
+        vals.update(zip(("m_1", "m_2", "m_3"), m, strict=True))
+    else:
+        vals.update(h0=tb.cmg.h0, beta=tb.cmg.skew)
+    for name, value in tb.effects.items():
+        per_axis = np.ndim(value) == 1 and len(value) == 3
+        per_axis = per_axis and name not in ("cm_offset_error", "residual_dipole")
+        names = effect_param_names(name, dof, per_axis)
+        v = np.atleast_1d(np.asarray(value, dtype=float))
+        if len(names) == 1 and v.size == 3:
+            v = v[2:]
+        vals.update(zip(names, v, strict=True))
+    missing = [n for n in model.p_names if n not in vals]
+    if missing:
+        raise RuntimeError(f"params_of: no value for model parameters {missing}")
+    return np.array([float(vals[n]) for n in model.p_names])
+
+
+@functools.cache
+def _run_model_class():
+    from airbearing.models.model import Model
+
+    class _RunModel(Model):
+        # the compiled loop (closed_loop_rollout, lru-cached by model) depends on the
+        # structure only: a run's model compares and hashes as its structure
+        def __eq__(self, other):
+            return getattr(other, "_structure", other) is self._structure
+
+        def __hash__(self):
+            return id(self._structure)
+
+    return _RunModel
+
+
+def _run_model(structure, tb: Testbed, p: np.ndarray):
+    """``structure`` with the run's testbed and ``p0``, equal to it as a cache key."""
+    fields = {f.name: getattr(structure, f.name) for f in dataclasses.fields(structure)}
+    m = _run_model_class()(**{**fields, "testbed": tb, "p0": p})
+    object.__setattr__(m, "_structure", structure)
+    return m
+
+
+def _slew(tb: Testbed, *, yaw_deg, axis, duration, seed, ideal, steering, rate_limit, gains):
+    """``scenarios.slew`` with the structure reused (tests check the runs are identical)."""
+    from airbearing.analysis.simulation.scenarios import slew
+    from airbearing.analysis.simulation.simulate import simulate
+    from airbearing.models import quaternion as quat
+
+    kw = dict(steering=steering, rate_limit_mode=rate_limit, ideal=ideal, gains=gains)
+    if (
+        tb.kind != "cmg"
+        or duration <= 0
+        or (tb.body.dof == 1 and tuple(np.round(axis, 12)) != (0.0, 0.0, 1.0))
+    ):
+        # let the scenario raise its own error for inputs it refuses
+        return slew(tb, angle_deg=yaw_deg, axis=axis, duration=duration, seed=seed, **kw)
+    key = _structure_key(tb, sorted(kw.items()))
+    if key not in _STRUCTURES:
+        from airbearing.design.attitude import cmg_attitude_controller
+        from airbearing.models.model import build_model
+
+        model = build_model(tb)
+        ctl_kw = {} if gains is None else {"gains": gains}
+        ctl = cmg_attitude_controller(
+            model, steering=steering, lowpass=1.0 if ideal else None,
+            rate_limit_mode=rate_limit, **ctl_kw,
+        )  # fmt: skip
+        _STRUCTURES[key] = (model, ctl)
+        _STATS["built"] += 1
+    else:
+        _STATS["reused"] += 1
+    structure, ctl = _STRUCTURES[key]
+    m = _run_model(structure, tb, params_of(structure, tb))
+    q_c = quat.from_axis_angle(axis, np.deg2rad(yaw_deg))
+    return simulate(m, ctl, duration=duration, x0=m.x0(), p=m.p0, reference=q_c, seed=seed,
+                    noise=not ideal)  # fmt: skip
+
+
+def _simulate(tb: Testbed, a: dict, seed: int, gains=None, src: str = ""):
+    """The run and summary of ``airbearing simulate`` (scenario slew or free)."""
+    from airbearing.analysis.simulation.scenarios import (
+        free_oscillation,
+        free_summary,
+        slew_summary,
+    )
+
+    scenario = a.get("scenario", "slew")
+    effects = _effects(src, a.get("effect", []))
+    if effects:
+        tb = tb.with_effects({**effects})
+    if scenario == "slew":
+        result = _slew(
+            tb, yaw_deg=a.get("yaw_deg", 180.0), axis=a.get("axis", (0.0, 0.0, 1.0)),
+            duration=a.get("duration", 40.0), seed=seed, ideal=a.get("ideal", False),
+            steering=a.get("steering", "mp"), rate_limit=a.get("rate_limit", "scale"),
+            gains=gains,
+        )  # fmt: skip
+        summary = slew_summary(result)
+    else:
+        result = free_oscillation(
+            tb, initial_rate=a.get("initial_rate", (0.0, 0.0, 0.0)),
+            q0=a.get("initial_quaternion", (1.0, 0.0, 0.0, 0.0)),
+            sliders=a.get("sliders", (0.0, 0.0, 0.0)), duration=a.get("duration", 60.0),
+            seed=seed, noise=not a.get("ideal", False),
+            attitude_noise=a.get("attitude_noise", 0.0),
+        )  # fmt: skip
+        summary = free_summary(result)
+    return result, {"testbed": tb.name, "scenario": scenario, "seed": seed, **summary}
+
+
+def _truth_log(campaign, tb: Testbed, seed: int):
+    """The run's log, simulated with the dispersed testbed, as the nominal testbed's log."""
+    from airbearing.io.log import Log
+
+    a = _convert(campaign.source, "simulate", campaign.truth_args, "simulate.")
+    result, _ = _simulate(tb, a, seed, src=campaign.source)
+    data = result.log.data
+    return Log(data, source=f"<campaign run, seed {seed}>", testbed=campaign.testbed)
+
+
+def run_command(campaign, testbed: Testbed, seed: int) -> dict:
+    """One run of ``campaign.command`` on ``testbed`` (the run's draw): its JSON summary."""
+    from airbearing.io.output import to_jsonable
+
+    cmd = campaign.command
+    a = _convert(campaign.source, cmd, campaign.args)
+    if cmd == "simulate":
+        _, summary = _simulate(testbed, a, seed, campaign.gains, campaign.source)
+        return to_jsonable(summary)
+    if cmd == "balance":
+        from airbearing.analysis.balancing.runs import run_balancing
+
+        run = run_balancing(
+            testbed, a.get("method", "mixed"), duration=a.get("duration", 300.0),
+            initial_offset=a.get("initial_offset_mm", -0.5) * 1e-3,
+            vertical_offset=a.get("vertical_offset"), start=a.get("start", "auto"),
+            initial_rate=a.get("initial_rate", (0.0, 0.0, 0.0)), seed=seed,
+            offset_stays=a.get("offset_stays", False),
+        )  # fmt: skip
+        return to_jsonable({"testbed": testbed.name, **run.metrics})
+    log = _truth_log(campaign, testbed, seed)
+    nominal = campaign.testbed
+    if cmd == "identify":
+        if nominal.kind == "cmg" and nominal.body.dof == 1:
+            from airbearing.analysis.identification.cmg_inertia import identify_cmg_inertia
+
+            fr = a.get("friction")
+            res = identify_cmg_inertia(nominal, [log], friction=None if fr == "none" else fr)
+        else:
+            from airbearing.analysis.identification.platform import identify_platform
+
+            res = identify_platform(
+                nominal, [log], known_offset_xy=a.get("known_offset_xy"),
+                known_mass=a.get("known_mass"), method=a.get("method", "output-error"),
+                form=a.get("form", "integrated"),
+            )  # fmt: skip
+        return to_jsonable(res.to_json())
+    from airbearing.analysis.discrepancy.search import discrepancy
+
+    res = discrepancy(
+        nominal, log, max_effects=a.get("max_effects", 2), only=a.get("only"), seed=seed,
+        window_s=a.get("window"),
+    )  # fmt: skip
+    return to_jsonable(res.to_json())

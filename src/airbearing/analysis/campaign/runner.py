@@ -1,0 +1,197 @@
+"""Running a campaign: chunks of runs as Dask tasks, rows saved as they finish.
+
+The client (this process) decides which runs are missing, sends them to the
+workers in chunks, and writes each finished chunk as a Parquet part at once, so an
+interrupted campaign keeps every finished run and ``resume`` runs only the others.
+Chunks start at one run per task; once runs have been timed, a chunk holds about
+:data:`TARGET_TASK_S` seconds of work (never more than a fair share of what is left),
+so scheduling costs little against a 0.1 s run and a kill loses little of a 10 s one.
+A run that raises is a row with its error; the campaign goes on.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+import os
+import time
+import traceback
+from collections.abc import Iterator
+
+from airbearing.analysis.campaign.adapters import run_command
+from airbearing.analysis.campaign.dispersions import dispersed_columns, draw_run
+from airbearing.analysis.campaign.results import flatten, merge_parts, open_parts, write_part
+from airbearing.errors import InputError
+from airbearing.progress import call
+
+__all__ = ["TARGET_TASK_S", "run_one", "run_chunk", "open_client", "run_campaign"]
+
+#: s, wanted work per task once the runs have been timed.
+TARGET_TASK_S = 2.0
+_MAX_CHUNK = 256
+_CONNECT_TIMEOUT_S = 5
+
+
+def run_one(campaign, run: int) -> dict:
+    """The results row of run ``run``: never raises for a failing run (``error`` says why)."""
+    draw = draw_run(campaign, run)
+    row = {"run": run, "seed": draw.seed, **draw.values}
+    error = draw.error
+    if draw.testbed is not None:
+        try:
+            summary = run_command(campaign, draw.testbed, draw.seed)
+        except Exception as e:  # noqa: BLE001 - a failed run is a row, not a dead campaign
+            msg = str(e).strip().splitlines()[0] if str(e).strip() else ""
+            error = f"{type(e).__name__}: {msg}"
+            if not isinstance(e, InputError | ArithmeticError):
+                tb = traceback.extract_tb(e.__traceback__)[-1]
+                error += f" ({os.path.basename(tb.filename)}:{tb.lineno})"
+        else:
+            for k, v in flatten(summary).items():
+                if k in row:
+                    if row[k] == v:
+                        continue
+                    k = f"summary.{k}"
+                row[k] = v
+    row["error"] = error
+    return row
+
+
+def run_chunk(campaign, runs: list[int]) -> tuple[list[dict], float]:
+    """Rows of ``runs`` and the wall time they took (s): one Dask task."""
+    t0 = time.perf_counter()
+    rows = [run_one(campaign, i) for i in runs]
+    return rows, time.perf_counter() - t0
+
+
+@contextlib.contextmanager
+def open_client(workers: int | None = None, scheduler: str | None = None) -> Iterator:
+    """A ``dask.distributed.Client``: a local cluster of ``workers`` processes, or ``scheduler``.
+
+    Raises
+    ------
+    InputError
+        ``workers`` < 1, or no scheduler answers at ``scheduler`` within a few seconds.
+    """
+    import logging
+
+    from dask.distributed import Client, LocalCluster
+
+    if scheduler is not None:
+        if workers is not None:
+            raise InputError("--workers and --scheduler: the cluster has its own workers")
+        try:
+            client = Client(scheduler, timeout=_CONNECT_TIMEOUT_S)
+        except (OSError, TimeoutError, ValueError) as e:
+            reason = str(e).splitlines()[0] if str(e) else type(e).__name__
+            raise InputError(
+                f"--scheduler {scheduler}: no Dask scheduler answers there "
+                f"(tried {_CONNECT_TIMEOUT_S} s: {reason})"
+            ) from None
+        with client:
+            yield client
+        return
+    n = (os.cpu_count() or 1) if workers is None else workers
+    if n < 1:
+        raise InputError(f"--workers {workers}: expected at least 1")
+    cluster = LocalCluster(
+        n_workers=n,
+        threads_per_worker=1,
+        processes=True,
+        dashboard_address=None,
+        silence_logs=logging.ERROR,
+    )
+    with cluster, Client(cluster) as client:
+        yield client
+
+
+def _chunk_size(remaining: int, n_workers: int, per_run_s: float | None) -> int:
+    if per_run_s is None:
+        return 1
+    fair = max(1, math.ceil(remaining / (2 * n_workers)))
+    want = max(1, int(TARGET_TASK_S / max(per_run_s, 1e-6)))
+    return max(1, min(want, fair, _MAX_CHUNK))
+
+
+def run_campaign(campaign, output, *, client=None, resume: bool = False, progress=None, runs=None):
+    """Run every missing run of ``campaign``; the merged results table (pandas).
+
+    Parameters
+    ----------
+    campaign : Campaign
+    output : path
+        The results file; parts go to ``<output>.parts/`` (the caller writes the
+        merged table and then removes the parts, see :mod:`.results`).
+    client : dask.distributed.Client, optional
+        Where to run; ``None`` runs in this process (tests, the demo).
+    resume : bool
+        Continue the parts of an interrupted campaign.
+    progress : callable, optional
+        ``progress(what, done, total)`` (:mod:`airbearing.progress`).
+    runs : iterable of int, optional
+        Only these runs (default ``range(campaign.runs)``).
+    """
+    say = call(progress)
+    folder = open_parts(output, campaign, resume=resume)
+    wanted = list(range(campaign.runs)) if runs is None else sorted(set(runs))
+    done_runs = set()
+    failed = 0
+    if resume:
+        from airbearing.analysis.campaign.results import read_parts
+
+        old = read_parts(folder)
+        done_runs = set(int(r) for r in old["run"])
+        if "error" in old.columns:
+            failed = int((old["error"].fillna("") != "").sum())
+    todo = [i for i in wanted if i not in done_runs]
+    total = len(wanted)
+    done = total - len(todo)
+    t_run, n_timed = 0.0, 0
+
+    def report():
+        say(f"runs done, {failed} failed", done, total)
+
+    def finished(rows, elapsed):
+        nonlocal done, failed, t_run, n_timed
+        write_part(folder, rows)
+        done += len(rows)
+        failed += sum(1 for r in rows if r["error"])
+        t_run += elapsed
+        n_timed += len(rows)
+        report()
+
+    report()
+    if client is None:
+        while todo:
+            k = _chunk_size(len(todo), 1, t_run / n_timed if n_timed else None)
+            chunk, todo = todo[:k], todo[k:]
+            finished(*run_chunk(campaign, chunk))
+    elif todo:
+        from dask.distributed import as_completed
+
+        n_workers = max(1, len(client.scheduler_info().get("workers", {})))
+        spec = client.scatter(campaign, broadcast=True)
+        queue = list(todo)
+
+        def submit(ac=None):
+            nonlocal queue
+            k = _chunk_size(len(queue), n_workers, t_run / n_timed if n_timed else None)
+            chunk, queue = queue[:k], queue[k:]
+            fut = client.submit(run_chunk, spec, chunk, pure=False)
+            if ac is not None:
+                ac.add(fut)
+            return fut
+
+        first = [submit() for _ in range(min(2 * n_workers, len(queue)))]
+        ac = as_completed(first)
+        try:
+            for fut in ac:
+                finished(*fut.result())
+                fut.release()
+                while queue and ac.count() < 2 * n_workers:
+                    submit(ac)
+        except BaseException:
+            for f in list(ac.futures) if hasattr(ac, "futures") else []:
+                f.cancel()
+            raise
+    return merge_parts(folder, dispersed_columns(campaign.testbed, campaign.dispersions))

@@ -1,0 +1,82 @@
+"""``airbearing campaign``: run one command many times on dispersed testbeds, on Dask."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from airbearing.cli import app
+
+
+@app.command()
+def campaign(
+    campaign_file: Annotated[Path, typer.Argument(help="Campaign file (TOML, FORMATS.md).")],
+    output: Annotated[
+        Path | None, typer.Option("-o", "--output", help="Results, .parquet (one row per run).")
+    ] = None,
+    workers: Annotated[
+        int | None, typer.Option(help="Local worker processes (default: the machine's cores).")
+    ] = None,
+    scheduler: Annotated[
+        str | None, typer.Option(help="Run on an existing Dask cluster, e.g. tcp://host:8786.")
+    ] = None,
+    report: Annotated[Path | None, typer.Option("--report", help="HTML report.")] = None,
+    resume: Annotated[
+        bool, typer.Option("--resume", help="Finish an interrupted campaign (its parts).")
+    ] = False,
+) -> None:
+    """Run CAMPAIGN_FILE's runs (local cluster or --scheduler), write the results table."""
+    from airbearing.analysis.campaign import open_client, read_campaign, run_campaign
+    from airbearing.analysis.campaign.results import parts_dir, remove_parts, write_results
+    from airbearing.cli.outputs import Outputs
+    from airbearing.cli.show_progress import progress_display
+    from airbearing.errors import InputError
+
+    out = Outputs()
+    if output is None:
+        raise InputError("-o/--output: the campaign needs a results file ending in .parquet")
+    res_path = out.plan(output, "-o", (".parquet",))
+    rep_path = out.plan(report, "--report", (".html",))
+    if workers is not None and workers < 1:
+        raise InputError(f"--workers {workers}: expected at least 1")
+    spec = read_campaign(campaign_file)
+    parts = parts_dir(res_path)
+    if parts.exists() and not resume:
+        raise InputError(
+            f"-o {output}: {parts} holds the runs of an interrupted campaign: pass --resume "
+            "to finish it, or delete the folder to start again"
+        )
+    with open_client(workers, scheduler) as client:
+        try:
+            with progress_display("campaign") as progress:
+                df = run_campaign(spec, res_path, client=client, resume=resume, progress=progress)
+        except KeyboardInterrupt:
+            typer.echo(
+                f"campaign: interrupted; finished runs are kept in {parts}: run again with "
+                "--resume to do the rest",
+                err=True,
+            )
+            raise typer.Exit(130) from None
+    html = None
+    if rep_path is not None:
+        from airbearing.reporting.campaign import campaign_report
+
+        html = campaign_report(spec, df).html()
+    out.file(res_path, lambda tmp: write_results(df, tmp))
+    if html is not None:
+        out.text(rep_path, html)
+    out.commit()
+    remove_parts(parts)
+    n_failed = int((df["error"] != "").sum()) if "error" in df.columns else 0
+    typer.echo(f"runs: {len(df)} ({n_failed} failed)")
+    typer.echo(f"results: {output}")
+    for entry in spec.spec:
+        if entry.metric in df.columns:
+            met = sum(entry.met(v) for v in df[entry.metric])
+            typer.echo(f"spec {entry.describe()}: {met}/{len(df)} runs")
+        else:
+            typer.echo(f"spec {entry.describe()}: not a result column, not checked")
+    if rep_path is not None:
+        typer.echo(f"report: {report}")
