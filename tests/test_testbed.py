@@ -64,7 +64,9 @@ def mutated(kind: str, key: str, value: object) -> dict:
 
 
 def test_builtin_names():
-    assert BUILTIN_TESTBEDS == ("platform-3dof", "cmg-yaw", "cmg-3dof")
+    assert BUILTIN_TESTBEDS == (
+        "seed000-tabletop", "seed004-platform", "cmg-yaw", "cmg-3dof", "platform-3dof"
+    )  # fmt: skip
 
 
 def test_cmg_3dof_values():
@@ -143,7 +145,7 @@ def test_builtin_round_trip_writes_degrees(name, tmp_path):
 
 
 def test_load_testbed_unknown_name_lists_builtins():
-    with pytest.raises(InputError, match="platform-3dof, cmg-yaw") as e:
+    with pytest.raises(InputError, match="seed000-tabletop, seed004-platform, cmg-yaw") as e:
         load_testbed("no-such-bench")
     assert "no-such-bench" in str(e.value)
 

@@ -2,29 +2,38 @@
 
 from __future__ import annotations
 
-import io
 import math
 from pathlib import Path
 from typing import Annotated
 
-import matplotlib.pyplot as plt
 import typer
 
-from airbearing.analysis.cmg.singularity import envelope_figure, surfaces_table
 from airbearing.cli import app
-from airbearing.cli.common import check_output_path, testbed_arg
-from airbearing.design.sizing import TABLE5_DEFAULTS, size_cluster
-from airbearing.design.steering import check_skew
+from airbearing.cli.common import number, testbed_arg
+from airbearing.cli.outputs import Outputs
+from airbearing.cli.tables import echo_table
 from airbearing.errors import InputError
-from airbearing.io.output import write_atomic, write_json
 
-__all__ = ["cmg_app"]
+__all__ = ["cmg_app", "TABLE5"]
 
 cmg_app = typer.Typer(
     help="CMG cluster design: flywheel sizing and the momentum envelope.",
     no_args_is_help=True,
+    rich_markup_mode=None,
 )
 app.add_typer(cmg_app, name="cmg")
+
+#: Seed 001 Table 5 (and Table 6 for skew and flywheel speed) in the CLI's units; the
+#: same values as airbearing.design.sizing.TABLE5_DEFAULTS (a test checks), kept here so
+#: that ``cmg size --help`` does not import numpy.
+TABLE5 = {
+    "gimbal_rate_deg": 35.0,  # deg/s
+    "skew_deg": 54.73,  # deg
+    "flywheel_rpm": 4000.0,  # rpm
+    "inner_radius": 0.002,  # m
+    "outer_radius": 0.017,  # m
+    "density": 2710.0,  # kg/m^3
+}
 
 
 @cmg_app.command("size")
@@ -32,58 +41,67 @@ def size(
     angle_deg: Annotated[float, typer.Option(help="Manoeuvre angle, deg (Table 5: 30).")],
     time: Annotated[float, typer.Option(help="Manoeuvre time, s (Table 5: 2).")],
     inertia: Annotated[float, typer.Option(help="Platform inertia, kg m^2 (Table 5: 0.0033).")],
-    gimbal_rate_deg: Annotated[
-        float, typer.Option(help="Largest gimbal rate, deg/s.")
-    ] = math.degrees(TABLE5_DEFAULTS["gimbal_rate"]),
-    skew_deg: Annotated[float, typer.Option(help="Pyramid skew, deg.")] = math.degrees(
-        TABLE5_DEFAULTS["skew"]
-    ),
-    flywheel_rpm: Annotated[float, typer.Option(help="Flywheel speed, rpm.")] = round(
-        TABLE5_DEFAULTS["flywheel_speed"] * 60 / (2 * math.pi), 9
-    ),
-    inner_radius: Annotated[float, typer.Option(help="Flywheel inner radius z1, m.")] = (
-        TABLE5_DEFAULTS["inner_radius"]
-    ),
-    outer_radius: Annotated[float, typer.Option(help="Flywheel outer radius z2, m.")] = (
-        TABLE5_DEFAULTS["outer_radius"]
-    ),
-    density: Annotated[float, typer.Option(help="Flywheel density, kg/m^3.")] = TABLE5_DEFAULTS[
-        "density"
+    gimbal_rate_deg: Annotated[float, typer.Option(help="Largest gimbal rate, deg/s.")] = TABLE5[
+        "gimbal_rate_deg"
     ],
+    skew_deg: Annotated[float, typer.Option(help="Pyramid skew, deg.")] = TABLE5["skew_deg"],
+    flywheel_rpm: Annotated[float, typer.Option(help="Flywheel speed, rpm.")] = TABLE5[
+        "flywheel_rpm"
+    ],
+    inner_radius: Annotated[float, typer.Option(help="Flywheel inner radius z1, m.")] = TABLE5[
+        "inner_radius"
+    ],
+    outer_radius: Annotated[float, typer.Option(help="Flywheel outer radius z2, m.")] = TABLE5[
+        "outer_radius"
+    ],
+    density: Annotated[float, typer.Option(help="Flywheel density, kg/m^3.")] = TABLE5["density"],
     json_out: Annotated[Path | None, typer.Option("--json", help="Result JSON.")] = None,
 ) -> None:
     """Size the flywheels for a manoeuvre (seed 001 eqs. 5-9; defaults are Table 5's)."""
-    check_output_path(json_out, "--json", (".json",))
-    positive = {
-        "--angle-deg": angle_deg,
-        "--time": time,
-        "--inertia": inertia,
-        "--gimbal-rate-deg": gimbal_rate_deg,
-        "--flywheel-rpm": flywheel_rpm,
-    }
-    for name, v in positive.items():
-        if not math.isfinite(v) or v <= 0:
-            raise InputError(f"{name} {v}: expected a positive number")
-    skew = check_skew(math.radians(skew_deg), "--skew-deg")
+    out = Outputs()
+    json_path = out.plan(json_out, "--json", (".json",))
+    number("--angle-deg", angle_deg, lo=0, hi=360, lo_open=True, unit="deg")
+    number("--time", time, lo=0, lo_open=True, unit="s")
+    number("--inertia", inertia, lo=0, lo_open=True, unit="kg m^2")
+    number("--gimbal-rate-deg", gimbal_rate_deg, lo=0, lo_open=True, unit="deg/s")
+    number("--skew-deg", skew_deg, lo=0, hi=90, lo_open=True, hi_open=True, unit="deg")
+    number("--flywheel-rpm", flywheel_rpm, lo=0, lo_open=True, unit="rpm")
+    number("--inner-radius", inner_radius, lo=0, unit="m")
+    number("--outer-radius", outer_radius, lo=0, lo_open=True, unit="m")
+    if not inner_radius < outer_radius:
+        raise InputError(
+            f"--inner-radius {inner_radius:g} m, --outer-radius {outer_radius:g} m: "
+            "expected the inner radius below the outer one"
+        )
+    number("--density", density, lo=0, lo_open=True, unit="kg/m^3")
+
+    from airbearing.design.sizing import size_cluster
+
     r = size_cluster(
         math.radians(angle_deg),
         time,
         inertia,
         gimbal_rate=math.radians(gimbal_rate_deg),
-        skew=skew,
+        skew=math.radians(skew_deg),
         flywheel_speed=flywheel_rpm * 2 * math.pi / 60,
         inner_radius=inner_radius,
         outer_radius=outer_radius,
         density=density,
     )
-    out = r.to_dict()
-    if json_out is not None:
-        write_json(json_out, out)
-    typer.echo(f"required torque N_req      {r.torque * 1e3:.4g} mNm")
-    typer.echo(f"momentum per flywheel h0   {r.momentum * 1e3:.4g} mNms")
-    typer.echo(f"flywheel inertia I_f       {r.flywheel_inertia * 1e3:.4g} g m^2")
-    typer.echo(f"flywheel mass m_f          {r.flywheel_mass * 1e3:.4g} g")
-    typer.echo(f"flywheel thickness L_f     {r.flywheel_thickness * 1e3:.4g} mm")
+    out.json(json_path, r.to_dict())
+    out.commit()
+    echo_table(
+        [
+            ["required torque N_req", r.torque * 1e3, "mN m"],
+            ["momentum per flywheel h0", r.momentum * 1e3, "mN m s"],
+            ["flywheel inertia I_f", r.flywheel_inertia * 1e3, "g m^2"],
+            ["flywheel mass m_f", r.flywheel_mass * 1e3, "g"],
+            ["flywheel thickness L_f", r.flywheel_thickness * 1e3, "mm"],
+        ],
+        ["quantity (seed 001 eqs. 5-9)", "value", "unit"],
+    )
+    if json_path is not None:
+        typer.echo(f"wrote {json_path}")
 
 
 @cmg_app.command("envelope")
@@ -96,17 +114,33 @@ def envelope(
     data: Annotated[
         Path | None, typer.Option(help="Also write the singular surfaces as CSV (h0, rad).")
     ] = None,
-    resolution: Annotated[int, typer.Option(help="Elevations of the direction grid.")] = 41,
+    resolution: Annotated[
+        int, typer.Option(min=5, max=400, help="Elevations of the direction grid, 5 to 400.")
+    ] = 41,
 ) -> None:
     """Momentum envelope and internal singular surfaces of the testbed's pyramid."""
-    check_output_path(output, "-o", (".png", ".svg", ".pdf"))
-    check_output_path(data, "--data", (".csv",))
-    if resolution < 5 or resolution > 400:
-        raise InputError(f"--resolution {resolution}: expected 5 to 400")
+    out = Outputs()
+    fig_path = out.plan(output, "-o", (".png", ".svg", ".pdf"))
+    data_path = out.plan(data, "--data", (".csv",))
+    number("--skew-deg", skew_deg, lo=0, hi=90, lo_open=True, hi_open=True, unit="deg")
     tb = testbed_arg(testbed)
     if tb.kind != "cmg":
         raise InputError(f"{tb.source}: the envelope needs a kind = 'cmg' testbed, got '{tb.kind}'")
-    beta = tb.cmg.skew if skew_deg is None else check_skew(math.radians(skew_deg), "--skew-deg")
+    beta = tb.cmg.skew if skew_deg is None else math.radians(skew_deg)
+
+    import io
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    try:
+        from airbearing.reporting.cmg import envelope_figure
+    except ImportError:  # before the move of the figure to reporting/
+        from airbearing.analysis.cmg.singularity import envelope_figure
+    from airbearing.analysis.cmg.singularity import surfaces_table
+
     fig = envelope_figure(
         beta, n_el=resolution, n_az=2 * resolution - 1,
         title=f"{tb.name}: 4-CMG pyramid, skew {math.degrees(beta):.2f} deg",
@@ -114,8 +148,9 @@ def envelope(
     buf = io.BytesIO()
     fig.savefig(buf, format=output.suffix.lower().lstrip("."), bbox_inches="tight", dpi=120)
     plt.close(fig)
-    table = surfaces_table(beta, n_el=resolution, n_az=2 * resolution - 1) if data else None
-    write_atomic(output, buf.getvalue())  # only after everything succeeded
-    if table is not None:
-        write_atomic(data, table.to_csv(index=False))
-    typer.echo(f"wrote {output}" + (f" and {data}" if table is not None else ""))
+    out.text(fig_path, buf.getvalue())
+    if data_path is not None:
+        table = surfaces_table(beta, n_el=resolution, n_az=2 * resolution - 1)
+        out.text(data_path, table.to_csv(index=False))
+    out.commit()
+    typer.echo(f"wrote {fig_path}" + (f" and {data_path}" if data_path is not None else ""))

@@ -1,23 +1,53 @@
-"""Argument helpers shared by the command modules."""
+"""Argument helpers shared by the command modules: testbeds, effects, numbers, outputs.
+
+Everything here is light to import (no numpy at module level): the command modules
+import it at start-up. Numbers in messages are printed plainly (:func:`fmt`), never as
+``np.float64(5.0)``.
+"""
 
 from __future__ import annotations
 
+import math
+import os
 from pathlib import Path
 
 from airbearing.errors import InputError
-from airbearing.io.testbed import Testbed, load_testbed
-from airbearing.io.vocabulary import EFFECTS
 
-__all__ = ["testbed_arg", "parse_effects", "check_output_path"]
+__all__ = [
+    "testbed_arg",
+    "parse_effects",
+    "check_output_path",
+    "fmt",
+    "number",
+    "numbers",
+    "check_log_size",
+    "MEMORY_FRACTION",
+]
+
+#: Largest share of the machine's memory a command's log may need before it is refused.
+MEMORY_FRACTION = 0.25
 
 
-def testbed_arg(value: str) -> Testbed:
-    """A testbed given as a path or a built-in name."""
+def fmt(value) -> str:
+    """A number as a person writes it (``5``, ``0.001``, ``1e+09``, ``nan``), any numeric type."""
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        return str(value)
+    return f"{v:.8g}"
+
+
+def testbed_arg(value: str):
+    """A testbed given as a path or a built-in name (:func:`airbearing.io.testbed.load_testbed`)."""
+    from airbearing.io.testbed import load_testbed
+
     return load_testbed(value)
 
 
 def parse_effects(items: list[str] | None, *, option: str = "--effect") -> dict:
     """``NAME=VALUE`` or ``NAME=V1,V2,V3`` strings to an effects mapping (FORMATS.md units)."""
+    from airbearing.io.vocabulary import EFFECTS
+
     out: dict = {}
     for item in items or []:
         name, sep, value = item.partition("=")
@@ -34,15 +64,108 @@ def parse_effects(items: list[str] | None, *, option: str = "--effect") -> dict:
             raise InputError(f"{option} '{item}': '{value}' is not a number or 3 numbers") from None
         if len(nums) not in (1, 3):
             raise InputError(f"{option} '{item}': expected 1 or 3 numbers, got {len(nums)}")
+        if not all(math.isfinite(v) for v in nums):
+            raise InputError(f"{option} '{item}': expected finite numbers")
         out[name] = nums[0] if len(nums) == 1 else tuple(nums)
     return out
 
 
+def number(
+    option: str,
+    value,
+    *,
+    lo: float | None = None,
+    hi: float | None = None,
+    lo_open: bool = False,
+    hi_open: bool = False,
+    unit: str = "",
+    why: str = "",
+):
+    """Check one numeric option: finite and within ``[lo, hi]`` (open ends on request).
+
+    Returns the value unchanged (``None`` passes). Raises :class:`InputError` naming the
+    option, the value and the accepted range (with ``unit``), plus ``why`` if given.
+    """
+    if value is None:
+        return None
+    u = f" {unit}" if unit else ""
+    if lo is not None and hi is not None:
+        rng = f"from {fmt(lo)} to {fmt(hi)}{u}"
+        if lo_open or hi_open:
+            rng = (
+                f"{'>' if lo_open else '>='} {fmt(lo)} and {'<' if hi_open else '<='} {fmt(hi)}{u}"
+            )
+    elif lo is not None:
+        rng = f"{'>' if lo_open else '>='} {fmt(lo)}{u}"
+    elif hi is not None:
+        rng = f"{'<' if hi_open else '<='} {fmt(hi)}{u}"
+    else:
+        rng = ""
+    expected = f"expected a finite number{' ' + rng if rng else ''}"
+    v = float(value)
+    bad = not math.isfinite(v)
+    if not bad and lo is not None:
+        bad = v <= lo if lo_open else v < lo
+    if not bad and hi is not None:
+        bad = v >= hi if hi_open else v > hi
+    if bad:
+        raise InputError(f"{option} {fmt(value)}: {expected}{'; ' + why if why else ''}")
+    return value
+
+
+def numbers(option: str, values, **kw):
+    """:func:`number` for each entry of a tuple option (``None`` passes)."""
+    if values is None:
+        return None
+    for v in values:
+        try:
+            number(option, v, **kw)
+        except InputError as e:
+            shown = " ".join(fmt(x) for x in values)
+            raise InputError(str(e).replace(f"{option} {fmt(v)}", f"{option} {shown}", 1)) from None
+    return values
+
+
+def _memory_bytes() -> float:
+    try:
+        return float(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES"))
+    except (ValueError, OSError, AttributeError):
+        return 8 * 2**30
+
+
+def _size(n_bytes: float) -> str:
+    for unit, scale in (("TiB", 2**40), ("GiB", 2**30), ("MiB", 2**20)):
+        if n_bytes >= scale:
+            return f"{n_bytes / scale:.3g} {unit}"
+    return f"{n_bytes / 2**10:.3g} KiB"
+
+
+def check_log_size(option: str, duration: float, rate_hz: float, columns: int = 40) -> None:
+    """Refuse a run whose log would not fit in memory, saying the size it would need.
+
+    ``columns`` float64 values per sample (the log plus the simulator's states and
+    outputs); the limit is :data:`MEMORY_FRACTION` of the machine's memory.
+    """
+    rows = duration * rate_hz + 1
+    need = rows * columns * 8.0 * 3  # the arrays, the log's table and one copy
+    limit = MEMORY_FRACTION * _memory_bytes()
+    if need > limit:
+        longest = limit / (columns * 8.0 * 3) / rate_hz
+        raise InputError(
+            f"{option} {fmt(duration)} s: the log would have {rows:.3g} rows at {fmt(rate_hz)} Hz "
+            f"and need about {_size(need)} of memory (this machine allows {_size(limit)}); "
+            f"expected at most {longest:.3g} s"
+        )
+
+
 def check_output_path(path: Path | None, option: str, suffixes: tuple[str, ...]) -> None:
-    """Refuse an output path with the wrong suffix or in a missing folder before any work."""
+    """Refuse an output path with the wrong suffix or in a missing/unwritable folder.
+
+    Kept for command modules that do not use :class:`airbearing.cli.outputs.Outputs` yet;
+    the same checks as :meth:`Outputs.plan`.
+    """
     if path is None:
         return
-    if suffixes and path.suffix.lower() not in suffixes:
-        raise InputError(f"{option} {path}: expected a file ending in {' or '.join(suffixes)}")
-    if not path.parent.exists():
-        raise InputError(f"{option} {path}: folder '{path.parent}' does not exist")
+    from airbearing.cli.outputs import Outputs
+
+    Outputs().plan(path, option, suffixes)

@@ -2,20 +2,42 @@
 
 from __future__ import annotations
 
+import inspect
+import shutil
+import tempfile
 from pathlib import Path
 from typing import Annotated
 
 import typer
 
 from airbearing.cli import app
-from airbearing.reporting.demo import run_demo
+from airbearing.cli.outputs import Outputs
+from airbearing.cli.show_progress import progress_display
 
 
 @app.command()
 def demo(
-    out: Annotated[Path, typer.Option("--out", help="Folder for the report.")] = Path("demo-out"),
+    out: Annotated[
+        Path, typer.Option("--out", help="Folder for the report (created if missing).")
+    ] = Path("demo-out"),
     quick: Annotated[bool, typer.Option(help="Shorter runs (for tests).")] = False,
 ) -> None:
     """Run every capability on the built-in testbeds and write DIR/report.html."""
-    path = run_demo(out, quick=quick)
-    typer.echo(f"wrote {path}")
+    outputs = Outputs()
+    if out.exists() and not out.is_dir():
+        from airbearing.errors import InputError
+
+        raise InputError(f"--out {out}: is a file, expected a folder")
+    report = outputs.plan(out / "report.html", "--out", (".html",), create_folder=True)
+
+    from airbearing.reporting.demo import run_demo
+
+    with tempfile.TemporaryDirectory(prefix="airbearing-demo-") as work:
+        kw = {"quick": quick}
+        with progress_display("demo") as progress:
+            if "progress" in inspect.signature(run_demo).parameters:
+                kw["progress"] = progress
+            path = Path(run_demo(Path(work), **kw))
+        outputs.file(report, lambda tmp: shutil.copyfile(path, tmp))
+        outputs.commit()
+    typer.echo(f"wrote {report}")

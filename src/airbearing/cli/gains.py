@@ -2,24 +2,32 @@
 
 from __future__ import annotations
 
+import inspect
 import json
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Literal, get_args
 
 import typer
 
 from airbearing.cli import app
-from airbearing.cli.common import check_output_path, testbed_arg
-from airbearing.design.loops import LOOPS, SPLITS
+from airbearing.cli.common import number, numbers, testbed_arg
+from airbearing.cli.outputs import Outputs
+from airbearing.cli.show_progress import progress_display
+from airbearing.cli.tables import cell, echo_table
 from airbearing.errors import InputError
-from airbearing.io.output import write_json
+
+#: Loops (airbearing.design.loops.LOOPS) and balancing PID splits (SPLITS); a test checks
+#: they agree with the library, kept here so that ``--help`` imports no numerical library.
+Loop = Literal["balancing", "attitude"]
+Split = Literal["mixed", "mechanical"]
+LOOPS, SPLITS = get_args(Loop), get_args(Split)
 
 
-def _check_loop(loop: str, split: str) -> None:
-    if loop not in LOOPS:
-        raise InputError(f"--loop {loop}: expected one of {'|'.join(LOOPS)}")
-    if split not in SPLITS:
-        raise InputError(f"--split {split}: expected one of {'|'.join(SPLITS)}")
+def _call(fn, *args, progress=None, **kw):
+    """``fn(*args, **kw)``, passing ``progress`` when ``fn`` takes it."""
+    if progress is not None and "progress" in inspect.signature(fn).parameters:
+        kw["progress"] = progress
+    return fn(*args, **kw)
 
 
 def read_gains(path: Path, loop: str) -> dict:
@@ -47,16 +55,18 @@ def read_gains(path: Path, loop: str) -> dict:
 @app.command()
 def gains(
     testbed: Annotated[str, typer.Argument(help="Testbed file or built-in name.")],
-    loop: Annotated[str, typer.Option(help="balancing or attitude.")] = "attitude",
-    split: Annotated[str, typer.Option(help="Balancing PID split: mixed or mechanical.")] = "mixed",
-    phase_margin_deg: Annotated[float, typer.Option(help="Minimum phase margin, deg.")] = 45.0,
-    gain_margin_db: Annotated[float, typer.Option(help="Minimum gain margin, dB.")] = 6.0,
-    max_sensitivity: Annotated[float, typer.Option(help="Largest |S| peak.")] = 2.0,
+    loop: Annotated[Loop, typer.Option(help="The loop to tune.")] = "attitude",
+    split: Annotated[Split, typer.Option(help="Balancing PID split (seed 000).")] = "mixed",
+    phase_margin_deg: Annotated[
+        float, typer.Option(help="Minimum phase margin, deg, 0 to 90.")
+    ] = 45.0,
+    gain_margin_db: Annotated[float, typer.Option(help="Minimum gain margin, dB, > 0.")] = 6.0,
+    max_sensitivity: Annotated[float, typer.Option(help="Largest |S| peak, > 1.")] = 2.0,
     bandwidth_hz: Annotated[
         float | None, typer.Option(help="Wanted bandwidth, Hz (default: fastest).")
     ] = None,
     inertia_uncertainty: Annotated[
-        float, typer.Option(help="Relative inertia uncertainty.")
+        float, typer.Option(help="Relative inertia uncertainty, 0 to 1.")
     ] = 0.15,
     offset_range_mm: Annotated[
         tuple[float, float] | None,
@@ -67,10 +77,24 @@ def gains(
     ] = None,
 ) -> None:
     """Tune the balancing PID or the CMG attitude PID to a specification."""
+    out = Outputs()
+    json_path = out.plan(json_out, "--json", (".json",))
+    number("--phase-margin-deg", phase_margin_deg, lo=0, hi=90, lo_open=True, hi_open=True,
+           unit="deg")  # fmt: skip
+    number("--gain-margin-db", gain_margin_db, lo=0, lo_open=True, unit="dB")
+    number("--max-sensitivity", max_sensitivity, lo=1, lo_open=True)
+    number("--bandwidth-hz", bandwidth_hz, lo=0, lo_open=True, unit="Hz")
+    number("--inertia-uncertainty", inertia_uncertainty, lo=0, hi=1, hi_open=True)
+    numbers("--offset-range-mm", offset_range_mm, lo=-100, hi=100, unit="mm")
+    if offset_range_mm is not None and offset_range_mm[0] > offset_range_mm[1]:
+        raise InputError(
+            f"--offset-range-mm {cell(offset_range_mm[0])} {cell(offset_range_mm[1])}: "
+            "expected LO <= HI"
+        )
+    tb = testbed_arg(testbed)
+
     from airbearing.design.tuning import Spec, tune
 
-    check_output_path(json_out, "--json", (".json",))
-    _check_loop(loop, split)
     spec = Spec(
         phase_margin_deg=phase_margin_deg,
         gain_margin_db=gain_margin_db,
@@ -79,21 +103,36 @@ def gains(
         inertia_uncertainty=inertia_uncertainty,
         offset_range=None if offset_range_mm is None else tuple(v * 1e-3 for v in offset_range_mm),
     )
-    tb = testbed_arg(testbed)
-    res = tune(tb, loop, spec, split=split)
-    if json_out is not None:
-        write_json(json_out, res.to_dict())
-    for k, v in res.gains.items():
-        typer.echo(f"{k}: {v:.6g}")
-    typer.echo(f"met: {res.met}")
+    with progress_display("gains") as progress:
+        progress(f"tuning the {loop} loop of {tb.name}")
+        res = _call(tune, tb, loop, spec, split=split, progress=progress)
+    data = res.to_dict()
+    out.json(json_path, data)
+    out.commit()
+    echo_table([[k, v] for k, v in res.gains.items()], ["gain", "value"])
+    typer.echo("")
+    checks = data.get("checks") or []
+    if checks:
+        echo_table(
+            [
+                [c.get("name"), c.get("value"), f"{c.get('sense') or ''} {cell(c.get('limit'))}",
+                 "met" if c.get("met") else "NOT met"]
+                for c in checks
+            ],
+            ["check", "value", "required", "verdict"],
+        )  # fmt: skip
+        typer.echo("")
+    typer.echo(f"specification met: {'yes' if res.met else 'no'}")
     typer.echo(res.message)
+    if json_path is not None:
+        typer.echo(f"wrote {json_path}")
 
 
 @app.command()
 def report(
     testbed: Annotated[str, typer.Argument(help="Testbed file or built-in name.")],
-    loop: Annotated[str, typer.Option(help="balancing or attitude.")] = "attitude",
-    split: Annotated[str, typer.Option(help="Balancing PID split: mixed or mechanical.")] = "mixed",
+    loop: Annotated[Loop, typer.Option(help="The loop to report.")] = "attitude",
+    split: Annotated[Split, typer.Option(help="Balancing PID split (seed 000).")] = "mixed",
     gains_file: Annotated[
         Path | None, typer.Option("--gains", help="Gains JSON of 'airbearing gains'.")
     ] = None,
@@ -101,15 +140,12 @@ def report(
     json_out: Annotated[Path | None, typer.Option("--json", help="Margins, JSON.")] = None,
 ) -> None:
     """Linear stability report (HTML) of a loop, with its margins as JSON."""
-    from airbearing.design.tuning import Spec
-    from airbearing.reporting.stability import stability_report
-
     if output is None:
         raise InputError("-o/--output: the report needs an output file ending in .html")
-    check_output_path(output, "-o", (".html",))
-    check_output_path(json_out, "--json", (".json",))
-    _check_loop(loop, split)
-    spec = None
+    out = Outputs()
+    html_path = out.plan(output, "-o", (".html",))
+    json_path = out.plan(json_out, "--json", (".json",))
+    spec_dict = None
     g = None
     if gains_file is not None:
         data = read_gains(gains_file, loop)
@@ -117,18 +153,33 @@ def report(
         if data.get("split") and loop == "balancing":
             split = data["split"]
         if isinstance(data.get("spec"), dict):
-            try:
-                spec = Spec(
-                    **{k: (tuple(v) if isinstance(v, list) else v) for k, v in data["spec"].items()}
-                )
-            except TypeError as e:
-                raise InputError(
-                    f"--gains {gains_file}: key 'spec' is not a specification ({e})"
-                ) from None
+            spec_dict = data["spec"]
     tb = testbed_arg(testbed)
-    rep, data = stability_report(tb, loop, gains=g, split=split, spec=spec)
-    rep.write(output)
-    if json_out is not None:
-        write_json(json_out, data)
-    typer.echo(f"report: {output}")
-    typer.echo(f"specification met: {data['met']}")
+
+    from airbearing.design.tuning import Spec
+    from airbearing.reporting.stability import stability_report
+
+    spec = None
+    if spec_dict is not None:
+        try:
+            spec = Spec(
+                **{k: (tuple(v) if isinstance(v, list) else v) for k, v in spec_dict.items()}
+            )
+        except TypeError as e:
+            raise InputError(
+                f"--gains {gains_file}: key 'spec' is not a specification ({e})"
+            ) from None
+    with progress_display("report") as progress:
+        progress(f"analysing the {loop} loop of {tb.name}")
+        rep, data = _call(stability_report, tb, loop, gains=g, split=split, spec=spec,
+                          progress=progress)  # fmt: skip
+        progress("rendering the report")
+        html = rep.html() if hasattr(rep, "html") else None
+    if html is not None:
+        out.text(html_path, html)
+    else:
+        out.file(html_path, rep.write)
+    out.json(json_path, data)
+    out.commit()
+    typer.echo(f"specification met: {'yes' if data.get('met') else 'no'}")
+    typer.echo(f"wrote {html_path}" + (f" and {json_path}" if json_path is not None else ""))

@@ -27,9 +27,21 @@ class Outputs:
     def __init__(self) -> None:
         self._planned: dict[Path, str] = {}
         self._writers: list[tuple[Path, str, Callable[[Path], None]]] = []
+        self._make_folders: list[Path] = []
 
-    def plan(self, path: Path | str | None, option: str, suffixes: tuple[str, ...]) -> Path | None:
+    def plan(
+        self,
+        path: Path | str | None,
+        option: str,
+        suffixes: tuple[str, ...],
+        *,
+        create_folder: bool = False,
+    ) -> Path | None:
         """Check an output path before any work; returns it as a Path (``None`` passes).
+
+        ``create_folder=True`` (an option that names a folder, e.g. ``demo --out DIR``):
+        the file's folder may be missing if its own parent exists and can be written;
+        :meth:`commit` creates it (and removes it again if the commit fails).
 
         Raises
         ------
@@ -43,6 +55,20 @@ class Outputs:
         if suffixes and path.suffix.lower() not in suffixes:
             raise InputError(f"{option} {path}: expected a file ending in {' or '.join(suffixes)}")
         folder = path.parent
+        if create_folder and not folder.exists():
+            parent = folder.parent
+            if not parent.is_dir():
+                raise InputError(f"{option} {folder}: folder '{parent}' does not exist")
+            if not os.access(parent, os.W_OK | os.X_OK):
+                raise InputError(f"{option} {folder}: cannot create it in folder '{parent}'")
+            key = path.resolve()
+            if key in self._planned:
+                raise InputError(
+                    f"{option} {path}: the same file is already the {self._planned[key]}"
+                )
+            self._planned[key] = option
+            self._make_folders.append(folder)
+            return path
         if not folder.exists():
             raise InputError(f"{option} {path}: folder '{folder}' does not exist")
         if not folder.is_dir():
@@ -88,9 +114,20 @@ class Outputs:
         """Write every queued output; all or nothing. Returns the paths written."""
         temps: list[tuple[Path, Path]] = []
         done: list[tuple[Path, Path | None]] = []
+        made: list[Path] = []
+        current = ("", Path())
         try:
-            for path, _option, write in self._writers:
-                fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+            for folder in self._make_folders:
+                if not folder.exists():
+                    folder.mkdir()
+                    made.append(folder)
+            for path, option, write in self._writers:
+                current = (option, path)
+                # the temporary name keeps the suffix: writers that choose the format by
+                # suffix (write_log: .csv or .parquet) see the real one
+                fd, tmp = tempfile.mkstemp(
+                    dir=path.parent, prefix=f".{path.stem}.", suffix=f".tmp{path.suffix}"
+                )
                 os.close(fd)
                 temps.append((path, Path(tmp)))
                 write(Path(tmp))
@@ -106,7 +143,7 @@ class Outputs:
                     os.replace(path, backup)
                 os.replace(tmp, path)
                 done.append((path, backup))
-        except BaseException:
+        except BaseException as exc:
             for path, backup in reversed(done):
                 if backup is not None:
                     os.replace(backup, path)
@@ -114,6 +151,17 @@ class Outputs:
                     path.unlink(missing_ok=True)
             for _path, tmp in temps:
                 tmp.unlink(missing_ok=True)
+            for folder in reversed(made):
+                try:
+                    folder.rmdir()
+                except OSError:
+                    pass
+            if isinstance(exc, OSError):
+                option, path = current
+                reason = exc.strerror or str(exc)
+                raise InputError(
+                    f"{option} {path}: cannot write it ({reason}); nothing written"
+                ) from None
             raise
         for _path, backup in done:
             if backup is not None:

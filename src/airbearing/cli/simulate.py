@@ -2,37 +2,54 @@
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Literal, get_args
 
 import typer
 
-from airbearing.analysis.simulation.scenarios import (
-    free_oscillation,
-    free_summary,
-    slew,
-    slew_summary,
-)
 from airbearing.cli import app
-from airbearing.cli.common import check_output_path, parse_effects, testbed_arg
-from airbearing.design.steering import STEERING_LAWS
+from airbearing.cli.common import (
+    check_log_size,
+    number,
+    numbers,
+    parse_effects,
+    testbed_arg,
+)
+from airbearing.cli.outputs import Outputs
+from airbearing.cli.tables import echo_summary
 from airbearing.errors import InputError
-from airbearing.io.log import write_log
-from airbearing.io.output import write_json
+
+#: Scenarios of ``--scenario``.
+Scenario = Literal["slew", "free"]
+#: Steering laws (airbearing.design.steering.STEERING_LAWS; tests check they agree).
+Steering = Literal["mp", "sr", "gsr", "sda"]
+#: Gimbal-rate limiting (airbearing.design.attitude: seed 001 eq. 4 scales, clip clips).
+RateLimit = Literal["scale", "clip"]
+SCENARIOS, STEERING, RATE_LIMITS = get_args(Scenario), get_args(Steering), get_args(RateLimit)
+#: deg, largest slew: the attitude loop takes the shorter way round, so a larger angle
+#: would silently become a different slew (270 deg is a -90 deg slew).
+MAX_SLEW_DEG = 180.0
 
 
 @app.command()
 def simulate(
     testbed: Annotated[str, typer.Argument(help="Testbed file or built-in name.")],
-    scenario: Annotated[str, typer.Option(help="slew (CMG) or free (free oscillation).")] = "slew",
-    yaw_deg: Annotated[float, typer.Option(help="Slew angle, deg.")] = 180.0,
+    scenario: Annotated[
+        Scenario, typer.Option(help="slew (CMG) or free (free oscillation).")
+    ] = "slew",
+    yaw_deg: Annotated[
+        float, typer.Option(help=f"Slew angle, deg, within +-{MAX_SLEW_DEG:g}.")
+    ] = 180.0,
     axis: Annotated[tuple[float, float, float], typer.Option(help="Slew axis, body.")] = (0, 0, 1),
     duration: Annotated[
         float | None, typer.Option(help="Run length, s (slew 40, free 60).")
     ] = None,
-    seed: Annotated[int, typer.Option(help="Noise seed.")] = 0,
-    steering: Annotated[str, typer.Option(help="Steering law.")] = "mp",
-    rate_limit: Annotated[str, typer.Option(help="scale (seed 001 eq. 4) or clip.")] = "scale",
+    seed: Annotated[int, typer.Option(min=0, help="Noise seed, >= 0.")] = 0,
+    steering: Annotated[Steering, typer.Option(help="Steering law (seed 001).")] = "mp",
+    rate_limit: Annotated[
+        RateLimit, typer.Option(help="Gimbal-rate limit: scale (seed 001 eq. 4) or clip.")
+    ] = "scale",
     ideal: Annotated[bool, typer.Option(help="No noise, no low-pass.")] = False,
     initial_rate: Annotated[
         tuple[float, float, float], typer.Option(help="Free: initial body rate, rad/s.")
@@ -53,44 +70,58 @@ def simulate(
     json_out: Annotated[Path | None, typer.Option("--json", help="Summary JSON.")] = None,
 ) -> None:
     """Simulate a testbed and write the log (FORMATS.md) and a summary JSON."""
-    check_output_path(output, "-o", (".csv", ".parquet"))
-    check_output_path(json_out, "--json", (".json",))
-    tb = testbed_arg(testbed)
+    out = Outputs()
+    log_path = out.plan(output, "-o", (".csv", ".parquet"))
+    json_path = out.plan(json_out, "--json", (".json",))
+    number(
+        "--yaw-deg", yaw_deg, lo=-MAX_SLEW_DEG, hi=MAX_SLEW_DEG, unit="deg",
+        why="the attitude loop takes the shorter way round, so a larger angle is a different slew",
+    )  # fmt: skip
+    numbers("--axis", axis)
+    if math.hypot(*axis) == 0:
+        raise InputError("--axis 0 0 0: expected a non-zero axis")
+    number("--duration", duration, lo=0, lo_open=True, unit="s")
+    numbers("--initial-rate", initial_rate, unit="rad/s")
+    numbers("--initial-quaternion", initial_quaternion)
+    if math.hypot(*initial_quaternion) == 0:
+        raise InputError("--initial-quaternion 0 0 0 0: expected a unit quaternion qw qx qy qz")
+    numbers("--sliders", sliders, unit="m")
+    number("--attitude-noise", attitude_noise, lo=0, unit="rad")
     effects = parse_effects(effect)
-    if steering not in STEERING_LAWS:
-        raise InputError(f"--steering {steering}: expected one of {'|'.join(STEERING_LAWS)}")
+    tb = testbed_arg(testbed)
+    length = (40.0 if scenario == "slew" else 60.0) if duration is None else duration
+    check_log_size("--duration", length, tb.sensors.rate)
+
+    from airbearing.analysis.simulation.scenarios import (
+        free_oscillation,
+        free_summary,
+        slew,
+        slew_summary,
+    )
+    from airbearing.io.output import to_jsonable
+
     if scenario == "slew":
         result = slew(
-            tb,
-            angle_deg=yaw_deg,
-            axis=axis,
-            duration=40.0 if duration is None else duration,
-            seed=seed,
-            ideal=ideal,
-            steering=steering,
-            rate_limit_mode=rate_limit,
-            effects=effects,
-        )
+            tb, angle_deg=yaw_deg, axis=axis, duration=length, seed=seed, ideal=ideal,
+            steering=steering, rate_limit_mode=rate_limit, effects=effects,
+        )  # fmt: skip
         summary = slew_summary(result)
-    elif scenario == "free":
-        result = free_oscillation(
-            tb,
-            initial_rate=initial_rate,
-            q0=initial_quaternion,
-            sliders=sliders,
-            effects=effects,
-            duration=60.0 if duration is None else duration,
-            seed=seed,
-            noise=not ideal,
-            attitude_noise=attitude_noise,
-        )
-        summary = free_summary(result)
     else:
-        raise InputError(f"--scenario {scenario}: expected 'slew' or 'free'")
-    summary = {"testbed": tb.name, "scenario": scenario, "seed": seed, **summary}
-    if output is not None:
-        write_log(result.log, output)
-    if json_out is not None:
-        write_json(json_out, summary)
-    for k, v in summary.items():
-        typer.echo(f"{k}: {v}")
+        result = free_oscillation(
+            tb, initial_rate=initial_rate, q0=initial_quaternion, sliders=sliders,
+            effects=effects, duration=length, seed=seed, noise=not ideal,
+            attitude_noise=attitude_noise,
+        )  # fmt: skip
+        summary = free_summary(result)
+    summary = to_jsonable({"testbed": tb.name, "scenario": scenario, "seed": seed, **summary})
+    if log_path is not None:
+        from airbearing.io.log import write_log
+
+        log = result.log
+        out.file(log_path, lambda tmp: write_log(log, tmp))
+    out.json(json_path, summary)
+    out.commit()
+    echo_summary(summary)
+    for p in (log_path, json_path):
+        if p is not None:
+            typer.echo(f"wrote {p}")

@@ -20,7 +20,6 @@ import tempfile
 import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass
-from importlib import resources
 from pathlib import Path
 from typing import Any
 
@@ -28,6 +27,7 @@ import numpy as np
 import tomli_w
 
 from airbearing.errors import InputError
+from airbearing.io.builtins import builtin_names, builtin_toml
 from airbearing.io.vocabulary import EFFECTS, EffectValue, validate_effect_value
 
 __all__ = [
@@ -49,8 +49,8 @@ __all__ = [
     "write_testbed",
 ]
 
-#: Names accepted by :func:`load_testbed` in place of a path.
-BUILTIN_TESTBEDS: tuple[str, ...] = ("platform-3dof", "cmg-yaw", "cmg-3dof")
+#: Names accepted by :func:`load_testbed` in place of a path (catalogue: io/builtins.py).
+BUILTIN_TESTBEDS: tuple[str, ...] = builtin_names()
 #: Values of the top-level ``kind`` key.
 KINDS: tuple[str, ...] = ("platform", "cmg")
 #: m/s^2, default of the top-level ``gravity`` key (FORMATS.md).
@@ -1021,9 +1021,8 @@ def load_testbed(path_or_name: str | os.PathLike[str]) -> Testbed:
         message lists the built-ins), or the file is invalid.
     """
     if isinstance(path_or_name, str) and path_or_name in BUILTIN_TESTBEDS:
-        resource = resources.files("airbearing.io").joinpath("builtin", f"{path_or_name}.toml")
         src = f"{path_or_name} (built-in)"
-        return testbed_from_dict(_parse_toml(resource.read_bytes(), src), source=src)
+        return testbed_from_dict(_parse_toml(builtin_toml(path_or_name), src), source=src)
     if not isinstance(path_or_name, str | os.PathLike):
         raise InputError(
             f"load_testbed: expected a path or a built-in name, got {path_or_name!r}; "

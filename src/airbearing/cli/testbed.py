@@ -1,0 +1,76 @@
+"""``airbearing testbed``: the built-in testbeds: list them, show one, export one as a template."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from airbearing.cli import app
+from airbearing.cli.outputs import Outputs
+from airbearing.cli.tables import echo_table
+from airbearing.errors import InputError
+from airbearing.io.builtins import BUILTINS, builtin_names, builtin_toml, find
+
+__all__ = ["testbed_app"]
+
+testbed_app = typer.Typer(
+    help="The built-in testbeds: list, show, export as a starting template.",
+    no_args_is_help=True,
+    rich_markup_mode=None,
+)
+app.add_typer(testbed_app, name="testbed")
+
+
+def _entry(name: str):
+    entry = find(name)
+    if entry is None:
+        raise InputError(
+            f"testbed '{name}': not a built-in; built-in testbeds are: {', '.join(builtin_names())}"
+        )
+    return entry
+
+
+@testbed_app.command("list")
+def list_(
+    json_: Annotated[bool, typer.Option("--json", help="Print a JSON list on stdout.")] = False,
+) -> None:
+    """List the built-in testbeds, one line each (--json: {name, kind, dof, description})."""
+    entries = [*BUILTINS, *(find(a) for a in builtin_names() if find(a).alias_of)]
+    if json_:
+        typer.echo(json.dumps([e.to_json() for e in entries], indent=2))
+        return
+    echo_table(
+        [[e.name, e.kind, str(e.dof), e.description] for e in entries],
+        ["name", "kind", "dof", "description"],
+    )
+
+
+@testbed_app.command("show")
+def show(
+    name: Annotated[str, typer.Argument(help="Built-in name (see 'airbearing testbed list').")],
+) -> None:
+    """Print a built-in testbed file (TOML, FORMATS.md) with its sources."""
+    _entry(name)
+    typer.echo(builtin_toml(name).decode("utf-8"), nl=False)
+
+
+@testbed_app.command("export")
+def export(
+    name: Annotated[str, typer.Argument(help="Built-in name (see 'airbearing testbed list').")],
+    output: Annotated[Path, typer.Option("-o", "--output", help="Testbed file to write, .toml.")],
+) -> None:
+    """Write a built-in testbed as a starting template for your own testbed file."""
+    out = Outputs()
+    path = out.plan(output, "-o", (".toml",))
+    _entry(name)
+    text = builtin_toml(name).decode("utf-8")
+    header = (
+        f"# Exported from the built-in '{name}' by 'airbearing testbed export'. Edit the values\n"
+        "# for your testbed (FORMATS.md, 'Testbed file'); the comments say where each came from.\n"
+    )
+    out.text(path, header + text)
+    out.commit()
+    typer.echo(f"wrote {path}")
