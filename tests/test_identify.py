@@ -184,18 +184,18 @@ def test_seed004_truth_recovered(seed_runs):
         for est in (res, res.equation_error):
             np.testing.assert_allclose(np.diag(est.inertia), TRUTH[:3], rtol=0.02)
             np.testing.assert_allclose(est.cm_offset, TRUTH[6:9], atol=20e-6)
-        assert res.active_constraints == ["known_offset_x", "known_offset_y"]
-        assert res.equation_error.warnings == [] and res.warnings == []
+        assert list(res.active_constraints) == ["known_offset_x", "known_offset_y"]
+        assert not res.equation_error.warnings and not res.warnings
 
 
 def test_output_error_consistent_with_its_standard_errors(seed_runs):
     """Refined error within 3 reported sigmas (the Fisher standard errors), every parameter."""
     for res in seed_runs:
-        free = res.std > 0
+        free = np.isfinite(res.std)
         z = (res.theta - TRUTH)[free] / res.std[free]
         assert np.all(np.abs(z) < 3.0), z
         # the fitted noise is the simulated one: std equals the Cramer-Rao bound within 10 %
-        ratio = np.asarray(res.details["std_over_cramer_rao"])
+        ratio = np.asarray(list(res.details["std_over_cramer_rao"].values()))
         np.testing.assert_allclose(ratio, 1.0, atol=0.1)
 
 
@@ -226,7 +226,7 @@ def test_offset_free_with_slider_shifts(truth_tb, prior_tb):
     res = identify_platform(prior_tb, _logs(truth_tb, 5), method="equation-error")
     np.testing.assert_allclose(np.diag(res.inertia), TRUTH[:3], rtol=0.02)
     np.testing.assert_allclose(res.cm_offset, TRUTH[6:9], atol=20e-6)
-    assert res.active_constraints == []
+    assert not res.active_constraints
 
 
 # ---------------------------------------------------------------------------- constraints
@@ -328,7 +328,7 @@ def test_cmg_inertia_seed001():
     res = identify_cmg_inertia(tb, logs)
     assert abs(res.inertia - 0.00323) < 3 * res.std  # within 3 reported sigmas
     assert abs(res.inertia - 0.00323) < 0.005 * 0.00323  # and within 0.5 %
-    assert res.active_constraints == [] and res.warnings == []
+    assert not res.active_constraints and not res.warnings
     assert set(res.to_json()) >= {
         "inertia",
         "std",

@@ -7,13 +7,16 @@ from typing import Annotated
 
 import typer
 
-from airbearing.analysis.identification.platform import identify_cmg_inertia, identify_platform
 from airbearing.cli import app
-from airbearing.cli.common import check_output_path, testbed_arg
+from airbearing.cli.common import testbed_arg
+from airbearing.cli.outputs import Outputs
+from airbearing.cli.show_progress import progress_display
 from airbearing.errors import InputError
-from airbearing.io.log import read_log
-from airbearing.io.output import write_json
-from airbearing.io.testbed import write_testbed
+
+
+def _fmt(v: float, s: float) -> str:
+    """``value+-std``, or ``value (no std)`` when the standard error is not a number."""
+    return f"{v: .6g}+-{s:.1e}" if s == s else f"{v: .6g} (no std)"
 
 
 @app.command()
@@ -39,55 +42,81 @@ def identify(
         Path | None, typer.Option("--write-testbed", help="Testbed file with identified values.")
     ] = None,
 ) -> None:
-    """Identify inertia (and CM offset) from free-oscillation or slew logs."""
-    check_output_path(json_out, "--json", (".json",))
-    check_output_path(write_testbed_path, "--write-testbed", (".toml",))
+    """Identify inertia (and CM offset) from free-oscillation, spin-down or slew logs."""
+    out = Outputs()
+    p_json = out.plan(json_out, "--json", (".json",))
+    p_tb = out.plan(write_testbed_path, "--write-testbed", (".toml",))
     if method not in ("output-error", "equation-error"):
         raise InputError(f"--method {method}: expected output-error or equation-error")
     if form not in ("integrated", "acceleration"):
         raise InputError(f"--form {form}: expected integrated or acceleration")
+    from airbearing.io.log import read_log
+    from airbearing.io.testbed import write_testbed
+
     tb = testbed_arg(testbed)
     loaded = [read_log(p, tb) for p in logs]
     if tb.kind == "cmg" and tb.body.dof == 1:
+        from airbearing.analysis.identification.cmg_inertia import identify_cmg_inertia
+
         if known_offset_xy is not None:
             raise InputError("--known-offset-xy applies to platform testbeds (dof 3), not to dof 1")
         fr = None if friction in (None, "none") else friction
         if fr not in (None, "viscous", "coulomb"):
             raise InputError(f"--friction {friction}: expected none, viscous or coulomb")
         result = identify_cmg_inertia(tb, loaded, friction=fr)
-        typer.echo(f"J_z = {result.inertia:.6g} +- {result.std:.2g} kg m^2")
+        typer.echo(f"J_z = {_fmt(result.inertia, result.std)} kg m^2")
         for k, v in result.friction.items():
-            typer.echo(f"{k} = {v:.4g} +- {result.std_friction[k]:.2g}")
-    else:
+            s = result.std_friction[k]
+            typer.echo(f"{k} = {_fmt(v, float('nan') if s is None else s)}")
+    elif tb.body.dof == 1:
+        from airbearing.analysis.identification.yaw_inertia import identify_yaw_inertia
+
+        if known_offset_xy is not None:
+            raise InputError("--known-offset-xy applies to dof-3 platforms, not to dof 1")
         if friction not in (None, "none"):
             raise InputError("--friction applies to dof-1 CMG testbeds")
-        result = identify_platform(
-            tb,
-            loaded,
-            known_offset_xy=known_offset_xy,
-            known_mass=known_mass,
-            method=method,
-            form=form,
-        )
+        with progress_display("identify") as progress:
+            result = identify_yaw_inertia(tb, loaded, method=method, progress=progress)
+        typer.echo(f"J_z = {_fmt(result.inertia, result.std)} kg m^2 ({result.method})")
+    else:
+        from airbearing.analysis.identification.platform import identify_platform
+
+        if friction not in (None, "none"):
+            raise InputError("--friction applies to dof-1 CMG testbeds")
+        with progress_display("identify") as progress:
+            result = identify_platform(
+                tb,
+                loaded,
+                known_offset_xy=known_offset_xy,
+                known_mass=known_mass,
+                method=method,
+                form=form,
+                prior=tb,
+                progress=progress,
+            )
         typer.echo(f"method: {result.method}")
         typer.echo("inertia about CR (kg m^2), sliders at zero:")
         for row, srow in zip(result.inertia, result.std_inertia, strict=True):
-            typer.echo(
-                "  " + "  ".join(f"{v: .6f}+-{s:.1e}" for v, s in zip(row, srow, strict=True))
-            )
+            typer.echo("  " + "  ".join(_fmt(v, s) for v, s in zip(row, srow, strict=True)))
         typer.echo(
             "cm_offset (m): "
             + "  ".join(
-                f"{v: .7f}+-{s:.1e}"
-                for v, s in zip(result.cm_offset, result.std_cm_offset, strict=True)
+                _fmt(v, s) for v, s in zip(result.cm_offset, result.std_cm_offset, strict=True)
             )
         )
         typer.echo(f"condition number: {result.condition_number:.3g}")
+        for name, why in result.std_status.items():
+            if why != "estimated":
+                typer.echo(f"{name}: {why}")
+    js = result.to_json()
     typer.echo(f"active constraints: {', '.join(result.active_constraints) or 'none'}")
-    typer.echo(f"residual rms: {result.residual_rms:.3g} {result.to_json()['residual_rms_unit']}")
+    typer.echo(f"residual rms: {result.residual_rms:.3g} {js['residual_unit']}")
+    if "segments" in js:
+        typer.echo(f"segments: {js['segments']}, outlier rows: {js['outlier_rows'] or 'none'}")
     for w in result.warnings:
         typer.echo(f"warning: {w}")
-    if json_out is not None:
-        write_json(json_out, result.to_json())
-    if write_testbed_path is not None:
-        write_testbed(result.to_testbed(tb), write_testbed_path)
+    out.json(p_json, js)
+    if p_tb is not None:
+        new_tb = result.to_testbed(tb)
+        out.file(p_tb, lambda tmp: write_testbed(new_tb, tmp))
+    out.commit()

@@ -20,7 +20,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-import cvxpy as cp
 import numpy as np
 
 from airbearing.errors import InputError, SolverError
@@ -39,7 +38,7 @@ INV_INERTIA_FLOOR = 1e-6
 RELATIVE_STD_WARN = 0.05
 
 
-@dataclass(eq=False)
+@dataclass(frozen=True, eq=False)
 class CMGIdentification:
     """Identified yaw inertia of a dof-1 CMG testbed.
 
@@ -55,11 +54,11 @@ class CMGIdentification:
         Effect name -> 1-sigma standard error.
     condition_number : float
         Of the column-scaled regressor.
-    active_constraints : list of str
+    active_constraints : tuple of str
         ``"inertia_positive"``, ``"friction_nonnegative:<effect>"`` when they bind.
     residual_rms : float
         RMS of the rate residual, rad/s.
-    warnings : list of str
+    warnings : tuple of str
     details : dict
     """
 
@@ -68,9 +67,9 @@ class CMGIdentification:
     friction: dict
     std_friction: dict
     condition_number: float
-    active_constraints: list
+    active_constraints: tuple
     residual_rms: float
-    warnings: list
+    warnings: tuple
     details: dict = field(default_factory=dict)
 
     def to_json(self) -> dict:
@@ -82,6 +81,7 @@ class CMGIdentification:
             "condition_number": float(self.condition_number),
             "active_constraints": list(self.active_constraints),
             "residual_rms": float(self.residual_rms),
+            "residual_unit": "rad/s",
             "residual_rms_unit": "rad/s",
             "friction": dict(self.friction),
             "std_friction": dict(self.std_friction),
@@ -160,6 +160,8 @@ def identify_cmg_inertia(
     SolverError
         When Clarabel fails.
     """
+    import cvxpy as cp  # 1.4 s to import: only when this fit runs
+
     if testbed.kind != "cmg" or testbed.body.dof != 1:
         raise InputError(
             f"{testbed.source}: CMG inertia identification needs kind = 'cmg' and dof = 1, got "
@@ -256,12 +258,16 @@ def identify_cmg_inertia(
         )
     return CMGIdentification(
         inertia=float(J),
-        std=float(std[0]),
+        std=float(std[0]) if "inertia_positive" not in active else float("nan"),
         friction={n: float(beta_hat[1 + k] / a) for k, n in enumerate(names)},
-        std_friction={n: float(std[1 + k]) for k, n in enumerate(names)},
+        # a friction pinned at zero by its sign constraint has no standard error (None)
+        std_friction={
+            n: None if f"friction_nonnegative:{n}" in active else float(std[1 + k])
+            for k, n in enumerate(names)
+        },
         condition_number=cond,
-        active_constraints=active,
+        active_constraints=tuple(active),
         residual_rms=rms,
-        warnings=warnings,
+        warnings=tuple(warnings),
         details={"samples": int(rows), "logs": nl, "h0": float(h0), "beta_rad": float(beta)},
     )

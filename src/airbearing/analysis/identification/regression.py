@@ -26,10 +26,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from airbearing.analysis.identification.data import PlatformData, prepare_platform_logs
 from airbearing.errors import InputError
-from airbearing.io.log import Log
 from airbearing.io.testbed import Testbed
-from airbearing.models import quaternion as quat
 
 __all__ = [
     "PARAM_NAMES",
@@ -48,146 +47,6 @@ PARAM_NAMES = ("J_xx", "J_yy", "J_zz", "J_xy", "J_xz", "J_yz", "r_x", "r_y", "r_
 CHUNK_SAMPLES = 100_000
 #: Equations buffered before they are reduced to the triangular factors.
 REDUCE_ROWS = 200_000
-#: A log whose measured rates stay within this many gyro sigmas of their mean is "at rest".
-REST_SIGMAS = 5.0
-#: Smallest rate spread (rad/s) that counts as motion when the gyro is ideal.
-REST_FLOOR = 1e-6
-
-
-@dataclass(frozen=True, eq=False)
-class PlatformData:
-    """The arrays of one platform log that identification uses (SI units, body axes).
-
-    Attributes
-    ----------
-    source : str
-        Where the log came from.
-    t : ndarray (N,)
-        Sample times, s.
-    q : ndarray (N, 4)
-        Logged attitude quaternion, body -> lab, on a continuous sign branch.
-    w : ndarray (N, 3)
-        Logged body rate, rad/s.
-    s : ndarray (N, 3)
-        Slider positions, m (held over each sample).
-    g_body : ndarray (N, 3)
-        Gravity vector in body axes from the logged attitude, m/s^2.
-    dipole : ndarray (N, 3)
-        Commanded dipole, A m^2 (zeros when not logged), held over each sample.
-    b_body : ndarray (N, 3)
-        Field in body axes, T (logged, else the testbed's lab field rotated).
-    b_lab : ndarray (N, 3)
-        The same field in the lab frame, T (the Model's input).
-    g_meas : ndarray (N, 3) or None
-        Logged unit gravity direction ``gx, gy, gz`` (accelerometer), if any.
-    """
-
-    source: str
-    t: np.ndarray
-    q: np.ndarray
-    w: np.ndarray
-    s: np.ndarray
-    g_body: np.ndarray
-    dipole: np.ndarray
-    b_body: np.ndarray
-    b_lab: np.ndarray
-    g_meas: np.ndarray | None
-
-    @property
-    def n(self) -> int:
-        return len(self.t)
-
-
-def prepare_platform_logs(testbed: Testbed, logs) -> list[PlatformData]:
-    """Check platform logs against ``testbed`` and extract the arrays identification needs.
-
-    Parameters
-    ----------
-    testbed : Testbed
-        A ``kind = "platform"``, ``dof = 3`` testbed.
-    logs : sequence of Log
-        Free-oscillation logs with ``t``, ``qw..qz``, ``wx..wz`` and the known
-        slider positions ``s1..s3`` (m); ``mx..mz`` and ``bx..bz`` are used when present.
-
-    Returns
-    -------
-    list of PlatformData
-
-    Raises
-    ------
-    InputError
-        Wrong testbed kind or dof, no logs, a log of another kind of testbed, a
-        missing column (sliders, quaternion, rates), or a log in which the platform
-        is at rest (no excitation: nothing to identify).
-    """
-    if testbed.kind != "platform" or testbed.body.dof != 3:
-        raise InputError(
-            f"{testbed.source}: platform identification needs kind = 'platform' and dof = 3, "
-            f"got kind = {testbed.kind!r}, dof = {testbed.body.dof}; a dof-1 CMG testbed "
-            "takes identify_cmg_inertia"
-        )
-    logs = list(logs)
-    if not logs:
-        raise InputError("identify: expected at least one log, got none")
-    out = []
-    g_lab = np.array([0.0, 0.0, -testbed.gravity])
-    sigma = testbed.sensors.gyro_noise
-    for log in logs:
-        if not isinstance(log, Log):
-            raise InputError(f"identify: expected Log objects, got {type(log).__name__}")
-        src = log.source
-        if log.testbed is not None and (
-            log.testbed.kind != testbed.kind or log.testbed.body.dof != testbed.body.dof
-        ):
-            raise InputError(
-                f"{src}: the log belongs to testbed {log.testbed.name!r} (kind = "
-                f"{log.testbed.kind!r}, dof = {log.testbed.body.dof}), but the testbed to "
-                f"identify {testbed.name!r} has kind = {testbed.kind!r}, dof = {testbed.body.dof}"
-            )
-        for group, what in (
-            (("s1", "s2", "s3"), "the known slider positions s1, s2, s3 (m)"),
-            (("qw", "qx", "qy", "qz"), "the attitude quaternion qw, qx, qy, qz"),
-            (("wx", "wy", "wz"), "the body rates wx, wy, wz (rad/s)"),
-        ):
-            if not log.has(*group):
-                raise InputError(
-                    f"{src}: missing columns {', '.join(c for c in group if not log.has(c))}: "
-                    f"platform identification needs {what} in every log"
-                )
-        t = log.t
-        if len(t) < 10:
-            raise InputError(f"{src}: {len(t)} samples; identification needs at least 10")
-        q = quat.continuous_branch(quat.normalize(log.columns(["qw", "qx", "qy", "qz"])))
-        w = log.columns(["wx", "wy", "wz"])
-        s = log.columns(["s1", "s2", "s3"])
-        spread = float(np.max(np.std(w, axis=0)))
-        if spread < max(REST_SIGMAS * sigma, REST_FLOOR):
-            raise InputError(
-                f"{src}: the platform is at rest (measured rates vary by {spread:.3g} rad/s RMS, "
-                f"within {REST_SIGMAS:g} gyro sigmas of {sigma:g} rad/s): a log without motion "
-                "carries no information on inertia or CM offset; give it an initial rate or drop it"
-            )
-        travel = testbed.masses.travel if testbed.masses is not None else 0.0
-        if np.any(np.abs(s) > travel * (1 + 1e-9)):
-            k = int(np.argmax(np.any(np.abs(s) > travel * (1 + 1e-9), axis=1)))
-            raise InputError(
-                f"{src}: row {k + 1}, columns s1..s3 = {s[k].tolist()} m: outside the rail "
-                f"travel +-{travel} m of testbed {testbed.name!r}"
-            )
-        g_body = quat.rotate_inverse(q, g_lab)
-        dipole = (
-            log.columns(["mx", "my", "mz"]) if log.has("mx", "my", "mz") else np.zeros((len(t), 3))
-        )
-        if log.has("bx", "by", "bz"):
-            b_body = log.columns(["bx", "by", "bz"])
-            b_lab = quat.rotate(q, b_body)
-        else:
-            lab = testbed.field.lab_vec if testbed.field is not None else np.zeros(3)
-            b_lab = np.tile(lab, (len(t), 1))
-            b_body = quat.rotate_inverse(q, b_lab)
-        g_meas = log.columns(["gx", "gy", "gz"]) if log.has("gx", "gy", "gz") else None
-        out.append(PlatformData(src, t, q, w, s, g_body, dipole, b_body, b_lab, g_meas))
-    return out
 
 
 # ----------------------------------------------------------------------------
@@ -300,6 +159,8 @@ class RegressionStatistics:
         ``"integrated"`` (rows in N m s) or ``"acceleration"`` (rows in N m).
     point_o : ndarray (3,)
         CR -> O used to build the regressor, m.
+    skipped : int
+        Samples in stretches (between gaps and outliers) too short for one window.
     """
 
     R: np.ndarray
@@ -309,6 +170,7 @@ class RegressionStatistics:
     samples: int
     form: str
     point_o: np.ndarray
+    skipped: int = 0
 
     def cost(self, theta, weights=(1.0, 1.0, 1.0)) -> np.ndarray:
         """Residual sum of squares per axis at ``theta`` (CR form), unweighted, (3,)."""
@@ -545,39 +407,45 @@ def regression_statistics(
     buffer, buffered = [], 0
     rows = np.zeros(3, dtype=int)
     samples = 0
-    for d in data:
-        samples += d.n
-        if form == "integrated" and d.n <= window:
-            raise InputError(
-                f"{d.source}: {d.n} samples, fewer than one integration window of {window}"
-            )
-        chunk = max(window, (CHUNK_SAMPLES // window) * window)
-        for k0 in range(0, d.n, chunk):
-            k1 = min(k0 + chunk, d.n)
-            if form == "integrated":
-                seg = d.s[k0 : min(k1 + window, d.n)]
-                held = bool(np.all(seg == seg[0]))
-                rows_fn = _rows_integrated_fast if held else _rows_integrated
-                Phi, rhs = rows_fn(d, k0, k1, window, r_o, mass, testbed)
-            else:
-                Phi, rhs = _rows_acceleration(d, k0, k1, r_o, mass, testbed)
-            if len(Phi) == 0:
+    skipped = 0
+    for whole in data:
+        # segments and outliers: windows and differences never cross a gap or an outlier row
+        for a, b in whole.pieces(2):
+            d = whole.slice(a, b)
+            if (form == "integrated" and d.n <= window) or d.n < 3:
+                skipped += d.n
                 continue
-            buffer.append((Phi, rhs))
-            buffered += len(Phi)
-            rows += len(Phi)
-            if buffered >= REDUCE_ROWS:
-                factors = _flush(factors, buffer)
-                buffer, buffered = [], 0
+            samples += d.n
+            chunk = max(window, (CHUNK_SAMPLES // window) * window)
+            for k0 in range(0, d.n, chunk):
+                k1 = min(k0 + chunk, d.n)
+                if form == "integrated":
+                    seg = d.s[k0 : min(k1 + window, d.n)]
+                    held = bool(np.all(seg == seg[0]))
+                    rows_fn = _rows_integrated_fast if held else _rows_integrated
+                    Phi, rhs = rows_fn(d, k0, k1, window, r_o, mass, testbed)
+                else:
+                    Phi, rhs = _rows_acceleration(d, k0, k1, r_o, mass, testbed)
+                if len(Phi) == 0:
+                    continue
+                buffer.append((Phi, rhs))
+                buffered += len(Phi)
+                rows += len(Phi)
+                if buffered >= REDUCE_ROWS:
+                    factors = _flush(factors, buffer)
+                    buffer, buffered = [], 0
     factors = _flush(factors, buffer)
     if any(f is None for f in factors):
-        raise InputError("identify: the logs give no equations (too short for one window)")
+        raise InputError(
+            f"identify: the logs give no equations: no stretch between gaps and outliers is "
+            f"longer than one integration window of {window} samples"
+        )
     T, t0 = o_to_cr_map(r_o, mass)
     Tinv = np.linalg.inv(T)
     R = np.stack([f[:9, :9] @ Tinv for f in factors])  # |R_O theta_O - z| in CR unknowns
     z = np.stack([f[:9, 9] + f[:9, :9] @ Tinv @ t0 for f in factors])
     e2 = np.array([f[9, 9] ** 2 for f in factors])
-    return RegressionStatistics(R, z, e2, rows, samples, form, r_o)
+    return RegressionStatistics(R, z, e2, rows, samples, form, r_o, skipped)
 
 
 def theta_to_body(theta) -> tuple[np.ndarray, np.ndarray]:

@@ -1,0 +1,273 @@
+"""Result objects of platform identification and the CAD prior.
+
+:class:`PlatformIdentification` is what :func:`~.platform.identify_platform` returns:
+a frozen dataclass whose :meth:`~PlatformIdentification.to_json` is the JSON contract
+of ``airbearing identify`` (keys ``inertia``, ``cm_offset``, ``std``,
+``condition_number``, ``active_constraints``, ``residual_rms``, ``residual_unit``,
+``segments``, ``outlier_rows``, ...).
+
+Honest errors (issue 13 item 6): a standard error is never reported as zero. A
+parameter that is known (``known_offset_xy``) or pinned by an active constraint (a
+prior bound) has no standard error (``null`` in JSON) and its reason in
+``std_status``; a parameter the logs cannot separate (a singular Fisher matrix) is
+"not identifiable from this log" with the reason, not a number with an astronomical
+error.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from airbearing.analysis.identification.regression import PARAM_NAMES, theta_to_body
+from airbearing.errors import InputError
+from airbearing.io.testbed import Body, Testbed
+
+__all__ = ["PlatformIdentification", "Prior", "PRIOR_STD_INERTIA", "PRIOR_STD_OFFSET"]
+
+#: Default 1-sigma of a CAD prior: fraction of the mean inertia, and m for the offset.
+PRIOR_STD_INERTIA = 0.1
+PRIOR_STD_OFFSET = 1e-3
+#: Errors "cover" a prior when it lies within this many combined sigmas of the estimate.
+PRIOR_COVER_SIGMAS = 3.0
+
+
+@dataclass(frozen=True)
+class Prior:
+    """A CAD prior on the platform's mass properties.
+
+    Parameters
+    ----------
+    inertia : array-like (3, 3)
+        kg m^2 about CR, sliders at zero.
+    cm_offset : array-like (3,)
+        m, CR -> CM, sliders at zero.
+    std_inertia : float, optional
+        1-sigma of each inertia entry, kg m^2 (default 10 % of the mean principal inertia).
+    std_cm_offset : float
+        1-sigma of each offset component, m.
+    inertia_bound : float, optional
+        Hard bound: each inertia entry within this many kg m^2 of the prior.
+    cm_offset_bound : float, optional
+        Hard bound: each offset component within this many m of the prior.
+    """
+
+    inertia: object
+    cm_offset: object = (0.0, 0.0, 0.0)
+    std_inertia: float | None = None
+    std_cm_offset: float = PRIOR_STD_OFFSET
+    inertia_bound: float | None = None
+    cm_offset_bound: float | None = None
+
+    @classmethod
+    def from_testbed(cls, testbed: Testbed, **kwargs) -> Prior:
+        """The testbed file's inertia and offset as a prior."""
+        return cls(testbed.body.inertia_matrix, testbed.body.cm_offset_vec, **kwargs)
+
+    def theta(self) -> np.ndarray:
+        """``[J_xx J_yy J_zz J_xy J_xz J_yz r_x r_y r_z]`` of the prior (kg m^2, m)."""
+        J = np.asarray(self.inertia, float)
+        if J.shape != (3, 3) or not np.allclose(J, J.T):
+            raise InputError(f"prior inertia: expected a symmetric 3x3 in kg m^2, got {J.tolist()}")
+        r = np.asarray(self.cm_offset, float).reshape(-1)
+        if r.shape != (3,):
+            raise InputError(f"prior cm_offset: expected 3 numbers in m, got {r.tolist()}")
+        return np.r_[J[0, 0], J[1, 1], J[2, 2], J[0, 1], J[0, 2], J[1, 2], r]
+
+    def std(self) -> np.ndarray:
+        """1-sigma of each entry of :meth:`theta` (kg m^2, m)."""
+        J = np.asarray(self.inertia, float)
+        sj = (
+            self.std_inertia
+            if self.std_inertia is not None
+            else PRIOR_STD_INERTIA * np.trace(J) / 3
+        )
+        return np.r_[np.full(6, sj), np.full(3, self.std_cm_offset)]
+
+
+def sym_from6(a) -> np.ndarray:
+    """``[xx yy zz xy xz yz]`` -> symmetric 3x3."""
+    return theta_to_body(np.r_[a[:6], 0, 0, 0])[0]
+
+
+def prior_check(theta, std, prior: Prior) -> tuple[dict, list[str]]:
+    """Does the estimate's error bar, with the prior's own, cover the prior?
+
+    Returns ``{name: (estimate - prior) / sqrt(std^2 + prior_std^2)}`` for the
+    parameters with a standard error, and a warning naming those beyond
+    :data:`PRIOR_COVER_SIGMAS`.
+    """
+    tp, sp = prior.theta(), prior.std()
+    z = {}
+    for i, n in enumerate(PARAM_NAMES):
+        if np.isfinite(std[i]):
+            z[n] = float((theta[i] - tp[i]) / np.hypot(std[i], sp[i]))
+    far = {n: v for n, v in z.items() if abs(v) > PRIOR_COVER_SIGMAS}
+    warn = []
+    if far:
+        parts = ", ".join(f"{n} {v:+.1f}" for n, v in far.items())
+        warn.append(
+            f"the reported errors do not cover the prior (CAD) values: {parts} combined sigmas "
+            f"(beyond {PRIOR_COVER_SIGMAS:g}); either the CAD values are off by more than their "
+            "stated uncertainty, or the model misses an effect that biases the fit"
+        )
+    return z, warn
+
+
+@dataclass(frozen=True, eq=False)
+class PlatformIdentification:
+    """Identified mass properties of a platform (dof 3).
+
+    Attributes
+    ----------
+    inertia : ndarray (3, 3)
+        kg m^2, about CR, body axes, sliders at rail zero.
+    cm_offset : ndarray (3,)
+        m, CR -> CM, sliders at rail zero.
+    std_inertia : ndarray (3, 3)
+        1-sigma standard errors of ``inertia``, kg m^2; NaN (JSON ``null``) where there
+        is none: see ``std_status``.
+    std_cm_offset : ndarray (3,)
+        1-sigma standard errors of ``cm_offset``, m; NaN where there is none.
+    condition_number : float
+        Of the information matrix with columns scaled to unit norm (free parameters only),
+        as the square root of its eigenvalue ratio.
+    active_constraints : tuple of str
+        Constraints that hold with equality at the answer: ``"known_offset_x"``,
+        ``"known_offset_y"``, ``"pseudo_inertia_lmi"`` (with ``"triangle_inequality"``
+        or ``"inertia_positive_definite"`` naming which face), ``"prior_bound:<name>"``.
+    residual_rms : float
+        RMS of the fit's residual, in ``residual_unit``.
+    residual_unit : str
+        ``"rad/s"`` (output error on gyro logs), ``"rad"`` (output error on attitude-only
+        logs), ``"N m s"`` (equation error, integrated form) or ``"N m"`` (acceleration form).
+    warnings : tuple of str
+        Poorly excited parameter combinations, prior not covered, solver remarks.
+    method : str
+        ``"output-error"`` or ``"equation-error"``.
+    mass : float
+        kg, the (known) total mass used.
+    std_status : dict
+        Parameter name -> ``"estimated"``, ``"known (<constraint>)"``,
+        ``"pinned by <constraint>"`` or ``"not identifiable from this log: <reason>"``.
+    segments : int
+        Segments (stretches between gaps) of all logs that the fit used.
+    logs : tuple of dict
+        Per log: ``source``, ``samples``, ``segments``, ``segment_rows``, ``outlier_rows``,
+        ``rates`` (``"gyro"`` or ``"from attitude"``).
+    equation_error : PlatformIdentification or None
+        The cvxpy-stage estimate (same fields), for an output-error result.
+    weak_directions : tuple of dict
+        Least-excited parameter combinations: ``{"relative_excitation", "combination", "hint"}``.
+    cramer_rao_inertia, cramer_rao_cm_offset : ndarray or None
+        Output error: the Cramer-Rao bound (1 sigma) for the testbed's sensor noise.
+    prior_z : dict
+        When a prior was given: per parameter, (estimate - prior) in combined sigmas.
+    details : dict
+        Noise levels, iterations, samples, point O, form.
+    """
+
+    inertia: np.ndarray
+    cm_offset: np.ndarray
+    std_inertia: np.ndarray
+    std_cm_offset: np.ndarray
+    condition_number: float
+    active_constraints: tuple
+    residual_rms: float
+    residual_unit: str
+    warnings: tuple
+    method: str
+    mass: float
+    std_status: dict = field(default_factory=dict)
+    segments: int = 1
+    logs: tuple = ()
+    equation_error: PlatformIdentification | None = None
+    weak_directions: tuple = ()
+    cramer_rao_inertia: np.ndarray | None = None
+    cramer_rao_cm_offset: np.ndarray | None = None
+    prior_z: dict = field(default_factory=dict)
+    details: dict = field(default_factory=dict)
+
+    @property
+    def theta(self) -> np.ndarray:
+        """``[J_xx J_yy J_zz J_xy J_xz J_yz r_x r_y r_z]`` (kg m^2, m)."""
+        J, r = self.inertia, self.cm_offset
+        return np.r_[J[0, 0], J[1, 1], J[2, 2], J[0, 1], J[0, 2], J[1, 2], r]
+
+    @property
+    def std(self) -> np.ndarray:
+        """Standard errors in the order of :attr:`theta` (NaN: none, see ``std_status``)."""
+        S, s = self.std_inertia, self.std_cm_offset
+        return np.r_[S[0, 0], S[1, 1], S[2, 2], S[0, 1], S[0, 2], S[1, 2], s]
+
+    @property
+    def not_identifiable(self) -> dict:
+        """Parameter name -> reason, for those the logs cannot separate."""
+        key = "not identifiable from this log"
+        return {n: s for n, s in self.std_status.items() if s.startswith(key)}
+
+    @property
+    def outlier_rows(self) -> list:
+        """Outlier rows left out: a flat list for one log, else one list per log."""
+        rows = [list(lg["outlier_rows"]) for lg in self.logs]
+        return rows[0] if len(rows) == 1 else rows
+
+    def to_json(self) -> dict:
+        """The JSON contract: inertia, cm_offset, std, condition_number, active_constraints,
+        residual_rms (+ residual_unit), segments, outlier_rows, std_status, ..."""
+        out = {
+            "inertia": self.inertia.tolist(),
+            "cm_offset": self.cm_offset.tolist(),
+            "std": {"inertia": self.std_inertia.tolist(), "cm_offset": self.std_cm_offset.tolist()},
+            "std_status": dict(self.std_status),
+            "not_identifiable": self.not_identifiable,
+            "condition_number": float(self.condition_number),
+            "active_constraints": list(self.active_constraints),
+            "residual_rms": float(self.residual_rms),
+            "residual_unit": self.residual_unit,
+            "residual_rms_unit": self.residual_unit,  # the key of the first version
+            "method": self.method,
+            "mass": float(self.mass),
+            "segments": int(self.segments),
+            "outlier_rows": self.outlier_rows,
+            "logs": [dict(lg) for lg in self.logs],
+            "warnings": list(self.warnings),
+            "weak_directions": [dict(w) for w in self.weak_directions],
+        }
+        if self.cramer_rao_inertia is not None:
+            out["cramer_rao"] = {
+                "inertia": self.cramer_rao_inertia.tolist(),
+                "cm_offset": self.cramer_rao_cm_offset.tolist(),
+            }
+        if self.prior_z:
+            out["prior_z"] = dict(self.prior_z)
+        out["details"] = dict(self.details)
+        if self.equation_error is not None:
+            out["equation_error"] = self.equation_error.to_json()
+        return out
+
+    def to_testbed(self, testbed: Testbed) -> Testbed:
+        """``testbed`` with the identified inertia, CM offset and mass."""
+        body = testbed.body
+        return testbed.replace(
+            body=Body(
+                dof=body.dof,
+                mass=self.mass,
+                inertia=tuple(tuple(float(v) for v in row) for row in self.inertia),
+                cm_offset=tuple(float(v) for v in self.cm_offset),
+                torque_noise=body.torque_noise,
+            )
+        )
+
+
+def make_result(theta, std, **kw) -> PlatformIdentification:
+    """A :class:`PlatformIdentification` from ``theta`` and ``std`` (9,), NaN = no error."""
+    J, r = theta_to_body(theta)
+    std = np.asarray(std, float)
+    for key in ("active_constraints", "warnings", "weak_directions", "logs"):
+        if key in kw:
+            kw[key] = tuple(kw[key])
+    return PlatformIdentification(
+        inertia=J, cm_offset=r, std_inertia=sym_from6(std), std_cm_offset=std[6:9].copy(), **kw
+    )

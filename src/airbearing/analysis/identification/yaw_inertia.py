@@ -1,0 +1,278 @@
+"""Yaw inertia of a dof-1 platform (usually passive) from a spin-down with a known torque.
+
+On a yaw-only bearing ``J_z w_z' = tau_z(yaw, w_z)``. Only a torque that is known
+(an effect of the testbed file with its value, e.g. a calibrated ``viscous_friction``,
+or a logged commanded dipole in the cage field) makes ``J_z`` visible: integrated over
+a window ``[t_a, t_b]`` inside one piece of a log (never across a gap or an outlier row,
+logged times),
+
+    w_z(t_b) - w_z(t_a) = (1 / J_z) int tau_z dt,
+
+linear in ``a = 1 / J_z``, with ``tau_z`` from the Model (its effects at their testbed
+values) at the logged states (trapezoidal rule). Without any known torque a rotor
+coasts at constant rate whatever its inertia: the inertia is then "not identifiable
+from this log", with that reason, never a number. Attitude-only logs
+(``sensors.gyro = false``) give ``w_z`` by the smooth differentiation of the yaw of
+:mod:`.data`. This is an equation-error estimate; its standard error is the least-squares
+one scaled by the residual (the rate noise of the window ends dominates it).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from airbearing.analysis.identification.data import RATE_DEGREE, RATE_HALF_WIDTH, _local_poly
+from airbearing.analysis.identification.data import log_quality as _quality
+from airbearing.errors import InputError
+from airbearing.io.log import Log
+from airbearing.io.testbed import Body, Testbed
+from airbearing.models import quaternion as quat
+
+__all__ = ["YawIdentification", "identify_yaw_inertia"]
+
+#: Relative standard error above which J_z is "not identifiable from this log".
+RELATIVE_STD_LIMIT = 0.5
+
+
+@dataclass(frozen=True, eq=False)
+class YawIdentification:
+    """Identified yaw inertia of a dof-1 platform.
+
+    Attributes
+    ----------
+    inertia : float
+        J_z, kg m^2 (NaN when not identifiable).
+    std : float
+        1-sigma standard error of J_z, kg m^2 (NaN when there is none).
+    std_status : dict
+        ``{"J_zz": "estimated" | "not identifiable from this log: <reason>"}``.
+    residual_rms : float
+        RMS of the window equations' residual, rad/s.
+    segments : int
+    logs : tuple of dict
+        Per log: ``source``, ``samples``, ``segments``, ``segment_rows``, ``outlier_rows``.
+    warnings : tuple of str
+    method : str
+        ``"equation-error"``.
+    details : dict
+    """
+
+    inertia: float
+    std: float
+    std_status: dict
+    residual_rms: float
+    segments: int
+    logs: tuple
+    warnings: tuple
+    method: str = "equation-error"
+    details: dict = field(default_factory=dict)
+
+    @property
+    def active_constraints(self) -> tuple:
+        return ()
+
+    def to_json(self) -> dict:
+        """``inertia``, ``std``, ``std_status``, ``residual_rms``, ``residual_unit``,
+        ``segments``, ``outlier_rows``, ``logs``, ``warnings``, ``method``."""
+        rows = [list(lg["outlier_rows"]) for lg in self.logs]
+        return {
+            "inertia": float(self.inertia),
+            "std": float(self.std),
+            "std_status": dict(self.std_status),
+            "condition_number": 1.0,
+            "active_constraints": [],
+            "residual_rms": float(self.residual_rms),
+            "residual_unit": "rad/s",
+            "residual_rms_unit": "rad/s",
+            "method": self.method,
+            "segments": int(self.segments),
+            "outlier_rows": rows[0] if len(rows) == 1 else rows,
+            "logs": [dict(lg) for lg in self.logs],
+            "warnings": list(self.warnings),
+            "details": dict(self.details),
+        }
+
+    def to_testbed(self, testbed: Testbed) -> Testbed:
+        """``testbed`` with J_z; an error when J_z was not identifiable."""
+        if not np.isfinite(self.inertia):
+            raise InputError(
+                f"--write-testbed: {self.std_status['J_zz']}; no testbed with an inertia to write"
+            )
+        b = testbed.body
+        return testbed.replace(
+            body=Body(
+                dof=1,
+                mass=b.mass,
+                inertia=float(self.inertia),
+                cm_offset=b.cm_offset,
+                torque_noise=b.torque_noise,
+            )
+        )
+
+
+def _arrays(testbed: Testbed, log: Log):
+    src = log.source
+    if not isinstance(log, Log):
+        raise InputError(f"identify: expected Log objects, got {type(log).__name__}")
+    if log.has("yaw"):
+        yaw = log.column("yaw")
+    elif log.has("qw", "qx", "qy", "qz"):
+        yaw = np.unwrap(quat.yaw_of(quat.normalize(log.columns(["qw", "qx", "qy", "qz"]))))
+    else:
+        raise InputError(f"{src}: missing column 'yaw' (or qw, qx, qy, qz): dof-1 identification")
+    segments, outliers = _quality(log, testbed)
+    usable = np.ones(log.n, bool)
+    usable[list(outliers)] = False
+    t = log.t
+    if testbed.sensors.gyro:
+        if not log.has("wz"):
+            raise InputError(f"{src}: missing column 'wz' (rad/s): sensors.gyro = true")
+        wz = log.column("wz")
+    else:
+        wz = np.full(log.n, np.nan)
+        for a, b in segments:
+            wt = usable[a:b].astype(float)
+            if b - a >= 3 and wt.sum() >= 3:
+                _, slope = _local_poly(t[a:b], yaw[a:b, None], wt, RATE_HALF_WIDTH, RATE_DEGREE)
+                wz[a:b] = slope[:, 0]
+    dipole = log.columns(["mx", "my", "mz"]) if log.has("mx", "my", "mz") else None
+    return t, yaw, wz, dipole, segments, usable
+
+
+def identify_yaw_inertia(
+    testbed: Testbed, logs, *, method: str = "equation-error", window: int | None = None,
+    progress=None,
+) -> YawIdentification:  # fmt: skip
+    """Yaw inertia of a dof-1 platform from spin-down logs with a known torque.
+
+    Parameters
+    ----------
+    testbed : Testbed
+        ``kind = "platform"``, ``dof = 1``; its ``[effects]`` are the known torques.
+    logs : list of Log
+        ``t``, ``yaw`` (or the quaternion), ``wz`` when ``sensors.gyro``.
+    method : str
+        ``"equation-error"``; ``"output-error"`` gives the same estimate with a warning.
+    window : int, optional
+        Samples per integration window (default about 1 s).
+    progress : callable, optional
+
+    Returns
+    -------
+    YawIdentification
+
+    Raises
+    ------
+    InputError
+        Wrong testbed, missing columns, no usable window.
+    """
+    from airbearing.models.model import build_model
+
+    if testbed.kind != "platform" or testbed.body.dof != 1:
+        raise InputError(
+            f"{testbed.source}: yaw-inertia identification needs kind = 'platform', dof = 1"
+        )
+    logs = list(logs)
+    if not logs:
+        raise InputError("identify: expected at least one log, got none")
+    window = max(1, int(round(testbed.sensors.rate))) if window is None else int(window)
+    model = build_model(testbed)
+    J0 = testbed.body.yaw_inertia
+    iw = model.index("wz")[0]
+    iy = model.index("yaw")[0]
+    xs, dws, entries, warnings = [], [], [], []
+    nseg = 0
+    any_dipole = False
+    for log in logs:
+        t, yaw, wz, dipole, segments, usable = _arrays(testbed, log)
+        nseg += len(segments)
+        entries.append(
+            {
+                "source": log.source,
+                "samples": int(log.n),
+                "segments": len(segments),
+                "segment_rows": [list(s) for s in segments],
+                "outlier_rows": [int(i) for i in np.flatnonzero(~usable)],
+                "rates": "gyro" if testbed.sensors.gyro else "from attitude",
+            }
+        )
+        X = np.zeros((log.n, model.nx))
+        X[:, iy], X[:, iw] = yaw, np.nan_to_num(wz)
+        U = np.zeros((log.n, model.nu))
+        if dipole is not None and testbed.magnetorquers is not None:
+            any_dipole = any_dipole or bool(np.any(dipole != 0))
+            U[:, model.index(["mx", "my", "mz"], "u")] = dipole
+        if testbed.field is not None and "bx_lab" in model.u_names:
+            U[:, model.index(["bx_lab", "by_lab", "bz_lab"], "u")] = testbed.field.lab_vec
+        wdot = np.asarray(model.f.map(log.n)(X.T, U.T, model.p0))[iw]
+        tau = J0 * wdot  # N m: the known torque at the logged state
+        ok = usable & np.isfinite(wz)
+        for a, b in segments:
+            run = ok[a:b].astype(np.int8)
+            edges = np.flatnonzero(np.diff(np.r_[0, run, 0]))
+            for s0, s1 in zip(edges[::2], edges[1::2], strict=True):
+                k = np.arange(a + s0, a + s1)
+                if len(k) <= window:
+                    continue
+                I = np.r_[0, np.cumsum(0.5 * np.diff(t[k]) * (tau[k][1:] + tau[k][:-1]))]
+                ia = np.arange(0, len(k) - window, window)
+                xs.append(I[ia + window] - I[ia])
+                dws.append(wz[k][ia + window] - wz[k][ia])
+    if not xs:
+        raise InputError(
+            f"identify: no stretch between gaps and outliers is longer than one window of "
+            f"{window} samples"
+        )
+    x, y = np.concatenate(xs), np.concatenate(dws)
+    sxx = float(x @ x)
+    reason = None
+    if not testbed.effects and not any_dipole:
+        reason = (
+            "nothing in the testbed exerts a known torque on the yaw axis ([effects] is "
+            "empty and no dipole acts): a free rotor coasts at the same rate whatever its "
+            "inertia; give a calibrated torque in [effects] (e.g. viscous_friction) or "
+            "log a commanded dipole in the cage field"
+        )
+    elif sxx <= 0:
+        reason = "the known torques vanish on these logs"
+    a_hat = float(x @ y / sxx) if sxx > 0 else float("nan")
+    res = y - a_hat * x if sxx > 0 else y
+    dof_res = max(len(y) - 1, 1)
+    s2 = float(res @ res / dof_res)
+    std_a = float(np.sqrt(s2 / sxx)) if sxx > 0 else float("inf")
+    J, std = (1.0 / a_hat, std_a / a_hat**2) if reason is None and a_hat > 0 else (np.nan, np.nan)
+    if reason is None and not (a_hat > 0):
+        reason = f"the fitted 1/J_z = {a_hat:.3g} is not positive: the known torque does not "
+        reason += "explain the change of rate"
+    if reason is None and std > RELATIVE_STD_LIMIT * J:
+        reason = (
+            f"the known torque changes the rate too little over these logs (J_z = {J:.3g} "
+            f"+- {std:.2g} kg m^2): spin faster or longer"
+        )
+    if reason is not None:
+        J, std = float("nan"), float("nan")
+        warnings.append(f"J_zz: not identifiable from this log: {reason}")
+    if method == "output-error":
+        warnings.append(
+            "dof-1 platforms: the yaw inertia is the equation-error estimate (no output-error "
+            "stage for dof 1)"
+        )
+    status = {
+        "J_zz": "estimated" if reason is None else f"not identifiable from this log: {reason}"
+    }
+    return YawIdentification(
+        inertia=float(J),
+        std=float(std),
+        std_status=status,
+        residual_rms=float(np.sqrt(np.mean(res**2))),
+        segments=nseg,
+        logs=tuple(entries),
+        warnings=tuple(warnings),
+        details={
+            "windows": int(len(y)),
+            "window_samples": window,
+            "effects": dict(testbed.effects),
+        },
+    )
