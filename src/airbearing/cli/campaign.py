@@ -26,10 +26,15 @@ def campaign(
     resume: Annotated[
         bool, typer.Option("--resume", help="Finish an interrupted campaign (its parts).")
     ] = False,
+    study: Annotated[
+        str | None,
+        typer.Option(help="detection: each run hides one dispersed effect, or nothing."),
+    ] = None,
 ) -> None:
     """Run CAMPAIGN_FILE's runs (local cluster or --scheduler), write the results table."""
     from airbearing.analysis.campaign import open_client, read_campaign, run_campaign
     from airbearing.analysis.campaign.results import parts_dir, remove_parts, write_results
+    from airbearing.analysis.campaign.spec import with_study
     from airbearing.cli.outputs import Outputs
     from airbearing.cli.show_progress import progress_display
     from airbearing.errors import InputError
@@ -41,7 +46,7 @@ def campaign(
     rep_path = out.plan(report, "--report", (".html",))
     if workers is not None and workers < 1:
         raise InputError(f"--workers {workers}: expected at least 1")
-    spec = read_campaign(campaign_file)
+    spec = with_study(read_campaign(campaign_file), study)
     parts = parts_dir(res_path)
     if parts.exists() and not resume:
         raise InputError(

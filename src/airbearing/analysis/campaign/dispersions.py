@@ -194,6 +194,17 @@ def draw_run(campaign, run: int) -> RunDraw:
         return RunDraw(run, seed, {}, campaign.testbed)
     doc = testbed_to_dict(campaign.testbed)
     out, values = _apply(doc, campaign.dispersions, lambda d, nom: _draw_one(rng, d, nom))
+    if campaign.study == "detection":  # one effect (or none) per run, see spec.with_study
+        keys = campaign.effect_keys
+        hide = run % (len(keys) + 1)
+        for k, key in enumerate(keys):
+            if k != hide:
+                out.get("effects", {}).pop(key.removeprefix("effects."), None)
+                for col in values:
+                    if col == key or col.startswith(key + "["):
+                        values[col] = 0.0
+        if not out.get("effects"):
+            out.pop("effects", None)
     try:
         tb = testbed_from_dict(out, source=f"{campaign.source} run {run}")
     except InputError as e:

@@ -31,7 +31,12 @@ __all__ = [
     "SpecEntry",
     "parse_campaign",
     "read_campaign",
+    "with_study",
+    "STUDIES",
 ]
+
+#: Studies a campaign can be run as (``airbearing campaign --study NAME``).
+STUDIES = ("detection",)
 
 #: Commands a campaign can run.
 COMMANDS = ("simulate", "balance", "identify", "discrepancy")
@@ -125,6 +130,12 @@ class Campaign:
     dispersions: tuple = ()
     spec: tuple = ()
     gains: tuple | None = None
+    study: str | None = None
+
+    @property
+    def effect_keys(self) -> list[str]:
+        """The dispersed ``effects.*`` keys, in file order."""
+        return [d.key for d in self.dispersions if d.key.startswith("effects.")]
 
     def fingerprint(self) -> str:
         """A hash of everything that decides the runs' results (resume checks it)."""
@@ -140,6 +151,7 @@ class Campaign:
             "truth_args": self.truth_args,
             "dispersions": [(d.key, d.kind, list(d.params)) for d in self.dispersions],
             "gains": self.gains,
+            "study": self.study,
         }
         text = json.dumps(doc, sort_keys=True, default=str)
         return hashlib.sha256(text.encode()).hexdigest()[:16]
@@ -304,3 +316,36 @@ def read_campaign(path: str | Path) -> Campaign:
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
         raise InputError(f"{path}: not a valid TOML file ({e})") from None
     return parse_campaign(data, str(path), path.parent)
+
+
+def with_study(campaign: Campaign, study: str | None) -> Campaign:
+    """``campaign`` run as ``study`` (:data:`STUDIES`), checked.
+
+    ``detection``: a ``discrepancy`` campaign whose ``[dispersions]`` list effect sizes
+    (``effects.NAME``, usually ``loguniform``). Run ``i`` hides the ``k``-th of those
+    ``K`` effects, ``k = i mod (K + 1)``, with its drawn size, and nothing when
+    ``k = K`` (the false-alarm runs); the other effects are not in its truth (their
+    columns are 0). Other dispersions (noise, inertia) apply to every run.
+    """
+    import dataclasses
+
+    if study is None:
+        return campaign
+    src = campaign.source
+    if study not in STUDIES:
+        raise InputError(f"--study {study}: expected one of {', '.join(STUDIES)}")
+    if campaign.command != "discrepancy":
+        raise InputError(f"--study detection: {src} must have command = 'discrepancy'")
+    keys = campaign.effect_keys
+    if not keys:
+        raise InputError(
+            f"--study detection: {src} disperses no effect; add e.g. "
+            '"effects.viscous_friction" = { loguniform = [1e-7, 1e-4] } to [dispersions]'
+        )
+    known = [k for k in keys if k.removeprefix("effects.") in campaign.testbed.effects]
+    if known:
+        raise InputError(
+            f"--study detection: {src}: '{known[0]}' is already in the testbed's [effects]; "
+            "the study hides effects the nominal model does not know"
+        )
+    return dataclasses.replace(campaign, study=study)
