@@ -5,6 +5,8 @@ momentum; a yaw rotor under viscous + quadratic drag has a closed-form spin-down
 attitude noise of a log is white with the configured sigma (chi-square bounds).
 """
 
+import json
+
 import casadi as ca
 import numpy as np
 import pytest
@@ -251,3 +253,30 @@ def test_attitude_noise_override_and_noise_free():
     assert_allclose(r.log.column("yaw"), r.log.column("true_yaw"), rtol=0, atol=0)
     with pytest.raises(InputError, match="attitude noise"):
         free_oscillation(tb, initial_rate=(0, 0, 1.0), duration=5.0, attitude_noise=-1.0)
+
+
+# ------------------------------------------------------------------------------ CLI
+
+
+def test_cli_spindown_of_a_motion_capture_rig(tmp_path):
+    from cli_run import run
+
+    from airbearing.io.log import read_log
+    from airbearing.io.testbed import write_testbed
+
+    tb = passive1(attitude_noise=1e-3)
+    path = write_testbed(tb, tmp_path / "rig.toml")
+    log, js = tmp_path / "spin.csv", tmp_path / "spin.json"
+    args = ["simulate", str(path), "--scenario", "spindown", "--spin-rate", "4", "--duration",
+            "40", "--effect", "aero_drag=3.5e-5", "-o", str(log), "--json", str(js)]  # fmt: skip
+    assert run(args) == 0
+    back = read_log(log, tb)
+    assert {"t", "yaw"} <= set(back.data.columns) and not back.has("wz")
+    # w' = -(k/J) w^2: w(t) = 4 / (1 + 4 k t / J) (closed form of quadratic drag)
+    final = 4 / (1 + 4 * 3.5e-5 * back.t[-1] / 0.05)
+    assert back.column("true_wz")[-1] == pytest.approx(final, rel=1e-6)  # RK4 at 25 ms: ~1e-12
+    assert json.loads(js.read_text())["scenario"] == "spindown"
+    bad = tmp_path / "bad.csv"
+    assert run(["simulate", str(path), "--scenario", "spindown", "--effect", "gyro_bias=0.01",
+                "-o", str(bad)]) == 2  # fmt: skip
+    assert not bad.exists()

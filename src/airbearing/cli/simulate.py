@@ -21,7 +21,7 @@ from airbearing.cli.tables import echo_summary
 from airbearing.errors import InputError
 
 #: Scenarios of ``--scenario``.
-Scenario = Literal["slew", "free"]
+Scenario = Literal["slew", "free", "spindown"]
 #: Steering laws (airbearing.design.steering.STEERING_LAWS; tests check they agree).
 Steering = Literal["mp", "sr", "gsr", "sda"]
 #: Gimbal-rate limiting (airbearing.design.attitude: seed 001 eq. 4 scales, clip clips).
@@ -36,14 +36,17 @@ MAX_SLEW_DEG = 180.0
 def simulate(
     testbed: Annotated[str, typer.Argument(help="Testbed file or built-in name.")],
     scenario: Annotated[
-        Scenario, typer.Option(help="slew (CMG) or free (free oscillation).")
+        Scenario,
+        typer.Option(
+            help="slew (CMG), free (free oscillation) or spindown (spun about z, coasting)."
+        ),
     ] = "slew",
     yaw_deg: Annotated[
         float, typer.Option(help=f"Slew angle, deg, within +-{MAX_SLEW_DEG:g}.")
     ] = 180.0,
     axis: Annotated[tuple[float, float, float], typer.Option(help="Slew axis, body.")] = (0, 0, 1),
     duration: Annotated[
-        float | None, typer.Option(help="Run length, s (slew 40, free 60).")
+        float | None, typer.Option(help="Run length, s (slew 40, free 60, spindown 120).")
     ] = None,
     seed: Annotated[int, typer.Option(min=0, help="Noise seed, >= 0.")] = 0,
     steering: Annotated[Steering, typer.Option(help="Steering law (seed 001).")] = "mp",
@@ -63,7 +66,13 @@ def simulate(
     effect: Annotated[
         list[str] | None, typer.Option(help="NAME=VALUE effect acting in the truth (repeatable).")
     ] = None,
-    attitude_noise: Annotated[float, typer.Option(help="Attitude noise, rad (1 sigma).")] = 0.0,
+    spin_rate: Annotated[
+        float, typer.Option(help="Spindown: initial rate about body z, rad/s.")
+    ] = 2.0,
+    attitude_noise: Annotated[
+        float | None,
+        typer.Option(help="Attitude noise, rad (1 sigma); default sensors.attitude_noise."),
+    ] = None,
     output: Annotated[
         Path | None, typer.Option("-o", "--output", help="Log, .csv or .parquet.")
     ] = None,
@@ -87,9 +96,11 @@ def simulate(
         raise InputError("--initial-quaternion 0 0 0 0: expected a unit quaternion qw qx qy qz")
     numbers("--sliders", sliders, unit="m")
     number("--attitude-noise", attitude_noise, lo=0, unit="rad")
+    number("--spin-rate", spin_rate, unit="rad/s")
     effects = parse_effects(effect)
     tb = testbed_arg(testbed)
-    length = (40.0 if scenario == "slew" else 60.0) if duration is None else duration
+    default_length = {"slew": 40.0, "free": 60.0, "spindown": 120.0}[scenario]
+    length = default_length if duration is None else duration
     check_log_size("--duration", length, tb.sensors.rate)
 
     from airbearing.analysis.simulation.scenarios import (
@@ -97,6 +108,7 @@ def simulate(
         free_summary,
         slew,
         slew_summary,
+        spindown,
     )
     from airbearing.io.output import to_jsonable
 
@@ -106,6 +118,12 @@ def simulate(
             steering=steering, rate_limit_mode=rate_limit, effects=effects,
         )  # fmt: skip
         summary = slew_summary(result)
+    elif scenario == "spindown":
+        result = spindown(
+            tb, initial_rate=spin_rate, q0=initial_quaternion, effects=effects, duration=length,
+            seed=seed, noise=not ideal, attitude_noise=attitude_noise,
+        )  # fmt: skip
+        summary = free_summary(result)
     else:
         result = free_oscillation(
             tb, initial_rate=initial_rate, q0=initial_quaternion, sliders=sliders,

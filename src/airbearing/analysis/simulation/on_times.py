@@ -195,17 +195,17 @@ def initial_state(
     w = np.zeros(3) if initial_rate is None else np.atleast_1d(np.asarray(initial_rate, float))
     if model.dof == 3:
         if w.shape != (3,):
-            raise InputError(f"initial_rate: expected 3 rates WX WY WZ in rad/s, got {list(w)}")
+            raise InputError(f"initial_rate: expected 3 rates WX WY WZ in rad/s, got {w.tolist()}")
         return model.x0(q=q0, w=w)
     if w.shape == (3,):
         if np.any(w[:2] != 0):
             raise InputError(
-                f"initial_rate {list(w)}: a dof = 1 bearing turns about body z only; "
+                f"initial_rate {w.tolist()}: a dof = 1 bearing turns about body z only; "
                 "give WX = WY = 0"
             )
         w = w[2:]
     if w.shape != (1,):
-        raise InputError(f"initial_rate: expected the yaw rate in rad/s, got {list(w)}")
+        raise InputError(f"initial_rate: expected the yaw rate in rad/s, got {w.tolist()}")
     return model.x0(yaw=yaw0, w=float(w[0]))
 
 

@@ -115,16 +115,16 @@ def free_oscillation(
     if testbed.kind == "platform":
         s = np.asarray(sliders, dtype=float)
         if s.shape != (3,):
-            raise InputError(f"--sliders: expected 3 positions in m, got {list(s)}")
+            raise InputError(f"--sliders: expected 3 positions in m, got {s.tolist()}")
         if testbed.masses is None and np.any(s != 0):
             raise InputError(
-                f"--sliders {list(s)}: testbed '{testbed.name}' has no [masses] table "
+                f"--sliders {s.tolist()}: testbed '{testbed.name}' has no [masses] table "
                 "(a passive platform); leave the sliders at 0"
             )
         travel = testbed.masses.travel if testbed.masses else 0.0
         if np.any(np.abs(s) > travel):
             raise InputError(
-                f"--sliders {list(s)}: each must lie within +-{travel} m (masses.travel)"
+                f"--sliders {s.tolist()}: each must lie within +-{travel} m (masses.travel)"
             )
         u[model.index(["s1", "s2", "s3"], "u")] = s
         if testbed.field is not None:
@@ -133,10 +133,10 @@ def free_oscillation(
         raise InputError("--sliders applies to kind = 'platform' testbeds only")
     w0 = np.asarray(initial_rate, dtype=float)
     if w0.shape != (3,):
-        raise InputError(f"--initial-rate: expected 3 rates WX WY WZ in rad/s, got {list(w0)}")
+        raise InputError(f"--initial-rate: expected 3 rates WX WY WZ in rad/s, got {w0.tolist()}")
     if model.dof == 1 and np.any(w0[:2] != 0):
         raise InputError(
-            f"--initial-rate {list(w0)}: a dof = 1 bearing turns about body z only; "
+            f"--initial-rate {w0.tolist()}: a dof = 1 bearing turns about body z only; "
             "give WX = WY = 0"
         )
     x0 = model.x0(q=q0, w=w0) if model.dof == 3 else model.x0(w=w0[2])
