@@ -330,7 +330,7 @@ def _simulate(tb: Testbed, a: dict, seed: int, gains=None, src: str = ""):
             q0=a.get("initial_quaternion", (1.0, 0.0, 0.0, 0.0)),
             sliders=a.get("sliders", (0.0, 0.0, 0.0)), duration=a.get("duration", 60.0),
             seed=seed, noise=not a.get("ideal", False),
-            attitude_noise=a.get("attitude_noise", 0.0),
+            attitude_noise=a.get("attitude_noise"),
         )  # fmt: skip
         summary = free_summary(result)
     return result, {"testbed": tb.name, "scenario": scenario, "seed": seed, **summary}
