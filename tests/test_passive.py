@@ -280,3 +280,15 @@ def test_cli_spindown_of_a_motion_capture_rig(tmp_path):
     assert run(["simulate", str(path), "--scenario", "spindown", "--effect", "gyro_bias=0.01",
                 "-o", str(bad)]) == 2  # fmt: skip
     assert not bad.exists()
+
+
+def test_slew_refuses_a_testbed_without_gyro():
+    from dataclasses import replace
+
+    from airbearing.analysis.simulation.scenarios import slew
+    from airbearing.io.testbed import load_testbed
+
+    cmg = load_testbed("cmg-yaw")
+    no_gyro = cmg.replace(sensors=replace(cmg.sensors, gyro=False))
+    with pytest.raises(InputError, match="gyro"):
+        slew(no_gyro, angle_deg=90, duration=1.0)

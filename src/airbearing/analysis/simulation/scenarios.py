@@ -44,6 +44,11 @@ def slew(
         )
     if duration <= 0:
         raise InputError(f"--duration {duration}: expected a positive time in s")
+    if not testbed.sensors.gyro:
+        raise InputError(
+            f"{testbed.source}: the seed-001 attitude loop feeds back the gyro rate (eqs. 3, 19), "
+            f"and testbed '{testbed.name}' has none (sensors.gyro = false)"
+        )
     model = build_model(testbed, effects)
     kwargs = {} if gains is None else {"gains": gains}
     ctl = cmg_attitude_controller(
