@@ -89,6 +89,19 @@ def test_passive_dof1_is_a_yaw_rotor():
     assert_allclose(log.data["true_wz"], 1.5, rtol=0, atol=0)
 
 
+def test_passive_dof1_on_a_spring_is_a_harmonic_oscillator():
+    """Cables on a yaw bearing: J yaw'' = -k yaw, yaw = y0 cos(W t) + (w0 / W) sin(W t)."""
+    tb = passive1()
+    k, J = 2e-3, 0.05  # N m / rad, kg m^2: W = 0.2 rad/s, period 31 s
+    t = with_jitter(sample_times(tb, 60.0), 0.3, seed=8)
+    log = simulate_on_times(tb, t, initial_rate=0.1, yaw0=0.5, noise=False,
+                            effects={"spring_torque": k})  # fmt: skip
+    W = np.sqrt(k / J)
+    yaw = 0.5 * np.cos(W * t) + 0.1 / W * np.sin(W * t)
+    # RK4 at h <= 37.5 ms on W = 0.2 rad/s: phase error ~ (h W)^4 W t / 120 ~ 1e-11 rad
+    assert_allclose(log.column("true_yaw"), yaw, rtol=0, atol=1e-10)
+
+
 def test_effects_that_act_on_a_passive_platform():
     # FORMATS.md table: everything but the CMG dead zone; the spring on dof 1 only;
     # the CM offset error on dof 3 only; rate-sensor effects only with a gyro
