@@ -12,7 +12,6 @@ from airbearing.cli import app
 from airbearing.cli.outputs import Outputs
 from airbearing.cli.tables import echo_table
 from airbearing.errors import InputError
-from airbearing.io.builtins import BUILTINS, builtin_names, builtin_toml, find
 
 __all__ = ["testbed_app"]
 
@@ -25,6 +24,8 @@ app.add_typer(testbed_app, name="testbed")
 
 
 def _entry(name: str):
+    from airbearing.io.builtins import builtin_names, find
+
     entry = find(name)
     if entry is None:
         raise InputError(
@@ -38,6 +39,8 @@ def list_(
     json_: Annotated[bool, typer.Option("--json", help="Print a JSON list on stdout.")] = False,
 ) -> None:
     """List the built-in testbeds, one line each (--json: {name, kind, dof, description})."""
+    from airbearing.io.builtins import BUILTINS, builtin_names, find
+
     entries = [*BUILTINS, *(find(a) for a in builtin_names() if find(a).alias_of)]
     if json_:
         typer.echo(json.dumps([e.to_json() for e in entries], indent=2))
@@ -53,6 +56,8 @@ def show(
     name: Annotated[str, typer.Argument(help="Built-in name (see 'airbearing testbed list').")],
 ) -> None:
     """Print a built-in testbed file (TOML, FORMATS.md) with its sources."""
+    from airbearing.io.builtins import builtin_toml
+
     _entry(name)
     typer.echo(builtin_toml(name).decode("utf-8"), nl=False)
 
@@ -63,6 +68,8 @@ def export(
     output: Annotated[Path, typer.Option("-o", "--output", help="Testbed file to write, .toml.")],
 ) -> None:
     """Write a built-in testbed as a starting template for your own testbed file."""
+    from airbearing.io.builtins import builtin_toml
+
     out = Outputs()
     path = out.plan(output, "-o", (".toml",))
     _entry(name)
