@@ -275,3 +275,49 @@ def test_first_sample_artefact_at_each_segment_start():
     assert np.all(g.column("wz")[list(rows)] == 0)
     with pytest.raises(InputError, match="wx, wy, wz"):
         with_first_sample_artefact(simulate_on_times(yaw_rig(gyro=False), t, initial_rate=2.0))
+
+
+# ------------------------------------------------------------------------------ rehearsal
+
+
+def test_rehearsal_log_and_its_answer_key(tmp_path):
+    import json
+
+    from cli_run import run
+
+    from airbearing.analysis.simulation.rehearsal import parse_gap, parse_glitch, rehearsal_log
+    from airbearing.io.log import read_log
+    from airbearing.io.testbed import write_testbed
+
+    tb = yaw_rig(gyro=True)
+    r = rehearsal_log(
+        tb, duration=100.0, initial_rate=(0, 0, 2.0), jitter=0.2, gaps=[(40.0, 15.0)],
+        glitches=[parse_glitch("rate_spike:10,700"), ("yaw_zero", (300,))], first_sample=True,
+        effects={"aero_drag": 1e-4}, seed=3,
+    )  # fmt: skip
+    key = r.to_json()
+    # the clock jitters with seed + 1: the gap starts where with_gap says on those times
+    t, after = with_gap(with_jitter(sample_times(tb, 100.0), 0.2, seed=4), 40.0, 15.0)
+    assert_allclose(r.log.t, t, rtol=0, atol=0)
+    assert key["segments"] == 2 and key["segment_rows"] == [[0, after], [after, len(t)]]
+    assert key["first_sample_rows"] == [0, after]
+    assert key["outlier_rows"] == [0, 10, 300, after, 700]
+    assert parse_gap("150:20") == (150.0, 20.0)
+    for bad in ("150", "a:b", "1:-2"):
+        with pytest.raises(InputError, match="--gap"):
+            parse_gap(bad)
+    with pytest.raises(InputError, match="KIND:ROW"):
+        parse_glitch("rate_drift:4")
+
+    # the same through the CLI: the log and its answer key in the summary JSON
+    path = write_testbed(tb, tmp_path / "rig.toml")
+    log, js = tmp_path / "r.parquet", tmp_path / "r.json"
+    assert run(["simulate", str(path), "--scenario", "spindown", "--duration", "100",
+                "--jitter", "0.2", "--gap", "40:15", "--glitch", "rate_spike:10,700",
+                "--glitch", "yaw_zero:300", "--first-sample-artefact", "--seed", "3",
+                "--effect", "aero_drag=1e-4", "-o", str(log), "--json", str(js)]) == 0  # fmt: skip
+    summary = json.loads(js.read_text())
+    assert summary["outlier_rows"] == key["outlier_rows"]
+    assert_allclose(read_log(log, tb).column("wz"), r.log.column("wz"), rtol=0, atol=1e-15)
+    assert run(["simulate", "cmg-yaw", "--jitter", "0.1", "--json", str(tmp_path / "s.json")]) == 2
+    assert not (tmp_path / "s.json").exists()

@@ -73,6 +73,18 @@ def simulate(
         float | None,
         typer.Option(help="Attitude noise, rad (1 sigma); default sensors.attitude_noise."),
     ] = None,
+    jitter: Annotated[
+        float, typer.Option(help="Free/spindown: sample intervals vary by up to this fraction.")
+    ] = 0.0,
+    gap: Annotated[
+        list[str] | None, typer.Option(help="Free/spindown: START:LENGTH s unlogged (repeatable).")
+    ] = None,
+    glitch: Annotated[
+        list[str] | None, typer.Option(help="Free/spindown: KIND:ROW[,ROW] glitch (repeatable).")
+    ] = None,
+    first_sample_artefact: Annotated[
+        bool, typer.Option(help="Free/spindown: rate 0 at each segment's first sample.")
+    ] = False,
     output: Annotated[
         Path | None, typer.Option("-o", "--output", help="Log, .csv or .parquet.")
     ] = None,
@@ -97,6 +109,14 @@ def simulate(
     numbers("--sliders", sliders, unit="m")
     number("--attitude-noise", attitude_noise, lo=0, unit="rad")
     number("--spin-rate", spin_rate, unit="rad/s")
+    number("--jitter", jitter, lo=0, hi=1, hi_open=True)
+    from airbearing.analysis.simulation.rehearsal import parse_gap, parse_glitch
+
+    gaps = [parse_gap(g) for g in gap or ()]
+    glitches = [parse_glitch(g) for g in glitch or ()]
+    artefacts = bool(jitter or gaps or glitches or first_sample_artefact)
+    if artefacts and scenario == "slew":
+        raise InputError("--jitter, --gap, --glitch, --first-sample-artefact: not for a slew")
     effects = parse_effects(effect)
     tb = testbed_arg(testbed)
     default_length = {"slew": 40.0, "free": 60.0, "spindown": 120.0}[scenario]
@@ -112,7 +132,18 @@ def simulate(
     )
     from airbearing.io.output import to_jsonable
 
-    if scenario == "slew":
+    if artefacts:  # a log as a real testbed writes it, with its answer key in the summary
+        from airbearing.analysis.simulation.rehearsal import rehearsal_log, rehearsal_summary
+
+        result = rehearsal_log(
+            tb, duration=length, effects=effects, seed=seed, noise=not ideal,
+            initial_rate=(0.0, 0.0, spin_rate) if scenario == "spindown" else initial_rate,
+            q0=initial_quaternion, attitude_noise=attitude_noise, jitter=jitter, gaps=gaps,
+            glitches=glitches, first_sample=first_sample_artefact,
+            inputs=dict(zip(("s1", "s2", "s3"), sliders, strict=True)) if any(sliders) else None,
+        )  # fmt: skip
+        summary = rehearsal_summary(result)
+    elif scenario == "slew":
         result = slew(
             tb, angle_deg=yaw_deg, axis=axis, duration=length, seed=seed, ideal=ideal,
             steering=steering, rate_limit_mode=rate_limit, effects=effects,
