@@ -184,3 +184,26 @@ def test_first_compilation_is_announced(tmp_path, monkeypatch):
     assert sink == said
     assert cm.clear_cache() >= 2  # the library and its sidecar
     assert not list(tmp_path.glob("compiled/*.so"))
+
+
+def test_default_notice_sink_is_used_outside_compile_notices(tmp_path, monkeypatch):
+    monkeypatch.setenv(cm.CACHE_ENV, str(tmp_path))
+    default, scoped = [], []
+    cm.announce_to(lambda what, done=None, total=None: default.append(what))
+    try:
+        cm.compiled(_fn(4.5))
+        with cm.compile_notices(lambda what, done=None, total=None: scoped.append(what)):
+            cm.compiled(_fn(5.5))
+    finally:
+        cm.announce_to(None)
+    assert len(default) == 1 and "cache_probe" in default[0]
+    assert len(scoped) == 1  # an open compile_notices takes the notice instead of the default
+
+
+def test_a_failing_compiler_leaves_the_function_uncompiled(tmp_path, monkeypatch):
+    monkeypatch.setenv(cm.CACHE_ENV, str(tmp_path))
+    monkeypatch.setenv("CC", "false")  # a "compiler" that always fails
+    f = _fn(6.5)
+    assert cm.compiled(f) is f
+    assert cm.cache_info().last == "uncompiled"
+    assert not list(tmp_path.glob("compiled/*.so"))

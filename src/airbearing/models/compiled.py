@@ -56,6 +56,7 @@ __all__ = [
     "cache_dir",
     "cache_info",
     "clear_cache",
+    "announce_to",
     "compile_notices",
     "compiled",
     "compiler",
@@ -77,6 +78,7 @@ _lock = threading.Lock()
 _memory: OrderedDict[str, object] = OrderedDict()
 _key_locks: dict[str, threading.Lock] = {}
 _sinks: list[Callable] = []
+_default_sink: list[Callable] = []
 _counts = {"memory_hits": 0, "disk_hits": 0, "compiled": 0, "rebuilt": 0, "uncompiled": 0}
 
 
@@ -204,10 +206,22 @@ def compile_notices(progress: Callable | None) -> Iterator[None]:
                 _sinks.remove(progress)
 
 
+def announce_to(progress: Callable | None) -> None:
+    """Send "compiling ..." notices to ``progress(what)`` when no :func:`compile_notices` is open.
+
+    The CLI sets one for the whole process (a line on stderr unless ``--quiet``);
+    ``None`` removes it.
+    """
+    with _lock:
+        _default_sink.clear()
+        if progress is not None:
+            _default_sink.append(progress)
+
+
 def _announce(what: str, progress: Callable | None) -> None:
     log.info(what)
     with _lock:
-        sinks = list(_sinks)
+        sinks = list(_sinks) or list(_default_sink)
     if progress is not None and progress not in sinks:
         sinks.append(progress)
     for s in sinks:
@@ -323,10 +337,8 @@ def compiled(fn, *, key: str = "", progress: Callable | None = None):
         Same name, inputs, outputs and values as ``fn``; ``fn`` itself when no C
         compiler is available or ``AIRBEARING_COMPILE=0``.
 
-    Raises
-    ------
-    RuntimeError
-        When the C compiler fails on the generated code.
+    When the compiler fails, ``fn`` is returned (a warning is logged and
+    :func:`cache_info` counts it as uncompiled).
     """
     import casadi as ca
 
@@ -376,8 +388,14 @@ def compiled(fn, *, key: str = "", progress: Callable | None = None):
                     for stale in (lib, side):
                         with contextlib.suppress(FileNotFoundError):
                             stale.unlink()
-                    _build(cc, name, source, lib, side)
-                    f = _load(name, lib, fn)
+                    try:
+                        _build(cc, name, source, lib, side)
+                        f = _load(name, lib, fn)
+                    except (RuntimeError, OSError) as e:
+                        # the virtual machine computes the same values, only slower
+                        log.warning("%s; running %s uncompiled", e, name)
+                        _count("uncompiled")
+                        return fn
         _count(what)
         with _lock:
             _memory[mem_key] = f
