@@ -29,7 +29,8 @@ __all__ = ["TARGET_TASK_S", "run_one", "run_chunk", "open_client", "run_campaign
 #: s, wanted work per task once the runs have been timed.
 TARGET_TASK_S = 2.0
 _MAX_CHUNK = 256
-_CONNECT_TIMEOUT_S = 5
+_CONNECT_TIMEOUT_S = 3
+_WORKER_WAIT_S = 60
 
 
 def run_one(campaign, run: int) -> dict:
@@ -169,6 +170,13 @@ def run_campaign(campaign, output, *, client=None, resume: bool = False, progres
     elif todo:
         from dask.distributed import as_completed
 
+        try:
+            client.wait_for_workers(1, timeout=_WORKER_WAIT_S)
+        except TimeoutError:
+            raise InputError(
+                f"the Dask cluster at {client.scheduler.address} has no workers "
+                f"(waited {_WORKER_WAIT_S} s): start some with 'dask worker ADDRESS'"
+            ) from None
         n_workers = max(1, len(client.scheduler_info().get("workers", {})))
         spec = client.scatter(campaign, broadcast=True)
         queue = list(todo)
