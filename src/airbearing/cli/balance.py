@@ -2,30 +2,115 @@
 
 from __future__ import annotations
 
+import math
+import os
+from enum import StrEnum
 from pathlib import Path
 from typing import Annotated
 
 import typer
 
-from airbearing.analysis.balancing.runs import (
-    compare_methods,
-    parse_sweep,
-    run_balancing,
-    sweep_comparison,
-    two_step,
-)
 from airbearing.cli import app
-from airbearing.cli.common import check_output_path, testbed_arg
-from airbearing.design.balancing import METHODS
+from airbearing.cli.common import testbed_arg
+from airbearing.cli.outputs import Outputs
+from airbearing.cli.show_progress import progress_display
 from airbearing.errors import InputError
-from airbearing.io.log import write_log
-from airbearing.io.output import to_jsonable, write_json
+
+__all__ = ["balance", "Method", "Start", "table_text"]
+
+
+class Method(StrEnum):
+    """Balancing laws (:data:`airbearing.design.balancing.METHODS`; a test keeps them equal)."""
+
+    mechanical = "mechanical"
+    mixed = "mixed"
+    lyapunov = "lyapunov"
+    adaptive = "adaptive"
+
+
+class Start(StrEnum):
+    """Initial attitude of a run (:func:`airbearing.analysis.balancing.runs.run_balancing`)."""
+
+    auto = "auto"
+    rest = "rest"
+    level = "level"
+
+
+def _finite(option: str, value, *, positive: bool = False, unit: str = "") -> None:
+    """Refuse a non-finite (or, with ``positive``, a non-positive) numeric option."""
+    values = value if isinstance(value, tuple) else (value,)
+    if value is None or all(math.isfinite(v) and (v > 0 or not positive) for v in values):
+        return
+    shown = " ".join(f"{v:g}" for v in values)
+    what = (
+        "a positive finite number"
+        if positive
+        else "finite numbers"
+        if len(values) > 1
+        else ("a finite number")
+    )
+    raise InputError(f"{option} {shown}: expected {what}{' in ' + unit if unit else ''}")
+
+
+def table_text(rows: list[dict]) -> str:
+    """Rows as an aligned text table (numbers to 4 significant digits, ``-`` for None)."""
+    if not rows:
+        return ""
+    cols = list(rows[0])
+
+    def cell(v) -> str:
+        if v is None:
+            return "-"
+        if isinstance(v, bool) or not isinstance(v, int | float):
+            return str(v)
+        return f"{float(v):.4g}"
+
+    cells = [[cell(r.get(c)) for c in cols] for r in rows]
+    widths = [max(len(c), *(len(row[i]) for row in cells)) for i, c in enumerate(cols)]
+    lines = ["  ".join(c.rjust(w) for c, w in zip(cols, widths, strict=True))]
+    lines += ["  ".join(v.rjust(w) for v, w in zip(row, widths, strict=True)) for row in cells]
+    return "\n".join(lines)
+
+
+def _comparison_rows(cmp) -> list[dict]:
+    rows = []
+    for off, table in cmp.tables.items():
+        for method, m in table.items():
+            rows.append(
+                {
+                    "offset_mm": off * 1e3,
+                    "method": method,
+                    "g_perp_rms": m["g_perp_rms"],
+                    "slider1_p2p_mm": m["slider_p2p_m"][0] * 1e3,
+                    "slider2_p2p_mm": m["slider_p2p_m"][1] * 1e3,
+                    "dipole_rms": m["dipole_rms"],
+                    "residual_torque_nm": m["residual_torque_nm"],
+                    "runs": m["runs"],
+                }
+            )
+    return rows
+
+
+def _sweep_rows(sw) -> list[dict]:
+    rows = []
+    for p in sw.points:
+        r = p.ratios or {}
+        rows.append(
+            {
+                f"{sw.name} ({sw.unit})": p.value,
+                "g_perp ratio": r.get("g_perp_rms"),
+                "p2p ratio": r.get("slider_p2p"),
+                "balanced": p.balanced,
+                "steady": None if p.steady is None else p.steady["steady"],
+            }
+        )
+    return rows
 
 
 @app.command()
 def balance(
     testbed: Annotated[str, typer.Argument(help="Testbed file or built-in name.")],
-    method: Annotated[str, typer.Option(help="|".join(METHODS))] = "mixed",
+    method: Annotated[Method, typer.Option(help="Balancing law.")] = Method.mixed,
     duration: Annotated[float, typer.Option(help="Run length, s (seed 000: 300).")] = 300.0,
     initial_offset_mm: Annotated[
         float, typer.Option(help="In-plane slider start, mm (seed 000: -0.5, +0.5).")
@@ -38,12 +123,12 @@ def balance(
         ),
     ] = None,
     start: Annotated[
-        str,
+        Start,
         typer.Option(
             help="rest (seed 000: the offset platform's rest position) | level | auto "
             "(rest if the platform has one, else level)."
         ),
-    ] = "auto",
+    ] = Start.auto,
     initial_rate: Annotated[
         tuple[float, float, float],
         typer.Option(help="Initial body rate, rad/s (seed 000: null; seed 004: a spin)."),
@@ -58,7 +143,7 @@ def balance(
             "sets the initial rest attitude.",
         ),
     ] = False,
-    seed: Annotated[int, typer.Option(help="Noise seed.")] = 0,
+    seed: Annotated[int, typer.Option(min=0, help="Noise seed.")] = 0,
     two_step_: Annotated[
         bool, typer.Option("--two-step", help="Seed 004's two-step procedure.")
     ] = False,
@@ -68,51 +153,92 @@ def balance(
     sweep: Annotated[
         str | None, typer.Option(help="NAME=START:STOP:N, e.g. backlash=0:5e-5:6.")
     ] = None,
-    seeds: Annotated[int, typer.Option(help="Seeds per offset in --compare.")] = 4,
+    seeds: Annotated[int, typer.Option(help="Seeds per offset in --compare (>= 1).")] = 4,
     json_out: Annotated[Path | None, typer.Option("--json", help="Summary JSON.")] = None,
     log: Annotated[Path | None, typer.Option("--log", help="Run log, .csv or .parquet.")] = None,
 ) -> None:
     """Balance a platform testbed automatically (seeds 000 and 004) and report the metrics."""
-    check_output_path(json_out, "--json", (".json",))
-    check_output_path(log, "--log", (".csv", ".parquet"))
-    tb = testbed_arg(testbed)
+    out = Outputs()
+    json_path = out.plan(json_out, "--json", (".json",))
+    log_path = out.plan(log, "--log", (".csv", ".parquet"))
+    _finite("--duration", duration, positive=True, unit="s")
+    _finite("--initial-offset-mm", initial_offset_mm, unit="mm")
+    _finite("--vertical-offset", vertical_offset, unit="m")
+    _finite("--initial-rate", tuple(initial_rate), unit="rad/s")
+    if seeds < 1:
+        raise InputError(f"--seeds {seeds}: expected at least 1")
     if sweep is not None and compare is None:
         raise InputError("--sweep needs --compare, e.g. --compare mechanical,mixed")
     if log is not None and (compare is not None or two_step_):
         raise InputError("--log applies to a single run (not --compare or --two-step)")
-    if two_step_:
-        summary = two_step(tb, method=method, seed=seed)
-        result = None
-    elif compare is not None:
+    if two_step_ and compare is not None:
+        raise InputError("--two-step and --compare are different runs: give one of them")
+    methods = None
+    if compare is not None:
         methods = [m.strip() for m in compare.split(",") if m.strip()]
-        if seeds < 1:
-            raise InputError(f"--seeds {seeds}: expected at least 1")
-        if sweep is not None:
-            name, values = parse_sweep(sweep)
-            summary = sweep_comparison(
-                tb, name, values, methods, seeds=range(seeds), duration=duration,
-                vertical_offset=vertical_offset, start=start, initial_rate=initial_rate,
-                offset_stays=offset_stays,
-            )  # fmt: skip
-        else:
-            summary = compare_methods(
-                tb, methods, seeds=range(seeds), duration=duration,
-                vertical_offset=vertical_offset, start=start, initial_rate=initial_rate,
-                offset_stays=offset_stays,
-            )  # fmt: skip
-        result = None
+        known = [m.value for m in Method]
+        bad = [m for m in methods if m not in known]
+        if not methods or bad:
+            raise InputError(f"--compare {compare}: expected names from {'|'.join(known)}")
+    sweep_spec = None
+    if sweep is not None:
+        from airbearing.analysis.balancing.comparison import parse_sweep
+
+        sweep_spec = parse_sweep(sweep)
+    tb = testbed_arg(testbed)
+    options = dict(
+        vertical_offset=vertical_offset,
+        start=start.value,
+        initial_rate=initial_rate,
+        offset_stays=offset_stays,
+    )
+    table = ""
+    if two_step_:
+        from airbearing.analysis.balancing.two_step import two_step
+
+        with progress_display("balance") as progress:
+            progress("two-step: in-plane balancing, identification, kinetic energy")
+            result = two_step(tb, method=method.value, seed=seed)
+        summary = result.to_json()
+    elif methods is not None:
+        from airbearing.analysis.balancing.comparison import compare_methods, sweep_comparison
+
+        with progress_display("balance") as progress:
+            if sweep_spec is not None:
+                name, values = sweep_spec
+                result = sweep_comparison(
+                    tb, name, values, methods, seeds=range(seeds), duration=duration,
+                    progress=progress, **options,
+                )  # fmt: skip
+                table = table_text(_sweep_rows(result))
+            else:
+                result = compare_methods(
+                    tb, methods, seeds=range(seeds), duration=duration, progress=progress,
+                    **options,
+                )  # fmt: skip
+                table = table_text(_comparison_rows(result))
+        summary = result.to_json()
     else:
-        run = run_balancing(
-            tb, method, duration=duration, initial_offset=initial_offset_mm * 1e-3,
-            vertical_offset=vertical_offset, start=start, initial_rate=initial_rate, seed=seed,
-            offset_stays=offset_stays,
-        )  # fmt: skip
-        summary, result = {"testbed": tb.name, **run.metrics}, run.result
-    summary = to_jsonable(summary)
-    if log is not None and result is not None:
-        write_log(result.log, log)
-    if json_out is not None:
-        write_json(json_out, summary)
+        from airbearing.analysis.balancing.runs import run_balancing
+        from airbearing.io.log import write_log
+
+        with progress_display("balance") as progress:
+            progress(f"{method.value}: {duration:g} s run")
+            run = run_balancing(
+                tb, method.value, duration=duration, initial_offset=initial_offset_mm * 1e-3,
+                seed=seed, **options,
+            )  # fmt: skip
+        summary = {"testbed": tb.name, **run.metrics}
+
+        def _write(tmp: Path) -> None:
+            # write_log picks the format by suffix; Outputs' temporary file has none
+            os.replace(write_log(run.result.log, tmp.with_name(tmp.name + log_path.suffix)), tmp)
+
+        out.file(log_path, _write)
+    out.json(json_path, summary)
+    out.commit()
+    if table:
+        typer.echo(table)
     for k, v in summary.items():
         if k not in ("points", "tables"):
             typer.echo(f"{k}: {v}")

@@ -1,0 +1,148 @@
+"""Seed-000 metrics of a balancing run (Tables 1-2), the residual torque and kinetic energy.
+
+Metrics (over the last third of the run, as the seed's "steady state")
+    ``g_perp_rms``, ``g_x_rms``, ``g_y_rms``: RMS of the measured in-plane ``g_hat``
+    components (what the seed's IMU measured; ``*_true`` from the true attitude);
+    ``slider_p2p_m``, ``slider_std_m``: of the stepper positions (the step counts the seed
+    logged; the mass positions, which include backlash, are in ``mass_p2p_m``);
+    ``dipole_rms``: RMS of ``|d|``; ``residual_torque_nm``: seed 000's estimate, the
+    left-hand side of seed 000 eq. 1 from the measured rates of the free-floating platform
+    after balancing (sliders held, magnetorquers off), RMS over the free run;
+    ``residual_offset_m``: the true CR -> CM offset the run leaves (simulation truth, the
+    sliders where they end).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.signal import savgol_filter
+
+from airbearing.analysis.simulation.simulate import SimResult
+from airbearing.errors import InputError
+from airbearing.io.testbed import Testbed
+from airbearing.models import quaternion as quat
+
+__all__ = [
+    "SEED000_TABLES",
+    "balancing_metrics",
+    "inertia_with_sliders",
+    "kinetic_energy",
+    "last_third",
+    "residual_torque",
+    "true_offset",
+]
+
+#: s, Savitzky-Golay window of the rate derivative in the residual torque: 2 s averages the
+#: gyro noise (about 40 samples at 20 Hz) and is short against the platform's swing periods.
+_SG_WINDOW_S = 2.0
+
+#: Seed 000 Tables 1 and 2 (averages of 4 tests each), SI units.
+SEED000_TABLES = {
+    -0.5e-3: {
+        "mechanical": {"g_x_rms": 3.74e-3, "g_y_rms": 5.31e-3, "g_perp_rms": 6.49e-3,
+                       "slider_p2p_m": (0.178e-3, 0.202e-3), "slider_std_m": (0.026e-3, 0.030e-3),
+                       "residual_torque_nm": 8.3e-5},
+        "mixed": {"g_x_rms": 2.15e-3, "g_y_rms": 1.54e-3, "g_perp_rms": 2.64e-3,
+                  "slider_p2p_m": (0.014e-3, 0.010e-3), "slider_std_m": (0.004e-3, 0.002e-3),
+                  "residual_torque_nm": 6.8e-5},
+    },
+    0.5e-3: {
+        "mechanical": {"g_x_rms": 2.44e-3, "g_y_rms": 3.87e-3, "g_perp_rms": 4.57e-3,
+                       "slider_p2p_m": (0.142e-3, 0.148e-3), "slider_std_m": (0.022e-3, 0.024e-3),
+                       "residual_torque_nm": 7.9e-5},
+        "mixed": {"g_x_rms": 1.54e-3, "g_y_rms": 2.71e-3, "g_perp_rms": 3.12e-3,
+                  "slider_p2p_m": (0.020e-3, 0.012e-3), "slider_std_m": (0.004e-3, 0.004e-3),
+                  "residual_torque_nm": 7.1e-5},
+    },
+}  # fmt: skip
+
+
+def true_offset(testbed: Testbed, s, offset0) -> np.ndarray:
+    """m, CR -> CM offset with the sliders at ``s`` (m), ``offset0`` with them at zero:
+    ``offset0 + sum m_i s_i u_i / m`` (seed 004 eq. 5)."""
+    m = testbed.masses
+    moment = (np.asarray(m.mass_vec) * np.asarray(s, dtype=float)) @ np.asarray(m.axes_matrix)
+    return np.asarray(offset0, dtype=float) + moment / testbed.body.mass
+
+
+def last_third(a: np.ndarray) -> np.ndarray:
+    n = a.shape[0]
+    return a[n - max(1, n // 3) :]
+
+
+def _rms(a, axis=None) -> np.ndarray:
+    return np.sqrt(np.mean(np.square(a), axis=axis))
+
+
+def balancing_metrics(result: SimResult, *, free: SimResult | None = None) -> dict:
+    """The seed-000 numbers (Tables 1-2) of a balancing run, over its last third.
+
+    Returns
+    -------
+    dict with ``g_perp_rms``, ``g_x_rms``, ``g_y_rms`` (-), ``g_perp_rms_true`` (-),
+    ``slider_p2p_m``, ``slider_std_m``, ``mass_p2p_m`` (3 each, m), ``dipole_rms`` (A m^2),
+    ``slider_final_m`` (3, m), ``residual_torque_nm`` (N m, None without ``free``).
+    """
+    m = result.model
+    g = last_third(result.y[:, m.index(["gx", "gy", "gz"], "y")])
+    q = last_third(result.x[:-1, 0:4])
+    g_true = quat.rotate_inverse(q, np.array([0.0, 0.0, -1.0]))
+    names = result.controller.extra_names
+    motor = last_third(result.extra[:, [names.index(f"motor{i}") for i in (1, 2, 3)]])
+    mass = last_third(result.u[:, m.index(["s1", "s2", "s3"], "u")])
+    d = last_third(result.u[:, m.index(["mx", "my", "mz"], "u")])
+    out = {
+        "g_perp_rms": float(_rms(np.hypot(g[:, 0], g[:, 1]))),
+        "g_x_rms": float(_rms(g[:, 0])),
+        "g_y_rms": float(_rms(g[:, 1])),
+        "g_perp_rms_true": float(_rms(np.hypot(g_true[:, 0], g_true[:, 1]))),
+        "slider_p2p_m": np.ptp(motor, axis=0).tolist(),
+        "slider_std_m": np.std(motor, axis=0).tolist(),
+        "mass_p2p_m": np.ptp(mass, axis=0).tolist(),
+        "dipole_rms": float(_rms(np.linalg.norm(d, axis=1))),
+        "slider_final_m": result.u[-1, m.index(["s1", "s2", "s3"], "u")].tolist(),
+        "residual_torque_nm": None,
+    }
+    if free is not None:
+        out["residual_torque_nm"] = residual_torque(free)
+    return out
+
+
+def inertia_with_sliders(testbed: Testbed, s, inertia=None) -> np.ndarray:
+    """Inertia about the CR (``inertia``, sliders at zero; default the testbed's nominal one)
+    plus the sliders' point masses at ``s`` (seed 004 eqs. 6-7), kg m^2."""
+    J = np.array(testbed.body.inertia_matrix if inertia is None else inertia, dtype=float)
+    for u_i, m_i, s_i in zip(testbed.masses.axes_matrix, testbed.masses.mass_vec, s, strict=True):
+        J += m_i * s_i**2 * (np.eye(3) - np.outer(u_i, u_i))
+    return J
+
+
+def residual_torque(free: SimResult, *, window_s: float = _SG_WINDOW_S) -> float:
+    """Seed 000's residual-torque estimate from a free-floating run, N m.
+
+    The left-hand side of seed 000 eq. 1, ``J w' + w x J w``, from the measured rates,
+    with ``w'`` a Savitzky-Golay derivative (quadratic, ``window_s`` long) and ``J`` the
+    nominal inertia with the sliders where they are; RMS of its norm over the run.
+    """
+    tb = free.model.testbed
+    dt = tb.sensors.dt
+    w = free.log.rates()
+    n = int(round(window_s / dt)) | 1
+    if w.shape[0] < n + 2:
+        raise InputError(
+            f"free-floating run of {w.shape[0]} samples is shorter than the {window_s} s "
+            "derivative window"
+        )
+    w_dot = savgol_filter(w, n, 2, deriv=1, delta=dt, axis=0)
+    w_s = savgol_filter(w, n, 2, axis=0)
+    s = free.u[0, free.model.index(["s1", "s2", "s3"], "u")]
+    J = inertia_with_sliders(tb, s)
+    tau = w_dot @ J.T + np.cross(w_s, w_s @ J.T)  # seed 000 eq. 1, left-hand side
+    half = n // 2
+    return float(_rms(np.linalg.norm(tau[half:-half], axis=1)))
+
+
+def kinetic_energy(w: np.ndarray, J: np.ndarray) -> np.ndarray:
+    """Rotational kinetic energy ``w^T J w`` per sample (seed 004 eq. 53, as written), J."""
+    w = np.asarray(w, dtype=float)
+    return np.einsum("ni,ij,nj->n", w, np.asarray(J, float), w)

@@ -1,0 +1,299 @@
+"""Seed 004's two-step balancing, verified by the kinetic-energy spread (eqs. 52-54)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields
+
+import numpy as np
+
+from airbearing.analysis.balancing.metrics import (
+    balancing_metrics,
+    inertia_with_sliders,
+    kinetic_energy,
+    last_third,
+    true_offset,
+)
+from airbearing.analysis.balancing.runs import FREE_FLOAT_DURATION, check_inputs
+from airbearing.analysis.simulation.simulate import simulate
+from airbearing.design.balancing import (
+    TILT_INTEGRAL_RATE,
+    balancing_controller,
+    lyapunov_gains_from_pid,
+    tilt_pid_gains,
+)
+from airbearing.design.controller import constant_input
+from airbearing.errors import InputError
+from airbearing.io.testbed import Testbed
+from airbearing.models.model import build_model
+
+__all__ = [
+    "IDENTIFICATION_DURATION",
+    "KNOWN_DISPLACEMENT",
+    "SEED004_RATES",
+    "STEP1_RESIDUAL",
+    "TwoStepResult",
+    "step1_duration",
+    "two_step",
+]
+
+
+@dataclass(frozen=True, eq=False)
+class TwoStepResult:
+    """Seed 004's two-step procedure (:func:`two_step`): what each step found and left.
+
+    Attributes
+    ----------
+    testbed, method : str
+        Testbed name and the step-1 balancing law.
+    ke_std_before, ke_std_after : float
+        J, standard deviation of the kinetic energy ``w^T J w`` (seed 004 eqs. 53-54) of
+        the free oscillations before (sliders at zero) and after balancing.
+    ke_reduction : float
+        ``1 - ke_std_after / ke_std_before`` (seed 004: 99.75 % in simulation).
+    vertical_offset_identified_m : float
+        m, identified vertical CR -> CM offset (sliders at zero).
+    cm_offset_identified_m, cm_offset_true_m : list of 3 float
+        m, identified and true CR -> CM offset, sliders at zero.
+    inertia_identified : 3x3 list
+        kg m^2, identified inertia about the CR.
+    identify_method : str
+        Identification method of step 2.
+    identify_warnings : list of str
+        Warnings of the identification.
+    known_displacement_m : list of 3 float
+        m, the known slider displacement of step 2.
+    in_plane_known : bool
+        Whether step 1's in-plane offset constrained the identification.
+    sliders_step1_m, sliders_final_m : list of 3 float
+        m, slider positions after step 1 and after both steps.
+    residual_offset_step1_m, residual_offset_m : list of 3 float
+        m, true CR -> CM offset left after step 1 and after both steps.
+    g_perp_rms_step1 : float
+        RMS of the measured in-plane gravity over step 1's last third.
+    balance_duration_s : float
+        s, length of step 1.
+    seed : int
+        Noise seed.
+    """
+
+    testbed: str
+    method: str
+    ke_std_before: float
+    ke_std_after: float
+    ke_reduction: float
+    vertical_offset_identified_m: float
+    cm_offset_identified_m: list
+    cm_offset_true_m: list
+    inertia_identified: list
+    identify_method: str
+    identify_warnings: list
+    known_displacement_m: list
+    in_plane_known: bool
+    sliders_step1_m: list
+    sliders_final_m: list
+    residual_offset_step1_m: list
+    residual_offset_m: list
+    g_perp_rms_step1: float
+    balance_duration_s: float
+    seed: int
+
+    def to_json(self) -> dict:
+        """The ``balance --two-step`` JSON: one key per attribute, in this order."""
+        return {f.name: getattr(self, f.name) for f in fields(self)}
+
+
+#: rad/s, initial rates of seed 004: the in-plane balancing simulation, and the unbalanced
+#: and balanced kinetic-energy experiments.
+SEED004_RATES = {
+    "balancing": (-0.307, 0.189, -1.500),
+    "unbalanced": (-0.5171, 0.0742, -1.7770),
+    "balanced": (0.3076, 0.1898, -1.5010),
+}
+#: s, seed 004: free oscillations for identification (simulation, 200 s at 0.05 s).
+IDENTIFICATION_DURATION = 200.0
+#: m, default known in-plane slider displacement of step 2 (per in-plane rail). It must move
+#: the CM by much more than step 1 leaves in-plane (about one backlash times m_i / M, 1.5 um
+#: with seed 004's 0.465 kg masses and 0.02 mm accuracy): 5 mm of a 0.465 kg mass is 0.37 mm,
+#: "in order of the offset vector" (seed 004's rule for its point O) and a tilt of the hanging
+#: platform of about 11 deg, well inside seed 004's +-50 deg.
+KNOWN_DISPLACEMENT = (5e-3, 5e-3, 0.0)
+#: m, in-plane residual seed 004 reached after in-plane balancing ("in the order of 1e-7 m").
+STEP1_RESIDUAL = 1e-7
+
+
+def step1_duration(testbed: Testbed, integral_rate: float = TILT_INTEGRAL_RATE) -> float:
+    """Default length of step 1, s: long enough that its last third is steady.
+
+    The tilt loop's slowest pole is its integral rate ``b`` (:func:`tilt_pid_gains`), so
+    the in-plane offset of the testbed file, ``|r_xy|``, decays as ``exp(-b t)``; it reaches
+    seed 004's residual (:data:`STEP1_RESIDUAL`) at ``t_ss = ln(|r_xy| / 1e-7 m) / b`` and
+    the run lasts ``1.5 t_ss`` (at least seed 004's 300 s), so the last third, over which
+    the balanced positions are averaged, starts at ``t_ss``.
+    """
+    r_xy = float(np.hypot(*testbed.body.cm_offset_vec[:2]))
+    t_ss = math.log(max(r_xy, STEP1_RESIDUAL) / STEP1_RESIDUAL) / integral_rate
+    return max(300.0, 1.5 * t_ss)
+
+
+def _free(model, u_sliders, b_lab, x0, duration, seed, noise):
+    u = np.zeros(model.nu)
+    u[model.index(["s1", "s2", "s3"], "u")] = u_sliders
+    u[model.index(["bx_lab", "by_lab", "bz_lab"], "u")] = b_lab
+    return simulate(model, constant_input(model, u), duration=duration, x0=x0, seed=seed,
+                    noise=noise)  # fmt: skip
+
+
+def two_step(
+    testbed: Testbed,
+    *,
+    method: str = "lyapunov",
+    balance_duration: float | None = None,
+    identification_duration: float = IDENTIFICATION_DURATION,
+    ke_duration: float = FREE_FLOAT_DURATION,
+    known_displacement=KNOWN_DISPLACEMENT,
+    seed: int = 0,
+    noise: bool = True,
+    identify_method: str = "equation-error",
+    initial_rate=(0.0, 0.0, 0.0),
+    in_plane_known: bool = True,
+) -> TwoStepResult:
+    """Seed 004's two-step balancing, verified by the kinetic-energy spread (eqs. 52-54).
+
+    1. In-plane balancing with ``method`` from the testbed's true offset, sliders at zero,
+       from rest (``initial_rate``), gains from :func:`tilt_pid_gains` for the testbed's
+       nominal pendulum, for ``balance_duration`` s (default :func:`step1_duration`, 675 s
+       on platform-3dof: the loop's integral pole has a 50 s time constant, so seed 004's
+       300 s would leave about 2 um in-plane). Seed 004 started at a 1.5 rad/s spin; with
+       products of inertia the spin's ``w x J w`` is a steady torque that eq. 51 (which
+       drops it) cancels with a wrong offset (about 0.15 mm on platform-3dof), so the
+       default starts at rest. The balanced slider positions are the stepper positions
+       averaged over the last third (the sensor noise keeps the sliders dithering by tens
+       of um, 0.6 um of CM; the final sample is one draw of that, the average is within
+       about 0.03 um), rounded to whole steps; the sliders are set there.
+    2. Two free oscillations of ``identification_duration`` s each (seed 004: 200 s at
+       20 Hz; "data sampled from different experiments are merged"): one with the sliders
+       where step 1 left them, one after the known in-plane displacement
+       ``known_displacement`` (m, per rail; seed 004: "a known unbalance vector is
+       introduced"). :func:`~.identification.platform.identify_platform` estimates the
+       inertia and the offset (sliders at zero), with the in-plane offset that step 1 found
+       as a constraint (seed 004: "used as constraints") when ``in_plane_known``. The
+       sliders then cancel the identified offset: only its vertical part with
+       ``in_plane_known`` (seed 004), all of it otherwise.
+
+       Why two logs: free motion, ``J w' + w x J w = m r x g``, is unchanged when ``J`` and
+       ``r`` are scaled together, so one free oscillation gives only ``r / J``. Its scale
+       comes from a known change of the mass moment: with one log, from the in-plane
+       offset during the log (step 1's answer plus the displacement), whose error is what
+       step 1 leaves (about a backlash times ``m_i / M``), so the vertical offset comes out
+       wrong by that fraction (3 % for a 0.5 mm displacement, 37 um of CM shift); with two
+       logs, from the displacement alone.
+    3. Kinetic energy ``w^T J w`` (eq. 53, measured rates, identified ``J`` plus the
+       sliders' point masses where they are, seed 004 eqs. 6-7) of ``ke_duration`` s free
+       oscillations before (sliders at zero) and after, from seed 004's initial rates; its
+       standard deviation (eq. 54: constant for a balanced platform). The gyro noise sets
+       a floor of about ``2 |J w| sigma_gyro`` (4e-5 J on platform-3dof).
+
+    Returns
+    -------
+    TwoStepResult
+    """
+    if balance_duration is None:
+        balance_duration = step1_duration(testbed)
+    check_inputs(testbed, method, balance_duration)
+    from airbearing.analysis.identification.platform import identify_platform
+
+    d = np.asarray(known_displacement, dtype=float).reshape(-1)
+    if d.shape != (3,) or not np.all(np.isfinite(d)) or not np.any(d != 0):
+        raise InputError(
+            f"known_displacement={known_displacement!r}: expected three finite slider "
+            "displacements in m, not all zero"
+        )
+    model = build_model(testbed)
+    b_lab = testbed.field.lab_vec if testbed.field is not None else np.zeros(3)
+    mass, m_i, A = testbed.body.mass, testbed.masses.mass_vec, testbed.masses.axes_matrix
+    travel = testbed.masses.travel
+    r_true0 = testbed.body.cm_offset_vec
+
+    # step 1: in-plane balancing (seed 004 eqs. 34/51)
+    pid = tilt_pid_gains(testbed)
+    gains = {"lyapunov": lyapunov_gains_from_pid(pid), "adaptive": (pid[1], pid[0])}.get(
+        method, pid
+    )
+    ctl = balancing_controller(model, method, slider_start=np.zeros(3), gains=gains)
+    x0 = model.x0(w=initial_rate)
+    r1 = simulate(model, ctl, duration=balance_duration, x0=x0, seed=seed, noise=noise)
+    names = r1.controller.extra_names
+    motor = r1.extra[:, [names.index(f"motor{i}") for i in (1, 2, 3)]]
+    if np.any(np.abs(motor[-1]) >= travel * (1 - 1e-9)):
+        raise InputError(
+            f"{testbed.source}: step 1 drove a slider to its travel limit ({travel} m): the "
+            f"sliding masses {m_i.tolist()} kg cannot shift the CM of '{testbed.name}' far "
+            f"enough (at most {float(np.min(m_i)) * travel / mass:.3g} m per rail)"
+        )
+    s1 = np.mean(last_third(motor), axis=0)  # the steady state's balanced positions
+    if testbed.masses.step > 0:
+        s1 = np.round(s1 / testbed.masses.step) * testbed.masses.step
+    M1 = A.T @ (m_i * s1)  # mass moment of the sliders, seed 004 eq. 5
+    known_xy = -M1[:2] / mass  # in-plane offset at zero sliders, known after step 1
+
+    # step 2: free oscillations before and after a known displacement, identification
+    s2 = s1 + d
+    if np.any(np.abs(s2) > travel):
+        raise InputError(
+            f"known_displacement={d.tolist()} m: from the step-1 positions {s1.tolist()} m it "
+            f"leaves the travel +-{travel} m"
+        )
+    logs = [
+        _free(model, s, b_lab, model.x0(w=SEED004_RATES[rate]), identification_duration,
+              seed + 1 + k, noise).log
+        for k, (s, rate) in enumerate(((s1, "balancing"), (s2, "balanced")))
+    ]  # fmt: skip
+    ident = identify_platform(
+        testbed,
+        logs,
+        known_offset_xy=tuple(known_xy) if in_plane_known else None,
+        method=identify_method,
+    )
+    r_est = np.asarray(ident.cm_offset, float).reshape(3)
+    J_est = np.asarray(ident.inertia, float).reshape(3, 3)
+    r_tot = r_est + M1 / mass  # identified offset with the sliders at s1
+    if in_plane_known:
+        r_tot[:2] = 0.0  # seed 004: step 2 moves only the vertical offset
+    # the sliders' mass moment must change by -mass * r_tot (seed 004 eq. 13 with eq. 5)
+    s_final = s1 + np.linalg.solve(A.T * m_i, -mass * r_tot)
+    if np.any(np.abs(s_final) > travel):
+        raise InputError(
+            f"{testbed.source}: the identified offset {r_tot.tolist()} m needs slider "
+            f"positions {s_final.tolist()} m beyond the travel +-{travel} m"
+        )
+
+    # step 3: kinetic-energy spread, seed 004 eqs. 52-54
+    before = _free(model, np.zeros(3), b_lab, model.x0(w=SEED004_RATES["unbalanced"]),
+                   ke_duration, seed + 3, noise)  # fmt: skip
+    after = _free(model, s_final, b_lab, model.x0(w=SEED004_RATES["balanced"]),
+                  ke_duration, seed + 4, noise)  # fmt: skip
+    ke_b = kinetic_energy(before.log.rates(), inertia_with_sliders(testbed, np.zeros(3), J_est))
+    ke_a = kinetic_energy(after.log.rates(), inertia_with_sliders(testbed, s_final, J_est))
+    return TwoStepResult(
+        testbed=testbed.name,
+        method=method,
+        ke_std_before=float(np.std(ke_b)),
+        ke_std_after=float(np.std(ke_a)),
+        ke_reduction=float(1 - np.std(ke_a) / np.std(ke_b)),
+        vertical_offset_identified_m=float(r_est[2]),
+        cm_offset_identified_m=r_est.tolist(),
+        cm_offset_true_m=r_true0.tolist(),
+        inertia_identified=J_est.tolist(),
+        identify_method=identify_method,
+        identify_warnings=list(ident.warnings),
+        known_displacement_m=d.tolist(),
+        in_plane_known=bool(in_plane_known),
+        sliders_step1_m=s1.tolist(),
+        sliders_final_m=s_final.tolist(),
+        residual_offset_step1_m=true_offset(testbed, s1, r_true0).tolist(),
+        residual_offset_m=true_offset(testbed, s_final, r_true0).tolist(),
+        g_perp_rms_step1=balancing_metrics(r1)["g_perp_rms"],
+        balance_duration_s=float(balance_duration),
+        seed=seed,
+    )
