@@ -16,7 +16,6 @@ from airbearing.analysis.cmg.steering_study import (
     NEAR_SINGULAR,
     cmg_3dof_testbed,
     compare_slews,
-    demo_section,
     internal_singularity_case,
     momentum_tracking,
     rate_limit_comparison,
@@ -24,6 +23,7 @@ from airbearing.analysis.cmg.steering_study import (
 from airbearing.cli import main
 from airbearing.design.steering import STEERING_LAWS
 from airbearing.errors import InputError
+from airbearing.reporting.cmg import demo_section
 from airbearing.reporting.html import Report
 
 BETA = np.deg2rad(53.13)
@@ -131,9 +131,9 @@ def test_demo_section_quick():
 def test_null_motion_escapes_hyperbolic_not_elliptic():
     """Null motion leaves a hyperbolic singular set but not an elliptic one (Wie 2004)."""
     from airbearing.analysis.cmg.singularity import classify_singularity
-    from airbearing.analysis.cmg.steering_study import _null_motion_cases, null_motion_run
+    from airbearing.analysis.cmg.steering_study import null_motion_cases, null_motion_run
 
-    (_, d_h), (_, d_e) = _null_motion_cases()
+    (_, d_h), (_, d_e) = null_motion_cases()
     off = np.deg2rad([2.0, -1.0, 1.0, 0.5])
     assert classify_singularity(d_h - off, BETA) == "hyperbolic"
     assert classify_singularity(d_e - off, BETA) == "elliptic"

@@ -1,20 +1,23 @@
 """The demo report: every capability run on the built-in testbeds, in one HTML file.
 
-Each capability contributes a section function ``section(report, *, quick)``;
-:data:`SECTIONS` lists them in the order they appear.
+Each capability contributes a section function ``section(report, *, quick)`` in a
+``reporting/`` module; :data:`SECTIONS` lists them in the order they appear, each named
+by module and function and imported only when the demo runs it (so importing this
+module, e.g. for ``airbearing --help``, loads no section's dependencies).
+:func:`run_demo` says which section it is in through the ``progress`` callback
+(:mod:`airbearing.progress`).
 """
 
 from __future__ import annotations
 
+import importlib
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import matplotlib.pyplot as plt
 import numpy as np
 
-from airbearing.analysis.balancing import runs as balancing
-from airbearing.analysis.cmg import steering_study as cmg_study
-from airbearing.analysis.identification import platform as identify
 from airbearing.analysis.simulation.scenarios import (
     free_oscillation,
     free_summary,
@@ -22,8 +25,7 @@ from airbearing.analysis.simulation.scenarios import (
     slew_summary,
 )
 from airbearing.io.testbed import load_testbed
-from airbearing.reporting import discrepancy as discrepancy_report
-from airbearing.reporting import stability as stability_report
+from airbearing.progress import call as _progress
 from airbearing.reporting.html import Report
 
 __all__ = ["run_demo", "SECTIONS", "foundation_section"]
@@ -83,19 +85,46 @@ def foundation_section(report: Report, *, quick: bool = False) -> None:
     report.figure(fig, "Measured body rates of a free oscillation (platform-3dof).")
 
 
+def _section(module: str, name: str = "demo_section") -> Callable:
+    """A demo section ``module.name``, imported when it is first called."""
+
+    def section(report: Report, *, quick: bool = False) -> None:
+        return getattr(importlib.import_module(module), name)(report, quick=quick)
+
+    section.__qualname__ = section.__name__ = f"{module}.{name}"
+    return section
+
+
 #: The demo's sections, in order: (title, function).
 SECTIONS = [
     ("Foundation", foundation_section),
-    ("CMG cluster", cmg_study.demo_section),
-    ("Balancing", balancing.demo_section),
-    ("Linear stability", stability_report.demo_section),
-    ("Identification", identify.demo_section),
-    ("Model discrepancy", discrepancy_report.demo_section),
+    ("CMG cluster", _section("airbearing.reporting.cmg")),
+    ("Balancing", _section("airbearing.reporting.balancing")),
+    ("Linear stability", _section("airbearing.reporting.stability")),
+    ("Identification", _section("airbearing.reporting.identification")),
+    ("Model discrepancy", _section("airbearing.reporting.discrepancy")),
 ]
 
 
-def run_demo(out_dir: str | Path, *, quick: bool = False) -> Path:
-    """Run every section and write ``out_dir/report.html``; returns its path."""
+def run_demo(out_dir: str | Path, *, quick: bool = False, progress=None) -> Path:
+    """Run every section and write ``out_dir/report.html``.
+
+    Parameters
+    ----------
+    out_dir : str or Path
+        Folder of the report (created if missing).
+    quick : bool
+        Shorter runs (for tests).
+    progress : callable, optional
+        ``progress(what, done, total)``: called with each section's title before it runs
+        (``done`` sections of ``total``) and once more when the report is written.
+
+    Returns
+    -------
+    Path
+        ``out_dir/report.html``.
+    """
+    report_progress = _progress(progress)
     out_dir = Path(out_dir)
     report = Report("airbearing demo on the built-in testbeds")
     report.paragraph(
@@ -103,10 +132,12 @@ def run_demo(out_dir: str | Path, *, quick: bool = False) -> Path:
         "Every number below is computed by this run."
     )
     timings = []
-    for title, section in SECTIONS:
+    for i, (title, section) in enumerate(SECTIONS):
+        report_progress(title, i, len(SECTIONS))
         t0 = time.perf_counter()
         section(report, quick=quick)
         timings.append({"section": title, "time (s)": time.perf_counter() - t0})
+    report_progress("writing the report", len(SECTIONS), len(SECTIONS))
     report.heading("Run times")
     report.table(timings)
     path = out_dir / "report.html"

@@ -21,16 +21,12 @@ from __future__ import annotations
 import itertools
 from dataclasses import dataclass
 
-import matplotlib
+import numpy as np
+import pandas as pd
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-import pandas as pd  # noqa: E402
-
-from airbearing.design.steering import check_skew  # noqa: E402
-from airbearing.errors import InputError  # noqa: E402
-from airbearing.models.cmg import cmg_functions  # noqa: E402
+from airbearing.design.steering import check_skew
+from airbearing.errors import InputError
+from airbearing.models.cmg import cmg_functions
 
 __all__ = [
     "PyramidGeometry",
@@ -47,7 +43,6 @@ __all__ = [
     "measure_along",
     "singularity_summary",
     "surface_slice",
-    "envelope_figure",
 ]
 
 _FN = cmg_functions()
@@ -315,34 +310,3 @@ def surface_slice(
         w = (fa[ok] / (fa[ok] - fb[ok]))[:, None]
         out.append(a[ok] + w * (b[ok] - a[ok]))
     return np.vstack(out)
-
-
-def envelope_figure(beta: float, *, n_el=41, n_az=81, title: str | None = None):
-    """Figure: the momentum envelope in 3-D and all singular surfaces cut by the plane ``H_y = 0``.
-
-    Returns a matplotlib Figure (the caller saves or embeds it).
-    """
-    beta = check_skew(beta)
-    env = momentum_envelope(beta, n_el=n_el, n_az=n_az)
-    fig = plt.figure(figsize=(11, 4.8))
-    ax = fig.add_subplot(1, 2, 1, projection="3d")
-    H = np.nan_to_num(env.H)
-    ax.plot_surface(H[..., 0], H[..., 1], H[..., 2], cmap="viridis", alpha=0.55, linewidth=0)
-    ax.set(xlabel="Hx / h0", ylabel="Hy / h0", zlabel="Hz / h0")
-    ax.set_title("momentum envelope")
-    ax2 = fig.add_subplot(1, 2, 2)
-    for s in SURFACE_SIGNS:
-        surf = singular_surface(beta, s, n_el=4 * n_el, n_az=4 * n_az)
-        P = surface_slice(surf, axis=1)
-        is_env = surf.name == "envelope"
-        ax2.scatter(
-            P[:, 0], P[:, 2], s=1.2 if is_env else 0.5, c="k" if is_env else "tab:red",
-            label="envelope" if is_env else None, rasterized=True,
-        )  # fmt: skip
-    ax2.scatter([], [], s=4, c="tab:red", label="internal singular surfaces")
-    ax2.set(xlabel="Hx / h0", ylabel="Hz / h0", aspect="equal")
-    ax2.set_title("singular momenta in the plane Hy = 0")
-    ax2.legend(loc="upper right", fontsize=8, markerscale=4)
-    fig.suptitle(title or f"4-CMG pyramid, skew {np.degrees(beta):.2f} deg")
-    fig.tight_layout()
-    return fig
