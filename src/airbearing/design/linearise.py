@@ -25,9 +25,9 @@ from dataclasses import dataclass
 from functools import lru_cache
 
 import casadi as ca
-import control as ct
 import numpy as np
 
+from airbearing.design import _control as ct
 from airbearing.errors import InputError, SolverError
 from airbearing.models import quaternion as quat
 from airbearing.models.model import INERTIA_NAMES, Model

@@ -38,9 +38,9 @@ from dataclasses import dataclass, field, replace
 from functools import lru_cache
 
 import casadi as ca
-import control as ct
 import numpy as np
 
+from airbearing.design import _control as ct
 from airbearing.design.actuators import MagnetorquerActuator, SliderActuator
 from airbearing.design.attitude import SEED001_GAINS, cmg_attitude_controller
 from airbearing.design.balancing import (

@@ -26,10 +26,10 @@ from __future__ import annotations
 import math
 from dataclasses import asdict, dataclass, field
 
-import control as ct
 import numpy as np
 from scipy.optimize import brentq, minimize
 
+from airbearing.design import _control as ct
 from airbearing.errors import InputError
 from airbearing.io.output import json_number
 

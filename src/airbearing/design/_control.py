@@ -1,0 +1,15 @@
+"""python-control, imported on first use.
+
+``import control`` (0.10) imports matplotlib, which no module outside ``reporting/`` may
+load when it is imported (issue 12; ``tests/test_layers.py``). The design modules use
+``from airbearing.design import _control as ct`` and call ``ct.ss(...)`` as they would
+``control.ss(...)``; the first attribute looked up imports python-control.
+"""
+
+from __future__ import annotations
+
+
+def __getattr__(name: str):
+    import control
+
+    return getattr(control, name)

@@ -1,0 +1,120 @@
+"""The layer rule of DESIGN.md, checked on the source (issue 12 items 1, 2 and 5).
+
+Layers, top to bottom: cli -> reporting -> analysis -> design -> models -> io. A module
+may import its own layer and the layers below, never above (anywhere in the file, also
+inside functions: a lazy import still makes the lower layer depend on the upper one).
+matplotlib is imported only by reporting code: no other module may load it when it is
+imported (checked in a fresh interpreter, import by import).
+"""
+
+from __future__ import annotations
+
+import ast
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+SRC = Path(__file__).resolve().parents[1] / "src"
+PKG = SRC / "airbearing"
+#: Layer ranks: a module may import modules of the same or a lower rank.
+RANK = {"io": 0, "models": 1, "design": 2, "analysis": 3, "reporting": 4, "cli": 5}
+
+
+def _module(path: Path) -> str:
+    parts = path.relative_to(SRC).with_suffix("").parts
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def _layer(module: str) -> str | None:
+    parts = module.split(".")
+    if parts[0] != "airbearing" or len(parts) < 2:
+        return None
+    return parts[1] if parts[1] in RANK else None
+
+
+def _imports(path: Path) -> list[tuple[int, str, bool]]:
+    """``(line, imported module, at module level)`` for every absolute import in a file."""
+    tree = ast.parse(path.read_text(), filename=str(path))
+    top = {id(n) for n in tree.body}
+    # imports under a module-level `if`/`try` run at import too
+    for n in tree.body:
+        if isinstance(n, ast.If | ast.Try):
+            top |= {id(c) for c in ast.walk(n)}
+    out = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            out += [(node.lineno, a.name, id(node) in top) for a in node.names]
+        elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+            names = [node.module]
+            if node.module == "airbearing":  # from airbearing import analysis
+                names = [f"airbearing.{a.name}" for a in node.names]
+            out += [(node.lineno, n, id(node) in top) for n in names]
+    return out
+
+
+ALL_FILES = sorted(PKG.rglob("*.py"))
+LAYERED = [p for p in ALL_FILES if _layer(_module(p)) is not None]
+
+
+def test_the_source_tree_is_found():
+    # a wrong SRC would make every check below pass on nothing
+    assert len(LAYERED) > 40 and {_layer(_module(p)) for p in LAYERED} == set(RANK)
+
+
+def test_imports_go_down_the_layers_only():
+    bad = []
+    for path in LAYERED:
+        mod = _module(path)
+        here = _layer(mod)
+        for line, name, _ in _imports(path):
+            there = _layer(name)
+            if there is not None and RANK[there] > RANK[here]:
+                bad.append(f"{mod}:{line} ({here}) imports {name} ({there})")
+    assert not bad, "\n".join(bad)
+
+
+@pytest.mark.parametrize("layer", ["design", "models", "io"])
+def test_lower_layers_never_import_analysis(layer):
+    """The issue's grep: nothing under design/, models/, io/ names airbearing.analysis."""
+    hits = [
+        f"{p.relative_to(SRC)}:{i}"
+        for p in sorted((PKG / layer).rglob("*.py"))
+        for i, text in enumerate(p.read_text().splitlines(), 1)
+        if re.match(r"\s*(from|import)\s+airbearing(\.analysis\b|\s+import\s+analysis\b)", text)
+    ]
+    assert not hits, hits
+
+
+def test_matplotlib_only_at_module_level_in_reporting():
+    bad = [
+        f"{_module(p)}:{line}"
+        for p in ALL_FILES
+        if _layer(_module(p)) != "reporting"
+        for line, name, at_top in _imports(p)
+        if at_top and name.split(".")[0] == "matplotlib"
+    ]
+    assert not bad, bad
+
+
+def test_algorithm_modules_do_not_load_matplotlib_on_import():
+    """Import every module of io/, models/, design/ and analysis/ in a fresh interpreter,
+    one after the other, and name the first that brings matplotlib in."""
+    modules = [
+        _module(p) for p in LAYERED if _layer(_module(p)) in ("io", "models", "design", "analysis")
+    ]
+    code = (
+        "import importlib, sys\n"
+        f"for m in {modules!r}:\n"
+        "    importlib.import_module(m)\n"
+        "    if 'matplotlib' in sys.modules:\n"
+        "        print(m)\n"
+        "        break\n"
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, timeout=300, check=False
+    )
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert done.stdout.strip() == "", f"{done.stdout.strip()} imports matplotlib"
