@@ -2,6 +2,7 @@
 
 import json
 import math
+import re
 
 import pytest
 from cli_run import run
@@ -65,7 +66,8 @@ def test_cli_size_json(tmp_path, capsys):
     assert round(d["flywheel_inertia_kgm2"] * 1e6, 3) == 2.068
     assert round(d["flywheel_mass_kg"] * 1e3, 1) == 14.1
     assert round(d["flywheel_thickness_m"] * 1e3, 1) == 5.8
-    assert "1.728 mNm" in capsys.readouterr().out
+    # the terminal table: seed 001 Table 5's torque, in mN m
+    assert re.search(r"required torque N_req\s+1\.728\s+mN m", capsys.readouterr().out)
 
 
 @pytest.mark.parametrize(
