@@ -20,6 +20,7 @@ from airbearing.design.controller import Controller
 from airbearing.errors import InputError
 from airbearing.io.log import Log
 from airbearing.models import quaternion as quat
+from airbearing.models.compiled import LOOP_MIN_STEPS, compiled
 from airbearing.models.model import Model
 
 __all__ = [
@@ -151,6 +152,8 @@ def closed_loop_rollout(model: Model, controller: Controller, n: int, substeps: 
         ["z", "v", "p", "gains"],
         ["z_next", "row"],
     )
+    if n >= LOOP_MIN_STEPS:  # long runs: C, cached on disk (airbearing.models.compiled)
+        one = compiled(one)
     return one.mapaccum("closed_loop", n, [0], [0])
 
 
