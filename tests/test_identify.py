@@ -65,7 +65,23 @@ def truth_tb():
 
 @pytest.fixture(scope="module")
 def prior_tb():
-    # the file's nominal values (seed 004 J_CR, not x_true): the identification's start
+    """The identification's start: seed-004 truth with EVERY entry 10 % off (issue 12 item 6).
+
+    Principal inertias +10 %, products -10 %, offset z +10 %, sliders and sensors as the
+    truth: the prior sets the solver's scaling, the regression point O (half its offset)
+    and the first noise weights, so an answer that leaned on it would show here.
+    """
+    tb = seed004_testbed()
+    J = tb.body.inertia_matrix * np.where(np.eye(3) > 0, 1.10, 0.90)
+    r = tb.body.cm_offset_vec * np.array([1.0, 1.0, 1.10])
+    return tb.replace(
+        body=Body(dof=3, mass=tb.body.mass, inertia=tuple(map(tuple, J)), cm_offset=tuple(r))
+    )
+
+
+@pytest.fixture(scope="module")
+def cad_tb():
+    # the file's nominal values (seed 004 J_CR, not x_true), for the prior-bound test
     return load_testbed("platform-3dof")
 
 
@@ -178,27 +194,60 @@ def test_moving_sliders_within_a_log(truth_tb):
 # ---------------------------------------------------------------------------- recovery
 
 
-def test_seed004_truth_recovered(seed_runs):
-    """Issue: principal inertias within 2 % and offset within 20 um (seed 004: 2 % worst case)."""
-    for res in seed_runs:
-        for est in (res, res.equation_error):
-            np.testing.assert_allclose(np.diag(est.inertia), TRUTH[:3], rtol=0.02)
-            np.testing.assert_allclose(est.cm_offset, TRUTH[6:9], atol=20e-6)
-        assert list(res.active_constraints) == ["known_offset_x", "known_offset_y"]
-        assert not res.equation_error.warnings and not res.warnings
+#: Tolerance of the output-error check in reported (Fisher) standard errors: 3 seeds x 7
+#: free parameters = 21 comparisons; P(|z| > 4) = 6.3e-5 each, 1.3e-3 for the whole test.
+Z_TOL = 4.0
 
 
-def test_output_error_consistent_with_its_standard_errors(seed_runs):
-    """Refined error within 3 reported sigmas (the Fisher standard errors), every parameter."""
+@pytest.mark.slow
+def test_seed004_every_entry_within_its_errors(seed_runs):
+    """Every inertia entry (products too) and the offset within 4 Fisher sigmas of x_true.
+
+    Seed 004 eqs. 39-50 and x_true. The sigmas are small (about 2e-4 of the principal
+    inertias here, checked below), so a model with a wrong sign, factor or slider term
+    fails by many sigmas (see test_a_wrong_model_fails_the_check); the sigmas themselves
+    are checked against the Cramer-Rao bound of the simulated noise (within 10 %: the
+    bound uses the specification's gyro noise, the fit the residual's, which agree to
+    ~1/sqrt(N) = 1 % on 1200 samples per log; 10 % leaves room for the attitude weight).
+    """
     for res in seed_runs:
         free = np.isfinite(res.std)
+        assert list(np.flatnonzero(~free)) == [6, 7]  # r_x, r_y known, no std
+        assert res.std_status["r_x"].startswith("known") and res.std_status["J_xy"] == "estimated"
         z = (res.theta - TRUTH)[free] / res.std[free]
-        assert np.all(np.abs(z) < 3.0), z
-        # the fitted noise is the simulated one: std equals the Cramer-Rao bound within 10 %
+        assert np.all(np.abs(z) < Z_TOL), z
+        assert np.all(res.std[:3] < 1e-3 * TRUTH[:3])  # the check is tight: < 0.1 % per sigma
         ratio = np.asarray(list(res.details["std_over_cramer_rao"].values()))
+        assert len(ratio) == 7
         np.testing.assert_allclose(ratio, 1.0, atol=0.1)
+        assert list(res.active_constraints) == ["known_offset_x", "known_offset_y"]
+        assert not res.warnings
+        assert res.to_json()["std"]["cm_offset"][0] is None or np.isnan(
+            res.to_json()["std"]["cm_offset"][0]
+        )
 
 
+@pytest.mark.slow
+def test_equation_error_every_entry(seed_runs):
+    """The convex stage on its own: every entry within its trapezoid bias of x_true.
+
+    The 20 Hz trapezoidal integral of eq. 47 misses (omega dt)^2 / 12 of the terms
+    quadratic in w, whose content reaches 2 |w| + nutation ~ 4 rad/s here:
+    (4 x 0.05)^2 / 12 = 3.3e-3 (noise-free logs show 1.7e-3). Tolerances: 5e-3 relative on
+    the principal inertias, 1e-3 x the mean inertia (3e-5 kg m^2) on the products, 2 um on
+    r_z (0.1 % of its 2.6 mm). A wrong slider term or sign misses these by far (seed 004
+    reports 2 % worst case).
+    """
+    js = TRUTH[:3].mean()
+    for res in seed_runs:
+        ee = res.equation_error
+        np.testing.assert_allclose(ee.theta[:3], TRUTH[:3], rtol=5e-3)
+        np.testing.assert_allclose(ee.theta[3:6], TRUTH[3:6], atol=1e-3 * js)
+        assert abs(ee.theta[8] - TRUTH[8]) < 2e-6
+        assert not ee.warnings
+
+
+@pytest.mark.slow
 def test_output_error_removes_the_integration_bias(seed_runs):
     """Issue: refined error at least 5x smaller than the equation-error bias on 20 Hz data."""
     ee = np.mean([np.diag(r.equation_error.inertia) - TRUTH[:3] for r in seed_runs], axis=0)
@@ -206,6 +255,26 @@ def test_output_error_removes_the_integration_bias(seed_runs):
     # the trapezoidal bias (issue: ~0.15 % of the principal inertias at 20 Hz)
     assert np.all(np.abs(ee) > 3e-4 * TRUTH[:3])
     assert np.all(oe * 5 < np.abs(ee))
+
+
+@pytest.mark.parametrize(
+    "method", ["equation-error", pytest.param("output-error", marks=pytest.mark.slow)]
+)
+def test_a_wrong_model_fails_the_check(truth_tb, prior_tb, method):
+    """The tolerances above can fail: a total mass 1 % off (the gravity torque m r x g of
+    seed 004 eq. 11 scaled by 1.01 with r_x, r_y known) moves the inertias by about 1 %:
+    beyond the 5e-3 equation-error tolerance, and far beyond 4 output-error sigmas."""
+    logs = _logs(truth_tb, 1, duration=10)
+    mass = 1.01 * truth_tb.body.mass
+    res = identify_platform(
+        prior_tb, logs, known_offset_xy=TRUTH[6:8], known_mass=mass, method=method
+    )
+    if method == "equation-error":
+        assert np.max(np.abs(res.theta[:3] / TRUTH[:3] - 1)) > 5e-3
+    else:
+        free = np.isfinite(res.std)
+        z = (res.theta - TRUTH)[free] / res.std[free]
+        assert np.max(np.abs(z)) > 5 * Z_TOL, z
 
 
 def test_acceleration_form_recovers(truth_tb, prior_tb):
@@ -222,10 +291,12 @@ def test_acceleration_form_recovers(truth_tb, prior_tb):
 
 
 def test_offset_free_with_slider_shifts(truth_tb, prior_tb):
-    """Without the known offset, the known slider shifts fix the scale (answer.json note)."""
+    """Without the known offset, the known slider shifts fix the scale: every entry within
+    4 of its (equation-error) sigmas plus the trapezoid bias (5e-3 relative, see above)."""
     res = identify_platform(prior_tb, _logs(truth_tb, 5), method="equation-error")
-    np.testing.assert_allclose(np.diag(res.inertia), TRUTH[:3], rtol=0.02)
-    np.testing.assert_allclose(res.cm_offset, TRUTH[6:9], atol=20e-6)
+    assert np.all(np.isfinite(res.std)) and set(res.std_status.values()) == {"estimated"}
+    tol = Z_TOL * res.std + 5e-3 * np.r_[TRUTH[:3], np.full(3, TRUTH[:3].mean()), 0, 0, 0]
+    assert np.all(np.abs(res.theta - TRUTH) < tol), (res.theta - TRUTH) / tol
     assert not res.active_constraints
 
 
@@ -261,8 +332,10 @@ def test_nonphysical_data_give_a_physical_answer(prior_tb):
     assert any("non-physical" in w for w in res.warnings)
 
 
-def test_prior_bounds_bind(truth_tb, prior_tb):
-    """A CAD prior with a hard bound tighter than the truth's distance: the bound is active."""
+def test_prior_bounds_bind(truth_tb, cad_tb):
+    """A CAD prior with a hard bound tighter than the truth's distance: the bound is active,
+    and the parameters it pins have no standard error (issue 13 item 6), not a zero one."""
+    prior_tb = cad_tb
     prior = Prior.from_testbed(prior_tb, inertia_bound=1e-5)  # |J - J_cad| <= 1e-5 kg m^2
     res = identify_platform(
         prior_tb,
@@ -275,11 +348,16 @@ def test_prior_bounds_bind(truth_tb, prior_tb):
     assert np.all(np.abs(res.theta[:6] - cad[:6]) <= 1e-5 * (1 + 1e-6))
     # truth J_yy = 0.0333 vs CAD 0.0332: 1e-4 apart, so the bound on J_yy binds
     assert "prior_bound:J_yy" in res.active_constraints
+    assert res.std_status["J_yy"] == "pinned by prior_bound:J_yy"
+    assert np.isnan(res.std_inertia[1, 1])
+    assert np.all((res.std > 0) | np.isnan(res.std))  # never a zero standard error
 
 
 # ---------------------------------------------------------------------------- public example
 
 
+@pytest.mark.slow
+@pytest.mark.skipif(not EXAMPLE.exists(), reason="public example data not present")
 def test_public_example_recovered():
     """The issue's public example: the refined answer within 4 x precision_1sigma of answer.json.
 

@@ -172,6 +172,7 @@ def identify_platform(
     )
     report("reading the logs", 0, 3)
     data = prepare_platform_logs(testbed, logs)
+    _check_scale(testbed, data, fixed, prior, prior_weight)
     gyro = all(d.gyro for d in data)
     js = float(np.trace(testbed.body.inertia_matrix) / 3)
     margin = MARGIN_FRACTION * js if margin is None else float(margin)
@@ -339,6 +340,26 @@ def identify_platform(
             },
             "initial_states": [x.tolist() for x in oe.x0],
         },
+    )
+
+
+def _check_scale(testbed, data, fixed, prior, prior_weight) -> None:
+    """Refuse logs that fix the inertia and offset only up to a common scale.
+
+    ``J w' + w x J w = m r x g`` (seed 004 eq. 11) is homogeneous in ``(J, r)``: free
+    motion alone says nothing about their scale. Something known must break it: sliders
+    at known non-zero positions (their inertia and CM shift, seed 004 eqs. 4-7), a known
+    offset component, a commanded dipole in a field, or a prior in the cost.
+    """
+    sliders = testbed.masses is not None and any(np.any(d.s != 0) for d in data)
+    dipole = any(np.any(d.dipole != 0) and np.any(d.b_body != 0) for d in data)
+    if fixed or sliders or dipole or (prior is not None and prior_weight > 0):
+        return
+    raise InputError(
+        "identify: inertia and CM offset are not identifiable from these logs: free motion "
+        "fixes them only up to a common scale (J w' + w x J w = m r x g is homogeneous in J "
+        "and r) and nothing known breaks it; give the in-plane offset (--known-offset-xy), "
+        "log with the sliders at known non-zero positions, or command a known dipole"
     )
 
 
