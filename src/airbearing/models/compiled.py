@@ -36,14 +36,8 @@ Compilation (not a cache hit) is announced once per structure through the
 from __future__ import annotations
 
 import contextlib
-import hashlib
-import logging
 import os
-import platform
-import shutil
-import subprocess
 import sys
-import tempfile
 import threading
 from collections import OrderedDict
 from collections.abc import Callable, Iterator
@@ -76,7 +70,12 @@ LOOP_MIN_STEPS = 6000
 #: Loaded Functions kept in memory per process.
 MEMORY_SIZE = 64
 
-log = logging.getLogger("airbearing.compiled")
+
+def _log():
+    import logging
+
+    return logging.getLogger("airbearing.compiled")
+
 
 _lock = threading.Lock()
 _memory: OrderedDict[str, object] = OrderedDict()
@@ -182,6 +181,8 @@ def clear_cache() -> int:
 
 def compiler() -> str | None:
     """Path of the C compiler (``$CC``, else ``gcc``, else ``cc``), or None when there is none."""
+    import shutil
+
     for cc in (os.environ.get("CC"), "gcc", "cc"):
         if cc:
             path = shutil.which(cc)
@@ -223,7 +224,7 @@ def announce_to(progress: Callable | None) -> None:
 
 
 def _announce(what: str, progress: Callable | None) -> None:
-    log.info(what)
+    _log().info(what)
     with _lock:
         sinks = list(_sinks) or list(_default_sink)
     if progress is not None and progress not in sinks:
@@ -237,6 +238,8 @@ def _suffix() -> str:
 
 
 def _digest_file(path: Path) -> str:
+    import hashlib
+
     h = hashlib.sha256()
     with open(path, "rb") as f:
         for chunk in iter(lambda: f.read(1 << 20), b""):
@@ -289,6 +292,10 @@ def _load(name: str, lib: Path, fn):
 
 def _build(cc: str, name: str, source: str, lib: Path, side: Path) -> None:
     """Compile ``source`` and install it at ``lib`` (atomically, sidecar first)."""
+    import shutil
+    import subprocess
+    import tempfile
+
     with tempfile.TemporaryDirectory(prefix="airbearing-cc-") as tmp:
         # a fixed source name keeps the library's bytes independent of the folder
         src = Path(tmp) / f"{lib.stem}.c"
@@ -344,6 +351,9 @@ def compiled(fn, *, key: str = "", progress: Callable | None = None):
     When the compiler fails, ``fn`` is returned (a warning is logged and
     :func:`cache_info` counts it as uncompiled).
     """
+    import hashlib
+    import platform
+
     import casadi as ca
 
     cc = compiler()
@@ -397,7 +407,7 @@ def compiled(fn, *, key: str = "", progress: Callable | None = None):
                         f = _load(name, lib, fn)
                     except (RuntimeError, OSError) as e:
                         # the virtual machine computes the same values, only slower
-                        log.warning("%s; running %s uncompiled", e, name)
+                        _log().warning("%s; running %s uncompiled", e, name)
                         _count("uncompiled")
                         return fn
         _count(what)
@@ -413,7 +423,7 @@ def _try_load(name: str, lib: Path, fn):
     try:
         return _load(name, lib, fn)
     except RuntimeError as e:
-        log.warning("ignoring unusable cache file %s (%s); rebuilding it", lib, e)
+        _log().warning("ignoring unusable cache file %s (%s); rebuilding it", lib, e)
         return None
 
 
