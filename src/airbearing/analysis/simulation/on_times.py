@@ -5,8 +5,9 @@ open-loop motion (inputs held from each logged sample to the next, zero-order ho
 exactly onto the given times and then adds the measurement noise of the testbed, so a
 tool can be tested on the times a lab really logs, and a lab can rehearse its analysis.
 
-How: one CasADi ``mapaccum`` of :meth:`Model.step_dt` (RK4 with the interval length an
-input, the same arithmetic as :func:`~airbearing.analysis.simulation.simulate.simulate`).
+How: a CasADi ``mapaccum`` of :meth:`Model.step_dt` (RK4 with the interval length an
+input, the same arithmetic as :func:`~airbearing.analysis.simulation.simulate.simulate`),
+called on chunks of up to :data:`CHUNK` intervals, compiled to C for long logs.
 An interval longer than ``max_interval`` (a gap) is cut into equal pieces no longer
 than it, so the integration error in a gap stays that of an ordinary sample; only the
 states at the logged times are kept.
@@ -25,6 +26,7 @@ from airbearing.analysis.simulation.simulate import add_noise, log_columns, nois
 from airbearing.errors import InputError
 from airbearing.io.log import Log
 from airbearing.io.testbed import Testbed
+from airbearing.models.compiled import LOOP_MIN_STEPS, compiled
 from airbearing.models.model import Model, build_model
 
 __all__ = ["integrate_on_times", "simulate_on_times", "initial_state", "free_inputs"]
@@ -34,14 +36,63 @@ __all__ = ["integrate_on_times", "simulate_on_times", "initial_state", "free_inp
 MAX_INTERVAL_PERIODS = 1.5
 
 
+#: Intervals per call of the compiled rollout: a log is integrated chunk by chunk, so one
+#: Function (per model and chunk size, a power of two up to this) serves every length.
+CHUNK = 4096
+
+
 @lru_cache(maxsize=32)
-def rollout_dt(model: Model, n: int, substeps: int = 4) -> ca.Function:
+def rollout_dt(model: Model, n: int, substeps: int = 4, compile_step: bool = False) -> ca.Function:
     """``(x0, U[nu x n], p, DT[1 x n]) -> X[nx x n]``: ``n`` intervals of given lengths.
 
     Column ``k`` of ``X`` is the state at the end of interval ``k``. One ``mapaccum``
-    over :meth:`Model.step_dt`; cached per (model, n, substeps).
+    over :meth:`Model.step_dt`; cached per (model, n, substeps). ``compile_step``: the
+    step compiled to C first (cached on disk, :mod:`airbearing.models.compiled`).
     """
-    return model.step_dt(substeps).mapaccum("rollout_dt", n, [0], [0])
+    step = model.step_dt(substeps)
+    if compile_step:
+        step = compiled(step)
+    return step.mapaccum("rollout_dt", n, [0], [0])
+
+
+def _rollout(model: Model, x0, U, p, DT, substeps: int) -> np.ndarray:
+    """States at the end of each interval (n, nx), chunk by chunk (see :data:`CHUNK`)."""
+    n = DT.size
+    chunk = min(CHUNK, 1 << max(0, n - 1).bit_length())
+    F = rollout_dt(model, chunk, substeps, n >= LOOP_MIN_STEPS)
+    out = np.empty((n, model.nx))
+    x = x0
+    for a in range(0, n, chunk):
+        b = min(n, a + chunk)
+        pad = chunk - (b - a)  # the last chunk repeats its last interval; those are dropped
+        Uc = np.vstack([U[a:b], np.repeat(U[b - 1 : b], pad, axis=0)])
+        DTc = np.concatenate([DT[a:b], np.repeat(DT[b - 1], pad)])
+        X = np.asarray(F(x, Uc.T, p, DTc[None, :])).T
+        out[a:b] = X[: b - a]
+        x = out[b - 1]
+    return out
+
+
+@lru_cache(maxsize=32)
+def _measure_map(model: Model, n: int, compile_it: bool) -> ca.Function:
+    fn = model.h.map(n)
+    return compiled(fn) if compile_it else fn
+
+
+def measure_on_samples(model: Model, x: np.ndarray, u: np.ndarray, p=None) -> np.ndarray:
+    """Noise-free measurements ``h(x_k, u_k, p)`` (N, ny) of states (N, nx), chunk by chunk."""
+    p = model.p0 if p is None else np.asarray(p, dtype=float)
+    n = x.shape[0]
+    chunk = min(CHUNK, 1 << max(0, n - 1).bit_length())
+    H = _measure_map(model, chunk, n >= LOOP_MIN_STEPS)
+    out = np.empty((n, model.ny))
+    for a in range(0, n, chunk):
+        b = min(n, a + chunk)
+        pad = chunk - (b - a)
+        xc = np.vstack([x[a:b], np.repeat(x[b - 1 : b], pad, axis=0)])
+        uc = np.vstack([u[a:b], np.repeat(u[b - 1 : b], pad, axis=0)])
+        out[a:b] = np.asarray(H(xc.T, uc.T, p)).T[: b - a]
+    return out
 
 
 def _times(t, what: str = "t") -> np.ndarray:
@@ -133,8 +184,7 @@ def integrate_on_times(
         U[:, model.index(["tau_x", "tau_y", "tau_z"], "u")] += (
             rng.standard_normal((DT.size, 3)) * torque_noise
         )
-    F = rollout_dt(model, int(DT.size), substeps)
-    X = np.asarray(F(x0, U.T, p, DT[None, :])).T
+    X = _rollout(model, x0, U, p, DT, substeps)
     ends = np.cumsum(pieces) - 1
     return np.vstack([x0, X[ends]])
 
@@ -286,7 +336,7 @@ def simulate_on_times(
         torque_noise=tau_sig if noise else 0.0,
         rng=rng,
     )
-    y = np.asarray(model.h.map(t.size)(x.T, u.T, model.p0)).T
+    y = measure_on_samples(model, x, u)
     if noise:
         sig = noise_sigmas(model, attitude_noise)
         y = add_noise(model, y, rng.standard_normal(y.shape) * sig)
