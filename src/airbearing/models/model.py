@@ -235,6 +235,13 @@ def build_model(testbed: Testbed, effects: Mapping | None = None) -> Model:
     effects : mapping, optional
         Extra effects ``name -> value`` (FORMATS.md units) added to (or replacing)
         the testbed's own. A 3-list makes a per-axis effect with three parameters.
+
+    Notes
+    -----
+    A platform without ``[masses]`` has no ``m_1..m_3`` parameters and no slider terms,
+    without ``[magnetorquers]`` no commanded-dipole torque; its inputs keep the platform
+    layout (see the module docstring). An effect that cannot act on the testbed
+    (:meth:`Effect.applies`, ``sensors.gyro`` included) is an InputError.
     """
     kind, dof = testbed.kind, testbed.body.dof
     has_field = testbed.field is not None or kind == "platform"  # platform: field is an input
