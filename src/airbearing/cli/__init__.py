@@ -74,6 +74,9 @@ def _global(
     from airbearing.cli.show_progress import set_quiet
 
     set_quiet(quiet)
+    from airbearing.models.compiled import announce_to  # stdlib only: start-up stays light
+
+    announce_to(None if quiet else lambda what, *_: print(f"airbearing: {what}", file=sys.stderr))
     GLOBAL["debug"] = debug
 
 
