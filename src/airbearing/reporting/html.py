@@ -9,6 +9,7 @@ from __future__ import annotations
 import base64
 import html
 import io
+import math
 from dataclasses import dataclass, field
 
 import matplotlib
@@ -18,15 +19,24 @@ from airbearing.io.output import write_atomic, write_json  # noqa: F401  (re-exp
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
-__all__ = ["Report", "figure_html", "table_html", "write_atomic", "write_json"]
+__all__ = ["Report", "figure_html", "table_html", "write_atomic", "write_json", "NONE_TEXT"]
+
+#: What a table shows for a value that does not exist (None, NaN); a legend says so.
+NONE_TEXT = "—"
+#: Columns whose True/False is a verdict (pass/FAIL); other booleans print yes/no.
+_VERDICT_WORDS = ("ok", "met", "pass", "stable", "verdict")
 
 
 _CSS = """
 body { font-family: system-ui, -apple-system, Segoe UI, Roboto, sans-serif; margin: 2em auto;
-       max-width: 1100px; color: #222; line-height: 1.45; padding: 0 1em; }
+       max-width: 1100px; color: #222; line-height: 1.45; padding: 0 1em;
+       overflow-wrap: anywhere; }
 h1 { border-bottom: 2px solid #345; padding-bottom: .2em; }
 h2 { margin-top: 2em; border-bottom: 1px solid #ccc; }
+.scroll { overflow-x: auto; max-width: 100%; margin: 1em 0; }
+.scroll table { margin: 0; }
 table { border-collapse: collapse; margin: 1em 0; font-size: 0.92em; }
+p.legend { font-size: 0.85em; color: #555; margin-top: -0.5em; }
 th, td { border: 1px solid #bbb; padding: 4px 8px; text-align: right; }
 th { background: #eef2f5; }
 td.l, th.l { text-align: left; }
@@ -41,7 +51,17 @@ figcaption { font-size: 0.9em; color: #555; }
 
 
 def figure_html(fig, caption: str = "", *, fmt: str = "svg") -> str:
-    """Embed a matplotlib figure as a base64 ``<img>`` and close it."""
+    """Embed a matplotlib figure as a base64 ``<img>`` and close it.
+
+    Figures without a layout engine get matplotlib's constrained layout (no label of
+    one panel over its neighbour) and aligned y-labels.
+    """
+    try:
+        if fig.get_layout_engine() is None:
+            fig.set_layout_engine("constrained")
+        fig.align_ylabels()
+    except (AttributeError, RuntimeError, ValueError):  # pragma: no cover - old matplotlib
+        pass
     buf = io.BytesIO()
     fig.savefig(buf, format=fmt, bbox_inches="tight", dpi=110)
     plt.close(fig)
@@ -54,15 +74,37 @@ def figure_html(fig, caption: str = "", *, fmt: str = "svg") -> str:
 
 
 def _fmt(v) -> str:
+    """A cell: 4 significant digits; no 'nan'/'inf' text (none, infinity sign)."""
     if v is None:
-        return "&infin;"
-    if isinstance(v, float):
-        return f"{v:.4g}"
+        return NONE_TEXT
+    if isinstance(v, float) or (hasattr(v, "dtype") and hasattr(v, "item")):
+        try:
+            f = float(v)
+        except (TypeError, ValueError):
+            return html.escape(str(v))
+        if math.isnan(f):
+            return NONE_TEXT
+        if math.isinf(f):
+            return "∞" if f > 0 else "−∞"
+        return f"{f:.4g}"
     return html.escape(str(v))
 
 
-def table_html(rows: list[dict], columns: list[str] | None = None, *, classes=None) -> str:
-    """A table from a list of dicts (None prints as infinity); first column left-aligned."""
+def _is_verdict(column: str) -> bool:
+    words = column.lower().replace("(", " ").replace(")", " ").split()
+    return any(w in _VERDICT_WORDS for w in words)
+
+
+def table_html(
+    rows: list[dict], columns: list[str] | None = None, *, classes=None, legend: str | None = None
+) -> str:
+    """A table from a list of dicts, in a wrapper that scrolls sideways when it is wide.
+
+    First column left-aligned. A value that does not exist (None, NaN) prints as
+    :data:`NONE_TEXT` and the table gets a legend saying what that means (``legend``,
+    default "not defined"). True/False print as pass/FAIL in verdict columns (names with
+    "ok", "met", "pass", "stable") and as yes/no elsewhere.
+    """
     if not rows:
         return "<p><em>(empty)</em></p>"
     columns = columns or list(rows[0])
@@ -70,16 +112,25 @@ def table_html(rows: list[dict], columns: list[str] | None = None, *, classes=No
         f'<th class="{"l" if i == 0 else ""}">{html.escape(c)}</th>' for i, c in enumerate(columns)
     )
     body = []
+    used_none = False
     for r in rows:
         cells = []
         for i, c in enumerate(columns):
             v = r.get(c, "")
             cls = "l" if i == 0 else ""
-            if isinstance(v, bool):
-                cls, v = ("pass", "pass") if v else ("fail", "FAIL")
-            cells.append(f'<td class="{cls}">{_fmt(v)}</td>')
+            if isinstance(v, bool) or type(v).__name__ == "bool_":
+                if _is_verdict(c):
+                    cls, v = ("pass", "pass") if v else ("fail", "FAIL")
+                else:
+                    v = "yes" if v else "no"
+            text = _fmt(v)
+            used_none = used_none or text == NONE_TEXT
+            cells.append(f'<td class="{cls}">{text}</td>')
         body.append("<tr>" + "".join(cells) + "</tr>")
-    return f"<table><tr>{head}</tr>{''.join(body)}</table>"
+    note = ""
+    if used_none:
+        note = f'<p class="legend">{NONE_TEXT}: {html.escape(legend or "not defined")}.</p>'
+    return f'<div class="scroll"><table><tr>{head}</tr>{"".join(body)}</table></div>{note}'
 
 
 @dataclass
@@ -99,8 +150,10 @@ class Report:
     def figure(self, fig, caption: str = "") -> None:
         self.parts.append(figure_html(fig, caption))
 
-    def table(self, rows: list[dict], columns: list[str] | None = None) -> None:
-        self.parts.append(table_html(rows, columns))
+    def table(
+        self, rows: list[dict], columns: list[str] | None = None, *, legend: str | None = None
+    ) -> None:
+        self.parts.append(table_html(rows, columns, legend=legend))
 
     def raw(self, fragment: str) -> None:
         self.parts.append(fragment)
@@ -113,4 +166,5 @@ class Report:
         )
 
     def write(self, path) -> None:
+        """Write the report atomically (commands queue :meth:`html` in their Outputs)."""
         write_atomic(path, self.html())

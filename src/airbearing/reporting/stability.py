@@ -25,6 +25,40 @@ from airbearing.reporting.html import Report, table_html
 __all__ = ["stability_report", "report_for_loop", "nonlinear_scenario", "demo_section"]
 
 _DIST_TORQUE = 7e-5  # N m, seed 000 Tables 1-2: residual torque after balancing (~7e-5 N m)
+#: The Bode plot of a discrete loop stops below Nyquist: at pi/dt the ZOH and delay put a
+#: zero of L there and |L| plunges to -400 dB, which says nothing about the margins.
+_BODE_TOP = 0.9  # fraction of the Nyquist frequency pi/dt
+
+#: Signals and actuator channels in words, with units (legends and axis labels).
+_WORDS = {
+    "true_yaw": "yaw (deg)",
+    "true_wz": "yaw rate (deg/s)",
+    "true_th_x": "tilt about x (deg)",
+    "true_th_y": "tilt about y (deg)",
+    "true_th_z": "rotation about z (deg)",
+    "s1": "slider 1 (m)",
+    "s2": "slider 2 (m)",
+    "s3": "slider 3 (m)",
+    "mx": "dipole x (A m^2)",
+    "my": "dipole y (A m^2)",
+    "mz": "dipole z (A m^2)",
+    "dd1": "gimbal 1 rate (rad/s)",
+    "dd2": "gimbal 2 rate (rad/s)",
+    "dd3": "gimbal 3 rate (rad/s)",
+    "dd4": "gimbal 4 rate (rad/s)",
+    "yaw": "yaw axis",
+}
+
+
+def words(name: str) -> str:
+    """A signal or channel name as a reader says it, with its unit (``s1`` -> slider 1 (m))."""
+    return _WORDS.get(name, name.replace("_", " "))
+
+
+def _margin_text(value, what: str = "none"):
+    """A margin for a table: the number, or ``what`` (no crossing: the margin is infinite)."""
+    v = json_number(value)
+    return what if v is None else v
 
 
 def nonlinear_scenario(loop: Loop, t_end: float):
@@ -89,8 +123,12 @@ def _bode_nyquist(analysis, loop: Loop, discrete: bool):
             else loop.loop_transfer(name, discrete=discrete)
         )
         w = frequency_grid(L, 1500)
+        if discrete:
+            w = w[w <= _BODE_TOP * math.pi / loop.dt]
         Lw = _response(L, w)
-        (line,) = a1.semilogx(w, 20 * np.log10(np.abs(Lw)), label=name)
+        with np.errstate(divide="ignore"):
+            mag = 20 * np.log10(np.abs(Lw))
+        (line,) = a1.semilogx(w, mag, label=words(name))
         a2.semilogx(w, np.degrees(np.unwrap(np.angle(Lw))), color=line.get_color())
         for wc in mg.crossover_rad_s:
             a1.plot(wc, 0, "o", color=line.get_color())
@@ -101,7 +139,7 @@ def _bode_nyquist(analysis, loop: Loop, discrete: bool):
                 "s",
                 color=line.get_color(),
             )
-        ax.plot(Lw.real, Lw.imag, color=line.get_color(), label=name)
+        ax.plot(Lw.real, Lw.imag, color=line.get_color(), label=words(name))
         ax.plot(Lw.real, -Lw.imag, color=line.get_color(), ls=":", lw=0.8)
         for wc in mg.crossover_rad_s:
             z = complex(_response(L, [wc])[0])
@@ -111,11 +149,14 @@ def _bode_nyquist(analysis, loop: Loop, discrete: bool):
     a1.set(ylabel="|L| (dB)", title="Loop at the actuator input (dots: gain crossovers)")
     a2.set(xlabel="frequency (rad/s)", ylabel="phase (deg)")
     a1.legend(fontsize=8)
+    nyq = f" up to {_BODE_TOP:g} x the Nyquist frequency ({math.pi / loop.dt:.3g} rad/s)"
     figs.append(
         (
             fig,
-            "Bode plot of every loop-at-a-time transfer; dots mark gain crossovers "
-            "(phase margin), squares phase crossovers (gain margin).",
+            "Bode plot of every loop-at-a-time transfer"
+            + (nyq if discrete else "")
+            + "; dots mark gain crossovers (phase margin), squares phase crossovers "
+            "(gain margin).",
         )
     )
     th = np.linspace(0, 2 * np.pi, 200)
@@ -137,18 +178,24 @@ def _bode_nyquist(analysis, loop: Loop, discrete: bool):
     return figs
 
 
+_MARGIN_LEGEND = (
+    "none: the loop never crosses that line (|L| = 1 for the phase and delay margins, "
+    "-180 deg for the gain margin), so the margin is unlimited; null in JSON."
+)
+
+
 def _margin_rows(analysis, spec: Spec | None):
     rows = []
     for name, m in analysis.channels.items():
         r = {
             "loop": name,
-            "GM (dB)": json_number(m.gain_margin_db),
-            "PM (deg)": json_number(m.phase_margin_deg),
-            "delay margin (s)": json_number(m.delay_margin_s),
+            "GM (dB)": _margin_text(m.gain_margin_db),
+            "PM (deg)": _margin_text(m.phase_margin_deg),
+            "delay margin (s)": _margin_text(m.delay_margin_s),
             "disk margin": m.disk_margin,
             "Ms": m.sensitivity_peak,
             "Mt": m.complementary_peak,
-            "w_B (rad/s)": m.bandwidth_rad_s,
+            "w_B (rad/s)": _margin_text(m.bandwidth_rad_s, "—"),
             "stable": m.stable,
         }
         if spec is not None:
@@ -166,8 +213,15 @@ def report_for_loop(
     report: Report | None = None,
     heading: str | None = None,
     nonlinear: bool = True,
+    progress=None,
 ):
-    """Add the stability analysis of ``loop`` to ``report`` and return its numbers (JSON-ready)."""
+    """Add the stability analysis of ``loop`` to ``report`` and return its numbers (JSON-ready).
+
+    ``progress``: see :mod:`airbearing.progress` (margins, then the responses).
+    """
+    from airbearing.progress import call
+
+    progress = call(progress)
     spec = Spec() if spec is None else spec
     rep = (
         report
@@ -186,6 +240,7 @@ def report_for_loop(
     rep.table(gains)
     for note in loop.notes:
         rep.paragraph(note, note=True)
+    progress("margins and the worst case over the uncertainty box", 1, 3)
     d = analyse_loop(loop, discrete=True)
     c = analyse_loop(loop, discrete=False)
     checks, worst, per = evaluate(loop, spec)
@@ -200,6 +255,7 @@ def report_for_loop(
     )
     rep.heading("Margins, discrete loop (ZOH, 1 sample delay, as implemented)", 3)
     rep.table(_margin_rows(d, spec))
+    rep.paragraph(_MARGIN_LEGEND)
     if d.multiloop:
         ml = d.multiloop
         rep.paragraph(
@@ -209,8 +265,13 @@ def report_for_loop(
         )
     rep.heading("Margins, continuous design model (no sampling, no delay)", 3)
     rep.table(_margin_rows(c, None))
+    rep.paragraph(_MARGIN_LEGEND)
     rep.heading("Specification, worst case over the uncertainty box", 3)
-    rep.table([ch.to_dict() for ch in checks], ["name", "value", "limit", "sense", "met", "by"])
+    rep.table(
+        [ch.to_dict() for ch in checks],
+        ["name", "value", "limit", "sense", "met", "by"],
+        legend="not evaluated, or unlimited (no crossing)",
+    )
     rep.table(
         [
             {
@@ -218,11 +279,13 @@ def report_for_loop(
                 **{k: (json_number(v) if isinstance(v, float) else v) for k, v in w.items()},
             }
             for lbl, w in per
-        ]
+        ],
+        legend="no crossing: the margin is unlimited",
     )
     for fig, cap in _bode_nyquist(d, loop, True):
         rep.figure(fig, cap)
     # responses
+    progress("responses, linear and nonlinear", 2, 3)
     t_lin, y_lin = scenario_response(loop)
     t_end = float(t_lin[-1])
     fig, axes = plt.subplots(1, 2, figsize=(11, 3.6))
@@ -231,17 +294,18 @@ def report_for_loop(
     if nonlinear:
         t_nl, nl = nonlinear_scenario(loop, t_end)
     for k in state_keys:
-        (ln,) = axes[0].plot(t_lin, np.degrees(y_lin[k]), label=f"{k} linear")
+        (ln,) = axes[0].plot(t_lin, np.degrees(y_lin[k]), label=f"{words(k)}, linear")
         if nl is not None and k in nl:
             axes[0].plot(
-                t_nl, np.degrees(nl[k]), "--", color=ln.get_color(), label=f"{k} nonlinear"
-            )
+                t_nl, np.degrees(nl[k]), "--", color=ln.get_color(),
+                label=f"{words(k)}, nonlinear",
+            )  # fmt: skip
     for ch in loop.channels:
-        (ln,) = axes[1].plot(t_lin, y_lin[ch], label=f"{ch} linear")
+        (ln,) = axes[1].plot(t_lin, y_lin[ch], label=f"{words(ch)}, linear")
         if nl is not None:
-            axes[1].plot(t_nl, nl[ch], "--", color=ln.get_color(), label=f"{ch} nonlinear")
-    axes[0].set(xlabel="t (s)", ylabel="deg (yaw rate: deg/s)")
-    axes[1].set(xlabel="t (s)", ylabel="actuator (m, A m^2 or rad/s)")
+            axes[1].plot(t_nl, nl[ch], "--", color=ln.get_color(), label=f"{words(ch)}, nonlinear")
+    axes[0].set(xlabel="time (s)", ylabel="attitude deviation (deg or deg/s)")
+    axes[1].set(xlabel="time (s)", ylabel="actuator deviation")
     axes[0].legend(fontsize=7)
     axes[1].legend(fontsize=7, ncol=2)
     scen = (
@@ -265,7 +329,8 @@ def report_for_loop(
         r = ct.forced_response(cl, t, U)
         fig, ax = plt.subplots(figsize=(10, 3))
         ax.plot(t, np.degrees(r.outputs[0]), label="yaw (deg)")
-        ax.set(xlabel="t (s)", ylabel="yaw deviation (deg)")
+        ax.set(xlabel="time (s)", ylabel="yaw deviation (deg)")
+        ax.legend(fontsize=8)
         rep.figure(
             fig,
             f"Linear response to a {_DIST_TORQUE:g} N m disturbance torque step "
@@ -286,16 +351,20 @@ def report_for_loop(
     from airbearing.design.margins import pole_damping
 
     wn, zeta = pole_damping(poles, loop.dt)
-    rep.table(
-        [
+    rows = []
+    for p, a, b in zip(poles, wn, zeta, strict=True):
+        integrator = abs(p - 1) < 1e-9
+        at_origin = abs(p) < 1e-12
+        rows.append(
             {
                 "pole (z)": f"{p.real:.6g} {p.imag:+.4g}j",
-                "w_n (rad/s)": float(a),
-                "damping": float(b),
+                "w_n (rad/s)": 0.0 if integrator else (None if at_origin else float(a)),
+                "damping": "integrator" if integrator else (
+                    "delay (z = 0)" if at_origin else (float(b) if np.isfinite(b) else None)
+                ),
             }
-            for p, a, b in zip(poles, wn, zeta, strict=True)
-        ]
-    )
+        )  # fmt: skip
+    rep.table(rows, legend="not defined for this pole")
     data = {
         "testbed": loop.model.testbed.name,
         "loop": loop.kind,
@@ -315,20 +384,32 @@ def report_for_loop(
 
 
 def stability_report(
-    testbed, loop: str, *, gains=None, split: str = "mixed", spec: Spec | None = None
+    testbed,
+    loop: str,
+    *,
+    gains=None,
+    split: str = "mixed",
+    spec: Spec | None = None,
+    progress=None,
 ):
     """The report of ``loop`` (``"balancing"``/``"attitude"``) of ``testbed`` with ``gains``
     (default the seed gains). Returns ``(Report, dict)``; write with ``Report.write`` and
-    :func:`airbearing.reporting.html.write_json`."""
+    :func:`airbearing.reporting.html.write_json`. ``progress``: see :mod:`airbearing.progress`.
+    """
+    from airbearing.progress import call
+
+    progress = call(progress)
     opts = {"split": split} if loop == "balancing" else {}
+    progress("linearising the loop", 0, 3)
     lp = make_loop(testbed, loop, gains=gains, **opts)
     rep = Report(f"Stability report: {lp.name} on {testbed.name}")
     rep.paragraph(
         "Loops broken at the actuator input; margins of the discrete loop (zero-order hold, "
         "one sample of computation delay, the controller as implemented) and of the "
-        "continuous design model. Infinite margins print as the infinity sign and are null in JSON."
+        "continuous design model. A margin that does not exist (the loop never crosses) prints as "
+        "'none' and is null in JSON."
     )
-    return report_for_loop(lp, spec, report=rep)
+    return report_for_loop(lp, spec, report=rep, progress=progress)
 
 
 def demo_section(report: Report, *, quick: bool = False) -> None:
