@@ -20,7 +20,8 @@ from airbearing.design.controller import Controller
 from airbearing.errors import InputError
 from airbearing.io.log import Log
 from airbearing.models import quaternion as quat
-from airbearing.models.compiled import LOOP_MIN_STEPS, compiled
+from airbearing.models.compiled import LOOP_MIN_STEPS
+from airbearing.models.loop import ChunkedLoop
 from airbearing.models.model import Model
 
 __all__ = [
@@ -122,7 +123,8 @@ def closed_loop_rollout(model: Model, controller: Controller, n: int, substeps: 
     Returns a CasADi Function
     ``(z0, V[nv x n], p, gains) -> (Z[nz x n], ROWS[nr x n])`` where ``z = [x; c]``,
     column ``k`` of ``V`` is ``[noise_k (ny); torque_k (3); ref_k; t_k]`` and a row is
-    ``[x_k; y_k; u_k; extra_k]``.
+    ``[x_k; y_k; u_k; extra_k]``. From ``LOOP_MIN_STEPS`` samples on, a
+    :class:`~airbearing.models.loop.ChunkedLoop` with the same call (NumPy outputs).
     """
     dt = model.testbed.sensors.dt
     step = model.step(dt, substeps)
@@ -152,8 +154,8 @@ def closed_loop_rollout(model: Model, controller: Controller, n: int, substeps: 
         ["z", "v", "p", "gains"],
         ["z_next", "row"],
     )
-    if n >= LOOP_MIN_STEPS:  # long runs: C, cached on disk (airbearing.models.compiled)
-        one = compiled(one)
+    if n >= LOOP_MIN_STEPS:  # long runs: compiled chunks, cached on disk (models/loop.py)
+        return ChunkedLoop(one, n)
     return one.mapaccum("closed_loop", n, [0], [0])
 
 
