@@ -335,3 +335,19 @@ def test_chunked_rollout_is_one_rollout(monkeypatch):
     chunked = simulate_on_times(tb, t, **kw)
     for c in whole.data.columns:
         assert_allclose(chunked.column(c), whole.column(c), rtol=0, atol=0)
+
+
+def test_disturbance_torque_is_white_per_interval():
+    """J w' = tau_k held over each interval: w_(k+1) - w_k = tau_k dt_k / J exactly."""
+    from scipy import stats
+
+    tb = yaw_rig()
+    sigma = 1e-4  # N m
+    t = with_jitter(sample_times(tb, 200.0), 0.3, seed=6)
+    log = simulate_on_times(tb, t, initial_rate=0.5, torque_noise=sigma, seed=3)
+    tau = np.diff(log.column("true_wz")) * 0.05 / np.diff(t)
+    n = tau.size
+    # chi-square with n degrees of freedom, two-sided false-alarm probability 2e-6
+    assert stats.chi2.ppf(1e-6, n) < np.sum((tau / sigma) ** 2) < stats.chi2.ppf(1 - 1e-6, n)
+    quiet = simulate_on_times(tb, t, initial_rate=0.5, torque_noise=sigma, noise=False)
+    assert np.all(quiet.column("true_wz") == 0.5)  # noise=False: no disturbance either
