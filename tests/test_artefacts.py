@@ -17,6 +17,7 @@ from airbearing.analysis.simulation.artefacts import (
     with_gap,
     with_glitches,
     with_jitter,
+    with_sign_flips,
 )
 from airbearing.analysis.simulation.on_times import integrate_on_times, simulate_on_times
 from airbearing.analysis.simulation.scenarios import free_oscillation
@@ -351,3 +352,14 @@ def test_disturbance_torque_is_white_per_interval():
     assert stats.chi2.ppf(1e-6, n) < np.sum((tau / sigma) ** 2) < stats.chi2.ppf(1 - 1e-6, n)
     quiet = simulate_on_times(tb, t, initial_rate=0.5, torque_noise=sigma, noise=False)
     assert np.all(quiet.column("true_wz") == 0.5)  # noise=False: no disturbance either
+
+
+def test_sign_flips_keep_the_attitude(gyro_log):
+    flipped, rows = with_sign_flips(gyro_log)  # the qw >= 0 hemisphere of many exporters
+    assert rows == tuple(np.flatnonzero(gyro_log.column("qw") < 0))
+    assert len(rows) > 0 and np.all(flipped.column("qw") >= 0)
+    q0, q1 = gyro_log.quaternions(), flipped.quaternions()
+    assert_allclose(quat.rotation_matrix(q1), quat.rotation_matrix(q0), rtol=0, atol=1e-15)
+    assert _changed(flipped, gyro_log) == (rows, {"qw", "qx", "qy", "qz"})
+    _, some = with_sign_flips(gyro_log, [3, 1])
+    assert some == (1, 3)

@@ -35,6 +35,7 @@ __all__ = [
     "with_gap",
     "with_glitches",
     "with_first_sample_artefact",
+    "with_sign_flips",
 ]
 
 #: Glitch kinds and what each writes at a hit row.
@@ -269,3 +270,29 @@ def with_first_sample_artefact(log: Log) -> tuple[Log, tuple[int, ...]]:
     data = log.data.copy()
     data.loc[list(rows), have] = 0.0
     return Log(data, source=log.source, testbed=log.testbed), rows
+
+
+def with_sign_flips(log: Log, rows=None) -> tuple[Log, tuple[int, ...]]:
+    """The quaternion negated at ``rows``: the same attitude (FORMATS.md: ``q`` and ``-q``).
+
+    Not a glitch: many exporters keep ``qw >= 0`` and so change sign as the attitude
+    passes half a turn; a tool must not flag or fit those rows differently. ``rows``
+    default: every row with ``qw < 0`` (the ``qw >= 0`` hemisphere an exporter writes).
+
+    Returns
+    -------
+    log : Log
+        A new, validated log.
+    rows : tuple of int
+        The rows negated.
+    """
+    if not all(c in log.data.columns for c in _QUAT):
+        raise InputError(f"{log.source}: sign flips need the columns qw, qx, qy, qz")
+    data = log.data.copy()
+    if rows is None:
+        hit = tuple(int(i) for i in np.flatnonzero(data["qw"].to_numpy() < 0))
+    else:
+        hit = _rows(rows, log.n)
+    if hit:
+        data.loc[list(hit), list(_QUAT)] *= -1.0
+    return Log(data, source=log.source, testbed=log.testbed), hit
