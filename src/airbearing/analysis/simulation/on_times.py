@@ -29,13 +29,18 @@ from airbearing.io.testbed import Testbed
 from airbearing.models.compiled import LOOP_MIN_STEPS, compiled
 from airbearing.models.model import Model, build_model
 
-__all__ = ["integrate_on_times", "simulate_on_times", "initial_state", "free_inputs"]
+__all__ = [
+    "simulate_on_times",
+    "integrate_on_times",
+    "measure_on_samples",
+    "initial_state",
+    "free_inputs",
+    "rollout_dt",
+]
 
 #: Default longest integration piece, in sample periods: the FORMATS.md gap threshold
 #: (an interval up to 1.5 / rate is an ordinary, jittered sample).
 MAX_INTERVAL_PERIODS = 1.5
-
-
 #: Intervals per call of the compiled rollout: a log is integrated chunk by chunk, so one
 #: Function (per model and chunk size, a power of two up to this) serves every length.
 CHUNK = 4096
