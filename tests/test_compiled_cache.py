@@ -207,3 +207,16 @@ def test_a_failing_compiler_leaves_the_function_uncompiled(tmp_path, monkeypatch
     assert cm.compiled(f) is f
     assert cm.cache_info().last == "uncompiled"
     assert not list(tmp_path.glob("compiled/*.so"))
+
+
+@pytest.mark.parametrize("ref_text", ["", "../../etc/passwd", "pendulum_step-missing.so"])
+def test_a_bad_ref_file_falls_back_to_the_generated_source(tmp_path, ref_text):
+    assert _run(tmp_path)["last"] == "compiled"
+    (ref,) = (tmp_path / "compiled").glob("pendulum_step-*.ref")
+    (lib,) = _libs(tmp_path)
+    assert ref.read_text().strip() == lib.name  # the structure's hash names the library
+    ref.write_text(ref_text)
+    again = _run(tmp_path)
+    assert again["last"] == "disk"  # found through the C source's key, not compiled again
+    np.testing.assert_allclose(again["val"], again["ref"], rtol=1e-12, atol=0)
+    assert ref.read_text().strip() == lib.name  # and the ref is repaired

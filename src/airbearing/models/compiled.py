@@ -19,7 +19,9 @@ compiling again (seconds):
   compiling it twice. A reader never loads a file whose content does not match
   its sidecar (a half-written, truncated or corrupt file): it rebuilds it.
 - in memory: a bounded LRU of loaded Functions keyed by the SHA-256 of
-  ``Function.serialize()`` (the structure, not ``id()``).
+  ``Function.serialize()`` (the structure, not ``id()``). The same hash names a
+  small ``.ref`` file pointing at the library, so a new process finds it without
+  generating the C source again (10-50 ms per window function).
 
 With no C compiler (or ``AIRBEARING_COMPILE=0``) the Function is returned
 unchanged and runs in CasADi's virtual machine: compiling changes how fast a
@@ -63,9 +65,11 @@ COMPILE_ENV = "AIRBEARING_COMPILE"
 #: Flags given to the C compiler (``-O1``: most of ``-O2``'s speed on CasADi's
 #: straight-line code at a fraction of its compile time).
 FLAGS = ("-O1", "-fPIC", "-shared")
-#: Shortest loop (steps) worth compiling: below it the virtual machine runs a
-#: ``mapaccum`` of a closed-loop step faster than a cached library loads (measured:
-#: VM about 5 us a step, compiled about 2 us, a cache hit 10-40 ms).
+#: Shortest loop (steps) worth compiling: below it building and running a
+#: ``mapaccum`` in the virtual machine costs less than loading a cached library
+#: (measured on the CMG closed loop, CPU time: VM 12-25 us a step for building the
+#: graph, evaluating it and converting its outputs; compiled chunks about 1 us a
+#: step plus a 20-40 ms load; the first compilation 1-2 s once per structure).
 LOOP_MIN_STEPS = 6000
 #: Loaded Functions kept in memory per process.
 MEMORY_SIZE = 64
@@ -160,6 +164,9 @@ def cache_dir() -> Path:
     return Path(root).expanduser() / "compiled"
 
 
+_FILES = (".so", ".dll", ".dylib", ".sha256", ".lock", ".tmp", ".ref")
+
+
 def clear_cache() -> int:
     """Delete every compiled library (and sidecar, lock) in :func:`cache_dir`; the count removed.
 
@@ -170,7 +177,7 @@ def clear_cache() -> int:
     n = 0
     if d.is_dir():
         for f in d.iterdir():
-            if f.is_file() and f.suffix in (".so", ".dll", ".dylib", ".sha256", ".lock", ".tmp"):
+            if f.is_file() and f.suffix in _FILES:
                 with contextlib.suppress(FileNotFoundError):
                     f.unlink()
                     n += 1
@@ -360,7 +367,8 @@ def compiled(fn, *, key: str = "", progress: Callable | None = None):
     if cc is None or os.environ.get(COMPILE_ENV, "1") == "0":
         _count("uncompiled")
         return fn
-    mem_key = hashlib.sha256((key + "\0" + fn.serialize()).encode()).hexdigest()
+    env = "\0".join((ca.__version__, cc, " ".join(FLAGS), platform.machine(), sys.platform, key))
+    mem_key = hashlib.sha256((env + "\0" + fn.serialize()).encode()).hexdigest()
     with _lock:
         hit = _memory.get(mem_key)
         if hit is not None:
@@ -376,18 +384,19 @@ def compiled(fn, *, key: str = "", progress: Callable | None = None):
             _count("memory")
             return hit
         name = fn.name()
-        source = _source(fn)
-        ident = "\0".join(
-            (source, ca.__version__, cc, " ".join(FLAGS), platform.machine(), sys.platform, key)
-        )
-        digest = hashlib.sha256(ident.encode()).hexdigest()[:24]
         folder = cache_dir()
         folder.mkdir(parents=True, exist_ok=True)
-        lib = folder / f"{name}-{digest}{_suffix()}"
-        side = lib.with_name(lib.name + ".sha256")
-        f, what = None, "disk"
-        if _valid(lib, side):
-            f = _try_load(name, lib, fn)
+        # the serialized structure names its library (no C generation on a disk hit) ...
+        ref = folder / f"{name}-{mem_key[:24]}.ref"
+        f, what, lib = _via_ref(ref, name, fn), "disk", None
+        if f is None:
+            # ... and the generated C source is the library's own key
+            source = _source(fn)
+            digest = hashlib.sha256((source + "\0" + env).encode()).hexdigest()[:24]
+            lib = folder / f"{name}-{digest}{_suffix()}"
+            side = lib.with_name(lib.name + ".sha256")
+            if _valid(lib, side):
+                f = _try_load(name, lib, fn)
         if f is None:
             with _file_lock(lib.with_name(lib.name + ".lock")):
                 # another process may have built it while we waited for the lock
@@ -410,6 +419,8 @@ def compiled(fn, *, key: str = "", progress: Callable | None = None):
                         _log().warning("%s; running %s uncompiled", e, name)
                         _count("uncompiled")
                         return fn
+        if lib is not None:  # found or built without the ref: write it for the next process
+            _write_ref(ref, lib.name)
         _count(what)
         with _lock:
             _memory[mem_key] = f
@@ -417,6 +428,34 @@ def compiled(fn, *, key: str = "", progress: Callable | None = None):
             while len(_memory) > MEMORY_SIZE:
                 _memory.popitem(last=False)
         return f
+
+
+def _via_ref(ref: Path, name: str, fn):
+    """The library a ``.ref`` file names, loaded, or None (no ref, or its library unusable)."""
+    try:
+        target = ref.read_text().strip()
+    except OSError:
+        return None
+    if not target or "/" in target or "\\" in target:
+        return None
+    lib = ref.with_name(target)
+    if not _valid(lib, lib.with_name(lib.name + ".sha256")):
+        return None
+    try:
+        return _load(name, lib, fn)
+    except RuntimeError:
+        return None
+
+
+def _write_ref(ref: Path, target: str) -> None:
+    part = ref.with_name(f".{ref.name}.{os.getpid()}.{threading.get_ident()}.tmp")
+    try:
+        part.write_text(target + "\n")
+        os.replace(part, ref)
+    except OSError as e:  # only a shortcut: the next process generates the C source again
+        _log().warning("could not write %s (%s)", ref, e)
+        with contextlib.suppress(FileNotFoundError):
+            part.unlink()
 
 
 def _try_load(name: str, lib: Path, fn):
