@@ -272,3 +272,19 @@ def test_report_has_spec_rate_and_failures(tmp_path):
     assert "final_yaw_error_deg &lt;= 0.5" in html or "final_yaw_error_deg <= 0.5" in html
     assert f'<td class="">{n_met}</td>' in html
     assert "Failed runs" in html and "InputError" in html
+
+
+def test_each_command_takes_its_own_options():
+    # balance options are not simulate options; identify/discrepancy take simulate.* too
+    c = parse_campaign({"testbed": "cmg-yaw", "command": "balance", "runs": 1,
+                        "args": {"method": "mixed", "duration": 20}})  # fmt: skip
+    assert c.args == {"method": "mixed", "duration": 20}
+    c = parse_campaign({"testbed": "cmg-yaw", "command": "discrepancy", "runs": 1,
+                        "args": {"max-effects": 1, "simulate.duration": 20}})  # fmt: skip
+    assert c.truth_args == {"duration": 20}
+    with pytest.raises(InputError, match="simulate.yaw"):
+        parse_campaign({"testbed": "cmg-yaw", "command": "identify", "runs": 1,
+                        "args": {"simulate.yaw": 20}})  # fmt: skip
+    with pytest.raises(InputError, match="method"):
+        parse_campaign({"testbed": "cmg-yaw", "command": "balance", "runs": 1,
+                        "args": {"method": "magic"}})  # fmt: skip

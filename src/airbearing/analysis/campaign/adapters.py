@@ -154,8 +154,11 @@ def check_args(src: str, command: str, args: dict, truth: dict) -> None:
     from airbearing.design.steering import STEERING_LAWS
 
     conv = _convert(src, command, args)
-    sim = _convert(src, "simulate", truth if command in ("identify", "discrepancy") else args,
-                   "simulate." if command != "simulate" else "")  # fmt: skip
+    sim = {}
+    if command == "simulate":
+        sim = conv
+    elif command in ("identify", "discrepancy"):
+        sim = _convert(src, "simulate", truth, "simulate.")
     if command in ("simulate", "identify", "discrepancy"):
         if sim.get("scenario", "slew") not in ("slew", "free"):
             raise InputError(f"{src}: [args] scenario {sim['scenario']!r}: expected slew or free")
