@@ -146,8 +146,13 @@ def _detection(report: Report, campaign, df) -> dict:
     return det
 
 
-def campaign_report(campaign, df, *, report: Report | None = None, level: int = 2) -> Report:
-    """The report of a campaign's results ``df`` (a new Report, or sections added to one)."""
+def campaign_report(
+    campaign, df, *, report: Report | None = None, level: int = 2, max_plotted: int = MAX_PLOTTED
+) -> Report:
+    """The report of a campaign's results ``df`` (a new Report, or sections added to one).
+
+    ``max_plotted`` metrics get a histogram and CDF (the ``[spec]`` metrics first).
+    """
     rep = report or Report(
         f"Campaign: {campaign.command} on {campaign.testbed.name}, {len(df)} runs"
     )
@@ -190,7 +195,7 @@ def campaign_report(campaign, df, *, report: Report | None = None, level: int = 
         if len(metrics) > MAX_TABLE:
             rep.paragraph(f"{len(metrics) - MAX_TABLE} more varying metrics are in the file.")
         entries = {e.metric: e for e in campaign.spec}
-        for m in metrics[:MAX_PLOTTED]:
+        for m in metrics[:max_plotted]:
             fig = _hist_cdf(df.loc[ok, m].astype(float).to_numpy(), m, entries.get(m))
             rep.figure(fig, f"{m}: histogram and empirical CDF over the successful runs")
         if disp and campaign.study != "detection":
@@ -288,7 +293,7 @@ def robust_verification_section(report: Report, *, quick: bool = False) -> None:
         f"interval {rate['ci_low']:.0%}-{rate['ci_high']:.0%}). The README gives the full "
         "campaign (airbearing campaign robust.toml)."
     )
-    campaign_report(campaign, df, report=report, level=3)
+    campaign_report(campaign, df, report=report, level=3, max_plotted=2)
 
 
 def detection_section(report: Report, *, quick: bool = False) -> None:
