@@ -130,3 +130,89 @@ def test_demo_quick(tmp_path):
     assert run(["demo", "--out", str(tmp_path), "--quick"]) == 0
     html = (tmp_path / "report.html").read_text()
     assert "Seed 001" in html and "data:image/svg+xml;base64," in html
+
+
+# ------------------------------------------------------------------ built-in testbeds
+
+
+def test_builtin_catalogue_matches_the_files():
+    from airbearing.io.builtins import BUILTINS, _check_catalogue
+
+    _check_catalogue()  # every file says its entry's name, kind and dof
+    for b in BUILTINS:
+        tb = load_testbed(b.name)
+        assert (tb.name, tb.kind, tb.body.dof) == (b.name, b.kind, b.dof)
+
+
+def test_platform_3dof_is_an_alias_of_the_seed000_tabletop():
+    alias, target = load_testbed("platform-3dof"), load_testbed("seed000-tabletop")
+    assert alias.name == "platform-3dof"
+    assert alias.replace(name="seed000-tabletop") == target
+
+
+def test_seed000_tabletop_is_the_seed000_platform():
+    tb = load_testbed("seed000-tabletop")
+    # seed 000 Sec. 2: three 0.041 kg sliders, 2 um steps, 1 A m^2 magnetorquers;
+    # Sec. 3: a vertical 6e-4 T cage field, 20 Hz
+    assert tb.masses.mass == (0.041, 0.041, 0.041) and tb.masses.step == 2e-6
+    assert tb.magnetorquers.max_dipole == 1.0
+    assert tuple(tb.field.lab) == (0.0, 0.0, 6e-4) and tb.sensors.rate == 20.0
+    # its in-plane offset is of the size seed 000 balances (+-0.5 mm, Tables 1-2)
+    assert max(abs(v) for v in tb.body.cm_offset[:2]) <= 1e-3
+
+
+def test_seed004_platform_reaches_its_offset():
+    tb = load_testbed("seed004-platform")
+    assert tb.body.mass == 6.3 and tb.masses.mass == (0.465, 0.465, 0.465)  # seed 004 Sec. 4
+    assert tb.magnetorquers is None
+    # seed 004 eq. 56: mass_balance / mass_total * travel = 0.465 / 6.3 * 37 mm = 2.7 mm per
+    # axis, enough for the 2.6 mm vertical offset of x_true (the seed-000 sliders: 0.24 mm)
+    reach = tb.masses.mass[2] / tb.body.mass * tb.masses.travel
+    assert reach == pytest.approx(2.7e-3, abs=0.05e-3)
+    assert reach > abs(tb.body.cm_offset[2]) == pytest.approx(2.6e-3)
+    tabletop = load_testbed("seed000-tabletop")
+    assert tabletop.masses.mass[2] / tabletop.body.mass * tabletop.masses.travel < 2.6e-3
+
+
+def test_testbed_list_show_export(tmp_path, capsys):
+    assert run(["testbed", "list", "--json"]) == 0
+    listed = json.loads(capsys.readouterr().out)
+    names = [e["name"] for e in listed]
+    assert names[:4] == ["seed000-tabletop", "seed004-platform", "cmg-yaw", "cmg-3dof"]
+    assert "platform-3dof" in names
+    for e in listed:
+        assert {"name", "kind", "dof", "description"} <= set(e) and e["description"]
+    assert run(["testbed", "list"]) == 0
+    out = capsys.readouterr().out
+    assert all(n in out for n in names) and "description" in out
+    assert run(["testbed", "show", "seed004-platform"]) == 0
+    assert 'name = "seed004-platform"' in capsys.readouterr().out
+    mine = tmp_path / "mine.toml"
+    assert run(["testbed", "export", "seed004-platform", "-o", str(mine)]) == 0
+    assert load_testbed(mine) == load_testbed("seed004-platform")  # a template that loads
+    assert "seed 004" in mine.read_text()  # with its sources
+
+
+def test_formats_copy_is_the_shared_one():
+    """docs/FORMATS.md is the project's copy of ../shared/FORMATS.md, byte for byte."""
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    ours = root / "docs" / "FORMATS.md"
+    assert ours.is_file() and "## Testbed file (TOML)" in ours.read_text()
+    shared = root.parent / "shared" / "FORMATS.md"
+    if shared.is_file():  # optional: only where ../shared is beside the repository
+        assert ours.read_bytes() == shared.read_bytes(), "docs/FORMATS.md differs from shared"
+
+
+def test_summary_is_an_aligned_table_with_units(tmp_path, capsys):
+    js = tmp_path / "s.json"
+    assert run(["simulate", "cmg-yaw", "--ideal", "--duration", "3", "--json", str(js)]) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert out[0].split() == ["quantity", "value", "unit"]
+    peak = next(line for line in out if line.startswith("peak rate"))
+    assert peak.split()[-1] == "deg/s"
+    value = float(peak.split()[2])
+    assert len(peak.split()[2].replace(".", "").lstrip("0")) <= 4  # 4 significant digits
+    # the JSON keeps full precision
+    assert json.loads(js.read_text())["peak_rate_deg_s"] == pytest.approx(value, rel=1e-3)

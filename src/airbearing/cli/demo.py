@@ -35,9 +35,11 @@ def demo(
     with tempfile.TemporaryDirectory(prefix="airbearing-demo-") as work:
         kw = {"quick": quick}
         with progress_display("demo") as progress:
+            progress("running every section on the built-in testbeds")
             if "progress" in inspect.signature(run_demo).parameters:
                 kw["progress"] = progress
             path = Path(run_demo(Path(work), **kw))
+            progress("writing the report")
         outputs.file(report, lambda tmp: shutil.copyfile(path, tmp))
         outputs.commit()
     typer.echo(f"wrote {report}")

@@ -1,0 +1,97 @@
+"""Progress of long work: plain lines on stderr when it is not a terminal, --quiet silences.
+
+Under pytest's capture stderr is not a terminal, so the in-process runs here see what a
+pipe, a log file or CI sees.
+"""
+
+from __future__ import annotations
+
+import io
+import subprocess
+import sys
+
+import pytest
+from cli_run import run
+
+from airbearing.cli import show_progress
+from airbearing.progress import call, silent
+
+
+@pytest.fixture(autouse=True)
+def _loud():
+    show_progress.set_quiet(False)
+    yield
+    show_progress.set_quiet(False)
+
+
+def test_plain_lines_say_what_and_how_far(monkeypatch):
+    buf = io.StringIO()
+    monkeypatch.setattr(sys, "stderr", buf)
+    with show_progress.progress_display("demo") as progress:
+        progress("section 1 of 2: CMG slews", 0, 2)
+        progress("section 1 of 2: CMG slews", 0, 2)  # same step within a second: not repeated
+        progress("section 2 of 2: balancing", 1, 2)
+    lines = buf.getvalue().splitlines()
+    assert lines[0] == "demo: section 1 of 2: CMG slews [0/2]"
+    assert lines[1].startswith("demo: section 2 of 2: balancing [1/2, about ")
+    assert len(lines) == 2
+
+
+def test_quiet_silences(monkeypatch):
+    buf = io.StringIO()
+    monkeypatch.setattr(sys, "stderr", buf)
+    show_progress.set_quiet(True)
+    with show_progress.progress_display("demo") as progress:
+        progress("anything", 1, 2)
+    assert buf.getvalue() == ""
+
+
+def test_library_progress_default_is_silent():
+    assert call(None) is silent
+    marker = []
+    assert call(lambda *a: marker.append(a)) is not silent
+
+
+@pytest.mark.parametrize(
+    "args, label",
+    [
+        (["gains", "cmg-yaw"], "gains:"),
+        (["report", "cmg-yaw", "-o", "{tmp}/r.html"], "report:"),
+    ],
+    ids=["gains", "report"],
+)
+def test_long_commands_show_progress_unless_quiet(args, label, tmp_path, capfd):
+    args = [a.replace("{tmp}", str(tmp_path)) for a in args]
+    assert run(args) == 0
+    err = capfd.readouterr().err
+    assert any(line.startswith(label) for line in err.splitlines()), err
+    assert run(["--quiet", *args]) == 0
+    err = capfd.readouterr().err
+    assert not any(line.startswith(label) for line in err.splitlines()), err
+
+
+@pytest.mark.slow
+def test_demo_says_which_section_it_is_in(tmp_path):
+    """The demo in a new process with stderr a pipe: progress lines, one per section."""
+    cmd = [sys.executable, "-m", "airbearing", "demo", "--quick", "--out", str(tmp_path / "d")]
+    out = subprocess.run(cmd, capture_output=True, text=True, timeout=900)
+    assert out.returncode == 0, out.stderr[-2000:]
+    lines = [ln for ln in out.stderr.splitlines() if ln.startswith("demo: ")]
+    assert len(lines) >= 2, out.stderr
+    assert (tmp_path / "d" / "report.html").is_file()
+    quiet = subprocess.run(
+        [sys.executable, "-m", "airbearing", "--quiet", *cmd[3:-1], str(tmp_path / "q")],
+        capture_output=True,
+        text=True,
+        timeout=900,
+    )
+    assert quiet.returncode == 0, quiet.stderr[-2000:]
+    assert not [ln for ln in quiet.stderr.splitlines() if ln.startswith("demo: ")]
+
+
+@pytest.mark.slow
+def test_balance_compare_shows_progress(tmp_path, capfd):
+    args = ["balance", "seed000-tabletop", "--compare", "mechanical,mixed", "--seeds", "1",
+            "--duration", "20"]  # fmt: skip
+    assert run(args) == 0
+    assert any(ln.startswith("balance:") for ln in capfd.readouterr().err.splitlines())
