@@ -105,6 +105,9 @@ FITS: tuple[tuple[int, int], ...] = ((3, 2), (4, 4), (5, 6))
 _MAX_RUN = 2  # longest run of consecutive suspects that is an isolated glitch
 _RELATIVE_FLOOR = 1e-9  # scale floor relative to the channel's magnitude
 _MAX_PASSES = 200
+_SCALE_ROWS = 2000  # rows spread over the log on which the noise scales are measured
+_MIN_SCALE_SAMPLES = 8  # fewer residuals than this give no scale (the floor is used)
+_RECOMPUTE = 3  # rows within this many k of a newly excluded sample are refitted
 
 
 @dataclass(frozen=True)
@@ -242,54 +245,73 @@ class LogQuality:
 
 
 def _loo(
-    t: np.ndarray, x: np.ndarray, good: np.ndarray, k: int, p: int, scale: float
-) -> tuple[np.ndarray, np.ndarray]:
-    """Leave-one-out residuals of one segment.
+    t: np.ndarray,
+    x: np.ndarray,
+    good: np.ndarray,
+    k: int,
+    p: int,
+    scale: float,
+    rows: np.ndarray,
+    shape: int | None = None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Leave-one-out residuals of some rows of one segment.
 
     Parameters
     ----------
-    t : (m,) times; x : (m, c) values; good : (m,) samples a fit may use.
+    t : (m,) times of the segment; x : (m, c) values; good : (m,) samples a fit may
+    use; k, p : window half-width and degree; scale : time unit of the fit, s;
+    rows : rows (of the segment) to predict; shape : force this many left
+    neighbours (and ``2k - shape`` right ones); None: ``k`` each side, sliding
+    inwards at the segment's ends.
 
     Returns
     -------
-    r : (m, c) residual ``x_i - x_hat_i`` (NaN where no fit is possible)
-    h : (m,) ``sum_j w_ij^2``, the noise gain of the prediction
+    r : (len(rows), c) residual ``x_i - x_hat_i`` (NaN where no fit is possible)
+    h : (len(rows),) ``sum_j w_ij^2``, the noise gain of the prediction
+    a : (len(rows),) left neighbours used (the window's shape)
     """
-    m = t.size
     g = np.flatnonzero(good)
     ng = g.size
-    idx = np.arange(m)
-    pos = np.searchsorted(g, idx)  # usable samples before i
-    own = good.astype(int)
+    pos = np.searchsorted(g, rows)  # usable samples before each row
+    own = good[rows].astype(int)
     left, right = pos, ng - pos - own
-    a = np.minimum(k, left)
-    b = np.minimum(right, 2 * k - a)  # slide inwards at the ends
-    a = np.minimum(left, 2 * k - b)
+    if shape is None:
+        a = np.minimum(k, left)
+        b = np.minimum(right, 2 * k - a)  # slide inwards at the ends
+        a = np.minimum(left, 2 * k - b)
+    else:
+        fits = (left >= shape) & (right >= 2 * k - shape)
+        a = np.where(fits, shape, 0)
+        b = np.where(fits, 2 * k - shape, 0)
     j = np.arange(2 * k)[None, :]
     take = np.where(
         j < a[:, None], pos[:, None] - a[:, None] + j, pos[:, None] + own[:, None] + j - a[:, None]
     )
     valid = j < (a + b)[:, None]
-    nb = g[np.clip(take, 0, max(ng - 1, 0))] if ng else np.zeros_like(take)
-    tau = (t[nb] - t[:, None]) / scale
-    V = tau[..., None] ** np.arange(p + 1)
-    Vw = V * valid[..., None]
-    ok = (a + b) >= p + 1
-    r = np.full(x.shape, np.nan)
-    h = np.full(m, np.nan)
-    if not ok.any():
-        return r, h
-    A = np.einsum("mja,mjb->mab", Vw[ok], V[ok])
-    e0 = np.zeros(p + 1)
-    e0[0] = 1.0
+    r = np.full((rows.size, x.shape[1]), np.nan)
+    h = np.full(rows.size, np.nan)
+    ok = (a + b) >= (2 * k if shape is not None else p + 1)
+    if not ok.any() or ng == 0:
+        return r, h, a
+    nb = g[np.clip(take[ok], 0, ng - 1)]
+    valid = valid[ok]
+    tau = (t[nb] - t[rows[ok], None]) / scale
+    powers = np.empty(tau.shape + (p + 1,))
+    powers[..., 0] = 1.0
+    for e in range(1, p + 1):
+        powers[..., e] = powers[..., e - 1] * tau
+    vw = powers * valid[..., None]
+    gram = np.einsum("mja,mjb->mab", vw, powers)
+    e0 = np.zeros((gram.shape[0], p + 1, 1))
+    e0[:, 0, 0] = 1.0
     try:
-        z = np.linalg.solve(A, np.broadcast_to(e0, (A.shape[0], p + 1))[..., None])[..., 0]
+        z = np.linalg.solve(gram, e0)[..., 0]
     except np.linalg.LinAlgError:
-        z = np.einsum("mab,b->ma", np.linalg.pinv(A), e0)
-    w = np.einsum("mja,ma->mj", Vw[ok], z)
-    r[ok] = x[ok] - np.einsum("mj,mjc->mc", w, x[nb[ok]])
+        z = np.linalg.pinv(gram)[:, :, 0]
+    w = np.einsum("mja,ma->mj", vw, z)
+    r[ok] = x[rows[ok]] - np.einsum("mj,mjc->mc", w, x[nb])
     h[ok] = np.sum(w * w, axis=1)
-    return r, h
+    return r, h, a
 
 
 @dataclass
@@ -297,49 +319,60 @@ class _Group:
     name: str  # "rates" or "attitude"
     columns: tuple[str, ...]  # log columns
     values: np.ndarray  # (n, c), prepared (signs continuous, yaw unwrapped)
-    vector: bool  # True: one chi-square(c-1) test on the vector (quaternion)
+    vector: bool  # True: one chi-square(3) test on the vector (quaternion)
     floor: np.ndarray  # (c,) or (1,) scale floor
     wrap: bool = False  # residual modulo 2 pi (yaw)
 
 
-def _residuals(
-    group: _Group, t: np.ndarray, segments, good: np.ndarray, k: int, p: int, scale: float
-) -> np.ndarray:
-    """Normalised residuals ``r / sqrt(1 + h)``, shape (n, c); NaN where unchecked."""
-    out = np.full(group.values.shape, np.nan)
+def _normalised(
+    group: _Group,
+    t: np.ndarray,
+    segments,
+    good: np.ndarray,
+    k: int,
+    p: int,
+    scale: float,
+    rows: np.ndarray,
+    shape: int | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Normalised residuals ``r / sqrt(1 + h)`` of ``rows`` (sorted), shape (len(rows), c),
+    NaN where unchecked, and each row's window shape (left neighbours)."""
+    out = np.full((rows.size, group.values.shape[1]), np.nan)
+    shapes = np.full(rows.size, -1)
     for start, stop in segments:
-        if stop - start < 4:
+        lo, hi = np.searchsorted(rows, [start, stop])
+        if hi == lo or stop - start < 4:
             continue
-        r, h = _loo(t[start:stop], group.values[start:stop], good[start:stop], k, p, scale)
+        r, h, a = _loo(
+            t[start:stop],
+            group.values[start:stop],
+            good[start:stop],
+            k,
+            p,
+            scale,
+            rows[lo:hi] - start,
+            shape,
+        )
         if group.wrap:
             r = np.mod(r + np.pi, 2 * np.pi) - np.pi
-        out[start:stop] = r / np.sqrt(1.0 + h)[:, None]
-    return out
+        out[lo:hi] = r / np.sqrt(1.0 + h)[:, None]
+        shapes[lo:hi] = a
+    return out, shapes
 
 
-def _scales(group: _Group, d: np.ndarray, mask: np.ndarray) -> np.ndarray:
-    """Robust noise scale per channel (or one for a vector group), floored."""
-    rows = mask & np.all(np.isfinite(d), axis=1)
-    if not rows.any():
-        return group.floor.copy()
+def _scale(group: _Group, d: np.ndarray) -> np.ndarray:
+    """Robust noise scale per channel (or one for a vector group) of normalised residuals."""
+    d = d[np.all(np.isfinite(d), axis=1)]
+    if d.shape[0] < _MIN_SCALE_SAMPLES:
+        return np.full(group.floor.shape, np.nan)
     if group.vector:
-        s = np.array([np.sqrt(np.median(np.sum(d[rows] ** 2, axis=1)) / _CHI2_3_MEDIAN)])
-    else:
-        dev = d[rows] - np.median(d[rows], axis=0)
-        s = _MAD_TO_SIGMA * np.median(np.abs(dev), axis=0)
-    return np.maximum(s, group.floor)
+        return np.array([np.sqrt(np.median(np.sum(d**2, axis=1)) / _CHI2_3_MEDIAN)])
+    return _MAD_TO_SIGMA * np.median(np.abs(d - np.median(d, axis=0)), axis=0)
 
 
-def _scores(group: _Group, d: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Per-row score (noise scales) and per-channel exceedance, NaN -> 0."""
-    d = np.nan_to_num(d, nan=0.0)
-    if group.vector:
-        z2 = np.sum(d * d, axis=1) / s[0] ** 2
-        score = np.sqrt(z2)
-        over = (z2 > CHI2_3_THRESHOLD)[:, None] & np.ones(d.shape[1], dtype=bool)
-        return score, over
-    z = np.abs(d) / s
-    return np.max(z, axis=1), z > Z_THRESHOLD
+def _sample_rows(n: int) -> np.ndarray:
+    """At most _SCALE_ROWS evenly spread rows: enough for a robust scale."""
+    return np.unique(np.linspace(0, n - 1, min(n, _SCALE_ROWS)).astype(int))
 
 
 @dataclass(frozen=True)
@@ -352,25 +385,110 @@ class _GroupResult:
     fit: tuple[int, int]  # (k, p) used
 
 
+def _shape_scales(group: _Group, t, segments, k: int, p: int, scale: float) -> np.ndarray:
+    """Noise scale of the normalised residual for each window shape (0 .. 2k left neighbours).
+
+    Edge samples are extrapolated; a fast motion leaves a larger misfit there than
+    in the interior. Every shape is tried on the same spread of rows wherever it
+    fits, so each shape's scale measures noise plus that shape's own misfit.
+    """
+    n = t.size
+    rows = _sample_rows(n)
+    good = np.ones(n, dtype=bool)
+    scales = np.empty((2 * k + 1, group.floor.size))
+    interior = None
+    for a in [k, *range(0, k), *range(k + 1, 2 * k + 1)]:
+        d, _ = _normalised(group, t, segments, good, k, p, scale, rows, shape=a)
+        s = _scale(group, d)
+        if a == k:
+            interior = s
+        if not np.all(np.isfinite(s)):
+            s = interior if interior is not None and np.all(np.isfinite(interior)) else group.floor
+        scales[a] = np.maximum(s, group.floor)
+        if a != k:
+            scales[a] = np.maximum(scales[a], scales[k])
+    return scales
+
+
+def _score(group: _Group, d: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per-row score (noise scales) and per-channel exceedance; NaN (unchecked) -> 0."""
+    d = np.nan_to_num(d, nan=0.0)
+    if group.vector:
+        z2 = np.sum(d * d, axis=1) / s[:, 0] ** 2
+        over = np.repeat((z2 > CHI2_3_THRESHOLD)[:, None], d.shape[1], axis=1)
+        return np.sqrt(z2), over
+    z = np.abs(d) / s
+    return np.max(z, axis=1), z > Z_THRESHOLD
+
+
+class _Scorer:
+    """Normalised scores of rows under the local fit chosen for each row's position.
+
+    Interior rows use the fit whose interior scale is smallest (module docstring,
+    step 3); the first and last ``k`` rows of a segment, which are extrapolated, use
+    for each position the fit whose scale *at that position* is smallest, each
+    shape's scale measured on the log itself (:func:`_shape_scales`), so that the
+    misfit of extrapolating fast motion counts as part of that position's scale.
+    """
+
+    def __init__(self, group: _Group, t: np.ndarray, segments, scale: float) -> None:
+        self.group, self.t, self.segments, self.scale = group, t, segments, scale
+        self.scales = {f: _shape_scales(group, t, segments, *f, scale) for f in FITS}
+
+        def key(s: np.ndarray) -> float:
+            return float(np.sum(np.log(s)))
+
+        self.fit = min(FITS, key=lambda f: key(self.scales[f][f[0]]))
+        n = t.size
+        self.from_start = np.zeros(n, dtype=int)
+        self.from_end = np.zeros(n, dtype=int)
+        for start, stop in segments:
+            self.from_start[start:stop] = np.arange(stop - start)
+            self.from_end[start:stop] = np.arange(stop - start)[::-1]
+        self.edge: dict[tuple[int, int], tuple[int, int]] = {}
+        for side in (0, 1):
+            for e in range(max(k for k, _ in FITS)):
+
+                def shape(f: tuple[int, int], side: int = side, e: int = e) -> int:
+                    k = f[0]
+                    return k if e >= k else (e if side == 0 else 2 * k - e)
+
+                best = min(FITS, key=lambda f, shape=shape: key(self.scales[f][shape(f)]))
+                if best != self.fit:
+                    self.edge[(side, e)] = best
+
+    @property
+    def noise(self) -> np.ndarray:
+        return self.scales[self.fit][self.fit[0]]
+
+    def __call__(self, rows: np.ndarray, good: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        g, t, segs, sc = self.group, self.t, self.segments, self.scale
+        k, p = self.fit
+        d, shapes = _normalised(g, t, segs, good, k, p, sc, rows)
+        score, over = _score(g, d, self.scales[self.fit][np.clip(shapes, 0, 2 * k)])
+        for (side, e), (kf, pf) in self.edge.items():
+            at = (self.from_start if side == 0 else self.from_end)[rows] == e
+            at &= (self.from_end if side == 0 else self.from_start)[rows] >= kf
+            if not at.any():
+                continue
+            sel = rows[at]
+            d_f, shapes_f = _normalised(g, t, segs, good, kf, pf, sc, sel)
+            s_f, o_f = _score(g, d_f, self.scales[(kf, pf)][np.clip(shapes_f, 0, 2 * kf)])
+            score[at], over[at] = s_f, o_f
+        return score, over
+
+
 def find_outliers(group: _Group, t: np.ndarray, segments, scale: float) -> _GroupResult:
     """Run the rule of the module docstring on one channel group."""
     n = t.size
-    all_good = np.ones(n, dtype=bool)
-    best: tuple[float, tuple[int, int]] | None = None
-    for k, p in FITS:
-        d = _residuals(group, t, segments, all_good, k, p, scale)
-        key = float(np.sum(np.log(_scales(group, d, all_good))))
-        if best is None or key < best[0]:
-            best = (key, (k, p))
-    assert best is not None
-    k, p = best[1]
-    excluded = np.zeros(n, dtype=bool)
+    scorer = _Scorer(group, t, segments, scale)
+    k = max(f[0] for f in FITS)
     seg_id = np.zeros(n, dtype=int)
     for i, (start, stop) in enumerate(segments):
         seg_id[start:stop] = i
+    excluded = np.zeros(n, dtype=bool)
+    score, over = scorer(np.arange(n), ~excluded)
     for _ in range(_MAX_PASSES):
-        d = _residuals(group, t, segments, ~excluded, k, p, scale)
-        score, over = _scores(group, d, _scales(group, d, ~excluded))
         suspect = over.any(axis=1) & ~excluded
         if not suspect.any():
             break
@@ -382,19 +500,21 @@ def find_outliers(group: _Group, t: np.ndarray, segments, scale: float) -> _Grou
             if score[i] >= np.max(score[near]):
                 take.append(i)
         excluded[take] = True
-    # final residuals with every excluded sample left out of the others' fits
-    d = _residuals(group, t, segments, ~excluded, k, p, scale)
-    s = _scales(group, d, ~excluded)
-    score, over = _scores(group, d, s)
+        # the fits that used a newly excluded sample change: recompute around them
+        near_mask = np.zeros(n, dtype=bool)
+        for i in take:
+            near_mask[max(i - _RECOMPUTE * k, 0) : i + _RECOMPUTE * k + 1] = True
+        again = np.flatnonzero(near_mask)
+        score[again], over[again] = scorer(again, ~excluded)
     suspect = excluded & over.any(axis=1)
     flagged = np.zeros(n, dtype=bool)
     unexplained = np.zeros(n, dtype=bool)
-    rows = np.flatnonzero(suspect)
-    if rows.size:
-        breaks = np.flatnonzero((np.diff(rows) != 1) | (np.diff(seg_id[rows]) != 0)) + 1
-        for run in np.split(rows, breaks):
+    bad = np.flatnonzero(suspect)
+    if bad.size:
+        breaks = np.flatnonzero((np.diff(bad) != 1) | (np.diff(seg_id[bad]) != 0)) + 1
+        for run in np.split(bad, breaks):
             (flagged if run.size <= _MAX_RUN else unexplained)[run] = True
-    return _GroupResult(flagged, unexplained, score, over, s, (k, p))
+    return _GroupResult(flagged, unexplained, score, over, scorer.noise, scorer.fit)
 
 
 # ----------------------------------------------------------------------------

@@ -1,0 +1,375 @@
+"""Import maps (FORMATS.md, "Import map (TOML): a lab's own log -> a log"): read and validate.
+
+An import map says how a lab's own log file (its column names, units, lab axis up,
+quaternion direction and body axes) becomes a log of FORMATS.md. This module reads
+and checks the map and the raw file's cells; the conversion itself, which needs the
+quaternion algebra of :mod:`airbearing.models.quaternion`, is
+:func:`airbearing.analysis.logs.import_map.import_log` (``io`` imports nothing from
+``models``, DESIGN.md).
+
+Every mistake is one :class:`~airbearing.errors.InputError` line naming the file and
+the key, row (0-based data row) or column.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import tomllib
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from airbearing.errors import InputError
+
+__all__ = [
+    "COLUMN_QUANTITY",
+    "LAB_UP",
+    "MAPS",
+    "UNITS",
+    "ImportMap",
+    "import_map_from_dict",
+    "raw_columns",
+    "read_import_map",
+    "read_raw",
+]
+
+_MEMORY = "<memory>"
+_ROTATION_TOL = 1e-6  # |C C^T - I| and |det C - 1| allowed for [frames] body
+
+#: Units a raw column may have, by quantity: unit -> factor to the SI unit (FORMATS.md).
+UNITS: dict[str, dict[str, float]] = {
+    "time": {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9},
+    "rate": {"rad/s": 1.0, "deg/s": math.pi / 180.0, "rpm": 2.0 * math.pi / 60.0},
+    "angle": {"rad": 1.0, "deg": math.pi / 180.0},
+    "length": {"m": 1.0, "mm": 1e-3, "um": 1e-6},
+    "dipole": {"A m^2": 1.0},
+    "field": {"T": 1.0},
+    "quaternion": {"-": 1.0},
+}
+#: The quantity of each log column (its unit table in :data:`UNITS`).
+COLUMN_QUANTITY: dict[str, str] = {
+    "t": "time",
+    **{c: "quaternion" for c in ("qw", "qx", "qy", "qz")},
+    "yaw": "angle",
+    "yaw_ref": "angle",
+    **{c: "rate" for c in ("wx", "wy", "wz")},
+    **{c: "length" for c in ("s1", "s2", "s3")},
+    **{c: "dipole" for c in ("mx", "my", "mz")},
+    **{c: "field" for c in ("bx", "by", "bz")},
+    **{c: "angle" for c in ("d1", "d2", "d3", "d4")},
+    **{c: "rate" for c in ("dd1", "dd2", "dd3", "dd4")},
+}
+#: Values of ``[quaternion] maps``.
+MAPS: tuple[str, ...] = ("body_to_lab", "lab_to_body")
+#: Values of ``[frames] lab_up``.
+LAB_UP: tuple[str, ...] = ("+x", "-x", "+y", "-y", "+z", "-z")
+_TABLES: dict[str, tuple[str, ...] | None] = {
+    "columns": None,  # keys: log columns
+    "units": None,  # keys: log columns named in [columns]
+    "quaternion": ("maps",),
+    "frames": ("lab_up", "body"),
+}
+_IDENTITY = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))
+
+
+@dataclass(frozen=True)
+class ImportMap:
+    """A validated import map.
+
+    Attributes
+    ----------
+    columns : dict of str to str
+        Log column -> the raw file's column (exact header text).
+    units : dict of str to str
+        Log column -> unit of the raw column (every mapped column; the SI unit
+        where the map names none).
+    maps : {"body_to_lab", "lab_to_body"}
+        What the raw quaternion maps.
+    lab_up : str
+        The raw lab axis that points up, ``"+x"`` ... ``"-z"``.
+    body : 3x3 tuple of float
+        ``C``, rows = the testbed's body axes in raw body axes (``v_body = C v_raw``),
+        a proper rotation.
+    source : str
+        The map's file (for messages).
+    """
+
+    columns: dict[str, str]
+    units: dict[str, str] = field(default_factory=dict)
+    maps: str = "body_to_lab"
+    lab_up: str = "+z"
+    body: tuple[tuple[float, ...], ...] = _IDENTITY
+    source: str = _MEMORY
+
+    def factor(self, column: str) -> float:
+        """Factor from the raw unit of a log column to its SI unit."""
+        return UNITS[COLUMN_QUANTITY[column]][self.units[column]]
+
+    @property
+    def body_matrix(self) -> np.ndarray:
+        """``C`` as an array, shape (3, 3)."""
+        return np.array(self.body, dtype=float)
+
+
+def _fail(src: str, key: str, expected: str, got: object) -> InputError:
+    return InputError(f"{src}: key '{key}': expected {expected}, got {got!r}")
+
+
+def _si_unit(column: str) -> str:
+    return next(iter(UNITS[COLUMN_QUANTITY[column]]))
+
+
+def import_map_from_dict(data: Mapping[str, Any], source: str = _MEMORY) -> ImportMap:
+    """Validate the layout of an import map (FORMATS.md) and build an :class:`ImportMap`.
+
+    Parameters
+    ----------
+    data : mapping
+        The parsed TOML: ``[columns]`` (required), ``[units]``, ``[quaternion]``,
+        ``[frames]``.
+    source : str
+        The map's name in messages.
+
+    Returns
+    -------
+    ImportMap
+
+    Raises
+    ------
+    InputError
+        An unknown table or key (the message lists the valid ones), no
+        ``[columns]``, a column that is not a log column or not a string, a unit
+        for a column that is not mapped or not valid for its quantity (the
+        message lists the valid units), an incomplete quaternion, an unknown
+        ``maps`` or ``lab_up``, or a ``body`` that is not a rotation matrix.
+    """
+    from airbearing.io.log import LOG_COLUMNS
+
+    src = str(source)
+    if not isinstance(data, Mapping):
+        raise InputError(f"{src}: expected tables of keys, got {data!r}")
+    for key, value in data.items():
+        if key not in _TABLES:
+            raise InputError(
+                f"{src}: unknown key '{key}'; an import map has the tables "
+                + ", ".join(f"[{t}]" for t in _TABLES)
+            )
+        if not isinstance(value, Mapping):
+            raise _fail(src, key, "a table", value)
+        valid = _TABLES[key]
+        for sub in value:
+            if valid is not None and sub not in valid:
+                raise InputError(
+                    f"{src}: unknown key '{key}.{sub}'; valid keys in [{key}] are: "
+                    + ", ".join(valid)
+                )
+            if valid is None and sub not in LOG_COLUMNS:
+                raise InputError(
+                    f"{src}: unknown key '{key}.{sub}': not a log column; log columns are: "
+                    + ", ".join(LOG_COLUMNS)
+                )
+    if "columns" not in data or not data["columns"]:
+        raise InputError(
+            f'{src}: table [columns] is required: log column = "raw column header", '
+            'e.g. t = "Time (ms)"'
+        )
+    columns: dict[str, str] = {}
+    for name, raw in data["columns"].items():
+        if not isinstance(raw, str) or raw == "":
+            raise _fail(src, f"columns.{name}", "the raw file's column header (a string)", raw)
+        columns[name] = raw
+    if "t" not in columns:
+        raise InputError(f"{src}: key 'columns.t' is required: the raw column of time")
+    quaternion = [c for c in ("qw", "qx", "qy", "qz") if c in columns]
+    if quaternion and len(quaternion) != 4:
+        missing = [c for c in ("qw", "qx", "qy", "qz") if c not in columns]
+        raise InputError(
+            f"{src}: key 'columns.{missing[0]}' is missing: the quaternion needs all four "
+            "of qw, qx, qy, qz (scalar-last files simply name their columns)"
+        )
+    units: dict[str, str] = {}
+    for name, unit in data.get("units", {}).items():
+        if name not in columns:
+            raise InputError(
+                f"{src}: key 'units.{name}': column {name!r} is not in [columns]; "
+                f"mapped columns are: {', '.join(columns)}"
+            )
+        valid_units = UNITS[COLUMN_QUANTITY[name]]
+        if not isinstance(unit, str) or unit not in valid_units:
+            raise _fail(
+                src,
+                f"units.{name}",
+                f"a {COLUMN_QUANTITY[name]} unit, one of {', '.join(valid_units)}",
+                unit,
+            )
+        units[name] = unit
+    units = {name: units.get(name, _si_unit(name)) for name in columns}
+    maps = data.get("quaternion", {}).get("maps", "body_to_lab")
+    if maps not in MAPS:
+        raise _fail(src, "quaternion.maps", "one of " + ", ".join(repr(m) for m in MAPS), maps)
+    frames = data.get("frames", {})
+    lab_up = frames.get("lab_up", "+z")
+    if lab_up not in LAB_UP:
+        raise _fail(src, "frames.lab_up", "one of " + ", ".join(repr(a) for a in LAB_UP), lab_up)
+    body = _rotation(frames.get("body", [list(r) for r in _IDENTITY]), src)
+    return ImportMap(columns, units, maps, lab_up, body, src)
+
+
+def _rotation(value: object, src: str) -> tuple[tuple[float, ...], ...]:
+    what = "a 3x3 rotation matrix (rows: testbed body axes in raw body axes)"
+    ok = (
+        isinstance(value, list | tuple)
+        and len(value) == 3
+        and all(isinstance(r, list | tuple) and len(r) == 3 for r in value)
+        and all(
+            isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
+            for r in value
+            for v in r
+        )
+    )
+    if not ok:
+        raise _fail(src, "frames.body", what, value)
+    c = np.array(value, dtype=float)
+    off = float(np.max(np.abs(c @ c.T - np.eye(3))))
+    det = float(np.linalg.det(c))
+    if off > _ROTATION_TOL or abs(det - 1.0) > _ROTATION_TOL:
+        why = (
+            f"C C^T differs from the identity by {off:.3g}"
+            if off > _ROTATION_TOL
+            else f"det C = {det:.6g} (a reflection, not a rotation)"
+        )
+        raise InputError(f"{src}: key 'frames.body': expected {what}, but {why}")
+    return tuple(tuple(float(v) for v in r) for r in value)  # type: ignore[union-attr]
+
+
+def read_import_map(path: str | os.PathLike[str]) -> ImportMap:
+    """Read and validate an import map file (TOML).
+
+    Parameters
+    ----------
+    path : str or path-like
+
+    Returns
+    -------
+    ImportMap
+
+    Raises
+    ------
+    InputError
+        If the file is missing, not TOML, or not a valid map (:func:`import_map_from_dict`).
+    """
+    src = str(path)
+    try:
+        content = Path(path).read_bytes()
+    except FileNotFoundError as e:
+        raise InputError(f"{src}: no such import map file") from e
+    except OSError as e:
+        raise InputError(f"{src}: cannot read the import map: {e.strerror}") from e
+    try:
+        data = tomllib.loads(content.decode("utf-8"))
+    except (UnicodeDecodeError, tomllib.TOMLDecodeError) as e:
+        raise InputError(f"{src}: not valid TOML: {e}") from e
+    return import_map_from_dict(data, src)
+
+
+def read_raw(path: str | os.PathLike[str]):
+    """Read a lab's raw log (CSV, or Parquet by suffix) with every cell kept as it is.
+
+    Parameters
+    ----------
+    path : str or path-like
+
+    Returns
+    -------
+    pandas.DataFrame
+        CSV cells as text (nothing turned into NaN behind the reader's back),
+        Parquet columns as stored. Row ``i`` is data row ``i`` (0-based).
+
+    Raises
+    ------
+    InputError
+        If the file is missing, empty or not readable.
+    """
+    import pandas as pd
+
+    p = Path(path)
+    src = str(path)
+    if not p.is_file():
+        raise InputError(f"{src}: no such raw log file")
+    try:
+        if p.suffix.lower() in (".parquet", ".pq"):
+            import pyarrow.parquet as pq
+
+            return pq.read_table(p).to_pandas()
+        return pd.read_csv(p, dtype=str, keep_default_na=False, skip_blank_lines=True)
+    except pd.errors.EmptyDataError as e:
+        raise InputError(f"{src}: the raw log is empty; expected a header row") from e
+    except Exception as e:  # noqa: BLE001 (any reader failure is a bad file)
+        raise InputError(f"{src}: cannot read the raw log: {str(e).strip()}") from e
+
+
+def raw_columns(raw, import_map: ImportMap, src: str, skip: tuple[str, ...] = ()):
+    """The mapped raw columns as float arrays in SI units.
+
+    Parameters
+    ----------
+    raw : pandas.DataFrame
+        From :func:`read_raw`.
+    import_map : ImportMap
+    src : str
+        The raw file's name, for messages.
+    skip : tuple of str
+        Log columns not to convert (ignored, e.g. rates without a gyro).
+
+    Returns
+    -------
+    dict of str to numpy.ndarray
+        Log column -> values times the unit's factor (``t = raw time x unit``,
+        never shifted).
+
+    Raises
+    ------
+    InputError
+        A mapped column missing from the file (the message lists the file's
+        columns), or a cell that is not a finite number (row and column named).
+    """
+    import pandas as pd
+
+    headers = [str(c) for c in raw.columns]
+    stripped = {h.strip(): h for h in headers}
+    out: dict[str, np.ndarray] = {}
+    for name, header in import_map.columns.items():
+        if name in skip:
+            continue
+        actual = header if header in headers else stripped.get(header.strip())
+        if actual is None:
+            raise InputError(
+                f"{src}: no column {header!r} (map {import_map.source}, key 'columns.{name}'); "
+                f"the file has: {', '.join(repr(h) for h in headers)}"
+            )
+        cells = raw[actual]
+        if pd.api.types.is_bool_dtype(cells.dtype):
+            values = np.full(len(cells), np.nan)
+        elif pd.api.types.is_numeric_dtype(cells.dtype):
+            values = cells.to_numpy(dtype=float, na_value=np.nan)
+        else:
+            text = cells.astype(str).str.strip()
+            values = pd.to_numeric(text, errors="coerce").to_numpy(dtype=float, na_value=np.nan)
+        bad = ~np.isfinite(values)
+        if bad.any():
+            i = int(np.argmax(bad))
+            raise InputError(
+                f"{src}: row {i}, column {actual!r} (log column {name!r}): expected a finite "
+                f"number, got {cells.iloc[i]!r}"
+            )
+        factor = import_map.factor(name)
+        inverse = round(1.0 / factor)
+        if factor < 1.0 and abs(1.0 / factor - inverse) < 1e-9 * inverse:
+            out[name] = values / inverse  # ms -> s as raw / 1000: correctly rounded
+        else:
+            out[name] = values * factor
+    return out
