@@ -14,6 +14,7 @@ from __future__ import annotations
 import contextlib
 import math
 import os
+import statistics
 import time
 import traceback
 from collections.abc import Iterator
@@ -106,6 +107,12 @@ def open_client(workers: int | None = None, scheduler: str | None = None) -> Ite
         yield client
 
 
+def _estimate(per_run: list[float]) -> float | None:
+    """Typical s per run: the median over finished chunks (a worker's first run, which
+    imports and builds, does not inflate it for the rest of the campaign)."""
+    return statistics.median(per_run) if per_run else None
+
+
 def _chunk_size(remaining: int, n_workers: int, per_run_s: float | None) -> int:
     if per_run_s is None:
         return 1
@@ -147,24 +154,23 @@ def run_campaign(campaign, output, *, client=None, resume: bool = False, progres
     todo = [i for i in wanted if i not in done_runs]
     total = len(wanted)
     done = total - len(todo)
-    t_run, n_timed = 0.0, 0
+    per_run: list[float] = []  # s per run of each finished chunk
 
     def report():
         say(f"runs done, {failed} failed", done, total)
 
     def finished(rows, elapsed):
-        nonlocal done, failed, t_run, n_timed
+        nonlocal done, failed
         write_part(folder, rows)
         done += len(rows)
         failed += sum(1 for r in rows if r["error"])
-        t_run += elapsed
-        n_timed += len(rows)
+        per_run.append(elapsed / len(rows))
         report()
 
     report()
     if client is None:
         while todo:
-            k = _chunk_size(len(todo), 1, t_run / n_timed if n_timed else None)
+            k = _chunk_size(len(todo), 1, _estimate(per_run))
             chunk, todo = todo[:k], todo[k:]
             finished(*run_chunk(campaign, chunk))
     elif todo:
@@ -183,7 +189,7 @@ def run_campaign(campaign, output, *, client=None, resume: bool = False, progres
 
         def submit(ac=None):
             nonlocal queue
-            k = _chunk_size(len(queue), n_workers, t_run / n_timed if n_timed else None)
+            k = _chunk_size(len(queue), n_workers, _estimate(per_run))
             chunk, queue = queue[:k], queue[k:]
             fut = client.submit(run_chunk, spec, chunk, pure=False)
             if ac is not None:
