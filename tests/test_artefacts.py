@@ -322,6 +322,14 @@ def test_rehearsal_log_and_its_answer_key(tmp_path):
     assert_allclose(read_log(log, tb).column("wz"), r.log.column("wz"), rtol=0, atol=1e-15)
     assert run(["simulate", "cmg-yaw", "--jitter", "0.1", "--json", str(tmp_path / "s.json")]) == 2
     assert not (tmp_path / "s.json").exists()
+    # a twin of a lab's log on its own clock: same times, same segments, same outlier-free rows
+    twin = tmp_path / "twin.csv"
+    assert run(["simulate", str(path), "--scenario", "spindown", "--times", str(log),
+                "-o", str(twin)]) == 0  # fmt: skip
+    assert_allclose(read_log(twin, tb).t, r.log.t, rtol=0, atol=1e-12)
+    assert rehearsal_log(tb, times=r.log.t).to_json()["segment_rows"] == key["segment_rows"]
+    with pytest.raises(InputError, match="duration"):
+        rehearsal_log(tb, times=r.log.t, duration=10.0)
 
 
 def test_chunked_rollout_is_one_rollout(monkeypatch):

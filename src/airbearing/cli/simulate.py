@@ -82,6 +82,9 @@ def simulate(
     glitch: Annotated[
         list[str] | None, typer.Option(help="Free/spindown: KIND:ROW[,ROW] glitch (repeatable).")
     ] = None,
+    times: Annotated[
+        Path | None, typer.Option(help="Free/spindown: sample on the t column of this log.")
+    ] = None,
     first_sample_artefact: Annotated[
         bool, typer.Option(help="Free/spindown: rate 0 at each segment's first sample.")
     ] = False,
@@ -114,9 +117,13 @@ def simulate(
 
     gaps = [parse_gap(g) for g in gap or ()]
     glitches = [parse_glitch(g) for g in glitch or ()]
-    artefacts = bool(jitter or gaps or glitches or first_sample_artefact)
+    artefacts = bool(jitter or gaps or glitches or first_sample_artefact or times)
     if artefacts and scenario == "slew":
-        raise InputError("--jitter, --gap, --glitch, --first-sample-artefact: not for a slew")
+        raise InputError(
+            "--jitter, --gap, --glitch, --times, --first-sample-artefact: not for a slew"
+        )
+    if times is not None and duration is not None:
+        raise InputError("--times and --duration: give one (the times set the run length)")
     effects = parse_effects(effect)
     tb = testbed_arg(testbed)
     default_length = {"slew": 40.0, "free": 60.0, "spindown": 120.0}[scenario]
@@ -134,9 +141,13 @@ def simulate(
 
     if artefacts:  # a log as a real testbed writes it, with its answer key in the summary
         from airbearing.analysis.simulation.rehearsal import rehearsal_log, rehearsal_summary
+        from airbearing.io.log import read_log
+
+        t_given = None if times is None else read_log(times).t
 
         result = rehearsal_log(
-            tb, duration=length, effects=effects, seed=seed, noise=not ideal,
+            tb, duration=None if times else length, times=t_given, effects=effects, seed=seed,
+            noise=not ideal,
             initial_rate=(0.0, 0.0, spin_rate) if scenario == "spindown" else initial_rate,
             q0=initial_quaternion, attitude_noise=attitude_noise, jitter=jitter, gaps=gaps,
             glitches=glitches, first_sample=first_sample_artefact,

@@ -105,7 +105,8 @@ def parse_gap(text: str) -> tuple[float, float]:
 def rehearsal_log(
     testbed: Testbed,
     *,
-    duration: float,
+    duration: float | None = None,
+    times=None,
     initial_rate=(0.0, 0.0, 0.0),
     q0=None,
     inputs: Mapping | None = None,
@@ -123,8 +124,11 @@ def rehearsal_log(
     Parameters
     ----------
     testbed : Testbed
-    duration : float
-        s; ``round(duration * rate)`` samples before gaps are cut.
+    duration : float, optional
+        s; ``round(duration * rate)`` samples at the sensor rate before gaps are cut.
+    times : array_like, optional
+        Sample times, s, instead of ``duration`` (e.g. the ``t`` column of a lab's own
+        log, so the rehearsal has its clock, gaps and segments); jitter and gaps apply on top.
     initial_rate, q0, inputs, effects, noise, attitude_noise
         As :func:`~airbearing.analysis.simulation.on_times.simulate_on_times` (rad/s, SI).
     seed : int
@@ -138,7 +142,9 @@ def rehearsal_log(
     first_sample : bool
         Rate 0 at each segment's first row (needs rate columns).
     """
-    t = sample_times(testbed, duration)
+    if (times is None) == (duration is None):
+        raise InputError("give either a duration (s) or the sample times, not both or neither")
+    t = sample_times(testbed, duration) if times is None else np.asarray(times, dtype=float)
     if jitter:
         t = with_jitter(t, jitter, seed=seed + 1)
     for gap in gaps:
