@@ -17,6 +17,7 @@ from airbearing.analysis.simulation.artefacts import (
     with_gap,
     with_glitches,
     with_jitter,
+    with_last_sample_artefact,
     with_sign_flips,
 )
 from airbearing.analysis.simulation.on_times import integrate_on_times, simulate_on_times
@@ -274,6 +275,8 @@ def test_first_sample_artefact_at_each_segment_start():
     assert rows == (0, after)
     assert _changed(g, log) == (rows, {"wz"})
     assert np.all(g.column("wz")[list(rows)] == 0)
+    g, last = with_last_sample_artefact(log)
+    assert last == (after - 1, log.n - 1) and _changed(g, log) == (last, {"wz"})
     with pytest.raises(InputError, match="wx, wy, wz"):
         with_first_sample_artefact(simulate_on_times(yaw_rig(gyro=False), t, initial_rate=2.0))
 

@@ -35,6 +35,7 @@ __all__ = [
     "with_gap",
     "with_glitches",
     "with_first_sample_artefact",
+    "with_last_sample_artefact",
     "with_sign_flips",
 ]
 
@@ -267,6 +268,27 @@ def with_first_sample_artefact(log: Log) -> tuple[Log, tuple[int, ...]]:
     """
     have = _present(log, _RATES, "first_sample")
     rows = segment_starts(log)
+    data = log.data.copy()
+    data.loc[list(rows), have] = 0.0
+    return Log(data, source=log.source, testbed=log.testbed), rows
+
+
+def with_last_sample_artefact(log: Log) -> tuple[Log, tuple[int, ...]]:
+    """Rate 0 at the last sample of each segment, as a central-difference export writes it.
+
+    The twin of :func:`with_first_sample_artefact`: a central difference has no next
+    sample at a segment's end.
+
+    Returns
+    -------
+    log : Log
+        A new, validated log; every rate column is 0 at the rows.
+    rows : tuple of int
+        The rows hit (the last row of each segment).
+    """
+    have = _present(log, _RATES, "last_sample")
+    starts = segment_starts(log)
+    rows = tuple(s - 1 for s in (*starts[1:], log.n))
     data = log.data.copy()
     data.loc[list(rows), have] = 0.0
     return Log(data, source=log.source, testbed=log.testbed), rows
