@@ -140,6 +140,7 @@ def test_magnetorquer_saturation_per_coil():
 # --------------------------------------------------------------------------- closed loops
 
 
+@pytest.mark.slow
 def test_lyapunov_law_drives_q_ep_to_zero_without_noise():
     tb = load_testbed("platform-3dof")
     body = dataclasses.replace(tb.body, cm_offset=(2e-6, -1e-6, -1.3e-7))
@@ -154,6 +155,7 @@ def test_lyapunov_law_drives_q_ep_to_zero_without_noise():
     assert qep[-200:].max() < 1e-3 * qep[0]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("method", ["mechanical", "mixed", "adaptive", "lyapunov"])
 def test_methods_balance_in_plane_without_noise(method):
     tb = load_testbed("platform-3dof")
@@ -302,6 +304,7 @@ def test_seed000_comparison_with_the_offset_kept_reports_the_transient():
     assert f"--duration {np.ceil(st['duration_for_steady_s']):.0f}" in cmp.verdict
 
 
+@pytest.mark.slow
 def test_duration_sweep_marks_where_the_last_third_is_steady():
     from airbearing.analysis.balancing.comparison import parse_sweep, sweep_comparison
 
@@ -312,6 +315,7 @@ def test_duration_sweep_marks_where_the_last_third_is_steady():
     assert sw.points[1].ratios["slider_p2p"] < sw.points[0].ratios["slider_p2p"]
 
 
+@pytest.mark.slow
 def test_seed000_advantage_of_the_mixed_split():
     """The issue's check, at seed 000's conditions (Sec. 3, Tables 1-2): platform-3dof,
     seed-000 gains, 300 s from the rest position of the -0.5 and +0.5 mm offsets, 4 noise
@@ -334,6 +338,7 @@ def test_seed000_advantage_of_the_mixed_split():
             assert 0.5 <= ratio <= 2.0, (off, method, ratio)
 
 
+@pytest.mark.slow
 def test_seed000_advantage_holds_with_the_offset_kept_at_steady_state():
     """With the offset kept the integral has to find it; past its transient (the settling
     time, 1.5 x for the last third) the mixed split keeps its advantage."""

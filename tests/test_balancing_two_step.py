@@ -19,6 +19,7 @@ def _seed004_masses():
     return tb.replace(masses=dataclasses.replace(tb.masses, mass=(0.465, 0.465, 0.465)))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("seed", [0, 1], ids=["noise-seed-0", "noise-seed-1"])
 def test_two_step_reduces_kinetic_energy_spread(seed):
     tb = _seed004_masses()

@@ -121,6 +121,7 @@ def test_simulate_cli_takes_every_steering_law(tmp_path):
         assert js.exists()
 
 
+@pytest.mark.slow
 def test_demo_section_quick():
     report = Report("t")
     demo_section(report, quick=True)

@@ -99,6 +99,7 @@ def test_matplotlib_only_at_module_level_in_reporting():
     assert not bad, bad
 
 
+@pytest.mark.slow
 def test_algorithm_modules_do_not_load_matplotlib_on_import():
     """Import every module of io/, models/, design/ and analysis/ in a fresh interpreter,
     one after the other, and name the first that brings matplotlib in."""

@@ -87,6 +87,7 @@ def test_json_uses_null_for_infinity():
     assert all(len(p) == 2 for p in d["closed_loop_poles"])
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("split", ["mechanical", "mixed"])
 def test_balancing_loops_stable_with_seed_gains(split):
     loop = balancing_loop(load_testbed("platform-3dof"), split=split)

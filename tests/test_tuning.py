@@ -23,6 +23,7 @@ def tuned_attitude(cmg_tb):
     return tune(cmg_tb, "attitude", Spec(phase_margin_deg=45, gain_margin_db=6))
 
 
+@pytest.mark.slow
 def test_tuned_attitude_gains_meet_the_spec(tuned_attitude, cmg_tb):
     r = tuned_attitude
     assert r.met, r.message
@@ -36,6 +37,7 @@ def test_tuned_attitude_gains_meet_the_spec(tuned_attitude, cmg_tb):
     assert set(d["gains"]) == {"K_p", "K_i", "K_w"} and d["met"] is True
 
 
+@pytest.mark.slow
 def test_tuned_attitude_gains_converge_in_the_nonlinear_loop(tuned_attitude, cmg_tb):
     """A 90 deg slew (seed 001 Table 8) with the tuned gains, noise and low-pass on."""
     r = slew(
@@ -57,6 +59,7 @@ def test_impossible_spec_is_reported_not_relaxed(cmg_tb):
     assert failed and "NOT met" in r.message
 
 
+@pytest.mark.slow
 def test_balancing_tuning_reports_the_unreachable_trim():
     """platform-3dof needs sliders at -61/-108 mm to balance: past the 37 mm travel."""
     tb = load_testbed("platform-3dof")
