@@ -431,21 +431,12 @@ class Log:
     def quality(self) -> LogQuality:
         """Segments, jitter and outliers of this log (:func:`airbearing.io.quality.assess`).
 
-        Computed once and cached. Needs the testbed (its sample rate says what a gap
-        is, its sensors which columns are measurements).
-
-        Raises
-        ------
-        InputError
-            If the log has no testbed.
+        Computed once and cached. Uses the testbed (its sample rate says what a gap
+        is, its sensors which columns are measurements and the noise floors);
+        without one, the median interval and no floors.
         """
         cached = self.__dict__.get("_quality")
         if cached is None:
-            if self.testbed is None:
-                raise InputError(
-                    f"{self.source}: the quality of a log (segments, outliers) needs its "
-                    "testbed; read it with read_log(path, testbed)"
-                )
             from airbearing.io.quality import assess
 
             cached = assess(self, self.testbed)

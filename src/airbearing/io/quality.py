@@ -552,16 +552,19 @@ def _continuous_signs(q: np.ndarray, segments) -> np.ndarray:
     return q * rel[:, None]
 
 
-def _groups(log: Log, testbed: Testbed, segments) -> list[_Group]:
+def _groups(log: Log, testbed: Testbed | None, segments) -> list[_Group]:
+    from airbearing.io.testbed import Sensors
+
     groups = []
-    sensors = testbed.sensors
+    sensors = testbed.sensors if testbed is not None else Sensors(gyro_noise=0.0)
     rates = log.rates()
     if rates is not None:
         cols = ("wx", "wy", "wz") if rates.shape[1] == 3 else ("wz",)
         mag = np.maximum(np.max(np.abs(rates), axis=0), 1.0)
         floor = np.maximum(sensors.gyro_noise, _RELATIVE_FLOOR * mag)
         groups.append(_Group("rates", cols, rates, False, floor))
-    use_yaw = testbed.body.dof == 1 and log.has("yaw")
+    dof = testbed.body.dof if testbed is not None else (3 if log.has("qw") else 1)
+    use_yaw = dof == 1 and log.has("yaw")
     if use_yaw:
         yaw = log.column("yaw")
         for start, stop in segments:
@@ -584,17 +587,19 @@ def _reason(group: _Group, cols: tuple[str, ...], score: float, logged_zero: boo
     )
 
 
-def assess(log: Log, testbed: Testbed) -> LogQuality:
+def assess(log: Log, testbed: Testbed | None) -> LogQuality:
     """Segments, jitter and outliers of a log (the rule is in the module docstring).
 
     Parameters
     ----------
     log : Log
         A validated log (``read_log``, ``Log(...)``); its columns are read as they are.
-    testbed : Testbed
+    testbed : Testbed or None
         Its sample rate defines gaps (interval > 1.5 / rate) and jitter; its sensors
         say which columns are measurements (``sensors.gyro``) and give the noise
-        floors (``gyro_noise``, ``attitude_noise``).
+        floors (``gyro_noise``, ``attitude_noise``). Without one (``log import``
+        without ``--testbed``) the period is the median interval, the rates and the
+        attitude are tested when present, and there is no nominal noise floor.
 
     Returns
     -------
@@ -608,11 +613,11 @@ def assess(log: Log, testbed: Testbed) -> LogQuality:
     from airbearing.io.log import segments_of
     from airbearing.io.testbed import Testbed
 
-    if not isinstance(testbed, Testbed):
+    if testbed is not None and not isinstance(testbed, Testbed):
         raise InputError(f"{log.source}: assess needs a Testbed, got {type(testbed).__name__}")
     t = log.data["t"].to_numpy(dtype=float)
     n = t.size
-    period = testbed.sensors.dt
+    period = testbed.sensors.dt if testbed is not None else float(np.median(np.diff(t)))
     segments = segments_of(t, period)
     dt = np.diff(t)
     inside = dt <= 1.5 * period
@@ -667,3 +672,67 @@ def assess(log: Log, testbed: Testbed) -> LogQuality:
         fits=fits,
         unchecked_rows=unchecked,
     )
+
+
+# ----------------------------------------------------------------------------
+# what each tool can use
+
+#: Usable samples a segment needs for identification and discrepancy windows: a
+#: free oscillation must show some motion; 20 samples are 1 s at 20 Hz.
+MIN_FIT_SAMPLES = 20
+#: The tools ``log check`` reports on, in the order it prints them.
+TOOLS: tuple[str, ...] = ("simulate replay", "identify", "discrepancy", "replay", "balance")
+
+
+def tool_use(log: Log, quality: LogQuality) -> dict[str, tuple[bool, str]]:
+    """Which tools can use this log, and why (or why not).
+
+    Parameters
+    ----------
+    log : Log
+        Validated with its testbed (so the testbed's required columns are present).
+    quality : LogQuality
+
+    Returns
+    -------
+    dict of str to (bool, str)
+        For each of :data:`TOOLS`: whether it can use the log and one sentence why.
+        Replays need a segment of 2 samples; fits need a segment of at least
+        :data:`MIN_FIT_SAMPLES` usable samples; balancing needs sliders.
+    """
+    tb = log.testbed
+    usable = quality.usable_mask()
+    longest = max((int(np.sum(usable[a:b])) for a, b in quality.segments), default=0)
+    n_fit = sum(1 for a, b in quality.segments if np.sum(usable[a:b]) >= MIN_FIT_SAMPLES)
+    segs = f"{quality.n_segments} segment(s), {len(quality.outlier_rows)} outlier row(s) left out"
+    measured = "attitude only (sensors.gyro = false)" if tb and not tb.sensors.gyro else "rates"
+    out: dict[str, tuple[bool, str]] = {}
+    replay_ok = longest >= 2
+    why_replay = (
+        f"{segs}; each segment starts afresh from its logged state"
+        if replay_ok
+        else "no segment has 2 usable samples"
+    )
+    out["simulate replay"] = (replay_ok, why_replay)
+    if n_fit:
+        why_fit = (
+            f"{n_fit} segment(s) of >= {MIN_FIT_SAMPLES} usable samples; fits {measured}; {segs}"
+        )
+        out["identify"] = (True, why_fit)
+        out["discrepancy"] = (True, why_fit)
+    else:
+        why = f"no segment has {MIN_FIT_SAMPLES} usable samples (longest: {longest})"
+        out["identify"] = (False, why)
+        out["discrepancy"] = (False, why)
+    out["replay"] = (replay_ok, why_replay)
+    if tb is None:
+        out["balance"] = (False, "no testbed given")
+    elif tb.kind != "platform":
+        out["balance"] = (False, "kind = 'cmg': no sliding masses to balance with")
+    elif tb.masses is None:
+        out["balance"] = (False, "passive platform (no [masses]): nothing to balance with")
+    elif not log.has("s1", "s2", "s3"):
+        out["balance"] = (False, "no slider columns s1, s2, s3")
+    else:
+        out["balance"] = (replay_ok, "sliders and attitude logged: balancing runs can be checked")
+    return out
