@@ -27,6 +27,7 @@ from airbearing.analysis.simulation.on_times import simulate_on_times
 from airbearing.errors import InputError
 from airbearing.io.log import Log
 from airbearing.io.testbed import Testbed
+from airbearing.models import quaternion as quat
 
 __all__ = ["Rehearsal", "rehearsal_log", "rehearsal_summary", "parse_glitch", "parse_gap"]
 
@@ -168,14 +169,17 @@ def rehearsal_log(
 
 
 def rehearsal_summary(r: Rehearsal) -> dict:
-    """The run in numbers: samples, duration, peak and final true rate, and the answer key."""
+    """The run in numbers (peak and final true rate, tilt on dof 3, ...) and the answer key."""
     log = r.log
     names = [c for c in ("true_wx", "true_wy", "true_wz") if log.has(c)]
     w = np.linalg.norm(log.columns(names), axis=1)
-    return {
+    out = {
         "peak_rate_deg_s": float(np.rad2deg(w.max())),
         "final_rate_deg_s": float(np.rad2deg(w[-1])),
         "duration_s": float(log.t[-1] - log.t[0]),
         "samples": int(log.n),
-        **r.to_json(),
     }
+    q_names = ["true_qw", "true_qx", "true_qy", "true_qz"]
+    if log.has(*q_names):  # the same keys as scenarios.free_summary
+        out["max_tilt_deg"] = float(np.rad2deg(quat.tilt_of(log.columns(q_names)).max()))
+    return {**out, **r.to_json()}
