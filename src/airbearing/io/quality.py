@@ -478,6 +478,30 @@ class _Scorer:
         return score, over
 
 
+def _best_explanation(scorer: _Scorer, i: int, excluded: np.ndarray, seg_id, k: int) -> int:
+    """The row among ``i - 1, i, i + 1`` whose exclusion best explains its neighbourhood.
+
+    A glitch at a segment's first sample also pulls the fit of the second, whose
+    interior residual can then score higher than the (extrapolated, so more
+    uncertain) first sample itself. Of the three candidates, the one whose exclusion
+    leaves the smallest largest score within ``2k`` rows is taken (``i`` on a tie).
+    """
+    n = excluded.size
+    window = np.arange(max(i - 2 * k, 0), min(i + 2 * k + 1, n))
+    window = window[seg_id[window] == seg_id[i]]
+    best, best_metric = i, np.inf
+    for c in (i, i - 1, i + 1):
+        if c < 0 or c >= n or seg_id[c] != seg_id[i] or excluded[c]:
+            continue
+        good = ~excluded
+        good[c] = False
+        rows = window[good[window]]
+        metric = float(np.max(scorer(rows, good)[0], initial=0.0))
+        if metric < best_metric - 1e-9:
+            best, best_metric = c, metric
+    return best
+
+
 def find_outliers(group: _Group, t: np.ndarray, segments, scale: float) -> _GroupResult:
     """Run the rule of the module docstring on one channel group."""
     n = t.size
@@ -498,7 +522,7 @@ def find_outliers(group: _Group, t: np.ndarray, segments, scale: float) -> _Grou
             near = np.arange(max(i - k, 0), min(i + k + 1, n))
             near = near[(seg_id[near] == seg_id[i]) & suspect[near]]
             if score[i] >= np.max(score[near]):
-                take.append(i)
+                take.append(_best_explanation(scorer, i, excluded, seg_id, k))
         excluded[take] = True
         # the fits that used a newly excluded sample change: recompute around them
         near_mask = np.zeros(n, dtype=bool)
