@@ -176,7 +176,8 @@ def rehearsal_summary(r: Rehearsal) -> dict:
     out = {
         "peak_rate_deg_s": float(np.rad2deg(w.max())),
         "final_rate_deg_s": float(np.rad2deg(w[-1])),
-        "duration_s": float(log.t[-1] - log.t[0]),
+        # as free_summary: the run's length, the last sample's interval included
+        "duration_s": float(log.t[-1] - log.t[0] + log.testbed.sensors.dt),
         "samples": int(log.n),
     }
     q_names = ["true_qw", "true_qx", "true_qy", "true_qz"]
