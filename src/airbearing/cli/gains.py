@@ -115,7 +115,8 @@ def gains(
     if checks:
         echo_table(
             [
-                [c.get("name"), c.get("value"), f"{c.get('sense') or ''} {cell(c.get('limit'))}",
+                [c.get("name"), c.get("value"),
+                 f"{c.get('sense')} {cell(c.get('limit'))}" if c.get("limit") is not None else "",
                  "met" if c.get("met") else "NOT met"]
                 for c in checks
             ],
@@ -123,7 +124,8 @@ def gains(
         )  # fmt: skip
         typer.echo("")
     typer.echo(f"specification met: {'yes' if res.met else 'no'}")
-    typer.echo(res.message)
+    if not res.message.lower().startswith("specification met"):
+        typer.echo(res.message)
     if json_path is not None:
         typer.echo(f"wrote {json_path}")
 
