@@ -264,6 +264,9 @@ def test_glitch_bad_input(gyro_log):
         with_glitches(gyro_log, [1], "rate_drift")
     assert set(GLITCH_KINDS) == {"rate_zero", "rate_spike", "quat_wrong_frame", "yaw_offset",
                                  "yaw_zero"}  # fmt: skip
+    from airbearing.cli.simulate import GLITCHES  # the CLI's help lists the same kinds
+
+    assert GLITCHES.split("|") == list(GLITCH_KINDS)
 
 
 def test_first_sample_artefact_at_each_segment_start():

@@ -30,6 +30,9 @@ SCENARIOS, STEERING, RATE_LIMITS = get_args(Scenario), get_args(Steering), get_a
 #: deg, largest slew: the attitude loop takes the shorter way round, so a larger angle
 #: would silently become a different slew (270 deg is a -90 deg slew).
 MAX_SLEW_DEG = 180.0
+#: Glitch kinds of --glitch (airbearing.analysis.simulation.artefacts.GLITCH_KINDS; a test
+#: checks they agree; not imported here to keep start-up light).
+GLITCHES = "rate_zero|rate_spike|quat_wrong_frame|yaw_offset|yaw_zero"
 
 
 @app.command()
@@ -80,7 +83,8 @@ def simulate(
         list[str] | None, typer.Option(help="Free/spindown: START:LENGTH s unlogged (repeatable).")
     ] = None,
     glitch: Annotated[
-        list[str] | None, typer.Option(help="Free/spindown: KIND:ROW[,ROW] glitch (repeatable).")
+        list[str] | None,
+        typer.Option(help=f"Free/spindown: KIND:ROW[,ROW] glitch, KIND {GLITCHES} (repeatable)."),
     ] = None,
     times: Annotated[
         Path | None, typer.Option(help="Free/spindown: sample on the t column of this log.")
