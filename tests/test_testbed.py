@@ -655,3 +655,48 @@ def test_angles_read_back_exactly(skew):
     cmg = CMG(skew=skew, flywheel_inertia=1e-6, flywheel_speed=1.0, max_gimbal_rate=skew)
     tb = Bench(kind="cmg", name="", gravity=9.81, body=Body(1, 1.0, 0.01), cmg=cmg)
     assert from_dict(to_dict(tb)).cmg == cmg
+
+
+# ----------------------------------------------------------------------------
+# passive platforms and motion capture (FORMATS.md: optional [masses], sensors.gyro)
+
+
+@pytest.mark.parametrize("dof", [1, 3])
+@pytest.mark.parametrize("gyro", [True, False])
+def test_passive_platform_loads_writes_and_takes_its_logs(tmp_path, dof, gyro):
+    import pandas as pd
+
+    from airbearing.io import Log, read_log, write_log
+
+    inertia = "0.05" if dof == 1 else "[[0.03, 0, 0], [0, 0.03, 0], [0, 0, 0.036]]"
+    path = tmp_path / "passive.toml"
+    path.write_text(
+        f'kind = "platform"\nname = "passive"\n[body]\ndof = {dof}\nmass = 4.2\n'
+        f"inertia = {inertia}\n[sensors]\nrate = 10.0\ngyro = {str(gyro).lower()}\n"
+        "attitude_noise = 0.001\n"
+    )
+    tb = read_testbed(path)
+    assert tb.masses is None and tb.magnetorquers is None
+    assert tb.sensors.gyro is gyro and tb.sensors.attitude_noise == 0.001
+    again = tmp_path / "again.toml"
+    write_testbed(tb, again)
+    assert read_testbed(again) == tb
+    # its log needs no sliders; rates only with a gyro; yaw (dof 1) or the quaternion
+    n = 30
+    data = {"t": 0.1 * np.arange(n)}
+    if dof == 1:
+        data["yaw"] = 0.2 * np.arange(n)
+    else:
+        data |= {"qw": np.ones(n), "qx": 0.0, "qy": 0.0, "qz": 0.0}
+    if gyro:
+        data |= {"wz": np.full(n, 2.0)} if dof == 1 else {"wx": 0.0, "wy": 0.0, "wz": 0.0}
+    log = Log(pd.DataFrame(data), "run.csv", tb)
+    assert (log.rates() is None) is (not gyro)
+    write_log(log, tmp_path / "run.parquet")
+    assert read_log(tmp_path / "run.parquet", tb).n == n
+    if not gyro:  # rate columns of a gyro-less testbed are not measurements: ignored
+        ratecols = {"wz": 1.0} if dof == 1 else {"wx": 0.0, "wy": 0.0, "wz": 1.0}
+        assert Log(pd.DataFrame(data | ratecols), "run.csv", tb).rates() is None
+    else:
+        with pytest.raises(InputError, match="missing column 'wz'" if dof == 1 else "'wx'"):
+            Log(pd.DataFrame(data).drop(columns=["wz"] if dof == 1 else ["wx"]), "run.csv", tb)
