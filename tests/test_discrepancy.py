@@ -11,12 +11,12 @@ within 1.5 times the noise floor estimated from the data.
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import numpy as np
 import pytest
 
-from airbearing.analysis.discrepancy.search import candidates_for, discrepancy
+from airbearing.analysis.discrepancy.candidates import candidates_for
+from airbearing.analysis.discrepancy.search import discrepancy
 from airbearing.analysis.simulation.scenarios import free_oscillation, slew
 from airbearing.errors import InputError
 from airbearing.io.log import read_log
@@ -27,7 +27,6 @@ W0 = (0.3676, 0.1265, -1.4835)  # seed-004 initial rate (public example platform
 Q0 = (0.99458, 0.024955, -0.014973, 0.099819)
 SLIDERS = (0.003, -0.002, 0.004)
 PLATFORM_S = 24.0  # s of free oscillation: 4 windows of 6 s
-EXAMPLES = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "examples"
 
 PLATFORM = load_testbed("platform-3dof")
 # a tilted cage field separates a residual dipole from a CM offset (FORMATS.md torques:
@@ -141,11 +140,10 @@ def test_nothing_hidden_gives_no_missing_effect():
     assert sum(named) >= 9, named
 
 
-@pytest.mark.skipif(not EXAMPLES.is_dir(), reason="public examples not beside the repository")
 @pytest.mark.parametrize("example", ["platform_viscous", "cmg_inertia", "cmg_none"])
-def test_public_examples_are_named(example):
-    # the issue allows comparing these examples with their answer.json
-    folder = EXAMPLES / example
+def test_public_examples_are_named(example, example_case):
+    # the public examples' cases, simulated by the package (tests/conftest.py), so no skip
+    folder = example_case(example)
     tb = load_testbed(folder / "testbed.toml")
     d = discrepancy(tb, read_log(folder / "log.csv", tb))
     answer = json.loads((folder / "answer.json").read_text())["effects"]

@@ -1,25 +1,29 @@
-"""``airbearing discrepancy``: name the effects a testbed's model misses in a log."""
+"""``airbearing discrepancy``: name the effects a testbed's model misses in one or more logs."""
 
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 from typing import Annotated
 
 import typer
 
 from airbearing.cli import app
-from airbearing.cli.common import check_output_path, testbed_arg
+from airbearing.cli.outputs import Outputs
 from airbearing.errors import InputError
-from airbearing.io.log import read_log
-from airbearing.io.output import write_json
-from airbearing.io.testbed import write_testbed
 
 
 @app.command()
 def discrepancy(
     testbed: Annotated[str, typer.Argument(help="Testbed file or built-in name.")],
-    log: Annotated[Path, typer.Argument(help="Log of a run, .csv or .parquet.")],
+    logs: Annotated[
+        list[Path], typer.Argument(help="Logs of runs (.csv or .parquet), fitted jointly.")
+    ],
+    validate: Annotated[
+        list[Path] | None,
+        typer.Option(
+            "--validate", help="A log NOT fitted, on which the named effects must shrink the gap."
+        ),
+    ] = None,
     json_out: Annotated[Path | None, typer.Option("--json", help="Result JSON.")] = None,
     report: Annotated[Path | None, typer.Option("--report", help="HTML report.")] = None,
     write_tb: Annotated[
@@ -34,38 +38,58 @@ def discrepancy(
         float | None, typer.Option(help="Multiple-shooting window, s (default min(10, T/4)).")
     ] = None,
 ) -> None:
-    """Replay LOG with TESTBED's model, localise the gap and name the missing effects."""
-    from airbearing.analysis.discrepancy.search import discrepancy as run
-    from airbearing.reporting.discrepancy import discrepancy_report
+    """Replay LOGS with TESTBED's model, localise the gap and name the missing effects.
 
-    check_output_path(json_out, "--json", (".json",))
-    check_output_path(report, "--report", (".html",))
-    check_output_path(write_tb, "--write-testbed", (".toml",))
+    Every log (and every segment between gaps) has its own initial states; one effect
+    set is fitted to all logs together. Outlier rows are left out and reported.
+    """
+    out = Outputs()
+    p_json = out.plan(json_out, "--json", (".json",))
+    p_html = out.plan(report, "--report", (".html",))
+    p_tb = out.plan(write_tb, "--write-testbed", (".toml",))
     if max_effects < 0:
         raise InputError(f"--max-effects {max_effects}: expected an integer >= 0")
+    from airbearing.analysis.discrepancy.search import discrepancy as run
+    from airbearing.cli.common import testbed_arg
+    from airbearing.cli.show_progress import progress_display
+    from airbearing.io.log import read_log
+    from airbearing.io.testbed import write_testbed
+
     tb = testbed_arg(testbed)
-    data = read_log(log, tb)
-    progress = None
-    if sys.stderr.isatty():
+    fitted = [read_log(p, tb) for p in logs]
+    held = [read_log(p, tb) for p in validate or []]
+    with progress_display("discrepancy") as progress:
+        result = run(
+            tb,
+            fitted,
+            validate=held,
+            max_effects=max_effects,
+            only=only,
+            seed=seed,
+            window_s=window,
+            progress=progress,
+        )
+        if p_html is not None:
+            from airbearing.reporting.discrepancy import discrepancy_report
 
-        def progress(msg: str) -> None:
-            typer.echo(f"  {msg}", err=True)
-
-    result = run(
-        tb, data, max_effects=max_effects, only=only, seed=seed, window_s=window, progress=progress
-    )
-    html = discrepancy_report(result) if report is not None else None
-    # outputs only after everything succeeded
-    if json_out is not None:
-        write_json(json_out, result.to_json())
-    if html is not None:
-        html.write(report)
-    if write_tb is not None:
-        write_testbed(result.augmented_testbed, write_tb)
+            out.text(p_html, discrepancy_report(result).html())
+    out.json(p_json, result.to_json())
+    out.file(p_tb, lambda tmp: write_testbed(result.augmented_testbed, tmp))
+    out.commit()
+    unit = result.gap_unit
     typer.echo(result.verdict)
     typer.echo(
-        f"gap before {result.gap_before:.4g} rad/s, after {result.gap_after:.4g} rad/s, "
-        f"noise floor {result.noise_floor:.4g} rad/s"
+        f"gap before {result.gap_before:.4g} {unit}, after {result.gap_after:.4g} {unit}, "
+        f"noise floor {result.noise_floor:.4g} {unit}"
     )
+    for d in result.datas:
+        j = d.segment_json()
+        rows = ", ".join(str(r) for r in j["outlier_rows"]) or "none"
+        typer.echo(f"{d.log.source}: {j['segments']} segment(s), outlier rows left out: {rows}")
+    for v in result.validation:
+        word = "shrinks" if v.shrinks else "does NOT shrink"
+        typer.echo(
+            f"validation {v.log}: gap {v.gap_before:.4g} -> {v.gap_after:.4g} {v.gap_unit} ({word})"
+        )
     for pair, text in result.experiments.items():
         typer.echo(f"confounded: {pair}: {text}")

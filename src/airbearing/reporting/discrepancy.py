@@ -6,61 +6,185 @@ embedded, nothing is fetched.
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import matplotlib.pyplot as plt
 import numpy as np
 
-from airbearing.analysis.discrepancy.search import Discrepancy, discrepancy, format_value
-from airbearing.io.log import read_log
-from airbearing.io.testbed import Sensors, load_testbed
+from airbearing.analysis.discrepancy.replay import Replay, primary_series
+from airbearing.analysis.discrepancy.search import Discrepancy, discrepancy
+from airbearing.analysis.discrepancy.words import format_value
 from airbearing.reporting.html import Report
 
-__all__ = ["add_discrepancy", "demo_section", "discrepancy_report", "EXAMPLE_DIR"]
-
-#: The public example of the seed-001 story, beside the repository (read-only data).
-EXAMPLE_DIR = Path(__file__).resolve().parents[3] / ".." / "shared" / "data" / "examples"
+__all__ = ["add_discrepancy", "add_replay", "demo_section", "discrepancy_report", "replay_report"]
 
 
-def _predictions(result: Discrepancy):
-    nom = result.nominal_problem.predicted(result.nominal_fit.delta, result.nominal_fit.p)
-    aug = result.final_problem.predicted(result.final_fit.delta, result.final_fit.p)
-    return nom, aug
+def _series_names(data, problem) -> list[str]:
+    out = problem.outputs[0]
+    if out == "rate":
+        return list(data.rate_names)
+    if out == "yaw":
+        return ["yaw"]
+    return ["attitude error x", "attitude error y", "attitude error z"]
+
+
+def _t(datas, s) -> np.ndarray:
+    return np.array([datas[i].t[r] for i, r in zip(s["source"], s["rows"], strict=True)])
+
+
+def _segments_paragraph(report: Report, datas) -> None:
+    rows = []
+    for d in datas:
+        j = d.segment_json()
+        rows.append(
+            {
+                "log": d.log.source,
+                "rows": d.n,
+                "segments": j["segments"],
+                "segment rows": ", ".join(f"{a}-{b - 1}" for a, b in j["segment_rows"]),
+                "outlier rows (left out)": ", ".join(str(r) for r in j["outlier_rows"]) or "none",
+            }
+        )
+    report.table(rows)
+
+
+def _residual_figure(report: Report, datas, problem, fits, labels, floor, windows) -> None:
+    """Measured and modelled primary output and residuals, one row per component."""
+    unit = datas[0].gap_unit
+    series = [primary_series(problem_, f.delta, f.p) for problem_, f in fits]
+    names = _series_names(datas[0], fits[0][0])
+    nc = len(names)
+    fig, axes = plt.subplots(nc, 2, figsize=(12, 2.6 * nc), squeeze=False)
+    base = series[0]
+    t = _t(datas, base)
+    multi = len(datas) > 1
+    for a in range(nc):
+        ax = axes[a, 0]
+        if problem.outputs[0] != "quat":
+            ax.plot(t, base["meas"][:, a], ".", ms=2, color="k", label="measured")
+            for s, lab in zip(series, labels, strict=True):
+                ax.plot(_t(datas, s), s["model"][:, a], ".", ms=1, label=lab)
+            ax.set_ylabel(f"{names[a]} ({unit})")
+        else:
+            ax.plot(t, np.rad2deg(base["residual"][:, a]), ".", ms=1, label=labels[0])
+            ax.set_ylabel(f"{names[a]} (deg)")
+        ax = axes[a, 1]
+        for s, lab in zip(series, labels, strict=True):
+            ax.plot(_t(datas, s), s["residual"][:, a], ".", ms=1, label=lab)
+        sig = floor.rate_axes[a] if unit == "rad/s" else floor.attitude
+        ax.axhline(2 * sig, color="gray", lw=0.5, ls=":")
+        ax.axhline(-2 * sig, color="gray", lw=0.5, ls=":")
+        ax.set_ylabel(f"residual ({unit})")
+    for d in datas[:1]:
+        for a_, _ in d.segments[1:]:
+            for ax in axes.ravel():
+                ax.axvline(d.t[a_], color="red", lw=0.6, alpha=0.6)
+        for r in d.outlier_rows:
+            for ax in axes[:, 0]:
+                ax.axvline(d.t[r], color="orange", lw=0.6, ls="--", alpha=0.8)
+    axes[0, 0].legend(fontsize=8)
+    axes[-1, 0].set_xlabel("t (s)" + (" (logs overlaid)" if multi else ""))
+    axes[-1, 1].set_xlabel("t (s)")
+    report.figure(
+        fig,
+        "Left: logged output (dots) and the models restarted at each window; right: residuals; "
+        "dotted: +-2 noise sigma; red lines: gaps (segments start afresh); orange dashed: "
+        "outlier rows, left out of every fit.",
+    )
+
+
+def add_replay(report: Report, result: Replay, *, level: int = 2) -> None:
+    """Append one replay (the gap of a given testbed on given logs) to ``report``."""
+    datas = result.datas
+    unit = result.gap_unit
+    report.heading(f"Replay: {datas[0].testbed.name}", level)
+    effects = datas[0].testbed.effects
+    report.paragraph(
+        "Testbed effects: "
+        + (", ".join(f"{k} = {format_value(v)}" for k, v in effects.items()) or "none")
+        + ". No effect is fitted: only each window's initial state."
+    )
+    rows = [
+        {"log": d.log.source, f"gap ({unit})": g, "x noise floor": g / result.floor.value}
+        for d, g in zip(datas, result.log_gaps(), strict=True)
+    ]
+    rows.append(
+        {
+            "log": "all",
+            f"gap ({unit})": result.gap,
+            "x noise floor": result.gap / result.floor.value,
+        }
+    )
+    report.table(rows)
+    report.paragraph(f"Noise floor {result.floor.value:.4g} {unit} ({result.floor.source}).")
+    _segments_paragraph(report, datas)
+    _residual_figure(
+        report,
+        datas,
+        result.problem,
+        [(result.problem, result.fit)],
+        ["model"],
+        result.floor,
+        result.windows,
+    )
+
+
+def replay_report(result: Replay, *, title: str | None = None) -> Report:
+    """A self-contained HTML report of one replay."""
+    report = Report(title or f"Replay: {result.data.testbed.name}")
+    add_replay(report, result)
+    return report
 
 
 def add_discrepancy(report: Report, result: Discrepancy, *, level: int = 2) -> None:
     """Append the sections of one discrepancy result to ``report``."""
     data = result.data
-    report.heading(f"Discrepancy: {result.testbed.name} vs {result.log.source}", level)
+    datas = result.datas
+    unit = result.gap_unit
+    names = ", ".join(d.log.source for d in datas)
+    report.heading(f"Discrepancy: {result.testbed.name} vs {names}", level)
     ratio_b = result.gap_before / result.noise_floor
     ratio_a = result.gap_after / result.noise_floor
     report.paragraph(result.verdict + ".", note=True)
     report.table(
         [
             {
-                "quantity": "gap of the nominal model (rad/s)",
+                "quantity": f"gap of the nominal model ({unit})",
                 "value": result.gap_before,
                 "x noise floor": ratio_b,
             },
             {
-                "quantity": "gap of the augmented model (rad/s)",
+                "quantity": f"gap of the augmented model ({unit})",
                 "value": result.gap_after,
                 "x noise floor": ratio_a,
             },
             {
-                "quantity": "rate noise floor from the data (rad/s)",
+                "quantity": f"noise floor from the data ({unit})",
                 "value": result.noise_floor,
                 "x noise floor": 1.0,
             },
         ]
     )
+    what = "rate" if unit == "rad/s" else "attitude"
     report.paragraph(
-        f"Gap = RMS over every sample of {result.windows.n} windows of "
-        f"{result.windows.length * data.dt:.3g} s and every rate axis of (logged rate - model "
-        "rate), each window restarted from the measured state corrected by a fitted initial-state "
-        "perturbation. Noise floor = robust (median absolute deviation) scale of the fourth "
-        "difference of the logged rates divided by sqrt(70). " + " ".join(data.notes)
+        f"Gap = RMS over every usable sample of {result.windows.n} windows of up to "
+        f"{result.windows.length * data.dt:.3g} s of (logged {what} - model {what}), each window "
+        "restarted from the measured state corrected by a fitted initial-state perturbation, "
+        "integrated on the logged times; no window spans a gap, outlier rows weigh zero. "
+        f"Noise floor: {result.floor.source}. " + " ".join(data.notes)
     )
+    _segments_paragraph(report, datas)
+    if result.validation:
+        report.heading("Validation logs (not fitted)", level + 1)
+        report.table(
+            [
+                {
+                    "log": v.log,
+                    f"gap nominal ({unit})": v.gap_before,
+                    f"gap augmented ({unit})": v.gap_after,
+                    "shrinks": v.shrinks,
+                }
+                for v in result.validation
+            ]
+        )
     if result.effects:
         rows = [
             {"effect": n, "value": format_value(v, result.effect_std[n]), "unit": _unit(n)}
@@ -68,69 +192,54 @@ def add_discrepancy(report: Report, result: Discrepancy, *, level: int = 2) -> N
         ]
         report.heading("Named effects", level + 1)
         report.table(rows)
-    # ---- where
-    report.heading("Where the nominal model and the log disagree", level + 1)
+    report.heading("Where the nominal model and the logs disagree", level + 1)
     for sentence in result.localisation.get("words", []):
         report.paragraph(sentence)
-    nom, aug = _predictions(result)
-    t = nom["t"]
-    w_meas = data.w[nom["index"]]
-    na = data.n_axes
-    fig, axes = plt.subplots(na, 2, figsize=(12, 2.6 * na), squeeze=False)
-    for a in range(na):
-        ax = axes[a, 0]
-        ax.plot(t, w_meas[:, a], ".", ms=2, color="k", label="measured")
-        ax.plot(t, nom["w"][:, a], lw=1, label="nominal")
-        ax.plot(t, aug["w"][:, a], lw=1, ls="--", label="augmented")
-        ax.set_ylabel(f"{data.rate_names[a]} (rad/s)")
-        ax = axes[a, 1]
-        ax.plot(t, w_meas[:, a] - nom["w"][:, a], lw=0.7, label="nominal")
-        ax.plot(t, w_meas[:, a] - aug["w"][:, a], lw=0.7, label="augmented")
-        ax.axhline(2 * result.floor.rate_axes[a], color="gray", lw=0.5, ls=":")
-        ax.axhline(-2 * result.floor.rate_axes[a], color="gray", lw=0.5, ls=":")
-        ax.set_ylabel(f"residual {data.rate_names[a]} (rad/s)")
-    for s in result.windows.starts[1:]:
-        for ax in axes.ravel():
-            ax.axvline(data.t[s], color="gray", lw=0.4, alpha=0.5)
-    axes[0, 0].legend(fontsize=8)
-    axes[0, 1].legend(fontsize=8)
-    axes[-1, 0].set_xlabel("t (s)")
-    axes[-1, 1].set_xlabel("t (s)")
-    report.figure(
-        fig,
-        "Left: logged rate (dots), nominal and augmented models restarted at each window "
-        "(grey lines). Right: residuals before and after; dotted: +-2 noise sigma.",
+    _residual_figure(
+        report,
+        datas,
+        result.nominal_problem,
+        [(result.nominal_problem, result.nominal_fit), (result.final_problem, result.final_fit)],
+        ["nominal", "augmented"],
+        result.floor,
+        result.windows,
     )
     loc = result.localisation
+    na = loc["residual"].shape[1]
     fig, axes = plt.subplots(1, 3, figsize=(12, 3.2))
-    wg = loc["window_gap"]
-    axes[0].bar(loc["window_t"], wg, width=result.windows.length * data.dt * 0.8, align="edge")
+    axes[0].plot(np.arange(len(loc["window_gap"])), loc["window_gap"], "o-")
     axes[0].axhline(result.noise_floor, color="k", ls=":", lw=0.8)
-    axes[0].set(xlabel="window start (s)", ylabel="gap (rad/s)", title="over time")
-    vr = loc["vs_rate"]
-    axes[1].bar(["slowest", "2nd", "3rd", "fastest"], vr)
+    axes[0].set(xlabel="window", ylabel=f"gap ({unit})", title="over the windows")
+    axes[1].bar(["slowest", "2nd", "3rd", "fastest"], loc["vs_rate"])
     axes[1].axhline(result.noise_floor * np.sqrt(na), color="k", ls=":", lw=0.8)
-    axes[1].set(ylabel="|residual| RMS (rad/s)", title="against |w| (quarters)")
+    axes[1].set(ylabel=f"|residual| RMS ({unit})", title="against |w| (quarters)")
     f, pxx, white = loc["spectrum"]
     for a in range(na):
-        axes[2].semilogy(f, pxx[:, a], lw=0.8, label=data.rate_names[a])
+        axes[2].semilogy(f, pxx[:, a], lw=0.8)
     axes[2].axhline(float(np.sum(white)) / na, color="k", ls=":", lw=0.8, label="white noise")
-    axes[2].set(xlabel="frequency (Hz)", ylabel="PSD (rad^2/s^2/Hz)", title="in frequency")
+    axes[2].set(xlabel="frequency (Hz)", ylabel="PSD", title="in frequency")
     axes[2].legend(fontsize=8)
     report.figure(fig, "The nominal residual per window, by rate magnitude, and its spectrum.")
     # ---- candidates
     report.heading("Candidates (first round, best first)", level + 1)
+    report.paragraph(
+        "An effect is named only when its fit converged, the logs can identify it, it is not "
+        "pinned at its physical bound, it passes the likelihood-ratio and BIC tests, it lies at "
+        "least 3 standard errors from zero (errors from the Gauss-Newton covariance with the "
+        "windows' initial states eliminated) and it shrinks the gap on held-out windows."
+    )
     rows = []
     for c in result.candidates:
         rows.append(
             {
                 "effect": c.label,
                 "value": format_value(c.value, c.std) if c.value is not None else "-",
-                "gap (rad/s)": c.gap if np.isfinite(c.gap) else None,
+                f"gap ({unit})": c.gap if np.isfinite(c.gap) else None,
                 "dBIC": c.delta_bic if np.isfinite(c.delta_bic) else None,
-                "held-out gap (rad/s)": c.heldout_gap if np.isfinite(c.heldout_gap) else None,
-                "significant": bool(c.significant),
-                "note": c.note,
+                f"held-out gap ({unit})": c.heldout_gap if np.isfinite(c.heldout_gap) else None,
+                "sigmas": c.sigmas if np.isfinite(c.sigmas) else None,
+                "status": c.status,
+                "why not named": c.reason,
             }
         )
     report.table(rows)
@@ -142,7 +251,7 @@ def add_discrepancy(report: Report, result: Discrepancy, *, level: int = 2) -> N
     if result.confounded:
         report.heading("Confounded effects", level + 1)
         for pair, text in result.experiments.items():
-            report.paragraph(f"{pair}: they explain this log equally well; {text}.")
+            report.paragraph(f"{pair}: they explain these logs equally well; {text}.")
 
 
 def _unit(name: str) -> str:
@@ -159,12 +268,9 @@ def discrepancy_report(result: Discrepancy, *, title: str | None = None) -> Repo
 
 
 def _story_inputs(quick: bool):
-    """The seed-001 inertia story: the public example if present, else simulated."""
-    folder = EXAMPLE_DIR / "cmg_inertia"
-    if folder.is_dir() and (folder / "testbed.toml").is_file() and (folder / "log.csv").is_file():
-        tb = load_testbed(folder / "testbed.toml")
-        return tb, read_log(folder / "log.csv", tb), f"public example {folder.name}"
+    """The seed-001 inertia story, simulated with the package's simulator and a fixed seed."""
     from airbearing.analysis.simulation.scenarios import slew
+    from airbearing.io.testbed import Sensors, load_testbed
 
     tb = load_testbed("cmg-yaw")
     tb = tb.replace(sensors=Sensors(rate=tb.sensors.rate, gyro_noise=5e-4, lowpass=1.0))
@@ -176,7 +282,7 @@ def _story_inputs(quick: bool):
         seed=5001,
         duration=20.0 if quick else 40.0,
     )
-    return tb, res.log, "simulated seed-001 slew (inertia hidden in the truth)"
+    return tb, res.log, "simulated seed-001 slew (inertia hidden in the truth, seed 5001)"
 
 
 def demo_section(report: Report, *, quick: bool = False) -> None:

@@ -1,0 +1,316 @@
+"""Candidate effects: which registry effects can act, as free Model parameters, and their start.
+
+Every effect of the registry that can act on the testbed
+(:func:`airbearing.models.effects.applicable_effects`; without a gyro, the
+measurement effects ``gyro_bias`` and ``sensor_lag`` cannot act) is a candidate;
+on dof 3 an effect that FORMATS.md allows as one number or three (friction, drag,
+gyro bias) is two candidates, one value for every axis and one per body axis.
+
+Effects with a physical sign are fitted inside their physical range
+(``PHYSICAL_LOWER``: friction, drag, lag and dead zone are >= 0).
+
+The start of a fit is a linear regression of the residual torque
+``J (w'_meas - w'_model)`` on the effect's torque regressor (the exact CasADi
+derivative of the Model's dynamics in the effect's parameters), over the usable
+rows of every segment of every log (rows within a filter half-width of a gap,
+a segment end or an outlier left out). Without a gyro the rate and its
+derivative are those of the same Savitzky-Golay filter applied to the yaw
+(dof 1); a dof-3 attitude-only log starts from zero.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable
+from dataclasses import dataclass
+
+import casadi as ca
+import numpy as np
+from scipy.signal import savgol_filter
+
+from airbearing.analysis.discrepancy.data import ReplayData
+from airbearing.errors import InputError
+from airbearing.io.testbed import Testbed
+from airbearing.io.vocabulary import EFFECTS as VOCABULARY
+from airbearing.models.effects import REGISTRY, applicable_effects, effect_param_names
+from airbearing.models.model import Model
+
+__all__ = [
+    "PHYSICAL_LOWER",
+    "Candidate",
+    "candidates_for",
+    "regression_start",
+    "residual_torque",
+    "universal_effects",
+]
+
+#: Smallest physical value of effects with a sign (a friction or a drag cannot push).
+PHYSICAL_LOWER = {
+    "viscous_friction": 0.0,
+    "coulomb_friction": 0.0,
+    "aero_drag": 0.0,
+    "sensor_lag": 0.0,
+    "gimbal_deadzone": 0.0,
+}
+#: Effects that change the measured rate only: they need a gyro.
+GYRO_EFFECTS = ("gyro_bias", "sensor_lag")
+#: Savitzky-Golay window (samples, odd) and order for the measured rate derivative.
+SG_WINDOW = 9
+SG_ORDER = 3
+
+
+@dataclass(frozen=True, eq=False)
+class Candidate:
+    """One effect of the registry as a set of free Model parameters.
+
+    Attributes
+    ----------
+    name : str
+        Effect name (FORMATS.md).
+    params : tuple of str
+        The Model parameters it moves.
+    tie : ndarray (len(params), k)
+        ``param values = tie @ theta``.
+    lower, upper : tuple of float
+        Bounds of ``theta`` (physical range).
+    smooth : bool
+        False for an effect the output has no derivative in (profile scan).
+    lag : bool
+        True for ``sensor_lag`` (fitted with a Model that has lag states).
+    per_axis : bool
+        One value per body axis for an effect that is one number or three.
+    """
+
+    name: str
+    params: tuple
+    tie: np.ndarray
+    lower: tuple
+    upper: tuple
+    smooth: bool = True
+    lag: bool = False
+    per_axis: bool = False
+
+    @property
+    def k(self) -> int:
+        """Number of free parameters."""
+        return self.tie.shape[1]
+
+    @property
+    def label(self) -> str:
+        """The effect name, with ``(per axis)`` for the three-value form."""
+        return f"{self.name} (per axis)" if self.per_axis else self.name
+
+    def value(self, theta: np.ndarray):
+        """FORMATS.md value: a float, or a 3-tuple for a vector or per-axis effect."""
+        theta = np.asarray(theta, dtype=float)
+        if self.per_axis or VOCABULARY[self.name].shape == "vector3":
+            return tuple(float(x) for x in theta)
+        return float(theta[0])
+
+
+def universal_effects(testbed: Testbed, names: Iterable[str]) -> dict:
+    """Every candidate at zero (per-axis parameters for dof 3) plus the testbed's own effects."""
+    dof = testbed.body.dof
+    out = {}
+    for name in names:
+        shape = VOCABULARY[name].shape
+        if shape == "vector3" or (shape == "scalar_or_axes" and dof == 3):
+            out[name] = (0.0, 0.0, 0.0)
+        else:
+            out[name] = 0.0
+    for name, value in testbed.effects.items():
+        if VOCABULARY[name].shape == "scalar_or_axes" and dof == 3 and np.ndim(value) == 0:
+            value = (float(value),) * 3
+        out[name] = value
+    return out
+
+
+def _has_field(testbed: Testbed, datas) -> bool:
+    if testbed.kind != "platform":
+        return testbed.field is not None
+    for d in datas:
+        idx = [d.u_names.index(n) for n in ("bx_lab", "by_lab", "bz_lab") if n in d.u_names]
+        if len(idx) == 3 and np.any(d.u[:, idx] != 0):
+            return True
+    return False
+
+
+def candidates_for(testbed: Testbed, datas=None, only=None) -> list[Candidate]:
+    """The registry's effects that can act on ``testbed`` and are not already in its ``[effects]``.
+
+    Parameters
+    ----------
+    testbed : Testbed
+    datas : ReplayData or sequence of them, optional
+        Decide whether a cage field acts (platform); default: the testbed's ``[field]``.
+    only : iterable of str, optional
+        Restrict to these effect names.
+
+    Raises
+    ------
+    InputError
+        If a name of ``only`` is not a registered effect, or cannot act on the testbed.
+    """
+    if isinstance(datas, ReplayData):
+        datas = [datas]
+    kind, dof = testbed.kind, testbed.body.dof
+    gyro = bool(getattr(testbed.sensors, "gyro", True))
+    has_field = _has_field(testbed, datas) if datas else testbed.field is not None
+    names = applicable_effects(kind, dof, has_field)
+    if not gyro:
+        names = [n for n in names if n not in GYRO_EFFECTS]
+    if only:
+        only = list(only)
+        for name in only:
+            if name not in REGISTRY:
+                raise InputError(
+                    f"--only {name}: unknown effect; expected one of {', '.join(REGISTRY)}"
+                )
+            if name not in names:
+                if name in GYRO_EFFECTS and not gyro:
+                    reason = "the testbed has no gyro (sensors.gyro = false)"
+                else:
+                    reason = REGISTRY[name].applies(kind, dof, has_field) or "not applicable"
+                raise InputError(f"--only {name}: cannot act on testbed '{testbed.name}': {reason}")
+        names = [n for n in names if n in only]
+    out = []
+    for name in names:
+        if name in testbed.effects:
+            continue
+        spec = VOCABULARY[name]
+        shape = spec.shape
+        axes = shape == "scalar_or_axes" and dof == 3
+        params = tuple(effect_param_names(name, dof, axes or shape == "vector3"))
+        if shape == "vector3":
+            forms = [(np.eye(3), False)]
+        elif axes:
+            forms = [(np.ones((3, 1)), False), (np.eye(3), True)]
+        else:
+            forms = [(np.ones((len(params), 1)), False)]
+        lo = PHYSICAL_LOWER.get(name, -math.inf if spec.lower is None else spec.lower)
+        if name == "inertia_error":
+            lo = -0.9  # (1 + value) > 0 with a margin
+        for tie, per_axis in forms:
+            k = tie.shape[1]
+            out.append(
+                Candidate(
+                    name=name,
+                    params=params,
+                    tie=tie,
+                    lower=(lo,) * k,
+                    upper=(math.inf,) * k,
+                    smooth=name != "gimbal_deadzone",
+                    lag=name == "sensor_lag",
+                    per_axis=per_axis,
+                )
+            )
+    return out
+
+
+# ----------------------------------------------------------------------------
+# residual torque and the linear regression start
+
+
+def smoothed(data: ReplayData):
+    """Smoothed rate, its derivative and the rows where both are trusted, per segment.
+
+    Returns
+    -------
+    w_s, w_dot : ndarray (N, n_axes)
+        rad/s, rad/s^2 (NaN where not computed).
+    ok : ndarray (N,) of bool
+    """
+    n = data.n
+    w_s = np.full((n, data.n_axes), np.nan)
+    w_dot = np.full((n, data.n_axes), np.nan)
+    ok = np.zeros(n, dtype=bool)
+    if data.w is None and data.q is not None:
+        return w_s, w_dot, ok
+    half = SG_WINDOW // 2
+    for a, b in data.segments:
+        if b - a < SG_WINDOW + 2:
+            continue
+        rows = np.arange(a, b)
+        good = data.mask[a:b]
+        if good.sum() < SG_WINDOW + 2:
+            continue
+        h = float(np.median(np.diff(data.t[a:b])))
+        if data.w is not None:
+            src = data.w[a:b].copy()
+            order = 0
+        else:
+            src = data.att[a:b, :1].copy()
+            order = 1
+        for j in range(src.shape[1]):  # outliers: interpolated, then left out below
+            src[~good, j] = np.interp(data.t[a:b][~good], data.t[a:b][good], src[good, j])
+        w_s[a:b] = savgol_filter(src, SG_WINDOW, SG_ORDER, deriv=order, delta=h, axis=0)
+        w_dot[a:b] = savgol_filter(src, SG_WINDOW, SG_ORDER, deriv=order + 1, delta=h, axis=0)
+        trust = good.copy()
+        for k in np.flatnonzero(~good):
+            trust[max(k - half, 0) : k + half + 1] = False
+        trust[:half] = trust[-half:] = False
+        ok[rows] = trust
+    return w_s, w_dot, ok
+
+
+def residual_torque(model: Model, datas, p: np.ndarray, S: np.ndarray | None = None):
+    """Residual torque of the logs under ``model`` and its regressors (module doc).
+
+    Returns
+    -------
+    tau : ndarray (M, n_axes)
+        N m, at the trusted rows of every log.
+    phi : ndarray (M, n_axes, k)
+    """
+    datas = [datas] if isinstance(datas, ReplayData) else list(datas)
+    S = np.zeros((model.n_p, 0)) if S is None else np.asarray(S, dtype=float)
+    d0 = datas[0]
+    xs, us, ps = ca.SX.sym("x", model.nx), ca.SX.sym("u", model.nu), ca.SX.sym("p", model.n_p)
+    rows = model.index(list(d0.rate_names), "x")
+    a = model.f(xs, us, ps)[rows]
+    fn = ca.Function("acc", [xs, us, ps], [a, ca.mtimes(ca.jacobian(a, ps), ca.DM(S))])
+    taus, phis = [], []
+    for d in datas:
+        w_s, w_dot, ok = smoothed(d)
+        idx = np.flatnonzero(ok)
+        if idx.size == 0:
+            continue
+        x = np.hstack([d.att, w_s, d.extra_x])[idx]
+        if model.lag_index:
+            x = np.hstack([x, w_s[idx]])
+        A, G = fn.map(idx.size)(x.T, d.u[idx].T, p)
+        A = np.asarray(A).T
+        G = np.asarray(G).reshape(len(rows), idx.size, S.shape[1], order="F").transpose(1, 0, 2)
+        if model.dof == 3:
+            J = d.testbed.body.inertia_matrix
+            taus.append((w_dot[idx] - A) @ J.T)
+            phis.append(np.einsum("ij,njk->nik", J, G))
+        else:
+            J = d.testbed.body.yaw_inertia
+            taus.append(J * (w_dot[idx] - A))
+            phis.append(J * G)
+    if not taus:
+        return np.zeros((0, d0.n_axes)), np.zeros((0, d0.n_axes, S.shape[1]))
+    return np.concatenate(taus), np.concatenate(phis)
+
+
+def lsq(A: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Minimum-norm least squares of a tall, thin system by its (column-scaled) normal equations."""
+    c = np.linalg.norm(A, axis=0)
+    c = np.where(c > 0, c, 1.0)
+    As = A / c
+    return (np.linalg.pinv(As.T @ As) @ (As.T @ b)) / c
+
+
+def regression_start(tau, phi):
+    """Least squares of the residual torque on the regressor: value and 1-sigma (inf: none)."""
+    k = phi.shape[2]
+    X = phi.reshape(-1, k)
+    y = tau.reshape(-1)
+    if X.size == 0 or not np.any(X):
+        return np.zeros(k), np.full(k, np.inf)
+    theta = lsq(X, y)
+    res = y - X @ theta
+    s2 = float(res @ res) / max(len(y) - k, 1)
+    cov = np.linalg.pinv(X.T @ X) * s2
+    return theta, np.sqrt(np.abs(np.diag(cov)))

@@ -1,0 +1,608 @@
+"""A log as a testbed's Model sees it: inputs, measurements, segments, outliers, windows, noise.
+
+Inputs (zero-order hold over each logged interval, FORMATS.md)
+    platform: ``s1..s3`` from the log (zero for a passive platform without ``[masses]``);
+    ``mx..mz`` from the log (zero when absent); the cage field in the LAB frame,
+    ``b_lab = R(q_meas) b_body`` from the log's ``bx, by, bz`` -- its mean when the
+    samples scatter by less than ``FIELD_CONSTANT_RTOL`` of its size -- or, when
+    the log has no field, the testbed's ``[field] lab``.
+    cmg: ``dd1..dd4`` from the log, applied from ``t_k`` on; when the log has none,
+    the forward difference of the measured gimbal angles.
+
+Measurements (the output groups of :mod:`airbearing.analysis.shooting`)
+    with a gyro (``sensors.gyro = true``): the rates (and, for dof 3, the attitude
+    quaternion); attitude only (``sensors.gyro = false``): the quaternion (dof 3)
+    or the yaw (dof 1). The gap is the RMS residual of the first group: rad/s with
+    a gyro, rad without (``gap_unit``).
+
+Segments and outliers
+    From the log's quality (:func:`airbearing.io.quality.assess`): segments are
+    never integrated across (every window lies inside one segment and starts
+    afresh) and outlier rows weigh zero in every residual, fit and gap.
+
+Windows
+    Each segment is cut into ``ceil(n_seg / L)`` windows of (nearly) equal length,
+    at most ``L = window_s / dt`` rows, padded to ``L`` rows of weight zero. A
+    window starts at a usable row: from its measured attitude and rate (with a gyro),
+    or from the rate of a local quadratic fit of the attitude over the first
+    ``RATE_FIT_ROWS`` usable rows (attitude only).
+
+Noise floor (from the data alone, per segment, outlier rows left out)
+    The fourth DIVIDED difference on the logged times, with unit-norm weights
+    (``sum c_j p(t_j) = 0`` for cubic ``p``, ``sum c_j^2 = 1``), removes a smooth
+    motion to ``O(h^4)`` even on a jittered grid and passes white noise of standard
+    deviation ``sigma`` unchanged; a median absolute deviation (times 1.4826) makes
+    it robust. On a uniform grid it is the fourth difference divided by ``sqrt(70)``.
+    Applied to the rates, to the yaw, or (dof 3 without a gyro) to the rotation
+    vectors of each 5-sample stencil from its first sample. A dof-3 attitude with a
+    gyro: the body-frame increments ``2 vec(conj(q_k) (x) q_{k+1})`` minus the
+    trapezoidal integral of the logged rate (var ``2 sa^2 + dt^2 sw^2 / 2``).
+    The testbed's ``sensors.attitude_noise`` is reported beside it, not used.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from airbearing.analysis.shooting import WindowSet
+from airbearing.errors import InputError
+from airbearing.io.log import Log
+from airbearing.io.testbed import Testbed
+from airbearing.models import quaternion as quat
+from airbearing.models.model import build_model
+
+__all__ = [
+    "DEFAULT_WINDOW_S",
+    "MIN_WINDOWS",
+    "MIN_WINDOW_SAMPLES",
+    "NoiseFloor",
+    "ReplayData",
+    "make_windows",
+    "noise_floor",
+    "replay_data",
+]
+
+#: s, longest multiple-shooting window by default (shorter logs get at least 4 windows).
+DEFAULT_WINDOW_S = 10.0
+#: Fewest windows the logs must give (the held-out test needs two).
+MIN_WINDOWS = 2
+#: Fewest usable samples in a window.
+MIN_WINDOW_SAMPLES = 10
+#: Order of the difference that removes the smooth motion in :func:`noise_floor`.
+NOISE_DIFF_ORDER = 4
+#: A lab field whose samples scatter less than this fraction of its size is taken as constant.
+FIELD_CONSTANT_RTOL = 0.02
+#: 1 / Phi^-1(3/4): median absolute deviation -> standard deviation of a normal law.
+MAD_TO_SIGMA = 1.482602218505602
+#: rad/s and rad: smallest noise level used as a weight (a noise-free log stays well scaled).
+RATE_SIGMA_MIN = 1e-7
+ATTITUDE_SIGMA_MIN = 1e-6
+#: Usable rows of the local quadratic fit that starts a window's rate from the attitude.
+RATE_FIT_ROWS = 7
+#: Interval of a padding row (times the nominal period): tiny, finite, weight zero.
+PAD_DT = 1e-3
+
+
+@dataclass(frozen=True, eq=False)
+class ReplayData:
+    """One log turned into the inputs and measurements of a testbed's Model.
+
+    Attributes
+    ----------
+    testbed : Testbed
+    log : Log
+    t : ndarray (N,)
+        Logged times, s.
+    dt : float
+        Nominal sample period of the testbed, s.
+    u : ndarray (N, nu)
+        Inputs held over ``[t_k, t_{k+1})`` in the Model's ``u_names`` (SI).
+    att : ndarray (N, 4) or (N, 1)
+        Measured attitude: quaternion (dof 3, sign continuous) or yaw (dof 1), rad.
+    w : ndarray (N, n_axes) or None
+        Measured rate, rad/s (None without a gyro).
+    q : ndarray (N, 4) or None
+        Measured quaternion (dof 3).
+    extra_x : ndarray (N, n)
+        Measured plant states after attitude and rate (gimbal angles), possibly empty.
+    rate_names : tuple of str
+    gyro : bool
+        The testbed has a rate sensor.
+    outputs : tuple of str
+        Output groups compared (``rate``, ``quat``, ``yaw``); the first one is the gap's.
+    segments : tuple of (int, int)
+        Row ranges between gaps (stop exclusive).
+    outlier_rows : tuple of int
+    mask : ndarray (N,) of bool
+        False at outlier rows.
+    notes : tuple of str
+    quality : dict
+        The log quality JSON (segments, outliers, jitter).
+    """
+
+    testbed: Testbed
+    log: Log
+    t: np.ndarray
+    dt: float
+    u: np.ndarray
+    att: np.ndarray
+    w: np.ndarray | None
+    q: np.ndarray | None
+    extra_x: np.ndarray
+    rate_names: tuple
+    gyro: bool
+    outputs: tuple
+    segments: tuple
+    outlier_rows: tuple
+    mask: np.ndarray
+    u_names: tuple
+    x_names: tuple
+    notes: tuple = ()
+    quality: dict | None = None
+
+    @property
+    def n(self) -> int:
+        """Number of rows."""
+        return len(self.t)
+
+    @property
+    def n_axes(self) -> int:
+        """Number of free rate axes (3 or 1)."""
+        return len(self.rate_names)
+
+    @property
+    def gap_unit(self) -> str:
+        """Unit of the gap and of the noise floor: ``rad/s`` (gyro) or ``rad``."""
+        return "rad/s" if self.outputs[0] == "rate" else "rad"
+
+    @property
+    def yaw(self) -> np.ndarray | None:
+        """Measured yaw (dof 1), rad."""
+        return self.att[:, 0] if self.att.shape[1] == 1 else None
+
+    def input(self, name: str) -> np.ndarray:
+        """One input column by Model name, shape (N,)."""
+        return self.u[:, self.u_names.index(name)]
+
+    def state(self, name: str) -> np.ndarray:
+        """A measured extra plant state (gimbal angle) by Model name, shape (N,)."""
+        names = self.x_names[len(self.x_names) - self.extra_x.shape[1] :]
+        return self.extra_x[:, list(names).index(name)]
+
+    def segment_json(self) -> dict:
+        """``segments`` (count), ``segment_rows``, ``outlier_rows``."""
+        return {
+            "segments": len(self.segments),
+            "segment_rows": [[int(a), int(b)] for a, b in self.segments],
+            "outlier_rows": [int(r) for r in self.outlier_rows],
+        }
+
+    # ------------------------------------------------------------------ window starts
+    def start_state(self, row: int, stop: int) -> np.ndarray:
+        """Plant state estimate at ``row`` (usable), from rows ``row..stop-1``."""
+        if self.w is not None:
+            rate = self.w[row]
+        else:
+            rate = self._rate_from_attitude(row, stop)
+        return np.concatenate([self.att[row], np.atleast_1d(rate), self.extra_x[row]])
+
+    def _rate_from_attitude(self, row: int, stop: int) -> np.ndarray:
+        use = np.flatnonzero(self.mask[row:stop])[:RATE_FIT_ROWS] + row
+        if use.size < 3:
+            return np.zeros(self.n_axes)
+        tau = self.t[use] - self.t[row]
+        if self.q is None:
+            y = self.att[use, :1] - self.att[row, 0]
+        else:
+            e = quat.qmul(quat.qconj(self.q[row])[None, :], self.q[use])
+            e = e * np.sign(e[:, :1] + (e[:, :1] == 0))
+            s = np.linalg.norm(e[:, 1:], axis=1)
+            ang = 2 * np.arctan2(s, e[:, 0])
+            y = e[:, 1:] * np.where(s > 0, ang / np.maximum(s, 1e-300), 2.0)[:, None]
+        A = np.column_stack([np.ones_like(tau), tau, 0.5 * tau**2])
+        coef, *_ = np.linalg.lstsq(A, y, rcond=None)
+        return coef[1]
+
+
+def _quality(log: Log, testbed: Testbed):
+    """Segments, outlier rows and the quality JSON of ``log`` (io.quality when present)."""
+    try:
+        q = log.quality
+        return tuple(q.segments), tuple(int(r) for r in q.outlier_rows), q.to_json()
+    except (ImportError, AttributeError):
+        pass
+    t = log.t
+    breaks = np.flatnonzero(np.diff(t) > 1.5 * testbed.sensors.dt) + 1
+    edges = np.r_[0, breaks, len(t)]
+    segs = tuple((int(a), int(b)) for a, b in zip(edges[:-1], edges[1:], strict=True))
+    return segs, (), {"segments": len(segs), "segment_rows": [list(s) for s in segs]}
+
+
+def replay_data(testbed: Testbed, log: Log) -> ReplayData:
+    """Turn ``log`` into the inputs and measurements of ``testbed``'s Model.
+
+    Parameters
+    ----------
+    testbed : Testbed
+        The nominal testbed the log is compared with.
+    log : Log
+        A run of that testbed (FORMATS.md columns, SI units).
+
+    Returns
+    -------
+    ReplayData
+
+    Raises
+    ------
+    InputError
+        If the log's columns do not fit the testbed's kind, dof and sensors; the
+        message names the log and the column.
+    """
+    if not isinstance(testbed, Testbed):
+        raise InputError(f"replay: expected a Testbed, got {type(testbed).__name__}")
+    if not isinstance(log, Log):
+        raise InputError(f"replay: expected a Log, got {type(log).__name__}")
+    log = Log(log.data, log.source, testbed)
+    model = build_model(testbed.replace(effects={}))
+    n = log.n
+    dof = testbed.body.dof
+    gyro = bool(getattr(testbed.sensors, "gyro", True))
+    notes = []
+    rate_names = ("wx", "wy", "wz") if dof == 3 else ("wz",)
+    w = log.columns(list(rate_names)) if gyro else None
+    if dof == 3:
+        q = quat.continuous_branch(quat.normalize(log.quaternions()))
+        att, q_att = q, q
+        outputs = ("rate", "quat") if gyro else ("quat",)
+    else:
+        yaw = log.yaw()
+        if yaw is None:
+            yaw = np.unwrap(quat.yaw_of(log.quaternions()))
+        att, q_att, q = yaw[:, None], quat.from_yaw(yaw), None
+        outputs = ("rate",) if gyro else ("yaw",)
+    if not gyro:
+        notes.append(
+            "attitude only (sensors.gyro = false): the attitude itself is fitted, the gap is in rad"
+        )
+    u = np.zeros((n, model.nu))
+    ui = {name: i for i, name in enumerate(model.u_names)}
+    extra = np.zeros((n, 0))
+    if testbed.kind == "platform":
+        sl = log.sliders()
+        if sl is not None and "s1" in ui:
+            u[:, [ui["s1"], ui["s2"], ui["s3"]]] = sl
+        dip = log.dipoles()
+        if dip is not None and "mx" in ui:
+            u[:, [ui["mx"], ui["my"], ui["mz"]]] = dip
+        b_idx = [ui[k] for k in ("bx_lab", "by_lab", "bz_lab") if k in ui]
+        b_body = log.fields()
+        if b_body is not None and len(b_idx) == 3:
+            b_lab = quat.rotate(q_att, b_body)
+            mean = b_lab.mean(axis=0)
+            spread = float(np.sqrt(np.mean(np.sum((b_lab - mean) ** 2, axis=1))))
+            if spread <= FIELD_CONSTANT_RTOL * float(np.linalg.norm(mean)):
+                u[:, b_idx] = mean
+                notes.append("cage field: the mean of the log's bx, by, bz rotated to the lab")
+            else:
+                u[:, b_idx] = b_lab
+                notes.append("cage field: the log's bx, by, bz rotated to the lab frame")
+        elif testbed.field is not None and len(b_idx) == 3:
+            u[:, b_idx] = testbed.field.lab_vec
+            notes.append("cage field: the testbed's [field] lab (the log has no bx, by, bz)")
+    else:
+        d = log.gimbals()
+        dd = log.gimbal_rates()
+        if dd is None:
+            step = np.diff(log.t)
+            dd = np.vstack([np.diff(d, axis=0) / step[:, None], np.zeros((1, 4))])
+            dd[-1] = dd[-2]
+            notes.append("gimbal rates: forward differences of the measured angles")
+        else:
+            notes.append("gimbal rates: the log's commanded dd1..dd4, applied from t_k")
+        u[:, [ui[f"dd{i}"] for i in range(1, 5)]] = dd
+        extra = d
+    segments, outliers, qjson = _quality(log, testbed)
+    mask = np.ones(n, dtype=bool)
+    mask[list(outliers)] = False
+    if outliers:
+        notes.append(
+            f"{len(outliers)} outlier row(s) left out of every residual and fit: "
+            + ", ".join(str(r) for r in outliers)
+        )
+    if len(segments) > 1:
+        notes.append(f"{len(segments)} segments: no window spans a gap")
+    return ReplayData(
+        testbed=testbed,
+        log=log,
+        t=log.t,
+        dt=testbed.sensors.dt,
+        u=u,
+        att=att,
+        w=w,
+        q=q,
+        extra_x=extra,
+        rate_names=rate_names,
+        gyro=gyro,
+        outputs=outputs,
+        segments=tuple(segments),
+        outlier_rows=tuple(outliers),
+        mask=mask,
+        u_names=tuple(model.u_names),
+        x_names=tuple(model.x_names),
+        notes=tuple(notes),
+        quality=qjson,
+    )
+
+
+# ----------------------------------------------------------------------------
+# windows
+
+
+def _usable_rows(datas) -> int:
+    return sum(int(d.mask[a:b].sum()) for d in datas for a, b in d.segments)
+
+
+def make_windows(datas, *, window_s: float | None = None) -> WindowSet:
+    """Cut the segments of one or more logs into multiple-shooting windows (module doc).
+
+    Parameters
+    ----------
+    datas : ReplayData or sequence of ReplayData
+        Logs of one testbed.
+    window_s : float, optional
+        Longest window, s. Default ``min(DEFAULT_WINDOW_S, T / 4)`` with ``T`` the
+        usable duration of all logs, at least ``MIN_WINDOW_SAMPLES`` samples.
+
+    Returns
+    -------
+    WindowSet
+        ``source`` is the log index of each window.
+
+    Raises
+    ------
+    InputError
+        If the logs give fewer than ``MIN_WINDOWS`` windows of ``MIN_WINDOW_SAMPLES``
+        usable samples.
+    """
+    datas = [datas] if isinstance(datas, ReplayData) else list(datas)
+    dt = datas[0].dt
+    n_use = _usable_rows(datas)
+    src = ", ".join(d.log.source for d in datas)
+    need = MIN_WINDOWS * MIN_WINDOW_SAMPLES
+    if n_use < need:
+        raise InputError(
+            f"{src}: too short to fit anything: {n_use} usable samples; the replay needs at "
+            f"least {MIN_WINDOWS} windows of {MIN_WINDOW_SAMPLES} samples ({need} samples)"
+        )
+    if window_s is None:
+        window_s = min(DEFAULT_WINDOW_S, n_use * dt / 4)
+    if not (window_s > 0 and math.isfinite(window_s)):
+        raise InputError(f"window {window_s!r} s: expected a positive length in s")
+    L = max(MIN_WINDOW_SAMPLES, int(round(window_s / dt)))
+    cuts = []  # (log index, first row, stop row)
+    for i, d in enumerate(datas):
+        for a, b in d.segments:
+            use = np.flatnonzero(d.mask[a:b]) + a
+            if use.size < MIN_WINDOW_SAMPLES:
+                continue
+            first, last = int(use[0]), int(use[-1]) + 1
+            n_w = max(1, math.ceil((last - first) / L))
+            edges = np.linspace(first, last, n_w + 1).round().astype(int)
+            for s, e in zip(edges[:-1], edges[1:], strict=True):
+                while s < e and not d.mask[s]:
+                    s += 1
+                if int(d.mask[s:e].sum()) >= MIN_WINDOW_SAMPLES:
+                    cuts.append((i, int(s), int(e)))
+    if len(cuts) < MIN_WINDOWS:
+        raise InputError(
+            f"{src}: {len(cuts)} window(s) of up to {L} samples inside its segments; need at "
+            f"least {MIN_WINDOWS}: use a shorter window (now {window_s:g} s) or a longer log"
+        )
+    return _window_set(datas, cuts, L)
+
+
+def _window_set(datas, cuts, L: int) -> WindowSet:
+    d0 = datas[0]
+    nw = len(cuts)
+    nu = d0.u.shape[1]
+    x0 = []
+    U = np.zeros((nw, L, nu))
+    DT = np.full((nw, L - 1), PAD_DT * d0.dt)
+    M = np.zeros((nw, L))
+    rows = np.zeros((nw, L), dtype=int)
+    rate = np.zeros((nw, L, d0.n_axes)) if "rate" in d0.outputs else None
+    qq = np.zeros((nw, L, 4)) if "quat" in d0.outputs else None
+    yw = np.zeros((nw, L)) if "yaw" in d0.outputs else None
+    for j, (i, s, e) in enumerate(cuts):
+        d = datas[i]
+        m = e - s
+        r = np.r_[np.arange(s, e), np.full(L - m, e - 1)]
+        rows[j] = r
+        x0.append(d.start_state(s, e))
+        U[j] = d.u[r]
+        DT[j, : m - 1] = np.diff(d.t[s:e])
+        M[j, :m] = d.mask[s:e]
+        if rate is not None:
+            rate[j] = d.w[r]
+        if qq is not None:
+            qq[j] = d.q[r]
+        if yw is not None:
+            yw[j] = d.att[r, 0]
+    return WindowSet(
+        x0=np.array(x0),
+        u=U,
+        dt=DT,
+        weight=M,
+        rate=rate,
+        quat=qq,
+        yaw=yw,
+        rows=rows,
+        source=np.array([c[0] for c in cuts], dtype=int),
+    )
+
+
+# ----------------------------------------------------------------------------
+# noise floor
+
+
+@dataclass(frozen=True)
+class NoiseFloor:
+    """White measurement noise estimated from the data alone.
+
+    Attributes
+    ----------
+    rate_axes : ndarray or None
+        rad/s, 1-sigma per free rate axis (None without a gyro).
+    rate : float or None
+        rad/s, RMS over the axes.
+    attitude : float or None
+        rad, 1-sigma attitude noise per axis (None for a dof-1 gyro log).
+    gap_unit : str
+        ``rad/s`` or ``rad``: the unit of :attr:`value`.
+    testbed_attitude : float
+        rad, the testbed's ``sensors.attitude_noise`` (0 when not given), for comparison.
+    """
+
+    rate_axes: np.ndarray | None
+    rate: float | None
+    attitude: float | None
+    gap_unit: str = "rad/s"
+    testbed_attitude: float = 0.0
+
+    @property
+    def value(self) -> float:
+        """The floor the gap is compared with, in :attr:`gap_unit`."""
+        return float(self.rate if self.gap_unit == "rad/s" else self.attitude)
+
+    @property
+    def source(self) -> str:
+        """How the floor was obtained, in words."""
+        if self.gap_unit == "rad/s":
+            return (
+                "data: median absolute deviation of the unit-norm fourth divided differences "
+                "of the logged rates (on the logged times)"
+            )
+        return (
+            "data: median absolute deviation of the unit-norm fourth divided differences "
+            "of the logged attitude (on the logged times)"
+        )
+
+    def to_json(self) -> dict:
+        return {
+            "noise_floor": self.value,
+            "gap_unit": self.gap_unit,
+            "noise_floor_source": self.source,
+            "rate_noise": self.rate,
+            "attitude_noise": self.attitude,
+            "testbed_attitude_noise": self.testbed_attitude or None,
+        }
+
+
+def _pieces(d: ReplayData, k: int):
+    """Row index arrays of differences of order ``k`` inside segments, no outlier touched."""
+    out = []
+    for a, b in d.segments:
+        if b - a <= k:
+            continue
+        idx = np.arange(a, b - k)
+        ok = np.ones(idx.size, dtype=bool)
+        for j in range(k + 1):
+            ok &= d.mask[idx + j]
+        out.append(idx[ok])
+    return np.concatenate(out) if out else np.zeros(0, dtype=int)
+
+
+def _mad(d: np.ndarray) -> np.ndarray:
+    med = np.median(d, axis=0)
+    return MAD_TO_SIGMA * np.median(np.abs(d - med), axis=0)
+
+
+def _weights(t: np.ndarray, idx: np.ndarray, k: int) -> np.ndarray:
+    """Unit-norm divided-difference weights of order ``k`` on the logged times, (M, k + 1).
+
+    ``sum_j c_j p(t_j) = 0`` for every polynomial of degree < ``k``, so a smooth motion
+    cancels to ``O(h^k)`` on any (jittered) grid, and ``sum c_j^2 = 1`` makes white noise
+    of standard deviation ``sigma`` come out with standard deviation ``sigma``. On a uniform
+    grid this is the ``k``-th difference divided by ``sqrt(C(2k, k))`` (``sqrt(70)`` for 4).
+    """
+    T = t[idx[:, None] + np.arange(k + 1)[None, :]]
+    T = (T - T[:, :1]) / np.maximum(T[:, -1:] - T[:, :1], 1e-300)
+    c = np.ones_like(T)
+    for j in range(k + 1):
+        for i in range(k + 1):
+            if i != j:
+                c[:, j] /= T[:, j] - T[:, i]
+    return c / np.linalg.norm(c, axis=1, keepdims=True)
+
+
+def _diff_at(x: np.ndarray, t: np.ndarray, idx: np.ndarray, k: int) -> np.ndarray:
+    """Normalised divided differences of ``x`` (N,) or (N, c) at stencils ``idx..idx+k``."""
+    c = _weights(t, idx, k)
+    x2 = x.reshape(len(x), -1)
+    return sum(c[:, j : j + 1] * x2[idx + j] for j in range(k + 1))
+
+
+def _rotvec(e: np.ndarray) -> np.ndarray:
+    e = e * np.sign(e[:, :1] + (e[:, :1] == 0))
+    s = np.linalg.norm(e[:, 1:], axis=1)
+    ang = 2 * np.arctan2(s, e[:, 0])
+    return e[:, 1:] * np.where(s > 0, ang / np.maximum(s, 1e-300), 2.0)[:, None]
+
+
+def _attitude_diff(q: np.ndarray, t: np.ndarray, idx: np.ndarray, k: int) -> np.ndarray:
+    """Divided differences of the attitude as rotation vectors from each stencil's first sample."""
+    c = _weights(t, idx, k)
+    q0c = quat.qconj(q[idx])
+    out = np.zeros((idx.size, 3))
+    for j in range(1, k + 1):
+        out += c[:, j : j + 1] * _rotvec(quat.qmul(q0c, q[idx + j]))
+    return out
+
+
+def _body_increments(q: np.ndarray) -> np.ndarray:
+    inc = quat.qmul(quat.qconj(q[:-1]), q[1:])
+    inc = inc * np.sign(inc[:, :1] + (inc[:, :1] == 0))
+    return 2.0 * inc[:, 1:]
+
+
+def noise_floor(datas) -> NoiseFloor:
+    """Estimate the measurement noise of one or more logs from the data alone (module doc)."""
+    datas = [datas] if isinstance(datas, ReplayData) else list(datas)
+    d0 = datas[0]
+    k = NOISE_DIFF_ORDER
+    rate_axes = rate = att = None
+    if d0.gyro:
+        parts = [_diff_at(d.w, d.t, _pieces(d, k), k) for d in datas]
+        D = np.concatenate(parts) if parts else np.zeros((0, d0.n_axes))
+        if len(D) < 2:
+            raise InputError(f"{d0.log.source}: too few consecutive usable rows for a noise floor")
+        rate_axes = _mad(D)
+        rate = float(np.sqrt(np.mean(rate_axes**2)))
+    if d0.q is not None:
+        if d0.gyro:
+            es = []
+            for d in datas:
+                idx = _pieces(d, 1)
+                inc = _body_increments(d.q)[idx]
+                h = (d.t[idx + 1] - d.t[idx])[:, None]
+                es.append(inc - 0.5 * (d.w[idx] + d.w[idx + 1]) * h)
+            e = np.concatenate(es)
+            s_e = float(np.sqrt(np.mean(_mad(e) ** 2)))
+            var = (s_e**2 - 0.5 * d0.dt**2 * rate**2) / 2.0
+            att = float(math.sqrt(max(var, 0.0)))
+        else:
+            es = [_attitude_diff(d.q, d.t, _pieces(d, k), k) for d in datas]
+            att = float(np.sqrt(np.mean(_mad(np.concatenate(es)) ** 2)))
+    elif not d0.gyro:
+        parts = [_diff_at(d.att[:, 0], d.t, _pieces(d, k), k) for d in datas]
+        att = float(_mad(np.concatenate(parts))[0])
+    return NoiseFloor(
+        rate_axes=rate_axes,
+        rate=rate,
+        attitude=att,
+        gap_unit=d0.gap_unit,
+        testbed_attitude=float(getattr(d0.testbed.sensors, "attitude_noise", 0.0) or 0.0),
+    )

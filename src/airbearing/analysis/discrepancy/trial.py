@@ -1,0 +1,386 @@
+"""One candidate tried against the data: its fit, its scores, and whether it may be named.
+
+A candidate is fitted by IPOPT to the output error, the windows' initial states
+free (:meth:`airbearing.analysis.shooting.ShootingProblem.fit`), from the
+residual-torque regression start. It is scored by
+
+- the likelihood ratio ``LR = n ln(RSS_0 / RSS_1)`` and the BIC change
+  ``dBIC = -LR + k ln(n)`` (``k`` added parameters; a first ``sensor_lag`` also
+  counts the lag filter's free start in every window);
+- its standard errors (Gauss-Newton covariance with the initial states
+  eliminated, :func:`airbearing.analysis.shooting.theta_errors`) and the Wald
+  distance ``sigmas = sqrt(theta^T C^-1 theta)`` (``|value| / std`` for one number);
+- the gap on held-out windows (K-fold over the windows: the fit moved by one
+  Gauss-Newton step fitted on the other folds, the held-out windows' initial
+  states refitted with the parameters held).
+
+Honest naming (issue 13): a candidate may be NAMED only when its fit converged,
+every parameter is identifiable from the logs (no zero Jacobian column, no
+singular Fisher matrix), it is not pinned at its physical bound, the LR exceeds
+the chi-square quantile ``1 - SIGNIFICANCE`` with the BIC dropping, its value is
+at least ``MIN_SIGMAS`` standard errors from zero, and it shrinks the held-out gap.
+A candidate that fails says which test it failed (``status`` and ``reason``); a
+candidate that cannot be identified has no value and no error, only the reason.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+
+from airbearing.analysis.discrepancy.candidates import Candidate, lsq, smoothed
+from airbearing.analysis.shooting import Fit, ShootingProblem
+from airbearing.errors import SolverError
+
+__all__ = ["CandidateResult", "MIN_SIGMAS", "SIGNIFICANCE", "cross_validate"]
+
+#: Level of the likelihood-ratio test a candidate must pass besides lowering the BIC.
+SIGNIFICANCE = 1e-3
+#: A named value lies at least this many standard errors from zero.
+MIN_SIGMAS = 3.0
+#: Folds of the held-out test (leave one window out when there are fewer windows).
+CV_FOLDS = 5
+#: s, longest sensor lag the start of a sensor_lag fit may take.
+LAG_START_MAX = 1.0
+#: Profile scan of a non-smooth threshold: grid points (quantiles of |commanded rate|).
+SCAN_POINTS = 10
+
+
+def _finite(x):
+    return None if x is None or not np.isfinite(x) else float(x)
+
+
+def jsonable(v):
+    """A value or a vector as JSON numbers (non-finite as None)."""
+    if v is None:
+        return None
+    if isinstance(v, tuple | list | np.ndarray):
+        return [_finite(float(x)) for x in v]
+    return _finite(float(v))
+
+
+@dataclass(frozen=True, eq=False)
+class CandidateResult:
+    """One candidate's fit and scores (in the selection round it was tried in).
+
+    Attributes
+    ----------
+    name : str
+    value, std : float, tuple or None
+        FORMATS.md value and 1-sigma; None when not identifiable or not fitted.
+    gap : float
+        Gap with the candidate added (rad/s or rad).
+    lr, delta_bic : float
+    heldout_gap : float
+        Gap on held-out windows with the candidate; ``heldout_gap_before`` without it.
+    sigmas : float
+        Wald distance of the value from zero, in standard errors.
+    significant : bool
+        LR and BIC test passed.
+    nameable : bool
+        Every test of the module doc passed.
+    status : str
+        ``converged``, ``warning`` (acceptable level), ``did not converge``,
+        ``not identifiable from this log``, ``at its physical bound``.
+    reason : str
+        Why it may not be named ("" when it may).
+    """
+
+    name: str
+    value: object
+    std: object
+    theta: np.ndarray
+    gap: float
+    rss: float
+    lr: float
+    delta_bic: float
+    heldout_gap: float
+    heldout_rss: float
+    heldout_gap_before: float
+    k: int
+    significant: bool
+    sigmas: float = math.nan
+    nameable: bool = False
+    status: str = "converged"
+    reason: str = ""
+    start: object = None
+    note: str = ""
+    fit: Fit | None = None
+    candidate: Candidate | None = None
+
+    @property
+    def label(self) -> str:
+        """The effect name, with ``(per axis)`` for the three-value form."""
+        return self.candidate.label if self.candidate is not None else self.name
+
+    @property
+    def per_axis(self) -> bool:
+        return bool(self.candidate is not None and self.candidate.per_axis)
+
+    def row(self) -> dict:
+        """A flat summary (JSON and report tables)."""
+        return {
+            "name": self.name,
+            "per_axis": self.per_axis,
+            "value": jsonable(self.value),
+            "std": jsonable(self.std),
+            "gap": _finite(self.gap),
+            "score": _finite(self.delta_bic),
+            "lr": _finite(self.lr),
+            "heldout_gap": _finite(self.heldout_gap),
+            "heldout_gap_before": _finite(self.heldout_gap_before),
+            "sigmas": _finite(self.sigmas),
+            "k": self.k,
+            "significant": bool(self.significant),
+            "nameable": bool(self.nameable),
+            "status": self.status,
+            "reason": self.reason,
+            "start": jsonable(self.start),
+            "note": self.note,
+        }
+
+    def to_json(self) -> dict:
+        return self.row()
+
+
+def chi2_threshold(k: int) -> float:
+    from scipy.stats import chi2
+
+    return float(chi2.ppf(1.0 - SIGNIFICANCE, k))
+
+
+def cross_validate(problem: ShootingProblem, fit: Fit, k: int, folds: np.ndarray):
+    """Held-out weighted RSS and gap of ``fit``, K-fold over the windows (module doc)."""
+    r, J = fit.extra["r"], fit.extra["J"].toarray()
+    nd, nw, n = problem.n_delta, problem.windows.n, problem.n_win_res
+    rows_of = [np.arange(j * n, (j + 1) * n) for j in range(nw)]
+    cols_of = [k + np.arange(j * nd, (j + 1) * nd) for j in range(nw)]
+    sel = problem.primary & problem.usable
+    rss, ss, cnt = 0.0, 0.0, 0
+    for f in np.unique(folds):
+        train = np.flatnonzero(folds != f)
+        test = np.flatnonzero(folds == f)
+        d_theta = np.zeros(k)
+        if k and len(train):
+            rows = np.concatenate([rows_of[j] for j in train])
+            cols = np.r_[np.arange(k), np.concatenate([cols_of[j] for j in train])]
+            d_theta = lsq(J[np.ix_(rows, cols)], -r[rows])[:k]
+        for j in test:
+            rj = r[rows_of[j]] + (J[rows_of[j], :k] @ d_theta if k else 0.0)
+            Jd = J[np.ix_(rows_of[j], cols_of[j])]
+            rj = rj + Jd @ lsq(Jd, -rj)
+            rss += float(rj @ rj)
+            m = sel[rows_of[j]]
+            ss += float(rj[m] @ rj[m])
+            cnt += int(m.sum())
+    sigma = problem.sigma_rate if problem.outputs[0] == "rate" else problem.sigma_att
+    return rss, sigma * math.sqrt(ss / max(cnt, 1))
+
+
+def failed(cand: Candidate, status: str, reason: str, start=None, before=math.nan):
+    """A candidate that has no fit to show."""
+    return CandidateResult(
+        name=cand.name,
+        value=None,
+        std=None,
+        theta=np.zeros(0),
+        gap=math.nan,
+        rss=math.nan,
+        lr=-math.inf,
+        delta_bic=math.inf,
+        heldout_gap=math.nan,
+        heldout_rss=math.nan,
+        heldout_gap_before=before,
+        k=cand.k,
+        significant=False,
+        status=status,
+        reason=reason,
+        start=start,
+        candidate=cand,
+    )
+
+
+def judge(cand, fit, k_sel, current, ln_n, k_added, heldout, heldout_before, start, note):
+    """Scores and the honest-naming tests of one fitted candidate (module doc)."""
+    k = k_sel + cand.k
+    n = fit.n_res
+    lr = n * math.log(current.rss / fit.rss) if fit.rss > 0 else math.inf
+    dbic = -lr + k_added * ln_n
+    significant = bool(dbic < 0 and lr > chi2_threshold(k_added))
+    th = fit.theta[k_sel:k]
+    reasons = [r for r in fit.not_identifiable[k_sel:k] if r]
+    common = {
+        "name": cand.name,
+        "theta": fit.theta.copy(),
+        "gap": fit.gap,
+        "rss": fit.rss,
+        "lr": lr,
+        "delta_bic": dbic,
+        "heldout_gap": heldout[1],
+        "heldout_rss": heldout[0],
+        "heldout_gap_before": heldout_before,
+        "k": cand.k,
+        "significant": significant,
+        "start": start,
+        "note": note,
+        "fit": fit,
+        "candidate": cand,
+    }
+    if reasons:
+        return CandidateResult(
+            value=None,
+            std=None,
+            status="not identifiable from this log",
+            reason=reasons[0],
+            **common,
+        )
+    sd = fit.theta_std[k_sel:k]
+    lo = np.asarray(cand.lower, dtype=float)
+    # within a thousandth of a standard error of the bound: pinned there by the constraint
+    near = 1e-3 * np.where(np.isfinite(sd), sd, np.abs(th))
+    at_bound = np.isfinite(lo) & (th - lo <= near)
+    cov = fit.cov[k_sel:k, k_sel:k]
+    try:
+        sig = float(math.sqrt(max(float(th @ np.linalg.solve(cov, th)), 0.0)))
+    except np.linalg.LinAlgError:
+        sig = math.nan
+    status = "warning: " + fit.status if fit.level == "warning" else "converged"
+    reason = ""
+    if np.any(at_bound):
+        status, reason = (
+            "at its physical bound",
+            (
+                f"pinned at its physical bound {lo[at_bound][0]:g}: the fit wants a value at "
+                "or beyond it (nothing of this effect in the logs)"
+            ),
+        )
+    elif not significant:
+        reason = (
+            f"not significant: likelihood ratio {lr:.3g} below the chi-square threshold "
+            f"{chi2_threshold(k_added):.3g} or BIC not lowered (dBIC {dbic:.3g})"
+        )
+    elif not sig >= MIN_SIGMAS:
+        reason = f"only {sig:.2g} standard errors from zero (need {MIN_SIGMAS:g})"
+    elif not heldout[1] < heldout_before:
+        reason = (
+            f"does not shrink the gap on held-out windows ({heldout[1]:.4g} against "
+            f"{heldout_before:.4g} without it)"
+        )
+    return CandidateResult(
+        value=cand.value(th),
+        std=cand.value(sd),
+        sigmas=sig,
+        nameable=not reason,
+        status=status,
+        reason=reason,
+        **common,
+    )
+
+
+def lag_start(problem: ShootingProblem, current: Fit, datas) -> float:
+    """Sensor-lag start: the current rate residual regressed on -w' (w_lag ~ w - tau w')."""
+    from airbearing.analysis.discrepancy.replay import primary_series
+
+    s = primary_series(problem, current.delta, current.p)
+    xs, ys = [], []
+    for i, d in enumerate(datas):
+        _, w_dot, ok = smoothed(d)
+        m = (s["source"] == i) & ok[np.clip(s["rows"], 0, d.n - 1)]
+        xs.append(-w_dot[s["rows"][m]].reshape(-1))
+        ys.append(s["residual"][m].reshape(-1))
+    x, y = np.concatenate(xs), np.concatenate(ys)
+    tau = float(x @ y) / max(float(x @ x), 1e-300)
+    return float(np.clip(tau, datas[0].dt / 4, LAG_START_MAX))
+
+
+def scan(problem, cand, p_base, S_sel, theta_sel, S_c, lo_sel, hi_sel, delta0, base_rss):
+    """Profile scan of a one-parameter effect with no derivative (gimbal_deadzone).
+
+    Returns ``(fit, start, note)``; the threshold's 1-sigma is where
+    ``n ln(RSS / RSS_min)`` rises by 1, at least half the spacing of the commanded rates.
+    """
+    w = problem.windows
+    cols = [problem.model.u_names.index(f"dd{i}") for i in range(1, 5)]
+    dd = np.abs(w.u[..., cols][w.weight > 0]).ravel()
+    dd = dd[dd > 0]
+    if dd.size == 0:
+        raise SolverError(f"candidate {cand.name}: the log commands no gimbal motion to scan")
+    grid = np.unique(np.quantile(dd, np.linspace(0.02, 0.9, SCAN_POINTS)))
+    col = S_c[:, 0]
+    fits: dict = {}
+
+    def at(th: float) -> Fit:
+        if th not in fits:
+            fits[th] = problem.fit(
+                p_base + col * th,
+                S_sel,
+                theta_sel,
+                lower=lo_sel,
+                upper=hi_sel,
+                delta0=delta0,
+                name=f"candidate {cand.name} = {th:.3g}",
+            )
+        return fits[th]
+
+    for th in grid:
+        at(float(th))
+    i = int(np.argmin([at(float(th)).rss for th in grid]))
+    best_rss = at(float(grid[i])).rss
+    n_res = at(float(grid[i])).n_res
+    if n_res * math.log(base_rss / best_rss) >= math.log(n_res):
+        # the RSS changes only where the threshold crosses a commanded rate: ternary search
+        # over the midpoints between sorted commanded rates inside the best bracket
+        lo_t, hi_t = grid[max(i - 1, 0)], grid[min(i + 1, len(grid) - 1)]
+        vals = np.unique(dd[(dd >= lo_t) & (dd <= hi_t)])
+        mids = 0.5 * (vals[1:] + vals[:-1]) if vals.size > 1 else vals
+        a_i, b_i = 0, len(mids) - 1
+        while b_i - a_i > 2:
+            m1 = a_i + (b_i - a_i) // 3
+            m2 = b_i - (b_i - a_i) // 3
+            if at(float(mids[m1])).rss <= at(float(mids[m2])).rss:
+                b_i = m2
+            else:
+                a_i = m1
+        for j in range(a_i, b_i + 1):
+            at(float(mids[j]))
+    else:
+        mids = np.array([grid[i]])
+    prof = np.array(sorted((th, f.rss) for th, f in fits.items()))
+    th_best = float(prof[int(np.argmin(prof[:, 1])), 0])
+    fbest = fits[th_best]
+    inside = prof[fbest.n_res * np.log(prof[:, 1] / fbest.rss) <= 1.0, 0]
+    std = float(max(inside.max() - th_best, th_best - inside.min(), 0.0)) if inside.size else 0.0
+    if mids.size > 1:
+        m = np.sort(mids)
+        j = int(np.clip(np.searchsorted(m, th_best), 1, m.size - 1))
+        std = max(std, float(m[j] - m[j - 1]) / 2)
+    k_sel = S_sel.shape[1]
+    J = fbest.extra["J"]
+    Jx = sp.hstack([J[:, :k_sel], sp.csc_matrix((J.shape[0], 1)), J[:, k_sel:]]).tocsc()
+    cov = np.full((k_sel + 1, k_sel + 1), 0.0)
+    if k_sel:
+        cov[:k_sel, :k_sel] = fbest.cov
+    cov[k_sel, k_sel] = std**2 if std > 0 else np.nan
+    fit = Fit(
+        theta=np.r_[fbest.theta, th_best],
+        theta_std=np.r_[fbest.theta_std, std if std > 0 else np.nan],
+        p=fbest.p,
+        delta=fbest.delta,
+        rss=fbest.rss,
+        n_res=fbest.n_res,
+        n_free=fbest.n_free + 1,
+        gap=fbest.gap,
+        iterations=fbest.iterations,
+        status=fbest.status,
+        level=fbest.level,
+        not_identifiable=(
+            *fbest.not_identifiable,
+            "" if std > 0 else "the profile is flat: no commanded rate near the threshold",
+        ),
+        cov=cov,
+        extra={"r": fbest.extra["r"], "J": Jx, "profile": prof},
+    )
+    return fit, float(grid[0]), f"profile scan over {len(fits)} thresholds"
