@@ -36,7 +36,9 @@ settling time) in :mod:`.transient`, the method comparison and the sweeps in
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 
@@ -49,7 +51,7 @@ from airbearing.design.controller import constant_input
 from airbearing.errors import InputError
 from airbearing.io.testbed import Testbed
 from airbearing.models import quaternion as quat
-from airbearing.models.model import build_model
+from airbearing.models.model import Model, build_model
 
 __all__ = [
     "FREE_FLOAT_DURATION",
@@ -104,6 +106,50 @@ def rest_attitude(offset) -> np.ndarray:
             "(seed 001); start it level or give a more pendulous --vertical-offset"
         )
     return q
+
+
+def _key(value):
+    """A hashable copy of an option (numbers, sequences, mappings), or the value itself."""
+    if value is None or isinstance(value, str | int | float | bool):
+        return value
+    if isinstance(value, Mapping):
+        return tuple(sorted((k, _key(v)) for k, v in value.items()))
+    return tuple(_key(v) for v in np.asarray(value, dtype=float).tolist())
+
+
+def _model(testbed: Testbed, effects) -> Model:
+    """The Model of a run; the same one for the same testbed and effects, so a comparison's
+    runs (which differ only in noise seed) share one compiled closed loop."""
+    try:
+        return _cached_model(testbed, _key(effects))
+    except TypeError:  # something unhashable: build it afresh
+        return build_model(testbed, effects)
+
+
+@lru_cache(maxsize=32)
+def _cached_model(testbed: Testbed, effects_key) -> Model:
+    return build_model(testbed, dict(effects_key) if effects_key else None)
+
+
+@lru_cache(maxsize=64)
+def _law(model: Model, method: str, initial_offset: float, offset_stays: bool, gains, lag: float,
+         ideal_actuators: bool):  # fmt: skip
+    """The balancing law of a run (seed 000 eqs. 3-5 or the other methods), cached with the
+    Model: the same law object lets the simulation reuse its compiled loop."""
+    testbed = model.testbed
+    s0 = np.array([initial_offset, initial_offset, 0.0])
+    options = {
+        "slider_start": s0,
+        "slider_zero": s0 if offset_stays else np.zeros(3),
+        "sliders": SliderActuator.from_testbed(testbed, ideal=ideal_actuators, lag=lag),
+    }
+    if gains is not None:
+        options["gains"] = gains
+    if ideal_actuators and method == "mixed":
+        from airbearing.design.actuators import MagnetorquerActuator
+
+        options["magnetorquers"] = MagnetorquerActuator.from_testbed(testbed, ideal=True)
+    return balancing_controller(model, method, **options)
 
 
 @dataclass(frozen=True, eq=False)
@@ -200,7 +246,7 @@ def run_balancing(
         vertical_offset = balanced_vertical_offset(testbed)
     if start not in ("auto", "rest", "level"):
         raise InputError(f"--start {start}: expected auto, rest or level")
-    model = build_model(testbed, effects)
+    model = _model(testbed, effects)
     s0 = np.array([initial_offset, initial_offset, 0.0])
     balanced = np.array([0.0, 0.0, vertical_offset])
     r0 = true_offset(testbed, s0, balanced)
@@ -219,18 +265,8 @@ def run_balancing(
             start = "level"
             notes.append(f"started level: {e}")
     x0 = model.x0(q=q0, w=w0)
-    options = {
-        "slider_start": s0,
-        "slider_zero": s0 if offset_stays else np.zeros(3),
-        "sliders": SliderActuator.from_testbed(testbed, ideal=ideal_actuators, lag=lag),
-    }
-    if gains is not None:
-        options["gains"] = gains
-    if ideal_actuators and method == "mixed":
-        from airbearing.design.actuators import MagnetorquerActuator
-
-        options["magnetorquers"] = MagnetorquerActuator.from_testbed(testbed, ideal=True)
-    ctl = balancing_controller(model, method, **options)
+    ctl = _law(model, method, float(initial_offset), bool(offset_stays), _key(gains), float(lag),
+               bool(ideal_actuators))  # fmt: skip
     p = model.params(r_x=0.0, r_y=0.0, r_z=vertical_offset)
     result = simulate(model, ctl, duration=duration, x0=x0, p=p, seed=seed, noise=noise)
     free = None
