@@ -262,6 +262,10 @@ def test_glitch_bad_input(gyro_log):
             with_glitches(gyro_log, rows, "rate_zero")
     with pytest.raises(InputError, match="expected one of"):
         with_glitches(gyro_log, [1], "rate_drift")
+    with pytest.raises(InputError, match="no size"):
+        with_glitches(gyro_log, [1], "rate_zero", size=1.0)
+    with pytest.raises(InputError, match="no column"):
+        with_glitches(gyro_log, [1], "yaw_offset", column="wx")
     assert set(GLITCH_KINDS) == {"rate_zero", "rate_spike", "quat_wrong_frame", "yaw_offset",
                                  "yaw_zero"}  # fmt: skip
     from airbearing.cli.simulate import GLITCHES  # the CLI's help lists the same kinds

@@ -213,6 +213,12 @@ def with_glitches(
     """
     if kind not in GLITCH_KINDS:
         raise InputError(f"glitch kind {kind!r}: expected one of {', '.join(GLITCH_KINDS)}")
+    if size is not None and kind in ("rate_zero", "yaw_zero"):
+        raise InputError(f"glitch kind {kind!r} takes no size (it writes zeros)")
+    if size is not None and not np.isfinite(size):
+        raise InputError(f"glitch size {size}: expected a finite number")
+    if column is not None and kind != "rate_spike":
+        raise InputError(f"glitch kind {kind!r} takes no column (only rate_spike does)")
     hit = _rows(rows, log.n)
     data = log.data.copy()
     idx = list(hit)
