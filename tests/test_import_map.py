@@ -347,3 +347,13 @@ def test_public_raw_example(case):
         same_attitude(log.quaternions()[:1], np.array([answer["initial_state"]["q"]]), 1e-4)
         np.testing.assert_allclose(log.rates()[0], answer["initial_state"]["w"], atol=1e-2)
     assert math.isfinite(log.quality.jitter)
+
+
+@pytest.mark.parametrize("sep", [",", ";", "\t"])
+def test_raw_with_byte_order_mark_and_other_separators(tmp_path, sep):
+    raw = tmp_path / "raw.csv"
+    raw.write_bytes(
+        ("\ufeffTime (s)" + sep + "Yaw (rad)\n0" + sep + "0.1\n0.1" + sep + "0.2\n").encode()
+    )
+    mp = import_map_from_dict({"columns": {"t": "Time (s)", "yaw": "Yaw (rad)"}})
+    assert import_log(raw, mp).yaw().tolist() == [0.1, 0.2]

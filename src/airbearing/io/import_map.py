@@ -35,10 +35,12 @@ __all__ = [
     "raw_columns",
     "read_import_map",
     "read_raw",
+    "unwrap",
 ]
 
 _MEMORY = "<memory>"
 _ROTATION_TOL = 1e-6  # |C C^T - I| and |det C - 1| allowed for [frames] body
+_SEGMENT_BREAK = 1.5  # x the file's median interval (FORMATS.md)
 
 #: Units a raw column may have, by quantity: unit -> factor to the SI unit (FORMATS.md).
 UNITS: dict[str, dict[str, float]] = {
@@ -286,7 +288,9 @@ def read_raw(path: str | os.PathLike[str]):
     Returns
     -------
     pandas.DataFrame
-        CSV cells as text (nothing turned into NaN behind the reader's back),
+        CSV (comma, or tab or semicolon when the header has no comma; a UTF-8
+        byte-order mark ignored) cells as text (nothing turned into NaN behind the
+        reader's back),
         Parquet columns as stored. Row ``i`` is data row ``i`` (0-based).
 
     Raises
@@ -305,7 +309,19 @@ def read_raw(path: str | os.PathLike[str]):
             import pyarrow.parquet as pq
 
             return pq.read_table(p).to_pandas()
-        return pd.read_csv(p, dtype=str, keep_default_na=False, skip_blank_lines=True)
+        with p.open(encoding="utf-8-sig") as fh:
+            header = fh.readline()
+        sep = ","
+        if "," not in header:  # a lab's export may use tabs or semicolons
+            sep = "\t" if "\t" in header else (";" if ";" in header else ",")
+        return pd.read_csv(
+            p,
+            sep=sep,
+            dtype=str,
+            keep_default_na=False,
+            skip_blank_lines=True,
+            encoding="utf-8-sig",  # a byte-order mark is not part of the first header
+        )
     except pd.errors.EmptyDataError as e:
         raise InputError(f"{src}: the raw log is empty; expected a header row") from e
     except Exception as e:  # noqa: BLE001 (any reader failure is a bad file)
@@ -372,4 +388,54 @@ def raw_columns(raw, import_map: ImportMap, src: str, skip: tuple[str, ...] = ()
             out[name] = values / inverse  # ms -> s as raw / 1000: correctly rounded
         else:
             out[name] = values * factor
+    return out
+
+
+def _wrap(a: np.ndarray) -> np.ndarray:
+    return np.mod(a + np.pi, 2.0 * np.pi) - np.pi
+
+
+def unwrap(angle: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """Unwrap an angle, each segment on its own, keeping the branch across isolated jumps.
+
+    Parameters
+    ----------
+    angle : numpy.ndarray
+        rad, shape (n,), e.g. a raw yaw in [-pi, pi).
+    t : numpy.ndarray
+        s, shape (n,), strictly increasing.
+
+    Returns
+    -------
+    numpy.ndarray
+        ``angle + 2 pi k`` (k integer per sample). A segment starts afresh (as
+        logged) after an interval longer than 1.5 x the median interval. Within a
+        segment each sample takes the branch nearest the previous sample, except
+        after an isolated sample that jumps away and back (more than pi/3 from both
+        neighbours while they are within pi/3 of each other): the sample after it
+        takes the branch nearest the sample before it, so an occluded frame
+        exported as 0 or a jump of more than pi and back does not change the branch.
+    """
+    y = np.asarray(angle, dtype=float)
+    t = np.asarray(t, dtype=float)
+    out = y.copy()
+    if y.size < 2:
+        return out
+    dt = np.diff(t)
+    breaks = np.flatnonzero(dt > _SEGMENT_BREAK * np.median(dt)) + 1
+    for seg in np.split(np.arange(y.size), breaks):
+        if seg.size < 2:
+            continue
+        s = y[seg]
+        step = _wrap(np.diff(s))  # step[i]: s[i] -> s[i+1]
+        inc = step.copy()
+        if s.size >= 3:
+            big = np.pi / 3
+            skip = _wrap(s[2:] - s[:-2])  # s[j-1] -> s[j+1], j = 1..m-2
+            spike = (np.abs(step[:-1]) > big) & (np.abs(step[1:]) > big) & (np.abs(skip) < big)
+            j = np.flatnonzero(spike)  # sample j + 1 is the isolated jump
+            inc[j + 1] = skip[j] - step[j]
+        u = s[0] + np.concatenate([[0.0], np.cumsum(inc)])
+        k = np.round((u - s) / (2.0 * np.pi))
+        out[seg] = s + 2.0 * np.pi * k
     return out

@@ -18,7 +18,7 @@ segment (never across a gap) and each channel group:
 1. **Channel groups.** The rates ``wx, wy, wz`` (``wz`` for dof 1) when the testbed
    has a gyro, each channel tested on its own; the attitude, either the quaternion
    (its four components as one vector, signs made continuous, see below) or the yaw
-   (unwrapped within the segment). Sliders, dipoles and gimbal angles are commands
+   (unwrapped within the segment, an isolated jump keeping the branch). Sliders, dipoles and gimbal angles are commands
    or stepper positions, not smooth measurements, and are not tested.
 2. **Leave-one-out residual.** Sample ``i`` is predicted by a polynomial in time of
    degree ``p`` fitted by least squares to its ``2k`` nearest samples of the same
@@ -35,7 +35,11 @@ segment (never across a gap) and each channel group:
    when the motion is fast for the sample rate (a 4 rad/s spin at 10 Hz, a 1.6 rad/s
    oscillation at 20 Hz) the low degree leaves a curvature residual and the higher
    degree, whose bias falls as ``(omega dt)^(p+2)``, removes it. So the scale
-   measures the noise, not the model's curvature.
+   measures the noise, not the model's curvature. The first and last ``k`` samples
+   of a segment are extrapolated, where a fit's misfit is larger: each window shape
+   (how many neighbours on the left) has its own scale, measured on the log itself
+   by predicting every sample with that shape, and each position near a segment's
+   end uses the fit whose scale there is smallest.
 4. **Robust noise scale**, per channel over all segments: ``1.4826 * MAD`` of the
    normalised residuals (for the quaternion, ``sqrt(median(|r|^2) / 2.366)``, the
    median of chi-square with 3 degrees of freedom: attitude noise of ``sigma`` rad
@@ -54,9 +58,12 @@ segment (never across a gap) and each channel group:
    segment's end.
 6. **Masking, one glitch at a time.** A glitch also pulls the fits of its
    neighbours, so only the suspects that are the largest within ``k`` samples are
-   taken, they are left out of every fit, and the residuals are computed again;
-   this repeats until no new suspect remains. A sample is an outlier if its final
-   residual (its neighbours' outliers left out) is still above the threshold.
+   taken; of such a suspect and its two neighbours, the one whose exclusion leaves
+   the smallest largest score around it is left out (a glitch at a segment's first
+   sample pulls the second sample's interior fit harder than its own extrapolated,
+   more uncertain one). The residuals near it are computed again and this repeats
+   until no new suspect remains. A sample is an outlier if its final residual (its
+   neighbours' outliers left out) is still above the threshold.
 7. **Isolated only.** A run of 1 or 2 consecutive suspects is an outlier run. A run
    of 3 or more is not an isolated glitch but something the log really did (an
    impact, a sustained fault, a step): it is reported as ``unexplained`` and kept
@@ -301,15 +308,15 @@ def _loo(
     for e in range(1, p + 1):
         powers[..., e] = powers[..., e - 1] * tau
     vw = powers * valid[..., None]
-    gram = np.einsum("mja,mjb->mab", vw, powers)
+    gram = np.matmul(vw.transpose(0, 2, 1), powers)
     e0 = np.zeros((gram.shape[0], p + 1, 1))
     e0[:, 0, 0] = 1.0
     try:
         z = np.linalg.solve(gram, e0)[..., 0]
     except np.linalg.LinAlgError:
         z = np.linalg.pinv(gram)[:, :, 0]
-    w = np.einsum("mja,ma->mj", vw, z)
-    r[ok] = x[rows[ok]] - np.einsum("mj,mjc->mc", w, x[nb])
+    w = np.matmul(vw, z[..., None])[..., 0]
+    r[ok] = x[rows[ok]] - np.matmul(w[:, None, :], x[nb])[:, 0, :]
     h[ok] = np.sum(w * w, axis=1)
     return r, h, a
 
@@ -579,6 +586,7 @@ def _continuous_signs(q: np.ndarray, segments) -> np.ndarray:
 def _groups(log: Log, testbed: Testbed | None, segments) -> list[_Group]:
     from airbearing.io.testbed import Sensors
 
+    t = log.data["t"].to_numpy(dtype=float)
     groups = []
     sensors = testbed.sensors if testbed is not None else Sensors(gyro_noise=0.0)
     rates = log.rates()
@@ -590,9 +598,11 @@ def _groups(log: Log, testbed: Testbed | None, segments) -> list[_Group]:
     dof = testbed.body.dof if testbed is not None else (3 if log.has("qw") else 1)
     use_yaw = dof == 1 and log.has("yaw")
     if use_yaw:
+        from airbearing.io.import_map import unwrap
+
         yaw = log.column("yaw")
-        for start, stop in segments:
-            yaw[start:stop] = np.unwrap(yaw[start:stop])
+        for start, stop in segments:  # a logged yaw should be unwrapped; if not, this does
+            yaw[start:stop] = unwrap(yaw[start:stop], t[start:stop])
         mag = max(float(np.max(np.abs(yaw))), 1.0)
         floor = np.array([max(sensors.attitude_noise, _RELATIVE_FLOOR * mag)])
         groups.append(_Group("attitude", ("yaw",), yaw[:, None], False, floor, wrap=True))
