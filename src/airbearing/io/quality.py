@@ -18,8 +18,9 @@ segment (never across a gap) and each channel group:
 1. **Channel groups.** The rates ``wx, wy, wz`` (``wz`` for dof 1) when the testbed
    has a gyro, each channel tested on its own; the attitude, either the quaternion
    (its four components as one vector, signs made continuous, see below) or the yaw
-   (unwrapped within the segment, an isolated jump keeping the branch). Sliders, dipoles and gimbal angles are commands
-   or stepper positions, not smooth measurements, and are not tested.
+   (unwrapped within the segment, an isolated jump keeping the branch). Sliders,
+   dipoles and gimbal angles are commands or stepper positions, not smooth
+   measurements, and are not tested.
 2. **Leave-one-out residual.** Sample ``i`` is predicted by a polynomial in time of
    degree ``p`` fitted by least squares to its ``2k`` nearest samples of the same
    segment (``k`` each side; at a segment's ends the window slides inwards, so the
