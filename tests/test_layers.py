@@ -119,3 +119,15 @@ def test_algorithm_modules_do_not_load_matplotlib_on_import():
     )
     assert done.returncode == 0, done.stderr[-2000:]
     assert done.stdout.strip() == "", f"{done.stdout.strip()} imports matplotlib"
+
+
+def test_no_library_code_knows_the_example_data():
+    """Issue 12 item 5: the demo and the tests simulate their own data; the library never
+    names the shared example folder."""
+    hits = [
+        f"{p.relative_to(SRC)}:{i}"
+        for p in ALL_FILES
+        for i, text in enumerate(p.read_text().splitlines(), 1)
+        if re.search(r"shared[/\\\\]+data|\.\./shared|/work/shared", text)
+    ]
+    assert not hits, hits
