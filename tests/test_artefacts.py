@@ -161,6 +161,10 @@ def test_on_times_bad_input():
         simulate_on_times(tb, [0.0, 0.1], inputs={"s9": 1.0})
     with pytest.raises(InputError, match="travel"):
         simulate_on_times(platform(), [0.0, 0.05], inputs={"s1": 0.05})
+    with pytest.raises(InputError, match="not both"):  # nothing silently overridden
+        simulate_on_times(tb, [0.0, 0.1], x0=[0.0, 1.0], initial_rate=2.0)
+    with pytest.raises(InputError, match="yaw0"):
+        simulate_on_times(tb, [0.0, 0.1], q0=[1.0, 0.0, 0.0, 0.0])
 
 
 # ------------------------------------------------------------------------------ times

@@ -148,12 +148,13 @@ def simulate(
         from airbearing.io.log import read_log
 
         t_given = None if times is None else read_log(times).t
-
+        level = tuple(initial_quaternion) == (1, 0, 0, 0)  # the default: not given
+        q0 = None if tb.body.dof == 1 and level else initial_quaternion
         result = rehearsal_log(
             tb, duration=None if times else length, times=t_given, effects=effects, seed=seed,
             noise=not ideal,
             initial_rate=(0.0, 0.0, spin_rate) if scenario == "spindown" else initial_rate,
-            q0=initial_quaternion, attitude_noise=attitude_noise, jitter=jitter, gaps=gaps,
+            q0=q0, attitude_noise=attitude_noise, jitter=jitter, gaps=gaps,
             glitches=glitches, first_sample=first_sample_artefact,
             inputs=dict(zip(("s1", "s2", "s3"), sliders, strict=True)) if any(sliders) else None,
         )  # fmt: skip

@@ -240,8 +240,14 @@ def initial_state(
 
     ``initial_rate``: body rate, rad/s, 3 values (dof 3), or one value or ``(0, 0, wz)``
     (dof 1); ``q0`` the attitude quaternion (dof 3, default level), ``yaw0`` the yaw (rad,
-    dof 1). ``x0`` (``model.x_names``) overrides them all.
+    dof 1). Or ``x0`` (``model.x_names``) instead of all of them; mixing is an InputError.
     """
+    if x0 is not None and (initial_rate is not None or q0 is not None or yaw0 != 0.0):
+        raise InputError("give the initial state as x0 or as rate and attitude, not both")
+    if model.dof == 1 and q0 is not None:
+        raise InputError("q0: a dof = 1 bearing starts at a yaw angle; give yaw0 (rad)")
+    if model.dof == 3 and yaw0 != 0.0:
+        raise InputError("yaw0: a dof = 3 bearing starts at a quaternion; give q0")
     if x0 is not None:
         x0 = np.asarray(x0, dtype=float)
         if x0.shape != (model.nx,):
