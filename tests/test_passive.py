@@ -214,6 +214,8 @@ def test_passive_scenarios_refuse_sliders_and_off_axis_rates_on_dof1():
         free_oscillation(passive3(), sliders=(0.001, 0, 0), duration=1.0)
     with pytest.raises(InputError, match="dof = 1"):
         free_oscillation(passive1(), initial_rate=(0.1, 0, 1.0), duration=1.0)
+    with pytest.raises(InputError, match="dof = 1"):
+        spindown(passive1(), q0=(0.0, 0.0, 0.0, 1.0), duration=1.0)
     with pytest.raises(InputError, match="no \\[masses\\]"):
         simulate_on_times(passive3(), sample_times(passive3(), 1.0), inputs={"s1": 0.001})
 

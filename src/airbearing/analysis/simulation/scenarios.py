@@ -144,6 +144,11 @@ def free_oscillation(
             f"--initial-rate {w0.tolist()}: a dof = 1 bearing turns about body z only; "
             "give WX = WY = 0"
         )
+    if model.dof == 1 and tuple(np.asarray(q0, dtype=float)) != (1.0, 0.0, 0.0, 0.0):
+        raise InputError(
+            f"--initial-quaternion {list(map(float, q0))}: a dof = 1 bearing starts at yaw 0; "
+            "leave the quaternion at 1 0 0 0"
+        )
     x0 = model.x0(q=q0, w=w0) if model.dof == 3 else model.x0(w=w0[2])
     return simulate(
         model,
