@@ -539,3 +539,33 @@ def test_cli_json_and_testbed(tmp_path, truth_tb):
     with pytest.raises(SystemExit) as e:
         cli.main(["identify", "platform-3dof", str(bare), "--json", str(out2)])
     assert e.value.code == 2 and not out2.exists()
+
+
+def test_cli_outputs_all_or_nothing(tmp_path, truth_tb):
+    """Outputs planned first, written together (issue 12 item 4): --write-testbed alone
+    leaves no JSON behind; the JSON says segments, outlier rows, the residual's unit, and
+    null (not 0) for the standard errors of the known offsets; a failing run writes nothing."""
+    from cli_run import run
+
+    paths = []
+    for i, log in enumerate(_logs(truth_tb, 12, duration=10)):
+        p = tmp_path / f"free{i}.csv"
+        log.data.to_csv(p, index=False)
+        paths.append(str(p))
+    base = ["identify", "platform-3dof", *paths, "--method", "equation-error"]
+    base += ["--known-offset-xy", "0.0004", "0.0007"]
+    tbp = tmp_path / "only.toml"
+    assert run([*base, "--write-testbed", str(tbp)]) == 0
+    assert tbp.exists() and sorted(p.name for p in tmp_path.glob("*.json")) == []
+    out = tmp_path / "id.json"
+    assert run([*base, "--json", str(out)]) == 0
+    js = json.loads(out.read_text())
+    assert js["segments"] == 3 and js["outlier_rows"] == [[], [], []]
+    assert js["residual_unit"] == "N m s"
+    assert js["std"]["cm_offset"][:2] == [None, None]
+    assert js["std_status"]["r_x"] == "known (known_offset_x)"
+    assert all(v > 0 for row in js["std"]["inertia"] for v in row)
+    # an unknown method: exit 2 before any work, neither output written
+    out2, tb2 = tmp_path / "no.json", tmp_path / "no.toml"
+    code = run([*base[:-5], "--method", "magic", "--json", str(out2), "--write-testbed", str(tb2)])
+    assert code == 2 and not out2.exists() and not tb2.exists()

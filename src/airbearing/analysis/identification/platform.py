@@ -24,7 +24,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from airbearing.analysis.identification.cmg_inertia import CMGIdentification, identify_cmg_inertia
 from airbearing.analysis.identification.convex import (
     active_constraints,
     diagnostics,
@@ -35,7 +34,6 @@ from airbearing.analysis.identification.convex import (
     std_status,
 )
 from airbearing.analysis.identification.data import prepare_platform_logs
-from airbearing.analysis.identification.output_error import refine_output_error
 from airbearing.analysis.identification.regression import (
     PARAM_NAMES,
     regression_statistics,
@@ -57,9 +55,17 @@ __all__ = [
     "PlatformIdentification",
     "Prior",
     "identify_platform",
-    "identify_cmg_inertia",
-    "CMGIdentification",
 ]
+
+
+def __getattr__(name):
+    # the CMG yaw-inertia fit, re-exported lazily (it loads the CMG model, CasADi)
+    if name in ("identify_cmg_inertia", "CMGIdentification"):
+        from airbearing.analysis.identification import cmg_inertia
+
+        return getattr(cmg_inertia, name)
+    raise AttributeError(name)
+
 
 #: Smallest eigenvalue of the second moment about the CM, as a fraction of the mean inertia.
 MARGIN_FRACTION = 1e-4
@@ -282,6 +288,8 @@ def identify_platform(
     # stage 2: output error from the convex answer; parameters the logs cannot
     # identify stay at the stage-1 value (fitting them would only move along a null space)
     report("output error (IPOPT)", 2, 3)
+    from airbearing.analysis.identification.output_error import refine_output_error
+
     free_oe = free & np.array([not status[n].startswith("not identifiable") for n in PARAM_NAMES])
     oe = refine_output_error(
         testbed, data, theta_ee, mass=mass, free=free_oe, margin=margin, segment=segment
