@@ -135,8 +135,31 @@ CASES = [
         ["log", "check", "{PLATLOG}", "--testbed", "seed000-tabletop", "--json", "{RO}/c.json"],
     ),  # fmt: skip
     ("log", ["log", "plot", "{PLATLOG}", "--testbed", "seed000-tabletop", "-o", "{RO}/p.png"]),
+    (
+        "log",
+        [
+            "log",
+            "check",
+            "{PLATLOG}",
+            "--testbed",
+            "seed000-tabletop",
+            "--json",
+            "{MISSING}/c.json",
+        ],
+    ),  # fmt: skip
+    ("log", ["log", "plot", "{PLATLOG}", "--testbed", "seed000-tabletop", "-o", "{OK}/p.txt"]),
     ("replay", ["replay", "cmg-yaw", "{CMGLOG}", "--json", "{RO}/r.json"]),
+    (
+        "replay",
+        ["replay", "cmg-yaw", "{CMGLOG}", "--json", "{OK}/r.json", "--report", "{RO}/r.html"],
+    ),  # fmt: skip
+    ("replay", ["replay", "cmg-yaw", "{CMGLOG}", "--window", "nan"]),
+    ("replay", ["replay", "cmg-yaw", "{CMGLOG}", "--window", "-1"]),
+    ("campaign", ["campaign", "{CAMPAIGN}", "-o", "{OK}/r.parquet", "--workers", "-1"]),
 ]
+
+#: A refusal for these reasons would mean the case itself is wrong (an option renamed).
+_NOT_THE_POINT = ("No such option", "Missing argument", "Missing option", "unexpected extra")
 
 
 @pytest.fixture(scope="module")
@@ -209,6 +232,7 @@ def test_refused_with_one_line_and_nothing_written(command, args, places, logs, 
     lines = err.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("airbearing: error: "), err
     assert "Traceback" not in err and "np.float64" not in err
+    assert not any(x in err for x in _NOT_THE_POINT), f"the case is out of date: {err}"
     assert _files(tmp_path) == before, "a file was written"
     assert _files(logs["CMGLOG"].parent) == logs_before
 
