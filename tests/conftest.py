@@ -20,14 +20,25 @@ sys.path.insert(0, str(Path(__file__).parent))  # tests/cli_run.py for every tes
 
 
 def _cmg_case(folder: Path, effects: dict, seed: int) -> None:
-    from airbearing.analysis.simulation.scenarios import slew
+    """The public CMG examples' run: a 180 deg slew, then back to 90 deg at 20 s (40 s)."""
+    import numpy as np
+
+    from airbearing.analysis.simulation.simulate import simulate
+    from airbearing.design.attitude import cmg_attitude_controller
     from airbearing.io.log import write_log
     from airbearing.io.testbed import load_testbed, write_testbed
+    from airbearing.models import quaternion as quat
+    from airbearing.models.model import build_model
 
     tb = load_testbed("cmg-yaw")
     # the public examples' gyro: 5e-4 rad/s white noise, no low-pass
     tb = tb.replace(sensors=dataclasses.replace(tb.sensors, gyro_noise=5e-4, lowpass=1.0))
-    run = slew(tb, angle_deg=180.0, duration=40.0, seed=seed, effects=effects)
+    model = build_model(tb, effects)
+    ctl = cmg_attitude_controller(model)
+    n = int(round(40.0 * tb.sensors.rate))
+    t = np.arange(n) / tb.sensors.rate
+    ref = np.where(t[:, None] < 20.0, quat.from_yaw(np.pi), quat.from_yaw(np.pi / 2))
+    run = simulate(model, ctl, duration=40.0, x0=model.x0(), reference=ref, seed=seed)
     write_testbed(tb, folder / "testbed.toml")
     write_log(run.log, folder / "log.csv")
     (folder / "answer.json").write_text(json.dumps({"effects": effects, "seed": seed}))
