@@ -31,12 +31,14 @@ segment (never across a gap) and each channel group:
    deviation ``s * sqrt(1 + sum_j w_ij^2)``; dividing by ``sqrt(1 + sum_j w_ij^2)``
    makes residuals of interior, edge and jittered samples comparable.
 3. **Following fast motion.** The fit is tried with ``(k, p)`` = (3, 2), (4, 4) and
-   (5, 6) and the one whose robust noise scale (step 4) is smallest is used. Under
-   pure noise the three scales agree (the normalisation of step 2 makes them so);
-   when the motion is fast for the sample rate (a 4 rad/s spin at 10 Hz, a 1.6 rad/s
-   oscillation at 20 Hz) the low degree leaves a curvature residual and the higher
-   degree, whose bias falls as ``(omega dt)^(p+2)``, removes it. So the scale
-   measures the noise, not the model's curvature. The first and last ``k`` samples
+   (5, 6) and the most sensitive one is used: the one whose robust scale (step 4)
+   times ``sqrt(1 + h)`` (``h`` on a regular grid: 0.50, 0.72, 0.91) is smallest, i.e.
+   which flags the smallest glitch. Under pure noise the normalised scales agree and
+   the low degree wins (smaller ``h``); when the motion is fast for the sample rate
+   (a 4 rad/s spin at 10 Hz, a 1.6 rad/s oscillation at 20 Hz) the low degree leaves
+   a curvature residual and a higher degree, whose bias falls as
+   ``(omega dt)^(p+2)``, removes it. So the scale measures the noise, not the
+   model's curvature. The first and last ``k`` samples
    of a segment are extrapolated, where a fit's misfit is larger: each window shape
    (how many neighbours on the left) has its own scale, measured on the log itself
    by predicting every sample with that shape, and each position near a segment's
@@ -429,6 +431,13 @@ def _score(group: _Group, d: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, np.
     return np.max(z, axis=1), z > Z_THRESHOLD
 
 
+def _noise_gain(k: int, p: int, a: int) -> float:
+    """``sum_j w_j^2`` of the fit ``(k, p)`` with ``a`` left neighbours on a regular grid."""
+    tau = np.r_[-np.arange(a, 0, -1), np.arange(1, 2 * k - a + 1)].astype(float)
+    w = np.linalg.pinv(np.vander(tau, p + 1, increasing=True))[0]
+    return float(w @ w)
+
+
 class _Scorer:
     """Normalised scores of rows under the local fit chosen for each row's position.
 
@@ -443,10 +452,13 @@ class _Scorer:
         self.group, self.t, self.segments, self.scale = group, t, segments, scale
         self.scales = {f: _shape_scales(group, t, segments, *f, scale) for f in FITS}
 
-        def key(s: np.ndarray) -> float:
-            return float(np.sum(np.log(s)))
+        def key(f: tuple[int, int], a: int) -> float:
+            # the smallest glitch this fit flags at this shape, in units of the noise:
+            # scale x sqrt(1 + h) (the raw residual's spread), summed over channels
+            s = self.scales[f][a]
+            return float(np.sum(np.log(s)) + s.size * 0.5 * np.log1p(_noise_gain(*f, a)))
 
-        self.fit = min(FITS, key=lambda f: key(self.scales[f][f[0]]))
+        self.fit = min(FITS, key=lambda f: key(f, f[0]))
         n = t.size
         self.from_start = np.zeros(n, dtype=int)
         self.from_end = np.zeros(n, dtype=int)
@@ -461,7 +473,7 @@ class _Scorer:
                     k = f[0]
                     return k if e >= k else (e if side == 0 else 2 * k - e)
 
-                best = min(FITS, key=lambda f, shape=shape: key(self.scales[f][shape(f)]))
+                best = min(FITS, key=lambda f, shape=shape: key(f, shape(f)))
                 if best != self.fit:
                     self.edge[(side, e)] = best
 
