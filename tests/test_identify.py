@@ -569,3 +569,48 @@ def test_cli_outputs_all_or_nothing(tmp_path, truth_tb):
     out2, tb2 = tmp_path / "no.json", tmp_path / "no.toml"
     code = run([*base[:-5], "--method", "magic", "--json", str(out2), "--write-testbed", str(tb2)])
     assert code == 2 and not out2.exists() and not tb2.exists()
+
+
+# ---------------------------------------------------------------------------- honest errors
+
+
+def test_singular_fisher_is_not_identifiable():
+    """Issue 13 item 6: a parameter nothing excites, and two the logs cannot tell apart,
+    are 'not identifiable from this log' with the reason, never a number with a zero or
+    astronomical standard error (a constructed information matrix: the oracle is its
+    null space)."""
+    from airbearing.analysis.identification.convex import diagnostics, std_status
+
+    rng = np.random.default_rng(0)
+    A = rng.standard_normal((50, 9)) * np.r_[np.full(6, 1e4), np.full(3, 1e2)]
+    A[:, 8] = 0.0  # r_z: no torque depends on it
+    A[:, 1] = A[:, 0]  # J_xx and J_yy enter only as their sum
+    F = A.T @ A
+    free = np.ones(9, bool)
+    cov, cond, weak, null = diagnostics(F, free, TRUTH, mass=6.3)
+    assert set(null) == {"J_xx", "J_yy", "r_z"}
+    assert "no torque" in null["r_z"] and "J_xx" in null["J_yy"]
+    std, status = std_status(cov, free, TRUTH, js=0.03, fixed={}, active=[], null=null)
+    for n in ("J_xx", "J_yy", "r_z"):
+        assert status[n].startswith("not identifiable from this log: ")
+    assert np.isnan(std[[0, 1, 8]]).all() and np.all(std[2:8] > 0)
+    assert not np.isfinite(cond)
+
+
+def test_prior_not_covered_warns(truth_tb, prior_tb):
+    """A CAD prior that the estimate's errors and the prior's own stated uncertainty do not
+    cover: a warning naming the entries; a prior 10 % off with the default uncertainty (10 %
+    of the mean inertia) does not warn (about 1 combined sigma per entry)."""
+    logs = _logs(truth_tb, 13, duration=10)
+    kw = dict(known_offset_xy=TRUTH[6:8], method="equation-error")
+    near = identify_platform(prior_tb, logs, prior=Prior.from_testbed(prior_tb), **kw)
+    assert not any("do not cover the prior" in w for w in near.warnings)
+    assert max(abs(v) for v in near.prior_z.values()) < 3
+    J = truth_tb.body.inertia_matrix * 1.5
+    far = Prior(J, truth_tb.body.cm_offset_vec, std_inertia=2e-3)  # a CAD stated to 2 g m^2
+    res = identify_platform(prior_tb, logs, prior=far, **kw)
+    msg = [w for w in res.warnings if "do not cover the prior" in w]
+    # principal inertias 50 % off (6-9 sigmas); products 50 % of ~1e-3 (< 0.3 sigma)
+    assert msg and all(n in msg[0] for n in ("J_xx", "J_yy", "J_zz"))
+    assert "J_xy" not in msg[0]
+    assert res.to_json()["prior_z"]["J_zz"] < -3
