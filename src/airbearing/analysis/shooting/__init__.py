@@ -1,0 +1,73 @@
+"""The one multiple-shooting output-error engine (replay, discrepancy, identification).
+
+A log is cut into windows of ``L`` rows that never span a gap. Window ``j``
+restarts from an estimate of the state at its first row, ``x_meas_j``,
+corrected by a small perturbation ``delta_j`` (a rotation vector on the
+attitude for dof 3, an offset on the yaw when the yaw is fitted, an offset on
+each rate, and on each lagged rate of a ``sensor_lag``). The Model is rolled
+over the window sample to sample with the LOGGED intervals (``dt`` is an input
+of every step, so jittered times are integrated as logged) and its measurement
+is compared with the logged one:
+
+- ``rate``: the measured angular rate (a gyro), residual ``(w_meas - w_model) / sigma_rate``;
+- ``quat``: the attitude quaternion, residual ``2 vec(conj(q_model) (x) q_meas) / sigma_att``
+  (the small rotation, rad, that takes the model attitude to the measured one);
+- ``yaw``: the yaw of a dof-1 platform, residual ``(yaw_meas - yaw_model) / sigma_att``.
+
+Each residual is multiplied by the row's weight ``m`` (0 for an outlier row and
+for the padding of a short window at the end of a segment, else 1), so a row
+that is not usable enters no residual, no fit and no gap.
+
+Free parameters enter as ``p = p_base + S theta`` with ``S`` an input, so ONE
+compiled window function serves every choice of free parameters (up to
+``THETA_SLOTS`` of them). Compiled functions are cached per process in one
+bounded cache keyed by the Model's structure (its serialized expressions), not
+by object identity: testbeds that differ only in parameter values share them.
+
+Solver-status policy (stated once, here)
+    ``converged``: IPOPT ``Solve_Succeeded``.
+    ``warning``: ``Solved_To_Acceptable_Level`` (converged to the looser
+    acceptable tolerance: the fit is used, the status is reported).
+    ``error``: anything else (iteration limit, restoration failure, a non-finite
+    replay): :class:`airbearing.errors.SolverError` is raised with the status.
+
+Standard errors
+    From the Gauss-Newton (Fisher) matrix ``F = J^T J`` of the weighted
+    residual, the window initial states ELIMINATED (Schur complement of their
+    block), scaled by the reduced chi-square. A parameter whose Jacobian column
+    is zero (nothing excites it) or whose reduced Fisher matrix is singular
+    (relative eigenvalue below ``FISHER_RCOND``: the log cannot tell it from the
+    initial states or from another parameter) gets no number but a reason.
+"""
+
+from airbearing.analysis.shooting.functions import (
+    DEFAULT_SUBSTEPS,
+    THETA_SLOTS,
+    compiled,
+    delta_layout,
+    jit_available,
+    step_function,
+    structure_key,
+)
+from airbearing.analysis.shooting.problem import (
+    Fit,
+    ShootingProblem,
+    WindowSet,
+    classify_status,
+    theta_errors,
+)
+
+__all__ = [
+    "DEFAULT_SUBSTEPS",
+    "THETA_SLOTS",
+    "Fit",
+    "ShootingProblem",
+    "WindowSet",
+    "classify_status",
+    "compiled",
+    "delta_layout",
+    "jit_available",
+    "step_function",
+    "structure_key",
+    "theta_errors",
+]

@@ -1,0 +1,447 @@
+"""The shooting problem of one Model on a set of windows: fits, errors, status policy."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from airbearing.analysis.shooting.functions import (
+    DEFAULT_SUBSTEPS,
+    FISHER_RCOND,
+    OUTPUTS,
+    THETA_SLOTS,
+    _problem_functions,
+    _problem_solver,
+    delta_layout,
+)
+from airbearing.errors import SolverError
+from airbearing.models.model import Model
+
+_CONVERGED = ("Solve_Succeeded",)
+_WARNING = ("Solved_To_Acceptable_Level",)
+
+
+def classify_status(status: str) -> str:
+    """IPOPT return status -> ``"converged"``, ``"warning"`` or ``"error"`` (module doc)."""
+    if status in _CONVERGED:
+        return "converged"
+    if status in _WARNING:
+        return "warning"
+    return "error"
+
+
+# ----------------------------------------------------------------------------
+# window data
+
+
+@dataclass(frozen=True, eq=False)
+class WindowSet:
+    """The data of ``n`` windows of ``L`` rows, ready for the compiled window function.
+
+    Attributes
+    ----------
+    x0 : ndarray (n, nx_plant)
+        State estimate at each window's first row (attitude, rate, gimbal angles).
+    u : ndarray (n, L, nu)
+        Inputs held over each row's interval.
+    dt : ndarray (n, L - 1)
+        Logged intervals, s (padding rows: a tiny positive interval, weight 0).
+    weight : ndarray (n, L)
+        1 for a usable row, 0 for an outlier or padding.
+    rate : ndarray (n, L, na) or None
+        Measured rates (output ``rate``), rad/s.
+    quat : ndarray (n, L, 4) or None
+        Measured attitude quaternion (output ``quat``).
+    yaw : ndarray (n, L) or None
+        Measured yaw (output ``yaw``), rad.
+    rows : ndarray (n, L) of int
+        The log row of each window sample (padding repeats the last row).
+    source : ndarray (n,) of int
+        Which log (or segment group) each window comes from.
+    """
+
+    x0: np.ndarray
+    u: np.ndarray
+    dt: np.ndarray
+    weight: np.ndarray
+    rate: np.ndarray | None
+    quat: np.ndarray | None
+    yaw: np.ndarray | None
+    rows: np.ndarray
+    source: np.ndarray
+
+    @property
+    def n(self) -> int:
+        return self.x0.shape[0]
+
+    @property
+    def length(self) -> int:
+        return self.weight.shape[1]
+
+    def subset(self, which) -> WindowSet:
+        """The windows at positions ``which``."""
+        which = np.asarray(which, dtype=int)
+
+        def pick(a):
+            return None if a is None else a[which]
+
+        return WindowSet(
+            x0=self.x0[which],
+            u=self.u[which],
+            dt=self.dt[which],
+            weight=self.weight[which],
+            rate=pick(self.rate),
+            quat=pick(self.quat),
+            yaw=pick(self.yaw),
+            rows=self.rows[which],
+            source=self.source[which],
+        )
+
+
+# ----------------------------------------------------------------------------
+# fits
+
+
+@dataclass(frozen=True, eq=False)
+class Fit:
+    """One output-error fit of a :class:`ShootingProblem`.
+
+    Attributes
+    ----------
+    theta : ndarray (k,)
+        Fitted free parameters (SI units of the Model's parameters).
+    theta_std : ndarray (k,)
+        1-sigma (module doc); NaN where not identifiable.
+    not_identifiable : tuple of str
+        Per parameter: "" or the reason it cannot be identified from the data.
+    p : ndarray
+        The full parameter vector.
+    delta : ndarray (n_delta, n_windows)
+        Fitted initial-state perturbations.
+    rss : float
+        Weighted residual sum of squares.
+    n_res : int
+        Number of weighted residuals of usable rows.
+    n_free : int
+        Number of free variables (``k + delta.size``).
+    gap : float
+        RMS of the primary output's residual (rad/s for rates, rad for attitude).
+    iterations : int
+    status : str
+        IPOPT status; ``level`` its class (:func:`classify_status`).
+    cov : ndarray (k, k)
+        Covariance of ``theta`` (NaN rows where not identifiable).
+    """
+
+    theta: np.ndarray
+    theta_std: np.ndarray
+    p: np.ndarray
+    delta: np.ndarray
+    rss: float
+    n_res: int
+    n_free: int
+    gap: float
+    iterations: int
+    status: str = ""
+    level: str = "converged"
+    not_identifiable: tuple = ()
+    cov: np.ndarray | None = None
+    extra: dict = field(default_factory=dict)  # "r", "J" (scipy CSC, unscaled) at the fit
+
+
+def theta_errors(J, k: int, s2: float, names=None):
+    """Standard errors of the first ``k`` columns of ``J`` with the others eliminated.
+
+    Parameters
+    ----------
+    J : scipy sparse or ndarray (n_res, n_free)
+        Jacobian of the weighted residual at the fit.
+    k : int
+        Number of parameters (the leading columns); the rest are nuisance (initial states).
+    s2 : float
+        Residual variance factor (reduced chi-square).
+
+    Returns
+    -------
+    std : ndarray (k,)
+        1-sigma, NaN where not identifiable.
+    cov : ndarray (k, k)
+    reasons : tuple of str
+        "" or why the parameter cannot be identified.
+    """
+    Jd = J.toarray() if hasattr(J, "toarray") else np.asarray(J)
+    if k == 0:
+        return np.zeros(0), np.zeros((0, 0)), ()
+    col = np.linalg.norm(Jd, axis=0)
+    reasons = ["" for _ in range(k)]
+    for i in range(k):
+        if not col[i] > 0:
+            reasons[i] = "no usable sample is sensitive to it (nothing in the log excites it)"
+    c = np.where(col > 0, col, 1.0)
+    Js = Jd / c
+    F = Js.T @ Js
+    Ftt, Ftd, Fdd = F[:k, :k], F[:k, k:], F[k:, k:]
+    if Fdd.size:
+        Fr = Ftt - Ftd @ np.linalg.pinv(Fdd, rcond=1e-12, hermitian=True) @ Ftd.T
+    else:
+        Fr = Ftt
+    Fr = 0.5 * (Fr + Fr.T)
+    ev, V = np.linalg.eigh(Fr)
+    ok = np.array([not r for r in reasons])
+    good = ev > FISHER_RCOND * max(float(np.max(np.diag(Ftt))), 1e-300)
+    for i in range(k):
+        if reasons[i]:
+            continue
+        # parameter i loads on a (near) null direction of the reduced Fisher matrix
+        load = np.abs(V[i, ~good])
+        if load.size and float(np.max(load)) > 1e-3:
+            reasons[i] = (
+                "its effect on the output cannot be told from the windows' initial states "
+                "or the other parameters (singular Fisher matrix)"
+            )
+            ok[i] = False
+    cov_s = (V[:, good] / ev[good]) @ V[:, good].T * s2
+    cov = cov_s / np.outer(c[:k], c[:k])
+    std = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    for i in range(k):
+        if not ok[i] or not std[i] > 0:
+            std[i] = np.nan
+            cov[i, :] = cov[:, i] = np.nan
+            if not reasons[i]:
+                reasons[i] = "zero variance: not identifiable from this log"
+    return std, cov, tuple(reasons)
+
+
+class ShootingProblem:
+    """The multiple-shooting output error of one Model on a :class:`WindowSet`.
+
+    Parameters
+    ----------
+    model : Model
+    windows : WindowSet
+    outputs : tuple of str
+        Output groups compared (``rate``, ``quat``, ``yaw``; module doc); the first is
+        the primary one, whose RMS residual is the gap.
+    sigma_rate, sigma_att : float
+        Noise levels (rad/s, rad) that weight the residuals.
+    substeps : int
+        RK4 sub-steps per sample.
+    jit : bool, optional
+        Compile to C (default: when a compiler is available).
+    theta_slots : int
+        Fits with up to this many free parameters share one compiled Jacobian.
+
+    Notes
+    -----
+    Residual layout: window after window; within a window each output group in the
+    order of ``outputs``, sample-major.
+    """
+
+    def __init__(
+        self,
+        model: Model,
+        windows: WindowSet,
+        outputs: tuple,
+        sigma_rate: float,
+        sigma_att: float,
+        *,
+        substeps: int = DEFAULT_SUBSTEPS,
+        jit: bool | None = None,
+        theta_slots: int = THETA_SLOTS,
+    ) -> None:
+        for o in outputs:
+            if o not in OUTPUTS:  # pragma: no cover - programming error
+                raise ValueError(f"unknown output group {o!r}")
+        self.model, self.windows, self.outputs = model, windows, tuple(outputs)
+        self.substeps, self.jit, self.theta_slots = int(substeps), jit, int(theta_slots)
+        self.sigma_rate, self.sigma_att = float(sigma_rate), float(sigma_att)
+        self.n_att, self.n_rate, self.n_lag = delta_layout(model, self.outputs)
+        self.n_delta = self.n_att + self.n_rate + self.n_lag
+        nw, L = windows.n, windows.length
+        sizes = {"rate": self.n_rate, "quat": 3, "yaw": 1}
+        group = np.concatenate([np.full(sizes[o] * L, i) for i, o in enumerate(self.outputs)])
+        wrow = np.concatenate([np.repeat(np.arange(L), sizes[o]) for o in self.outputs])
+        self.n_win_res = group.size
+        self.group = np.tile(group, nw)  # output group of each residual
+        self.sample = np.tile(wrow, nw) + np.repeat(np.arange(nw) * L, group.size)
+        self.usable = windows.weight.reshape(-1)[self.sample] > 0
+        self.n_res = int(self.usable.sum())
+        self.primary = self.group == 0
+        self._data = self._data_vector()
+
+    # ------------------------------------------------------------------ plumbing
+    def _data_vector(self) -> np.ndarray:
+        w = self.windows
+        nw, L = w.n, w.length
+        na = self.n_rate
+
+        def cols(a, rows):  # (nw, L, rows) -> (rows, L nw)
+            return np.zeros((rows, L * nw)) if a is None else a.reshape(nw * L, rows).T
+
+        parts = (
+            w.x0.T,
+            w.u.reshape(nw * L, -1).T,
+            w.dt.reshape(1, -1),
+            w.weight.reshape(1, -1),
+            cols(w.rate, na),
+            cols(w.quat, 4),
+            np.zeros((1, L * nw)) if w.yaw is None else w.yaw.reshape(1, -1),
+            np.array([[max(self.sigma_rate, 1e-300)], [max(self.sigma_att, 1e-300)]]),
+        )
+        return np.concatenate([np.asarray(a, dtype=float).reshape(-1, order="F") for a in parts])
+
+    def _key(self, K: int) -> tuple:
+        return (
+            self.model,
+            self.windows.length,
+            self.windows.n,
+            K,
+            self.outputs,
+            self.substeps,
+            self.jit,
+        )
+
+    def _pad(self, S: np.ndarray):
+        k = S.shape[1]
+        K = max(self.theta_slots, k)
+        return np.hstack([S, np.zeros((S.shape[0], K - k))]), K
+
+    def _eval(self, which: int, v, p_base, S):
+        return _problem_functions(*self._key(S.shape[1]))[which](v, p_base, S, self._data)
+
+    def _v(self, delta, S, theta=None):
+        Sp, K = self._pad(np.zeros((self.model.n_p, 0)) if S is None else S)
+        k = 0 if S is None else S.shape[1]
+        th = np.zeros(k) if theta is None else np.asarray(theta, dtype=float)
+        d = np.asarray(delta, dtype=float).reshape(-1, order="F")
+        return np.concatenate([th, np.zeros(K - k), d]), Sp
+
+    # ------------------------------------------------------------------ evaluation
+    def residual(self, delta: np.ndarray, p: np.ndarray) -> np.ndarray:
+        """Weighted residual at ``delta`` (n_delta, n_windows) and parameters ``p``."""
+        v, Sp = self._v(delta, None)
+        return np.asarray(self._eval(0, v, np.asarray(p, dtype=float), Sp)).ravel()
+
+    def gap_of_residual(self, r: np.ndarray, mask: np.ndarray | None = None) -> float:
+        """RMS of the primary output's residual over usable rows (its unit)."""
+        sel = self.primary & self.usable
+        if mask is not None:
+            sel &= mask
+        sigma = self.sigma_rate if self.outputs[0] == "rate" else self.sigma_att
+        if not sel.any():
+            return float("nan")
+        return float(sigma * np.sqrt(np.mean(r[sel] ** 2)))
+
+    def gap_of(self, delta: np.ndarray, p: np.ndarray) -> float:
+        """RMS primary output error at ``delta``, ``p``."""
+        return self.gap_of_residual(self.residual(delta, p))
+
+    def outputs_at(self, delta: np.ndarray, p: np.ndarray) -> np.ndarray:
+        """Model measurement at every window sample: (n_windows, L, ny)."""
+        v, Sp = self._v(delta, None)
+        Y = np.asarray(self._eval(2, v, np.asarray(p, dtype=float), Sp))
+        nw, L = self.windows.n, self.windows.length
+        return Y.T.reshape(nw, L, -1)
+
+    def jacobian(self, fit: Fit, S: np.ndarray | None = None):
+        """Weighted residual ``r`` and its Jacobian (scipy CSC) in ``[theta; vec(delta)]``."""
+        S = np.zeros((self.model.n_p, 0)) if S is None else np.asarray(S, dtype=float)
+        k = S.shape[1]
+        v, Sp = self._v(fit.delta, S, fit.theta)
+        K = Sp.shape[1]
+        p_base = fit.p - S @ fit.theta if k else fit.p
+        r, J = self._eval(1, v, p_base, Sp)
+        keep = np.r_[np.arange(k), np.arange(K, J.shape[1])]
+        return np.asarray(r).ravel(), J.sparse().tocsc()[:, keep]
+
+    def fit(
+        self,
+        p_base: np.ndarray,
+        S: np.ndarray | None = None,
+        theta0: np.ndarray | None = None,
+        *,
+        lower: np.ndarray | None = None,
+        upper: np.ndarray | None = None,
+        delta0: np.ndarray | None = None,
+        name: str = "output error",
+    ) -> Fit:
+        """Fit the window initial states (and ``theta``) by IPOPT with a Gauss-Newton Hessian.
+
+        Parameters
+        ----------
+        p_base : ndarray (n_p,)
+            Parameters with every free entry at its base value.
+        S : ndarray (n_p, k), optional
+            ``p = p_base + S theta``; None fits the initial states only.
+        theta0, lower, upper : ndarray (k,), optional
+            Start and bounds of ``theta`` (default 0, unbounded).
+        delta0 : ndarray (n_delta, n_windows), optional
+            Start of the initial-state perturbations (default 0).
+        name : str
+            Names the problem in a SolverError.
+
+        Raises
+        ------
+        SolverError
+            When the status is an error (module doc) or the replay is not finite.
+        """
+        p_base = np.asarray(p_base, dtype=float)
+        S = np.zeros((self.model.n_p, 0)) if S is None else np.asarray(S, dtype=float)
+        k = S.shape[1]
+        nd, nw = self.n_delta, self.windows.n
+        d0 = np.zeros((nd, nw)) if delta0 is None else np.asarray(delta0, dtype=float)
+        v0, Sp = self._v(d0, S, theta0)
+        K = Sp.shape[1]
+        lb = np.full(v0.size, -np.inf)
+        ub = np.full(v0.size, np.inf)
+        if lower is not None:
+            lb[:k] = lower
+        if upper is not None:
+            ub[:k] = upper
+        lb[k:K] = ub[k:K] = 0.0  # unused slots
+        v0 = np.clip(v0, lb, ub)
+        r0, J0 = self._eval(1, v0, p_base, Sp)
+        r0 = np.asarray(r0).ravel()
+        if not np.all(np.isfinite(r0)):
+            raise SolverError(f"{name}: the replay is not finite at the starting point")
+        col = np.sqrt(np.asarray(J0.sparse().power(2).sum(axis=0)).ravel())
+        scale = np.where(col > 0, 1.0 / np.maximum(col, 1e-300), 1.0)
+        solver = _problem_solver(*self._key(K))
+        par = np.concatenate([p_base, Sp.reshape(-1, order="F"), scale, self._data])
+        sol = solver(x0=v0 / scale, lbx=lb / scale, ubx=ub / scale, p=par)
+        stats = solver.stats()
+        status = str(stats.get("return_status", "?"))
+        level = classify_status(status)
+        if level == "error":
+            raise SolverError(f"{name}: IPOPT did not converge ({status})")
+        v = np.asarray(sol["x"]).ravel() * scale
+        r, J = self._eval(1, v, p_base, Sp)
+        r = np.asarray(r).ravel()
+        if not np.all(np.isfinite(r)):
+            raise SolverError(f"{name}: the fitted replay is not finite")
+        keep = np.r_[np.arange(k), np.arange(K, v.size)]
+        v = v[keep]
+        J = J.sparse().tocsc()[:, keep]
+        rss = float(r @ r)
+        n_free = v.size
+        theta = v[:k]
+        s2 = rss / max(self.n_res - n_free, 1)
+        std, cov, reasons = theta_errors(J, k, s2)
+        p = p_base + S @ theta if k else p_base.copy()
+        return Fit(
+            theta=theta,
+            theta_std=std,
+            p=p,
+            delta=v[k:].reshape(nd, nw, order="F"),
+            rss=rss,
+            n_res=self.n_res,
+            n_free=n_free,
+            gap=self.gap_of_residual(r),
+            iterations=int(stats.get("iter_count", 0)),
+            status=status,
+            level=level,
+            not_identifiable=reasons,
+            cov=cov,
+            extra={"r": r, "J": J},
+        )
