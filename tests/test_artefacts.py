@@ -323,6 +323,11 @@ def test_rehearsal_log_and_its_answer_key(tmp_path):
             parse_gap(bad)
     with pytest.raises(InputError, match="KIND:ROW"):
         parse_glitch("rate_drift:4")
+    assert parse_glitch("rate_spike:594@wy") == ("rate_spike", (594,), "wy")
+    with pytest.raises(InputError, match="only rate_spike"):
+        parse_glitch("rate_zero:4@wy")
+    spiked = rehearsal_log(tb, times=r.log.t, glitches=[("rate_spike", (5,), "wz")])
+    assert spiked.glitches == (("rate_spike", (5,)),)
 
     # the same through the CLI: the log and its answer key in the summary JSON
     path = write_testbed(tb, tmp_path / "rig.toml")

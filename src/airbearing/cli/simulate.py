@@ -84,7 +84,9 @@ def simulate(
     ] = None,
     glitch: Annotated[
         list[str] | None,
-        typer.Option(help=f"Free/spindown: KIND:ROW[,ROW] glitch, KIND {GLITCHES} (repeatable)."),
+        typer.Option(
+            help=f"Free/spindown: KIND:ROW[,ROW][@wx|wy|wz] glitch, KIND {GLITCHES} (repeatable)."
+        ),
     ] = None,
     times: Annotated[
         Path | None, typer.Option(help="Free/spindown: sample on the t column of this log.")

@@ -74,19 +74,25 @@ class Rehearsal:
         }
 
 
-def parse_glitch(text: str) -> tuple[str, tuple[int, ...]]:
-    """``"KIND:ROW[,ROW...]"`` (0-based rows) -> ``(kind, rows)``; InputError otherwise."""
-    kind, sep, rows = str(text).partition(":")
+def parse_glitch(text: str) -> tuple:
+    """``"KIND:ROW[,ROW...][@COLUMN]"`` (0-based rows) -> ``(kind, rows[, column])``.
+
+    ``@COLUMN`` names the rate column of a ``rate_spike`` (e.g. ``rate_spike:594@wy``).
+    """
+    kind, sep, rest = str(text).partition(":")
     if not sep or kind not in GLITCH_KINDS:
         raise InputError(
             f"--glitch {text!r}: expected KIND:ROW[,ROW...] with KIND one of "
             f"{', '.join(GLITCH_KINDS)} and 0-based rows"
         )
+    rows, at, column = rest.partition("@")
     try:
         out = tuple(int(r) for r in rows.split(","))
     except ValueError:
         raise InputError(f"--glitch {text!r}: rows must be 0-based integers") from None
-    return kind, out
+    if at and kind != "rate_spike":
+        raise InputError(f"--glitch {text!r}: only rate_spike takes @COLUMN (wx, wy or wz)")
+    return (kind, out, column) if at else (kind, out)
 
 
 def parse_gap(text: str) -> tuple[float, float]:
@@ -138,8 +144,9 @@ def rehearsal_log(
         Largest relative change of a sample interval (:func:`with_jitter`), ``< 1``.
     gaps : sequence of (t_start, length)
         Recording gaps, s (:func:`with_gap`), cut in order.
-    glitches : sequence of (kind, rows)
-        Glitches (:data:`GLITCH_KINDS`) at 0-based rows of the final log.
+    glitches : sequence of (kind, rows) or (kind, rows, column)
+        Glitches (:data:`GLITCH_KINDS`) at 0-based rows of the final log; ``column`` is
+        the rate column of a ``rate_spike``.
     first_sample : bool
         Rate 0 at each segment's first row (needs rate columns).
     """
@@ -160,8 +167,9 @@ def rehearsal_log(
     if first_sample:
         log, first = with_first_sample_artefact(log)
     hits = []
-    for kind, rows in glitches:
-        log, hit = with_glitches(log, rows, kind)
+    for glitch in glitches:
+        kind, rows, *column = glitch
+        log, hit = with_glitches(log, rows, kind, column=column[0] if column else None)
         hits.append((kind, hit))
     starts = segment_starts(log)
     segs = tuple(zip(starts, (*starts[1:], log.n), strict=True))
