@@ -15,9 +15,13 @@ of the usable rows and the fit repeated (Gaussian maximum likelihood); the param
 covariance is the inverse Fisher information with every segment's initial state
 eliminated (equality-constrained Gauss-Newton matrix).
 
-Solver-status policy (the same as :mod:`airbearing.analysis.shooting`): IPOPT
-``Solve_Succeeded`` is converged; ``Solved_To_Acceptable_Level`` is used with a
-warning; anything else raises :class:`~airbearing.errors.SolverError`.
+Solver-status policy: the one of :mod:`airbearing.analysis.shooting`
+(:func:`~airbearing.analysis.shooting.classify_status`): IPOPT ``Solve_Succeeded`` is
+converged; ``Solved_To_Acceptable_Level`` is used with a warning; anything else raises
+:class:`~airbearing.errors.SolverError`. The NLP itself is not that engine's: the
+inertia needs 7-9 free parameters (the engine has 6 slots), the pseudo-inertia LMI as
+inequality constraints, and continuity between the pieces of a segment (the engine's
+windows restart freely), which is what makes the errors reach the Cramer-Rao bound.
 """
 
 from __future__ import annotations
@@ -28,10 +32,11 @@ import numpy as np
 
 from airbearing.analysis.identification.data import PlatformData
 from airbearing.analysis.identification.oe_problem import Problem
+from airbearing.analysis.shooting import classify_status
 from airbearing.errors import SolverError
 from airbearing.io.testbed import Testbed
 
-__all__ = ["OutputErrorResult", "refine_output_error", "classify_status"]
+__all__ = ["OutputErrorResult", "refine_output_error"]
 
 #: Smallest noise level (rad, rad/s) used to weight residuals, so an ideal log stays finite.
 SIGMA_FLOOR = 1e-7
@@ -39,17 +44,6 @@ SIGMA_FLOOR = 1e-7
 SIGMA_Q_START = 1e-3
 #: Refit while a re-estimated noise level moves by more than this fraction.
 SIGMA_CHANGE = 0.1
-_CONVERGED = ("Solve_Succeeded",)
-_WARNING = ("Solved_To_Acceptable_Level",)
-
-
-def classify_status(status: str) -> str:
-    """IPOPT return status -> ``"converged"``, ``"warning"`` or ``"error"`` (module doc)."""
-    if status in _CONVERGED:
-        return "converged"
-    if status in _WARNING:
-        return "warning"
-    return "error"
 
 
 @dataclass(frozen=True, eq=False)
