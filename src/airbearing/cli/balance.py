@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import math
 import os
 from enum import StrEnum
 from pathlib import Path
@@ -11,7 +10,7 @@ from typing import Annotated
 import typer
 
 from airbearing.cli import app
-from airbearing.cli.common import testbed_arg
+from airbearing.cli.common import number, numbers, testbed_arg
 from airbearing.cli.outputs import Outputs
 from airbearing.cli.show_progress import progress_display
 from airbearing.errors import InputError
@@ -34,22 +33,6 @@ class Start(StrEnum):
     auto = "auto"
     rest = "rest"
     level = "level"
-
-
-def _finite(option: str, value, *, positive: bool = False, unit: str = "") -> None:
-    """Refuse a non-finite (or, with ``positive``, a non-positive) numeric option."""
-    values = value if isinstance(value, tuple) else (value,)
-    if value is None or all(math.isfinite(v) and (v > 0 or not positive) for v in values):
-        return
-    shown = " ".join(f"{v:g}" for v in values)
-    what = (
-        "a positive finite number"
-        if positive
-        else "finite numbers"
-        if len(values) > 1
-        else ("a finite number")
-    )
-    raise InputError(f"{option} {shown}: expected {what}{' in ' + unit if unit else ''}")
 
 
 def table_text(rows: list[dict]) -> str:
@@ -161,10 +144,10 @@ def balance(
     out = Outputs()
     json_path = out.plan(json_out, "--json", (".json",))
     log_path = out.plan(log, "--log", (".csv", ".parquet"))
-    _finite("--duration", duration, positive=True, unit="s")
-    _finite("--initial-offset-mm", initial_offset_mm, unit="mm")
-    _finite("--vertical-offset", vertical_offset, unit="m")
-    _finite("--initial-rate", tuple(initial_rate), unit="rad/s")
+    number("--duration", duration, lo=0, lo_open=True, unit="s")
+    number("--initial-offset-mm", initial_offset_mm, unit="mm")
+    number("--vertical-offset", vertical_offset, unit="m")
+    numbers("--initial-rate", initial_rate, unit="rad/s")
     if seeds < 1:
         raise InputError(f"--seeds {seeds}: expected at least 1")
     if sweep is not None and compare is None:
@@ -197,8 +180,7 @@ def balance(
         from airbearing.analysis.balancing.two_step import two_step
 
         with progress_display("balance") as progress:
-            progress("two-step: in-plane balancing, identification, kinetic energy")
-            result = two_step(tb, method=method.value, seed=seed)
+            result = two_step(tb, method=method.value, seed=seed, progress=progress)
         summary = result.to_json()
     elif methods is not None:
         from airbearing.analysis.balancing.comparison import compare_methods, sweep_comparison

@@ -26,6 +26,7 @@ from airbearing.design.controller import constant_input
 from airbearing.errors import InputError
 from airbearing.io.testbed import Testbed
 from airbearing.models.model import build_model
+from airbearing.progress import call as _progress
 
 __all__ = [
     "IDENTIFICATION_DURATION",
@@ -157,6 +158,7 @@ def two_step(
     identify_method: str = "equation-error",
     initial_rate=(0.0, 0.0, 0.0),
     in_plane_known: bool = True,
+    progress=None,
 ) -> TwoStepResult:
     """Seed 004's two-step balancing, verified by the kinetic-energy spread (eqs. 52-54).
 
@@ -194,6 +196,8 @@ def two_step(
        standard deviation (eq. 54: constant for a balanced platform). The gyro noise sets
        a floor of about ``2 |J w| sigma_gyro`` (4e-5 J on platform-3dof).
 
+    ``progress(what, done, total)`` (:mod:`airbearing.progress`) is told each step.
+
     Returns
     -------
     TwoStepResult
@@ -215,7 +219,9 @@ def two_step(
     travel = testbed.masses.travel
     r_true0 = testbed.body.cm_offset_vec
 
+    report = _progress(progress)
     # step 1: in-plane balancing (seed 004 eqs. 34/51)
+    report(f"step 1: in-plane balancing, {balance_duration:.0f} s", 0, 3)
     pid = tilt_pid_gains(testbed)
     gains = {"lyapunov": lyapunov_gains_from_pid(pid), "adaptive": (pid[1], pid[0])}.get(
         method, pid
@@ -238,6 +244,7 @@ def two_step(
     known_xy = -M1[:2] / mass  # in-plane offset at zero sliders, known after step 1
 
     # step 2: free oscillations before and after a known displacement, identification
+    report("step 2: free oscillations and identification", 1, 3)
     s2 = s1 + d
     if np.any(np.abs(s2) > travel):
         raise InputError(
@@ -269,6 +276,7 @@ def two_step(
         )
 
     # step 3: kinetic-energy spread, seed 004 eqs. 52-54
+    report("step 3: kinetic energy before and after", 2, 3)
     before = _free(model, np.zeros(3), b_lab, model.x0(w=SEED004_RATES["unbalanced"]),
                    ke_duration, seed + 3, noise)  # fmt: skip
     after = _free(model, s_final, b_lab, model.x0(w=SEED004_RATES["balanced"]),
