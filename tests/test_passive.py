@@ -102,6 +102,17 @@ def test_passive_dof1_on_a_spring_is_a_harmonic_oscillator():
     assert_allclose(log.column("true_yaw"), yaw, rtol=0, atol=1e-10)
 
 
+def test_residual_dipole_on_a_passive_platform_sees_the_logged_field():
+    """tau = m_res x b_body with b the input (logged) field, not the [field] table's value."""
+    tb = passive3(cm_offset=(0, 0, 0), field=(0, 0, 6e-4))
+    m = build_model(tb, {"residual_dipole": (0.05, 0.0, 0.0)})
+    u = np.zeros(m.nu)
+    u[m.index(["bx_lab", "by_lab", "bz_lab"], "u")] = [0.0, 2e-4, 0.0]  # not the table's
+    w_dot = np.asarray(m.f(m.x0(), u, m.p0)).ravel()[4:7]
+    # level body = lab axes: (0.05, 0, 0) x (0, 2e-4, 0) = (0, 0, 1e-5) N m
+    assert_allclose(np.asarray(J3) @ w_dot, [0, 0, 1e-5], rtol=1e-12, atol=1e-20)
+
+
 def test_effects_that_act_on_a_passive_platform():
     # FORMATS.md table: everything but the CMG dead zone; the spring on dof 1 only;
     # the CM offset error on dof 3 only; rate-sensor effects only with a gyro

@@ -341,14 +341,14 @@ def build_model(testbed: Testbed, effects: Mapping | None = None) -> Model:
             r_cm = r_cm + mi * s[i] * ui / P["mass"]
             dJ = mi * s[i] ** 2 * (ca.DM.eye(3) - ca.mtimes(ui, ui.T))
             J_cr = J_cr + (dJ if dof == 3 else dJ[2, 2])
-    if kind == "platform":
+    if kind == "platform":  # the cage field is an input (a log may carry it)
         b_lab = ca.vertcat(U["bx_lab"], U["by_lab"], U["bz_lab"])
         b_body = quat.rotate_inverse(q, b_lab)
+    elif testbed.field is not None:  # a CMG testbed inside a cage: the field is a constant
+        b_body = quat.rotate_inverse(q, ca.DM(testbed.field.lab_vec))
     if dipole:
         m_dip = ca.vertcat(U["mx"], U["my"], U["mz"])
         torque = torque + ca.cross(m_dip, b_body)  # magnetorquer torque d x b (seed 000 eq. 2)
-    elif testbed.field is not None:  # a CMG testbed inside a cage: the field is a constant
-        b_body = quat.rotate_inverse(q, ca.DM(testbed.field.lab_vec))
     # gravity torque of the CR -> CM offset (seed 004 eq. 11, seed 000 eq. 1)
     torque = torque + P["mass"] * ca.cross(r_cm, g_body) + tau_d
     if dof == 1:
