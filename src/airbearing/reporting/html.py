@@ -30,7 +30,7 @@ _VERDICT_WORDS = ("ok", "met", "pass", "stable", "verdict")
 _CSS = """
 body { font-family: system-ui, -apple-system, Segoe UI, Roboto, sans-serif; margin: 2em auto;
        max-width: 1100px; color: #222; line-height: 1.45; padding: 0 1em;
-       overflow-wrap: anywhere; }
+       overflow-wrap: break-word; }
 h1 { border-bottom: 2px solid #345; padding-bottom: .2em; }
 h2 { margin-top: 2em; border-bottom: 1px solid #ccc; }
 .scroll { overflow-x: auto; max-width: 100%; margin: 1em 0; }
@@ -39,6 +39,7 @@ table { border-collapse: collapse; margin: 1em 0; font-size: 0.92em; }
 p.legend { font-size: 0.85em; color: #555; margin-top: -0.5em; }
 th, td { border: 1px solid #bbb; padding: 4px 8px; text-align: right; }
 th { background: #eef2f5; }
+td.l { white-space: nowrap; }
 td.l, th.l { text-align: left; }
 .pass { color: #11772d; font-weight: 600; }
 .fail { color: #b00020; font-weight: 600; }

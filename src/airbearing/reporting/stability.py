@@ -55,6 +55,17 @@ def words(name: str) -> str:
     return _WORDS.get(name, name.replace("_", " "))
 
 
+_KEY_UNITS = (("_rad_s", "rad/s"), ("_db", "dB"), ("_deg", "deg"), ("_s", "s"))
+
+
+def _pretty_key(key: str) -> str:
+    """A JSON key as a column header: ``gain_margin_db`` -> ``gain margin (dB)``."""
+    for suffix, unit in _KEY_UNITS:
+        if key.endswith(suffix):
+            return f"{key[: -len(suffix)].replace('_', ' ')} ({unit})"
+    return key.replace("_", " ")
+
+
 def _margin_text(value, what: str = "none"):
     """A margin for a table: the number, or ``what`` (no crossing: the margin is infinite)."""
     v = json_number(value)
@@ -276,7 +287,10 @@ def report_for_loop(
         [
             {
                 "corner": lbl,
-                **{k: (json_number(v) if isinstance(v, float) else v) for k, v in w.items()},
+                **{
+                    _pretty_key(k): (json_number(v) if isinstance(v, float) else v)
+                    for k, v in w.items()
+                },
             }
             for lbl, w in per
         ],
