@@ -390,3 +390,19 @@ def test_sign_flips_keep_the_attitude(gyro_log):
     assert _changed(flipped, gyro_log) == (rows, {"qw", "qx", "qy", "qz"})
     _, some = with_sign_flips(gyro_log, [3, 1])
     assert some == (1, 3)
+
+
+@pytest.mark.slow
+def test_long_logs_run_compiled_with_the_same_values(monkeypatch):
+    """From LOOP_MIN_STEPS intervals on, compiled chunks (C) replace the virtual machine."""
+    from airbearing.analysis.simulation import on_times
+
+    tb = yaw_rig()
+    t, _ = with_gap(with_jitter(sample_times(tb, 650.0), 0.3, seed=2), 300.0, 20.0)
+    assert t.size >= on_times.LOOP_MIN_STEPS
+    kw = {"initial_rate": 4.0, "effects": {"aero_drag": 3.5e-5}, "seed": 1}
+    fast = simulate_on_times(tb, t, **kw)
+    monkeypatch.setattr(on_times, "LOOP_MIN_STEPS", 10**9)  # force the virtual machine
+    slow = simulate_on_times(tb, t, **kw)
+    for c in fast.data.columns:  # the same operations; C and the VM may round differently
+        assert_allclose(fast.column(c), slow.column(c), rtol=1e-12, atol=1e-12)

@@ -7,7 +7,8 @@ tool can be tested on the times a lab really logs, and a lab can rehearse its an
 
 How: a CasADi ``mapaccum`` of :meth:`Model.step_dt` (RK4 with the interval length an
 input, the same arithmetic as :func:`~airbearing.analysis.simulation.simulate.simulate`),
-called on chunks of up to :data:`CHUNK` intervals, compiled to C for long logs.
+called on chunks of up to :data:`CHUNK` intervals; long logs (``LOOP_MIN_STEPS`` on) run
+as compiled chunks (:class:`airbearing.models.loop.ChunkedLoop`, disk-cached C).
 An interval longer than ``max_interval`` (a gap) is cut into equal pieces no longer
 than it, so the integration error in a gap stays that of an ordinary sample; only the
 states at the logged times are kept.
@@ -27,6 +28,7 @@ from airbearing.errors import InputError
 from airbearing.io.log import Log
 from airbearing.io.testbed import Testbed
 from airbearing.models.compiled import LOOP_MIN_STEPS, compiled
+from airbearing.models.loop import ChunkedLoop
 from airbearing.models.model import Model, build_model
 
 __all__ = [
@@ -63,8 +65,17 @@ def rollout_dt(model: Model, n: int, substeps: int = 4, compile_step: bool = Fal
 def _rollout(model: Model, x0, U, p, DT, substeps: int) -> np.ndarray:
     """States at the end of each interval (n, nx), chunk by chunk (see :data:`CHUNK`)."""
     n = DT.size
+    if n >= LOOP_MIN_STEPS:  # long logs: compiled chunks on NumPy memory (models/loop.py)
+        x = ca.SX.sym("x", model.nx)
+        v = ca.SX.sym("v", model.nu + 1)  # [u; dt] of one interval
+        pp = ca.SX.sym("p", model.n_p)
+        step = model.step_dt(substeps)(x, v[: model.nu], pp, v[model.nu])
+        # ChunkedLoop wants (carried state, rows...): the state is its own row here
+        one = ca.Function("step_dt_v", [x, v, pp], [step, step], ["x", "v", "p"], ["z", "row"])
+        X, _ = ChunkedLoop(one, n)(x0, np.vstack([U.T, DT[None, :]]), p)
+        return X.T
     chunk = min(CHUNK, 1 << max(0, n - 1).bit_length())
-    F = rollout_dt(model, chunk, substeps, n >= LOOP_MIN_STEPS)
+    F = rollout_dt(model, chunk, substeps)
     out = np.empty((n, model.nx))
     x = x0
     for a in range(0, n, chunk):
