@@ -11,7 +11,8 @@ The workflow (issue 7, issue 13):
 3. **Name the missing effects**: every applicable effect is a candidate
    (:mod:`.candidates`), fitted jointly over ALL logs (one effect set, each
    window of each segment of each log its own initial state) and judged
-   (:mod:`.trial`). Forward selection adds the nameable candidate with the
+   (:mod:`.trial`); on dof 3 the per-axis form of an effect is tried only when its
+   one-value form is significant. Forward selection adds the nameable candidate with the
    lowest BIC, refits, and looks again, up to ``max_effects``. Nameable
    candidates within ``CONFOUND_BIC`` of the best are reported as confounded,
    with the experiment that would separate them; the registry's first of them
@@ -472,19 +473,26 @@ def discrepancy(
         def run(c, chosen=chosen, theta=theta_chosen, cur=current, lag=current_lag, b=before):
             return _try(search, c, chosen, theta, cur, lag, ln_n, starts, b)
 
-        results = []
-        if workers > 1 and len(remaining) > 1:
-            with ThreadPoolExecutor(max_workers=workers) as pool:
-                for res in pool.map(run, remaining):
-                    results.append(res)
-                    done += 1
-                    say(f"{res.label}: gap {res.gap:.3g} {unit}, {res.status}", done, total)
-        else:
-            for c in remaining:
-                res = run(c)
-                results.append(res)
+        def fit_all(group):
+            nonlocal done
+            out = []
+            if workers > 1 and len(group) > 1:
+                with ThreadPoolExecutor(max_workers=workers) as pool:
+                    out = list(pool.map(run, group))
+            else:
+                out = [run(c) for c in group]
+            for res in out:
                 done += 1
                 say(f"{res.label}: gap {res.gap:.3g} {unit}, {res.status}", done, total)
+            return out
+
+        # the per-axis form of an effect only when its one-value form is significant: an
+        # effect the logs do not see with one value is not seen with three either
+        results = fit_all([c for c in remaining if not c.per_axis])
+        seen = {r.name for r in results if r.significant}
+        per_axis = [c for c in remaining if c.per_axis and c.name in seen]
+        done += sum(1 for c in remaining if c.per_axis and c.name not in seen)
+        results += fit_all(per_axis)
         results.sort(key=lambda c: (not np.isfinite(c.delta_bic), c.delta_bic))
         rounds.append(tuple(results))
         good = [c for c in results if c.nameable]
