@@ -62,8 +62,9 @@ __all__ = [
 CACHE_ENV = "AIRBEARING_CACHE_DIR"
 #: Set to ``0`` to never compile (the virtual machine runs everything).
 COMPILE_ENV = "AIRBEARING_COMPILE"
-#: Flags given to the C compiler (``-O1``: most of ``-O2``'s speed on CasADi's
-#: straight-line code at a fraction of its compile time).
+#: Flags given to the C compiler. Measured on a discrepancy window function (residual
+#: and Jacobian, 200 samples): ``-O1`` runs as fast as ``-O2`` (0.23 ms) and compiles
+#: in 1.3 s against 1.6 s; ``-O0`` compiles in 0.5 s but runs 2.6x slower.
 FLAGS = ("-O1", "-fPIC", "-shared")
 #: Shortest loop (steps) worth compiling: below it building and running a
 #: ``mapaccum`` in the virtual machine costs less than loading a cached library
