@@ -295,3 +295,26 @@ def test_tool_use():
     assert use["balance"] == (False, "passive platform (no [masses]): nothing to balance with")
     with pytest.raises(InputError, match="assess needs a Testbed"):
         assess(log, "platform-3dof")
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    "kind", ["rate_zero", "rate_spike", "quat_wrong_frame", "yaw_offset", "yaw_zero"]
+)
+def test_simulated_free_oscillation_with_injected_glitches(kind):
+    # the package's own simulator and artefact injectors (engineer "sim"): a platform
+    # whose logged attitude is noise-free (attitude_noise = 0) -- a fit's misfit, not
+    # noise, is then all there is, and leaving the glitch out must not cascade
+    from airbearing.analysis.simulation import artefacts
+    from airbearing.analysis.simulation.scenarios import free_oscillation
+    from airbearing.io import load_testbed
+
+    tb = load_testbed("seed004-platform")
+    log = free_oscillation(
+        tb, initial_rate=(0.05, -0.03, 0.2), q0=(0.99, 0.1, 0.0, 0.0), duration=120, seed=3
+    ).log
+    assert log.quality.outlier_rows == ()
+    glitched, rows = artefacts.with_glitches(log, [100, 1500, 2000], kind)
+    assert glitched.quality.outlier_rows == rows
+    first, rows = artefacts.with_first_sample_artefact(log)
+    assert first.quality.outlier_rows == rows

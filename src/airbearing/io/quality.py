@@ -50,8 +50,9 @@ segment (never across a gap) and each channel group:
    ``|r|^2`` is chi-square(3) whatever the attitude, while single components are
    not identically distributed). The scale is never taken below the testbed's
    nominal noise (``sensors.gyro_noise``; ``sensors.attitude_noise``, halved for the
-   quaternion) nor below ``1e-9`` of the channel's magnitude (noise-free
-   simulations), so that a clean, noise-free log is not over-flagged.
+   quaternion) nor below :data:`ABSOLUTE_FLOOR` = 1e-7 rad or rad/s (quieter than
+   any real sensor) or ``1e-9`` of the channel's magnitude, so that a noise-free
+   simulated log is judged against a physical noise, not the fits' own rounding.
 5. **Threshold.** A sample is suspect when a channel's normalised residual exceeds
    6 scales (two-sided Gaussian tail 2e-9; for the quaternion, ``|r|^2`` above
    chi-square(3) at 2e-9, i.e. 43.4 squared scales). With 3 rate channels and the
@@ -61,10 +62,12 @@ segment (never across a gap) and each channel group:
    segment's end.
 6. **Masking, one glitch at a time.** A glitch also pulls the fits of its
    neighbours, so only the suspects that are the largest within ``k`` samples are
-   taken; of such a suspect and its two neighbours, the one whose exclusion leaves
-   the smallest largest score around it is left out (a glitch at a segment's first
-   sample pulls the second sample's interior fit harder than its own extrapolated,
-   more uncertain one). The residuals near it are computed again and this repeats
+   taken; around such a suspect, the row or pair of consecutive rows whose exclusion
+   best explains the neighbourhood (smallest sum of squared scores left, plus the
+   threshold squared per excluded row) is left out: a glitch at a segment's first
+   sample pulls the second sample's interior fit harder than its own extrapolated
+   one, and two consecutive glitches pull each other. The residuals near them are
+   computed again and this repeats
    until no new suspect remains. A sample is an outlier if its final residual (its
    neighbours' outliers left out) is still above the threshold.
 7. **Isolated only.** A run of 1 or 2 consecutive suspects is an outlier run. A run
@@ -114,6 +117,11 @@ _MAD_TO_SIGMA = 1.4826  # 1 / Phi^-1(3/4): MAD of a Gaussian -> its standard dev
 FITS: tuple[tuple[int, int], ...] = ((3, 2), (4, 4), (5, 6))
 _MAX_RUN = 2  # longest run of consecutive suspects that is an isolated glitch
 _RELATIVE_FLOOR = 1e-9  # scale floor relative to the channel's magnitude
+#: rad or rad/s: no scale below this. A star tracker's 1 arcsec is 5e-6 rad and a
+#: navigation-grade gyro has ~1e-6 rad/s of noise per sample at 20 Hz, so no real
+#: sensor is this quiet; a noise-free simulated log is judged against it, not
+#: against the local fits' own rounding and misfit.
+ABSOLUTE_FLOOR = 1e-7
 _MAX_PASSES = 200
 _SCALE_ROWS = 2000  # rows spread over the log on which the noise scales are measured
 _MIN_SCALE_SAMPLES = 8  # fewer residuals than this give no scale (the floor is used)
@@ -280,11 +288,8 @@ def _loo(
     h : (len(rows),) ``sum_j w_ij^2``, the noise gain of the prediction
     a : (len(rows),) left neighbours used (the window's shape)
     """
-    g = np.flatnonzero(good)
-    ng = g.size
-    pos = np.searchsorted(g, rows)  # usable samples before each row
-    own = good[rows].astype(int)
-    left, right = pos, ng - pos - own
+    m = t.size
+    left, right = rows, m - 1 - rows  # samples of the segment before and after each row
     if shape is None:
         a = np.minimum(k, left)
         b = np.minimum(right, 2 * k - a)  # slide inwards at the ends
@@ -294,18 +299,24 @@ def _loo(
         a = np.where(fits, shape, 0)
         b = np.where(fits, 2 * k - shape, 0)
     j = np.arange(2 * k)[None, :]
-    take = np.where(
-        j < a[:, None], pos[:, None] - a[:, None] + j, pos[:, None] + own[:, None] + j - a[:, None]
+    # the window is the 2k nearest samples in time; samples already found to be
+    # outliers are left out of it (not replaced by farther ones: the span, and with
+    # it the fit's misfit, stays that of a clean window)
+    nb_all = np.where(
+        j < a[:, None], rows[:, None] - a[:, None] + j, rows[:, None] + 1 + j - a[:, None]
     )
-    valid = j < (a + b)[:, None]
+    nb_all = np.clip(nb_all, 0, max(m - 1, 0))
+    valid = (j < (a + b)[:, None]) & good[nb_all]
     r = np.full((rows.size, x.shape[1]), np.nan)
     h = np.full(rows.size, np.nan)
-    ok = (a + b) >= (2 * k if shape is not None else p + 1)
-    if not ok.any() or ng == 0:
+    count = np.sum(valid, axis=1)
+    ok = count >= (p + 1 if shape is None else 2 * k)
+    if not ok.any():
         return r, h, a
-    nb = g[np.clip(take[ok], 0, ng - 1)]
+    nb = nb_all[ok]
     valid = valid[ok]
-    tau = (t[nb] - t[rows[ok], None]) / scale
+    # times in units of the window's half-width (|tau| <~ 2): a well-conditioned Gram matrix
+    tau = (t[nb] - t[rows[ok], None]) / (scale * (k + 1))
     powers = np.empty(tau.shape + (p + 1,))
     powers[..., 0] = 1.0
     for e in range(1, p + 1):
@@ -498,27 +509,37 @@ class _Scorer:
         return score, over
 
 
-def _best_explanation(scorer: _Scorer, i: int, excluded: np.ndarray, seg_id, k: int) -> int:
-    """The row among ``i - 1, i, i + 1`` whose exclusion best explains its neighbourhood.
+def _best_explanation(
+    scorer: _Scorer, i: int, suspect: np.ndarray, excluded: np.ndarray, seg_id, k: int
+) -> tuple[int, ...]:
+    """The rows near suspect ``i`` whose exclusion best explains its neighbourhood.
 
-    A glitch at a segment's first sample also pulls the fit of the second, whose
-    interior residual can then score higher than the (extrapolated, so more
-    uncertain) first sample itself. Of the three candidates, the one whose exclusion
-    leaves the smallest largest score within ``2k`` rows is taken (``i`` on a tie).
+    A glitch pulls the fits of its neighbours; next to a segment's end, or when two
+    consecutive samples are hit, a neighbour's residual can score higher than the
+    glitch's own. Candidates are each suspect within ``k`` rows of ``i``, ``i`` and its
+    two neighbours, and the two pairs of consecutive rows containing ``i``; the one
+    taken minimises ``sum(score^2)`` of the remaining rows within ``2k`` plus the
+    threshold squared for each row it leaves out (a glitch explains itself only if
+    leaving it out removes more than an outlier's worth of misfit).
     """
     n = excluded.size
     window = np.arange(max(i - 2 * k, 0), min(i + 2 * k + 1, n))
-    window = window[seg_id[window] == seg_id[i]]
-    best, best_metric = i, np.inf
-    for c in (i, i - 1, i + 1):
-        if c < 0 or c >= n or seg_id[c] != seg_id[i] or excluded[c]:
+    window = window[(seg_id[window] == seg_id[i]) & ~excluded[window]]
+    near = [int(c) for c in window if abs(int(c) - i) <= k and suspect[c]]
+    candidates = {(c,) for c in [*near, i - 1, i, i + 1]} | {(i - 1, i), (i, i + 1)}
+    cost = CHI2_3_THRESHOLD if scorer.group.vector else Z_THRESHOLD**2
+    best: tuple[int, ...] = (i,)
+    best_metric = np.inf
+    for cand in sorted(candidates, key=lambda c: (len(c), abs(c[0] - i))):
+        if any(c < 0 or c >= n or seg_id[c] != seg_id[i] or excluded[c] for c in cand):
             continue
         good = ~excluded
-        good[c] = False
+        good[list(cand)] = False
         rows = window[good[window]]
-        metric = float(np.max(scorer(rows, good)[0], initial=0.0))
+        score = scorer(rows, good)[0]
+        metric = float(np.sum(score**2)) + cost * len(cand)
         if metric < best_metric - 1e-9:
-            best, best_metric = c, metric
+            best, best_metric = cand, metric
     return best
 
 
@@ -542,7 +563,7 @@ def find_outliers(group: _Group, t: np.ndarray, segments, scale: float) -> _Grou
             near = np.arange(max(i - k, 0), min(i + k + 1, n))
             near = near[(seg_id[near] == seg_id[i]) & suspect[near]]
             if score[i] >= np.max(score[near]):
-                take.append(_best_explanation(scorer, i, excluded, seg_id, k))
+                take.extend(_best_explanation(scorer, i, suspect, excluded, seg_id, k))
         excluded[take] = True
         # the fits that used a newly excluded sample change: recompute around them
         near_mask = np.zeros(n, dtype=bool)
@@ -606,7 +627,7 @@ def _groups(log: Log, testbed: Testbed | None, segments) -> list[_Group]:
     if rates is not None:
         cols = ("wx", "wy", "wz") if rates.shape[1] == 3 else ("wz",)
         mag = np.maximum(np.max(np.abs(rates), axis=0), 1.0)
-        floor = np.maximum(sensors.gyro_noise, _RELATIVE_FLOOR * mag)
+        floor = np.maximum(max(sensors.gyro_noise, ABSOLUTE_FLOOR), _RELATIVE_FLOOR * mag)
         groups.append(_Group("rates", cols, rates, False, floor))
     dof = testbed.body.dof if testbed is not None else (3 if log.has("qw") else 1)
     use_yaw = dof == 1 and log.has("yaw")
@@ -617,11 +638,11 @@ def _groups(log: Log, testbed: Testbed | None, segments) -> list[_Group]:
         for start, stop in segments:  # a logged yaw should be unwrapped; if not, this does
             yaw[start:stop] = unwrap(yaw[start:stop], t[start:stop])
         mag = max(float(np.max(np.abs(yaw))), 1.0)
-        floor = np.array([max(sensors.attitude_noise, _RELATIVE_FLOOR * mag)])
+        floor = np.array([max(sensors.attitude_noise, ABSOLUTE_FLOOR, _RELATIVE_FLOOR * mag)])
         groups.append(_Group("attitude", ("yaw",), yaw[:, None], False, floor, wrap=True))
     elif log.has("qw", "qx", "qy", "qz"):
         q = _continuous_signs(log.quaternions(), segments)
-        floor = np.array([max(0.5 * sensors.attitude_noise, _RELATIVE_FLOOR)])
+        floor = np.array([0.5 * max(sensors.attitude_noise, ABSOLUTE_FLOOR)])
         groups.append(_Group("attitude", ("qw", "qx", "qy", "qz"), q, True, floor))
     return groups
 
