@@ -11,6 +11,7 @@ import typer
 from airbearing.cli import app
 from airbearing.cli.common import number, testbed_arg
 from airbearing.cli.outputs import Outputs
+from airbearing.cli.show_progress import progress_display
 from airbearing.cli.tables import echo_table
 from airbearing.errors import InputError
 
@@ -141,16 +142,20 @@ def envelope(
         from airbearing.analysis.cmg.singularity import envelope_figure
     from airbearing.analysis.cmg.singularity import surfaces_table
 
-    fig = envelope_figure(
-        beta, n_el=resolution, n_az=2 * resolution - 1,
-        title=f"{tb.name}: 4-CMG pyramid, skew {math.degrees(beta):.2f} deg",
-    )  # fmt: skip
-    buf = io.BytesIO()
-    fig.savefig(buf, format=output.suffix.lower().lstrip("."), bbox_inches="tight", dpi=120)
-    plt.close(fig)
-    out.text(fig_path, buf.getvalue())
-    if data_path is not None:
-        table = surfaces_table(beta, n_el=resolution, n_az=2 * resolution - 1)
-        out.text(data_path, table.to_csv(index=False))
-    out.commit()
+    with progress_display("cmg envelope") as progress:
+        progress(f"singular surfaces of the pyramid, {resolution} elevations")
+        fig = envelope_figure(
+            beta, n_el=resolution, n_az=2 * resolution - 1,
+            title=f"{tb.name}: 4-CMG pyramid, skew {math.degrees(beta):.2f} deg",
+        )  # fmt: skip
+        progress("drawing the figure")
+        buf = io.BytesIO()
+        fig.savefig(buf, format=output.suffix.lower().lstrip("."), bbox_inches="tight", dpi=120)
+        plt.close(fig)
+        out.text(fig_path, buf.getvalue())
+        if data_path is not None:
+            progress("the surfaces as a table")
+            table = surfaces_table(beta, n_el=resolution, n_az=2 * resolution - 1)
+            out.text(data_path, table.to_csv(index=False))
+        out.commit()
     typer.echo(f"wrote {fig_path}" + (f" and {data_path}" if data_path is not None else ""))
