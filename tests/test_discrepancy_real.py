@@ -22,7 +22,7 @@ from airbearing.analysis.simulation.artefacts import (
     with_jitter,
 )
 from airbearing.analysis.simulation.on_times import simulate_on_times
-from airbearing.analysis.simulation.scenarios import spindown
+from airbearing.analysis.simulation.scenarios import free_oscillation, spindown
 from airbearing.io.log import write_log
 from airbearing.io.testbed import load_testbed, write_testbed
 from airbearing.io.testbed import testbed_from_dict as make_testbed
@@ -239,3 +239,33 @@ def test_replay_bad_input_writes_nothing(two_spindowns, tmp_path, capsys):
     assert e.value.code == 2
     assert "missing.csv" in capsys.readouterr().err
     assert not any(tmp_path.iterdir())
+
+
+@pytest.mark.slow
+def test_attitude_only_dof3_names_a_cm_offset():
+    # a spherical platform filmed by motion capture (no gyro): the attitude itself is
+    # fitted as a small rotation; a CM offset of a few um (seed 004's balancing accuracy)
+    sphere = make_testbed(
+        {
+            "kind": "platform",
+            "name": "mocap-sphere",
+            "body": {
+                "dof": 3,
+                "mass": 6.3,
+                "inertia": [[0.0241, -0.001, 0.0], [-0.001, 0.0332, -0.004], [0.0, -0.004, 0.0363]],
+                "cm_offset": [0.0, 0.0, -2e-4],
+            },
+            "sensors": {"rate": 20.0, "gyro": False, "attitude_noise": 1e-3},
+        }
+    )
+    truth = (3e-6, -2e-6, 4e-6)
+    log = free_oscillation(
+        sphere, initial_rate=W0, q0=Q0, effects={"cm_offset_error": truth}, seed=3, duration=30.0
+    ).log
+    d = discrepancy(sphere, log, max_effects=1)
+    assert set(d.effects) == {"cm_offset_error"}, d.verdict
+    assert _rel(d.effects["cm_offset_error"], truth) < 0.2
+    assert d.gap_unit == "rad"
+    # the attitude noise (1e-3 rad) is what remains: gap within 1.2 x the floor from the data
+    assert d.gap_after < 1.2 * d.noise_floor < d.gap_before
+    assert d.floor.attitude == pytest.approx(1e-3, rel=0.15)
