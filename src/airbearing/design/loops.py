@@ -53,11 +53,13 @@ from airbearing.design.controller import Controller
 from airbearing.design.linearise import (
     DISTURBANCE_INPUTS,
     TrimPoint,
+    d2c_bilinear,
     delay_system,
     linearisation,
+    prune_states,
     trim,
 )
-from airbearing.errors import InputError, SolverError
+from airbearing.errors import InputError
 from airbearing.io.testbed import Testbed
 from airbearing.models import quaternion as quat
 from airbearing.models.model import Model, build_model
@@ -72,8 +74,6 @@ __all__ = [
     "attitude_loop",
     "make_loop",
     "with_delay",
-    "d2c_bilinear",
-    "prune_states",
 ]
 
 #: Loop kinds the package builds.
@@ -366,98 +366,6 @@ def _gain_dict(names, gains) -> dict:
 
 
 # ---------------------------------------------------------------------- helpers
-
-
-def prune_states(sys: ct.StateSpace, outputs=None, inputs=None) -> ct.StateSpace:
-    """Drop states the ``outputs`` never see or the ``inputs`` never reach (structural).
-
-    Structural means exact zeros of the evaluated ``A, B, C``: a state is observable when
-    it appears in a kept output or drives an observable state, reachable when a kept input
-    drives it or a reachable state does. The dropped blocks are neutral modes of a trim
-    that the loop does not act on (gimbal angles, the yaw of a balancing platform, the
-    vertical integral of a balancing law). ``None`` keeps all outputs / inputs.
-    """
-    A = np.asarray(sys.A)
-    n = A.shape[0]
-    out_idx = (
-        range(sys.noutputs)
-        if outputs is None
-        else [list(sys.output_labels).index(o) for o in outputs]
-    )
-    in_idx = (
-        range(sys.ninputs) if inputs is None else [list(sys.input_labels).index(i) for i in inputs]
-    )
-    C = np.asarray(sys.C)[list(out_idx)]
-    B = np.asarray(sys.B)[:, list(in_idx)]
-
-    def closure(start, forward):
-        keep = set(start)
-        todo = list(start)
-        while todo:
-            i = todo.pop()
-            nxt = np.nonzero(A[:, i] if forward else A[i, :])[0]
-            for j in nxt.tolist():
-                if j not in keep:
-                    keep.add(j)
-                    todo.append(j)
-        return keep
-
-    observable = closure(np.nonzero(np.any(C != 0, axis=0))[0].tolist(), forward=False)
-    reachable = closure(np.nonzero(np.any(B != 0, axis=1))[0].tolist(), forward=True)
-    k = sorted(observable & reachable) if n else []
-    names = [sys.state_labels[i] for i in k]
-    return ct.ss(
-        A[np.ix_(k, k)],
-        np.asarray(sys.B)[k],
-        np.asarray(sys.C)[:, k],
-        sys.D,
-        dt=sys.dt,
-        states=names,
-        inputs=list(sys.input_labels),
-        outputs=list(sys.output_labels),
-        name=sys.name,
-    )
-
-
-def d2c_bilinear(sysd: ct.StateSpace) -> ct.StateSpace:
-    """Continuous system whose Tustin (bilinear) discretisation is ``sysd``.
-
-    ``A_c = (2/T)(A - I)(A + I)^-1`` and matching ``B, C, D``; a discrete pole at ``-1``
-    has no continuous image.
-    """
-    T = sysd.dt
-    A, B, C, D = (np.asarray(m, float) for m in (sysd.A, sysd.B, sysd.C, sysd.D))
-    n = A.shape[0]
-    if n == 0:
-        return ct.ss(
-            [],
-            [],
-            [],
-            D,
-            inputs=list(sysd.input_labels),
-            outputs=list(sysd.output_labels),
-            name=sysd.name,
-        )
-    M = A + np.eye(n)
-    if np.linalg.cond(M) > 1e12:
-        raise SolverError(f"{sysd.name}: a discrete pole at z = -1 has no continuous equivalent")
-    Mi = np.linalg.inv(M)
-    # inverse of the bilinear map A_d = (I - T/2 A)^-1 (I + T/2 A), B_d = (I - T/2 A)^-1 T B,
-    # C_d = C (I - T/2 A)^-1, D_d = D + C B_d / 2 (scipy's "bilinear" convention)
-    Ac = 2 / T * (A - np.eye(n)) @ Mi
-    Bc = 2 / T * Mi @ B
-    Cc = 2 * C @ Mi
-    Dc = D - C @ Mi @ B
-    return ct.ss(
-        Ac,
-        Bc,
-        Cc,
-        Dc,
-        states=list(sysd.state_labels),
-        inputs=list(sysd.input_labels),
-        outputs=list(sysd.output_labels),
-        name=sysd.name,
-    )
 
 
 def with_delay(controller: Controller, model: Model, samples: int = 1, u_hold=None) -> Controller:
