@@ -155,7 +155,8 @@ def detection(df, effect_keys: list[str]) -> dict:
     Returns
     -------
     dict
-        ``effects``: per effect ``runs``, ``named`` (correctly), ``rate``,
+        ``effects``: per effect ``runs``, ``named`` (correctly), ``rate``, ``misnamed``
+        (runs that named other effects but not this one),
         ``size_95`` (the size named 95 % of the time from the logistic fit, None when
         every or no run named it, see ``note``), ``fit`` ``(a, b)`` in ``log10(size)``,
         and ``points`` (size, named) for the figure; ``false_alarm``: runs hiding
@@ -180,11 +181,13 @@ def detection(df, effect_keys: list[str]) -> dict:
         sel = (hidden == name) & ok
         x = np.log10(s[sel])
         hit = np.array([name in named[i] for i in np.flatnonzero(sel)], bool)
+        other = sum(1 for i in np.flatnonzero(sel) if named[i] and name not in named[i])
         row = {
             "effect": name,
             "runs": int(sel.sum()),
             "named": int(hit.sum()),
             "rate": float(hit.mean()) if hit.size else None,
+            "misnamed": int(other),
             "size_min": float(s[sel].min()) if sel.any() else None,
             "size_max": float(s[sel].max()) if sel.any() else None,
             "size_95": None,
