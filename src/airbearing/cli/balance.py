@@ -10,7 +10,7 @@ from typing import Annotated
 import typer
 
 from airbearing.cli import app
-from airbearing.cli.common import number, numbers, testbed_arg
+from airbearing.cli.common import check_log_size, number, numbers, testbed_arg
 from airbearing.cli.outputs import Outputs
 from airbearing.cli.show_progress import progress_display
 from airbearing.errors import InputError
@@ -169,6 +169,11 @@ def balance(
 
         sweep_spec = parse_sweep(sweep)
     tb = testbed_arg(testbed)
+    if not two_step_:  # each run keeps its whole log in memory
+        longest = duration
+        if sweep_spec is not None and sweep_spec[0] == "duration":
+            longest = float(max(sweep_spec[1]))
+        check_log_size("--duration", longest, tb.sensors.rate)
     options = dict(
         vertical_offset=vertical_offset,
         start=start.value,
