@@ -17,7 +17,6 @@ from airbearing.cli.common import (
     testbed_arg,
 )
 from airbearing.cli.outputs import Outputs
-from airbearing.cli.show_progress import progress_display
 from airbearing.cli.tables import echo_summary
 from airbearing.errors import InputError
 
@@ -146,8 +145,6 @@ def simulate(
     )
     from airbearing.io.output import to_jsonable
 
-    with progress_display("simulate") as progress:  # the run is one compiled call: say what
-        progress(f"{scenario} of {tb.name}, {length:g} s of log at {tb.sensors.rate:g} Hz")
     if artefacts:  # a log as a real testbed writes it, with its answer key in the summary
         from airbearing.analysis.simulation.rehearsal import rehearsal_log, rehearsal_summary
         from airbearing.io.log import read_log
