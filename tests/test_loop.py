@@ -67,3 +67,20 @@ def test_long_simulation_is_the_virtual_machines(monkeypatch, tmp_path):
     sim.closed_loop_rollout.cache_clear()
     np.testing.assert_allclose(fast.x, slow.x, rtol=1e-12, atol=1e-14)
     np.testing.assert_allclose(fast.u, slow.u, rtol=1e-12, atol=1e-14)
+
+
+def test_chunked_loop_without_a_compiler_runs_in_the_virtual_machine(monkeypatch):
+    monkeypatch.setenv("AIRBEARING_COMPILE", "0")
+    step = _pendulum_loop()
+    n = 45
+    V = np.vstack([np.zeros(n), np.full(n, 0.2)])
+    p, g = np.array([9.81, 0.2]), np.array([[4.0, 0.5], [0.0, 3.0]])
+    from airbearing.models.compiled import cache_info
+
+    loop = ChunkedLoop(step, n, chunk=16)
+    assert cache_info().last == "uncompiled" and loop.fn.name() == "pend_step_x16"
+    Z, R = loop(np.array([0.3, -0.1, 0.0]), V, p, g)
+    Zr, Rr = step.mapaccum("ref", n, [0], [0])(np.array([0.3, -0.1, 0.0]), V, p, g)
+    # the same virtual machine on the same expressions: identical to rounding
+    np.testing.assert_allclose(Z, Zr.full(), rtol=1e-12, atol=1e-14)
+    np.testing.assert_allclose(R, Rr.full(), rtol=1e-12, atol=1e-14)
