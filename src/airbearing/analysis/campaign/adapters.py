@@ -192,6 +192,7 @@ _RUN_VALUES = {
     "sensors": ("gyro_noise", "accel_noise", "attitude_noise"),
 }
 _STRUCTURES: dict = {}
+_MAX_STRUCTURES = 16
 _STATS = {"built": 0, "reused": 0}
 
 
@@ -296,6 +297,8 @@ def _slew(tb: Testbed, *, yaw_deg, axis, duration, seed, ideal, steering, rate_l
             model, steering=steering, lowpass=1.0 if ideal else None,
             rate_limit_mode=rate_limit, **ctl_kw,
         )  # fmt: skip
+        if len(_STRUCTURES) >= _MAX_STRUCTURES:  # a dispersed structural value: bounded
+            _STRUCTURES.pop(next(iter(_STRUCTURES)))
         _STRUCTURES[key] = (model, ctl)
         _STATS["built"] += 1
     else:
