@@ -53,6 +53,8 @@ segment (never across a gap) and each channel group:
    quaternion) nor below :data:`ABSOLUTE_FLOOR` = 1e-7 rad or rad/s (quieter than
    any real sensor) or ``1e-9`` of the channel's magnitude, so that a noise-free
    simulated log is judged against a physical noise, not the fits' own rounding.
+   Where the log is locally rougher than overall (a running median of the squared
+   normalised residuals over 51 samples), the local scale is used.
 5. **Threshold.** A sample is suspect when a channel's normalised residual exceeds
    6 scales (two-sided Gaussian tail 2e-9; for the quaternion, ``|r|^2`` above
    chi-square(3) at 2e-9, i.e. 43.4 squared scales). With 3 rate channels and the
@@ -126,6 +128,7 @@ _MAX_PASSES = 200
 _SCALE_ROWS = 2000  # rows spread over the log on which the noise scales are measured
 _MIN_SCALE_SAMPLES = 8  # fewer residuals than this give no scale (the floor is used)
 _RECOMPUTE = 3  # rows within this many k of a newly excluded sample are refitted
+_LOCAL = 25  # half-width (samples) of the running median that gives the local scale
 
 
 @dataclass(frozen=True)
@@ -487,6 +490,36 @@ class _Scorer:
                 best = min(FITS, key=lambda f, shape=shape: key(f, shape(f)))
                 if best != self.fit:
                     self.edge[(side, e)] = best
+        self.local = self._local_factor()
+
+    def _local_factor(self) -> np.ndarray:
+        """Per row and channel, how much rougher the log is locally than overall (>= 1).
+
+        Noise or motion that is rougher in one stretch of a log than overall (a
+        manoeuvre with the commands changing at every sample, vibration while a
+        motor runs) would otherwise be judged against the quieter overall scale. The
+        local scale is a running median over ``2 * _LOCAL + 1`` samples of the
+        segment; one glitch, and the few neighbours its fit pulls, cannot move a
+        median of 51 samples much.
+        """
+        import pandas as pd
+
+        g = self.group
+        n = self.t.size
+        k, p = self.fit
+        rows = np.arange(n)
+        d, _ = _normalised(g, self.t, self.segments, np.ones(n, bool), k, p, self.scale, rows)
+        if g.vector:
+            a = np.sum(d**2, axis=1, keepdims=True) / _CHI2_3_MEDIAN
+        else:
+            a = (_MAD_TO_SIGMA * d) ** 2
+        local = np.full(a.shape, np.nan)
+        for start, stop in self.segments:
+            frame = pd.DataFrame(a[start:stop])
+            med = frame.rolling(2 * _LOCAL + 1, center=True, min_periods=_LOCAL).median()
+            local[start:stop] = np.sqrt(med.to_numpy())
+        ratio = local / self.noise[None, :]
+        return np.where(np.isfinite(ratio), np.maximum(ratio, 1.0), 1.0)
 
     @property
     def noise(self) -> np.ndarray:
@@ -495,8 +528,9 @@ class _Scorer:
     def __call__(self, rows: np.ndarray, good: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         g, t, segs, sc = self.group, self.t, self.segments, self.scale
         k, p = self.fit
+        local = self.local[rows]
         d, shapes = _normalised(g, t, segs, good, k, p, sc, rows)
-        score, over = _score(g, d, self.scales[self.fit][np.clip(shapes, 0, 2 * k)])
+        score, over = _score(g, d, self.scales[self.fit][np.clip(shapes, 0, 2 * k)] * local)
         for (side, e), (kf, pf) in self.edge.items():
             at = (self.from_start if side == 0 else self.from_end)[rows] == e
             at &= (self.from_end if side == 0 else self.from_start)[rows] >= kf
@@ -504,7 +538,8 @@ class _Scorer:
                 continue
             sel = rows[at]
             d_f, shapes_f = _normalised(g, t, segs, good, kf, pf, sc, sel)
-            s_f, o_f = _score(g, d_f, self.scales[(kf, pf)][np.clip(shapes_f, 0, 2 * kf)])
+            scale_f = self.scales[(kf, pf)][np.clip(shapes_f, 0, 2 * kf)] * local[at]
+            s_f, o_f = _score(g, d_f, scale_f)
             score[at], over[at] = s_f, o_f
         return score, over
 
