@@ -17,6 +17,7 @@ from airbearing.analysis.identification.regression import PARAM_NAMES, sigma_cm
 from airbearing.errors import SolverError
 
 __all__ = [
+    "fisher_from_covariance",
     "solve_convex",
     "face",
     "active_constraints",
@@ -42,8 +43,9 @@ NULL_RATIO = 1e-12
 #: A parameter takes part in a null direction when its component exceeds this.
 NULL_COMPONENT = 0.2
 #: Standard errors beyond these are "not identifiable", not numbers: an inertia entry's
-#: error above the mean principal inertia, an offset's above 1 cm (no balanced platform).
-ASTRONOMICAL_INERTIA = 1.0
+#: error above half the estimate's mean principal inertia (the estimate says nothing about
+#: its own size), an offset's above 1 cm (no balanced platform is that far off).
+ASTRONOMICAL_INERTIA = 0.5
 ASTRONOMICAL_OFFSET = 1e-2
 
 _AXES_OF = {
@@ -249,19 +251,41 @@ def diagnostics(F, free, theta, *, mass):
     return cov, cond, weak, null
 
 
+def fisher_from_covariance(cov, free, scale) -> np.ndarray:
+    """Information matrix (9, 9) from a covariance that may be numerically indefinite.
+
+    In the scaled unknowns (``scale``: kg m^2 and m per unit), eigen-directions of the
+    covariance with a non-positive (round-off) or non-finite variance carry no
+    information: their Fisher eigenvalue is set to zero, so :func:`diagnostics` names them.
+    """
+    idx = np.flatnonzero(free)
+    sc = np.asarray(scale, float)[idx]
+    C = cov[np.ix_(idx, idx)] / np.outer(sc, sc)
+    C = 0.5 * (C + C.T)
+    F = np.zeros((9, 9))
+    if not np.all(np.isfinite(C)):
+        return F
+    w, V = np.linalg.eigh(C)
+    inv = np.where(w > NULL_RATIO * max(abs(w).max(), 1e-300), 1.0 / np.where(w > 0, w, 1), 0.0)
+    F[np.ix_(idx, idx)] = (V * inv) @ V.T / np.outer(sc, sc)
+    return F
+
+
 def std_status(cov, free, theta, *, js, fixed, active, null):
     """Standard errors (9,) with NaN where there is none, and each parameter's status.
 
     ``fixed``: index -> value of known parameters; ``active``: active constraint names
     (``prior_bound:<name>`` pins that parameter); ``null``: name -> reason, from
-    :func:`diagnostics`. A standard error beyond :data:`ASTRONOMICAL_INERTIA` x the mean
-    inertia or :data:`ASTRONOMICAL_OFFSET` m is reported as not identifiable.
+    :func:`diagnostics`. A standard error beyond :data:`ASTRONOMICAL_INERTIA` x the
+    estimate's mean principal inertia (at least 1e-3 x ``js``, the testbed's) or
+    :data:`ASTRONOMICAL_OFFSET` m is reported as not identifiable.
     """
     std = np.sqrt(np.maximum(np.diag(cov), 0))
     status = {}
     for i, n in enumerate(PARAM_NAMES):
         pinned = f"prior_bound:{n}"
-        limit = ASTRONOMICAL_INERTIA * js if i < 6 else ASTRONOMICAL_OFFSET
+        size = max(float(np.mean(theta[:3])), 1e-3 * js)
+        limit = ASTRONOMICAL_INERTIA * size if i < 6 else ASTRONOMICAL_OFFSET
         if i in fixed:
             status[n] = f"known (known_offset_{'xyz'[i - 6]})" if i >= 6 else "known"
         elif pinned in active:

@@ -29,6 +29,7 @@ from airbearing.analysis.identification.convex import (
     diagnostics,
     excitation_warnings,
     face,
+    fisher_from_covariance,
     least_squares,
     solve_convex,
     std_status,
@@ -69,6 +70,9 @@ def __getattr__(name):
 
 #: Smallest eigenvalue of the second moment about the CM, as a fraction of the mean inertia.
 MARGIN_FRACTION = 1e-4
+#: Output-error residual above this multiple of the testbed's sensor noise gets a warning
+#: (white noise of N >= 100 samples has an RMS within 1.5 x its sigma with certainty).
+RESIDUAL_WARN = 1.5
 
 
 def _log_entries(data) -> list[dict]:
@@ -285,27 +289,43 @@ def identify_platform(
         report("done", 3, 3)
         return ee
 
-    # stage 2: output error from the convex answer; parameters the logs cannot
-    # identify stay at the stage-1 value (fitting them would only move along a null space)
+    # stage 2: output error from the convex answer; parameters in an exact null direction
+    # of stage 1 stay at their stage-1 value (fitting them would only move along it)
     report("output error (IPOPT)", 2, 3)
     from airbearing.analysis.identification.output_error import refine_output_error
 
-    free_oe = free & np.array([not status[n].startswith("not identifiable") for n in PARAM_NAMES])
+    free_oe = free & np.array([n not in null for n in PARAM_NAMES])
     oe = refine_output_error(
         testbed, data, theta_ee, mass=mass, free=free_oe, margin=margin, segment=segment
     )
     theta = oe.theta
     active_oe = [n for n in active if n.startswith("known_offset")]
     active_oe += face(theta, mass=mass, margin=margin, js=js)
-    Fi = np.zeros((9, 9))
-    idx = np.flatnonzero(free_oe)
-    Fi[np.ix_(idx, idx)] = np.linalg.pinv(oe.cov[np.ix_(idx, idx)])
+    Fi = fisher_from_covariance(oe.cov, free_oe, np.where(np.arange(9) < 6, js, 1e-3))
     cov_oe, cond_oe, weak_oe, null_oe = diagnostics(Fi, free_oe, theta, mass=mass)
+    pd_oe = _positive_definite(oe.cov, free_oe, js)
+    if not pd_oe:
+        # the inverse of a numerically singular Fisher matrix: no parameter has a number,
+        # and the weakest combination of the (better conditioned) first stage says why
+        why = "the output-error Fisher matrix is singular to working precision"
+        if weak and weak[0]["hint"]:
+            why += f" (weakest combination {weak[0]['combination']}: {weak[0]['hint']})"
+        null_oe = {PARAM_NAMES[i]: why for i in np.flatnonzero(free_oe)}
     null_oe.update({n: null[n] for n in null})
     std_oe, status_oe = std_status(
-        oe.cov, free_oe, theta, js=js, fixed=fixed, active=active_oe, null=null_oe
+        cov_oe, free_oe, theta, js=js, fixed=fixed, active=active_oe, null=null_oe
     )
-    warn_oe = list(oe.warnings) + excitation_warnings(oe.cov, cond_oe, weak_oe, theta, free_oe)
+    warn_oe = list(oe.warnings)
+    spec = testbed.sensors.gyro_noise if gyro else testbed.sensors.attitude_noise
+    rms = oe.rms_w if gyro else oe.rms_q
+    if spec > 0 and rms > RESIDUAL_WARN * spec:
+        warn_oe.append(
+            f"the output-error residual {rms:.3g} {'rad/s' if gyro else 'rad'} is "
+            f"{rms / spec:.1f} times the sensor noise of the testbed file: the model misses "
+            "a torque or a known value is wrong (try airbearing discrepancy on these logs)"
+        )
+    if pd_oe:
+        warn_oe += excitation_warnings(cov_oe, cond_oe, weak_oe, theta, free_oe)
     warn_oe += _null_warning(status_oe)
     prior_z_oe = {}
     if prior is not None:
@@ -369,6 +389,17 @@ def _check_scale(testbed, data, fixed, prior, prior_weight) -> None:
         "and r) and nothing known breaks it; give the in-plane offset (--known-offset-xy), "
         "log with the sliders at known non-zero positions, or command a known dipole"
     )
+
+
+def _positive_definite(cov, free, js) -> bool:
+    """Is the free block of ``cov`` (scaled: js, mm) finite and positive definite?"""
+    idx = np.flatnonzero(free)
+    sc = np.where(idx < 6, js, 1e-3)
+    C = cov[np.ix_(idx, idx)] / np.outer(sc, sc)
+    if not np.all(np.isfinite(C)):
+        return False
+    w = np.linalg.eigvalsh(0.5 * (C + C.T))
+    return bool(w[0] > 0)
 
 
 def _has_bounds(prior) -> bool:
