@@ -34,3 +34,20 @@ def test_two_step_reduces_kinetic_energy_spread(seed):
     # step 1 reaches seed 004's in-plane residual ("in the order of 1e-7 m"); the stepper's
     # step (2 um of a 0.465 kg mass on 6.3 kg) quantises it to 0.15 um
     assert np.all(np.abs(out.residual_offset_step1_m[:2]) <= 3e-7), out
+
+
+@pytest.mark.slow
+def test_cli_two_step_json_keys(tmp_path):
+    """``balance --two-step --json``: one key per TwoStepResult field, in order."""
+    import json
+
+    from cli_run import run
+
+    from airbearing.io.testbed import write_testbed
+
+    tb_file, out = tmp_path / "seed004.toml", tmp_path / "two.json"
+    write_testbed(_seed004_masses(), tb_file)  # the library test's testbed, noise seed 0
+    assert run(["balance", str(tb_file), "--two-step", "--json", str(out)]) == 0
+    data = json.loads(out.read_text())
+    assert list(data) == [f.name for f in dataclasses.fields(TwoStepResult)]
+    assert data["ke_reduction"] >= 0.99  # seed 004: 99.75 % in simulation

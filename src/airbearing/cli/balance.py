@@ -93,7 +93,10 @@ def _sweep_rows(sw) -> list[dict]:
 @app.command()
 def balance(
     testbed: Annotated[str, typer.Argument(help="Testbed file or built-in name.")],
-    method: Annotated[Method, typer.Option(help="Balancing law.")] = Method.mixed,
+    method: Annotated[
+        Method | None,
+        typer.Option(help="Balancing law (default: mixed; with --two-step seed 004's lyapunov)."),
+    ] = None,
     duration: Annotated[float, typer.Option(help="Run length, s (seed 000: 300).")] = 300.0,
     initial_offset_mm: Annotated[
         float, typer.Option(help="In-plane slider start, mm (seed 000: -0.5, +0.5).")
@@ -168,6 +171,8 @@ def balance(
         from airbearing.analysis.balancing.comparison import parse_sweep
 
         sweep_spec = parse_sweep(sweep)
+    if method is None:
+        method = Method.lyapunov if two_step_ else Method.mixed
     tb = testbed_arg(testbed)
     if not two_step_:  # each run keeps its whole log in memory
         longest = duration
