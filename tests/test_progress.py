@@ -9,6 +9,7 @@ from __future__ import annotations
 import io
 import subprocess
 import sys
+import time
 
 import pytest
 from cli_run import run
@@ -27,6 +28,7 @@ def _loud():
 def test_plain_lines_say_what_and_how_far(monkeypatch):
     buf = io.StringIO()
     monkeypatch.setattr(sys, "stderr", buf)
+    monkeypatch.setattr(show_progress, "PLAIN_DELAY", 0.0)
     with show_progress.progress_display("demo") as progress:
         progress("section 1 of 2: CMG slews", 0, 2)
         progress("section 1 of 2: CMG slews", 0, 2)  # same step within a second: not repeated
@@ -35,6 +37,21 @@ def test_plain_lines_say_what_and_how_far(monkeypatch):
     assert lines[0] == "demo: section 1 of 2: CMG slews [0/2]"
     assert lines[1].startswith("demo: section 2 of 2: balancing [1/2, about ")
     assert len(lines) == 2
+
+
+def test_work_refused_at_once_prints_no_progress(monkeypatch, capfd):
+    """A command that fails before PLAIN_DELAY prints its one error line and nothing else."""
+    monkeypatch.setattr(show_progress, "PLAIN_DELAY", 0.5)
+    with pytest.raises(ValueError), show_progress.progress_display("gains") as progress:
+        progress("tuning the balancing loop")
+        raise ValueError("bad input")
+    time.sleep(0.7)  # the held-back line would have been printed by now
+    assert capfd.readouterr().err == ""
+    # work that lasts past the delay shows its line
+    with show_progress.progress_display("gains") as progress:
+        progress("tuning the balancing loop")
+        time.sleep(0.8)
+    assert capfd.readouterr().err == "gains: tuning the balancing loop\n"
 
 
 def test_quiet_silences(monkeypatch):

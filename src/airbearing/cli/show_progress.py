@@ -2,17 +2,20 @@
 
 On a terminal: a ``rich`` bar with what is being done, steps and ETA. Not on a
 terminal (a pipe, a log file, CI): plain one-line updates on stderr, at most one a
-second unless the step description changes. ``--quiet`` (global) silences both.
+second unless the step description changes, starting once the work has run
+:data:`PLAIN_DELAY` s (a command refused at once prints only its error line).
+``--quiet`` (global) silences both.
 """
 
 from __future__ import annotations
 
 import sys
+import threading
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 
-__all__ = ["QUIET", "progress_display", "set_quiet"]
+__all__ = ["QUIET", "PLAIN_DELAY", "progress_display", "set_quiet"]
 
 QUIET = {"on": False}
 
@@ -22,12 +25,33 @@ def set_quiet(on: bool) -> None:
     QUIET["on"] = bool(on)
 
 
+#: s: plain lines start only once the work has run this long, so a command that fails
+#: at once on bad input prints its one error line and nothing else.
+PLAIN_DELAY = 1.0
+
+
 class _Plain:
     def __init__(self, label: str, stream) -> None:
         self.label, self.stream = label, stream
         self.last_what: str | None = None
         self.last_t = 0.0
         self.t0 = time.monotonic()
+        self.pending: str | None = None
+        self.timer: threading.Timer | None = None
+        self.lock = threading.Lock()
+
+    def _flush(self) -> None:
+        with self.lock:
+            if self.pending is not None:
+                print(self.pending, file=self.stream, flush=True)
+                self.pending = None
+
+    def close(self) -> None:
+        """End of the work: a line still held back (work shorter than the delay) is dropped."""
+        if self.timer is not None:
+            self.timer.cancel()
+        with self.lock:
+            self.pending = None
 
     def __call__(self, what: str, done=None, total=None) -> None:
         now = time.monotonic()
@@ -41,7 +65,14 @@ class _Plain:
             if 0 < frac < 1:
                 eta = f", about {(now - self.t0) * (1 - frac) / frac:.0f} s left"
             count = f" [{done:g}/{total:g}{eta}]"
-        print(f"{self.label}: {what}{count}", file=self.stream, flush=True)
+        with self.lock:
+            self.pending = f"{self.label}: {what}{count}"
+        if now - self.t0 >= PLAIN_DELAY:
+            self._flush()
+        elif self.timer is None:
+            self.timer = threading.Timer(PLAIN_DELAY - (now - self.t0), self._flush)
+            self.timer.daemon = True
+            self.timer.start()
 
 
 class _Rich:
@@ -71,7 +102,11 @@ def progress_display(label: str) -> Iterator:
         return
     stream = sys.stderr
     if not stream.isatty():
-        yield _Plain(label, stream)
+        plain = _Plain(label, stream)
+        try:
+            yield plain
+        finally:
+            plain.close()
         return
     from rich.console import Console
     from rich.progress import (
