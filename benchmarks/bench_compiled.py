@@ -86,7 +86,10 @@ def rollouts() -> list[tuple[str, float, float, float]]:
 def window() -> tuple[float, float, float] | None:
     """One discrepancy window (residual + Jacobian): VM and compiled CPU time, compile wall time."""
     try:
-        from airbearing.analysis import shooting as sh
+        try:
+            from airbearing.analysis.shooting import functions as sh
+        except ImportError:
+            from airbearing.analysis import shooting as sh
         from airbearing.io.testbed import load_testbed
         from airbearing.models.model import build_model
     except ImportError:
