@@ -305,8 +305,8 @@ def row_ident4(cur: Tree, base: Tree, cache: Path, inputs: dict, work: Path) -> 
 
 def row_ident6(cur: Tree, base: Tree, cache: Path, inputs: dict, work: Path) -> Row:
     cmd = _identify(inputs["ident6"], inputs["testbed"])
-    b = timed(cmd, base, cache, repeat=2)
-    m = timed(cmd, cur, cache, repeat=3)
+    b = timed(cmd, base, cache)
+    m = timed(cmd, cur, cache, repeat=2)
     what = "identify 10^6 samples (Parquet), end to end"
     return Row(what, "< 3 s", b, m, *_under(m, 3.0))
 
@@ -317,7 +317,7 @@ def row_discrepancy(cur: Tree, base: Tree, cache: Path, inputs: dict, work: Path
 
     first = timed(cmd(inputs["disc"]), cur, cache)  # the first process compiles
     m = timed(cmd(inputs["disc_b"]), cur, cache)  # a new process, another log
-    b_first = timed(cmd(inputs["disc"]), base, cache)
+    # the old code kept nothing across processes: its second process is like its first
     b = timed(cmd(inputs["disc_b"]), base, cache)
     return Row(
         "discrepancy, 60 s log, new process after the first",
@@ -325,9 +325,8 @@ def row_discrepancy(cur: Tree, base: Tree, cache: Path, inputs: dict, work: Path
         b,
         m,
         *_under(m, 8.0),
-        baseline_text=f"{fmt(b)} (first {fmt(b_first)})",
-        measured_text=f"{fmt(m)} (first {fmt(first)})",
-        extra={"first_process_s": first.best, "baseline_first_s": b_first.best},
+        measured_text=f"{fmt(m)}; first process {fmt(first)}",
+        extra={"first_process_s": first.best, "first_process_cpu_s": first.best_cpu},
     )
 
 

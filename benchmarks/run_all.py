@@ -40,6 +40,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--baseline-rev", default=e2e.BASELINE_REV)
     ap.add_argument("--no-slow-baselines", action="store_true")
     ap.add_argument("--json", type=Path, default=None, help="also write the numbers here")
+    ap.add_argument(
+        "--markdown", type=Path, default=None, help="rewrite the table here after each row"
+    )
     ap.add_argument("--keep", action="store_true", help="keep the scratch folder")
     args = ap.parse_args(argv)
     names = [n.strip() for n in args.only.split(",") if n.strip()]
@@ -74,6 +77,8 @@ def main(argv: list[str] | None = None) -> int:
             kw = {"baseline": False} if n in ("suite", "demo") and args.no_slow_baselines else {}
             r = fn(cur, base, cache, inputs, work, **kw)
             rows.append(r)
+            if args.markdown:
+                args.markdown.write_text(e2e.table(rows) + "\n")
             b, m = e2e.fmt(r.baseline, r.baseline_text), e2e.fmt(r.measured, r.measured_text)
             _say(f"  {b} -> {m}")
         load1 = os.getloadavg()
