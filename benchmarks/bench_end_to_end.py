@@ -371,8 +371,8 @@ ROWS: dict[str, Callable] = {
     "ident4": row_ident4,
     "ident6": row_ident6,
     "discrepancy": row_discrepancy,
-    "suite": row_suite,
     "demo": row_demo,
+    "suite": row_suite,
 }
 
 
