@@ -220,3 +220,23 @@ def test_a_bad_ref_file_falls_back_to_the_generated_source(tmp_path, ref_text):
     assert again["last"] == "disk"  # found through the C source's key, not compiled again
     np.testing.assert_allclose(again["val"], again["ref"], rtol=1e-12, atol=0)
     assert ref.read_text().strip() == lib.name  # and the ref is repaired
+
+
+def test_command_line_info_and_clear(tmp_path):
+    _run(tmp_path)
+    env = {**os.environ, cm.CACHE_ENV: str(tmp_path)}
+
+    def cmd(*args):
+        return subprocess.run(
+            [sys.executable, "-m", "airbearing.models.compiled", *args],
+            env=env,
+            capture_output=True,
+            text=True,
+        )
+
+    info = cmd("info")
+    assert info.returncode == 0 and "1 compiled functions" in info.stdout
+    cleared = cmd("clear")
+    assert cleared.returncode == 0 and not _libs(tmp_path)
+    assert "0 compiled functions" in cmd("info").stdout
+    assert cmd("bogus").returncode == 2
