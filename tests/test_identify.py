@@ -488,6 +488,22 @@ def test_one_slider_setting_without_offset_warns(truth_tb, prior_tb):
     logs = _logs(truth_tb, 2, duration=10, runs=RUNS[:1])
     res = identify_platform(prior_tb, logs, method="equation-error")
     assert any("unidentifiable parameters" in w for w in res.warnings)
+    # the principal inertias carry the scale: no number for them (issue 13 item 6)
+    for n in ("J_xx", "J_yy", "J_zz"):
+        assert res.std_status[n].startswith("not identifiable from this log")
+    assert np.all(np.isnan(np.diag(res.std_inertia)))
+
+
+@pytest.mark.slow
+def test_one_slider_setting_output_error_says_not_identifiable(truth_tb, prior_tb):
+    """The same log through output error: its Fisher matrix is singular to working
+    precision along the common scale of J and r; every parameter says so, with the hint."""
+    logs = _logs(truth_tb, 2, duration=10, runs=RUNS[:1])
+    res = identify_platform(prior_tb, logs)
+    assert np.all(np.isnan(res.std))
+    assert set(res.not_identifiable) == set(ir.PARAM_NAMES)
+    assert all("singular" in why and "weakest" in why for why in res.not_identifiable.values())
+    assert res.to_json()["not_identifiable"] == res.not_identifiable
 
 
 # ---------------------------------------------------------------------------- CLI
