@@ -318,3 +318,15 @@ def test_simulated_free_oscillation_with_injected_glitches(kind):
     assert glitched.quality.outlier_rows == rows
     first, rows = artefacts.with_first_sample_artefact(log)
     assert first.quality.outlier_rows == rows
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", ["cmg-yaw", "cmg-3dof"])
+def test_noise_free_controlled_slew_has_no_outlier(name):
+    # the built-in CMG testbeds have an ideal gyro: a 180 deg slew leaves and enters
+    # gimbal-rate saturation, kinks of the rate that are smooth motion, not glitches
+    from airbearing.analysis.simulation.scenarios import slew
+    from airbearing.io import load_testbed
+
+    log = slew(load_testbed(name), angle_deg=180, duration=40, seed=1, ideal=True).log
+    assert log.quality.outlier_rows == ()

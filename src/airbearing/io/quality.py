@@ -129,6 +129,7 @@ _SCALE_ROWS = 2000  # rows spread over the log on which the noise scales are mea
 _MIN_SCALE_SAMPLES = 8  # fewer residuals than this give no scale (the floor is used)
 _RECOMPUTE = 3  # rows within this many k of a newly excluded sample are refitted
 _LOCAL = 25  # half-width (samples) of the running median that gives the local scale
+_ROUGH = 0.2  # noise-free channels: scale floor per unit median |second difference|
 
 
 @dataclass(frozen=True)
@@ -519,7 +520,28 @@ class _Scorer:
             med = frame.rolling(2 * _LOCAL + 1, center=True, min_periods=_LOCAL).median()
             local[start:stop] = np.sqrt(med.to_numpy())
         ratio = local / self.noise[None, :]
-        return np.where(np.isfinite(ratio), np.maximum(ratio, 1.0), 1.0)
+        factor = np.where(np.isfinite(ratio), np.maximum(ratio, 1.0), 1.0)
+        # A channel without noise (its scale at the physical floor: a simulation)
+        # cannot tell a glitch from a kink (a torque switched between samples, a rate
+        # limit reached) by statistics: its scale is never below _ROUGH x the running
+        # median of |second difference|, the motion's own sample-to-sample change of
+        # slope. Any real sensor noise is far above it, so it acts on noise-free logs only.
+        quiet = self.noise <= g.floor * (1 + 1e-9)
+        quiet &= g.floor <= ABSOLUTE_FLOOR * (1 + 1e-9)
+        if quiet.any():
+            d2 = np.zeros(g.values.shape)
+            for start, stop in self.segments:
+                if stop - start >= 3:
+                    d2[start + 1 : stop - 1] = np.diff(g.values[start:stop], 2, axis=0)
+            size = np.linalg.norm(d2, axis=1, keepdims=True) if g.vector else np.abs(d2)
+            rough = np.zeros(size.shape)
+            for start, stop in self.segments:
+                frame = pd.DataFrame(size[start:stop])
+                med = frame.rolling(2 * _LOCAL + 1, center=True, min_periods=1).median()
+                rough[start:stop] = _ROUGH * med.to_numpy()
+            floor = np.maximum(factor, rough / self.noise[None, :])
+            factor = np.where(quiet[None, :], floor, factor)
+        return factor
 
     @property
     def noise(self) -> np.ndarray:
