@@ -84,3 +84,27 @@ def test_chunked_loop_without_a_compiler_runs_in_the_virtual_machine(monkeypatch
     # the same virtual machine on the same expressions: identical to rounding
     np.testing.assert_allclose(Z, Zr.full(), rtol=1e-12, atol=1e-14)
     np.testing.assert_allclose(R, Rr.full(), rtol=1e-12, atol=1e-14)
+
+
+def test_chunked_loop_with_two_inputs_per_step(tmp_path, monkeypatch):
+    """A replay step ``(x, u, p, dt) -> x_next``: inputs and logged intervals per step."""
+    monkeypatch.setenv("AIRBEARING_CACHE_DIR", str(tmp_path))
+    x, u = ca.SX.sym("x", 2), ca.SX.sym("u")
+    p, dt = ca.SX.sym("p", 2), ca.SX.sym("dt")
+    step = ca.Function(
+        "replay_step",
+        [x, u, p, dt],
+        [ca.vertcat(x[0] + dt * x[1], x[1] + dt * (u - p[0] * ca.sin(x[0]) - p[1] * x[1]))],
+    )
+    n = 57
+    rng = np.random.default_rng(1)
+    U = rng.normal(0, 0.5, (1, n))
+    DT = 0.05 + rng.uniform(-0.01, 0.01, n)  # jittered intervals, given as (n,)
+    p = np.array([9.81, 0.3])
+    (X,) = ChunkedLoop(step, n, chunk=10, mapped=(1, 3))(np.array([0.2, 0.0]), U, p, DT)
+    Xr = step.mapaccum("ref", n, [0], [0])(np.array([0.2, 0.0]), U, p, DT[None, :])
+    np.testing.assert_allclose(X, Xr.full(), rtol=1e-12, atol=1e-14)  # same arithmetic
+    with pytest.raises(ValueError, match="shape"):
+        ChunkedLoop(step, n, chunk=10, mapped=(1, 3))(np.zeros(2), U, p, DT[:-1])
+    with pytest.raises(ValueError, match="mapped"):
+        ChunkedLoop(step, n, mapped=(0,))

@@ -23,24 +23,28 @@ CHUNK = 250
 
 
 class ChunkedLoop:
-    """``step.mapaccum(n)`` as compiled chunks: ``(z0, V, *consts) -> (Z, ROWS)``.
+    """``step.mapaccum(n)`` as compiled chunks: ``(z0, *inputs) -> (Z, *ROWS)``.
 
     Parameters
     ----------
     step : casadi.Function
-        ``(z, v, *consts) -> (z_next, *rows)``: input 0 and output 0 are the carried
-        state (same shape, a column), input 1 is one column of per-step data, the
-        other inputs are held for the whole run; every output is a column.
+        ``(z, ...) -> (z_next, *rows)``: input 0 and output 0 are the carried state
+        (same shape, a column); the inputs named by ``mapped`` take one column per
+        step; the others are held for the whole run; every output is a column and
+        every input dense.
     n : int
         Steps.
     chunk : int
         Steps per compiled chunk.
+    mapped : tuple of int
+        Inputs with one column per step (default: input 1).
 
-    Calling it returns NumPy arrays ``Z (nz, n)`` (``z_1 .. z_n``) and one
-    ``(n_out_i, n)`` array per further output, the same values as the ``mapaccum``.
+    Calling it with ``(z0, ...)`` (mapped inputs as ``(rows, n)`` arrays) returns
+    NumPy arrays ``Z (nz, n)`` (``z_1 .. z_n``) and one ``(n_out_i, n)`` array per
+    further output: the same values as ``step.mapaccum(name, n, [0], [0])``.
     """
 
-    def __init__(self, step, n: int, chunk: int = CHUNK) -> None:
+    def __init__(self, step, n: int, chunk: int = CHUNK, mapped: tuple = (1,)) -> None:
         import casadi as ca
 
         if n < 1:
@@ -48,54 +52,78 @@ class ChunkedLoop:
         for i in range(step.n_out()):
             if step.size2_out(i) != 1:
                 raise ValueError(f"{step.name()} output {i} is not a column")
+        for i in range(step.n_in()):
+            if not step.sparsity_in(i).is_dense():
+                raise ValueError(f"{step.name()} input {step.name_in(i)} is not dense")
+        self.mapped = tuple(sorted(set(mapped)))
+        if 0 in self.mapped or not all(0 < i < step.n_in() for i in self.mapped):
+            raise ValueError(f"mapped inputs {mapped}: expected indices 1..{step.n_in() - 1}")
+        for i in self.mapped:
+            if step.size2_in(i) != 1:
+                raise ValueError(f"{step.name()} input {step.name_in(i)} is not a column")
         self.n = int(n)
         self.K = K = int(chunk)  # n itself would give every run length its own library
         self.step = step
-        z = ca.MX.sym("z", step.sparsity_in(0))
-        V = ca.MX.sym("V", step.size1_in(1), K)
-        consts = [ca.MX.sym(step.name_in(i), step.sparsity_in(i)) for i in range(2, step.n_in())]
-        outs = step.mapaccum(f"{step.name()}_acc", K, [0], [0])(z, V, *consts)
-        fn = ca.Function(f"{step.name()}_x{K}", [z, V, *consts], outs)
-        self.fn = compiled(fn)
+        args = [ca.MX.sym("z", step.sparsity_in(0))]
+        for i in range(1, step.n_in()):
+            if i in self.mapped:
+                args.append(ca.MX.sym(step.name_in(i), step.size1_in(i), K))
+            else:
+                args.append(ca.MX.sym(step.name_in(i), step.sparsity_in(i)))
+        outs = step.mapaccum(f"{step.name()}_acc", K, [0], [0]).call(args)
+        self.fn = compiled(ca.Function(f"{step.name()}_x{K}", args, outs))
 
-    def __call__(self, z0, V, *consts):
+    def __call__(self, z0, *inputs):
         n, K, step = self.n, self.K, self.step
-        nz, nv = step.size1_in(0), step.size1_in(1)
+        if len(inputs) != step.n_in() - 1:
+            raise ValueError(f"{step.name()} takes {step.n_in()} inputs, got {len(inputs) + 1}")
+        nz = step.size1_in(0)
         z0 = np.ascontiguousarray(np.asarray(z0, dtype=float).reshape(-1))
         if z0.size != nz:
             raise ValueError(f"z0 has {z0.size} entries, expected {nz}")
-        # column k of V is step k; rows of Vt are contiguous columns (CasADi is column-major)
-        Vt = np.asarray(V, dtype=float)
-        Vt = np.ascontiguousarray(Vt.T if Vt.shape == (nv, n) else Vt.reshape(n, nv))
-        cs = []
-        for i, c in enumerate(consts, start=2):
-            a = np.asarray(c, dtype=float)
-            # a dense input is column-major: pass the transpose's C-order memory
-            cs.append(np.ascontiguousarray(a.T if a.ndim == 2 else a.reshape(-1)))
-            if cs[-1].size != step.numel_in(i):
-                raise ValueError(f"input {step.name_in(i)} has {a.size} entries")
+        data = {}
+        for i, a in enumerate(inputs, start=1):
+            a = np.asarray(a, dtype=float)
+            if i in self.mapped:
+                rows = step.size1_in(i)
+                if a.shape != (rows, n) and not (rows == 1 and a.shape == (n,)):
+                    raise ValueError(
+                        f"input {step.name_in(i)} has shape {a.shape}, expected ({rows}, {n})"
+                    )
+                # column k is step k; rows of the transpose are contiguous columns
+                data[i] = np.ascontiguousarray(a.reshape(rows, n).T)
+            else:
+                # dense and column-major: the transpose's C-order memory
+                data[i] = np.ascontiguousarray(a.T if a.ndim == 2 else a.reshape(-1))
+                if data[i].size != step.numel_in(i):
+                    raise ValueError(f"input {step.name_in(i)} has {a.size} entries")
         outs = [np.empty((n, step.size1_out(i))) for i in range(step.n_out())]
         buf, evaluate = self.fn.buffer()
-        for i, c in enumerate(cs, start=2):
-            buf.set_arg(i, memoryview(c))
+        for i, c in data.items():
+            if i not in self.mapped:
+                buf.set_arg(i, memoryview(c))
         q, r = divmod(n, K)
         z = z0
         for j in range(q):
             a, b = j * K, (j + 1) * K
             buf.set_arg(0, memoryview(z))
-            buf.set_arg(1, memoryview(Vt[a:b]))
+            for i in self.mapped:
+                buf.set_arg(i, memoryview(data[i][a:b]))
             for i, o in enumerate(outs):
                 buf.set_res(i, memoryview(o[a:b]))
             evaluate()
             z = np.ascontiguousarray(outs[0][b - 1])
         if r:
             # the last, partial chunk: pad with the last column (finite, discarded)
-            vpad = np.empty((K, nv))
-            vpad[:r] = Vt[q * K :]
-            vpad[r:] = Vt[-1]
+            pads = {}
+            for i in self.mapped:
+                pads[i] = np.empty((K, data[i].shape[1]))
+                pads[i][:r] = data[i][q * K :]
+                pads[i][r:] = data[i][-1]
             tmp = [np.empty((K, o.shape[1])) for o in outs]
             buf.set_arg(0, memoryview(z))
-            buf.set_arg(1, memoryview(vpad))
+            for i in self.mapped:
+                buf.set_arg(i, memoryview(pads[i]))
             for i, o in enumerate(tmp):
                 buf.set_res(i, memoryview(o))
             evaluate()
