@@ -54,7 +54,11 @@ segment (never across a gap) and each channel group:
    any real sensor) or ``1e-9`` of the channel's magnitude, so that a noise-free
    simulated log is judged against a physical noise, not the fits' own rounding.
    Where the log is locally rougher than overall (a running median of the squared
-   normalised residuals over 51 samples), the local scale is used.
+   normalised residuals over 51 samples), the local scale is used. A channel with
+   no noise at all (a simulation: its scale at the floor) cannot tell a glitch from
+   a kink (a torque switched, a rate limit reached) by statistics; its scale is
+   never below 0.2 x the running median of its |second difference| (the motion's
+   own change of slope per sample), which real sensor noise always exceeds.
 5. **Threshold.** A sample is suspect when a channel's normalised residual exceeds
    6 scales (two-sided Gaussian tail 2e-9; for the quaternion, ``|r|^2`` above
    chi-square(3) at 2e-9, i.e. 43.4 squared scales). With 3 rate channels and the
