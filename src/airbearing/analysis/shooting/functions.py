@@ -13,6 +13,8 @@ import weakref
 from collections import OrderedDict
 
 import casadi as ca
+import numpy as np
+import scipy.sparse as sp
 
 from airbearing.models import quaternion as quat
 from airbearing.models.model import Model
@@ -241,49 +243,143 @@ def _build_problem(model, L, nw, K, outputs, substeps, jit):
 
 
 def _problem_solver(model, L, nw, K, outputs, substeps, jit):
+    """``(solver, keep)``: the IPOPT solver and the Python objects it calls (kept alive)."""
     key = ("solver", structure_key(model), L, nw, K, outputs, substeps, jit)
     return _cached(key, lambda: _build_solver(model, L, nw, K, outputs, substeps, jit))
 
 
+_PATTERNS: OrderedDict = OrderedDict()
+
+
+def to_csc(J: ca.DM) -> sp.csc_matrix:
+    """A CasADi sparse matrix as scipy CSC, its (constant) pattern converted once."""
+    spy = J.sparsity()
+    key = (spy.hash(), spy.size1(), spy.size2(), spy.nnz())
+    pat = _PATTERNS.get(key)
+    if pat is None:
+        pat = (np.asarray(spy.row(), dtype=np.int64), np.asarray(spy.colind(), dtype=np.int64))
+        _PATTERNS[key] = pat
+        while len(_PATTERNS) > CACHE_SIZE:
+            _PATTERNS.popitem(last=False)
+    data = np.asarray(J.nonzeros(), dtype=float)
+    return sp.csc_matrix((data, pat[0], pat[1]), shape=(spy.size1(), spy.size2()))
+
+
+class _Oracle:
+    """The weighted residual ``r`` and its Jacobian at the last point, shared by IPOPT's
+    objective, gradient and Gauss-Newton Hessian: one compiled evaluation per iterate."""
+
+    def __init__(self, fr, fj, n_p: int, K: int, n_v: int) -> None:
+        self.fr, self.fj = fr, fj
+        self.n_p, self.K, self.n_v = n_p, K, n_v
+        self.z = self.par = self.r = self.J = None
+
+    def _args(self, z, par):
+        n_p, K, n_v = self.n_p, self.K, self.n_v
+        pb = par[:n_p]
+        S = par[n_p : n_p + n_p * K].reshape(n_p, K, order="F")
+        scale = par[n_p + n_p * K : n_p + n_p * K + n_v]
+        return z * scale, pb, S, par[n_p + n_p * K + n_v :], scale
+
+    def _same(self, z, par) -> bool:
+        return self.z is not None and np.array_equal(z, self.z) and np.array_equal(par, self.par)
+
+    def r_at(self, z, par) -> np.ndarray:
+        if not self._same(z, par):
+            v, pb, S, data, _ = self._args(z, par)
+            self.z, self.par, self.J = z.copy(), par.copy(), None
+            self.r = self.fr(v, pb, S, data).full().ravel()
+        return self.r
+
+    def rj_at(self, z, par):
+        if not (self._same(z, par) and self.J is not None):
+            v, pb, S, data, scale = self._args(z, par)
+            r, J = self.fj(v, pb, S, data)
+            self.z, self.par = z.copy(), par.copy()
+            self.r = r.full().ravel()
+            self.J = to_csc(J) @ sp.diags(scale)  # scipy CSC (sparse windows)
+        return self.r, self.J
+
+
+class _Call(ca.Callback):
+    """A CasADi Function evaluated in Python (optionally with a Jacobian Function)."""
+
+    def __init__(self, name, sizes, out_sp, fn, jac=None) -> None:
+        ca.Callback.__init__(self)
+        self.sizes, self.out_sp, self.fn, self.jac = sizes, out_sp, fn, jac
+        self.construct(name, {})
+
+    def get_n_in(self):
+        return len(self.sizes)
+
+    def get_n_out(self):
+        return len(self.out_sp)
+
+    def get_sparsity_in(self, i):
+        return ca.Sparsity.dense(self.sizes[i], 1)
+
+    def get_sparsity_out(self, i):
+        return self.out_sp[i]
+
+    def eval(self, arg):
+        return self.fn(*[np.asarray(a, dtype=float).ravel() for a in arg])
+
+    def has_jacobian(self):
+        return self.jac is not None
+
+    def get_jacobian(self, name, inames, onames, opts):
+        return self.jac(name)
+
+
 def _build_solver(model, L, nw, K, outputs, substeps, jit):
-    """IPOPT on ``z = v / scale``: objective 0.5 |r|^2, gradient J^T r, Hessian J^T J."""
+    """IPOPT on ``z = v / scale``: objective 0.5 |r|^2, gradient J^T r, Hessian J^T J.
+
+    Gauss-Newton: no second derivatives through the rollout. The objective, its gradient
+    and the Hessian come from one compiled evaluation of ``(r, J)`` per iterate (a shared
+    :class:`_Oracle`; trial points of the line search evaluate ``r`` alone). The
+    objective's derivative in the solver parameters is declared structurally zero: IPOPT
+    never uses it (no multipliers of the parameters are computed).
+    """
     fr, fj, _ = _problem_functions(model, L, nw, K, outputs, substeps, jit)
-    fr_plain = _problem_functions(model, L, nw, K, outputs, substeps, False)[0]
     nd = sum(delta_layout(model, outputs))
     n_v = K + nd * nw
     n_p = model.n_p
-    n_data = fr.size1_in(3)
+    n_par = n_p + n_p * K + n_v + fr.size1_in(3)
+    o = _Oracle(fr, fj, n_p, K, n_v)
+
+    def f(z, par):
+        r = o.r_at(z, par)
+        return [0.5 * float(r @ r)]
+
+    def grad(z, par):
+        r, J = o.rj_at(z, par)
+        return [0.5 * float(r @ r), np.asarray(J.T @ r).ravel()]
+
+    def jac_f(name):
+        def fn(z, par, _out):
+            r, J = o.rj_at(z, par)
+            return [np.asarray(J.T @ r).reshape(1, -1), np.zeros((1, 0))]
+
+        return _Call(name, [n_v, n_par, 1], [ca.Sparsity.dense(1, n_v), ca.Sparsity(1, n_par)], fn)
+
+    def hess(z, par, lam_f, _lam_g):
+        _, J = o.rj_at(z, par)
+        return [np.triu(lam_f[0] * (J.T @ J).toarray())]
+
+    F = _Call("nlp_f_cb", [n_v, n_par], [ca.Sparsity.dense(1, 1)], f, jac_f)
+    G = _Call(
+        "nlp_grad_f", [n_v, n_par], [ca.Sparsity.dense(1, 1), ca.Sparsity.dense(n_v, 1)], grad
+    )
+    H = _Call("nlp_hess_l", [n_v, n_par, 1, 0], [ca.Sparsity.upper(n_v)], hess)
     z = ca.MX.sym("z", n_v)
-    par = ca.MX.sym("par", n_p + n_p * K + n_v + n_data)
-    pb, S = par[:n_p], ca.reshape(par[n_p : n_p + n_p * K], n_p, K)
-    scale = par[n_p + n_p * K : n_p + n_p * K + n_v]
-    data = par[n_p + n_p * K + n_v :]
-    rz, Jv = fj(z * scale, pb, S, data)
-    Jz = Jv * ca.repmat(scale.T, Jv.shape[0], 1)
-    lam = ca.MX.sym("lam_f")
-    grad_f = ca.Function(
-        "nlp_grad_f",
-        [z, par],
-        [0.5 * ca.sumsqr(rz), ca.mtimes(Jz.T, rz)],
-        ["x", "p"],
-        ["f", "grad"],
-    )
-    hess = ca.Function(
-        "nlp_hess_l",
-        [z, par, lam, ca.MX.sym("lam_g", 0)],
-        [ca.triu(lam * ca.mtimes(Jz.T, Jz))],
-        ["x", "p", "lam_f", "lam_g"],
-        ["triu_hess_gamma_x_x"],
-    )
-    return ca.nlpsol(
+    par = ca.MX.sym("par", n_par)
+    solver = ca.nlpsol(
         "output_error",
         "ipopt",
-        # the objective itself through the uncompiled (differentiable) residual: IPOPT's set-up
-        # differentiates it once; every iteration uses the compiled gradient and Hessian
-        {"x": z, "p": par, "f": 0.5 * ca.sumsqr(fr_plain(z * scale, pb, S, data))},
+        {"x": z, "p": par, "f": F(z, par)},
         {
-            "grad_f": grad_f,
-            "hess_lag": hess,
+            "grad_f": G,
+            "hess_lag": H,
             "calc_lam_p": False,
             "calc_lam_x": False,
             "calc_multipliers": False,
@@ -297,3 +393,4 @@ def _build_solver(model, L, nw, K, outputs, substeps, jit):
             "ipopt.mu_strategy": "adaptive",
         },
     )
+    return solver, (F, G, H, o)

@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+import scipy.sparse as sp
 
 from airbearing.analysis.shooting.functions import (
     DEFAULT_SUBSTEPS,
@@ -14,6 +15,7 @@ from airbearing.analysis.shooting.functions import (
     _problem_functions,
     _problem_solver,
     delta_layout,
+    to_csc,
 )
 from airbearing.errors import SolverError
 from airbearing.models.model import Model
@@ -321,7 +323,7 @@ class ShootingProblem:
     def residual(self, delta: np.ndarray, p: np.ndarray) -> np.ndarray:
         """Weighted residual at ``delta`` (n_delta, n_windows) and parameters ``p``."""
         v, Sp = self._v(delta, None)
-        return np.asarray(self._eval(0, v, np.asarray(p, dtype=float), Sp)).ravel()
+        return self._eval(0, v, np.asarray(p, dtype=float), Sp).full().ravel()
 
     def gap_of_residual(self, r: np.ndarray, mask: np.ndarray | None = None) -> float:
         """RMS of the primary output's residual over usable rows (its unit)."""
@@ -353,7 +355,7 @@ class ShootingProblem:
         p_base = fit.p - S @ fit.theta if k else fit.p
         r, J = self._eval(1, v, p_base, Sp)
         keep = np.r_[np.arange(k), np.arange(K, J.shape[1])]
-        return np.asarray(r).ravel(), J.sparse().tocsc()[:, keep]
+        return r.full().ravel(), to_csc(J)[:, keep]
 
     def fit(
         self,
@@ -402,12 +404,12 @@ class ShootingProblem:
         lb[k:K] = ub[k:K] = 0.0  # unused slots
         v0 = np.clip(v0, lb, ub)
         r0, J0 = self._eval(1, v0, p_base, Sp)
-        r0 = np.asarray(r0).ravel()
+        r0 = r0.full().ravel()
         if not np.all(np.isfinite(r0)):
             raise SolverError(f"{name}: the replay is not finite at the starting point")
-        col = np.sqrt(np.asarray(J0.sparse().power(2).sum(axis=0)).ravel())
+        col = np.sqrt(np.asarray(to_csc(J0).power(2).sum(axis=0)).ravel())
         scale = np.where(col > 0, 1.0 / np.maximum(col, 1e-300), 1.0)
-        solver = _problem_solver(*self._key(K))
+        solver, _keep = _problem_solver(*self._key(K))
         par = np.concatenate([p_base, Sp.reshape(-1, order="F"), scale, self._data])
         sol = solver(x0=v0 / scale, lbx=lb / scale, ubx=ub / scale, p=par)
         stats = solver.stats()
@@ -415,14 +417,20 @@ class ShootingProblem:
         level = classify_status(status)
         if level == "error":
             raise SolverError(f"{name}: IPOPT did not converge ({status})")
-        v = np.asarray(sol["x"]).ravel() * scale
-        r, J = self._eval(1, v, p_base, Sp)
-        r = np.asarray(r).ravel()
+        z = sol["x"].full().ravel()
+        v = z * scale
+        oracle = _keep[-1]
+        if oracle.J is not None and oracle._same(z, par):
+            # IPOPT's last iterate was evaluated with its Jacobian: reuse it
+            r, J = oracle.r.copy(), oracle.J @ sp.diags(1.0 / scale)
+        else:
+            r, J = self._eval(1, v, p_base, Sp)
+            r, J = r.full().ravel(), to_csc(J)
         if not np.all(np.isfinite(r)):
             raise SolverError(f"{name}: the fitted replay is not finite")
         keep = np.r_[np.arange(k), np.arange(K, v.size)]
         v = v[keep]
-        J = J.sparse().tocsc()[:, keep]
+        J = sp.csc_matrix(J)[:, keep]
         rss = float(r @ r)
         n_free = v.size
         theta = v[:k]
