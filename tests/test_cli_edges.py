@@ -447,6 +447,11 @@ def test_outputs_plan_refuses_before_work(tmp_path):
         out.plan(tmp_path / "no" / "x.json", "--json", (".json",))
     with pytest.raises(InputError, match="is a folder"):
         out.plan(tmp_path, "--json", ())
+    if Path("/proc/self").is_dir():  # Linux: a folder no one can create files in, not even root
+        with pytest.raises(InputError, match="cannot write in folder '/proc'"):
+            out.plan("/proc/x.json", "--json", (".json",))
+        with pytest.raises(InputError, match="cannot create it in folder '/proc'"):
+            out.plan("/proc/d/report.html", "--out", (".html",), create_folder=True)
     # a folder to create: its parent must exist; commit creates it
     p = out.plan(tmp_path / "new" / "r.html", "--out", (".html",), create_folder=True)
     out.text(p, "<html></html>")

@@ -21,13 +21,24 @@ from airbearing.errors import InputError
 __all__ = ["Outputs"]
 
 
+def _probe(folder: Path, message: str) -> None:
+    """Create and remove a file in ``folder``: the one check that holds for root too (a
+    read-only mount, /proc), where ``os.access`` says yes."""
+    try:
+        fd, tmp = tempfile.mkstemp(dir=folder, prefix=".airbearing-probe-")
+    except OSError as e:
+        raise InputError(f"{message} ({e.strerror or e})") from None
+    os.close(fd)
+    os.unlink(tmp)
+
+
 class Outputs:
     """The output files of one command run."""
 
     def __init__(self) -> None:
         self._planned: dict[Path, str] = {}
         self._writers: list[tuple[Path, str, Callable[[Path], None]]] = []
-        self._make_folders: list[Path] = []
+        self._make_folders: list[tuple[Path, str]] = []
 
     def plan(
         self,
@@ -61,13 +72,14 @@ class Outputs:
                 raise InputError(f"{option} {folder}: folder '{parent}' does not exist")
             if not os.access(parent, os.W_OK | os.X_OK):
                 raise InputError(f"{option} {folder}: cannot create it in folder '{parent}'")
+            _probe(parent, f"{option} {folder}: cannot create it in folder '{parent}'")
             key = path.resolve()
             if key in self._planned:
                 raise InputError(
                     f"{option} {path}: the same file is already the {self._planned[key]}"
                 )
             self._planned[key] = option
-            self._make_folders.append(folder)
+            self._make_folders.append((folder, option))
             return path
         if not folder.exists():
             raise InputError(f"{option} {path}: folder '{folder}' does not exist")
@@ -79,6 +91,7 @@ class Outputs:
             path.exists() and not os.access(path, os.W_OK)
         ):
             raise InputError(f"{option} {path}: cannot write in folder '{folder}'")
+        _probe(folder, f"{option} {path}: cannot write in folder '{folder}'")
         key = path.resolve()
         if key in self._planned:
             raise InputError(f"{option} {path}: the same file is already the {self._planned[key]}")
@@ -117,7 +130,8 @@ class Outputs:
         made: list[Path] = []
         current = ("", Path())
         try:
-            for folder in self._make_folders:
+            for folder, option in self._make_folders:
+                current = (option, folder)
                 if not folder.exists():
                     folder.mkdir()
                     made.append(folder)
