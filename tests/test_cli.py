@@ -223,3 +223,19 @@ def test_summary_is_an_aligned_table_with_units(tmp_path, capsys):
     assert len(peak.split()[2].replace(".", "").lstrip("0")) <= 4  # 4 significant digits
     # the JSON keeps full precision
     assert json.loads(js.read_text())["peak_rate_deg_s"] == pytest.approx(value, rel=1e-3)
+
+
+def test_table_cells_are_plain():
+    import numpy as np
+
+    from airbearing.cli.tables import cell, summary_table, unit_of
+
+    assert cell(np.float64(5.0)) == "5" and cell(0.123456789) == "0.1235"
+    assert cell(None) == "—" and cell(float("nan")) == "—" and cell(float("inf")) == "∞"
+    assert cell(True) == "yes" and cell([1.0, 2.5]) == "1 2.5"
+    assert unit_of("peak_rate_deg_s") == ("peak rate", "deg/s")
+    assert unit_of("gimbal_min_deg") == ("gimbal min", "deg")
+    lines = summary_table({"t_peak_s": 1.6, "testbed": "cmg-yaw"}).splitlines()
+    assert lines[2].split() == ["t", "peak", "1.6", "s"]
+    # columns line up: the values start where the header's "value" starts
+    assert lines[2].index("1.6") == lines[0].index("value") == lines[3].index("cmg-yaw")
