@@ -45,9 +45,10 @@ def campaign_doc(runs: int, duration: float, seed: int = 11) -> dict:
 
 
 def _timed(fn):
-    t0 = time.perf_counter()
-    out = fn()
-    return time.perf_counter() - t0, out
+    """Wall time and this process's CPU time of ``fn()``, s."""
+    t0, c0 = time.perf_counter(), time.process_time()
+    fn()
+    return time.perf_counter() - t0, time.process_time() - c0
 
 
 def main() -> None:
@@ -70,34 +71,42 @@ def main() -> None:
             slew_summary(r)
 
     plain_reused()  # warm the structure cache
-    t_plain, _ = _timed(plain)
-    t_reused, _ = _timed(plain_reused)
+    t_plain, c_plain = _timed(plain)
+    t_reused, c_reused = _timed(plain_reused)
+    walls, cpus = {}, {}
     with tempfile.TemporaryDirectory() as tmp:
-        t_inproc, _ = _timed(lambda: run_campaign(c, Path(tmp) / "a.parquet"))
-        walls = {}
+        t_inproc, c_inproc = _timed(lambda: run_campaign(c, Path(tmp) / "a.parquet"))
         for n in (1, 2):
             with open_client(n) as client:
                 warm = parse_campaign(campaign_doc(2 * n, 5.0, seed=99), "warm-up")
                 run_campaign(warm, Path(tmp) / f"w{n}.parquet", client=client)
-                walls[n], _ = _timed(
+                w0 = sum(client.run(time.process_time).values())
+                walls[n], cpus[n] = _timed(
                     lambda n=n, client=client: run_campaign(
                         c, Path(tmp) / f"d{n}.parquet", client=client
                     )
                 )
+                cpus[n] += sum(client.run(time.process_time).values()) - w0
     per = 1e3 / c.runs
-    print(f"{c.runs} runs of a {a.duration:g} s slew (cmg-yaw), per run:")
-    print(f"  plain loop (scenarios.slew)          {t_plain * per:8.1f} ms")
-    print(f"  plain loop, structure reused          {t_reused * per:8.1f} ms")
-    print(f"  campaign in-process                   {t_inproc * per:8.1f} ms")
-    print(f"  campaign, 1 Dask worker               {walls[1] * per:8.1f} ms")
-    print(f"  campaign, 2 Dask workers              {walls[2] * per:8.1f} ms")
-    print(f"overhead per run, campaign in-process vs plain reused loop: "
-          f"{(t_inproc - t_reused) * per:.1f} ms")  # fmt: skip
-    print(f"overhead per run, 1 Dask worker vs plain reused loop:       "
-          f"{(walls[1] - t_reused) * per:.1f} ms")  # fmt: skip
-    print(f"overhead per run, 1 Dask worker vs plain scenarios.slew loop: "
-          f"{(walls[1] - t_plain) * per:.1f} ms")  # fmt: skip
-    print(f"speed-up 2 workers / 1 worker: {walls[1] / walls[2]:.2f}x")
+    print(f"{c.runs} runs of a {a.duration:g} s slew (cmg-yaw), per run (wall / CPU):")
+    for name, w, cpu in (
+        ("plain loop (scenarios.slew)", t_plain, c_plain),
+        ("plain loop, structure reused", t_reused, c_reused),
+        ("campaign in-process", t_inproc, c_inproc),
+        ("campaign, 1 Dask worker", walls[1], cpus[1]),
+        ("campaign, 2 Dask workers", walls[2], cpus[2]),
+    ):
+        print(f"  {name:38s} {w * per:8.1f} ms  {cpu * per:8.1f} ms CPU")
+    print("CPU: this process plus the workers (scheduler thread included, nannies not).")
+    d_in = (t_inproc - t_reused) * per, (c_inproc - c_reused) * per
+    print(f"overhead per run, in-process campaign vs plain reused loop: {d_in[0]:.1f} ms wall, "
+          f"{d_in[1]:.1f} ms CPU")  # fmt: skip
+    print(f"overhead per run, 1 Dask worker vs plain reused loop: "
+          f"{(walls[1] - t_reused) * per:.1f} ms wall, {(cpus[1] - c_reused) * per:.1f} ms CPU; "
+          f"vs plain scenarios.slew loop: {(walls[1] - t_plain) * per:.1f} ms wall")  # fmt: skip
+    print(f"CPU per run with 2 workers: {(cpus[2] - c_reused) * per:.1f} ms over the reused loop")
+    print(f"speed-up 2 workers / 1 worker (wall): {walls[1] / walls[2]:.2f}x; "
+          f"CPU per run 2 vs 1 worker: {cpus[2] / cpus[1]:.2f}")  # fmt: skip
     if a.detection:
         from airbearing.analysis.campaign.spec import with_study
         from airbearing.reporting.campaign import DETECTION_CAMPAIGN
