@@ -12,7 +12,9 @@ The workflow (issue 7, issue 13):
    (:mod:`.candidates`), fitted jointly over ALL logs (one effect set, each
    window of each segment of each log its own initial state) and judged
    (:mod:`.trial`); on dof 3 the per-axis form of an effect is tried only when its
-   one-value form is significant. Forward selection adds the nameable candidate with the
+   one-value form is significant, and a candidate the logs cannot identify or that the fit
+   pins at its physical bound is not refitted in later rounds. Forward selection adds the
+   nameable candidate with the
    lowest BIC, refits, and looks again, up to ``max_effects``. Nameable
    candidates within ``CONFOUND_BIC`` of the best are reported as confounded,
    with the experiment that would separate them; the registry's first of them
@@ -449,10 +451,11 @@ def discrepancy(
     rounds, confounded, experiments = [], [], {}
     stop_reason = "max_effects = 0" if max_effects == 0 else ""
     starts: dict = {}
+    dropped: set = set()
 
     while len(chosen) < max_effects:
         taken = {c.name for c in chosen}
-        remaining = [c for c in cands if c.name not in taken]
+        remaining = [c for c in cands if c.name not in taken and c.label not in dropped]
         if not remaining:
             stop_reason = "every candidate is in the model"
             break
@@ -495,6 +498,13 @@ def discrepancy(
         results += fit_all(per_axis)
         results.sort(key=lambda c: (not np.isfinite(c.delta_bic), c.delta_bic))
         rounds.append(tuple(results))
+        # what the logs cannot identify (nothing excites it) or what the fit pins at its
+        # physical bound is not refitted in later rounds
+        dropped |= {
+            r.label
+            for r in results
+            if r.status in ("not identifiable from this log", "at its physical bound")
+        }
         good = [c for c in results if c.nameable]
         if not good:
             stop_reason = (
