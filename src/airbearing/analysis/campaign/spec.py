@@ -21,7 +21,7 @@ from pathlib import Path
 from typing import Any
 
 from airbearing.errors import InputError
-from airbearing.io.testbed import BUILTIN_TESTBEDS, Testbed, load_testbed
+from airbearing.io.testbed import BUILTIN_TESTBEDS, Testbed, load_testbed, testbed_to_dict
 
 __all__ = [
     "COMMANDS",
@@ -143,7 +143,7 @@ class Campaign:
         import json
 
         doc = {
-            "testbed": repr(self.testbed),
+            "testbed": testbed_to_dict(self.testbed),  # values, not where it was read
             "command": self.command,
             "runs": self.runs,
             "seed": self.seed,
