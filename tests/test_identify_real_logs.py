@@ -228,7 +228,7 @@ def test_dof1_without_known_torque_is_not_identifiable():
     """A passive yaw rotor with nothing known acting: J_z is 'not identifiable from this
     log' with the reason, NaN (JSON null) instead of a number."""
     truth = _yaw_testbed()
-    res = identify_yaw_inertia(truth, [_spindown(truth)])
+    res = identify_yaw_inertia(truth, [_spindown(truth)])  # output error: never reached
     assert np.isnan(res.inertia) and np.isnan(res.std)
     assert res.std_status["J_zz"].startswith("not identifiable from this log: nothing")
     text = json.dumps(res.to_json(), allow_nan=True)
@@ -245,7 +245,7 @@ def test_dof1_spindown_with_known_torque(effects):
     truth = _yaw_testbed(effects)
     log, rows = with_first_sample_artefact(_spindown(truth))
     nominal = truth.replace(body=Body(dof=1, mass=truth.body.mass, inertia=0.04))
-    res = identify_yaw_inertia(nominal, [log])
+    res = identify_yaw_inertia(nominal, [log], method="equation-error")
     assert res.segments == 2 and res.to_json()["outlier_rows"] == list(rows)
     assert abs(res.inertia - 0.036) < Z_TOL * res.std
     assert res.std < 0.02 * 0.036  # a tight check: 2 % per sigma at most
@@ -257,6 +257,27 @@ def test_dof1_attitude_only():
     truth = _yaw_testbed({"viscous_friction": 2e-4}, gyro=False)
     log = _spindown(truth, seed=4)
     assert not log.has("wz")
-    res = identify_yaw_inertia(truth, [log])
+    res = identify_yaw_inertia(truth, [log], method="equation-error")
     assert abs(res.inertia - 0.036) < Z_TOL * res.std
     assert res.std_status["J_zz"] == "estimated"
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("gyro", [True, False], ids=["gyro", "attitude-only"])
+def test_dof1_output_error_on_the_shooting_engine(gyro):
+    """Output error (the one shooting engine, J_z free): within 4 of its sigmas of the
+    truth, its sigma well below the equation error's (the whole trajectory, not window
+    ends, carries the information), residual at the sensor noise in the right unit."""
+    truth = _yaw_testbed({"viscous_friction": 2e-4}, gyro=gyro)
+    log = _spindown(truth, seed=4)
+    if gyro:
+        log, _ = with_first_sample_artefact(log)
+    nominal = truth.replace(body=Body(dof=1, mass=truth.body.mass, inertia=0.04))
+    ee = identify_yaw_inertia(nominal, [log], method="equation-error")
+    res = identify_yaw_inertia(nominal, [log])
+    assert res.method == "output-error" and res.std_status["J_zz"] == "estimated"
+    assert abs(res.inertia - 0.036) < Z_TOL * res.std
+    assert res.std < 0.2 * ee.std
+    noise = truth.sensors.gyro_noise if gyro else truth.sensors.attitude_noise
+    assert res.residual_unit == ("rad/s" if gyro else "rad")
+    assert res.residual_rms == pytest.approx(noise, rel=0.1)  # 2000 samples: 3 % spread

@@ -13,8 +13,12 @@ values) at the logged states (trapezoidal rule). Without any known torque a roto
 coasts at constant rate whatever its inertia: the inertia is then "not identifiable
 from this log", with that reason, never a number. Attitude-only logs
 (``sensors.gyro = false``) give ``w_z`` by the smooth differentiation of the yaw of
-:mod:`.data`. This is an equation-error estimate; its standard error is the least-squares
-one scaled by the residual (the rate noise of the window ends dominates it).
+:mod:`.data`. The equation-error standard error is the least-squares one scaled by the
+residual (the rate noise of the window ends dominates it). The default ``output-error``
+then refines J_z on the one multiple-shooting engine (:mod:`airbearing.analysis.shooting`:
+windows within segments with their own initial states, logged intervals, outlier rows
+weighted 0; the yaw and the rate, or the yaw alone for attitude-only logs), with its
+Fisher standard error (initial states eliminated) or its "not identifiable" reason.
 """
 
 from __future__ import annotations
@@ -49,13 +53,15 @@ class YawIdentification:
     std_status : dict
         ``{"J_zz": "estimated" | "not identifiable from this log: <reason>"}``.
     residual_rms : float
-        RMS of the window equations' residual, rad/s.
+        Equation error: RMS of the window equations' residual, rad/s; output error: RMS
+        of the primary output's residual (rad/s with a gyro, rad attitude-only).
     segments : int
     logs : tuple of dict
         Per log: ``source``, ``samples``, ``segments``, ``segment_rows``, ``outlier_rows``.
     warnings : tuple of str
     method : str
-        ``"equation-error"``.
+        ``"equation-error"`` or ``"output-error"``.
+    residual_unit : str
     details : dict
     """
 
@@ -67,6 +73,7 @@ class YawIdentification:
     logs: tuple
     warnings: tuple
     method: str = "equation-error"
+    residual_unit: str = "rad/s"
     details: dict = field(default_factory=dict)
 
     @property
@@ -84,8 +91,8 @@ class YawIdentification:
             "condition_number": 1.0,
             "active_constraints": [],
             "residual_rms": float(self.residual_rms),
-            "residual_unit": "rad/s",
-            "residual_rms_unit": "rad/s",
+            "residual_unit": self.residual_unit,
+            "residual_rms_unit": self.residual_unit,
             "method": self.method,
             "segments": int(self.segments),
             "outlier_rows": rows[0] if len(rows) == 1 else rows,
@@ -142,7 +149,7 @@ def _arrays(testbed: Testbed, log: Log):
 
 
 def identify_yaw_inertia(
-    testbed: Testbed, logs, *, method: str = "equation-error", window: int | None = None,
+    testbed: Testbed, logs, *, method: str = "output-error", window: int | None = None,
     progress=None,
 ) -> YawIdentification:  # fmt: skip
     """Yaw inertia of a dof-1 platform from spin-down logs with a known torque.
@@ -154,7 +161,9 @@ def identify_yaw_inertia(
     logs : list of Log
         ``t``, ``yaw`` (or the quaternion), ``wz`` when ``sensors.gyro``.
     method : str
-        ``"equation-error"``; ``"output-error"`` gives the same estimate with a warning.
+        ``"output-error"``: the equation-error estimate refined on the one shooting engine
+        (windows within segments, logged intervals, outliers weighted 0); or
+        ``"equation-error"``.
     window : int, optional
         Samples per integration window (default about 1 s).
     progress : callable, optional
@@ -254,25 +263,80 @@ def identify_yaw_inertia(
     if reason is not None:
         J, std = float("nan"), float("nan")
         warnings.append(f"J_zz: not identifiable from this log: {reason}")
-    if method == "output-error":
-        warnings.append(
-            "dof-1 platforms: the yaw inertia is the equation-error estimate (no output-error "
-            "stage for dof 1)"
-        )
-    status = {
-        "J_zz": "estimated" if reason is None else f"not identifiable from this log: {reason}"
-    }
+    details = {"windows": int(len(y)), "window_samples": window, "effects": dict(testbed.effects)}
+    method_used = "equation-error"
+    rms = float(np.sqrt(np.mean(res**2)))
+    unit = "rad/s"
+    if method == "output-error" and reason is None:
+        if progress is not None:
+            progress("output error (shooting engine)", 1, 2)
+        fit = _output_error(testbed, logs, float(J))
+        J, std = fit["inertia"], fit["std"]
+        rms, unit, method_used = fit["gap"], fit["gap_unit"], "output-error"
+        details.update(fit["details"])
+        if fit["reason"]:
+            reason = fit["reason"]
+            J, std = float("nan"), float("nan")
+            warnings.append(f"J_zz: not identifiable from this log: {reason}")
+        warnings += fit["warnings"]
+    why = "estimated" if reason is None else f"not identifiable from this log: {reason}"
     return YawIdentification(
         inertia=float(J),
         std=float(std),
-        std_status=status,
-        residual_rms=float(np.sqrt(np.mean(res**2))),
+        std_status={"J_zz": why},
+        residual_rms=rms,
+        residual_unit=unit,
         segments=nseg,
         logs=tuple(entries),
         warnings=tuple(warnings),
-        details={
-            "windows": int(len(y)),
-            "window_samples": window,
-            "effects": dict(testbed.effects),
-        },
+        method=method_used,
+        details=details,
     )
+
+
+def _output_error(testbed: Testbed, logs, J_start: float) -> dict:
+    """J_z by output error on the one shooting engine (:mod:`airbearing.analysis.shooting`).
+
+    The logs are cut into windows within segments (each with its own initial state,
+    outlier rows weighted 0, logged intervals), the Model's yaw and rate (or the yaw
+    alone, attitude-only) compared with the log, J_z the one free parameter.
+    """
+    from airbearing.analysis.discrepancy.data import make_windows, replay_data
+    from airbearing.analysis.shooting import ShootingProblem
+    from airbearing.models.model import build_model
+
+    b = testbed.body
+    start = testbed.replace(
+        body=Body(dof=1, mass=b.mass, inertia=J_start, cm_offset=b.cm_offset,
+                  torque_noise=b.torque_noise)
+    )  # fmt: skip
+    model = build_model(start)
+    datas = [replay_data(start, log) for log in logs]
+    windows = make_windows(datas)
+    sens = testbed.sensors
+    sig_rate = sens.gyro_noise if sens.gyro_noise > 0 else 1e-4
+    sig_att = sens.attitude_noise if sens.attitude_noise > 0 else 1e-3
+    prob = ShootingProblem(model, windows, datas[0].outputs, sig_rate, sig_att)
+    S = np.zeros((model.n_p, 1))
+    S[model.index("J_zz", "p")[0], 0] = 1.0
+    fit = prob.fit(model.p0, S, np.zeros(1), lower=np.array([-0.9 * J_start]),
+                   name="dof-1 yaw inertia (output error)")  # fmt: skip
+    reason = fit.not_identifiable[0] if fit.not_identifiable else ""
+    warnings = []
+    if fit.level == "warning":
+        warnings.append(f"output error: IPOPT stopped at an acceptable level ({fit.status})")
+    gyro = datas[0].outputs[0] == "rate"
+    return {
+        "inertia": float(J_start + fit.theta[0]),
+        "std": float(fit.theta_std[0]),
+        "reason": reason,
+        "gap": float(fit.gap),
+        "gap_unit": "rad/s" if gyro else "rad",
+        "warnings": warnings,
+        "details": {
+            "equation_error_inertia": J_start,
+            "shooting_windows": int(windows.n),
+            "ipopt_status": fit.status,
+            "ipopt_iterations": fit.iterations,
+        },
+    }
