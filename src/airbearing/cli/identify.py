@@ -15,7 +15,9 @@ from airbearing.errors import InputError
 
 
 def _fmt(v: float, s: float) -> str:
-    """``value+-std``, or ``value (no std)`` when the standard error is not a number."""
+    """``value+-std``, ``value (no std)`` without a standard error, or "not identifiable"."""
+    if v != v:
+        return "not identifiable"
     return f"{v: .6g}+-{s:.1e}" if s == s else f"{v: .6g} (no std)"
 
 
@@ -77,7 +79,8 @@ def identify(
             raise InputError("--friction applies to dof-1 CMG testbeds")
         with progress_display("identify") as progress:
             result = identify_yaw_inertia(tb, loaded, method=method, progress=progress)
-        typer.echo(f"J_z = {_fmt(result.inertia, result.std)} kg m^2 ({result.method})")
+        unit = "" if result.inertia != result.inertia else " kg m^2"
+        typer.echo(f"J_z = {_fmt(result.inertia, result.std)}{unit} ({result.method})")
     else:
         from airbearing.analysis.identification.platform import identify_platform
 
