@@ -81,6 +81,7 @@ def test_every_registered_effect_has_a_hidden_effect_case():
         assert name in [c.name for c in candidates_for(tb)]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", list(HIDDEN), ids=list(HIDDEN))
 def test_hidden_effect_is_named(name):
     tb, value = HIDDEN[name]
@@ -97,6 +98,7 @@ def test_hidden_effect_is_named(name):
     assert name in d.augmented_testbed.effects
 
 
+@pytest.mark.slow
 def test_two_hidden_effects_are_both_found():
     effects = {"viscous_friction": 6e-6, "cm_offset_error": (3e-6, -2e-6, 4e-6)}
     d = discrepancy(PLATFORM, _log(PLATFORM, effects, seed=12))
@@ -106,6 +108,7 @@ def test_two_hidden_effects_are_both_found():
     assert d.gap_after < 1.5 * d.noise_floor
 
 
+@pytest.mark.slow
 def test_per_axis_friction_is_named_per_axis():
     # FORMATS.md: a list of three is one value per body axis. Spin-axis friction a fifth of
     # the tilt axes' (an air film is not isotropic); the one-value form cannot explain it
@@ -119,6 +122,7 @@ def test_per_axis_friction_is_named_per_axis():
     assert best.label == "viscous_friction (per axis)" and best.row()["per_axis"]
 
 
+@pytest.mark.slow
 def test_cm_offset_and_dipole_under_a_vertical_field_are_confounded():
     d = discrepancy(PLATFORM, _log(PLATFORM, {"cm_offset_error": (3e-6, -2e-6, 4e-6)}, seed=13))
     # FORMATS.md torques: mass dr x g_body = m_res x b_body when b || g: one and the same
@@ -132,6 +136,7 @@ def test_cm_offset_and_dipole_under_a_vertical_field_are_confounded():
 NULL_SEEDS = [(CMG, s) for s in range(100, 105)] + [(PLATFORM, s) for s in range(200, 205)]
 
 
+@pytest.mark.slow
 def test_nothing_hidden_gives_no_missing_effect():
     named = []
     for tb, seed in NULL_SEEDS:
@@ -140,6 +145,7 @@ def test_nothing_hidden_gives_no_missing_effect():
     assert sum(named) >= 9, named
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("example", ["platform_viscous", "cmg_inertia", "cmg_none"])
 def test_public_examples_are_named(example, example_case):
     # the public examples' cases, simulated by the package (tests/conftest.py), so no skip

@@ -28,6 +28,7 @@ def story(tmp_path_factory):
     return folder
 
 
+@pytest.mark.slow
 def test_report_is_self_contained_and_shows_the_story(story):
     from airbearing.io.log import read_log
 
@@ -41,6 +42,7 @@ def test_report_is_self_contained_and_shows_the_story(story):
         assert words in html
 
 
+@pytest.mark.slow
 def test_cli_writes_json_report_and_testbed(story, tmp_path):
     out = tmp_path / "out.json"
     rep = tmp_path / "out.html"
@@ -100,6 +102,7 @@ def test_cli_log_of_the_wrong_kind(story, tmp_path, capsys):
     assert "missing column" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_demo_section_quick():
     report = Report("demo")
     demo_section(report, quick=True)
