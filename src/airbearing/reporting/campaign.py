@@ -90,6 +90,8 @@ def _scatter(df, metrics: list[str], cols: list[str], log_cols: set[str]):
 
 
 def _detection(report: Report, campaign, df) -> dict:
+    from scipy.special import expit
+
     det = studies.detection(df, [c for c in df.columns if c.startswith("effects.")])
     report.heading("Detection rate of the discrepancy workflow")
     report.paragraph(
@@ -133,7 +135,7 @@ def _detection(report: Report, campaign, df) -> dict:
             if r["fit"] is not None:
                 a, b = r["fit"]
                 xs = np.logspace(np.log10(s.min()), np.log10(s.max()), 100)
-                ax.plot(xs, 1 / (1 + np.exp(-(a + b * np.log10(xs)))), color="#cc3311")
+                ax.plot(xs, expit(a + b * np.log10(xs)), color="#cc3311")
             if r["size_95"] is not None:
                 ax.axvline(r["size_95"], color="k", ls="--", lw=1)
             ax.set_xscale("log")
