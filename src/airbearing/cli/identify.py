@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Literal
 
 import typer
 
@@ -12,6 +12,10 @@ from airbearing.cli.common import testbed_arg
 from airbearing.cli.outputs import Outputs
 from airbearing.cli.show_progress import progress_display
 from airbearing.errors import InputError
+
+#: Identification methods and equation-error forms (the library's names).
+Method = Literal["output-error", "equation-error"]
+Form = Literal["integrated", "acceleration"]
 
 
 def _fmt(v: float, s: float) -> str:
@@ -31,10 +35,10 @@ def identify(
     ] = None,
     known_mass: Annotated[float | None, typer.Option(help="Total mass, kg.")] = None,
     method: Annotated[
-        str, typer.Option(help="output-error (refined, default) or equation-error (fast).")
+        Method, typer.Option(help="output-error (refined, default) or equation-error (fast).")
     ] = "output-error",
     form: Annotated[
-        str, typer.Option(help="integrated (seed 004 eq. 47) or acceleration (eq. 45).")
+        Form, typer.Option(help="integrated (seed 004 eq. 47) or acceleration (eq. 45).")
     ] = "integrated",
     friction: Annotated[
         str | None, typer.Option(help="CMG: none, viscous or coulomb friction with J_z.")
