@@ -24,6 +24,7 @@ from airbearing.analysis.identification.platform import (
     identify_platform,
     seed004_testbed,
 )
+from airbearing.analysis.simulation.artefacts import with_glitches
 from airbearing.analysis.simulation.scenarios import free_oscillation, slew
 from airbearing.errors import InputError
 from airbearing.io.log import Log, read_log
@@ -632,3 +633,15 @@ def test_prior_not_covered_warns(truth_tb, prior_tb):
     assert msg and all(n in msg[0] for n in ("J_xx", "J_yy", "J_zz"))
     assert "J_xy" not in msg[0]
     assert res.to_json()["prior_z"]["J_zz"] < -3
+
+
+def test_cmg_inertia_leaves_outliers_out():
+    """A rate spike of 0.05 rad/s (100 gyro sigmas) in a slew log: its row is reported and
+    left out, and J_z moves by less than 0.5 of its standard error (one of ~300 rows gone)."""
+    tb, truth = _cmg_truth()
+    log = slew(truth, angle_deg=180, duration=15, seed=1).log
+    clean = identify_cmg_inertia(tb, [log])
+    hit_log, hit = with_glitches(log, [77], "rate_spike", size=0.05)
+    res = identify_cmg_inertia(tb, [hit_log])
+    assert 77 in res.to_json()["outlier_rows"] and res.segments == 1
+    assert abs(res.inertia - clean.inertia) < 0.5 * clean.std

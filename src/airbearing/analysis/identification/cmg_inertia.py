@@ -8,7 +8,8 @@ friction, ``d/dt (J_z w_z + h_z) = -c w_z - f sign(w_z)`` (FORMATS.md
 
     w_z(t_k) = alpha - (1/J_z) h_z(t_k) - (c/J_z) int w_z dt - (f/J_z) int sign(w_z) dt,
 
-linear in ``a = 1/J_z``, ``c a``, ``f a`` and one constant ``alpha`` per log. The
+linear in ``a = 1/J_z``, ``c a``, ``f a`` and one constant ``alpha`` per segment (the
+integrals restart after a gap; outlier rows are left out, io.quality's rule). The
 measured rate is the dependent variable, so gyro noise does not bias the estimate
 (the gimbal encoders give ``h_z`` with little noise). Solved in cvxpy/Clarabel with
 ``J_z > 0`` (``a > 0``) and non-negative friction as constraints; this answers
@@ -22,6 +23,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from airbearing.analysis.identification.data import log_quality
 from airbearing.errors import InputError, SolverError
 from airbearing.io.log import Log
 from airbearing.io.testbed import Body, Testbed
@@ -60,6 +62,10 @@ class CMGIdentification:
         RMS of the rate residual, rad/s.
     warnings : tuple of str
     details : dict
+    segments : int
+        Segments (between gaps) of all logs, each with its own momentum constant.
+    outlier_rows : tuple of tuple of int
+        Per log, the rows left out (io.quality's rule).
     """
 
     inertia: float
@@ -71,6 +77,8 @@ class CMGIdentification:
     residual_rms: float
     warnings: tuple
     details: dict = field(default_factory=dict)
+    segments: int = 1
+    outlier_rows: tuple = ()
 
     def to_json(self) -> dict:
         """``inertia`` (J_z), ``std``, ``condition_number``, ``active_constraints``,
@@ -86,6 +94,12 @@ class CMGIdentification:
             "friction": dict(self.friction),
             "std_friction": dict(self.std_friction),
             "method": "momentum-exchange",
+            "segments": int(self.segments),
+            "outlier_rows": (
+                list(self.outlier_rows[0])
+                if len(self.outlier_rows) == 1
+                else [list(r) for r in self.outlier_rows]
+            ),
             "warnings": list(self.warnings),
             "details": dict(self.details),
         }
@@ -176,17 +190,36 @@ def identify_cmg_inertia(
     H = cmg_functions()["H"]
     names = FRICTION[friction]
     nfr = len(names)
-    nl = len(logs)
-    npar = 1 + nfr + nl  # a = 1/J_z, friction/J_z, alpha per log
-    R = None
-    rows = 0
-    sigma = testbed.sensors.gyro_noise
-    for li, log in enumerate(logs):
+    # segments (never integrated across a gap: each its own constant) and outlier rows
+    # (left out of the rows and of the friction integrals), io.quality's rule
+    pieces, entries = [], []
+    for log in logs:
         t, w, d = _log_arrays(testbed, log)
+        segments, outliers = log_quality(log, testbed)
+        usable = np.ones(len(t), bool)
+        usable[list(outliers)] = False
+        entries.append(
+            {
+                "source": log.source,
+                "segments": len(segments),
+                "segment_rows": [list(sg) for sg in segments],
+                "outlier_rows": [int(r) for r in outliers],
+            }
+        )
         # seed 001 eq. 12, z component, in N m s
         hz = h0 * np.asarray(H.map(len(t))(d.T, beta))[2]
         if np.ptp(hz) <= 0:
             raise InputError(f"{log.source}: the gimbals do not move: no momentum exchange to use")
+        for a, b in segments:
+            k = np.arange(a, b)[usable[a:b]]
+            if len(k) >= 3:
+                pieces.append((t[k], w[k], hz[k]))
+    nl = len(pieces)
+    npar = 1 + nfr + nl  # a = 1/J_z, friction/J_z, alpha per segment
+    R = None
+    rows = 0
+    sigma = testbed.sensors.gyro_noise
+    for li, (t, w, hz) in enumerate(pieces):
         dt = np.diff(t)
         X = np.zeros((len(t), npar))
         X[:, 0] = -hz
@@ -269,5 +302,13 @@ def identify_cmg_inertia(
         active_constraints=tuple(active),
         residual_rms=rms,
         warnings=tuple(warnings),
-        details={"samples": int(rows), "logs": nl, "h0": float(h0), "beta_rad": float(beta)},
+        details={
+            "samples": int(rows),
+            "logs": len(logs),
+            "h0": float(h0),
+            "beta_rad": float(beta),
+            "per_log": entries,
+        },
+        segments=int(sum(e["segments"] for e in entries)),
+        outlier_rows=tuple(tuple(e["outlier_rows"]) for e in entries),
     )
