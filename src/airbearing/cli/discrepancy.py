@@ -30,7 +30,7 @@ def discrepancy(
         Path | None, typer.Option("--write-testbed", help="Augmented testbed, .toml.")
     ] = None,
     max_effects: Annotated[int, typer.Option(help="Most effects to add.")] = 2,
-    seed: Annotated[int, typer.Option(help="Seed of the held-out window split.")] = 0,
+    seed: Annotated[int, typer.Option(min=0, help="Seed of the held-out window split.")] = 0,
     only: Annotated[
         list[str] | None, typer.Option(help="Search only this effect (repeatable).")
     ] = None,
