@@ -272,7 +272,12 @@ class _Oracle:
     def __init__(self, fr, fj, n_p: int, K: int, n_v: int) -> None:
         self.fr, self.fj = fr, fj
         self.n_p, self.K, self.n_v = n_p, K, n_v
-        self.z = self.par = self.r = self.J = None
+        self.z = self.par = self.r = self.J = self.cur = None
+
+    def set(self, par: np.ndarray) -> None:
+        """The solver parameters of the next solve (kept here, not passed through IPOPT:
+        converting the log's data vector on every callback would cost more than the fit)."""
+        self.cur, self.z = par, None
 
     def _args(self, z, par):
         n_p, K, n_v = self.n_p, self.K, self.n_v
@@ -282,12 +287,12 @@ class _Oracle:
         return z * scale, pb, S, par[n_p + n_p * K + n_v :], scale
 
     def _same(self, z, par) -> bool:
-        return self.z is not None and np.array_equal(z, self.z) and np.array_equal(par, self.par)
+        return self.z is not None and par is self.par and np.array_equal(z, self.z)
 
     def r_at(self, z, par) -> np.ndarray:
         if not self._same(z, par):
             v, pb, S, data, _ = self._args(z, par)
-            self.z, self.par, self.J = z.copy(), par.copy(), None
+            self.z, self.par, self.J = z.copy(), par, None
             self.r = self.fr(v, pb, S, data).full().ravel()
         return self.r
 
@@ -295,7 +300,7 @@ class _Oracle:
         if not (self._same(z, par) and self.J is not None):
             v, pb, S, data, scale = self._args(z, par)
             r, J = self.fj(v, pb, S, data)
-            self.z, self.par = z.copy(), par.copy()
+            self.z, self.par = z.copy(), par
             self.r = r.full().ravel()
             self.J = to_csc(J) @ sp.diags(scale)  # scipy CSC (sparse windows)
         return self.r, self.J
@@ -322,7 +327,8 @@ class _Call(ca.Callback):
         return self.out_sp[i]
 
     def eval(self, arg):
-        return self.fn(*[np.asarray(a, dtype=float).ravel() for a in arg])
+        # DM.full() converts in C; np.asarray(DM) goes element by element
+        return self.fn(*[a.full().ravel() for a in arg])
 
     def has_jacobian(self):
         return self.jac is not None
@@ -344,26 +350,26 @@ def _build_solver(model, L, nw, K, outputs, substeps, jit):
     nd = sum(delta_layout(model, outputs))
     n_v = K + nd * nw
     n_p = model.n_p
-    n_par = n_p + n_p * K + n_v + fr.size1_in(3)
+    n_par = 0  # the solver parameters live in the oracle (:meth:`_Oracle.set`)
     o = _Oracle(fr, fj, n_p, K, n_v)
 
-    def f(z, par):
-        r = o.r_at(z, par)
+    def f(z, _par):
+        r = o.r_at(z, o.cur)
         return [0.5 * float(r @ r)]
 
-    def grad(z, par):
-        r, J = o.rj_at(z, par)
+    def grad(z, _par):
+        r, J = o.rj_at(z, o.cur)
         return [0.5 * float(r @ r), np.asarray(J.T @ r).ravel()]
 
     def jac_f(name):
-        def fn(z, par, _out):
-            r, J = o.rj_at(z, par)
+        def fn(z, _par, _out):
+            r, J = o.rj_at(z, o.cur)
             return [np.asarray(J.T @ r).reshape(1, -1), np.zeros((1, 0))]
 
         return _Call(name, [n_v, n_par, 1], [ca.Sparsity.dense(1, n_v), ca.Sparsity(1, n_par)], fn)
 
-    def hess(z, par, lam_f, _lam_g):
-        _, J = o.rj_at(z, par)
+    def hess(z, _par, lam_f, _lam_g):
+        _, J = o.rj_at(z, o.cur)
         return [np.triu(lam_f[0] * (J.T @ J).toarray())]
 
     F = _Call("nlp_f_cb", [n_v, n_par], [ca.Sparsity.dense(1, 1)], f, jac_f)

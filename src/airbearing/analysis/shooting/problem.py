@@ -411,7 +411,9 @@ class ShootingProblem:
         scale = np.where(col > 0, 1.0 / np.maximum(col, 1e-300), 1.0)
         solver, _keep = _problem_solver(*self._key(K))
         par = np.concatenate([p_base, Sp.reshape(-1, order="F"), scale, self._data])
-        sol = solver(x0=v0 / scale, lbx=lb / scale, ubx=ub / scale, p=par)
+        oracle = _keep[-1]
+        oracle.set(par)
+        sol = solver(x0=v0 / scale, lbx=lb / scale, ubx=ub / scale)
         stats = solver.stats()
         status = str(stats.get("return_status", "?"))
         level = classify_status(status)
@@ -419,7 +421,6 @@ class ShootingProblem:
             raise SolverError(f"{name}: IPOPT did not converge ({status})")
         z = sol["x"].full().ravel()
         v = z * scale
-        oracle = _keep[-1]
         if oracle.J is not None and oracle._same(z, par):
             # IPOPT's last iterate was evaluated with its Jacobian: reuse it
             r, J = oracle.r.copy(), oracle.J @ sp.diags(1.0 / scale)
