@@ -31,7 +31,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from airbearing.analysis.discrepancy.candidates import Candidate, lsq, smoothed
+from airbearing.analysis.discrepancy.candidates import Candidate, smoothed
 from airbearing.analysis.shooting import Fit, ShootingProblem
 from airbearing.errors import SolverError
 
@@ -153,28 +153,44 @@ def chi2_threshold(k: int) -> float:
 
 
 def cross_validate(problem: ShootingProblem, fit: Fit, k: int, folds: np.ndarray):
-    """Held-out weighted RSS and gap of ``fit``, K-fold over the windows (module doc)."""
-    r, J = fit.extra["r"], fit.extra["J"].toarray()
+    """Held-out weighted RSS and gap of ``fit``, K-fold over the windows (module doc).
+
+    The Gauss-Newton step of a fold eliminates each training window's initial state from
+    its own small normal equations (per-window Gram blocks, column-scaled), then the
+    held-out windows' initial states are refitted with the parameters held.
+    """
+    r, J = fit.extra["r"], fit.extra["J"].tocsc()
     nd, nw, n = problem.n_delta, problem.windows.n, problem.n_win_res
-    rows_of = [np.arange(j * n, (j + 1) * n) for j in range(nw)]
-    cols_of = [k + np.arange(j * nd, (j + 1) * nd) for j in range(nw)]
     sel = problem.primary & problem.usable
+    Jt_all = J[:, :k].toarray() if k else np.zeros((J.shape[0], 0))
+    pre = []
+    for j in range(nw):
+        R = slice(j * n, (j + 1) * n)
+        Jt = Jt_all[R]
+        Jd = J[R, k + j * nd : k + (j + 1) * nd].toarray()
+        rj = r[R]
+        P = np.linalg.pinv(Jd.T @ Jd, hermitian=True)
+        Gtd = Jt.T @ Jd
+        pre.append(
+            (Jt, Jd, rj, P, Jt.T @ Jt - Gtd @ P @ Gtd.T, Jt.T @ rj - Gtd @ P @ (Jd.T @ rj), sel[R])
+        )
     rss, ss, cnt = 0.0, 0.0, 0
     for f in np.unique(folds):
         train = np.flatnonzero(folds != f)
         test = np.flatnonzero(folds == f)
         d_theta = np.zeros(k)
         if k and len(train):
-            rows = np.concatenate([rows_of[j] for j in train])
-            cols = np.r_[np.arange(k), np.concatenate([cols_of[j] for j in train])]
-            d_theta = lsq(J[np.ix_(rows, cols)], -r[rows])[:k]
+            S = sum(pre[j][4] for j in train)
+            g = sum(pre[j][5] for j in train)
+            c = np.sqrt(np.maximum(np.diag(S), 0.0))
+            c = np.where(c > 0, c, 1.0)
+            d_theta = -(np.linalg.pinv(S / np.outer(c, c), hermitian=True) @ (g / c)) / c
         for j in test:
-            rj = r[rows_of[j]] + (J[rows_of[j], :k] @ d_theta if k else 0.0)
-            Jd = J[np.ix_(rows_of[j], cols_of[j])]
-            rj = rj + Jd @ lsq(Jd, -rj)
-            rss += float(rj @ rj)
-            m = sel[rows_of[j]]
-            ss += float(rj[m] @ rj[m])
+            Jt, Jd, rj, P, _, _, m = pre[j]
+            e = rj + (Jt @ d_theta if k else 0.0)
+            e = e - Jd @ (P @ (Jd.T @ e))
+            rss += float(e @ e)
+            ss += float(e[m] @ e[m])
             cnt += int(m.sum())
     sigma = problem.sigma_rate if problem.outputs[0] == "rate" else problem.sigma_att
     return rss, sigma * math.sqrt(ss / max(cnt, 1))
