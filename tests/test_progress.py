@@ -77,7 +77,8 @@ def test_library_progress_default_is_silent():
     ],
     ids=["gains", "report"],
 )
-def test_long_commands_show_progress_unless_quiet(args, label, tmp_path, capfd):
+def test_long_commands_show_progress_unless_quiet(args, label, tmp_path, capfd, monkeypatch):
+    monkeypatch.setattr(show_progress, "PLAIN_DELAY", 0.0)  # on a fast machine, too
     args = [a.replace("{tmp}", str(tmp_path)) for a in args]
     assert run(args) == 0
     err = capfd.readouterr().err
@@ -107,7 +108,8 @@ def test_demo_says_which_section_it_is_in(tmp_path):
 
 
 @pytest.mark.slow
-def test_balance_compare_shows_progress(tmp_path, capfd):
+def test_balance_compare_shows_progress(tmp_path, capfd, monkeypatch):
+    monkeypatch.setattr(show_progress, "PLAIN_DELAY", 0.0)  # short runs: show them anyway
     args = ["balance", "seed000-tabletop", "--compare", "mechanical,mixed", "--seeds", "1",
             "--duration", "20"]  # fmt: skip
     assert run(args) == 0
