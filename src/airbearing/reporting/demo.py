@@ -103,6 +103,11 @@ SECTIONS = [
     ("Linear stability", _section("airbearing.reporting.stability")),
     ("Identification", _section("airbearing.reporting.identification")),
     ("Model discrepancy", _section("airbearing.reporting.discrepancy")),
+    (
+        "Campaign: robust verification",
+        _section("airbearing.reporting.campaign", "robust_verification_section"),
+    ),
+    ("Campaign: detection rate", _section("airbearing.reporting.campaign", "detection_section")),
 ]
 
 

@@ -245,7 +245,7 @@ def add_discrepancy(report: Report, result: Discrepancy, *, level: int = 2) -> N
     report.table(rows)
     for i, rnd in enumerate(result.rounds[1:], start=2):
         report.paragraph(
-            f"Round {i}: " + ", ".join(f"{c.label} (dBIC {c.delta_bic:.1f})" for c in rnd[:4])
+            f"Round {i}: " + ", ".join(f"{c.label} ({_dbic_words(c.delta_bic)})" for c in rnd[:4])
         )
     report.paragraph(f"Search stopped: {result.stop_reason}.")
     if result.confounded:
@@ -306,3 +306,8 @@ def demo_section(report: Report, *, quick: bool = False) -> None:
             f"+- {j0 * sd:.1g} kg m^2 (seed 001: 0.00323 kg m^2).",
             note=True,
         )
+
+
+def _dbic_words(dbic: float) -> str:
+    """A candidate's BIC change in words (no fit, e.g. not identifiable: "not fitted")."""
+    return f"dBIC {dbic:.1f}" if np.isfinite(dbic) else "not fitted"
