@@ -5,6 +5,7 @@ import pytest
 from numpy.testing import assert_allclose
 
 from airbearing.analysis.simulation.scenarios import free_oscillation, slew, slew_summary
+from airbearing.errors import InputError
 from airbearing.io.log import read_log, write_log
 from airbearing.io.testbed import Body, load_testbed
 
@@ -85,3 +86,22 @@ def test_simulated_logs_are_valid_logs(tmp_path, suffix, cmg):
     write_log(f.log, tmp_path / f"free{suffix}")
     back = read_log(tmp_path / f"free{suffix}", tb)
     assert {"qw", "wx", "s1", "bx"} <= set(back.data.columns)
+
+
+@pytest.mark.parametrize(
+    "kwargs",
+    [
+        {"duration": float("nan")},
+        {"duration": float("inf")},
+        {"duration": -1.0},
+        {"duration": 1e9},  # 2e10 samples: refused with the memory it would need
+        {"seed": -1},
+        {"seed": 1.5},
+    ],
+    ids=["nan", "inf", "negative", "absurd", "seed-negative", "seed-float"],
+)
+def test_library_refuses_bad_numbers_at_the_api_boundary(kwargs):
+    # issue 14: validation at the API boundary, not only in the CLI
+    tb = load_testbed("cmg-yaw")
+    with pytest.raises(InputError):
+        slew(tb, **{"duration": 5.0, **kwargs})

@@ -34,6 +34,9 @@ __all__ = [
     "add_noise",
 ]
 
+#: bytes, the most memory a simulated run may plan to use (a guard, not a tuning knob).
+_MEMORY_LIMIT_BYTES = 8 * 2**30
+
 
 @dataclass(frozen=True, eq=False)
 class SimResult:
@@ -203,13 +206,30 @@ def simulate(
     """
     tb = model.testbed
     dt = tb.sensors.dt
+    # the API boundary: the same checks as the CLI's, for callers of the library
+    if not np.isfinite(duration) or duration <= 0:
+        raise InputError(f"duration {float(duration):g} s: expected a finite number > 0")
+    if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
+        raise InputError(f"seed {seed!r}: expected an integer >= 0")
     n = int(round(duration / dt))
     if n < 1:
         raise InputError(f"duration {duration} s is shorter than one sample ({dt} s)")
+    # states, measurements, inputs and the log's copies, float64
+    need = 8 * n * 4 * (model.nx + model.ny + model.nu + 8)
+    if need > _MEMORY_LIMIT_BYTES:
+        raise InputError(
+            f"duration {float(duration):g} s: {n} samples would need about "
+            f"{need / 2**30:.3g} GiB of memory (limit {_MEMORY_LIMIT_BYTES / 2**30:g} GiB)"
+        )
     x0 = np.asarray(x0, dtype=float)
     if x0.shape != (model.nx,):
         raise InputError(f"x0 has shape {x0.shape}, expected ({model.nx},) for {model.x_names}")
+    if not np.all(np.isfinite(x0)):
+        raise InputError(f"x0 {x0.tolist()}: expected finite numbers for {model.x_names}")
     p = model.p0 if p is None else np.asarray(p, dtype=float)
+    if not np.all(np.isfinite(p)):
+        bad = [name for name, v in zip(model.p_names, p, strict=False) if not np.isfinite(v)]
+        raise InputError(f"parameters {bad}: expected finite numbers")
     nref = len(controller.ref_names)
     ref = np.zeros((n, nref)) if reference is None else np.asarray(reference, dtype=float)
     if ref.ndim == 1:
