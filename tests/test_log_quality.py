@@ -18,8 +18,9 @@ import pytest
 
 from airbearing.errors import InputError
 from airbearing.io import Log
-from airbearing.io.quality import CHI2_3_THRESHOLD, Z_THRESHOLD, assess, tool_use
+from airbearing.io.quality import CHI2_3_THRESHOLD, Z_THRESHOLD, assess
 from airbearing.io.testbed import testbed_from_dict as make_testbed
+from airbearing.io.tool_use import tool_use
 from airbearing.models import quaternion as quat
 
 QUAT = ["qw", "qx", "qy", "qz"]

@@ -90,7 +90,7 @@ def check(
     json_path = out.plan(json_out, "--json", (".json",))
     tb = _testbed(testbed)
     from airbearing.io.log import read_log
-    from airbearing.io.quality import TOOLS, tool_use
+    from airbearing.io.tool_use import TOOLS, tool_use
 
     log = read_log(log_file, tb)
     quality = log.quality

@@ -18,16 +18,6 @@ only the way to the initial condition. ``offset_stays=True`` is the other test: 
 stays as an imbalance the law does not know (its displacements are added to the offset
 positions) and the integral term has to find it.
 
-Steady state. The seed's metrics are over the last third of a 300 s run, which is steady
-only if the tilt transient has settled by then. :func:`settling_time` gives that time from
-the linearised loop and the run's start: from the rest position with the offset removed,
-the P and D terms bring the platform level (117 s on platform-3dof); an offset that stays
-needs the integral pole too, whose time constant is about ``(K_p + k_g) / (K_d K_i)``
-(``k_g = -m |g| r_z``, the pendulum stiffness; :func:`integral_time_constant`), 210 s on
-platform-3dof, and then 300 s is not steady. The comparison says so (``steady``) and
-``--sweep duration=...`` shows where the steady state starts.
-positions and the integral term has to find it.
-
 The metrics are in :mod:`.metrics`, the linearised tilt loop (integral time constant,
 settling time) in :mod:`.transient`, the method comparison and the sweeps in
 :mod:`.comparison` and seed 004's two-step procedure in :mod:`.two_step`.

@@ -207,18 +207,10 @@ class ReplayData:
         return coef[1]
 
 
-def _quality(log: Log, testbed: Testbed):
-    """Segments, outlier rows and the quality JSON of ``log`` (io.quality when present)."""
-    try:
-        q = log.quality
-        return tuple(q.segments), tuple(int(r) for r in q.outlier_rows), q.to_json()
-    except (ImportError, AttributeError):
-        pass
-    t = log.t
-    breaks = np.flatnonzero(np.diff(t) > 1.5 * testbed.sensors.dt) + 1
-    edges = np.r_[0, breaks, len(t)]
-    segs = tuple((int(a), int(b)) for a, b in zip(edges[:-1], edges[1:], strict=True))
-    return segs, (), {"segments": len(segs), "segment_rows": [list(s) for s in segs]}
+def _quality(log: Log):
+    """Segments, outlier rows and the quality JSON of ``log`` (:attr:`Log.quality`)."""
+    q = log.quality
+    return tuple(q.segments), tuple(int(r) for r in q.outlier_rows), q.to_json()
 
 
 def replay_data(testbed: Testbed, log: Log) -> ReplayData:
@@ -304,7 +296,7 @@ def replay_data(testbed: Testbed, log: Log) -> ReplayData:
             notes.append("gimbal rates: the log's commanded dd1..dd4, applied from t_k")
         u[:, [ui[f"dd{i}"] for i in range(1, 5)]] = dd
         extra = d
-    segments, outliers, qjson = _quality(log, testbed)
+    segments, outliers, qjson = _quality(log)
     mask = np.ones(n, dtype=bool)
     mask[list(outliers)] = False
     if outliers:

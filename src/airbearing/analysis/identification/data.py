@@ -43,8 +43,6 @@ REST_FLOOR = 1e-6
 RATE_HALF_WIDTH = 4
 #: Degree of that local polynomial (a cubic follows an oscillation's curvature without lag).
 RATE_DEGREE = 3
-#: Interval above which a fallback (no io.quality) splits a log, in sample periods (FORMATS.md).
-GAP_FACTOR = 1.5
 
 
 @dataclass(frozen=True, eq=False)
@@ -147,21 +145,18 @@ class PlatformData:
 def log_quality(log: Log, testbed: Testbed) -> tuple[tuple, tuple]:
     """Segments ``((start, stop), ...)`` and outlier rows of ``log`` (0-based rows).
 
-    From :func:`airbearing.io.quality.assess` (the package's one rule for gaps and
-    outliers). Without that module, gaps only (an interval longer than 1.5 / rate).
+    From :func:`airbearing.io.quality.assess`, the package's one rule for gaps and
+    outliers; the log's cached :attr:`~airbearing.io.log.Log.quality` when it was read
+    with this testbed.
     """
-    try:
+    if log.testbed is testbed:
+        qual = log.quality
+    else:
         from airbearing.io.quality import assess
-    except ImportError:  # pragma: no cover - before io.quality exists
-        assess = None
-    if assess is not None:
+
         qual = assess(log, testbed)
-        segs = tuple((int(a), int(b)) for a, b in qual.segments)
-        return segs, tuple(int(r) for r in qual.outlier_rows)
-    t = log.t
-    cut = np.flatnonzero(np.diff(t) > GAP_FACTOR * testbed.sensors.dt) + 1
-    edges = np.r_[0, cut, len(t)]
-    return tuple((int(a), int(b)) for a, b in zip(edges[:-1], edges[1:], strict=True)), ()
+    segs = tuple((int(a), int(b)) for a, b in qual.segments)
+    return segs, tuple(int(r) for r in qual.outlier_rows)
 
 
 def _local_poly(t, y, weight, half, degree):

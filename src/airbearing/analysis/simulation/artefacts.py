@@ -23,7 +23,7 @@ from __future__ import annotations
 import numpy as np
 
 from airbearing.errors import InputError
-from airbearing.io.log import GAP_FACTORS, Log
+from airbearing.io.log import Log
 from airbearing.io.testbed import Testbed
 from airbearing.models import quaternion as quat
 
@@ -137,10 +137,7 @@ def segment_starts(log: Log) -> tuple[int, ...]:
     The period is ``1 / sensors.rate`` of the log's testbed (FORMATS.md), else the median
     interval of the log.
     """
-    t = log.t
-    dt = np.diff(t)
-    period = log.testbed.sensors.dt if log.testbed is not None else float(np.median(dt))
-    return (0, *(int(i) + 1 for i in np.flatnonzero(dt > GAP_FACTORS[1] * period)))
+    return tuple(start for start, _ in log.segments)
 
 
 def _rows(rows, n: int) -> tuple[int, ...]:

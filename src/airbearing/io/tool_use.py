@@ -1,0 +1,76 @@
+"""What each tool can use of a log (``airbearing log check``'s "tools" table).
+
+From the log's segments and outlier rows (:mod:`airbearing.io.quality`) and its
+testbed: replays need a segment of 2 samples, fits a segment of
+:data:`MIN_FIT_SAMPLES` usable samples, balancing the slider columns.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from airbearing.io.log import Log
+from airbearing.io.quality import LogQuality
+
+__all__ = ["MIN_FIT_SAMPLES", "TOOLS", "tool_use"]
+
+
+#: Usable samples a segment needs for identification and discrepancy windows: a
+#: free oscillation must show some motion; 20 samples are 1 s at 20 Hz.
+MIN_FIT_SAMPLES = 20
+#: The tools ``log check`` reports on, in the order it prints them.
+TOOLS: tuple[str, ...] = ("simulate replay", "identify", "discrepancy", "replay", "balance")
+
+
+def tool_use(log: Log, quality: LogQuality) -> dict[str, tuple[bool, str]]:
+    """Which tools can use this log, and why (or why not).
+
+    Parameters
+    ----------
+    log : Log
+        Validated with its testbed (so the testbed's required columns are present).
+    quality : LogQuality
+
+    Returns
+    -------
+    dict of str to (bool, str)
+        For each of :data:`TOOLS`: whether it can use the log and one sentence why.
+        Replays need a segment of 2 samples; fits need a segment of at least
+        :data:`MIN_FIT_SAMPLES` usable samples; balancing needs sliders.
+    """
+    tb = log.testbed
+    usable = quality.usable_mask()
+    longest = max((int(np.sum(usable[a:b])) for a, b in quality.segments), default=0)
+    n_fit = sum(1 for a, b in quality.segments if np.sum(usable[a:b]) >= MIN_FIT_SAMPLES)
+    segs = f"{quality.n_segments} segment(s), {len(quality.outlier_rows)} outlier row(s) left out"
+    measured = "attitude only (sensors.gyro = false)" if tb and not tb.sensors.gyro else "rates"
+    out: dict[str, tuple[bool, str]] = {}
+    replay_ok = longest >= 2
+    why_replay = (
+        f"{segs}; each segment starts afresh from its logged state"
+        if replay_ok
+        else "no segment has 2 usable samples"
+    )
+    out["simulate replay"] = (replay_ok, why_replay)
+    if n_fit:
+        why_fit = (
+            f"{n_fit} segment(s) of >= {MIN_FIT_SAMPLES} usable samples; fits {measured}; {segs}"
+        )
+        out["identify"] = (True, why_fit)
+        out["discrepancy"] = (True, why_fit)
+    else:
+        why = f"no segment has {MIN_FIT_SAMPLES} usable samples (longest: {longest})"
+        out["identify"] = (False, why)
+        out["discrepancy"] = (False, why)
+    out["replay"] = (replay_ok, why_replay)
+    if tb is None:
+        out["balance"] = (False, "no testbed given")
+    elif tb.kind != "platform":
+        out["balance"] = (False, "kind = 'cmg': no sliding masses to balance with")
+    elif tb.masses is None:
+        out["balance"] = (False, "passive platform (no [masses]): nothing to balance with")
+    elif not log.has("s1", "s2", "s3"):
+        out["balance"] = (False, "no slider columns s1, s2, s3")
+    else:
+        out["balance"] = (replay_ok, "sliders and attitude logged: balancing runs can be checked")
+    return out
