@@ -63,6 +63,15 @@ def test_local_cluster_gives_the_in_process_results(tmp_path, in_process, worker
     pd.testing.assert_frame_equal(df, in_process)  # identical, whatever the workers
 
 
+@pytest.mark.slow
+def test_run_timeout_on_workers_gives_the_in_process_results(tmp_path, in_process):
+    # each worker runs its runs in a child process it can stop (analysis/campaign/child.py)
+    with open_client(2) as client:
+        c = parse_campaign(SLEW)
+        df = run_campaign(c, tmp_path / "r.parquet", client=client, run_timeout=120.0)
+    pd.testing.assert_frame_equal(df, in_process)
+
+
 def _wait_for(path: Path, timeout: float = 60.0):
     t0 = time.monotonic()
     while not path.exists():

@@ -26,12 +26,21 @@ def campaign(
     resume: Annotated[
         bool, typer.Option("--resume", help="Finish an interrupted campaign (its parts).")
     ] = False,
+    run_timeout: Annotated[
+        float | None,
+        typer.Option(
+            "--run-timeout",
+            help="s: a run still going after this is stopped and is a row with its error.",
+        ),
+    ] = None,
     study: Annotated[
         str | None,
         typer.Option(help="detection: each run hides one dispersed effect, or nothing."),
     ] = None,
 ) -> None:
     """Run CAMPAIGN_FILE's runs (local cluster or --scheduler), write the results table."""
+    import math
+
     from airbearing.analysis.campaign import open_client, read_campaign, run_campaign
     from airbearing.analysis.campaign.results import parts_dir, remove_parts, write_results
     from airbearing.analysis.campaign.spec import with_study
@@ -46,6 +55,8 @@ def campaign(
     rep_path = out.plan(report, "--report", (".html",))
     if workers is not None and workers < 1:
         raise InputError(f"--workers {workers}: expected at least 1")
+    if run_timeout is not None and not (math.isfinite(run_timeout) and run_timeout > 0):
+        raise InputError(f"--run-timeout {run_timeout}: expected a time > 0 in s")
     spec = with_study(read_campaign(campaign_file), study)
     parts = parts_dir(res_path)
     if parts.exists() and not resume:
@@ -56,7 +67,10 @@ def campaign(
     with open_client(workers, scheduler) as client:
         try:
             with progress_display("campaign") as progress:
-                df = run_campaign(spec, res_path, client=client, resume=resume, progress=progress)
+                df = run_campaign(
+                    spec, res_path, client=client, resume=resume, progress=progress,
+                    run_timeout=run_timeout,
+                )  # fmt: skip
         except KeyboardInterrupt:
             typer.echo(
                 f"campaign: interrupted; finished runs are kept in {parts}: run again with "

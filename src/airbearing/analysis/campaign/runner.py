@@ -59,10 +59,22 @@ def run_one(campaign, run: int) -> dict:
     return row
 
 
-def run_chunk(campaign, runs: list[int]) -> tuple[list[dict], float]:
-    """Rows of ``runs`` and the wall time they took (s): one Dask task."""
+def run_chunk(
+    campaign, runs: list[int], run_timeout: float | None = None, _run=run_one
+) -> tuple[list[dict], float]:
+    """Rows of ``runs`` and the wall time they took (s): one Dask task.
+
+    With ``run_timeout`` (s) each run goes to this process's child process
+    (:mod:`.child`) and a run still going after ``run_timeout`` s is a row with a
+    ``TimeoutError``; ``_run`` replaces :func:`run_one` (tests).
+    """
     t0 = time.perf_counter()
-    rows = [run_one(campaign, i) for i in runs]
+    if run_timeout is None:
+        rows = [_run(campaign, i) for i in runs]
+    else:
+        from airbearing.analysis.campaign.child import run_with_timeout
+
+        rows = [run_with_timeout(campaign, i, run_timeout, _run) for i in runs]
     return rows, time.perf_counter() - t0
 
 
@@ -121,7 +133,16 @@ def _chunk_size(remaining: int, n_workers: int, per_run_s: float | None) -> int:
     return max(1, min(want, fair, _MAX_CHUNK))
 
 
-def run_campaign(campaign, output, *, client=None, resume: bool = False, progress=None, runs=None):
+def run_campaign(
+    campaign,
+    output,
+    *,
+    client=None,
+    resume: bool = False,
+    progress=None,
+    runs=None,
+    run_timeout: float | None = None,
+):
     """Run every missing run of ``campaign``; the merged results table (pandas).
 
     Parameters
@@ -138,7 +159,13 @@ def run_campaign(campaign, output, *, client=None, resume: bool = False, progres
         ``progress(what, done, total)`` (:mod:`airbearing.progress`).
     runs : iterable of int, optional
         Only these runs (default ``range(campaign.runs)``).
+    run_timeout : float, optional
+        s, longest time one run may take; a run still going then is stopped and is a row
+        whose ``error`` starts with ``TimeoutError`` (each run then goes through a child
+        process of its worker, see :mod:`.child`). None: no limit.
     """
+    if run_timeout is not None and not (math.isfinite(run_timeout) and run_timeout > 0):
+        raise InputError(f"--run-timeout {run_timeout}: expected a time > 0 in s")
     say = call(progress)
     folder = open_parts(output, campaign, resume=resume)
     wanted = list(range(campaign.runs)) if runs is None else sorted(set(runs))
@@ -172,7 +199,7 @@ def run_campaign(campaign, output, *, client=None, resume: bool = False, progres
         while todo:
             k = _chunk_size(len(todo), 1, _estimate(per_run))
             chunk, todo = todo[:k], todo[k:]
-            finished(*run_chunk(campaign, chunk))
+            finished(*run_chunk(campaign, chunk, run_timeout))
     elif todo:
         from dask.distributed import as_completed
 
@@ -191,7 +218,7 @@ def run_campaign(campaign, output, *, client=None, resume: bool = False, progres
             nonlocal queue
             k = _chunk_size(len(queue), n_workers, _estimate(per_run))
             chunk, queue = queue[:k], queue[k:]
-            fut = client.submit(run_chunk, spec, chunk, pure=False)
+            fut = client.submit(run_chunk, spec, chunk, run_timeout, pure=False)
             if ac is not None:
                 ac.add(fut)
             return fut
