@@ -288,3 +288,78 @@ def test_each_command_takes_its_own_options():
     with pytest.raises(InputError, match="method"):
         parse_campaign({"testbed": "cmg-yaw", "command": "balance", "runs": 1,
                         "args": {"method": "magic"}})  # fmt: skip
+
+
+FREE = {
+    "testbed": "platform-3dof",
+    "command": "simulate",
+    "runs": 4,
+    "seed": 8,
+    "args": {
+        "scenario": "free",
+        "duration": 10,
+        "initial-rate": [0.01, -0.02, 0.3],
+        "sliders": [1e-4, 0.0, -1e-4],
+    },  # fmt: skip
+    "dispersions": {
+        "body.inertia": {"relative_normal": 0.05},
+        "body.cm_offset": {"normal": [0.0, 1e-5]},
+        "sensors.gyro_noise": {"uniform": [1e-4, 3e-4]},
+        "effects.viscous_friction": {"loguniform": [1e-7, 1e-5]},
+    },
+}
+
+
+def test_free_oscillation_reuses_the_structure_and_is_the_scenario():
+    from airbearing.analysis.campaign.adapters import _convert, _simulate, structure_stats
+    from airbearing.analysis.simulation.scenarios import free_oscillation
+
+    c = parse_campaign(FREE)
+    a = _convert(c.source, "simulate", c.args)
+    draws = [draw_run(c, i) for i in range(c.runs)]
+    _simulate(draws[0].testbed, a, draws[0].seed)  # builds the structure
+    for d in draws:
+        built, misses = structure_stats()["built"], closed_loop_rollout.cache_info().misses
+        fast, _ = _simulate(d.testbed, a, d.seed)
+        # dispersed inertia, CM offset, noise and effect value: no new model, no new loop
+        assert structure_stats()["built"] == built
+        assert closed_loop_rollout.cache_info().misses == misses
+        ref = free_oscillation(
+            d.testbed, initial_rate=(0.01, -0.02, 0.3), sliders=(1e-4, 0.0, -1e-4),
+            duration=10, seed=d.seed,
+        )  # fmt: skip
+        assert np.array_equal(fast.x, ref.x)  # the same run as a fresh build, bit for bit
+        assert np.array_equal(fast.y, ref.y)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("method", ["mixed", "mechanical", "lyapunov", "adaptive"])
+def test_balance_reuses_the_structure_and_is_a_fresh_run(method):
+    from airbearing.analysis.balancing.runs import run_balancing
+    from airbearing.analysis.campaign.adapters import run_command, structure_stats
+    from airbearing.io.output import to_jsonable
+
+    doc = {
+        "testbed": "seed000-tabletop",
+        "command": "balance",
+        "runs": 3,
+        "seed": 5,
+        "args": {"method": method, "duration": 20},
+        "dispersions": {
+            "body.inertia": {"relative_normal": 0.05},  # the Lyapunov law holds J
+            "body.mass": {"relative_normal": 0.02},  # the adaptive law holds m
+            "body.cm_offset": {"normal": [0.0, 2e-6]},
+            "sensors.gyro_noise": {"uniform": [1e-5, 1e-4]},
+        },
+    }
+    c = parse_campaign(doc)
+    draws = [draw_run(c, i) for i in range(c.runs)]
+    run_command(c, draws[0].testbed, draws[0].seed)
+    for d in draws[1:]:
+        built = structure_stats()["built"]
+        got = run_command(c, d.testbed, d.seed)
+        fresh = run_balancing(d.testbed, method, duration=20, seed=d.seed)
+        # identical to a run on a freshly built Model and law (a stale law would differ)
+        assert got == to_jsonable({"testbed": d.testbed.name, **fresh.metrics})
+        # a law that holds a dispersed value is a new structure; the others reuse one
+        assert structure_stats()["built"] - built == (method in ("lyapunov", "adaptive"))

@@ -181,6 +181,7 @@ def run_balancing(
     noise: bool = True,
     free_duration: float | None = FREE_FLOAT_DURATION,
     effects=None,
+    model: Model | None = None,
 ) -> BalancingRun:
     """The seed-000 balancing test (Sec. 3) of ``method`` on ``testbed``.
 
@@ -225,6 +226,9 @@ def run_balancing(
         s, free float after balancing for ``residual_torque_nm``; None skips it.
     effects : mapping, optional
         FORMATS.md effects acting in the truth.
+    model : Model, optional
+        The Model to run, default the one of ``testbed`` and ``effects``; a campaign passes
+        one Model per structure with this run's values in ``p0``.
     """
     check_inputs(testbed, method, duration)
     if not math.isfinite(initial_offset) or abs(initial_offset) > testbed.masses.travel:
@@ -236,7 +240,7 @@ def run_balancing(
         vertical_offset = balanced_vertical_offset(testbed)
     if start not in ("auto", "rest", "level"):
         raise InputError(f"--start {start}: expected auto, rest or level")
-    model = _model(testbed, effects)
+    model = _model(testbed, effects) if model is None else model
     s0 = np.array([initial_offset, initial_offset, 0.0])
     balanced = np.array([0.0, 0.0, vertical_offset])
     r0 = true_offset(testbed, s0, balanced)

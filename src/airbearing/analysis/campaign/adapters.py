@@ -5,11 +5,17 @@ Each adapter takes the nominal testbed, the run's dispersed testbed, the campaig
 document the CLI writes with ``--json`` (simulate: ``{"testbed", "scenario", "seed",
 **slew_summary}``, built inline in ``cli/simulate.py``, rebuilt here the same way).
 
-Efficiency: a slew reuses, per worker process, the Model, the controller and the
-compiled closed loop of its *structure* (everything but the values that enter the
-loop as parameters ``p``, the initial state or the noise). A dispersed inertia, CM
+Efficiency: a run reuses, per worker process, the Model of its *structure* (everything
+but the values that enter the loop as parameters ``p``, the initial state or the noise),
+its controller and so its compiled closed loop: a slew (Model, attitude controller), a
+free oscillation (Model, held input), a balancing run (Model, balancing law; the values a
+law is built with, see ``_LAW_READS``, are part of its structure), and the truth log of
+an identify or discrepancy run (a slew or a free oscillation). A dispersed inertia, CM
 offset, mass, flywheel momentum, effect value, gyro or torque noise or initial gimbal
-angle is a new ``p`` vector (or new noise), never a new model.
+angle is a new ``p`` vector (or new noise), never a new model. ``identify`` and
+``discrepancy`` then fit with the nominal testbed: the regression builds no model, and
+the output-error and discrepancy fits keep their compiled functions per structure in the
+shooting engine's own cache (``analysis/shooting``), in memory and on disk.
 """
 
 from __future__ import annotations
@@ -182,7 +188,7 @@ def check_args(src: str, command: str, args: dict, truth: dict) -> None:
             raise InputError(f"{src}: [args] method: expected one of {'|'.join(METHODS)}")
 
 
-# ---------------------------------------------------------------- slew: structure reuse
+# ---------------------------------------------------------------- structure reuse
 
 # parameters and per-run values: everything else in the testbed decides the structure
 _RUN_VALUES = {
@@ -191,13 +197,22 @@ _RUN_VALUES = {
     "cmg": ("flywheel_inertia", "flywheel_speed", "gimbal_angles"),
     "sensors": ("gyro_noise", "accel_noise", "attitude_noise"),
 }
+#: Run values a balancing law reads when it is built (design/balancing.py: the slider
+#: matrix divides by gravity, the Lyapunov law holds J, the adaptive law m and g): they
+#: are constants of its compiled loop, so they are part of a balance run's structure.
+_LAW_READS = {
+    "mechanical": ("gravity",),
+    "mixed": ("gravity",),
+    "lyapunov": ("gravity", "body.inertia"),
+    "adaptive": ("gravity", "body.mass"),
+}
 _STRUCTURES: dict = {}
 _MAX_STRUCTURES = 16
 _STATS = {"built": 0, "reused": 0}
 
 
 def structure_stats() -> dict:
-    """How many slew structures this process built and how many runs reused one."""
+    """How many run structures this process built and how many runs reused one."""
     return dict(_STATS)
 
 
@@ -209,6 +224,27 @@ def _structure_key(tb: Testbed, extra) -> str:
             holder.pop(k, None)
     doc["effects"] = {k: np.shape(v) for k, v in tb.effects.items()}  # names and shapes only
     return json.dumps([doc, extra], sort_keys=True, default=str)
+
+
+def _structure(tb: Testbed, extra, build: Callable):
+    """``build()`` once per structure of ``tb`` (and ``extra``) in this process, then reused."""
+    key = _structure_key(tb, extra)
+    if key not in _STRUCTURES:
+        if len(_STRUCTURES) >= _MAX_STRUCTURES:  # a dispersed structural value: bounded
+            _STRUCTURES.pop(next(iter(_STRUCTURES)))
+        _STRUCTURES[key] = build()
+        _STATS["built"] += 1
+    else:
+        _STATS["reused"] += 1
+    return _STRUCTURES[key]
+
+
+def _reused_model(tb: Testbed, extra=()):
+    """The Model of ``tb``'s structure, built once, with ``tb``'s values as ``p0``."""
+    from airbearing.models.model import build_model
+
+    structure = _structure(tb, ["model", extra], lambda: build_model(tb))
+    return _run_model(structure, tb, params_of(structure, tb))
 
 
 def params_of(model, tb: Testbed) -> np.ndarray:
@@ -272,6 +308,11 @@ def _run_model(structure, tb: Testbed, p: np.ndarray):
     return m
 
 
+def _dotted(doc: dict, key: str):
+    table, _, entry = key.rpartition(".")
+    return (doc.get(table, {}) if table else doc).get(entry)
+
+
 def _slew(tb: Testbed, *, yaw_deg, axis, duration, seed, ideal, steering, rate_limit, gains):
     """``scenarios.slew`` with the structure reused (tests check the runs are identical)."""
     from airbearing.analysis.simulation.scenarios import slew
@@ -286,8 +327,8 @@ def _slew(tb: Testbed, *, yaw_deg, axis, duration, seed, ideal, steering, rate_l
     ):
         # let the scenario raise its own error for inputs it refuses
         return slew(tb, angle_deg=yaw_deg, axis=axis, duration=duration, seed=seed, **kw)
-    key = _structure_key(tb, sorted(kw.items()))
-    if key not in _STRUCTURES:
+
+    def build():
         from airbearing.design.attitude import cmg_attitude_controller
         from airbearing.models.model import build_model
 
@@ -297,13 +338,9 @@ def _slew(tb: Testbed, *, yaw_deg, axis, duration, seed, ideal, steering, rate_l
             model, steering=steering, lowpass=1.0 if ideal else None,
             rate_limit_mode=rate_limit, **ctl_kw,
         )  # fmt: skip
-        if len(_STRUCTURES) >= _MAX_STRUCTURES:  # a dispersed structural value: bounded
-            _STRUCTURES.pop(next(iter(_STRUCTURES)))
-        _STRUCTURES[key] = (model, ctl)
-        _STATS["built"] += 1
-    else:
-        _STATS["reused"] += 1
-    structure, ctl = _STRUCTURES[key]
+        return model, ctl
+
+    structure, ctl = _structure(tb, ["slew", sorted(kw.items())], build)
     m = _run_model(structure, tb, params_of(structure, tb))
     q_c = quat.from_axis_angle(axis, np.deg2rad(yaw_deg))
     return simulate(m, ctl, duration=duration, x0=m.x0(), p=m.p0, reference=q_c, seed=seed,
@@ -336,7 +373,7 @@ def _simulate(tb: Testbed, a: dict, seed: int, gains=None, src: str = ""):
             q0=a.get("initial_quaternion", (1.0, 0.0, 0.0, 0.0)),
             sliders=a.get("sliders", (0.0, 0.0, 0.0)), duration=a.get("duration", 60.0),
             seed=seed, noise=not a.get("ideal", False),
-            attitude_noise=a.get("attitude_noise"),
+            attitude_noise=a.get("attitude_noise"), model=_reused_model(tb),
         )  # fmt: skip
         summary = free_summary(result)
     return result, {"testbed": tb.name, "scenario": scenario, "seed": seed, **summary}
@@ -364,8 +401,12 @@ def run_command(campaign, testbed: Testbed, seed: int) -> dict:
     if cmd == "balance":
         from airbearing.analysis.balancing.runs import run_balancing
 
+        method = a.get("method", "mixed")
+        doc = testbed_to_dict(testbed)
+        reads = [(k, _dotted(doc, k)) for k in _LAW_READS.get(method, ())]
+        model = _reused_model(testbed, ["balance", method, reads]) if reads else None
         run = run_balancing(
-            testbed, a.get("method", "mixed"), duration=a.get("duration", 300.0),
+            testbed, method, duration=a.get("duration", 300.0), model=model,
             initial_offset=a.get("initial_offset_mm", -0.5) * 1e-3,
             vertical_offset=a.get("vertical_offset"), start=a.get("start", "auto"),
             initial_rate=a.get("initial_rate", (0.0, 0.0, 0.0)), seed=seed,

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Mapping
+from functools import lru_cache
 
 import numpy as np
 
@@ -12,7 +13,7 @@ from airbearing.design.controller import constant_input
 from airbearing.errors import InputError
 from airbearing.io.testbed import Testbed
 from airbearing.models import quaternion as quat
-from airbearing.models.model import build_model
+from airbearing.models.model import Model, build_model
 
 __all__ = ["slew", "slew_summary", "free_oscillation", "free_summary", "spindown"]
 
@@ -103,6 +104,7 @@ def free_oscillation(
     seed: int = 0,
     noise: bool = True,
     attitude_noise: float | None = None,
+    model: Model | None = None,
 ) -> SimResult:
     """Free motion with inputs held: sliders at ``sliders`` (m), no dipole, the cage field on.
 
@@ -111,11 +113,13 @@ def free_oscillation(
     Works on passive platforms (no ``[masses]``: ``sliders`` must stay zero) and on
     dof-1 bearings (only the z entry of ``initial_rate`` may be non-zero). The log
     follows the testbed's sensors: ``sensors.gyro = false`` gives attitude only, with
-    ``attitude_noise`` (default ``sensors.attitude_noise``, rad).
+    ``attitude_noise`` (default ``sensors.attitude_noise``, rad). ``model``: the Model to
+    run, default ``build_model(testbed, effects)``; a campaign passes one Model per
+    structure with this run's values in ``p0``, and then reuses its compiled loop.
     """
     if duration <= 0:
         raise InputError(f"--duration {duration}: expected a positive time in s")
-    model = build_model(testbed, effects)
+    model = build_model(testbed, effects) if model is None else model
     u = np.zeros(model.nu)
     if testbed.kind == "platform":
         s = np.asarray(sliders, dtype=float)
@@ -152,13 +156,20 @@ def free_oscillation(
     x0 = model.x0(q=q0, w=w0) if model.dof == 3 else model.x0(w=w0[2])
     return simulate(
         model,
-        constant_input(model, u),
+        _held_input(model, tuple(u.tolist())),
         duration=duration,
         x0=x0,
         seed=seed,
         noise=noise,
         attitude_noise=attitude_noise,
     )
+
+
+@lru_cache(maxsize=16)
+def _held_input(model: Model, u: tuple):
+    """``constant_input(model, u)``, the same object for the same Model and ``u``: a Model
+    reused across runs (a campaign's) then reuses its compiled loop too."""
+    return constant_input(model, np.array(u))
 
 
 def spindown(
