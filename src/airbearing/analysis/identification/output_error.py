@@ -31,9 +31,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from airbearing.analysis.identification.data import PlatformData
-from airbearing.analysis.identification.oe_problem import Problem
-from airbearing.analysis.shooting import classify_status
-from airbearing.errors import SolverError
+from airbearing.analysis.identification.oe_problem import physical_constraint, platform_windows
 from airbearing.io.testbed import Testbed
 
 __all__ = ["OutputErrorResult", "refine_output_error"]
@@ -44,6 +42,9 @@ SIGMA_FLOOR = 1e-7
 SIGMA_Q_START = 1e-3
 #: Refit while a re-estimated noise level moves by more than this fraction.
 SIGMA_CHANGE = 0.1
+#: Parameter slots of the output-error problem: 7 to 9 free entries share one compiled
+#: Jacobian (part of the engine's cache key).
+THETA_SLOTS_OE = 9
 
 
 @dataclass(frozen=True, eq=False)
@@ -145,74 +146,97 @@ def refine_output_error(
     SolverError
         When IPOPT fails (infeasible, iteration limit, numerical trouble).
     """
+    from airbearing.analysis.identification.regression import PARAM_NAMES, theta_to_body
+    from airbearing.analysis.shooting import ShootingProblem
+    from airbearing.io.testbed import Body
+    from airbearing.models.model import build_model
+
     free = np.ones(9, bool) if free is None else np.asarray(free, bool)
     theta0 = np.asarray(theta0, float)
-    prob = Problem(testbed, data, theta0, free, mass, margin, segment, substeps)
+    J0, r0 = theta_to_body(theta0)
+    tb = testbed.replace(
+        body=Body(dof=3, mass=mass, inertia=tuple(map(tuple, J0)), cm_offset=tuple(r0),
+                  torque_noise=testbed.body.torque_noise)
+    )  # fmt: skip
+    model = build_model(tb)
+    windows = platform_windows(model, data, segment)
+    gyro = all(d.gyro for d in data)
+    outputs = ("rate", "quat") if gyro else ("quat",)
     spec_w = testbed.sensors.gyro_noise
     spec_q = testbed.sensors.attitude_noise
     sw = sigma_w if sigma_w is not None else (spec_w if spec_w > 0 else 1e-4)
     sq = sigma_q if sigma_q is not None else (spec_q if spec_q > 0 else SIGMA_Q_START)
-    sig = np.array([max(sq, SIGMA_FLOOR), max(sw, SIGMA_FLOOR)])
-    v = np.concatenate([np.zeros(prob.nf), prob.z_start().T.ravel()])
+    sw, sq = max(sw, SIGMA_FLOOR), max(sq, SIGMA_FLOOR)
+    prob = ShootingProblem(
+        model, windows, outputs, sw, sq, substeps=substeps, theta_slots=THETA_SLOTS_OE
+    )
+    # p = p_base + S theta: theta are the free entries themselves (kg m^2, m)
+    idx = np.asarray(model.index(list(PARAM_NAMES), "p"))
+    fidx = np.flatnonzero(free)
+    p_base = model.p0.copy()
+    p_base[idx[fidx]] = 0.0
+    S = np.zeros((model.n_p, fidx.size))
+    S[idx[fidx], np.arange(fidx.size)] = 1.0
+    js = float(np.trace(J0) / 3)
+    phys = physical_constraint(theta0, free, mass=mass, margin=margin, js=js)
+    name = (
+        f"output-error fit ({len(data)} logs, {windows.n} shooting pieces; the "
+        "equation-error estimate may be too far off: try more logs, shorter segments or "
+        "method='equation-error')"
+    )
+    theta, delta = theta0[fidx], None
     iterations, warnings = 0, []
-    status = ""
-    for _ in range(max_refits + 1):
-        v, stats = prob.solve(v, sig, max_iter)
-        iterations += int(stats.get("iter_count", 0))
-        status = stats.get("return_status", "unknown")
-        verdict = classify_status(status)
-        if verdict == "warning":
-            warnings.append(f"output-error fit: IPOPT stopped at an acceptable level ({status})")
-        elif verdict == "error":
-            raise SolverError(
-                f"output-error fit (IPOPT, {len(data)} logs, {prob.nseg} shooting pieces): "
-                f"{status}; the equation-error estimate may be too far off (try more logs, "
-                "shorter segments or method='equation-error')"
+    fit = None
+    for i in range(max_refits + 1):
+        used_q, used_w = sq, sw
+        fit = prob.fit(p_base, S, theta, delta0=delta, constraint=phys, max_iter=max_iter,
+                       name=name)  # fmt: skip
+        iterations += fit.iterations
+        if fit.level == "warning":
+            warnings.append(
+                f"output-error fit: IPOPT stopped at an acceptable level ({fit.status})"
             )
-        R = prob.raw_residuals(v, sig)
-        new = sig.copy()
-        new[0] = max(_rms(R[0:3]), SIGMA_FLOOR)
-        if prob.gyro:
-            new[1] = max(_rms(R[3:6]), SIGMA_FLOOR)
-        changed = np.max(np.abs(new / sig - 1)) > SIGMA_CHANGE
-        sig = new
-        if not changed:
+        theta, delta = fit.theta, fit.delta
+        rms = prob.noise_rms(fit.extra["r"])
+        sq = max(rms["quat"], SIGMA_FLOOR)
+        sw = max(rms["rate"], SIGMA_FLOOR) if gyro else sw
+        if max(abs(sq / used_q - 1), abs(sw / used_w - 1)) <= SIGMA_CHANGE or i == max_refits:
             break
-    th = v[: prob.nf]
-    theta_full = np.asarray(prob.theta_full(th)).ravel()
-    sc = prob.scale[free]
-    ratio_w = (sig[1] / spec_w) ** 2 if spec_w > 0 and prob.gyro else 1.0
-    ratio_q = (sig[0] / spec_q) ** 2 if spec_q > 0 else 1.0
-    if prob.gyro and spec_w <= 0:
+        prob.set_noise(sw, sq)
+    # the Fisher information at the re-estimated noise, and at the sensor specification
+    # (the Cramer-Rao bound for that noise); the fit's Jacobian is weighted by (sw, sq)
+    if gyro and spec_w <= 0:
         warnings.append(
             "testbed sensors.gyro_noise = 0: the Cramer-Rao bound uses the fitted noise"
         )
-    if not prob.gyro and spec_q <= 0:
+    if not gyro and spec_q <= 0:
         warnings.append(
             "testbed sensors.attitude_noise = 0: the Cramer-Rao bound uses the fitted noise"
         )
-    c_fit, c_spec = prob.covariance(v, sig, ((1.0, 1.0), (ratio_q, ratio_w)))
+    k = fidx.size
+    _, c_fit, _ = prob.covariance(fit, k, rate=(used_w / sw) ** 2, att=(used_q / sq) ** 2)
+    spec_w_ = spec_w if spec_w > 0 else sw
+    spec_q_ = spec_q if spec_q > 0 else sq
+    rate_spec, att_spec = (used_w / spec_w_) ** 2, (used_q / spec_q_) ** 2
+    _, c_spec, _ = prob.covariance(fit, k, rate=rate_spec, att=att_spec)
     cov, cov_spec = np.zeros((9, 9)), np.zeros((9, 9))
-    cov[np.ix_(free, free)] = c_fit * np.outer(sc, sc)
-    cov_spec[np.ix_(free, free)] = c_spec * np.outer(sc, sc)
-    _, Z = prob._split(v)
-    x0 = []
-    for j, seg in enumerate(prob.segs):
-        li, ref = seg[0], seg[5]
-        first = j == 0 or prob.segs[j - 1][4]  # the first piece of a segment
-        if first:
-            x0.append(np.asarray(prob.start(data[li].q[ref], Z[:, j])).ravel())
+    cov[np.ix_(free, free)] = c_fit
+    cov_spec[np.ix_(free, free)] = c_spec
+    theta_full = theta0.copy()
+    theta_full[fidx] = fit.theta
+    X0 = prob.start_states(fit.delta)
+    first = np.r_[True, ~windows.link]  # the first piece of each segment
     return OutputErrorResult(
         theta=theta_full,
         cov=cov,
         cov_spec=cov_spec,
-        sigma_w=float(sig[1]) if prob.gyro else float("nan"),
-        sigma_q=float(sig[0]),
-        rms_w=_rms(R[3:6]) if prob.gyro else float("nan"),
-        rms_q=_rms(R[0:3]),
-        x0=x0,
-        shooting_segments=prob.nseg,
+        sigma_w=float(sw) if gyro else float("nan"),
+        sigma_q=float(sq),
+        rms_w=rms["rate"] if gyro else float("nan"),
+        rms_q=rms["quat"],
+        x0=[X0[j] for j in np.flatnonzero(first)],
+        shooting_segments=int(windows.n),
         iterations=iterations,
-        status=status,
+        status=fit.status,
         warnings=warnings,
     )

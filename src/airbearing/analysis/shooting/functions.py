@@ -113,20 +113,25 @@ def delta_layout(model: Model, outputs: tuple) -> tuple[int, int, int]:
     return n_att, n_rate, len(model.lag_index)
 
 
-def _window_functions(model: Model, L: int, K: int, outputs: tuple, substeps: int, jit):
-    key = ("window", structure_key(model), L, K, outputs, substeps, jit)
-    return _cached(key, lambda: _build_window(model, L, K, outputs, substeps, jit))
+def _window_functions(
+    model: Model, L: int, K: int, outputs: tuple, substeps: int, jit, link: bool = False
+):
+    key = ("window", structure_key(model), L, K, outputs, substeps, jit, link)
+    return _cached(key, lambda: _build_window(model, L, K, outputs, substeps, jit, link))
 
 
-def _build_window(model: Model, L: int, K: int, outputs: tuple, substeps: int, jit):
-    dof = model.dof
+def start_function(model: Model, outputs: tuple) -> ca.Function:
+    """``(delta, x_meas) -> x0``: a window's initial state from its estimate (module doc)."""
+    key = ("start", structure_key(model), tuple(outputs))
+    return _cached(key, lambda: _build_start(model, tuple(outputs)))
+
+
+def _build_start(model: Model, outputs: tuple) -> ca.Function:
     n_att, n_rate, n_lag = delta_layout(model, outputs)
     nd = n_att + n_rate + n_lag
-    nx_plant = model.nx - n_lag
-    na = n_rate
     d = ca.SX.sym("delta", nd)
-    xm = ca.SX.sym("x_meas", nx_plant)
-    if dof == 3:
+    xm = ca.SX.sym("x_meas", model.nx - n_lag)
+    if model.dof == 3:
         rate0 = xm[4:7] + d[3:6]
         parts = [quat.qmul(xm[0:4], quat.qexp(d[0:3])), rate0, xm[7:]]
     else:
@@ -136,7 +141,55 @@ def _build_window(model: Model, L: int, K: int, outputs: tuple, substeps: int, j
     if n_lag:
         # the lagged gyro starts near the start rate, free per window
         parts.append(rate0 + d[n_att + n_rate :])
-    x0_fn = ca.Function("x0", [d, xm], [ca.vertcat(*parts)])
+    return ca.Function("x0", [d, xm], [ca.vertcat(*parts)])
+
+
+def _link_function(model: Model, K: int, outputs: tuple) -> ca.Function:
+    """Continuity defect between a window's end and the next window's start.
+
+    ``(x_end, dx_end, delta_next, x_meas_next, sigma) -> (c, dc/d[theta; delta], dc/d delta_next)``
+    with ``dx_end`` the end state's Jacobian in ``[theta; delta]`` of its own window. One
+    entry per entry of ``delta`` (the states a window's ``delta`` sets): the small rotation
+    ``2 vec(conj(q_end) (x) q_next)`` (dof 3) or the yaw difference, over ``sigma_att``; the
+    rate and lagged-rate differences over ``sigma_rate`` (defects in noise units).
+    """
+    n_att, n_rate, n_lag = delta_layout(model, outputs)
+    nd = n_att + n_rate + n_lag
+    nx = model.nx
+    xe = ca.SX.sym("x_end", nx)
+    dxe = ca.SX.sym("dx_end", nx, K + nd)
+    dn = ca.SX.sym("delta_next", nd)
+    xm = ca.SX.sym("x_meas_next", nx - n_lag)
+    sig = ca.SX.sym("sigma", 2)
+    xn = start_function(model, outputs)(dn, xm)
+    rate = list(range(4, 7)) if model.dof == 3 else [1]
+    parts = []
+    if model.dof == 3:
+        e = quat.qmul(quat.qconj(xe[0:4]), xn[0:4])
+        parts.append(2 * ca.sign(e[0] + 1e-300) * e[1:4] / sig[1])
+    elif n_att:
+        parts.append((xn[0] - xe[0]) / sig[1])
+    parts.append((xn[rate] - xe[rate]) / sig[0])
+    if n_lag:
+        lag = list(model.lag_index)
+        parts.append((xn[lag] - xe[lag]) / sig[0])
+    c = ca.vertcat(*parts)
+    return ca.Function(
+        "link",
+        [xe, dxe, dn, xm, sig],
+        [c, ca.mtimes(ca.jacobian(c, xe), dxe), ca.jacobian(c, dn)],
+    )
+
+
+def _build_window(
+    model: Model, L: int, K: int, outputs: tuple, substeps: int, jit, link: bool = False
+):
+    dof = model.dof
+    n_att, n_rate, n_lag = delta_layout(model, outputs)
+    nd = n_att + n_rate + n_lag
+    nx_plant = model.nx - n_lag
+    na = n_rate
+    x0_fn = start_function(model, outputs)
     qa, qb = ca.SX.sym("qa", 4), ca.SX.sym("qb", 4)
     e = quat.qmul(quat.qconj(qa), qb)
     att_fn = ca.Function("att_err", [qa, qb], [2 * ca.sign(e[0] + 1e-300) * e[1:4]])
@@ -185,17 +238,34 @@ def _build_window(model: Model, L: int, K: int, outputs: tuple, substeps: int, j
         "theta",
         "sigma",
     ]
-    win_r = ca.Function("window_r", ins, [r], names, ["r"])
-    win_rj = ca.Function(
-        "window_rj", ins, [r, ca.jacobian(r, ca.vertcat(TH, D))], names, ["r", "J"]
-    )
+    if link:
+        # the state at the row the selector E picks (the next window's first row)
+        E = ca.MX.sym("end", 1, L)
+        xe = ca.mtimes(X_all, E.T)
+        ins, names = [*ins, E], [*names, "end"]
+        Jall = ca.jacobian(ca.vertcat(r, xe), ca.vertcat(TH, D))
+        n_r = r.shape[0]
+        win_r = ca.Function("window_r", ins, [r, xe], names, ["r", "x_end"])
+        win_rj = ca.Function(
+            "window_rj",
+            ins,
+            [r, Jall[:n_r, :], xe, Jall[n_r:, :]],
+            names,
+            ["r", "J", "x_end", "dx_end"],
+        )
+    else:
+        win_r = ca.Function("window_r", ins, [r], names, ["r"])
+        win_rj = ca.Function(
+            "window_rj", ins, [r, ca.jacobian(r, ca.vertcat(TH, D))], names, ["r", "J"]
+        )
     win_y = ca.Function("window_y", [D, XM, U, DT, PB, S, TH], [Y])
     # the residual, its Jacobian and the outputs compiled to C as whole windows (the
     # derivatives are inside), cached on disk: a new process loads them
     return compiled(win_r, jit=jit), compiled(win_rj, jit=jit), compiled(win_y, jit=jit)
 
 
-def _data_shapes(model: Model, L: int, nw: int, na: int) -> list:
+def _data_shapes(model: Model, L: int, nw: int, na: int, link: bool = False) -> list:
+    """Pieces of the data vector; ``sigma`` (2) is always the last one."""
     nx_plant = model.nx - len(model.lag_index)
     return [
         (nx_plant, nw),
@@ -205,47 +275,73 @@ def _data_shapes(model: Model, L: int, nw: int, na: int) -> list:
         (na, L * nw),
         (4, L * nw),
         (1, L * nw),
+        *([(1, L * nw)] if link else []),  # end-row selector of each window
         (2, 1),
     ]
 
 
-def _problem_functions(model, L, nw, K, outputs, substeps, jit):
-    key = ("problem", structure_key(model), L, nw, K, outputs, substeps, jit)
-    return _cached(key, lambda: _build_problem(model, L, nw, K, outputs, substeps, jit))
+def _problem_functions(model, L, nw, K, outputs, substeps, jit, link=False):
+    key = ("problem", structure_key(model), L, nw, K, outputs, substeps, jit, link)
+    return _cached(key, lambda: _build_problem(model, L, nw, K, outputs, substeps, jit, link))
 
 
-def _build_problem(model, L, nw, K, outputs, substeps, jit):
-    win_r, win_rj, win_y = _window_functions(model, L, K, outputs, substeps, jit)
+def _build_problem(model, L, nw, K, outputs, substeps, jit, link=False):
+    """``fr, fj, fy`` of all windows: ``(v, p_base, S, data) -> `` residual (and with
+    ``link`` the continuity defects of every consecutive pair of windows), their Jacobians
+    in ``v = [theta; vec(delta)]``, the outputs."""
+    win_r, win_rj, win_y = _window_functions(model, L, K, outputs, substeps, jit, link)
     n_att, n_rate, n_lag = delta_layout(model, outputs)
     nd = n_att + n_rate + n_lag
     v = ca.MX.sym("v", K + nd * nw)
     pb = ca.MX.sym("p_base", model.n_p)
     S = ca.MX.sym("S", model.n_p, K)
-    shapes = _data_shapes(model, L, nw, n_rate)
+    shapes = _data_shapes(model, L, nw, n_rate, link)
     data = ca.MX.sym("data", sum(a * b for a, b in shapes))
     pieces, i = [], 0
     for a, b in shapes:
         pieces.append(ca.reshape(data[i : i + a * b], a, b))
         i += a * b
     th, D = v[:K], ca.reshape(v[K:], nd, nw)
-    args = [D, *pieces[:7], pb, S, th, pieces[7]]
-    R = win_r.map(nw, "thread", 2)(*args)
-    Rj, Jj = win_rj.map(nw, "thread", 2)(*args)
+    args = [D, *pieces[:7], pb, S, th, pieces[-1], *(pieces[7:8] if link else [])]
+    out_r = win_r.map(nw, "thread", 2)(*args)
+    out_rj = win_rj.map(nw, "thread", 2)(*args)
+    R, (Rj, Jj) = (out_r[0], out_rj[:2]) if link else (out_r, out_rj)
     n = Rj.shape[0]
     blocks = [Jj[:, j * (K + nd) : (j + 1) * (K + nd)] for j in range(nw)]
     J_th = ca.vertcat(*[blk[:, :K] for blk in blocks]) if K else ca.MX(n * nw, 0)
     J = ca.horzcat(J_th, ca.diagcat(*[blk[:, K:] for blk in blocks]))
     Y = win_y.map(nw, "thread", 2)(D, pieces[0], pieces[1], pieces[2], pb, S, th)
-    fr = ca.Function("r", [v, pb, S, data], [ca.vec(R)])
-    fj = ca.Function("rj", [v, pb, S, data], [ca.vec(Rj), J])
+    if link and nw > 1:
+        lf = _link_function(model, K, outputs).map(nw - 1)
+        sig = ca.repmat(pieces[-1], 1, nw - 1)
+        C = ca.vec(lf(out_r[1][:, :-1], ca.DM.zeros(model.nx, (K + nd) * (nw - 1)),
+                      D[:, 1:], pieces[0][:, 1:], sig)[0])  # fmt: skip
+        dX = out_rj[3]
+        Cj, A, B = lf(out_rj[2][:, :-1], dX[:, : (K + nd) * (nw - 1)], D[:, 1:],
+                      pieces[0][:, 1:], sig)  # fmt: skip
+        m = nd * (nw - 1)
+        a_blocks = [A[:, j * (K + nd) : (j + 1) * (K + nd)] for j in range(nw - 1)]
+        b_blocks = [B[:, j * nd : (j + 1) * nd] for j in range(nw - 1)]
+        JC_th = ca.vertcat(*[blk[:, :K] for blk in a_blocks]) if K else ca.MX(m, 0)
+        JC_d = ca.horzcat(ca.diagcat(*[blk[:, K:] for blk in a_blocks]), ca.MX(m, nd))
+        JC_d = JC_d + ca.horzcat(ca.MX(m, nd), ca.diagcat(*b_blocks))
+        JC = ca.horzcat(JC_th, JC_d)
+        fr = ca.Function("r", [v, pb, S, data], [ca.vec(R), C])
+        fj = ca.Function("rj", [v, pb, S, data], [ca.vec(Rj), J, ca.vec(Cj), JC])
+    elif link:  # one window: nothing to join
+        fr = ca.Function("r", [v, pb, S, data], [ca.vec(R), ca.MX(0, 1)])
+        fj = ca.Function("rj", [v, pb, S, data], [ca.vec(Rj), J, ca.MX(0, 1), ca.MX(0, v.shape[0])])
+    else:
+        fr = ca.Function("r", [v, pb, S, data], [ca.vec(R)])
+        fj = ca.Function("rj", [v, pb, S, data], [ca.vec(Rj), J])
     fy = ca.Function("y", [v, pb, S, data], [Y])
     return fr, fj, fy
 
 
-def _problem_solver(model, L, nw, K, outputs, substeps, jit):
+def _problem_solver(model, L, nw, K, outputs, substeps, jit, max_iter=IPOPT_MAX_ITER):
     """``(solver, keep)``: the IPOPT solver and the Python objects it calls (kept alive)."""
-    key = ("solver", structure_key(model), L, nw, K, outputs, substeps, jit)
-    return _cached(key, lambda: _build_solver(model, L, nw, K, outputs, substeps, jit))
+    key = ("solver", structure_key(model), L, nw, K, outputs, substeps, jit, max_iter)
+    return _cached(key, lambda: _build_solver(model, L, nw, K, outputs, substeps, jit, max_iter))
 
 
 _PATTERNS: OrderedDict = OrderedDict()
@@ -337,7 +433,7 @@ class _Call(ca.Callback):
         return self.jac(name)
 
 
-def _build_solver(model, L, nw, K, outputs, substeps, jit):
+def _build_solver(model, L, nw, K, outputs, substeps, jit, max_iter=IPOPT_MAX_ITER):
     """IPOPT on ``z = v / scale``: objective 0.5 |r|^2, gradient J^T r, Hessian J^T J.
 
     Gauss-Newton: no second derivatives through the rollout. The objective, its gradient
@@ -392,7 +488,7 @@ def _build_solver(model, L, nw, K, outputs, substeps, jit):
             "print_time": False,
             "ipopt.print_level": 0,
             "ipopt.sb": "yes",
-            "ipopt.max_iter": IPOPT_MAX_ITER,
+            "ipopt.max_iter": int(max_iter),
             "ipopt.tol": IPOPT_TOL,
             "ipopt.acceptable_tol": 1e-5,
             "ipopt.acceptable_iter": 3,

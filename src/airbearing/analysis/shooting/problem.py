@@ -7,14 +7,17 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 
+from airbearing.analysis.shooting.constrained import Inequality, linked_solver, null_space_basis
 from airbearing.analysis.shooting.functions import (
     DEFAULT_SUBSTEPS,
     FISHER_RCOND,
+    IPOPT_MAX_ITER,
     OUTPUTS,
     THETA_SLOTS,
     _problem_functions,
     _problem_solver,
     delta_layout,
+    start_function,
     to_csc,
 )
 from airbearing.errors import SolverError
@@ -61,6 +64,12 @@ class WindowSet:
         The log row of each window sample (padding repeats the last row).
     source : ndarray (n,) of int
         Which log (or segment group) each window comes from.
+    link : ndarray (n - 1,) of bool, optional
+        ``link[j]``: window ``j + 1`` continues window ``j`` (continuity constraint: the
+        state of window ``j`` at its row ``end[j]`` is window ``j + 1``'s start). None: every
+        window starts afresh.
+    end : ndarray (n,) of int, optional
+        Row (within its window) where each linked window hands over to the next one.
     """
 
     x0: np.ndarray
@@ -72,6 +81,13 @@ class WindowSet:
     yaw: np.ndarray | None
     rows: np.ndarray
     source: np.ndarray
+    link: np.ndarray | None = None
+    end: np.ndarray | None = None
+
+    @property
+    def linked(self) -> bool:
+        """True when some window continues the previous one."""
+        return self.link is not None and bool(np.any(self.link))
 
     @property
     def n(self) -> int:
@@ -82,7 +98,7 @@ class WindowSet:
         return self.weight.shape[1]
 
     def subset(self, which) -> WindowSet:
-        """The windows at positions ``which``."""
+        """The windows at positions ``which`` (each starting afresh: links are dropped)."""
         which = np.asarray(which, dtype=int)
 
         def pick(a):
@@ -98,7 +114,7 @@ class WindowSet:
             yaw=pick(self.yaw),
             rows=self.rows[which],
             source=self.source[which],
-        )
+        )  # link, end: None
 
 
 # ----------------------------------------------------------------------------
@@ -149,7 +165,9 @@ class Fit:
     level: str = "converged"
     not_identifiable: tuple = ()
     cov: np.ndarray | None = None
-    extra: dict = field(default_factory=dict)  # "r", "J" (scipy CSC, unscaled) at the fit
+    # "r", "J" (scipy CSC, unscaled) at the fit; with continuity also "N", the basis of the
+    # directions that keep it (theta first, :func:`~.constrained.null_space_basis`)
+    extra: dict = field(default_factory=dict)
 
 
 def theta_errors(J, k: int, s2: float, names=None):
@@ -270,6 +288,12 @@ class ShootingProblem:
         self.usable = windows.weight.reshape(-1)[self.sample] > 0
         self.n_res = int(self.usable.sum())
         self.primary = self.group == 0
+        self.link = windows.linked
+        if self.link:
+            pairs = np.flatnonzero(windows.link)
+            self.link_rows = (pairs[:, None] * self.n_delta + np.arange(self.n_delta)).ravel()
+        else:
+            self.link_rows = np.zeros(0, dtype=int)
         self._data = self._data_vector()
 
     # ------------------------------------------------------------------ plumbing
@@ -289,9 +313,18 @@ class ShootingProblem:
             cols(w.rate, na),
             cols(w.quat, 4),
             np.zeros((1, L * nw)) if w.yaw is None else w.yaw.reshape(1, -1),
-            np.array([[max(self.sigma_rate, 1e-300)], [max(self.sigma_att, 1e-300)]]),
         )
+        if self.link:  # one-hot selector of each window's hand-over row
+            E = np.zeros((nw, L))
+            E[np.arange(nw), np.asarray(w.end, dtype=int)] = 1.0
+            parts = (*parts, E.reshape(1, -1))
+        parts = (*parts, np.array([[max(self.sigma_rate, 1e-300)], [max(self.sigma_att, 1e-300)]]))
         return np.concatenate([np.asarray(a, dtype=float).reshape(-1, order="F") for a in parts])
+
+    def set_noise(self, sigma_rate: float, sigma_att: float) -> None:
+        """New noise levels (rad/s, rad) weighting the residuals (a re-weighted fit)."""
+        self.sigma_rate, self.sigma_att = float(sigma_rate), float(sigma_att)
+        self._data[-2:] = [max(self.sigma_rate, 1e-300), max(self.sigma_att, 1e-300)]
 
     def _key(self, K: int) -> tuple:
         return (
@@ -310,7 +343,11 @@ class ShootingProblem:
         return np.hstack([S, np.zeros((S.shape[0], K - k))]), K
 
     def _eval(self, which: int, v, p_base, S):
-        return _problem_functions(*self._key(S.shape[1]))[which](v, p_base, S, self._data)
+        fn = _problem_functions(*self._key(S.shape[1]), self.link)[which]
+        out = fn(v, p_base, S, self._data)
+        if self.link and which < 2:  # the residual (and its Jacobian), not the defects
+            return out[0] if which == 0 else tuple(out[:2])
+        return out
 
     def _v(self, delta, S, theta=None):
         Sp, K = self._pad(np.zeros((self.model.n_p, 0)) if S is None else S)
@@ -367,8 +404,15 @@ class ShootingProblem:
         upper: np.ndarray | None = None,
         delta0: np.ndarray | None = None,
         name: str = "output error",
+        constraint=None,
+        max_iter: int | None = None,
     ) -> Fit:
         """Fit the window initial states (and ``theta``) by IPOPT with a Gauss-Newton Hessian.
+
+        With linked windows (:attr:`WindowSet.link`) the continuity of each linked pair is
+        an equality constraint, and ``constraint`` adds ``h(theta) >= 0``
+        (:mod:`.constrained`); the errors are then those of the constrained problem (the
+        continuity eliminated through its null space, the inequalities ignored).
 
         Parameters
         ----------
@@ -382,6 +426,11 @@ class ShootingProblem:
             Start of the initial-state perturbations (default 0).
         name : str
             Names the problem in a SolverError.
+        constraint : casadi.Function, optional
+            ``theta (k,) -> h (m,)``, kept ``>= 0`` (e.g. physical consistency); the start
+            must satisfy it.
+        max_iter : int, optional
+            IPOPT iteration limit (default ``IPOPT_MAX_ITER``).
 
         Raises
         ------
@@ -409,11 +458,27 @@ class ShootingProblem:
             raise SolverError(f"{name}: the replay is not finite at the starting point")
         col = np.sqrt(np.asarray(to_csc(J0).power(2).sum(axis=0)).ravel())
         scale = np.where(col > 0, 1.0 / np.maximum(col, 1e-300), 1.0)
-        solver, _keep = _problem_solver(*self._key(K))
-        par = np.concatenate([p_base, Sp.reshape(-1, order="F"), scale, self._data])
-        oracle = _keep[-1]
-        oracle.set(par)
-        sol = solver(x0=v0 / scale, lbx=lb / scale, ubx=ub / scale)
+        ineq = None if constraint is None else Inequality(constraint)
+        n_link = self.link_rows.size
+        n_ineq = 0 if ineq is None else ineq.m
+        Jc = None
+        if n_link or n_ineq:
+            if ineq is not None and np.any(ineq.value(v0[:k]) < 0):
+                raise SolverError(f"{name}: the starting point violates the constraint")
+            mi = IPOPT_MAX_ITER if max_iter is None else int(max_iter)
+            solver, _keep = linked_solver(*self._key(K), self.link, n_link, n_ineq, mi)
+            oracle = _keep[-1]
+            oracle.set(p_base, Sp, scale, self._data, self.link_rows, ineq)
+            lbg = np.zeros(n_link + n_ineq)
+            ubg = np.r_[np.zeros(n_link), np.full(n_ineq, np.inf)]
+            sol = solver(x0=v0 / scale, lbx=lb / scale, ubx=ub / scale, lbg=lbg, ubg=ubg)
+        else:
+            mi = IPOPT_MAX_ITER if max_iter is None else int(max_iter)
+            solver, _keep = _problem_solver(*self._key(K), mi)
+            par = np.concatenate([p_base, Sp.reshape(-1, order="F"), scale, self._data])
+            oracle = _keep[-1]
+            oracle.set(par)
+            sol = solver(x0=v0 / scale, lbx=lb / scale, ubx=ub / scale)
         stats = solver.stats()
         status = str(stats.get("return_status", "?"))
         level = classify_status(status)
@@ -421,7 +486,12 @@ class ShootingProblem:
             raise SolverError(f"{name}: IPOPT did not converge ({status})")
         z = sol["x"].full().ravel()
         v = z * scale
-        if oracle.J is not None and oracle._same(z, par):
+        if n_link or n_ineq:
+            oracle.derivatives(z)  # memoised when IPOPT's last iterate had them
+            r, J = oracle.r.copy(), oracle.J @ sp.diags(1.0 / scale)
+            if n_link:
+                Jc = oracle.Jc / scale
+        elif oracle.J is not None and oracle._same(z, par):
             # IPOPT's last iterate was evaluated with its Jacobian: reuse it
             r, J = oracle.r.copy(), oracle.J @ sp.diags(1.0 / scale)
         else:
@@ -432,11 +502,19 @@ class ShootingProblem:
         keep = np.r_[np.arange(k), np.arange(K, v.size)]
         v = v[keep]
         J = sp.csc_matrix(J)[:, keep]
+        extra = {"r": r, "J": J}
         rss = float(r @ r)
         n_free = v.size
         theta = v[:k]
+        if Jc is not None:  # errors on the continuous trajectories: eliminate the defects
+            N = null_space_basis(Jc[:, keep], k)
+            extra["N"] = N
+            n_free = N.shape[1]
+            Jr = J @ N
+        else:
+            Jr = J
         s2 = rss / max(self.n_res - n_free, 1)
-        std, cov, reasons = theta_errors(J, k, s2)
+        std, cov, reasons = theta_errors(Jr, k, s2)
         p = p_base + S @ theta if k else p_base.copy()
         return Fit(
             theta=theta,
@@ -452,5 +530,34 @@ class ShootingProblem:
             level=level,
             not_identifiable=reasons,
             cov=cov,
-            extra={"r": r, "J": J},
+            extra=extra,
         )
+
+    # ------------------------------------------------------------------ after a fit
+    def covariance(self, fit: Fit, k: int, *, rate: float = 1.0, att: float = 1.0,
+                   s2: float = 1.0):  # fmt: skip
+        """Errors of ``fit``'s first ``k`` parameters with each output group's information
+        scaled: ``rate`` for the rate residuals, ``att`` for the attitude (or yaw) ones
+        (e.g. ``(sigma_used / sigma_other)^2`` for another noise level), times ``s2``.
+
+        Returns ``(std, cov, reasons)`` as :func:`theta_errors`.
+        """
+        w = np.array([rate if o == "rate" else att for o in self.outputs])[self.group]
+        J = sp.diags(np.sqrt(w)) @ fit.extra["J"]
+        if "N" in fit.extra:
+            J = J @ fit.extra["N"]
+        return theta_errors(J, k, s2)
+
+    def noise_rms(self, r: np.ndarray) -> dict:
+        """RMS of each output group's UNWEIGHTED residual over usable rows (rad/s, rad)."""
+        out = {}
+        for i, o in enumerate(self.outputs):
+            sel = (self.group == i) & self.usable
+            sigma = self.sigma_rate if o == "rate" else self.sigma_att
+            out[o] = float(sigma * np.sqrt(np.mean(r[sel] ** 2))) if sel.any() else float("nan")
+        return out
+
+    def start_states(self, delta: np.ndarray) -> np.ndarray:
+        """Each window's initial state (n_windows, nx) at ``delta`` (n_delta, n_windows)."""
+        fn = start_function(self.model, self.outputs).map(self.windows.n)
+        return np.asarray(fn(np.asarray(delta, dtype=float), self.windows.x0.T)).T
