@@ -1,27 +1,26 @@
-"""Output-error refinement of a platform's inertia and CM offset (CasADi, IPOPT).
+"""Output-error refinement of a platform's inertia and CM offset (the one shooting engine).
 
 The equation-error estimate of :mod:`airbearing.analysis.identification.regression`
 integrates sampled data with the trapezoidal rule, which biases it by about
 0.1-0.2 % on 20 Hz logs. Here the Model's own dynamics (RK4 with the inputs held
 over each logged interval, :meth:`Model.step_dt`) are fitted to the logged attitudes
-(and rates, with a gyro) by multiple shooting (:mod:`.oe_problem`): each segment of a
-log (between gaps) is cut into pieces whose initial states are free, continuity joins
-the pieces of one segment, outlier rows are masked out of the residual, and the
-physical consistency of the inertia (the second moment about the CM positive
-semi-definite with a margin, i.e. the pseudo-inertia LMI, written as its seven
-principal minors) stays a constraint. IPOPT solves it with exact CasADi derivatives,
-started from the cvxpy answer. The noise levels are re-estimated from the residuals
-of the usable rows and the fit repeated (Gaussian maximum likelihood); the parameter
-covariance is the inverse Fisher information with every segment's initial state
-eliminated (equality-constrained Gauss-Newton matrix).
+(and rates, with a gyro) by multiple shooting on :mod:`airbearing.analysis.shooting`:
+each segment of a log (between gaps) is cut into pieces whose initial states are free,
+continuity joins the pieces of one segment (linked windows, equality constraints),
+outlier rows are weighted zero, and the physical consistency of the inertia (the second
+moment about the CM positive semi-definite with a margin, i.e. the pseudo-inertia LMI,
+written as its seven principal minors, :func:`.oe_problem.physical_constraint`) is the
+engine's inequality ``h(theta) >= 0``. IPOPT solves it with exact CasADi derivatives
+(compiled window functions, cached on disk), started from the cvxpy answer, up to nine
+free parameters in ``THETA_SLOTS_OE`` slots. The noise levels are re-estimated from the
+residuals of the usable rows and the fit repeated (Gaussian maximum likelihood); the
+parameter covariance is the inverse Fisher information with every segment's initial
+state eliminated (the engine's errors in the null space of the continuity), at the
+re-estimated noise and at the sensor specification (the Cramer-Rao bound).
 
-Solver-status policy: the one of :mod:`airbearing.analysis.shooting`
-(:func:`~airbearing.analysis.shooting.classify_status`): IPOPT ``Solve_Succeeded`` is
-converged; ``Solved_To_Acceptable_Level`` is used with a warning; anything else raises
-:class:`~airbearing.errors.SolverError`. The NLP itself is not that engine's: the
-inertia needs 7-9 free parameters (the engine has 6 slots), the pseudo-inertia LMI as
-inequality constraints, and continuity between the pieces of a segment (the engine's
-windows restart freely), which is what makes the errors reach the Cramer-Rao bound.
+Solver-status policy: the engine's (:mod:`airbearing.analysis.shooting`): IPOPT
+``Solve_Succeeded`` is converged; ``Solved_To_Acceptable_Level`` is used with a warning;
+anything else raises :class:`~airbearing.errors.SolverError`.
 """
 
 from __future__ import annotations

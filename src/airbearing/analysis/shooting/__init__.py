@@ -1,5 +1,10 @@
 """The one multiple-shooting output-error engine (replay, discrepancy, identification).
 
+Used by the replay and the discrepancy search (:mod:`airbearing.analysis.discrepancy`),
+the dof-1 yaw inertia and the platform inertia output error
+(:mod:`airbearing.analysis.identification`): one NLP builder over the Model's rollout on
+windows, one solver-status policy, one bounded cache of compiled functions.
+
 A log is cut into windows of ``L`` rows that never span a gap. Window ``j``
 restarts from an estimate of the state at its first row, ``x_meas_j``,
 corrected by a small perturbation ``delta_j`` (a rotation vector on the
@@ -20,9 +25,22 @@ that is not usable enters no residual, no fit and no gap.
 
 Free parameters enter as ``p = p_base + S theta`` with ``S`` an input, so ONE
 compiled window function serves every choice of free parameters (up to
-``THETA_SLOTS`` of them). Compiled functions are cached per process in one
-bounded cache keyed by the Model's structure (its serialized expressions), not
-by object identity: testbeds that differ only in parameter values share them.
+``max(theta_slots, k)`` slots, ``THETA_SLOTS`` by default; the slot count is part of
+the cache key, so a problem may choose its own, e.g. 9 for the platform inertia).
+Compiled functions are cached per process in one bounded cache keyed by the Model's
+structure (its serialized expressions), not by object identity: testbeds that differ
+only in parameter values share them.
+
+Constraints (:mod:`.constrained`)
+    By default every window restarts freely. A :class:`WindowSet` may LINK consecutive
+    windows (``link``, ``end``): the state of window ``j`` at its row ``end[j]`` (the
+    next window's first row) must equal window ``j + 1``'s start, an equality
+    constraint per entry of ``delta`` (in noise units), so the windows of a segment are
+    one trajectory (Bock's multiple shooting). ``fit(..., constraint=h)`` adds
+    ``h(theta) >= 0`` for any CasADi Function ``h`` of the free parameters (e.g. the
+    principal minors of a pseudo-inertia). IPOPT then gets the constraint Jacobian and
+    the Hessian ``J^T J`` plus the exact Hessian of the inequalities (constrained
+    Gauss-Newton: the defects' second derivatives are left out).
 
 Solver-status policy (stated once, here)
     ``converged``: IPOPT ``Solve_Succeeded``.
@@ -34,18 +52,26 @@ Solver-status policy (stated once, here)
 Standard errors
     From the Gauss-Newton (Fisher) matrix ``F = J^T J`` of the weighted
     residual, the window initial states ELIMINATED (Schur complement of their
-    block), scaled by the reduced chi-square. A parameter whose Jacobian column
-    is zero (nothing excites it) or whose reduced Fisher matrix is singular
-    (relative eigenvalue below ``FISHER_RCOND``: the log cannot tell it from the
-    initial states or from another parameter) gets no number but a reason.
+    block), scaled by the reduced chi-square. With linked windows ``J`` is first
+    restricted to the null space of the linearised continuity (the errors of single
+    shooting, at the Cramer-Rao bound for the weights used); inequalities are ignored.
+    A parameter whose Jacobian column is zero (nothing excites it) or whose reduced
+    Fisher matrix is singular (relative eigenvalue below ``FISHER_RCOND``: the log
+    cannot tell it from the initial states or from another parameter) gets no number
+    but a reason. :meth:`ShootingProblem.covariance` recomputes them with each output
+    group's information rescaled (another noise level, e.g. a sensor specification);
+    :meth:`ShootingProblem.noise_rms` and :meth:`ShootingProblem.set_noise` serve fits
+    that re-estimate the noise weights.
 """
 
+from airbearing.analysis.shooting.constrained import Inequality, null_space_basis
 from airbearing.analysis.shooting.functions import (
     DEFAULT_SUBSTEPS,
     THETA_SLOTS,
     compiled,
     delta_layout,
     jit_available,
+    start_function,
     step_function,
     structure_key,
 )
@@ -61,12 +87,15 @@ __all__ = [
     "DEFAULT_SUBSTEPS",
     "THETA_SLOTS",
     "Fit",
+    "Inequality",
     "ShootingProblem",
     "WindowSet",
     "classify_status",
     "compiled",
     "delta_layout",
     "jit_available",
+    "null_space_basis",
+    "start_function",
     "step_function",
     "structure_key",
     "theta_errors",

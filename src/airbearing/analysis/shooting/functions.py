@@ -2,8 +2,10 @@
 
 One bounded cache (``CACHE_SIZE`` entries) keyed by the Model's STRUCTURE (a hash of
 its serialized expressions, :func:`structure_key`), the window length, the number of
-parameter slots and the output groups; the window functions are compiled to C through
-the on-disk cache of :mod:`airbearing.models.compiled` (a new process loads them).
+parameter slots, the output groups and whether windows are linked; the window
+functions are compiled to C through the on-disk cache of
+:mod:`airbearing.models.compiled` (a new process loads them). The constrained solver
+(linked windows, inequalities) is in :mod:`.constrained`, in the same cache.
 """
 
 from __future__ import annotations
