@@ -26,9 +26,9 @@ from dataclasses import dataclass
 
 import casadi as ca
 import numpy as np
-from scipy.signal import savgol_filter
 
 from airbearing.analysis.discrepancy.data import ReplayData
+from airbearing.analysis.discrepancy.filters import savgol
 from airbearing.errors import InputError
 from airbearing.io.testbed import Testbed
 from airbearing.io.vocabulary import EFFECTS as VOCABULARY
@@ -243,8 +243,8 @@ def smoothed(data: ReplayData):
             order = 1
         for j in range(src.shape[1]):  # outliers: interpolated, then left out below
             src[~good, j] = np.interp(data.t[a:b][~good], data.t[a:b][good], src[good, j])
-        w_s[a:b] = savgol_filter(src, SG_WINDOW, SG_ORDER, deriv=order, delta=h, axis=0)
-        w_dot[a:b] = savgol_filter(src, SG_WINDOW, SG_ORDER, deriv=order + 1, delta=h, axis=0)
+        w_s[a:b] = savgol(src, SG_WINDOW, SG_ORDER, order, h)
+        w_dot[a:b] = savgol(src, SG_WINDOW, SG_ORDER, order + 1, h)
         trust = good.copy()
         for k in np.flatnonzero(~good):
             trust[max(k - half, 0) : k + half + 1] = False

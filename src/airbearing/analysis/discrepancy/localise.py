@@ -3,9 +3,9 @@
 from __future__ import annotations
 
 import numpy as np
-from scipy.signal import welch
 
 from airbearing.analysis.discrepancy.data import NoiseFloor
+from airbearing.analysis.discrepancy.filters import welch
 from airbearing.analysis.discrepancy.replay import primary_series
 from airbearing.analysis.shooting import Fit, ShootingProblem
 from airbearing.models import quaternion as quat
@@ -183,7 +183,7 @@ def localise(datas, problem: ShootingProblem, fit: Fit, floor: NoiseFloor) -> di
                 )
     # frequency
     seg = min(256, len(res))
-    f, pxx = welch(res, fs=1.0 / d0.dt, nperseg=seg, axis=0)
+    f, pxx = welch(res, 1.0 / d0.dt, seg)
     white = 2 * d0.dt * axis_floor**2
     out["spectrum"] = (f, pxx, white)
     if ratio >= ABOVE:

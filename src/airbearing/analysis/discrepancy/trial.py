@@ -147,9 +147,10 @@ class CandidateResult:
 
 
 def chi2_threshold(k: int) -> float:
-    from scipy.stats import chi2
+    """The chi-square quantile ``1 - SIGNIFICANCE`` with ``k`` degrees of freedom."""
+    from scipy.special import chdtri  # chi2.ppf(1 - a, k) without importing scipy.stats (0.6 s)
 
-    return float(chi2.ppf(1.0 - SIGNIFICANCE, k))
+    return float(chdtri(k, SIGNIFICANCE))
 
 
 def cross_validate(problem: ShootingProblem, fit: Fit, k: int, folds: np.ndarray):
@@ -263,7 +264,9 @@ def judge(cand, fit, k_sel, current, ln_n, k_added, heldout, heldout_before, sta
         sig = float(math.sqrt(max(float(th @ np.linalg.solve(cov, th)), 0.0)))
     except np.linalg.LinAlgError:
         sig = math.nan
-    status = "warning: " + fit.status if fit.level == "warning" else "converged"
+    status = {"warning": "warning: " + fit.status, "screened": "screened"}.get(
+        fit.level, "converged"
+    )
     reason = ""
     if np.any(at_bound):
         status, reason = (

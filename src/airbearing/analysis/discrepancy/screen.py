@@ -1,0 +1,221 @@
+"""Score-test screening: which candidates of a round can matter, from ONE shared Jacobian.
+
+Before a round's IPOPT fits, the residual and its exact Jacobian at the current fit are
+evaluated once for every Model parameter a candidate moves (a few compiled evaluations for
+all candidates together, ``THETA_SLOTS`` parameters at a time). With each window's initial
+state eliminated in its own small normal equations (as in the held-out test), every
+candidate's Gauss-Newton step from the current fit is a small least-squares problem
+(within its physical bounds: the box-constrained minimum of the quadratic model, by its
+active sets). Its predicted fall of the weighted RSS is Rao's score statistic (asymptotically
+the likelihood ratio, Rao 1948), and the residual evaluated at the step checks it.
+
+A candidate whose predicted and checked likelihood ratio both lie below
+``SCREEN_FRACTION`` of what naming needs (the chi-square quantile and the BIC penalty of
+:mod:`.trial`), with the two agreeing within ``AGREE_FRACTION`` of it, cannot be named: it
+is judged on the step (status ``screened``: value, error, gap, score and held-out gap of
+the step) and IPOPT is not run. Every other candidate is fitted by IPOPT as before.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+import scipy.sparse as sp
+
+from airbearing.analysis.shooting import THETA_SLOTS, Fit, ShootingProblem, theta_errors
+
+__all__ = ["AGREE_FRACTION", "SCREEN_FRACTION", "Linearisation", "Step", "linearise"]
+
+#: A candidate is screened (no IPOPT fit) when its linearised likelihood ratio, and the one
+#: checked at its step, are below this fraction of what naming needs: for a screened
+#: candidate the BIC cannot drop even if the quadratic model were off by a factor of two.
+SCREEN_FRACTION = 0.5
+#: The quadratic model is trusted when the residual at its step gives a likelihood ratio
+#: within this fraction of the naming threshold of the predicted one (else IPOPT decides).
+AGREE_FRACTION = 0.25
+
+
+@dataclass(frozen=True, eq=False)
+class Step:
+    """A candidate's Gauss-Newton step from the current fit (quadratic model, within bounds)."""
+
+    theta: np.ndarray  # chosen parameters then the candidate's, absolute values
+    delta: np.ndarray  # (n_delta, n_windows)
+    p: np.ndarray
+    rss_model: float  # predicted weighted RSS
+    rss: float  # weighted RSS of the residual evaluated at the step
+    r: np.ndarray
+    J: sp.csc_matrix  # Jacobian at the current fit in [theta; vec(delta)]
+    feasible: bool  # the chosen parameters stay inside their bounds
+
+
+class Linearisation:
+    """The current fit's residual and Jacobian in every candidate parameter, windows eliminated.
+
+    Parameters
+    ----------
+    problem : ShootingProblem
+    current : Fit
+        The current (converged) fit; its first ``S_sel.shape[1]`` parameters are chosen.
+    S_sel : ndarray (n_p, k_sel)
+        The chosen effects' columns (``p = p_base + S theta``).
+    raw : sequence of int
+        The Model parameters (indices of ``p``) any candidate moves.
+    """
+
+    def __init__(self, problem: ShootingProblem, current: Fit, S_sel: np.ndarray, raw) -> None:
+        self.problem, self.current = problem, current
+        self.S_sel = np.asarray(S_sel, dtype=float)
+        self.k_sel = k_sel = self.S_sel.shape[1]
+        self.raw = list(raw)
+        n_p = problem.model.n_p
+        room = THETA_SLOTS - k_sel
+        r, A_sel, Jd, cols = None, None, None, []
+        for i in range(0, len(self.raw), room):
+            chunk = self.raw[i : i + room]
+            S_raw = np.zeros((n_p, len(chunk)))
+            S_raw[chunk, np.arange(len(chunk))] = 1.0
+            S = np.hstack([self.S_sel, S_raw])
+            at = replace(current, theta=np.r_[current.theta, np.zeros(len(chunk))])
+            r_i, J = problem.jacobian(at, S)
+            if r is None:
+                r, Jd = r_i, J[:, k_sel + len(chunk) :].tocsc()
+                A_sel = J[:, :k_sel].toarray()
+            cols.append(J[:, k_sel : k_sel + len(chunk)].toarray())
+        self.r = r
+        self.A = np.hstack([A_sel, *cols])  # (n_res_all, k_sel + len(raw))
+        self.Jd = Jd
+        nd, nw, n = problem.n_delta, problem.windows.n, problem.n_win_res
+        m = self.A.shape[1]
+        G, g = np.zeros((m, m)), np.zeros(m)
+        self.blocks = []
+        for j in range(nw):
+            R = slice(j * n, (j + 1) * n)
+            Aj, rj = self.A[R], r[R]
+            Dj = Jd[R, j * nd : (j + 1) * nd].toarray()
+            P = np.linalg.pinv(Dj.T @ Dj, hermitian=True)
+            B = Aj.T @ Dj
+            G += Aj.T @ Aj - B @ P @ B.T
+            g += Aj.T @ rj - B @ P @ (Dj.T @ rj)
+            self.blocks.append((R, Dj, P))
+        self.G, self.g = G, g
+        self.rss0 = float(r @ r)
+
+    def columns(self, params: tuple, tie: np.ndarray) -> np.ndarray:
+        """``E`` (k_sel + len(raw), k_sel + k_c): chosen and candidate parameters -> columns."""
+        k_sel, k_c = self.k_sel, tie.shape[1]
+        E = np.zeros((self.A.shape[1], k_sel + k_c))
+        E[:k_sel, :k_sel] = np.eye(k_sel)
+        idx = self.problem.model.index(list(params), "p")
+        for row, pi in zip(tie, idx, strict=True):
+            E[k_sel + self.raw.index(pi), k_sel:] += row
+        return E
+
+    def step(self, E: np.ndarray, lower_sel, upper_sel, lower_c, upper_c) -> Step:
+        """The Gauss-Newton step of the chosen and one candidate's parameters (class doc)."""
+        k_sel = self.k_sel
+        Gc, gc = E.T @ self.G @ E, E.T @ self.g
+        k = Gc.shape[0]
+        th0 = np.r_[self.current.theta, np.zeros(k - k_sel)]
+        lo = np.r_[np.full(k_sel, -np.inf), np.asarray(lower_c, dtype=float)] - th0
+        hi = np.r_[np.full(k_sel, np.inf), np.asarray(upper_c, dtype=float)] - th0
+        d, q = _box_min(Gc, gc, lo, hi)
+        theta = th0 + d
+        feasible = bool(
+            np.all(theta[:k_sel] >= np.asarray(lower_sel, dtype=float))
+            and np.all(theta[:k_sel] <= np.asarray(upper_sel, dtype=float))
+        )
+        pb = self.problem
+        nd, nw = pb.n_delta, pb.windows.n
+        e = self.r + self.A @ (E @ d)
+        delta = self.current.delta.copy()
+        for j, (R, Dj, P) in enumerate(self.blocks):
+            delta[:, j] -= P @ (Dj.T @ e[R])
+        S_sel_c = self.S_all(E)
+        p_base = self.current.p - (self.S_sel @ self.current.theta if k_sel else 0.0)
+        p = p_base + S_sel_c @ theta
+        r = pb.residual(delta.reshape(nd, nw), p)
+        J = sp.hstack([sp.csc_matrix(self.A @ E), self.Jd]).tocsc()
+        return Step(theta, delta, p, self.rss0 + q, float(r @ r), r, J, feasible)
+
+    def S_all(self, E: np.ndarray) -> np.ndarray:
+        """``S`` of the chosen and the candidate's parameters (n_p, k)."""
+        n_p = self.problem.model.n_p
+        S_raw = np.zeros((n_p, len(self.raw)))
+        S_raw[self.raw, np.arange(len(self.raw))] = 1.0
+        return np.hstack([self.S_sel, S_raw]) @ E
+
+    def fit_of(self, st: Step, k: int) -> Fit:
+        """The step as a :class:`Fit` (errors from the Jacobian at the current fit)."""
+        pb = self.problem
+        n_free = k + st.delta.size
+        s2 = st.rss / max(pb.n_res - n_free, 1)
+        std, cov, reasons = theta_errors(st.J, k, s2)
+        return Fit(
+            theta=st.theta,
+            theta_std=std,
+            p=st.p,
+            delta=st.delta,
+            rss=st.rss,
+            n_res=pb.n_res,
+            n_free=n_free,
+            gap=pb.gap_of_residual(st.r),
+            iterations=0,
+            status="screened",
+            level="screened",
+            not_identifiable=reasons,
+            cov=cov,
+            extra={"r": st.r, "J": st.J},
+        )
+
+
+def linearise(problem, current, S_sel, cands) -> Linearisation | None:
+    """The round's :class:`Linearisation` for ``cands`` (None when no slot is left)."""
+    k_sel = S_sel.shape[1]
+    if k_sel >= THETA_SLOTS or not cands:
+        return None
+    idx = problem.model.index
+    raw = list(dict.fromkeys(i for c in cands for i in idx(list(c.params), "p")))
+    return Linearisation(problem, current, S_sel, raw)
+
+
+def _box_min(G: np.ndarray, g: np.ndarray, lo: np.ndarray, hi: np.ndarray):
+    """``argmin 2 g.d + d.G.d`` over ``lo <= d <= hi`` and its value (active sets, k <= 6).
+
+    Columns are scaled by the diagonal; a direction the data do not see (zero column) stays 0.
+    """
+    k = g.size
+    c = np.sqrt(np.maximum(np.diag(G), 0.0))
+    seen = c > 0
+    c = np.where(seen, c, 1.0)
+    Gs, gs = G / np.outer(c, c), g / c
+    los, his = lo * c, hi * c
+    bounded = [i for i in range(k) if np.isfinite(los[i]) or np.isfinite(his[i])]
+    best, best_q = np.zeros(k), 0.0  # d = 0 (the current fit) is inside the box
+    for pick in itertools.product((None, "lo", "hi"), repeat=len(bounded)):
+        d = np.zeros(k)
+        fixed = ~seen
+        for i, how in zip(bounded, pick, strict=True):
+            if how is not None:
+                d[i], fixed[i] = (los[i] if how == "lo" else his[i]), True
+        if not np.all(np.isfinite(d)):
+            continue
+        free = ~fixed
+        if free.any():
+            rhs = -(gs[free] + Gs[np.ix_(free, fixed)] @ d[fixed])
+            d[free] = np.linalg.pinv(Gs[np.ix_(free, free)], hermitian=True) @ rhs
+        tol = 1e-12 * (1 + np.abs(d))
+        if np.any(d < los - tol) or np.any(d > his + tol):
+            continue
+        q = float(2 * gs @ d + d @ Gs @ d)
+        if q < best_q:
+            best, best_q = d, q
+    return best / c, best_q
+
+
+def lr_of(n: int, rss0: float, rss: float) -> float:
+    """Likelihood ratio ``n ln(RSS_0 / RSS)`` (inf for a perfect fit)."""
+    return n * math.log(rss0 / rss) if rss > 0 else math.inf
