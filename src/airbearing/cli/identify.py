@@ -56,11 +56,12 @@ def identify(
         raise InputError(f"--method {method}: expected output-error or equation-error")
     if form not in ("integrated", "acceleration"):
         raise InputError(f"--form {form}: expected integrated or acceleration")
+    from airbearing.analysis.identification.data import COLUMNS_USED
     from airbearing.io.log import read_log
     from airbearing.io.testbed import write_testbed
 
     tb = testbed_arg(testbed)
-    loaded = [read_log(p, tb) for p in logs]
+    loaded = [read_log(p, tb, columns=COLUMNS_USED) for p in logs]
     if tb.kind == "cmg" and tb.body.dof == 1:
         from airbearing.analysis.identification.cmg_inertia import identify_cmg_inertia
 

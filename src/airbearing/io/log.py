@@ -254,7 +254,11 @@ def _validate(
     src: str,
     testbed: Testbed | None,
     lines: Sequence[int] | None = None,
+    *,
+    fresh: bool = False,
 ) -> pd.DataFrame:
+    """The checks of :func:`validate_log`; ``fresh``: ``data`` was just read from a file
+    and nobody else holds it, so it is normalised in place instead of copied."""
     if not isinstance(data, pd.DataFrame):
         raise InputError(f"{src}: expected a pandas DataFrame, got {type(data).__name__}")
     if testbed is not None and not isinstance(testbed, Testbed):
@@ -282,18 +286,23 @@ def _validate(
                 f"{_present(have)} given"
             )
 
-    out = data.reset_index(drop=True).copy()
+    if fresh and isinstance(data.index, pd.RangeIndex) and data.index.start == 0:
+        out = data
+    else:
+        out = data.reset_index(drop=True).copy()
     # Non-numeric and non-finite cells: report the earliest row over all known columns.
-    first_bad: tuple[int, str] | None = None
+    first_bad: tuple[int, str, pd.Series] | None = None
     for name in [c for c in columns if c in LOG_COLUMNS]:
-        values = _as_float(out[name], name, src)
+        cells = out[name]
+        values = _as_float(cells, name, src)
         bad = ~np.isfinite(values)
         if bad.any() and (first_bad is None or int(np.argmax(bad)) < first_bad[0]):
-            first_bad = (int(np.argmax(bad)), name)
-        out[name] = values
+            first_bad = (int(np.argmax(bad)), name, cells)
+        if cells.dtype != np.float64:  # a float64 column already holds these values
+            out[name] = values
     if first_bad is not None:
-        row, name = first_bad
-        raise _bad_cell(data[name], name, row, src, lines)
+        row, name, cells = first_bad
+        raise _bad_cell(cells, name, row, src, lines)
 
     t = out["t"].to_numpy()
     dt = np.diff(t)
@@ -606,7 +615,14 @@ def _read_csv(path: Path, src: str) -> tuple[pd.DataFrame, list[int] | None]:
     return df, lines
 
 
-def _read_csv_fast(path: Path) -> pd.DataFrame:
+def _to_pandas(table) -> pd.DataFrame:
+    """An Arrow table as a DataFrame: one block per column (no consolidating copy) where
+    pandas copies on write (pandas >= 3), so the arrays may stay Arrow's own."""
+    split = int(pd.__version__.split(".")[0]) >= 3
+    return table.to_pandas(split_blocks=split)
+
+
+def _read_csv_fast(path: Path, wanted: set[str] | None) -> pd.DataFrame:
     """pyarrow's CSV reader: known columns as float64, others inferred (raises on any doubt)."""
     import pyarrow as pa
     import pyarrow.csv as pacsv
@@ -616,19 +632,42 @@ def _read_csv_fast(path: Path) -> pd.DataFrame:
     names = [h.strip() for h in header]
     if len(set(names)) != len(names) or any(h != n for h, n in zip(header, names, strict=True)):
         raise ValueError("header needs the careful reader")
-    types = {name: pa.float64() for name in names if name in LOG_COLUMNS}
+    keep = [n for n in names if wanted is None or n in wanted]
+    types = {name: pa.float64() for name in keep if name in LOG_COLUMNS}
     table = pacsv.read_csv(
         path,
         convert_options=pacsv.ConvertOptions(
-            column_types=types, strings_can_be_null=False, quoted_strings_can_be_null=False
+            column_types=types,
+            strings_can_be_null=False,
+            quoted_strings_can_be_null=False,
+            include_columns=keep,
         ),
     )
     if table.num_rows == 0 or any(table.column(n).null_count for n in types):
         raise ValueError("empty or missing cells need the careful reader")
-    return table.to_pandas()
+    return _to_pandas(table)
 
 
-def read_log(path: str | os.PathLike[str], testbed: Testbed | None = None) -> Log:
+def _wanted(columns: Iterable[str] | None, testbed: Testbed | None) -> set[str] | None:
+    """The columns to read: ``columns`` plus ``t``, the testbed's required columns and,
+    for a column of a group (the quaternion, the sliders...), the whole group."""
+    if columns is None:
+        return None
+    wanted = {"t", *columns, *REQUIRED_COLUMNS(testbed)}
+    if testbed is not None and testbed.body.dof == 1:
+        wanted |= set(_QUATERNION)  # accepted in place of yaw
+    for group in COLUMN_GROUPS:
+        if wanted & set(group):
+            wanted |= set(group)
+    return wanted
+
+
+def read_log(
+    path: str | os.PathLike[str],
+    testbed: Testbed | None = None,
+    *,
+    columns: Iterable[str] | None = None,
+) -> Log:
     """Read and validate a log file.
 
     Parameters
@@ -638,6 +677,12 @@ def read_log(path: str | os.PathLike[str], testbed: Testbed | None = None) -> Lo
         ``.parquet`` file with the columns of FORMATS.md in SI units.
     testbed : Testbed or None
         The testbed the log belongs to; enables its column and sampling checks.
+    columns : iterable of str or None
+        Read only these columns (those the file has), with ``t``, the columns the
+        testbed requires and the rest of any column group named (all four of
+        ``qw .. qz``...); the file's other columns are not read, checked or kept.
+        None (default): every column. A tool that uses a few columns of a wide
+        log reads it faster this way.
 
     Returns
     -------
@@ -661,28 +706,34 @@ def read_log(path: str | os.PathLike[str], testbed: Testbed | None = None) -> Lo
     kind = _format(p)
     if not p.is_file():
         raise InputError(f"{src}: no such log file")
+    wanted = _wanted(columns, testbed)
     if kind == "csv":
         try:
-            fast = _read_csv_fast(p)
+            fast = _read_csv_fast(p, wanted)
         except Exception:  # noqa: BLE001 (any doubt: the careful reader decides and explains)
             fast = None
         if fast is not None:
             try:
-                return Log._from_validated(_validate(fast, src, testbed), src, testbed)
+                data = _validate(fast, src, testbed, fresh=True)
+                return Log._from_validated(data, src, testbed)
             except InputError:
                 pass  # read again below, to name the line too
     try:
         if kind == "csv":
             df, lines = _read_csv(p, src)
+            if wanted is not None:
+                df = df[[c for c in df.columns if c in wanted]]
         else:
             import pyarrow.parquet as pq
 
-            df, lines = pq.read_table(p).to_pandas(), None
+            names = pq.read_schema(p).names
+            keep = None if wanted is None else [c for c in names if c in wanted]
+            df, lines = _to_pandas(pq.read_table(p, columns=keep)), None
     except InputError:
         raise
     except Exception as e:  # pyarrow's errors (ArrowInvalid, OSError) on a bad file
         raise InputError(f"{src}: cannot read the {kind} log: {e}") from e
-    data = _validate(df, src, testbed, lines)
+    data = _validate(df, src, testbed, lines, fresh=True)
     return Log._from_validated(data, src, testbed)
 
 

@@ -819,20 +819,47 @@ def _continuous_signs(q: np.ndarray, segments) -> np.ndarray:
     for start, stop in segments:
         seg_start[start:stop] = start
     for lag in (1, 2, 3):
+        if n <= lag:
+            break
+        dot = np.sum(q[lag:] * q[:-lag], axis=1)  # q_i . q_(i - lag), i = lag .. n - 1
         i = np.arange(lag, n)
-        i = i[i - lag >= seg_start[i]]
-        dot = np.sum(q[i] * q[i - lag], axis=1)
-        better = np.abs(dot) > best[i]
+        better = (i - lag >= seg_start[lag:]) & (np.abs(dot) > best[lag:])
         i, dot = i[better], dot[better]
         best[i] = np.abs(dot)
         parent[i] = i - lag
         rel[i] = np.where(dot < 0, -1.0, 1.0)
-    # sign_i = rel_i * sign_parent(i): pointer doubling to the segment's first sample
-    while np.any(parent != parent[parent]):
-        rel = rel * rel[parent]
-        parent = parent[parent]
-    rel = rel * rel[parent]  # roots have rel 1
-    return q * rel[:, None]
+    return q * _signs_along_parents(parent, rel)[:, None]
+
+
+def _signs_along_parents(parent: np.ndarray, rel: np.ndarray) -> np.ndarray:
+    """``sign_i = rel_i * sign_parent(i)`` (roots: ``parent_i = i``, ``rel_i = 1``, sign 1)
+    for a forest whose parents precede their children (``parent_i < i``).
+
+    Most samples take their predecessor as parent: along such a run the sign is a
+    running product (a cumulative count of ``rel = -1``). Only the first sample of
+    each run (a root, or a sample whose parent is 2 or 3 back) needs pointer doubling,
+    over those run heads alone.
+    """
+    n = parent.size
+    idx = np.arange(n)
+    flips = np.cumsum(rel < 0)  # flips[i] - flips[h]: the -1's after h up to i
+    heads = np.flatnonzero(parent != idx - 1)  # roots and jumps (row 0 is a root)
+    head = np.maximum.accumulate(np.where(parent != idx - 1, idx, 0))
+    p = parent[heads]
+    hp = head[p]  # the head of each head's parent's run
+    # sign_h = rel_h * sign_hp * (-1)^(flips[p] - flips[hp]); roots (p = h): 1
+    root = p == heads
+    hrel = np.where(root, 1.0, rel[heads] * np.where((flips[p] - flips[hp]) % 2, -1.0, 1.0))
+    pos = np.zeros(n, dtype=int)
+    pos[heads] = np.arange(heads.size)
+    hparent = np.where(root, np.arange(heads.size), pos[hp])
+    while np.any(hparent != hparent[hparent]):
+        hrel = hrel * hrel[hparent]
+        hparent = hparent[hparent]
+    hrel = hrel * hrel[hparent]
+    sign_head = np.empty(n)
+    sign_head[heads] = hrel
+    return sign_head[head] * np.where((flips - flips[head]) % 2, -1.0, 1.0)
 
 
 def _groups(log: Log, testbed: Testbed | None, segments) -> list[_Group]:

@@ -23,11 +23,12 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from airbearing.errors import InputError
-from airbearing.io.log import Log
+from airbearing.io.log import LOG_COLUMNS, Log
 from airbearing.io.testbed import Testbed
 from airbearing.models import quaternion as quat
 
 __all__ = [
+    "COLUMNS_USED",
     "PlatformData",
     "log_quality",
     "prepare_platform_logs",
@@ -35,6 +36,10 @@ __all__ = [
     "RATE_HALF_WIDTH",
 ]
 
+#: The log columns identification reads: those of FORMATS.md and the accelerometer's
+#: gravity direction ``gx, gy, gz``; ``read_log(path, testbed, columns=COLUMNS_USED)``
+#: leaves a log's other columns (simulation truth, notes) unread.
+COLUMNS_USED: tuple[str, ...] = (*LOG_COLUMNS, "gx", "gy", "gz")
 #: A log whose measured rates stay within this many gyro sigmas of their mean is "at rest".
 REST_SIGMAS = 5.0
 #: Smallest rate spread (rad/s) that counts as motion when the gyro is ideal.
@@ -304,17 +309,20 @@ def prepare_platform_logs(testbed: Testbed, logs) -> list[PlatformData]:
                 f"{src}: row {k}, columns s1..s3 = {s[k].tolist()} m: outside the rail "
                 f"travel +-{travel} m of testbed {testbed.name!r}"
             )
-        g_body = quat.rotate_inverse(q, g_lab)
+        # R(q) once for both rotations (quat.rotate / rotate_inverse form it each time)
+        rot = quat.rotation_matrix(q)
+        g_body = np.einsum("...ji,...j->...i", rot, g_lab)  # R^T g, as quat.rotate_inverse
         dipole = (
             log.columns(["mx", "my", "mz"]) if log.has("mx", "my", "mz") else np.zeros((len(t), 3))
         )
         if log.has("bx", "by", "bz"):
             b_body = log.columns(["bx", "by", "bz"])
-            b_lab = quat.rotate(q, b_body)
+            b_lab = np.einsum("...ij,...j->...i", rot, b_body)  # R b, as quat.rotate
         else:
             lab = testbed.field.lab_vec if testbed.field is not None else np.zeros(3)
             b_lab = np.tile(lab, (len(t), 1))
-            b_body = quat.rotate_inverse(q, b_lab)
+            b_body = np.einsum("...ji,...j->...i", rot, b_lab)
+        del rot
         g_meas = log.columns(["gx", "gy", "gz"]) if log.has("gx", "gy", "gz") else None
         out.append(
             PlatformData(
