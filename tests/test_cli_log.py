@@ -9,27 +9,10 @@ import numpy as np
 import pandas as pd
 import pytest
 from cli_run import run
+from rigs import MOCAP_MAP_TOML, MOCAP_RIG_TOML
 
-MAP = """
-[columns]
-t = "Time (ms)"
-yaw = "Yaw (deg)"
-[units]
-t = "ms"
-yaw = "deg"
-"""
-TESTBED = """
-kind = "platform"
-name = "spin-rig"
-[body]
-dof = 1
-mass = 4.2
-inertia = 0.05
-[sensors]
-rate = 10.0
-gyro = false
-attitude_noise = 0.001
-"""
+# the README's motion-capture rig and its import map
+MAP, TESTBED = MOCAP_MAP_TOML, MOCAP_RIG_TOML
 
 
 def lab_files(tmp_path: Path, n: int = 600, seed: int = 0) -> tuple[Path, Path, Path]:

@@ -12,6 +12,10 @@ import json
 import numpy as np
 import pytest
 
+# the mocap rotor (10 Hz, yaw noise 1 mrad, J = 0.05 kg m^2) and sphere, seed 004's
+# oscillation and sliders, that oscillation on jittered times
+from rigs import Q0, ROTOR, SPHERE, W0, jittered_platform
+
 import airbearing.cli as cli
 from airbearing.analysis.discrepancy.search import discrepancy
 from airbearing.analysis.simulation.artefacts import (
@@ -19,7 +23,6 @@ from airbearing.analysis.simulation.artefacts import (
     with_first_sample_artefact,
     with_gap,
     with_glitches,
-    with_jitter,
 )
 from airbearing.analysis.simulation.on_times import simulate_on_times
 from airbearing.analysis.simulation.scenarios import free_oscillation, spindown
@@ -27,16 +30,6 @@ from airbearing.io.log import write_log
 from airbearing.io.testbed import load_testbed, write_testbed
 from airbearing.io.testbed import testbed_from_dict as make_testbed
 
-# a passive yaw rig filmed by motion capture: 10 Hz, yaw noise 1 mrad (OptiTrack class),
-# J = 0.05 kg m^2 (a CubeSat mock-up on a spherical bearing, yaw only)
-ROTOR = make_testbed(
-    {
-        "kind": "platform",
-        "name": "mocap-rotor",
-        "body": {"dof": 1, "mass": 4.2, "inertia": 0.05},
-        "sensors": {"rate": 10.0, "gyro": False, "attitude_noise": 1e-3},
-    }
-)
 # the same rig with a gyro (20 Hz, 1.5e-4 rad/s)
 GYRO_ROTOR = make_testbed(
     {
@@ -47,9 +40,6 @@ GYRO_ROTOR = make_testbed(
     }
 )
 PLATFORM = load_testbed("platform-3dof")
-W0 = (0.3676, 0.1265, -1.4835)  # seed-004 initial rate
-Q0 = (0.99458, 0.024955, -0.014973, 0.099819)
-SLIDERS = {"s1": 0.003, "s2": -0.002, "s3": 0.004}
 
 # decelerations of a real coast-down (truth of the mocap spin-down example: aero and
 # viscous 7e-4 per s on J = 0.05) plus a Coulomb friction of 1e-3 rad/s^2
@@ -136,18 +126,7 @@ def test_a_first_sample_artefact_names_nothing_false():
 @pytest.mark.slow
 def test_artefacts_leave_the_answer_within_its_errors():
     truth = {"viscous_friction": 6e-6}
-    t = with_jitter(sample_times(PLATFORM, 36.0), 0.2, seed=7)
-    t, _ = with_gap(t, 15.0, 4.0)
-    clean = simulate_on_times(
-        PLATFORM,
-        t,
-        initial_rate=W0,
-        q0=Q0,
-        inputs=SLIDERS,
-        effects=truth,
-        seed=7,
-        attitude_noise=1e-3,
-    )
+    clean = jittered_platform(PLATFORM, 7, gap=(15.0, 4.0), duration=36.0, effects=truth)
     dirty, rows = with_glitches(clean, [100, 333], "rate_spike", size=0.05)
     dirty, more = with_glitches(dirty, [500], "quat_wrong_frame")
     a = discrepancy(PLATFORM, clean, max_effects=1)
@@ -245,19 +224,7 @@ def test_replay_bad_input_writes_nothing(two_spindowns, tmp_path, capsys):
 def test_attitude_only_dof3_names_a_cm_offset():
     # a spherical platform filmed by motion capture (no gyro): the attitude itself is
     # fitted as a small rotation; a CM offset of a few um (seed 004's balancing accuracy)
-    sphere = make_testbed(
-        {
-            "kind": "platform",
-            "name": "mocap-sphere",
-            "body": {
-                "dof": 3,
-                "mass": 6.3,
-                "inertia": [[0.0241, -0.001, 0.0], [-0.001, 0.0332, -0.004], [0.0, -0.004, 0.0363]],
-                "cm_offset": [0.0, 0.0, -2e-4],
-            },
-            "sensors": {"rate": 20.0, "gyro": False, "attitude_noise": 1e-3},
-        }
-    )
+    sphere = SPHERE
     truth = (3e-6, -2e-6, 4e-6)
     log = free_oscillation(
         sphere, initial_rate=W0, q0=Q0, effects={"cm_offset_error": truth}, seed=3, duration=30.0

@@ -11,6 +11,10 @@ import numpy as np
 import pandas as pd
 import pytest
 
+# seed-004 free oscillation, the mocap rotor and sphere, the jittered platform log
+from rigs import Q0, ROTOR, SLIDERS, SPHERE, W0
+from rigs import jittered_platform as _jittered_platform
+
 from airbearing.analysis.discrepancy.data import make_windows, noise_floor, replay_data
 from airbearing.analysis.discrepancy.replay import open_loop, replay
 from airbearing.analysis.simulation.artefacts import (
@@ -24,37 +28,7 @@ from airbearing.analysis.simulation.scenarios import free_oscillation, slew, spi
 from airbearing.errors import InputError
 from airbearing.io.log import Log
 from airbearing.io.testbed import Sensors, load_testbed
-from airbearing.io.testbed import testbed_from_dict as make_testbed
 from airbearing.models.model import build_model
-
-# seed-004 free oscillation (public example platform_viscous: initial state)
-W0 = (0.3676, 0.1265, -1.4835)
-Q0 = (0.99458, 0.024955, -0.014973, 0.099819)
-SLIDERS = (0.003, -0.002, 0.004)
-
-# a passive yaw rig filmed by motion capture: 10 Hz, yaw noise 1 mrad (OptiTrack class)
-ROTOR = make_testbed(
-    {
-        "kind": "platform",
-        "name": "mocap-rotor",
-        "body": {"dof": 1, "mass": 4.2, "inertia": 0.05},
-        "sensors": {"rate": 10.0, "gyro": False, "attitude_noise": 1e-3},
-    }
-)
-# a passive spherical platform filmed by motion capture (dof 3, attitude only)
-SPHERE = make_testbed(
-    {
-        "kind": "platform",
-        "name": "mocap-sphere",
-        "body": {
-            "dof": 3,
-            "mass": 6.3,
-            "inertia": [[0.0241, -0.001, 0.0], [-0.001, 0.0332, -0.004], [0.0, -0.004, 0.0363]],
-            "cm_offset": [0.0, 0.0, -2e-4],
-        },
-        "sensors": {"rate": 20.0, "gyro": False, "attitude_noise": 1e-3},
-    }
-)
 
 
 @pytest.fixture(scope="module")
@@ -71,23 +45,6 @@ def cmg():
 def _free(tb, **kw):
     kw.setdefault("duration", 20.0)
     return free_oscillation(tb, initial_rate=W0, q0=Q0, sliders=SLIDERS, **kw)
-
-
-def _jittered_platform(tb, seed, *, gap=None, duration=30.0, effects=None):
-    t = with_jitter(sample_times(tb, duration), 0.2, seed=seed)
-    if gap is not None:
-        t, _ = with_gap(t, *gap)
-    inputs = {"s1": SLIDERS[0], "s2": SLIDERS[1], "s3": SLIDERS[2]}
-    return simulate_on_times(
-        tb,
-        t,
-        initial_rate=W0,
-        q0=Q0,
-        inputs=inputs,
-        seed=seed,
-        attitude_noise=1e-3,
-        effects=effects,
-    )
 
 
 def test_inputs_are_the_logged_ones_and_the_field_is_lab_frame(platform):

@@ -16,26 +16,10 @@ import numpy as np
 import pandas as pd
 import pytest
 from cli_run import run
+from rigs import MOCAP_MAP_TOML, MOCAP_RIG_TOML
 
-RIG = """kind = "platform"
-name = "mocap-spin-rig"
-[body]
-dof = 1
-mass = 4.2
-inertia = 0.05
-[sensors]
-rate = 10.0
-gyro = false
-attitude_noise = 0.001
-"""
-
-MAP = """[columns]
-t = "Time (ms)"
-yaw = "Yaw (deg)"
-[units]
-t = "ms"
-yaw = "deg"
-"""
+# the README's motion-capture rig and its import map
+MAP, RIG = MOCAP_MAP_TOML, MOCAP_RIG_TOML
 
 TRUTH = {"aero_drag": 3.5e-5, "viscous_friction": 3.5e-5}
 

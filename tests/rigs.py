@@ -1,0 +1,77 @@
+"""Test rigs and simulated logs shared by several test files (one definition of each).
+
+- ``MOCAP_RIG_TOML`` / ``ROTOR``: a passive yaw rig filmed by motion capture (the
+  README's ``mocap-spin-rig``): 10 Hz, yaw noise 1 mrad (OptiTrack class), J = 0.05
+  kg m^2 (a CubeSat mock-up on a spherical bearing, yaw only).
+- ``MOCAP_MAP_TOML``: the import map of that rig's raw export (ms clock, degrees).
+- ``SPHERE``: a passive spherical platform filmed by motion capture (dof 3, attitude only).
+- ``W0``, ``Q0``, ``SLIDERS``: seed 004's free oscillation (public example
+  platform_viscous: initial state) and slider positions (m).
+- :func:`jittered_platform`: that oscillation simulated on jittered logged times.
+"""
+
+from __future__ import annotations
+
+import tomllib
+
+from airbearing.analysis.simulation.artefacts import sample_times, with_gap, with_jitter
+from airbearing.analysis.simulation.on_times import simulate_on_times
+from airbearing.io.testbed import testbed_from_dict
+
+W0 = (0.3676, 0.1265, -1.4835)  # rad/s
+Q0 = (0.99458, 0.024955, -0.014973, 0.099819)
+SLIDERS = (0.003, -0.002, 0.004)  # m
+
+MOCAP_RIG_TOML = """kind = "platform"
+name = "mocap-spin-rig"
+[body]
+dof = 1
+mass = 4.2
+inertia = 0.05
+[sensors]
+rate = 10.0
+gyro = false
+attitude_noise = 0.001
+"""
+
+MOCAP_MAP_TOML = """[columns]
+t = "Time (ms)"
+yaw = "Yaw (deg)"
+[units]
+t = "ms"
+yaw = "deg"
+"""
+
+ROTOR = testbed_from_dict(tomllib.loads(MOCAP_RIG_TOML))
+SPHERE = testbed_from_dict(
+    {
+        "kind": "platform",
+        "name": "mocap-sphere",
+        "body": {
+            "dof": 3,
+            "mass": 6.3,
+            "inertia": [[0.0241, -0.001, 0.0], [-0.001, 0.0332, -0.004], [0.0, -0.004, 0.0363]],
+            "cm_offset": [0.0, 0.0, -2e-4],
+        },
+        "sensors": {"rate": 20.0, "gyro": False, "attitude_noise": 1e-3},
+    }
+)
+
+
+def jittered_platform(tb, seed, *, gap=None, duration=30.0, effects=None):
+    """Seed 004's free oscillation on ``tb`` simulated on jittered times (20 % of a period),
+    with an optional ``gap = (start, length)`` (s); attitude noise 1 mrad."""
+    t = with_jitter(sample_times(tb, duration), 0.2, seed=seed)
+    if gap is not None:
+        t, _ = with_gap(t, *gap)
+    inputs = {"s1": SLIDERS[0], "s2": SLIDERS[1], "s3": SLIDERS[2]}
+    return simulate_on_times(
+        tb,
+        t,
+        initial_rate=W0,
+        q0=Q0,
+        inputs=inputs,
+        seed=seed,
+        attitude_noise=1e-3,
+        effects=effects,
+    )
