@@ -26,7 +26,9 @@ __all__ = [
     "flatten",
     "parts_dir",
     "open_parts",
+    "part_bytes",
     "write_part",
+    "write_part_bytes",
     "read_parts",
     "merge_parts",
     "write_results",
@@ -130,13 +132,26 @@ def _frame(rows: list[dict]):
     return _normalise(pd.DataFrame(rows))
 
 
+def part_bytes(rows: list[dict]) -> bytes:
+    """Finished rows as the bytes of one Parquet part (a worker makes them, see
+    :func:`write_part_bytes`: the conversion costs the client nothing)."""
+    import io
+
+    buf = io.BytesIO()
+    _frame(rows).to_parquet(buf, index=False)
+    return buf.getvalue()
+
+
+def write_part_bytes(folder: Path, runs: list[int], data: bytes) -> Path:
+    """Write a part made by :func:`part_bytes` from ``runs`` (atomically); its path."""
+    path = folder / f"runs-{min(runs):06d}-{max(runs):06d}-{uuid.uuid4().hex[:8]}.parquet"
+    _atomic(path, lambda tmp: Path(tmp).write_bytes(data))
+    return path
+
+
 def write_part(folder: Path, rows: list[dict]) -> Path:
     """Write finished rows as one Parquet part (atomically); the part's path."""
-    runs = [r["run"] for r in rows]
-    path = folder / f"runs-{min(runs):06d}-{max(runs):06d}-{uuid.uuid4().hex[:8]}.parquet"
-    df = _frame(rows)
-    _atomic(path, lambda tmp: df.to_parquet(tmp, index=False))
-    return path
+    return write_part_bytes(folder, [r["run"] for r in rows], part_bytes(rows))
 
 
 def read_parts(folder: Path):

@@ -21,17 +21,24 @@ from collections.abc import Iterator
 
 from airbearing.analysis.campaign.adapters import run_command
 from airbearing.analysis.campaign.dispersions import dispersed_columns, draw_run
-from airbearing.analysis.campaign.results import flatten, merge_parts, open_parts, write_part
+from airbearing.analysis.campaign.results import (
+    flatten,
+    merge_parts,
+    open_parts,
+    part_bytes,
+    write_part_bytes,
+)
 from airbearing.errors import InputError
 from airbearing.progress import call
 
-__all__ = ["TARGET_TASK_S", "run_one", "run_chunk", "open_client", "run_campaign"]
+__all__ = ["TARGET_TASK_S", "run_one", "run_chunk", "run_part", "open_client", "run_campaign"]
 
 #: s, wanted work per task once the runs have been timed.
 TARGET_TASK_S = 2.0
 _MAX_CHUNK = 256
 _CONNECT_TIMEOUT_S = 3
 _WORKER_WAIT_S = 60
+_WORKER_CONFIG = {"distributed.worker.profile.enabled": False}
 
 
 def run_one(campaign, run: int) -> dict:
@@ -78,6 +85,17 @@ def run_chunk(
     return rows, time.perf_counter() - t0
 
 
+def run_part(campaign, runs: list[int], run_timeout: float | None = None) -> tuple:
+    """One task: the Parquet part of ``runs`` (bytes) and ``(runs, failed, elapsed s)``.
+
+    The worker converts its rows to Parquet, so the client only writes bytes: on a
+    2-core machine the client's share of the CPU is taken from the workers.
+    """
+    rows, elapsed = run_chunk(campaign, runs, run_timeout)
+    failed = sum(1 for r in rows if r["error"])
+    return part_bytes(rows), (list(runs), failed, elapsed)
+
+
 @contextlib.contextmanager
 def open_client(workers: int | None = None, scheduler: str | None = None) -> Iterator:
     """A ``dask.distributed.Client``: a local cluster of ``workers`` processes, or ``scheduler``.
@@ -89,6 +107,7 @@ def open_client(workers: int | None = None, scheduler: str | None = None) -> Ite
     """
     import logging
 
+    import dask
     from dask.distributed import Client, LocalCluster
 
     if scheduler is not None:
@@ -108,13 +127,16 @@ def open_client(workers: int | None = None, scheduler: str | None = None) -> Ite
     n = (os.cpu_count() or 1) if workers is None else workers
     if n < 1:
         raise InputError(f"--workers {workers}: expected at least 1")
-    cluster = LocalCluster(
-        n_workers=n,
-        threads_per_worker=1,
-        processes=True,
-        dashboard_address=":0",
-        silence_logs=logging.ERROR,
-    )
+    # the workers' statistical profiler samples the running task's stack every 10 ms
+    # (holding the GIL): a few % of every run, for a dashboard a campaign does not serve
+    with dask.config.set(_WORKER_CONFIG):
+        cluster = LocalCluster(
+            n_workers=n,
+            threads_per_worker=1,
+            processes=True,
+            dashboard_address=None,
+            silence_logs=logging.ERROR,
+        )
     with cluster, Client(cluster) as client:
         yield client
 
@@ -186,12 +208,13 @@ def run_campaign(
     def report():
         say(f"runs done, {failed} failed", done, total)
 
-    def finished(rows, elapsed):
+    def finished(data, info):
         nonlocal done, failed
-        write_part(folder, rows)
-        done += len(rows)
-        failed += sum(1 for r in rows if r["error"])
-        per_run.append(elapsed / len(rows))
+        runs_done, n_failed, elapsed = info
+        write_part_bytes(folder, runs_done, data)
+        done += len(runs_done)
+        failed += n_failed
+        per_run.append(elapsed / len(runs_done))
         report()
 
     report()
@@ -199,7 +222,7 @@ def run_campaign(
         while todo:
             k = _chunk_size(len(todo), 1, _estimate(per_run))
             chunk, todo = todo[:k], todo[k:]
-            finished(*run_chunk(campaign, chunk, run_timeout))
+            finished(*run_part(campaign, chunk, run_timeout))
     elif todo:
         from dask.distributed import as_completed
 
@@ -218,7 +241,7 @@ def run_campaign(
             nonlocal queue
             k = _chunk_size(len(queue), n_workers, _estimate(per_run))
             chunk, queue = queue[:k], queue[k:]
-            fut = client.submit(run_chunk, spec, chunk, run_timeout, pure=False)
+            fut = client.submit(run_part, spec, chunk, run_timeout, pure=False)
             if ac is not None:
                 ac.add(fut)
             return fut
