@@ -529,48 +529,12 @@ def _sample_rows(n: int) -> np.ndarray:
     return np.unique(np.linspace(0, n - 1, min(n, _SCALE_ROWS)).astype(int))
 
 
-#: Segments at least this long take the interior of their running median from
-#: ``scipy.ndimage.median_filter`` (import ~0.2 s, then ~5x faster than pandas').
-_LONG_SEGMENT = 20_000
-
-
-def _running_median(values: np.ndarray, segments, min_periods: int) -> np.ndarray:
-    """Running median over ``2 * _LOCAL + 1`` samples, centred, within each segment.
-
-    ``pandas``' centred rolling median (NaN ignored, NaN where fewer than
-    ``min_periods`` values), column by column. On a long segment without NaN the
-    rows whose window lies inside the segment come from ``scipy.ndimage``'s median
-    filter: a median of an odd number of values is one of them, so both give the
-    same numbers; the ``_LOCAL`` rows at each end still come from pandas.
-    """
-    import pandas as pd
-
-    width = 2 * _LOCAL + 1
-    out = np.full(values.shape, np.nan)
-
-    def by_pandas(v: np.ndarray) -> np.ndarray:
-        med = pd.DataFrame(v).rolling(width, center=True, min_periods=min_periods).median()
-        return med.to_numpy()
-
-    for start, stop in segments:
-        v = values[start:stop]
-        if stop - start < _LONG_SEGMENT or not np.isfinite(v).all():
-            out[start:stop] = by_pandas(v)
-            continue
-        from scipy.ndimage import median_filter
-
-        for c in range(v.shape[1]):
-            out[start:stop, c] = median_filter(v[:, c], size=width, mode="nearest")
-        out[start : start + _LOCAL] = by_pandas(v[: width + _LOCAL])[:_LOCAL]
-        out[stop - _LOCAL : stop] = by_pandas(v[-(width + _LOCAL) :])[-_LOCAL:]
-    return out
-
-
 @dataclass(frozen=True)
 class _GroupResult:
     flagged: np.ndarray  # (n,) bool: outlier rows (isolated runs of 1-2)
     unexplained: np.ndarray  # (n,) bool: rows in longer runs of suspects
-    score: np.ndarray  # (n,) final normalised score, noise scales
+    score: np.ndarray  # (n,) final normalised score, noise scales (exact at suspects,
+    # an upper bound elsewhere: see _Scorer.__call__)
     over: np.ndarray  # (n, c) per-channel exceedance at the final pass
     noise: np.ndarray  # robust noise scale per channel (one for a vector group)
     fit: tuple[int, int]  # (k, p) used
@@ -657,11 +621,10 @@ class _Scorer:
                 best = min(FITS, key=lambda f, shape=shape: key(f, shape(f)))
                 if best != self.fit:
                     self.edge[(side, e)] = best
-        self._all_rows: tuple[np.ndarray, np.ndarray] | None = None
-        self.local = self._local_factor()
+        self._prepare_local()
 
-    def _local_factor(self) -> np.ndarray:
-        """Per row and channel, how much rougher the log is locally than overall (>= 1).
+    def _prepare_local(self) -> None:
+        """What the local factor (:meth:`local_at`) of any row is computed from.
 
         Noise or motion that is rougher in one stretch of a log than overall (a
         manoeuvre with the commands changing at every sample, vibration while a
@@ -677,12 +640,9 @@ class _Scorer:
         d, shapes = _normalised(g, self.t, self.segments, np.ones(n, bool), k, p, self.scale, rows)
         self._all_rows = (d, shapes)  # the first pass (nothing excluded yet) scores these
         if g.vector:
-            a = np.sum(d**2, axis=1, keepdims=True) / _CHI2_3_MEDIAN
+            self._rough_sq = np.sum(d**2, axis=1, keepdims=True) / _CHI2_3_MEDIAN
         else:
-            a = (_MAD_TO_SIGMA * d) ** 2
-        local = np.sqrt(_running_median(a, self.segments, _LOCAL))
-        ratio = local / self.noise[None, :]
-        factor = np.where(np.isfinite(ratio), np.maximum(ratio, 1.0), 1.0)
+            self._rough_sq = (_MAD_TO_SIGMA * d) ** 2
         # A channel without noise (its scale at the physical floor: a simulation)
         # cannot tell a glitch from a kink (a torque switched between samples, a rate
         # limit reached) by statistics: its scale is never below _ROUGH x the running
@@ -690,41 +650,114 @@ class _Scorer:
         # slope. Any real sensor noise is far above it, so it acts on noise-free logs only.
         quiet = self.noise <= g.floor * (1 + 1e-9)
         quiet &= g.floor <= ABSOLUTE_FLOOR * (1 + 1e-9)
+        self._quiet = quiet
+        self._step = None
         if quiet.any():
             d2 = np.zeros(g.values.shape)
             for start, stop in self.segments:
                 if stop - start >= 3:
                     d2[start + 1 : stop - 1] = np.diff(g.values[start:stop], 2, axis=0)
-            size = np.linalg.norm(d2, axis=1, keepdims=True) if g.vector else np.abs(d2)
-            rough = _ROUGH * _running_median(size, self.segments, 1)
-            floor = np.maximum(factor, rough / self.noise[None, :])
-            factor = np.where(quiet[None, :], floor, factor)
-        return factor
+            self._step = np.linalg.norm(d2, axis=1, keepdims=True) if g.vector else np.abs(d2)
+        self._seg_lo = np.zeros(n, dtype=int)
+        self._seg_hi = np.zeros(n, dtype=int)
+        for start, stop in self.segments:
+            self._seg_lo[start:stop], self._seg_hi[start:stop] = start, stop
+        self._local = np.ones(self._rough_sq.shape)
+        self._known = np.zeros(n, dtype=bool)
+
+    def local_at(self, rows: np.ndarray) -> np.ndarray:
+        """Per row and channel, how much rougher the log is locally than overall (>= 1).
+
+        Computed for the rows asked (and kept): the running medians of
+        :meth:`_prepare_local` at those rows (:func:`_window_median`, the numbers of
+        pandas' centred rolling median).
+        """
+        need = np.unique(rows[~self._known[rows]])
+        if need.size:
+            lo, hi = self._seg_lo[need], self._seg_hi[need]
+            local = np.sqrt(_window_median(self._rough_sq, lo, hi, need, _LOCAL))
+            ratio = local / self.noise[None, :]
+            factor = np.where(np.isfinite(ratio), np.maximum(ratio, 1.0), 1.0)
+            if self._step is not None:
+                rough = _ROUGH * _window_median(self._step, lo, hi, need, 1)
+                floor = np.maximum(factor, rough / self.noise[None, :])
+                factor = np.where(self._quiet[None, :], floor, factor)
+            self._local[need] = factor
+            self._known[need] = True
+        return self._local[rows]
 
     @property
     def noise(self) -> np.ndarray:
         return self.scales[self.fit][self.fit[0]]
 
-    def __call__(self, rows: np.ndarray, good: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def __call__(
+        self, rows: np.ndarray, good: np.ndarray, exact: bool = True
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Scores (noise scales) and per-channel exceedances of ``rows`` (sorted) when
+        the fits use only the ``good`` samples.
+
+        ``exact=False``: the exceedances are the same, and so are the scores of the
+        rows that exceed; other rows' scores are upper bounds (their local factor,
+        >= 1, is only computed where it could decide an exceedance).
+        """
         g, t, segs, sc = self.group, self.t, self.segments, self.scale
         k, p = self.fit
-        local = self.local[rows]
         if self._all_rows is not None and rows.size == t.size and good.all():
             d, shapes = self._all_rows
         else:
             d, shapes = _normalised(g, t, segs, good, k, p, sc, rows)
-        score, over = _score(g, d, self.scales[self.fit][np.clip(shapes, 0, 2 * k)] * local)
+        d = d.copy()
+        scale = self.scales[self.fit][np.clip(shapes, 0, 2 * k)]
         for (side, e), (kf, pf) in self.edge.items():
             at = (self.from_start if side == 0 else self.from_end)[rows] == e
             at &= (self.from_end if side == 0 else self.from_start)[rows] >= kf
             if not at.any():
                 continue
-            sel = rows[at]
-            d_f, shapes_f = _normalised(g, t, segs, good, kf, pf, sc, sel)
-            scale_f = self.scales[(kf, pf)][np.clip(shapes_f, 0, 2 * kf)] * local[at]
-            s_f, o_f = _score(g, d_f, scale_f)
-            score[at], over[at] = s_f, o_f
+            d_f, shapes_f = _normalised(g, t, segs, good, kf, pf, sc, rows[at])
+            d[at], scale[at] = d_f, self.scales[(kf, pf)][np.clip(shapes_f, 0, 2 * kf)]
+        if exact:
+            return _score(g, d, scale * self.local_at(rows))
+        score, over = _score(g, d, scale)  # local factor 1: an upper bound of each score
+        maybe = over.any(axis=1)
+        if maybe.any():
+            score[maybe], over[maybe] = _score(
+                g, d[maybe], scale[maybe] * self.local_at(rows[maybe])
+            )
         return score, over
+
+
+#: Rows per block of :func:`_window_median` (a block holds 51 values per row and channel).
+_MEDIAN_BLOCK = 8192
+
+
+def _window_median(
+    values: np.ndarray, lo: np.ndarray, hi: np.ndarray, rows: np.ndarray, min_periods: int
+) -> np.ndarray:
+    """Centred running median over ``2 * _LOCAL + 1`` samples at some rows, per column.
+
+    The window of row ``i`` is clipped to its segment ``[lo_i, hi_i)``; NaN values are
+    left out, and the median is NaN where fewer than ``min_periods`` (at least 1)
+    values remain. As pandas' ``rolling(2 * _LOCAL + 1, center=True,
+    min_periods=...).median()`` on each segment: the middle value of an odd count,
+    the mean ``(low + high) / 2`` of the two middle values of an even count.
+    """
+    out = np.empty((rows.size, values.shape[1]))
+    offsets = np.arange(-_LOCAL, _LOCAL + 1)
+    last = values.shape[0] - 1
+    for b0 in range(0, rows.size, _MEDIAN_BLOCK):
+        block = slice(b0, b0 + _MEDIAN_BLOCK)
+        idx = rows[block, None] + offsets[None, :]
+        inside = (idx >= lo[block, None]) & (idx < hi[block, None])
+        window = values[np.clip(idx, 0, last)]  # (rows, 51, columns)
+        window[~inside] = np.nan
+        window.sort(axis=1)  # NaN last
+        count = np.sum(~np.isnan(window), axis=1)  # (rows, columns)
+        mid = count // 2
+        high = np.take_along_axis(window, np.minimum(mid, 2 * _LOCAL)[:, None, :], axis=1)[:, 0]
+        low = np.take_along_axis(window, np.maximum(mid - 1, 0)[:, None, :], axis=1)[:, 0]
+        med = np.where(count % 2 == 1, high, (low + high) / 2)
+        out[block] = np.where(count >= max(min_periods, 1), med, np.nan)
+    return out
 
 
 def _best_explanation(
@@ -770,7 +803,9 @@ def find_outliers(group: _Group, t: np.ndarray, segments, scale: float) -> _Grou
     for i, (start, stop) in enumerate(segments):
         seg_id[start:stop] = i
     excluded = np.zeros(n, dtype=bool)
-    score, over = scorer(np.arange(n), ~excluded)
+    # scores of rows that are not suspects are never used below (only the suspects' are
+    # compared, and _best_explanation scores its windows exactly): upper bounds suffice
+    score, over = scorer(np.arange(n), ~excluded, exact=False)
     for _ in range(_MAX_PASSES):
         suspect = over.any(axis=1) & ~excluded
         if not suspect.any():
@@ -788,7 +823,7 @@ def find_outliers(group: _Group, t: np.ndarray, segments, scale: float) -> _Grou
         for i in take:
             near_mask[max(i - _RECOMPUTE * k, 0) : i + _RECOMPUTE * k + 1] = True
         again = np.flatnonzero(near_mask)
-        score[again], over[again] = scorer(again, ~excluded)
+        score[again], over[again] = scorer(again, ~excluded, exact=False)
     suspect = excluded & over.any(axis=1)
     flagged = np.zeros(n, dtype=bool)
     unexplained = np.zeros(n, dtype=bool)
