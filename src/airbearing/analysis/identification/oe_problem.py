@@ -69,10 +69,12 @@ def physical_constraint(theta0, free, *, mass: float, margin: float, js: float) 
 
 
 def _pieces(n: int, steps: int | None) -> list[tuple[int, int]]:
-    """Split ``n`` samples into near-equal pieces of about ``steps`` samples: (start, count)."""
-    k = 1 if not steps else max(1, int(round(n / steps)))
-    k = min(k, max(1, n // 2))
-    edges = np.linspace(0, n, k + 1).round().astype(int)
+    """Split ``n`` samples into pieces of ``steps`` samples, the last one shorter:
+    (start, count). Equal pieces give every log of one sample rate the same window length,
+    hence one compiled window function (continuity makes the cut immaterial to the fit)."""
+    if not steps or n <= steps:
+        return [(0, int(n))]
+    edges = np.r_[np.arange(0, n, steps), n]
     return [(int(a), int(b - a)) for a, b in zip(edges[:-1], edges[1:], strict=True)]
 
 
@@ -98,8 +100,8 @@ def platform_inputs(model, d: PlatformData) -> np.ndarray:
 def platform_windows(model, data: list[PlatformData], segment: float | None) -> WindowSet:
     """The shooting pieces of the logs as linked windows of the engine.
 
-    Each segment of each log (between gaps) is cut into near-equal pieces of about
-    ``segment`` seconds (None: one piece per segment). A piece that is not the last of its
+    Each segment of each log (between gaps) is cut into pieces of ``segment`` seconds,
+    the last one shorter (None: one piece per segment). A piece that is not the last of its
     segment also holds the next piece's first row, weighted zero: its state there is the
     next piece's start (``link``, ``end``). A piece starts from the logged attitude and
     rate at its first usable row. Shorter pieces are padded (tiny intervals, weight 0).

@@ -90,6 +90,20 @@ class OutputErrorResult:
     warnings: list
 
 
+def _inverse(F: np.ndarray) -> np.ndarray:
+    """The covariance: ``F^-1`` (scaled by its diagonal for conditioning), NaN if singular.
+
+    A numerically singular ``F`` gives a covariance that is not positive definite; the
+    caller (:func:`~.platform.identify_platform`) reads that as "not identifiable".
+    """
+    d = np.sqrt(np.maximum(np.diag(F), 0))
+    d = np.where(d > 0, d, 1.0)
+    try:
+        return np.linalg.inv(F / np.outer(d, d)) / np.outer(d, d)
+    except np.linalg.LinAlgError:
+        return np.full(F.shape, np.nan)
+
+
 def _rms(a) -> float:
     return float(np.sqrt(np.mean(a**2))) if a.size else float("nan")
 
@@ -213,11 +227,11 @@ def refine_output_error(
             "testbed sensors.attitude_noise = 0: the Cramer-Rao bound uses the fitted noise"
         )
     k = fidx.size
-    _, c_fit, _ = prob.covariance(fit, k, rate=(used_w / sw) ** 2, att=(used_q / sq) ** 2)
+    c_fit = _inverse(prob.fisher(fit, k, rate=(used_w / sw) ** 2, att=(used_q / sq) ** 2))
     spec_w_ = spec_w if spec_w > 0 else sw
     spec_q_ = spec_q if spec_q > 0 else sq
     rate_spec, att_spec = (used_w / spec_w_) ** 2, (used_q / spec_q_) ** 2
-    _, c_spec, _ = prob.covariance(fit, k, rate=rate_spec, att=att_spec)
+    c_spec = _inverse(prob.fisher(fit, k, rate=rate_spec, att=att_spec))
     cov, cov_spec = np.zeros((9, 9)), np.zeros((9, 9))
     cov[np.ix_(free, free)] = c_fit
     cov_spec[np.ix_(free, free)] = c_spec

@@ -170,6 +170,18 @@ class Fit:
     extra: dict = field(default_factory=dict)
 
 
+def _reduced(Js: np.ndarray, k: int):
+    """Schur complement of the nuisance block of ``Js^T Js`` (columns ``k:`` eliminated),
+    symmetrised, and the parameters' own block."""
+    F = Js.T @ Js
+    Ftt, Ftd, Fdd = F[:k, :k], F[:k, k:], F[k:, k:]
+    if Fdd.size:
+        Fr = Ftt - Ftd @ np.linalg.pinv(Fdd, rcond=1e-12, hermitian=True) @ Ftd.T
+    else:
+        Fr = Ftt
+    return 0.5 * (Fr + Fr.T), Ftt
+
+
 def theta_errors(J, k: int, s2: float, names=None):
     """Standard errors of the first ``k`` columns of ``J`` with the others eliminated.
 
@@ -199,14 +211,7 @@ def theta_errors(J, k: int, s2: float, names=None):
         if not col[i] > 0:
             reasons[i] = "no usable sample is sensitive to it (nothing in the log excites it)"
     c = np.where(col > 0, col, 1.0)
-    Js = Jd / c
-    F = Js.T @ Js
-    Ftt, Ftd, Fdd = F[:k, :k], F[:k, k:], F[k:, k:]
-    if Fdd.size:
-        Fr = Ftt - Ftd @ np.linalg.pinv(Fdd, rcond=1e-12, hermitian=True) @ Ftd.T
-    else:
-        Fr = Ftt
-    Fr = 0.5 * (Fr + Fr.T)
+    Fr, Ftt = _reduced(Jd / c, k)
     ev, V = np.linalg.eigh(Fr)
     ok = np.array([not r for r in reasons])
     good = ev > FISHER_RCOND * max(float(np.max(np.diag(Ftt))), 1e-300)
@@ -547,6 +552,20 @@ class ShootingProblem:
         if "N" in fit.extra:
             J = J @ fit.extra["N"]
         return theta_errors(J, k, s2)
+
+    def fisher(self, fit: Fit, k: int, *, rate: float = 1.0, att: float = 1.0) -> np.ndarray:
+        """Fisher information (k, k) of ``fit``'s first ``k`` parameters, the initial states
+        eliminated (Schur complement; with continuity in its null space), each output
+        group's information scaled as in :meth:`covariance`. Not inverted: the caller
+        decides what a singular one means."""
+        w = np.array([rate if o == "rate" else att for o in self.outputs])[self.group]
+        J = sp.diags(np.sqrt(w)) @ fit.extra["J"]
+        if "N" in fit.extra:
+            J = J @ fit.extra["N"]
+        Jd = J.toarray() if hasattr(J, "toarray") else np.asarray(J)
+        col = np.linalg.norm(Jd, axis=0)
+        c = np.where(col > 0, col, 1.0)
+        return _reduced(Jd / c, k)[0] * np.outer(c[:k], c[:k])
 
     def noise_rms(self, r: np.ndarray) -> dict:
         """RMS of each output group's UNWEIGHTED residual over usable rows (rad/s, rad)."""
