@@ -25,9 +25,18 @@ from dataclasses import dataclass, replace
 import numpy as np
 import scipy.sparse as sp
 
+from airbearing.analysis.discrepancy.trial import chi2_threshold, cross_validate, judge
+from airbearing.analysis.discrepancy.words import why
 from airbearing.analysis.shooting import THETA_SLOTS, Fit, ShootingProblem, theta_errors
 
-__all__ = ["AGREE_FRACTION", "SCREEN_FRACTION", "Linearisation", "Step", "linearise"]
+__all__ = [
+    "AGREE_FRACTION",
+    "SCREEN_FRACTION",
+    "Linearisation",
+    "Step",
+    "linearise",
+    "screened",
+]
 
 #: A candidate is screened (no IPOPT fit) when its linearised likelihood ratio, and the one
 #: checked at its step, are below this fraction of what naming needs: for a screened
@@ -170,6 +179,34 @@ class Linearisation:
             cov=cov,
             extra={"r": st.r, "J": st.J},
         )
+
+
+def screened(lin, cand, k_sel, lower, upper, current, ln_n, before, folds):
+    """The judged Gauss-Newton step when the score test screens ``cand`` out, else None.
+
+    (Module doc.) Measured: starting IPOPT from the step instead of the regression start
+    took more iterations (7 against 4 for a bounded friction: the barrier starts again), so
+    a candidate that is fitted starts from the regression as before."""
+    E = lin.columns(cand.params, cand.tie)
+    st = lin.step(E, lower[:k_sel], upper[:k_sel], cand.lower, cand.upper)
+    need = max(chi2_threshold(cand.k), cand.k * ln_n)
+    n = current.n_res
+    lr_model, lr_step = lr_of(n, current.rss, st.rss_model), lr_of(n, current.rss, st.rss)
+    agree = abs(lr_step - lr_model) < AGREE_FRACTION * need
+    if not (st.feasible and agree) or max(lr_model, lr_step) >= SCREEN_FRACTION * need:
+        return None
+    k = k_sel + cand.k
+    fit = lin.fit_of(st, k)
+    heldout = cross_validate(lin.problem, fit, k, folds)
+    note = (
+        f"screened by the score test: one Gauss-Newton step from the current fit gives a "
+        f"likelihood ratio of {lr_step:.3g} (predicted {lr_model:.3g}), under "
+        f"{SCREEN_FRACTION:g} x the {need:.3g} naming needs; IPOPT not run"
+    )
+    start = cand.value(np.zeros(cand.k))
+    return why(
+        lin.problem, judge(cand, fit, k_sel, current, ln_n, cand.k, heldout, before, start, note)
+    )
 
 
 def linearise(problem, current, S_sel, cands) -> Linearisation | None:

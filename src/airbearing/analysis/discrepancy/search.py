@@ -47,16 +47,10 @@ from airbearing.analysis.discrepancy.replay import (
     prepare,
     problem_for,
 )
-from airbearing.analysis.discrepancy.screen import (
-    AGREE_FRACTION,
-    SCREEN_FRACTION,
-    linearise,
-    lr_of,
-)
+from airbearing.analysis.discrepancy.screen import linearise, screened
 from airbearing.analysis.discrepancy.trial import (
     CV_FOLDS,
     CandidateResult,
-    chi2_threshold,
     cross_validate,
     failed,
     jsonable,
@@ -64,7 +58,7 @@ from airbearing.analysis.discrepancy.trial import (
     lag_start,
     scan,
 )
-from airbearing.analysis.discrepancy.words import experiment_for, format_value, verdict
+from airbearing.analysis.discrepancy.words import experiment_for, format_value, verdict, why
 from airbearing.analysis.shooting import Fit, ShootingProblem, WindowSet
 from airbearing.errors import InputError, SolverError
 from airbearing.io.log import Log
@@ -301,32 +295,6 @@ class _Search:
         return d
 
 
-def _screened(search, lin, cand, k_sel, lower, upper, current, ln_n, before):
-    """The judged Gauss-Newton step when the score test screens ``cand`` out, else None.
-
-    (:mod:`.screen`.) Measured: starting IPOPT from the step instead of the regression start
-    took more iterations (7 against 4 for a bounded friction: the barrier starts again), so
-    a candidate that is fitted starts from the regression as before."""
-    E = lin.columns(cand.params, cand.tie)
-    st = lin.step(E, lower[:k_sel], upper[:k_sel], cand.lower, cand.upper)
-    need = max(chi2_threshold(cand.k), cand.k * ln_n)
-    n = current.n_res
-    lr_model, lr_step = lr_of(n, current.rss, st.rss_model), lr_of(n, current.rss, st.rss)
-    agree = abs(lr_step - lr_model) < AGREE_FRACTION * need
-    if not (st.feasible and agree) or max(lr_model, lr_step) >= SCREEN_FRACTION * need:
-        return None
-    k = k_sel + cand.k
-    fit = lin.fit_of(st, k)
-    heldout = cross_validate(lin.problem, fit, k, search.folds)
-    note = (
-        f"screened by the score test: one Gauss-Newton step from the current fit gives a "
-        f"likelihood ratio of {lr_step:.3g} (predicted {lr_model:.3g}), under "
-        f"{SCREEN_FRACTION:g} x the {need:.3g} naming needs; IPOPT not run"
-    )
-    start = cand.value(np.zeros(cand.k))
-    return judge(cand, fit, k_sel, current, ln_n, cand.k, heldout, before, start, note)
-
-
 def _try(search, cand, chosen, theta_chosen, current, current_lag, ln_n, starts, before, lin=None):
     lag = current_lag or cand.lag
     problem = search.problem(lag)
@@ -366,7 +334,9 @@ def _try(search, cand, chosen, theta_chosen, current, current_lag, ln_n, starts,
                 else:
                     note = "start: residual-torque regression"
                 if lin is not None:
-                    res = _screened(search, lin, cand, k_sel, lower, upper, current, ln_n, before)
+                    res = screened(
+                        lin, cand, k_sel, lower, upper, current, ln_n, before, search.folds
+                    )
                     if res is not None:
                         return res
             th0 = np.clip(th0, cand.lower, cand.upper)
@@ -381,12 +351,14 @@ def _try(search, cand, chosen, theta_chosen, current, current_lag, ln_n, starts,
                 name=f"candidate {cand.label}",
             )
     except SolverError as e:
-        return failed(cand, "did not converge", str(e), start, before)
+        return failed(cand, "did not converge", str(e), start, before.total()[1])
     k_added = cand.k
     if cand.lag and not current_lag:
         k_added += len(model.lag_index) * problem.windows.n
     heldout = cross_validate(problem, fit, k, search.folds)
-    return judge(cand, fit, k_sel, current, ln_n, k_added, heldout, before, start, note)
+    return why(
+        problem, judge(cand, fit, k_sel, current, ln_n, k_added, heldout, before, start, note)
+    )
 
 
 def _validate(testbed, effects, logs, window_s, jit) -> tuple:
@@ -502,7 +474,7 @@ def discrepancy(
             break
         before = cross_validate(
             search.problem(current_lag), current, len(theta_chosen), search.folds
-        )[1]
+        )
         # regression starts of this round (one residual-torque evaluation per candidate)
         model = search.models[current_lag]
         p_cur = model.p0 + (search.S(current_lag, chosen) @ theta_chosen if chosen else 0.0)

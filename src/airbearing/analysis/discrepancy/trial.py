@@ -12,13 +12,20 @@ residual-torque regression start. It is scored by
   distance ``sigmas = sqrt(theta^T C^-1 theta)`` (``|value| / std`` for one number);
 - the gap on held-out windows (K-fold over the windows: the fit moved by one
   Gauss-Newton step fitted on the other folds, the held-out windows' initial
-  states refitted with the parameters held).
+  states refitted with the parameters held), over the folds that can test the
+  effect: those whose training windows AND held-out windows each see it (Wald
+  distance of the fitted value at least ``MIN_SIGMAS`` in each, :meth:`HeldOut.testable`).
+  A fold whose training windows do not see the effect would extrapolate it (on a
+  slew, drag acts in the one window with the slew: without that window the step is
+  ~1e3 times the value, and the held-out gap 1e3 times the noise); a fold whose
+  held-out windows do not see it tests nothing.
 
 Honest naming (issue 13): a candidate may be NAMED only when its fit converged,
 every parameter is identifiable from the logs (no zero Jacobian column, no
 singular Fisher matrix), it is not pinned at its physical bound, the LR exceeds
 the chi-square quantile ``1 - SIGNIFICANCE`` with the BIC dropping, its value is
-at least ``MIN_SIGMAS`` standard errors from zero, and it shrinks the held-out gap.
+at least ``MIN_SIGMAS`` standard errors from zero, and it shrinks the held-out gap
+(when no fold can test the effect, the note says so and the other tests decide).
 A candidate that fails says which test it failed (``status`` and ``reason``); a
 candidate that cannot be identified has no value and no error, only the reason.
 """
@@ -35,7 +42,7 @@ from airbearing.analysis.discrepancy.candidates import Candidate, smoothed
 from airbearing.analysis.shooting import Fit, ShootingProblem
 from airbearing.errors import SolverError
 
-__all__ = ["CandidateResult", "MIN_SIGMAS", "SIGNIFICANCE", "cross_validate"]
+__all__ = ["CandidateResult", "HeldOut", "MIN_SIGMAS", "SIGNIFICANCE", "cross_validate"]
 
 #: Level of the likelihood-ratio test a candidate must pass besides lowering the BIC.
 SIGNIFICANCE = 1e-3
@@ -153,7 +160,53 @@ def chi2_threshold(k: int) -> float:
     return float(chdtri(k, SIGNIFICANCE))
 
 
-def cross_validate(problem: ShootingProblem, fit: Fit, k: int, folds: np.ndarray):
+@dataclass(frozen=True, eq=False)
+class HeldOut:
+    """Per-fold sums of the held-out test of one fit (:func:`cross_validate`).
+
+    Attributes
+    ----------
+    rss, ss, cnt : ndarray (n_folds,)
+        Held-out weighted RSS, sum of squares of the primary output's usable residuals and
+        their count, per fold.
+    info_train, info_test : ndarray (n_folds, k, k)
+        Fisher information of the parameters (initial states eliminated) in the training and
+        in the held-out windows of each fold.
+    sigma : float
+        Noise level of the primary output (its unit).
+    """
+
+    rss: np.ndarray
+    ss: np.ndarray
+    cnt: np.ndarray
+    info_train: np.ndarray
+    info_test: np.ndarray
+    sigma: float
+
+    def total(self, use: np.ndarray | None = None) -> tuple[float, float]:
+        """``(rss, gap)`` over the folds ``use`` (default all)."""
+        use = np.ones(self.rss.size, dtype=bool) if use is None else use
+        ss, cnt = float(self.ss[use].sum()), int(self.cnt[use].sum())
+        return float(self.rss[use].sum()), self.sigma * math.sqrt(ss / max(cnt, 1))
+
+    def testable(self, theta: np.ndarray, lo: int, hi: int) -> np.ndarray:
+        """The folds that can test parameters ``lo:hi`` at ``theta`` (module doc).
+
+        A fold tests an effect when its training windows alone see it (Wald distance of
+        ``theta`` at least ``MIN_SIGMAS``) and so do its held-out windows; a fold without
+        either cannot tell a good effect from a bad one (its training step is an
+        extrapolation, or the held-out windows do not depend on the effect). An effect with
+        no derivative (a profile scan) is tested on every fold.
+        """
+        th = np.asarray(theta, dtype=float)
+        a = np.einsum("i,fij,j->f", th, self.info_train[:, lo:hi, lo:hi], th)
+        b = np.einsum("i,fij,j->f", th, self.info_test[:, lo:hi, lo:hi], th)
+        if not np.any(a + b > 0):
+            return np.ones(self.rss.size, dtype=bool)
+        return (a >= MIN_SIGMAS**2) & (b >= MIN_SIGMAS**2)
+
+
+def cross_validate(problem: ShootingProblem, fit: Fit, k: int, folds: np.ndarray) -> HeldOut:
     """Held-out weighted RSS and gap of ``fit``, K-fold over the windows (module doc).
 
     The Gauss-Newton step of a fold eliminates each training window's initial state from
@@ -175,26 +228,31 @@ def cross_validate(problem: ShootingProblem, fit: Fit, k: int, folds: np.ndarray
         pre.append(
             (Jt, Jd, rj, P, Jt.T @ Jt - Gtd @ P @ Gtd.T, Jt.T @ rj - Gtd @ P @ (Jd.T @ rj), sel[R])
         )
-    rss, ss, cnt = 0.0, 0.0, 0
-    for f in np.unique(folds):
+    fold_ids = np.unique(folds)
+    nf = fold_ids.size
+    rss, ss, cnt = np.zeros(nf), np.zeros(nf), np.zeros(nf, dtype=int)
+    info_train, info_test = np.zeros((nf, k, k)), np.zeros((nf, k, k))
+    for i, f in enumerate(fold_ids):
         train = np.flatnonzero(folds != f)
         test = np.flatnonzero(folds == f)
         d_theta = np.zeros(k)
         if k and len(train):
             S = sum(pre[j][4] for j in train)
             g = sum(pre[j][5] for j in train)
+            info_train[i] = S
             c = np.sqrt(np.maximum(np.diag(S), 0.0))
             c = np.where(c > 0, c, 1.0)
             d_theta = -(np.linalg.pinv(S / np.outer(c, c), hermitian=True) @ (g / c)) / c
         for j in test:
-            Jt, Jd, rj, P, _, _, m = pre[j]
+            Jt, Jd, rj, P, Sj, _, m = pre[j]
+            info_test[i] += Sj
             e = rj + (Jt @ d_theta if k else 0.0)
             e = e - Jd @ (P @ (Jd.T @ e))
-            rss += float(e @ e)
-            ss += float(e[m] @ e[m])
-            cnt += int(m.sum())
+            rss[i] += float(e @ e)
+            ss[i] += float(e[m] @ e[m])
+            cnt[i] += int(m.sum())
     sigma = problem.sigma_rate if problem.outputs[0] == "rate" else problem.sigma_att
-    return rss, sigma * math.sqrt(ss / max(cnt, 1))
+    return HeldOut(rss, ss, cnt, info_train, info_test, sigma)
 
 
 def failed(cand: Candidate, status: str, reason: str, start=None, before=math.nan):
@@ -220,7 +278,7 @@ def failed(cand: Candidate, status: str, reason: str, start=None, before=math.na
     )
 
 
-def judge(cand, fit, k_sel, current, ln_n, k_added, heldout, heldout_before, start, note):
+def judge(cand, fit, k_sel, current, ln_n, k_added, held: HeldOut, before: HeldOut, start, note):
     """Scores and the honest-naming tests of one fitted candidate (module doc)."""
     k = k_sel + cand.k
     n = fit.n_res
@@ -228,6 +286,21 @@ def judge(cand, fit, k_sel, current, ln_n, k_added, heldout, heldout_before, sta
     dbic = -lr + k_added * ln_n
     significant = bool(dbic < 0 and lr > chi2_threshold(k_added))
     th = fit.theta[k_sel:k]
+    use = held.testable(th, k_sel, k) if np.all(np.isfinite(th)) else np.ones(held.rss.size, bool)
+    if use.any():
+        heldout, heldout_before = held.total(use), before.total(use)[1]
+        if significant and not use.all():
+            note += (
+                f"; held-out test on {int(use.sum())} of {use.size} folds (in the others the "
+                "training or the held-out windows do not see the effect)"
+            )
+    else:
+        heldout, heldout_before = (math.nan, math.nan), math.nan
+        if significant:
+            note += (
+                "; no held-out test possible: no fold has the effect both in its training and "
+                "in its held-out windows (it acts in too few windows)"
+            )
     reasons = [r for r in fit.not_identifiable[k_sel:k] if r]
     common = {
         "name": cand.name,
@@ -283,7 +356,7 @@ def judge(cand, fit, k_sel, current, ln_n, k_added, heldout, heldout_before, sta
         )
     elif not sig >= MIN_SIGMAS:
         reason = f"only {sig:.2g} standard errors from zero (need {MIN_SIGMAS:g})"
-    elif not heldout[1] < heldout_before:
+    elif use.any() and not heldout[1] < heldout_before:
         reason = (
             f"does not shrink the gap on held-out windows ({heldout[1]:.4g} against "
             f"{heldout_before:.4g} without it)"

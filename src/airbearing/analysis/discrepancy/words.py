@@ -2,9 +2,24 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+from typing import TYPE_CHECKING
+
 import numpy as np
 
-__all__ = ["EXPERIMENTS", "GENERIC_EXPERIMENT", "experiment_for", "format_value", "verdict"]
+if TYPE_CHECKING:
+    from airbearing.analysis.discrepancy.trial import CandidateResult
+    from airbearing.analysis.shooting import ShootingProblem
+
+__all__ = [
+    "EXPERIMENTS",
+    "GENERIC_EXPERIMENT",
+    "GYRO_BIAS_DOF1",
+    "experiment_for",
+    "format_value",
+    "verdict",
+    "why",
+]
 
 #: What separates two effects that fit the same data (name pair -> experiment).
 EXPERIMENTS: dict[frozenset, str] = {
@@ -67,3 +82,25 @@ def verdict(effects: dict, effect_std: dict, stop_reason: str) -> str:
         parts = [f"{n} = {format_value(v, effect_std[n])}" for n, v in effects.items()]
         return "missing effect" + ("s" if len(effects) > 1 else "") + ": " + "; ".join(parts)
     return "no missing effect: " + (stop_reason or "nothing to add")
+
+
+#: Why a gyro bias cannot be seen on a dof-1 testbed with a gyro (FORMATS.md: its ``yaw`` is
+#: the testbed's own integral of the gyro, not an independent sensor; seed 001 Sec. 2.1.2).
+GYRO_BIAS_DOF1 = (
+    "a yaw-only testbed with a gyro logs the yaw as the integral of that gyro (FORMATS.md), "
+    "so only the rate is compared, and a constant rate bias is exactly a different start "
+    "rate of every window: no log of this testbed can show it (only an attitude measured "
+    "independently of the gyro could)"
+)
+
+
+def why(problem: ShootingProblem, res: CandidateResult) -> CandidateResult:
+    """A structural reason in place of the generic one where the physics says it."""
+    if (
+        res.name == "gyro_bias"
+        and res.status == "not identifiable from this log"
+        and problem.model.dof == 1
+        and "yaw" not in problem.outputs
+    ):
+        return replace(res, reason=GYRO_BIAS_DOF1)
+    return res
