@@ -363,3 +363,24 @@ def test_balance_reuses_the_structure_and_is_a_fresh_run(method):
         assert got == to_jsonable({"testbed": d.testbed.name, **fresh.metrics})
         # a law that holds a dispersed value is a new structure; the others reuse one
         assert structure_stats()["built"] - built == (method in ("lyapunov", "adaptive"))
+
+
+def test_detection_says_not_found_up_to_the_largest_size_and_why():
+    from airbearing.analysis.campaign.studies import detection
+
+    # gyro bias hidden in every other run, never named; its candidate gives the reason
+    s = np.logspace(-5, -2, 10)
+    reason = "not identifiable: a constant rate bias is a different start rate of every window"
+    df = pd.DataFrame({
+        "run": range(20),
+        "effects.gyro_bias": np.where(np.arange(20) % 2 == 0, np.repeat(s, 2), 0.0),
+        "candidates[0].name": "viscous_friction",
+        "candidates[0].reason": "not significant: likelihood ratio 0.1",
+        "candidates[1].name": "gyro_bias",
+        "candidates[1].reason": reason,
+        "error": "",
+    })  # fmt: skip
+    row = detection(df, ["effects.gyro_bias"])["effects"][0]
+    assert row["named"] == 0 and row["size_95"] is None
+    assert row["note"] == f"not found up to size {s[-1]:.3g} rad/s"  # the largest size swept
+    assert row["why_missed"] == "not identifiable (10 of 10 missed runs)"

@@ -159,6 +159,7 @@ def detection(df, effect_keys: list[str]) -> dict:
         (runs that named other effects but not this one),
         ``size_95`` (the size named 95 % of the time from the logistic fit, None when
         every or no run named it, see ``note``), ``fit`` ``(a, b)`` in ``log10(size)``,
+        ``unit``, ``why_missed`` (the commonest reason the workflow gave for not naming it)
         and ``points`` (size, named) for the figure; ``false_alarm``: runs hiding
         nothing, how many named anything, the rate and its 95 % interval.
     """
@@ -195,12 +196,16 @@ def detection(df, effect_keys: list[str]) -> dict:
             "note": "",
             "points": list(zip(s[sel].tolist(), hit.tolist(), strict=True)),
         }
+        unit = _unit(name)
+        missed = [i for i in np.flatnonzero(sel) if name not in named[i]]
+        row["unit"] = unit
+        row["why_missed"] = _common_reason(df, name, missed)
         fit = _logistic(x, hit)
         if fit is None:
             row["note"] = (
-                "named in every run: the 95 % size is below the range swept"
+                f"named in every run: the 95 % size is below {row['size_min']:.3g} {unit}"
                 if hit.size and hit.all()
-                else "never named in the range swept"
+                else f"not found up to size {row['size_max']:.3g} {unit}"
                 if hit.size
                 else "no successful run"
             )
@@ -210,10 +215,17 @@ def detection(df, effect_keys: list[str]) -> dict:
             if b > 0:
                 z95 = math.log(DETECTION_LEVEL / (1 - DETECTION_LEVEL))
                 row["size_95"] = 10 ** ((z95 - a) / b)
-                if not row["size_min"] <= row["size_95"] <= row["size_max"]:
-                    row["note"] = "extrapolated beyond the range swept"
+                if row["size_95"] > row["size_max"]:
+                    row["note"] = (
+                        f"not found {DETECTION_LEVEL:.0%} of the time up to size "
+                        f"{row['size_max']:.3g} {unit} (size_95 extrapolated)"
+                    )
+                elif row["size_95"] < row["size_min"]:
+                    row["note"] = "size_95 extrapolated below the range swept"
             else:
-                row["note"] = "detection does not grow with size in the range swept"
+                row["note"] = (
+                    f"detection does not grow with size up to {row['size_max']:.3g} {unit}"
+                )
         out["effects"].append(row)
     null = (hidden == "") & ok
     if null.any():
@@ -229,6 +241,34 @@ def detection(df, effect_keys: list[str]) -> dict:
         }
     out["failed_runs"] = int((~ok).sum())
     return out
+
+
+def _unit(name: str) -> str:
+    from airbearing.io.vocabulary import EFFECTS
+
+    spec = EFFECTS.get(name)
+    return getattr(spec, "unit", "") if spec is not None else ""
+
+
+def _common_reason(df, name: str, runs) -> str:
+    """The commonest reason the discrepancy runs ``runs`` gave for not naming ``name``
+    (their ``candidates[i].reason`` where ``candidates[i].name`` is ``name``), with its count."""
+    from collections import Counter
+
+    cols = [c for c in df.columns if c.startswith("candidates[") and c.endswith("].name")]
+    reasons = Counter()
+    for i in runs:
+        r = df.iloc[i]
+        for c in cols:
+            if r[c] == name:
+                text = r.get(c.removesuffix(".name") + ".reason")
+                if isinstance(text, str) and text:
+                    reasons[text.split(":")[0].strip()] += 1
+                break
+    if not reasons:
+        return ""
+    text, n = reasons.most_common(1)[0]
+    return f"{text} ({n} of {len(runs)} missed runs)"
 
 
 def detection_json(result: dict) -> str:
