@@ -1,7 +1,8 @@
 """The fast paths of airbearing.io.quality flag exactly what the per-row reference flags.
 
 ``assess`` computes the leave-one-out residuals of regular windows with one weight
-vector per window shape (``_loo``), the local scale only at the rows that need it
+vector per window shape (``_loo``, and ``_shape_residuals`` for all shapes at
+once), the local scale only at the rows that need it
 (``_window_median``), the first pass's scores of non-suspects as upper bounds, and
 the quaternion signs from run heads (``_signs_along_parents``). The oracle is the
 rule computed the slow way: one least-squares solve per row (``_loo_reference``),
@@ -44,6 +45,16 @@ def _signs_by_pointer_doubling(parent, rel):
     return rel * rel[parent]
 
 
+def _shape_residuals_one_by_one(group, t, segments, k, p, scale, rows):
+    good = np.ones(t.size, dtype=bool)
+    return np.stack(
+        [
+            Q._normalised(group, t, segments, good, k, p, scale, rows, shape=a)[0]
+            for a in range(2 * k + 1)
+        ]
+    )
+
+
 def reference_quality(monkeypatch, log: Log) -> Q.LogQuality:
     """``assess`` with every fast path replaced by the slow one."""
     exact_call = Q._Scorer.__call__
@@ -53,6 +64,7 @@ def reference_quality(monkeypatch, log: Log) -> Q.LogQuality:
 
     with monkeypatch.context() as m:
         m.setattr(Q, "_loo", Q._loo_reference)
+        m.setattr(Q, "_shape_residuals", _shape_residuals_one_by_one)
         m.setattr(Q, "_window_median", _median_by_pandas)
         m.setattr(Q, "_signs_along_parents", _signs_by_pointer_doubling)
         m.setattr(Q._Scorer, "__call__", always_exact)

@@ -540,6 +540,54 @@ class _GroupResult:
     fit: tuple[int, int]  # (k, p) used
 
 
+def _shape_residuals(
+    group: _Group, t: np.ndarray, segments, k: int, p: int, scale: float, rows: np.ndarray
+) -> np.ndarray:
+    """Normalised residuals of ``rows`` (sorted) under every window shape, all samples good.
+
+    ``out[a]`` is ``_normalised(group, t, segments, good, k, p, scale, rows, shape=a)[0]``
+    for ``a = 0 .. 2k``, with the fast path of :func:`_loo` (regular windows: the
+    weights of their shape) taken for all shapes at once; the rows whose window is
+    not regular go through :func:`_normalised` itself.
+    """
+    n_shapes = 2 * k + 1
+    out = np.full((n_shapes, rows.size, group.values.shape[1]), np.nan)
+    if rows.size == 0:
+        return out
+    starts = np.array([a for a, _ in segments])
+    stops = np.array([b for _, b in segments])
+    seg = np.searchsorted(starts, rows, side="right") - 1
+    lo, hi = starts[seg], stops[seg]
+    shapes = np.arange(n_shapes)[:, None]
+    fits = (rows - lo >= shapes) & (hi - 1 - rows >= 2 * k - shapes) & (hi - lo >= 4)
+    first = np.where(fits, rows - shapes, rows)  # (shapes, rows): first row of each span
+    span = np.minimum(first[..., None] + np.arange(2 * k + 1), t.size - 1)
+    dt = np.diff(t[span], axis=-1)
+    big = np.maximum(np.abs(t[lo]), np.abs(t[hi - 1]))
+    tol = _REGULAR_ULPS * np.spacing(big)
+    regular = fits & (np.max(dt, axis=-1) - np.min(dt, axis=-1) <= tol)
+    x = group.values
+    good = None
+    for a in range(n_shapes):
+        at = rows[regular[a]]
+        if at.size:
+            w = _regular_weights(k, p, a)
+            offsets = np.r_[-np.arange(a, 0, -1), np.arange(1, 2 * k - a + 1)]
+            pred = w[0] * x[at + offsets[0]]  # as _loo's fast path
+            for off, wj in zip(offsets[1:], w[1:], strict=True):
+                pred += wj * x[at + off]
+            r = x[at] - pred
+            if group.wrap:
+                r = np.mod(r + np.pi, 2 * np.pi) - np.pi
+            out[a, regular[a]] = r / np.sqrt(1.0 + float(w @ w))
+        other = fits[a] & ~regular[a]
+        if other.any():
+            good = np.ones(t.size, dtype=bool) if good is None else good
+            d, _ = _normalised(group, t, segments, good, k, p, scale, rows[other], shape=a)
+            out[a, other] = d
+    return out
+
+
 def _shape_scales(group: _Group, t, segments, k: int, p: int, scale: float) -> np.ndarray:
     """Noise scale of the normalised residual for each window shape (0 .. 2k left neighbours).
 
@@ -547,14 +595,11 @@ def _shape_scales(group: _Group, t, segments, k: int, p: int, scale: float) -> n
     in the interior. Every shape is tried on the same spread of rows wherever it
     fits, so each shape's scale measures noise plus that shape's own misfit.
     """
-    n = t.size
-    rows = _sample_rows(n)
-    good = np.ones(n, dtype=bool)
+    d_all = _shape_residuals(group, t, segments, k, p, scale, _sample_rows(t.size))
     scales = np.empty((2 * k + 1, group.floor.size))
     interior = None
     for a in [k, *range(0, k), *range(k + 1, 2 * k + 1)]:
-        d, _ = _normalised(group, t, segments, good, k, p, scale, rows, shape=a)
-        s = _scale(group, d)
+        s = _scale(group, d_all[a])
         if a == k:
             interior = s
         if not np.all(np.isfinite(s)):

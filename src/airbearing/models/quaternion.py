@@ -90,7 +90,11 @@ def rotation_matrix(q):
     ]
     if _is_ca(q):
         return ca.vertcat(*[ca.horzcat(*row) for row in rows])
-    return np.stack([np.stack(np.broadcast_arrays(*row), axis=-1) for row in rows], axis=-2)
+    out = np.empty(np.broadcast_shapes(*(np.shape(v) for row in rows for v in row)) + (3, 3))
+    for i, row in enumerate(rows):  # filled in place: nested np.stack copies (N, 3, 3) twice
+        for j, v in enumerate(row):
+            out[..., i, j] = v
+    return out
 
 
 def rotate(q, v_body):
