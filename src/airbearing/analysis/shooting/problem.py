@@ -294,6 +294,8 @@ class ShootingProblem:
         self.n_res = int(self.usable.sum())
         self.primary = self.group == 0
         self.link = windows.linked
+        if self.link and windows.end is None:  # pragma: no cover - programming error
+            raise ValueError("linked windows need `end`, the row each hands over at")
         if self.link:
             pairs = np.flatnonzero(windows.link)
             self.link_rows = (pairs[:, None] * self.n_delta + np.arange(self.n_delta)).ravel()
