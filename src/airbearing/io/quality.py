@@ -493,10 +493,11 @@ def _normalised(
     NaN where unchecked, and each row's window shape (left neighbours)."""
     out = np.full((rows.size, group.values.shape[1]), np.nan)
     shapes = np.full(rows.size, -1)
-    for start, stop in segments:
-        lo, hi = np.searchsorted(rows, [start, stop])
-        if hi == lo or stop - start < 4:
-            continue
+    bounds = np.asarray(segments, dtype=int).reshape(-1, 2)
+    first = np.searchsorted(rows, bounds[:, 0])
+    last = np.searchsorted(rows, bounds[:, 1])
+    for i in np.flatnonzero((last > first) & (bounds[:, 1] - bounds[:, 0] >= 4)):
+        (start, stop), lo, hi = bounds[i].tolist(), int(first[i]), int(last[i])
         r, h, a = _loo(
             t[start:stop],
             group.values[start:stop],
@@ -666,6 +667,7 @@ class _Scorer:
                 best = min(FITS, key=lambda f, shape=shape: key(f, shape(f)))
                 if best != self.fit:
                     self.edge[(side, e)] = best
+        self._edge_depth = 1 + max((e for _, e in self.edge), default=-1)
         self._prepare_local()
 
     def _prepare_local(self) -> None:
@@ -753,11 +755,17 @@ class _Scorer:
             d, shapes = _normalised(g, t, segs, good, k, p, sc, rows)
         d = d.copy()
         scale = self.scales[self.fit][np.clip(shapes, 0, 2 * k)]
+        # rows at a segment's first or last few positions may take another fit
+        edge_rows = np.flatnonzero(
+            np.minimum(self.from_start[rows], self.from_end[rows]) < self._edge_depth
+        )
+        from_start, from_end = self.from_start[rows[edge_rows]], self.from_end[rows[edge_rows]]
         for (side, e), (kf, pf) in self.edge.items():
-            at = (self.from_start if side == 0 else self.from_end)[rows] == e
-            at &= (self.from_end if side == 0 else self.from_start)[rows] >= kf
+            at = (from_start if side == 0 else from_end) == e
+            at &= (from_end if side == 0 else from_start) >= kf
             if not at.any():
                 continue
+            at = edge_rows[at]
             d_f, shapes_f = _normalised(g, t, segs, good, kf, pf, sc, rows[at])
             d[at], scale[at] = d_f, self.scales[(kf, pf)][np.clip(shapes_f, 0, 2 * kf)]
         if exact:
