@@ -549,21 +549,21 @@ class ShootingProblem:
 
         Returns ``(std, cov, reasons)`` as :func:`theta_errors`.
         """
+        return theta_errors(self._weighted_jacobian(fit, rate, att), k, s2)
+
+    def _weighted_jacobian(self, fit: Fit, rate: float, att: float):
+        """The fit's Jacobian with each group's rows scaled by sqrt(weight), restricted to
+        the continuity's null space when windows are linked."""
         w = np.array([rate if o == "rate" else att for o in self.outputs])[self.group]
         J = sp.diags(np.sqrt(w)) @ fit.extra["J"]
-        if "N" in fit.extra:
-            J = J @ fit.extra["N"]
-        return theta_errors(J, k, s2)
+        return J @ fit.extra["N"] if "N" in fit.extra else J
 
     def fisher(self, fit: Fit, k: int, *, rate: float = 1.0, att: float = 1.0) -> np.ndarray:
         """Fisher information (k, k) of ``fit``'s first ``k`` parameters, the initial states
         eliminated (Schur complement; with continuity in its null space), each output
         group's information scaled as in :meth:`covariance`. Not inverted: the caller
         decides what a singular one means."""
-        w = np.array([rate if o == "rate" else att for o in self.outputs])[self.group]
-        J = sp.diags(np.sqrt(w)) @ fit.extra["J"]
-        if "N" in fit.extra:
-            J = J @ fit.extra["N"]
+        J = self._weighted_jacobian(fit, rate, att)
         Jd = J.toarray() if hasattr(J, "toarray") else np.asarray(J)
         col = np.linalg.norm(Jd, axis=0)
         c = np.where(col > 0, col, 1.0)
