@@ -29,6 +29,9 @@ def replay(
     out = Outputs()
     p_json = out.plan(json_out, "--json", (".json",))
     p_html = out.plan(report, "--report", (".html",))
+    from airbearing.cli.discrepancy import one_blas_thread
+
+    one_blas_thread()
     from airbearing.analysis.discrepancy.replay import replay as run
     from airbearing.cli.common import testbed_arg
     from airbearing.cli.show_progress import progress_display

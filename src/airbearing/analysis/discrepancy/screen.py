@@ -36,6 +36,7 @@ __all__ = [
     "Step",
     "linearise",
     "screened",
+    "screened_lag",
 ]
 
 #: A candidate is screened (no IPOPT fit) when its linearised likelihood ratio, and the one
@@ -206,6 +207,92 @@ def screened(lin, cand, k_sel, lower, upper, current, ln_n, before, folds):
     start = cand.value(np.zeros(cand.k))
     return why(
         lin.problem, judge(cand, fit, k_sel, current, ln_n, cand.k, heldout, before, start, note)
+    )
+
+
+def screened_lag(problem, current, cand, datas, ln_n, k_added, before):
+    """The sensor-lag candidate judged by its score test in the lag-FREE problem, or None.
+
+    A lag ``tau`` of the rate sensor makes it read ``w - tau w'`` to first order, plus a
+    free start of the lagged rate in every window that decays over ``tau``. The residual
+    regressor of ``tau`` is the measured rate derivative (the Savitzky-Golay derivative of
+    the regression start, rows it trusts) on the rate rows, each window's initial state
+    eliminated; the free starts are credited with the whole residual of every window's first
+    ``ceil(3 tau / dt)`` samples (more than they can take). When even that stays below
+    ``SCREEN_FRACTION`` of what naming a lag needs (it counts the free starts too), the lag
+    Model (more states, another compiled structure) is neither built nor fitted.
+    """
+    from airbearing.analysis.discrepancy.candidates import smoothed
+    from airbearing.analysis.discrepancy.trial import CandidateResult
+
+    if problem.outputs[0] != "rate" or problem.n_lag:
+        return None
+    w, nd, nw, n = problem.windows, problem.n_delta, problem.windows.n, problem.n_win_res
+    L, na = w.length, problem.n_rate
+    wdots = [smoothed(d)[1:] for d in datas]
+    x = np.zeros(problem.n_win_res * nw)
+    for j in range(nw):
+        w_dot, ok = wdots[int(w.source[j])]
+        rows = w.rows[j]
+        good = ok[rows] & (w.weight[j] > 0)
+        vals = np.where(good[:, None], w_dot[rows], 0.0) / problem.sigma_rate
+        x[j * n : j * n + L * na] = vals.reshape(-1)  # rate group first, sample-major
+    r, J = current.extra["r"], current.extra["J"].tocsc()
+    k0 = J.shape[1] - nd * nw
+    xp = np.zeros_like(x)  # the regressor with every window's initial state eliminated
+    for j in range(nw):
+        R = slice(j * n, (j + 1) * n)
+        D = J[R, k0 + j * nd : k0 + (j + 1) * nd].toarray()
+        xp[R] = x[R] - D @ (np.linalg.pinv(D.T @ D, hermitian=True) @ (D.T @ x[R]))
+    xx, xr = float(xp @ xp), float(xp @ r)
+    if not xx > 0:
+        return None
+    tau = max(-xr / xx, 0.0)  # within the physical range
+    e = r + tau * xp
+    reach = max(1, math.ceil(3 * tau / float(np.median(w.dt[w.dt > 0]))))
+    starts = sum(float(np.sum(e[j * n : j * n + reach * na] ** 2)) for j in range(nw))
+    rss = max(float(e @ e) - starts, 1e-300)
+    lr = lr_of(current.n_res, current.rss, rss)
+    need = max(chi2_threshold(k_added), k_added * ln_n)
+    if lr >= SCREEN_FRACTION * need:
+        return None
+    s2 = current.rss / max(current.n_res - current.n_free, 1)
+    std = math.sqrt(s2 / xx)
+    dbic = -lr + k_added * ln_n
+    at_bound = tau == 0.0
+    reason = (
+        "pinned at its physical bound 0: the fit wants a value at or beyond it (nothing of "
+        "this effect in the logs)"
+        if at_bound
+        else f"not significant: likelihood ratio {lr:.3g} below the chi-square threshold "
+        f"{chi2_threshold(k_added):.3g} or BIC not lowered (dBIC {dbic:.3g})"
+    )
+    before_gap = before.total()[1]
+    return CandidateResult(
+        name=cand.name,
+        value=cand.value(np.array([tau])),
+        std=cand.value(np.array([std])),
+        theta=np.r_[current.theta, tau],
+        gap=problem.gap_of_residual(e),
+        rss=rss,
+        lr=lr,
+        delta_bic=dbic,
+        heldout_gap=math.nan,
+        heldout_rss=math.nan,
+        heldout_gap_before=before_gap,
+        k=cand.k,
+        significant=False,
+        sigmas=tau / std,
+        nameable=False,
+        status="at its physical bound" if at_bound else "screened",
+        reason=reason,
+        start=cand.value(np.array([tau])),
+        note=(
+            f"screened by the score test in the lag-free model: a likelihood ratio of at most "
+            f"{lr:.3g} (the lag's first-order term and every window's free start), under "
+            f"{SCREEN_FRACTION:g} x the {need:.3g} naming needs; the lag model was not fitted"
+        ),
+        candidate=cand,
     )
 
 

@@ -47,7 +47,7 @@ from airbearing.analysis.discrepancy.replay import (
     prepare,
     problem_for,
 )
-from airbearing.analysis.discrepancy.screen import linearise, screened
+from airbearing.analysis.discrepancy.screen import linearise, screened, screened_lag
 from airbearing.analysis.discrepancy.trial import (
     CV_FOLDS,
     CandidateResult,
@@ -324,6 +324,13 @@ def _try(search, cand, chosen, theta_chosen, current, current_lag, ln_n, starts,
             )
         else:
             if cand.lag:
+                if lin is not None and not current_lag:
+                    k_added = 1 + len(model.lag_index) * search.windows.n
+                    res = screened_lag(
+                        search.problem(False), current, cand, search.datas, ln_n, k_added, before
+                    )
+                    if res is not None:
+                        return res
                 th0 = np.array([lag_start(search.problem(current_lag), current, search.datas)])
                 note = "start: rate residual regressed on -w' (a lag delays the measured rate)"
             else:

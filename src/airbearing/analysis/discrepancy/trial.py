@@ -294,8 +294,8 @@ def judge(cand, fit, k_sel, current, ln_n, k_added, held: HeldOut, before: HeldO
                 f"; held-out test on {int(use.sum())} of {use.size} folds (in the others the "
                 "training or the held-out windows do not see the effect)"
             )
-    else:
-        heldout, heldout_before = (math.nan, math.nan), math.nan
+    else:  # reported over every fold, but no test: no fold can make one
+        heldout, heldout_before = held.total(), before.total()[1]
         if significant:
             note += (
                 "; no held-out test possible: no fold has the effect both in its training and "
