@@ -434,8 +434,8 @@ class ShootingProblem:
         name : str
             Names the problem in a SolverError.
         constraint : casadi.Function, optional
-            ``theta (k,) -> h (m,)``, kept ``>= 0`` (e.g. physical consistency); the start
-            must satisfy it.
+            ``theta (k,) -> h (m,)``, kept ``>= 0`` (e.g. physical consistency); a start
+            outside is allowed (IPOPT moves into the feasible set).
         max_iter : int, optional
             IPOPT iteration limit (default ``IPOPT_MAX_ITER``).
 
@@ -470,8 +470,6 @@ class ShootingProblem:
         n_ineq = 0 if ineq is None else ineq.m
         Jc = None
         if n_link or n_ineq:
-            if ineq is not None and np.any(ineq.value(v0[:k]) < 0):
-                raise SolverError(f"{name}: the starting point violates the constraint")
             mi = IPOPT_MAX_ITER if max_iter is None else int(max_iter)
             solver, _keep = linked_solver(*self._key(K), self.link, n_link, n_ineq, mi)
             oracle = _keep[-1]
