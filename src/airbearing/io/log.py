@@ -325,8 +325,8 @@ def _validate(
                 f"{period:.6g} s"
             )
     if all(q in out.columns for q in _QUATERNION):
-        q = out[list(_QUATERNION)].to_numpy()
-        norm = np.sqrt(np.sum(q * q, axis=1))
+        qw, qx, qy, qz = (out[c].to_numpy() for c in _QUATERNION)
+        norm = np.sqrt(qw * qw + qx * qx + qy * qy + qz * qz)
         off = np.abs(norm - 1.0) > QUATERNION_NORM_TOL
         if off.any():
             i = int(np.argmax(off))
@@ -504,7 +504,13 @@ class Log:
 
     def columns(self, names: Sequence[str]) -> np.ndarray:
         """Several columns as a float array, shape (n, len(names))."""
-        return np.column_stack([self.column(name) for name in names]).reshape(self.n, len(names))
+        out = np.empty((self.n, len(names)))
+        for i, name in enumerate(names):
+            if name in LOG_COLUMNS and name in self.data.columns and self.data[name].dtype == float:
+                out[:, i] = self.data[name].to_numpy()  # validated: finite float64
+            else:
+                out[:, i] = self.column(name)
+        return out
 
     def _optional(self, names: Sequence[str]) -> np.ndarray | None:
         return self.columns(names) if self.has(*names) else None
