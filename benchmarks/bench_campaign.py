@@ -3,14 +3,15 @@
 Run by hand on a quiet machine (issue 16 goals: speed-up of 2 workers over 1 >= 1.7x for
 0.1-1 s runs; overhead per run against a plain in-process loop < 20 ms)::
 
-    .venv/bin/python benchmarks/bench_campaign.py                      # balance, ~0.3 s runs
+    .venv/bin/python benchmarks/bench_campaign.py                      # balance, 0.1-1 s runs
     .venv/bin/python benchmarks/bench_campaign.py --command slew --duration 200   # ~25 ms runs
     .venv/bin/python benchmarks/bench_campaign.py --detection 18       # + detection-study runs
 
 Commands (``--command``):
 
 - ``balance`` (default): seed-000 balancing (mixed law) on ``seed000-tabletop``,
-  ``--duration`` 300 s, inertia, CM offset and gyro noise dispersed: 0.2-0.4 s a run;
+  ``--duration`` 3000 s (a long run, so that one takes 0.1-1 s), inertia, CM offset and
+  gyro noise dispersed;
 - ``free``: a free oscillation of ``platform-3dof`` (dof 3), ``--duration`` s;
 - ``slew``: the seed-001 slew on ``cmg-yaw``, inertia, gyro noise and gimbal angles.
 
@@ -44,7 +45,7 @@ from airbearing.analysis.campaign import open_client, parse_campaign, run_campai
 from airbearing.analysis.campaign.adapters import run_command
 from airbearing.analysis.campaign.dispersions import draw_run
 
-DEFAULT_DURATION = {"balance": 300.0, "free": 600.0, "slew": 200.0}
+DEFAULT_DURATION = {"balance": 3000.0, "free": 3000.0, "slew": 200.0}
 
 
 def campaign_doc(command: str, runs: int, duration: float, seed: int = 11) -> dict:
