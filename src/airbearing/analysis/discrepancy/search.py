@@ -47,7 +47,7 @@ from airbearing.analysis.discrepancy.replay import (
     prepare,
     problem_for,
 )
-from airbearing.analysis.discrepancy.screen import linearise, screened, screened_lag
+from airbearing.analysis.discrepancy.screen import MATTER_BIC, linearise, screened, screened_lag
 from airbearing.analysis.discrepancy.trial import (
     CV_FOLDS,
     CandidateResult,
@@ -527,6 +527,20 @@ def discrepancy(
         per_axis = [c for c in remaining if c.per_axis and c.name in seen]
         done += sum(1 for c in remaining if c.per_axis and c.name not in seen)
         results += fit_all(per_axis)
+        # IPOPT where it can matter: a candidate judged on its Gauss-Newton step that could be
+        # named and whose BIC comes within MATTER_BIC of the best is fitted by IPOPT
+        for _ in range(3):
+            best = min((r.delta_bic for r in results if r.significant), default=math.inf)
+            again = [
+                i
+                for i, r in enumerate(results)
+                if r.status == "screened" and r.significant and r.delta_bic <= best + MATTER_BIC
+            ]
+            if not again:
+                break
+            for i in again:
+                results[i] = run(results[i].candidate, lin=None)
+                say(f"{results[i].label}: fitted by IPOPT, {results[i].status}", done, total)
         results.sort(key=lambda c: (not np.isfinite(c.delta_bic), c.delta_bic))
         rounds.append(tuple(results))
         # what the logs cannot identify (nothing excites it) or what the fit pins at its
