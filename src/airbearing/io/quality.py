@@ -346,9 +346,11 @@ def _loo(
     slow = ~fast
     if slow.any():
         r[slow], h[slow], _ = _loo_reference(t, x, good, k, p, scale, rows[slow], shape)
-    for left in np.unique(a[fast]):
-        sel = fast & (a == left)
-        at = rows[sel]
+    for left in np.flatnonzero(np.bincount(a[fast], minlength=2 * k + 1)):
+        pos = np.flatnonzero(fast & (a == left))  # positions in rows (sorted)
+        if pos[-1] - pos[0] + 1 == pos.size:  # one run of positions: slices
+            pos = slice(int(pos[0]), int(pos[-1]) + 1)
+        at = rows[pos]
         w = _regular_weights(k, p, int(left))
         offsets = np.r_[-np.arange(left, 0, -1), np.arange(1, 2 * k - left + 1)]
         lo, hi = int(at[0]), int(at[-1]) + 1
@@ -356,13 +358,13 @@ def _loo(
             pred = w[0] * x[lo + offsets[0] : hi + offsets[0]]
             for off, wj in zip(offsets[1:], w[1:], strict=True):
                 pred += wj * x[lo + off : hi + off]
-            r[sel] = x[lo:hi] - pred
+            r[pos] = x[lo:hi] - pred
         else:
             pred = w[0] * x[at + offsets[0]]
             for off, wj in zip(offsets[1:], w[1:], strict=True):
                 pred += wj * x[at + off]
-            r[sel] = x[at] - pred
-        h[sel] = float(w @ w)
+            r[pos] = x[at] - pred
+        h[pos] = float(w @ w)
     return r, h, a
 
 
