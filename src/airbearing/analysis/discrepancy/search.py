@@ -529,12 +529,18 @@ def discrepancy(
         results += fit_all(per_axis)
         # IPOPT where it can matter: a candidate judged on its Gauss-Newton step that could be
         # named and whose BIC comes within MATTER_BIC of the best is fitted by IPOPT
-        for _ in range(3):
-            best = min((r.delta_bic for r in results if r.significant), default=math.inf)
+        while True:  # each pass refits at least one step, which is then an IPOPT fit
+            # near the best significant candidate, or near the best nameable one (the pick)
+            bests = [
+                min((r.delta_bic for r in results if test(r)), default=-math.inf)
+                for test in (lambda r: r.significant, lambda r: r.nameable)
+            ]
             again = [
                 i
                 for i, r in enumerate(results)
-                if r.status == "screened" and r.significant and r.delta_bic <= best + MATTER_BIC
+                if r.status == "screened"
+                and r.significant
+                and any(r.delta_bic <= b + MATTER_BIC for b in bests)
             ]
             if not again:
                 break
@@ -563,6 +569,9 @@ def discrepancy(
         order = {name: i for i, name in enumerate(REGISTRY)}
         group.sort(key=lambda c: (c.k, order[c.name]))
         pick = group[0]
+        # a pick is always an IPOPT fit: within MATTER_BIC (> CONFOUND_BIC) of the best
+        # nameable candidate, every step was refitted above
+        assert pick.status != "screened", pick.label
         for other in (c for c in group[1:] if c.name != pick.name):
             pair = (pick.name, other.name)
             if pair not in confounded:
