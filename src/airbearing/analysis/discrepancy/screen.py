@@ -41,6 +41,7 @@ __all__ = [
     "linearise",
     "screened",
     "screened_lag",
+    "screened_scan",
 ]
 
 #: A candidate is screened (no IPOPT fit) when its linearised likelihood ratio, and the one
@@ -50,6 +51,9 @@ SCREEN_FRACTION = 0.5
 #: A candidate judged on its step is fitted by IPOPT when its BIC is within this of the best:
 #: the confounding band (``search.CONFOUND_BIC`` = 2) plus 2 for the step's own error.
 MATTER_BIC = 4.0
+#: Where a one-number candidate's likelihood ratio is also checked (standard errors of its
+#: step, either side): the quadratic model reaches a few; an effect worth naming lies at 10-1000.
+PROBE_SIGMAS = (10.0, -10.0, 100.0, -100.0)
 #: The quadratic model is trusted when the residual at its step gives a likelihood ratio
 #: within this fraction of the naming threshold of the predicted one (else IPOPT decides).
 AGREE_FRACTION = 0.25
@@ -158,6 +162,20 @@ class Linearisation:
         J = sp.hstack([sp.csc_matrix(self.A @ E), self.Jd]).tocsc()
         return Step(theta, delta, p, self.rss0 + q, float(r @ r), r, J, feasible)
 
+    def lr_at(self, E: np.ndarray, th_c: np.ndarray) -> float:
+        """Likelihood ratio with the candidate at ``th_c``, the chosen effects held and every
+        window's state refitted by its linear step (one residual): a check away from the
+        current fit, where the quadratic model there does not reach."""
+        th_c = np.asarray(th_c, dtype=float)
+        if not np.all(np.isfinite(th_c)) or not np.any(th_c):
+            return 0.0
+        S = self.S_all(E)
+        r = self.problem.residual(self.current.delta, self.current.p + S[:, self.k_sel :] @ th_c)
+        e = r.copy()
+        for R, Dj, P in self.blocks:
+            e[R] -= Dj @ (P @ (Dj.T @ r[R]))
+        return lr_of(self.current.n_res, self.current.rss, float(e @ e))
+
     def S_all(self, E: np.ndarray) -> np.ndarray:
         """``S`` of the chosen and the candidate's parameters (n_p, k)."""
         n_p = self.problem.model.n_p
@@ -189,7 +207,7 @@ class Linearisation:
         )
 
 
-def screened(lin, cand, k_sel, lower, upper, current, ln_n, before, folds):
+def screened(lin, cand, k_sel, lower, upper, current, ln_n, before, folds, th_reg=None):
     """The candidate judged on its Gauss-Newton step (status ``screened``), or None.
 
     None (fit it by IPOPT) when the step leaves the chosen effects' bounds or the residual
@@ -207,6 +225,18 @@ def screened(lin, cand, k_sel, lower, upper, current, ln_n, before, folds):
     lr_model, lr_step = lr_of(n, current.rss, st.rss_model), lr_of(n, current.rss, st.rss)
     agree = abs(lr_step - lr_model) < AGREE_FRACTION * need
     if not (st.feasible and agree):
+        return None
+    # away from the current fit: the regression start, and for one number PROBE_SIGMAS
+    # standard errors either side within bounds (Coulomb friction's tanh makes the output
+    # far from linear once it changes when the rate crosses zero: on a slew with a spring
+    # hidden, LR 0 at the step but 348 at 5e-5 N m); better there: IPOPT decides
+    probes = [] if th_reg is None else [np.asarray(th_reg, dtype=float)]
+    if cand.k == 1:
+        s2 = current.rss / max(current.n_res - current.n_free, 1)  # > 1 while effects miss
+        sd = math.sqrt(s2 / max(float((E.T @ lin.G @ E)[k_sel, k_sel]), 1e-300))
+        lo, hi = float(cand.lower[0]), float(cand.upper[0])
+        probes += [np.array([m * sd]) for m in PROBE_SIGMAS if lo <= m * sd <= hi]
+    if any(lin.lr_at(E, th) > lr_step + AGREE_FRACTION * need for th in probes):
         return None
     k = k_sel + cand.k
     fit = lin.fit_of(st, k)
@@ -310,6 +340,85 @@ def screened_lag(problem, current, cand, datas, ln_n, k_added, before):
         ),
         candidate=cand,
     )
+
+
+def screened_scan(problem, cand, current, S_sel, col, ln_n, before, folds):
+    """The dead-zone profile scan by Gauss-Newton steps from the current fit, or None.
+
+    At each grid threshold the residual is evaluated once at the current initial states and
+    the chosen effects' values, and their refit is the linear least-squares step with the
+    current Jacobian (a dead zone changes the torque only while a gimbal turns slower than
+    it, not how the states and the other effects act). When the best grid threshold's
+    likelihood ratio, checked by the residual at its step, stays below ``SCREEN_FRACTION`` of
+    what naming needs, the candidate is judged on that profile (its 1-sigma from where the
+    profile rises by 1) and IPOPT's scan is not run.
+    """
+    from airbearing.analysis.discrepancy.trial import profile_std, scan_grid
+
+    _, grid = scan_grid(problem, cand)
+    J = current.extra["J"].tocsc()
+    Q, Rq = np.linalg.qr(J.toarray())
+    keep = np.abs(np.diag(Rq)) > 1e-12 * max(float(np.abs(np.diag(Rq)).max()), 1e-300)
+    Q, Rq = Q[:, keep], Rq[np.ix_(keep, keep)]
+    nd, nw, n = problem.n_delta, problem.windows.n, current.n_res
+    k_sel, p_sel = S_sel.shape[1], current.p
+    prof = []
+    for th in grid:
+        r = problem.residual(current.delta, p_sel + col * th)
+        e = r - Q @ (Q.T @ r)
+        prof.append((float(th), float(e @ e)))
+    prof = np.array(prof)
+    i = int(np.argmin(prof[:, 1]))
+    th_best = float(prof[i, 0])
+    need = max(chi2_threshold(1), ln_n)
+    lr_model = lr_of(n, current.rss, prof[i, 1])
+    # the step at the best threshold, checked by the residual there
+    r = problem.residual(current.delta, p_sel + col * th_best)
+    z = np.zeros(J.shape[1])
+    z[keep] = -np.linalg.solve(Rq, Q.T @ r)
+    theta = np.r_[current.theta + z[:k_sel], th_best]
+    delta = current.delta + z[k_sel:].reshape(nd, nw, order="F")
+    p = p_sel + col * th_best + (S_sel @ z[:k_sel] if k_sel else 0.0)
+    r_step = problem.residual(delta, p)
+    rss = float(r_step @ r_step)
+    lr_step = lr_of(n, current.rss, rss)
+    if abs(lr_step - lr_model) >= AGREE_FRACTION * need:
+        return None
+    if max(lr_model, lr_step) >= SCREEN_FRACTION * need:
+        return None
+    std = profile_std(prof, n)  # 0 on a flat profile: "not identifiable", as IPOPT's scan says
+    k = k_sel + 1
+    Jx = sp.hstack([J[:, :k_sel], sp.csc_matrix((J.shape[0], 1)), J[:, k_sel:]]).tocsc()
+    cov = np.zeros((k, k))
+    if k_sel:
+        cov[:k_sel, :k_sel] = current.cov
+    cov[k_sel, k_sel] = std**2 if std > 0 else np.nan
+    fit = Fit(
+        theta=theta,
+        theta_std=np.r_[current.theta_std, std if std > 0 else np.nan],
+        p=p,
+        delta=delta,
+        rss=rss,
+        n_res=n,
+        n_free=current.n_free + 1,
+        gap=problem.gap_of_residual(r_step),
+        iterations=0,
+        status="screened",
+        level="screened",
+        not_identifiable=(
+            *current.not_identifiable,
+            "" if std > 0 else "the profile is flat: no commanded rate near the threshold",
+        ),
+        cov=cov,
+        extra={"r": r_step, "J": Jx, "profile": prof},
+    )
+    heldout = cross_validate(problem, fit, k, folds)
+    note = (
+        f"profile over {grid.size} thresholds by Gauss-Newton steps from the current fit: "
+        f"likelihood ratio {lr_step:.4g} at best (predicted {lr_model:.4g}), under "
+        f"{SCREEN_FRACTION:g} x the {need:.3g} naming needs; IPOPT's scan not run"
+    )
+    return judge(cand, fit, k_sel, current, ln_n, 1, heldout, before, float(grid[0]), note)
 
 
 def linearise(problem, current, S_sel, cands) -> Linearisation | None:

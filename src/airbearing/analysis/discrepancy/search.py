@@ -47,7 +47,13 @@ from airbearing.analysis.discrepancy.replay import (
     prepare,
     problem_for,
 )
-from airbearing.analysis.discrepancy.screen import MATTER_BIC, linearise, screened, screened_lag
+from airbearing.analysis.discrepancy.screen import (
+    MATTER_BIC,
+    linearise,
+    screened,
+    screened_lag,
+    screened_scan,
+)
 from airbearing.analysis.discrepancy.trial import (
     CV_FOLDS,
     CandidateResult,
@@ -310,6 +316,12 @@ def _try(search, cand, chosen, theta_chosen, current, current_lag, ln_n, starts,
     start, note = None, ""
     try:
         if not cand.smooth:
+            if lin is not None:
+                res = screened_scan(
+                    problem, cand, current, S_all[:, :k_sel], S_c[:, 0], ln_n, before, search.folds
+                )
+                if res is not None:
+                    return res
             fit, start, note = scan(
                 problem,
                 cand,
@@ -341,8 +353,9 @@ def _try(search, cand, chosen, theta_chosen, current, current_lag, ln_n, starts,
                 else:
                     note = "start: residual-torque regression"
                 if lin is not None:
+                    th_reg = np.clip(th0, cand.lower, cand.upper)
                     res = screened(
-                        lin, cand, k_sel, lower, upper, current, ln_n, before, search.folds
+                        lin, cand, k_sel, lower, upper, current, ln_n, before, search.folds, th_reg
                     )
                     if res is not None:
                         return res

@@ -388,11 +388,13 @@ def lag_start(problem: ShootingProblem, current: Fit, datas) -> float:
     return float(np.clip(tau, datas[0].dt / 4, LAG_START_MAX))
 
 
-def scan(problem, cand, p_base, S_sel, theta_sel, S_c, lo_sel, hi_sel, delta0, base_rss):
-    """Profile scan of a one-parameter effect with no derivative (gimbal_deadzone).
+def scan_grid(problem: ShootingProblem, cand: Candidate):
+    """``(dd, grid)``: the commanded gimbal rates (usable rows, non-zero) and the scan's grid.
 
-    Returns ``(fit, start, note)``; the threshold's 1-sigma is where
-    ``n ln(RSS / RSS_min)`` rises by 1, at least half the spacing of the commanded rates.
+    Raises
+    ------
+    SolverError
+        When the log commands no gimbal motion.
     """
     w = problem.windows
     cols = [problem.model.u_names.index(f"dd{i}") for i in range(1, 5)]
@@ -400,7 +402,25 @@ def scan(problem, cand, p_base, S_sel, theta_sel, S_c, lo_sel, hi_sel, delta0, b
     dd = dd[dd > 0]
     if dd.size == 0:
         raise SolverError(f"candidate {cand.name}: the log commands no gimbal motion to scan")
-    grid = np.unique(np.quantile(dd, np.linspace(0.02, 0.9, SCAN_POINTS)))
+    return dd, np.unique(np.quantile(dd, np.linspace(0.02, 0.9, SCAN_POINTS)))
+
+
+def profile_std(prof: np.ndarray, n_res: int) -> float:
+    """1-sigma of a profile ``[(threshold, rss), ...]``: where ``n ln(RSS / RSS_min)``
+    rises by 1."""
+    i = int(np.argmin(prof[:, 1]))
+    inside = prof[n_res * np.log(prof[:, 1] / prof[i, 1]) <= 1.0, 0]
+    th = prof[i, 0]
+    return float(max(inside.max() - th, th - inside.min(), 0.0)) if inside.size else 0.0
+
+
+def scan(problem, cand, p_base, S_sel, theta_sel, S_c, lo_sel, hi_sel, delta0, base_rss):
+    """Profile scan of a one-parameter effect with no derivative (gimbal_deadzone).
+
+    Returns ``(fit, start, note)``; the threshold's 1-sigma is where
+    ``n ln(RSS / RSS_min)`` rises by 1, at least half the spacing of the commanded rates.
+    """
+    dd, grid = scan_grid(problem, cand)
     col = S_c[:, 0]
     fits: dict = {}
 
