@@ -158,3 +158,20 @@ def test_a_gyro_bias_on_the_yaw_only_cmg_testbed_is_not_identifiable():
     (c,) = [c for c in d.candidates if c.name == "gyro_bias"]
     assert c.status == "not identifiable from this log" and c.value is None
     assert c.reason == GYRO_BIAS_DOF1
+
+
+@pytest.mark.slow
+def test_screening_does_not_hide_a_far_optimum():
+    # with a spring hidden on a CMG slew, Coulomb friction's fit is far from its local step
+    # (LR ~0 at the step, ~600 at IPOPT's 5e-5 N m: its tanh changes the motion where the
+    # rate crosses zero); the probes away from the step must send it to IPOPT
+    tb = CMG.replace(sensors=Sensors(rate=CMG.sensors.rate, gyro_noise=5e-4, lowpass=1.0))
+    log = slew(tb, effects={"spring_torque": 2e-5}, seed=5, duration=60.0).log
+    fast = discrepancy(tb, log, max_effects=1)
+    full = discrepancy(tb, log, max_effects=1, screen=False)
+    assert list(fast.effects) == list(full.effects) == ["spring_torque"]
+    a = {c.label: c for c in fast.candidates}["coulomb_friction"]
+    b = {c.label: c for c in full.candidates}["coulomb_friction"]
+    assert a.status != "screened" and a.nameable == b.nameable
+    # the same IPOPT fit from the same start: the same score to the solver's tolerance
+    assert a.delta_bic == pytest.approx(b.delta_bic, abs=0.5)
