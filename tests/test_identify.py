@@ -645,3 +645,19 @@ def test_cmg_inertia_leaves_outliers_out():
     res = identify_cmg_inertia(tb, [hit_log])
     assert 77 in res.to_json()["outlier_rows"] and res.segments == 1
     assert abs(res.inertia - clean.inertia) < 0.5 * clean.std
+
+
+def test_diagnostics_of_logs_without_information():
+    """No torque in the logs depends on any parameter: every one is named, no division by zero."""
+    import warnings
+
+    from airbearing.analysis.identification.convex import diagnostics
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # a 0/0 in the weak-direction ratio would raise here
+        cov, cond, weak, null = diagnostics(
+            np.zeros((9, 9)), np.ones(9, bool), np.zeros(9), mass=10.0
+        )
+    assert cond == float("inf")
+    assert set(null) == set(ir.PARAM_NAMES)
+    assert [w["relative_excitation"] for w in weak] == [0.0, 0.0]

@@ -206,7 +206,7 @@ def diagnostics(F, free, theta, *, mass):
     cov[np.ix_(idx, idx)] = np.linalg.pinv(Fn, rcond=NULL_RATIO) / np.outer(d, d)
     weak = []
     for k in range(min(2, len(w))):
-        rel = float(np.sqrt(max(w[k], 0) / w[-1]))
+        rel = float(np.sqrt(max(w[k], 0) / w[-1])) if w[-1] > 0 else 0.0
         v = V[:, k]
         order = np.argsort(-np.abs(v))
         parts = [f"{v[o]:+.2f} {PARAM_NAMES[idx[o]]}" for o in order if abs(v[o]) >= 0.2]
