@@ -175,3 +175,14 @@ def test_screening_does_not_hide_a_far_optimum():
     assert a.status != "screened" and a.nameable == b.nameable
     # the same IPOPT fit from the same start: the same score to the solver's tolerance
     assert a.delta_bic == pytest.approx(b.delta_bic, abs=0.5)
+
+
+@pytest.mark.slow
+def test_a_noise_free_log_names_nothing():
+    # the built-in cmg-yaw has an ideal gyro: the replay matches the simulation to ~1e-11
+    # rad/s (integration error), and the scale-free likelihood ratio once named
+    # "aero_drag = 7e-14" there. Below RATE_SIGMA_MIN (1e-7 rad/s) nothing is named
+    log = slew(_CMG, effects={"gyro_bias": 0.01}, seed=3, duration=40.0).log
+    d = discrepancy(_CMG, log)
+    assert d.gap_before < 1e-7
+    assert d.no_missing_effect and "noise-free" in d.stop_reason, d.verdict

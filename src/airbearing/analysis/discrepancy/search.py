@@ -39,7 +39,12 @@ from airbearing.analysis.discrepancy.candidates import (
     residual_torque,
     universal_effects,
 )
-from airbearing.analysis.discrepancy.data import NoiseFloor, ReplayData
+from airbearing.analysis.discrepancy.data import (
+    ATTITUDE_SIGMA_MIN,
+    RATE_SIGMA_MIN,
+    NoiseFloor,
+    ReplayData,
+)
 from airbearing.analysis.discrepancy.localise import localise
 from airbearing.analysis.discrepancy.replay import (
     log_gaps,
@@ -485,6 +490,16 @@ def discrepancy(
     stop_reason = "max_effects = 0" if max_effects == 0 else ""
     starts: dict = {}
     dropped: set = set()
+    # a noise-free log: below the smallest noise level the replay weighs with, what is left is
+    # the integration's own error (~1e-6 rad/s on fast motion with 2 RK4 sub-steps), not an
+    # effect; the likelihood ratio is scale-free and would name it
+    resolution = RATE_SIGMA_MIN if unit == "rad/s" else ATTITUDE_SIGMA_MIN
+    if max_effects and nominal.gap < resolution:
+        stop_reason = (
+            f"the nominal model replays the logs to {nominal.gap:.3g} {unit}, below the "
+            f"{resolution:g} {unit} the replay resolves (a noise-free log): nothing to name"
+        )
+        max_effects = 0
 
     while len(chosen) < max_effects:
         taken = {c.name for c in chosen}
