@@ -11,10 +11,12 @@ The workflow (issue 7, issue 13):
 3. **Name the missing effects**: every applicable effect is a candidate
    (:mod:`.candidates`), fitted jointly over ALL logs (one effect set, each
    window of each segment of each log its own initial state) and judged
-   (:mod:`.trial`); on dof 3 the per-axis form of an effect is tried only when its
-   one-value form is significant, and a candidate the logs cannot identify or that the fit
-   pins at its physical bound is not refitted in later rounds. Forward selection adds the
-   nameable candidate with the
+   (:mod:`.trial`): first on its Gauss-Newton step from one Jacobian shared by the
+   round (:mod:`.screen`), then by IPOPT when it could be named near the round's
+   best (the named effect is always an IPOPT fit); on dof 3 the per-axis form of an
+   effect is tried only when its one-value form is significant, and a candidate the
+   logs cannot identify or that the fit pins at its physical bound is not refitted in
+   later rounds. Forward selection adds the nameable candidate with the
    lowest BIC, refits, and looks again, up to ``max_effects``. Nameable
    candidates within ``CONFOUND_BIC`` of the best are reported as confounded,
    with the experiment that would separate them; the registry's first of them
