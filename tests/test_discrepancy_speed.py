@@ -186,3 +186,17 @@ def test_a_noise_free_log_names_nothing():
     d = discrepancy(_CMG, log)
     assert d.gap_before < 1e-7
     assert d.no_missing_effect and "noise-free" in d.stop_reason, d.verdict
+
+
+def test_the_search_modules_do_not_import_scipy_signal_or_stats():
+    # issue 15: importing scipy.signal (it pulls scipy.stats) cost ~1 s of CPU per command
+    import subprocess
+    import sys
+
+    code = (
+        "import sys, airbearing.analysis.discrepancy.search, airbearing.cli.discrepancy; "
+        "bad = [m for m in ('scipy.signal', 'scipy.stats') if m in sys.modules]; "
+        "sys.exit(', '.join(bad))"
+    )
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert res.returncode == 0, res.stderr
