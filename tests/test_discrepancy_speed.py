@@ -196,7 +196,7 @@ def test_the_search_modules_do_not_import_scipy_signal_or_stats():
     code = (
         "import sys, airbearing.analysis.discrepancy.search, airbearing.cli.discrepancy; "
         "bad = [m for m in ('scipy.signal', 'scipy.stats') if m in sys.modules]; "
-        "sys.exit(', '.join(bad))"
+        "sys.exit(', '.join(bad) or None)"
     )
     res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert res.returncode == 0, res.stderr
