@@ -20,6 +20,7 @@ import pytest
 from test_log_quality import QUAT, RATES, mocap_yaw_log, tumble_log
 
 from airbearing.io import Log
+from airbearing.io import local_fits as F
 from airbearing.io import quality as Q
 from airbearing.models import quaternion as quat
 
@@ -32,7 +33,7 @@ def _median_by_pandas(values, lo, hi, rows, min_periods):
     out = np.empty((rows.size, values.shape[1]))
     for a, b in {(int(x), int(y)) for x, y in zip(lo, hi, strict=True)}:
         frame = pd.DataFrame(values[a:b])
-        med = frame.rolling(2 * Q._LOCAL + 1, center=True, min_periods=min_periods).median()
+        med = frame.rolling(2 * F.LOCAL + 1, center=True, min_periods=min_periods).median()
         at = (lo == a) & (hi == b)
         out[at] = med.to_numpy()[rows[at] - a]
     return out
@@ -63,7 +64,7 @@ def reference_quality(monkeypatch, log: Log) -> Q.LogQuality:
         return exact_call(self, rows, good, exact=True)
 
     with monkeypatch.context() as m:
-        m.setattr(Q, "_loo", Q._loo_reference)
+        m.setattr(Q, "_loo", F.loo_reference)
         m.setattr(Q, "_shape_residuals", _shape_residuals_one_by_one)
         m.setattr(Q, "_window_median", _median_by_pandas)
         m.setattr(Q, "_signs_along_parents", _signs_by_pointer_doubling)
@@ -173,21 +174,21 @@ def test_regular_windows_use_the_shape_weights_and_others_solve():
     good = np.ones(40, bool)
     good[10] = False
     rows = np.arange(40)
-    a, b = Q._window_shape(40, 3, rows, None)
-    fast = Q._regular_span(t, good, rows, a, b, 3)
+    a, b = F.window_shape(40, 3, rows, None)
+    fast = F.regular_span(t, good, rows, a, b, 3)
     # windows holding row 10 (excluded) or the interval 24-25 are not regular
     expected = np.ones(40, bool)
     expected[[r for r in rows if r - a[r] <= 10 <= r + b[r] and r != 10]] = False
     expected[[r for r in rows if r - a[r] <= 24 and r + b[r] >= 25]] = False
     assert fast.tolist() == expected.tolist()
-    r_fast, h_fast, _ = Q._loo(t, x, good, 3, 2, 0.05, rows)
-    r_ref, h_ref, _ = Q._loo_reference(t, x, good, 3, 2, 0.05, rows)
+    r_fast, h_fast, _ = F.loo(t, x, good, 3, 2, 0.05, rows)
+    r_ref, h_ref, _ = F.loo_reference(t, x, good, 3, 2, 0.05, rows)
     # the same prediction (rounding of t ~ 1e-14 s relative to 0.05 s steps)
     np.testing.assert_allclose(r_fast, r_ref, rtol=1e-9, atol=1e-13)
     np.testing.assert_allclose(h_fast, h_ref, rtol=1e-9)
     # interior h of the (3, 2) fit on a regular grid: module docstring, step 3 (0.50)
-    assert h_fast[20] == pytest.approx(Q._noise_gain(3, 2, 3), rel=1e-12)
-    assert Q._noise_gain(3, 2, 3) == pytest.approx(0.50, abs=0.005)
+    assert h_fast[20] == pytest.approx(F.noise_gain(3, 2, 3), rel=1e-12)
+    assert F.noise_gain(3, 2, 3) == pytest.approx(0.50, abs=0.005)
 
 
 def test_window_median_is_pandas_rolling_median():
@@ -198,7 +199,7 @@ def test_window_median_is_pandas_rolling_median():
     lo = np.where(np.arange(700) < 400, 0, 400)
     hi = np.where(np.arange(700) < 400, 400, 700)
     rows = np.arange(700)
-    for min_periods in (1, Q._LOCAL):
-        got = Q._window_median(v, lo, hi, rows, min_periods)
+    for min_periods in (1, F.LOCAL):
+        got = F.window_median(v, lo, hi, rows, min_periods)
         want = _median_by_pandas(v, lo, hi, rows, min_periods)
         assert np.array_equal(got, want, equal_nan=True)
