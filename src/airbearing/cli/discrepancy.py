@@ -12,23 +12,6 @@ from airbearing.cli.outputs import Outputs
 from airbearing.errors import InputError
 
 
-def one_blas_thread() -> None:
-    """One BLAS thread for this process when numpy is not loaded yet.
-
-    The search's dense algebra is small (Fisher and held-out blocks of ~10^4 x 40), and
-    the two cores already run CasADi's window threads: OpenBLAS's own threads only
-    contend. Measured on the shared 2-core machine (load ~5): the reduced Fisher matrix of
-    a 60 s platform fit 97 ms with OpenBLAS's threads against 3.5 ms with one; a whole
-    ``airbearing discrepancy`` 6.4-6.6 s CPU against 4.6-6.0 s. A user's own
-    ``OPENBLAS_NUM_THREADS`` wins.
-    """
-    import os
-    import sys
-
-    if "numpy" not in sys.modules:
-        os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-
-
 @app.command()
 def discrepancy(
     testbed: Annotated[str, typer.Argument(help="Testbed file or built-in name.")],
@@ -66,6 +49,8 @@ def discrepancy(
     p_tb = out.plan(write_tb, "--write-testbed", (".toml",))
     if max_effects < 0:
         raise InputError(f"--max-effects {max_effects}: expected an integer >= 0")
+    from airbearing.cli.process_settings import one_blas_thread
+
     one_blas_thread()
     from airbearing.analysis.discrepancy.search import discrepancy as run
     from airbearing.cli.common import testbed_arg

@@ -18,38 +18,6 @@ Method = Literal["output-error", "equation-error"]
 Form = Literal["integrated", "acceleration"]
 
 
-def _reuse_freed_memory() -> None:
-    """Let glibc's malloc keep freed memory for reuse in this short-lived process, and
-    Arrow allocate from it too.
-
-    Identifying 10^6-sample logs allocates and frees many arrays of 3-30 MB. By default
-    glibc hands such memory back to the system as soon as the top of its heap has twice
-    its (adaptive) mmap threshold free, and the next array faults every page in again:
-    half of the page faults of a 10^6-row run, 0.3-0.5 s of system time on a loaded
-    machine. With a fixed 32 MB mmap threshold and a 1 GB trim threshold the memory is
-    reused instead (the peak resident memory stays ~0.7 GB). Only where the C library
-    has ``mallopt`` (glibc); elsewhere nothing changes.
-    """
-    import sys
-
-    if not sys.platform.startswith("linux"):
-        return
-    import ctypes
-
-    try:
-        mallopt = ctypes.CDLL(None).mallopt
-    except (OSError, AttributeError):
-        return
-    m_trim_threshold, m_mmap_threshold = -1, -3  # <malloc.h>
-    mallopt(m_mmap_threshold, 32 << 20)
-    mallopt(m_trim_threshold, 1 << 30)
-    import pyarrow as pa  # (imported by pandas anyway)
-
-    # Arrow's buffers (the Parquet columns) from the same malloc: its default pool
-    # (mimalloc) hands freed pages back at once, 0.2-0.4 s of system time per 10^6 rows
-    pa.set_memory_pool(pa.system_memory_pool())
-
-
 def _fmt(v: float, s: float) -> str:
     """``value+-std``, ``value (no std)`` without a standard error, or "not identifiable"."""
     if v != v:
@@ -89,10 +57,11 @@ def identify(
     if form not in ("integrated", "acceleration"):
         raise InputError(f"--form {form}: expected integrated or acceleration")
     from airbearing.analysis.identification.data import COLUMNS_USED
+    from airbearing.cli.process_settings import reuse_freed_memory
     from airbearing.io.log import read_log
     from airbearing.io.testbed import write_testbed
 
-    _reuse_freed_memory()
+    reuse_freed_memory()
     tb = testbed_arg(testbed)
     loaded = [read_log(p, tb, columns=COLUMNS_USED) for p in logs]
     if tb.kind == "cmg" and tb.body.dof == 1:

@@ -29,7 +29,7 @@ def replay(
     out = Outputs()
     p_json = out.plan(json_out, "--json", (".json",))
     p_html = out.plan(report, "--report", (".html",))
-    from airbearing.cli.discrepancy import one_blas_thread
+    from airbearing.cli.process_settings import one_blas_thread
 
     one_blas_thread()
     from airbearing.analysis.discrepancy.replay import replay as run
