@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import casadi as ca
 import numpy as np
-import scipy.linalg as sla
 import scipy.sparse as sp
 
 from airbearing.analysis.shooting.functions import (
@@ -209,6 +208,8 @@ def null_space_basis(Jc: np.ndarray, k: int) -> np.ndarray:
     if Jc.shape[0] == 0:
         return np.eye(n)
     Ct, Cd = Jc[:, :k], Jc[:, k:]
+    import scipy.linalg as sla  # only the linked fits need it (0.25 s to import)
+
     Zd = sla.null_space(Cd)
     P = -np.linalg.lstsq(Cd, Ct, rcond=None)[0] if k else np.zeros((n - k, 0))
     top = np.hstack([np.eye(k), np.zeros((k, Zd.shape[1]))])
