@@ -64,46 +64,29 @@ def identify(
     reuse_freed_memory()
     tb = testbed_arg(testbed)
     loaded = [read_log(p, tb, columns=COLUMNS_USED) for p in logs]
-    if tb.kind == "cmg" and tb.body.dof == 1:
-        from airbearing.analysis.identification.cmg_inertia import identify_cmg_inertia
+    from airbearing.api.identify import identify as identify_logs
 
-        if known_offset_xy is not None:
-            raise InputError("--known-offset-xy applies to platform testbeds (dof 3), not to dof 1")
-        fr = None if friction in (None, "none") else friction
-        if fr not in (None, "viscous", "coulomb"):
-            raise InputError(f"--friction {friction}: expected none, viscous or coulomb")
-        result = identify_cmg_inertia(tb, loaded, friction=fr)
+    with progress_display("identify") as progress:
+        try:
+            result = identify_logs(
+                tb, loaded, known_offset_xy=known_offset_xy, known_mass=known_mass,
+                method=method, form=form, friction=friction, progress=progress,
+            )  # fmt: skip
+        except InputError as e:  # the library names parameters; the CLI names its flags
+            msg = str(e)
+            for param in ("known_offset_xy", "friction", "method", "form"):
+                if msg.startswith(param):
+                    msg = "--" + param.replace("_", "-") + msg[len(param) :].replace("=", " ", 1)
+            raise InputError(msg) from None
+    if tb.kind == "cmg" and tb.body.dof == 1:
         typer.echo(f"J_z = {_fmt(result.inertia, result.std)} kg m^2")
         for k, v in result.friction.items():
             s = result.std_friction[k]
             typer.echo(f"{k} = {_fmt(v, float('nan') if s is None else s)}")
     elif tb.body.dof == 1:
-        from airbearing.analysis.identification.yaw_inertia import identify_yaw_inertia
-
-        if known_offset_xy is not None:
-            raise InputError("--known-offset-xy applies to dof-3 platforms, not to dof 1")
-        if friction not in (None, "none"):
-            raise InputError("--friction applies to dof-1 CMG testbeds")
-        with progress_display("identify") as progress:
-            result = identify_yaw_inertia(tb, loaded, method=method, progress=progress)
         unit = "" if result.inertia != result.inertia else " kg m^2"
         typer.echo(f"J_z = {_fmt(result.inertia, result.std)}{unit} ({result.method})")
     else:
-        from airbearing.analysis.identification.platform import identify_platform
-
-        if friction not in (None, "none"):
-            raise InputError("--friction applies to dof-1 CMG testbeds")
-        with progress_display("identify") as progress:
-            result = identify_platform(
-                tb,
-                loaded,
-                known_offset_xy=known_offset_xy,
-                known_mass=known_mass,
-                method=method,
-                form=form,
-                prior=tb,
-                progress=progress,
-            )
         typer.echo(f"method: {result.method}")
         typer.echo("inertia about CR (kg m^2), sliders at zero:")
         for row, srow in zip(result.inertia, result.std_inertia, strict=True):

@@ -416,19 +416,15 @@ def run_command(campaign, testbed: Testbed, seed: int) -> dict:
     log = _truth_log(campaign, testbed, seed)
     nominal = campaign.testbed
     if cmd == "identify":
-        if nominal.kind == "cmg" and nominal.body.dof == 1:
-            from airbearing.analysis.identification.cmg_inertia import identify_cmg_inertia
+        from airbearing.api.identify import identify
 
-            fr = a.get("friction")
-            res = identify_cmg_inertia(nominal, [log], friction=None if fr == "none" else fr)
-        else:
-            from airbearing.analysis.identification.platform import identify_platform
-
-            res = identify_platform(
-                nominal, [log], known_offset_xy=a.get("known_offset_xy"),
-                known_mass=a.get("known_mass"), method=a.get("method", "output-error"),
-                form=a.get("form", "integrated"),
-            )  # fmt: skip
+        # the choice of method is the library's (as airbearing identify); no CAD prior
+        # check, so a campaign's columns stay those of its runs
+        res = identify(
+            nominal, [log], known_offset_xy=a.get("known_offset_xy"),
+            known_mass=a.get("known_mass"), method=a.get("method", "output-error"),
+            form=a.get("form", "integrated"), friction=a.get("friction"), prior=False,
+        )  # fmt: skip
         return to_jsonable(res.to_json())
     from airbearing.analysis.discrepancy.search import discrepancy
 

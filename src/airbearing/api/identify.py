@@ -1,0 +1,144 @@
+"""``identify``: one entry point that picks the identification method from the testbed.
+
+The choice is the one ``airbearing identify`` has always made:
+
+* ``kind = "cmg"``, ``dof = 1``: yaw inertia (and optional friction) from slew logs by
+  momentum exchange (:func:`~airbearing.analysis.identification.cmg_inertia.identify_cmg_inertia`);
+* any other ``dof = 1`` testbed: yaw inertia from spin-down logs with the testbed's known
+  torques (:func:`~airbearing.analysis.identification.yaw_inertia.identify_yaw_inertia`);
+* ``dof = 3``: inertia about the centre of rotation and the CM offset
+  (:func:`~airbearing.analysis.identification.platform.identify_platform`), with the
+  testbed file as the CAD prior.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Iterable
+
+from airbearing.errors import InputError
+
+__all__ = ["identify", "METHODS", "FORMS", "FRICTIONS"]
+
+#: Accepted values of ``method``, ``form`` and ``friction`` (``None`` = no friction term).
+METHODS = ("output-error", "equation-error")
+FORMS = ("integrated", "acceleration")
+FRICTIONS = (None, "none", "viscous", "coulomb")
+
+
+def as_testbed(testbed):
+    """A :class:`~airbearing.io.testbed.Testbed` from itself, a file path or a built-in name."""
+    from airbearing.io.testbed import Testbed, load_testbed
+
+    return testbed if isinstance(testbed, Testbed) else load_testbed(testbed)
+
+
+def as_logs(logs, testbed, columns=None) -> list:
+    """A list of :class:`~airbearing.io.log.Log` from logs or paths (one or several)."""
+    from airbearing.io.log import Log, read_log
+
+    if isinstance(logs, Log | str | os.PathLike):
+        logs = [logs]
+    out = [log if isinstance(log, Log) else read_log(log, testbed, columns=columns) for log in logs]
+    if not out:
+        raise InputError("logs: expected at least one log, got none")
+    return out
+
+
+def identify(
+    testbed,
+    logs: Iterable,
+    *,
+    known_offset_xy: tuple[float, float] | None = None,
+    known_mass: float | None = None,
+    method: str = "output-error",
+    form: str = "integrated",
+    friction: str | None = None,
+    prior=True,
+    progress=None,
+):
+    """Identify a testbed's mass properties from its logs, the method chosen by the testbed.
+
+    Parameters
+    ----------
+    testbed : Testbed, str or path-like
+        The testbed (its file values are the prior), a testbed file or a built-in name.
+    logs : Log, path-like, or a list of them
+        Free-oscillation (dof 3), spin-down (dof-1 platform) or slew (dof-1 CMG) logs.
+    known_offset_xy : (float, float), optional
+        Platform (dof 3) only: CR -> CM offset x, y with sliders at zero, m (from balancing).
+    known_mass : float, optional
+        Platform (dof 3) only: total mass, kg (default: the testbed's).
+    method : {"output-error", "equation-error"}
+        Output error (refined on the shooting engine, default) or the fast equation error.
+        Not used by the dof-1 CMG identification (always momentum exchange).
+    form : {"integrated", "acceleration"}
+        Equation-error form for dof 3: seed 004 eq. 47 (integrated) or eq. 45.
+    friction : {None, "none", "viscous", "coulomb"}
+        dof-1 CMG only: a friction term identified with J_z.
+    prior : bool, Prior or Testbed
+        dof 3 only: the CAD values the result is checked against (``prior_z``, a warning
+        when its errors do not cover them). True (default): the testbed's own values, as
+        ``airbearing identify`` does; False: none.
+    progress : callable, optional
+        ``progress(step, done, total)`` for long fits.
+
+    Returns
+    -------
+    PlatformIdentification, YawIdentification or CMGIdentification
+        Frozen results with ``inertia`` (kg m^2), ``to_json()`` (the ``airbearing
+        identify --json`` contract) and ``to_testbed(testbed)``.
+
+    Raises
+    ------
+    InputError
+        An option that does not apply to this testbed, a value outside its choices, a log
+        that does not fit the testbed.
+    SolverError
+        When the underlying solver fails.
+
+    Examples
+    --------
+    >>> import airbearing as ab
+    >>> ab.identify("cmg-yaw", [], method="fast")
+    Traceback (most recent call last):
+    ...
+    airbearing.errors.InputError: method='fast': expected one of output-error, equation-error
+    """
+    if method not in METHODS:
+        raise InputError(f"method={method!r}: expected one of {', '.join(METHODS)}")
+    if form not in FORMS:
+        raise InputError(f"form={form!r}: expected one of {', '.join(FORMS)}")
+    if friction not in FRICTIONS:
+        raise InputError(f"friction={friction!r}: expected none, viscous or coulomb")
+    from airbearing.analysis.identification.data import COLUMNS_USED
+
+    tb = as_testbed(testbed)
+    loaded = as_logs(logs, tb, columns=COLUMNS_USED)
+    fr = None if friction in (None, "none") else friction
+    if tb.body.dof == 1:
+        if known_offset_xy is not None:
+            raise InputError("known_offset_xy applies to platform testbeds (dof 3), not to dof 1")
+        if tb.kind == "cmg":
+            from airbearing.analysis.identification.cmg_inertia import identify_cmg_inertia
+
+            return identify_cmg_inertia(tb, loaded, friction=fr)
+        if fr is not None:
+            raise InputError("friction applies to dof-1 CMG testbeds")
+        from airbearing.analysis.identification.yaw_inertia import identify_yaw_inertia
+
+        return identify_yaw_inertia(tb, loaded, method=method, progress=progress)
+    if fr is not None:
+        raise InputError("friction applies to dof-1 CMG testbeds")
+    from airbearing.analysis.identification.platform import identify_platform
+
+    return identify_platform(
+        tb,
+        loaded,
+        known_offset_xy=known_offset_xy,
+        known_mass=known_mass,
+        method=method,
+        form=form,
+        prior=tb if prior is True else (prior or None),
+        progress=progress,
+    )

@@ -1,0 +1,187 @@
+"""Check and plot a log from Python: what ``airbearing log check`` and ``log plot`` do.
+
+:func:`check_log` returns a :class:`LogCheck` whose :meth:`~LogCheck.to_json` is the
+``log check --json`` contract (keys ``log``, ``testbed``, ``rows``, ``duration``,
+``rate``, the :class:`~airbearing.io.quality.LogQuality` keys and ``tools``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from airbearing.errors import InputError
+
+__all__ = ["LogCheck", "check_log", "plot_log"]
+
+
+def _rows_text(rows) -> str:
+    return ", ".join(str(r) for r in rows) if len(rows) else "none"
+
+
+@dataclass(frozen=True)
+class LogCheck:
+    """Segments, sampling, outliers and tool use of one log (:func:`check_log`).
+
+    Attributes
+    ----------
+    log : str
+        Where the log came from (its path, or ``"<memory>"``).
+    testbed : str
+        The testbed's name.
+    rows : int
+        Rows of the log.
+    duration : float
+        s, last minus first logged time.
+    rate : float
+        Hz, the testbed's nominal sensor rate.
+    quality : LogQuality
+        Segments, jitter and outliers (:func:`airbearing.io.quality.assess`).
+    tools : dict of str to (bool, str)
+        Whether each tool can use the log, and why.
+    """
+
+    log: str
+    testbed: str
+    rows: int
+    duration: float
+    rate: float
+    quality: object = field(repr=False)
+    tools: dict = field(repr=False)
+
+    @property
+    def outlier_rows(self) -> tuple[int, ...]:
+        """0-based data rows left out of every fit."""
+        return tuple(self.quality.outlier_rows)
+
+    @property
+    def segments(self) -> int:
+        """Number of segments (a gap longer than 1.5 sample periods splits the log)."""
+        return len(self.quality.segments)
+
+    def to_json(self) -> dict:
+        """The ``airbearing log check --json`` contract."""
+        return {
+            "log": self.log,
+            "testbed": self.testbed,
+            "rows": self.rows,
+            "duration": self.duration,
+            "rate": self.rate,
+            **self.quality.to_json(),
+            "tools": {name: {"usable": ok, "why": why} for name, (ok, why) in self.tools.items()},
+        }
+
+    def __str__(self) -> str:
+        q = self.quality
+        lines = [
+            f"{self.log}: {self.rows} rows, {self.duration:.6g} s at {self.rate:g} Hz, "
+            f"{len(q.segments)} segment(s), outlier rows: {_rows_text(q.outlier_rows)}"
+        ]
+        for o in q.outliers:
+            lines.append(f"  row {o.row} (t = {o.t:.6g} s): {o.reason}")
+        for name, (ok, why) in self.tools.items():
+            lines.append(f"  {name}: {'yes' if ok else 'no'} ({why})")
+        return "\n".join(lines)
+
+    def plot(self, log=None):
+        """The log's channels with gaps shaded and outliers circled (matplotlib Figure).
+
+        Parameters
+        ----------
+        log : Log
+            The log that was checked (its samples are not kept in the result).
+        """
+        if log is None:
+            raise InputError("log: LogCheck.plot needs the Log that was checked")
+        from airbearing.reporting.log_plot import log_figure
+
+        return log_figure(log, self.quality)
+
+    def to_pandas(self):
+        """The outliers as a table: ``row``, ``t`` (s), ``columns``, ``reason``, ``score``."""
+        import pandas as pd
+
+        return pd.DataFrame(
+            [o.to_json() for o in self.quality.outliers],
+            columns=["row", "t", "columns", "reason", "score"],
+        )
+
+
+def check_log(log, testbed=None) -> LogCheck:
+    """Segments, jitter, outlier rows and what each tool can use of a log.
+
+    Parameters
+    ----------
+    log : Log or path-like
+        A log (read with its testbed) or a ``.csv`` / ``.parquet`` file.
+    testbed : Testbed, str or path-like, optional
+        The testbed (object, file or built-in name); default: the log's own.
+
+    Returns
+    -------
+    LogCheck
+
+    Raises
+    ------
+    InputError
+        No testbed given and none attached to the log; a log that does not fit it.
+
+    Examples
+    --------
+    >>> import airbearing as ab
+    >>> run = ab.spindown(ab.load_testbed("cmg-yaw"), initial_rate=1.0, duration=5.0)
+    >>> check = ab.check_log(run.log)
+    >>> check.segments, check.outlier_rows
+    (1, ())
+    """
+    from airbearing.api.identify import as_testbed
+    from airbearing.io.log import Log, read_log
+    from airbearing.io.tool_use import tool_use
+
+    tb = None if testbed is None else as_testbed(testbed)
+    if not isinstance(log, Log):
+        if tb is None:
+            raise InputError("testbed: expected a testbed to read the log file with")
+        log = read_log(log, tb)
+    elif tb is not None and log.testbed is not tb:
+        log = Log._from_validated(log.data, log.source, tb)
+    if log.testbed is None:
+        raise InputError(f"{log.source}: testbed: expected a testbed (the log has none)")
+    quality = log.quality
+    t = log.t
+    return LogCheck(
+        log=log.source,
+        testbed=log.testbed.name,
+        rows=log.n,
+        duration=float(t[-1] - t[0]),
+        rate=log.testbed.sensors.rate,
+        quality=quality,
+        tools=tool_use(log, quality),
+    )
+
+
+def plot_log(log, testbed=None):
+    """Every logged channel group against time, gaps shaded, outliers circled.
+
+    Parameters
+    ----------
+    log : Log or path-like
+    testbed : Testbed, str or path-like, optional
+        With a testbed (or a log read with one), gaps and outliers are marked.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    from airbearing.api.identify import as_testbed
+    from airbearing.io.log import Log, read_log
+    from airbearing.reporting.log_plot import log_figure
+
+    tb = None if testbed is None else as_testbed(testbed)
+    if not isinstance(log, Log):
+        log = read_log(log, tb)
+    tb = tb if tb is not None else log.testbed
+    if tb is None:
+        return log_figure(log, None)
+    from airbearing.io.quality import assess
+
+    return log_figure(log, assess(log, tb))
