@@ -15,7 +15,7 @@ derivative of the Model's dynamics in the effect's parameters), over the usable
 rows of every segment of every log (rows within a filter half-width of a gap,
 a segment end or an outlier left out). Without a gyro the rate and its
 derivative are those of the same Savitzky-Golay filter applied to the yaw
-(dof 1); a dof-3 attitude-only log starts from zero.
+(dof 1), or to the attitude relative to each row (dof 3, :func:`smoothed`).
 """
 
 from __future__ import annotations
@@ -28,10 +28,11 @@ import casadi as ca
 import numpy as np
 
 from airbearing.analysis.discrepancy.data import ReplayData
-from airbearing.analysis.discrepancy.filters import savgol
+from airbearing.analysis.discrepancy.filters import _savgol_weights, savgol
 from airbearing.errors import InputError
 from airbearing.io.testbed import Testbed
 from airbearing.io.vocabulary import EFFECTS as VOCABULARY
+from airbearing.models import quaternion as quat
 from airbearing.models.effects import REGISTRY, applicable_effects, effect_param_names
 from airbearing.models.model import Model
 
@@ -57,6 +58,8 @@ GYRO_EFFECTS = ("gyro_bias", "sensor_lag")
 #: Savitzky-Golay window (samples, odd) and order for the measured rate derivative.
 SG_WINDOW = 9
 SG_ORDER = 3
+#: Order of the fit of the relative attitude of a dof-3 attitude-only log (:func:`smoothed`).
+SG_ORDER_ATT = 4
 
 
 @dataclass(frozen=True, eq=False)
@@ -225,7 +228,7 @@ def smoothed(data: ReplayData):
     w_dot = np.full((n, data.n_axes), np.nan)
     ok = np.zeros(n, dtype=bool)
     if data.w is None and data.q is not None:
-        return w_s, w_dot, ok
+        return _smoothed_attitude(data, w_s, w_dot, ok)
     half = SG_WINDOW // 2
     for a, b in data.segments:
         if b - a < SG_WINDOW + 2:
@@ -250,6 +253,56 @@ def smoothed(data: ReplayData):
             trust[max(k - half, 0) : k + half + 1] = False
         trust[:half] = trust[-half:] = False
         ok[rows] = trust
+    return w_s, w_dot, ok
+
+
+def _rotvec(e: np.ndarray) -> np.ndarray:
+    """Rotation vectors (rad) of unit quaternions ``e`` (N, 4), shortest way."""
+    e = e * np.sign(e[:, :1] + (e[:, :1] == 0))
+    s = np.linalg.norm(e[:, 1:], axis=1)
+    ang = 2 * np.arctan2(s, e[:, 0])
+    return e[:, 1:] * np.where(s > 0, ang / np.maximum(s, 1e-300), 2.0)[:, None]
+
+
+def _smoothed_attitude(data: ReplayData, w_s, w_dot, ok):
+    """Body rate and its derivative of a dof-3 attitude-only log (:func:`smoothed`).
+
+    Around every row ``k`` the attitude of the neighbours is taken relative to row ``k``,
+    ``phi_j = log(conj(q_k) (x) q_{k+j})`` (body frame, rad); ``phi`` vanishes at ``j = 0``,
+    its first derivative there is the body rate and its second the body angular
+    acceleration (the terms of the rotation's Jacobian beyond ``I + [phi]x / 2`` vanish at
+    ``phi = 0``, and ``w x w = 0``). A constant-rate spin is a straight line in ``phi``, so
+    the Savitzky-Golay fit (``SG_WINDOW`` rows, order ``SG_ORDER_ATT``) has no bias from
+    the spin however fast it is; at 0.32 rad per sample (3.2 rad/s filmed at 10 Hz) a torque
+    turning with the body keeps 99.6 % of its size (order 3: 87 %).
+    """
+    half = SG_WINDOW // 2
+    for a, b in data.segments:
+        good = data.mask[a:b]
+        if b - a < SG_WINDOW + 2 or good.sum() < SG_WINDOW + 2:
+            continue
+        q = data.q[a:b]
+        m = b - a
+        h = float(np.median(np.diff(data.t[a:b])))
+        c1 = _savgol_weights(SG_WINDOW, SG_ORDER_ATT, 1, h, 0.0)
+        c2 = _savgol_weights(SG_WINDOW, SG_ORDER_ATT, 2, h, 0.0)
+        centre = np.arange(half, m - half)
+        qc = quat.qconj(q[centre])
+        w1 = np.zeros((centre.size, 3))
+        w2 = np.zeros((centre.size, 3))
+        for i, j in enumerate(range(-half, half + 1)):
+            if j == 0:
+                continue
+            phi = _rotvec(quat.qmul(qc, q[centre + j]))
+            w1 += c1[i] * phi
+            w2 += c2[i] * phi
+        w_s[a + centre] = w1
+        w_dot[a + centre] = w2
+        trust = good.copy()
+        for k in np.flatnonzero(~good):  # an outlier spoils every stencil it lies in
+            trust[max(k - half, 0) : k + half + 1] = False
+        trust[:half] = trust[-half:] = False
+        ok[a:b] = trust
     return w_s, w_dot, ok
 
 
@@ -280,7 +333,8 @@ def residual_torque(model: Model, datas, p: np.ndarray, S: np.ndarray | None = N
             x = np.hstack([x, w_s[idx]])
         A, G = fn.map(idx.size)(x.T, d.u[idx].T, p)
         A = np.asarray(A).T
-        G = np.asarray(G).reshape(len(rows), idx.size, S.shape[1], order="F").transpose(1, 0, 2)
+        # map() puts the calls' (axes, k) blocks side by side: column n k + j
+        G = np.asarray(G).reshape(len(rows), S.shape[1], idx.size, order="F").transpose(2, 0, 1)
         if model.dof == 3:
             J = d.testbed.body.inertia_matrix
             taus.append((w_dot[idx] - A) @ J.T)
