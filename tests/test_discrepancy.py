@@ -46,6 +46,7 @@ HIDDEN = {
     "coulomb_friction": (PLATFORM, 1e-5),
     "aero_drag": (PLATFORM, 5e-6),
     "spring_torque": (CMG, 2e-5),  # dof = 1 only
+    "yaw_imbalance": (CMG, (2e-5, -1e-5)),  # dof = 1 only; as large as the spring's torque
     "cm_offset_error": (PLATFORM, (3e-6, -2e-6, 4e-6)),  # dof = 3 only
     "residual_dipole": (TILTED, (0.05, -0.08, 0.03)),
     "gyro_bias": (PLATFORM, 2e-3),  # dof 3: the attitude sensor makes a bias observable

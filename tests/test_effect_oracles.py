@@ -7,7 +7,9 @@ is evaluated at random states and inputs and compared with an independent oracle
 
 * torque effects: the nominal Model's ``f`` plus ``J^-1 tau`` with ``tau`` from the
   FORMATS formula (``J`` the inertia about the CR with the sliders' point masses, seed
-  004 eqs. 6-7; gravity and field in body axes from the quaternion, written out here);
+  004 eqs. 6-7; gravity and field in body axes from the quaternion, written out here;
+  ``yaw_imbalance``, ``A_s sin(yaw) + A_c cos(yaw)``, on the dof-1 platform and the
+  dof-1 CMG, and refused on dof 3);
 * ``inertia_error``: Euler's equation with ``(1 + e) J``, the rest of the torque taken
   from the nominal Model (``J w' + w x J w``);
 * ``gyro_bias``: the nominal measurement plus the bias; ``sensor_lag``: the lag state's
@@ -76,6 +78,7 @@ VALUES = {
     "coulomb_friction": (1.5e-3, (1e-3, 2e-3, 3e-3)),
     "aero_drag": (6e-3, (3e-3, 7e-3, 1.1e-2)),
     "spring_torque": (2e-3, None),
+    "yaw_imbalance": ((1.5e-3, -2.5e-3), None),  # one pair [A_s, A_c], N m
     "cm_offset_error": (None, (3e-5, -5e-5, 2e-5)),
     "residual_dipole": (None, (0.05, -0.08, 0.12)),
     "gyro_bias": (2e-3, (1e-3, -2e-3, 3e-3)),
@@ -86,7 +89,7 @@ VALUES = {
 
 def _applies(name: str, tb) -> bool:
     """Where FORMATS lets the effect act (its table and the notes beside it)."""
-    if name == "spring_torque":
+    if name in ("spring_torque", "yaw_imbalance"):
         return tb.body.dof == 1
     if name == "cm_offset_error":
         return tb.body.dof == 3
@@ -167,6 +170,9 @@ def _torque(name: str, value, tb, x_named: dict, u_named: dict) -> np.ndarray:
         return -_axes(value, dof) * np.abs(w) * w
     if name == "spring_torque":
         return np.array([-value * x_named["yaw"]])
+    if name == "yaw_imbalance":
+        a_s, a_c = value
+        return np.array([a_s * np.sin(x_named["yaw"]) + a_c * np.cos(x_named["yaw"])])
     if name == "cm_offset_error":
         g_body = R.T @ np.array([0.0, 0.0, -tb.gravity])
         return tb.body.mass * np.cross(np.asarray(value, float), g_body)

@@ -136,10 +136,12 @@ def test_cmg_3dof_conserves_total_momentum_in_lab_frame(cmg):
 @pytest.mark.parametrize("name", list(REGISTRY))
 def test_every_effect_changes_the_model(name, platform, cmg):
     """Each registered effect, switched on, changes xdot or y at a generic state."""
-    tb = cmg if name in ("spring_torque", "gimbal_deadzone") else platform
-    value = {"cm_offset_error": (1e-4, -2e-4, 3e-4), "residual_dipole": (0.01, 0.02, 0.03)}.get(
-        name, 0.1
-    )
+    tb = cmg if name in ("spring_torque", "yaw_imbalance", "gimbal_deadzone") else platform
+    value = {
+        "cm_offset_error": (1e-4, -2e-4, 3e-4),
+        "residual_dipole": (0.01, 0.02, 0.03),
+        "yaw_imbalance": (0.1, -0.05),
+    }.get(name, 0.1)
     base = build_model(tb)
     m = build_model(tb, {name: value})
     assert len(m.p_names) > len(base.p_names)

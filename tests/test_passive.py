@@ -118,6 +118,7 @@ def test_effects_that_act_on_a_passive_platform():
     # the CM offset error on dof 3 only; rate-sensor effects only with a gyro
     assert set(applicable_effects("platform", 3, True)) == set(REGISTRY) - {
         "spring_torque",
+        "yaw_imbalance",
         "gimbal_deadzone",
     }
     assert set(applicable_effects("platform", 1, True, gyro=False)) == set(REGISTRY) - {
@@ -126,7 +127,11 @@ def test_effects_that_act_on_a_passive_platform():
         "gyro_bias",
         "sensor_lag",
     }
-    values = {"cm_offset_error": (1e-5, 0, 0), "residual_dipole": (0.01, 0, 0)}
+    values = {
+        "cm_offset_error": (1e-5, 0, 0),
+        "residual_dipole": (0.01, 0, 0),
+        "yaw_imbalance": (1e-4, 0),
+    }
     for dof, tb in ((3, passive3(field=(0, 0, 6e-4))), (1, passive1(gyro=True))):
         for name in applicable_effects("platform", dof, True):
             m = build_model(tb, {name: values.get(name, 1e-3)})

@@ -488,6 +488,7 @@ FORMATS_EFFECTS = (
     "coulomb_friction",
     "aero_drag",
     "spring_torque",
+    "yaw_imbalance",
     "cm_offset_error",
     "residual_dipole",
     "gyro_bias",
@@ -500,6 +501,7 @@ SHAPES = {
     "coulomb_friction": "scalar_or_axes",
     "aero_drag": "scalar_or_axes",
     "spring_torque": "scalar",
+    "yaw_imbalance": "pair",
     "cm_offset_error": "vector3",
     "residual_dipole": "vector3",
     "gyro_bias": "scalar_or_axes",
@@ -521,6 +523,12 @@ def test_validate_effect_value_by_shape(name):
     if shape in ("scalar", "scalar_or_axes"):
         assert validate_effect_value(name, 1, "here") == 1.0
         assert type(validate_effect_value(name, 1, "here")) is float
+    elif shape == "pair":
+        assert validate_effect_value(name, [1, -2.5], "here") == (1.0, -2.5)
+        for bad in (1.0, [1, 0, 2], [1]):
+            with pytest.raises(InputError, match=r"here: expected a list of 2 numbers"):
+                validate_effect_value(name, bad, "here")
+        return
     else:
         with pytest.raises(InputError, match="here: expected a list of 3 numbers"):
             validate_effect_value(name, 1.0, "here")
@@ -575,6 +583,8 @@ def effect_values(name):
         return scalar
     if spec.shape == "vector3":
         return vec3(-1.0, 1.0)
+    if spec.shape == "pair":
+        return st.tuples(finite(-1.0, 1.0), finite(-1.0, 1.0))
     return st.one_of(scalar, vec3(lo, 10.0))
 
 

@@ -45,7 +45,7 @@ def testbed_arg(value: str):
 
 
 def parse_effects(items: list[str] | None, *, option: str = "--effect") -> dict:
-    """``NAME=VALUE`` or ``NAME=V1,V2,V3`` strings to an effects mapping (FORMATS.md units)."""
+    """``NAME=VALUE``, ``NAME=V1,V2,V3`` or (a pair) ``NAME=V1,V2`` to an effects mapping (SI)."""
     from airbearing.io.vocabulary import EFFECTS
 
     out: dict = {}
@@ -62,8 +62,10 @@ def parse_effects(items: list[str] | None, *, option: str = "--effect") -> dict:
             nums = [float(v) for v in value.split(",")]
         except ValueError:
             raise InputError(f"{option} '{item}': '{value}' is not a number or 3 numbers") from None
-        if len(nums) not in (1, 3):
-            raise InputError(f"{option} '{item}': expected 1 or 3 numbers, got {len(nums)}")
+        pair = EFFECTS[name].shape == "pair"  # yaw_imbalance=A_S,A_C
+        if len(nums) not in ((2,) if pair else (1, 3)):
+            want = "2 numbers A_S,A_C" if pair else "1 or 3 numbers"
+            raise InputError(f"{option} '{item}': expected {want}, got {len(nums)}")
         if not all(math.isfinite(v) for v in nums):
             raise InputError(f"{option} '{item}': expected finite numbers")
         out[name] = nums[0] if len(nums) == 1 else tuple(nums)

@@ -536,7 +536,7 @@ class Testbed:
     cmg : CMG or None
         Required for kind ``"cmg"``, not allowed otherwise.
     sensors : Sensors
-    effects : dict of str to float or 3-tuple of float
+    effects : dict of str to float, 3-tuple or (yaw_imbalance) 2-tuple of float
         Effects already known to act, by name (:data:`airbearing.io.vocabulary.EFFECTS`).
         Copied and normalised on construction; treat it as read-only.
     source : str
@@ -646,7 +646,7 @@ class Testbed:
 
         Parameters
         ----------
-        effects : mapping of str to float or sequence of 3 float
+        effects : mapping of str to float or sequence of 3 (a pair: 2) float
             Effect names and values (units of the vocabulary). Effects not
             named here keep their current value; to remove effects use
             ``replace(effects=...)``.

@@ -17,10 +17,10 @@ from airbearing.errors import InputError
 
 __all__ = ["EFFECTS", "EffectSpec", "EffectValue", "validate_effect_value"]
 
-Shape = Literal["scalar", "scalar_or_axes", "vector3"]
-EffectValue = float | tuple[float, float, float]
+Shape = Literal["scalar", "scalar_or_axes", "vector3", "pair"]
+EffectValue = float | tuple[float, float] | tuple[float, float, float]
 
-_SHAPES: tuple[str, ...] = ("scalar", "scalar_or_axes", "vector3")
+_SHAPES: tuple[str, ...] = ("scalar", "scalar_or_axes", "vector3", "pair")
 
 
 @dataclass(frozen=True)
@@ -35,10 +35,11 @@ class EffectSpec:
         SI unit of the value ("-" for dimensionless).
     description : str
         What the effect changes (torque or measurement), one line.
-    shape : {"scalar", "scalar_or_axes", "vector3"}
+    shape : {"scalar", "scalar_or_axes", "vector3", "pair"}
         ``"scalar"``: one number. ``"scalar_or_axes"``: one number that applies
         to every free body axis, or a list of three (one per body axis).
-        ``"vector3"``: a 3-vector in body axes.
+        ``"vector3"``: a 3-vector in body axes. ``"pair"``: two numbers (the
+        sine and cosine amplitudes of ``yaw_imbalance``).
     lower : float or None
         Smallest admissible value of each component, or None for no bound.
     lower_strict : bool
@@ -92,6 +93,13 @@ _SPECS: tuple[EffectSpec, ...] = (
         "N m / rad",
         "tau_z = -k * yaw (cables, umbilical), dof = 1",
         "scalar",
+    ),
+    EffectSpec(
+        "yaw_imbalance",
+        "N m",
+        "tau_z = A_s * sin(yaw) + A_c * cos(yaw), value [A_s, A_c] (tilted bearing axis, "
+        "CM off it: gravity torque once per turn), dof = 1",
+        "pair",
     ),
     EffectSpec(
         "cm_offset_error",
@@ -157,7 +165,7 @@ def validate_effect_value(name: str, value: object, where: str) -> EffectValue:
     name : str
         Effect name; must be a key of :data:`EFFECTS`.
     value : object
-        The value as read (a number, or a sequence of three numbers).
+        The value as read (a number, or a sequence of three numbers; two for a pair).
         Integers are accepted as floats; booleans are not numbers.
     where : str
         Location used as the prefix of error messages, for example
@@ -165,9 +173,10 @@ def validate_effect_value(name: str, value: object, where: str) -> EffectValue:
 
     Returns
     -------
-    float or tuple of 3 float
+    float or tuple of 2 or 3 float
         The value in the unit of :attr:`EffectSpec.unit`: a float for a single
-        number, a tuple of three floats (body axes x, y, z) for a list.
+        number, a tuple of three floats (body axes x, y, z) for a list, a tuple of
+        two floats ``(A_s, A_c)`` for a pair.
 
     Raises
     ------
@@ -185,6 +194,11 @@ def validate_effect_value(name: str, value: object, where: str) -> EffectValue:
         return _component(spec, value, where)
     if spec.shape == "scalar_or_axes" and _is_number(value):
         return _component(spec, value, where)
+    if spec.shape == "pair":
+        if not isinstance(value, list | tuple) or len(value) != 2:
+            raise InputError(f"{where}: expected a list of 2 numbers [A_s, A_c], got {value!r}")
+        a, b = (_component(spec, v, where) for v in value)
+        return (a, b)
     expected = (
         "a number or a list of 3 numbers (per body axis)"
         if spec.shape == "scalar_or_axes"

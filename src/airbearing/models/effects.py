@@ -5,7 +5,7 @@ An effect is a small final object. While a Model is built it sees a
 
 * ``inertia_scale`` (inertia_error),
 * ``gimbal_rates`` (gimbal_deadzone),
-* ``torque`` (friction, drag, springs, offsets, dipoles),
+* ``torque`` (friction, drag, springs, the yaw imbalance, offsets, dipoles),
 * ``rate_measured`` and ``lag`` states (gyro_bias, sensor_lag).
 
 The discrepancy workflow walks :data:`REGISTRY`; a test checks that it names
@@ -59,6 +59,8 @@ class Effect:
         shape = VOCABULARY[self.name].shape
         if shape == "vector3":
             return 3
+        if shape == "pair":
+            return 2
         if shape == "scalar_or_axes" and per_axis and dof == 3:
             return 3
         return 1
@@ -76,6 +78,11 @@ class Effect:
             )
         if self.name == "spring_torque" and dof != 1:
             return "spring_torque acts on the yaw angle of a dof = 1 bearing"
+        if self.name == "yaw_imbalance" and dof != 1:
+            return (
+                "yaw_imbalance is the once-per-turn gravity torque of a dof = 1 bearing whose "
+                "axis is tilted; on a dof = 3 bearing the same physics is cm_offset_error"
+            )
         if self.name == "cm_offset_error" and dof != 3:
             return "a CM offset gives no torque about the vertical axis of a dof = 1 bearing"
         if self.name == "residual_dipole" and not has_field:
@@ -116,6 +123,11 @@ def _spring(ctx, th):
     ctx.torque = ctx.torque - th[0] * ctx.yaw
 
 
+def _yaw_imbalance(ctx, th):
+    # bearing axis tilted from vertical, CM off it: gravity torque once per turn
+    ctx.torque = ctx.torque + th[0] * ca.sin(ctx.yaw) + th[1] * ca.cos(ctx.yaw)
+
+
 def _cm_offset_error(ctx, th):
     ctx.torque = ctx.torque + ctx.mass * ca.cross(th, ctx.g_body)
 
@@ -148,6 +160,7 @@ _APPLY = {
     "coulomb_friction": _coulomb,
     "aero_drag": _aero,
     "spring_torque": _spring,
+    "yaw_imbalance": _yaw_imbalance,
     "cm_offset_error": _cm_offset_error,
     "residual_dipole": _residual_dipole,
     "gyro_bias": _gyro_bias,
@@ -175,6 +188,8 @@ def get_effect(name: str) -> Effect:
 def effect_param_names(name: str, dof: int, per_axis: bool) -> list[str]:
     """Parameter names of effect ``name`` as they appear in a Model's ``p_names``."""
     n = get_effect(name).n_params(dof, per_axis)
+    if n == 2:  # a pair: yaw_imbalance's sine and cosine amplitudes
+        return [f"{name}_s", f"{name}_c"]
     return [name] if n == 1 else [f"{name}_{a}" for a in _AXES]
 
 
