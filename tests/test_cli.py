@@ -63,7 +63,7 @@ def test_simulate_free_with_effect(tmp_path):
             "viscous_friction=6e-6",
             "--duration",
             "5",
-            "--seed",
+            "--noise-seed",
             "3",
             "-o",
             str(out),

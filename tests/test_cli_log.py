@@ -36,14 +36,11 @@ def lab_files(tmp_path: Path, n: int = 600, seed: int = 0) -> tuple[Path, Path, 
 def test_import_then_check_and_plot(tmp_path, capsys, suffix):
     raw, mp, tb = lab_files(tmp_path)
     out = tmp_path / f"log{suffix}"
-    assert (
-        run(["log", "import", str(raw), "--map", str(mp), "-o", str(out), "--testbed", str(tb)])
-        == 0
-    )
+    assert run(["log", "import", str(tb), str(raw), "--map", str(mp), "-o", str(out)]) == 0
     text = capsys.readouterr().out
     assert "rows: 600" in text and "segments: 2" in text and "outlier rows: 123" in text
     check_json = tmp_path / "check.json"
-    assert run(["log", "check", str(out), "--testbed", str(tb), "--json", str(check_json)]) == 0
+    assert run(["log", "check", str(tb), str(out), "--json", str(check_json)]) == 0
     text = capsys.readouterr().out
     assert "row 123" in text and "balance" in text and "passive platform" in text
     summary = json.loads(check_json.read_text())
@@ -52,7 +49,7 @@ def test_import_then_check_and_plot(tmp_path, capsys, suffix):
     assert summary["tools"]["replay"]["usable"] is True
     assert summary["tools"]["balance"]["usable"] is False
     for plot in ("plot.png", "plot.html"):
-        assert run(["log", "plot", str(out), "--testbed", str(tb), "-o", str(tmp_path / plot)]) == 0
+        assert run(["log", "plot", str(tb), str(out), "-o", str(tmp_path / plot)]) == 0
         assert (tmp_path / plot).stat().st_size > 1000
     assert (tmp_path / "plot.png").read_bytes()[:4] == b"\x89PNG"
 
@@ -80,7 +77,7 @@ def bad_cases(tmp_path: Path):
     pd.DataFrame({"Time (ms)": [0, 1000, 2000, 3000], "Yaw (deg)": [0, 1, 2, 3]}).to_csv(
         gaps, index=False
     )
-    cases["all-gaps"] = ([str(gaps), "--map", str(mp), "--testbed", str(tb)], "all gaps")
+    cases["all-gaps"] = ([str(tb), str(gaps), "--map", str(mp)], "all gaps")
     return cases
 
 
@@ -103,18 +100,12 @@ def test_gyro_false_says_rates_are_ignored(tmp_path, capsys):
     mp = tmp_path / "rates.toml"
     mp.write_text(MAP.replace("[units]", 'wz = "omega_z"\n[units]'))
     out = tmp_path / "log.csv"
-    assert (
-        run(["log", "import", str(raw), "--map", str(mp), "-o", str(out), "--testbed", str(tb)])
-        == 0
-    )
+    assert run(["log", "import", str(tb), str(raw), "--map", str(mp), "-o", str(out)]) == 0
     assert "rate column(s) wz ('omega_z') ignored" in capsys.readouterr().out
     assert "wz" not in out.read_text().splitlines()[0].split(",")
 
 
 def test_check_wrong_output_suffix_before_work(tmp_path, capsys):
     raw, _, tb = lab_files(tmp_path)
-    assert (
-        run(["log", "check", str(raw), "--testbed", str(tb), "--json", str(tmp_path / "x.txt")])
-        == 2
-    )
+    assert run(["log", "check", str(tb), str(raw), "--json", str(tmp_path / "x.txt")]) == 2
     assert "--json" in capsys.readouterr().err

@@ -11,7 +11,14 @@ One error path for the whole command line (:func:`main`):
   1, and the traceback only under the global ``--debug``.
 
 Outputs are planned before any work and written all-or-nothing at the end
-(:class:`airbearing.cli.outputs.Outputs`), so none of these leaves a partial file.
+(:class:`airbearing.cli.outputs.Outputs`), so none of these leaves a partial file, and
+an output that is one of the command's inputs is refused.
+
+One grammar (:mod:`airbearing.cli.grammar`, docs/reference/cli.md): old spellings are
+rewritten with one deprecation line. The terminal shows only what the command prints:
+Python warnings, log records and (for the console script) the solvers' own output on
+the process's file descriptors go to a debug log (:func:`chatter_to_debug_log`)
+unless ``--verbose`` is given.
 
 Start-up: command modules import only ``typer`` (and this package's light modules) at
 module level; numerical libraries are imported inside the command functions, so
@@ -20,15 +27,22 @@ module level; numerical libraries are imported inside the command functions, so
 
 from __future__ import annotations
 
+import contextlib
+import logging
+import os
 import sys
+import tempfile
 import traceback
+import warnings
+from collections.abc import Iterator
+from pathlib import Path
 from typing import Annotated
 
 import typer
 
 from airbearing.errors import AirbearingError, InputError
 
-__all__ = ["app", "main", "one_line"]
+__all__ = ["app", "main", "one_line", "chatter_to_debug_log", "debug_log_path"]
 
 app = typer.Typer(
     name="airbearing",
@@ -40,7 +54,7 @@ app = typer.Typer(
 )
 
 #: Global flags of this process (set by the callback below).
-GLOBAL = {"debug": False}
+GLOBAL = {"debug": False, "verbose": False}
 
 
 def _version(value: bool) -> None:
@@ -58,6 +72,15 @@ def _global(
     ] = False,
     debug: Annotated[
         bool, typer.Option("--debug", help="Show the traceback of an internal error.")
+    ] = False,
+    verbose: Annotated[
+        bool,
+        typer.Option(
+            "--verbose",
+            "-v",
+            help="Show warnings, solver output and compile notices on the terminal "
+            "(otherwise they go to a debug log).",
+        ),
     ] = False,
     version: Annotated[
         bool,
@@ -78,6 +101,81 @@ def _global(
 
     announce_to(None if quiet else lambda what, *_: print(f"airbearing: {what}", file=sys.stderr))
     GLOBAL["debug"] = debug
+    GLOBAL["verbose"] = verbose
+
+
+def debug_log_path() -> Path:
+    """Where this process's warnings and solver output go without ``--verbose``."""
+    return Path(tempfile.gettempdir()) / f"airbearing-{os.getpid()}.log"
+
+
+@contextlib.contextmanager
+def chatter_to_debug_log(verbose: bool, *, fds: bool = False) -> Iterator[Path | None]:
+    """Keep warnings, log records and solver chatter off the terminal unless ``verbose``.
+
+    Python warnings (numpy's RuntimeWarning, ...) and ``airbearing.*`` log records go
+    to :func:`debug_log_path`. With ``fds=True`` (the console script), file descriptors
+    1 and 2 point there too while the command runs, so C and Fortran output (IPOPT's
+    iteration table, CasADi's "NaN detected") does not reach the terminal, while
+    ``sys.stdout``/``sys.stderr`` keep writing to the terminal. The log is removed at
+    the end when empty. ``verbose``: nothing is redirected; log records go to stderr.
+    """
+    logger = logging.getLogger("airbearing")
+    old = (logger.handlers[:], logger.propagate, logger.level)
+    if verbose:
+        handler: logging.Handler = logging.StreamHandler(sys.stderr)
+        handler.setFormatter(logging.Formatter("airbearing: %(name)s: %(message)s"))
+        logger.handlers[:] = [handler]
+        logger.setLevel(logging.INFO)
+        try:
+            yield None
+        finally:
+            logger.handlers[:], logger.propagate, logger.level = old
+        return
+    path = debug_log_path()
+    sink = open(path, "a", buffering=1)  # noqa: SIM115 (closed below)
+    saved: list[tuple[int, int, object]] = []
+    try:
+        handler = logging.StreamHandler(sink)
+        handler.setFormatter(logging.Formatter("%(asctime)s %(name)s %(levelname)s %(message)s"))
+        logger.handlers[:] = [handler]
+        logger.propagate = False
+        logger.setLevel(logging.INFO)
+        with warnings.catch_warnings():
+            warnings.simplefilter("default")
+
+            def _show(message, category, filename, lineno, file=None, line=None):
+                sink.write(warnings.formatwarning(message, category, filename, lineno, line))
+
+            warnings.showwarning = _show
+            if fds:
+                for fd, name in ((1, "stdout"), (2, "stderr")):
+                    stream = getattr(sys, name)
+                    with contextlib.suppress(Exception):
+                        stream.flush()
+                    keep = os.dup(fd)
+                    saved.append((fd, keep, stream))
+                    setattr(
+                        sys,
+                        name,
+                        open(keep, "w", buffering=1, closefd=False),  # noqa: SIM115
+                    )
+                    os.dup2(sink.fileno(), fd)
+            yield path
+    finally:
+        for fd, keep, stream in reversed(saved):
+            name = "stdout" if fd == 1 else "stderr"
+            with contextlib.suppress(Exception):
+                getattr(sys, name).flush()
+                getattr(sys, name).close()
+            os.dup2(keep, fd)
+            os.close(keep)
+            setattr(sys, name, stream)
+        logger.handlers[:], logger.propagate, logger.level = old
+        sink.close()
+        with contextlib.suppress(OSError):
+            if path.stat().st_size == 0:
+                path.unlink()
 
 
 def _register() -> None:
@@ -117,10 +215,26 @@ def main(argv: list[str] | None = None) -> None:
     Exit status: 0 success, 2 bad input or usage, 1 solver failure or internal error,
     130 interrupted.
     """
+    console = argv is None
     args = list(sys.argv[1:] if argv is None else argv)
     GLOBAL["debug"] = False
     if not args:
         args = ["--help"]  # a bare `airbearing` is a request for help, not an error
+    from airbearing.cli.grammar import command_path, rewrite
+    from airbearing.cli.help_types import install
+
+    install()
+    args, notes = rewrite(args)
+    for note in notes:
+        print(f"airbearing: {note}", file=sys.stderr)
+    _path, start = command_path(args)
+    verbose = any(a in ("--verbose", "-v") for a in args[: max(start - len(_path), 0)])
+    with chatter_to_debug_log(verbose, fds=console):
+        _run(args)
+
+
+def _run(args: list[str]) -> None:
+    """Run the app on ``args``; every error leaves as one line and an exit status."""
     try:
         _register()
         app(args=args, prog_name="airbearing", standalone_mode=False)

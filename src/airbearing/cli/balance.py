@@ -10,7 +10,7 @@ from typing import Annotated
 import typer
 
 from airbearing.cli import app
-from airbearing.cli.common import check_log_size, number, numbers, testbed_arg
+from airbearing.cli.common import check_log_size, number, numbers, testbed_arg, testbed_input
 from airbearing.cli.outputs import Outputs
 from airbearing.cli.show_progress import progress_display
 from airbearing.errors import InputError
@@ -129,7 +129,9 @@ def balance(
             "sets the initial rest attitude.",
         ),
     ] = False,
-    seed: Annotated[int, typer.Option(min=0, help="Noise seed.")] = 0,
+    seed: Annotated[
+        int, typer.Option("--noise-seed", min=0, help="Seed of the sensor noise, >= 0.")
+    ] = 0,
     two_step_: Annotated[
         bool, typer.Option("--two-step", help="Seed 004's two-step procedure.")
     ] = False,
@@ -141,12 +143,15 @@ def balance(
     ] = None,
     seeds: Annotated[int, typer.Option(help="Seeds per offset in --compare (>= 1).")] = 4,
     json_out: Annotated[Path | None, typer.Option("--json", help="Summary JSON.")] = None,
-    log: Annotated[Path | None, typer.Option("--log", help="Run log, .csv or .parquet.")] = None,
+    log: Annotated[
+        Path | None, typer.Option("-o", "--out", help="Run log, .csv or .parquet.")
+    ] = None,
 ) -> None:
     """Balance a platform testbed automatically (seeds 000 and 004) and report the metrics."""
     out = Outputs()
+    testbed_input(out, testbed)
     json_path = out.plan(json_out, "--json", (".json",))
-    log_path = out.plan(log, "--log", (".csv", ".parquet"))
+    log_path = out.plan(log, "-o", (".csv", ".parquet"))
     number("--duration", duration, lo=0, lo_open=True, unit="s")
     number("--initial-offset-mm", initial_offset_mm, unit="mm")
     number("--vertical-offset", vertical_offset, unit="m")
@@ -156,7 +161,9 @@ def balance(
     if sweep is not None and compare is None:
         raise InputError("--sweep needs --compare, e.g. --compare mechanical,mixed")
     if log is not None and (compare is not None or two_step_):
-        raise InputError("--log applies to a single run (not --compare or --two-step)")
+        raise InputError(
+            "-o/--out (the run log) applies to a single run (not --compare or --two-step)"
+        )
     if two_step_ and compare is not None:
         raise InputError("--two-step and --compare are different runs: give one of them")
     methods = None

@@ -3,18 +3,40 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Literal
 
 import typer
 
 from airbearing.cli import app
 
 
+def _campaign_inputs(out, campaign_file: Path) -> None:
+    """The campaign file and the files it names (testbed, gains) are inputs.
+
+    Read here with tomllib only, before the outputs are planned; a file that cannot be
+    read is left to :func:`read_campaign` to explain.
+    """
+    import tomllib
+
+    out.input(campaign_file, "the campaign file")
+    try:
+        data = tomllib.loads(Path(campaign_file).read_text())
+        named = [(data.get("testbed"), "the campaign's testbed"),
+                 (data.get("args", {}).get("gains"), "the campaign's gains file")]  # fmt: skip
+    except (OSError, ValueError, AttributeError):
+        return
+    for value, what in named:
+        if isinstance(value, str):
+            path = Path(value) if Path(value).is_absolute() else Path(campaign_file).parent / value
+            if path.is_file():
+                out.input(path, what)
+
+
 @app.command()
 def campaign(
     campaign_file: Annotated[Path, typer.Argument(help="Campaign file (TOML, FORMATS.md).")],
     output: Annotated[
-        Path | None, typer.Option("-o", "--output", help="Results, .parquet (one row per run).")
+        Path | None, typer.Option("-o", "--out", help="Results, .parquet (one row per run).")
     ] = None,
     workers: Annotated[
         int | None, typer.Option(help="Local worker processes (default: the machine's cores).")
@@ -34,7 +56,7 @@ def campaign(
         ),
     ] = None,
     study: Annotated[
-        str | None,
+        Literal["detection"] | None,
         typer.Option(help="detection: each run hides one dispersed effect, or nothing."),
     ] = None,
 ) -> None:
@@ -49,8 +71,9 @@ def campaign(
     from airbearing.errors import InputError
 
     out = Outputs()
+    _campaign_inputs(out, campaign_file)
     if output is None:
-        raise InputError("-o/--output: the campaign needs a results file ending in .parquet")
+        raise InputError("-o/--out: the campaign needs a results file ending in .parquet")
     res_path = out.plan(output, "-o", (".parquet",))
     rep_path = out.plan(report, "--report", (".html",))
     if workers is not None and workers < 1:

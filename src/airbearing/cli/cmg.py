@@ -9,7 +9,7 @@ from typing import Annotated
 import typer
 
 from airbearing.cli import app
-from airbearing.cli.common import number, testbed_arg
+from airbearing.cli.common import number, testbed_arg, testbed_input
 from airbearing.cli.outputs import Outputs
 from airbearing.cli.show_progress import progress_display
 from airbearing.cli.tables import echo_table
@@ -28,6 +28,9 @@ app.add_typer(cmg_app, name="cmg")
 #: same values as airbearing.design.sizing.TABLE5_DEFAULTS (a test checks), kept here so
 #: that ``cmg size --help`` does not import numpy.
 TABLE5 = {
+    "angle_deg": 30.0,  # deg, Table 5: a
+    "time": 2.0,  # s, Table 5: t
+    "inertia": 0.0033,  # kg m^2, Table 5: J
     "gimbal_rate_deg": 35.0,  # deg/s
     "skew_deg": 54.73,  # deg
     "flywheel_rpm": 4000.0,  # rpm
@@ -39,9 +42,9 @@ TABLE5 = {
 
 @cmg_app.command("size")
 def size(
-    angle_deg: Annotated[float, typer.Option(help="Manoeuvre angle, deg (Table 5: 30).")],
-    time: Annotated[float, typer.Option(help="Manoeuvre time, s (Table 5: 2).")],
-    inertia: Annotated[float, typer.Option(help="Platform inertia, kg m^2 (Table 5: 0.0033).")],
+    angle_deg: Annotated[float, typer.Option(help="Manoeuvre angle, deg.")] = TABLE5["angle_deg"],
+    time: Annotated[float, typer.Option(help="Manoeuvre time, s.")] = TABLE5["time"],
+    inertia: Annotated[float, typer.Option(help="Platform inertia, kg m^2.")] = TABLE5["inertia"],
     gimbal_rate_deg: Annotated[float, typer.Option(help="Largest gimbal rate, deg/s.")] = TABLE5[
         "gimbal_rate_deg"
     ],
@@ -58,7 +61,11 @@ def size(
     density: Annotated[float, typer.Option(help="Flywheel density, kg/m^3.")] = TABLE5["density"],
     json_out: Annotated[Path | None, typer.Option("--json", help="Result JSON.")] = None,
 ) -> None:
-    """Size the flywheels for a manoeuvre (seed 001 eqs. 5-9; defaults are Table 5's)."""
+    """Size the flywheels for a manoeuvre (seed 001 eqs. 5-9).
+
+    Every default is seed 001's Table 5 (and Table 6): with no option the command
+    reproduces Table 5 (N_req 1.728 mN m, h0 0.8661 mN m s, m_f 14.1 g, L_f 5.8 mm).
+    """
     out = Outputs()
     json_path = out.plan(json_out, "--json", (".json",))
     number("--angle-deg", angle_deg, lo=0, hi=360, lo_open=True, unit="deg")
@@ -108,7 +115,7 @@ def size(
 @cmg_app.command("envelope")
 def envelope(
     testbed: Annotated[str, typer.Argument(help="Testbed file or built-in name (kind = cmg).")],
-    output: Annotated[Path, typer.Option("-o", "--output", help="Figure: .png, .svg or .pdf.")],
+    output: Annotated[Path, typer.Option("-o", "--out", help="Figure: .png, .svg or .pdf.")],
     skew_deg: Annotated[
         float | None, typer.Option(help="Skew, deg (default: the testbed's).")
     ] = None,
@@ -121,6 +128,7 @@ def envelope(
 ) -> None:
     """Momentum envelope and internal singular surfaces of the testbed's pyramid."""
     out = Outputs()
+    testbed_input(out, testbed)
     fig_path = out.plan(output, "-o", (".png", ".svg", ".pdf"))
     data_path = out.plan(data, "--data", (".csv",))
     number("--skew-deg", skew_deg, lo=0, hi=90, lo_open=True, hi_open=True, unit="deg")

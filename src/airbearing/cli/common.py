@@ -15,6 +15,7 @@ from airbearing.errors import InputError
 
 __all__ = [
     "testbed_arg",
+    "testbed_input",
     "parse_effects",
     "check_output_path",
     "fmt",
@@ -42,6 +43,12 @@ def testbed_arg(value: str):
     from airbearing.io.testbed import load_testbed
 
     return load_testbed(value)
+
+
+def testbed_input(outputs, value: str | None) -> None:
+    """Declare a testbed argument as an input of ``outputs`` when it names a file."""
+    if value is not None and Path(value).is_file():
+        outputs.input(Path(value), "the testbed")
 
 
 def parse_effects(items: list[str] | None, *, option: str = "--effect") -> dict:

@@ -18,7 +18,7 @@ from airbearing.cli.show_progress import progress_display
 @app.command()
 def demo(
     out: Annotated[
-        Path, typer.Option("--out", help="Folder for the report (created if missing).")
+        Path, typer.Option("-o", "--out", help="Folder for the report (created if missing).")
     ] = Path("demo-out"),
     quick: Annotated[bool, typer.Option(help="Shorter runs (for tests).")] = False,
 ) -> None:

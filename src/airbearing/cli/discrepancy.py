@@ -30,7 +30,9 @@ def discrepancy(
         Path | None, typer.Option("--write-testbed", help="Augmented testbed, .toml.")
     ] = None,
     max_effects: Annotated[int, typer.Option(help="Most effects to add.")] = 2,
-    seed: Annotated[int, typer.Option(min=0, help="Seed of the held-out window split.")] = 0,
+    seed: Annotated[
+        int, typer.Option("--split-seed", min=0, help="Seed of the held-out window split, >= 0.")
+    ] = 0,
     only: Annotated[
         list[str] | None, typer.Option(help="Search only this effect (repeatable).")
     ] = None,
@@ -44,6 +46,11 @@ def discrepancy(
     set is fitted to all logs together. Outlier rows are left out and reported.
     """
     out = Outputs()
+    from airbearing.cli.common import testbed_input
+
+    testbed_input(out, testbed)
+    out.inputs(logs, "log")
+    out.inputs(validate, "validation log")
     p_json = out.plan(json_out, "--json", (".json",))
     p_html = out.plan(report, "--report", (".html",))
     p_tb = out.plan(write_tb, "--write-testbed", (".toml",))

@@ -10,7 +10,7 @@ from typing import Annotated, Literal, get_args
 import typer
 
 from airbearing.cli import app
-from airbearing.cli.common import number, numbers, testbed_arg
+from airbearing.cli.common import number, numbers, testbed_arg, testbed_input
 from airbearing.cli.outputs import Outputs
 from airbearing.cli.show_progress import progress_display
 from airbearing.cli.tables import cell, echo_table
@@ -78,6 +78,7 @@ def gains(
 ) -> None:
     """Tune the balancing PID or the CMG attitude PID to a specification."""
     out = Outputs()
+    testbed_input(out, testbed)
     json_path = out.plan(json_out, "--json", (".json",))
     number("--phase-margin-deg", phase_margin_deg, lo=0, hi=90, lo_open=True, hi_open=True,
            unit="deg")  # fmt: skip
@@ -138,13 +139,15 @@ def report(
     gains_file: Annotated[
         Path | None, typer.Option("--gains", help="Gains JSON of 'airbearing gains'.")
     ] = None,
-    output: Annotated[Path | None, typer.Option("-o", "--output", help="Report, .html.")] = None,
+    output: Annotated[Path | None, typer.Option("-o", "--out", help="Report, .html.")] = None,
     json_out: Annotated[Path | None, typer.Option("--json", help="Margins, JSON.")] = None,
 ) -> None:
     """Linear stability report (HTML) of a loop, with its margins as JSON."""
     if output is None:
-        raise InputError("-o/--output: the report needs an output file ending in .html")
+        raise InputError("-o/--out: the report needs an output file ending in .html")
     out = Outputs()
+    testbed_input(out, testbed)
+    out.input(gains_file, "the gains file")
     html_path = out.plan(output, "-o", (".html",))
     json_path = out.plan(json_out, "--json", (".json",))
     spec_dict = None

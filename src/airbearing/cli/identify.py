@@ -8,7 +8,7 @@ from typing import Annotated, Literal
 import typer
 
 from airbearing.cli import app
-from airbearing.cli.common import testbed_arg
+from airbearing.cli.common import testbed_arg, testbed_input
 from airbearing.cli.outputs import Outputs
 from airbearing.cli.show_progress import progress_display
 from airbearing.errors import InputError
@@ -41,7 +41,8 @@ def identify(
         Form, typer.Option(help="integrated (seed 004 eq. 47) or acceleration (eq. 45).")
     ] = "integrated",
     friction: Annotated[
-        str | None, typer.Option(help="CMG: none, viscous or coulomb friction with J_z.")
+        Literal["none", "viscous", "coulomb"] | None,
+        typer.Option(help="CMG: none, viscous or coulomb friction with J_z."),
     ] = None,
     json_out: Annotated[Path | None, typer.Option("--json", help="Result JSON.")] = None,
     write_testbed_path: Annotated[
@@ -50,6 +51,8 @@ def identify(
 ) -> None:
     """Identify inertia (and CM offset) from free-oscillation, spin-down or slew logs."""
     out = Outputs()
+    testbed_input(out, testbed)
+    out.inputs(logs, "log")
     p_json = out.plan(json_out, "--json", (".json",))
     p_tb = out.plan(write_testbed_path, "--write-testbed", (".toml",))
     if method not in ("output-error", "equation-error"):

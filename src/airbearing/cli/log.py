@@ -30,6 +30,35 @@ def _testbed(value: str | None):
     return testbed_arg(value)
 
 
+def _testbed_and_file(
+    args: list[str], command: str, what: str, *, testbed_required: bool
+) -> tuple[str | None, Path]:
+    """``[TESTBED] FILE`` positionals: the testbed first (the one grammar), then the file."""
+    from airbearing.errors import InputError
+
+    usage = f"airbearing log {command} {'TESTBED' if testbed_required else '[TESTBED]'} {what}"
+    if len(args) == 2:
+        return args[0], Path(args[1])
+    if len(args) == 1 and not testbed_required:
+        return None, Path(args[0])
+    if len(args) == 1:
+        raise InputError(
+            f"log {command} {args[0]}: missing the testbed; expected '{usage}' "
+            "(a testbed file or built-in name first)"
+        )
+    raise InputError(
+        f"log {command}: expected '{usage}', got {len(args)} arguments: {' '.join(args)}"
+    )
+
+
+def _declare_inputs(out, testbed: str | None, files: list[tuple[Path | None, str]]) -> None:
+    from airbearing.cli.common import testbed_input
+
+    testbed_input(out, testbed)
+    for path, what in files:
+        out.input(path, what)
+
+
 def _rows(rows) -> str:
     rows = list(rows)
     if not rows:
@@ -40,18 +69,27 @@ def _rows(rows) -> str:
 
 @log_app.command("import")
 def import_(
-    raw: Annotated[Path, typer.Argument(help="The lab's raw log (CSV, or .parquet).")],
-    map_path: Annotated[Path, typer.Option("--map", help="Import map (TOML, FORMATS.md).")],
-    output: Annotated[Path, typer.Option("-o", "--output", help="Log to write, .csv or .parquet.")],
-    testbed: Annotated[
-        str | None,
-        typer.Option(help="Testbed file or built-in name: validate against it, find outliers."),
-    ] = None,
+    args: Annotated[
+        list[str],
+        typer.Argument(
+            metavar="[TESTBED] RAW",
+            help="Testbed file or built-in name (optional: validate against it, find "
+            "outliers), then the lab's raw log (.csv or .parquet).",
+        ),
+    ],
+    map_path: Annotated[
+        Path, typer.Option("--map", metavar="MAP.toml", help="Import map (TOML, FORMATS.md).")
+    ],
+    output: Annotated[
+        Path, typer.Option("-o", "--out", metavar="LOG", help="Log to write, .csv or .parquet.")
+    ],
 ) -> None:
     """Convert a lab's raw log into a log (FORMATS.md import map) and summarise it."""
     from airbearing.cli.outputs import Outputs
 
+    testbed, raw = _testbed_and_file(args, "import", "RAW", testbed_required=False)
     out = Outputs()
+    _declare_inputs(out, testbed, [(raw, "the raw log"), (map_path, "the import map")])
     log_path = out.plan(output, "-o", _LOG_SUFFIXES)
     tb = _testbed(testbed)
     from airbearing.analysis.logs.import_map import import_log_with_notes
@@ -69,7 +107,7 @@ def import_(
     typer.echo(f"segments: {quality.n_segments} (rows {_segments_text(quality)})")
     typer.echo(f"outlier rows: {_rows(quality.outlier_rows)}")
     if tb is None:
-        typer.echo("note: no --testbed: gaps judged by the median interval, no sensor noise floor")
+        typer.echo("note: no testbed: gaps judged by the median interval, no sensor noise floor")
     typer.echo(f"wrote {log_path}")
 
 
@@ -79,20 +117,34 @@ def _segments_text(quality) -> str:
 
 @log_app.command("check")
 def check(
-    log_file: Annotated[Path, typer.Argument(help="Log, .csv or .parquet.")],
-    testbed: Annotated[str, typer.Option(help="Testbed file or built-in name.")],
-    json_out: Annotated[Path | None, typer.Option("--json", help="Result JSON.")] = None,
+    args: Annotated[
+        list[str],
+        typer.Argument(metavar="TESTBED LOG", help="Testbed file or built-in name, then the log."),
+    ],
+    json_out: Annotated[
+        Path | None, typer.Option("--json", metavar="PATH", help="Result JSON.")
+    ] = None,
 ) -> None:
-    """Rows, rate, segments, jitter, outlier rows and what each tool can use."""
+    """Rows, rate, segments, jitter, outlier rows and what each tool can use.
+
+    A log with cells no tool can use (not a number, not finite, or of magnitude above
+    1e100) is reported with those rows and "no" for every tool.
+    """
     from airbearing.cli.outputs import Outputs
 
+    testbed, log_file = _testbed_and_file(args, "check", "LOG", testbed_required=True)
     out = Outputs()
+    _declare_inputs(out, testbed, [(log_file, "the log")])
     json_path = out.plan(json_out, "--json", (".json",))
     tb = _testbed(testbed)
-    from airbearing.io.log import read_log
+    from airbearing.io.log import BadCellsError, read_log
     from airbearing.io.tool_use import TOOLS, tool_use
 
-    log = read_log(log_file, tb)
+    try:
+        log = read_log(log_file, tb)
+    except BadCellsError as e:
+        _report_bad_cells(out, json_path, log_file, tb, e)
+        return
     quality = log.quality
     tools = tool_use(log, quality)
     t = log.t
@@ -150,19 +202,61 @@ def check(
         typer.echo(f"wrote {json_path}")
 
 
+def _report_bad_cells(out, json_path, log_file, tb, error) -> None:
+    """``log check`` of a log with unusable cells: those rows, why, and "no" everywhere."""
+    from airbearing.cli import one_line
+    from airbearing.io.log import OVERFLOW_LIMIT, row_ranges
+    from airbearing.io.tool_use import TOOLS
+
+    where = "; ".join(f"column '{c}' rows {row_ranges(r)}" for c, r in error.bad.items())
+    why = (
+        f"{len(error.rows)} row(s) with cells that are not finite numbers of magnitude "
+        f"<= {OVERFLOW_LIMIT:g} ({where}): fix or remove them"
+    )
+    summary = {
+        "log": str(log_file),
+        "testbed": tb.name,
+        "usable": False,
+        "bad_rows": error.rows,
+        "bad_cells": error.bad,
+        "error": one_line(error),
+        "tools": {name: {"usable": False, "why": why} for name in TOOLS},
+    }
+    out.json(json_path, summary)
+    out.commit()
+    typer.echo(f"log       {log_file} (testbed {tb.name!r})")
+    typer.echo(f"bad rows  {row_ranges(error.rows)}")
+    for c, r in error.bad.items():
+        typer.echo(f"          column '{c}': rows {row_ranges(r)} ({len(r)} cells)")
+    typer.echo(f"why       {one_line(error)}")
+    typer.echo("tools")
+    width = max(len(n) for n in TOOLS)
+    for name in TOOLS:
+        typer.echo(f"  {name:<{width}}  no   bad cells in rows {row_ranges(error.rows)}")
+    if json_path is not None:
+        typer.echo(f"wrote {json_path}")
+
+
 @log_app.command("plot")
 def plot(
-    log_file: Annotated[Path, typer.Argument(help="Log, .csv or .parquet.")],
-    output: Annotated[Path, typer.Option("-o", "--output", help="Plot, .png or .html.")],
-    testbed: Annotated[
-        str | None,
-        typer.Option(help="Testbed file or built-in name: shade gaps, mark outliers."),
-    ] = None,
+    args: Annotated[
+        list[str],
+        typer.Argument(
+            metavar="[TESTBED] LOG",
+            help="Testbed file or built-in name (optional: shade gaps, mark outliers), "
+            "then the log (.csv or .parquet).",
+        ),
+    ],
+    output: Annotated[
+        Path, typer.Option("-o", "--out", metavar="PLOT", help="Plot, .png or .html.")
+    ],
 ) -> None:
-    """The logged channels against time; gaps shaded and outliers circled (with --testbed)."""
+    """The logged channels against time; gaps shown as breaks, outliers circled (with a testbed)."""
     from airbearing.cli.outputs import Outputs
 
+    testbed, log_file = _testbed_and_file(args, "plot", "LOG", testbed_required=False)
     out = Outputs()
+    _declare_inputs(out, testbed, [(log_file, "the log")])
     plot_path = out.plan(output, "-o", (".png", ".html"))
     tb = _testbed(testbed)
     from airbearing.io.log import read_log

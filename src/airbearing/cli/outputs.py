@@ -7,6 +7,10 @@ built in memory and handed over (:meth:`Outputs.text`, :meth:`Outputs.file`), an
 :meth:`Outputs.commit` writes them all: each to a temporary file in its folder, then
 all renamed in place. If any write fails, the temporary files are removed and the
 outputs already renamed are taken back, so a failure leaves nothing new behind.
+
+Inputs are never written: every file a command reads is declared
+(:meth:`Outputs.input`), and an output that is the same file (same real path, or
+the same file through a hard link) is refused before any work, naming both.
 """
 
 from __future__ import annotations
@@ -32,10 +36,21 @@ def _probe(folder: Path, message: str) -> None:
     os.unlink(tmp)
 
 
+def _same_file(a: Path, b: Path) -> bool:
+    """``a`` and ``b`` are one file: the same real path, or one inode (a hard link)."""
+    if os.path.realpath(a) == os.path.realpath(b):
+        return True
+    try:
+        return os.path.samefile(a, b)
+    except OSError:  # one of them does not exist (yet)
+        return False
+
+
 class Outputs:
     """The output files of one command run."""
 
     def __init__(self) -> None:
+        self._inputs: list[tuple[Path, str]] = []
         self._planned: dict[Path, str] = {}
         self._writers: list[tuple[Path, str, Callable[[Path], None]]] = []
         self._make_folders: list[tuple[Path, str]] = []
@@ -63,6 +78,7 @@ class Outputs:
         if path is None:
             return None
         path = Path(path)
+        self._check_not_input(path, option)
         if suffixes and path.suffix.lower() not in suffixes:
             raise InputError(f"{option} {path}: expected a file ending in {' or '.join(suffixes)}")
         folder = path.parent
@@ -97,6 +113,43 @@ class Outputs:
             raise InputError(f"{option} {path}: the same file is already the {self._planned[key]}")
         self._planned[key] = option
         return path
+
+    def input(self, path, what: str) -> None:
+        """Declare a file the command reads (``None``, or a name that is no file, passes).
+
+        ``what`` says which input it is (``"the testbed"``, ``"log 2"``). An output
+        planned before or after that is the same file is refused.
+
+        Raises
+        ------
+        InputError
+            An already planned output is this input.
+        """
+        if path is None:
+            return
+        path = Path(path)
+        for key, option in self._planned.items():
+            if _same_file(key, path):
+                raise self._clash(option, key, what, path)
+        self._inputs.append((path, what))
+
+    def inputs(self, paths, what: str) -> None:
+        """:meth:`input` for each path of a list; ``what`` is numbered when there are several."""
+        paths = list(paths or [])
+        for i, p in enumerate(paths):
+            self.input(p, what if len(paths) == 1 else f"{what} {i + 1}")
+
+    @staticmethod
+    def _clash(option: str, out: Path, what: str, inp: Path) -> InputError:
+        return InputError(
+            f"{option} {out}: is {what} {inp}, an input of this command; refusing to "
+            "overwrite an input: choose another output file"
+        )
+
+    def _check_not_input(self, path: Path, option: str) -> None:
+        for inp, what in self._inputs:
+            if _same_file(path, inp):
+                raise self._clash(option, path, what, inp)
 
     def file(self, path: Path | None, write: Callable[[Path], None]) -> None:
         """Queue an output written by ``write(tmp_path)`` (a planned path; ``None`` skips)."""

@@ -27,6 +27,10 @@ def replay(
     (discrepancy --write-testbed) on a new log.
     """
     out = Outputs()
+    from airbearing.cli.common import testbed_input
+
+    testbed_input(out, testbed)
+    out.inputs(logs, "log")
     p_json = out.plan(json_out, "--json", (".json",))
     p_html = out.plan(report, "--report", (".html",))
     from airbearing.cli.process_settings import one_blas_thread

@@ -15,6 +15,7 @@ from airbearing.cli.common import (
     numbers,
     parse_effects,
     testbed_arg,
+    testbed_input,
 )
 from airbearing.cli.outputs import Outputs
 from airbearing.cli.tables import echo_summary
@@ -51,7 +52,9 @@ def simulate(
     duration: Annotated[
         float | None, typer.Option(help="Run length, s (slew 40, free 60, spindown 120).")
     ] = None,
-    seed: Annotated[int, typer.Option(min=0, help="Noise seed, >= 0.")] = 0,
+    seed: Annotated[
+        int, typer.Option("--noise-seed", min=0, help="Seed of the sensor noise, >= 0.")
+    ] = 0,
     steering: Annotated[Steering, typer.Option(help="Steering law (seed 001).")] = "mp",
     rate_limit: Annotated[
         RateLimit, typer.Option(help="Gimbal-rate limit: scale (seed 001 eq. 4) or clip.")
@@ -95,12 +98,14 @@ def simulate(
         bool, typer.Option(help="Free/spindown: rate 0 at each segment's first sample.")
     ] = False,
     output: Annotated[
-        Path | None, typer.Option("-o", "--output", help="Log, .csv or .parquet.")
+        Path | None, typer.Option("-o", "--out", help="Log, .csv or .parquet.")
     ] = None,
     json_out: Annotated[Path | None, typer.Option("--json", help="Summary JSON.")] = None,
 ) -> None:
     """Simulate a testbed and write the log (FORMATS.md) and a summary JSON."""
     out = Outputs()
+    testbed_input(out, testbed)
+    out.input(times, "the --times log")
     log_path = out.plan(output, "-o", (".csv", ".parquet"))
     json_path = out.plan(json_out, "--json", (".json",))
     number(

@@ -36,14 +36,28 @@ def _entry(name: str):
 
 @testbed_app.command("list")
 def list_(
-    json_: Annotated[bool, typer.Option("--json", help="Print a JSON list on stdout.")] = False,
+    json_: Annotated[
+        str | None,
+        typer.Option(
+            "--json",
+            metavar="PATH",
+            help="Write the list as JSON ({name, kind, dof, description}); '-' for stdout.",
+        ),
+    ] = None,
 ) -> None:
-    """List the built-in testbeds, one line each (--json: {name, kind, dof, description})."""
+    """List the built-in testbeds, one line each (--json PATH: as JSON)."""
     from airbearing.io.builtins import BUILTINS, builtin_names, find
 
+    out = Outputs()
+    json_path = None if json_ in (None, "-") else out.plan(Path(json_), "--json", (".json",))
     entries = [*BUILTINS, *(find(a) for a in builtin_names() if find(a).alias_of)]
-    if json_:
+    if json_ == "-":
         typer.echo(json.dumps([e.to_json() for e in entries], indent=2))
+        return
+    if json_path is not None:
+        out.text(json_path, json.dumps([e.to_json() for e in entries], indent=2) + "\n")
+        out.commit()
+        typer.echo(f"wrote {json_path}")
         return
     echo_table(
         [[e.name, e.kind, str(e.dof), e.description] for e in entries],
@@ -65,7 +79,7 @@ def show(
 @testbed_app.command("export")
 def export(
     name: Annotated[str, typer.Argument(help="Built-in name (see 'airbearing testbed list').")],
-    output: Annotated[Path, typer.Option("-o", "--output", help="Testbed file to write, .toml.")],
+    output: Annotated[Path, typer.Option("-o", "--out", help="Testbed file to write, .toml.")],
 ) -> None:
     """Write a built-in testbed as a starting template for your own testbed file."""
     from airbearing.io.builtins import builtin_toml

@@ -3,7 +3,8 @@
 A :class:`Log` holds one run's samples as a validated :class:`pandas.DataFrame`:
 one row per sample, the columns of FORMATS.md (SI units) as float64, and any
 other columns kept untouched. Validation never fills or drops anything: a
-missing column, an empty or non-numeric cell, a non-finite value, time that
+missing column, an empty or non-numeric cell, a non-finite or overflow-sized value
+(magnitude above :data:`OVERFLOW_LIMIT`, the same rule on every column), time that
 does not increase, a log that is all gaps or a non-unit quaternion raises
 :class:`~airbearing.errors.InputError` naming the file, the row and the column.
 
@@ -45,7 +46,9 @@ if TYPE_CHECKING:
     from airbearing.io.quality import LogQuality
 
 __all__ = [
+    "BadCellsError",
     "COLUMN_GROUPS",
+    "OVERFLOW_LIMIT",
     "GAP_FACTORS",
     "LOG_COLUMNS",
     "MIN_SEGMENT_ROWS",
@@ -91,6 +94,13 @@ COLUMN_GROUPS: tuple[tuple[str, ...], ...] = (
     _GIMBALS,
     _GIMBAL_RATES,
 )
+#: Largest magnitude a log cell may have, on every column (SI units). The fits square
+#: residuals, multiply up to three values (quaternion and inertia products) and sum
+#: over up to 1e8 samples: with |x| <= 1e100, 1e8 * (1e100)**3 = 1e308 stays below the
+#: largest float64 (1.8e308), so no use of a value overflows. No physical quantity of a
+#: log (rad, rad/s, m, A m^2, T, s) comes anywhere near it: a larger value is a logger
+#: fault, refused like a non-finite one.
+OVERFLOW_LIMIT = 1e100
 #: Largest allowed ``abs(norm(q) - 1)`` of a logged quaternion.
 QUATERNION_NORM_TOL = 1e-3
 #: Multiples of ``1 / sensors.rate``: an interval below the first is irregular
@@ -209,21 +219,84 @@ def _as_float(series: pd.Series, name: str, src: str) -> np.ndarray:
     return values
 
 
+class BadCellsError(InputError):
+    """Cells that are not numbers, not finite or overflow-sized (:data:`OVERFLOW_LIMIT`).
+
+    Attributes
+    ----------
+    bad : dict of str to list of int
+        For each column with bad cells, all its bad rows (0-based data rows).
+    """
+
+    def __init__(self, message: str, bad: dict[str, list[int]]) -> None:
+        super().__init__(message)
+        self.bad = bad
+
+    @property
+    def rows(self) -> list[int]:
+        """Every row with a bad cell, sorted."""
+        return sorted({r for rows in self.bad.values() for r in rows})
+
+
+def row_ranges(rows: Sequence[int]) -> str:
+    """Rows as runs, ``500-519, 530`` (sorted, 0-based)."""
+    rows = sorted(int(r) for r in rows)
+    runs: list[list[int]] = []
+    for r in rows:
+        if runs and r == runs[-1][1] + 1:
+            runs[-1][1] = r
+        else:
+            runs.append([r, r])
+    return ", ".join(f"{a}" if a == b else f"{a}-{b}" for a, b in runs)
+
+
+def bad_mask(values: np.ndarray) -> np.ndarray:
+    """Cells that cannot be used: not finite, or of magnitude above :data:`OVERFLOW_LIMIT`."""
+    with np.errstate(invalid="ignore"):
+        return ~(np.abs(values) <= OVERFLOW_LIMIT)  # NaN compares False: bad too
+
+
 def _numeric(series: pd.Series, name: str, src: str, lines: Sequence[int] | None) -> np.ndarray:
-    """A column as float64; the first cell that is not a finite number is an error."""
+    """A column as float64; a cell that is not a finite number (:func:`bad_mask`) is an error."""
     values = _as_float(series, name, src)
-    bad = ~np.isfinite(values)
+    bad = bad_mask(values)
     if bad.any():
-        raise _bad_cell(series, name, int(np.argmax(bad)), src, lines)
+        raise _bad_cell(series, name, int(np.argmax(bad)), src, lines, {name: bad})
     return values
 
 
 def _bad_cell(
-    series: pd.Series, name: str, i: int, src: str, lines: Sequence[int] | None
-) -> InputError:
-    return InputError(
-        f"{src}: {_at(i, lines)}, column '{name}': expected a finite number, "
-        f"got {_describe(series.iloc[i])}"
+    series: pd.Series,
+    name: str,
+    i: int,
+    src: str,
+    lines: Sequence[int] | None,
+    masks: dict[str, np.ndarray] | None = None,
+) -> BadCellsError:
+    bad = {c: [int(r) for r in np.flatnonzero(m)] for c, m in (masks or {name: None}).items()
+           if m is not None}  # fmt: skip
+    bad = bad or {name: [i]}
+    value = series.iloc[i]
+    try:
+        big = np.isfinite(float(value)) and abs(float(value)) > OVERFLOW_LIMIT
+    except (TypeError, ValueError):
+        big = False
+    got = f"{float(value):.6g}" if big else _describe(value)
+    limit = (
+        f" of magnitude at most {OVERFLOW_LIMIT:g} (larger values overflow float64 in the fits)"
+        if big
+        else ""
+    )
+    n = sum(len(r) for r in bad.values())
+    more = ""
+    if n > 1:
+        more = f"; {n} such cells: " + "; ".join(
+            f"column '{c}' rows {row_ranges(r)}" for c, r in bad.items()
+        )
+    return BadCellsError(
+        f"{src}: {_at(i, lines)}, column '{name}': expected a finite number{limit}, "
+        f"got {got}{more}",
+        bad,
     )
 
 
@@ -292,17 +365,20 @@ def _validate(
         out = data.reset_index(drop=True).copy()
     # Non-numeric and non-finite cells: report the earliest row over all known columns.
     first_bad: tuple[int, str, pd.Series] | None = None
+    masks: dict[str, np.ndarray] = {}
     for name in [c for c in columns if c in LOG_COLUMNS]:
         cells = out[name]
         values = _as_float(cells, name, src)
-        bad = ~np.isfinite(values)
-        if bad.any() and (first_bad is None or int(np.argmax(bad)) < first_bad[0]):
-            first_bad = (int(np.argmax(bad)), name, cells)
+        bad = bad_mask(values)
+        if bad.any():
+            masks[name] = bad
+            if first_bad is None or int(np.argmax(bad)) < first_bad[0]:
+                first_bad = (int(np.argmax(bad)), name, cells.copy())
         if cells.dtype != np.float64:  # a float64 column already holds these values
             out[name] = values
     if first_bad is not None:
         row, name, cells = first_bad
-        raise _bad_cell(cells, name, row, src, lines)
+        raise _bad_cell(cells, name, row, src, lines, masks)
 
     t = out["t"].to_numpy()
     dt = np.diff(t)
