@@ -133,3 +133,30 @@ def example_case(tmp_path_factory):
         return made[name]
 
     return make
+
+
+#: The demo as the README's first command runs it (``--quick`` in the suite).
+DEMO_ARGS = ["demo", "--out", "demo-out", "--quick"]
+
+
+@pytest.fixture(scope="session")
+def demo_run(tmp_path_factory):
+    """The demo, run ONCE per test session as a new process with stderr a pipe.
+
+    Returns ``(out_dir, completed_process)``. Every test about the demo (the report, its
+    rendering, the progress lines, the README's demo command) reads this one run instead of
+    running the demo again (it is the longest run in the suite). Tests that use it carry
+    ``@pytest.mark.xdist_group("demo")`` so pytest-xdist (``--dist loadgroup``) sends them to
+    one worker.
+    """
+    import subprocess
+
+    cwd = tmp_path_factory.mktemp("demo")
+    proc = subprocess.run(
+        [sys.executable, "-m", "airbearing", *DEMO_ARGS],
+        cwd=cwd,
+        capture_output=True,
+        text=True,
+        timeout=1800,
+    )
+    return cwd / "demo-out", proc

@@ -3,12 +3,26 @@
 from __future__ import annotations
 
 import html
+import os
 import re
 import shutil
 import subprocess
 from pathlib import Path
 
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
+
+
+def require_chromium() -> str:
+    """Chromium's path; without it a test fails when ``CI`` is set (.ci/run installs it),
+    and is skipped otherwise (a developer's machine)."""
+    import pytest
+
+    if CHROMIUM is not None:
+        return CHROMIUM
+    if os.environ.get("CI"):
+        pytest.fail("chromium is not installed, and CI is set: .ci/run must install it")
+    pytest.skip("chromium is not installed (CI's .ci/run installs it; with CI set this fails)")
+
 
 #: Runs in the page once it has loaded: does the page scroll sideways (a table or figure
 #: wider than the window), and how many tables sit outside a scrolling wrapper.

@@ -126,17 +126,7 @@ def test_console_script_has_no_traceback(tmp_path):
     assert len(proc.stderr.strip().splitlines()) == 1
 
 
-@pytest.mark.slow
-def test_demo_quick(tmp_path):
-    from html_check import CHROMIUM, bad_text, check_layout, render
-
-    assert run(["demo", "--out", str(tmp_path), "--quick"]) == 0
-    html = (tmp_path / "report.html").read_text()
-    assert "Seed 001" in html and "data:image/svg+xml;base64," in html
-    assert bad_text(html) == [], "nan/inf text in the demo report"
-    if CHROMIUM is not None:  # CI installs it; tests/test_stability_report.py says when not
-        for width in (1200, 700):
-            check_layout(render(tmp_path / "report.html", tmp_path, width), f"demo at {width} px")
+# The demo report: tests/test_demo.py (one demo run per session, the demo_run fixture).
 
 
 # ------------------------------------------------------------------ built-in testbeds

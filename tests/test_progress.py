@@ -7,7 +7,6 @@ pipe, a log file or CI sees.
 from __future__ import annotations
 
 import io
-import subprocess
 import sys
 import time
 
@@ -88,23 +87,7 @@ def test_long_commands_show_progress_unless_quiet(args, label, tmp_path, capfd, 
     assert not any(line.startswith(label) for line in err.splitlines()), err
 
 
-@pytest.mark.slow
-def test_demo_says_which_section_it_is_in(tmp_path):
-    """The demo in a new process with stderr a pipe: progress lines, one per section."""
-    cmd = [sys.executable, "-m", "airbearing", "demo", "--quick", "--out", str(tmp_path / "d")]
-    out = subprocess.run(cmd, capture_output=True, text=True, timeout=900)
-    assert out.returncode == 0, out.stderr[-2000:]
-    lines = [ln for ln in out.stderr.splitlines() if ln.startswith("demo: ")]
-    assert len(lines) >= 2, out.stderr
-    assert (tmp_path / "d" / "report.html").is_file()
-    quiet = subprocess.run(
-        [sys.executable, "-m", "airbearing", "--quiet", *cmd[3:-1], str(tmp_path / "q")],
-        capture_output=True,
-        text=True,
-        timeout=900,
-    )
-    assert quiet.returncode == 0, quiet.stderr[-2000:]
-    assert not [ln for ln in quiet.stderr.splitlines() if ln.startswith("demo: ")]
+# The demo's progress lines: tests/test_demo.py (the suite's one demo run).
 
 
 @pytest.mark.slow

@@ -3,7 +3,7 @@
 import json
 
 import pytest
-from html_check import CHROMIUM, bad_text, check_layout, page_text, render
+from html_check import bad_text, check_layout, page_text, render, require_chromium
 
 import airbearing.cli as cli
 import airbearing.cli.gains  # noqa: F401  (registers the commands)
@@ -58,9 +58,9 @@ def test_report_tables_have_no_nan_or_inf_text(attitude_report, balancing_report
     assert "delay (z = 0)" in page_text((balancing_report / "report.html").read_text())
 
 
-@pytest.mark.skipif(CHROMIUM is None, reason="chromium is not installed (CI's .ci/run installs it)")
 @pytest.mark.parametrize("width", [1200, 700], ids=["wide-window", "narrow-window"])
 def test_report_renders_in_headless_chromium(attitude_report, balancing_report, tmp_path, width):
+    require_chromium()
     for d in (attitude_report[0], balancing_report):
         png = tmp_path / f"{d.name}-{width}.png"
         dom = render(d / "report.html", tmp_path, width, screenshot=png)

@@ -1,0 +1,38 @@
+"""The demo report, from the suite's one demo run (the ``demo_run`` session fixture).
+
+What a reader gets: one self-contained HTML page with every section, no ``nan``/``inf``
+text, no sideways overflow in a wide or a narrow window, and progress lines naming each
+section on stderr while it runs.
+"""
+
+from __future__ import annotations
+
+import pytest
+from html_check import bad_text, check_layout, render, require_chromium
+
+pytestmark = [pytest.mark.slow, pytest.mark.xdist_group("demo")]
+
+
+def test_demo_runs_and_reports_every_section(demo_run):
+    out, proc = demo_run
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    html = (out / "report.html").read_text()
+    assert "Seed 001" in html and "data:image/svg+xml;base64," in html
+    assert "http://" not in html and "https://" not in html  # self-contained
+    assert bad_text(html) == [], "nan/inf text in the demo report"
+
+
+def test_demo_says_which_section_it_is_in(demo_run):
+    """stderr is a pipe: plain one-line updates, one per section (no bar, no ANSI codes)."""
+    _, proc = demo_run
+    lines = [ln for ln in proc.stderr.splitlines() if ln.startswith("demo: ")]
+    assert len(lines) >= 2, proc.stderr
+    assert "\x1b[" not in proc.stderr
+
+
+@pytest.mark.parametrize("width", [1200, 700], ids=["wide-window", "narrow-window"])
+def test_demo_report_renders_in_headless_chromium(demo_run, tmp_path, width):
+    require_chromium()
+    out, proc = demo_run
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    check_layout(render(out / "report.html", tmp_path, width), f"demo at {width} px")
