@@ -9,6 +9,20 @@ gyro bias) is two candidates, one value for every axis and one per body axis.
 Effects with a physical sign are fitted inside their physical range
 (``PHYSICAL_LOWER``: friction, drag, lag and dead zone are >= 0).
 
+Only physical candidates are offered (:func:`not_physical`): a linear
+``spring_torque`` (``tau_z = -k yaw``: cables, an umbilical) is not offered on logs
+whose yaw spans more than :data:`SPRING_MAX_SPAN` (one turn) within a segment. After
+a full turn the rig is back in the same attitude, so any torque that depends on the
+attitude (gravity on a tilted bearing, a field) must repeat, while ``-k yaw`` keeps
+growing; and a cable wound a whole turn further no longer pulls towards one rest
+angle. A spring fitted on such a log describes something else (on a coast-down, the
+slow change of a rate-dependent torque, which grows with the yaw turned); a torque
+that repeats every turn is ``yaw_imbalance``. The candidate is listed with that
+reason (:func:`unphysical_candidates`) and never fitted; ``--only spring_torque`` on
+such a log is an error that says why. ``yaw_imbalance`` is linear in its value
+``[A_s, A_c]``: its regressors are ``sin(yaw)`` and ``cos(yaw)``, and it is fitted
+without bounds.
+
 The start of a fit is a linear regression of the residual torque
 ``J (w'_meas - w'_model)`` on the effect's torque regressor (the exact CasADi
 derivative of the Model's dynamics in the effect's parameters), over the usable
@@ -38,8 +52,11 @@ from airbearing.models.model import Model
 
 __all__ = [
     "PHYSICAL_LOWER",
+    "SPRING_MAX_SPAN",
     "Candidate",
     "candidates_for",
+    "not_physical",
+    "unphysical_candidates",
     "regression_start",
     "residual_torque",
     "universal_effects",
@@ -55,6 +72,9 @@ PHYSICAL_LOWER = {
 }
 #: Effects that change the measured rate only: they need a gyro.
 GYRO_EFFECTS = ("gyro_bias", "sensor_lag")
+#: rad, the largest yaw span within a segment on which a linear spring_torque is offered:
+#: one turn (module doc: past it, an attitude-dependent torque repeats and -k yaw does not).
+SPRING_MAX_SPAN = 2 * math.pi
 #: Savitzky-Golay window (samples, odd) and order for the measured rate derivative.
 SG_WINDOW = 9
 SG_ORDER = 3
@@ -104,9 +124,9 @@ class Candidate:
         return f"{self.name} (per axis)" if self.per_axis else self.name
 
     def value(self, theta: np.ndarray):
-        """FORMATS.md value: a float, or a 3-tuple for a vector or per-axis effect."""
+        """FORMATS.md value: a float, a 3-tuple (vector or per-axis effect) or a pair."""
         theta = np.asarray(theta, dtype=float)
-        if self.per_axis or VOCABULARY[self.name].shape == "vector3":
+        if self.per_axis or VOCABULARY[self.name].shape in ("vector3", "pair"):
             return tuple(float(x) for x in theta)
         return float(theta[0])
 
@@ -119,6 +139,8 @@ def universal_effects(testbed: Testbed, names: Iterable[str]) -> dict:
         shape = VOCABULARY[name].shape
         if shape == "vector3" or (shape == "scalar_or_axes" and dof == 3):
             out[name] = (0.0, 0.0, 0.0)
+        elif shape == "pair":
+            out[name] = (0.0, 0.0)
         else:
             out[name] = 0.0
     for name, value in testbed.effects.items():
@@ -138,22 +160,82 @@ def _has_field(testbed: Testbed, datas) -> bool:
     return False
 
 
-def candidates_for(testbed: Testbed, datas=None, only=None) -> list[Candidate]:
-    """The registry's effects that can act on ``testbed`` and are not already in its ``[effects]``.
+def _turns(span: float) -> str:
+    turns = span / (2 * math.pi)
+    return f"{turns:.0f} turns" if turns >= 9.5 else f"{turns:.1f} turns"
+
+
+def not_physical(testbed: Testbed, datas=None) -> dict:
+    """Effects whose form is not physical on these logs, ``name -> reason`` (module doc).
 
     Parameters
     ----------
     testbed : Testbed
     datas : ReplayData or sequence of them, optional
-        Decide whether a cage field acts (platform); default: the testbed's ``[field]``.
+        The logs; without them nothing is refused.
+
+    Returns
+    -------
+    dict
+        ``{"spring_torque": "not physical on this log: the yaw spans 37 turns; ..."}``
+        when the measured yaw of a dof-1 log spans more than :data:`SPRING_MAX_SPAN`
+        within one segment (usable rows only; the log named when there are several).
+    """
+    if isinstance(datas, ReplayData):
+        datas = [datas]
+    if not datas or testbed.body.dof != 1:
+        return {}
+    worst, where = 0.0, ""
+    for d in datas:
+        if d.yaw is None:
+            continue
+        for a, b in d.segments:
+            yaw = d.yaw[a:b][d.mask[a:b]]
+            if yaw.size < 2:
+                continue
+            span = float(np.ptp(np.unwrap(yaw)))  # a logged yaw is unwrapped; a wrapped one too
+            if span > worst:
+                worst, where = span, d.log.source
+    if worst <= SPRING_MAX_SPAN:
+        return {}
+    on = "this log" if len(datas) == 1 else where
+    return {
+        "spring_torque": (
+            f"not physical on {on}: the yaw spans {_turns(worst)}; a linear spring acts "
+            "within about one turn, and a torque that repeats every turn is yaw_imbalance"
+        )
+    }
+
+
+def candidates_for(testbed: Testbed, datas=None, only=None) -> list[Candidate]:
+    """The registry's effects that can act on ``testbed`` and are not already in its ``[effects]``.
+
+    Effects whose form is not physical on the logs (:func:`not_physical`) are left out.
+
+    Parameters
+    ----------
+    testbed : Testbed
+    datas : ReplayData or sequence of them, optional
+        Decide whether a cage field acts (platform; default: the testbed's ``[field]``)
+        and which forms are physical (the yaw span).
     only : iterable of str, optional
         Restrict to these effect names.
 
     Raises
     ------
     InputError
-        If a name of ``only`` is not a registered effect, or cannot act on the testbed.
+        If a name of ``only`` is not a registered effect, cannot act on the testbed, or is
+        not physical on the logs.
     """
+    return _candidates(testbed, datas, only)[0]
+
+
+def unphysical_candidates(testbed: Testbed, datas=None, only=None) -> list[tuple]:
+    """``(Candidate, reason)`` of each effect that could act but is not physical on the logs."""
+    return _candidates(testbed, datas, only)[1]
+
+
+def _candidates(testbed: Testbed, datas, only) -> tuple[list, list]:
     if isinstance(datas, ReplayData):
         datas = [datas]
     kind, dof = testbed.kind, testbed.body.dof
@@ -162,6 +244,7 @@ def candidates_for(testbed: Testbed, datas=None, only=None) -> list[Candidate]:
     names = applicable_effects(kind, dof, has_field)
     if not gyro:
         names = [n for n in names if n not in GYRO_EFFECTS]
+    refused = not_physical(testbed, datas)
     if only:
         only = list(only)
         for name in only:
@@ -175,8 +258,10 @@ def candidates_for(testbed: Testbed, datas=None, only=None) -> list[Candidate]:
                 else:
                     reason = REGISTRY[name].applies(kind, dof, has_field) or "not applicable"
                 raise InputError(f"--only {name}: cannot act on testbed '{testbed.name}': {reason}")
+            if name in refused:
+                raise InputError(f"--only {name}: {refused[name]}")
         names = [n for n in names if n in only]
-    out = []
+    out, unphysical = [], []
     for name in names:
         if name in testbed.effects:
             continue
@@ -186,6 +271,8 @@ def candidates_for(testbed: Testbed, datas=None, only=None) -> list[Candidate]:
         params = tuple(effect_param_names(name, dof, axes or shape == "vector3"))
         if shape == "vector3":
             forms = [(np.eye(3), False)]
+        elif shape == "pair":  # yaw_imbalance: [A_s, A_c], regressors sin(yaw), cos(yaw)
+            forms = [(np.eye(2), False)]
         elif axes:
             forms = [(np.ones((3, 1)), False), (np.eye(3), True)]
         else:
@@ -195,7 +282,7 @@ def candidates_for(testbed: Testbed, datas=None, only=None) -> list[Candidate]:
             lo = -0.9  # (1 + value) > 0 with a margin
         for tie, per_axis in forms:
             k = tie.shape[1]
-            out.append(
+            (unphysical if name in refused else out).append(
                 Candidate(
                     name=name,
                     params=params,
@@ -207,7 +294,7 @@ def candidates_for(testbed: Testbed, datas=None, only=None) -> list[Candidate]:
                     per_axis=per_axis,
                 )
             )
-    return out
+    return out, [(c, refused[c.name]) for c in unphysical]
 
 
 # ----------------------------------------------------------------------------

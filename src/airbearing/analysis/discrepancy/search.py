@@ -40,6 +40,7 @@ from airbearing.analysis.discrepancy.candidates import (
     regression_start,
     residual_torque,
     universal_effects,
+    unphysical_candidates,
 )
 from airbearing.analysis.discrepancy.data import (
     ATTITUDE_SIGMA_MIN,
@@ -471,6 +472,8 @@ def discrepancy(
     say = progress or (lambda *a, **k: None)
     datas, windows, floor = prepare(testbed, logs, window_s=window_s)
     cands = candidates_for(testbed, datas, only)
+    # listed with their reason, never fitted (a spring on a yaw that turns many times)
+    refused = [failed(c, "not offered", r) for c, r in unphysical_candidates(testbed, datas, only)]
     search = _Search(testbed, datas, windows, floor, cands, seed, jit)
     total = 1 + len(cands) * max(max_effects, 1) + len(validate)
     done = 0
@@ -645,7 +648,7 @@ def discrepancy(
         gap_before=nominal.gap,
         gap_after=current.gap,
         noise_floor=floor.value,
-        candidates=rounds[0] if rounds else (),
+        candidates=(rounds[0] if rounds else ()) + tuple(refused),
         rounds=tuple(rounds),
         confounded=tuple(confounded),
         experiments=experiments,
