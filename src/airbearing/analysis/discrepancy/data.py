@@ -337,7 +337,7 @@ def _usable_rows(datas) -> int:
     return sum(int(d.mask[a:b].sum()) for d in datas for a, b in d.segments)
 
 
-def make_windows(datas, *, window_s: float | None = None) -> WindowSet:
+def make_windows(datas, *, window_s: float | None = None, linked: bool = False) -> WindowSet:
     """Cut the segments of one or more logs into multiple-shooting windows (module doc).
 
     Parameters
@@ -347,11 +347,15 @@ def make_windows(datas, *, window_s: float | None = None) -> WindowSet:
     window_s : float, optional
         Longest window, s. Default ``min(DEFAULT_WINDOW_S, T / 4)`` with ``T`` the
         usable duration of all logs, at least ``MIN_WINDOW_SAMPLES`` samples.
+    linked : bool
+        Consecutive windows of a segment also hold the next window's first row (weight
+        zero), where their state hands over (``link``, ``end``): the pieces of the
+        process-noise estimator (:mod:`airbearing.analysis.shooting.process_noise`).
 
     Returns
     -------
     WindowSet
-        ``source`` is the log index of each window.
+        ``source`` is the log index of each window, ``segment`` its segment.
 
     Raises
     ------
@@ -374,9 +378,11 @@ def make_windows(datas, *, window_s: float | None = None) -> WindowSet:
     if not (window_s > 0 and math.isfinite(window_s)):
         raise InputError(f"window {window_s!r} s: expected a positive length in s")
     L = max(MIN_WINDOW_SAMPLES, int(round(window_s / dt)))
-    cuts = []  # (log index, first row, stop row)
+    cuts = []  # (log index, first row, stop row, segment number)
+    seg = -1
     for i, d in enumerate(datas):
         for a, b in d.segments:
+            seg += 1
             use = np.flatnonzero(d.mask[a:b]) + a
             if use.size < MIN_WINDOW_SAMPLES:
                 continue
@@ -387,18 +393,34 @@ def make_windows(datas, *, window_s: float | None = None) -> WindowSet:
                 while s < e and not d.mask[s]:
                     s += 1
                 if int(d.mask[s:e].sum()) >= MIN_WINDOW_SAMPLES:
-                    cuts.append((i, int(s), int(e)))
+                    cuts.append((i, int(s), int(e), seg))
+                else:
+                    seg += 1  # a piece left out: the next one starts afresh
     if len(cuts) < MIN_WINDOWS:
         raise InputError(
             f"{src}: {len(cuts)} window(s) of up to {L} samples inside its segments; need at "
             f"least {MIN_WINDOWS}: use a shorter window (now {window_s:g} s) or a longer log"
         )
-    return _window_set(datas, cuts, L)
+    return _window_set(datas, cuts, L, linked)
 
 
-def _window_set(datas, cuts, L: int) -> WindowSet:
+def _hand_over(cuts, linked: bool):
+    """Per cut: rows in its window and whether it hands over to the next cut."""
+    out = []
+    for j, (i, s, e, seg) in enumerate(cuts):
+        nxt = cuts[j + 1] if j + 1 < len(cuts) else None
+        if linked and nxt is not None and nxt[0] == i and nxt[3] == seg:
+            out.append((nxt[1] - s + 1, True))
+        else:
+            out.append((e - s, False))
+    return out
+
+
+def _window_set(datas, cuts, L: int, linked: bool = False) -> WindowSet:
     d0 = datas[0]
     nw = len(cuts)
+    hand = _hand_over(cuts, linked)
+    L = max(L, max(m for m, _ in hand))
     nu = d0.u.shape[1]
     x0 = []
     U = np.zeros((nw, L, nu))
@@ -408,15 +430,15 @@ def _window_set(datas, cuts, L: int) -> WindowSet:
     rate = np.zeros((nw, L, d0.n_axes)) if "rate" in d0.outputs else None
     qq = np.zeros((nw, L, 4)) if "quat" in d0.outputs else None
     yw = np.zeros((nw, L)) if "yaw" in d0.outputs else None
-    for j, (i, s, e) in enumerate(cuts):
+    for j, (i, s, e, _) in enumerate(cuts):
         d = datas[i]
-        m = e - s
-        r = np.r_[np.arange(s, e), np.full(L - m, e - 1)]
+        m = hand[j][0]
+        r = np.r_[np.arange(s, s + m), np.full(L - m, s + m - 1)]
         rows[j] = r
         x0.append(d.start_state(s, e))
         U[j] = d.u[r]
-        DT[j, : m - 1] = np.diff(d.t[s:e])
-        M[j, :m] = d.mask[s:e]
+        DT[j, : m - 1] = np.diff(d.t[s : s + m])
+        M[j, : e - s] = d.mask[s:e]  # the hand-over row (the next window's) weighs zero
         if rate is not None:
             rate[j] = d.w[r]
         if qq is not None:
@@ -433,6 +455,9 @@ def _window_set(datas, cuts, L: int) -> WindowSet:
         yaw=yw,
         rows=rows,
         source=np.array([c[0] for c in cuts], dtype=int),
+        link=np.array([h for _, h in hand[:-1]], dtype=bool) if linked else None,
+        end=np.array([m - 1 for m, _ in hand], dtype=int) if linked else None,
+        segment=np.array([c[3] for c in cuts], dtype=int),
     )
 
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+import casadi as ca
 import numpy as np
 import scipy.sparse as sp
 
@@ -70,6 +71,9 @@ class WindowSet:
         window starts afresh.
     end : ndarray (n,) of int, optional
         Row (within its window) where each linked window hands over to the next one.
+    segment : ndarray (n,) of int, optional
+        The log segment (between gaps) of each window, numbered over all logs; None: windows
+        are grouped by ``source`` and ``link`` (:meth:`segments`).
     """
 
     x0: np.ndarray
@@ -83,6 +87,17 @@ class WindowSet:
     source: np.ndarray
     link: np.ndarray | None = None
     end: np.ndarray | None = None
+    segment: np.ndarray | None = None
+
+    def segments(self) -> np.ndarray:
+        """Segment number of each window (``segment`` when given, else a new number at every
+        change of ``source`` and, with links, at every unlinked pair)."""
+        if self.segment is not None:
+            return np.asarray(self.segment, dtype=int)
+        new = np.r_[True, self.source[1:] != self.source[:-1]]
+        if self.link is not None:
+            new[1:] |= ~np.asarray(self.link, dtype=bool)
+        return np.cumsum(new) - 1
 
     @property
     def linked(self) -> bool:
@@ -114,6 +129,7 @@ class WindowSet:
             yaw=pick(self.yaw),
             rows=self.rows[which],
             source=self.source[which],
+            segment=self.segments()[which],
         )  # link, end: None
 
 
@@ -289,6 +305,11 @@ class ShootingProblem:
         wrow = np.concatenate([np.repeat(np.arange(L), sizes[o]) for o in self.outputs])
         self.n_win_res = group.size
         self.group = np.tile(group, nw)  # output group of each residual
+        self.n_meas = self.group.size  # measurement residuals; process-noise rows follow them
+        # process noise (:mod:`.process_noise`): whitening of the continuity defects, or None
+        self.penalty = None
+        self.penalty_logdet = 0.0
+        self.process_noise = None
         self.sample = np.tile(wrow, nw) + np.repeat(np.arange(nw) * L, group.size)
         self.usable = windows.weight.reshape(-1)[self.sample] > 0
         self.n_res = int(self.usable.sum())
@@ -353,6 +374,13 @@ class ShootingProblem:
         fn = _problem_functions(*self._key(S.shape[1]), self.link)[which]
         out = fn(v, p_base, S, self._data)
         if self.link and which < 2:  # the residual (and its Jacobian), not the defects
+            if self.penalty is not None:  # with process noise: the weighted defects follow
+                if which == 0:
+                    c = out[1].full().ravel()
+                    return ca.DM(np.r_[out[0].full().ravel(), self.penalty @ c])
+                r = np.r_[out[0].full().ravel(), self.penalty @ out[2].full().ravel()]
+                Jc = self.penalty @ to_csc(out[3])
+                return r, sp.vstack([to_csc(out[1]), Jc]).tocsc()
             return out[0] if which == 0 else tuple(out[:2])
         return out
 
@@ -365,7 +393,8 @@ class ShootingProblem:
 
     # ------------------------------------------------------------------ evaluation
     def residual(self, delta: np.ndarray, p: np.ndarray) -> np.ndarray:
-        """Weighted residual at ``delta`` (n_delta, n_windows) and parameters ``p``."""
+        """Weighted residual at ``delta`` (n_delta, n_windows) and parameters ``p`` (with
+        process noise, :attr:`n_meas` measurement rows then the whitened defects)."""
         v, Sp = self._v(delta, None)
         return self._eval(0, v, np.asarray(p, dtype=float), Sp).full().ravel()
 
@@ -377,6 +406,7 @@ class ShootingProblem:
         sigma = self.sigma_rate if self.outputs[0] == "rate" else self.sigma_att
         if not sel.any():
             return float("nan")
+        r = r[: self.n_meas]
         return float(sigma * np.sqrt(np.mean(r[sel] ** 2)))
 
     def gap_of(self, delta: np.ndarray, p: np.ndarray) -> float:
@@ -399,6 +429,8 @@ class ShootingProblem:
         p_base = fit.p - S @ fit.theta if k else fit.p
         r, J = self._eval(1, v, p_base, Sp)
         keep = np.r_[np.arange(k), np.arange(K, J.shape[1])]
+        if self.penalty is not None and self.link:
+            return r, J[:, keep]
         return r.full().ravel(), to_csc(J)[:, keep]
 
     def fit(
@@ -460,16 +492,28 @@ class ShootingProblem:
         lb[k:K] = ub[k:K] = 0.0  # unused slots
         v0 = np.clip(v0, lb, ub)
         r0, J0 = self._eval(1, v0, p_base, Sp)
-        r0 = r0.full().ravel()
+        r0 = r0.full().ravel() if hasattr(r0, "full") else np.asarray(r0)
         if not np.all(np.isfinite(r0)):
             raise SolverError(f"{name}: the replay is not finite at the starting point")
-        col = np.sqrt(np.asarray(to_csc(J0).power(2).sum(axis=0)).ravel())
+        J0 = J0 if sp.issparse(J0) else to_csc(J0)
+        col = np.sqrt(np.asarray(J0.power(2).sum(axis=0)).ravel())
         scale = np.where(col > 0, 1.0 / np.maximum(col, 1e-300), 1.0)
         ineq = None if constraint is None else Inequality(constraint)
         n_link = self.link_rows.size
         n_ineq = 0 if ineq is None else ineq.m
         Jc = None
-        if n_link or n_ineq:
+        penalised = self.penalty is not None and self.link
+        if penalised:
+            if ineq is not None:  # pragma: no cover - programming error
+                raise ValueError("process noise and inequality constraints together")
+            from airbearing.analysis.shooting.process_noise import penalised_solver
+
+            mi = IPOPT_MAX_ITER if max_iter is None else int(max_iter)
+            solver, _keep = penalised_solver(*self._key(K), mi)
+            oracle = _keep[-1]
+            oracle.set(p_base, Sp, scale, self._data, self.penalty)
+            sol = solver(x0=v0 / scale, lbx=lb / scale, ubx=ub / scale)
+        elif n_link or n_ineq:
             mi = IPOPT_MAX_ITER if max_iter is None else int(max_iter)
             solver, _keep = linked_solver(*self._key(K), self.link, n_link, n_ineq, mi)
             oracle = _keep[-1]
@@ -491,7 +535,10 @@ class ShootingProblem:
             raise SolverError(f"{name}: IPOPT did not converge ({status})")
         z = sol["x"].full().ravel()
         v = z * scale
-        if n_link or n_ineq:
+        if penalised:
+            r, J = oracle.rj_at(z)
+            r, J = r.copy(), J @ sp.diags(1.0 / scale)
+        elif n_link or n_ineq:
             oracle.derivatives(z)  # memoised when IPOPT's last iterate had them
             r, J = oracle.r.copy(), oracle.J @ sp.diags(1.0 / scale)
             if n_link:
@@ -507,18 +554,19 @@ class ShootingProblem:
         keep = np.r_[np.arange(k), np.arange(K, v.size)]
         v = v[keep]
         J = sp.csc_matrix(J)[:, keep]
-        extra = {"r": r, "J": J}
+        extra = {"r": r, "J": J, "S": S, "p_base": p_base}
         rss = float(r @ r)
         n_free = v.size
         theta = v[:k]
-        if Jc is not None:  # errors on the continuous trajectories: eliminate the defects
+        if Jc is not None and not penalised:  # errors on continuous trajectories: eliminate defects
             N = null_space_basis(Jc[:, keep], k)
             extra["N"] = N
             n_free = N.shape[1]
             Jr = J @ N
         else:
             Jr = J
-        s2 = rss / max(self.n_res - n_free, 1)
+        n_obs = self.n_res + (self.penalty.getnnz(axis=1) > 0).sum() if penalised else self.n_res
+        s2 = rss / max(n_obs - n_free, 1)
         std, cov, reasons = theta_errors(Jr, k, s2)
         p = p_base + S @ theta if k else p_base.copy()
         return Fit(
@@ -553,7 +601,9 @@ class ShootingProblem:
         """The fit's Jacobian with each group's rows scaled by sqrt(weight), restricted to
         the continuity's null space when windows are linked."""
         w = np.array([rate if o == "rate" else att for o in self.outputs])[self.group]
-        J = sp.diags(np.sqrt(w)) @ fit.extra["J"]
+        J = fit.extra["J"]
+        w = np.r_[w, np.ones(J.shape[0] - w.size)]  # process-noise rows keep their weight
+        J = sp.diags(np.sqrt(w)) @ J
         return J @ fit.extra["N"] if "N" in fit.extra else J
 
     def fisher(self, fit: Fit, k: int, *, rate: float = 1.0, att: float = 1.0) -> np.ndarray:
@@ -570,6 +620,7 @@ class ShootingProblem:
     def noise_rms(self, r: np.ndarray) -> dict:
         """RMS of each output group's UNWEIGHTED residual over usable rows (rad/s, rad)."""
         out = {}
+        r = r[: self.n_meas]
         for i, o in enumerate(self.outputs):
             sel = (self.group == i) & self.usable
             sigma = self.sigma_rate if o == "rate" else self.sigma_att

@@ -1,0 +1,291 @@
+"""Standard errors that survive coloured noise and model misfit, and the bound of the data.
+
+Three numbers per fitted parameter:
+
+``std_white``
+    The white-noise Fisher value: the inverse Gauss-Newton matrix of the weighted
+    residual, the window initial states eliminated (Schur complement), times the reduced
+    chi-square (:func:`.problem.theta_errors`). Right when the residual is white.
+``std``
+    The honest one: a sandwich (Huber-White) covariance ``B^-1 M B^-1`` whose meat ``M``
+    is the heteroscedasticity-and-autocorrelation-consistent (HAC) sum of the residual
+    scores' autocovariances within each segment, Bartlett kernel (Newey & West 1987,
+    ``statsmodels.stats.sandwich_covariance.S_hac_simple``), and never smaller than
+    ``std_white``: the sandwich is biased low in finite samples, and a white residual
+    must not make an answer look more precise than its Fisher value. The bandwidth comes
+    from the residuals: the Newey-West rule ``4 (n / 100)^(2/9)`` or three correlation
+    times, whichever is longer (capped at half the shortest segment). Process-noise rows
+    (:mod:`.process_noise`) enter the meat as independent scores.
+``crlb``
+    The Cramer-Rao bound of the data: the Fisher information at the noise floor (the
+    problem's weights, chi-square 1) of ONE trajectory per segment (the windows' continuity
+    enforced, one initial state per segment), not of free windows.
+
+The scores are ``A_i r_i`` with ``A`` the parameters' Jacobian columns projected off the
+nuisance columns (initial states), so the sandwich is the one of the profiled parameters.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+
+from airbearing.analysis.shooting.constrained import null_space_basis
+from airbearing.analysis.shooting.functions import _problem_functions, to_csc
+from airbearing.analysis.shooting.problem import theta_errors
+
+__all__ = [
+    "HonestErrors",
+    "Residuals",
+    "correlation_time",
+    "crlb",
+    "honest_errors",
+    "normalised_residuals",
+]
+
+#: Autocorrelation below which two residual samples count as uncorrelated (1/e).
+DECORRELATED = math.exp(-1.0)
+
+
+@dataclass(frozen=True)
+class HonestErrors:
+    """Standard errors of a fit's first ``k`` parameters (module doc), SI units."""
+
+    std: np.ndarray
+    std_white: np.ndarray
+    cov: np.ndarray
+    cov_white: np.ndarray
+    crlb: np.ndarray
+    correlation_time_s: float
+    nlags: int
+
+    @property
+    def efficiency(self) -> np.ndarray:
+        """``std / crlb`` (1: the answer is as precise as the log allows)."""
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return self.std / self.crlb
+
+
+@dataclass(frozen=True)
+class Residuals:
+    """The primary output's normalised residual of one log segment, in time order."""
+
+    source: int
+    segment: int
+    rows: np.ndarray  # (n,) log rows
+    t: np.ndarray  # (n,) s from the segment's first usable row
+    r: np.ndarray  # (n, n_axes), in noise units
+
+
+def _sample_index(problem):
+    """Per measurement residual row: its window sample (window * L + row)."""
+    return problem.sample
+
+
+def _segment_order(problem):
+    """Per segment: the window samples in time order (usable rows only) and their times."""
+    w = problem.windows
+    seg = w.segments()
+    L = w.length
+    cum = np.concatenate([np.zeros((w.n, 1)), np.cumsum(w.dt, axis=1)], axis=1)
+    end = (
+        np.asarray(w.end, dtype=int)
+        if w.end is not None
+        else (w.weight > 0).shape[1] - 1 - np.argmax((w.weight > 0)[:, ::-1], axis=1)
+    )
+    out = []
+    for s in np.unique(seg):
+        idx, times = [], []
+        t0 = 0.0
+        for j in np.flatnonzero(seg == s):
+            use = np.flatnonzero(w.weight[j] > 0)
+            idx.append(j * L + use)
+            times.append(t0 + cum[j, use])
+            t0 += (
+                cum[j, end[j]]
+                if w.link is not None
+                else cum[j, use[-1]] + float(np.median(w.dt[j, : max(use[-1], 1)]))
+            )
+        out.append((int(w.source[np.flatnonzero(seg == s)[0]]), int(s), np.concatenate(idx),
+                    np.concatenate(times)))  # fmt: skip
+    return out
+
+
+def normalised_residuals(problem, fit) -> list[Residuals]:
+    """The primary output's residual (noise units) per log segment, in time order.
+
+    Parameters
+    ----------
+    problem : ShootingProblem
+    fit : Fit
+        A fit of ``problem`` (its ``extra["r"]``).
+
+    Returns
+    -------
+    list of Residuals
+        One per segment: log rows, times (s from the segment's first row) and the
+        residual ``(n, n_axes)`` of usable rows.
+    """
+    w = problem.windows
+    r = np.asarray(fit.extra["r"])[: problem.n_meas]
+    n_ax = (
+        problem.n_rate
+        if problem.outputs[0] == "rate"
+        else (3 if problem.outputs[0] == "quat" else 1)
+    )
+    L = w.length
+    per_win = r.reshape(w.n, problem.n_win_res)[:, : L * n_ax].reshape(w.n * L, n_ax)
+    out = []
+    for src, seg, idx, t in _segment_order(problem):
+        out.append(Residuals(src, seg, w.rows.reshape(-1)[idx], t, per_win[idx]))
+    return out
+
+
+def correlation_time(residuals: list[Residuals], dt: float | None = None) -> float:
+    """s, the lag at which the residuals' mean autocorrelation first falls below 1/e.
+
+    The autocorrelation of each segment and axis (``statsmodels.tsa.stattools.acf``),
+    averaged with the segments' lengths as weights; 0 for a white residual.
+    """
+    from statsmodels.tsa.stattools import acf
+
+    acc, wsum, step = None, 0.0, []
+    for res in residuals:
+        n = res.r.shape[0]
+        if n < 8:
+            continue
+        nl = min(n // 2, 2000)
+        for a in range(res.r.shape[1]):
+            x = res.r[:, a]
+            if not np.any(x != x[0]):
+                continue
+            c = acf(x, nlags=nl, fft=True)
+            if acc is None or acc.size > c.size:
+                acc = acc[: c.size] if acc is not None else np.zeros(c.size)
+            acc[: c.size] += n * c[: acc.size]
+            wsum += n
+        step.append(float(np.median(np.diff(res.t))) if n > 1 else 0.0)
+    if acc is None or wsum == 0:
+        return 0.0
+    acc = acc / wsum
+    below = np.flatnonzero(acc < DECORRELATED)
+    lag = int(below[0]) if below.size else acc.size
+    h = dt if dt is not None else (float(np.median(step)) if step else 0.0)
+    return float(max(lag - 1, 0) * h) if lag > 1 else 0.0
+
+
+def _projected(J, k: int, N=None) -> np.ndarray:
+    """The parameters' Jacobian columns with the nuisance columns projected off (dense)."""
+    if N is not None:
+        J = sp.csc_matrix(J @ N) if not sp.issparse(J @ N) else (J @ N).tocsc()
+    J = sp.csc_matrix(J)
+    At = J[:, :k].toarray()
+    An = J[:, k:]
+    if An.shape[1] == 0:
+        return At
+    G = (An.T @ An).toarray()
+    c = np.sqrt(np.maximum(np.diag(G), 1e-300))
+    B = np.asarray(An.T @ At)
+    coef = np.linalg.pinv(G / np.outer(c, c), rcond=1e-12, hermitian=True) @ (B / c[:, None])
+    return At - An @ (coef / c[:, None])
+
+
+def honest_errors(problem, fit, k: int) -> HonestErrors:
+    """Sandwich (HAC) standard errors, white-noise ones and the bound (module doc).
+
+    Parameters
+    ----------
+    problem : ShootingProblem
+    fit : Fit
+        A fit of ``problem`` whose first ``k`` free variables are the parameters.
+    k : int
+        Number of parameters.
+
+    Returns
+    -------
+    HonestErrors
+        ``std``, ``std_white``, ``crlb`` (k,), their covariances, the residuals'
+        correlation time (s) and the HAC bandwidth (samples).
+    """
+    from statsmodels.stats.sandwich_covariance import S_hac_simple
+
+    std_w = np.asarray(fit.theta_std[:k], dtype=float)
+    cov_w = np.asarray(fit.cov, dtype=float) if fit.cov is not None else np.diag(std_w**2)
+    bound = crlb(problem, fit, k)
+    residuals = normalised_residuals(problem, fit)
+    tau = correlation_time(residuals)
+    if k == 0:
+        z = np.zeros(0)
+        return HonestErrors(z, z, np.zeros((0, 0)), np.zeros((0, 0)), z, tau, 0)
+    J, r = fit.extra["J"], np.asarray(fit.extra["r"])
+    A = _projected(J, k, fit.extra.get("N"))
+    scores = A * r[:, None]
+    n_meas = problem.n_meas
+    per_sample = np.zeros((problem.windows.n * problem.windows.length, k))
+    np.add.at(per_sample, problem.sample, scores[:n_meas])
+    dt = float(np.median(problem.windows.dt[problem.windows.weight[:, 1:] > 0]))
+    order = _segment_order(problem)
+    shortest = min(len(o[2]) for o in order)
+    lags = []
+    meat = scores[n_meas:].T @ scores[n_meas:]  # process-noise rows: independent
+    for _, _, idx, _ in order:
+        x = per_sample[idx]
+        n = x.shape[0]
+        nl = max(int(math.floor(4 * (n / 100.0) ** (2.0 / 9.0))), int(math.ceil(3 * tau / dt)))
+        nl = max(0, min(nl, shortest // 2, n - 1))
+        lags.append(nl)
+        meat = meat + S_hac_simple(x, nlags=nl)
+    bread = A.T @ A
+    c = np.sqrt(np.maximum(np.diag(bread), 1e-300))
+    Binv = np.linalg.pinv(bread / np.outer(c, c), rcond=1e-12, hermitian=True) / np.outer(c, c)
+    cov = Binv @ meat @ Binv
+    cov = 0.5 * (cov + cov.T)
+    std_hac = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    ok = np.isfinite(std_w)
+    std = np.where(ok, np.maximum(std_hac, np.where(ok, std_w, 0.0)), np.nan)
+    return HonestErrors(
+        std=std,
+        std_white=std_w,
+        cov=cov,
+        cov_white=cov_w,
+        crlb=bound,
+        correlation_time_s=tau,
+        nlags=int(max(lags) if lags else 0),
+    )
+
+
+def crlb(problem, fit, k: int) -> np.ndarray:
+    """The Cramer-Rao bound (1-sigma, SI) of the first ``k`` parameters (module doc).
+
+    The measurement Jacobian at ``fit`` in the problem's noise units, restricted to the
+    directions that keep every linked pair of windows continuous (one trajectory per
+    segment). Windows that are not linked count as separate trajectories. NaN where the
+    data cannot identify a parameter.
+    """
+    if k == 0:
+        return np.zeros(0)
+    w = problem.windows
+    if not w.linked:
+        std, _, _ = theta_errors(sp.csc_matrix(fit.extra["J"])[: problem.n_meas], k, 1.0)
+        return std
+    S_fit = fit.extra.get("S")
+    if S_fit is None:  # a fit that did not record its parameter map (a screened step)
+        return np.full(k, np.nan)
+    Sp, K = problem._pad(np.asarray(S_fit, dtype=float))
+    fn = _problem_functions(*problem._key(K), True)[1]
+    delta = np.asarray(fit.delta).reshape(-1, order="F")
+    v = np.concatenate([fit.theta[:k], np.zeros(K - k), delta])
+    p_base = fit.p - np.asarray(S_fit) @ fit.theta[:k]
+    out = fn(v, p_base, Sp, problem._data)
+    keep = np.r_[np.arange(k), np.arange(K, v.size)]
+    Jm = to_csc(out[1])[:, keep]
+    pairs = np.flatnonzero(np.asarray(w.link, dtype=bool))
+    nd = problem.n_delta
+    rows = (pairs[:, None] * nd + np.arange(nd)).ravel()
+    Jc = to_csc(out[3])[rows][:, keep].toarray()
+    N = null_space_basis(Jc, k)
+    std, _, _ = theta_errors(Jm @ N, k, 1.0)
+    return std

@@ -1,0 +1,399 @@
+"""Process noise: what the Model does not explain, estimated with the effects.
+
+Grey-box stochastic modelling (Kristensen, Madsen & Joergensen 2004, CTSM; the smoother
+form of multiple shooting): the windows of a segment are LINKED (:class:`.WindowSet`
+``link``), but instead of forcing the continuity defects to zero they are penalised by
+the covariance of a random torque the Model does not contain. A white torque noise makes
+each rate axis a random walk of intensity ``sigma_w`` (rad/s per sqrt(s)); over a
+hand-over interval ``T`` the defect of (attitude, rate) on one axis is Gaussian with
+covariance (the integrated Wiener process)::
+
+    sigma_w^2 [[T^3 / 3, T^2 / 2],
+               [T^2 / 2, T      ]]
+
+(the rate alone, ``sigma_w^2 T``, when the attitude is not fitted; a lagged gyro state
+like the rate). The whitened defects ``W c`` join the measurement residual, so one
+Gauss-Newton fit gives the maximum a-posteriori trajectory and effects at a given
+intensity. The intensity is chosen by maximising the Laplace approximation of the
+marginal likelihood (the window states integrated out, exact for linear-Gaussian
+dynamics, the Kalman-smoother likelihood)::
+
+    2 l(q) = -|r|^2 - |W c|^2 + 2 log|W| - log det(A_d^T A_d)
+
+with ``A_d`` the window-state columns of the stacked Jacobian. The search runs DOWN a
+grid of intensities, each fit warm-started from the previous one: a continuation from
+nearly free windows (robust far from the optimum) to nearly one trajectory per segment
+(the most precise), and stops where the data say the model no longer holds.
+
+When nothing is unexplained the estimate sits at the bottom of the grid: the fit is the
+output error over whole segments, at the Cramer-Rao bound. When something is, the
+intensity is significant (likelihood-ratio test against the bottom of the grid, a 50:50
+mixture of chi2(0) and chi2(1) since the null sits on the boundary, Self & Liang 1987),
+the effects' standard errors widen as they must, and ``horizon_s`` says over what time
+the Model can be trusted to predict to the noise.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import casadi as ca
+import numpy as np
+import scipy.sparse as sp
+
+from airbearing.analysis.shooting.functions import (
+    IPOPT_TOL,
+    _cached,
+    _Call,
+    _problem_functions,
+    delta_layout,
+    structure_key,
+    to_csc,
+)
+
+__all__ = [
+    "KAPPA_GRID",
+    "ProcessNoise",
+    "defect_whitening",
+    "estimate_process_noise",
+    "penalised_solver",
+]
+
+#: Grid of the dimensionless intensity ``kappa`` (defect variance over a typical piece, in
+#: units of the measurement noise variance), searched from the top down. 1e4: the windows
+#: are practically free (the old fixed-window fit); 1e-8: one trajectory per segment (a
+#: defect of 1e-4 noise sigma; lower intensities only make the solve ill-conditioned).
+KAPPA_GRID = (1e4, 1e2, 1.0, 1e-2, 1e-4, 1e-6, 1e-8)
+#: Likelihood-ratio p-value below which the unexplained torque is significant.
+SIGNIFICANCE = 1e-3
+
+
+@dataclass(frozen=True)
+class ProcessNoise:
+    """The estimated unexplained torque of one fit.
+
+    Attributes
+    ----------
+    intensity : float
+        ``sigma_w``, rad/s per sqrt(s): the random-walk intensity of the rate (an
+        unexplained torque of spectral density ``J sigma_w`` N m per sqrt(Hz)).
+    kappa : float
+        The same, dimensionless (defect variance over a piece, over the noise variance).
+    lr : float
+        Likelihood-ratio statistic against the bottom of the grid (no process noise).
+    p : float
+        Its p-value (chi2 mixture, module doc).
+    significant : bool
+        ``p < SIGNIFICANCE``.
+    horizon_s : float
+        s, time over which the unexplained torque moves the output by one noise sigma
+        (``inf`` when not significant: whole segments).
+    piece_s : float
+        s, the mean length of the linked pieces.
+    loglik : dict
+        ``kappa -> log-likelihood`` of every intensity tried.
+    """
+
+    intensity: float
+    kappa: float
+    lr: float
+    p: float
+    significant: bool
+    horizon_s: float
+    piece_s: float
+    loglik: dict
+
+    def to_json(self) -> dict:
+        """The JSON form (``fit.extra["process_noise"]``)."""
+        return {
+            "intensity": self.intensity,
+            "unit": "rad/s/sqrt(s)",
+            "kappa": self.kappa,
+            "lr": self.lr,
+            "p": self.p,
+            "significant": self.significant,
+            "horizon_s": self.horizon_s if math.isfinite(self.horizon_s) else None,
+            "piece_s": self.piece_s,
+        }
+
+
+# ----------------------------------------------------------------------------
+# the whitening of the defects
+
+
+def piece_durations(problem) -> np.ndarray:
+    """s, time from each window's first row to its hand-over row."""
+    w = problem.windows
+    cum = np.concatenate([np.zeros((w.n, 1)), np.cumsum(w.dt, axis=1)], axis=1)
+    end = np.asarray(w.end, dtype=int)
+    return cum[np.arange(w.n), end]
+
+
+def _sigma_of_kappa(problem, kappa: float) -> float:
+    """``sigma_w`` of a dimensionless intensity (module doc)."""
+    T = float(np.mean(piece_durations(problem)[:-1])) if problem.windows.n > 1 else 1.0
+    if problem.n_att:
+        return math.sqrt(kappa * problem.sigma_att**2 * 3.0 / T**3)
+    return math.sqrt(kappa * problem.sigma_rate**2 / T)
+
+
+def defect_whitening(problem, sigma_w: float):
+    """``(W, logdet_W)``: the whitening of every consecutive pair's defects (module doc).
+
+    Parameters
+    ----------
+    problem : ShootingProblem
+        On linked windows.
+    sigma_w : float
+        Random-walk intensity of the rate, rad/s per sqrt(s) (> 0).
+
+    Returns
+    -------
+    W : scipy.sparse.csr_matrix (n_delta (n - 1), n_delta (n - 1))
+        Maps the defects (noise units, :func:`.functions._link_function`) to independent
+        unit-variance residuals; zero rows where two windows are not linked.
+    logdet : float
+        ``log det`` of the linked blocks of ``W``.
+    """
+    w = problem.windows
+    nd, n_att, n_rate = problem.n_delta, problem.n_att, problem.n_rate
+    T = piece_durations(problem)
+    link = np.asarray(w.link, dtype=bool)
+    sa, sr = problem.sigma_att, problem.sigma_rate
+    rows, cols, vals = [], [], []
+    logdet = 0.0
+    eps = 1e-12  # keeps a block positive definite at any intensity
+    for j in np.flatnonzero(link):
+        base = j * nd
+        t = max(float(T[j]), 1e-9)
+        q = sigma_w**2
+        for a in range(n_rate):
+            ir = base + n_att + a
+            vr = q * t / sr**2 + eps
+            if n_att:
+                ia = base + a
+                va = q * t**3 / 3.0 / sa**2 + eps
+                cv = q * t**2 / 2.0 / (sa * sr)
+                # inverse of the lower Cholesky factor of [[va, cv], [cv, vr]]
+                l11 = math.sqrt(va)
+                l21 = cv / l11
+                l22 = math.sqrt(max(vr - l21**2, eps))
+                rows += [ia, ir, ir]
+                cols += [ia, ia, ir]
+                vals += [1.0 / l11, -l21 / (l11 * l22), 1.0 / l22]
+                logdet -= math.log(l11 * l22)
+            else:
+                rows.append(ir)
+                cols.append(ir)
+                vals.append(1.0 / math.sqrt(vr))
+                logdet -= 0.5 * math.log(vr)
+        for i in range(n_att + n_rate, nd):  # lagged gyro states: like the rate
+            vr = q * t / sr**2 + eps
+            rows.append(base + i)
+            cols.append(base + i)
+            vals.append(1.0 / math.sqrt(vr))
+            logdet -= 0.5 * math.log(vr)
+    m = nd * max(w.n - 1, 0)
+    W = sp.csr_matrix((vals, (rows, cols)), shape=(m, m))
+    return W, logdet
+
+
+# ----------------------------------------------------------------------------
+# the solver: linked windows, defects penalised
+
+
+class _PenalisedOracle:
+    """Stacked residual ``[r; W c]`` and its Jacobian at the last iterate."""
+
+    def __init__(self, fr, fj, n_v: int) -> None:
+        self.fr, self.fj, self.n_v = fr, fj, n_v
+        self.z = self.r = self.J = None
+
+    def set(self, p_base, S, scale, data, W) -> None:
+        self.pb, self.S, self.scale, self.data, self.W = p_base, S, scale, data, W
+        self.z = None
+
+    def r_at(self, z):
+        if self.z is None or not np.array_equal(z, self.z):
+            r, c = self.fr(z * self.scale, self.pb, self.S, self.data)
+            self.z, self.J = z.copy(), None
+            self.r = np.r_[r.full().ravel(), self.W @ c.full().ravel()]
+        return self.r
+
+    def rj_at(self, z):
+        if self.z is None or self.J is None or not np.array_equal(z, self.z):
+            r, J, c, Jc = self.fj(z * self.scale, self.pb, self.S, self.data)
+            self.z = z.copy()
+            self.r = np.r_[r.full().ravel(), self.W @ c.full().ravel()]
+            Js = sp.vstack([to_csc(J), self.W @ to_csc(Jc)]).tocsc()
+            self.J = Js @ sp.diags(self.scale)
+        return self.r, self.J
+
+
+def _build_penalised(model, L, nw, K, outputs, substeps, jit, max_iter):
+    fr, fj, _ = _problem_functions(model, L, nw, K, outputs, substeps, jit, True)
+    nd = sum(delta_layout(model, outputs))
+    n_v = K + nd * nw
+    o = _PenalisedOracle(fr, fj, n_v)
+
+    def f(z):
+        r = o.r_at(z)
+        return [0.5 * float(r @ r)]
+
+    def grad(z, _par):
+        r, J = o.rj_at(z)
+        return [0.5 * float(r @ r), np.asarray(J.T @ r).ravel()]
+
+    def hess(z, _par, lam_f, _lam_g):
+        _, J = o.rj_at(z)
+        return [np.triu(lam_f[0] * (J.T @ J).toarray())]
+
+    f_jac = _Call(
+        "pn_jac_f", [n_v, 1], [ca.Sparsity.dense(1, n_v)], lambda z, _f: [grad(z, 0)[1][None, :]]
+    )
+    F = _Call("pn_f", [n_v], [ca.Sparsity.dense(1, 1)], f, lambda name: f_jac)
+    GF = _Call("pn_grad_f", [n_v, 0], [ca.Sparsity.dense(1, 1), ca.Sparsity.dense(n_v, 1)], grad)
+    H = _Call("pn_hess_l", [n_v, 0, 1, 0], [ca.Sparsity.upper(n_v)], hess)
+    z = ca.MX.sym("z", n_v)
+    solver = ca.nlpsol(
+        "output_error_process_noise",
+        "ipopt",
+        {"x": z, "f": F(z)},
+        {
+            "grad_f": GF,
+            "hess_lag": H,
+            "print_time": False,
+            "ipopt.print_level": 0,
+            "ipopt.sb": "yes",
+            "ipopt.max_iter": int(max_iter),
+            "ipopt.tol": IPOPT_TOL,
+            "ipopt.acceptable_tol": 1e-5,
+            "ipopt.acceptable_iter": 3,
+            "ipopt.mu_strategy": "adaptive",
+        },
+    )
+    return solver, (F, GF, H, f_jac, o)
+
+
+def penalised_solver(model, L, nw, K, outputs, substeps, jit, max_iter):
+    """``(solver, keep)``: IPOPT on the stacked residual ``[r; W c]`` (module doc)."""
+    key = ("penalised", structure_key(model), L, nw, K, outputs, substeps, jit, max_iter)
+    return _cached(key, lambda: _build_penalised(model, L, nw, K, outputs, substeps, jit, max_iter))
+
+
+# ----------------------------------------------------------------------------
+# the intensity
+
+
+def _loglik(problem, fit, k: int) -> float:
+    """Laplace log marginal likelihood (module doc) of a fit at the problem's intensity."""
+    J = fit.extra["J"]
+    Jd = J[:, k:]
+    G = (Jd.T @ Jd).toarray()
+    # column scaling leaves the differences between intensities unchanged (the same
+    # columns at every intensity) and keeps the determinant well conditioned
+    c = np.sqrt(np.maximum(np.diag(G), 1e-300))
+    sign, logdet = np.linalg.slogdet(G / np.outer(c, c))
+    if sign <= 0:
+        logdet = -np.inf
+    return float(-0.5 * fit.rss + problem.penalty_logdet - 0.5 * (logdet + 2 * np.log(c).sum()))
+
+
+def set_intensity(problem, kappa: float | None) -> None:
+    """Penalise ``problem``'s defects at dimensionless intensity ``kappa`` (None: unpenalised)."""
+    if kappa is None:
+        problem.penalty, problem.penalty_logdet, problem.process_noise = None, 0.0, None
+        return
+    sigma_w = _sigma_of_kappa(problem, kappa)
+    problem.penalty, problem.penalty_logdet = defect_whitening(problem, sigma_w)
+    problem.process_noise = (float(kappa), float(sigma_w))
+
+
+def estimate_process_noise(
+    problem,
+    p_base: np.ndarray,
+    S: np.ndarray | None = None,
+    theta0: np.ndarray | None = None,
+    *,
+    lower=None,
+    upper=None,
+    delta0=None,
+    name: str = "process noise",
+    grid=KAPPA_GRID,
+    start=None,
+):
+    """Fit at each intensity of ``grid`` (top down, warm-started) and keep the most likely.
+
+    Parameters
+    ----------
+    problem : ShootingProblem
+        On linked windows (:meth:`.WindowSet.linked`).
+    p_base, S, theta0, lower, upper, delta0 :
+        As :meth:`ShootingProblem.fit`.
+    grid : sequence of float
+        Dimensionless intensities, largest first.
+    start : Fit, optional
+        A fit at the top of the grid already made (saves one solve).
+
+    Returns
+    -------
+    fit : Fit
+        The fit at the most likely intensity; ``fit.extra["process_noise"]`` is the
+        :class:`ProcessNoise`, and ``problem`` is left at that intensity.
+    """
+    from scipy import stats
+
+    from airbearing.errors import SolverError
+
+    k = 0 if S is None else np.asarray(S).shape[1]
+    fits, ll = {}, {}
+    th, d = theta0, delta0
+    for i, kappa in enumerate(grid):
+        set_intensity(problem, kappa)
+        if i == 0 and start is not None:
+            fit = start
+        else:
+            try:
+                fit = problem.fit(
+                    p_base, S, th, lower=lower, upper=upper, delta0=d, name=f"{name} ({kappa:g})"
+                )
+            except SolverError:
+                if not fits:
+                    raise
+                break  # a lower intensity the fit cannot reach: keep what was found
+        fits[kappa], ll[kappa] = fit, _loglik(problem, fit, k)
+        th, d = fit.theta, fit.delta
+        best = max(ll, key=ll.get)
+        # the likelihood has passed its peak by a clear margin: lower intensities only
+        # fall further (the model cannot follow the data over longer horizons)
+        if ll[kappa] < ll[best] - 50.0:
+            break
+    best = max(ll, key=ll.get)
+    bottom = min(ll)  # the smallest intensity reached
+    lr = max(0.0, 2.0 * (ll[best] - ll[bottom]))
+    p = 0.5 * float(stats.chi2.sf(lr, 1)) if lr > 0 else 1.0
+    significant = p < SIGNIFICANCE
+    set_intensity(problem, best)
+    sigma_w = problem.process_noise[1]
+    piece = float(np.mean(piece_durations(problem)[:-1])) if problem.windows.n > 1 else 0.0
+    if significant and sigma_w > 0:
+        if problem.n_att:
+            horizon = (3.0 * problem.sigma_att**2 / sigma_w**2) ** (1.0 / 3.0)
+        else:
+            horizon = problem.sigma_rate**2 / sigma_w**2
+    else:
+        horizon = math.inf
+    pn = ProcessNoise(
+        intensity=float(sigma_w),
+        kappa=float(best),
+        lr=float(lr),
+        p=float(p),
+        significant=bool(significant),
+        horizon_s=float(horizon),
+        piece_s=piece,
+        loglik={float(a): float(b) for a, b in ll.items()},
+    )
+    fit = fits[best]
+    fit.extra["process_noise"] = pn
+    return fit
