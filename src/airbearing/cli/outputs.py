@@ -26,14 +26,21 @@ __all__ = ["Outputs"]
 
 
 def _probe(folder: Path, message: str) -> None:
-    """Create and remove a file in ``folder``: the one check that holds for root too (a
-    read-only mount, /proc), where ``os.access`` says yes."""
-    try:
-        fd, tmp = tempfile.mkstemp(dir=folder, prefix=".airbearing-probe-")
-    except OSError as e:
-        raise InputError(f"{message} ({e.strerror or e})") from None
-    os.close(fd)
-    os.unlink(tmp)
+    """Create, write and remove a file in ``folder``: the one check that holds for root
+    too (a read-only mount, /proc), where ``os.access`` says yes. The message ends with
+    errno's reason (:func:`airbearing.io.output.why_unwritable`)."""
+    from airbearing.io.output import why_unwritable
+
+    why = why_unwritable(folder)
+    if why is not None:
+        raise InputError(f"{message} ({why})")
+
+
+def _access_reason(folder: Path) -> str:
+    """The reason ``os.access`` refused: the probe's, or permission denied."""
+    from airbearing.io.output import why_unwritable
+
+    return why_unwritable(folder) or "permission denied"
 
 
 def _same_file(a: Path, b: Path) -> bool:
@@ -87,7 +94,10 @@ class Outputs:
             if not parent.is_dir():
                 raise InputError(f"{option} {folder}: folder '{parent}' does not exist")
             if not os.access(parent, os.W_OK | os.X_OK):
-                raise InputError(f"{option} {folder}: cannot create it in folder '{parent}'")
+                raise InputError(
+                    f"{option} {folder}: cannot create it in folder '{parent}' "
+                    f"({_access_reason(parent)})"
+                )
             _probe(parent, f"{option} {folder}: cannot create it in folder '{parent}'")
             key = path.resolve()
             if key in self._planned:
@@ -106,7 +116,8 @@ class Outputs:
         if not os.access(folder, os.W_OK | os.X_OK) or (
             path.exists() and not os.access(path, os.W_OK)
         ):
-            raise InputError(f"{option} {path}: cannot write in folder '{folder}'")
+            why = "permission denied" if path.exists() else _access_reason(folder)
+            raise InputError(f"{option} {path}: cannot write in folder '{folder}' ({why})")
         _probe(folder, f"{option} {path}: cannot write in folder '{folder}'")
         key = path.resolve()
         if key in self._planned:
@@ -225,7 +236,9 @@ class Outputs:
                     pass
             if isinstance(exc, OSError):
                 option, path = current
-                reason = exc.strerror or str(exc)
+                from airbearing.io.output import reason as _reason
+
+                reason = _reason(exc)
                 raise InputError(
                     f"{option} {path}: cannot write it ({reason}); nothing written"
                 ) from None

@@ -98,6 +98,9 @@ class ImportMap:
         a proper rotation.
     source : str
         The map's file (for messages).
+    given_units : tuple of str
+        The columns whose unit the map names in ``[units]`` (the others took the SI
+        unit by default).
     """
 
     columns: dict[str, str]
@@ -106,6 +109,7 @@ class ImportMap:
     lab_up: str = "+z"
     body: tuple[tuple[float, ...], ...] = _IDENTITY
     source: str = _MEMORY
+    given_units: tuple[str, ...] = ()
 
     def factor(self, column: str) -> float:
         """Factor from the raw unit of a log column to its SI unit."""
@@ -209,6 +213,7 @@ def import_map_from_dict(data: Mapping[str, Any], source: str = _MEMORY) -> Impo
                 unit,
             )
         units[name] = unit
+    given = tuple(units)
     units = {name: units.get(name, _si_unit(name)) for name in columns}
     maps = data.get("quaternion", {}).get("maps", "body_to_lab")
     if maps not in MAPS:
@@ -218,7 +223,7 @@ def import_map_from_dict(data: Mapping[str, Any], source: str = _MEMORY) -> Impo
     if lab_up not in LAB_UP:
         raise _fail(src, "frames.lab_up", "one of " + ", ".join(repr(a) for a in LAB_UP), lab_up)
     body = _rotation(frames.get("body", [list(r) for r in _IDENTITY]), src)
-    return ImportMap(columns, units, maps, lab_up, body, src)
+    return ImportMap(columns, units, maps, lab_up, body, src, given)
 
 
 def _rotation(value: object, src: str) -> tuple[tuple[float, ...], ...]:
@@ -351,9 +356,14 @@ def raw_columns(raw, import_map: ImportMap, src: str, skip: tuple[str, ...] = ()
     ------
     InputError
         A mapped column missing from the file (the message lists the file's
-        columns), or a cell that is not a finite number (row and column named).
+        columns), a cell that is not a finite number or is overflow-sized (the log's
+        rule, :func:`airbearing.io.log.bad_mask`; rows and column named), or a time
+        column in s by default whose median interval is :data:`SLOWEST_INTERVAL` or
+        more (the message asks whether it is in ms).
     """
     import pandas as pd
+
+    from airbearing.io.log import bad_mask, row_ranges
 
     headers = [str(c) for c in raw.columns]
     stripped = {h.strip(): h for h in headers}
@@ -375,13 +385,17 @@ def raw_columns(raw, import_map: ImportMap, src: str, skip: tuple[str, ...] = ()
         else:
             text = cells.astype(str).str.strip()
             values = pd.to_numeric(text, errors="coerce").to_numpy(dtype=float, na_value=np.nan)
-        bad = ~np.isfinite(values)
+        bad = bad_mask(values)
         if bad.any():
             i = int(np.argmax(bad))
+            rows = np.flatnonzero(bad)
+            more = f" ({len(rows)} such rows: {row_ranges(rows)})" if len(rows) > 1 else ""
             raise InputError(
                 f"{src}: row {i}, column {actual!r} (log column {name!r}): expected a finite "
-                f"number, got {cells.iloc[i]!r}"
+                f"number of magnitude at most 1e+100, got {cells.iloc[i]!r}{more}"
             )
+        if name == "t" and "t" not in import_map.given_units and len(values) > 1:
+            _check_seconds(values, src, actual, import_map.source)
         factor = import_map.factor(name)
         inverse = round(1.0 / factor)
         if factor < 1.0 and abs(1.0 / factor - inverse) < 1e-9 * inverse:
@@ -389,6 +403,29 @@ def raw_columns(raw, import_map: ImportMap, src: str, skip: tuple[str, ...] = ()
         else:
             out[name] = values * factor
     return out
+
+
+#: s: a time column read in s (no ``[units] t``) whose median interval is this or more is
+#: taken for milliseconds or microseconds read as seconds: air-bearing logs sample at
+#: 1 Hz or faster (attitude control and identification need it), while a 10-100 Hz
+#: log in ms gives median intervals of 10-100 "s".
+SLOWEST_INTERVAL = 1.0
+
+
+def _check_seconds(t: np.ndarray, src: str, header: str, map_src: str) -> None:
+    dt = np.diff(t)
+    dt = dt[dt > 0]
+    if not dt.size:
+        return
+    median = float(np.median(dt))
+    if median < SLOWEST_INTERVAL:
+        return
+    guess = "us" if median >= 1e3 * SLOWEST_INTERVAL else "ms"
+    raise InputError(
+        f"{src}: column {header!r} (log column 't'): median interval {median:.4g} s; is the "
+        f'time column in {guess}? set [units] t = "{guess}" in {map_src} (or t = "s" if '
+        "the samples really are that far apart)"
+    )
 
 
 def _wrap(a: np.ndarray) -> np.ndarray:

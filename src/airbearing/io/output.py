@@ -9,6 +9,7 @@ an infinite margin or a time constant that does not exist is "none").
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import json
 import math
@@ -17,7 +18,49 @@ import tempfile
 from collections.abc import Mapping
 from pathlib import Path
 
-__all__ = ["write_atomic", "write_json", "to_jsonable", "json_number"]
+__all__ = ["write_atomic", "write_json", "to_jsonable", "json_number", "reason", "why_unwritable"]
+
+
+def reason(error: OSError) -> str:
+    """errno's reason for an OS error in words (``permission denied``, ``read-only file
+    system``, ``no space left on device``), lower case, without the path."""
+    import errno as _errno
+
+    text = error.strerror or (os.strerror(error.errno) if error.errno else str(error))
+    if error.errno == _errno.EROFS:
+        text = "read-only file system"
+    return text[:1].lower() + text[1:]
+
+
+def why_unwritable(folder: str | os.PathLike) -> str | None:
+    """Why files cannot be written in ``folder`` (errno's reason), or ``None`` if they can.
+
+    Tries what a write does: a temporary file is created, written one byte and removed.
+    A read-only mount says ``read-only file system`` even for root, a folder without
+    write permission ``permission denied``, and a full disk ``no space left on device``
+    (also when it has no free block for a non-root user).
+    """
+    folder = Path(folder)
+    try:
+        fd, tmp = tempfile.mkstemp(dir=folder, prefix=".airbearing-probe-")
+    except OSError as e:
+        return reason(e)
+    try:
+        os.write(fd, b"\0")
+        os.fsync(fd)
+    except OSError as e:
+        return reason(e)
+    finally:
+        os.close(fd)
+        with contextlib.suppress(OSError):
+            os.unlink(tmp)
+    try:
+        st = os.statvfs(folder)
+    except (OSError, AttributeError):
+        return None
+    if st.f_bavail == 0 and os.geteuid() != 0:
+        return "no space left on device"
+    return None
 
 
 def json_number(v):
