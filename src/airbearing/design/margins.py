@@ -48,7 +48,7 @@ _N_GRID = 3000  # points of the logarithmic frequency grid
 _SQRT_HALF = 1 / math.sqrt(2)
 
 
-@dataclass
+@dataclass(frozen=True)
 class LoopMargins:
     """Margins of one SISO loop (SI units; angles in degrees, as the names say)."""
 
@@ -59,15 +59,16 @@ class LoopMargins:
     gain_reduction_margin_db: float  # downward gain margin, dB (<= 0; -inf: none)
     phase_margin_deg: float  # smallest over every gain crossover (inf: no crossover)
     delay_margin_s: float  # smallest extra delay that destabilises (inf: no crossover)
-    crossover_rad_s: list  # every gain crossover frequency
-    phase_crossover_rad_s: list  # every phase crossover frequency
+    crossover_rad_s: list = field(repr=False)  # every gain crossover frequency
+    phase_crossover_rad_s: list = field(repr=False)  # every phase crossover frequency
     disk_margin: float  # alpha of the balanced disk margin
     disk_gain_margin_db: float
     disk_phase_margin_deg: float
     sensitivity_peak: float  # max |S|
     complementary_peak: float  # max |T|
     bandwidth_rad_s: float | None  # w_B: |S| reaches 1/sqrt(2) from below
-    closed_loop_poles: list = field(default_factory=list)  # [re, im] (z-plane when discrete)
+    # [re, im] (z-plane when discrete)
+    closed_loop_poles: list = field(default_factory=list, repr=False)
     min_damping: float = math.nan
     stable: bool = False
 
@@ -79,7 +80,18 @@ class LoopMargins:
     def bandwidth_hz(self) -> float | None:
         return None if self.bandwidth_rad_s is None else self.bandwidth_rad_s / (2 * math.pi)
 
-    def to_dict(self) -> dict:
+    def __str__(self) -> str:
+        def num(v, fmt):
+            return "none" if v is None or not math.isfinite(v) else format(v, fmt)
+
+        return (
+            f"{self.name}: gain margin {num(self.gain_margin_db, '.3g')} dB, phase margin "
+            f"{num(self.phase_margin_deg, '.3g')} deg, delay margin "
+            f"{num(self.delay_margin_s, '.3g')} s, disk margin {num(self.disk_margin, '.3g')}, "
+            f"{'stable' if self.stable else 'UNSTABLE'}"
+        )
+
+    def to_json(self) -> dict:
         """JSON-ready: infinities and NaN become None."""
         out = {}
         for k, v in asdict(self).items():
@@ -95,6 +107,8 @@ class LoopMargins:
         out["sensitivity_peak_db"] = json_number(self.sensitivity_peak_db)
         out["bandwidth_hz"] = json_number(self.bandwidth_hz)
         return out
+
+    to_dict = to_json  # the earlier name
 
 
 def frequency_grid(sys: ct.StateSpace, n: int = _N_GRID) -> np.ndarray:
@@ -322,16 +336,28 @@ def multiloop_disk_margin(L: ct.StateSpace, omega=None, *, n_freq: int = 400) ->
     }
 
 
-@dataclass
+@dataclass(frozen=True)
 class LoopAnalysis:
     """Margins of every channel of a loop, its multi-loop disk margin and its poles."""
 
     name: str
     discrete: bool
-    channels: dict  # channel -> LoopMargins
-    multiloop: dict | None
-    closed_loop_poles: np.ndarray
+    channels: dict = field(repr=False)  # channel -> LoopMargins
+    multiloop: dict | None = field(repr=False)
+    closed_loop_poles: np.ndarray = field(repr=False)
     stable: bool
+
+    def __str__(self) -> str:
+        kind = "discrete" if self.discrete else "continuous"
+        head = f"{self.name} ({kind}): {'stable' if self.stable else 'UNSTABLE'}"
+        return "\n".join([head, *(f"  {m}" for m in self.channels.values())])
+
+    def to_pandas(self):
+        """One row per channel: the margins of :meth:`LoopMargins.to_json` (None for inf)."""
+        import pandas as pd
+
+        rows = {k: m.to_json() for k, m in self.channels.items()}
+        return pd.DataFrame.from_dict(rows, orient="index")
 
     def worst(self) -> dict:
         """The worst value of each margin over the channels."""
@@ -349,7 +375,7 @@ class LoopAnalysis:
             "stable": self.stable,
         }
 
-    def to_dict(self) -> dict:
+    def to_json(self) -> dict:
         """``{"loops": {channel: {...}}, "multiloop": {...}, "stable": bool}`` (None = inf)."""
         out = {"loops": {k: m.to_dict() for k, m in self.channels.items()}, "stable": self.stable}
         if self.multiloop is not None:
@@ -357,6 +383,8 @@ class LoopAnalysis:
                 k: json_number(v) if isinstance(v, float) else v for k, v in self.multiloop.items()
             }
         return out
+
+    to_dict = to_json  # the earlier name
 
 
 def analyse_loop(

@@ -79,7 +79,14 @@ class SizingResult:
     flywheel_mass: float
     flywheel_thickness: float
 
-    def to_dict(self) -> dict:
+    def __str__(self) -> str:
+        return (
+            f"torque {self.torque * 1e3:.4g} mN m, momentum {self.momentum * 1e3:.4g} mN m s "
+            f"per flywheel; flywheel {self.flywheel_inertia * 1e3:.4g} g m^2, "
+            f"{self.flywheel_mass * 1e3:.4g} g, {self.flywheel_thickness * 1e3:.3g} mm thick"
+        )
+
+    def to_json(self) -> dict:
         """JSON-ready: SI values under unit-suffixed keys (and the inputs)."""
         d = asdict(self)
         return {
@@ -100,6 +107,8 @@ class SizingResult:
                 "density_kgm3": d["density"],
             },
         }
+
+    to_dict = to_json  # the earlier name
 
 
 def _positive(name: str, value) -> float:

@@ -52,28 +52,31 @@ class Spec:
     def __post_init__(self) -> None:
         if not (0 < self.phase_margin_deg < 90):
             raise InputError(
-                f"--phase-margin-deg {self.phase_margin_deg}: expected a margin in (0, 90) deg"
+                f"phase_margin_deg={self.phase_margin_deg}: expected a margin in (0, 90) deg"
             )
         if not self.gain_margin_db > 0:
             raise InputError(
-                f"--gain-margin-db {self.gain_margin_db}: expected a positive margin in dB"
+                f"gain_margin_db={self.gain_margin_db}: expected a positive margin in dB"
             )
         if not self.max_sensitivity > 1:
-            raise InputError(f"max sensitivity {self.max_sensitivity}: expected a peak > 1")
+            raise InputError(f"max_sensitivity={self.max_sensitivity}: expected a peak > 1")
         if self.bandwidth_hz is not None and not self.bandwidth_hz > 0:
-            raise InputError(f"--bandwidth-hz {self.bandwidth_hz}: expected a positive frequency")
+            raise InputError(f"bandwidth_hz={self.bandwidth_hz}: expected a positive frequency")
         if not 0 <= self.inertia_uncertainty < 1:
-            raise InputError(f"inertia uncertainty {self.inertia_uncertainty}: expected 0 <= u < 1")
+            raise InputError(f"inertia_uncertainty={self.inertia_uncertainty}: expected 0 <= u < 1")
         if self.offset_range is not None and (
             len(self.offset_range) != 2 or self.offset_range[0] > self.offset_range[1]
         ):
-            raise InputError(f"offset range {self.offset_range}: expected (low, high) in m")
+            raise InputError(f"offset_range={self.offset_range}: expected (low, high) in m")
 
-    def to_dict(self) -> dict:
+    def to_json(self) -> dict:
+        """The specification, SI (the ``spec`` key of ``airbearing gains --json``)."""
         return asdict(self)
 
+    to_dict = to_json  # the earlier name
 
-@dataclass
+
+@dataclass(frozen=True)
 class Check:
     """One line of the verdict: ``value`` against ``limit`` (``sense`` ">=" or "<=")."""
 
@@ -84,7 +87,17 @@ class Check:
     met: bool
     by: float | None  # how far inside (+) or outside (-) the limit, in the value's unit
 
-    def to_dict(self) -> dict:
+    def __str__(self) -> str:
+        if self.value is None:
+            return f"{self.name}: {'pass' if self.met else 'FAIL'}"
+        return (
+            f"{self.name} {self.value:.4g} {self.sense} {self.limit:.4g}: "
+            f"{'pass' if self.met else 'FAIL'}"
+        )
+
+    def to_json(self) -> dict:
+        """``name``, ``value``, ``limit``, ``sense``, ``met``, ``by`` (None for inf/NaN)."""
+
         def num(v):
             return None if v is None or not math.isfinite(v) else float(v)
 
@@ -97,6 +110,8 @@ class Check:
             "by": num(self.by),
         }
 
+    to_dict = to_json  # the earlier name
+
 
 def _check(name, value, limit, sense) -> Check:
     if value is None:
@@ -107,22 +122,50 @@ def _check(name, value, limit, sense) -> Check:
     return Check(name, value, limit, sense, bool(by >= 0), by)
 
 
-@dataclass
+@dataclass(frozen=True)
 class TuningResult:
-    """Gains and the verdict; ``met`` is True only when every check passes."""
+    """Gains tuned to a specification and the verdict (:func:`tune`).
+
+    Attributes
+    ----------
+    loop : {"balancing", "attitude"}
+    split : str or None
+        Balancing PID split (``"mixed"`` or ``"mechanical"``); None for the attitude loop.
+    testbed : str
+        The testbed's name.
+    gains : dict of str to float
+        The gains, SI (the ``gains`` of :func:`airbearing.stability_report`).
+    spec : Spec
+    checks : list of Check
+        Each requirement at the worst corner (inertia and offset range).
+    met : bool
+        True only when every check passes.
+    worst_case : dict
+        Worst margins over the corners (dB, deg, s).
+    message : str
+        The verdict in words (says plainly when the specification cannot be met).
+    corners : list
+        ``(name, parameters)`` of the corners evaluated.
+    """
 
     loop: str
     split: str | None
     testbed: str
     gains: dict
-    spec: Spec
-    checks: list
+    spec: Spec = field(repr=False)
+    checks: list = field(repr=False)
     met: bool
-    worst_case: dict
-    message: str
-    corners: list = field(default_factory=list)
+    worst_case: dict = field(repr=False)
+    message: str = field(repr=False)
+    corners: list = field(default_factory=list, repr=False)
 
-    def to_dict(self) -> dict:
+    def __str__(self) -> str:
+        gains = ", ".join(f"{k} = {v:.4g}" for k, v in self.gains.items())
+        lines = [f"{self.loop} loop of {self.testbed}: {gains}", self.message]
+        lines += [f"  {c}" for c in self.checks]
+        return "\n".join(lines)
+
+    def to_json(self) -> dict:
         return {
             "loop": self.loop,
             "split": self.split,
@@ -137,6 +180,8 @@ class TuningResult:
             },
             "message": self.message,
         }
+
+    to_dict = to_json  # the earlier name
 
 
 def corners(loop: Loop, spec: Spec) -> list[tuple[str, np.ndarray]]:

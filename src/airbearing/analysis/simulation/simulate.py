@@ -9,7 +9,7 @@ The loop over all samples is one CasADi ``mapaccum`` Function, evaluated in C++.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import lru_cache
 
 import casadi as ca
@@ -60,15 +60,48 @@ class SimResult:
         The reference at each sample.
     """
 
-    log: Log
-    t: np.ndarray
-    x: np.ndarray
-    y: np.ndarray
-    u: np.ndarray
-    extra: np.ndarray
-    model: Model
-    controller: Controller
-    reference: np.ndarray
+    log: Log = field(repr=False)
+    t: np.ndarray = field(repr=False)
+    x: np.ndarray = field(repr=False)
+    y: np.ndarray = field(repr=False)
+    u: np.ndarray = field(repr=False)
+    extra: np.ndarray = field(repr=False)
+    model: Model = field(repr=False)
+    controller: Controller = field(repr=False)
+    reference: np.ndarray = field(repr=False)
+
+    def __repr__(self) -> str:
+        return (
+            f"SimResult(testbed={self.model.testbed.name!r}, samples={len(self.t)}, "
+            f"duration_s={self.duration_s:.6g})"
+        )
+
+    def __str__(self) -> str:
+        js = self.to_json()
+        return (
+            f"{js['testbed']}: {js['samples']} samples over {js['duration_s']:.6g} s, peak rate "
+            f"{js['peak_rate_deg_s']:.4g} deg/s, final rate {js['final_rate_deg_s']:.4g} deg/s"
+        )
+
+    @property
+    def duration_s(self) -> float:
+        """s, from the first sample to the end of the last sample's interval."""
+        return float(self.t[-1] - self.t[0] + self.model.testbed.sensors.dt) if len(self.t) else 0.0
+
+    def to_json(self) -> dict:
+        """``testbed`` and the run's motion: ``peak_rate_deg_s``, ``final_rate_deg_s``,
+        ``duration_s``, ``samples`` (``max_tilt_deg`` on dof 3), true states.
+
+        ``airbearing simulate --json`` adds the scenario's own numbers (a slew's
+        :func:`~airbearing.analysis.simulation.scenarios.slew_summary`).
+        """
+        from airbearing.analysis.simulation.scenarios import free_summary
+
+        return {"testbed": self.model.testbed.name, **free_summary(self)}
+
+    def to_pandas(self):
+        """The run as a log table (pandas DataFrame: FORMATS.md columns, ``true_*``, ...)."""
+        return self.log.data.copy()
 
     def state(self, name: str) -> np.ndarray:
         """True state ``name`` at the sample instants ``t`` (N,)."""
