@@ -81,14 +81,13 @@ class LoopMargins:
         return None if self.bandwidth_rad_s is None else self.bandwidth_rad_s / (2 * math.pi)
 
     def __str__(self) -> str:
-        def num(v, fmt):
-            return "none" if v is None or not math.isfinite(v) else format(v, fmt)
+        def num(v, unit=""):
+            return "none" if v is None or not math.isfinite(v) else f"{v:.3g}{unit}"
 
         return (
-            f"{self.name}: gain margin {num(self.gain_margin_db, '.3g')} dB, phase margin "
-            f"{num(self.phase_margin_deg, '.3g')} deg, delay margin "
-            f"{num(self.delay_margin_s, '.3g')} s, disk margin {num(self.disk_margin, '.3g')}, "
-            f"{'stable' if self.stable else 'UNSTABLE'}"
+            f"{self.name}: gain margin {num(self.gain_margin_db, ' dB')}, phase margin "
+            f"{num(self.phase_margin_deg, ' deg')}, delay margin {num(self.delay_margin_s, ' s')}, "
+            f"disk margin {num(self.disk_margin)}, {'stable' if self.stable else 'UNSTABLE'}"
         )
 
     def to_json(self) -> dict:
