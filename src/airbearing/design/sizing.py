@@ -82,7 +82,7 @@ class SizingResult:
     def __str__(self) -> str:
         return (
             f"torque {self.torque * 1e3:.4g} mN m, momentum {self.momentum * 1e3:.4g} mN m s "
-            f"per flywheel; flywheel {self.flywheel_inertia * 1e3:.4g} g m^2, "
+            f"per flywheel\nflywheel {self.flywheel_inertia * 1e3:.4g} g m^2, "
             f"{self.flywheel_mass * 1e3:.4g} g, {self.flywheel_thickness * 1e3:.3g} mm thick"
         )
 
@@ -157,6 +157,29 @@ def size_cluster(
     Returns
     -------
     SizingResult
+
+    Raises
+    ------
+    InputError
+        A value that is not a positive finite number (named by its parameter), or radii
+        out of order.
+
+    Examples
+    --------
+    Seed 001 Table 5: a 30 deg yaw manoeuvre in 2 s of a 0.0033 kg m^2 platform.
+
+    >>> import math
+    >>> import airbearing as ab
+    >>> sizing = ab.size_cluster(math.radians(30.0), 2.0, 0.0033)
+    >>> print(sizing)
+    torque 1.728 mN m, momentum 0.8661 mN m s per flywheel
+    flywheel 0.002068 g m^2, 14.11 g, 5.82 mm thick
+    >>> round(sizing.to_json()["flywheel_mass_kg"], 4)
+    0.0141
+    >>> ab.size_cluster(0.0, 2.0, 0.0033)
+    Traceback (most recent call last):
+    ...
+    airbearing.errors.InputError: angle 0.0: expected a positive number
     """
     a = _positive("angle", angle)
     t = _positive("time", time)

@@ -19,7 +19,7 @@ basis of the null space of ``A``; *hyperbolic* when ``P`` is indefinite.
 from __future__ import annotations
 
 import itertools
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import pandas as pd
@@ -111,9 +111,24 @@ class SingularSurface:
 
     beta: float
     signs: tuple
-    u: np.ndarray
-    H: np.ndarray
-    delta: np.ndarray
+    u: np.ndarray = field(repr=False)
+    H: np.ndarray = field(repr=False)
+    delta: np.ndarray = field(repr=False)
+
+    def __str__(self) -> str:
+        reach = np.nanmax(np.linalg.norm(self.H, axis=-1))
+        return (
+            f"{self.name} of the pyramid at skew {np.degrees(self.beta):.4g} deg: "
+            f"{self.u.shape[0]} x {self.u.shape[1]} directions, largest |H| {reach:.4g} h0"
+        )
+
+    def to_pandas(self):
+        """One row per direction: ``ux uy uz``, ``Hx Hy Hz`` (h0), ``d1..d4`` (rad)."""
+        u, H, d = (a.reshape(-1, a.shape[-1]) for a in (self.u, self.H, self.delta))
+        cols = {f"u{a}": u[:, i] for i, a in enumerate("xyz")}
+        cols |= {f"H{a}": H[:, i] for i, a in enumerate("xyz")}
+        cols |= {f"d{i + 1}": d[:, i] for i in range(4)}
+        return pd.DataFrame(cols)
 
     @property
     def name(self) -> str:

@@ -105,16 +105,44 @@ class SteeringRun:
     """
 
     law: str
-    t: np.ndarray
-    delta: np.ndarray
-    H: np.ndarray
-    H_ref: np.ndarray
-    h_cmd: np.ndarray
-    h_out: np.ndarray
-    delta_dot: np.ndarray
-    m: np.ndarray
+    t: np.ndarray = field(repr=False)
+    delta: np.ndarray = field(repr=False)
+    H: np.ndarray = field(repr=False)
+    H_ref: np.ndarray = field(repr=False)
+    h_cmd: np.ndarray = field(repr=False)
+    h_out: np.ndarray = field(repr=False)
+    delta_dot: np.ndarray = field(repr=False)
+    m: np.ndarray = field(repr=False)
     tolerance: float = 0.05
-    info: dict = field(default_factory=dict)
+    info: dict = field(default_factory=dict, repr=False)
+
+    def __str__(self) -> str:
+        s = self.summary()
+        done = (
+            f"completed in {s['completion_time_s']:.3g} s"
+            if s["completed"]
+            else f"not completed (final momentum error {s['final_momentum_error_h0']:.3g} h0)"
+        )
+        return f"{self.law}: {done}, peak gimbal rate {s['peak_gimbal_rate_deg_s']:.3g} deg/s"
+
+    def to_json(self) -> dict:
+        """:meth:`summary` with infinite values as None (JSON null)."""
+        from airbearing.io.output import to_jsonable
+
+        return to_jsonable(self.summary())
+
+    def to_pandas(self):
+        """The run as a table: ``t`` (s), gimbal angles ``delta1..4`` (rad), momentum
+        ``Hx Hy Hz`` and reference ``Hx_ref ..`` (h0), singularity measure ``m``."""
+        import pandas as pd
+
+        n = len(self.t)
+        cols = {"t": self.t}
+        cols |= {f"delta{i + 1}": self.delta[:n, i] for i in range(4)}
+        cols |= {f"H{a}": self.H[:n, i] for i, a in enumerate("xyz")}
+        cols |= {f"H{a}_ref": self.H_ref[:n, i] for i, a in enumerate("xyz")}
+        cols["m"] = self.m[:n]
+        return pd.DataFrame(cols)
 
     def summary(self) -> dict:
         """Tracking error, peak gimbal rate, time near singularity, time to escape."""

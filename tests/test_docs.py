@@ -1,0 +1,126 @@
+"""The documentation: its examples run, its navigation is whole, CI builds it.
+
+- The Examples sections of the public functions the front door exposes run as doctests
+  (:data:`DOCTEST_MODULES`).
+- The tutorials' ```python blocks run, from a folder holding a copy of ``examples/``.
+- Every page in ``mkdocs.yml``'s navigation exists; ``docs/FORMATS.md`` is the shared
+  contract byte for byte when the shared copy is beside the repository.
+- ``.ci/run`` runs the README's test command and its documentation build, verbatim.
+
+The site itself (``mkdocs build --strict``) is built by ``.ci/run``, not here: it needs the
+``docs`` extra, and the test suite must not depend on it.
+"""
+
+from __future__ import annotations
+
+import doctest
+import importlib
+import re
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+DOCS = ROOT / "docs"
+
+#: Modules whose docstring Examples are part of the public documentation.
+DOCTEST_MODULES = [
+    "airbearing.api.identify",
+    "airbearing.api.logs",
+    "airbearing.api.gains",
+    "airbearing.design.sizing",
+]
+#: Tutorials and how-to pages whose Python blocks run here (the campaign tutorial starts a
+#: Dask cluster on a file the reader writes: its commands are tested in test_campaign*).
+RUN_PAGES = [
+    "tutorials/raw-log-to-effect.md",
+    "tutorials/slew-tune-report.md",
+    "tutorials/identify-platform.md",
+    "how-to/python.md",
+]
+
+
+@pytest.mark.parametrize("name", DOCTEST_MODULES)
+def test_docstring_examples_run(name):
+    module = importlib.import_module(name)
+    flags = doctest.ELLIPSIS | doctest.NORMALIZE_WHITESPACE
+    finder = doctest.DocTestFinder()
+    runner = doctest.DocTestRunner(optionflags=flags)
+    tests = [t for t in finder.find(module) if t.examples]
+    assert tests, f"{name}: no Examples section"
+    for test in tests:
+        runner.run(test)
+    result = runner.summarize(verbose=False)
+    assert result.failed == 0, f"{name}: {result.failed} doctest example(s) failed (see above)"
+
+
+def _python_blocks(text: str) -> list[str]:
+    return re.findall(r"```python[^\n]*\n(.*?)```", text, re.S)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("page", RUN_PAGES)
+def test_page_python_blocks_run(page, tmp_path):
+    blocks = _python_blocks((DOCS / page).read_text())
+    assert blocks, f"{page}: no python block"
+    shutil.copytree(ROOT / "examples", tmp_path / "examples")
+    for i, code in enumerate(blocks):
+        out = subprocess.run(
+            [sys.executable, "-c", code], cwd=tmp_path, capture_output=True, text=True,
+            timeout=900,
+        )  # fmt: skip
+        assert out.returncode == 0, f"{page} block {i}:\n{code}\n{out.stderr[-2000:]}"
+
+
+def _nav_pages(node) -> list[str]:
+    if isinstance(node, str):
+        return [node] if node.endswith(".md") else []
+    if isinstance(node, dict):
+        return [p for v in node.values() for p in _nav_pages(v)]
+    if isinstance(node, list):
+        return [p for v in node for p in _nav_pages(v)]
+    return []
+
+
+def test_every_nav_page_exists_and_no_page_is_orphaned():
+    text = (ROOT / "mkdocs.yml").read_text()
+    nav = re.findall(r":\s*([\w./-]+\.md)\s*$", text, re.M)
+    assert "index.md" in nav and "FORMATS.md" in nav and "changelog.md" in nav
+    missing = [p for p in nav if not (DOCS / p).is_file()]
+    assert not missing, f"in mkdocs.yml's nav but not in docs/: {missing}"
+    # pages written by others land in docs/ first; the nav must take them in
+    orphans = sorted(
+        str(p.relative_to(DOCS)) for p in DOCS.rglob("*.md") if str(p.relative_to(DOCS)) not in nav
+    )
+    assert not orphans, f"docs pages not in mkdocs.yml's nav: {orphans}"
+
+
+def test_formats_is_the_shared_contract():
+    shared = ROOT.parent / "shared" / "FORMATS.md"
+    if not shared.is_file():
+        pytest.skip("no shared FORMATS.md beside the repository")
+    assert (DOCS / "FORMATS.md").read_bytes() == shared.read_bytes()
+
+
+def test_ci_runs_the_readme_commands():
+    readme = (ROOT / "README.md").read_text()
+    ci = (ROOT / ".ci" / "run").read_text()
+    test_cmd = (
+        'python3 -m venv .venv && .venv/bin/pip install -q -e ".[test]"'
+        " && .venv/bin/python -m pytest"
+    )
+    docs_cmd = (
+        '.venv/bin/pip install -q -e ".[docs]" && .venv/bin/mkdocs build --strict --site-dir site'
+    )
+    for cmd in (test_cmd, docs_cmd):
+        assert cmd in readme, f"the README no longer shows: {cmd}"
+        assert any(line.strip() == cmd for line in ci.splitlines()), f".ci/run does not run: {cmd}"
+    assert "chromium" in ci and "CI=" in ci
+
+
+def test_changelog_is_in_the_site():
+    assert (DOCS / "changelog.md").read_text().strip() == '--8<-- "CHANGELOG.md"'
+    assert (ROOT / "CHANGELOG.md").read_text().startswith("# Changelog")
