@@ -90,7 +90,7 @@ def test_bad_specs_are_input_errors(kwargs):
 
 
 def test_bad_loop_and_gains_are_input_errors(cmg_tb):
-    with pytest.raises(InputError, match="--loop"):
+    with pytest.raises(InputError, match="loop='pitch'"):
         make_loop(cmg_tb, "pitch")
     with pytest.raises(InputError, match="kind = 'platform'"):
         make_loop(cmg_tb, "balancing")

@@ -679,4 +679,4 @@ def make_loop(testbed_or_model, loop: str, **options) -> Loop:
         return balancing_loop(testbed_or_model, **options)
     if loop == "attitude":
         return attitude_loop(testbed_or_model, **options)
-    raise InputError(f"--loop {loop}: expected one of {'|'.join(LOOPS)}")
+    raise InputError(f"loop={loop!r}: expected one of {'|'.join(LOOPS)}")

@@ -379,7 +379,7 @@ def tune(testbed, loop: str, spec: Spec | None = None, *, split: str = "mixed") 
         w_target = 2 * math.pi * spec.bandwidth_hz
         if w_target >= nyq:
             raise InputError(
-                f"--bandwidth-hz {spec.bandwidth_hz}: at or above the Nyquist frequency "
+                f"bandwidth_hz={spec.bandwidth_hz}: at or above the Nyquist frequency "
                 f"{nyq / (2 * math.pi):g} Hz of the {1 / base.dt:g} Hz sensor rate"
             )
         best = design(w_target)  # the placed pair sets w_B close to w

@@ -44,7 +44,7 @@ def slew(
             f"got '{testbed.kind}'"
         )
     if duration <= 0:
-        raise InputError(f"--duration {duration}: expected a positive time in s")
+        raise InputError(f"duration={duration}: expected a positive time in s")
     if not testbed.sensors.gyro:
         raise InputError(
             f"{testbed.source}: the seed-001 attitude loop feeds back the gyro rate (eqs. 3, 19), "
@@ -118,39 +118,39 @@ def free_oscillation(
     structure with this run's values in ``p0``, and then reuses its compiled loop.
     """
     if duration <= 0:
-        raise InputError(f"--duration {duration}: expected a positive time in s")
+        raise InputError(f"duration={duration}: expected a positive time in s")
     model = build_model(testbed, effects) if model is None else model
     u = np.zeros(model.nu)
     if testbed.kind == "platform":
         s = np.asarray(sliders, dtype=float)
         if s.shape != (3,):
-            raise InputError(f"--sliders: expected 3 positions in m, got {s.tolist()}")
+            raise InputError(f"sliders: expected 3 positions in m, got {s.tolist()}")
         if testbed.masses is None and np.any(s != 0):
             raise InputError(
-                f"--sliders {s.tolist()}: testbed '{testbed.name}' has no [masses] table "
+                f"sliders={s.tolist()}: testbed '{testbed.name}' has no [masses] table "
                 "(a passive platform); leave the sliders at 0"
             )
         travel = testbed.masses.travel if testbed.masses else 0.0
         if np.any(np.abs(s) > travel):
             raise InputError(
-                f"--sliders {s.tolist()}: each must lie within +-{travel} m (masses.travel)"
+                f"sliders={s.tolist()}: each must lie within +-{travel} m (masses.travel)"
             )
         u[model.index(["s1", "s2", "s3"], "u")] = s
         if testbed.field is not None:
             u[model.index(["bx_lab", "by_lab", "bz_lab"], "u")] = testbed.field.lab_vec
     elif any(v != 0 for v in sliders):
-        raise InputError("--sliders applies to kind = 'platform' testbeds only")
+        raise InputError("sliders applies to kind = 'platform' testbeds only")
     w0 = np.asarray(initial_rate, dtype=float)
     if w0.shape != (3,):
-        raise InputError(f"--initial-rate: expected 3 rates WX WY WZ in rad/s, got {w0.tolist()}")
+        raise InputError(f"initial_rate: expected 3 rates WX WY WZ in rad/s, got {w0.tolist()}")
     if model.dof == 1 and np.any(w0[:2] != 0):
         raise InputError(
-            f"--initial-rate {w0.tolist()}: a dof = 1 bearing turns about body z only; "
+            f"initial_rate={w0.tolist()}: a dof = 1 bearing turns about body z only; "
             "give WX = WY = 0"
         )
     if model.dof == 1 and tuple(np.asarray(q0, dtype=float)) != (1.0, 0.0, 0.0, 0.0):
         raise InputError(
-            f"--initial-quaternion {list(map(float, q0))}: a dof = 1 bearing starts at yaw 0; "
+            f"q0={list(map(float, q0))}: a dof = 1 bearing starts at yaw 0; "
             "leave the quaternion at 1 0 0 0"
         )
     x0 = model.x0(q=q0, w=w0) if model.dof == 3 else model.x0(w=w0[2])
@@ -192,7 +192,7 @@ def spindown(
     """
     w = float(initial_rate)
     if not np.isfinite(w):
-        raise InputError(f"--spin-rate {initial_rate}: expected a finite rate in rad/s")
+        raise InputError(f"initial_rate={initial_rate}: expected a finite rate in rad/s")
     return free_oscillation(
         testbed,
         initial_rate=(0.0, 0.0, w),
