@@ -32,6 +32,10 @@ DOCTEST_MODULES = [
     "airbearing.api.logs",
     "airbearing.api.gains",
     "airbearing.design.sizing",
+    "airbearing.design.tuning",
+    "airbearing.design.margins",
+    "airbearing.design.loops",
+    "airbearing.analysis.simulation.scenarios",
 ]
 #: Tutorials and how-to pages whose Python blocks run here (the campaign tutorial starts a
 #: Dask cluster on a file the reader writes: its commands are tested in test_campaign*).

@@ -674,7 +674,33 @@ def _lin_ctrl_cached(model, ctl, tp, channels, kind) -> _LinearController:
 
 
 def make_loop(testbed_or_model, loop: str, **options) -> Loop:
-    """:func:`balancing_loop` or :func:`attitude_loop` by name (``"balancing"``, ``"attitude"``)."""
+    """:func:`balancing_loop` or :func:`attitude_loop` by name.
+
+    Parameters
+    ----------
+    testbed_or_model : Testbed or Model
+    loop : {"balancing", "attitude"}
+        The balancing loop of a platform with sliders, or the attitude loop of a CMG testbed.
+    **options
+        Passed on: ``gains`` (dict, SI; default the seed's), ``split`` (balancing).
+
+    Returns
+    -------
+    Loop
+
+    Raises
+    ------
+    InputError
+        An unknown loop name, or a loop the testbed does not have.
+
+    Examples
+    --------
+    >>> import airbearing as ab
+    >>> ab.make_loop(ab.load_testbed("cmg-yaw"), "pitch")
+    Traceback (most recent call last):
+    ...
+    airbearing.errors.InputError: loop='pitch': expected one of balancing|attitude
+    """
     if loop == "balancing":
         return balancing_loop(testbed_or_model, **options)
     if loop == "attitude":

@@ -389,8 +389,36 @@ class LoopAnalysis:
 def analyse_loop(
     loop, *, discrete: bool = True, multiloop: bool = True, n_freq: int = _N_GRID
 ) -> LoopAnalysis:
-    """Loop-at-a-time margins of every actuator channel of a :class:`~airbearing.design.loops.Loop`,
-    its multi-loop disk margin (more than one channel) and its closed-loop poles."""
+    """Loop-at-a-time margins of every actuator channel of a loop, its multi-loop disk
+    margin (more than one channel) and its closed-loop poles.
+
+    Parameters
+    ----------
+    loop : Loop
+        From :func:`~airbearing.design.loops.make_loop`.
+    discrete : bool
+        The loop as implemented (zero-order hold, one sample of delay; default) or the
+        continuous design model.
+    multiloop : bool
+        Also the balanced multi-loop disk margin (loops with several channels).
+    n_freq : int
+        Points of the frequency grid.
+
+    Returns
+    -------
+    LoopAnalysis
+        Per channel a :class:`LoopMargins` (dB, deg, s); ``stable``; ``to_json()`` is the
+        ``airbearing report --json`` document.
+
+    Examples
+    --------
+    >>> import airbearing as ab
+    >>> result = ab.analyse_loop(ab.make_loop(ab.load_testbed("cmg-yaw"), "attitude"))
+    >>> result.stable, sorted(result.channels)
+    (True, ['dd1', 'dd2', 'dd3', 'dd4', 'yaw'])
+    >>> 40 < result.channels["yaw"].phase_margin_deg < 60  # seed gains: 51.7 deg
+    True
+    """
     poles = loop.stability_system(discrete=discrete).poles()
     chans = {}
     for ch in loop.channels:

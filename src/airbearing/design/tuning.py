@@ -356,6 +356,27 @@ def tune(testbed, loop: str, spec: Spec | None = None, *, split: str = "mixed") 
         Default :class:`Spec` (45 deg, 6 dB, |S| <= 2, fastest).
     split : {"mixed", "mechanical"}
         Balancing PID split.
+
+    Returns
+    -------
+    TuningResult
+        The gains (SI) and every requirement checked at the worst corner of the inertia
+        (+-``spec.inertia_uncertainty``) and offset range; ``met`` is False, with the reason
+        in ``message``, when the specification cannot be met.
+
+    Raises
+    ------
+    InputError
+        An unknown loop, a loop the testbed does not have, a bandwidth at or above Nyquist.
+
+    Examples
+    --------
+    >>> import airbearing as ab
+    >>> tuned = ab.tune(ab.load_testbed("cmg-yaw"), "attitude")
+    >>> tuned.met, sorted(tuned.gains)
+    (True, ['K_i', 'K_p', 'K_w'])
+    >>> print(tuned.checks[1])
+    phase margin (deg) ... >= 45: pass
     """
     spec = Spec() if spec is None else spec
     opts = {"split": split} if loop == "balancing" else {}

@@ -35,8 +35,51 @@ def slew(
 ) -> SimResult:
     """A rest-to-rest slew of ``angle_deg`` about ``axis`` with the seed-001 attitude loop.
 
-    ``ideal=True`` removes sensor noise, disturbance torque and the gyro low-pass
-    (the "theoretical" runs of seed 001 Tables 7-8).
+    Parameters
+    ----------
+    testbed : Testbed
+        ``kind = "cmg"`` with a rate gyro (``sensors.gyro = true``).
+    angle_deg : float
+        Slew angle, deg (the loop takes the shorter way round).
+    axis : sequence of 3 float
+        Slew axis, body frame; a dof-1 testbed slews about z only.
+    duration : float
+        s (> 0), the run length at the sensor rate.
+    seed : int
+        Seed of the sensor and disturbance noise.
+    ideal : bool
+        No sensor noise, disturbance torque or gyro low-pass (the "theoretical" runs of
+        seed 001 Tables 7-8).
+    steering : {"mp", "sr", "gsr", "sda"}
+        Steering law (:mod:`airbearing.design.steering`); ``steering_options`` its options.
+    rate_limit_mode : {"scale", "clip"}
+        Gimbal-rate limiting: seed 001 eq. 4 scales the whole command, or clip each rate.
+    form : str
+        Jacobian form of the steering law (``"normalised"`` or ``"eq15"``).
+    effects : mapping, optional
+        Effects acting in the truth (FORMATS.md names and units).
+    gains : dict, optional
+        Attitude gains (``K_p``, ``K_i``, ``K_w``); default seed 001's.
+
+    Returns
+    -------
+    SimResult
+        The run; :func:`slew_summary` gives the numbers seed 001 reports.
+
+    Raises
+    ------
+    InputError
+        Not a CMG testbed, no gyro, a non-positive duration, an axis a dof-1 bearing
+        cannot turn about.
+
+    Examples
+    --------
+    Seed 001 Table 8, the theoretical 90 deg slew (gimbal minimum -33.11 deg):
+
+    >>> import airbearing as ab
+    >>> run = ab.slew(ab.load_testbed("cmg-yaw"), angle_deg=90.0, duration=10.0, ideal=True)
+    >>> round(ab.slew_summary(run)["gimbal_min_deg"][0], 1)
+    -33.2
     """
     if testbed.kind != "cmg":
         raise InputError(
@@ -70,7 +113,20 @@ def slew(
 
 
 def slew_summary(result: SimResult) -> dict:
-    """The numbers seed 001 reports for a slew (Tables 7-8), in degrees."""
+    """The numbers seed 001 reports for a slew (Tables 7-8), in degrees.
+
+    Parameters
+    ----------
+    result : SimResult
+        A run of :func:`slew`.
+
+    Returns
+    -------
+    dict
+        ``peak_rate_deg_s`` and ``t_peak_s`` (s), ``gimbal_min_deg``, ``gimbal_max_deg``,
+        ``gimbal_final_deg`` (4 each), ``final_yaw_error_deg``, ``final_yaw_deg``,
+        ``duration_s`` (s): the ``airbearing simulate --scenario slew --json`` keys.
+    """
     m = result.model
     w_idx = m.index(["wx", "wy", "wz"] if m.dof == 3 else ["wz"])
     w = result.x[:, w_idx]
@@ -113,9 +169,52 @@ def free_oscillation(
     Works on passive platforms (no ``[masses]``: ``sliders`` must stay zero) and on
     dof-1 bearings (only the z entry of ``initial_rate`` may be non-zero). The log
     follows the testbed's sensors: ``sensors.gyro = false`` gives attitude only, with
-    ``attitude_noise`` (default ``sensors.attitude_noise``, rad). ``model``: the Model to
-    run, default ``build_model(testbed, effects)``; a campaign passes one Model per
-    structure with this run's values in ``p0``, and then reuses its compiled loop.
+    ``attitude_noise`` (default ``sensors.attitude_noise``, rad).
+
+    Parameters
+    ----------
+    testbed : Testbed
+    initial_rate : sequence of 3 float
+        Body rates at the start, rad/s.
+    q0 : sequence of 4 float
+        Attitude at the start (scalar first).
+    sliders : sequence of 3 float
+        Slider positions held during the run, m (platforms with ``[masses]``).
+    effects : mapping, optional
+        Effects acting in the truth (FORMATS.md names and units).
+    duration : float
+        s (> 0).
+    seed : int
+        Seed of the measurement noise.
+    noise : bool
+        Measurement noise on (default) or off.
+    attitude_noise : float, optional
+        rad, 1-sigma attitude noise of an attitude-only log.
+    model : Model, optional
+        The Model to run, default ``build_model(testbed, effects)``; a campaign passes one
+        Model per structure with this run's values in ``p0``, and reuses its compiled loop.
+
+    Returns
+    -------
+    SimResult
+
+    Raises
+    ------
+    InputError
+        A non-positive duration, sliders on a testbed without ``[masses]`` or beyond their
+        travel, a rate a dof-1 bearing cannot have.
+
+    Examples
+    --------
+    >>> import airbearing as ab
+    >>> tb = ab.load_testbed("seed004-platform")
+    >>> run = ab.free_oscillation(tb, initial_rate=(0.3, -0.2, 0.5), duration=5.0)
+    >>> run.to_json()["samples"], list(run.log.data.columns[:5])
+    (100, ['t', 'qw', 'qx', 'qy', 'qz'])
+    >>> ab.free_oscillation(tb, duration=-1.0)
+    Traceback (most recent call last):
+    ...
+    airbearing.errors.InputError: duration=-1.0: expected a positive time in s
     """
     if duration <= 0:
         raise InputError(f"duration={duration}: expected a positive time in s")
@@ -189,6 +288,42 @@ def spindown(
     CM offset act; sliders at zero, no dipole. The log follows the testbed's sensors
     (attitude only when ``sensors.gyro = false``). A thin form of
     :func:`free_oscillation` with ``initial_rate = (0, 0, initial_rate)``.
+
+    Parameters
+    ----------
+    testbed : Testbed
+    initial_rate : float
+        rad/s about body z at the start.
+    duration : float
+        s (> 0).
+    effects : mapping, optional
+        Effects acting in the truth (FORMATS.md names and units), e.g. friction.
+    seed : int
+        Seed of the measurement noise.
+    noise : bool
+        Measurement noise on (default) or off.
+    q0 : sequence of 4 float
+        Attitude at the start (scalar first).
+    attitude_noise : float, optional
+        rad, 1-sigma attitude noise of an attitude-only log.
+
+    Returns
+    -------
+    SimResult
+
+    Examples
+    --------
+    A viscous coast-down: ``J w' = -c w``, so the rate decays as ``exp(-c t / J)``.
+
+    >>> import math
+    >>> import airbearing as ab
+    >>> tb = ab.load_testbed("cmg-yaw")
+    >>> run = ab.spindown(tb, initial_rate=1.0, duration=10.0, noise=False,
+    ...                   effects={"viscous_friction": 1e-4})
+    >>> J = tb.body.inertia_matrix[2][2]
+    >>> w_end = run.state("wz")[-1]
+    >>> bool(abs(w_end / math.exp(-1e-4 * run.t[-1] / J) - 1) < 1e-9)  # RK4 at 20 Hz
+    True
     """
     w = float(initial_rate)
     if not np.isfinite(w):
@@ -206,7 +341,18 @@ def spindown(
 
 
 def free_summary(result: SimResult) -> dict:
-    """Peak and final rate, largest tilt and the run length of a free oscillation."""
+    """Peak and final rate, largest tilt and the run length of a free oscillation.
+
+    Parameters
+    ----------
+    result : SimResult
+
+    Returns
+    -------
+    dict
+        ``peak_rate_deg_s``, ``final_rate_deg_s`` (deg/s), ``duration_s`` (s), ``samples``
+        and, on dof 3, ``max_tilt_deg``.
+    """
     m = result.model
     w = result.x[:, m.index(["wx", "wy", "wz"] if m.dof == 3 else ["wz"])]
     out = {
