@@ -44,6 +44,7 @@ RUN_PAGES = [
     "tutorials/slew-tune-report.md",
     "tutorials/identify-platform.md",
     "how-to/python.md",
+    "how-to/simulate-passive-and-artefacts.md",
 ]
 
 

@@ -10,7 +10,7 @@ find exactly those rows before it trusts them on its own logs.
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -50,11 +50,19 @@ class Rehearsal:
         The jitter fraction the clock was given.
     """
 
-    log: Log
+    log: Log = field(repr=False)
     segment_rows: tuple
     glitches: tuple
     first_sample_rows: tuple
     jitter: float
+
+    def __str__(self) -> str:
+        segs = ", ".join(f"{a}-{b - 1}" for a, b in self.segment_rows)
+        rows = ", ".join(map(str, self.outlier_rows)) or "none"
+        return (
+            f"{self.log.n} rows, {len(self.segment_rows)} segment(s) (rows {segs}), "
+            f"outlier rows {rows}, jitter {self.jitter:g}"
+        )
 
     @property
     def outlier_rows(self) -> tuple[int, ...]:
