@@ -124,40 +124,44 @@ def identify(
     ...
     airbearing.errors.InputError: method='fast': expected one of output-error, equation-error
     """
-    if method not in METHODS:
-        raise InputError(f"method={method!r}: expected one of {', '.join(METHODS)}")
-    if form not in FORMS:
-        raise InputError(f"form={form!r}: expected one of {', '.join(FORMS)}")
-    if friction not in FRICTIONS:
-        raise InputError(f"friction={friction!r}: expected none, viscous or coulomb")
+    _check_choices(method, form, friction)
     from airbearing.analysis.identification.data import COLUMNS_USED
 
     tb = as_testbed(testbed)
     loaded = as_logs(logs, tb, columns=COLUMNS_USED)
     fr = None if friction in (None, "none") else friction
     if tb.body.dof == 1:
-        if known_offset_xy is not None:
-            raise InputError("known_offset_xy applies to platform testbeds (dof 3), not to dof 1")
-        if tb.kind == "cmg":
-            from airbearing.analysis.identification.cmg_inertia import identify_cmg_inertia
-
-            return identify_cmg_inertia(tb, loaded, friction=fr)
-        if fr is not None:
-            raise InputError("friction applies to dof-1 CMG testbeds")
-        from airbearing.analysis.identification.yaw_inertia import identify_yaw_inertia
-
-        return identify_yaw_inertia(tb, loaded, method=method, progress=progress)
+        return _identify_dof1(tb, loaded, known_offset_xy, method, fr, progress)
     if fr is not None:
         raise InputError("friction applies to dof-1 CMG testbeds")
     from airbearing.analysis.identification.platform import identify_platform
 
     return identify_platform(
-        tb,
-        loaded,
-        known_offset_xy=known_offset_xy,
-        known_mass=known_mass,
-        method=method,
-        form=form,
-        prior=tb if prior is True else (prior or None),
-        progress=progress,
-    )
+        tb, loaded, known_offset_xy=known_offset_xy, known_mass=known_mass, method=method,
+        form=form, prior=tb if prior is True else (prior or None), progress=progress,
+    )  # fmt: skip
+
+
+def _check_choices(method, form, friction) -> None:
+    """Options outside their choices, before any work."""
+    if method not in METHODS:
+        raise InputError(f"method={method!r}: expected one of {', '.join(METHODS)}")
+    if form not in FORMS:
+        raise InputError(f"form={form!r}: expected one of {', '.join(FORMS)}")
+    if friction not in FRICTIONS:
+        raise InputError(f"friction={friction!r}: expected none, viscous or coulomb")
+
+
+def _identify_dof1(tb, loaded, known_offset_xy, method, friction, progress):
+    """Yaw inertia: momentum exchange on a CMG testbed, else a spin-down with known torques."""
+    if known_offset_xy is not None:
+        raise InputError("known_offset_xy applies to platform testbeds (dof 3), not to dof 1")
+    if tb.kind == "cmg":
+        from airbearing.analysis.identification.cmg_inertia import identify_cmg_inertia
+
+        return identify_cmg_inertia(tb, loaded, friction=friction)
+    if friction is not None:
+        raise InputError("friction applies to dof-1 CMG testbeds")
+    from airbearing.analysis.identification.yaw_inertia import identify_yaw_inertia
+
+    return identify_yaw_inertia(tb, loaded, method=method, progress=progress)

@@ -164,6 +164,35 @@ def pole_damping(poles, dt: float | None):
     return wn, zeta
 
 
+def _crossovers(Lof, w, Lw, mag) -> tuple[list, list]:
+    """Gain crossovers (|L| = 1) and phase crossovers (L on the negative real axis), rad/s,
+    bracketed on the grid ``w`` and refined by Brent's method."""
+    lm = np.log(np.maximum(mag, 1e-300))
+    gc = []
+    for i in np.nonzero(np.sign(lm[:-1]) * np.sign(lm[1:]) < 0)[0]:
+        gc.append(brentq(lambda x: math.log(abs(Lof(x))), w[i], w[i + 1], xtol=1e-12 * w[i]))
+    im = Lw.imag
+    pc = []
+    for i in np.nonzero((np.sign(im[:-1]) * np.sign(im[1:]) < 0) & (Lw.real[:-1] < 0))[0]:
+        x = brentq(lambda x: Lof(x).imag, w[i], w[i + 1], xtol=1e-12 * w[i])
+        if Lof(x).real < 0:
+            pc.append(x)
+    return gc, pc
+
+
+def _disk_margin(S) -> tuple[float, float, float]:
+    """Balanced disk margin (skew 0) from the sensitivity on the grid, as
+    control.disk_margins: ``alpha = 1 / max |S - 1/2|``, its gain (dB) and phase (deg)."""
+    alpha = 1 / float(np.max(np.abs(S - 0.5)))
+    if alpha >= 2:
+        return alpha, math.inf, 90.0
+    return (
+        alpha,
+        20 * math.log10((1 + alpha / 2) / (1 - alpha / 2)),
+        math.degrees(2 * math.atan(alpha / 2)),
+    )
+
+
 def loop_margins(
     L: ct.StateSpace,
     *,
@@ -195,18 +224,7 @@ def loop_margins(
     def Lof(x):
         return complex(_response(L, [x])[0])
 
-    # gain crossovers: |L| = 1
-    lm = np.log(np.maximum(mag, 1e-300))
-    gc = []
-    for i in np.nonzero(np.sign(lm[:-1]) * np.sign(lm[1:]) < 0)[0]:
-        gc.append(brentq(lambda x: math.log(abs(Lof(x))), w[i], w[i + 1], xtol=1e-12 * w[i]))
-    # phase crossovers: L on the negative real axis
-    im = Lw.imag
-    pc = []
-    for i in np.nonzero((np.sign(im[:-1]) * np.sign(im[1:]) < 0) & (Lw.real[:-1] < 0))[0]:
-        x = brentq(lambda x: Lof(x).imag, w[i], w[i + 1], xtol=1e-12 * w[i])
-        if Lof(x).real < 0:
-            pc.append(x)
+    gc, pc = _crossovers(Lof, w, Lw, mag)
     gms = [-1 / Lof(x).real for x in pc]
     up = [g for g in gms if g > 1]
     down = [g for g in gms if g < 1]
@@ -248,13 +266,7 @@ def loop_margins(
         dm = 0.0
         if gms:  # as control.stability_margins: the (negative) margin to the crossing
             gm_db = 20 * math.log10(min(gms))
-    # balanced disk margin (skew 0): alpha = 1 / max |S - 1/2| (as control.disk_margins)
-    alpha = 1 / float(np.max(np.abs(S - 0.5)))
-    if alpha >= 2:
-        dgm, dpm = math.inf, 90.0
-    else:
-        dgm = 20 * math.log10((1 + alpha / 2) / (1 - alpha / 2))
-        dpm = math.degrees(2 * math.atan(alpha / 2))
+    alpha, dgm, dpm = _disk_margin(S)
     return LoopMargins(
         name=name,
         discrete=discrete,

@@ -423,21 +423,6 @@ def tune(testbed, loop: str, spec: Spec | None = None, *, split: str = "mixed") 
     lp = best
     checks, worst, per = evaluate(lp, spec, actuators=True)
     met = all(c.met for c in checks)
-    failed = [c for c in checks if not c.met]
-    if met:
-        msg = "specification met: " + "; ".join(
-            f"{c.name} {c.value:.4g} (limit {c.limit:.4g})" for c in checks if c.value is not None
-        )
-    else:
-        msg = "specification NOT met: " + "; ".join(
-            f"{c.name} "
-            + (
-                "unstable"
-                if c.value is None
-                else f"{c.value:.4g} vs {c.sense} {c.limit:.4g}, short by {abs(c.by):.3g}"
-            )
-            for c in failed
-        )
     return TuningResult(
         loop=loop,
         split=split if loop == "balancing" else None,
@@ -447,6 +432,24 @@ def tune(testbed, loop: str, spec: Spec | None = None, *, split: str = "mixed") 
         checks=checks,
         met=met,
         worst_case=worst,
-        message=msg,
+        message=_verdict(checks),
         corners=[(label, w) for label, w in per],
+    )
+
+
+def _verdict(checks: list) -> str:
+    """The tuning verdict in words: every value against its limit, or what falls short."""
+    if all(c.met for c in checks):
+        return "specification met: " + "; ".join(
+            f"{c.name} {c.value:.4g} (limit {c.limit:.4g})" for c in checks if c.value is not None
+        )
+    return "specification NOT met: " + "; ".join(
+        f"{c.name} "
+        + (
+            "unstable"
+            if c.value is None
+            else f"{c.value:.4g} vs {c.sense} {c.limit:.4g}, short by {abs(c.by):.3g}"
+        )
+        for c in checks
+        if not c.met
     )

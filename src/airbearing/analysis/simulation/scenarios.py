@@ -219,6 +219,22 @@ def free_oscillation(
     if duration <= 0:
         raise InputError(f"duration={duration}: expected a positive time in s")
     model = build_model(testbed, effects) if model is None else model
+    u = _free_inputs(testbed, model, sliders)
+    w0 = _initial_rate(model, initial_rate, q0)
+    x0 = model.x0(q=q0, w=w0) if model.dof == 3 else model.x0(w=w0[2])
+    return simulate(
+        model,
+        _held_input(model, tuple(u.tolist())),
+        duration=duration,
+        x0=x0,
+        seed=seed,
+        noise=noise,
+        attitude_noise=attitude_noise,
+    )
+
+
+def _free_inputs(testbed: Testbed, model: Model, sliders) -> np.ndarray:
+    """The held input of a free oscillation: sliders at ``sliders`` (m), the cage field on."""
     u = np.zeros(model.nu)
     if testbed.kind == "platform":
         s = np.asarray(sliders, dtype=float)
@@ -239,6 +255,11 @@ def free_oscillation(
             u[model.index(["bx_lab", "by_lab", "bz_lab"], "u")] = testbed.field.lab_vec
     elif any(v != 0 for v in sliders):
         raise InputError("sliders applies to kind = 'platform' testbeds only")
+    return u
+
+
+def _initial_rate(model: Model, initial_rate, q0) -> np.ndarray:
+    """``initial_rate`` (rad/s) checked against the bearing (dof 1: about z, from yaw 0)."""
     w0 = np.asarray(initial_rate, dtype=float)
     if w0.shape != (3,):
         raise InputError(f"initial_rate: expected 3 rates WX WY WZ in rad/s, got {w0.tolist()}")
@@ -252,16 +273,7 @@ def free_oscillation(
             f"q0={list(map(float, q0))}: a dof = 1 bearing starts at yaw 0; "
             "leave the quaternion at 1 0 0 0"
         )
-    x0 = model.x0(q=q0, w=w0) if model.dof == 3 else model.x0(w=w0[2])
-    return simulate(
-        model,
-        _held_input(model, tuple(u.tolist())),
-        duration=duration,
-        x0=x0,
-        seed=seed,
-        noise=noise,
-        attitude_noise=attitude_noise,
-    )
+    return w0
 
 
 @lru_cache(maxsize=16)
