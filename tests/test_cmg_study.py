@@ -23,8 +23,6 @@ from airbearing.analysis.cmg.steering_study import (
 from airbearing.cli import main
 from airbearing.design.steering import STEERING_LAWS
 from airbearing.errors import InputError
-from airbearing.reporting.cmg import demo_section
-from airbearing.reporting.html import Report
 
 BETA = np.deg2rad(53.13)
 BUDGET_S = 30.0  # time budget of the manoeuvre (nominal ramp: 10 s to 2.0 h0)
@@ -121,12 +119,7 @@ def test_simulate_cli_takes_every_steering_law(tmp_path):
         assert js.exists()
 
 
-@pytest.mark.slow
-def test_demo_section_quick():
-    report = Report("t")
-    demo_section(report, quick=True)
-    html = report.html()
-    assert "elliptic internal singularity" in html and html.count("<img") >= 3
+# The CMG demo section: tests/test_demo.py (the suite's one demo run).
 
 
 def test_null_motion_escapes_hyperbolic_not_elliptic():

@@ -18,6 +18,10 @@ def test_demo_runs_and_reports_every_section(demo_run):
     assert proc.returncode == 0, proc.stderr[-2000:]
     html = (out / "report.html").read_text()
     assert "Seed 001" in html and "data:image/svg+xml;base64," in html
+    # each section's finding (the sections are not run again on their own)
+    assert "elliptic internal singularity" in html  # CMG: steering laws at a singularity
+    assert "seed-001 inertia story" in html and "inertia_error" in html  # discrepancy
+    assert html.count("<img") >= 10  # every section has its figures, embedded
     assert "http://" not in html and "https://" not in html  # self-contained
     assert bad_text(html) == [], "nan/inf text in the demo report"
 

@@ -12,8 +12,7 @@ from airbearing.analysis.discrepancy.search import discrepancy
 from airbearing.analysis.simulation.scenarios import slew
 from airbearing.io.log import write_log
 from airbearing.io.testbed import Sensors, load_testbed, read_testbed, write_testbed
-from airbearing.reporting.discrepancy import demo_section, discrepancy_report
-from airbearing.reporting.html import Report
+from airbearing.reporting.discrepancy import discrepancy_report
 
 _CMG = load_testbed("cmg-yaw")
 CMG = _CMG.replace(sensors=Sensors(rate=_CMG.sensors.rate, gyro_noise=5e-4, lowpass=1.0))
@@ -102,10 +101,4 @@ def test_cli_log_of_the_wrong_kind(story, tmp_path, capsys):
     assert "missing column" in capsys.readouterr().err
 
 
-@pytest.mark.slow
-def test_demo_section_quick():
-    report = Report("demo")
-    demo_section(report, quick=True)
-    html = report.html()
-    assert "seed-001 inertia story" in html
-    assert "inertia_error" in html
+# The discrepancy demo section: tests/test_demo.py (the suite's one demo run).
