@@ -28,9 +28,9 @@ DOCS = ROOT / "docs"
 
 #: Modules whose docstring Examples are part of the public documentation.
 DOCTEST_MODULES = [
-    "airbearing.api.identify",
+    "airbearing.analysis.identify",
     "airbearing.api.logs",
-    "airbearing.api.gains",
+    "airbearing.io.gains",
     "airbearing.design.sizing",
     "airbearing.design.tuning",
     "airbearing.design.margins",

@@ -49,7 +49,7 @@ _WHERE: dict[str, str] = {
     ),
     **dict.fromkeys(["Rehearsal", "rehearsal_log"], "airbearing.analysis.simulation.rehearsal"),
     # identification
-    "identify": "airbearing.api.identify",
+    "identify": "airbearing.analysis.identify",
     "Prior": "airbearing.analysis.identification.result",
     "PlatformIdentification": "airbearing.analysis.identification.result",
     "YawIdentification": "airbearing.analysis.identification.yaw_inertia",
@@ -59,7 +59,7 @@ _WHERE: dict[str, str] = {
     **dict.fromkeys(["Replay", "replay"], "airbearing.analysis.discrepancy.replay"),
     # tuning, linearisation, margins, stability report
     **dict.fromkeys(["Spec", "TuningResult", "tune", "evaluate"], "airbearing.design.tuning"),
-    "read_gains": "airbearing.api.gains",
+    "read_gains": "airbearing.io.gains",
     **dict.fromkeys(["Loop", "make_loop"], "airbearing.design.loops"),
     **dict.fromkeys(["TrimPoint", "trim", "linearise"], "airbearing.design.linearise"),
     **dict.fromkeys(

@@ -1,6 +1,6 @@
-"""Library functions behind the front door ``import airbearing as ab``.
+"""The top library layer, under the CLI: results that draw with ``reporting/``.
 
-Each module here holds a decision that used to live only in the command line (which
-identifier runs, the ``log check`` summary), so that the CLI, the campaign adapters and a
-notebook call the same function. Nothing here imports a numerical library at import time.
+:mod:`.logs` holds what ``airbearing log check`` and ``log plot`` do (``ab.check_log``,
+``ab.plot_log``), with a result whose ``.plot()`` uses :mod:`airbearing.reporting`, which the
+layers below may not import. Nothing here imports a numerical library at import time.
 """

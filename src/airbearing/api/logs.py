@@ -133,7 +133,7 @@ def check_log(log, testbed=None) -> LogCheck:
     >>> check.segments, check.outlier_rows
     (1, ())
     """
-    from airbearing.api.identify import as_testbed
+    from airbearing.analysis.identify import as_testbed
     from airbearing.io.log import Log, read_log
     from airbearing.io.tool_use import tool_use
 
@@ -172,7 +172,7 @@ def plot_log(log, testbed=None):
     -------
     matplotlib.figure.Figure
     """
-    from airbearing.api.identify import as_testbed
+    from airbearing.analysis.identify import as_testbed
     from airbearing.io.log import Log, read_log
     from airbearing.reporting.log_plot import log_figure
 

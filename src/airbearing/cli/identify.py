@@ -67,7 +67,7 @@ def identify(
     reuse_freed_memory()
     tb = testbed_arg(testbed)
     loaded = [read_log(p, tb, columns=COLUMNS_USED) for p in logs]
-    from airbearing.api.identify import identify as identify_logs
+    from airbearing.analysis.identify import identify as identify_logs
 
     with progress_display("identify") as progress:
         try:

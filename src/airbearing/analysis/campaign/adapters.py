@@ -416,7 +416,7 @@ def run_command(campaign, testbed: Testbed, seed: int) -> dict:
     log = _truth_log(campaign, testbed, seed)
     nominal = campaign.testbed
     if cmd == "identify":
-        from airbearing.api.identify import identify
+        from airbearing.analysis.identify import identify
 
         # the choice of method is the library's (as airbearing identify); no CAD prior
         # check, so a campaign's columns stay those of its runs

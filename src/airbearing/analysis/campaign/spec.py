@@ -204,24 +204,18 @@ def _spec(src: str, key: Any, entry: Any) -> SpecEntry:
 
 
 def _read_gains(src: str, base: Path, value: Any) -> tuple[float, float, float]:
-    import json
+    """``K_p, K_i, K_w`` of an ``airbearing gains --loop attitude --json`` file (the one
+    reader, :func:`airbearing.io.gains.read_gains`), the path relative to ``base``."""
+    from airbearing.io.gains import read_gains
 
     where = f"{src}: [args] gains"
     if not isinstance(value, str):
         raise InputError(f"{where}: expected the path of an 'airbearing gains --json' file")
     path = (base / value) if not Path(value).is_absolute() else Path(value)
     try:
-        data = json.loads(path.read_text())
-    except FileNotFoundError:
-        raise InputError(f"{where} '{value}': file {path} not found") from None
-    except (json.JSONDecodeError, UnicodeDecodeError) as e:
-        raise InputError(f"{where} '{value}': not a JSON file ({e})") from None
-    g = data.get("gains") if isinstance(data, dict) else None
-    if not isinstance(data, dict) or data.get("loop") != "attitude" or not isinstance(g, dict):
-        raise InputError(
-            f"{where} '{value}': expected the JSON of 'airbearing gains --loop attitude' "
-            "(keys 'loop' = 'attitude' and 'gains')"
-        )
+        g = read_gains(path, "attitude")["gains"]
+    except InputError as e:
+        raise InputError(f"{where} '{value}': {e}") from None
     try:
         return tuple(float(g[k]) for k in ("K_p", "K_i", "K_w"))
     except (KeyError, TypeError, ValueError):

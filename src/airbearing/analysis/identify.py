@@ -56,6 +56,7 @@ def identify(
     friction: str | None = None,
     prior=True,
     progress=None,
+    hold: str | None = None,
 ):
     """Identify a testbed's mass properties from its logs, the method chosen by the testbed.
 
@@ -82,6 +83,10 @@ def identify(
         ``airbearing identify`` does; False: none.
     progress : callable, optional
         ``progress(step, done, total)`` for long fits.
+    hold : {None, "inertia", "cm"}
+        dof 3 only: take the testbed's inertia (fit the CM offset) or its CM offset (fit
+        the inertia) as known; free motion fixes them only up to a common scale. The
+        result's ``held`` says which.
 
     Returns
     -------
@@ -130,6 +135,8 @@ def identify(
     tb = as_testbed(testbed)
     loaded = as_logs(logs, tb, columns=COLUMNS_USED)
     fr = None if friction in (None, "none") else friction
+    if hold is not None and tb.body.dof == 1:
+        raise InputError("hold applies to platform testbeds (dof 3), not to dof 1")
     if tb.body.dof == 1:
         return _identify_dof1(tb, loaded, known_offset_xy, method, fr, progress)
     if fr is not None:
@@ -139,6 +146,7 @@ def identify(
     return identify_platform(
         tb, loaded, known_offset_xy=known_offset_xy, known_mass=known_mass, method=method,
         form=form, prior=tb if prior is True else (prior or None), progress=progress,
+        hold=hold,
     )  # fmt: skip
 
 
