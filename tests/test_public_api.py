@@ -134,3 +134,25 @@ def test_identify_chooses_the_method_as_the_cli_did(testbed, chosen, monkeypatch
     if chosen == "identify_platform":
         assert kw["prior"] is tb and kw["method"] == "output-error"
         assert kw["form"] == "integrated"
+
+
+def test_check_log_is_the_log_check_json(tmp_path):
+    """ab.check_log(...).to_json() is the document `airbearing log check --json` writes."""
+    import json
+
+    from cli_run import run
+
+    tb = ab.load_testbed("cmg-yaw")
+    log = ab.spindown(tb, initial_rate=1.0, duration=5.0, seed=3).log
+    path = tmp_path / "spin.csv"
+    ab.write_log(log, path)
+    assert (
+        run(["--quiet", "log", "check", "cmg-yaw", str(path), "--json", str(tmp_path / "c.json")])
+        == 0
+    )
+    cli = json.loads((tmp_path / "c.json").read_text())
+    lib = json.loads(json.dumps(ab.check_log(path, tb).to_json()))
+    assert lib == cli
+    check = ab.check_log(ab.read_log(path, tb))
+    assert check.segments == 1 and check.outlier_rows == ()
+    assert len(str(check).splitlines()) <= 10 and len(repr(check)) < 200
