@@ -44,6 +44,13 @@ def identify(
         Literal["none", "viscous", "coulomb"] | None,
         typer.Option(help="CMG: none, viscous or coulomb friction with J_z."),
     ] = None,
+    hold: Annotated[
+        Literal["inertia", "cm"] | None,
+        typer.Option(
+            help="Platform: take the testbed's inertia (fit the CM offset) or CM offset "
+            "(fit the inertia) as known."
+        ),
+    ] = None,
     json_out: Annotated[Path | None, typer.Option("--json", help="Result JSON.")] = None,
     write_testbed_path: Annotated[
         Path | None, typer.Option("--write-testbed", help="Testbed file with identified values.")
@@ -73,11 +80,11 @@ def identify(
         try:
             result = identify_logs(
                 tb, loaded, known_offset_xy=known_offset_xy, known_mass=known_mass,
-                method=method, form=form, friction=friction, progress=progress,
+                method=method, form=form, friction=friction, progress=progress, hold=hold,
             )  # fmt: skip
         except InputError as e:  # the library names parameters; the CLI names its flags
             msg = str(e)
-            for param in ("known_offset_xy", "friction", "method", "form"):
+            for param in ("known_offset_xy", "friction", "method", "form", "hold"):
                 if msg.startswith(param):
                     msg = "--" + param.replace("_", "-") + msg[len(param) :].replace("=", " ", 1)
             raise InputError(msg) from None
@@ -101,6 +108,8 @@ def identify(
             )
         )
         typer.echo(f"condition number: {result.condition_number:.3g}")
+        if getattr(result, "held", None):
+            typer.echo(f"held: {result.held} (from the testbed file)")
         for name, why in result.std_status.items():
             if why != "estimated":
                 typer.echo(f"{name}: {why}")

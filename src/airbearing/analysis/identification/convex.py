@@ -146,7 +146,9 @@ def face(theta, *, mass, margin, js) -> list[str]:
 
 def active_constraints(theta, theta_ls, *, mass, margin, js, fixed, prior):
     """Names of the constraints that bind at ``theta`` (``theta_ls``: without inequalities)."""
-    names = [f"known_offset_{'xyz'[i - 6]}" for i in sorted(fixed)]
+    names = [f"known_offset_{'xyz'[i - 6]}" for i in sorted(fixed) if i >= 6]
+    if any(i < 6 for i in fixed):
+        names.append("held_inertia")
     ls_physical = np.linalg.eigvalsh(sigma_cm(theta_ls, mass)).min() >= margin
     if not ls_physical:
         names += face(theta, mass=mass, margin=margin, js=js) or ["pseudo_inertia_lmi"]

@@ -89,7 +89,29 @@ def _log_entries(data) -> list[dict]:
     ]
 
 
-def _check_options(testbed, method, known_mass, known_offset_xy, prior, prior_weight):
+#: What ``hold=`` may take as known from the testbed file (module doc).
+HOLD = ("inertia", "cm")
+
+
+def _held(testbed, hold, known_offset_xy) -> dict:
+    """Index -> value of the parameters ``hold`` takes from the testbed file."""
+    if hold is None:
+        return {}
+    if hold not in HOLD:
+        raise InputError(f"hold={hold!r}: expected 'inertia' or 'cm'")
+    if hold == "cm":
+        if known_offset_xy is not None:
+            raise InputError(
+                "hold='cm' takes the whole CM offset from the testbed file; give either it "
+                "or known_offset_xy"
+            )
+        return {6 + i: float(v) for i, v in enumerate(testbed.body.cm_offset_vec)}
+    J = testbed.body.inertia_matrix
+    six = (J[0, 0], J[1, 1], J[2, 2], J[0, 1], J[0, 2], J[1, 2])
+    return {i: float(v) for i, v in enumerate(six)}
+
+
+def _check_options(testbed, method, known_mass, known_offset_xy, prior, prior_weight, hold=None):
     if method not in ("output-error", "equation-error"):
         raise InputError(f"method={method!r}: expected 'output-error' or 'equation-error'")
     mass = testbed.body.mass if known_mass is None else float(known_mass)
@@ -101,6 +123,7 @@ def _check_options(testbed, method, known_mass, known_offset_xy, prior, prior_we
         if xy.shape != (2,) or not np.all(np.isfinite(xy)):
             raise InputError(f"known_offset_xy={known_offset_xy!r}: expected two numbers X Y in m")
         fixed = {6: float(xy[0]), 7: float(xy[1])}
+    fixed.update(_held(testbed, hold, known_offset_xy))
     if isinstance(prior, Testbed):
         prior = Prior.from_testbed(prior)
     if prior is not None and not isinstance(prior, Prior):
@@ -124,6 +147,7 @@ def identify_platform(
     window: int | None = None,
     margin: float | None = None,
     segment: float | None = 4.0,
+    hold: str | None = None,
     progress=None,
 ) -> PlatformIdentification:
     """Identify the inertia about CR and the CR -> CM offset of a platform from its logs.
@@ -160,6 +184,11 @@ def identify_platform(
         the mean inertia).
     segment : float or None
         Output error: multiple-shooting segment length, s (None: one per log segment).
+    hold : {"inertia", "cm"}, optional
+        Take the testbed file's inertia (``"inertia"``: fit the CM offset) or its CM offset
+        (``"cm"``: fit the inertia) as known. Free motion fixes J and r only up to a common
+        scale (``J w' + w x J w = m r x g`` is homogeneous in both); holding one breaks it.
+        The result's ``held`` says which.
     progress : callable, optional
         ``progress(what, done, total)`` (:mod:`airbearing.progress`).
 
@@ -178,7 +207,7 @@ def identify_platform(
 
     report = call(progress)
     mass, fixed, prior = _check_options(
-        testbed, method, known_mass, known_offset_xy, prior, prior_weight
+        testbed, method, known_mass, known_offset_xy, prior, prior_weight, hold
     )
     report("reading the logs", 0, 3)
     data = prepare_platform_logs(testbed, logs)
@@ -275,6 +304,7 @@ def identify_platform(
         logs=logs_json,
         weak_directions=weak,
         prior_z=prior_z,
+        held=hold,
         details={
             "form": form,
             "window_samples": int(window) if form == "integrated" else None,
@@ -299,7 +329,7 @@ def identify_platform(
         testbed, data, theta_ee, mass=mass, free=free_oe, margin=margin, segment=segment
     )
     theta = oe.theta
-    active_oe = [n for n in active if n.startswith("known_offset")]
+    active_oe = [n for n in active if n.startswith(("known_offset", "held_"))]
     active_oe += face(theta, mass=mass, margin=margin, js=js)
     Fi = fisher_from_covariance(oe.cov, free_oe, np.where(np.arange(9) < 6, js, 1e-3))
     cov_oe, cond_oe, weak_oe, null_oe = diagnostics(Fi, free_oe, theta, mass=mass)
@@ -353,6 +383,7 @@ def identify_platform(
         cramer_rao_inertia=sym_from6(crb),
         cramer_rao_cm_offset=crb[6:9].copy(),
         prior_z=prior_z_oe,
+        held=hold,
         details={
             "residual_rms_rate_rad_s": oe.rms_w if gyro else None,
             "residual_rms_attitude_rad": oe.rms_q,
@@ -386,8 +417,9 @@ def _check_scale(testbed, data, fixed, prior, prior_weight) -> None:
     raise InputError(
         "identify: inertia and CM offset are not identifiable from these logs: free motion "
         "fixes them only up to a common scale (J w' + w x J w = m r x g is homogeneous in J "
-        "and r) and nothing known breaks it; give the in-plane offset (--known-offset-xy), "
-        "log with the sliders at known non-zero positions, or command a known dipole"
+        "and r) and nothing known breaks it; hold the testbed's inertia or CM offset as known "
+        "(--hold inertia, --hold cm), give the in-plane offset (--known-offset-xy), log with "
+        "the sliders at known non-zero positions, or command a known dipole"
     )
 
 

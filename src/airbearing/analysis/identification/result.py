@@ -166,6 +166,9 @@ class PlatformIdentification:
         When a prior was given: per parameter, (estimate - prior) in combined sigmas.
     details : dict
         Noise levels, iterations, samples, point O, form.
+    held : str or None
+        ``"inertia"`` or ``"cm"``: the testbed file's value taken as known (``hold=``),
+        which breaks the common scale of J and r in free motion; None when neither.
     """
 
     inertia: np.ndarray
@@ -188,6 +191,7 @@ class PlatformIdentification:
     cramer_rao_cm_offset: np.ndarray | None = None
     prior_z: dict = field(default_factory=dict)
     details: dict = field(default_factory=dict)
+    held: str | None = None
 
     @property
     def theta(self) -> np.ndarray:
@@ -234,6 +238,7 @@ class PlatformIdentification:
             "logs": [dict(lg) for lg in self.logs],
             "warnings": list(self.warnings),
             "weak_directions": [dict(w) for w in self.weak_directions],
+            "held": self.held,
         }
         if self.cramer_rao_inertia is not None:
             out["cramer_rao"] = {
