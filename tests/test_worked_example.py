@@ -57,6 +57,9 @@ def test_readme_worked_example_names_the_hidden_effects(tmp_path):
         assert abs(named[name]["value"] - value) <= 0.2 * value, (name, named[name])
         assert abs(named[name]["value"]) >= 3 * named[name]["std"]
     assert result["gap_unit"] == "rad" and result["outlier_rows"] == [400, 1700]
+    # the README says so: nothing on the rig acts that does not scale with J
+    status = {c["name"]: c["status"] for c in result["candidates"]}
+    assert status["inertia_error"].startswith("not identifiable"), status
     replay = json.loads((tmp_path / "r.json").read_text())
     # the augmented testbed on the second run: about the noise floor ("1.00 x" in the README)
     assert replay["gap"] <= 1.5 * replay["noise_floor"], replay
