@@ -7,7 +7,9 @@ on dof 3 an effect that FORMATS.md allows as one number or three (friction, drag
 gyro bias) is two candidates, one value for every axis and one per body axis.
 
 Effects with a physical sign are fitted inside their physical range
-(``PHYSICAL_LOWER``: friction, drag, lag and dead zone are >= 0).
+(``PHYSICAL_LOWER``: friction, drag, lag and dead zone are >= 0), and every effect within
+what real rigs have (``PHYSICAL_RANGE``, e.g. a CM offset within +-0.1 m: several cm
+before balancing).
 
 Only physical candidates are offered (:func:`not_physical`): a linear
 ``spring_torque`` (``tau_z = -k yaw``: cables, an umbilical) is not offered on logs
@@ -52,6 +54,7 @@ from airbearing.models.model import Model
 
 __all__ = [
     "PHYSICAL_LOWER",
+    "PHYSICAL_RANGE",
     "SPRING_MAX_SPAN",
     "Candidate",
     "candidates_for",
@@ -69,6 +72,21 @@ PHYSICAL_LOWER = {
     "aero_drag": 0.0,
     "sensor_lag": 0.0,
     "gimbal_deadzone": 0.0,
+}
+#: The range a fit may take each effect's value in: what real rigs have, with a wide margin
+#: (sources in docs/reference/effect-ranges.md).
+#: Each entry is ``(lower, upper)`` per component, FORMATS.md units.
+PHYSICAL_RANGE = {
+    "inertia_error": (-0.9, 9.0),  # (1 + value) in [0.1, 10]: CAD within a factor of ten
+    "viscous_friction": (0.0, 1.0),  # N m s; air bearings 1e-7..1e-4
+    "coulomb_friction": (0.0, 1.0),  # N m; air bearings 1e-6..1e-3
+    "aero_drag": (0.0, 1.0),  # N m s^2; 1e-7..1e-4, on every axis of a platform
+    "spring_torque": (-10.0, 10.0),  # N m / rad; cables and umbilicals 1e-5..1e-2
+    "cm_offset_error": (-0.1, 0.1),  # m per axis; several cm before balancing
+    "residual_dipole": (-10.0, 10.0),  # A m^2 per axis; CubeSats 1e-3..1e-1
+    "gyro_bias": (-0.1, 0.1),  # rad/s per axis; MEMS gyros 1e-4..1e-2
+    "sensor_lag": (0.0, 1.0),  # s
+    "gimbal_deadzone": (0.0, 1.0),  # rad/s
 }
 #: Effects that change the measured rate only: they need a gyro.
 GYRO_EFFECTS = ("gyro_bias", "sensor_lag")
@@ -280,6 +298,8 @@ def _candidates(testbed: Testbed, datas, only) -> tuple[list, list]:
         lo = PHYSICAL_LOWER.get(name, -math.inf if spec.lower is None else spec.lower)
         if name == "inertia_error":
             lo = -0.9  # (1 + value) > 0 with a margin
+        rng = PHYSICAL_RANGE.get(name, (-math.inf, math.inf))
+        lo, hi = max(lo, rng[0]), rng[1]
         for tie, per_axis in forms:
             k = tie.shape[1]
             (unphysical if name in refused else out).append(
@@ -288,7 +308,7 @@ def _candidates(testbed: Testbed, datas, only) -> tuple[list, list]:
                     params=params,
                     tie=tie,
                     lower=(lo,) * k,
-                    upper=(math.inf,) * k,
+                    upper=(hi,) * k,
                     smooth=name != "gimbal_deadzone",
                     lag=name == "sensor_lag",
                     per_axis=per_axis,

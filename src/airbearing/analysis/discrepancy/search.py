@@ -30,7 +30,7 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -61,6 +61,14 @@ from airbearing.analysis.discrepancy.screen import (
     screened,
     screened_lag,
     screened_scan,
+)
+from airbearing.analysis.discrepancy.starts import (
+    RETRY_EXPLAINED,
+    RETRY_GAP_FLOOR,
+    continuation_fit,
+    explained_fraction,
+    needs_retry,
+    start_json,
 )
 from airbearing.analysis.discrepancy.trial import (
     CV_FOLDS,
@@ -247,6 +255,9 @@ class Discrepancy:
                         "nameable",
                         "status",
                         "reason",
+                        "start",
+                        "retried",
+                        "retry_reason",
                     )
                 }
                 for c in self.candidates
@@ -321,7 +332,8 @@ def _try(search, cand, chosen, theta_chosen, current, current_lag, ln_n, starts,
     lower = np.r_[[lo for c in chosen for lo in c.lower], cand.lower]
     upper = np.r_[[hi for c in chosen for hi in c.upper], cand.upper]
     delta0 = search.delta_for(lag, current)
-    start, note = None, ""
+    start, note, retried, left = None, "", "", ""
+    source, explained, floor = "regression", 0.0, search.floor.value
     try:
         if not cand.smooth:
             if lin is not None:
@@ -330,7 +342,7 @@ def _try(search, cand, chosen, theta_chosen, current, current_lag, ln_n, starts,
                 )
                 if res is not None:
                     return res
-            fit, start, note = scan(
+            fit, start_grid, note = scan(
                 problem,
                 cand,
                 p_base,
@@ -342,6 +354,7 @@ def _try(search, cand, chosen, theta_chosen, current, current_lag, ln_n, starts,
                 delta0,
                 current.rss,
             )
+            start = start_json("grid", start_grid, points=len(fit.extra["profile"]))
         else:
             if cand.lag:
                 if lin is not None and not current_lag:
@@ -353,40 +366,103 @@ def _try(search, cand, chosen, theta_chosen, current, current_lag, ln_n, starts,
                         return res
                 th0 = np.array([lag_start(search.problem(current_lag), current, search.datas)])
                 note = "start: rate residual regressed on -w' (a lag delays the measured rate)"
+                start = start_json("regression", th0[0], regressor="-w'")
             else:
-                th0, sd0 = starts[(cand.label, len(chosen))]
+                th0, sd0, explained = starts[(cand.label, len(chosen))]
                 if not np.all(np.isfinite(sd0)):
-                    th0 = np.zeros(cand.k)
+                    th0, source, explained = np.zeros(cand.k), "nominal", 0.0
                     note = "start: 0 (no torque regressor from the logs)"
                 else:
                     note = "start: residual-torque regression"
+                # far from the nominal the step cannot be trusted to dismiss an effect the
+                # regression sees: IPOPT decides (module doc of .starts)
+                far = current.gap > RETRY_GAP_FLOOR * floor and explained >= RETRY_EXPLAINED
                 if lin is not None:
                     th_reg = np.clip(th0, cand.lower, cand.upper)
                     res = screened(
                         lin, cand, k_sel, lower, upper, current, ln_n, before, search.folds, th_reg
                     )
-                    if res is not None:
-                        return res
+                    if res is not None and not (far and not res.significant):
+                        how = "Gauss-Newton step from the current fit"
+                        return replace(res, start=start_json("nominal", res.value, method=how))
             th0 = np.clip(th0, cand.lower, cand.upper)
-            start = cand.value(th0)
-            fit = problem.fit(
-                p_base,
-                S_all,
-                np.r_[theta_chosen, th0],
-                lower=lower,
-                upper=upper,
-                delta0=delta0,
-                name=f"candidate {cand.label}",
+            if not cand.lag:
+                start = start_json(source, cand.value(th0))
+            fit, retried, left = _fit_or_retry(
+                search,
+                lag,
+                cand,
+                (p_base, S_all, np.r_[theta_chosen, th0], lower, upper, delta0),
+                current,
+                source,
+                explained,
             )
+            if isinstance(fit, str):  # neither fit converged: the reason
+                return replace(
+                    failed(cand, "did not converge", fit, start, before.total()[1]),
+                    retried=True,
+                    retry_reason=retried,
+                )
+            if retried and "stages" in fit.extra:
+                start = start_json(
+                    "continuation", cand.value(th0), start_from=source, stages=fit.extra["stages"]
+                )
     except SolverError as e:
         return failed(cand, "did not converge", str(e), start, before.total()[1])
     k_added = cand.k
     if cand.lag and not current_lag:
         k_added += len(model.lag_index) * problem.windows.n
     heldout = cross_validate(problem, fit, k, search.folds)
-    return why(
+    res = why(
         problem, judge(cand, fit, k_sel, current, ln_n, k_added, heldout, before, start, note)
     )
+    if retried:
+        res = replace(res, retried=True, retry_reason=retried)
+        if left:  # the retry ended badly too: not an answer
+            res = replace(res, nameable=False, reason=res.reason or retried)
+    return res
+
+
+def _fit_or_retry(search, lag, cand, args, current, source, expl):
+    """IPOPT from the start; a fit that ended badly is retried by continuation (.starts).
+
+    ``args = (p_base, S_all, theta0, lower, upper, delta0)``. Returns ``(fit, retried,
+    left)``: the better fit (or the error text when neither converged), why it was retried
+    ("" when it was not) and what is still wrong after the retry ("" when nothing).
+    """
+    p_base, S_all, theta0, lower, upper, delta0 = args
+    problem = search.problem(lag)
+    floor = search.floor.value
+    err = ""
+    try:
+        fit = problem.fit(
+            p_base,
+            S_all,
+            theta0,
+            lower=lower,
+            upper=upper,
+            delta0=delta0,
+            name=f"candidate {cand.label}",
+        )
+    except SolverError as e:
+        fit, err = None, str(e)
+    retry = needs_retry(fit, current, floor, expl)
+    if not retry:
+        return (fit if fit is not None else err), "", ""
+    try:
+        fit2, stages = continuation_fit(
+            search, lag, p_base, S_all, theta0, lower, upper, cand.label
+        )
+        fit2 = replace(fit2, extra={**fit2.extra, "stages": stages})
+    except SolverError as e:
+        fit2, err = None, f"{err}; continuation: {e}" if err else str(e)
+    if fit2 is not None and (fit is None or fit2.rss < fit.rss):
+        fit = fit2
+    left = needs_retry(fit, current, floor, expl)
+    retried = f"retried by continuation from the {source} start ({retry})" + (
+        f"; the retry failed too: {left}" if left else ""
+    )
+    return (fit if fit is not None else f"{err}; {retried}"), retried, left
 
 
 def _validate(testbed, effects, logs, window_s, jit) -> tuple:
@@ -521,7 +597,8 @@ def discrepancy(
         for c in remaining:
             if c.smooth and not c.lag:
                 tau, phi = residual_torque(model, datas, p_cur, search.S(current_lag, [c]))
-                starts[(c.label, len(chosen))] = regression_start(tau, phi)
+                th, sd = regression_start(tau, phi)
+                starts[(c.label, len(chosen))] = (th, sd, explained_fraction(tau, phi, th))
         # the lag problem (more states) is built before the threads share it
         for c in remaining:
             search.problem(current_lag or c.lag)

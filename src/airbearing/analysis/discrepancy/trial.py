@@ -117,6 +117,9 @@ class CandidateResult:
     note: str = ""
     fit: Fit | None = None
     candidate: Candidate | None = None
+    #: the fit was retried by continuation from the regression start (:mod:`.starts`), and why
+    retried: bool = False
+    retry_reason: str = ""
 
     @property
     def label(self) -> str:
@@ -145,8 +148,10 @@ class CandidateResult:
             "nameable": bool(self.nameable),
             "status": self.status,
             "reason": self.reason,
-            "start": jsonable(self.start),
+            "start": self.start if isinstance(self.start, dict) else jsonable(self.start),
             "note": self.note,
+            "retried": bool(self.retried),
+            "retry_reason": self.retry_reason,
         }
 
     def to_json(self) -> dict:
