@@ -30,6 +30,7 @@ DOCS = ROOT / "docs"
 DOCTEST_MODULES = [
     "airbearing.analysis.identify",
     "airbearing.api.logs",
+    "airbearing.api.plot",
     "airbearing.io.gains",
     "airbearing.design.sizing",
     "airbearing.design.tuning",

@@ -30,6 +30,7 @@ REQUIRED = {
     "discrepancy": ["discrepancy", "replay", "Discrepancy", "Replay"],
     "design": ["tune", "Spec", "read_gains", "linearise", "trim", "loop_margins", "make_loop"],
     "stability": ["stability_report", "analyse_loop"],
+    "pictures": ["plot", "report", "plot_log"],
     "balancing": ["run_balancing", "compare_methods", "sweep_comparison", "two_step"],
     "cmg": ["size_cluster", "momentum_envelope", "singular_surface", "compare_slews"],
     "campaigns": ["read_campaign", "parse_campaign", "run_campaign", "Campaign"],

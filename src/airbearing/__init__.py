@@ -36,6 +36,7 @@ _WHERE: dict[str, str] = {
     "read_import_map": "airbearing.io.import_map",
     **dict.fromkeys(["LogQuality"], "airbearing.io.quality"),
     **dict.fromkeys(["LogCheck", "check_log", "plot_log"], "airbearing.api.logs"),
+    **dict.fromkeys(["plot", "report"], "airbearing.api.plot"),
     # models and controllers
     **dict.fromkeys(["Model", "build_model"], "airbearing.models.model"),
     **dict.fromkeys(["Controller", "constant_input"], "airbearing.design.controller"),
