@@ -240,15 +240,7 @@ def report_for_loop(
         else Report(f"Stability report: {loop.name} on {loop.model.testbed.name}")
     )
     rep.heading(heading or f"{loop.name} on {loop.model.testbed.name}")
-    gains = [{"gain": k, "value": v} for k, v in loop.gains.items()]
-    if loop.kind == "balancing":
-        gains.append(
-            {
-                "gain": "K_i = K_dK_i / K_d (1/s)",
-                "value": loop.gains["K_dK_i"] / max(loop.gains["K_d"], 1e-300),
-            }
-        )
-    rep.table(gains)
+    _gains_table(rep, loop)
     for note in loop.notes:
         rep.paragraph(note, note=True)
     progress("margins and the worst case over the uncertainty box", 1, 3)
@@ -264,6 +256,49 @@ def report_for_loop(
         ),
         note=True,
     )
+    _margin_tables(rep, d, c, checks, per, spec)
+    for fig, cap in _bode_nyquist(d, loop, True):
+        rep.figure(fig, cap)
+    # responses
+    progress("responses, linear and nonlinear", 2, 3)
+    t_end = _responses(rep, loop, nonlinear)
+    if loop.kind == "attitude":
+        _disturbance_response(rep, loop, t_end)
+    _pole_map(rep, d.closed_loop_poles, loop.dt)
+    data = {
+        "testbed": loop.model.testbed.name,
+        "loop": loop.kind,
+        "name": loop.name,
+        "gains": dict(loop.gains),
+        "spec": spec.to_dict(),
+        "met": met,
+        "checks": [ch.to_dict() for ch in checks],
+        **d.to_dict(),
+        "continuous": c.to_dict(),
+        "worst_case": {
+            k: (json_number(v) if isinstance(v, float) else v) for k, v in worst.items()
+        },
+        "notes": list(loop.notes),
+    }
+    return rep, data
+
+
+def _gains_table(rep: Report, loop: Loop) -> None:
+    """The gains, and for the balancing loop its integral rate K_i = K_dK_i / K_d."""
+    gains = [{"gain": k, "value": v} for k, v in loop.gains.items()]
+    if loop.kind == "balancing":
+        gains.append(
+            {
+                "gain": "K_i = K_dK_i / K_d (1/s)",
+                "value": loop.gains["K_dK_i"] / max(loop.gains["K_d"], 1e-300),
+            }
+        )
+    rep.table(gains)
+
+
+def _margin_tables(rep: Report, d, c, checks, per, spec: Spec) -> None:
+    """Margins of the discrete and continuous loops, the specification at its worst
+    corner, and the margins at every corner."""
     rep.heading("Margins, discrete loop (ZOH, 1 sample delay, as implemented)", 3)
     rep.table(_margin_rows(d, spec))
     rep.paragraph(_MARGIN_LEGEND)
@@ -296,10 +331,10 @@ def report_for_loop(
         ],
         legend="no crossing: the margin is unlimited",
     )
-    for fig, cap in _bode_nyquist(d, loop, True):
-        rep.figure(fig, cap)
-    # responses
-    progress("responses, linear and nonlinear", 2, 3)
+
+
+def _responses(rep: Report, loop: Loop, nonlinear: bool) -> float:
+    """The scenario's linear response, the nonlinear closed loop overlaid; its end, s."""
     t_lin, y_lin = scenario_response(loop)
     t_end = float(t_lin[-1])
     fig, axes = plt.subplots(1, 2, figsize=(11, 3.6))
@@ -333,25 +368,31 @@ def report_for_loop(
         "CasADi closed loop with the same controller, ideal actuators and one sample of "
         "delay (dashed), as deviations from the trim.",
     )
-    if loop.kind == "attitude":
-        import control as ct
+    return t_end
 
-        cl = loop.closed_loop()
-        t = np.arange(0, min(t_end, 60.0), loop.dt)
-        U = np.zeros((cl.ninputs, t.size))
-        U[list(cl.input_labels).index(loop.disturbances[-1])] = _DIST_TORQUE
-        r = ct.forced_response(cl, t, U)
-        fig, ax = plt.subplots(figsize=(10, 3))
-        ax.plot(t, np.degrees(r.outputs[0]), label="yaw (deg)")
-        ax.set(xlabel="time (s)", ylabel="yaw deviation (deg)")
-        ax.legend(fontsize=8)
-        rep.figure(
-            fig,
-            f"Linear response to a {_DIST_TORQUE:g} N m disturbance torque step "
-            "(the residual torque of seed 000 Tables 1-2).",
-        )
-    # pole map
-    poles = d.closed_loop_poles
+
+def _disturbance_response(rep: Report, loop: Loop, t_end: float) -> None:
+    """The attitude loop's linear response to a disturbance torque step."""
+    import control as ct
+
+    cl = loop.closed_loop()
+    t = np.arange(0, min(t_end, 60.0), loop.dt)
+    U = np.zeros((cl.ninputs, t.size))
+    U[list(cl.input_labels).index(loop.disturbances[-1])] = _DIST_TORQUE
+    r = ct.forced_response(cl, t, U)
+    fig, ax = plt.subplots(figsize=(10, 3))
+    ax.plot(t, np.degrees(r.outputs[0]), label="yaw (deg)")
+    ax.set(xlabel="time (s)", ylabel="yaw deviation (deg)")
+    ax.legend(fontsize=8)
+    rep.figure(
+        fig,
+        f"Linear response to a {_DIST_TORQUE:g} N m disturbance torque step "
+        "(the residual torque of seed 000 Tables 1-2).",
+    )
+
+
+def _pole_map(rep: Report, poles, dt: float) -> None:
+    """The discrete closed-loop poles in the z-plane, their natural frequency and damping."""
     fig, ax = plt.subplots(figsize=(5.5, 5.5))
     th = np.linspace(0, 2 * np.pi, 300)
     ax.plot(np.cos(th), np.sin(th), "k-", lw=0.6)
@@ -364,7 +405,7 @@ def report_for_loop(
     )
     from airbearing.design.margins import pole_damping
 
-    wn, zeta = pole_damping(poles, loop.dt)
+    wn, zeta = pole_damping(poles, dt)
     rows = []
     for p, a, b in zip(poles, wn, zeta, strict=True):
         integrator = abs(p - 1) < 1e-9
@@ -379,22 +420,6 @@ def report_for_loop(
             }
         )  # fmt: skip
     rep.table(rows, legend="not defined for this pole")
-    data = {
-        "testbed": loop.model.testbed.name,
-        "loop": loop.kind,
-        "name": loop.name,
-        "gains": dict(loop.gains),
-        "spec": spec.to_dict(),
-        "met": met,
-        "checks": [ch.to_dict() for ch in checks],
-        **d.to_dict(),
-        "continuous": c.to_dict(),
-        "worst_case": {
-            k: (json_number(v) if isinstance(v, float) else v) for k, v in worst.items()
-        },
-        "notes": list(loop.notes),
-    }
-    return rep, data
 
 
 def stability_report(
