@@ -15,6 +15,10 @@ __all__ = ["cmg_attitude_controller", "SEED001_GAINS"]
 
 #: K_p, K_i, K_w of seed 001 Table 6 (normalised form: torque per h0).
 SEED001_GAINS = (6.0, 0.001, 6.0)
+#: What the controller logs each sample: attitude estimate, filtered rate, commanded torque,
+#: the estimate's yaw.
+EXTRA_NAMES = ("qe_w", "qe_x", "qe_y", "qe_z", "G_x", "G_y", "G_z", "Tc_x", "Tc_y", "Tc_z",
+               "yaw_est")  # fmt: skip
 
 
 def cmg_attitude_controller(
@@ -58,19 +62,9 @@ def cmg_attitude_controller(
     gains : sequence of 3 floats
         ``K_p, K_i, K_w``.
     """
-    if model.kind != "cmg":
-        raise InputError(
-            f"the CMG attitude controller needs a kind = 'cmg' testbed, got '{model.kind}'"
-        )
-    if form not in ("normalised", "physical"):
-        raise InputError(f"form '{form}': expected 'normalised' or 'physical'")
-    if attitude not in ("gyro", "measured") or (attitude == "measured" and model.dof != 3):
-        raise InputError(f"attitude '{attitude}': expected 'gyro', or 'measured' for dof 3")
+    fg = _checked_options(model, form, attitude, lowpass)
     tb = model.testbed
     dt = tb.sensors.dt
-    fg = tb.sensors.lowpass if lowpass is None else lowpass
-    if not 0 < fg <= 1:
-        raise InputError(f"lowpass factor {fg}: expected 0 < f_g <= 1")
     beta, h0, limit = tb.cmg.skew, tb.cmg.h0, tb.cmg.max_gimbal_rate
     opts = {"skew": beta, **(steering_options or {})}  # null motion needs the pyramid's skew
     steer = steering_function(steering, **opts)
@@ -128,17 +122,21 @@ def cmg_attitude_controller(
         gains=np.asarray(gains, float),
         gain_names=("K_p", "K_i", "K_w"),
         ref_names=("qc_w", "qc_x", "qc_y", "qc_z"),
-        extra_names=(
-            "qe_w",
-            "qe_x",
-            "qe_y",
-            "qe_z",
-            "G_x",
-            "G_y",
-            "G_z",
-            "Tc_x",
-            "Tc_y",
-            "Tc_z",
-            "yaw_est",
-        ),
+        extra_names=EXTRA_NAMES,
     )
+
+
+def _checked_options(model, form: str, attitude: str, lowpass: float | None) -> float:
+    """The controller's options checked against the Model; the low-pass factor ``f_g``."""
+    if model.kind != "cmg":
+        raise InputError(
+            f"the CMG attitude controller needs a kind = 'cmg' testbed, got '{model.kind}'"
+        )
+    if form not in ("normalised", "physical"):
+        raise InputError(f"form '{form}': expected 'normalised' or 'physical'")
+    if attitude not in ("gyro", "measured") or (attitude == "measured" and model.dof != 3):
+        raise InputError(f"attitude '{attitude}': expected 'gyro', or 'measured' for dof 3")
+    fg = model.testbed.sensors.lowpass if lowpass is None else lowpass
+    if not 0 < fg <= 1:
+        raise InputError(f"lowpass factor {fg}: expected 0 < f_g <= 1")
+    return fg
