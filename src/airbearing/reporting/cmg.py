@@ -77,7 +77,15 @@ def demo_section(report, *, quick: bool = False) -> None:
         "All use the normalised Jacobian of seed 001 eq. 15 and the eq. 4 rate limit."
     )
 
-    # 1. the internal singularity
+    _internal_singularity(report, laws, quick)
+    tb3 = _slews(report, laws, quick)
+    _null_motion(report, quick)
+    _rate_limiting(report, tb3, quick)
+    _envelopes(report, quick)
+
+
+def _internal_singularity(report, laws, quick: bool) -> None:
+    """The cluster alone on a momentum ramp into the elliptic internal singularity."""
     report.heading("The elliptic internal singularity (beta = 53.13 deg)", level=3)
     runs = {law: internal_singularity_case(law, duration=20.0 if quick else 30.0) for law in laws}
     rows = [r.summary() for r in runs.values()]
@@ -106,7 +114,9 @@ def demo_section(report, *, quick: bool = False) -> None:
     ax[0].legend()
     report.figure(fig, "Momentum along x and the singularity measure for each law.")
 
-    # 2. 3-DoF slew about x through the same singularity, closed loop
+
+def _slews(report, laws, quick: bool):
+    """Closed-loop 180 deg slews on a 3-DoF bearing (and seed 001's yaw slew); its testbed."""
     tb3 = cmg_3dof_testbed(skew_deg=BENCHMARK_SKEW_DEG)
     report.heading("Closed-loop slews on a 3-DoF bearing", level=3)
     rows3, runs3 = compare_slews(
@@ -142,8 +152,11 @@ def demo_section(report, *, quick: bool = False) -> None:
         rows1, _ = compare_slews(tb1, laws=laws, angle_deg=180.0, duration=25.0)
         report.paragraph("Seed 001's 180 deg yaw slew (cmg-yaw, 1-DoF) with each law:")
         report.table([{k: r[k] for k in cols3} for r in rows1], cols3)
+    return tb3
 
-    # null motion
+
+def _null_motion(report, quick: bool) -> None:
+    """Null motion from near a hyperbolic and near the elliptic singular state."""
     report.heading("Null motion: leaving a singular set without torque", level=3)
     nrows = []
     for label, d0 in null_motion_cases():
@@ -165,7 +178,9 @@ def demo_section(report, *, quick: bool = False) -> None:
     )
     report.table(nrows)
 
-    # 3. rate limiting
+
+def _rate_limiting(report, tb3, quick: bool) -> None:
+    """Scaling against clipping of the gimbal rates."""
     report.heading("Rate limiting: scale (seed 001 eq. 4) or clip", level=3)
     rrows, _ = rate_limit_comparison(tb3, duration=10.0 if quick else 20.0)
     report.paragraph(
@@ -179,7 +194,9 @@ def demo_section(report, *, quick: bool = False) -> None:
     ]  # fmt: skip
     report.table([{k: r[k] for k in colsr} for r in rrows], colsr)
 
-    # 4. envelope
+
+def _envelopes(report, quick: bool) -> None:
+    """The momentum envelope and singular surfaces of the benchmark skews."""
     report.heading("Momentum envelope and singular surfaces", level=3)
     for b in (BENCHMARK_SKEW_DEG,) if quick else (BENCHMARK_SKEW_DEG, 54.73):
         n = (21, 41) if quick else (41, 81)
