@@ -203,15 +203,7 @@ def run_campaign(
     say = call(progress)
     folder = open_parts(output, campaign, resume=resume)
     wanted = list(range(campaign.runs)) if runs is None else sorted(set(runs))
-    done_runs = set()
-    failed = 0
-    if resume:
-        from airbearing.analysis.campaign.results import read_parts
-
-        old = read_parts(folder)
-        done_runs = set(int(r) for r in old["run"])
-        if "error" in old.columns:
-            failed = int((old["error"].fillna("") != "").sum())
+    done_runs, failed = _done_before(folder) if resume else (set(), 0)
     todo = [i for i in wanted if i not in done_runs]
     total = len(wanted)
     done = total - len(todo)
@@ -236,38 +228,53 @@ def run_campaign(
             chunk, todo = todo[:k], todo[k:]
             finished(*run_part(campaign, chunk, run_timeout))
     elif todo:
-        from dask.distributed import as_completed
-
-        try:
-            client.wait_for_workers(1, timeout=_WORKER_WAIT_S)
-        except TimeoutError:
-            raise InputError(
-                f"the Dask cluster at {client.scheduler.address} has no workers "
-                f"(waited {_WORKER_WAIT_S} s): start some with 'dask worker ADDRESS'"
-            ) from None
-        n_workers = max(1, len(client.scheduler_info().get("workers", {})))
-        spec = client.scatter(campaign, broadcast=True)
-        queue = list(todo)
-
-        def submit(ac=None):
-            nonlocal queue
-            k = _chunk_size(len(queue), n_workers, _estimate(per_run))
-            chunk, queue = queue[:k], queue[k:]
-            fut = client.submit(run_part, spec, chunk, run_timeout, pure=False)
-            if ac is not None:
-                ac.add(fut)
-            return fut
-
-        first = [submit() for _ in range(min(2 * n_workers, len(queue)))]
-        ac = as_completed(first)
-        try:
-            for fut in ac:
-                finished(*fut.result())
-                fut.release()
-                while queue and ac.count() < 2 * n_workers:
-                    submit(ac)
-        except BaseException:
-            for f in list(ac.futures) if hasattr(ac, "futures") else []:
-                f.cancel()
-            raise
+        _run_on_cluster(client, campaign, todo, run_timeout, per_run, finished)
     return merge_parts(folder, dispersed_columns(campaign.testbed, campaign.dispersions))
+
+
+def _done_before(folder) -> tuple[set, int]:
+    """Runs an interrupted campaign already finished (its parts), and how many failed."""
+    from airbearing.analysis.campaign.results import read_parts
+
+    old = read_parts(folder)
+    failed = int((old["error"].fillna("") != "").sum()) if "error" in old.columns else 0
+    return set(int(r) for r in old["run"]), failed
+
+
+def _run_on_cluster(client, campaign, todo, run_timeout, per_run, finished) -> None:
+    """Chunks of ``todo`` on the cluster, at most two per worker in flight; ``finished``
+    is called with each chunk's result as it arrives (``per_run`` sizes the next chunks)."""
+    from dask.distributed import as_completed
+
+    try:
+        client.wait_for_workers(1, timeout=_WORKER_WAIT_S)
+    except TimeoutError:
+        raise InputError(
+            f"the Dask cluster at {client.scheduler.address} has no workers "
+            f"(waited {_WORKER_WAIT_S} s): start some with 'dask worker ADDRESS'"
+        ) from None
+    n_workers = max(1, len(client.scheduler_info().get("workers", {})))
+    spec = client.scatter(campaign, broadcast=True)
+    queue = list(todo)
+
+    def submit(ac=None):
+        nonlocal queue
+        k = _chunk_size(len(queue), n_workers, _estimate(per_run))
+        chunk, queue = queue[:k], queue[k:]
+        fut = client.submit(run_part, spec, chunk, run_timeout, pure=False)
+        if ac is not None:
+            ac.add(fut)
+        return fut
+
+    first = [submit() for _ in range(min(2 * n_workers, len(queue)))]
+    ac = as_completed(first)
+    try:
+        for fut in ac:
+            finished(*fut.result())
+            fut.release()
+            while queue and ac.count() < 2 * n_workers:
+                submit(ac)
+    except BaseException:
+        for f in list(ac.futures) if hasattr(ac, "futures") else []:
+            f.cancel()
+        raise
