@@ -76,12 +76,12 @@ def open_parts(output: str | Path, campaign, *, resume: bool) -> Path:
             old = None
         if not resume:
             raise InputError(
-                f"-o {output}: {folder} holds the runs of an interrupted campaign: pass "
-                "--resume to finish it, or delete the folder to start again"
+                f"{output}: {folder} holds the runs of an interrupted campaign: resume it "
+                "(airbearing campaign --resume), or delete the folder to start again"
             )
         if not old or old.get("fingerprint") != manifest["fingerprint"]:
             raise InputError(
-                f"--resume: {folder} holds runs of a different campaign (or of a changed "
+                f"resume: {folder} holds runs of a different campaign (or of a changed "
                 f"campaign file) than {campaign.source}; delete it to start again"
             )
         return folder

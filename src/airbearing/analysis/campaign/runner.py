@@ -120,13 +120,13 @@ def open_client(workers: int | None = None, scheduler: str | None = None) -> Ite
 
     if scheduler is not None:
         if workers is not None:
-            raise InputError("--workers and --scheduler: the cluster has its own workers")
+            raise InputError("workers and scheduler: the cluster has its own workers; give one")
         try:
             client = Client(scheduler, timeout=_CONNECT_TIMEOUT_S)
         except (OSError, TimeoutError, ValueError) as e:
             reason = str(e).splitlines()[0] if str(e) else type(e).__name__
             raise InputError(
-                f"--scheduler {scheduler}: no Dask scheduler answers there "
+                f"scheduler={scheduler!r}: no Dask scheduler answers there "
                 f"(tried {_CONNECT_TIMEOUT_S} s: {reason})"
             ) from None
         with client:
@@ -134,7 +134,7 @@ def open_client(workers: int | None = None, scheduler: str | None = None) -> Ite
         return
     n = (os.cpu_count() or 1) if workers is None else workers
     if n < 1:
-        raise InputError(f"--workers {workers}: expected at least 1")
+        raise InputError(f"workers={workers}: expected at least 1")
     # Dask's nanny sets MALLOC_TRIM_THRESHOLD_=65536 in its workers, which turns off
     # glibc's dynamic mmap threshold: every NumPy array above 128 KiB is then a fresh
     # mmap, page-faulted and unmapped again. A 200 s slew took 46 ms of CPU in such a
@@ -199,7 +199,7 @@ def run_campaign(
         process of its worker, see :mod:`.child`). None: no limit.
     """
     if run_timeout is not None and not (math.isfinite(run_timeout) and run_timeout > 0):
-        raise InputError(f"--run-timeout {run_timeout}: expected a time > 0 in s")
+        raise InputError(f"run_timeout={run_timeout}: expected a time > 0 in s")
     say = call(progress)
     folder = open_parts(output, campaign, resume=resume)
     wanted = list(range(campaign.runs)) if runs is None else sorted(set(runs))

@@ -327,19 +327,19 @@ def with_study(campaign: Campaign, study: str | None) -> Campaign:
         return campaign
     src = campaign.source
     if study not in STUDIES:
-        raise InputError(f"--study {study}: expected one of {', '.join(STUDIES)}")
+        raise InputError(f"study={study!r}: expected one of {', '.join(STUDIES)}")
     if campaign.command != "discrepancy":
-        raise InputError(f"--study detection: {src} must have command = 'discrepancy'")
+        raise InputError(f"study='detection': {src} must have command = 'discrepancy'")
     keys = campaign.effect_keys
     if not keys:
         raise InputError(
-            f"--study detection: {src} disperses no effect; add e.g. "
+            f"study='detection': {src} disperses no effect; add e.g. "
             '"effects.viscous_friction" = { loguniform = [1e-7, 1e-4] } to [dispersions]'
         )
     known = [k for k in keys if k.removeprefix("effects.") in campaign.testbed.effects]
     if known:
         raise InputError(
-            f"--study detection: {src}: '{known[0]}' is already in the testbed's [effects]; "
+            f"study='detection': {src}: '{known[0]}' is already in the testbed's [effects]; "
             "the study hides effects the nominal model does not know"
         )
     return dataclasses.replace(campaign, study=study)
