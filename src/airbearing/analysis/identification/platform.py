@@ -111,6 +111,24 @@ def _held(testbed, hold, known_offset_xy) -> dict:
     return {i: float(v) for i, v in enumerate(six)}
 
 
+def fold_cm_offset(testbed: Testbed) -> Testbed:
+    """``testbed`` with an effect ``cm_offset_error`` moved into ``body.cm_offset``.
+
+    ``airbearing discrepancy --write-testbed`` names a CM offset as the effect
+    ``cm_offset_error`` (an extra CR -> CM offset ``dr``, torque ``m dr x g``); it is part of
+    the CM offset that identification fits, so identification starts from their sum and
+    writes the sum to ``[body]`` (:meth:`PlatformIdentification.to_testbed` drops the effect).
+    """
+    dr = testbed.effects.get("cm_offset_error")
+    if dr is None or testbed.body.dof != 3:
+        return testbed
+    b = testbed.body
+    r = tuple(float(x) for x in b.cm_offset_vec + np.asarray(dr, dtype=float))
+    body = Body(dof=b.dof, mass=b.mass, inertia=b.inertia, cm_offset=r, torque_noise=b.torque_noise)
+    effects = {k: v for k, v in testbed.effects.items() if k != "cm_offset_error"}
+    return testbed.replace(body=body, effects=effects)
+
+
 def _check_options(testbed, method, known_mass, known_offset_xy, prior, prior_weight, hold=None):
     if method not in ("output-error", "equation-error"):
         raise InputError(f"method={method!r}: expected 'output-error' or 'equation-error'")
@@ -125,7 +143,7 @@ def _check_options(testbed, method, known_mass, known_offset_xy, prior, prior_we
         fixed = {6: float(xy[0]), 7: float(xy[1])}
     fixed.update(_held(testbed, hold, known_offset_xy))
     if isinstance(prior, Testbed):
-        prior = Prior.from_testbed(prior)
+        prior = Prior.from_testbed(fold_cm_offset(prior))
     if prior is not None and not isinstance(prior, Prior):
         raise InputError(f"prior: expected a Prior or a Testbed, got {type(prior).__name__}")
     if prior_weight < 0 or (prior_weight > 0 and prior is None):
@@ -206,6 +224,7 @@ def identify_platform(
     from airbearing.progress import call
 
     report = call(progress)
+    testbed = fold_cm_offset(testbed)
     mass, fixed, prior = _check_options(
         testbed, method, known_mass, known_offset_xy, prior, prior_weight, hold
     )

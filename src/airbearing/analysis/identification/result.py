@@ -253,16 +253,22 @@ class PlatformIdentification:
         return out
 
     def to_testbed(self, testbed: Testbed) -> Testbed:
-        """``testbed`` with the identified inertia, CM offset and mass."""
+        """``testbed`` with the identified inertia, CM offset and mass.
+
+        An effect ``cm_offset_error`` of ``testbed`` is dropped: identification fits the whole
+        CM offset, that effect included (:func:`.platform.fold_cm_offset`).
+        """
         body = testbed.body
+        effects = {k: v for k, v in testbed.effects.items() if k != "cm_offset_error"}
         return testbed.replace(
+            effects=effects,
             body=Body(
                 dof=body.dof,
                 mass=self.mass,
                 inertia=tuple(tuple(float(v) for v in row) for row in self.inertia),
                 cm_offset=tuple(float(v) for v in self.cm_offset),
                 torque_noise=body.torque_noise,
-            )
+            ),
         )
 
 
