@@ -130,3 +130,41 @@ def test_ci_runs_the_readme_commands():
 def test_changelog_is_in_the_site():
     assert (DOCS / "changelog.md").read_text().strip() == '--8<-- "CHANGELOG.md"'
     assert (ROOT / "CHANGELOG.md").read_text().startswith("# Changelog")
+
+
+def _resolves(dotted: str) -> bool:
+    parts = dotted.split(".")
+    for k in range(len(parts), 1, -1):
+        try:
+            obj = importlib.import_module(".".join(parts[:k]))
+        except ImportError:
+            continue
+        try:
+            for name in parts[k:]:
+                obj = getattr(obj, name)
+        except AttributeError:
+            return False
+        return True
+    return False
+
+
+def test_docs_name_only_what_exists():
+    """Every `airbearing.x.y` / `io.x.y` / `ab.name` the pages and README name exists (the
+    old README and internals.md had drifted from the code)."""
+    import airbearing as ab
+
+    pattern = r"`((?:airbearing\.)?(?:io|models|design|analysis|reporting|cli|api)\.[\w.]+)"
+    pages = [p for p in DOCS.rglob("*.md") if p.name != "FORMATS.md"] + [ROOT / "README.md"]
+    bad = []
+    for page in pages:
+        text = page.read_text()
+        for name in set(re.findall(pattern, text)):
+            full = name if name.startswith("airbearing.") else f"airbearing.{name}"
+            if not _resolves(full):
+                bad.append(f"{page.relative_to(ROOT)}: {name}")
+        bad += [
+            f"{page.relative_to(ROOT)}: ab.{n}"
+            for n in set(re.findall(r"\bab\.(\w+)\(", text))
+            if n not in ab.__all__
+        ]
+    assert not bad, bad
