@@ -350,19 +350,21 @@ def _slew(tb: Testbed, *, yaw_deg, axis, duration, seed, ideal, steering, rate_l
 def _simulate(tb: Testbed, a: dict, seed: int, gains=None, src: str = ""):
     """The run and summary of ``airbearing simulate`` (scenario slew or free)."""
     from airbearing.analysis.simulation.scenarios import (
+        SCENARIO_DURATIONS,
         free_oscillation,
         free_summary,
         slew_summary,
     )
 
     scenario = a.get("scenario", "slew")
+    duration = a.get("duration", SCENARIO_DURATIONS[scenario])
     effects = _effects(src, a.get("effect", []))
     if effects:
         tb = tb.with_effects({**effects})
     if scenario == "slew":
         result = _slew(
             tb, yaw_deg=a.get("yaw_deg", 180.0), axis=a.get("axis", (0.0, 0.0, 1.0)),
-            duration=a.get("duration", 40.0), seed=seed, ideal=a.get("ideal", False),
+            duration=duration, seed=seed, ideal=a.get("ideal", False),
             steering=a.get("steering", "mp"), rate_limit=a.get("rate_limit", "scale"),
             gains=gains,
         )  # fmt: skip
@@ -371,7 +373,7 @@ def _simulate(tb: Testbed, a: dict, seed: int, gains=None, src: str = ""):
         result = free_oscillation(
             tb, initial_rate=a.get("initial_rate", (0.0, 0.0, 0.0)),
             q0=a.get("initial_quaternion", (1.0, 0.0, 0.0, 0.0)),
-            sliders=a.get("sliders", (0.0, 0.0, 0.0)), duration=a.get("duration", 60.0),
+            sliders=a.get("sliders", (0.0, 0.0, 0.0)), duration=duration,
             seed=seed, noise=not a.get("ideal", False),
             attitude_noise=a.get("attitude_noise"), model=_reused_model(tb),
         )  # fmt: skip

@@ -15,7 +15,13 @@ from airbearing.io.testbed import Testbed
 from airbearing.models import quaternion as quat
 from airbearing.models.model import Model, build_model
 
-__all__ = ["slew", "slew_summary", "free_oscillation", "free_summary", "spindown"]
+__all__ = [
+    "SCENARIO_DURATIONS", "slew", "slew_summary", "free_oscillation", "free_summary", "spindown"
+]  # fmt: skip
+
+#: s, the default run length of each scenario (a seed-001 slew and its settling, a free
+#: oscillation long enough for identification, a coast-down that loses most of its rate).
+SCENARIO_DURATIONS = {"slew": 40.0, "free": 60.0, "spindown": 120.0}
 
 
 def slew(
@@ -23,7 +29,7 @@ def slew(
     *,
     angle_deg: float = 180.0,
     axis=(0.0, 0.0, 1.0),
-    duration: float = 40.0,
+    duration: float = SCENARIO_DURATIONS["slew"],
     seed: int = 0,
     ideal: bool = False,
     steering: str = "mp",
@@ -156,7 +162,7 @@ def free_oscillation(
     q0=(1.0, 0.0, 0.0, 0.0),
     sliders=(0.0, 0.0, 0.0),
     effects: Mapping | None = None,
-    duration: float = 60.0,
+    duration: float = SCENARIO_DURATIONS["free"],
     seed: int = 0,
     noise: bool = True,
     attitude_noise: float | None = None,
@@ -287,7 +293,7 @@ def spindown(
     testbed: Testbed,
     *,
     initial_rate: float = 2.0,
-    duration: float = 120.0,
+    duration: float = SCENARIO_DURATIONS["spindown"],
     effects: Mapping | None = None,
     seed: int = 0,
     noise: bool = True,
