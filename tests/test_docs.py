@@ -28,15 +28,21 @@ DOCS = ROOT / "docs"
 
 #: Modules whose docstring Examples are part of the public documentation.
 DOCTEST_MODULES = [
-    "airbearing.analysis.identify",
     "airbearing.api.logs",
     "airbearing.api.plot",
-    "airbearing.io.gains",
     "airbearing.design.sizing",
     "airbearing.design.tuning",
     "airbearing.design.margins",
     "airbearing.design.loops",
     "airbearing.analysis.simulation.scenarios",
+    "airbearing.io.builtins",
+    "airbearing.io.gains",
+    "airbearing.analysis.identify",
+    "airbearing.analysis.logs.import_map",
+    "airbearing.models.model",
+    "airbearing.design.linearise",
+    "airbearing.analysis.cmg.singularity",
+    "airbearing.analysis.campaign.spec",
 ]
 #: Tutorials and how-to pages whose Python blocks run here (the campaign tutorial starts a
 #: Dask cluster on a file the reader writes: its commands are tested in test_campaign*).

@@ -142,6 +142,13 @@ def trim(model: Model, p=None, *, yaw: float = 0.0, gimbals=None) -> TrimPoint:
         IPOPT did not converge, or no input cancels the gravity torque.
     InputError
         The requested point is not an equilibrium of this testbed.
+
+    Examples
+    --------
+    >>> import airbearing as ab
+    >>> point = ab.trim(ab.build_model(ab.load_testbed("cmg-yaw")))
+    >>> type(point).__name__
+    'TrimPoint'
     """
     p = np.asarray(model.p0 if p is None else p, dtype=float)
     tb = model.testbed
@@ -321,6 +328,15 @@ def linearise(model: Model, trim_point: TrimPoint | None = None, p=None) -> ct.S
     control.StateSpace
         Named states (``th_x th_y th_z`` for the attitude of a dof-3 body, rad),
         inputs (the Model's ``u_names``) and outputs (``y_names`` + ``true_<state>``).
+
+    Examples
+    --------
+    The yaw-only CMG testbed at rest is a double integrator from gimbal rates to yaw:
+
+    >>> import airbearing as ab
+    >>> sys = ab.linearise(ab.build_model(ab.load_testbed("cmg-yaw")))
+    >>> sys.state_labels[:2]
+    ['yaw', 'wz']
     """
     tp = trim(model, p) if trim_point is None else trim_point
     return linearisation(model).state_space(tp, p)

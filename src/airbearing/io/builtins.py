@@ -90,7 +90,25 @@ ALIASES: dict[str, str] = {"platform-3dof": "seed000-tabletop"}
 
 
 def builtin_names(*, aliases: bool = True) -> tuple[str, ...]:
-    """Names accepted in place of a testbed path (built-ins, then aliases)."""
+    """Names accepted in place of a testbed path (built-ins, then aliases).
+
+    Parameters
+    ----------
+    aliases : bool
+        Include the aliases (earlier names that load the same values).
+
+    Returns
+    -------
+    tuple of str
+
+    Examples
+    --------
+    >>> import airbearing as ab
+    >>> ab.builtin_names(aliases=False)
+    ('seed000-tabletop', 'seed004-platform', 'cmg-yaw', 'cmg-3dof')
+    >>> ab.load_testbed("cmg-yaw").body.dof
+    1
+    """
     names = tuple(b.name for b in BUILTINS)
     return names + tuple(ALIASES) if aliases else names
 

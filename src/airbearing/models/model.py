@@ -242,6 +242,19 @@ def build_model(testbed: Testbed, effects: Mapping | None = None) -> Model:
     without ``[magnetorquers]`` no commanded-dipole torque; its inputs keep the platform
     layout (see the module docstring). An effect that cannot act on the testbed
     (:meth:`Effect.applies`, ``sensors.gyro`` included) is an InputError.
+
+    Returns
+    -------
+    Model
+        Named states, inputs, parameters and outputs, and the CasADi functions of the
+        dynamics and the measurement.
+
+    Examples
+    --------
+    >>> import airbearing as ab
+    >>> model = ab.build_model(ab.load_testbed("cmg-yaw"), {"viscous_friction": 2e-6})
+    >>> model.x_names[:2], "viscous_friction" in model.p_names
+    (('yaw', 'wz'), True)
     """
     kind, dof = testbed.kind, testbed.body.dof
     has_field = testbed.field is not None or kind == "platform"  # platform: field is an input

@@ -226,6 +226,20 @@ def parse_campaign(data: dict, source: str = "<memory>", base: Path | None = Non
     """Validate a parsed campaign document (see :func:`read_campaign`).
 
     ``base`` is the folder that relative testbed and gains paths start from.
+
+    Examples
+    --------
+    >>> import airbearing as ab
+    >>> campaign = ab.parse_campaign({
+    ...     "testbed": "cmg-yaw", "command": "simulate", "runs": 4, "seed": 1,
+    ...     "args": {"scenario": "slew", "yaw-deg": 90, "duration": 10},
+    ...     "dispersions": {"sensors.gyro_noise": {"uniform": [0.0, 1e-3]}},
+    ... })
+    >>> campaign.runs, campaign.command
+    (4, 'simulate')
+    >>> table = ab.run_campaign(campaign, __import__("tempfile").mkdtemp() + "/r.parquet")
+    >>> len(table), "sensors.gyro_noise" in table.columns
+    (4, True)
     """
     from airbearing.analysis.campaign.adapters import check_args
     from airbearing.analysis.campaign.dispersions import check_dispersions

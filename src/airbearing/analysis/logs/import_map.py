@@ -194,5 +194,42 @@ def import_log(
     import_map: ImportMap | str | os.PathLike[str],
     testbed: Testbed | None = None,
 ) -> Log:
-    """A lab's raw log as a :class:`~airbearing.io.log.Log` (:func:`import_log_with_notes`)."""
+    """A lab's raw log as a :class:`~airbearing.io.log.Log` (:func:`import_log_with_notes`).
+
+    Parameters
+    ----------
+    raw : path-like or pandas.DataFrame
+        The lab's export (``.csv``, with a byte-order mark, tab or semicolon separators
+        allowed, or ``.parquet``).
+    import_map : ImportMap or path-like
+        Its columns, units, frames and yaw unwrapping (FORMATS.md "Import map").
+    testbed : Testbed, optional
+        Validates the log against the testbed (columns, sampling) and finds its outliers.
+
+    Returns
+    -------
+    Log
+        In FORMATS.md columns and SI units; nothing filled, smoothed or resampled.
+
+    Raises
+    ------
+    InputError
+        A map key, column or unit the file or the map does not have (listing the valid
+        ones), a non-numeric cell (row and column), time not increasing, ...
+
+    Examples
+    --------
+    A motion-capture export with a millisecond clock and the yaw in degrees:
+
+    >>> import pandas as pd
+    >>> import airbearing as ab
+    >>> raw = pd.DataFrame({"Time (ms)": [0.0, 100.0, 200.0],
+    ...                     "Yaw (deg)": [179.0, -179.0, -177.0]})
+    >>> mapping = {"columns": {"t": "Time (ms)", "yaw": "Yaw (deg)"},
+    ...            "units": {"t": "ms", "yaw": "deg"}}
+    >>> from airbearing.io.import_map import import_map_from_dict
+    >>> log = ab.import_log(raw, import_map_from_dict(mapping))
+    >>> log.t.tolist(), [round(float(y), 4) for y in log.data["yaw"]]  # s; rad, unwrapped
+    ([0.0, 0.1, 0.2], [3.1241, 3.159, 3.194])
+    """
     return import_log_with_notes(raw, import_map, testbed).log
