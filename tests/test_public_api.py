@@ -161,16 +161,17 @@ def test_check_log_is_the_log_check_json(tmp_path):
 
 @pytest.mark.slow
 def test_notebook_script_raw_log_to_effect_inertia_gains_report(tmp_path):
-    """The issue's notebook: only `ab.`, from a raw log to a named effect, an identified
-    inertia, tuned gains and a stability report; each result prints in a few lines."""
+    """The issue's notebook: only `ab.`, from a raw log (checked) to an identified inertia,
+    tuned gains and a stability report; each result prints in a few lines."""
     from pathlib import Path
 
     ex = Path(__file__).resolve().parents[1] / "examples" / "mocap-spin"
     rig = ab.read_testbed(ex / "rig.toml")
     log = ab.import_log(ex / "raw.csv", ex / "map.toml", rig)
     check = ab.check_log(log)
-    found = ab.discrepancy(rig, [log])
-    assert {e["name"] for e in found.to_json()["effects"]} == {"aero_drag", "viscous_friction"}
+    assert check.outlier_rows == (400, 1700)
+    # ab.discrepancy(rig, [log]) naming both effects: the README's Python block asserts it
+    # (tests/test_readme_commands.py), on this very log; not run a fourth time here
 
     platform = ab.load_testbed("seed004-platform")
     runs = [
@@ -196,4 +197,3 @@ def test_notebook_script_raw_log_to_effect_inertia_gains_report(tmp_path):
         text, short = str(result), repr(result)
         assert 1 <= len(text.splitlines()) <= 12, (type(result).__name__, text)
         assert len(short) <= 300, (type(result).__name__, short[:400])
-    assert len(found.verdict.splitlines()) <= 5
