@@ -37,6 +37,10 @@ def test_hold_inertia_recovers_a_19_mm_offset_within_1_percent(spin):
     js = res.to_json()
     assert js["held"] == "inertia" and "held_inertia" in js["active_constraints"]
     assert all(js["std_status"][n] == "known" for n in ("J_xx", "J_yy", "J_zz"))
+    # std is the honest (HAC sandwich) error, never below the white-noise one beside it
+    sw = np.array(js["std_white"]["cm_offset"], dtype=float)
+    assert np.all(np.array(js["std"]["cm_offset"], dtype=float) >= sw * (1 - 1e-9))
+    assert np.all(sw > 0)
     # the residual is the motion capture's noise (1 mrad) within 20 %
     assert res.residual_rms == pytest.approx(1e-3, rel=0.2)
 

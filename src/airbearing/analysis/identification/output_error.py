@@ -55,8 +55,13 @@ class OutputErrorResult:
     theta : ndarray (9,)
         ``J_xx .. J_yz`` (kg m^2, about CR, sliders at zero) and ``r_x .. r_z`` (m).
     cov : ndarray (9, 9)
-        Covariance from the Fisher information with the fitted noise levels
-        (zero rows and columns for fixed parameters).
+        The honest covariance (zero rows and columns for fixed parameters): the engine's
+        HAC sandwich (:func:`airbearing.analysis.shooting.errors.honest_errors`), which stays
+        right when the residual is coloured (a torque the model misses), scaled up where
+        needed so that no standard error is below its white-noise value.
+    cov_white : ndarray (9, 9)
+        Covariance from the Fisher information with the fitted noise levels (right for a
+        white residual).
     cov_spec : ndarray (9, 9)
         The same with the testbed's sensor specification (gyro noise; attitude noise
         when given): the Cramer-Rao bound for that noise.
@@ -88,6 +93,7 @@ class OutputErrorResult:
     iterations: int
     status: str
     warnings: list
+    cov_white: np.ndarray | None = None
 
 
 def _inverse(F: np.ndarray) -> np.ndarray:
@@ -232,8 +238,16 @@ def refine_output_error(
     spec_q_ = spec_q if spec_q > 0 else sq
     rate_spec, att_spec = (used_w / spec_w_) ** 2, (used_q / spec_q_) ** 2
     c_spec = _inverse(prob.fisher(fit, k, rate=rate_spec, att=att_spec))
-    cov, cov_spec = np.zeros((9, 9)), np.zeros((9, 9))
-    cov[np.ix_(free, free)] = c_fit
+    from airbearing.analysis.shooting.errors import honest_errors
+
+    c_hac = honest_errors(prob, fit, k).cov
+    sd_fit = np.sqrt(np.maximum(np.diag(c_fit), 0.0))
+    sd_hac = np.sqrt(np.maximum(np.diag(c_hac), 0.0))
+    up = np.where(sd_hac > 0, np.maximum(1.0, sd_fit / np.maximum(sd_hac, 1e-300)), 1.0)
+    c_honest = np.where(np.isfinite(c_hac), c_hac, 0.0) * np.outer(up, up)
+    cov, cov_spec, cov_white = np.zeros((9, 9)), np.zeros((9, 9)), np.zeros((9, 9))
+    cov[np.ix_(free, free)] = c_honest
+    cov_white[np.ix_(free, free)] = c_fit
     cov_spec[np.ix_(free, free)] = c_spec
     theta_full = theta0.copy()
     theta_full[fidx] = fit.theta
@@ -252,4 +266,5 @@ def refine_output_error(
         iterations=iterations,
         status=fit.status,
         warnings=warnings,
+        cov_white=cov_white,
     )

@@ -380,6 +380,8 @@ def identify_platform(
     if prior is not None:
         prior_z_oe, pw = prior_check(theta, std_oe, prior)
         warn_oe += pw
+    std_white = np.sqrt(np.maximum(np.diag(oe.cov_white), 0))
+    std_white = np.where(np.isfinite(std_oe), std_white, np.nan)
     crb = np.sqrt(np.maximum(np.diag(oe.cov_spec), 0))
     crb = np.where(np.isfinite(std_oe), crb, np.nan)
     ok = np.isfinite(std_oe)
@@ -403,6 +405,7 @@ def identify_platform(
         cramer_rao_cm_offset=crb[6:9].copy(),
         prior_z=prior_z_oe,
         held=hold,
+        std_white=std_white,
         details={
             "residual_rms_rate_rad_s": oe.rms_w if gyro else None,
             "residual_rms_attitude_rad": oe.rms_q,

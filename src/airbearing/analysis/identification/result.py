@@ -166,6 +166,10 @@ class PlatformIdentification:
         When a prior was given: per parameter, (estimate - prior) in combined sigmas.
     details : dict
         Noise levels, iterations, samples, point O, form.
+    std_white : ndarray (9,) or None
+        Output error: the white-noise (Fisher) standard errors in the order of
+        :attr:`theta`; ``std_inertia`` and ``std_cm_offset`` are then the honest ones (a
+        HAC sandwich that stays right when the residual is coloured).
     held : str or None
         ``"inertia"`` or ``"cm"``: the testbed file's value taken as known (``hold=``),
         which breaks the common scale of J and r in free motion; None when neither.
@@ -192,6 +196,7 @@ class PlatformIdentification:
     prior_z: dict = field(default_factory=dict)
     details: dict = field(default_factory=dict)
     held: str | None = None
+    std_white: np.ndarray | None = None
 
     @property
     def theta(self) -> np.ndarray:
@@ -240,6 +245,12 @@ class PlatformIdentification:
             "weak_directions": [dict(w) for w in self.weak_directions],
             "held": self.held,
         }
+        if self.std_white is not None:
+            sw = np.asarray(self.std_white, dtype=float)
+            out["std_white"] = {
+                "inertia": sym_from6(sw).tolist(),
+                "cm_offset": sw[6:9].tolist(),
+            }
         if self.cramer_rao_inertia is not None:
             out["cramer_rao"] = {
                 "inertia": self.cramer_rao_inertia.tolist(),
