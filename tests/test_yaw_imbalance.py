@@ -167,3 +167,46 @@ def test_discrepancy_lists_the_refused_spring_and_names_the_imbalance():
     assert spring["status"] == "not offered" and spring["value"] is None
     assert spring["reason"].startswith("not physical on this log: the yaw spans ")
     assert isinstance(rows["yaw_imbalance"]["value"], list)
+
+
+def test_experiment_separates_it_from_confounded_effects():
+    from airbearing.analysis.discrepancy.words import GENERIC_EXPERIMENT, experiment_for
+
+    for other in ("spring_torque", "coulomb_friction", "viscous_friction", "aero_drag"):
+        text = experiment_for("yaw_imbalance", other)
+        assert text != GENERIC_EXPERIMENT and "spin through several turns" in text
+
+
+# --------------------------------------------------------------------------- campaigns
+
+
+def test_detection_campaign_hides_the_pair(tmp_path):
+    from airbearing.analysis.campaign import parse_campaign, run_campaign, studies
+    from airbearing.analysis.campaign.dispersions import dispersed_columns, draw_run
+    from airbearing.analysis.campaign.spec import with_study
+    from airbearing.reporting.campaign import DETECTION_CAMPAIGN
+
+    assert "effects.yaw_imbalance" in DETECTION_CAMPAIGN["dispersions"]
+    doc = {
+        "testbed": "cmg-yaw",
+        "command": "discrepancy",
+        "runs": 2,  # run 0 hides the imbalance, run 1 nothing
+        "seed": 3,
+        "args": {"simulate.scenario": "slew", "simulate.duration": 20},
+        "dispersions": {"effects.yaw_imbalance": {"loguniform": [2e-5, 1e-4]}},
+    }
+    campaign = with_study(parse_campaign(doc, "det"), "detection")
+    cols = ["effects.yaw_imbalance[0]", "effects.yaw_imbalance[1]"]
+    assert dispersed_columns(campaign.testbed, campaign.dispersions) == cols
+    hidden = draw_run(campaign, 0)
+    a_s, a_c = hidden.testbed.effects["yaw_imbalance"]
+    assert (a_s, a_c) == (hidden.values[cols[0]], hidden.values[cols[1]])
+    assert 2e-5 <= a_s <= 1e-4 and 2e-5 <= a_c <= 1e-4
+    assert draw_run(campaign, 1).testbed.effects == {}
+    df = run_campaign(campaign, tmp_path / "det.parquet")
+    det = studies.detection(df, cols)
+    (row,) = det["effects"]
+    # a slew of half a turn with a torque of 2e-5..1e-4 N m (the spring's 95 % size times
+    # pi is ~3e-6 N m): named
+    assert row["effect"] == "yaw_imbalance" and row["runs"] == 1 and row["named"] == 1
+    assert det["false_alarm"]["runs"] == 1

@@ -243,18 +243,21 @@ ROBUST_CAMPAIGN = {
 DETECTION_CAMPAIGN = {
     "testbed": "cmg-yaw",
     "command": "discrepancy",
-    "runs": 900,  # 100 per effect + 100 with nothing hidden
+    "runs": 1000,  # 100 per effect + 100 with nothing hidden
     "seed": 7,
     "args": {"simulate.scenario": "slew", "simulate.duration": 40},
     # from below the size the workflow names to well above it (measured on 180 runs: every
     # size named in the range of the last session for aero drag, inertia error and sensor
     # lag, so they start lower); gyro bias is not identifiable on a yaw-only CMG testbed
-    # with a gyro (its yaw is the gyro's integral): the report says so, up to 0.01 rad/s
+    # with a gyro (its yaw is the gyro's integral): the report says so, up to 0.01 rad/s;
+    # yaw_imbalance ([A_s, A_c] N m, each entry drawn) from well below to above the torque
+    # k * pi of the spring's range over the slew's half turn
     "dispersions": {
         "effects.viscous_friction": {"loguniform": [1e-9, 1e-3]},
         "effects.coulomb_friction": {"loguniform": [1e-10, 1e-4]},
         "effects.aero_drag": {"loguniform": [1e-9, 1e-2]},
         "effects.spring_torque": {"loguniform": [1e-8, 1e-4]},
+        "effects.yaw_imbalance": {"loguniform": [1e-9, 1e-4]},
         "effects.inertia_error": {"loguniform": [1e-5, 0.3]},
         "effects.gyro_bias": {"loguniform": [1e-5, 1e-2]},
         "effects.sensor_lag": {"loguniform": [1e-5, 1.0]},

@@ -12,6 +12,9 @@ Column names of the drawn values: the dotted key for a number
 ``key[i][j]`` for a matrix entry. ``body.inertia`` (3x3) is symmetric: the six
 entries on and above the diagonal are drawn (``body.inertia[0][1]``, not
 ``[1][0]``) and mirrored, so a dispersed inertia stays a valid symmetric matrix.
+An effect the testbed does not have takes its value's shape from the vocabulary:
+each entry of a vector (``cm_offset_error``, ``residual_dipole``) or of a pair
+(``yaw_imbalance``: ``effects.yaw_imbalance[0]`` = ``A_s``, ``[1]`` = ``A_c``) is drawn.
 """
 
 from __future__ import annotations
@@ -79,6 +82,19 @@ def _set(doc: dict, key: str, value) -> None:
     holder[entry] = value
 
 
+def _drawn_nominal(doc: dict, key: str):
+    """The testbed's value at ``key``; for an effect it lacks, zeros of the vocabulary's shape."""
+    nominal = _nominal(doc, key)
+    table, entry = _split(key)
+    if nominal is None and table == "effects":
+        from airbearing.io.vocabulary import EFFECTS
+
+        size = {"vector3": 3, "pair": 2}.get(getattr(EFFECTS.get(entry), "shape", ""), 0)
+        if size:
+            return [0.0] * size
+    return nominal
+
+
 def _shape(nominal) -> tuple[int, ...]:
     if nominal is None or isinstance(nominal, int | float):
         return ()
@@ -104,7 +120,7 @@ def dispersed_columns(testbed: Testbed, dispersions) -> list[str]:
     doc = testbed_to_dict(testbed)
     cols = []
     for d in dispersions:
-        cols += [_column(d.key, ix) for ix in _entries(d.key, _shape(_nominal(doc, d.key)))]
+        cols += [_column(d.key, ix) for ix in _entries(d.key, _shape(_drawn_nominal(doc, d.key)))]
     return cols
 
 
@@ -131,7 +147,7 @@ def _apply(doc: dict, dispersions, pick) -> dict:
     out = copy.deepcopy(doc)
     values = {}
     for d in dispersions:
-        nominal = _nominal(doc, d.key)
+        nominal = _drawn_nominal(doc, d.key)
         shape = _shape(nominal)
         if shape == ():
             v = pick(d, nominal)

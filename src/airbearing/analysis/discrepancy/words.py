@@ -52,6 +52,23 @@ EXPERIMENTS: dict[frozenset, str] = {
     frozenset({"gyro_bias", "spring_torque"}): (
         "measure the yaw with an independent sensor (camera, encoder) during a long rest"
     ),
+    frozenset({"yaw_imbalance", "spring_torque"}): (
+        "spin through several turns: an imbalance torque repeats every turn, a spring's grows "
+        "with the yaw turned (on a log that spans more than a turn a spring is not offered)"
+    ),
+    frozenset({"yaw_imbalance", "coulomb_friction"}): (
+        "spin through several turns at two or more rates: the imbalance follows the yaw angle "
+        "(once per turn, zero on average over a turn), Coulomb friction opposes the rate at "
+        "every angle"
+    ),
+    frozenset({"yaw_imbalance", "viscous_friction"}): (
+        "spin through several turns at two or more rates: the imbalance follows the yaw angle "
+        "(once per turn), viscous friction the rate"
+    ),
+    frozenset({"yaw_imbalance", "aero_drag"}): (
+        "spin through several turns at two or more rates: the imbalance follows the yaw angle "
+        "(once per turn), drag the square of the rate"
+    ),
 }
 GENERIC_EXPERIMENT = (
     "excite the testbed over a wider range of the states the two torques depend on "
