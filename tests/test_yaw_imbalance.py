@@ -210,3 +210,33 @@ def test_detection_campaign_hides_the_pair(tmp_path):
     # pi is ~3e-6 N m): named
     assert row["effect"] == "yaw_imbalance" and row["runs"] == 1 and row["named"] == 1
     assert det["false_alarm"]["runs"] == 1
+
+
+# ------------------------------------------------------------ the acceptance
+
+
+#: One rig's truth: friction and drag of the size seen on real coast-downs, and an
+#: imbalance of 3.6e-5 N m (a 4.2 kg rig, CM 0.1 mm off a bearing axis tilted 0.5 deg)
+COAST_TRUTH = {
+    "coulomb_friction": 1e-5,
+    "aero_drag": 8e-6,
+    "yaw_imbalance": (3e-5, -2e-5),
+}
+
+
+@pytest.mark.slow
+def test_three_coast_downs_name_friction_drag_and_the_imbalance():
+    logs = [
+        spindown(ROTOR, initial_rate=w, duration=300.0, effects=COAST_TRUTH, seed=70 + i).log
+        for i, w in enumerate((4.5, 1.5, 0.4))
+    ]
+    for log in logs:  # each log alone: the spring is never named (nor offered)
+        alone = discrepancy(ROTOR, log, max_effects=3)
+        assert "spring_torque" not in alone.effects, alone.verdict
+        row = next(c for c in alone.candidates if c.name == "spring_torque")
+        assert row.status == "not offered", row
+    joint = discrepancy(ROTOR, logs, max_effects=3)
+    assert set(joint.effects) == set(COAST_TRUTH), joint.verdict
+    for name, value in COAST_TRUTH.items():
+        f, t = np.atleast_1d(joint.effects[name]), np.atleast_1d(value)
+        assert np.linalg.norm(f - t) < 0.2 * np.linalg.norm(t), (name, joint.verdict)
