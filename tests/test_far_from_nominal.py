@@ -194,3 +194,39 @@ def test_a_nominal_replay_that_does_not_converge_is_still_a_baseline():
     found = np.array(d.effects["cm_offset_error"])
     assert np.linalg.norm(found - truth) < 0.01 * np.linalg.norm(truth)
     assert d.gap_after <= 1.5 * NOISE
+
+
+@pytest.mark.slow
+def test_the_spin_test_tutorial_runs(tmp_path, monkeypatch):
+    # every command of docs/tutorials/spin-test.md, in order, from an empty folder: its TOML
+    # blocks headed "# file: NAME" are the files it asks to save
+    import json
+    import re
+    import shlex
+    from pathlib import Path
+
+    import airbearing.cli as cli
+
+    page = Path(__file__).parents[1] / "docs" / "tutorials" / "spin-test.md"
+    text = page.read_text()
+    monkeypatch.chdir(tmp_path)
+    for block in re.findall(r"```toml\n(.*?)```", text, re.S):
+        name = re.match(r"# file: (\S+)\n", block)
+        assert name, block[:40]
+        (tmp_path / name.group(1)).write_text(block)
+    commands = [line for b in re.findall(r"```sh\n(.*?)```", text, re.S) for line in b.splitlines()]
+    assert len(commands) == 4
+    for line in commands:
+        args = shlex.split(line)
+        assert args[0] == "airbearing"
+        cli.main(["--quiet", *args[1:]])
+    d = json.loads((tmp_path / "d.json").read_text())
+    named = {e["name"]: e["value"] for e in d["effects"]}
+    assert named["cm_offset_error"][2] == pytest.approx(-0.019, rel=0.01)
+    assert d["gap_after"] <= 1.5 * d["noise_floor"]
+    ident = json.loads((tmp_path / "id.json").read_text())
+    assert ident["held"] == "inertia"
+    assert ident["cm_offset"][2] == pytest.approx(-0.019, rel=0.01)
+    assert "cm_offset_error" not in (tmp_path / "spin-rig-id.toml").read_text()
+    bal = json.loads((tmp_path / "bal.json").read_text())
+    assert abs(bal["residual_offset_m"][2]) < 1e-4  # 19 mm balanced to below 0.1 mm
