@@ -21,7 +21,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import lru_cache
 
 import casadi as ca
@@ -72,13 +72,23 @@ class TrimPoint:
         the right small-signal model, but the testbed cannot get there.
     """
 
-    model: Model
-    x: np.ndarray
-    u: np.ndarray
-    p: np.ndarray
+    model: Model = field(repr=False)
+    x: np.ndarray = field(repr=False)
+    u: np.ndarray = field(repr=False)
+    p: np.ndarray = field(repr=False)
     solved: tuple
     residual: float
     limit_violations: tuple = ()
+
+    def __str__(self) -> str:
+        solved = ", ".join(f"{n} = {self.value(n):.4g}" for n in self.solved) or "nothing"
+        where = (
+            f"; beyond the actuators: {', '.join(self.limit_violations)}"
+            if self.limit_violations
+            else ""
+        )
+        name = self.model.testbed.name
+        return f"trim of {name}: solved {solved} (residual {self.residual:.2g}){where}"
 
     def value(self, name: str, which: str = "u") -> float:
         """One entry of ``x``, ``u`` or ``p`` by name."""

@@ -132,17 +132,17 @@ class Loop:
 
     kind: str
     name: str
-    model: Model
-    trim: TrimPoint
-    controller: Controller
+    model: Model = field(repr=False)
+    trim: TrimPoint = field(repr=False)
+    controller: Controller = field(repr=False)
     gains: dict
     channels: tuple
-    references: tuple
-    disturbances: tuple
-    p: np.ndarray
+    references: tuple = field(repr=False)
+    disturbances: tuple = field(repr=False)
+    p: np.ndarray = field(repr=False)
     delay_samples: int
     _lin_ctrl: _LinearController = field(repr=False)
-    notes: tuple = ()
+    notes: tuple = field(default=(), repr=False)
 
     @property
     def dt(self) -> float:
