@@ -239,6 +239,15 @@ def _norm_masses(raw: Mapping[str, Any], src: str) -> dict[str, Any]:
         "step": _number(raw["step"], src, "masses.step", "m", ge=0.0),
         "speed": _number(raw["speed"], src, "masses.speed", "m/s", gt=0.0),
         "backlash": _number(raw["backlash"], src, "masses.backlash", "m", ge=0.0),
+        "gyro_vibration": _number(
+            raw["gyro_vibration"], src, "masses.gyro_vibration", "rad/s", ge=0.0
+        ),
+        "accel_vibration": _number(
+            raw["accel_vibration"], src, "masses.accel_vibration", "-", ge=0.0
+        ),
+        "drive_torque_noise": _number(
+            raw["drive_torque_noise"], src, "masses.drive_torque_noise", "N m", ge=0.0
+        ),
     }
 
 
@@ -368,6 +377,18 @@ class Masses:
         m/s, largest slider speed; > 0.
     backlash : float
         m, lost motion when a slider reverses; >= 0.
+    gyro_vibration : float
+        rad/s, 1-sigma white noise added per sample to each rate component when the
+        steppers' summed speed over the sample before is ``speed``; it scales with the
+        square root of that speed (each step shakes the platform once: noise power in
+        proportion to the step rate); >= 0, default 0.
+    accel_vibration : float
+        -, 1-sigma white noise added per sample to each component of the measured
+        gravity direction at the summed speed ``speed``; it scales in proportion to the
+        speed (the reaction acceleration); >= 0, default 0.
+    drive_torque_noise : float
+        N m, 1-sigma white disturbance torque per sample and axis while a balancing law
+        drives the steppers (none while the sliders are held); >= 0, default 0.
     """
 
     mass: tuple[float, float, float]
@@ -376,6 +397,9 @@ class Masses:
     step: float = 2e-6
     speed: float = 0.005
     backlash: float = 0.0
+    gyro_vibration: float = 0.0
+    accel_vibration: float = 0.0
+    drive_torque_noise: float = 0.0
 
     def __post_init__(self) -> None:
         _apply(self, _norm_masses(_fields_of(self), _MEMORY))
@@ -664,7 +688,17 @@ class Testbed:
 _TOP_KEYS = ("kind", "name", "gravity", *_TABLE_TYPES, "effects")
 _TABLE_KEYS: dict[str, tuple[str, ...]] = {
     "body": ("dof", "mass", "inertia", "cm_offset", "torque_noise"),
-    "masses": ("mass", "axes", "travel", "step", "speed", "backlash"),
+    "masses": (
+        "mass",
+        "axes",
+        "travel",
+        "step",
+        "speed",
+        "backlash",
+        "gyro_vibration",
+        "accel_vibration",
+        "drive_torque_noise",
+    ),
     "magnetorquers": ("max_dipole",),
     "field": ("lab",),
     "cmg": (
@@ -678,6 +712,8 @@ _TABLE_KEYS: dict[str, tuple[str, ...]] = {
     ),
     "sensors": ("rate", "gyro_noise", "accel_noise", "lowpass", "gyro", "attitude_noise"),
 }
+#: Optional [masses] keys written by :func:`testbed_to_dict` only when non-zero.
+_VIBRATION_KEYS = ("gyro_vibration", "accel_vibration", "drive_torque_noise")
 _REQUIRED: dict[str, tuple[str, ...]] = {
     "body": ("mass", "inertia"),
     "masses": ("mass",),
@@ -924,6 +960,9 @@ def testbed_to_dict(testbed: Testbed) -> dict[str, Any]:
             "speed": m.speed,
             "backlash": m.backlash,
         }
+        for key in _VIBRATION_KEYS:  # optional: written only when set
+            if getattr(m, key):
+                out["masses"][key] = getattr(m, key)
     if testbed.magnetorquers is not None:
         out["magnetorquers"] = {"max_dipole": testbed.magnetorquers.max_dipole}
     if testbed.field is not None:

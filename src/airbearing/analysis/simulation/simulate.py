@@ -152,8 +152,62 @@ def _measure(model: Model, y, noise):
     return y + noise
 
 
+#: Loop states of the slider vibration: last slider positions (3), speed fraction, started.
+_VIB_STATES = 5
+#: Unit normal draws per sample of the slider vibration: gyro (3), accelerometer (3),
+#: drive torque (3).
+_VIB_DRAWS = 9
+
+
+def slider_vibration(model: Model) -> dict | None:
+    """The ``[masses]`` vibration coupling of ``model``'s testbed, or None when it has none.
+
+    ``{"gyro", "accel", "drive", "speed"}``: ``masses.gyro_vibration`` (rad/s),
+    ``accel_vibration`` (-), ``drive_torque_noise`` (N m) and ``speed`` (m/s). With ``f``
+    the steppers' summed speed over a sample as a fraction of ``masses.speed``
+    (:func:`_stepper_positions`), the next sample's measurement gets extra white noise of
+    1-sigma ``gyro_vibration * sqrt(f)`` on each rate (each step shakes the platform once:
+    the noise power grows with the step rate) and ``accel_vibration * f`` on each component
+    of the gravity direction (the sliders' reaction acceleration grows with their speed);
+    seed 000 Sec. 1: the sliders' "unwanted mechanical vibration ... can increase gyro noise
+    amplitude". While a balancing law drives the steppers (its controller logs
+    ``motor1..3``), the platform also gets a white disturbance torque of 1-sigma
+    ``drive_torque_noise`` per sample and axis.
+    """
+    m = model.testbed.masses
+    if model.kind != "platform" or model.dof != 3 or m is None:
+        return None
+    vib = {"gyro": m.gyro_vibration, "accel": m.accel_vibration, "drive": m.drive_torque_noise}
+    if not any(vib.values()):
+        return None
+    return {**vib, "speed": m.speed}
+
+
+def _stepper_positions(model: Model, controller: Controller, u, extra):
+    """The steppers' positions and whether a law drives them: the controller's ``motor1..3``
+    when it logs them (they step within the backlash, where the masses stand still), else
+    the sliders ``s1..s3``."""
+    names = [f"motor{i}" for i in (1, 2, 3)]
+    if all(n in controller.extra_names for n in names):
+        return ca.vertcat(*[extra[controller.extra_names.index(n)] for n in names]), True
+    return ca.vertcat(*[u[i] for i in model.index(["s1", "s2", "s3"], "u")]), False
+
+
+def _vibration_noise(model: Model, vib: dict, draws, frac):
+    """Measurement noise (ny) of the slider vibration: six unit normal ``draws`` scaled by
+    ``gyro * sqrt(frac)`` (rates) and ``accel * frac`` (gravity direction)."""
+    out = [ca.SX.zeros(1) for _ in model.y_names]
+    for k, name in enumerate(("wx", "wy", "wz")):
+        out[model.y_names.index(name)] = vib["gyro"] * ca.sqrt(frac) * draws[k]
+    for k, name in enumerate(("gx", "gy", "gz")):
+        out[model.y_names.index(name)] = vib["accel"] * frac * draws[3 + k]
+    return ca.vertcat(*out)
+
+
 @lru_cache(maxsize=32)
-def closed_loop_rollout(model: Model, controller: Controller, n: int, substeps: int = 4):
+def closed_loop_rollout(
+    model: Model, controller: Controller, n: int, substeps: int = 4, vibration: bool = False
+):
     """The compiled closed loop over ``n`` samples.
 
     Returns a CasADi Function
@@ -161,32 +215,49 @@ def closed_loop_rollout(model: Model, controller: Controller, n: int, substeps: 
     column ``k`` of ``V`` is ``[noise_k (ny); torque_k (3); ref_k; t_k]`` and a row is
     ``[x_k; y_k; u_k; extra_k]``. From ``LOOP_MIN_STEPS`` samples on, a
     :class:`~airbearing.models.loop.ChunkedLoop` with the same call (NumPy outputs).
+    With ``vibration`` and a testbed with slider vibration (:func:`slider_vibration`),
+    ``z`` ends with the vibration's 5 states (zeros at the start) and each column of
+    ``V`` with 9 unit normal draws (gyro, accelerometer, torque).
     """
     dt = model.testbed.sensors.dt
     step = model.step(dt, substeps)
     fn = controller.function
     nx, nc = model.nx, controller.c0.size
     nref = len(controller.ref_names)
-    z = ca.SX.sym("z", nx + nc)
-    v = ca.SX.sym("v", model.ny + 3 + nref + 1)
     p = ca.SX.sym("p", model.n_p)
     g = ca.SX.sym("gains", controller.gains.size)
-    x, c = z[:nx], z[nx:]
+    vib = slider_vibration(model) if vibration else None
+    nvib = _VIB_STATES if vib is not None else 0
+    z = ca.SX.sym("z", nx + nc + nvib)
+    v = ca.SX.sym("v", model.ny + 3 + nref + 1 + (_VIB_DRAWS if vib is not None else 0))
+    x, c, zv = z[:nx], z[nx : nx + nc], z[nx + nc :]
     noise = v[: model.ny]
     torque = v[model.ny : model.ny + 3]
     ref = v[model.ny + 3 : model.ny + 3 + nref]
-    t = v[-1]
+    t = v[model.ny + 3 + nref]
+    if vib is not None:  # slider vibration: extra sensor noise from the last sample's motion
+        draws = v[model.ny + 4 + nref :]
+        noise = noise + _vibration_noise(model, vib, draws[0:6], zv[3])
     y = _measure(model, model.h(x, ca.DM.zeros(model.nu), p), noise)
     u, c_next, extra = fn(y, c, ref, g, t)
     tau_idx = model.index(["tau_x", "tau_y", "tau_z"], "u")
     u_applied = ca.SX(u)
+    z_vib = []
+    if vib is not None:
+        s_now, driven = _stepper_positions(model, controller, u, extra)
+        # summed slider speed over this sample as a fraction of masses.speed (0 at the
+        # first sample: where the sliders were before it is not known)
+        frac = zv[4] * ca.sum1(ca.fabs(s_now - zv[0:3])) / (dt * vib["speed"])
+        if driven:
+            torque = torque + vib["drive"] * draws[6:9]
+        z_vib = [s_now, frac, ca.DM.ones(1)]
     for j, i in enumerate(tau_idx):
         u_applied[i] = u_applied[i] + torque[j]
     x_next = step(x, u_applied, p)
     one = ca.Function(
         "closed_loop_step",
         [z, v, p, g],
-        [ca.vertcat(x_next, c_next), ca.vertcat(x, y, u_applied, extra)],
+        [ca.vertcat(x_next, c_next, *z_vib), ca.vertcat(x, y, u_applied, extra)],
         ["z", "v", "p", "gains"],
         ["z_next", "row"],
     )
@@ -278,11 +349,17 @@ def simulate(
         tau_sig = 0.0
     meas_noise = rng.standard_normal((n, model.ny)) * sig
     tau = rng.standard_normal((n, 3)) * tau_sig
-    V = np.hstack([meas_noise, tau, ref, t[:, None]]).T
+    cols = [meas_noise, tau, ref, t[:, None]]
+    z0_vib = []
+    vibration = slider_vibration(model) is not None
+    if vibration:  # drawn after the others: same seed, same run
+        cols.append(rng.standard_normal((n, _VIB_DRAWS)) * (1.0 if noise else 0.0))
+        z0_vib = [np.zeros(_VIB_STATES)]
+    V = np.hstack(cols).T
 
     c0 = controller.c0 if c0 is None else np.asarray(c0, float)
-    F = closed_loop_rollout(model, controller, n, substeps)
-    Z, R = F(np.concatenate([x0, c0]), V, p, controller.gains)
+    F = closed_loop_rollout(model, controller, n, substeps, vibration)
+    Z, R = F(np.concatenate([x0, c0, *z0_vib]), V, p, controller.gains)
     Z, R = np.asarray(Z).T, np.asarray(R).T
     nx, ny, nu = model.nx, model.ny, model.nu
     x = np.vstack([x0, Z[:, :nx]])
