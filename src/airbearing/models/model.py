@@ -99,6 +99,12 @@ class Model:
     _lag: ca.Function
     lag_init: ca.Function
 
+    def __repr__(self) -> str:
+        return (
+            f"Model(testbed={self.testbed.name!r}, effects={self.effects!r}, "
+            f"x_names={self.x_names!r})"
+        )
+
     @property
     def nx(self) -> int:
         return len(self.x_names)
