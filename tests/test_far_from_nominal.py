@@ -177,10 +177,15 @@ def test_a_fit_that_ends_badly_is_retried_and_not_named(low19, monkeypatch):
     res = next(r for r in d.candidates if r.name == "cm_offset_error")
     assert res.retried and "retried by continuation" in res.retry_reason
     if "failed too" in res.retry_reason:
-        assert not res.nameable and "failed too" in res.reason
+        assert res.retry_failed and not res.nameable and "failed too" in res.reason
         assert "cm_offset_error" not in d.effects
     row = res.row()
     assert row["retried"] is True and row["retry_reason"] == res.retry_reason
+    assert row["retry_failed"] is res.retry_failed
+    # the better of the two fits is kept, and its start says which
+    assert row["start"]["source"] in ("regression", "continuation")
+    if row["start"]["source"] == "continuation":
+        assert [s["window_s"] for s in row["start"]["stages"]] == [2.0, 10.0]
 
 
 def test_a_nominal_replay_that_does_not_converge_is_still_a_baseline():

@@ -258,6 +258,7 @@ class Discrepancy:
                         "start",
                         "retried",
                         "retry_reason",
+                        "retry_failed",
                     )
                 }
                 for c in self.candidates
@@ -402,6 +403,7 @@ def _try(search, cand, chosen, theta_chosen, current, current_lag, ln_n, starts,
                     failed(cand, "did not converge", fit, start, before.total()[1]),
                     retried=True,
                     retry_reason=retried,
+                    retry_failed=True,
                 )
             if retried and "stages" in fit.extra:
                 start = start_json(
@@ -417,7 +419,7 @@ def _try(search, cand, chosen, theta_chosen, current, current_lag, ln_n, starts,
         problem, judge(cand, fit, k_sel, current, ln_n, k_added, heldout, before, start, note)
     )
     if retried:
-        res = replace(res, retried=True, retry_reason=retried)
+        res = replace(res, retried=True, retry_reason=retried, retry_failed=bool(left))
         if left:  # the retry ended badly too: not an answer
             res = replace(res, nameable=False, reason=res.reason or retried)
     return res

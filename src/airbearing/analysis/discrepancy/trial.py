@@ -120,6 +120,8 @@ class CandidateResult:
     #: the fit was retried by continuation from the regression start (:mod:`.starts`), and why
     retried: bool = False
     retry_reason: str = ""
+    #: the retry ended badly too: the candidate is not an answer (verdicts name it)
+    retry_failed: bool = False
 
     @property
     def label(self) -> str:
@@ -152,6 +154,7 @@ class CandidateResult:
             "note": self.note,
             "retried": bool(self.retried),
             "retry_reason": self.retry_reason,
+            "retry_failed": bool(self.retry_failed),
         }
 
     def to_json(self) -> dict:
