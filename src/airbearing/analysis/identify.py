@@ -91,8 +91,7 @@ def identify(
     Returns
     -------
     PlatformIdentification, YawIdentification or CMGIdentification
-        Frozen results with ``inertia`` (kg m^2), ``to_json()`` (the ``airbearing
-        identify --json`` contract) and ``to_testbed(testbed)``.
+        ``inertia`` (kg m^2), ``to_json()`` (``identify --json``), ``to_testbed(testbed)``.
 
     Raises
     ------
@@ -100,12 +99,11 @@ def identify(
         An option that does not apply to this testbed, a value outside its choices, a log
         that does not fit the testbed.
     SolverError
-        When the underlying solver fails.
+        The underlying solver failed.
 
     Examples
     --------
-    Two free oscillations of the seed-004 platform (simulated, the testbed's gyro noise),
-    the second with the sliders moved; the in-plane offset known from balancing:
+    Two simulated free oscillations of seed 004's platform, the sliders moved between:
 
     >>> import airbearing as ab
     >>> tb = ab.load_testbed("seed004-platform")
@@ -118,8 +116,7 @@ def identify(
     ...                     method="equation-error")
     >>> type(found).__name__, found.method
     ('PlatformIdentification', 'equation-error')
-    >>> true_J = tb.body.inertia_matrix
-    >>> bool(abs(found.inertia[2][2] / true_J[2][2] - 1) < 0.01)  # J_zz within 1 %
+    >>> bool(abs(found.inertia[2][2] / tb.body.inertia_matrix[2][2] - 1) < 0.01)  # J_zz, 1 %
     True
 
     Options are checked before any work, and named as parameters:

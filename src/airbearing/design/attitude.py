@@ -106,15 +106,10 @@ def cmg_attitude_controller(
     u = ca.vertcat(dd, 0, 0, 0)
     c_next = ca.vertcat(G, q_est, integral_next)
     extra = ca.vertcat(q_est, G, T_c, quat.yaw_of(q_est))
-    fn = ca.Function(
-        "cmg_attitude",
-        [y, c, ref, g, t],
-        [u, c_next, extra],
-        ["y", "c", "ref", "gains", "t"],
-        ["u", "c_next", "extra"],
-    )
+    fn = ca.Function("cmg_attitude", [y, c, ref, g, t], [u, c_next, extra],
+                     ["y", "c", "ref", "gains", "t"], ["u", "c_next", "extra"])  # fmt: skip
     c0 = np.zeros(10)
-    c0[3] = 1.0
+    c0[3] = 1.0  # the attitude estimate starts at the identity quaternion
     return Controller(
         name=f"cmg_attitude_{steering}",
         function=fn,
