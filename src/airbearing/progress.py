@@ -12,7 +12,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Protocol
 
-__all__ = ["Progress", "silent", "call"]
+__all__ = ["Progress", "silent", "call", "TimeLeft"]
 
 
 class Progress(Protocol):
@@ -30,3 +30,43 @@ def silent(what: str, done: float | None = None, total: float | None = None) -> 
 def call(progress: Callable | None) -> Progress:
     """``progress`` itself, or :func:`silent` when it is ``None``."""
     return silent if progress is None else progress
+
+
+class TimeLeft:
+    """An estimate of the time left that never jumps up by more than its own uncertainty.
+
+    The raw estimate assumes the steps left take as long as the steps done on average:
+    ``left = elapsed * (total - done) / done``. Its uncertainty is ``left / sqrt(done)``
+    (the standard error of a mean of ``done`` step times whose spread is as large as the
+    mean: a conservative coefficient of variation of 1). A new estimate is shown as is
+    when it is lower; when it is higher it is capped at the previous one, less the time
+    since, plus the previous uncertainty. So the number a person reads counts down and
+    only rises when the work has clearly slowed, and then by no more than the ``+-`` it
+    carried.
+
+    Parameters
+    ----------
+    start : float
+        Time the work started, s (``time.monotonic()``).
+    """
+
+    def __init__(self, start: float) -> None:
+        self.start = start
+        self.shown: float | None = None
+        self.uncertainty = 0.0
+        self.at = start
+
+    def update(self, done: float, total: float, now: float) -> tuple[float, float] | None:
+        """``(left, uncertainty)`` in s at ``now`` after ``done`` of ``total`` steps, or
+        ``None`` before the first step is done or after the last."""
+        if not total or done <= 0 or done >= total:
+            return None
+        elapsed = max(now - self.start, 0.0)
+        raw = elapsed * (total - done) / done
+        unc = raw / done**0.5
+        if self.shown is not None:
+            cap = max(self.shown - (now - self.at), 0.0) + self.uncertainty
+            if raw > cap:
+                raw = cap
+        self.shown, self.uncertainty, self.at = raw, unc, now
+        return raw, unc

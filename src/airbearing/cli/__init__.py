@@ -94,12 +94,16 @@ def _global(
     Bad input: one line on stderr, exit status 2, nothing written. Long work shows
     progress on stderr (a bar on a terminal, plain lines otherwise; --quiet silences it).
     """
-    from airbearing.cli.show_progress import set_quiet
+    from airbearing.cli.show_progress import _repeated_compile_notice, set_quiet
 
     set_quiet(quiet)
     from airbearing.models.compiled import announce_to  # stdlib only: start-up stays light
 
-    announce_to(None if quiet else lambda what, *_: print(f"airbearing: {what}", file=sys.stderr))
+    def notice(what: str, *_) -> None:
+        if not _repeated_compile_notice(what):
+            print(f"airbearing: {what}", file=sys.stderr)
+
+    announce_to(None if quiet else notice)
     GLOBAL["debug"] = debug
     GLOBAL["verbose"] = verbose
 
@@ -128,7 +132,16 @@ def chatter_to_debug_log(verbose: bool, *, fds: bool = False) -> Iterator[Path |
         logger.handlers[:] = [handler]
         logger.setLevel(logging.INFO)
         try:
-            yield None
+            with warnings.catch_warnings():
+                warnings.simplefilter("default")
+
+                def _loud(message, category, filename, lineno, file=None, line=None):
+                    sys.stderr.write(
+                        warnings.formatwarning(message, category, filename, lineno, line)
+                    )
+
+                warnings.showwarning = _loud
+                yield None
         finally:
             logger.handlers[:], logger.propagate, logger.level = old
         return

@@ -36,23 +36,18 @@ class Start(StrEnum):
 
 
 def table_text(rows: list[dict]) -> str:
-    """Rows as an aligned text table (numbers to 4 significant digits, ``-`` for None)."""
+    """Rows as an aligned table: 4 significant digits, the unit in each column head
+    (from the key's suffix, ``offset_mm`` -> ``offset (mm)``), one symbol for none."""
+    from airbearing.cli.tables import table, unit_of
+
     if not rows:
         return ""
     cols = list(rows[0])
-
-    def cell(v) -> str:
-        if v is None:
-            return "-"
-        if isinstance(v, bool) or not isinstance(v, int | float):
-            return str(v)
-        return f"{float(v):.4g}"
-
-    cells = [[cell(r.get(c)) for c in cols] for r in rows]
-    widths = [max(len(c), *(len(row[i]) for row in cells)) for i, c in enumerate(cols)]
-    lines = ["  ".join(c.rjust(w) for c, w in zip(cols, widths, strict=True))]
-    lines += ["  ".join(v.rjust(w) for v, w in zip(row, widths, strict=True)) for row in cells]
-    return "\n".join(lines)
+    heads = []
+    for c in cols:
+        label, unit = unit_of(c)
+        heads.append(f"{label} ({unit})" if unit else label)
+    return table([[r.get(c) for c in cols] for r in rows], heads)
 
 
 def _comparison_rows(cmp) -> list[dict]:
@@ -236,8 +231,12 @@ def balance(
         out.file(log_path, _write)
     out.json(json_path, summary)
     out.commit()
+    from airbearing.cli.tables import human_summary
+
     if table:
         typer.echo(table)
-    for k, v in summary.items():
-        if k not in ("points", "tables"):
-            typer.echo(f"{k}: {v}")
+        typer.echo("")
+    typer.echo(human_summary(summary, skip=("points", "tables", "values")))
+    for p in (log_path, json_path):
+        if p is not None:
+            typer.echo(f"wrote {p}")

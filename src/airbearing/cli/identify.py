@@ -98,15 +98,18 @@ def identify(
         typer.echo(f"J_z = {_fmt(result.inertia, result.std)}{unit} ({result.method})")
     else:
         typer.echo(f"method: {result.method}")
-        typer.echo("inertia about CR (kg m^2), sliders at zero:")
-        for row, srow in zip(result.inertia, result.std_inertia, strict=True):
-            typer.echo("  " + "  ".join(_fmt(v, s) for v, s in zip(row, srow, strict=True)))
+        from airbearing.cli.tables import matrix_table, table
+
+        typer.echo("inertia about CR, sliders at zero (+- standard error; — not identifiable):")
+        typer.echo(matrix_table(result.inertia, "kg m^2", std=result.std_inertia))
+        typer.echo("CR -> CM offset, sliders at zero (the JSON keeps m):")
         typer.echo(
-            "cm_offset (m): "
-            + "  ".join(
-                _fmt(v, s) for v, s in zip(result.cm_offset, result.std_cm_offset, strict=True)
+            table(
+                [[ax, v * 1e6, s * 1e6]
+                 for ax, v, s in zip("xyz", result.cm_offset, result.std_cm_offset, strict=True)],
+                ["axis", "offset (um)", "std (um)"],
             )
-        )
+        )  # fmt: skip
         typer.echo(f"condition number: {result.condition_number:.3g}")
         if getattr(result, "held", None):
             typer.echo(f"held: {result.held} (from the testbed file)")

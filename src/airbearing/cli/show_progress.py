@@ -18,6 +18,19 @@ from contextlib import contextmanager
 __all__ = ["QUIET", "PLAIN_DELAY", "progress_display", "set_quiet"]
 
 QUIET = {"on": False}
+#: The "compiling ... to C" notice is shown once per process, whichever wrapper of the
+#: progress callback it arrives through (airbearing.models.compiled tells each sink once).
+_COMPILE_NOTICE = {"shown": False}
+
+
+def _repeated_compile_notice(what: str) -> bool:
+    """True for a "compiling ..." notice after the first one of this process."""
+    if not what.startswith("compiling "):
+        return False
+    if _COMPILE_NOTICE["shown"]:
+        return True
+    _COMPILE_NOTICE["shown"] = True
+    return False
 
 
 def set_quiet(on: bool) -> None:
@@ -36,6 +49,9 @@ class _Plain:
         self.last_what: str | None = None
         self.last_t = 0.0
         self.t0 = time.monotonic()
+        from airbearing.progress import TimeLeft
+
+        self.left = TimeLeft(self.t0)
         self.pending: str | None = None
         self.timer: threading.Timer | None = None
         self.lock = threading.Lock()
@@ -54,16 +70,16 @@ class _Plain:
             self.pending = None
 
     def __call__(self, what: str, done=None, total=None) -> None:
+        if _repeated_compile_notice(what):
+            return
         now = time.monotonic()
         if what == self.last_what and now - self.last_t < 1.0:
             return
         self.last_what, self.last_t = what, now
         count = ""
         if done is not None and total:
-            frac = min(max(done / total, 0.0), 1.0)
-            eta = ""
-            if 0 < frac < 1:
-                eta = f", about {(now - self.t0) * (1 - frac) / frac:.0f} s left"
+            left = self.left.update(done, total, now)
+            eta = f", about {left[0]:.0f} s left" if left is not None else ""
             count = f" [{done:g}/{total:g}{eta}]"
         with self.lock:
             self.pending = f"{self.label}: {what}{count}"
@@ -78,11 +94,19 @@ class _Plain:
 class _Rich:
     def __init__(self, label: str, bar) -> None:
         self.bar = bar
-        self.task = bar.add_task(label, total=None)
+        self.task = bar.add_task(label, total=None, left="")
         self.label = label
+        from airbearing.progress import TimeLeft
+
+        self.left = TimeLeft(time.monotonic())
 
     def __call__(self, what: str, done=None, total=None) -> None:
+        if _repeated_compile_notice(what):
+            return
         kw = {"description": f"{self.label}: {what}"}
+        if done is not None and total:
+            left = self.left.update(done, total, time.monotonic())
+            kw["left"] = f"about {left[0]:.0f} s left" if left is not None else ""
         if total is not None:
             kw["total"] = total
         if done is not None:
@@ -115,7 +139,6 @@ def progress_display(label: str) -> Iterator:
         Progress,
         TextColumn,
         TimeElapsedColumn,
-        TimeRemainingColumn,
     )
 
     with Progress(
@@ -123,7 +146,7 @@ def progress_display(label: str) -> Iterator:
         BarColumn(),
         MofNCompleteColumn(),
         TimeElapsedColumn(),
-        TimeRemainingColumn(),
+        TextColumn("{task.fields[left]}"),
         console=Console(stderr=True),
         transient=True,
     ) as bar:

@@ -11,7 +11,17 @@ from collections.abc import Iterable, Mapping, Sequence
 
 import typer
 
-__all__ = ["cell", "table", "summary_table", "echo_table", "echo_summary", "unit_of"]
+__all__ = [
+    "cell",
+    "table",
+    "summary_table",
+    "echo_table",
+    "echo_summary",
+    "unit_of",
+    "shown",
+    "human_summary",
+    "matrix_table",
+]
 
 #: Units taken from a key's suffix (the JSON contract's naming): ``peak_rate_deg_s`` -> deg/s.
 _SUFFIX_UNITS = (
@@ -38,6 +48,116 @@ def unit_of(key: str) -> tuple[str, str]:
         if low.endswith(suffix) and len(low) > len(suffix):
             return key[: -len(suffix)].replace("_", " "), unit
     return key.replace("_", " "), ""
+
+
+#: Lengths in the unit a person uses: CM offsets and residual offsets in um (they are
+#: um to tenths of mm), slider positions and displacements in mm. (words in key, unit, x)
+_LENGTHS = (
+    (("offset", "residual", "cm_"), "um", 1e6),
+    (("slider", "displacement", "p2p", "travel"), "mm", 1e3),
+)
+
+
+def shown(key: str, value):
+    """``(label, unit, value)`` for a person: SI lengths of key suffix ``_m`` rescaled.
+
+    ``cm_offset_identified_m`` -> ``("cm offset identified", "um", value * 1e6)``; other
+    keys as :func:`unit_of`. Lists and nested lists are rescaled element by element.
+    """
+    label, unit = unit_of(key)
+    if unit == "m":
+        low = key.lower()
+        for words, new, factor in _LENGTHS:
+            if any(w in low for w in words):
+                return label, new, _scale(value, factor)
+    return label, unit, value
+
+
+def _scale(value, factor: float):
+    if isinstance(value, bool) or value is None:
+        return value
+    if isinstance(value, int | float):
+        return value * factor
+    if isinstance(value, list | tuple):
+        return [_scale(v, factor) for v in value]
+    return value
+
+
+def _is_vector(value) -> bool:
+    return (
+        isinstance(value, list | tuple)
+        and 1 < len(value) <= 4
+        and all(isinstance(v, int | float) and not isinstance(v, bool) or v is None for v in value)
+    )
+
+
+def _is_matrix(value) -> bool:
+    return (
+        isinstance(value, list | tuple)
+        and len(value) in (2, 3)
+        and all(_is_vector(r) and len(r) == len(value) for r in value)
+    )
+
+
+def matrix_table(rows, unit: str = "", names=("x", "y", "z"), std=None, digits: int = 4) -> str:
+    """A square matrix as an aligned table (4 significant digits, ``+-std`` if given)."""
+    body = []
+    for i, row in enumerate(rows):
+        cells = []
+        for j, v in enumerate(row):
+            text = cell(v, digits)
+            if std is not None and std[i][j] is not None and std[i][j] == std[i][j]:
+                text += f" +-{float(std[i][j]):.2g}"
+            cells.append(text)
+        body.append([names[i] if i < len(names) else str(i), *cells])
+    head = f"({unit})" if unit else ""
+    return table(body, [head, *(names[j] for j in range(len(rows)))], digits)
+
+
+def human_summary(summary: Mapping, skip: Iterable[str] = (), digits: int = 4) -> str:
+    """A JSON summary for a person: scalars as one aligned table, vectors as x y z rows,
+    matrices as aligned blocks, small mappings as their own tables, text lists as lines.
+
+    Units come from the key suffix; CM offsets are shown in um and sliders in mm
+    (:func:`shown`); the JSON keeps SI.
+    """
+    skip = set(skip)
+    scalars, vectors, blocks, sentences = [], [], [], []
+    for key, value in summary.items():
+        if key in skip:
+            continue
+        label, unit, v = shown(key, value)
+        if _is_matrix(v):
+            blocks.append(f"{label}:\n" + matrix_table(v, unit, digits=digits))
+        elif _is_vector(v):
+            vectors.append([label, *[cell(x, digits) for x in v], unit, len(v)])
+        elif isinstance(v, Mapping):
+            if v and all(not isinstance(x, Mapping | list | tuple) for x in v.values()):
+                rows = [[shown(k, x)[0], cell(shown(k, x)[2], digits), shown(k, x)[1]]
+                        for k, x in v.items()]  # fmt: skip
+                blocks.append(f"{label}:\n" + table(rows, ["quantity", "value", "unit"]))
+        elif isinstance(v, list | tuple) and all(isinstance(x, str) for x in v):
+            if v:
+                blocks.append(f"{label}:\n" + "\n".join(f"  - {x}" for x in v))
+            else:
+                scalars.append([label, "none", unit])
+        elif isinstance(v, list | tuple):
+            continue  # long series: in the JSON
+        elif isinstance(v, str) and len(v) > 40:
+            sentences.append(f"{label}: {v}")
+        else:
+            scalars.append([label, cell(v, digits), unit])
+    parts = []
+    if scalars:
+        parts.append(table(scalars, ["quantity", "value", "unit"], digits))
+    if vectors:
+        n = max(r[-1] for r in vectors)
+        names = ["x", "y", "z", "4"][:n]
+        rows = [[r[0], *r[1:-2], *[""] * (n - (len(r) - 3)), r[-2]] for r in vectors]
+        parts.append(table(rows, ["vector", *names, "unit"], digits))
+    parts.extend(blocks)
+    parts.extend(sentences)
+    return "\n\n".join(parts)
 
 
 def cell(value, digits: int = 4) -> str:

@@ -29,10 +29,11 @@ Function runs, never what it computes. The compiled Function has no derivative
 information of its own: compile Functions whose outputs already contain the
 derivatives you need (e.g. a residual and its Jacobian).
 
-Compilation (not a cache hit) is announced once per structure through the
-``progress`` argument, through every sink registered with :func:`compile_notices`
-(the CLI's progress display) and as an ``INFO`` record of the
-``airbearing.compiled`` logger.
+Compilation (not a cache hit) is announced through the ``progress`` argument and
+through every sink registered with :func:`compile_notices` (the CLI's progress
+display), each sink hearing it once per process (the first compilation: a run that
+builds 20 structures says so once, not 20 times), and every time as an ``INFO``
+record of the ``airbearing.compiled`` logger.
 """
 
 from __future__ import annotations
@@ -41,6 +42,7 @@ import contextlib
 import os
 import sys
 import threading
+import weakref
 from collections import OrderedDict
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
@@ -87,6 +89,9 @@ _memory: OrderedDict[str, object] = OrderedDict()
 _key_locks: dict[str, threading.Lock] = {}
 _sinks: list[Callable] = []
 _default_sink: list[Callable] = []
+#: Sinks that have had their one notice (weakly held; ids for sinks without weakrefs).
+_told = weakref.WeakSet()
+_told_ids: set[int] = set()
 _counts = {"memory_hits": 0, "disk_hits": 0, "compiled": 0, "rebuilt": 0, "uncompiled": 0}
 
 
@@ -238,7 +243,22 @@ def _announce(what: str, progress: Callable | None) -> None:
     if progress is not None and progress not in sinks:
         sinks.append(progress)
     for s in sinks:
-        s(what, None, None)
+        if _first_notice(s):
+            s(what, None, None)
+
+
+def _first_notice(sink: Callable) -> bool:
+    """True the first time ``sink`` is told in this process (and remember it)."""
+    with _lock:
+        try:
+            if sink in _told:
+                return False
+            _told.add(sink)
+        except TypeError:  # not weakly referable
+            if id(sink) in _told_ids:
+                return False
+            _told_ids.add(id(sink))
+    return True
 
 
 def _suffix() -> str:
