@@ -111,7 +111,11 @@ def test_screening_leaves_the_answer_as_ipopt_gives_it():
     assert set(fast.effects) == set(full.effects) == {"viscous_friction"}
     a, b = fast.effects["viscous_friction"], full.effects["viscous_friction"]
     assert a == pytest.approx(b, rel=1e-6)  # the named effect is fitted by IPOPT in both
-    assert fast.verdict == full.verdict and fast.confounded == full.confounded
+    # the verdicts agree up to the candidates that did not converge or sat at a bound (only
+    # IPOPT fits can; the screen fits fewer)
+    cut = "; not converged or at a bound"
+    assert fast.verdict.split(cut)[0] == full.verdict.split(cut)[0]
+    assert fast.confounded == full.confounded
     ln_n = math.log(full.nominal_fit.n_res)
     screened = 0
     for r_fast, r_full in zip(fast.rounds, full.rounds, strict=True):

@@ -27,13 +27,15 @@ The workflow (issue 7, issue 13):
 
 from __future__ import annotations
 
+import logging
 import math
 from collections.abc import Iterable
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from airbearing.analysis.discrepancy.adequacy import Adequacy, adequacy
 from airbearing.analysis.discrepancy.candidates import (
     Candidate,
     candidates_for,
@@ -42,12 +44,14 @@ from airbearing.analysis.discrepancy.candidates import (
     universal_effects,
     unphysical_candidates,
 )
+from airbearing.analysis.discrepancy.consistency import consistency, per_log_fits
 from airbearing.analysis.discrepancy.data import (
     ATTITUDE_SIGMA_MIN,
     RATE_SIGMA_MIN,
     NoiseFloor,
     ReplayData,
 )
+from airbearing.analysis.discrepancy.honest import Errors, effect_errors, honest
 from airbearing.analysis.discrepancy.localise import localise
 from airbearing.analysis.discrepancy.replay import (
     log_gaps,
@@ -80,7 +84,13 @@ from airbearing.analysis.discrepancy.trial import (
     lag_start,
     scan,
 )
-from airbearing.analysis.discrepancy.words import experiment_for, format_value, verdict, why
+from airbearing.analysis.discrepancy.words import (
+    experiment_for,
+    failure_words,
+    format_value,
+    verdict,
+    why,
+)
 from airbearing.analysis.shooting import Fit, ShootingProblem, WindowSet
 from airbearing.errors import InputError, SolverError
 from airbearing.io.log import Log
@@ -99,6 +109,8 @@ __all__ = [
     "format_value",
     "localise",
 ]
+
+_log = logging.getLogger(__name__)
 
 #: Candidates whose BIC lies within this of the best explain the data equally well
 #: (a BIC difference below 2 is "not worth more than a bare mention", Kass & Raftery 1995).
@@ -145,7 +157,17 @@ class Discrepancy:
     effects : dict
         Named missing effects, ``name -> value`` (FORMATS.md units), in the order found.
     effect_std : dict
-        ``name -> 1-sigma`` of each value.
+        ``name -> 1-sigma`` of each value: the honest error (:mod:`.honest`, a HAC sandwich
+        with the residuals' autocovariance).
+    effect_std_white, effect_crlb, effect_efficiency : dict
+        ``name ->`` the white-noise Fisher error, the Cramer-Rao bound of the data for whole
+        segments, and ``std / crlb``.
+    adequacy : Adequacy
+        Whether the final fit's residual is at the noise, and what remains (:mod:`.adequacy`).
+    per_log : tuple of LogFit
+        With several runs (fitted or ``validate``), the named effects fitted on each alone.
+    consistency : tuple of Consistency
+        The chi-square test of each named effect across those runs (:mod:`.consistency`).
     gap_before, gap_after : float
         The gap of the nominal and of the augmented Model over all fitted logs
         (``gap_unit``).
@@ -190,6 +212,13 @@ class Discrepancy:
     validation: tuple = ()
     log_gaps_before: tuple = ()
     log_gaps_after: tuple = ()
+    effect_std_white: dict = field(default_factory=dict)
+    effect_crlb: dict = field(default_factory=dict)
+    effect_efficiency: dict = field(default_factory=dict)
+    errors: Errors | None = None
+    adequacy: Adequacy | None = None
+    per_log: tuple = ()
+    consistency: tuple = ()
 
     @property
     def data(self) -> ReplayData:
@@ -230,7 +259,14 @@ class Discrepancy:
             "testbed": self.testbed.name,
             "log": self.log.source,
             "effects": [
-                {"name": n, "value": jsonable(v), "std": jsonable(self.effect_std[n])}
+                {
+                    "name": n,
+                    "value": jsonable(v),
+                    "std": jsonable(self.effect_std[n]),
+                    "std_white": jsonable(self.effect_std_white.get(n)),
+                    "crlb": jsonable(self.effect_crlb.get(n)),
+                    "efficiency": jsonable(self.effect_efficiency.get(n)),
+                }
                 for n, v in self.effects.items()
             ],
             "gap_before": float(self.gap_before),
@@ -247,6 +283,9 @@ class Discrepancy:
                         "per_axis",
                         "value",
                         "std",
+                        "std_white",
+                        "crlb",
+                        "efficiency",
                         "gap",
                         "score",
                         "heldout_gap",
@@ -275,6 +314,9 @@ class Discrepancy:
             "logs": logs,
             "validation": [v.to_json() for v in self.validation],
             "localisation": self.localisation.get("words", []),
+            "adequacy": self.adequacy.to_json() if self.adequacy is not None else None,
+            "per_log": [f.to_json() for f in self.per_log],
+            "consistency": [c.to_json() for c in self.consistency],
         }
 
 
@@ -674,9 +716,7 @@ def discrepancy(
         good = [c for c in results if c.nameable]
         if not good:
             stop_reason = (
-                "no further candidate may be named"
-                if chosen
-                else "the nominal model explains the data: no candidate may be named"
+                "no further candidate may be named" if chosen else "no candidate may be named"
             )
             break
         best_bic = min(c.delta_bic for c in good)
@@ -700,17 +740,60 @@ def discrepancy(
     else:
         stop_reason = stop_reason or f"reached max_effects = {max_effects}"
 
-    effects, effect_std = {}, {}
+    final_problem = search.problem(current_lag)
+    errs = honest(final_problem, current, len(current.theta))
+    effects, effect_std, white, crlb, eff = {}, {}, {}, {}, {}
     i = 0
     for c in chosen:
         effects[c.name] = c.value(current.theta[i : i + c.k])
-        effect_std[c.name] = c.value(current.theta_std[i : i + c.k])
+        ee = effect_errors(c, errs, i)
+        effect_std[c.name], white[c.name], crlb[c.name] = ee.std, ee.std_white, ee.crlb
+        eff[c.name] = ee.efficiency
         i += c.k
+    if rounds:
+        rounds[0] = tuple(_with_honest(search, r) for r in rounds[0])
     augmented = testbed.with_effects(effects) if effects else testbed
-    final_problem = search.problem(current_lag)
     validation = _validate(testbed, effects, validate, window_s, jit) if validate else ()
     done += len(validate)
-    text = verdict(effects, effect_std, stop_reason)
+    runs = [(lg, "fitted") for lg in logs] + [(lg, "validation") for lg in validate]
+    per_log, agree = [], []
+    if effects and len(runs) >= 2:
+        say("each named effect on each log alone", done, total)
+        per_log = per_log_fits(
+            testbed,
+            [lg for lg, _ in runs],
+            [r for _, r in runs],
+            search.models[current_lag],
+            search.S(current_lag, chosen),
+            chosen,
+            current.theta,
+            np.r_[[lo for c in chosen for lo in c.lower]],
+            np.r_[[hi for c in chosen for hi in c.upper]],
+            window_s,
+            jit,
+        )
+        agree = consistency(chosen, per_log)
+    adq = adequacy(
+        final_problem, current, floor, datas, gap_before=nominal.gap if effects else None
+    )
+    unfit = {}
+    for rnd in rounds:
+        for r in rnd:
+            if r.status in ("did not converge", "at its physical bound"):
+                _log.debug("candidate %s: %s: %s", r.label, r.status, r.reason)
+                unfit.setdefault(r.label, failure_words(r.status, r.reason))
+            elif getattr(r, "retry_failed", False):
+                _log.debug("candidate %s: retry failed: %s", r.label, r.retry_reason)
+                unfit.setdefault(r.label, "a retry from another start did not converge either")
+    text = verdict(
+        effects,
+        effect_std,
+        stop_reason,
+        efficiency=eff,
+        adequacy=adq,
+        unfit=tuple(unfit.items()),
+        disagreements=[w for w in (c.words() for c in agree) if w],
+    )
     if validation and effects:
         bad = [v.log for v in validation if not v.shrinks]
         text += (
@@ -746,4 +829,20 @@ def discrepancy(
         validation=validation,
         log_gaps_before=tuple(log_gaps(base_problem, nominal)),
         log_gaps_after=tuple(log_gaps(final_problem, current)),
+        effect_std_white=white,
+        effect_crlb=crlb,
+        effect_efficiency=eff,
+        errors=errs,
+        adequacy=adq,
+        per_log=tuple(per_log),
+        consistency=tuple(agree),
     )
+
+
+def _with_honest(search: _Search, res: CandidateResult) -> CandidateResult:
+    """A first-round candidate with its honest error, white-noise error, bound and efficiency."""
+    if res.fit is None or res.value is None or res.candidate is None:
+        return res
+    k = len(res.fit.theta)
+    ee = effect_errors(res.candidate, honest(search.problem(res.candidate.lag), res.fit, k), 0)
+    return replace(res, std=ee.std, std_white=ee.std_white, crlb=ee.crlb, efficiency=ee.efficiency)

@@ -77,7 +77,11 @@ class CandidateResult:
     ----------
     name : str
     value, std : float, tuple or None
-        FORMATS.md value and 1-sigma; None when not identifiable or not fitted.
+        FORMATS.md value and 1-sigma; None when not identifiable or not fitted. The
+        search replaces ``std`` by the honest error (:mod:`.honest`) once a round is done.
+    std_white, crlb, efficiency : float, tuple or None
+        The white-noise Fisher error, the Cramer-Rao bound of the data for whole segments
+        and ``std / crlb`` (None until the search sets them, or without a fit).
     gap : float
         Gap with the candidate added (rad/s or rad).
     lr, delta_bic : float
@@ -122,6 +126,9 @@ class CandidateResult:
     retry_reason: str = ""
     #: the retry ended badly too: the candidate is not an answer (verdicts name it)
     retry_failed: bool = False
+    std_white: object = None
+    crlb: object = None
+    efficiency: object = None
 
     @property
     def label(self) -> str:
@@ -139,6 +146,9 @@ class CandidateResult:
             "per_axis": self.per_axis,
             "value": jsonable(self.value),
             "std": jsonable(self.std),
+            "std_white": jsonable(self.std_white),
+            "crlb": jsonable(self.crlb),
+            "efficiency": jsonable(self.efficiency),
             "gap": _finite(self.gap),
             "score": _finite(self.delta_bic),
             "lr": _finite(self.lr),

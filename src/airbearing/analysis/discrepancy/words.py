@@ -16,6 +16,7 @@ __all__ = [
     "GENERIC_EXPERIMENT",
     "GYRO_BIAS_DOF1",
     "experiment_for",
+    "failure_words",
     "format_value",
     "verdict",
     "why",
@@ -93,12 +94,108 @@ def format_value(v, std=None) -> str:
     return f"{v:.4g}" + ("" if std is None else f" +- {std:.2g}")
 
 
-def verdict(effects: dict, effect_std: dict, stop_reason: str) -> str:
-    """One sentence: the named effects with their errors, or "no missing effect" and why."""
+def _efficiency_words(eff) -> str:
+    if eff is None:
+        return ""
+    e = np.atleast_1d(np.asarray(eff, dtype=float))
+    if not np.all(np.isfinite(e)):
+        return ""
+    if e.size == 1:
+        return f" (std / bound {e[0]:.2g})"
+    return " (std / bound [" + ", ".join(f"{x:.2g}" for x in e) + "])"
+
+
+#: IPOPT statuses in words (a candidate that did not converge says why, not the raw message).
+SOLVER_WORDS = {
+    "Maximum_Iterations_Exceeded": "IPOPT reached its iteration limit",
+    "Restoration_Failed": "IPOPT's restoration phase failed",
+    "Infeasible_Problem_Detected": "IPOPT found the bounds infeasible",
+    "Error_In_Step_Computation": "IPOPT could not compute a step",
+    "Invalid_Number_Detected": "the replay gave a non-finite number",
+    "Maximum_CpuTime_Exceeded": "IPOPT ran out of time",
+}
+
+
+def failure_words(status: str, reason: str) -> str:
+    """Why a candidate did not converge or sat at a bound, in a few words (no solver text)."""
+    if status == "at its physical bound":
+        head = reason.split(":")[0] if reason else ""
+        return head.replace("pinned at its physical bound", "at its bound") or "at its bound"
+    for key, words in SOLVER_WORDS.items():
+        if key in reason:
+            return words
+    if "not finite" in reason:
+        return "the replay is not finite" + (
+            " at the start" if "starting point" in reason else " at the fit"
+        )
+    if "gimbal motion" in reason:
+        return "the log commands no gimbal motion"
+    return "the fit did not converge"
+
+
+def verdict(
+    effects: dict,
+    effect_std: dict,
+    stop_reason: str,
+    *,
+    efficiency: dict | None = None,
+    adequacy=None,
+    unfit=(),
+    disagreements=(),
+) -> str:
+    """The verdict: named effects with errors and efficiency, or what the model leaves.
+
+    Parameters
+    ----------
+    effects, effect_std : dict
+        Named effects and their (honest) 1-sigma.
+    stop_reason : str
+        Why the search stopped.
+    efficiency : dict, optional
+        ``name -> std / Cramer-Rao bound``.
+    adequacy : Adequacy, optional
+        The final fit's adequacy (:mod:`.adequacy`): "no missing effect: the nominal model
+        explains the data" is said only when its residual is at the noise.
+    unfit : sequence of (label, words)
+        Candidates that did not converge or sat at a bound, and why.
+    disagreements : sequence of str
+        Effects the runs disagree on, in words.
+    """
+    efficiency = efficiency or {}
+    remains = adequacy is not None and adequacy.structure_remains
     if effects:
-        parts = [f"{n} = {format_value(v, effect_std[n])}" for n, v in effects.items()]
-        return "missing effect" + ("s" if len(effects) > 1 else "") + ": " + "; ".join(parts)
-    return "no missing effect: " + (stop_reason or "nothing to add")
+        parts = [
+            f"{n} = {format_value(v, effect_std[n])}{_efficiency_words(efficiency.get(n))}"
+            for n, v in effects.items()
+        ]
+        text = "missing effect" + ("s" if len(effects) > 1 else "") + ": " + "; ".join(parts)
+        if remains:
+            text += "; " + adequacy.words(named=True)
+    elif not remains:
+        std_reasons = ("", "no candidate may be named")
+        text = "no missing effect: the nominal model explains the data"
+        if adequacy is None:
+            text = "no missing effect: " + (stop_reason or "nothing to add")
+        elif stop_reason not in std_reasons:
+            text += f" ({stop_reason})"
+    else:
+        n = adequacy.gap_over_floor
+        if stop_reason.startswith("max_effects = 0"):
+            text = (
+                "no effect searched (max_effects = 0): the nominal model leaves "
+                f"{n:.3g} x the noise floor"
+            )
+        else:
+            text = (
+                "no candidate of the vocabulary explains the remaining gap "
+                f"({n:.3g} x the noise floor)"
+            )
+        text += "; " + adequacy.words(named=False)
+    if unfit:
+        text += "; not converged or at a bound: " + ", ".join(f"{c} ({w})" for c, w in unfit)
+    for d in disagreements:
+        text += "; " + d
+    return text
 
 
 #: Why a gyro bias cannot be seen on a dof-1 testbed with a gyro (FORMATS.md: its ``yaw`` is

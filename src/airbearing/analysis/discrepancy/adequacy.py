@@ -1,0 +1,421 @@
+"""Is a fit adequate? What its residual leaves above the noise, is it white, what it follows.
+
+Every discrepancy fit is judged on its residual:
+
+``gap_over_floor``
+    The fit's gap over the noise floor estimated from the data (both in the gap's unit).
+    Within the model it is about ``sqrt(1 - n_free / n_res)`` (slightly below 1).
+``whiteness_p``
+    A portmanteau test of the normalised primary residual
+    (:func:`airbearing.analysis.shooting.errors.normalised_residuals`): the Ljung-Box
+    statistic (``statsmodels.stats.diagnostic.acorr_ljungbox``) of every log segment and
+    every axis at ``min(LB_LAGS, n // 5)`` lags, combined by the SMALLEST p-value times
+    the number of tests (Bonferroni, capped at 1): the probability, for white residuals,
+    that at least one segment looks as correlated as the worst one.
+``structure_remains``
+    ``(whiteness_p < WHITENESS_ALPHA and gap_over_floor > GAP_ABOVE)`` or the fit's
+    process-noise intensity is significant (``fit.extra["process_noise"]["significant"]``,
+    when the estimator provides it). Both conditions are needed for the first arm: a
+    residual at the floor may be slightly correlated by the fit itself, and a residual
+    above a floor that the difference estimator underestimates may still be white.
+``correlation_time_s``
+    Where the autocorrelation of the normalised residual (pooled over segments and axes,
+    each segment weighted by its length) first falls below ``1/e``, linearly
+    interpolated between lags, times the median sample period, s.
+``follows``
+    The residual (gap unit) regressed, within each segment, on four functions of each
+    of: the yaw angle (``sin, cos`` of ``yaw`` and ``2 yaw``), the rate (``w``, ``|w|``,
+    ``w |w|``, ``sign w`` about the yaw axis, or ``wx, wy, wz, |w|`` on dof 3) and time
+    (Legendre polynomials of degree 1-4 over each segment, one set per segment), each
+    group with the segment's mean; ``R^2`` of each group (about the segments' means), and
+    the one that explains most.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+__all__ = [
+    "GAP_ABOVE",
+    "LB_LAGS",
+    "WHITENESS_ALPHA",
+    "Adequacy",
+    "adequacy",
+    "correlation_time",
+    "follows",
+    "whiteness",
+]
+
+#: Level below which the combined Ljung-Box p-value says "not white".
+WHITENESS_ALPHA = 1e-3
+#: The gap must exceed the noise floor by this factor for structure to remain (the floor is
+#: a robust difference estimate: a few % off on 10^3 samples, see :mod:`.data`).
+GAP_ABOVE = 1.1
+#: Most lags of the Ljung-Box test (fewer on short segments: ``n // 5``).
+LB_LAGS = 20
+#: Fewest samples of a segment tested for whiteness.
+MIN_SEGMENT = 25
+#: Most lags of the pooled autocorrelation (the correlation time and the report's plot).
+ACF_LAGS = 600
+#: Names of the regressor groups of :func:`follows`, in words.
+GROUP_WORDS = {"angle": "the yaw angle", "rate": "the rate", "time": "time"}
+
+
+def _segments(raw) -> list:
+    """``(source, rows, t, r)`` per log segment of the estimator's normalised residuals."""
+    out = []
+    for item in raw:
+        if hasattr(item, "r"):
+            source, rows, t, r = item.source, item.rows, item.t, item.r
+        else:
+            source, rows, t, r = item
+        r = np.asarray(r, dtype=float)
+        out.append(
+            (int(source), np.asarray(rows), np.asarray(t, dtype=float), r.reshape(len(r), -1))
+        )
+    return out
+
+
+def whiteness(segments) -> tuple[float, int]:
+    """Combined Ljung-Box p-value of normalised residual segments (module doc).
+
+    Parameters
+    ----------
+    segments : list of ndarray (n, n_axes)
+        Normalised residuals of each segment, in time order.
+
+    Returns
+    -------
+    p : float
+        Smallest p-value times the number of tests, capped at 1 (NaN when no segment is
+        long enough).
+    tests : int
+    """
+    from statsmodels.stats.diagnostic import acorr_ljungbox
+
+    ps = []
+    for r in segments:
+        n = r.shape[0]
+        if n < MIN_SEGMENT:
+            continue
+        h = int(min(LB_LAGS, n // 5))
+        for a in range(r.shape[1]):
+            x = r[:, a]
+            if not np.all(np.isfinite(x)) or np.ptp(x) == 0:
+                continue
+            df = acorr_ljungbox(x, lags=[h], return_df=True)
+            ps.append(float(df["lb_pvalue"].iloc[-1]))
+    if not ps:
+        return math.nan, 0
+    return float(min(1.0, min(ps) * len(ps))), len(ps)
+
+
+def pooled_acf(segments, nlags: int = ACF_LAGS) -> np.ndarray:
+    """Autocorrelation of the residual at lags ``0..nlags``, pooled over segments and axes
+    (each weighted by its number of samples at that lag)."""
+    num = np.zeros(nlags + 1)
+    den = np.zeros(nlags + 1)
+    for r in segments:
+        n = r.shape[0]
+        if n < 3:
+            continue
+        x = r - r.mean(axis=0)
+        var = float(np.sum(x**2))
+        if var <= 0:
+            continue
+        m = min(nlags, n - 1)
+        nfft = 1 << int(math.ceil(math.log2(2 * n)))
+        f = np.fft.rfft(x, nfft, axis=0)
+        c = np.fft.irfft(f * np.conj(f), nfft, axis=0)[: m + 1].sum(axis=1)
+        # each segment's autocovariance sums weighted by its own variance (the biased ACF)
+        num[: m + 1] += c
+        den[: m + 1] += var
+    with np.errstate(invalid="ignore", divide="ignore"):
+        acf = num / den
+    return acf[den > 0] if den[0] > 0 else np.array([1.0])
+
+
+def correlation_time(acf: np.ndarray, dt: float) -> float:
+    """s, where ``acf`` first falls below ``1/e``, interpolated between lags (module doc)."""
+    level = math.exp(-1.0)
+    below = np.flatnonzero(acf < level)
+    if below.size == 0:
+        return float(len(acf) - 1) * dt
+    j = int(below[0])
+    if j == 0:
+        return 0.0
+    a, b = float(acf[j - 1]), float(acf[j])
+    return float((j - 1 + (a - level) / (a - b)) * dt)
+
+
+def _legendre(x: np.ndarray, deg: int) -> np.ndarray:
+    from numpy.polynomial import legendre
+
+    return np.column_stack([legendre.legval(x, np.eye(deg + 1)[d]) for d in range(1, deg + 1)])
+
+
+def follows(residual, yaw, rate, t, segment) -> dict:
+    """``R^2`` of the residual on functions of the yaw angle, the rate and time (module doc).
+
+    Parameters
+    ----------
+    residual : ndarray (n, c)
+        Residual in the gap's unit.
+    yaw : ndarray (n,)
+        rad, the yaw angle at each sample.
+    rate : ndarray (n, a)
+        rad/s, the angular rate (one axis: about the yaw axis).
+    t : ndarray (n,)
+        s.
+    segment : ndarray (n,) of int
+        Segment label of each sample (means and time polynomials per segment).
+
+    Returns
+    -------
+    dict
+        ``{"angle": R2, "rate": R2, "time": R2, "most": group or None}``.
+    """
+    y = np.asarray(residual, dtype=float).reshape(len(residual), -1)
+    seg = np.asarray(segment)
+    labels = np.unique(seg)
+    means = (seg[:, None] == labels[None, :]).astype(float)
+    # residual about each segment's mean (what the segment's own constant explains is no
+    # one's)
+    y0 = y - means @ np.linalg.lstsq(means, y, rcond=None)[0]
+    ss = float(np.sum(y0**2))
+    w = np.asarray(rate, dtype=float).reshape(len(rate), -1)
+    if w.shape[1] == 1:
+        wz = w[:, 0]
+        g_rate = np.column_stack([wz, np.abs(wz), wz * np.abs(wz), np.sign(wz)])
+    else:
+        g_rate = np.column_stack([w, np.linalg.norm(w, axis=1)])
+    tt = np.zeros(len(t))
+    for lab in labels:
+        m = seg == lab
+        lo, hi = float(np.min(t[m])), float(np.max(t[m]))
+        tt[m] = 2 * (t[m] - lo) / max(hi - lo, 1e-12) - 1
+    groups = {
+        "angle": np.column_stack([np.sin(yaw), np.cos(yaw), np.sin(2 * yaw), np.cos(2 * yaw)]),
+        "rate": g_rate,
+        # a slow drift has its own shape in each segment: polynomials per segment
+        "time": np.hstack([_legendre(tt, 4) * means[:, [j]] for j in range(len(labels))]),
+    }
+    out: dict = {}
+    for name, X in groups.items():
+        A = np.hstack([means, X])
+        scale = np.sqrt(np.sum(A**2, axis=0))
+        A = A / np.where(scale > 0, scale, 1.0)
+        coef = np.linalg.lstsq(A, y, rcond=1e-10)[0]
+        e = y - A @ coef
+        out[name] = float(1.0 - np.sum(e**2) / ss) if ss > 0 else 0.0
+    best = max(groups, key=lambda k: out[k])
+    out["most"] = best if out[best] > 0 else None
+    return out
+
+
+@dataclass(frozen=True, eq=False)
+class Adequacy:
+    """The adequacy verdict of one fit (module doc).
+
+    Attributes
+    ----------
+    gap_over_floor : float
+    whiteness_p : float
+        Bonferroni-combined Ljung-Box p-value (NaN: no segment long enough).
+    tests : int
+        Number of Ljung-Box tests combined.
+    structure_remains : bool
+    correlation_time_s : float
+        s.
+    follows : dict
+        ``R^2`` per regressor group and the group that explains most (:func:`follows`).
+    explained_fraction : float or None
+        Fraction of the nominal gap's excess over the floor (in variance) that the named
+        effects explain, ``(gap_0^2 - gap^2) / (gap_0^2 - floor^2)``; None without effects.
+    process_noise : dict or None
+        The fit's ``extra["process_noise"]`` when the estimator provides it.
+    note : str
+        The verdict in words.
+    acf : ndarray
+        Pooled autocorrelation at lags ``0..``, for the report.
+    dt : float
+        s, the lag step of ``acf``.
+    """
+
+    gap_over_floor: float
+    whiteness_p: float
+    tests: int
+    structure_remains: bool
+    correlation_time_s: float
+    follows: dict
+    explained_fraction: float | None
+    process_noise: dict | None
+    note: str
+    acf: np.ndarray = field(repr=False, default_factory=lambda: np.ones(1))
+    dt: float = 0.0
+    series: dict = field(repr=False, default_factory=dict)
+
+    @property
+    def at_noise(self) -> bool:
+        """True when the residual is at the noise (no structure remains)."""
+        return not self.structure_remains
+
+    def words(self, named: bool) -> str:
+        """What remains, in words (empty when the residual is at the noise)."""
+        if not self.structure_remains:
+            return ""
+        parts = []
+        if named and self.explained_fraction is not None:
+            parts.append(
+                f"the named effects explain {100 * self.explained_fraction:.0f} % of the gap's "
+                "excess over the noise"
+            )
+        parts.append(f"{self.gap_over_floor:.3g} x the noise floor remains")
+        parts.append(f"correlated over {self.correlation_time_s:.3g} s")
+        f = self.follows
+        if f.get("most"):
+            others = ", ".join(
+                f"{GROUP_WORDS[g]} {f[g]:.2f}" for g in ("angle", "rate", "time") if g != f["most"]
+            )
+            parts.append(
+                f"it follows {GROUP_WORDS[f['most']]} most (R^2 {f[f['most']]:.2f}; {others})"
+            )
+        pn = self.process_noise
+        if pn and pn.get("significant"):
+            parts.append(
+                f"an unexplained torque of intensity {pn.get('intensity'):.3g} "
+                f"{pn.get('unit', '')} is significant (p {pn.get('p', math.nan):.2g})".replace(
+                    "  ", " "
+                )
+            )
+        return "structure remains: " + ", ".join(parts)
+
+    def to_json(self) -> dict:
+        def num(x):
+            return None if x is None or not np.isfinite(x) else float(x)
+
+        out = {
+            "gap_over_floor": num(self.gap_over_floor),
+            "whiteness_p": num(self.whiteness_p),
+            "whiteness_test": (
+                f"Ljung-Box per segment and axis at up to {LB_LAGS} lags, {self.tests} tests, "
+                "combined: smallest p times the number of tests (Bonferroni)"
+            ),
+            "structure_remains": bool(self.structure_remains),
+            "correlation_time_s": num(self.correlation_time_s),
+            "explained_fraction": num(self.explained_fraction),
+            "follows": {k: (v if k == "most" else num(v)) for k, v in self.follows.items()},
+            "rule": (
+                f"structure remains when whiteness_p < {WHITENESS_ALPHA:g} and gap_over_floor > "
+                f"{GAP_ABOVE:g}, or the process noise is significant"
+            ),
+            "note": self.note,
+        }
+        if self.process_noise is not None:
+            out["process_noise"] = {
+                k: (num(v) if isinstance(v, float) else v) for k, v in self.process_noise.items()
+            }
+        return out
+
+
+def _states(problem, fit, datas):
+    """Residual (gap unit), yaw, rate, time and segment label at every usable window sample."""
+    from airbearing.analysis.discrepancy.replay import primary_series
+    from airbearing.models import quaternion as quat
+
+    s = primary_series(problem, fit.delta, fit.p)
+    w = problem.windows
+    Y = problem.outputs_at(fit.delta, fit.p)[w.weight > 0]
+    d0 = datas[0]
+    rate = Y[:, problem.model.index(list(d0.rate_names), "y")]
+    src, rows = s["source"], s["rows"]
+    if d0.q is None:
+        yaw = np.array([datas[i].att[r, 0] for i, r in zip(src, rows, strict=True)])
+    else:
+        q = np.array([datas[i].q[r] for i, r in zip(src, rows, strict=True)])
+        yaw = quat.yaw_of(q)
+    t = np.array([datas[i].t[r] for i, r in zip(src, rows, strict=True)])
+    seg = np.zeros(len(rows), dtype=int)
+    k = 0
+    for i, d in enumerate(datas):
+        for a, b in d.segments:
+            seg[(src == i) & (rows >= a) & (rows < b)] = k
+            k += 1
+    return s["residual"], yaw, rate, t, seg, src
+
+
+def adequacy(problem, fit, floor, datas, *, gap_before: float | None = None) -> Adequacy:
+    """The adequacy verdict of ``fit`` (module doc).
+
+    Parameters
+    ----------
+    problem : ShootingProblem
+        The problem ``fit`` solved.
+    fit : Fit
+    floor : NoiseFloor
+        The noise estimated from the data.
+    datas : sequence of ReplayData
+        The logs of ``problem`` (``windows.source`` indexes them).
+    gap_before : float, optional
+        The nominal model's gap (same unit), for the fraction the named effects explain.
+
+    Returns
+    -------
+    Adequacy
+    """
+    from airbearing.analysis.shooting import errors
+
+    ratio = float(fit.gap / max(floor.value, 1e-300))
+    raw = errors.normalised_residuals(problem, fit)
+    segs = _segments(raw)
+    p, tests = whiteness([r for _, _, _, r in segs])
+    dts = [np.median(np.diff(t)) for _, _, t, _ in segs if len(t) > 1]
+    dt = float(np.median(dts)) if dts else float(datas[0].dt)
+    acf = pooled_acf([r for _, _, _, r in segs])
+    # the estimator's own correlation time (the one its HAC bandwidth uses), else ours
+    ct = getattr(errors, "correlation_time", None)
+    tau = float(ct(raw)) if ct is not None and raw and hasattr(raw[0], "r") else None
+    tau = correlation_time(acf, dt) if tau is None else tau
+    res, yaw, rate, t, seg, src = _states(problem, fit, datas)
+    fol = follows(res, yaw, rate, t, seg)
+    pn = fit.extra.get("process_noise") if isinstance(fit.extra, dict) else None
+    significant_noise = bool(pn and pn.get("significant"))
+    remains = bool(np.isfinite(p) and p < WHITENESS_ALPHA and ratio > GAP_ABOVE) or (
+        significant_noise
+    )
+    explained = None
+    if gap_before is not None and gap_before > fit.gap:
+        excess = gap_before**2 - floor.value**2
+        if excess > 0:
+            explained = float(np.clip((gap_before**2 - fit.gap**2) / excess, 0.0, 1.0))
+    a = Adequacy(
+        gap_over_floor=ratio,
+        whiteness_p=p,
+        tests=tests,
+        structure_remains=remains,
+        correlation_time_s=tau,
+        follows=fol,
+        explained_fraction=explained,
+        process_noise=dict(pn) if pn else None,
+        note="",
+        acf=acf,
+        dt=dt,
+        series={"residual": res, "yaw": yaw, "rate": rate, "t": t, "source": src},
+    )
+    if remains:
+        note = a.words(named=explained is not None)
+    else:
+        note = (
+            f"the residual is at the noise: {ratio:.3g} x the noise floor, whiteness p "
+            f"{p:.2g} (Ljung-Box, {tests} tests)"
+        )
+    return _with_note(a, note)
+
+
+def _with_note(a: Adequacy, note: str) -> Adequacy:
+    from dataclasses import replace
+
+    return replace(a, note=note)
