@@ -308,10 +308,13 @@ def test_seed000_comparison_with_the_offset_kept_reports_the_transient():
 def test_duration_sweep_marks_where_the_last_third_is_steady():
     from airbearing.analysis.balancing.comparison import parse_sweep, sweep_comparison
 
-    name, values = parse_sweep("duration=300:1000:2")
+    # seed000-tabletop's mixed runs are still settling 200-300 s into the run (the rest
+    # position's swing decays with 2 J / K_d = 33 s from 5 deg); by 600-900 s they are not
+    name, values = parse_sweep("duration=300:900:2")
     sw = sweep_comparison(load_testbed("platform-3dof"), name, values, offsets=(-0.5e-3,),
-                          seeds=(0,), offset_stays=True)  # fmt: skip
+                          seeds=(0, 1))  # fmt: skip
     assert [p.steady["steady"] for p in sw.points] == [False, True]
+    assert sw.points[0].steady["steady_linear"]  # the linearised check alone said steady
     assert sw.points[1].ratios["slider_p2p"] < sw.points[0].ratios["slider_p2p"]
 
 
@@ -325,7 +328,6 @@ def test_seed000_advantage_of_the_mixed_split():
     tb = load_testbed("platform-3dof")
     cmp = compare_methods(tb, ("mechanical", "mixed"), seeds=(0, 1, 2, 3),
                           free_duration=None)  # fmt: skip
-    assert cmp.steady["steady"]
     # seed 000 measured 0.09 (peak-to-peak) and 0.54 (g_perp); the issue asks for at
     # least 50 % lower peak-to-peak and a g_perp_rms no worse
     assert cmp.ratios["slider_p2p"] <= 0.5, cmp.ratios
@@ -339,13 +341,18 @@ def test_seed000_advantage_of_the_mixed_split():
 
 
 @pytest.mark.slow
-def test_seed000_advantage_holds_with_the_offset_kept_at_steady_state():
-    """With the offset kept the integral has to find it; past its transient (the settling
-    time, 1.5 x for the last third) the mixed split keeps its advantage."""
+def test_seed000_offset_kept_creep_through_backlash_is_not_steady():
+    """With the offset kept the integral has to find it. The linearised loop says 900 s
+    is steady (settling 573 s < 600 s), but through the 20 um backlash the integral still
+    creeps: the steppers' means move by tens of um between 300-600 s and 600-900 s, so the
+    windowed check calls it drifting. The mixed split keeps its advantage meanwhile."""
     tb = load_testbed("platform-3dof")
     cmp = compare_methods(tb, ("mechanical", "mixed"), duration=900.0, seeds=(0, 1),
                           free_duration=None, offset_stays=True)  # fmt: skip
-    assert cmp.steady["steady"]
+    st = cmp.steady
+    assert st["steady_linear"] and not st["steady"], st
+    assert st["metrics_window_s"] == [600.0, 900.0]
+    assert any("stepper" in d and "mean moved" in d for d in st["drifting"]), st["drifting"]
     assert cmp.ratios["slider_p2p"] <= 0.5, cmp.ratios
     assert cmp.ratios["g_perp_rms"] <= 1.0, cmp.ratios
 

@@ -59,7 +59,10 @@ class Comparison:
         (in-plane sliders 1 and 2 averaged); None with a single method.
     steady : dict or None
         :func:`~.transient.steady_state` of the slowest run (None when no run has a
-        seed-000 PID to analyse).
+        seed-000 PID to analyse), plus the windowed check of every run (:mod:`.drift`):
+        ``metrics_window_s``, ``runs``, ``runs_drifting``, ``drifting`` (one line per
+        drifting run), ``steady_linear`` (the linearised verdict) and ``reason``;
+        ``steady`` is true only when both say so.
     verdict : str or None
         One sentence: does the second method beat the first as seed 000's mixed split did?
     """
@@ -177,6 +180,9 @@ def _with(testbed: Testbed, name: str, value: float) -> Testbed:
 def _mean_metrics(rows: list[dict]) -> dict:
     keys = ("g_perp_rms", "g_x_rms", "g_y_rms", "g_perp_rms_true", "dipole_rms")
     out = {k: float(np.mean([r[k] for r in rows])) for k in keys}
+    out["metrics_window_s"] = rows[0]["metrics_window_s"]
+    judged = [r["steady"] for r in rows if r["steady"] is not None]
+    out["runs_steady"] = int(sum(judged))
     for k in ("slider_p2p_m", "slider_std_m", "mass_p2p_m", "residual_offset_m"):
         out[k] = np.mean([r[k] for r in rows], axis=0).tolist()
     rt = [r["residual_torque_nm"] for r in rows if r["residual_torque_nm"] is not None]
@@ -231,7 +237,7 @@ def compare_methods(
     report = _progress(progress)
     total, done = len(offsets) * len(methods) * len(seeds), 0
     tables: dict = {}
-    taus = []
+    taus, drifting, window = [], [], None
     for off in offsets:
         tables[off] = {}
         for method in methods:
@@ -244,11 +250,43 @@ def compare_methods(
                 done += 1
             tables[off][method] = _mean_metrics(rows)
             taus += [r["settling_time_s"] for r in rows if r["settling_time_s"] is not None]
+            drifting += [
+                f"{method}, offset {off * 1e3:+g} mm, seed {s}: {r['steady_reason']}"
+                for s, r in zip(seeds, rows, strict=True)
+                if r["steady"] is False
+            ]
+            window = rows[0]["metrics_window_s"]
     report("compared", done, total)
-    steady = steady_state(max(taus), duration) if taus else None
+    steady = _steady(steady_state(max(taus), duration) if taus else None, window, drifting,
+                     total)  # fmt: skip
     ratios = _ratios(tables, methods)
     verdict = _verdict(ratios, steady) if ratios is not None and steady is not None else None
     return Comparison(tuple(methods), float(duration), tables, ratios, steady, verdict)
+
+
+def _steady(linear: dict | None, window, drifting: list, runs: int) -> dict | None:
+    """The comparison's ``steady``: the linearised settling time (:func:`~.transient.
+    steady_state`) and the windowed check of every run (:mod:`.drift`); steady only if the
+    linear transient has settled before the metrics window and no run drifts in it."""
+    if linear is None:
+        return None
+    out = dict(linear)
+    out["steady_linear"] = linear["steady"]
+    out["metrics_window_s"] = window
+    out["runs_drifting"] = len(drifting)
+    out["runs"] = runs
+    out["drifting"] = drifting
+    out["steady"] = bool(linear["steady"] and not drifting)
+    if drifting:
+        out["reason"] = (
+            f"{len(drifting)} of {runs} runs still drift between the window before the "
+            f"metrics window and it (windowed g_perp_rms or stepper means; see 'drifting')"
+        )
+    elif not linear["steady"]:
+        out["reason"] = "the linearised tilt transient settles after the metrics window starts"
+    else:
+        out["reason"] = "no run drifts and the linearised transient has settled"
+    return out
 
 
 def _verdict(ratios: dict, steady: dict) -> str:
@@ -262,6 +300,11 @@ def _verdict(ratios: dict, steady: dict) -> str:
     )
     if steady["steady"]:
         return text + "the last third is steady."
+    if steady.get("steady_linear", True) and steady.get("runs_drifting"):
+        return text + (
+            f"{steady['runs_drifting']} of {steady['runs']} runs are still settling in the "
+            "last third (their windowed metrics drift): longer runs give the steady state."
+        )
     hide = "" if pp_ok and g_ok else ", which can hide a difference"
     return text + (
         f"the tilt transient, common to both methods, settles in "

@@ -17,6 +17,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.signal import savgol_filter
 
+from airbearing.analysis.balancing.drift import window_drift
 from airbearing.analysis.simulation.simulate import SimResult
 from airbearing.errors import InputError
 from airbearing.io.testbed import Testbed
@@ -81,7 +82,9 @@ def balancing_metrics(result: SimResult, *, free: SimResult | None = None) -> di
     -------
     dict with ``g_perp_rms``, ``g_x_rms``, ``g_y_rms`` (-), ``g_perp_rms_true`` (-),
     ``slider_p2p_m``, ``slider_std_m``, ``mass_p2p_m`` (3 each, m), ``dipole_rms`` (A m^2),
-    ``slider_final_m`` (3, m), ``residual_torque_nm`` (N m, None without ``free``).
+    ``slider_final_m`` (3, m), ``residual_torque_nm`` (N m, None without ``free``), and
+    the steady-state check of :func:`~.drift.window_drift` (``metrics_window_s``,
+    ``steady``, ``steady_reason``, the two windows' ``g_perp_rms_windows``, ...).
     """
     m = result.model
     g = last_third(result.y[:, m.index(["gx", "gy", "gz"], "y")])
@@ -105,6 +108,11 @@ def balancing_metrics(result: SimResult, *, free: SimResult | None = None) -> di
     }
     if free is not None:
         out["residual_torque_nm"] = residual_torque(free)
+    # is the metrics window steady? consecutive windows compared (.drift)
+    g_all = result.y[:, m.index(["gx", "gy"], "y")]
+    motor_all = result.extra[:, [names.index(f"motor{i}") for i in (1, 2)]]
+    step = m.testbed.masses.step if m.testbed.masses is not None else 0.0
+    out.update(window_drift(result.t, np.hypot(g_all[:, 0], g_all[:, 1]), motor_all, step=step))
     return out
 
 
