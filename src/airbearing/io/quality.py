@@ -18,9 +18,9 @@ segment (never across a gap) and each channel group:
 1. **Channel groups.** The rates ``wx, wy, wz`` (``wz`` for dof 1) when the testbed
    has a gyro, each channel tested on its own; the attitude, either the quaternion
    (its four components as one vector, signs made continuous, see below) or the yaw
-   (unwrapped within the segment, an isolated jump keeping the branch). Sliders,
-   dipoles and gimbal angles are commands or stepper positions, not smooth
-   measurements, and are not tested.
+   (unwrapped within the segment, an isolated jump keeping the branch). The input
+   channels too (see "Inputs" below): the gimbal angles ``d1..d4``, the sliders
+   ``s1..s3`` and the dipoles ``mx..mz``, each channel on its own.
 2. **Leave-one-out residual.** Sample ``i`` is predicted by a polynomial in time of
    degree ``p`` fitted by least squares to its ``2k`` nearest samples of the same
    segment (``k`` each side; at a segment's ends the window slides inwards, so the
@@ -85,6 +85,35 @@ Noise-free first-sample artefacts (a rate of 0 at a segment's first sample becau
 the exporter differentiated the attitude) are found by the extrapolated fit of
 step 2: the residual is the whole rate, many noise scales unless the platform is
 at rest, in which case 0 is not wrong.
+
+Inputs
+------
+Gimbal angles, slider positions and dipoles get the same rule, with two changes
+that their physics asks for:
+
+- **Commands switch between samples.** A commanded rate or dipole may step, and a
+  stepper slider starts and stops at once, so an input is smooth only piecewise: a
+  kink or a step is not a glitch. Each input sample is therefore scored by the best
+  of three fits of the same ``(k, p)``: the centred one (steps 2-4) and the two
+  one-sided ones (all ``2k`` neighbours before it, all after it), each against its
+  own scale measured on the log. A kink or step leaves one side straight, which
+  explains the sample; a glitch disagrees with both sides. A sample with fewer than
+  ``2k`` samples of its segment on one side has no one-sided fit there: a command
+  may have switched just beyond it (a controller starting with the segment), so it
+  is not judged. Channels that do not change within any segment are not tested
+  (nothing to find, nothing to pay).
+- **Gimbal angles follow their commanded rates.** They are tested when the log has
+  ``dd1..dd4``: the rule is applied to ``d_i - D_i``, with ``D_i`` the zero-order-
+  hold integral of the logged commanded rate from the segment's first sample. What
+  is left is the tracking error (dead zone, rate limit, encoder noise), smooth even
+  in a fast slew, so a glitch of a fraction of a degree stands out at its own row.
+  Without the commanded rates the angles are the only record of the command, and a
+  steering law that chatters near a singularity (the gimbals stepping back and forth
+  every sample) cannot be told from glitches: they are not tested.
+
+Scale floors: sliders at ``masses.step / sqrt(12)`` (the stepper's rounding),
+others at :data:`ABSOLUTE_FLOOR` and ``1e-9`` of the channel's magnitude; a
+noise-free simulated input then falls back on the change-of-slope floor of step 4.
 """
 
 from __future__ import annotations
@@ -273,12 +302,13 @@ class LogQuality:
 
 @dataclass
 class _Group:
-    name: str  # "rates" or "attitude"
+    name: str  # "rates", "attitude" or an input group ("gimbals", "sliders", "dipoles")
     columns: tuple[str, ...]  # log columns
     values: np.ndarray  # (n, c), prepared (signs continuous, yaw unwrapped)
     vector: bool  # True: one chi-square(3) test on the vector (quaternion)
     floor: np.ndarray  # (c,) or (1,) scale floor
     wrap: bool = False  # residual modulo 2 pi (yaw)
+    sided: bool = False  # inputs: the best of the centred and one-sided fits (module doc)
 
 
 def _normalised(
@@ -533,6 +563,26 @@ class _Scorer:
     def noise(self) -> np.ndarray:
         return self.scales[self.fit][self.fit[0]]
 
+    def _sided(self, rows, good, d, scale):
+        """Per row and channel, the fit (centred, all-left, all-right) that explains the
+        sample best, in its own scale (module doc, "Inputs")."""
+        g, t, segs, sc = self.group, self.t, self.segments, self.scale
+        k, p = self.fit
+        z = np.abs(d) / scale
+        z = np.where(np.isfinite(z), z, np.inf)
+        for a in (0, 2 * k):  # all neighbours after, all before
+            d_a, _ = _normalised(g, t, segs, good, k, p, sc, rows, shape=a)
+            # no one-sided fit (too near the segment's end): not judged (module doc)
+            side = self.from_end[rows] if a == 0 else self.from_start[rows]
+            d_a[side < 2 * k] = 0.0
+            s_a = np.broadcast_to(self.scales[self.fit][a], d_a.shape)
+            z_a = np.abs(d_a) / s_a
+            better = np.isfinite(z_a) & (z_a < z)
+            d, scale, z = (
+                np.where(better, x_a, x) for x_a, x in ((d_a, d), (s_a, scale), (z_a, z))
+            )
+        return d, scale
+
     def __call__(
         self, rows: np.ndarray, good: np.ndarray, exact: bool = True
     ) -> tuple[np.ndarray, np.ndarray]:
@@ -564,6 +614,8 @@ class _Scorer:
             at = edge_rows[at]
             d_f, shapes_f = _normalised(g, t, segs, good, kf, pf, sc, rows[at])
             d[at], scale[at] = d_f, self.scales[(kf, pf)][np.clip(shapes_f, 0, 2 * kf)]
+        if g.sided:
+            d, scale = self._sided(rows, good, d, scale)
         if exact:
             return _score(g, d, scale * self.local_at(rows))
         score, over = _score(g, d, scale)  # local factor 1: an upper bound of each score
@@ -739,11 +791,59 @@ def _groups(log: Log, testbed: Testbed | None, segments) -> list[_Group]:
         q = _continuous_signs(log.quaternions(), segments)
         floor = np.array([0.5 * max(sensors.attitude_noise, ABSOLUTE_FLOOR)])
         groups.append(_Group("attitude", ("qw", "qx", "qy", "qz"), q, True, floor))
+    groups += _input_groups(log, testbed, segments, t)
     return groups
 
 
+def _changing(values: np.ndarray, segments) -> np.ndarray:
+    """Per channel: does it change within some segment of at least 4 samples?"""
+    out = np.zeros(values.shape[1], dtype=bool)
+    for start, stop in segments:
+        if stop - start >= 4:
+            out |= np.ptp(values[start:stop], axis=0) > 0
+    return out
+
+
+def _input_groups(log: Log, testbed: Testbed | None, segments, t: np.ndarray) -> list[_Group]:
+    """Gimbal angles (minus the integral of their commanded rates), sliders and dipoles."""
+    from airbearing.io.log import _DIPOLES, _GIMBAL_RATES, _GIMBALS, _SLIDERS
+
+    groups = []
+    step = 0.0
+    if testbed is not None and getattr(testbed, "masses", None) is not None:
+        step = float(testbed.masses.step) / np.sqrt(12.0)  # stepper rounding, uniform
+    for name, cols, floor in (
+        ("gimbals", _GIMBALS, ABSOLUTE_FLOOR),
+        ("sliders", _SLIDERS, max(step, ABSOLUTE_FLOOR)),
+        ("dipoles", _DIPOLES, ABSOLUTE_FLOOR),
+    ):
+        if not log.has(*cols):
+            continue
+        x = np.stack([log.column(c) for c in cols], axis=1).astype(float)
+        if name == "gimbals":
+            if not log.has(*_GIMBAL_RATES):
+                continue  # module doc: no commanded rates, no test
+            dd = np.stack([log.column(c) for c in _GIMBAL_RATES], axis=1).astype(float)
+            for start, stop in segments:  # zero-order hold: dd_j acts over [t_j, t_j+1)
+                steps = dd[start : stop - 1] * np.diff(t[start:stop])[:, None]
+                x[start + 1 : stop] -= np.cumsum(steps, axis=0)
+        use = _changing(x, segments)
+        if not use.any():
+            continue
+        x = x[:, use]
+        mag = np.maximum(np.max(np.abs(x), axis=0), 1.0)
+        cols = tuple(c for c, u in zip(cols, use, strict=True) if u)
+        groups.append(
+            _Group(name, cols, x, False, np.maximum(floor, _RELATIVE_FLOOR * mag), sided=True)
+        )
+    return groups
+
+
+_WHAT = {"rates": "rate", "gimbals": "gimbal angle", "sliders": "slider", "dipoles": "dipole"}
+
+
 def _reason(group: _Group, cols: tuple[str, ...], score: float, logged_zero: bool) -> str:
-    what = "rate" if group.name == "rates" else "attitude"
+    what = _WHAT.get(group.name, "attitude")
     return (
         f"{what} {', '.join(cols)}{' logged as 0,' if logged_zero else ''} {score:.3g} noise "
         "scales from the smooth fit of its neighbours"

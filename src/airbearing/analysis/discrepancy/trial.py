@@ -211,13 +211,20 @@ class HeldOut:
         """The folds that can test parameters ``lo:hi`` at ``theta`` (module doc).
 
         A fold tests an effect when its training windows alone see it (Wald distance of
-        ``theta`` at least ``MIN_SIGMAS``) and so do its held-out windows; a fold without
+        ``theta`` at least ``MIN_SIGMAS``; for several values, in every direction) and so do
+        its held-out windows; a fold without
         either cannot tell a good effect from a bad one (its training step is an
         extrapolation, or the held-out windows do not depend on the effect). An effect with
         no derivative (a profile scan) is tested on every fold.
         """
         th = np.asarray(theta, dtype=float)
         a = np.einsum("i,fij,j->f", th, self.info_train[:, lo:hi, lo:hi], th)
+        if hi - lo > 1 and th.size == hi - lo:
+            # several values (of one unit): the training step must see every direction, or
+            # it extrapolates along the one it does not (yaw_imbalance on a slew that holds
+            # one attitude in most windows sees A_s sin + A_c cos there, not A_s and A_c)
+            lam = np.linalg.eigvalsh(self.info_train[:, lo:hi, lo:hi])[:, 0]
+            a = np.minimum(a, lam * float(th @ th))
         b = np.einsum("i,fij,j->f", th, self.info_test[:, lo:hi, lo:hi], th)
         if not np.any(a + b > 0):
             return np.ones(self.rss.size, dtype=bool)

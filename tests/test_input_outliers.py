@@ -1,0 +1,85 @@
+"""The outlier rule on input channels: gimbal angles, sliders and dipoles (io/quality.py, "Inputs").
+
+Oracle: glitches injected at known rows of logs from the package's own simulator (a
+closed-loop CMG slew, the seed-000 balancing runs); the rule must report exactly those
+rows and columns, and nothing on the clean logs. A 1.5 deg gimbal-angle glitch is ~500
+times the change of slope of the angle per sample of a slew, and 1 mm on a slider is
+~1700 stepper roundings: found with a wide margin; the clean logs test the other side
+(commands that step, saturate and chatter, sliders that start and stop at once).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from test_quality_fast import assert_same, reference_quality
+
+from airbearing.analysis.balancing.runs import run_balancing
+from airbearing.analysis.simulation.scenarios import slew
+from airbearing.io import Log
+from airbearing.io.testbed import load_testbed
+
+GLITCH = np.deg2rad(1.5)  # rad
+
+
+def _slew(name, seed, ideal=False, duration=60.0):
+    return slew(load_testbed(name), seed=seed, duration=duration, ideal=ideal).log
+
+
+def _with(log, changes):
+    df = log.data.copy()
+    for row, col, delta in changes:
+        df.loc[row, col] += delta
+    return Log(df, "glitched.csv", log.testbed)
+
+
+@pytest.mark.parametrize("name", ["cmg-yaw", "cmg-3dof"])
+def test_gimbal_angle_glitch_found_at_its_row(name, monkeypatch):
+    log = _slew(name, seed=2)
+    assert log.quality.outlier_rows == ()
+    # one glitch where the gimbals turn fastest, one where they hardly move (away from the
+    # first and last 2k = 6 rows, where an input may switch unseen and is not judged)
+    fast = 10 + int(np.argmax(np.abs(np.diff(log.column("d2")[10:-10]))))
+    quiet = log.data.shape[0] - 200
+    bad = _with(log, [(fast, "d2", GLITCH), (quiet, "d3", -GLITCH)])
+    q = bad.quality
+    assert q.outlier_rows == tuple(sorted((fast, quiet)))
+    cols = {o.row: o.columns for o in q.outliers}
+    assert cols[fast] == ("d2",) and cols[quiet] == ("d3",)
+    assert all(o.reason.startswith("gimbal angle ") for o in q.outliers)
+    assert set(q.noise) >= {"d1", "d2", "d3", "d4"} and "gimbals" in q.fits
+    # the fast paths flag exactly what the per-row reference flags
+    assert_same(q, reference_quality(monkeypatch, bad))
+
+
+def test_slider_and_dipole_glitches_found(monkeypatch):
+    log = run_balancing(load_testbed("seed000-tabletop"), "mixed", duration=120.0, seed=1)
+    log = log.result.log
+    assert log.quality.outlier_rows == ()
+    bad = _with(log, [(700, "s1", 1e-3), (1500, "mx", 0.5), (1501, "my", -0.5)])
+    q = bad.quality
+    assert q.outlier_rows == (700, 1500, 1501)
+    assert [o.columns for o in q.outliers] == [("s1",), ("mx",), ("my",)]
+    assert q.outliers[0].reason.startswith("slider s1")
+    assert_same(q, reference_quality(monkeypatch, bad))
+
+
+def test_gimbal_angles_without_commanded_rates_are_not_tested():
+    # without dd1..dd4 the angles are the only record of the command (module doc)
+    log = _slew("cmg-yaw", seed=2)
+    df = log.data.drop(columns=["dd1", "dd2", "dd3", "dd4"])
+    assert "gimbals" not in Log(df, "x.csv", log.testbed).quality.fits
+
+
+def test_long_clean_logs_with_inputs_have_no_outlier():
+    logs = [_slew(n, seed=s, ideal=i) for n in ("cmg-yaw", "cmg-3dof") for s, i in ((1, True),
+            (2, False), (3, False))]  # fmt: skip
+    tb = load_testbed("seed000-tabletop")
+    for method in ("mixed", "mechanical", "lyapunov", "adaptive"):
+        for seed in (1, 2):
+            logs.append(run_balancing(tb, method, duration=300.0, seed=seed).result.log)
+    for log in logs:
+        q = log.quality
+        tested = {"gimbals", "sliders", "dipoles"} & set(q.fits)
+        assert tested, log.source
+        assert q.outlier_rows == () and q.unexplained_rows == (), (log.source, q.outliers)
