@@ -56,9 +56,11 @@ from airbearing.models.model import build_model
 
 __all__ = [
     "DEFAULT_WINDOW_S",
+    "MAX_PIECES",
     "MIN_WINDOWS",
     "MIN_WINDOW_SAMPLES",
     "NoiseFloor",
+    "PIECE_S",
     "ReplayData",
     "make_windows",
     "noise_floor",
@@ -67,6 +69,11 @@ __all__ = [
 
 #: s, longest multiple-shooting window by default (shorter logs get at least 4 windows).
 DEFAULT_WINDOW_S = 10.0
+#: s, length of the linked pieces of the process-noise estimator by default (the resolution
+#: of the unexplained torque in time; a 20 s correlated torque is followed by 5 s pieces).
+PIECE_S = 5.0
+#: Most linked pieces by default (longer logs get longer pieces: the solve stays small).
+MAX_PIECES = 240
 #: Fewest windows the logs must give (the held-out test needs two).
 MIN_WINDOWS = 2
 #: Fewest usable samples in a window.
@@ -373,7 +380,9 @@ def make_windows(datas, *, window_s: float | None = None, linked: bool = False) 
             f"{src}: too short to fit anything: {n_use} usable samples; the replay needs at "
             f"least {MIN_WINDOWS} windows of {MIN_WINDOW_SAMPLES} samples ({need} samples)"
         )
-    if window_s is None:
+    if window_s is None and linked:
+        window_s = max(min(PIECE_S, n_use * dt / 4), n_use * dt / MAX_PIECES)
+    elif window_s is None:
         window_s = min(DEFAULT_WINDOW_S, n_use * dt / 4)
     if not (window_s > 0 and math.isfinite(window_s)):
         raise InputError(f"window {window_s!r} s: expected a positive length in s")

@@ -44,6 +44,11 @@ from airbearing.analysis.shooting import (
     jit_available,
     step_function,
 )
+from airbearing.analysis.shooting.process_noise import (
+    KAPPA_GRID,
+    estimate_process_noise,
+    set_intensity,
+)
 from airbearing.errors import InputError
 from airbearing.io.log import Log
 from airbearing.io.testbed import Testbed
@@ -95,10 +100,15 @@ def problem_for(
     *,
     substeps: int = DEFAULT_SUBSTEPS,
     jit: bool | None = None,
+    kappa: float | None = None,
 ) -> ShootingProblem:
-    """The shooting problem of ``model`` on ``windows``, weighted by the noise ``floor``."""
+    """The shooting problem of ``model`` on ``windows``, weighted by the noise ``floor``.
+
+    On linked windows the defects are penalised at the dimensionless process-noise
+    intensity ``kappa`` (default the top of :data:`KAPPA_GRID`: nearly free pieces).
+    """
     d0 = datas[0] if not isinstance(datas, ReplayData) else datas
-    return ShootingProblem(
+    problem = ShootingProblem(
         model,
         windows,
         d0.outputs,
@@ -107,6 +117,9 @@ def problem_for(
         substeps=substeps,
         jit=jit,
     )
+    if windows.linked:  # linked pieces start nearly free (the top of the intensity grid)
+        set_intensity(problem, KAPPA_GRID[0] if kappa is None else kappa)
+    return problem
 
 
 def primary_series(problem: ShootingProblem, fit_delta, p) -> dict:
@@ -247,7 +260,8 @@ def prepare(testbed: Testbed, logs, *, window_s: float | None = None):
     if not logs:
         raise InputError("replay: expected at least one log")
     datas = [replay_data(testbed, log) for log in logs]
-    windows = make_windows(datas, window_s=window_s)
+    # no window given: linked pieces whose horizon the process noise sets (module doc)
+    windows = make_windows(datas, window_s=window_s, linked=window_s is None)
     floor = noise_floor(datas)
     return datas, windows, floor
 
@@ -291,5 +305,8 @@ def replay(
     problem = problem_for(model, datas, windows, floor, substeps=substeps, jit=jit)
     names = ", ".join(d.log.source for d in datas)
     fit = problem.fit(model.p0, name=f"replay of {names}: initial states of the windows")
+    if windows.linked:  # the horizon from the data: the unexplained torque's intensity
+        say("replay: estimating the unexplained torque (the horizon)", 0, 1)
+        fit = estimate_process_noise(problem, model.p0, name=f"replay of {names}", start=fit)
     say("replay: done", 1, 1)
     return Replay(model, tuple(datas), windows, floor, fit, problem)

@@ -35,7 +35,7 @@ import scipy.sparse as sp
 
 from airbearing.analysis.shooting.constrained import null_space_basis
 from airbearing.analysis.shooting.functions import _problem_functions, to_csc
-from airbearing.analysis.shooting.problem import theta_errors
+from airbearing.analysis.shooting.problem import solve_gram, theta_errors
 
 __all__ = [
     "HonestErrors",
@@ -186,10 +186,11 @@ def _projected(J, k: int, N=None) -> np.ndarray:
     An = J[:, k:]
     if An.shape[1] == 0:
         return At
-    G = (An.T @ An).toarray()
-    c = np.sqrt(np.maximum(np.diag(G), 1e-300))
+    G = sp.csc_matrix(An.T @ An)
+    c = np.sqrt(np.maximum(G.diagonal(), 1e-300))
+    Dc = sp.diags(1.0 / c)
     B = np.asarray(An.T @ At)
-    coef = np.linalg.pinv(G / np.outer(c, c), rcond=1e-12, hermitian=True) @ (B / c[:, None])
+    coef = solve_gram(Dc @ G @ Dc, B / c[:, None])
     return At - An @ (coef / c[:, None])
 
 
@@ -285,7 +286,30 @@ def crlb(problem, fit, k: int) -> np.ndarray:
     pairs = np.flatnonzero(np.asarray(w.link, dtype=bool))
     nd = problem.n_delta
     rows = (pairs[:, None] * nd + np.arange(nd)).ravel()
-    Jc = to_csc(out[3])[rows][:, keep].toarray()
-    N = null_space_basis(Jc, k)
-    std, _, _ = theta_errors(Jm @ N, k, 1.0)
-    return std
+    C = to_csc(out[3])[rows][:, keep]
+    # the continuity as constraints of the Fisher problem: the parameters' block of the
+    # inverse of the bordered (KKT) matrix [[J'J, C'], [C, 0]] is their covariance on the
+    # continuous trajectories (column-scaled; a sparse alternative to a null-space basis)
+    F = sp.csc_matrix(Jm.T @ Jm)
+    c = np.sqrt(np.maximum(F.diagonal(), 0.0))
+    if not np.all(c[:k] > 0):
+        std, _, _ = theta_errors(Jm @ sp.csc_matrix(null_space_basis(C.toarray(), k)), k, 1.0)
+        return std
+    c = np.where(c > 0, c, 1.0)
+    Dc = sp.diags(1.0 / c)
+    Cs = C @ Dc
+    m = Cs.shape[0]
+    K = sp.bmat([[Dc @ F @ Dc, Cs.T], [Cs, None]], format="csc")
+    rhs = np.zeros((K.shape[0], k))
+    rhs[np.arange(k), np.arange(k)] = 1.0
+    from scipy.sparse.linalg import splu
+
+    try:
+        X = splu(K).solve(rhs)
+    except RuntimeError:  # singular: the data cannot fix some direction
+        return np.full(k, np.nan)
+    if not np.all(np.isfinite(X)):
+        return np.full(k, np.nan)
+    del m
+    var = np.diag(X[:k]) / c[:k] ** 2
+    return np.where(var > 0, np.sqrt(np.abs(var)), np.nan)

@@ -231,11 +231,38 @@ class _PenalisedOracle:
         return self.r, self.J
 
 
+def _pattern(spy: ca.Sparsity) -> sp.csc_matrix:
+    """A CasADi sparsity as a scipy CSC matrix of ones."""
+    return sp.csc_matrix(
+        (np.ones(spy.nnz()), np.asarray(spy.row()), np.asarray(spy.colind())),
+        shape=(spy.size1(), spy.size2()),
+    )
+
+
+def hessian_pattern(fj, nd: int, nw: int) -> sp.csc_matrix:
+    """Upper triangle of the structure of ``J^T J + Jc^T W^T W Jc`` (``W`` dense within each
+    pair's ``nd x nd`` block): fixed for a problem structure, so IPOPT gets a sparse Hessian
+    (the window states couple only their neighbours)."""
+    J = _pattern(fj.sparsity_out(1))
+    Jc = _pattern(fj.sparsity_out(3))
+    m = nd * max(nw - 1, 0)
+    Wp = sp.block_diag([np.ones((nd, nd))] * max(nw - 1, 0), format="csc") if m else None
+    H = (J.T @ J) + ((Wp @ Jc).T @ (Wp @ Jc) if m else 0 * (J.T @ J))
+    H = sp.triu(H, format="csc")
+    H.data[:] = 1.0
+    H.sort_indices()
+    return H
+
+
 def _build_penalised(model, L, nw, K, outputs, substeps, jit, max_iter):
     fr, fj, _ = _problem_functions(model, L, nw, K, outputs, substeps, jit, True)
     nd = sum(delta_layout(model, outputs))
     n_v = K + nd * nw
     o = _PenalisedOracle(fr, fj, n_v)
+    Hp = hessian_pattern(fj, nd, nw)
+    h_spy = ca.Sparsity(n_v, n_v, Hp.indptr.tolist(), Hp.indices.tolist())
+    h_rows = Hp.indices
+    h_cols = np.repeat(np.arange(n_v), np.diff(Hp.indptr))
 
     def f(z):
         r = o.r_at(z)
@@ -247,14 +274,16 @@ def _build_penalised(model, L, nw, K, outputs, substeps, jit, max_iter):
 
     def hess(z, _par, lam_f, _lam_g):
         _, J = o.rj_at(z)
-        return [np.triu(lam_f[0] * (J.T @ J).toarray())]
+        H = (J.T @ J).tocsr()
+        vals = float(lam_f[0]) * np.asarray(H[h_rows, h_cols]).ravel()
+        return [ca.DM(h_spy, vals)]
 
     f_jac = _Call(
         "pn_jac_f", [n_v, 1], [ca.Sparsity.dense(1, n_v)], lambda z, _f: [grad(z, 0)[1][None, :]]
     )
     F = _Call("pn_f", [n_v], [ca.Sparsity.dense(1, 1)], f, lambda name: f_jac)
     GF = _Call("pn_grad_f", [n_v, 0], [ca.Sparsity.dense(1, 1), ca.Sparsity.dense(n_v, 1)], grad)
-    H = _Call("pn_hess_l", [n_v, 0, 1, 0], [ca.Sparsity.upper(n_v)], hess)
+    H = _Call("pn_hess_l", [n_v, 0, 1, 0], [h_spy], hess)
     z = ca.MX.sym("z", n_v)
     solver = ca.nlpsol(
         "output_error_process_noise",
@@ -288,15 +317,20 @@ def penalised_solver(model, L, nw, K, outputs, substeps, jit, max_iter):
 
 def _loglik(problem, fit, k: int) -> float:
     """Laplace log marginal likelihood (module doc) of a fit at the problem's intensity."""
-    J = fit.extra["J"]
+    from scipy.sparse.linalg import splu
+
+    J = sp.csc_matrix(fit.extra["J"])
     Jd = J[:, k:]
-    G = (Jd.T @ Jd).toarray()
-    # column scaling leaves the differences between intensities unchanged (the same
-    # columns at every intensity) and keeps the determinant well conditioned
-    c = np.sqrt(np.maximum(np.diag(G), 1e-300))
-    sign, logdet = np.linalg.slogdet(G / np.outer(c, c))
-    if sign <= 0:
-        logdet = -np.inf
+    G = sp.csc_matrix(Jd.T @ Jd)
+    # column scaling keeps the determinant well conditioned (its log is added back)
+    c = np.sqrt(np.maximum(G.diagonal(), 1e-300))
+    Dc = sp.diags(1.0 / c)
+    try:
+        lu = splu(sp.csc_matrix(Dc @ G @ Dc))
+        d = lu.U.diagonal()
+        logdet = float(np.sum(np.log(np.abs(d)))) if np.all(d != 0) else np.inf
+    except RuntimeError:  # singular: a state the data cannot fix at any intensity
+        logdet = np.inf
     return float(-0.5 * fit.rss + problem.penalty_logdet - 0.5 * (logdet + 2 * np.log(c).sum()))
 
 
@@ -395,5 +429,5 @@ def estimate_process_noise(
         loglik={float(a): float(b) for a, b in ll.items()},
     )
     fit = fits[best]
-    fit.extra["process_noise"] = pn
+    fit.extra["process_noise"] = {**pn.to_json(), "loglik": pn.loglik}
     return fit
