@@ -403,6 +403,21 @@ def estimate_process_noise(
         # fall further (the model cannot follow the data over longer horizons)
         if ll[kappa] < ll[best] - 50.0:
             break
+    # refine between the coarse grid's points around the best (one decade each side)
+    best = max(ll, key=ll.get)
+    for kappa in (best * 10.0, best / 10.0):
+        if not (min(grid) < kappa < max(grid)) or kappa in ll or len(ll) < 2:
+            continue
+        set_intensity(problem, kappa)
+        near = min(fits, key=lambda a, kappa=kappa: abs(math.log(a / kappa)))
+        try:
+            fit = problem.fit(
+                p_base, S, fits[near].theta, lower=lower, upper=upper, delta0=fits[near].delta,
+                name=f"{name} ({kappa:g})",
+            )  # fmt: skip
+        except SolverError:
+            continue
+        fits[kappa], ll[kappa] = fit, _loglik(problem, fit, k)
     best = max(ll, key=ll.get)
     bottom = min(ll)  # the smallest intensity reached
     lr = max(0.0, 2.0 * (ll[best] - ll[bottom]))
