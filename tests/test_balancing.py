@@ -497,5 +497,5 @@ def test_comparison_reports_progress_and_keeps_the_json_keys(tmp_path, capsys):
     assert set(data["tables"]) == {"-0.0005", "0.0005"}
     text = capsys.readouterr().out
     # the aligned table: one header and one row per offset and method
-    lines = [ln for ln in text.splitlines() if "offset_mm" in ln or ln.strip().startswith("-0.5")]
+    lines = [ln for ln in text.splitlines() if "offset (mm)" in ln or ln.strip().startswith("-0.5")]
     assert len(lines) == 3 and len({len(ln) for ln in lines}) == 1, text

@@ -270,6 +270,8 @@ def plot(
         out.text(plot_path, log_report_html(log, quality))
     else:
         fig = log_figure(log, quality)
-        out.file(plot_path, lambda tmp: fig.savefig(tmp, format="png", dpi=110))
+        out.file(
+            plot_path, lambda tmp: fig.savefig(tmp, format="png", dpi=110, bbox_inches="tight")
+        )
     out.commit()
     typer.echo(f"wrote {plot_path}")

@@ -10,6 +10,7 @@ import base64
 import html
 import io
 import math
+import re
 from dataclasses import dataclass, field
 
 import matplotlib
@@ -19,10 +20,37 @@ from airbearing.io.output import write_atomic, write_json  # noqa: F401  (re-exp
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
-__all__ = ["Report", "figure_html", "table_html", "write_atomic", "write_json", "NONE_TEXT"]
+__all__ = [
+    "Report",
+    "figure_html",
+    "table_html",
+    "write_atomic",
+    "write_json",
+    "NONE_TEXT",
+    "column_label",
+    "sentence",
+]
 
 #: What a table shows for a value that does not exist (None, NaN); a legend says so.
 NONE_TEXT = "—"
+#: Texts other code uses for "no value"; a table shows :data:`NONE_TEXT` for each.
+_MISSING_TEXTS = frozenset({"", "-", "–", "—", "nan", "NaN", "None", "none", "n/a", "N/A"})
+#: Unit suffixes of code-style column names (the JSON's naming) and their unit.
+_UNIT_SUFFIXES = (
+    ("_deg_s", "deg/s"),
+    ("_rad_s", "rad/s"),
+    ("_deg", "deg"),
+    ("_rad", "rad"),
+    ("_mm", "mm"),
+    ("_um", "um"),
+    ("_m", "m"),
+    ("_s", "s"),
+    ("_hz", "Hz"),
+    ("_db", "dB"),
+    ("_kg", "kg"),
+    ("_nm", "N m"),
+    ("_j", "J"),
+)
 #: Columns whose True/False is a verdict (pass/FAIL); other booleans print yes/no.
 _VERDICT_WORDS = ("ok", "met", "pass", "stable", "verdict")
 
@@ -68,10 +96,35 @@ def figure_html(fig, caption: str = "", *, fmt: str = "svg") -> str:
     plt.close(fig)
     mime = "image/svg+xml" if fmt == "svg" else "image/png"
     data = base64.b64encode(buf.getvalue()).decode("ascii")
-    cap = f"<figcaption>{html.escape(caption)}</figcaption>" if caption else ""
+    cap = f"<figcaption>{html.escape(sentence(caption))}</figcaption>" if caption else ""
     return (
         f'<figure><img alt="{html.escape(caption)}" src="data:{mime};base64,{data}"/>{cap}</figure>'
     )
+
+
+def column_label(name: str) -> str:
+    """A column name for people: ``final_Hx_h0`` -> ``final Hx / h0``, ``t_peak_s`` ->
+    ``t peak (s)``; a name with a space (already for people) is kept."""
+    if " " in name or "_" not in name:
+        return name
+    unit = ""
+    low = name.lower()
+    for suffix, u in _UNIT_SUFFIXES:
+        if low.endswith(suffix) and len(name) > len(suffix):
+            name, unit = name[: -len(suffix)], u
+            break
+    parts = name.split("_")
+    if len(parts) > 2 and re.fullmatch(r"[a-z]\w*0", parts[-1]):  # normalised by h0, J0, ...
+        text = " ".join(parts[:-1]) + " / " + parts[-1]
+    else:
+        text = " ".join(parts)
+    return f"{text} ({unit})" if unit else text
+
+
+def sentence(text: str) -> str:
+    """``text`` ending as a sentence (a full stop added unless it ends in . ! ? or :)."""
+    text = str(text).strip()
+    return text if not text or text[-1] in ".!?:" else text + "."
 
 
 def _fmt(v) -> str:
@@ -88,6 +141,8 @@ def _fmt(v) -> str:
         if math.isinf(f):
             return "∞" if f > 0 else "−∞"
         return f"{f:.4g}"
+    if isinstance(v, str) and v.strip() in _MISSING_TEXTS:
+        return NONE_TEXT
     return html.escape(str(v))
 
 
@@ -109,8 +164,9 @@ def table_html(
     if not rows:
         return "<p><em>(empty)</em></p>"
     columns = columns or list(rows[0])
-    head = "".join(
-        f'<th class="{"l" if i == 0 else ""}">{html.escape(c)}</th>' for i, c in enumerate(columns)
+    head = "\n".join(
+        f'<th class="{"l" if i == 0 else ""}">{html.escape(column_label(str(c)))}</th>'
+        for i, c in enumerate(columns)
     )
     body = []
     used_none = False
@@ -127,11 +183,12 @@ def table_html(
             text = _fmt(v)
             used_none = used_none or text == NONE_TEXT
             cells.append(f'<td class="{cls}">{text}</td>')
-        body.append("<tr>" + "".join(cells) + "</tr>")
+        body.append("<tr>" + "\n".join(cells) + "</tr>")
     note = ""
     if used_none:
         note = f'<p class="legend">{NONE_TEXT}: {html.escape(legend or "not defined")}.</p>'
-    return f'<div class="scroll"><table><tr>{head}</tr>{"".join(body)}</table></div>{note}'
+    rows_html = "\n".join(body)
+    return f'<div class="scroll"><table>\n<tr>{head}</tr>\n{rows_html}\n</table></div>{note}'
 
 
 @dataclass
@@ -146,7 +203,7 @@ class Report:
 
     def paragraph(self, text: str, *, note: bool = False) -> None:
         cls = ' class="note"' if note else ""
-        self.parts.append(f"<p{cls}>{html.escape(text)}</p>")
+        self.parts.append(f"<p{cls}>{html.escape(sentence(text))}</p>")
 
     def figure(self, fig, caption: str = "") -> None:
         self.parts.append(figure_html(fig, caption))

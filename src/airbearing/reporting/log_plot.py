@@ -1,30 +1,116 @@
-"""Plot of a log: its channels against time, gaps shaded, outliers marked.
+"""Plot of a log: its channels against time, gaps as breaks, glitches visible, outliers marked.
 
 Used by ``airbearing log plot``; the only module of the ``log`` command that imports
-matplotlib.
+matplotlib. What the figure shows so that a person sees the log's artefacts:
+
+- a gap is a break in every line (a NaN between segments) and a shaded band, never a
+  straight line drawn across it;
+- yaw is plotted wrapped to (-180, 180] deg (a spinning rig's unwrapped yaw reaches
+  tens of thousands of degrees, where an 8 deg glitch is invisible), with the yaw rate
+  from the logged angle and the **residual from a local trend** (the sample minus the
+  running median of its neighbours): a glitch stands out there without any marker;
+- every label lies inside the figure (constrained layout; the CLI saves with a tight
+  bounding box).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from airbearing.io.log import Log
+from airbearing.io.log import Log, segments_of
 from airbearing.io.quality import LogQuality
 from airbearing.reporting.html import Report, figure_html, plt
 
-__all__ = ["log_figure", "log_report_html"]
+__all__ = ["log_figure", "log_report_html", "with_breaks", "local_residual", "TREND_WINDOW"]
 
+_DEG = 180.0 / np.pi
 # (title, columns, y label, scale to the plotted unit)
 _PANELS: tuple[tuple[str, tuple[str, ...], str, float], ...] = (
     ("attitude quaternion", ("qw", "qx", "qy", "qz"), "quaternion component (-)", 1.0),
-    ("yaw", ("yaw",), "yaw angle (deg)", 180.0 / np.pi),
-    ("angular rate", ("wx", "wy", "wz"), "angular rate, body axes (deg/s)", 180.0 / np.pi),
+    ("yaw", ("yaw",), "yaw angle (deg)", _DEG),
+    ("angular rate", ("wx", "wy", "wz"), "angular rate, body axes (deg/s)", _DEG),
     ("slider positions", ("s1", "s2", "s3"), "slider position along its rail (mm)", 1e3),
     ("magnetorquer dipole", ("mx", "my", "mz"), "commanded dipole, body axes (A m^2)", 1.0),
     ("magnetic field", ("bx", "by", "bz"), "magnetic field, body axes (uT)", 1e6),
-    ("gimbal angles", ("d1", "d2", "d3", "d4"), "gimbal angle (deg)", 180.0 / np.pi),
-    ("gimbal rates", ("dd1", "dd2", "dd3", "dd4"), "commanded gimbal rate (deg/s)", 180.0 / np.pi),
+    ("gimbal angles", ("d1", "d2", "d3", "d4"), "gimbal angle (deg)", _DEG),
+    ("gimbal rates", ("dd1", "dd2", "dd3", "dd4"), "commanded gimbal rate (deg/s)", _DEG),
 )
+#: Samples of the running median that defines the local trend (odd). A glitch of up to
+#: (TREND_WINDOW - 1) / 2 consecutive samples does not move the median, so the residual
+#: shows it whole; a smooth motion (monotonic over the window, as a spin is) has a
+#: residual of the noise only.
+TREND_WINDOW = 9
+
+
+def _segments(log: Log, quality: LogQuality | None) -> tuple[tuple[int, int], ...]:
+    if quality is not None:
+        return tuple(quality.segments)
+    t = log.t
+    if log.testbed is not None:
+        return segments_of(t, log.testbed.sensors.dt)
+    return segments_of(t, float(np.median(np.diff(t)))) if log.n > 1 else ((0, log.n),)
+
+
+def with_breaks(t: np.ndarray, y: np.ndarray, segments) -> tuple[np.ndarray, np.ndarray]:
+    """``t`` and ``y`` with a NaN between segments, so a plotted line breaks at each gap."""
+    ts, ys = [], []
+    for k, (a, b) in enumerate(segments):
+        if k:
+            ts.append([np.nan])
+            ys.append([np.nan])
+        ts.append(t[a:b])
+        ys.append(y[a:b])
+    return np.concatenate(ts), np.concatenate(ys)
+
+
+def local_residual(
+    y: np.ndarray, segments, t: np.ndarray | None = None, window: int = TREND_WINDOW
+) -> np.ndarray:
+    """``y`` minus its local trend, within each segment.
+
+    The local trend at a sample is a robust straight line through the ``window``
+    samples centred on it (fewer at a segment's ends): slope the median of the
+    sample-to-sample slopes, level the median of ``y`` moved along that slope to the
+    sample's time. A motion that is straight over the window (a spin, a slow swing)
+    leaves the noise only; a glitch of up to ``(window - 1) / 2`` samples moves neither
+    median and stands out whole. NaN in segments shorter than 3 samples.
+    """
+    y = np.asarray(y, dtype=float)
+    t = np.arange(len(y), dtype=float) if t is None else np.asarray(t, dtype=float)
+    out = np.full(len(y), np.nan)
+    half = window // 2
+    pad = np.full(half, np.nan)
+    for a, b in segments:
+        if b - a < 3:
+            continue
+        ys = np.lib.stride_tricks.sliding_window_view(np.concatenate([pad, y[a:b], pad]), window)
+        ts = np.lib.stride_tricks.sliding_window_view(np.concatenate([pad, t[a:b], pad]), window)
+        slope = np.nanmedian(np.diff(ys, axis=1) / np.diff(ts, axis=1), axis=1)
+        centre = t[a:b]
+        level = np.nanmedian(ys - slope[:, None] * (ts - centre[:, None]), axis=1)
+        out[a:b] = y[a:b] - level
+    return out
+
+
+def _break_at_wraps(t: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A NaN where a wrapped angle (deg) jumps by more than 180 deg: no line across it."""
+    jumps = np.flatnonzero(np.abs(np.diff(y)) > 180.0) + 1
+    return np.insert(t, jumps, np.nan), np.insert(y, jumps, np.nan)
+
+
+def _unwrap(y: np.ndarray, segments) -> np.ndarray:
+    out = np.array(y, dtype=float)
+    for a, b in segments:
+        out[a:b] = np.unwrap(out[a:b])
+    return out
+
+
+def _yaw_rate(t: np.ndarray, yaw: np.ndarray, segments) -> np.ndarray:
+    out = np.full(len(t), np.nan)
+    for a, b in segments:
+        if b - a >= 2:
+            out[a:b] = np.gradient(yaw[a:b], t[a:b])
+    return out
 
 
 def log_figure(log: Log, quality: LogQuality | None = None, *, title: str | None = None):
@@ -35,7 +121,8 @@ def log_figure(log: Log, quality: LogQuality | None = None, *, title: str | None
     log : Log
     quality : LogQuality or None
         If given, gaps between segments are shaded grey and outlier samples are
-        circled in red on every channel they concern.
+        circled in red on every channel they concern. Without it, segments are found
+        from the testbed's rate (or the median interval).
     title : str or None
         Figure title (default: the log's source).
 
@@ -43,43 +130,64 @@ def log_figure(log: Log, quality: LogQuality | None = None, *, title: str | None
     -------
     matplotlib.figure.Figure
         One panel per channel group present (attitude, rates, sliders, ...), time
-        in s on the shared x axis, each y axis labelled in words with its unit.
+        in s on the shared x axis, each y axis labelled in words with its unit; lines
+        break at gaps. A ``yaw`` column adds two panels: the yaw rate from the logged
+        angle (deg/s) and the residual from the local trend (deg, :func:`local_residual`);
+        yaw itself is shown wrapped to (-180, 180] deg.
     """
     panels = [p for p in _PANELS if log.has(*p[1])]
     if log.testbed is not None and not log.testbed.sensors.gyro:
         panels = [p for p in panels if p[0] != "angular rate"]
     t = log.t
+    segments = _segments(log, quality)
+    series: list[tuple[str, str, list[tuple[str, np.ndarray, np.ndarray]]]] = []
+    for name, cols, label, factor in panels:
+        if name == "yaw":
+            yaw = _unwrap(log.column("yaw"), segments)
+            wrapped = (np.mod(yaw + np.pi, 2 * np.pi) - np.pi) * factor
+            series.append(("yaw, wrapped to +-180 deg", "yaw angle (deg)",
+                           [("yaw", wrapped, log.column("yaw") * factor)]))  # fmt: skip
+            series.append(("yaw rate from the logged yaw", "yaw rate (deg/s)",
+                           [("d yaw / dt", _yaw_rate(t, yaw, segments) * _DEG, None)]))  # fmt: skip
+            series.append((
+                f"yaw minus its local trend (a robust line through {TREND_WINDOW} samples): "
+                "a glitch stands out here",
+                "yaw residual (deg)",
+                [("yaw residual", local_residual(yaw, segments, t) * factor, None)],
+            ))  # fmt: skip
+            continue
+        series.append((name, label, [(c, log.column(c) * factor, None) for c in cols]))
+    n_panels = max(len(series), 1)
     fig, axes = plt.subplots(
-        max(len(panels), 1), 1, sharex=True, figsize=(9, 2.3 * max(len(panels), 1) + 0.6)
+        n_panels, 1, sharex=True, figsize=(9, 2.3 * n_panels + 0.6), layout="constrained"
     )
     axes = np.atleast_1d(axes)
     outlier_cols: dict[int, tuple[str, ...]] = {}
     if quality is not None:
         outlier_cols = {o.row: o.columns for o in quality.outliers}
-    for ax, (name, cols, label, factor) in zip(axes, panels, strict=False):
-        for c in cols:
-            ax.plot(t, log.column(c) * factor, lw=0.8, label=c)
-        if quality is not None:
-            for (_, b), (a2, _) in zip(quality.segments[:-1], quality.segments[1:], strict=True):
-                ax.axvspan(t[b - 1], t[a2], color="0.85", zorder=0)
-            for row, ocols in outlier_cols.items():
-                for c in cols:
-                    if c in ocols:
-                        ax.plot(
-                            t[row], log.column(c)[row] * factor, "o", mfc="none", mec="red", ms=8
-                        )
+    for ax, (name, label, lines) in zip(axes, series, strict=False):
+        for c, y, _raw in lines:
+            tb, yb = with_breaks(t, y, segments)
+            if name.startswith("yaw, wrapped"):
+                tb, yb = _break_at_wraps(tb, yb)
+            ax.plot(tb, yb, lw=0.8, label=c)
+        for (_, b), (a2, _) in zip(segments[:-1], segments[1:], strict=True):
+            ax.axvspan(t[b - 1], t[a2], color="0.85", zorder=0)
+        for row, ocols in outlier_cols.items():
+            for c, y, _raw in lines:
+                if c in ocols:
+                    ax.plot(t[row], y[row], "o", mfc="none", mec="red", ms=8)
         ax.set_ylabel(label)
         ax.set_title(name, fontsize=10, loc="left")
-        ax.legend(loc="upper right", fontsize=8, ncol=len(cols))
+        if len(lines) > 1:
+            ax.legend(loc="upper right", fontsize=8, ncol=len(lines))
         ax.grid(alpha=0.3)
     axes[-1].set_xlabel("time (s)")
-    note = ""
+    note = f" — {len(segments)} segment(s), gaps shown as breaks"
     if quality is not None:
-        note = (
-            f" — {quality.n_segments} segment(s) (gaps shaded), "
-            f"{len(quality.outlier_rows)} outlier row(s) (red circles)"
-        )
+        note += f", {len(quality.outlier_rows)} outlier row(s) (red circles)"
     fig.suptitle((title or log.source) + note, fontsize=10)
+    fig.align_ylabels(axes)
     return fig
 
 
@@ -88,9 +196,10 @@ def log_report_html(log: Log, quality: LogQuality | None = None) -> str:
     report = Report(f"Log {log.source}")
     report.raw(figure_html(log_figure(log, quality), "Logged channels against time."))
     if quality is not None:
+        outliers = ", ".join(map(str, quality.outlier_rows)) or "none"
         report.paragraph(
-            f"{log.n} rows, {quality.n_segments} segment(s), jitter {quality.jitter:.3f}, "
-            f"outlier rows: {', '.join(map(str, quality.outlier_rows)) or 'none'}."
+            f"{log.n} rows in {quality.n_segments} segment(s). Jitter {quality.jitter:.3f}. "
+            f"Outlier rows: {outliers}."
         )
         if quality.outliers:
             report.table(
