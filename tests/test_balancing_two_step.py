@@ -16,7 +16,10 @@ def _seed004_masses():
     # seed 004 simulation set-up (Sec. "Simulation results", eqs. 55-56): balance masses of
     # 0.465 kg each; the 0.041 kg sliders of the built-in (seed 000) move the CM by at most
     # 0.24 mm per rail, short of the built-in's 0.4/0.7/-2.6 mm offset
-    return tb.replace(masses=dataclasses.replace(tb.masses, mass=(0.465, 0.465, 0.465)))
+    # (and other motors: the built-in's slider vibration, fitted to seed 000, is left out)
+    masses = dataclasses.replace(tb.masses, mass=(0.465, 0.465, 0.465), gyro_vibration=0.0,
+                                 accel_vibration=0.0, drive_torque_noise=0.0)  # fmt: skip
+    return tb.replace(masses=masses)
 
 
 @pytest.mark.slow
@@ -25,8 +28,8 @@ def test_two_step_reduces_kinetic_energy_spread(seed):
     tb = _seed004_masses()
     out = two_step(tb, seed=seed)
     assert isinstance(out, TwoStepResult)
-    # seed 004: 99.75 % in simulation; the issue asks for at least 99 %
-    assert out.ke_reduction >= 0.99, out
+    # seed 004: 99.75 % in simulation (true rates, as ke_reduction now is)
+    assert out.ke_reduction >= 0.9975, out
     # the vertical offset the KE spread needs: a residual of 2 um leaves a spread of about
     # 7e-5 J against 8e-3 J before (the 99 % line); the identification must be well within it
     r_true_z = tb.body.cm_offset_vec[2]
@@ -51,3 +54,27 @@ def test_cli_two_step_json_keys(tmp_path):
     data = json.loads(out.read_text())
     assert list(data) == [f.name for f in dataclasses.fields(TwoStepResult)]
     assert data["ke_reduction"] >= 0.99  # seed 004: 99.75 % in simulation
+
+
+@pytest.mark.slow
+def test_seed004_platform_two_step_reaches_the_papers_reduction():
+    """``balance seed004-platform --two-step``, 4 noise seeds: seed 004 Sec. "Simulation
+    results" reports a kinetic-energy spread falling from 0.0011 to 2.7142e-6 J (99.75 %),
+    from the true rates of its simulation (eqs. 52-54, "neglecting the air friction")."""
+    tb = load_testbed("seed004-platform")
+    runs = [two_step(tb, seed=s) for s in range(4)]
+    assert np.median([r.ke_reduction for r in runs]) >= 0.9975, [r.ke_reduction for r in runs]
+    step = tb.masses.step
+    for r in runs:
+        assert r.ke_rates == "true"
+        # commands in whole 10 um steps (seed 004: "The motor step is 0.01 mm")
+        s = np.asarray(r.sliders_final_m)
+        assert np.allclose(s / step, np.round(s / step), atol=1e-6), r.sliders_final_m
+        # iterated until the estimate moves by less than one step's CM shift (0.74 um)
+        est = r.vertical_offset_estimates_m
+        assert r.iterations == len(est) >= 2
+        assert r.iterations == 6 or abs(est[-1] - est[-2]) <= 0.465 * step / 6.3, est
+        # the measured check sits on the BNO055 gyro's floor (2 sigma rms|J w| = 8.8e-5 J,
+        # 32x the paper's 2.7e-6 J): within 20 % of it, above the true-rate spread
+        assert 0.8 * r.ke_noise_floor <= r.ke_std_after_measured <= 1.2 * r.ke_noise_floor, r
+        assert r.ke_std_after < 0.5 * r.ke_std_after_measured, r

@@ -31,6 +31,7 @@ from airbearing.progress import call as _progress
 __all__ = [
     "IDENTIFICATION_DURATION",
     "KNOWN_DISPLACEMENT",
+    "MAX_ITERATIONS",
     "SEED004_RATES",
     "STEP1_RESIDUAL",
     "TwoStepResult",
@@ -49,7 +50,8 @@ class TwoStepResult:
         Testbed name and the step-1 balancing law.
     ke_std_before, ke_std_after : float
         J, standard deviation of the kinetic energy ``w^T J w`` (seed 004 eqs. 53-54) of
-        the free oscillations before (sliders at zero) and after balancing.
+        the free oscillations before (sliders at zero) and after balancing, from the true
+        rates, as seed 004's simulation (``ke_rates``: ``"true"``).
     ke_reduction : float
         ``1 - ke_std_after / ke_std_before`` (seed 004: 99.75 % in simulation).
     vertical_offset_identified_m : float
@@ -76,6 +78,22 @@ class TwoStepResult:
         s, length of step 1.
     seed : int
         Noise seed.
+    ke_rates : str
+        Which rates ``ke_std_before``/``ke_std_after`` use: ``"true"`` (simulation truth).
+    ke_std_before_measured, ke_std_after_measured, ke_reduction_measured : float
+        J, J, -: the same from the measured (noisy) gyro rates, what a lab computes.
+    ke_noise_floor : float
+        J, the spread the gyro noise alone adds to a measured kinetic energy:
+        ``2 sigma_gyro rms|J w|`` over the after run (the first-order term of
+        ``(w + n)^T J (w + n)``); a measured after-value near it is at the floor.
+    iterations : int
+        Identification rounds of step 2 (seed 004: "iterated until the data are
+        consistent with respect the previous identification").
+    vertical_offset_estimates_m : list of float
+        m, the vertical offset (sliders at zero) each round identified.
+    sliders_final_unrounded_m : list of 3 float
+        m, the slider positions that cancel the identified offset before rounding to
+        whole steps (``sliders_final_m``).
     """
 
     testbed: str
@@ -98,6 +116,14 @@ class TwoStepResult:
     g_perp_rms_step1: float
     balance_duration_s: float
     seed: int
+    ke_rates: str
+    ke_std_before_measured: float
+    ke_std_after_measured: float
+    ke_reduction_measured: float
+    ke_noise_floor: float
+    iterations: int
+    vertical_offset_estimates_m: list
+    sliders_final_unrounded_m: list
 
     def to_json(self) -> dict:
         """The ``balance --two-step`` JSON: one key per attribute, in this order."""
@@ -121,6 +147,9 @@ IDENTIFICATION_DURATION = 200.0
 KNOWN_DISPLACEMENT = (5e-3, 5e-3, 0.0)
 #: m, in-plane residual seed 004 reached after in-plane balancing ("in the order of 1e-7 m").
 STEP1_RESIDUAL = 1e-7
+#: Most identification rounds of step 2 (seed 004 iterates "till no more appreciable
+#: variation on estimated parameters could be noticed"; here it stops moving in 2-3).
+MAX_ITERATIONS = 6
 
 
 def step1_duration(testbed: Testbed, integral_rate: float = TILT_INTEGRAL_RATE) -> float:
@@ -243,37 +272,52 @@ def two_step(
     M1 = A.T @ (m_i * s1)  # mass moment of the sliders, seed 004 eq. 5
     known_xy = -M1[:2] / mass  # in-plane offset at zero sliders, known after step 1
 
-    # step 2: free oscillations before and after a known displacement, identification
+    # step 2: free oscillations before and after a known displacement, identification,
+    # iterated as seed 004 does: each round adds two free oscillations about the sliders'
+    # current positions to the data ("merged together") until the estimate stops moving
     report("step 2: free oscillations and identification", 1, 3)
-    s2 = s1 + d
-    if np.any(np.abs(s2) > travel):
-        raise InputError(
-            f"known_displacement={d.tolist()} m: from the step-1 positions {s1.tolist()} m it "
-            f"leaves the travel +-{travel} m"
+    step = testbed.masses.step
+    # the CM shift of one step of the vertical rail: a finer change cannot be commanded
+    tol = max(float(m_i[2] * step / mass), STEP1_RESIDUAL)
+    logs, estimates = [], []
+    s_cur, s_final = s1, None
+    for k in range(MAX_ITERATIONS):
+        s2 = s_cur + d
+        if np.any(np.abs(s2) > travel):
+            raise InputError(
+                f"known_displacement={d.tolist()} m: from the slider positions "
+                f"{s_cur.tolist()} m it leaves the travel +-{travel} m"
+            )
+        seeds = (seed + 1, seed + 2) if k == 0 else (seed + 10 + 2 * k, seed + 11 + 2 * k)
+        logs += [
+            _free(model, s, b_lab, model.x0(w=SEED004_RATES[rate]), identification_duration,
+                  sd, noise).log
+            for s, rate, sd in ((s_cur, "balancing", seeds[0]), (s2, "balanced", seeds[1]))
+        ]  # fmt: skip
+        ident = identify_platform(
+            testbed,
+            logs,
+            known_offset_xy=tuple(known_xy) if in_plane_known else None,
+            method=identify_method,
         )
-    logs = [
-        _free(model, s, b_lab, model.x0(w=SEED004_RATES[rate]), identification_duration,
-              seed + 1 + k, noise).log
-        for k, (s, rate) in enumerate(((s1, "balancing"), (s2, "balanced")))
-    ]  # fmt: skip
-    ident = identify_platform(
-        testbed,
-        logs,
-        known_offset_xy=tuple(known_xy) if in_plane_known else None,
-        method=identify_method,
-    )
-    r_est = np.asarray(ident.cm_offset, float).reshape(3)
-    J_est = np.asarray(ident.inertia, float).reshape(3, 3)
-    r_tot = r_est + M1 / mass  # identified offset with the sliders at s1
-    if in_plane_known:
-        r_tot[:2] = 0.0  # seed 004: step 2 moves only the vertical offset
-    # the sliders' mass moment must change by -mass * r_tot (seed 004 eq. 13 with eq. 5)
-    s_final = s1 + np.linalg.solve(A.T * m_i, -mass * r_tot)
-    if np.any(np.abs(s_final) > travel):
-        raise InputError(
-            f"{testbed.source}: the identified offset {r_tot.tolist()} m needs slider "
-            f"positions {s_final.tolist()} m beyond the travel +-{travel} m"
-        )
+        r_est = np.asarray(ident.cm_offset, float).reshape(3)
+        J_est = np.asarray(ident.inertia, float).reshape(3, 3)
+        estimates.append(float(r_est[2]))
+        r_tot = r_est + M1 / mass  # identified offset with the sliders at s1
+        if in_plane_known:
+            r_tot[:2] = 0.0  # seed 004: step 2 moves only the vertical offset
+        # the sliders' mass moment must change by -mass * r_tot (seed 004 eq. 13 with eq. 5)
+        s_exact = s1 + np.linalg.solve(A.T * m_i, -mass * r_tot)
+        # steppers move in whole steps: the command is rounded to them
+        s_final = np.round(s_exact / step) * step if step > 0 else s_exact
+        if np.any(np.abs(s_final) > travel):
+            raise InputError(
+                f"{testbed.source}: the identified offset {r_tot.tolist()} m needs slider "
+                f"positions {s_final.tolist()} m beyond the travel +-{travel} m"
+            )
+        if k > 0 and abs(estimates[-1] - estimates[-2]) <= tol:
+            break
+        s_cur = s_final
 
     # step 3: kinetic-energy spread, seed 004 eqs. 52-54
     report("step 3: kinetic energy before and after", 2, 3)
@@ -281,8 +325,15 @@ def two_step(
                    ke_duration, seed + 3, noise)  # fmt: skip
     after = _free(model, s_final, b_lab, model.x0(w=SEED004_RATES["balanced"]),
                   ke_duration, seed + 4, noise)  # fmt: skip
-    ke_b = kinetic_energy(before.log.rates(), inertia_with_sliders(testbed, np.zeros(3), J_est))
-    ke_a = kinetic_energy(after.log.rates(), inertia_with_sliders(testbed, s_final, J_est))
+    J_b = inertia_with_sliders(testbed, np.zeros(3), J_est)
+    J_a = inertia_with_sliders(testbed, s_final, J_est)
+    w_idx = model.index(["wx", "wy", "wz"])
+    # seed 004 eq. 53 with the true rates, as its simulation ("neglecting the air friction")
+    ke_b, ke_a = (kinetic_energy(r.x[:-1, w_idx], J) for r, J in ((before, J_b), (after, J_a)))
+    ke_bm = kinetic_energy(before.log.rates(), J_b)
+    ke_am = kinetic_energy(after.log.rates(), J_a)
+    sigma = testbed.sensors.gyro_noise if noise else 0.0
+    floor = 2.0 * sigma * float(np.sqrt(np.mean(np.sum((after.x[:-1, w_idx] @ J_a.T) ** 2, 1))))
     return TwoStepResult(
         testbed=testbed.name,
         method=method,
@@ -304,4 +355,12 @@ def two_step(
         g_perp_rms_step1=balancing_metrics(r1)["g_perp_rms"],
         balance_duration_s=float(balance_duration),
         seed=seed,
+        ke_rates="true",
+        ke_std_before_measured=float(np.std(ke_bm)),
+        ke_std_after_measured=float(np.std(ke_am)),
+        ke_reduction_measured=float(1 - np.std(ke_am) / np.std(ke_bm)),
+        ke_noise_floor=floor,
+        iterations=len(estimates),
+        vertical_offset_estimates_m=estimates,
+        sliders_final_unrounded_m=s_exact.tolist(),
     )
