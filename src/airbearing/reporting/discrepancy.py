@@ -187,11 +187,26 @@ def add_discrepancy(report: Report, result: Discrepancy, *, level: int = 2) -> N
         )
     if result.effects:
         rows = [
-            {"effect": n, "value": format_value(v, result.effect_std[n]), "unit": _unit(n)}
+            {
+                "effect": n,
+                "value": format_value(v, result.effect_std[n]),
+                "std (white noise)": format_value(result.effect_std_white.get(n)),
+                "Cramer-Rao bound": format_value(result.effect_crlb.get(n)),
+                "std / bound": format_value(result.effect_efficiency.get(n)),
+                "unit": _unit(n),
+            }
             for n, v in result.effects.items()
         ]
         report.heading("Named effects", level + 1)
         report.table(rows)
+        report.paragraph(
+            "std: the honest standard error (a sandwich covariance with the residuals' "
+            "autocovariance); std (white noise): the Fisher value, right only when the "
+            "residual is white; Cramer-Rao bound: the best any unbiased estimate could do "
+            "with these logs (whole segments, one initial state each, at the noise floor)."
+        )
+    _consistency_section(report, result, level + 1)
+    _adequacy_section(report, result, level + 1)
     report.heading("Where the nominal model and the logs disagree", level + 1)
     for sentence in result.localisation.get("words", []):
         report.paragraph(sentence)
@@ -226,7 +241,8 @@ def add_discrepancy(report: Report, result: Discrepancy, *, level: int = 2) -> N
         "An effect is named only when its fit converged, the logs can identify it, it is not "
         "pinned at its physical bound, it passes the likelihood-ratio and BIC tests, it lies at "
         "least 3 standard errors from zero (errors from the Gauss-Newton covariance with the "
-        "windows' initial states eliminated) and it shrinks the gap on held-out windows."
+        "windows' initial states eliminated) and it shrinks the gap on held-out windows. "
+        "The values below carry their honest standard errors."
     )
     rows = []
     for c in result.candidates:
@@ -252,6 +268,90 @@ def add_discrepancy(report: Report, result: Discrepancy, *, level: int = 2) -> N
         report.heading("Confounded effects", level + 1)
         for pair, text in result.experiments.items():
             report.paragraph(f"{pair}: they explain these logs equally well; {text}.")
+
+
+def _consistency_section(report: Report, result: Discrepancy, level: int) -> None:
+    """Each named effect fitted on each log alone, and the chi-square test of agreement."""
+    if not result.per_log:
+        return
+    report.heading("Agreement across runs", level)
+    rows = []
+    for f in result.per_log:
+        row = {"log": f.log, "role": f.role, "status": f.status}
+        for n in result.effects:
+            row[n] = format_value(f.effects.get(n), f.std.get(n)) if n in f.effects else "-"
+        rows.append(row)
+    report.table(rows)
+    report.table(
+        [
+            {
+                "effect": c.name,
+                "chi2": c.chi2 if np.isfinite(c.chi2) else None,
+                "dof": c.dof,
+                "p": c.p if np.isfinite(c.p) else None,
+                "runs agree": {True: "yes", False: "NO", None: "-"}[c.consistent],
+            }
+            for c in result.consistency
+        ]
+    )
+    for c in result.consistency:
+        if c.words():
+            report.paragraph(c.words() + ".", note=True)
+
+
+def _adequacy_section(report: Report, result: Discrepancy, level: int) -> None:
+    """What the final fit leaves: its residual, its autocorrelation, against angle and rate."""
+    a = result.adequacy
+    if a is None:
+        return
+    unit = result.gap_unit
+    report.heading("Is the fit adequate?", level)
+    report.paragraph(a.note[:1].upper() + a.note[1:] + ".", note=True)
+    f = a.follows
+    report.table(
+        [
+            {"quantity": "gap / noise floor", "value": a.gap_over_floor},
+            {"quantity": "whiteness p (Ljung-Box, Bonferroni)", "value": a.whiteness_p},
+            {"quantity": "correlation time (s)", "value": a.correlation_time_s},
+            {"quantity": "R^2 on functions of the yaw angle", "value": f.get("angle")},
+            {"quantity": "R^2 on functions of the rate", "value": f.get("rate")},
+            {"quantity": "R^2 on functions of time", "value": f.get("time")},
+            {"quantity": "structure remains", "value": str(bool(a.structure_remains))},
+        ]
+    )
+    ser = a.series
+    res = np.asarray(ser.get("residual", np.zeros((0, 1))))
+    if res.size == 0:
+        return
+    res = res.reshape(len(res), -1)
+    rate = np.asarray(ser["rate"]).reshape(len(res), -1)
+    fig, axes = plt.subplots(1, 4, figsize=(15, 3.2))
+    multi = len(result.datas) > 1
+    for i in np.unique(ser["source"]):
+        m = ser["source"] == i
+        lab = result.datas[int(i)].log.source if multi else None
+        axes[0].plot(ser["t"][m], res[m, 0], ".", ms=1, label=lab)
+        axes[2].plot(np.mod(ser["yaw"][m], 2 * np.pi), res[m, 0], ".", ms=1)
+        axes[3].plot(rate[m, -1], res[m, 0], ".", ms=1)
+    axes[0].set(xlabel="t (s)", ylabel=f"residual ({unit})", title="final residual")
+    if multi:
+        axes[0].legend(fontsize=7, markerscale=6)
+    lags = np.arange(len(a.acf)) * a.dt
+    axes[1].plot(lags, a.acf, lw=0.8)
+    axes[1].axhline(np.exp(-1), color="k", ls=":", lw=0.8, label="1/e")
+    axes[1].axhline(0.0, color="gray", lw=0.5)
+    axes[1].set(xlabel="lag (s)", ylabel="autocorrelation", title="its autocorrelation")
+    axes[1].legend(fontsize=8)
+    axes[2].set(xlabel="yaw mod 2 pi (rad)", title="against the angle")
+    axes[3].set(xlabel="rate (rad/s)", title="against the rate")
+    for ax in axes[2:]:
+        ax.axhline(0.0, color="gray", lw=0.5)
+    report.figure(
+        fig,
+        "The residual the named effects leave (first axis), its autocorrelation (normalised "
+        "residual, pooled over segments), and its dependence on the yaw angle and the rate. "
+        "At the noise it is flat, uncorrelated and featureless.",
+    )
 
 
 def _unit(name: str) -> str:

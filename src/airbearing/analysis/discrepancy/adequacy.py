@@ -60,6 +60,8 @@ LB_LAGS = 20
 MIN_SEGMENT = 25
 #: Most lags of the pooled autocorrelation (the correlation time and the report's plot).
 ACF_LAGS = 600
+#: Smallest R^2 with which the residual is said to follow the angle, the rate or time.
+FOLLOWS_MIN = 0.05
 #: Names of the regressor groups of :func:`follows`, in words.
 GROUP_WORDS = {"angle": "the yaw angle", "rate": "the rate", "time": "time"}
 
@@ -274,9 +276,16 @@ class Adequacy:
                 "excess over the noise"
             )
         parts.append(f"{self.gap_over_floor:.3g} x the noise floor remains")
-        parts.append(f"correlated over {self.correlation_time_s:.3g} s")
+        if self.dt and self.correlation_time_s < self.dt:
+            parts.append("uncorrelated from one sample to the next")
+        else:
+            parts.append(f"correlated over {self.correlation_time_s:.3g} s")
         f = self.follows
-        if f.get("most"):
+        if f.get("most") and f[f["most"]] < FOLLOWS_MIN:
+            parts.append(
+                f"it follows neither the yaw angle, the rate nor time (R^2 below {FOLLOWS_MIN:g})"
+            )
+        elif f.get("most"):
             others = ", ".join(
                 f"{GROUP_WORDS[g]} {f[g]:.2f}" for g in ("angle", "rate", "time") if g != f["most"]
             )
