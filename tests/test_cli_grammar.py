@@ -265,3 +265,22 @@ def test_values_at_the_limit_are_kept(tmp_path):
         path, index=False
     )
     assert read_log(path).n == 3
+
+
+@pytest.mark.parametrize("command", sorted(COMMANDS))
+def test_every_shown_default_is_accepted_by_its_option(command):
+    """A default in --help converts with the option's own type and lies in its range."""
+    import typer.main
+
+    cmd = COMMANDS[command]
+    ctx = typer.main.get_command(app).make_context("airbearing", ["--help"], resilient_parsing=True)
+    for param in cmd.params:
+        default = param.default
+        if default is None or callable(default) or param.name == "help":
+            continue
+        # the option's own conversion (type, choices, range) raises on a refused value
+        value = param.get_runtime_param().coerce(default, param=param, ctx=ctx)
+        lo, hi = getattr(param, "min", None), getattr(param, "max", None)
+        for v in value if isinstance(value, tuple | list) else [value]:
+            assert lo is None or v >= lo, (command, param.name)
+            assert hi is None or v <= hi, (command, param.name)

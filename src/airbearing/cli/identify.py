@@ -22,7 +22,7 @@ def _fmt(v: float, s: float) -> str:
     """``value+-std``, ``value (no std)`` without a standard error, or "not identifiable"."""
     if v != v:
         return "not identifiable"
-    return f"{v: .6g}+-{s:.1e}" if s == s else f"{v: .6g} (no std)"
+    return f"{v:.4g} +- {s:.2g}" if s == s else f"{v:.4g} (no std)"
 
 
 @app.command()
@@ -120,7 +120,8 @@ def identify(
     typer.echo(f"active constraints: {', '.join(result.active_constraints) or 'none'}")
     typer.echo(f"residual rms: {result.residual_rms:.3g} {js['residual_unit']}")
     if "segments" in js:
-        typer.echo(f"segments: {js['segments']}, outlier rows: {js['outlier_rows'] or 'none'}")
+        rows = ", ".join(str(r) for r in js["outlier_rows"] or []) or "none"
+        typer.echo(f"segments: {js['segments']}, outlier rows: {rows}")
     for w in result.warnings:
         typer.echo(f"warning: {w}")
     out.json(p_json, js)
