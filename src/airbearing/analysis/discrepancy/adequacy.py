@@ -60,6 +60,8 @@ LB_LAGS = 20
 MIN_SEGMENT = 25
 #: Most lags of the pooled autocorrelation (the correlation time and the report's plot).
 ACF_LAGS = 600
+#: The keys of the estimator's process-noise record that the JSON carries.
+PROCESS_NOISE_KEYS = ("intensity", "unit", "lr", "p", "significant", "horizon_s", "kappa")
 #: Smallest R^2 with which the residual is said to follow the angle, the rate or time.
 FOLLOWS_MIN = 0.05
 #: Names of the regressor groups of :func:`follows`, in words.
@@ -325,7 +327,9 @@ class Adequacy:
         }
         if self.process_noise is not None:
             out["process_noise"] = {
-                k: (num(v) if isinstance(v, float) else v) for k, v in self.process_noise.items()
+                k: (num(v) if isinstance(v, float) else v)
+                for k, v in self.process_noise.items()
+                if k in PROCESS_NOISE_KEYS
             }
         return out
 

@@ -2,7 +2,8 @@
 
 With several logs (fitted jointly, or ``--validate`` logs beside them), every named
 effect is also fitted on each log alone: the same Model and the same effect set, the
-log's own windows, noise floor and initial states, started at the joint values. Each
+log's own windows, noise floor and initial states, started at the joint values, at the
+joint fit's process-noise intensity (the horizon the logs together support). Each
 log's values carry their honest errors (:mod:`.honest`).
 
 For each effect the per-log values ``x_i`` (its parameters, covariance ``C_i`` from the
@@ -116,8 +117,13 @@ class Consistency:
         }
 
 
-def per_log_fits(testbed, logs, roles, model, S, chosen, theta0, lower, upper, window_s, jit):
+def per_log_fits(
+    testbed, logs, roles, model, S, chosen, theta0, lower, upper, window_s, jit, kappa=None
+):
     """Each log fitted alone with the effects ``chosen`` (module doc).
+
+    ``kappa``: the process-noise intensity of the joint fit (linked pieces), used for each
+    log alone too (None: the problem's default).
 
     Returns
     -------
@@ -128,7 +134,7 @@ def per_log_fits(testbed, logs, roles, model, S, chosen, theta0, lower, upper, w
     for lg, role in zip(logs, roles, strict=True):
         try:
             datas, windows, floor = prepare(testbed, [lg], window_s=window_s)
-            problem = problem_for(model, datas, windows, floor, jit=jit)
+            problem = problem_for(model, datas, windows, floor, jit=jit, kappa=kappa)
             fit = problem.fit(
                 model.p0.copy(),
                 S,

@@ -771,6 +771,7 @@ def discrepancy(
             np.r_[[hi for c in chosen for hi in c.upper]],
             window_s,
             jit,
+            kappa=getattr(search, "kappa", None),
         )
         agree = consistency(chosen, per_log)
     adq = adequacy(
