@@ -111,9 +111,11 @@ that their physics asks for:
   steering law that chatters near a singularity (the gimbals stepping back and forth
   every sample) cannot be told from glitches: they are not tested.
 
-Scale floors: sliders at ``masses.step / sqrt(12)`` (the stepper's rounding),
-others at :data:`ABSOLUTE_FLOOR` and ``1e-9`` of the channel's magnitude; a
-noise-free simulated input then falls back on the change-of-slope floor of step 4.
+Scale floors: sliders at ``masses.step`` (a stepper position moves in whole steps: a
+slow move is a staircase whose misfit from a smooth curve reaches a step or two,
+not random rounding of ``step / sqrt(12)``), others at :data:`ABSOLUTE_FLOOR` and
+``1e-9`` of the channel's magnitude; a noise-free simulated input then falls back on
+the change-of-slope floor of step 4.
 """
 
 from __future__ import annotations
@@ -811,7 +813,7 @@ def _input_groups(log: Log, testbed: Testbed | None, segments, t: np.ndarray) ->
     groups = []
     step = 0.0
     if testbed is not None and getattr(testbed, "masses", None) is not None:
-        step = float(testbed.masses.step) / np.sqrt(12.0)  # stepper rounding, uniform
+        step = float(testbed.masses.step)  # whole steps (module doc, "Inputs")
     for name, cols, floor in (
         ("gimbals", _GIMBALS, ABSOLUTE_FLOOR),
         ("sliders", _SLIDERS, max(step, ABSOLUTE_FLOOR)),
