@@ -210,7 +210,12 @@ def two_step(
        inertia and the offset (sliders at zero), with the in-plane offset that step 1 found
        as a constraint (seed 004: "used as constraints") when ``in_plane_known``. The
        sliders then cancel the identified offset: only its vertical part with
-       ``in_plane_known`` (seed 004), all of it otherwise.
+       ``in_plane_known`` (seed 004), all of it otherwise, commanded in whole steps
+       (``masses.step``). Seed 004 iterates "until the data are consistent with respect
+       the previous identification": each further round adds two free oscillations about
+       the sliders' new positions to the logs and identifies again, until the vertical
+       estimate moves by less than one step's CM shift (``m_3 step / m``) or
+       :data:`MAX_ITERATIONS` rounds.
 
        Why two logs: free motion, ``J w' + w x J w = m r x g``, is unchanged when ``J`` and
        ``r`` are scaled together, so one free oscillation gives only ``r / J``. Its scale
@@ -219,11 +224,13 @@ def two_step(
        step 1 leaves (about a backlash times ``m_i / M``), so the vertical offset comes out
        wrong by that fraction (3 % for a 0.5 mm displacement, 37 um of CM shift); with two
        logs, from the displacement alone.
-    3. Kinetic energy ``w^T J w`` (eq. 53, measured rates, identified ``J`` plus the
-       sliders' point masses where they are, seed 004 eqs. 6-7) of ``ke_duration`` s free
-       oscillations before (sliders at zero) and after, from seed 004's initial rates; its
-       standard deviation (eq. 54: constant for a balanced platform). The gyro noise sets
-       a floor of about ``2 |J w| sigma_gyro`` (4e-5 J on platform-3dof).
+    3. Kinetic energy ``w^T J w`` (eq. 53, identified ``J`` plus the sliders' point
+       masses where they are, seed 004 eqs. 6-7) of ``ke_duration`` s free oscillations
+       before (sliders at zero) and after, from seed 004's initial rates; its standard
+       deviation (eq. 54: constant for a balanced platform). From the true rates, as seed
+       004's simulation ("neglecting the air friction"), and from the measured ones beside
+       it; the gyro noise puts a floor of ``2 sigma_gyro rms|J w|`` under the measured one
+       (8.8e-5 J on seed004-platform, 32x the paper's after-value).
 
     ``progress(what, done, total)`` (:mod:`airbearing.progress`) is told each step.
 
