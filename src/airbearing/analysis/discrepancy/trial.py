@@ -236,23 +236,45 @@ def cross_validate(problem: ShootingProblem, fit: Fit, k: int, folds: np.ndarray
 
     The Gauss-Newton step of a fold eliminates each training window's initial state from
     its own small normal equations (per-window Gram blocks, column-scaled), then the
-    held-out windows' initial states are refitted with the parameters held.
+    held-out windows' initial states are refitted with the parameters held. On linked
+    pieces with process noise, the whitened continuity defects of a piece with its
+    neighbours enter its blocks (each pair's once in training; both in the held-out
+    refit, the neighbours' starts held): a held-out piece then cannot absorb an effect the
+    process noise says the trajectory must show.
     """
-    r, J = fit.extra["r"], fit.extra["J"].tocsc()
+    r, J = np.asarray(fit.extra["r"]), fit.extra["J"].tocsc()
     nd, nw, n = problem.n_delta, problem.windows.n, problem.n_win_res
-    sel = problem.primary & problem.usable
+    sel0 = problem.primary & problem.usable
+    sel = np.zeros(r.size, dtype=bool)
+    sel[: sel0.size] = sel0
     Jt_all = J[:, :k].toarray() if k else np.zeros((J.shape[0], 0))
+    # linked pieces with process noise: the whitened defects follow the measurement rows,
+    # nd per consecutive pair; a piece's start is tied to its neighbours by them
+    n_meas = int(getattr(problem, "n_meas", r.size))
+    penalised = r.size > n_meas
+
+    def links(*pairs):
+        if not penalised:
+            return []
+        return [np.arange(n_meas + q * nd, n_meas + (q + 1) * nd) for q in pairs if 0 <= q < nw - 1]
+
+    def block(rows, j):
+        Jt, rj = Jt_all[rows], r[rows]
+        Jd = J[rows, k + j * nd : k + (j + 1) * nd].toarray()
+        return Jt, Jd, rj, np.linalg.pinv(Jd.T @ Jd, hermitian=True)
+
     pre = []
     for j in range(nw):
-        R = slice(j * n, (j + 1) * n)
-        Jt = Jt_all[R]
-        Jd = J[R, k + j * nd : k + (j + 1) * nd].toarray()
-        rj = r[R]
-        P = np.linalg.pinv(Jd.T @ Jd, hermitian=True)
+        R = np.arange(j * n, (j + 1) * n)
+        # training: each pair's defect rows counted once (with the later piece)
+        Jt, Jd, rj, P = block(np.concatenate([R, *links(j - 1)]), j)
         Gtd = Jt.T @ Jd
-        pre.append(
-            (Jt, Jd, rj, P, Jt.T @ Jt - Gtd @ P @ Gtd.T, Jt.T @ rj - Gtd @ P @ (Jd.T @ rj), sel[R])
-        )
+        S_j, g_j = Jt.T @ Jt - Gtd @ P @ Gtd.T, Jt.T @ rj - Gtd @ P @ (Jd.T @ rj)
+        # held out: the piece's start refitted with its neighbours' starts held, so under
+        # process noise it cannot absorb what it could as a free piece
+        Rt = np.concatenate([R, *links(j - 1, j)])
+        Jt, Jd, rj, P = block(Rt, j)
+        pre.append((Jt, Jd, rj, P, S_j, g_j, sel[Rt]))
     fold_ids = np.unique(folds)
     nf = fold_ids.size
     rss, ss, cnt = np.zeros(nf), np.zeros(nf), np.zeros(nf, dtype=int)
