@@ -284,3 +284,17 @@ def test_every_shown_default_is_accepted_by_its_option(command):
         for v in value if isinstance(value, tuple | list) else [value]:
             assert lo is None or v >= lo, (command, param.name)
             assert hi is None or v <= hi, (command, param.name)
+
+
+def test_log_check_says_no_for_time_going_back(tmp_path, capsys):
+    tb = tmp_path / "rig.toml"
+    tb.write_text(MOCAP_RIG_TOML)
+    t = np.arange(200) * 0.1
+    t[50] = t[48]  # a logger hiccup: row 50 repeats an earlier time
+    path = tmp_path / "log.csv"
+    pd.DataFrame({"t": t, "yaw": 0.2 * t}).to_csv(path, index=False)
+    js = tmp_path / "c.json"
+    assert run(["log", "check", str(tb), str(path), "--json", str(js)]) == 0
+    assert json.loads(js.read_text())["bad_rows"] == [50]
+    assert "no" in capsys.readouterr().out
+    assert run(["identify", str(tb), str(path)]) == 2

@@ -127,8 +127,9 @@ def check(
 ) -> None:
     """Rows, rate, segments, jitter, outlier rows and what each tool can use.
 
-    A log with cells no tool can use (not a number, not finite, or of magnitude above
-    1e100) is reported with those rows and "no" for every tool.
+    A log with rows no tool can use (a cell that is not a number, not finite or of
+    magnitude above 1e100, time that does not increase, a non-unit quaternion) is
+    reported with exactly those rows, why, and "no" for every tool.
     """
     from airbearing.cli.outputs import Outputs
 
@@ -205,14 +206,11 @@ def check(
 def _report_bad_cells(out, json_path, log_file, tb, error) -> None:
     """``log check`` of a log with unusable cells: those rows, why, and "no" everywhere."""
     from airbearing.cli import one_line
-    from airbearing.io.log import OVERFLOW_LIMIT, row_ranges
+    from airbearing.io.log import row_ranges
     from airbearing.io.tool_use import TOOLS
 
     where = "; ".join(f"column '{c}' rows {row_ranges(r)}" for c, r in error.bad.items())
-    why = (
-        f"{len(error.rows)} row(s) with cells that are not finite numbers of magnitude "
-        f"<= {OVERFLOW_LIMIT:g} ({where}): fix or remove them"
-    )
+    why = f"{len(error.rows)} unusable row(s) ({where}): fix or remove them"
     summary = {
         "log": str(log_file),
         "testbed": tb.name,

@@ -220,7 +220,8 @@ def _as_float(series: pd.Series, name: str, src: str) -> np.ndarray:
 
 
 class BadCellsError(InputError):
-    """Cells that are not numbers, not finite or overflow-sized (:data:`OVERFLOW_LIMIT`).
+    """Rows no tool can use: cells that are not numbers, not finite or overflow-sized
+    (:data:`OVERFLOW_LIMIT`), time that does not increase, or a non-unit quaternion.
 
     Attributes
     ----------
@@ -385,9 +386,12 @@ def _validate(
     not_increasing = ~(dt > 0.0)
     if not_increasing.any():
         i = int(np.argmax(not_increasing)) + 1  # 0-based index of the offending row
-        raise InputError(
+        rows = [int(r) + 1 for r in np.flatnonzero(not_increasing)]
+        raise BadCellsError(
             f"{src}: {_at(i, lines)}, column 't': time must be strictly increasing, "
             f"but t = {float(t[i])!r} s follows t = {float(t[i - 1])!r} s of row {i - 1}"
+            + (f"; {len(rows)} such rows: {row_ranges(rows)}" if len(rows) > 1 else ""),
+            {"t": rows},
         )
     if testbed is not None:
         period = testbed.sensors.dt
@@ -406,9 +410,12 @@ def _validate(
         off = np.abs(norm - 1.0) > QUATERNION_NORM_TOL
         if off.any():
             i = int(np.argmax(off))
-            raise InputError(
+            rows = [int(r) for r in np.flatnonzero(off)]
+            raise BadCellsError(
                 f"{src}: {_at(i, lines)}, columns qw, qx, qy, qz: expected a unit "
                 f"quaternion (norm within {QUATERNION_NORM_TOL:g} of 1), got norm {norm[i]:.9g}"
+                + (f"; {len(rows)} such rows: {row_ranges(rows)}" if len(rows) > 1 else ""),
+                {"qw, qx, qy, qz": rows},
             )
     return out
 
