@@ -40,6 +40,20 @@ PAIR = (2e-4, -1e-4)  # N m: [A_s, A_c]
 # ----------------------------------------------------------------------------- the model
 
 
+def test_registry_names_exactly_the_formats_table():
+    # docs/FORMATS.md is the shared contract (a byte-equal copy, tests/test_docs.py)
+    from pathlib import Path
+
+    from airbearing.io.vocabulary import EFFECTS
+    from airbearing.models.effects import REGISTRY
+
+    text = (Path(__file__).parents[1] / "docs" / "FORMATS.md").read_text()
+    table = text.split("## Effects: names and parameters")[1].split("## Log")[0]
+    names = [ln.split("`")[1] for ln in table.splitlines() if ln.startswith("| `")]
+    assert list(EFFECTS) == list(REGISTRY) == names
+    assert EFFECTS["yaw_imbalance"].shape == "pair" and EFFECTS["yaw_imbalance"].unit == "N m"
+
+
 @pytest.mark.parametrize("tb", [ROTOR, load_testbed("cmg-yaw")], ids=["rotor", "cmg-yaw"])
 def test_torque_is_the_formats_formula(tb):
     nominal, model = build_model(tb), build_model(tb, {"yaw_imbalance": PAIR})
