@@ -211,6 +211,13 @@ def table(rows: Iterable[Sequence], headers: Sequence[str], digits: int = 4) -> 
     return "\n".join([line(list(headers)), rule, *(line(r) for r in body)])
 
 
+def _is_pairs(value) -> bool:
+    return isinstance(value, Sequence) and all(
+        isinstance(p, Sequence) and len(p) == 2 and all(isinstance(x, int) for x in p)
+        for p in value
+    )
+
+
 def summary_table(summary: Mapping, skip: Iterable[str] = (), digits: int = 4) -> str:
     """A flat JSON summary as a ``quantity | value | unit`` table (units from key suffixes)."""
     skip = set(skip)
@@ -220,8 +227,14 @@ def summary_table(summary: Mapping, skip: Iterable[str] = (), digits: int = 4) -
             continue
         if isinstance(value, Sequence) and not isinstance(value, str) and len(value) > 8:
             continue
-        label, unit = unit_of(key)
-        rows.append([label, cell(value, digits), unit])
+        label, unit, value = shown(key, value)
+        if key.endswith("_rows") and _is_pairs(value):
+            text = ", ".join(f"{a}-{b - 1}" for a, b in value) or "none"  # [start, stop)
+        elif isinstance(value, Sequence) and not isinstance(value, str) and not value:
+            text = "none"
+        else:
+            text = cell(value, digits)
+        rows.append([label, text, unit])
     return table(rows, ["quantity", "value", "unit"], digits)
 
 
