@@ -78,8 +78,8 @@ def _global(
         typer.Option(
             "--verbose",
             "-v",
-            help="Show warnings, solver output and compile notices on the terminal "
-            "(otherwise they go to a debug log).",
+            help="Show warnings, log records and solver output on the terminal "
+            "(otherwise they go to a debug log in the temporary folder).",
         ),
     ] = False,
     version: Annotated[
