@@ -13,6 +13,7 @@ from airbearing.analysis.discrepancy.replay import Replay, primary_series
 from airbearing.analysis.discrepancy.search import Discrepancy, discrepancy
 from airbearing.analysis.discrepancy.words import format_value
 from airbearing.reporting.html import Report
+from airbearing.reporting.html import sentence as as_sentence
 
 __all__ = ["add_discrepancy", "add_replay", "demo_section", "discrepancy_report", "replay_report"]
 
@@ -169,7 +170,7 @@ def add_discrepancy(report: Report, result: Discrepancy, *, level: int = 2) -> N
         f"{result.windows.length * data.dt:.3g} s of (logged {what} - model {what}), each window "
         "restarted from the measured state corrected by a fitted initial-state perturbation, "
         "integrated on the logged times; no window spans a gap, outlier rows weigh zero. "
-        f"Noise floor: {result.floor.source}. " + " ".join(data.notes)
+        f"Noise floor: {result.floor.source}. " + " ".join(as_sentence(n) for n in data.notes)
     )
     _segments_paragraph(report, datas)
     if result.validation:
