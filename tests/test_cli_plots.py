@@ -119,6 +119,7 @@ def test_html_tables_one_missing_symbol_and_human_columns():
     assert cells.count(NONE_TEXT) == 4 and "-" not in cells
     assert column_label("g_perp_rms") == "g perp rms"
     assert column_label("t (s)") == "t (s)"  # already for people
+    assert column_label("min_m") == "min m" and column_label("cm_offset_m") == "cm offset (m)"
 
 
 def test_html_sentences_are_separated():

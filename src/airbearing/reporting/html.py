@@ -111,7 +111,10 @@ def column_label(name: str) -> str:
     low = name.lower()
     for suffix, u in _UNIT_SUFFIXES:
         if low.endswith(suffix) and len(name) > len(suffix):
-            name, unit = name[: -len(suffix)], u
+            stem = name[: -len(suffix)]
+            if suffix == "_m" and "_" not in stem:
+                break  # min_m: the manipulability m, not metres
+            name, unit = stem, u
             break
     parts = name.split("_")
     if len(parts) > 2 and re.fullmatch(r"[a-z]\w*0", parts[-1]):  # normalised by h0, J0, ...
