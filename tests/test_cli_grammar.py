@@ -298,3 +298,15 @@ def test_log_check_says_no_for_time_going_back(tmp_path, capsys):
     assert json.loads(js.read_text())["bad_rows"] == [50]
     assert "no" in capsys.readouterr().out
     assert run(["identify", str(tb), str(path)]) == 2
+
+
+def test_log_commands_say_the_testbed_comes_first(tmp_path, capsys):
+    log = _yaw_log(tmp_path / "log.csv", bad=[])
+    tb = tmp_path / "rig.toml"
+    tb.write_text(MOCAP_RIG_TOML)
+    assert run(["log", "check", str(log), str(tb)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "the testbed comes first" in err
+    assert run(["log", "check", str(tb), str(log)]) == 0
+    assert run(["log", "check", str(log), "--testbed", str(tb)]) == 0  # the old spelling
+    assert "deprecated" in capsys.readouterr().err

@@ -38,7 +38,13 @@ def _testbed_and_file(
 
     usage = f"airbearing log {command} {'TESTBED' if testbed_required else '[TESTBED]'} {what}"
     if len(args) == 2:
-        return args[0], Path(args[1])
+        first, second = args
+        if Path(first).suffix.lower() in _LOG_SUFFIXES and Path(second).suffix.lower() == ".toml":
+            raise InputError(
+                f"log {command} {first} {second}: the testbed comes first; expected '{usage}', "
+                f"e.g. airbearing log {command} {second} {first}"
+            )
+        return first, Path(second)
     if len(args) == 1 and not testbed_required:
         return None, Path(args[0])
     if len(args) == 1:
