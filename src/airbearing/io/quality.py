@@ -241,7 +241,9 @@ class LogQuality:
         ``"quaternion"``...), in the channel's unit.
     fits : dict of str to (int, int)
         The local fit ``(k, p)`` used for each channel group (``"rates"``,
-        ``"attitude"``).
+        ``"attitude"``, and the inputs tested: ``"gimbals"``, ``"sliders"``,
+        ``"dipoles"``; their channels' scales are in ``noise``, a gimbal angle's
+        as ``d - D``, module doc).
     unchecked_rows : tuple of int
         Rows of segments too short for any local fit (fewer than 4 samples).
     """
