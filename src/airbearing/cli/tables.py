@@ -65,6 +65,8 @@ def shown(key: str, value):
     keys as :func:`unit_of`. Lists and nested lists are rescaled element by element.
     """
     label, unit = unit_of(key)
+    if not unit and key.startswith(("ke_std", "ke_noise")):
+        unit = "J"  # spreads of the kinetic energy w^T J w (seed 004 eqs. 53-54)
     if unit == "m":
         low = key.lower()
         for words, new, factor in _LENGTHS:
@@ -177,7 +179,7 @@ def cell(value, digits: int = 4) -> str:
             return "—"
         if math.isinf(v):
             return "∞" if v > 0 else "-∞"
-        return f"{v:.{digits}g}"
+        return f"{v + 0.0:.{digits}g}"  # + 0.0: no "-0"
     if isinstance(value, Mapping):
         return ", ".join(f"{k} {cell(v, digits)}" for k, v in value.items())
     if isinstance(value, Sequence) and not isinstance(value, str):
@@ -198,7 +200,11 @@ def table(rows: Iterable[Sequence], headers: Sequence[str], digits: int = 4) -> 
     body = [[cell(v, digits) if not isinstance(v, str) else v for v in r] for r in rows]
     cols = len(headers)
     widths = [max([len(headers[j])] + [len(r[j]) for r in body]) for j in range(cols)]
-    numeric = [all(_is_number(r[j]) or r[j] == "—" for r in body) and body for j in range(cols)]
+    numeric = [
+        all(_is_number(r[j]) or r[j] in ("—", "") for r in body)
+        and any(_is_number(r[j]) for r in body)
+        for j in range(cols)
+    ]
 
     def line(items):
         out = [
