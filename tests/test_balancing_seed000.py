@@ -92,3 +92,24 @@ def test_slider_vibration_enters_the_closed_loop_only_while_the_steppers_run():
 
     assert gyro_error(runs[2]) == pytest.approx(3.86e-4, rel=0.1)
     assert gyro_error(runs[0]) > 5 * gyro_error(runs[2])
+
+
+def test_window_drift_calls_a_creep_drifting_and_noise_steady():
+    from airbearing.analysis.balancing.drift import window_drift
+
+    rng = np.random.default_rng(7)
+    t = np.arange(6000) * 0.05  # 300 s at 20 Hz
+    steppers = 20e-6 * rng.standard_normal((t.size, 2))
+    noise = np.abs(3e-3 + 1e-3 * rng.standard_normal(t.size))
+    calm = window_drift(t, noise, steppers, step=2e-6)
+    assert calm["steady"] is True and calm["metrics_window_s"] == [200.0, 300.0]
+    # g_perp falling with a 100 s time constant: from 100-200 s to 200-300 s by 60 %
+    creep = window_drift(t, noise * (1 + 3 * np.exp(-t / 100.0)), steppers, step=2e-6)
+    assert creep["steady"] is False and "g_perp_rms went from" in creep["steady_reason"]
+    # a stepper creeping 30 um per 100 s (its dither is 20 um): drifting, and named
+    moved = steppers + np.column_stack([0.3e-6 * t, np.zeros(t.size)])
+    slow = window_drift(t, noise, moved, step=2e-6)
+    assert slow["steady"] is False and "stepper 1" in slow["steady_reason"], slow
+    assert "stepper 2" not in slow["steady_reason"]
+    # too short for six 20 s batches: not judged
+    assert window_drift(t[:1000], noise[:1000], steppers[:1000])["steady"] is None

@@ -237,7 +237,7 @@ def compare_methods(
     report = _progress(progress)
     total, done = len(offsets) * len(methods) * len(seeds), 0
     tables: dict = {}
-    taus, drifting, window = [], [], None
+    taus, drifting, window, unjudged = [], [], None, 0
     for off in offsets:
         tables[off] = {}
         for method in methods:
@@ -250,6 +250,7 @@ def compare_methods(
                 done += 1
             tables[off][method] = _mean_metrics(rows)
             taus += [r["settling_time_s"] for r in rows if r["settling_time_s"] is not None]
+            unjudged += sum(r["steady"] is None for r in rows)
             drifting += [
                 f"{method}, offset {off * 1e3:+g} mm, seed {s}: {r['steady_reason']}"
                 for s, r in zip(seeds, rows, strict=True)
@@ -258,26 +259,30 @@ def compare_methods(
             window = rows[0]["metrics_window_s"]
     report("compared", done, total)
     steady = _steady(steady_state(max(taus), duration) if taus else None, window, drifting,
-                     total)  # fmt: skip
+                     total, unjudged)  # fmt: skip
     ratios = _ratios(tables, methods)
     verdict = _verdict(ratios, steady) if ratios is not None and steady is not None else None
     return Comparison(tuple(methods), float(duration), tables, ratios, steady, verdict)
 
 
-def _steady(linear: dict | None, window, drifting: list, runs: int) -> dict | None:
+def _steady(linear: dict | None, window, drifting: list, runs: int, unjudged: int = 0):
     """The comparison's ``steady``: the linearised settling time (:func:`~.transient.
     steady_state`) and the windowed check of every run (:mod:`.drift`); steady only if the
-    linear transient has settled before the metrics window and no run drifts in it."""
+    linear transient has settled before the metrics window and no run drifts in it (runs
+    too short for the windowed check leave the linearised verdict alone)."""
     if linear is None:
         return None
     out = dict(linear)
     out["steady_linear"] = linear["steady"]
     out["metrics_window_s"] = window
     out["runs_drifting"] = len(drifting)
+    out["runs_not_judged"] = unjudged
     out["runs"] = runs
     out["drifting"] = drifting
     out["steady"] = bool(linear["steady"] and not drifting)
-    if drifting:
+    if unjudged == runs:
+        out["reason"] = "runs too short for the windowed check: the linearised verdict only"
+    elif drifting:
         out["reason"] = (
             f"{len(drifting)} of {runs} runs still drift between the window before the "
             f"metrics window and it (windowed g_perp_rms or stepper means; see 'drifting')"

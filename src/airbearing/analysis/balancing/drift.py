@@ -12,12 +12,13 @@ no material, significant change between the two consecutive windows in
 * the measured in-plane gravity ``g_perp^2`` (its mean is ``g_perp_rms^2``), and
 * the in-plane stepper positions (the integral state the creep moves).
 
-Each is regressed on a window indicator (OLS, HAC / Newey-West covariance from
-statsmodels with :data:`HAC_LAG_S` of lags, since consecutive samples are correlated);
-a change is significant at ``p <`` :data:`DRIFT_P` and material when ``g_perp_rms``
-changes by more than :data:`DRIFT_G_REL` or a stepper's mean moves by more than
-:data:`DRIFT_STEPPER_REL` of its within-window standard deviation (and more than two
-steps). A run too short for two windows of a second each is not judged.
+Consecutive samples are correlated, so the trend is tested on batch means: both windows
+are cut into batches of :data:`BATCH_S` and the slope of the batch means against time is
+tested (least squares, ``scipy.stats.linregress``). A change is significant at
+``p <`` :data:`DRIFT_P` and material when ``g_perp_rms`` changes by more than
+:data:`DRIFT_G_REL` or a stepper's mean moves by more than :data:`DRIFT_STEPPER_REL` of its
+within-window standard deviation (and more than two steps). A run shorter than six
+batches (120 s) is not judged (``steady`` None).
 """
 
 from __future__ import annotations
@@ -28,7 +29,7 @@ __all__ = [
     "DRIFT_G_REL",
     "DRIFT_P",
     "DRIFT_STEPPER_REL",
-    "HAC_LAG_S",
+    "BATCH_S",
     "window_drift",
 ]
 
@@ -43,23 +44,27 @@ DRIFT_G_REL = 0.10
 #: steppers wander within their noise-driven dither (about one step in 400 s on
 #: seed000-tabletop), while a creep through backlash moves them by tens of um.
 DRIFT_STEPPER_REL = 1.0
-#: s, HAC lag window: longer than the tilt loop's period (about 17 s on seed000-tabletop,
-#: sqrt(J / (K_p + k_g))), so the correlation of consecutive samples is covered.
-HAC_LAG_S = 20.0
+#: s, batch length of the batch-means test: longer than the tilt loop's period (about 17 s
+#: on seed000-tabletop, 2 pi sqrt(J / (K_p + k_g))), so the batch means are nearly
+#: independent.
+BATCH_S = 20.0
 
 
-def _indicator_test(y: np.ndarray, n1: int, maxlags: int) -> tuple[float, float]:
-    """OLS of ``y`` on ``[1, window-2 indicator]`` (the first ``n1`` samples are window 1),
-    HAC covariance: ``(difference of the window means, two-sided p-value)``."""
-    import statsmodels.api as sm
+def _window_test(y: np.ndarray, n1: int, batch: int) -> tuple[float, float]:
+    """Difference of the means of ``y[n1:]`` and ``y[:n1]``, and the two-sided p-value of a
+    trend across both windows: ``y`` is cut into batches of ``batch`` samples (longer than
+    the samples' correlation, so the batch means are nearly independent) and the slope of
+    the batch means against time is tested (``scipy.stats.linregress``)."""
+    from scipy import stats
 
-    d = np.zeros(y.size)
-    d[n1:] = 1.0
-    X = np.column_stack([np.ones(y.size), d])
-    if np.ptp(y) == 0:
-        return 0.0, 1.0
-    fit = sm.OLS(y, X).fit(cov_type="HAC", cov_kwds={"maxlags": maxlags})
-    return float(fit.params[1]), float(fit.pvalues[1])
+    diff = float(np.mean(y[n1:]) - np.mean(y[:n1]))
+    nb = y.size // batch
+    if nb < 4:
+        return diff, 1.0
+    means = y[y.size - nb * batch :].reshape(nb, batch).mean(axis=1)
+    if np.ptp(means) == 0:
+        return diff, 1.0
+    return diff, float(stats.linregress(np.arange(nb), means).pvalue)
 
 
 def window_drift(t, g_perp, steppers, *, step: float = 0.0) -> dict:
@@ -98,20 +103,24 @@ def window_drift(t, g_perp, steppers, *, step: float = 0.0) -> dict:
         "drift_p_g": None,
         "drift_p_stepper": None,
         "steady": None,
-        "steady_reason": "run too short for two windows",
+        "steady_reason": "",
     }
-    if w * dt < 1.0:
+    if 2 * w < 4 * max(1, int(round(BATCH_S / dt))):
+        out["steady_reason"] = (
+            f"not judged: the trend test needs two windows of at least {2 * BATCH_S:g} s "
+            f"(a run of {6 * BATCH_S:g} s or more)"
+        )
         return out
     a, b = slice(n - 2 * w, n - w), slice(n - w, n)
     out["previous_window_s"] = [float(t[n - 2 * w]), float(t[n - w])]
     rms = [float(np.sqrt(np.mean(g[a] ** 2))), float(np.sqrt(np.mean(g[b] ** 2)))]
     out["g_perp_rms_windows"] = rms
-    lags = max(1, min(int(round(HAC_LAG_S / dt)), w - 1))
+    batch = max(1, int(round(BATCH_S / dt)))
     span = slice(n - 2 * w, n)
-    _, p_g = _indicator_test(g[span] ** 2, w, lags)
+    _, p_g = _window_test(g[span] ** 2, w, batch)
     shifts, p_s, moved = [], [], []
     for j in range(s.shape[1]):
-        diff, p = _indicator_test(s[span, j], w, lags)
+        diff, p = _window_test(s[span, j], w, batch)
         sd = max(float(np.std(s[a, j])), float(np.std(s[b, j])))
         shifts.append(diff)
         p_s.append(p)
