@@ -351,7 +351,9 @@ def simulate(
     tau = rng.standard_normal((n, 3)) * tau_sig
     cols = [meas_noise, tau, ref, t[:, None]]
     z0_vib = []
-    vibration = slider_vibration(model) is not None
+    # a held input (constant_input) never moves the sliders: the loop without vibration,
+    # whose compiled code free oscillations already share
+    vibration = slider_vibration(model) is not None and controller.name != "open_loop"
     if vibration:  # drawn after the others: same seed, same run
         cols.append(rng.standard_normal((n, _VIB_DRAWS)) * (1.0 if noise else 0.0))
         z0_vib = [np.zeros(_VIB_STATES)]
