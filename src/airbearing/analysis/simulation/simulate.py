@@ -152,7 +152,7 @@ def _measure(model: Model, y, noise):
     return y + noise
 
 
-#: Loop states of the slider vibration: last slider positions (3), speed fraction, started.
+#: Loop states of the slider vibration: last stepper positions (3), summed speed, started.
 _VIB_STATES = 5
 #: Unit normal draws per sample of the slider vibration: gyro (3), accelerometer (3),
 #: drive torque (3).
@@ -193,15 +193,27 @@ def _stepper_positions(model: Model, controller: Controller, u, extra):
     return ca.vertcat(*[u[i] for i in model.index(["s1", "s2", "s3"], "u")]), False
 
 
-def _vibration_noise(model: Model, vib: dict, draws, frac):
-    """Measurement noise (ny) of the slider vibration: six unit normal ``draws`` scaled by
-    ``gyro * sqrt(frac)`` (rates) and ``accel * frac`` (gravity direction)."""
+def _vibration_noise(model: Model, draws, speed):
+    """Measurement noise (ny) of the slider vibration at the summed stepper ``speed`` (m/s):
+    six draws already scaled (:func:`vibration_draws`), times ``sqrt(speed)`` (rates) and
+    ``speed`` (gravity direction)."""
     out = [ca.SX.zeros(1) for _ in model.y_names]
     for k, name in enumerate(("wx", "wy", "wz")):
-        out[model.y_names.index(name)] = vib["gyro"] * ca.sqrt(frac) * draws[k]
+        out[model.y_names.index(name)] = ca.sqrt(speed) * draws[k]
     for k, name in enumerate(("gx", "gy", "gz")):
-        out[model.y_names.index(name)] = vib["accel"] * frac * draws[3 + k]
+        out[model.y_names.index(name)] = speed * draws[3 + k]
     return ca.vertcat(*out)
+
+
+def vibration_draws(vib: dict, unit: np.ndarray) -> np.ndarray:
+    """The loop's vibration columns from unit normal draws ``unit`` (n, 9): gyro draws times
+    ``gyro_vibration / sqrt(masses.speed)``, accelerometer draws times ``accel_vibration /
+    masses.speed``, torque draws times ``drive_torque_noise``. The values travel with the
+    data, not in the compiled loop, so runs whose testbeds differ only in them share it."""
+    scale = np.repeat(
+        [vib["gyro"] / np.sqrt(vib["speed"]), vib["accel"] / vib["speed"], vib["drive"]], 3
+    )
+    return unit * scale
 
 
 @lru_cache(maxsize=32)
@@ -217,7 +229,8 @@ def closed_loop_rollout(
     :class:`~airbearing.models.loop.ChunkedLoop` with the same call (NumPy outputs).
     With ``vibration`` and a testbed with slider vibration (:func:`slider_vibration`),
     ``z`` ends with the vibration's 5 states (zeros at the start) and each column of
-    ``V`` with 9 unit normal draws (gyro, accelerometer, torque).
+    ``V`` with 9 scaled draws (gyro, accelerometer, torque; :func:`vibration_draws`): the
+    compiled loop holds no vibration value, only whether there is vibration.
     """
     dt = model.testbed.sensors.dt
     step = model.step(dt, substeps)
@@ -237,7 +250,7 @@ def closed_loop_rollout(
     t = v[model.ny + 3 + nref]
     if vib is not None:  # slider vibration: extra sensor noise from the last sample's motion
         draws = v[model.ny + 4 + nref :]
-        noise = noise + _vibration_noise(model, vib, draws[0:6], zv[3])
+        noise = noise + _vibration_noise(model, draws[0:6], zv[3])
     y = _measure(model, model.h(x, ca.DM.zeros(model.nu), p), noise)
     u, c_next, extra = fn(y, c, ref, g, t)
     tau_idx = model.index(["tau_x", "tau_y", "tau_z"], "u")
@@ -245,12 +258,12 @@ def closed_loop_rollout(
     z_vib = []
     if vib is not None:
         s_now, driven = _stepper_positions(model, controller, u, extra)
-        # summed slider speed over this sample as a fraction of masses.speed (0 at the
-        # first sample: where the sliders were before it is not known)
-        frac = zv[4] * ca.sum1(ca.fabs(s_now - zv[0:3])) / (dt * vib["speed"])
+        # the steppers' summed speed over this sample, m/s (0 at the first sample: where
+        # they were before it is not known)
+        speed = zv[4] * ca.sum1(ca.fabs(s_now - zv[0:3])) / dt
         if driven:
-            torque = torque + vib["drive"] * draws[6:9]
-        z_vib = [s_now, frac, ca.DM.ones(1)]
+            torque = torque + draws[6:9]
+        z_vib = [s_now, speed, ca.DM.ones(1)]
     for j, i in enumerate(tau_idx):
         u_applied[i] = u_applied[i] + torque[j]
     x_next = step(x, u_applied, p)
@@ -353,9 +366,11 @@ def simulate(
     z0_vib = []
     # a held input (constant_input) never moves the sliders: the loop without vibration,
     # whose compiled code free oscillations already share
-    vibration = slider_vibration(model) is not None and controller.name != "open_loop"
+    vib = slider_vibration(model)
+    vibration = vib is not None and controller.name != "open_loop"
     if vibration:  # drawn after the others: same seed, same run
-        cols.append(rng.standard_normal((n, _VIB_DRAWS)) * (1.0 if noise else 0.0))
+        unit = rng.standard_normal((n, _VIB_DRAWS)) * (1.0 if noise else 0.0)
+        cols.append(vibration_draws(vib, unit))
         z0_vib = [np.zeros(_VIB_STATES)]
     V = np.hstack(cols).T
 
