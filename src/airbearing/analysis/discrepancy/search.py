@@ -67,8 +67,6 @@ from airbearing.analysis.discrepancy.screen import (
     screened_scan,
 )
 from airbearing.analysis.discrepancy.starts import (
-    RETRY_EXPLAINED,
-    RETRY_GAP_FLOOR,
     continuation_fit,
     explained_fraction,
     needs_retry,
@@ -376,7 +374,7 @@ def _try(search, cand, chosen, theta_chosen, current, current_lag, ln_n, starts,
     upper = np.r_[[hi for c in chosen for hi in c.upper], cand.upper]
     delta0 = search.delta_for(lag, current)
     start, note, retried, left = None, "", "", ""
-    source, explained, floor = "regression", 0.0, search.floor.value
+    source, explained = "regression", 0.0
     try:
         if not cand.smooth:
             if lin is not None:
@@ -417,15 +415,12 @@ def _try(search, cand, chosen, theta_chosen, current, current_lag, ln_n, starts,
                     note = "start: 0 (no torque regressor from the logs)"
                 else:
                     note = "start: residual-torque regression"
-                # far from the nominal the step cannot be trusted to dismiss an effect the
-                # regression sees: IPOPT decides (module doc of .starts)
-                far = current.gap > RETRY_GAP_FLOOR * floor and explained >= RETRY_EXPLAINED
-                if lin is not None:
+                if lin is not None:  # the screen also checks the residual at th_reg
                     th_reg = np.clip(th0, cand.lower, cand.upper)
                     res = screened(
                         lin, cand, k_sel, lower, upper, current, ln_n, before, search.folds, th_reg
                     )
-                    if res is not None and not (far and not res.significant):
+                    if res is not None:
                         how = "Gauss-Newton step from the current fit"
                         return replace(res, start=start_json("nominal", res.value, method=how))
             th0 = np.clip(th0, cand.lower, cand.upper)
