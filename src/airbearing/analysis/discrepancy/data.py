@@ -69,9 +69,10 @@ __all__ = [
 
 #: s, longest multiple-shooting window by default (shorter logs get at least 4 windows).
 DEFAULT_WINDOW_S = 10.0
-#: s, length of the linked pieces of the process-noise estimator by default (the resolution
-#: of the unexplained torque in time; a 20 s correlated torque is followed by 5 s pieces).
-PIECE_S = 5.0
+#: s, length of the linked pieces of the process-noise estimator by default: the resolution
+#: of the unexplained torque in time, and the short horizon on which effects are named (the
+#: old fixed windows, whose naming the detection study calibrated).
+PIECE_S = DEFAULT_WINDOW_S
 #: Most linked pieces by default (longer logs get longer pieces: the solve stays small).
 MAX_PIECES = 240
 #: Fewest windows the logs must give (the held-out test needs two).

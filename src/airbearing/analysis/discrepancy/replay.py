@@ -192,7 +192,13 @@ class Replay:
     windows : WindowSet
     floor : NoiseFloor
     fit : Fit
+        The fit on short pieces (the gap's horizon: each piece nearly free).
     problem : ShootingProblem
+    process_noise : dict or None
+        The unexplained torque estimated on linked pieces
+        (:mod:`airbearing.analysis.shooting.process_noise`): its intensity, significance,
+        the horizon over which the Model predicts to the noise, and ``gap_whole``, the gap
+        of one trajectory per segment. None on fixed windows.
     """
 
     model: Model
@@ -201,6 +207,7 @@ class Replay:
     floor: NoiseFloor
     fit: Fit
     problem: ShootingProblem
+    process_noise: dict | None = None
 
     @property
     def data(self) -> ReplayData:
@@ -242,6 +249,11 @@ class Replay:
             "windows": {"count": self.windows.n, "length_s": self.windows.length * self.data.dt},
             "solver": {"status": self.fit.status, "level": self.fit.level},
             "logs": per,
+            "process_noise": (
+                None
+                if self.process_noise is None
+                else {k: v for k, v in self.process_noise.items() if k != "loglik"}
+            ),
         }
 
 
@@ -305,8 +317,10 @@ def replay(
     problem = problem_for(model, datas, windows, floor, substeps=substeps, jit=jit)
     names = ", ".join(d.log.source for d in datas)
     fit = problem.fit(model.p0, name=f"replay of {names}: initial states of the windows")
+    pn = None
     if windows.linked:  # the horizon from the data: the unexplained torque's intensity
         say("replay: estimating the unexplained torque (the horizon)", 0, 1)
-        fit = estimate_process_noise(problem, model.p0, name=f"replay of {names}", start=fit)
+        long = estimate_process_noise(problem, model.p0, name=f"replay of {names}", start=fit)
+        pn = long.extra["process_noise"]
     say("replay: done", 1, 1)
-    return Replay(model, tuple(datas), windows, floor, fit, problem)
+    return Replay(model, tuple(datas), windows, floor, fit, problem, pn)

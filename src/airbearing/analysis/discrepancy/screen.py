@@ -271,8 +271,8 @@ def screened_lag(problem, current, cand, datas, ln_n, k_added, before):
     from airbearing.analysis.discrepancy.candidates import smoothed
     from airbearing.analysis.discrepancy.trial import CandidateResult
 
-    if problem.outputs[0] != "rate" or problem.n_lag:
-        return None
+    if problem.outputs[0] != "rate" or problem.n_lag or problem.penalty is not None:
+        return None  # (linked pieces: the lag is fitted by IPOPT)
     w, nd, nw, n = problem.windows, problem.n_delta, problem.windows.n, problem.n_win_res
     L, na = w.length, problem.n_rate
     wdots = [smoothed(d)[1:] for d in datas]

@@ -90,6 +90,11 @@ from airbearing.analysis.discrepancy.words import (
     why,
 )
 from airbearing.analysis.shooting import Fit, ShootingProblem, WindowSet
+from airbearing.analysis.shooting.process_noise import (
+    KAPPA_GRID,
+    estimate_process_noise,
+    set_intensity,
+)
 from airbearing.errors import InputError, SolverError
 from airbearing.io.log import Log
 from airbearing.io.testbed import Testbed
@@ -330,6 +335,7 @@ class _Search:
         if any(c.lag for c in cands):
             self.models[True] = model_for(testbed, {**self.base_effects, "sensor_lag": 0.0})
         self.problems: dict = {}
+        self.kappa = None  # process-noise intensity of linked pieces (None: the grid's top)
         rng = np.random.default_rng(seed)
         folds = np.arange(windows.n) % min(windows.n, CV_FOLDS)
         self.folds = folds[rng.permutation(windows.n)]
@@ -337,9 +343,38 @@ class _Search:
     def problem(self, lag: bool) -> ShootingProblem:
         if lag not in self.problems:
             self.problems[lag] = problem_for(
-                self.models[lag], self.datas, self.windows, self.floor, jit=self.jit
-            )
+                self.models[lag], self.datas, self.windows, self.floor, jit=self.jit,
+                kappa=self.kappa,
+            )  # fmt: skip
         return self.problems[lag]
+
+    def horizon(self, fit: Fit, lag: bool, chosen, theta) -> Fit:
+        """``fit`` refitted at the most likely process-noise intensity at or below the current
+        one (:func:`estimate_process_noise`, continued down from ``fit``); every problem of
+        the search takes that intensity. Unlinked (fixed) windows: ``fit`` unchanged."""
+        if not self.windows.linked:
+            return fit
+        top = KAPPA_GRID[0] if self.kappa is None else self.kappa
+        grid = [k for k in KAPPA_GRID if k <= top]
+        if not grid or grid[0] != top:
+            grid = [top, *grid]
+        model = self.models[lag]
+        fit = estimate_process_noise(
+            self.problem(lag),
+            model.p0.copy(),
+            self.S(lag, chosen) if chosen else None,
+            theta if chosen else None,
+            lower=np.r_[[lo for c in chosen for lo in c.lower]] if chosen else None,
+            upper=np.r_[[hi for c in chosen for hi in c.upper]] if chosen else None,
+            delta0=fit.delta,
+            grid=grid,
+            start=fit,
+            name="process noise of the logs",
+        )
+        self.kappa = fit.extra["process_noise"]["kappa"]
+        for pb in self.problems.values():
+            set_intensity(pb, self.kappa)
+        return fit
 
     def S(self, lag: bool, chosen) -> np.ndarray:
         m = self.models[lag]
@@ -735,6 +770,13 @@ def discrepancy(
     else:
         stop_reason = stop_reason or f"reached max_effects = {max_effects}"
 
+    # effects are named on short pieces (the detection study's calibration, robust far from
+    # the nominal); their values and errors come from the horizon the data support: the
+    # process noise estimated with the named effects, continued down from the short pieces
+    short = current
+    if windows.linked:
+        say("the horizon: how much torque the model still leaves unexplained", done, total)
+        current = search.horizon(current, current_lag, chosen, theta_chosen)
     final_problem = search.problem(current_lag)
     errs = honest(final_problem, current, len(current.theta))
     effects, effect_std, white, crlb, eff = {}, {}, {}, {}, {}
@@ -807,7 +849,7 @@ def discrepancy(
         effects=effects,
         effect_std=effect_std,
         gap_before=nominal.gap,
-        gap_after=current.gap,
+        gap_after=short.gap,
         noise_floor=floor.value,
         candidates=(rounds[0] if rounds else ()) + tuple(refused),
         rounds=tuple(rounds),
@@ -824,7 +866,7 @@ def discrepancy(
         stop_reason=stop_reason,
         validation=validation,
         log_gaps_before=tuple(log_gaps(base_problem, nominal)),
-        log_gaps_after=tuple(log_gaps(final_problem, current)),
+        log_gaps_after=tuple(log_gaps(final_problem, short)),
         effect_std_white=white,
         effect_crlb=crlb,
         effect_efficiency=eff,

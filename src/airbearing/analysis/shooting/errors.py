@@ -19,7 +19,8 @@ Three numbers per fitted parameter:
 ``crlb``
     The Cramer-Rao bound of the data: the Fisher information at the noise floor (the
     problem's weights, chi-square 1) of ONE trajectory per segment (the windows' continuity
-    enforced, one initial state per segment), not of free windows.
+    enforced, one initial state per segment), not of free windows. On free windows (a
+    fixed window length asked for) there is no trajectory to join: NaN.
 
 The scores are ``A_i r_i`` with ``A`` the parameters' Jacobian columns projected off the
 nuisance columns (initial states), so the sandwich is the one of the profiled parameters.
@@ -269,9 +270,8 @@ def crlb(problem, fit, k: int) -> np.ndarray:
     if k == 0:
         return np.zeros(0)
     w = problem.windows
-    if not w.linked:
-        std, _, _ = theta_errors(sp.csc_matrix(fit.extra["J"])[: problem.n_meas], k, 1.0)
-        return std
+    if not w.linked:  # free windows (a window length given): no trajectory to join
+        return np.full(k, np.nan)
     S_fit = fit.extra.get("S")
     if S_fit is None:  # a fit that did not record its parameter map (a screened step)
         return np.full(k, np.nan)

@@ -398,11 +398,7 @@ def estimate_process_noise(
                 break  # a lower intensity the fit cannot reach: keep what was found
         fits[kappa], ll[kappa] = fit, _loglik(problem, fit, k)
         th, d = fit.theta, fit.delta
-        best = max(ll, key=ll.get)
-        # the likelihood has passed its peak by a clear margin: lower intensities only
-        # fall further (the model cannot follow the data over longer horizons)
-        if ll[kappa] < ll[best] - 50.0:
-            break
+
     # refine between the coarse grid's points around the best (one decade each side)
     best = max(ll, key=ll.get)
     for kappa in (best * 10.0, best / 10.0):
@@ -444,5 +440,13 @@ def estimate_process_noise(
         loglik={float(a): float(b) for a, b in ll.items()},
     )
     fit = fits[best]
-    fit.extra["process_noise"] = {**pn.to_json(), "loglik": pn.loglik}
+    fit.extra["process_noise"] = {
+        **pn.to_json(),
+        # the gap of the most continuous fit reached (one trajectory per segment when the
+        # continuation reached the bottom of the grid)
+        "gap_whole": float(fits[bottom].gap),
+        "kappa_whole": float(bottom),
+        "gap_short": float(fits[max(fits)].gap),
+        "loglik": pn.loglik,
+    }
     return fit
