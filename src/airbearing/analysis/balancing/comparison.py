@@ -161,6 +161,9 @@ SWEEPS = {
     "gyro_noise": ("sensors.gyro_noise", "rad/s"),
     "accel_noise": ("sensors.accel_noise", "-"),
     "torque_noise": ("body.torque_noise", "N m"),
+    "gyro_vibration": ("masses.gyro_vibration", "rad/s"),
+    "accel_vibration": ("masses.accel_vibration", "-"),
+    "drive_torque_noise": ("masses.drive_torque_noise", "N m"),
     "vertical_offset": ("CR -> CM vertical offset of the balanced platform", "m"),
     "duration": ("run length (the metrics use its last third)", "s"),
 }
@@ -168,7 +171,8 @@ SWEEPS = {
 
 def _with(testbed: Testbed, name: str, value: float) -> Testbed:
     """``testbed`` with one sweepable imperfection set (not ``lag``/``vertical_offset``)."""
-    if name in ("backlash", "speed", "step"):
+    if name in ("backlash", "speed", "step", "gyro_vibration", "accel_vibration",
+                "drive_torque_noise"):  # fmt: skip
         return testbed.replace(masses=dataclasses.replace(testbed.masses, **{name: value}))
     if name in ("gyro_noise", "accel_noise"):
         return testbed.replace(sensors=dataclasses.replace(testbed.sensors, **{name: value}))
