@@ -134,6 +134,7 @@ def test_consistency_is_the_chi_square_about_the_weighted_mean():
 def _adequacy(remains, ratio=3.3):
     return Adequacy(
         gap_over_floor=ratio,
+        pieces_gap_over_floor=ratio,
         whiteness_p=1e-12 if remains else 0.4,
         tests=3,
         structure_remains=remains,
@@ -172,3 +173,16 @@ def test_failures_in_words_carry_no_solver_text():
     assert "IPOPT" not in failure_words("did not converge", "candidate x: NaN detected")
     bound = "pinned at its physical bound 0: the fit wants a value at or beyond it"
     assert failure_words("at its physical bound", bound) == "at its bound 0"
+
+
+def test_a_significant_unexplained_torque_is_said_with_the_whole_segment_gap():
+    from dataclasses import replace
+
+    pn = {"intensity": 8e-5, "unit": "rad/s/sqrt(s)", "p": 1e-30, "significant": True}
+    a = replace(_adequacy(True, 5.6), process_noise={**pn, "horizon_s": 10.0})
+    text = verdict({}, {}, "no candidate may be named", adequacy=a)
+    assert "an unexplained torque is significant (intensity 8e-05 rad/s/sqrt(s)" in text
+    assert "predicts to the noise over about 10 s" in text
+    assert "over whole segments 5.6 x the noise floor remains" in text
+    # the pieces' residual is white by construction: no correlation time is claimed
+    assert "correlated over" not in text

@@ -812,7 +812,7 @@ def discrepancy(
         )
         agree = consistency(chosen, per_log)
     adq = adequacy(
-        final_problem, current, floor, datas, gap_before=nominal.gap if effects else None
+        final_problem, current, floor, datas, gap_before=_whole_gap(nominal) if effects else None
     )
     unfit = {}
     for rnd in rounds:
@@ -875,6 +875,12 @@ def discrepancy(
         per_log=tuple(per_log),
         consistency=tuple(agree),
     )
+
+
+def _whole_gap(fit: Fit) -> float:
+    """The gap of one trajectory per segment when the process-noise estimate reached it."""
+    pn = fit.extra.get("process_noise") or {}
+    return float(max(fit.gap, pn.get("gap_whole", 0.0)))
 
 
 def _with_honest(search: _Search, res: CandidateResult) -> CandidateResult:
