@@ -23,6 +23,11 @@ The workflow (issue 7, issue 13):
    (fewest parameters first) is added.
 4. **Check** the augmented Model on validation logs that were not fitted: the
    named effects must shrink their gap too (reported per log).
+5. **Judge the answer**: every value carries its honest error, the white-noise one and
+   the Cramer-Rao bound (:mod:`.honest`); the final fit gets an adequacy verdict
+   (:mod:`.adequacy`: is what it leaves the noise, and if not, what it follows); with
+   several runs each named effect is fitted on each alone and their agreement tested
+   (:mod:`.consistency`). The verdict says "explains the data" only at the noise.
 """
 
 from __future__ import annotations
