@@ -17,6 +17,7 @@ from airbearing.analysis.discrepancy.adequacy import (
     correlation_time,
     follows,
     pooled_acf,
+    structure_rule,
     whiteness,
 )
 from airbearing.analysis.discrepancy.candidates import Candidate
@@ -186,3 +187,13 @@ def test_a_significant_unexplained_torque_is_said_with_the_whole_segment_gap():
     assert "over whole segments 5.6 x the noise floor remains" in text
     # the pieces' residual is white by construction: no correlation time is claimed
     assert "correlated over" not in text
+
+
+def test_structure_rule():
+    # correlated AND above the floor; or a significant unexplained torque; or twice the floor
+    assert structure_rule(1e-6, 1.5, False)
+    assert not structure_rule(1e-6, 1.02, False)  # correlated at the floor: the fit's own
+    assert not structure_rule(0.2, 1.5, False)  # white just above a floor: not claimed
+    assert structure_rule(0.2, 2.5, False)
+    assert structure_rule(0.5, 1.0, True)
+    assert not structure_rule(float("nan"), 1.0, False)

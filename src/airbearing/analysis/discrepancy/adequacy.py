@@ -15,9 +15,11 @@ Every discrepancy fit is judged on its residual:
 ``structure_remains``
     ``(whiteness_p < WHITENESS_ALPHA and gap_over_floor > GAP_ABOVE)`` or the fit's
     process-noise intensity is significant (``fit.extra["process_noise"]["significant"]``,
-    when the estimator provides it). Both conditions are needed for the first arm: a
-    residual at the floor may be slightly correlated by the fit itself, and a residual
-    above a floor that the difference estimator underestimates may still be white.
+    when the estimator provides it), or ``gap_over_floor > GAP_CLEAR`` (2: whatever the
+    whiteness test says, twice the floor is not the noise). Both conditions are needed
+    for the first arm: a residual at the floor may be slightly correlated by the fit
+    itself, and a residual just above a floor that the difference estimator
+    underestimates may still be white.
 ``correlation_time_s``
     Where the autocorrelation of the normalised residual (pooled over segments and axes,
     each segment weighted by its length) first falls below ``1/e``, linearly
@@ -46,6 +48,7 @@ __all__ = [
     "adequacy",
     "correlation_time",
     "follows",
+    "structure_rule",
     "whiteness",
 ]
 
@@ -54,6 +57,9 @@ WHITENESS_ALPHA = 1e-3
 #: The gap must exceed the noise floor by this factor for structure to remain (the floor is
 #: a robust difference estimate: a few % off on 10^3 samples, see :mod:`.data`).
 GAP_ABOVE = 1.1
+#: Above this many noise floors structure remains whatever the whiteness test says (a white
+#: residual twice the floor is a misfit or a floor the data's differences cannot see).
+GAP_CLEAR = 2.0
 #: Most lags of the Ljung-Box test (fewer on short segments: ``n // 5``).
 LB_LAGS = 20
 #: Fewest samples of a segment tested for whiteness.
@@ -332,7 +338,8 @@ class Adequacy:
             "follows": {k: (v if k in ("most", "of") else num(v)) for k, v in self.follows.items()},
             "rule": (
                 f"structure remains when whiteness_p < {WHITENESS_ALPHA:g} and gap_over_floor > "
-                f"{GAP_ABOVE:g}, or the process noise is significant"
+                f"{GAP_ABOVE:g}, or the process noise is significant, or gap_over_floor > "
+                f"{GAP_CLEAR:g}"
             ),
             "note": self.note,
         }
@@ -369,6 +376,17 @@ def _states(problem, fit, datas):
             seg[(src == i) & (rows >= a) & (rows < b)] = k
             k += 1
     return s["residual"], yaw, rate, t, seg, src
+
+
+def structure_rule(whiteness_p: float, gap_over_floor: float, significant_noise: bool) -> bool:
+    """``structure_remains`` from the whiteness p-value, the gap over the floor and the
+    process-noise test (module doc)."""
+    white_fails = bool(np.isfinite(whiteness_p) and whiteness_p < WHITENESS_ALPHA)
+    return bool(
+        (white_fails and gap_over_floor > GAP_ABOVE)
+        or significant_noise
+        or gap_over_floor > GAP_CLEAR
+    )
 
 
 def _defects(problem, fit, datas):
@@ -453,9 +471,7 @@ def adequacy(problem, fit, floor, datas, *, gap_before: float | None = None) -> 
         if dfx is not None:
             fol = {**follows(*dfx), "of": "the unexplained torque at the pieces' hand-overs"}
     significant_noise = bool(pn and pn.get("significant"))
-    remains = bool(np.isfinite(p) and p < WHITENESS_ALPHA and ratio > GAP_ABOVE) or (
-        significant_noise
-    )
+    remains = structure_rule(p, ratio, significant_noise)
     explained = None
     if gap_before is not None and gap_before > fit.gap:
         excess = gap_before**2 - floor.value**2
