@@ -245,6 +245,9 @@ def refine_output_error(
     sd_hac = np.sqrt(np.maximum(np.diag(c_hac), 0.0))
     up = np.where(sd_hac > 0, np.maximum(1.0, sd_fit / np.maximum(sd_hac, 1e-300)), 1.0)
     c_honest = np.where(np.isfinite(c_hac), c_hac, 0.0) * np.outer(up, up)
+    bad = ~np.isfinite(np.diag(c_fit))  # not identifiable: no honest number either
+    c_honest[bad, :] = np.nan
+    c_honest[:, bad] = np.nan
     cov, cov_spec, cov_white = np.zeros((9, 9)), np.zeros((9, 9)), np.zeros((9, 9))
     cov[np.ix_(free, free)] = c_honest
     cov_white[np.ix_(free, free)] = c_fit

@@ -352,7 +352,8 @@ def identify_platform(
     active_oe += face(theta, mass=mass, margin=margin, js=js)
     Fi = fisher_from_covariance(oe.cov, free_oe, np.where(np.arange(9) < 6, js, 1e-3))
     cov_oe, cond_oe, weak_oe, null_oe = diagnostics(Fi, free_oe, theta, mass=mass)
-    pd_oe = _positive_definite(oe.cov, free_oe, js)
+    # singular Fisher information: the white-noise covariance says it (the sandwich may not)
+    pd_oe = _positive_definite(oe.cov if oe.cov_white is None else oe.cov_white, free_oe, js)
     if not pd_oe:
         # the inverse of a numerically singular Fisher matrix: no parameter has a number,
         # and the weakest combination of the (better conditioned) first stage says why

@@ -680,10 +680,13 @@ class ShootingProblem:
         eliminated (Schur complement; with continuity in its null space), each output
         group's information scaled as in :meth:`covariance`. Not inverted: the caller
         decides what a singular one means."""
-        J = sp.csc_matrix(self._weighted_jacobian(fit, rate, att))
-        col = np.sqrt(np.asarray(J.power(2).sum(axis=0)).ravel())
+        J = self._weighted_jacobian(fit, rate, att)
+        # dense: the caller decides singularity at working precision, and the output-error
+        # identification's verdicts were calibrated on the dense products
+        Jd = J.toarray() if hasattr(J, "toarray") else np.asarray(J)
+        col = np.linalg.norm(Jd, axis=0)
         c = np.where(col > 0, col, 1.0)
-        return _reduced(J @ sp.diags(1.0 / c), k)[0] * np.outer(c[:k], c[:k])
+        return _reduced(Jd / c, k)[0] * np.outer(c[:k], c[:k])
 
     def noise_rms(self, r: np.ndarray) -> dict:
         """RMS of each output group's UNWEIGHTED residual over usable rows (rad/s, rad)."""
