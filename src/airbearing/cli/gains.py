@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import inspect
-import json
 from pathlib import Path
 from typing import Annotated, Literal, get_args
 
@@ -28,28 +27,6 @@ def _call(fn, *args, progress=None, **kw):
     if progress is not None and "progress" in inspect.signature(fn).parameters:
         kw["progress"] = progress
     return fn(*args, **kw)
-
-
-def read_gains(path: Path, loop: str) -> dict:
-    """Gains from a ``airbearing gains --json`` file, checked to belong to ``loop``."""
-    try:
-        data = json.loads(Path(path).read_text())
-    except FileNotFoundError:
-        raise InputError(f"--gains {path}: file not found") from None
-    except (json.JSONDecodeError, UnicodeDecodeError) as e:
-        raise InputError(f"--gains {path}: not a JSON file ({e})") from None
-    if not isinstance(data, dict) or "gains" not in data or "loop" not in data:
-        raise InputError(
-            f"--gains {path}: expected the JSON of 'airbearing gains' with keys 'loop' and 'gains'"
-        )
-    if data["loop"] != loop:
-        raise InputError(
-            f"--gains {path}: key 'loop' is '{data['loop']}', but --loop is '{loop}': these are "
-            f"gains of the {data['loop']} loop"
-        )
-    if not isinstance(data["gains"], dict):
-        raise InputError(f"--gains {path}: key 'gains' must be an object of name -> value")
-    return data
 
 
 @app.command()
@@ -153,7 +130,12 @@ def report(
     spec_dict = None
     g = None
     if gains_file is not None:
-        data = read_gains(gains_file, loop)
+        from airbearing.io.gains import read_gains
+
+        try:
+            data = read_gains(gains_file, loop)
+        except InputError as e:  # the library names the file; the CLI names the flag
+            raise InputError(f"--gains {e}") from None
         g = data["gains"]
         if data.get("split") and loop == "balancing":
             split = data["split"]

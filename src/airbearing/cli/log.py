@@ -144,26 +144,18 @@ def check(
     _declare_inputs(out, testbed, [(log_file, "the log")])
     json_path = out.plan(json_out, "--json", (".json",))
     tb = _testbed(testbed)
+    from airbearing.api.logs import check_log
     from airbearing.io.log import BadCellsError, read_log
-    from airbearing.io.tool_use import TOOLS, tool_use
+    from airbearing.io.tool_use import TOOLS
 
     try:
         log = read_log(log_file, tb)
     except BadCellsError as e:
         _report_bad_cells(out, json_path, log_file, tb, e)
         return
-    quality = log.quality
-    tools = tool_use(log, quality)
-    t = log.t
-    summary = {
-        "log": str(log_file),
-        "testbed": tb.name,
-        "rows": log.n,
-        "duration": float(t[-1] - t[0]),
-        "rate": tb.sensors.rate,
-        **quality.to_json(),
-        "tools": {name: {"usable": ok, "why": why} for name, (ok, why) in tools.items()},
-    }
+    result = check_log(log)
+    quality, tools, t = result.quality, result.tools, log.t
+    summary = {**result.to_json(), "log": str(log_file)}
     out.json(json_path, summary)
     out.commit()
     lines = [

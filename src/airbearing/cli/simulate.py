@@ -108,6 +108,38 @@ def simulate(
     out.input(times, "the --times log")
     log_path = out.plan(output, "-o", (".csv", ".parquet"))
     json_path = out.plan(json_out, "--json", (".json",))
+    _check_numbers(yaw_deg, axis, duration, initial_rate, initial_quaternion, sliders,
+                   attitude_noise, spin_rate, jitter)  # fmt: skip
+    gaps, glitches, artefacts = _artefacts(scenario, jitter, gap, glitch,
+                                           first_sample_artefact, times, duration)  # fmt: skip
+    from airbearing.analysis.simulation.scenarios import SCENARIO_DURATIONS
+
+    effects = parse_effects(effect)
+    tb = testbed_arg(testbed)
+    length = SCENARIO_DURATIONS[scenario] if duration is None else duration
+    check_log_size("--duration", length, tb.sensors.rate)
+    kw = dict(
+        effects=effects, seed=seed, ideal=ideal, initial_rate=initial_rate,
+        q0=initial_quaternion, sliders=sliders, spin_rate=spin_rate,
+        attitude_noise=attitude_noise,
+    )  # fmt: skip
+    if artefacts:  # a log as a real testbed writes it, with its answer key in the summary
+        result, summary = _rehearsal(
+            tb, scenario, length=None if times else length, times=times, jitter=jitter,
+            gaps=gaps, glitches=glitches, first_sample=first_sample_artefact, **kw,
+        )  # fmt: skip
+    else:
+        result, summary = _scenario(
+            tb, scenario, length, yaw_deg=yaw_deg, axis=axis, steering=steering,
+            rate_limit=rate_limit, **kw,
+        )  # fmt: skip
+    _write(out, log_path, json_path, result,
+           {"testbed": tb.name, "scenario": scenario, "seed": seed, **summary})  # fmt: skip
+
+
+def _check_numbers(yaw_deg, axis, duration, initial_rate, initial_quaternion, sliders,
+                   attitude_noise, spin_rate, jitter) -> None:  # fmt: skip
+    """Each numeric option finite and in its range (one line naming the flag if not)."""
     number(
         "--yaw-deg", yaw_deg, lo=-MAX_SLEW_DEG, hi=MAX_SLEW_DEG, unit="deg",
         why="the attitude loop takes the shorter way round, so a larger angle is a different slew",
@@ -124,23 +156,45 @@ def simulate(
     number("--attitude-noise", attitude_noise, lo=0, unit="rad")
     number("--spin-rate", spin_rate, unit="rad/s")
     number("--jitter", jitter, lo=0, hi=1, hi_open=True)
+
+
+def _artefacts(scenario, jitter, gap, glitch, first_sample, times, duration):
+    """The parsed ``--gap`` and ``--glitch`` values, and whether any artefact is asked for."""
     from airbearing.analysis.simulation.rehearsal import parse_gap, parse_glitch
 
     gaps = [parse_gap(g) for g in gap or ()]
     glitches = [parse_glitch(g) for g in glitch or ()]
-    artefacts = bool(jitter or gaps or glitches or first_sample_artefact or times)
+    artefacts = bool(jitter or gaps or glitches or first_sample or times)
     if artefacts and scenario == "slew":
         raise InputError(
             "--jitter, --gap, --glitch, --times, --first-sample-artefact: not for a slew"
         )
     if times is not None and duration is not None:
         raise InputError("--times and --duration: give one (the times set the run length)")
-    effects = parse_effects(effect)
-    tb = testbed_arg(testbed)
-    default_length = {"slew": 40.0, "free": 60.0, "spindown": 120.0}[scenario]
-    length = default_length if duration is None else duration
-    check_log_size("--duration", length, tb.sensors.rate)
+    return gaps, glitches, artefacts
 
+
+def _rehearsal(tb, scenario, *, length, times, jitter, gaps, glitches, first_sample, effects,
+               seed, ideal, initial_rate, q0, sliders, spin_rate, attitude_noise):  # fmt: skip
+    """A free or spin-down run on a real clock with artefacts, and its summary."""
+    from airbearing.analysis.simulation.rehearsal import rehearsal_log, rehearsal_summary
+    from airbearing.analysis.simulation.scenarios import initial_attitude
+    from airbearing.io.log import read_log
+
+    t_given = None if times is None else read_log(times).t
+    result = rehearsal_log(
+        tb, duration=length, times=t_given, effects=effects, seed=seed, noise=not ideal,
+        initial_rate=(0.0, 0.0, spin_rate) if scenario == "spindown" else initial_rate,
+        q0=initial_attitude(tb, q0), attitude_noise=attitude_noise, jitter=jitter, gaps=gaps,
+        glitches=glitches, first_sample=first_sample,
+        inputs=dict(zip(("s1", "s2", "s3"), sliders, strict=True)) if any(sliders) else None,
+    )  # fmt: skip
+    return result, rehearsal_summary(result)
+
+
+def _scenario(tb, scenario, length, *, yaw_deg, axis, steering, rate_limit, effects, seed,
+              ideal, initial_rate, q0, sliders, spin_rate, attitude_noise):  # fmt: skip
+    """A slew, spin-down or free oscillation of ``length`` s, and its summary."""
     from airbearing.analysis.simulation.scenarios import (
         free_oscillation,
         free_summary,
@@ -148,44 +202,31 @@ def simulate(
         slew_summary,
         spindown,
     )
-    from airbearing.io.output import to_jsonable
 
-    if artefacts:  # a log as a real testbed writes it, with its answer key in the summary
-        from airbearing.analysis.simulation.rehearsal import rehearsal_log, rehearsal_summary
-        from airbearing.io.log import read_log
-
-        t_given = None if times is None else read_log(times).t
-        level = tuple(initial_quaternion) == (1, 0, 0, 0)  # the default: not given
-        q0 = None if tb.body.dof == 1 and level else initial_quaternion
-        result = rehearsal_log(
-            tb, duration=None if times else length, times=t_given, effects=effects, seed=seed,
-            noise=not ideal,
-            initial_rate=(0.0, 0.0, spin_rate) if scenario == "spindown" else initial_rate,
-            q0=q0, attitude_noise=attitude_noise, jitter=jitter, gaps=gaps,
-            glitches=glitches, first_sample=first_sample_artefact,
-            inputs=dict(zip(("s1", "s2", "s3"), sliders, strict=True)) if any(sliders) else None,
-        )  # fmt: skip
-        summary = rehearsal_summary(result)
-    elif scenario == "slew":
+    if scenario == "slew":
         result = slew(
             tb, angle_deg=yaw_deg, axis=axis, duration=length, seed=seed, ideal=ideal,
             steering=steering, rate_limit_mode=rate_limit, effects=effects,
         )  # fmt: skip
-        summary = slew_summary(result)
-    elif scenario == "spindown":
+        return result, slew_summary(result)
+    if scenario == "spindown":
         result = spindown(
-            tb, initial_rate=spin_rate, q0=initial_quaternion, effects=effects, duration=length,
+            tb, initial_rate=spin_rate, q0=q0, effects=effects, duration=length,
             seed=seed, noise=not ideal, attitude_noise=attitude_noise,
         )  # fmt: skip
-        summary = free_summary(result)
     else:
         result = free_oscillation(
-            tb, initial_rate=initial_rate, q0=initial_quaternion, sliders=sliders,
-            effects=effects, duration=length, seed=seed, noise=not ideal,
-            attitude_noise=attitude_noise,
+            tb, initial_rate=initial_rate, q0=q0, sliders=sliders, effects=effects,
+            duration=length, seed=seed, noise=not ideal, attitude_noise=attitude_noise,
         )  # fmt: skip
-        summary = free_summary(result)
-    summary = to_jsonable({"testbed": tb.name, "scenario": scenario, "seed": seed, **summary})
+    return result, free_summary(result)
+
+
+def _write(out, log_path, json_path, result, summary: dict) -> None:
+    """The log and the summary JSON written together, then the summary printed."""
+    from airbearing.io.output import to_jsonable
+
+    summary = to_jsonable(summary)
     if log_path is not None:
         from airbearing.io.log import write_log
 

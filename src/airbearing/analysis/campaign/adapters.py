@@ -350,6 +350,7 @@ def _slew(tb: Testbed, *, yaw_deg, axis, duration, seed, ideal, steering, rate_l
 def _simulate(tb: Testbed, a: dict, seed: int, gains=None, src: str = ""):
     """The run and summary of ``airbearing simulate`` (scenario slew or free)."""
     from airbearing.analysis.simulation.scenarios import (
+        LEVEL,
         SCENARIO_DURATIONS,
         free_oscillation,
         free_summary,
@@ -372,7 +373,7 @@ def _simulate(tb: Testbed, a: dict, seed: int, gains=None, src: str = ""):
     else:
         result = free_oscillation(
             tb, initial_rate=a.get("initial_rate", (0.0, 0.0, 0.0)),
-            q0=a.get("initial_quaternion", (1.0, 0.0, 0.0, 0.0)),
+            q0=a.get("initial_quaternion", LEVEL),
             sliders=a.get("sliders", (0.0, 0.0, 0.0)), duration=duration,
             seed=seed, noise=not a.get("ideal", False),
             attitude_noise=a.get("attitude_noise"), model=_reused_model(tb),

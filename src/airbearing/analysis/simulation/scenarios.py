@@ -16,12 +16,36 @@ from airbearing.models import quaternion as quat
 from airbearing.models.model import Model, build_model
 
 __all__ = [
-    "SCENARIO_DURATIONS", "slew", "slew_summary", "free_oscillation", "free_summary", "spindown"
+    "SCENARIO_DURATIONS", "LEVEL", "initial_attitude", "slew", "slew_summary",
+    "free_oscillation", "free_summary", "spindown",
 ]  # fmt: skip
 
 #: s, the default run length of each scenario (a seed-001 slew and its settling, a free
 #: oscillation long enough for identification, a coast-down that loses most of its rate).
 SCENARIO_DURATIONS = {"slew": 40.0, "free": 60.0, "spindown": 120.0}
+#: The level attitude, qw qx qy qz: every scenario's default initial quaternion.
+LEVEL = (1.0, 0.0, 0.0, 0.0)
+
+
+def initial_attitude(testbed: Testbed, q0=None):
+    """The initial quaternion to pass on: ``None`` (the model's own start) or ``q0``.
+
+    A dof-1 bearing starts at yaw 0 and takes no quaternion: a level ``q0`` (the default,
+    not given) becomes ``None``; any other ``q0`` is passed on for the simulation to refuse.
+
+    Parameters
+    ----------
+    testbed : Testbed
+    q0 : sequence of 4 float, optional
+        Attitude at the start, qw qx qy qz.
+
+    Returns
+    -------
+    tuple of 4 float or None
+    """
+    if q0 is None or (testbed.body.dof == 1 and tuple(map(float, q0)) == LEVEL):
+        return None
+    return tuple(q0)
 
 
 def slew(
