@@ -473,10 +473,12 @@ def adequacy(problem, fit, floor, datas, *, gap_before: float | None = None) -> 
     significant_noise = bool(pn and pn.get("significant"))
     remains = structure_rule(p, ratio, significant_noise)
     explained = None
-    if gap_before is not None and gap_before > fit.gap:
+    if gap_before is not None:
+        # both over whole segments when the estimator reached them (the search passes the
+        # nominal's whole-segment gap)
         excess = gap_before**2 - floor.value**2
         if excess > 0:
-            explained = float(np.clip((gap_before**2 - fit.gap**2) / excess, 0.0, 1.0))
+            explained = float(np.clip((gap_before**2 - gap**2) / excess, 0.0, 1.0))
     a = Adequacy(
         gap_over_floor=ratio,
         pieces_gap_over_floor=ratio_pieces,

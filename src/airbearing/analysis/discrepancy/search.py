@@ -817,7 +817,11 @@ def discrepancy(
         )
         agree = consistency(chosen, per_log)
     adq = adequacy(
-        final_problem, current, floor, datas, gap_before=_whole_gap(nominal) if effects else None
+        final_problem,
+        current,
+        floor,
+        datas,
+        gap_before=_whole_gap(nominal, current) if effects else None,
     )
     unfit = {}
     for rnd in rounds:
@@ -882,10 +886,15 @@ def discrepancy(
     )
 
 
-def _whole_gap(fit: Fit) -> float:
-    """The gap of one trajectory per segment when the process-noise estimate reached it."""
-    pn = fit.extra.get("process_noise") or {}
-    return float(max(fit.gap, pn.get("gap_whole", 0.0)))
+def _whole_gap(nominal: Fit, final: Fit) -> float | None:
+    """The nominal gap to compare the final one with in the adequacy verdict: over whole
+    segments when the process-noise estimate reached them for both; None when only the
+    final fit has it (the nominal's pieces' gap is not comparable)."""
+    pn0 = nominal.extra.get("process_noise") or {}
+    pn1 = final.extra.get("process_noise") or {}
+    if "gap_whole" in pn1 and "gap_whole" not in pn0:
+        return None
+    return float(max(nominal.gap, pn0.get("gap_whole", 0.0)))
 
 
 def _with_honest(search: _Search, res: CandidateResult) -> CandidateResult:
