@@ -89,13 +89,13 @@ def identify(
                     msg = "--" + param.replace("_", "-") + msg[len(param) :].replace("=", " ", 1)
             raise InputError(msg) from None
     if tb.kind == "cmg" and tb.body.dof == 1:
-        typer.echo(f"J_z = {_fmt(result.inertia, result.std)} kg m^2")
+        typer.echo(f"J_z = {_fmt(result.inertia, result.std_inertia)} kg m^2")
         for k, v in result.friction.items():
             s = result.std_friction[k]
             typer.echo(f"{k} = {_fmt(v, float('nan') if s is None else s)}")
     elif tb.body.dof == 1:
         unit = "" if result.inertia != result.inertia else " kg m^2"
-        typer.echo(f"J_z = {_fmt(result.inertia, result.std)}{unit} ({result.method})")
+        typer.echo(f"J_z = {_fmt(result.inertia, result.std_inertia)}{unit} ({result.method})")
     else:
         typer.echo(f"method: {result.method}")
         from airbearing.cli.tables import matrix_table, table

@@ -101,6 +101,6 @@ def demo_section(report, *, quick: bool) -> None:
         "Seed 001's question: the CAD yaw inertia is 0.00283 kg m^2, the slews were explained by "
         "0.00323 kg m^2. From a simulated 180 deg slew of a platform whose true inertia is "
         f"0.00323 kg m^2 (gyro noise 5e-4 rad/s), momentum exchange J_z w_z + h_z(delta) = const "
-        f"gives J_z = {cmg.inertia:.5f} +- {cmg.std:.1g} kg m^2 (rate residual "
+        f"gives J_z = {cmg.inertia:.5f} +- {cmg.std_inertia:.1g} kg m^2 (rate residual "
         f"{cmg.residual_rms:.2g} rad/s), starting from the CAD value in the testbed file."
     )

@@ -24,6 +24,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from airbearing.analysis.identification.data import log_quality
+from airbearing.analysis.identification.result import IdentificationResult
 from airbearing.errors import InputError, SolverError
 from airbearing.io.log import Log
 from airbearing.io.testbed import Body, Testbed
@@ -40,16 +41,20 @@ INV_INERTIA_FLOOR = 1e-6
 RELATIVE_STD_WARN = 0.05
 
 
-@dataclass(frozen=True, eq=False)
-class CMGIdentification:
+@dataclass(frozen=True, eq=False, repr=False)
+class CMGIdentification(IdentificationResult):
     """Identified yaw inertia of a dof-1 CMG testbed.
+
+    The shape of every identification result (:class:`.result.IdentificationResult`):
+    :attr:`std` is the ndarray ``[std_inertia]``; ``cm_offset``, ``std_cm_offset``,
+    ``held`` and ``std_white`` are None (dof 1, nothing held, no output error).
 
     Attributes
     ----------
     inertia : float
         J_z, kg m^2, about the bearing axis.
-    std : float
-        1-sigma standard error of J_z, kg m^2.
+    std_inertia : float
+        1-sigma standard error of J_z, kg m^2 (NaN when a constraint pins it).
     friction : dict
         Effect name -> identified value (N m s or N m), for the chosen friction model.
     std_friction : dict
@@ -64,42 +69,59 @@ class CMGIdentification:
     details : dict
     segments : int
         Segments (between gaps) of all logs, each with its own momentum constant.
-    outlier_rows : tuple of tuple of int
-        Per log, the rows left out (io.quality's rule).
+    outlier_rows_per_log : tuple of tuple of int
+        Per log, the rows left out (io.quality's rule); :attr:`outlier_rows` is the flat
+        list for one log, else one list per log (as every identification result).
+    std_status : dict
+        ``{"J_zz": "estimated" | "pinned by inertia_positive"}``.
+    method : str
+        ``"momentum-exchange"``.
+    residual_unit : str
+        ``"rad/s"``.
     """
 
     inertia: float
-    std: float
+    std_inertia: float
     friction: dict
     std_friction: dict
     condition_number: float
     active_constraints: tuple
     residual_rms: float
     warnings: tuple
-    details: dict = field(default_factory=dict)
+    details: dict = field(default_factory=dict, repr=False)
     segments: int = 1
-    outlier_rows: tuple = ()
+    outlier_rows_per_log: tuple = field(default=(), repr=False)
+    std_status: dict = field(default_factory=lambda: {"J_zz": "estimated"})
+    method: str = "momentum-exchange"
+    residual_unit: str = "rad/s"
+    cm_offset: None = None
+    std_cm_offset: None = None
+    held: None = None
+    std_white: None = None
+
+    @property
+    def outlier_rows(self) -> list:
+        """Outlier rows left out: a flat list for one log, else one list per log."""
+        rows = [list(r) for r in self.outlier_rows_per_log]
+        return rows[0] if len(rows) == 1 else rows
 
     def to_json(self) -> dict:
         """``inertia`` (J_z), ``std``, ``condition_number``, ``active_constraints``,
         ``residual_rms`` and the friction terms."""
         return {
             "inertia": float(self.inertia),
-            "std": float(self.std),
+            "std": float(self.std_inertia),
+            "std_status": dict(self.std_status),
             "condition_number": float(self.condition_number),
             "active_constraints": list(self.active_constraints),
             "residual_rms": float(self.residual_rms),
-            "residual_unit": "rad/s",
-            "residual_rms_unit": "rad/s",
+            "residual_unit": self.residual_unit,
+            "residual_rms_unit": self.residual_unit,
             "friction": dict(self.friction),
             "std_friction": dict(self.std_friction),
-            "method": "momentum-exchange",
+            "method": self.method,
             "segments": int(self.segments),
-            "outlier_rows": (
-                list(self.outlier_rows[0])
-                if len(self.outlier_rows) == 1
-                else [list(r) for r in self.outlier_rows]
-            ),
+            "outlier_rows": self.outlier_rows,
             "warnings": list(self.warnings),
             "details": dict(self.details),
         }
@@ -291,7 +313,7 @@ def identify_cmg_inertia(
         )
     return CMGIdentification(
         inertia=float(J),
-        std=float(std[0]) if "inertia_positive" not in active else float("nan"),
+        std_inertia=float(std[0]) if "inertia_positive" not in active else float("nan"),
         friction={n: float(beta_hat[1 + k] / a) for k, n in enumerate(names)},
         # a friction pinned at zero by its sign constraint has no standard error (None)
         std_friction={
@@ -310,5 +332,8 @@ def identify_cmg_inertia(
             "per_log": entries,
         },
         segments=int(sum(e["segments"] for e in entries)),
-        outlier_rows=tuple(tuple(e["outlier_rows"]) for e in entries),
+        outlier_rows_per_log=tuple(tuple(e["outlier_rows"]) for e in entries),
+        std_status={
+            "J_zz": "pinned by inertia_positive" if "inertia_positive" in active else "estimated"
+        },
     )

@@ -24,7 +24,13 @@ from airbearing.analysis.identification.regression import PARAM_NAMES, theta_to_
 from airbearing.errors import InputError
 from airbearing.io.testbed import Body, Testbed
 
-__all__ = ["PlatformIdentification", "Prior", "PRIOR_STD_INERTIA", "PRIOR_STD_OFFSET"]
+__all__ = [
+    "IdentificationResult",
+    "PlatformIdentification",
+    "Prior",
+    "PRIOR_STD_INERTIA",
+    "PRIOR_STD_OFFSET",
+]
 
 #: Default 1-sigma of a CAD prior: fraction of the mean inertia, and m for the offset.
 PRIOR_STD_INERTIA = 0.1
@@ -115,8 +121,79 @@ def prior_check(theta, std, prior: Prior) -> tuple[dict, list[str]]:
     return z, warn
 
 
-@dataclass(frozen=True, eq=False)
-class PlatformIdentification:
+def _num(v, unit: str = "") -> str:
+    """``1.234e-03`` style number (``nan`` as "-"), with its unit."""
+    v = float(v)
+    return ("-" if v != v else f"{v:.4g}") + (f" {unit}" if unit else "")
+
+
+class IdentificationResult:
+    """The shape every identification result shares (platform dof 3, dof-1 yaw, CMG).
+
+    Fields where they make sense: ``method``, ``inertia`` (3x3 kg m^2 for dof 3, J_z as a
+    float for dof 1), ``std_inertia``, ``cm_offset`` and ``std_cm_offset`` (m; None for
+    dof 1), ``std_status``, ``residual_rms`` in ``residual_unit``, ``segments``,
+    ``outlier_rows``, ``warnings``, ``held`` and ``std_white``. The properties
+    :attr:`theta`, :attr:`std` (ndarray in the order of :attr:`param_names`, NaN where
+    there is no standard error) and :attr:`not_identifiable` have the same type for every
+    method; ``to_json()`` is each command's JSON contract.
+    """
+
+    #: Parameter names of :attr:`theta`, in order.
+    param_names: tuple = ("J_zz",)
+
+    @property
+    def theta(self) -> np.ndarray:
+        """The identified parameters in the order of :attr:`param_names` (kg m^2, m)."""
+        return np.atleast_1d(np.asarray(self.inertia, dtype=float)).reshape(-1)
+
+    @property
+    def std(self) -> np.ndarray:
+        """Standard errors in the order of :attr:`theta` (NaN: none, see ``std_status``)."""
+        return np.atleast_1d(np.asarray(self.std_inertia, dtype=float)).reshape(-1)
+
+    @property
+    def not_identifiable(self) -> dict:
+        """Parameter name -> reason, for those the logs cannot separate."""
+        key = "not identifiable from this log"
+        return {n: s for n, s in self.std_status.items() if s.startswith(key)}
+
+    def _value_lines(self) -> list[str]:
+        """One line per identified value with its error (dof 1: J_z)."""
+        reason = self.not_identifiable.get("J_zz")
+        if reason:
+            return [f"J_z: {reason}"]
+        return [f"J_z = {_num(self.inertia)} +- {_num(self.std_inertia, 'kg m^2')}"]
+
+    def __repr__(self) -> str:
+        name = type(self).__name__
+        if np.ndim(self.inertia) == 0:
+            value = f"inertia={_num(self.inertia)}, std_inertia={_num(self.std_inertia)}"
+        else:
+            d = np.diag(np.asarray(self.inertia, float))
+            r = np.asarray(self.cm_offset, float)
+            value = (
+                "inertia_diag=[" + ", ".join(f"{v:.4g}" for v in d) + "], "
+                "cm_offset=[" + ", ".join(f"{v:.3g}" for v in r) + "]"
+            )
+        return (
+            f"{name}(method={self.method!r}, {value}, residual_rms={_num(self.residual_rms)} "
+            f"{self.residual_unit}, segments={int(self.segments)}, "
+            f"warnings={len(self.warnings)})"
+        )
+
+    def __str__(self) -> str:
+        lines = [f"{type(self).__name__} ({self.method}, {int(self.segments)} segment(s))"]
+        lines += self._value_lines()
+        lines.append(f"residual rms {_num(self.residual_rms, self.residual_unit)}")
+        if self.held:
+            lines.append(f"held from the testbed file: {self.held}")
+        lines += [f"warning: {w}" for w in self.warnings]
+        return "\n".join(lines)
+
+
+@dataclass(frozen=True, eq=False, repr=False)
+class PlatformIdentification(IdentificationResult):
     """Identified mass properties of a platform (dof 3).
 
     Attributes
@@ -175,6 +252,8 @@ class PlatformIdentification:
         which breaks the common scale of J and r in free motion; None when neither.
     """
 
+    param_names = PARAM_NAMES
+
     inertia: np.ndarray
     cm_offset: np.ndarray
     std_inertia: np.ndarray
@@ -188,15 +267,15 @@ class PlatformIdentification:
     mass: float
     std_status: dict = field(default_factory=dict)
     segments: int = 1
-    logs: tuple = ()
-    equation_error: PlatformIdentification | None = None
-    weak_directions: tuple = ()
-    cramer_rao_inertia: np.ndarray | None = None
-    cramer_rao_cm_offset: np.ndarray | None = None
-    prior_z: dict = field(default_factory=dict)
-    details: dict = field(default_factory=dict)
+    logs: tuple = field(default=(), repr=False)
+    equation_error: PlatformIdentification | None = field(default=None, repr=False)
+    weak_directions: tuple = field(default=(), repr=False)
+    cramer_rao_inertia: np.ndarray | None = field(default=None, repr=False)
+    cramer_rao_cm_offset: np.ndarray | None = field(default=None, repr=False)
+    prior_z: dict = field(default_factory=dict, repr=False)
+    details: dict = field(default_factory=dict, repr=False)
     held: str | None = None
-    std_white: np.ndarray | None = None
+    std_white: np.ndarray | None = field(default=None, repr=False)
 
     @property
     def theta(self) -> np.ndarray:
@@ -210,11 +289,18 @@ class PlatformIdentification:
         S, s = self.std_inertia, self.std_cm_offset
         return np.r_[S[0, 0], S[1, 1], S[2, 2], S[0, 1], S[0, 2], S[1, 2], s]
 
-    @property
-    def not_identifiable(self) -> dict:
-        """Parameter name -> reason, for those the logs cannot separate."""
-        key = "not identifiable from this log"
-        return {n: s for n, s in self.std_status.items() if s.startswith(key)}
+    def _value_lines(self) -> list[str]:
+        out = []
+        for n, v, s in zip(PARAM_NAMES, self.theta, self.std, strict=True):
+            unit = "m" if n.startswith("r_") else "kg m^2"
+            status = self.std_status.get(n, "estimated")
+            if status.startswith("not identifiable"):
+                out.append(f"{n}: {status}")
+            elif np.isfinite(s):
+                out.append(f"{n} = {_num(v)} +- {_num(s, unit)}")
+            else:
+                out.append(f"{n} = {_num(v, unit)} ({status})")
+        return out
 
     @property
     def outlier_rows(self) -> list:

@@ -29,6 +29,7 @@ import numpy as np
 
 from airbearing.analysis.identification.data import RATE_DEGREE, RATE_HALF_WIDTH, _local_poly
 from airbearing.analysis.identification.data import log_quality as _quality
+from airbearing.analysis.identification.result import IdentificationResult
 from airbearing.errors import InputError
 from airbearing.io.log import Log
 from airbearing.io.testbed import Body, Testbed
@@ -40,15 +41,19 @@ __all__ = ["YawIdentification", "identify_yaw_inertia"]
 RELATIVE_STD_LIMIT = 0.5
 
 
-@dataclass(frozen=True, eq=False)
-class YawIdentification:
+@dataclass(frozen=True, eq=False, repr=False)
+class YawIdentification(IdentificationResult):
     """Identified yaw inertia of a dof-1 platform.
+
+    The shape of every identification result (:class:`.result.IdentificationResult`):
+    :attr:`std` is the ndarray ``[std_inertia]``; ``cm_offset``, ``std_cm_offset`` and
+    ``held`` are None (dof 1).
 
     Attributes
     ----------
     inertia : float
         J_z, kg m^2 (NaN when not identifiable).
-    std : float
+    std_inertia : float
         1-sigma standard error of J_z, kg m^2 (NaN when there is none).
     std_status : dict
         ``{"J_zz": "estimated" | "not identifiable from this log: <reason>"}``.
@@ -63,30 +68,42 @@ class YawIdentification:
         ``"equation-error"`` or ``"output-error"``.
     residual_unit : str
     details : dict
+    std_white : None
+        No separate white-noise error (the output error's is its Fisher one).
     """
 
     inertia: float
-    std: float
+    std_inertia: float
     std_status: dict
     residual_rms: float
     segments: int
-    logs: tuple
+    logs: tuple = field(repr=False)
     warnings: tuple
     method: str = "equation-error"
     residual_unit: str = "rad/s"
-    details: dict = field(default_factory=dict)
+    details: dict = field(default_factory=dict, repr=False)
+    cm_offset: None = None
+    std_cm_offset: None = None
+    held: None = None
+    std_white: None = None
 
     @property
     def active_constraints(self) -> tuple:
+        """None bind (no constraints in the dof-1 fit)."""
         return ()
+
+    @property
+    def outlier_rows(self) -> list:
+        """Outlier rows left out: a flat list for one log, else one list per log."""
+        rows = [list(lg["outlier_rows"]) for lg in self.logs]
+        return rows[0] if len(rows) == 1 else rows
 
     def to_json(self) -> dict:
         """``inertia``, ``std``, ``std_status``, ``residual_rms``, ``residual_unit``,
         ``segments``, ``outlier_rows``, ``logs``, ``warnings``, ``method``."""
-        rows = [list(lg["outlier_rows"]) for lg in self.logs]
         return {
             "inertia": float(self.inertia),
-            "std": float(self.std),
+            "std": float(self.std_inertia),
             "std_status": dict(self.std_status),
             "condition_number": 1.0,
             "active_constraints": [],
@@ -95,7 +112,7 @@ class YawIdentification:
             "residual_rms_unit": self.residual_unit,
             "method": self.method,
             "segments": int(self.segments),
-            "outlier_rows": rows[0] if len(rows) == 1 else rows,
+            "outlier_rows": self.outlier_rows,
             "logs": [dict(lg) for lg in self.logs],
             "warnings": list(self.warnings),
             "details": dict(self.details),
@@ -282,7 +299,7 @@ def identify_yaw_inertia(
     why = "estimated" if reason is None else f"not identifiable from this log: {reason}"
     return YawIdentification(
         inertia=float(J),
-        std=float(std),
+        std_inertia=float(std),
         std_status={"J_zz": why},
         residual_rms=rms,
         residual_unit=unit,
