@@ -34,9 +34,8 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from airbearing.analysis.shooting.constrained import null_space_basis
 from airbearing.analysis.shooting.functions import _problem_functions, to_csc
-from airbearing.analysis.shooting.problem import solve_gram, theta_errors
+from airbearing.analysis.shooting.problem import solve_gram
 
 __all__ = [
     "HonestErrors",
@@ -178,6 +177,11 @@ def correlation_time(residuals: list[Residuals], dt: float | None = None) -> flo
     return float(max(lag - 1, 0) * h) if lag > 1 else 0.0
 
 
+def _n_segments(problem) -> int:
+    """Number of segments (trajectories) of the problem's windows."""
+    return int(np.unique(problem.windows.segments()).size)
+
+
 def _projected(J, k: int, N=None) -> np.ndarray:
     """The parameters' Jacobian columns with the nuisance columns projected off (dense)."""
     if N is not None:
@@ -216,16 +220,32 @@ def honest_errors(problem, fit, k: int) -> HonestErrors:
 
     std_w = np.asarray(fit.theta_std[:k], dtype=float)
     cov_w = np.asarray(fit.cov, dtype=float) if fit.cov is not None else np.diag(std_w**2)
-    bound = crlb(problem, fit, k)
     residuals = normalised_residuals(problem, fit)
     tau = correlation_time(residuals)
     if k == 0:
         z = np.zeros(0)
         return HonestErrors(z, z, np.zeros((0, 0)), np.zeros((0, 0)), z, tau, 0)
     J, r = fit.extra["J"], np.asarray(fit.extra["r"])
-    A = _projected(J, k, fit.extra.get("N"))
-    scores = A * r[:, None]
     n_meas = problem.n_meas
+    pn = fit.extra.get("process_noise") or {}
+    con = _constrained(problem, fit, k)
+    bound = np.full(k, np.nan) if con is None else np.sqrt(np.maximum(np.diag(con[0]), 0.0))
+    bound = np.where(bound > 0, bound, np.nan)
+    # in-model (the intensity at the bottom of the grid): the fit is one trajectory per
+    # segment, and its errors are those of the constrained problem (the stiff penalties of
+    # the bottom intensity make the stacked Gram matrix lose the parameters' information)
+    whole = con is not None and problem.penalty is not None and pn and not pn["significant"]
+    if whole:
+        cov0, M = con
+        rm = r[:n_meas]
+        s2 = float(rm @ rm) / max(problem.n_res - k - problem.n_delta * _n_segments(problem), 1)
+        cov_w = cov0 * s2
+        var = np.diag(cov_w)
+        std_w = np.where(var > 0, np.sqrt(np.abs(var)), np.nan)
+        scores = np.vstack([(M * rm[None, :]).T, np.zeros((r.size - n_meas, k))])
+    else:
+        A = _projected(J, k, fit.extra.get("N"))
+        scores = A * r[:, None]
     per_sample = np.zeros((problem.windows.n * problem.windows.length, k))
     np.add.at(per_sample, problem.sample, scores[:n_meas])
     dt = float(np.median(problem.windows.dt[problem.windows.weight[:, 1:] > 0]))
@@ -240,10 +260,14 @@ def honest_errors(problem, fit, k: int) -> HonestErrors:
         nl = max(0, min(nl, shortest // 2, n - 1))
         lags.append(nl)
         meat = meat + S_hac_simple(x, nlags=nl)
-    bread = A.T @ A
-    c = np.sqrt(np.maximum(np.diag(bread), 1e-300))
-    Binv = np.linalg.pinv(bread / np.outer(c, c), rcond=1e-12, hermitian=True) / np.outer(c, c)
-    cov = Binv @ meat @ Binv
+    if whole:  # the scores already carry the inverse: theta - theta_true ~ -M r
+        cov = meat
+    else:
+        bread = A.T @ A
+        c = np.sqrt(np.maximum(np.diag(bread), 1e-300))
+        Binv = np.linalg.pinv(bread / np.outer(c, c), rcond=1e-12, hermitian=True)
+        Binv = Binv / np.outer(c, c)
+        cov = Binv @ meat @ Binv
     cov = 0.5 * (cov + cov.T)
     std_hac = np.sqrt(np.maximum(np.diag(cov), 0.0))
     ok = np.isfinite(std_w)
@@ -259,22 +283,24 @@ def honest_errors(problem, fit, k: int) -> HonestErrors:
     )
 
 
-def crlb(problem, fit, k: int) -> np.ndarray:
-    """The Cramer-Rao bound (1-sigma, SI) of the first ``k`` parameters (module doc).
+def _constrained(problem, fit, k: int):
+    """The linearised problem of ONE trajectory per segment at ``fit``: ``(cov0, M)``.
 
-    The measurement Jacobian at ``fit`` in the problem's noise units, restricted to the
-    directions that keep every linked pair of windows continuous (one trajectory per
-    segment). Windows that are not linked count as separate trajectories. NaN where the
-    data cannot identify a parameter.
+    ``cov0`` (k, k) is the parameters' block of the inverse of the bordered (KKT) matrix
+    ``[[J'J, C'], [C, 0]]`` (measurement Jacobian ``J`` in noise units, continuity Jacobian
+    ``C`` of every linked pair): their covariance at unit noise on continuous trajectories.
+    ``M`` (k, n_meas) maps the measurement residual to the parameters' first-order change
+    (``theta - theta_true ~ -M r``), so ``M Sigma M'`` is their covariance for any residual
+    covariance ``Sigma``. Column-scaled, sparse (a null-space basis would need a dense SVD).
+    None when the windows are not linked, the fit has no parameter map, or the data cannot
+    fix some direction.
     """
-    if k == 0:
-        return np.zeros(0)
     w = problem.windows
-    if not w.linked:  # free windows (a window length given): no trajectory to join
-        return np.full(k, np.nan)
     S_fit = fit.extra.get("S")
-    if S_fit is None:  # a fit that did not record its parameter map (a screened step)
-        return np.full(k, np.nan)
+    if k == 0 or not w.linked or S_fit is None:
+        return None
+    from scipy.sparse.linalg import splu
+
     Sp, K = problem._pad(np.asarray(S_fit, dtype=float))
     fn = _problem_functions(*problem._key(K), True)[1]
     delta = np.asarray(fit.delta).reshape(-1, order="F")
@@ -287,29 +313,39 @@ def crlb(problem, fit, k: int) -> np.ndarray:
     nd = problem.n_delta
     rows = (pairs[:, None] * nd + np.arange(nd)).ravel()
     C = to_csc(out[3])[rows][:, keep]
-    # the continuity as constraints of the Fisher problem: the parameters' block of the
-    # inverse of the bordered (KKT) matrix [[J'J, C'], [C, 0]] is their covariance on the
-    # continuous trajectories (column-scaled; a sparse alternative to a null-space basis)
     F = sp.csc_matrix(Jm.T @ Jm)
     c = np.sqrt(np.maximum(F.diagonal(), 0.0))
     if not np.all(c[:k] > 0):
-        std, _, _ = theta_errors(Jm @ sp.csc_matrix(null_space_basis(C.toarray(), k)), k, 1.0)
-        return std
+        return None
     c = np.where(c > 0, c, 1.0)
     Dc = sp.diags(1.0 / c)
-    Cs = C @ Dc
-    m = Cs.shape[0]
-    K = sp.bmat([[Dc @ F @ Dc, Cs.T], [Cs, None]], format="csc")
-    rhs = np.zeros((K.shape[0], k))
+    Kkt = sp.bmat([[Dc @ F @ Dc, (C @ Dc).T], [C @ Dc, None]], format="csc")
+    rhs = np.zeros((Kkt.shape[0], k))
     rhs[np.arange(k), np.arange(k)] = 1.0
-    from scipy.sparse.linalg import splu
-
     try:
-        X = splu(K).solve(rhs)
-    except RuntimeError:  # singular: the data cannot fix some direction
-        return np.full(k, np.nan)
+        X = splu(Kkt).solve(rhs)
+    except RuntimeError:  # singular
+        return None
     if not np.all(np.isfinite(X)):
+        return None
+    n_v = Jm.shape[1]
+    cov0 = X[:k] / np.outer(c[:k], c[:k])
+    M = ((Jm @ Dc) @ X[:n_v]).T / c[:k, None]
+    return 0.5 * (cov0 + cov0.T), np.asarray(M)
+
+
+def crlb(problem, fit, k: int) -> np.ndarray:
+    """The Cramer-Rao bound (1-sigma, SI) of the first ``k`` parameters (module doc).
+
+    The measurement Jacobian at ``fit`` in the problem's noise units, restricted to the
+    directions that keep every linked pair of windows continuous (one trajectory per
+    segment; :func:`_constrained`). NaN on free windows (no trajectory to join) and where
+    the data cannot identify a parameter.
+    """
+    if k == 0:
+        return np.zeros(0)
+    con = _constrained(problem, fit, k)
+    if con is None:
         return np.full(k, np.nan)
-    del m
-    var = np.diag(X[:k]) / c[:k] ** 2
+    var = np.diag(con[0])
     return np.where(var > 0, np.sqrt(np.abs(var)), np.nan)
