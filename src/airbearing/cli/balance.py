@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import os
 from enum import StrEnum
 from pathlib import Path
 from typing import Annotated
@@ -13,9 +12,10 @@ from airbearing.cli import app
 from airbearing.cli.common import check_log_size, number, numbers, testbed_arg, testbed_input
 from airbearing.cli.outputs import Outputs
 from airbearing.cli.show_progress import progress_display
+from airbearing.cli.tables import dict_table
 from airbearing.errors import InputError
 
-__all__ = ["balance", "Method", "Start", "table_text"]
+__all__ = ["balance", "Method", "Start"]
 
 
 class Method(StrEnum):
@@ -33,21 +33,6 @@ class Start(StrEnum):
     auto = "auto"
     rest = "rest"
     level = "level"
-
-
-def table_text(rows: list[dict]) -> str:
-    """Rows as an aligned table: 4 significant digits, the unit in each column head
-    (from the key's suffix, ``offset_mm`` -> ``offset (mm)``), one symbol for none."""
-    from airbearing.cli.tables import table, unit_of
-
-    if not rows:
-        return ""
-    cols = list(rows[0])
-    heads = []
-    for c in cols:
-        label, unit = unit_of(c)
-        heads.append(f"{label} ({unit})" if unit else label)
-    return table([[r.get(c) for c in cols] for r in rows], heads)
 
 
 def _comparison_rows(cmp) -> list[dict]:
@@ -147,6 +132,48 @@ def balance(
     testbed_input(out, testbed)
     json_path = out.plan(json_out, "--json", (".json",))
     log_path = out.plan(log, "-o", (".csv", ".parquet"))
+    methods, sweep_spec = _check_options(
+        duration, initial_offset_mm, vertical_offset, initial_rate, seeds, sweep, compare, log,
+        two_step_,
+    )  # fmt: skip
+    if method is None:
+        method = Method.lyapunov if two_step_ else Method.mixed
+    tb = testbed_arg(testbed)
+    if not two_step_:  # each run keeps its whole log in memory
+        longest = duration
+        if sweep_spec is not None and sweep_spec[0] == "duration":
+            longest = float(max(sweep_spec[1]))
+        check_log_size("--duration", longest, tb.sensors.rate)
+    options = dict(vertical_offset=vertical_offset, start=start.value,
+                   initial_rate=initial_rate, offset_stays=offset_stays)  # fmt: skip
+    table = ""
+    if two_step_:
+        from airbearing.analysis.balancing.two_step import two_step
+
+        with progress_display("balance") as progress:
+            result = two_step(tb, method=method.value, seed=seed, progress=progress)
+        summary = result.to_json()
+    elif methods is not None:
+        summary, table = _compare(tb, methods, sweep_spec, seeds, duration, options)
+    else:
+        summary = _single(out, log_path, tb, method, duration, initial_offset_mm, seed, options)
+    out.json(json_path, summary)
+    out.commit()
+    from airbearing.cli.tables import human_summary
+
+    if table:
+        typer.echo(table)
+        typer.echo("")
+    typer.echo(human_summary(summary, skip=("points", "tables", "values")))
+    for p in (log_path, json_path):
+        if p is not None:
+            typer.echo(f"wrote {p}")
+
+
+def _check_options(duration, initial_offset_mm, vertical_offset, initial_rate, seeds, sweep,
+                   compare, log, two_step_):  # fmt: skip
+    """Numbers in range and flags that go together; the ``--compare`` methods and the
+    parsed ``--sweep`` (None when not given)."""
     number("--duration", duration, lo=0, lo_open=True, unit="s")
     number("--initial-offset-mm", initial_offset_mm, unit="mm")
     number("--vertical-offset", vertical_offset, unit="m")
@@ -172,71 +199,45 @@ def balance(
     if sweep is not None:
         from airbearing.analysis.balancing.comparison import parse_sweep
 
-        sweep_spec = parse_sweep(sweep)
-    if method is None:
-        method = Method.lyapunov if two_step_ else Method.mixed
-    tb = testbed_arg(testbed)
-    if not two_step_:  # each run keeps its whole log in memory
-        longest = duration
-        if sweep_spec is not None and sweep_spec[0] == "duration":
-            longest = float(max(sweep_spec[1]))
-        check_log_size("--duration", longest, tb.sensors.rate)
-    options = dict(
-        vertical_offset=vertical_offset,
-        start=start.value,
-        initial_rate=initial_rate,
-        offset_stays=offset_stays,
-    )
-    table = ""
-    if two_step_:
-        from airbearing.analysis.balancing.two_step import two_step
+        try:
+            sweep_spec = parse_sweep(sweep)
+        except InputError as e:  # the library names its parameter, the CLI its flag
+            raise InputError(f"--sweep {sweep!r}: {str(e).split(': ', 1)[-1]}") from None
+    return methods, sweep_spec
 
-        with progress_display("balance") as progress:
-            result = two_step(tb, method=method.value, seed=seed, progress=progress)
-        summary = result.to_json()
-    elif methods is not None:
-        from airbearing.analysis.balancing.comparison import compare_methods, sweep_comparison
 
-        with progress_display("balance") as progress:
-            if sweep_spec is not None:
-                name, values = sweep_spec
-                result = sweep_comparison(
-                    tb, name, values, methods, seeds=range(seeds), duration=duration,
-                    progress=progress, **options,
-                )  # fmt: skip
-                table = table_text(_sweep_rows(result))
-            else:
-                result = compare_methods(
-                    tb, methods, seeds=range(seeds), duration=duration, progress=progress,
-                    **options,
-                )  # fmt: skip
-                table = table_text(_comparison_rows(result))
-        summary = result.to_json()
-    else:
-        from airbearing.analysis.balancing.runs import run_balancing
-        from airbearing.io.log import write_log
+def _compare(tb, methods, sweep_spec, seeds, duration, options) -> tuple[dict, str]:
+    """``--compare`` (with ``--sweep``): the summary and its table."""
+    from airbearing.analysis.balancing.comparison import compare_methods, sweep_comparison
 
-        with progress_display("balance") as progress:
-            progress(f"{method.value}: {duration:g} s run")
-            run = run_balancing(
-                tb, method.value, duration=duration, initial_offset=initial_offset_mm * 1e-3,
-                seed=seed, **options,
+    with progress_display("balance") as progress:
+        if sweep_spec is not None:
+            name, values = sweep_spec
+            result = sweep_comparison(
+                tb, name, values, methods, seeds=range(seeds), duration=duration,
+                progress=progress, **options,
             )  # fmt: skip
-        summary = {"testbed": tb.name, **run.metrics}
+            table = dict_table(_sweep_rows(result))
+        else:
+            result = compare_methods(
+                tb, methods, seeds=range(seeds), duration=duration, progress=progress,
+                **options,
+            )  # fmt: skip
+            table = dict_table(_comparison_rows(result))
+    return result.to_json(), table
 
-        def _write(tmp: Path) -> None:
-            # write_log picks the format by suffix; Outputs' temporary file has none
-            os.replace(write_log(run.result.log, tmp.with_name(tmp.name + log_path.suffix)), tmp)
 
-        out.file(log_path, _write)
-    out.json(json_path, summary)
-    out.commit()
-    from airbearing.cli.tables import human_summary
+def _single(out, log_path, tb, method, duration, initial_offset_mm, seed, options) -> dict:
+    """One balancing run: its summary; its log queued on ``out``."""
+    from airbearing.analysis.balancing.runs import run_balancing
+    from airbearing.io.log import write_log
 
-    if table:
-        typer.echo(table)
-        typer.echo("")
-    typer.echo(human_summary(summary, skip=("points", "tables", "values")))
-    for p in (log_path, json_path):
-        if p is not None:
-            typer.echo(f"wrote {p}")
+    with progress_display("balance") as progress:
+        progress(f"{method.value}: {duration:g} s run")
+        run = run_balancing(
+            tb, method.value, duration=duration, initial_offset=initial_offset_mm * 1e-3,
+            seed=seed, **options,
+        )  # fmt: skip
+    log = run.result.log
+    out.file(log_path, lambda tmp: write_log(log, tmp))  # the temporary keeps the suffix
+    return {"testbed": tb.name, **run.metrics}

@@ -189,6 +189,8 @@ class Outputs:
 
     def commit(self) -> list[Path]:
         """Write every queued output; all or nothing. Returns the paths written."""
+        from airbearing.io.output import write_temp
+
         temps: list[tuple[Path, Path]] = []
         done: list[tuple[Path, Path | None]] = []
         made: list[Path] = []
@@ -203,13 +205,7 @@ class Outputs:
                 current = (option, path)
                 # the temporary name keeps the suffix: writers that choose the format by
                 # suffix (write_log: .csv or .parquet) see the real one
-                fd, tmp = tempfile.mkstemp(
-                    dir=path.parent, prefix=f".{path.stem}.", suffix=f".tmp{path.suffix}"
-                )
-                os.close(fd)
-                temps.append((path, Path(tmp)))
-                write(Path(tmp))
-                os.chmod(tmp, 0o644)
+                temps.append((path, write_temp(path, write=write)))
             for path, tmp in temps:
                 backup = None
                 if path.exists():

@@ -217,6 +217,19 @@ def table(rows: Iterable[Sequence], headers: Sequence[str], digits: int = 4) -> 
     return "\n".join([line(list(headers)), rule, *(line(r) for r in body)])
 
 
+def dict_table(rows: Sequence[Mapping]) -> str:
+    """Rows of ``{key: value}`` as a :func:`table`, the unit in each column head from the
+    key's suffix (``offset_mm`` -> ``offset (mm)``); empty text for no rows."""
+    if not rows:
+        return ""
+    cols = list(rows[0])
+    heads = []
+    for c in cols:
+        label, unit = unit_of(c)
+        heads.append(f"{label} ({unit})" if unit else label)
+    return table([[r.get(c) for c in cols] for r in rows], heads)
+
+
 def _is_pairs(value) -> bool:
     return isinstance(value, Sequence) and all(
         isinstance(p, Sequence) and len(p) == 2 and all(isinstance(x, int) for x in p)

@@ -15,10 +15,18 @@ import json
 import math
 import os
 import tempfile
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from pathlib import Path
 
-__all__ = ["write_atomic", "write_json", "to_jsonable", "json_number", "reason", "why_unwritable"]
+__all__ = [
+    "write_atomic",
+    "write_temp",
+    "write_json",
+    "to_jsonable",
+    "json_number",
+    "reason",
+    "why_unwritable",
+]
 
 
 def reason(error: OSError) -> str:
@@ -97,19 +105,92 @@ def to_jsonable(obj):
     raise TypeError(f"cannot write {type(obj).__name__} to JSON")
 
 
-def write_atomic(path: str | os.PathLike, data: str | bytes) -> None:
-    """Write a file via a temporary file and rename, so no partial file is left on failure."""
+#: The mode of a new output file (mkstemp makes 0600; outputs are ordinary files).
+NEW_FILE_MODE = 0o644
+
+
+def write_temp(
+    path: str | os.PathLike,
+    data: str | bytes | None = None,
+    *,
+    write: Callable[[Path], object] | None = None,
+    keep_mode: bool = False,
+) -> Path:
+    """Write the content of ``path`` to a temporary file beside it; return that file.
+
+    The temporary name keeps ``path``'s suffix, so a ``write`` that chooses the format by
+    suffix (``.csv`` or ``.parquet``) sees the real one. Nothing is left on failure.
+
+    Parameters
+    ----------
+    path : str or path-like
+        The file the content is for (its folder must exist).
+    data : str or bytes, optional
+        The content; or give ``write`` instead.
+    write : callable, optional
+        ``write(tmp_path)`` writes the content to the temporary file.
+    keep_mode : bool
+        Give the file the mode of the file it replaces (default: 0644).
+
+    Returns
+    -------
+    pathlib.Path
+        The temporary file, to be renamed onto ``path`` (:func:`write_atomic`).
+    """
+    if (data is None) == (write is None):
+        raise TypeError("write_temp: give either data or write")
     path = Path(path)
-    mode = "wb" if isinstance(data, bytes) else "w"
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    fd, name = tempfile.mkstemp(
+        dir=path.parent, prefix=f".{path.stem}.", suffix=f".tmp{path.suffix}"
+    )
+    tmp = Path(name)
     try:
-        with os.fdopen(fd, mode) as fh:
-            fh.write(data)
-        os.chmod(tmp, 0o644)  # mkstemp makes 0600; outputs are ordinary files
+        if write is None:
+            with os.fdopen(fd, "wb" if isinstance(data, bytes) else "w") as fh:
+                fh.write(data)
+        else:
+            os.close(fd)
+            write(tmp)
+        keep = keep_mode and path.is_file()
+        os.chmod(tmp, path.stat().st_mode & 0o777 if keep else NEW_FILE_MODE)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+    return tmp
+
+
+def write_atomic(
+    path: str | os.PathLike,
+    data: str | bytes | None = None,
+    *,
+    write: Callable[[Path], object] | None = None,
+    keep_mode: bool = False,
+) -> Path:
+    """Write a file via a temporary file and rename, so no partial file is left on failure.
+
+    Parameters
+    ----------
+    path : str or path-like
+        The file to write (its folder must exist).
+    data : str or bytes, optional
+        The content; or give ``write`` instead.
+    write : callable, optional
+        ``write(tmp_path)`` writes the content (e.g. ``df.to_parquet``).
+    keep_mode : bool
+        Keep the mode of the file replaced (default: a new file's 0644).
+
+    Returns
+    -------
+    pathlib.Path
+        ``path``.
+    """
+    tmp = write_temp(path, data, write=write, keep_mode=keep_mode)
+    try:
         os.replace(tmp, path)
     except BaseException:
-        Path(tmp).unlink(missing_ok=True)
+        tmp.unlink(missing_ok=True)
         raise
+    return Path(path)
 
 
 def dumps_json(obj) -> str:

@@ -16,7 +16,6 @@ import dataclasses
 import difflib
 import math
 import os
-import tempfile
 import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -1131,26 +1130,20 @@ def _dumps(document: Mapping[str, Any]) -> str:
     return "\n".join(lines) + "\n"
 
 
-_NEW_FILE_MODE = 0o644
-
-
 def _atomic_write_bytes(path: Path, content: bytes) -> Path:
+    from airbearing.io.output import write_temp
+
     directory = path.parent if str(path.parent) else Path(".")
     if not directory.is_dir():
         raise InputError(f"{path}: directory {str(directory)!r} does not exist")
     try:
-        fd, tmp = tempfile.mkstemp(dir=directory, prefix=f".{path.name}.", suffix=".tmp")
+        # the mode of the file it replaces, or the usual mode of a new data file
+        tmp = write_temp(path, content, keep_mode=True)
     except OSError as e:
         raise InputError(f"{path}: cannot write to {str(directory)!r}: {e.strerror}") from e
     try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(content)
-        # mkstemp creates the file private (0600); give it the mode of the file it
-        # replaces, or the usual mode of a new data file.
-        mode = path.stat().st_mode & 0o777 if path.is_file() else _NEW_FILE_MODE
-        os.chmod(tmp, mode)
         os.replace(tmp, path)
     except BaseException:
-        Path(tmp).unlink(missing_ok=True)
+        tmp.unlink(missing_ok=True)
         raise
     return path

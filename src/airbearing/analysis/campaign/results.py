@@ -15,8 +15,6 @@ each written atomically; ``campaign.json`` there names the campaign they belong 
 from __future__ import annotations
 
 import json
-import os
-import tempfile
 import uuid
 from pathlib import Path
 
@@ -91,15 +89,9 @@ def open_parts(output: str | Path, campaign, *, resume: bool) -> Path:
 
 
 def _atomic(path: Path, write) -> None:
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    os.close(fd)
-    try:
-        write(tmp)
-        os.chmod(tmp, 0o644)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    from airbearing.io.output import write_atomic
+
+    write_atomic(path, write=write)
 
 
 def _normalise(df):
