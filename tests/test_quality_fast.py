@@ -22,6 +22,7 @@ from test_log_quality import QUAT, RATES, mocap_yaw_log, tumble_log
 from airbearing.io import Log
 from airbearing.io import local_fits as F
 from airbearing.io import quality as Q
+from airbearing.io import quaternion_signs as S
 from airbearing.models import quaternion as quat
 
 # ----------------------------------------------------------------------------
@@ -67,7 +68,7 @@ def reference_quality(monkeypatch, log: Log) -> Q.LogQuality:
         m.setattr(Q, "_loo", F.loo_reference)
         m.setattr(Q, "_shape_residuals", _shape_residuals_one_by_one)
         m.setattr(Q, "_window_median", _median_by_pandas)
-        m.setattr(Q, "_signs_along_parents", _signs_by_pointer_doubling)
+        m.setattr(S, "_signs_along_parents", _signs_by_pointer_doubling)
         m.setattr(Q._Scorer, "__call__", always_exact)
         return Q.assess(log, log.testbed)
 

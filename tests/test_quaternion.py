@@ -113,3 +113,22 @@ def test_continuous_branch_removes_sign_jumps():
     q = quat.from_yaw(np.linspace(0, 6, 50))
     flipped = q * np.where(np.arange(50) % 7 == 3, -1.0, 1.0)[:, None]
     assert_allclose(quat.continuous_branch(flipped), q, atol=1e-15)
+
+
+def test_one_sign_continuity_routine_one_and_three_lags():
+    """continuous_branch is continuous_signs with one lag; three lags keep the segment's
+    branch across one glitched sample that one lag follows (q and -q are one attitude)."""
+    from airbearing.io.quaternion_signs import continuous_signs
+
+    rng = np.random.default_rng(3)
+    q = quat.normalize(np.cumsum(rng.normal(scale=0.02, size=(50, 4)), axis=0) + [1, 0, 0, 0])
+    signs = np.where(rng.random(50) < 0.3, -1.0, 1.0)
+    signs[0] = 1.0
+    assert_allclose(continuous_signs(q * signs[:, None], lags=1), q, atol=1e-15)
+    assert_allclose(quat.continuous_branch(q * signs[:, None]), q, atol=1e-15)
+    glitched = q.copy()
+    d = q[19] - q[21]  # a wrong sample at row 20, agreeing with row 19 and not with 21
+    glitched[20] = d / np.linalg.norm(d)
+    assert glitched[20] @ q[19] > 0 > glitched[20] @ q[21]
+    assert_allclose(continuous_signs(glitched, lags=3)[21:], q[21:], atol=1e-15)
+    assert_allclose(continuous_signs(glitched, lags=1)[21:], -q[21:], atol=1e-15)

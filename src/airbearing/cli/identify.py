@@ -88,6 +88,24 @@ def identify(
                 if msg.startswith(param):
                     msg = "--" + param.replace("_", "-") + msg[len(param) :].replace("=", " ", 1)
             raise InputError(msg) from None
+    _echo_estimates(tb, result)
+    js = result.to_json()
+    typer.echo(f"active constraints: {', '.join(result.active_constraints) or 'none'}")
+    typer.echo(f"residual rms: {result.residual_rms:.3g} {js['residual_unit']}")
+    if "segments" in js:
+        rows = ", ".join(str(r) for r in js["outlier_rows"] or []) or "none"
+        typer.echo(f"segments: {js['segments']}, outlier rows: {rows}")
+    for w in result.warnings:
+        typer.echo(f"warning: {w}")
+    out.json(p_json, js)
+    if p_tb is not None:
+        new_tb = result.to_testbed(tb)
+        out.file(p_tb, lambda tmp: write_testbed(new_tb, tmp))
+    out.commit()
+
+
+def _echo_estimates(tb, result) -> None:
+    """The identified values, each with its standard error, as a person reads them."""
     if tb.kind == "cmg" and tb.body.dof == 1:
         typer.echo(f"J_z = {_fmt(result.inertia, result.std_inertia)} kg m^2")
         for k, v in result.friction.items():
@@ -116,16 +134,3 @@ def identify(
         for name, why in result.std_status.items():
             if why != "estimated":
                 typer.echo(f"{name}: {why}")
-    js = result.to_json()
-    typer.echo(f"active constraints: {', '.join(result.active_constraints) or 'none'}")
-    typer.echo(f"residual rms: {result.residual_rms:.3g} {js['residual_unit']}")
-    if "segments" in js:
-        rows = ", ".join(str(r) for r in js["outlier_rows"] or []) or "none"
-        typer.echo(f"segments: {js['segments']}, outlier rows: {rows}")
-    for w in result.warnings:
-        typer.echo(f"warning: {w}")
-    out.json(p_json, js)
-    if p_tb is not None:
-        new_tb = result.to_testbed(tb)
-        out.file(p_tb, lambda tmp: write_testbed(new_tb, tmp))
-    out.commit()

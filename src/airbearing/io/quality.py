@@ -132,6 +132,7 @@ from airbearing.io.local_fits import loo as _loo
 from airbearing.io.local_fits import noise_gain as _noise_gain
 from airbearing.io.local_fits import regular_weights as _regular_weights
 from airbearing.io.local_fits import window_median as _window_median
+from airbearing.io.quaternion_signs import continuous_signs
 
 if TYPE_CHECKING:
     from airbearing.io.log import Log
@@ -710,64 +711,6 @@ def find_outliers(group: _Group, t: np.ndarray, segments, scale: float) -> _Grou
 # channel groups of a log
 
 
-def _continuous_signs(q: np.ndarray, segments) -> np.ndarray:
-    """``q`` with signs chosen so that each sample agrees with its most similar predecessor.
-
-    Each sample is compared with the previous 3 (within its segment) and takes its
-    sign from the one with the largest ``|q_i . q_j|``, so that one or two glitched
-    samples cannot flip the rest of the segment (q and -q are the same attitude).
-    """
-    n = q.shape[0]
-    parent = np.arange(n)
-    rel = np.ones(n)
-    best = np.zeros(n)
-    seg_start = np.zeros(n, dtype=int)
-    for start, stop in segments:
-        seg_start[start:stop] = start
-    for lag in (1, 2, 3):
-        if n <= lag:
-            break
-        dot = np.sum(q[lag:] * q[:-lag], axis=1)  # q_i . q_(i - lag), i = lag .. n - 1
-        i = np.arange(lag, n)
-        better = (i - lag >= seg_start[lag:]) & (np.abs(dot) > best[lag:])
-        i, dot = i[better], dot[better]
-        best[i] = np.abs(dot)
-        parent[i] = i - lag
-        rel[i] = np.where(dot < 0, -1.0, 1.0)
-    return q * _signs_along_parents(parent, rel)[:, None]
-
-
-def _signs_along_parents(parent: np.ndarray, rel: np.ndarray) -> np.ndarray:
-    """``sign_i = rel_i * sign_parent(i)`` (roots: ``parent_i = i``, ``rel_i = 1``, sign 1)
-    for a forest whose parents precede their children (``parent_i < i``).
-
-    Most samples take their predecessor as parent: along such a run the sign is a
-    running product (a cumulative count of ``rel = -1``). Only the first sample of
-    each run (a root, or a sample whose parent is 2 or 3 back) needs pointer doubling,
-    over those run heads alone.
-    """
-    n = parent.size
-    idx = np.arange(n)
-    flips = np.cumsum(rel < 0)  # flips[i] - flips[h]: the -1's after h up to i
-    heads = np.flatnonzero(parent != idx - 1)  # roots and jumps (row 0 is a root)
-    head = np.maximum.accumulate(np.where(parent != idx - 1, idx, 0))
-    p = parent[heads]
-    hp = head[p]  # the head of each head's parent's run
-    # sign_h = rel_h * sign_hp * (-1)^(flips[p] - flips[hp]); roots (p = h): 1
-    root = p == heads
-    hrel = np.where(root, 1.0, rel[heads] * np.where((flips[p] - flips[hp]) % 2, -1.0, 1.0))
-    pos = np.zeros(n, dtype=int)
-    pos[heads] = np.arange(heads.size)
-    hparent = np.where(root, np.arange(heads.size), pos[hp])
-    while np.any(hparent != hparent[hparent]):
-        hrel = hrel * hrel[hparent]
-        hparent = hparent[hparent]
-    hrel = hrel * hrel[hparent]
-    sign_head = np.empty(n)
-    sign_head[heads] = hrel
-    return sign_head[head] * np.where((flips - flips[head]) % 2, -1.0, 1.0)
-
-
 def _groups(log: Log, testbed: Testbed | None, segments) -> list[_Group]:
     from airbearing.io.testbed import Sensors
 
@@ -792,7 +735,7 @@ def _groups(log: Log, testbed: Testbed | None, segments) -> list[_Group]:
         floor = np.array([max(sensors.attitude_noise, ABSOLUTE_FLOOR, _RELATIVE_FLOOR * mag)])
         groups.append(_Group("attitude", ("yaw",), yaw[:, None], False, floor, wrap=True))
     elif log.has("qw", "qx", "qy", "qz"):
-        q = _continuous_signs(log.quaternions(), segments)
+        q = continuous_signs(log.quaternions(), segments)
         floor = np.array([0.5 * max(sensors.attitude_noise, ABSOLUTE_FLOOR)])
         groups.append(_Group("attitude", ("qw", "qx", "qy", "qz"), q, True, floor))
     groups += _input_groups(log, testbed, segments, t)

@@ -186,8 +186,8 @@ def continuous_branch(q):
     """Flip signs of stacked quaternions ``(N, 4)`` so consecutive samples agree.
 
     ``q`` and ``-q`` are the same attitude; a log may switch branch between samples.
+    :func:`airbearing.io.quaternion_signs.continuous_signs` with one lag.
     """
-    q = np.array(q, dtype=float)
-    flip = np.sum(q[1:] * q[:-1], axis=1) < 0
-    sign = np.concatenate([[1.0], np.where(np.cumsum(flip) % 2 == 1, -1.0, 1.0)])
-    return q * sign[:, None]
+    from airbearing.io.quaternion_signs import continuous_signs
+
+    return continuous_signs(q, lags=1)
