@@ -563,7 +563,7 @@ def balancing_controller(model, method: str, **options) -> Controller:
         return lyapunov_balancing_controller(model, **options)
     if method == "adaptive":
         return adaptive_balancing_controller(model, **options)
-    raise InputError(f"--method {method}: expected one of {'|'.join(METHODS)}")
+    raise InputError(f"method={method!r}: expected one of {'|'.join(METHODS)}")
 
 
 def tilt_pid_gains(

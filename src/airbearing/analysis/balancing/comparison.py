@@ -235,7 +235,7 @@ def compare_methods(
         ``steady`` says whether the last third is past the integral transient.
     """
     if len(methods) < 1 or any(m not in METHODS for m in methods):
-        raise InputError(f"--compare {','.join(methods)}: expected names from {'|'.join(METHODS)}")
+        raise InputError(f"methods={list(methods)!r}: expected names from {'|'.join(METHODS)}")
     if not seeds:
         raise InputError("compare: expected at least one seed")
     report = _progress(progress)
@@ -352,15 +352,15 @@ def parse_sweep(text: str) -> tuple[str, np.ndarray]:
     name = name.strip()
     if not sep or name not in SWEEPS:
         raise InputError(
-            f"--sweep '{text}': expected NAME=START:STOP:N with NAME one of {', '.join(SWEEPS)}"
+            f"sweep={text!r}: expected NAME=START:STOP:N with NAME one of {', '.join(SWEEPS)}"
         )
     parts = rng.split(":")
     try:
         start, stop, n = float(parts[0]), float(parts[1]), int(parts[2])
     except (ValueError, IndexError):
-        raise InputError(f"--sweep '{text}': expected START:STOP:N, e.g. 0:5e-5:6") from None
+        raise InputError(f"sweep={text!r}: expected START:STOP:N, e.g. 0:5e-5:6") from None
     if len(parts) != 3 or n < 2 or not (math.isfinite(start) and math.isfinite(stop)):
-        raise InputError(f"--sweep '{text}': expected START:STOP:N with finite ends and N >= 2")
+        raise InputError(f"sweep={text!r}: expected START:STOP:N with finite ends and N >= 2")
     return name, np.linspace(start, stop, n)
 
 
@@ -398,12 +398,12 @@ def sweep_comparison(
         :data:`SEED000_RATIOS`) within :data:`RATIO_MATCH_FACTOR`, and where both do.
     """
     if name not in SWEEPS:
-        raise InputError(f"--sweep {name}: expected one of {', '.join(SWEEPS)}")
+        raise InputError(f"name={name!r}: expected one of {', '.join(SWEEPS)}")
     values = np.asarray(values, dtype=float)
     if np.any(~np.isfinite(values)) or (name != "vertical_offset" and np.any(values < 0)):
-        raise InputError(f"--sweep {name}: values {values.tolist()} must be finite and >= 0")
+        raise InputError(f"values={values.tolist()} ({name}): expected finite values >= 0")
     if name == "duration" and np.any(values <= 0):
-        raise InputError(f"--sweep duration: values {values.tolist()} s must be > 0")
+        raise InputError(f"values={values.tolist()} (duration): expected times > 0 s")
     report = _progress(progress)
     per = len(offsets) * len(methods) * len(seeds)
     points = []

@@ -14,6 +14,9 @@ Metrics (over the last third of the run, as the seed's "steady state")
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+
 import numpy as np
 from scipy.signal import savgol_filter
 
@@ -25,6 +28,7 @@ from airbearing.models import quaternion as quat
 
 __all__ = [
     "SEED000_TABLES",
+    "BalancingMetrics",
     "balancing_metrics",
     "inertia_with_sliders",
     "kinetic_energy",
@@ -75,12 +79,123 @@ def _rms(a, axis=None) -> np.ndarray:
     return np.sqrt(np.mean(np.square(a), axis=axis))
 
 
-def balancing_metrics(result: SimResult, *, free: SimResult | None = None) -> dict:
+#: Keys of a run's context (:func:`~.runs.run_balancing`), after the measured ones.
+_RUN_KEYS = (
+    "method", "initial_offset_m", "seed", "vertical_offset_m", "start", "offset_stays",
+    "duration_s", "residual_offset_m", "integral_time_constant_s", "settling_time_s",
+)  # fmt: skip
+
+
+@dataclass(frozen=True, eq=False)
+class BalancingMetrics(Mapping):
+    """The seed-000 numbers of a balancing run (module notes), frozen.
+
+    A read-only mapping over :meth:`to_json` (``metrics["g_perp_rms"]``, ``{**metrics}``),
+    whose keys are the ``balance --json`` contract. The fields of a run's context
+    (``method`` to ``settling_time_s``) are None for bare :func:`balancing_metrics` and
+    are then left out of the JSON.
+
+    Attributes
+    ----------
+    g_perp_rms, g_x_rms, g_y_rms, g_perp_rms_true : float
+        RMS of the in-plane ``g_hat`` (measured; ``_true`` from the true attitude), -.
+    slider_p2p_m, slider_std_m, mass_p2p_m, slider_final_m : tuple of float
+        m, per slider.
+    dipole_rms : float
+        A m^2.
+    residual_torque_nm : float or None
+        N m, from the free float (None without one).
+    steady_check : dict
+        :func:`~.drift.window_drift`'s keys (``metrics_window_s``, ``steady``, ...).
+    note : str or None
+        Why the run started level, or what the adaptive law cannot learn.
+    """
+
+    g_perp_rms: float
+    g_x_rms: float
+    g_y_rms: float
+    g_perp_rms_true: float
+    slider_p2p_m: tuple
+    slider_std_m: tuple
+    mass_p2p_m: tuple
+    dipole_rms: float
+    slider_final_m: tuple
+    residual_torque_nm: float | None = None
+    steady_check: dict = field(default_factory=dict, repr=False)
+    note: str | None = field(default=None, repr=False)
+    method: str | None = None
+    initial_offset_m: float | None = None
+    seed: int | None = None
+    vertical_offset_m: float | None = None
+    start: str | None = None
+    offset_stays: bool | None = None
+    duration_s: float | None = None
+    residual_offset_m: tuple | None = field(default=None, repr=False)
+    integral_time_constant_s: float | None = field(default=None, repr=False)
+    settling_time_s: float | None = field(default=None, repr=False)
+
+    def to_json(self) -> dict:
+        """The metrics as the ``balance --json`` keys (lists for the per-slider values)."""
+        out = {
+            "g_perp_rms": self.g_perp_rms,
+            "g_x_rms": self.g_x_rms,
+            "g_y_rms": self.g_y_rms,
+            "g_perp_rms_true": self.g_perp_rms_true,
+            "slider_p2p_m": list(self.slider_p2p_m),
+            "slider_std_m": list(self.slider_std_m),
+            "mass_p2p_m": list(self.mass_p2p_m),
+            "dipole_rms": self.dipole_rms,
+            "slider_final_m": list(self.slider_final_m),
+            "residual_torque_nm": self.residual_torque_nm,
+            **self.steady_check,
+        }
+        if self.note is not None:
+            out["note"] = self.note
+        if self.method is not None:
+            for k in _RUN_KEYS:
+                v = getattr(self, k)
+                out[k] = list(v) if k == "residual_offset_m" else v
+        return out
+
+    def __getitem__(self, key):
+        return self.to_json()[key]
+
+    def __iter__(self):
+        return iter(self.to_json())
+
+    def __len__(self) -> int:
+        return len(self.to_json())
+
+    def __repr__(self) -> str:
+        tail = f"method={self.method!r}, " if self.method is not None else ""
+        return (
+            f"BalancingMetrics({tail}g_perp_rms={self.g_perp_rms:.3g}, "
+            f"dipole_rms={self.dipole_rms:.3g}, residual_torque_nm={self.residual_torque_nm}, "
+            f"steady={self.steady_check.get('steady')})"
+        )
+
+    def __str__(self) -> str:
+        p2p = ", ".join(f"{1e6 * v:.1f}" for v in self.slider_p2p_m)
+        lines = [
+            f"g_perp_rms {self.g_perp_rms:.3g} (x {self.g_x_rms:.3g}, y {self.g_y_rms:.3g})",
+            f"slider p2p {p2p} um, dipole rms {self.dipole_rms:.3g} A m^2",
+        ]
+        if self.residual_torque_nm is not None:
+            lines.append(f"residual torque {self.residual_torque_nm:.3g} N m")
+        if self.steady_check.get("steady_reason"):
+            lines.append(f"steady: {self.steady_check['steady_reason']}")
+        if self.note:
+            lines.append(f"note: {self.note}")
+        return "\n".join(lines)
+
+
+def balancing_metrics(result: SimResult, *, free: SimResult | None = None) -> BalancingMetrics:
     """The seed-000 numbers (Tables 1-2) of a balancing run, over its last third.
 
     Returns
     -------
-    dict with ``g_perp_rms``, ``g_x_rms``, ``g_y_rms`` (-), ``g_perp_rms_true`` (-),
+    BalancingMetrics
+        A mapping with ``g_perp_rms``, ``g_x_rms``, ``g_y_rms`` (-), ``g_perp_rms_true`` (-),
     ``slider_p2p_m``, ``slider_std_m``, ``mass_p2p_m`` (3 each, m), ``dipole_rms`` (A m^2),
     ``slider_final_m`` (3, m), ``residual_torque_nm`` (N m, None without ``free``), and
     the steady-state check of :func:`~.drift.window_drift` (``metrics_window_s``,
@@ -94,26 +209,25 @@ def balancing_metrics(result: SimResult, *, free: SimResult | None = None) -> di
     motor = last_third(result.extra[:, [names.index(f"motor{i}") for i in (1, 2, 3)]])
     mass = last_third(result.u[:, m.index(["s1", "s2", "s3"], "u")])
     d = last_third(result.u[:, m.index(["mx", "my", "mz"], "u")])
-    out = {
-        "g_perp_rms": float(_rms(np.hypot(g[:, 0], g[:, 1]))),
-        "g_x_rms": float(_rms(g[:, 0])),
-        "g_y_rms": float(_rms(g[:, 1])),
-        "g_perp_rms_true": float(_rms(np.hypot(g_true[:, 0], g_true[:, 1]))),
-        "slider_p2p_m": np.ptp(motor, axis=0).tolist(),
-        "slider_std_m": np.std(motor, axis=0).tolist(),
-        "mass_p2p_m": np.ptp(mass, axis=0).tolist(),
-        "dipole_rms": float(_rms(np.linalg.norm(d, axis=1))),
-        "slider_final_m": result.u[-1, m.index(["s1", "s2", "s3"], "u")].tolist(),
-        "residual_torque_nm": None,
-    }
-    if free is not None:
-        out["residual_torque_nm"] = residual_torque(free)
     # is the metrics window steady? consecutive windows compared (.drift)
     g_all = result.y[:, m.index(["gx", "gy"], "y")]
     motor_all = result.extra[:, [names.index(f"motor{i}") for i in (1, 2)]]
     step = m.testbed.masses.step if m.testbed.masses is not None else 0.0
-    out.update(window_drift(result.t, np.hypot(g_all[:, 0], g_all[:, 1]), motor_all, step=step))
-    return out
+    return BalancingMetrics(
+        g_perp_rms=float(_rms(np.hypot(g[:, 0], g[:, 1]))),
+        g_x_rms=float(_rms(g[:, 0])),
+        g_y_rms=float(_rms(g[:, 1])),
+        g_perp_rms_true=float(_rms(np.hypot(g_true[:, 0], g_true[:, 1]))),
+        slider_p2p_m=tuple(np.ptp(motor, axis=0).tolist()),
+        slider_std_m=tuple(np.std(motor, axis=0).tolist()),
+        mass_p2p_m=tuple(np.ptp(mass, axis=0).tolist()),
+        dipole_rms=float(_rms(np.linalg.norm(d, axis=1))),
+        slider_final_m=tuple(result.u[-1, m.index(["s1", "s2", "s3"], "u")].tolist()),
+        residual_torque_nm=None if free is None else residual_torque(free),
+        steady_check=window_drift(
+            result.t, np.hypot(g_all[:, 0], g_all[:, 1]), motor_all, step=step
+        ),
+    )
 
 
 def inertia_with_sliders(testbed: Testbed, s, inertia=None) -> np.ndarray:

@@ -25,14 +25,15 @@ settling time) in :mod:`.transient`, the method comparison and the sweeps in
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import lru_cache
 
 import numpy as np
 
-from airbearing.analysis.balancing.metrics import balancing_metrics, true_offset
+from airbearing.analysis.balancing.metrics import BalancingMetrics, balancing_metrics, true_offset
 from airbearing.analysis.balancing.transient import integral_time_constant, settling_time
 from airbearing.analysis.simulation.simulate import SimResult, simulate
 from airbearing.design.actuators import SliderActuator
@@ -144,24 +145,54 @@ def _law(model: Model, method: str, initial_offset: float, offset_stays: bool, g
 
 @dataclass(frozen=True, eq=False)
 class BalancingRun:
-    """One balancing run: the closed loop, the free float after it, and the metrics."""
+    """One balancing run: the closed loop, the free float after it, and the metrics.
+
+    Attributes
+    ----------
+    method : str
+    result : SimResult
+        The closed-loop run.
+    free : SimResult or None
+        The free float after it (sliders held, magnetorquers off).
+    metrics : BalancingMetrics
+        Seed 000's numbers and the run's context (:mod:`.metrics`).
+    """
 
     method: str
-    result: SimResult
-    free: SimResult | None
-    metrics: dict
+    result: SimResult = field(repr=False)
+    free: SimResult | None = field(repr=False)
+    metrics: BalancingMetrics = field(repr=False)
+
+    def to_json(self) -> dict:
+        """The ``balance --json`` metrics of the run (:meth:`BalancingMetrics.to_json`)."""
+        return self.metrics.to_json()
+
+    def to_pandas(self):
+        """The closed-loop time series (:meth:`SimResult.to_pandas` when it has one)."""
+        return self.result.to_pandas()
+
+    def __repr__(self) -> str:
+        m = self.metrics
+        return (
+            f"BalancingRun(method={self.method!r}, duration_s={m.duration_s}, "
+            f"g_perp_rms={m.g_perp_rms:.3g}, dipole_rms={m.dipole_rms:.3g}, "
+            f"steady={m.steady_check.get('steady')})"
+        )
+
+    def __str__(self) -> str:
+        return f"balancing run, {self.method}, {self.metrics.duration_s:g} s\n{self.metrics}"
 
 
 def check_inputs(testbed: Testbed, method: str, duration: float) -> None:
     if method not in METHODS:
-        raise InputError(f"--method {method}: expected one of {'|'.join(METHODS)}")
+        raise InputError(f"method={method!r}: expected one of {'|'.join(METHODS)}")
     if testbed.kind != "platform" or testbed.body.dof != 3 or testbed.masses is None:
         raise InputError(
             f"{testbed.source}: balancing needs a kind = 'platform', dof = 3 testbed with "
             f"[masses]; '{testbed.name}' is kind = '{testbed.kind}', dof = {testbed.body.dof}"
         )
     if not (math.isfinite(duration) and duration > 0):
-        raise InputError(f"--duration {duration}: expected a positive time in s")
+        raise InputError(f"duration={duration}: expected a positive time in s")
 
 
 def run_balancing(
@@ -233,20 +264,59 @@ def run_balancing(
     check_inputs(testbed, method, duration)
     if not math.isfinite(initial_offset) or abs(initial_offset) > testbed.masses.travel:
         raise InputError(
-            f"--initial-offset {initial_offset} m: expected a slider position within "
+            f"initial_offset={initial_offset} m: expected a slider position within "
             f"+-{testbed.masses.travel} m (masses.travel)"
         )
     if vertical_offset is None:
         vertical_offset = balanced_vertical_offset(testbed)
     if start not in ("auto", "rest", "level"):
-        raise InputError(f"--start {start}: expected auto, rest or level")
+        raise InputError(f"start={start!r}: expected auto, rest or level")
     model = _model(testbed, effects) if model is None else model
-    s0 = np.array([initial_offset, initial_offset, 0.0])
     balanced = np.array([0.0, 0.0, vertical_offset])
+    x0, start, notes = _initial_state(model, initial_offset, balanced, start, initial_rate)
+    ctl = _law(model, method, float(initial_offset), bool(offset_stays), _key(gains), float(lag),
+               bool(ideal_actuators))  # fmt: skip
+    p = model.params(r_x=0.0, r_y=0.0, r_z=vertical_offset)
+    result = simulate(model, ctl, duration=duration, x0=x0, p=p, seed=seed, noise=noise)
+    free = _free_float(model, result, p, free_duration, seed, noise)
+    metrics = balancing_metrics(result, free=free)
+    r_end = true_offset(testbed, np.asarray(metrics.slider_final_m), balanced)
+    moving = bool(np.any(np.asarray(initial_rate, dtype=float)))
+    notes += _adaptive_notes(method, offset_stays, start, moving)
+    # the tilt-loop analysis is of the seed-000 PID; None for the other laws
+    itc = settle = None
+    if method in ("mechanical", "mixed"):
+        pid_gains = SEED000_GAINS if gains is None else gains
+        itc = integral_time_constant(testbed, pid_gains, vertical_offset)
+        settle = settling_time(
+            testbed, pid_gains, vertical_offset, start=start, offset_stays=offset_stays
+        )
+    metrics = dataclasses.replace(
+        metrics,
+        note=" ".join(notes) if notes else None,
+        method=method,
+        initial_offset_m=initial_offset,
+        seed=seed,
+        vertical_offset_m=vertical_offset,
+        start=start,
+        offset_stays=offset_stays,
+        duration_s=duration,
+        residual_offset_m=tuple(r_end.tolist()),
+        integral_time_constant_s=itc,
+        settling_time_s=settle,
+    )
+    return BalancingRun(method, result, free, metrics)
+
+
+def _initial_state(model: Model, initial_offset: float, balanced, start: str, initial_rate):
+    """Initial state, the start actually used and notes: the rest attitude of the offset
+    platform (seed 000 Sec. 3) or level (``auto`` falls back to level with a note)."""
+    testbed = model.testbed
+    s0 = np.array([initial_offset, initial_offset, 0.0])
     r0 = true_offset(testbed, s0, balanced)
     w0 = np.asarray(initial_rate, dtype=float).reshape(-1)
     if w0.shape != (3,) or not np.all(np.isfinite(w0)):
-        raise InputError(f"initial rate {initial_rate!r}: expected three finite rates in rad/s")
+        raise InputError(f"initial_rate={initial_rate!r}: expected three finite rates in rad/s")
     notes = []
     q0 = None
     if start in ("auto", "rest"):
@@ -258,63 +328,40 @@ def run_balancing(
                 raise
             start = "level"
             notes.append(f"started level: {e}")
-    x0 = model.x0(q=q0, w=w0)
-    ctl = _law(model, method, float(initial_offset), bool(offset_stays), _key(gains), float(lag),
-               bool(ideal_actuators))  # fmt: skip
-    p = model.params(r_x=0.0, r_y=0.0, r_z=vertical_offset)
-    result = simulate(model, ctl, duration=duration, x0=x0, p=p, seed=seed, noise=noise)
-    free = None
-    if free_duration:
-        u = result.u[-1].copy()
-        u[model.index(["mx", "my", "mz", "tau_x", "tau_y", "tau_z"], "u")] = 0.0
-        free = simulate(
-            model,
-            constant_input(model, u),
-            duration=free_duration,
-            x0=result.x[-1],
-            p=p,
-            seed=seed + 1_000_003,
-            noise=noise,
-        )
-    metrics = balancing_metrics(result, free=free)
-    s_end = np.asarray(metrics["slider_final_m"])
-    r_end = true_offset(testbed, s_end, balanced)
-    pid_gains = None
-    if method in ("mechanical", "mixed"):
-        pid_gains = SEED000_GAINS if gains is None else gains
-    if method == "adaptive" and offset_stays and start == "rest" and not np.any(w0):
-        notes.append(
+    return model.x0(q=q0, w=w0), start, notes
+
+
+def _free_float(model: Model, result: SimResult, p, free_duration, seed: int, noise: bool):
+    """The free float after balancing (sliders held, magnetorquers off), or None."""
+    if not free_duration:
+        return None
+    u = result.u[-1].copy()
+    u[model.index(["mx", "my", "mz", "tau_x", "tau_y", "tau_z"], "u")] = 0.0
+    return simulate(
+        model,
+        constant_input(model, u),
+        duration=free_duration,
+        x0=result.x[-1],
+        p=p,
+        seed=seed + 1_000_003,
+        noise=noise,
+    )
+
+
+def _adaptive_notes(method: str, offset_stays: bool, start: str, moving: bool) -> list[str]:
+    """What the adaptive law cannot learn from this start."""
+    if method == "adaptive" and offset_stays and start == "rest" and not moving:
+        return [
             "the adaptive law learns from motion only (its estimate moves as "
             "gamma m |g| (g_hat - g_hat(0))); started at rest in its rest position the "
             "platform does not move and nothing is learnt: use --start level or an "
             "--initial-rate (or let the law take the sliders back: no --offset-stays)"
-        )
-    elif method == "adaptive" and start == "rest":
-        notes.append(
+        ]
+    if method == "adaptive" and start == "rest":
+        return [
             "the adaptive law drives the rates to zero, not the tilt: its estimate moves as "
             "gamma m |g| (g_hat - g_hat(0)), so started tilted it settles where that "
             "estimate cancels the gravity torque, between the start attitude and level; "
             "use --start level to balance in-plane"
-        )
-    if notes:
-        metrics["note"] = " ".join(notes)
-    metrics.update(
-        method=method,
-        initial_offset_m=initial_offset,
-        seed=seed,
-        vertical_offset_m=vertical_offset,
-        start=start,
-        offset_stays=offset_stays,
-        duration_s=duration,
-        residual_offset_m=r_end.tolist(),
-    )
-    # the tilt-loop analysis is of the seed-000 PID; None for the other laws
-    metrics["integral_time_constant_s"] = metrics["settling_time_s"] = None
-    if pid_gains is not None:
-        metrics["integral_time_constant_s"] = integral_time_constant(
-            testbed, pid_gains, vertical_offset
-        )
-        metrics["settling_time_s"] = settling_time(
-            testbed, pid_gains, vertical_offset, start=start, offset_stays=offset_stays
-        )
-    return BalancingRun(method, result, free, metrics)
+        ]
+    return []

@@ -122,7 +122,7 @@ class YawIdentification(IdentificationResult):
         """``testbed`` with J_z; an error when J_z was not identifiable."""
         if not np.isfinite(self.inertia):
             raise InputError(
-                f"--write-testbed: {self.std_status['J_zz']}; no testbed with an inertia to write"
+                f"to_testbed: {self.std_status['J_zz']}; no testbed with an inertia to write"
             )
         b = testbed.body
         return testbed.replace(
