@@ -81,7 +81,7 @@ LOOPS = ("balancing", "attitude")
 #: PID splits of the balancing loop (seed 000 eq. 8 and eqs. 5, 7).
 SPLITS = {"mechanical": MECHANICAL, "mixed": MIXED}
 #: Gain names and seed values: seed 000 Tables 1-2 (K_p N m, K_d N m s, K_d K_i N m/s).
-BALANCING_GAINS = dict(zip(("K_p", "K_d", "K_dK_i"), SEED000_GAINS, strict=True))
+BALANCING_GAINS = SEED000_GAINS.to_json()
 #: Seed 001 Table 6 (normalised form: torque = h0 times the command).
 ATTITUDE_GAINS = dict(zip(("K_p", "K_i", "K_w"), SEED001_GAINS, strict=True))
 _TRIM_TOL = 1e-9  # relative residual accepted for the controller's trim state
