@@ -43,7 +43,7 @@ from airbearing.models.effects import (
     get_effect,
 )
 
-__all__ = ["Model", "build_model", "inertia_from_params", "INERTIA_NAMES"]
+__all__ = ["Model", "build_model", "parameter_values", "inertia_from_params", "INERTIA_NAMES"]
 
 INERTIA_NAMES = ("J_xx", "J_yy", "J_zz", "J_xy", "J_xz", "J_yz")
 
@@ -264,12 +264,63 @@ def build_model(testbed: Testbed, effects: Mapping | None = None) -> Model:
     """
     kind, dof = testbed.kind, testbed.body.dof
     has_field = testbed.field is not None or kind == "platform"  # platform: field is an input
-    gyro = testbed.sensors.gyro
-    sliders = kind == "platform" and testbed.masses is not None
-    dipole = kind == "platform" and testbed.magnetorquers is not None
     effects = _effects_of(testbed, effects)
+    p_names, p0, effect_slices = parameter_values(testbed, effects)
+    p = ca.SX.sym("p", len(p_names))
+    P = {n: p[i] for i, n in enumerate(p_names)}
+    x_names, u_names = _state_input_names(kind, dof)
+    xp = ca.SX.sym("x", len(x_names))
+    u = ca.SX.sym("u", len(u_names))
+    U = {n: u[i] for i, n in enumerate(u_names)}
+    X = {n: xp[i] for i, n in enumerate(x_names)}
+    ctx, J_cr, q = _nominal_physics(testbed, has_field, xp, X, U, P)
+    for name in effects:
+        eff = get_effect(name)
+        if eff.stage == "plant":
+            eff.apply(ctx, p[effect_slices[name]])
+    f_plant = _plant(kind, dof, ctx, ctx.inertia_scale * J_cr, q, xp, X, u, p, P)
+    # ---- measurement effects (may add lag states)
+    for name in effects:
+        eff = get_effect(name)
+        if eff.stage == "sensor":
+            eff.apply(ctx, p[effect_slices[name]])
+    lag_names, x_all, lag_fn, lag_init = _lag_states(ctx, dof, xp, u, p, f_plant)
+    lag_dot = [(src - s) / ca.fmax(tau, 1e-6) for s, src, tau in ctx.lag_states]
+    f = ca.Function(
+        "f",
+        [x_all, u, p],
+        [ca.vertcat(f_plant(xp, u, p), *lag_dot)],
+        ["x", "u", "p"],
+        ["xdot"],
+    )
+    y_names, h_fn = _measurement(kind, dof, ctx, q, X, x_all, u, p, P)
+    n_plant = len(x_names)
+    return Model(
+        testbed=testbed,
+        effects=effects,
+        x_names=tuple(x_names + lag_names),
+        u_names=tuple(u_names),
+        p_names=tuple(p_names),
+        y_names=tuple(y_names),
+        f=f,
+        h=h_fn,
+        p0=np.array(p0),
+        lag_index=tuple(range(n_plant, n_plant + len(lag_names))),
+        _f_plant=f_plant,
+        _lag=lag_fn,
+        lag_init=lag_init,
+    )
 
-    # ---- parameters
+
+def parameter_values(testbed: Testbed, effects: Mapping) -> tuple[list, list, dict]:
+    """The parameters of ``testbed``'s Model with ``effects`` (all of them, the testbed's
+    own included): names, values (SI) and each effect's slice of the vector.
+
+    The same names and values :func:`build_model` puts in ``p_names`` and ``p0``, without
+    CasADi. An effect that cannot act on the testbed is an InputError.
+    """
+    kind, dof = testbed.kind, testbed.body.dof
+    has_field = testbed.field is not None or kind == "platform"
     p_names: list[str] = []
     p0: list[float] = []
 
@@ -284,35 +335,28 @@ def build_model(testbed: Testbed, effects: Mapping | None = None) -> Model:
     else:
         par(["J_zz"], [testbed.body.yaw_inertia])
     par(["mass", "gravity"], [testbed.body.mass, testbed.gravity])
-    if sliders:
+    if kind == "platform" and testbed.masses is not None:
         par(["m_1", "m_2", "m_3"], testbed.masses.mass_vec)
     elif kind == "cmg":
         par(["h0", "beta"], [testbed.cmg.h0, testbed.cmg.skew])
     effect_slices = {}
     for name, value in effects.items():
-        eff = get_effect(name)
-        reason = eff.applies(kind, dof, has_field, gyro)
+        reason = get_effect(name).applies(kind, dof, has_field, testbed.sensors.gyro)
         if reason:
             raise InputError(f"effect '{name}' cannot act on testbed '{testbed.name}': {reason}")
-        per_axis = (
-            np.ndim(value) == 1
-            and len(value) == 3
-            and name
-            not in (
-                "cm_offset_error",
-                "residual_dipole",
-            )
-        )
+        per_axis = np.ndim(value) == 1 and len(value) == 3
+        per_axis = per_axis and name not in ("cm_offset_error", "residual_dipole")
         names = effect_param_names(name, dof, per_axis)
         vals = np.atleast_1d(np.asarray(value, dtype=float))
         if len(names) == 1 and vals.size == 3:  # per-axis value on a dof-1 bearing: z axis
             vals = vals[2:]
         effect_slices[name] = slice(len(p_names), len(p_names) + len(names))
         par(names, vals)
-    p = ca.SX.sym("p", len(p_names))
-    P = {n: p[i] for i, n in enumerate(p_names)}
+    return p_names, p0, effect_slices
 
-    # ---- states and inputs
+
+def _state_input_names(kind: str, dof: int) -> tuple[list[str], list[str]]:
+    """The plant's state names and the input names (the layout of the module docstring)."""
     if dof == 3:
         x_names = ["qw", "qx", "qy", "qz", "wx", "wy", "wz"]
     else:
@@ -323,12 +367,15 @@ def build_model(testbed: Testbed, effects: Mapping | None = None) -> Model:
     else:
         u_names = ["s1", "s2", "s3", "mx", "my", "mz", "bx_lab", "by_lab", "bz_lab"]
         u_names += ["tau_x", "tau_y", "tau_z"]
-    xp = ca.SX.sym("x", len(x_names))
-    u = ca.SX.sym("u", len(u_names))
-    U = {n: u[i] for i, n in enumerate(u_names)}
-    X = {n: xp[i] for i, n in enumerate(x_names)}
-    tau_d = ca.vertcat(U["tau_x"], U["tau_y"], U["tau_z"])
+    return x_names, u_names
 
+
+def _nominal_physics(testbed: Testbed, has_field: bool, xp, X, U, P):
+    """Attitude, gravity and field in body axes, the inertia about the CR and the torques of
+    the nominal physics (sliders, magnetorquers, CM offset, disturbance input): the
+    effects' context, the inertia and the attitude quaternion."""
+    kind, dof = testbed.kind, testbed.body.dof
+    tau_d = ca.vertcat(U["tau_x"], U["tau_y"], U["tau_z"])
     g_lab = ca.vertcat(0, 0, -P["gravity"])
     if dof == 3:
         q = xp[0:4]
@@ -340,8 +387,6 @@ def build_model(testbed: Testbed, effects: Mapping | None = None) -> Model:
         w = ca.vertcat(X["wz"])
         q = quat.from_yaw(yaw)
         g_body = quat.rotate_inverse(q, g_lab)
-
-    # ---- inertia, offset and actuator torques of the nominal physics
     if dof == 3:
         J_cr = inertia_from_params(ca.vertcat(*[P[n] for n in INERTIA_NAMES]))
         r_cm = ca.vertcat(P["r_x"], P["r_y"], P["r_z"])
@@ -350,7 +395,7 @@ def build_model(testbed: Testbed, effects: Mapping | None = None) -> Model:
         r_cm = ca.SX.zeros(3)
     torque = ca.SX.zeros(3)
     b_body = ca.SX.zeros(3)
-    if sliders:
+    if kind == "platform" and testbed.masses is not None:
         axes = testbed.masses.axes_matrix
         s = ca.vertcat(U["s1"], U["s2"], U["s3"])
         for i in range(3):
@@ -365,14 +410,13 @@ def build_model(testbed: Testbed, effects: Mapping | None = None) -> Model:
         b_body = quat.rotate_inverse(q, b_lab)
     elif testbed.field is not None:  # a CMG testbed inside a cage: the field is a constant
         b_body = quat.rotate_inverse(q, ca.DM(testbed.field.lab_vec))
-    if dipole:
+    if kind == "platform" and testbed.magnetorquers is not None:
         m_dip = ca.vertcat(U["mx"], U["my"], U["mz"])
         torque = torque + ca.cross(m_dip, b_body)  # magnetorquer torque d x b (seed 000 eq. 2)
     # gravity torque of the CR -> CM offset (seed 004 eq. 11, seed 000 eq. 1)
     torque = torque + P["mass"] * ca.cross(r_cm, g_body) + tau_d
     if dof == 1:
         torque = torque[2]
-
     ctx = EffectContext(
         kind=kind,
         dof=dof,
@@ -386,13 +430,12 @@ def build_model(testbed: Testbed, effects: Mapping | None = None) -> Model:
         gimbal_rates=ca.vertcat(*[U[f"dd{i}"] for i in range(1, 5)]) if kind == "cmg" else None,
         rate_measured=w,
     )
-    for name in effects:
-        eff = get_effect(name)
-        if eff.stage == "plant":
-            eff.apply(ctx, p[effect_slices[name]])
-    J_eff = ctx.inertia_scale * J_cr
+    return ctx, J_cr, q
 
-    # ---- dynamics
+
+def _plant(kind: str, dof: int, ctx, J_eff, q, xp, X, u, p, P) -> ca.Function:
+    """``f_plant(x, u, p) -> xdot``: Euler's equations with the CMG momentum (seed 001)."""
+    w = ctx.w
     if kind == "cmg":
         delta = ca.vertcat(*[X[f"d{i}"] for i in range(1, 5)])
         dd = ctx.gimbal_rates
@@ -412,27 +455,18 @@ def build_model(testbed: Testbed, effects: Mapping | None = None) -> Model:
         x_dot = [w, rhs / J_eff]
     if kind == "cmg":
         x_dot.append(dd)
-    f_plant = ca.Function("f_plant", [xp, u, p], [ca.vertcat(*x_dot)], ["x", "u", "p"], ["xdot"])
+    return ca.Function("f_plant", [xp, u, p], [ca.vertcat(*x_dot)], ["x", "u", "p"], ["xdot"])
 
-    # ---- measurement effects (may add lag states)
-    for name in effects:
-        eff = get_effect(name)
-        if eff.stage == "sensor":
-            eff.apply(ctx, p[effect_slices[name]])
+
+def _lag_states(ctx, dof: int, xp, u, p, f_plant):
+    """The sensor lags' state names, the full state, their exact update over a sub-interval
+    and their steady start."""
     lag_syms = [s for s, _, _ in ctx.lag_states]
     lag_names = []
     for k, _ in enumerate(lag_syms):
         axes_names = ["wx", "wy", "wz"] if dof == 3 else ["wz"]
         lag_names += [f"lag_{a}" if k == 0 else f"lag{k}_{a}" for a in axes_names]
     x_all = ca.vertcat(xp, *lag_syms)
-    lag_dot = [(src - s) / ca.fmax(tau, 1e-6) for s, src, tau in ctx.lag_states]
-    f = ca.Function(
-        "f",
-        [x_all, u, p],
-        [ca.vertcat(f_plant(xp, u, p), *lag_dot)],
-        ["x", "u", "p"],
-        ["xdot"],
-    )
     # exact update of the lag states over one sub-interval h for a source varying linearly
     # from a to b (first-order hold): y+ = b - tau s + (y - a + tau s) exp(-h/tau), s = (b-a)/h
     xa, xb, hh = ca.SX.sym("xa", xp.shape[0]), ca.SX.sym("xb", xp.shape[0]), ca.SX.sym("h")
@@ -449,43 +483,28 @@ def build_model(testbed: Testbed, effects: Mapping | None = None) -> Model:
     )
     # a lag that has followed the rate for a while: steady state of a ramp, y = src - tau src'
     src_dot = [ca.jtimes(src, xp, f_plant(xp, u, p)) for _, src, _ in ctx.lag_states]
+    lag0 = [src - tau * sd for (_, src, tau), sd in zip(ctx.lag_states, src_dot, strict=True)]
     lag_init = ca.Function(
         "lag_init",
         [xp, u, p],
-        [
-            ca.vertcat(
-                *[src - tau * sd for (_, src, tau), sd in zip(ctx.lag_states, src_dot, strict=True)]
-            )
-            if lag_syms
-            else ca.SX(0, 1)
-        ],
+        [ca.vertcat(*lag0) if lag_syms else ca.SX(0, 1)],
         ["x_plant", "u", "p"],
         ["lag0"],
     )
+    return lag_names, x_all, lag_fn, lag_init
 
+
+def _measurement(kind: str, dof: int, ctx, q, X, x_all, u, p, P):
+    """The output names and ``h(x, u, p) -> y``: attitude, measured rate, gravity direction
+    (dof 3) and gimbal angles (CMG)."""
     if dof == 3:
-        y = [q, ctx.rate_measured, g_body / P["gravity"]]
+        y = [q, ctx.rate_measured, ctx.g_body / P["gravity"]]
         y_names = ["qw", "qx", "qy", "qz", "wx", "wy", "wz", "gx", "gy", "gz"]
     else:
-        y = [yaw, ctx.rate_measured]
+        y = [ctx.yaw, ctx.rate_measured]
         y_names = ["yaw", "wz"]
     if kind == "cmg":
-        y.append(delta)
+        y.append(ca.vertcat(*[X[f"d{i}"] for i in range(1, 5)]))
         y_names += ["d1", "d2", "d3", "d4"]
     h_fn = ca.Function("h", [x_all, u, p], [ca.vertcat(*y)], ["x", "u", "p"], ["y"])
-    n_plant = len(x_names)
-    return Model(
-        testbed=testbed,
-        effects=effects,
-        x_names=tuple(x_names + lag_names),
-        u_names=tuple(u_names),
-        p_names=tuple(p_names),
-        y_names=tuple(y_names),
-        f=f,
-        h=h_fn,
-        p0=np.array(p0),
-        lag_index=tuple(range(n_plant, n_plant + len(lag_names))),
-        _f_plant=f_plant,
-        _lag=lag_fn,
-        lag_init=lag_init,
-    )
+    return y_names, h_fn

@@ -250,34 +250,13 @@ def _reused_model(tb: Testbed, extra=()):
 def params_of(model, tb: Testbed) -> np.ndarray:
     """The parameter vector ``p`` of ``tb`` for a Model of the same structure.
 
-    The same values :func:`airbearing.models.model.build_model` puts in ``p0``
-    (tests check they are identical), without building a model.
+    The values :func:`airbearing.models.model.build_model` puts in ``p0``
+    (:func:`~airbearing.models.model.parameter_values`), without building a model.
     """
-    from airbearing.models.effects import effect_param_names
-    from airbearing.models.model import INERTIA_NAMES
+    from airbearing.models.model import parameter_values
 
-    dof = tb.body.dof
-    vals: dict[str, float] = {"mass": tb.body.mass, "gravity": tb.gravity}
-    if dof == 3:
-        J = tb.body.inertia_matrix
-        j6 = [J[0, 0], J[1, 1], J[2, 2], J[0, 1], J[0, 2], J[1, 2]]
-        vals.update(zip(INERTIA_NAMES, j6, strict=True))
-        vals.update(zip(("r_x", "r_y", "r_z"), tb.body.cm_offset_vec, strict=True))
-    else:
-        vals["J_zz"] = tb.body.yaw_inertia
-    if tb.kind == "platform":
-        m = tb.masses.mass_vec if tb.masses else np.zeros(3)
-        vals.update(zip(("m_1", "m_2", "m_3"), m, strict=True))
-    else:
-        vals.update(h0=tb.cmg.h0, beta=tb.cmg.skew)
-    for name, value in tb.effects.items():
-        per_axis = np.ndim(value) == 1 and len(value) == 3
-        per_axis = per_axis and name not in ("cm_offset_error", "residual_dipole")
-        names = effect_param_names(name, dof, per_axis)
-        v = np.atleast_1d(np.asarray(value, dtype=float))
-        if len(names) == 1 and v.size == 3:
-            v = v[2:]
-        vals.update(zip(names, v, strict=True))
+    names, values, _ = parameter_values(tb, dict(tb.effects))
+    vals = dict(zip(names, values, strict=True))
     missing = [n for n in model.p_names if n not in vals]
     if missing:
         raise RuntimeError(f"params_of: no value for model parameters {missing}")
