@@ -170,6 +170,9 @@ def test_methods_balance_in_plane_without_noise(method):
     # offset is a loose bound for a 300 s run
     s = np.asarray(run.metrics["slider_final_m"])
     assert np.all(np.abs(s[:2]) < 0.05e-3), s
+    # the run's contract: its JSON is the metrics' (run context included), a short repr
+    assert run.to_json()["method"] == method and run.to_json()["start"] == "level"
+    assert len(repr(run)) < 300 and f"balancing run, {method}, 300 s" in str(run)
 
 
 def test_law_positions_are_measured_from_the_balanced_zero():
@@ -195,6 +198,12 @@ def test_gyro_noise_reaches_sliders_only_in_the_mechanical_split():
     cmp = compare_methods(tb, ("mechanical", "mixed"), offsets=(-0.5e-3,), seeds=(0,),
                           free_duration=None)  # fmt: skip
     t = cmp.tables[-0.5e-3]
+    # the result contract: a short repr, the verdict in a few lines, a table for pandas
+    assert len(repr(cmp)) < 300 and repr(cmp).startswith("Comparison(methods=")
+    assert "mechanical vs mixed" in str(cmp) and len(str(cmp).splitlines()) <= 6
+    df = cmp.to_pandas()
+    assert list(df["method"]) == ["mechanical", "mixed"]
+    assert df["slider_std_m_1"].iloc[0] == t["mechanical"]["slider_std_m"][0]
     # mechanical: the D term moves the sliders by K_d sigma_w / (m g) = 1.8e-3 * 3e-2 / 0.40
     # = 0.13 mm per sample (1 sigma), far above backlash; mixed sends it to the coils
     assert np.mean(t["mechanical"]["slider_std_m"][:2]) > 5e-5
@@ -314,6 +323,8 @@ def test_duration_sweep_marks_where_the_last_third_is_steady():
     sw = sweep_comparison(load_testbed("platform-3dof"), name, values, offsets=(-0.5e-3,),
                           seeds=(0, 1))  # fmt: skip
     assert [p.steady["steady"] for p in sw.points] == [False, True]
+    assert len(repr(sw)) < 300 and "sweep of duration" in str(sw)
+    assert list(sw.to_pandas()["duration"]) == [300.0, 900.0]
     assert sw.points[0].steady["steady_linear"]  # the linearised check alone said steady
     assert sw.points[1].ratios["slider_p2p"] < sw.points[0].ratios["slider_p2p"]
 

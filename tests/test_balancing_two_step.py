@@ -28,6 +28,7 @@ def test_two_step_reduces_kinetic_energy_spread(seed):
     tb = _seed004_masses()
     out = two_step(tb, seed=seed)
     assert isinstance(out, TwoStepResult)
+    assert len(repr(out)) < 300 and "kinetic-energy spread" in str(out)
     # seed 004: 99.75 % in simulation (true rates, as ke_reduction now is)
     assert out.ke_reduction >= 0.9975, out
     # the vertical offset the KE spread needs: a residual of 2 um leaves a spread of about

@@ -81,6 +81,46 @@ class Comparison:
             out["verdict"] = self.verdict
         return out
 
+    def to_pandas(self):
+        """One row per offset and method: the averaged metrics (scalars; per-slider lists
+        as ``<key>_1..3``)."""
+        import pandas as pd
+
+        rows = []
+        for off, table in self.tables.items():
+            for method, m in table.items():
+                row = {"offset_m": off, "method": method}
+                for k, v in m.items():
+                    if isinstance(v, list | tuple):
+                        row.update({f"{k}_{i + 1}": x for i, x in enumerate(v)})
+                    else:
+                        row[k] = v
+                rows.append(row)
+        return pd.DataFrame(rows)
+
+    def __repr__(self) -> str:
+        r = self.ratios or {}
+        ratios = ", ".join(f"{k}={v:.3g}" for k, v in r.items() if isinstance(v, float))
+        return (
+            f"Comparison(methods={self.methods!r}, duration_s={self.duration_s:g}, "
+            f"offsets={len(self.tables)}, ratios=({ratios}))"
+        )
+
+    def __str__(self) -> str:
+        lines = [f"{' vs '.join(self.methods)}, {len(self.tables)} offset(s), "
+                 f"{self.duration_s:g} s runs"]  # fmt: skip
+        if self.ratios:
+            of = self.ratios.get("of", "")
+            lines.append(
+                f"ratios {of}: g_perp_rms {self.ratios['g_perp_rms']:.3g}, "
+                f"slider p2p {self.ratios['slider_p2p']:.3g}"
+            )
+        if self.steady is not None and self.steady.get("reason"):
+            lines.append(f"steady: {self.steady['reason']}")
+        if self.verdict:
+            lines.append(self.verdict)
+        return "\n".join(lines)
+
 
 @dataclass(frozen=True, eq=False)
 class SweepPoint:
@@ -112,6 +152,11 @@ class SweepPoint:
         """``value``, ``ratios``, ``metrics``, ``steady``."""
         return {"value": self.value, "ratios": self.ratios, "metrics": self.metrics,
                 "steady": self.steady}  # fmt: skip
+
+    def __repr__(self) -> str:
+        r = self.ratios or {}
+        ratios = ", ".join(f"{k}={v:.3g}" for k, v in r.items() if isinstance(v, float))
+        return f"SweepPoint(value={self.value:g}, balanced={self.balanced}, ratios=({ratios}))"
 
 
 @dataclass(frozen=True, eq=False)
@@ -150,6 +195,33 @@ class Sweep:
                 "values": list(self.values), "points": [p.to_json() for p in self.points],
                 "seed_ratios": self.seed_ratios, "seed_ratio_within": self.seed_ratio_within,
                 "seed_ratios_within": self.seed_ratios_within}  # fmt: skip
+
+    def to_pandas(self):
+        """One row per swept value: the ratios and whether every method balanced."""
+        import pandas as pd
+
+        rows = []
+        for p in self.points:
+            row = {self.name: p.value, "balanced": p.balanced}
+            for k, v in (p.ratios or {}).items():
+                if k != "of":
+                    row[f"ratio_{k}"] = v
+            rows.append(row)
+        return pd.DataFrame(rows)
+
+    def __repr__(self) -> str:
+        return (
+            f"Sweep(name={self.name!r}, unit={self.unit!r}, values={len(self.values)}, "
+            f"seed_ratios_within={self.seed_ratios_within!r})"[:300]
+        )
+
+    def __str__(self) -> str:
+        vals = ", ".join(f"{v:.3g}" for v in self.values)
+        both = ", ".join(f"{v:.3g}" for v in self.seed_ratios_within) or "none"
+        return (
+            f"sweep of {self.name} ({self.where}) over {vals} {self.unit}\n"
+            f"seed 000's ratios both within {RATIO_MATCH_FACTOR:g}x at: {both}"
+        )
 
 
 #: Sweepable imperfections: name -> (where it lives, unit).

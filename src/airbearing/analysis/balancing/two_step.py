@@ -129,6 +129,24 @@ class TwoStepResult:
         """The ``balance --two-step`` JSON: one key per attribute, in this order."""
         return {f.name: getattr(self, f.name) for f in fields(self)}
 
+    def __repr__(self) -> str:
+        return (
+            f"TwoStepResult(testbed={self.testbed!r}, method={self.method!r}, "
+            f"ke_reduction={self.ke_reduction:.4g}, "
+            f"vertical_offset_identified_m={self.vertical_offset_identified_m:.4g}, "
+            f"iterations={self.iterations})"
+        )
+
+    def __str__(self) -> str:
+        r = np.asarray(self.residual_offset_m, dtype=float) * 1e6
+        return "\n".join([
+            f"two-step balancing of {self.testbed} ({self.method}, {self.iterations} round(s))",
+            f"kinetic-energy spread {self.ke_std_before:.3g} -> {self.ke_std_after:.3g} J "
+            f"({100 * self.ke_reduction:.2f} % less, {self.ke_rates} rates)",
+            f"vertical offset identified {1e6 * self.vertical_offset_identified_m:.2f} um",
+            "residual offset [" + ", ".join(f"{v:.3g}" for v in r) + "] um",
+        ])  # fmt: skip
+
 
 #: rad/s, initial rates of seed 004: the in-plane balancing simulation, and the unbalanced
 #: and balanced kinetic-energy experiments.
