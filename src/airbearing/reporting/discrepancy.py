@@ -173,42 +173,62 @@ def add_discrepancy(report: Report, result: Discrepancy, *, level: int = 2) -> N
         f"Noise floor: {result.floor.source}. " + " ".join(as_sentence(n) for n in data.notes)
     )
     _segments_paragraph(report, datas)
-    if result.validation:
-        report.heading("Validation logs (not fitted)", level + 1)
-        report.table(
-            [
-                {
-                    "log": v.log,
-                    f"gap nominal ({unit})": v.gap_before,
-                    f"gap augmented ({unit})": v.gap_after,
-                    "shrinks": v.shrinks,
-                }
-                for v in result.validation
-            ]
-        )
-    if result.effects:
-        rows = [
-            {
-                "effect": n,
-                "value": format_value(v, result.effect_std[n]),
-                "std (white noise)": format_value(result.effect_std_white.get(n)),
-                "Cramer-Rao bound": format_value(result.effect_crlb.get(n)),
-                "std / bound": format_value(result.effect_efficiency.get(n)),
-                "unit": _unit(n),
-            }
-            for n, v in result.effects.items()
-        ]
-        report.heading("Named effects", level + 1)
-        report.table(rows)
-        report.paragraph(
-            "std: the honest standard error (a sandwich covariance with the residuals' "
-            "autocovariance); std (white noise): the Fisher value, right only when the "
-            "residual is white; Cramer-Rao bound: the best any unbiased estimate could do "
-            "with these logs (whole segments, one initial state each, at the noise floor)."
-        )
+    _validation_section(report, result, level + 1)
+    _effects_section(report, result, level + 1)
     _consistency_section(report, result, level + 1)
     _adequacy_section(report, result, level + 1)
-    report.heading("Where the nominal model and the logs disagree", level + 1)
+    _localisation_section(report, result, level + 1)
+    _candidates_section(report, result, level + 1)
+
+
+def _validation_section(report: Report, result: Discrepancy, level: int) -> None:
+    """The gaps on the validation logs (not fitted)."""
+    unit = result.gap_unit
+    if not result.validation:
+        return
+    report.heading("Validation logs (not fitted)", level)
+    report.table(
+        [
+            {
+                "log": v.log,
+                f"gap nominal ({unit})": v.gap_before,
+                f"gap augmented ({unit})": v.gap_after,
+                "shrinks": v.shrinks,
+            }
+            for v in result.validation
+        ]
+    )
+
+
+def _effects_section(report: Report, result: Discrepancy, level: int) -> None:
+    """The named effects with their honest, white-noise and Cramer-Rao errors."""
+    if not result.effects:
+        return
+    rows = [
+        {
+            "effect": n,
+            "value": format_value(v, result.effect_std[n]),
+            "std (white noise)": format_value(result.effect_std_white.get(n)),
+            "Cramer-Rao bound": format_value(result.effect_crlb.get(n)),
+            "std / bound": format_value(result.effect_efficiency.get(n)),
+            "unit": _unit(n),
+        }
+        for n, v in result.effects.items()
+    ]
+    report.heading("Named effects", level)
+    report.table(rows)
+    report.paragraph(
+        "std: the honest standard error (a sandwich covariance with the residuals' "
+        "autocovariance); std (white noise): the Fisher value, right only when the "
+        "residual is white; Cramer-Rao bound: the best any unbiased estimate could do "
+        "with these logs (whole segments, one initial state each, at the noise floor)."
+    )
+
+
+def _localisation_section(report: Report, result: Discrepancy, level: int) -> None:
+    """Where the nominal model and the logs disagree: words, residuals, windows, spectrum."""
+    datas, unit = result.datas, result.gap_unit
+    report.heading("Where the nominal model and the logs disagree", level)
     for sentence in result.localisation.get("words", []):
         report.paragraph(sentence)
     _residual_figure(
@@ -236,8 +256,12 @@ def add_discrepancy(report: Report, result: Discrepancy, *, level: int = 2) -> N
     axes[2].set(xlabel="frequency (Hz)", ylabel="PSD", title="in frequency")
     axes[2].legend(fontsize=8)
     report.figure(fig, "The nominal residual per window, by rate magnitude, and its spectrum.")
-    # ---- candidates
-    report.heading("Candidates (first round, best first)", level + 1)
+
+
+def _candidates_section(report: Report, result: Discrepancy, level: int) -> None:
+    """Every candidate of the first round, the later rounds, the stop and confounded pairs."""
+    unit = result.gap_unit
+    report.heading("Candidates (first round, best first)", level)
     report.paragraph(
         "An effect is named only when its fit converged, the logs can identify it, it is not "
         "pinned at its physical bound, it passes the likelihood-ratio and BIC tests, it lies at "
@@ -266,7 +290,7 @@ def add_discrepancy(report: Report, result: Discrepancy, *, level: int = 2) -> N
         )
     report.paragraph(f"Search stopped: {result.stop_reason}.")
     if result.confounded:
-        report.heading("Confounded effects", level + 1)
+        report.heading("Confounded effects", level)
         for pair, text in result.experiments.items():
             report.paragraph(f"{pair}: they explain these logs equally well; {text}.")
 

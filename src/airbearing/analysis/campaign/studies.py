@@ -163,7 +163,6 @@ def detection(df, effect_keys: list[str]) -> dict:
         and ``points`` (size, named) for the figure; ``false_alarm``: runs hiding
         nothing, how many named anything, the rate and its 95 % interval.
     """
-    from scipy.stats import binomtest
 
     ok = _ok(df).to_numpy()
     named = named_effects(df)
@@ -179,68 +178,79 @@ def detection(df, effect_keys: list[str]) -> dict:
         hidden[s > 0] = name
     out = {"effects": [], "false_alarm": None}
     for name, s in sizes.items():
-        sel = (hidden == name) & ok
-        x = np.log10(s[sel])
-        hit = np.array([name in named[i] for i in np.flatnonzero(sel)], bool)
-        other = sum(1 for i in np.flatnonzero(sel) if named[i] and name not in named[i])
-        row = {
-            "effect": name,
-            "runs": int(sel.sum()),
-            "named": int(hit.sum()),
-            "rate": float(hit.mean()) if hit.size else None,
-            "misnamed": int(other),
-            "size_min": float(s[sel].min()) if sel.any() else None,
-            "size_max": float(s[sel].max()) if sel.any() else None,
-            "size_95": None,
-            "fit": None,
-            "note": "",
-            "points": list(zip(s[sel].tolist(), hit.tolist(), strict=True)),
-        }
-        unit = _unit(name)
-        missed = [i for i in np.flatnonzero(sel) if name not in named[i]]
-        row["unit"] = unit
-        row["why_missed"] = _common_reason(df, name, missed)
-        fit = _logistic(x, hit)
-        if fit is None:
-            row["note"] = (
-                f"named in every run: the 95 % size is below {row['size_min']:.3g} {unit}"
-                if hit.size and hit.all()
-                else f"not found up to size {row['size_max']:.3g} {unit}"
-                if hit.size
-                else "no successful run"
-            )
-        else:
-            a, b, _ = fit
-            row["fit"] = (a, b)
-            if b > 0:
-                z95 = math.log(DETECTION_LEVEL / (1 - DETECTION_LEVEL))
-                row["size_95"] = 10 ** ((z95 - a) / b)
-                if row["size_95"] > row["size_max"]:
-                    row["note"] = (
-                        f"not found {DETECTION_LEVEL:.0%} of the time up to size "
-                        f"{row['size_max']:.3g} {unit} (size_95 extrapolated)"
-                    )
-                elif row["size_95"] < row["size_min"]:
-                    row["note"] = "size_95 extrapolated below the range swept"
-            else:
-                row["note"] = (
-                    f"detection does not grow with size up to {row['size_max']:.3g} {unit}"
-                )
-        out["effects"].append(row)
+        out["effects"].append(_detection_row(df, name, s, (hidden == name) & ok, named))
     null = (hidden == "") & ok
     if null.any():
-        alarms = int(sum(bool(named[i]) for i in np.flatnonzero(null)))
-        ci = binomtest(alarms, int(null.sum())).proportion_ci(method="exact")
-        out["false_alarm"] = {
-            "runs": int(null.sum()),
-            "alarms": alarms,
-            "rate": alarms / int(null.sum()),
-            "ci_low": float(ci.low),
-            "ci_high": float(ci.high),
-            "named": sorted({n for i in np.flatnonzero(null) for n in named[i]}),
-        }
+        out["false_alarm"] = _false_alarm(named, null)
     out["failed_runs"] = int((~ok).sum())
     return out
+
+
+def _detection_row(df, name: str, s: np.ndarray, sel: np.ndarray, named) -> dict:
+    """One effect's row of :func:`detection`: runs hiding it (``sel``), how many named it,
+    and the size named 95 % of the time."""
+    x = np.log10(s[sel])
+    hit = np.array([name in named[i] for i in np.flatnonzero(sel)], bool)
+    other = sum(1 for i in np.flatnonzero(sel) if named[i] and name not in named[i])
+    row = {
+        "effect": name,
+        "runs": int(sel.sum()),
+        "named": int(hit.sum()),
+        "rate": float(hit.mean()) if hit.size else None,
+        "misnamed": int(other),
+        "size_min": float(s[sel].min()) if sel.any() else None,
+        "size_max": float(s[sel].max()) if sel.any() else None,
+        "size_95": None,
+        "fit": None,
+        "note": "",
+        "points": list(zip(s[sel].tolist(), hit.tolist(), strict=True)),
+    }
+    unit = _unit(name)
+    missed = [i for i in np.flatnonzero(sel) if name not in named[i]]
+    row["unit"] = unit
+    row["why_missed"] = _common_reason(df, name, missed)
+    fit = _logistic(x, hit)
+    if fit is None:
+        row["note"] = (
+            f"named in every run: the 95 % size is below {row['size_min']:.3g} {unit}"
+            if hit.size and hit.all()
+            else f"not found up to size {row['size_max']:.3g} {unit}"
+            if hit.size
+            else "no successful run"
+        )
+        return row
+    a, b, _ = fit
+    row["fit"] = (a, b)
+    if b > 0:
+        z95 = math.log(DETECTION_LEVEL / (1 - DETECTION_LEVEL))
+        row["size_95"] = 10 ** ((z95 - a) / b)
+        if row["size_95"] > row["size_max"]:
+            row["note"] = (
+                f"not found {DETECTION_LEVEL:.0%} of the time up to size "
+                f"{row['size_max']:.3g} {unit} (size_95 extrapolated)"
+            )
+        elif row["size_95"] < row["size_min"]:
+            row["note"] = "size_95 extrapolated below the range swept"
+    else:
+        row["note"] = f"detection does not grow with size up to {row['size_max']:.3g} {unit}"
+    return row
+
+
+def _false_alarm(named, null: np.ndarray) -> dict:
+    """Runs hiding nothing (``null``): how many named anything, the rate and its exact
+    95 % interval."""
+    from scipy.stats import binomtest
+
+    alarms = int(sum(bool(named[i]) for i in np.flatnonzero(null)))
+    ci = binomtest(alarms, int(null.sum())).proportion_ci(method="exact")
+    return {
+        "runs": int(null.sum()),
+        "alarms": alarms,
+        "rate": alarms / int(null.sum()),
+        "ci_low": float(ci.low),
+        "ci_high": float(ci.high),
+        "named": sorted({n for i in np.flatnonzero(null) for n in named[i]}),
+    }
 
 
 def _unit(name: str) -> str:

@@ -321,9 +321,26 @@ def simulate(
     substeps : int
         RK4 sub-steps per sample.
     """
-    tb = model.testbed
-    dt = tb.sensors.dt
-    # the API boundary: the same checks as the CLI's, for callers of the library
+    dt = model.testbed.sensors.dt
+    n, x0, p, ref = _checked_inputs(model, controller, duration, seed, x0, p, reference)
+    t = np.arange(n) * dt
+    V, vibration, z0_vib = _draws(model, controller, n, t, ref, seed, noise, attitude_noise,
+                                  torque_noise)  # fmt: skip
+    c0 = controller.c0 if c0 is None else np.asarray(c0, float)
+    F = closed_loop_rollout(model, controller, n, substeps, vibration)
+    Z, R = F(np.concatenate([x0, c0, *z0_vib]), V, p, controller.gains)
+    Z, R = np.asarray(Z).T, np.asarray(R).T
+    nx, ny, nu = model.nx, model.ny, model.nu
+    x = np.vstack([x0, Z[:, :nx]])
+    y, u, extra = R[:, nx : nx + ny], R[:, nx + ny : nx + ny + nu], R[:, nx + ny + nu :]
+    log = log_from_arrays(model, t, x[:-1], y, u, extra, controller, ref)
+    return SimResult(log, t, x, y, u, extra, model, controller, ref)
+
+
+def _checked_inputs(model, controller, duration, seed, x0, p, reference):
+    """The API boundary (the same checks as the CLI's, for callers of the library): the
+    number of samples, the initial state, the parameters and the reference per sample."""
+    dt = model.testbed.sensors.dt
     if not np.isfinite(duration) or duration <= 0:
         raise InputError(f"duration {float(duration):g} s: expected a finite number > 0")
     if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
@@ -353,8 +370,13 @@ def simulate(
         ref = np.tile(ref, (n, 1))
     if ref.shape != (n, nref):
         raise InputError(f"reference has shape {ref.shape}, expected ({n}, {nref})")
-    t = np.arange(n) * dt
+    return n, x0, p, ref
 
+
+def _draws(model, controller, n, t, ref, seed, noise, attitude_noise, torque_noise):
+    """The inputs of the compiled loop per sample (measurement noise, disturbance torque,
+    reference, time, slider vibration), all drawn from one generator seeded ``seed``."""
+    tb = model.testbed
     rng = np.random.default_rng(seed)
     sig = noise_sigmas(model, attitude_noise) if noise else np.zeros(model.ny)
     tau_sig = tb.body.torque_noise if torque_noise is None else torque_noise
@@ -374,15 +396,7 @@ def simulate(
         z0_vib = [np.zeros(_VIB_STATES)]
     V = np.hstack(cols).T
 
-    c0 = controller.c0 if c0 is None else np.asarray(c0, float)
-    F = closed_loop_rollout(model, controller, n, substeps, vibration)
-    Z, R = F(np.concatenate([x0, c0, *z0_vib]), V, p, controller.gains)
-    Z, R = np.asarray(Z).T, np.asarray(R).T
-    nx, ny, nu = model.nx, model.ny, model.nu
-    x = np.vstack([x0, Z[:, :nx]])
-    y, u, extra = R[:, nx : nx + ny], R[:, nx + ny : nx + ny + nu], R[:, nx + ny + nu :]
-    log = log_from_arrays(model, t, x[:-1], y, u, extra, controller, ref)
-    return SimResult(log, t, x, y, u, extra, model, controller, ref)
+    return V, vibration, z0_vib
 
 
 def log_from_arrays(model, t, x, y, u, extra, controller, ref) -> Log:
