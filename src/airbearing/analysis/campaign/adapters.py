@@ -294,36 +294,18 @@ def _dotted(doc: dict, key: str):
 
 def _slew(tb: Testbed, *, yaw_deg, axis, duration, seed, ideal, steering, rate_limit, gains):
     """``scenarios.slew`` with the structure reused (tests check the runs are identical)."""
-    from airbearing.analysis.simulation.scenarios import slew
-    from airbearing.analysis.simulation.simulate import simulate
-    from airbearing.models import quaternion as quat
+    from airbearing.analysis.simulation.scenarios import slew, slew_loop
 
     kw = dict(steering=steering, rate_limit_mode=rate_limit, ideal=ideal, gains=gains)
-    if (
+    loop = None
+    if not (
         tb.kind != "cmg"
         or duration <= 0
         or (tb.body.dof == 1 and tuple(np.round(axis, 12)) != (0.0, 0.0, 1.0))
-    ):
-        # let the scenario raise its own error for inputs it refuses
-        return slew(tb, angle_deg=yaw_deg, axis=axis, duration=duration, seed=seed, **kw)
-
-    def build():
-        from airbearing.design.attitude import cmg_attitude_controller
-        from airbearing.models.model import build_model
-
-        model = build_model(tb)
-        ctl_kw = {} if gains is None else {"gains": gains}
-        ctl = cmg_attitude_controller(
-            model, steering=steering, lowpass=1.0 if ideal else None,
-            rate_limit_mode=rate_limit, **ctl_kw,
-        )  # fmt: skip
-        return model, ctl
-
-    structure, ctl = _structure(tb, ["slew", sorted(kw.items())], build)
-    m = _run_model(structure, tb, params_of(structure, tb))
-    q_c = quat.from_axis_angle(axis, np.deg2rad(yaw_deg))
-    return simulate(m, ctl, duration=duration, x0=m.x0(), p=m.p0, reference=q_c, seed=seed,
-                    noise=not ideal)  # fmt: skip
+    ):  # else the scenario raises its own error for inputs it refuses
+        structure, ctl = _structure(tb, ["slew", sorted(kw.items())], lambda: slew_loop(tb, **kw))
+        loop = (_run_model(structure, tb, params_of(structure, tb)), ctl)
+    return slew(tb, angle_deg=yaw_deg, axis=axis, duration=duration, seed=seed, loop=loop, **kw)
 
 
 def _simulate(tb: Testbed, a: dict, seed: int, gains=None, src: str = ""):

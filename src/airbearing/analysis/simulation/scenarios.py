@@ -16,7 +16,7 @@ from airbearing.models import quaternion as quat
 from airbearing.models.model import Model, build_model
 
 __all__ = [
-    "SCENARIO_DURATIONS", "LEVEL", "initial_attitude", "slew", "slew_summary",
+    "SCENARIO_DURATIONS", "LEVEL", "initial_attitude", "slew", "slew_loop", "slew_summary",
     "free_oscillation", "free_summary", "spindown",
 ]  # fmt: skip
 
@@ -62,6 +62,7 @@ def slew(
     form: str = "normalised",
     effects: Mapping | None = None,
     gains=None,
+    loop: tuple | None = None,
 ) -> SimResult:
     """A rest-to-rest slew of ``angle_deg`` about ``axis`` with the seed-001 attitude loop.
 
@@ -90,6 +91,9 @@ def slew(
         Effects acting in the truth (FORMATS.md names and units).
     gains : dict, optional
         Attitude gains (``K_p``, ``K_i``, ``K_w``); default seed 001's.
+    loop : (Model, Controller), optional
+        The loop to run, default :func:`slew_loop` of these arguments; a campaign passes
+        one per structure with this run's values in the Model's ``p0``.
 
     Returns
     -------
@@ -123,6 +127,37 @@ def slew(
             f"{testbed.source}: the seed-001 attitude loop feeds back the gyro rate (eqs. 3, 19), "
             f"and testbed '{testbed.name}' has none (sensors.gyro = false)"
         )
+    if loop is None:
+        loop = slew_loop(
+            testbed, ideal=ideal, steering=steering, steering_options=steering_options,
+            rate_limit_mode=rate_limit_mode, form=form, effects=effects, gains=gains,
+        )  # fmt: skip
+    model, ctl = loop
+    if testbed.body.dof == 1 and tuple(np.round(axis, 12)) != (0.0, 0.0, 1.0):
+        raise InputError("a dof = 1 testbed slews about body z only: leave the axis at 0 0 1")
+    q_c = quat.from_axis_angle(axis, np.deg2rad(angle_deg))
+    return simulate(
+        model, ctl, duration=duration, x0=model.x0(), reference=q_c, seed=seed, noise=not ideal
+    )
+
+
+def slew_loop(
+    testbed: Testbed,
+    *,
+    ideal: bool = False,
+    steering: str = "mp",
+    steering_options: dict | None = None,
+    rate_limit_mode: str = "scale",
+    form: str = "normalised",
+    effects: Mapping | None = None,
+    gains=None,
+) -> tuple[Model, object]:
+    """The Model and seed-001 attitude controller a :func:`slew` runs (arguments as there).
+
+    Returns
+    -------
+    (Model, Controller)
+    """
     model = build_model(testbed, effects)
     kwargs = {} if gains is None else {"gains": gains}
     ctl = cmg_attitude_controller(
@@ -134,12 +169,7 @@ def slew(
         form=form,
         **kwargs,
     )
-    if testbed.body.dof == 1 and tuple(np.round(axis, 12)) != (0.0, 0.0, 1.0):
-        raise InputError("a dof = 1 testbed slews about body z only: leave the axis at 0 0 1")
-    q_c = quat.from_axis_angle(axis, np.deg2rad(angle_deg))
-    return simulate(
-        model, ctl, duration=duration, x0=model.x0(), reference=q_c, seed=seed, noise=not ideal
-    )
+    return model, ctl
 
 
 def slew_summary(result: SimResult) -> dict:
