@@ -225,3 +225,24 @@ def test_step_with_dt_as_input_is_the_same_step(platform):
         a = np.asarray(m.step(dt, 4)(x, u, m.p0)).ravel()
         b = np.asarray(m.step_dt(4)(x, u, m.p0, dt)).ravel()
         assert_allclose(b, a, rtol=0, atol=1e-15)  # rounding only
+
+
+def test_structure_cache_one_model_per_structure():
+    """Two testbeds differing only in values share one Model (equal as a cache key, so the
+    compiled loops are reused) and each keeps its own values as p0; another structure
+    (an effect added) is another Model."""
+    import dataclasses
+
+    from airbearing.models import structure_cache as sc
+
+    tb = load_testbed("cmg-yaw")
+    heavier = tb.replace(body=dataclasses.replace(tb.body, mass=tb.body.mass * 2))
+    tag = ["test_structure_cache"]
+    before = sc.structure_stats()
+    a, b = sc.model_for(tb, tag), sc.model_for(heavier, tag)
+    assert a == b and hash(a) == hash(b)
+    assert a.p0[a.p_names.index("mass")] * 2 == b.p0[b.p_names.index("mass")]
+    assert sc.structure_stats()["built"] - before["built"] == 1
+    c = sc.model_for(tb.with_effects({"viscous_friction": 1e-6}), tag)
+    assert c != a and "viscous_friction" in c.p_names
+    assert sc.structure_stats()["built"] - before["built"] == 2

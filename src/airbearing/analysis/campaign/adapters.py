@@ -5,8 +5,9 @@ Each adapter takes the nominal testbed, the run's dispersed testbed, the campaig
 document the CLI writes with ``--json`` (simulate: ``{"testbed", "scenario", "seed",
 **slew_summary}``, built inline in ``cli/simulate.py``, rebuilt here the same way).
 
-Efficiency: a run reuses, per worker process, the Model of its *structure* (everything
-but the values that enter the loop as parameters ``p``, the initial state or the noise),
+Efficiency: a run reuses, per worker process (:mod:`airbearing.models.structure_cache`),
+the Model of its *structure* (everything but the values that enter the loop as parameters
+``p``, the initial state or the noise),
 its controller and so its compiled closed loop: a slew (Model, attitude controller), a
 free oscillation (Model, held input), a balancing run (Model, balancing law; the values a
 law is built with, see ``_LAW_READS``, are part of its structure), and the truth log of
@@ -20,15 +21,16 @@ shooting engine's own cache (``analysis/shooting``), in memory and on disk.
 
 from __future__ import annotations
 
-import dataclasses
-import functools
-import json
 from collections.abc import Callable
 
 import numpy as np
 
 from airbearing.errors import InputError
 from airbearing.io.testbed import Testbed, testbed_to_dict
+from airbearing.models.structure_cache import cached as _structure
+from airbearing.models.structure_cache import model_for as _reused_model
+from airbearing.models.structure_cache import params_of, structure_stats
+from airbearing.models.structure_cache import with_values as _with_values
 
 __all__ = ["ARGS", "check_args", "run_command", "params_of", "structure_stats"]
 
@@ -190,13 +192,6 @@ def check_args(src: str, command: str, args: dict, truth: dict) -> None:
 
 # ---------------------------------------------------------------- structure reuse
 
-# parameters and per-run values: everything else in the testbed decides the structure
-_RUN_VALUES = {
-    "": ("gravity", "name"),
-    "body": ("mass", "inertia", "cm_offset", "torque_noise"),
-    "cmg": ("flywheel_inertia", "flywheel_speed", "gimbal_angles"),
-    "sensors": ("gyro_noise", "accel_noise", "attitude_noise"),
-}
 #: Run values a balancing law reads when it is built (design/balancing.py: the slider
 #: matrix divides by gravity, the Lyapunov law holds J, the adaptive law m and g): they
 #: are constants of its compiled loop, so they are part of a balance run's structure.
@@ -206,85 +201,6 @@ _LAW_READS = {
     "lyapunov": ("gravity", "body.inertia"),
     "adaptive": ("gravity", "body.mass"),
 }
-_STRUCTURES: dict = {}
-_MAX_STRUCTURES = 16
-_STATS = {"built": 0, "reused": 0}
-
-
-def structure_stats() -> dict:
-    """How many run structures this process built and how many runs reused one."""
-    return dict(_STATS)
-
-
-def _structure_key(tb: Testbed, extra) -> str:
-    doc = testbed_to_dict(tb)
-    for table, keys in _RUN_VALUES.items():
-        holder = doc if not table else doc.get(table, {})
-        for k in keys:
-            holder.pop(k, None)
-    doc["effects"] = {k: np.shape(v) for k, v in tb.effects.items()}  # names and shapes only
-    return json.dumps([doc, extra], sort_keys=True, default=str)
-
-
-def _structure(tb: Testbed, extra, build: Callable):
-    """``build()`` once per structure of ``tb`` (and ``extra``) in this process, then reused."""
-    key = _structure_key(tb, extra)
-    if key not in _STRUCTURES:
-        if len(_STRUCTURES) >= _MAX_STRUCTURES:  # a dispersed structural value: bounded
-            _STRUCTURES.pop(next(iter(_STRUCTURES)))
-        _STRUCTURES[key] = build()
-        _STATS["built"] += 1
-    else:
-        _STATS["reused"] += 1
-    return _STRUCTURES[key]
-
-
-def _reused_model(tb: Testbed, extra=()):
-    """The Model of ``tb``'s structure, built once, with ``tb``'s values as ``p0``."""
-    from airbearing.models.model import build_model
-
-    structure = _structure(tb, ["model", extra], lambda: build_model(tb))
-    return _run_model(structure, tb, params_of(structure, tb))
-
-
-def params_of(model, tb: Testbed) -> np.ndarray:
-    """The parameter vector ``p`` of ``tb`` for a Model of the same structure.
-
-    The values :func:`airbearing.models.model.build_model` puts in ``p0``
-    (:func:`~airbearing.models.model.parameter_values`), without building a model.
-    """
-    from airbearing.models.model import parameter_values
-
-    names, values, _ = parameter_values(tb, dict(tb.effects))
-    vals = dict(zip(names, values, strict=True))
-    missing = [n for n in model.p_names if n not in vals]
-    if missing:
-        raise RuntimeError(f"params_of: no value for model parameters {missing}")
-    return np.array([float(vals[n]) for n in model.p_names])
-
-
-@functools.cache
-def _run_model_class():
-    from airbearing.models.model import Model
-
-    class _RunModel(Model):
-        # the compiled loop (closed_loop_rollout, lru-cached by model) depends on the
-        # structure only: a run's model compares and hashes as its structure
-        def __eq__(self, other):
-            return getattr(other, "_structure", other) is self._structure
-
-        def __hash__(self):
-            return id(self._structure)
-
-    return _RunModel
-
-
-def _run_model(structure, tb: Testbed, p: np.ndarray):
-    """``structure`` with the run's testbed and ``p0``, equal to it as a cache key."""
-    fields = {f.name: getattr(structure, f.name) for f in dataclasses.fields(structure)}
-    m = _run_model_class()(**{**fields, "testbed": tb, "p0": p})
-    object.__setattr__(m, "_structure", structure)
-    return m
 
 
 def _dotted(doc: dict, key: str):
@@ -304,7 +220,7 @@ def _slew(tb: Testbed, *, yaw_deg, axis, duration, seed, ideal, steering, rate_l
         or (tb.body.dof == 1 and tuple(np.round(axis, 12)) != (0.0, 0.0, 1.0))
     ):  # else the scenario raises its own error for inputs it refuses
         structure, ctl = _structure(tb, ["slew", sorted(kw.items())], lambda: slew_loop(tb, **kw))
-        loop = (_run_model(structure, tb, params_of(structure, tb)), ctl)
+        loop = (_with_values(structure, tb), ctl)
     return slew(tb, angle_deg=yaw_deg, axis=axis, duration=duration, seed=seed, loop=loop, **kw)
 
 

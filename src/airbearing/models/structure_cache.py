@@ -1,0 +1,122 @@
+"""One structure-keyed cache of Models (and what is built on one) per process.
+
+A testbed's *structure* is everything but the values that enter a run as parameters
+``p`` (inertia, CM offset, masses, gravity, flywheel momentum, effect values), its
+initial state (gimbal angles) or its noise: two testbeds of one structure share one
+Model, and a Model with another testbed's values (:func:`with_values`) compares and
+hashes as its structure, so the compiled loops cached by Model are reused too.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import json
+from collections.abc import Callable
+
+import numpy as np
+
+from airbearing.io.testbed import Testbed, testbed_to_dict
+
+__all__ = ["structure_key", "cached", "model_for", "with_values", "params_of", "structure_stats"]
+
+# parameters and per-run values: everything else in the testbed decides the structure
+_RUN_VALUES = {
+    "": ("gravity", "name"),
+    "body": ("mass", "inertia", "cm_offset", "torque_noise"),
+    "cmg": ("flywheel_inertia", "flywheel_speed", "gimbal_angles"),
+    "sensors": ("gyro_noise", "accel_noise", "attitude_noise"),
+}
+_STRUCTURES: dict = {}
+_MAX_STRUCTURES = 16
+_STATS = {"built": 0, "reused": 0}
+
+
+def structure_stats() -> dict:
+    """How many structures this process built and how many times one was reused."""
+    return dict(_STATS)
+
+
+def structure_key(tb: Testbed, extra=()) -> str:
+    """The key of ``tb``'s structure (and ``extra``, JSON-able): its values left out,
+    effects by name and shape."""
+    doc = testbed_to_dict(tb)
+    for table, keys in _RUN_VALUES.items():
+        holder = doc if not table else doc.get(table, {})
+        for k in keys:
+            holder.pop(k, None)
+    doc["effects"] = {k: np.shape(v) for k, v in tb.effects.items()}  # names and shapes only
+    return json.dumps([doc, extra], sort_keys=True, default=str)
+
+
+def cached(tb: Testbed, extra, build: Callable):
+    """``build()`` once per structure of ``tb`` (and ``extra``) in this process, then reused."""
+    key = structure_key(tb, extra)
+    if key not in _STRUCTURES:
+        if len(_STRUCTURES) >= _MAX_STRUCTURES:  # a dispersed structural value: bounded
+            _STRUCTURES.pop(next(iter(_STRUCTURES)))
+        _STRUCTURES[key] = build()
+        _STATS["built"] += 1
+    else:
+        _STATS["reused"] += 1
+    return _STRUCTURES[key]
+
+
+def model_for(tb: Testbed, extra=()):
+    """The Model of ``tb``'s structure, built once, with ``tb``'s values as ``p0``.
+
+    Parameters
+    ----------
+    tb : Testbed
+        The testbed (its ``[effects]`` included).
+    extra : JSON-able, optional
+        More that decides the structure (a caller's own tag).
+
+    Returns
+    -------
+    Model
+    """
+    from airbearing.models.model import build_model
+
+    return with_values(cached(tb, ["model", extra], lambda: build_model(tb)), tb)
+
+
+def params_of(model, tb: Testbed) -> np.ndarray:
+    """The parameter vector ``p`` of ``tb`` for a Model of the same structure.
+
+    The values :func:`airbearing.models.model.build_model` puts in ``p0``
+    (:func:`~airbearing.models.model.parameter_values`), without building a model.
+    """
+    from airbearing.models.model import parameter_values
+
+    names, values, _ = parameter_values(tb, dict(tb.effects))
+    vals = dict(zip(names, values, strict=True))
+    missing = [n for n in model.p_names if n not in vals]
+    if missing:
+        raise RuntimeError(f"params_of: no value for model parameters {missing}")
+    return np.array([float(vals[n]) for n in model.p_names])
+
+
+@functools.cache
+def _run_model_class():
+    from airbearing.models.model import Model
+
+    class _RunModel(Model):
+        # the compiled loop (closed_loop_rollout, lru-cached by model) depends on the
+        # structure only: a run's model compares and hashes as its structure
+        def __eq__(self, other):
+            return getattr(other, "_structure", other) is self._structure
+
+        def __hash__(self):
+            return id(self._structure)
+
+    return _RunModel
+
+
+def with_values(structure, tb: Testbed):
+    """``structure`` (a Model) with ``tb`` and its values as ``p0``, equal to ``structure``
+    as a cache key."""
+    fields = {f.name: getattr(structure, f.name) for f in dataclasses.fields(structure)}
+    m = _run_model_class()(**{**fields, "testbed": tb, "p0": params_of(structure, tb)})
+    object.__setattr__(m, "_structure", structure)
+    return m
