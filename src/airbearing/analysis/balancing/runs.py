@@ -261,16 +261,9 @@ def run_balancing(
         The Model to run, default the one of ``testbed`` and ``effects``; a campaign passes
         one Model per structure with this run's values in ``p0``.
     """
-    check_inputs(testbed, method, duration)
-    if not math.isfinite(initial_offset) or abs(initial_offset) > testbed.masses.travel:
-        raise InputError(
-            f"initial_offset={initial_offset} m: expected a slider position within "
-            f"+-{testbed.masses.travel} m (masses.travel)"
-        )
+    _check_run(testbed, method, duration, initial_offset, start)
     if vertical_offset is None:
         vertical_offset = balanced_vertical_offset(testbed)
-    if start not in ("auto", "rest", "level"):
-        raise InputError(f"start={start!r}: expected auto, rest or level")
     model = _model(testbed, effects) if model is None else model
     balanced = np.array([0.0, 0.0, vertical_offset])
     x0, start, notes = _initial_state(model, initial_offset, balanced, start, initial_rate)
@@ -306,6 +299,17 @@ def run_balancing(
         settling_time_s=settle,
     )
     return BalancingRun(method, result, free, metrics)
+
+
+def _check_run(testbed: Testbed, method: str, duration: float, initial_offset: float, start):
+    check_inputs(testbed, method, duration)
+    if not math.isfinite(initial_offset) or abs(initial_offset) > testbed.masses.travel:
+        raise InputError(
+            f"initial_offset={initial_offset} m: expected a slider position within "
+            f"+-{testbed.masses.travel} m (masses.travel)"
+        )
+    if start not in ("auto", "rest", "level"):
+        raise InputError(f"start={start!r}: expected auto, rest or level")
 
 
 def _initial_state(model: Model, initial_offset: float, balanced, start: str, initial_rate):

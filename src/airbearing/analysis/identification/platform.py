@@ -22,6 +22,8 @@ the attitude itself, weighted by ``sensors.attitude_noise``.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from airbearing.analysis.identification.convex import (
@@ -231,9 +233,20 @@ def identify_platform(
     report("reading the logs", 0, 3)
     data = prepare_platform_logs(testbed, logs)
     _check_scale(testbed, data, fixed, prior, prior_weight)
-    gyro = all(d.gyro for d in data)
     js = float(np.trace(testbed.body.inertia_matrix) / 3)
-    margin = MARGIN_FRACTION * js if margin is None else float(margin)
+    fit = _Fit(
+        testbed=testbed,
+        data=data,
+        mass=mass,
+        fixed=fixed,
+        prior=prior,
+        prior_weight=prior_weight,
+        js=js,
+        margin=MARGIN_FRACTION * js if margin is None else float(margin),
+        gyro=all(d.gyro for d in data),
+        hold=hold,
+        free=np.array([i not in fixed for i in range(9)]),
+    )
     if point_o is None:
         point_o = 0.5 * testbed.body.cm_offset_vec  # seed 004: rho^o half the unbalance vector
     if window is None:
@@ -242,14 +255,44 @@ def identify_platform(
     stats = regression_statistics(
         testbed, data, mass=mass, point_o=point_o, form=form, window=window
     )
-    free = np.array([i not in fixed for i in range(9)])
+    ee, active, null, weak = _equation_error(fit, stats, form, window)
+    if method == "equation-error":
+        report("done", 3, 3)
+        return ee
+    # stage 2: output error from the convex answer; parameters in an exact null direction
+    # of stage 1 stay at their stage-1 value (fitting them would only move along it)
+    report("output error (IPOPT)", 2, 3)
+    result = _output_error(fit, ee, active, null, weak, segment)
+    report("done", 3, 3)
+    return result
 
-    # stage 1: weighted least squares with one noise level per axis (two passes)
+
+@dataclass(frozen=True, eq=False)
+class _Fit:
+    """What both stages of :func:`identify_platform` share."""
+
+    testbed: Testbed
+    data: list
+    mass: float
+    fixed: object
+    prior: Prior | None
+    prior_weight: float
+    js: float
+    margin: float
+    gyro: bool
+    hold: str | None
+    free: np.ndarray
+
+
+def _stage1_weights(fit: _Fit, stats, form: str):
+    """Weighted least squares with one noise level per axis (two passes): the weights and
+    the unconstrained answer."""
     # the rate noise alone puts a floor under each axis's equation noise: the endpoint rates
     # of eq. 47 (J_aa w(t_b) - J_aa w(t_a)) or the central-difference w' of eq. 45; a fit that
     # leaves less (a near-null direction absorbing the data) must not shrink the errors
+    testbed = fit.testbed
     sw = testbed.sensors.gyro_noise
-    if not gyro:  # rates from the attitude: a cubic's slope over 9 samples, ~ sigma_q / (3 dt)
+    if not fit.gyro:  # rates from the attitude: a cubic's slope over 9 samples, ~ sigma_q / (3 dt)
         sw = testbed.sensors.attitude_noise / (3 * testbed.sensors.dt)
     Jd = np.diag(testbed.body.inertia_matrix)
     dt = testbed.sensors.dt
@@ -259,16 +302,24 @@ def identify_platform(
     for _ in range(2):
         F = stats.information(weights)
         g = np.einsum("a,aji,aj->i", weights, stats.R, stats.z)
-        theta_ls = least_squares(F, g, fixed)
+        theta_ls = least_squares(F, g, fit.fixed)
         rss = stats.cost(theta_ls)
         var = np.maximum(rss / np.maximum(stats.rows - 3, 1), floor)
         weights = 1.0 / np.maximum(var, 1e-300)
+    return weights, theta_ls
+
+
+def _equation_error(fit: _Fit, stats, form: str, window: int):
+    """Stage 1 (seed 004 eqs. 45/47 in cvxpy): the result, its active constraints, the
+    parameters in an exact null direction and the weak directions."""
+    mass, prior, prior_weight, js = fit.mass, fit.prior, fit.prior_weight, fit.js
+    weights, theta_ls = _stage1_weights(fit, stats, form)
     theta_ee, warn = solve_convex(
         stats,
         weights,
         mass=mass,
-        fixed=fixed,
-        margin=margin,
+        fixed=fit.fixed,
+        margin=fit.margin,
         js=js,
         prior=prior if prior_weight > 0 or _has_bounds(prior) else None,
         prior_weight=prior_weight,
@@ -276,54 +327,37 @@ def identify_platform(
     F = stats.information(weights)
     if prior is not None and prior_weight > 0:
         F = F + prior_weight * np.diag(1.0 / prior.std() ** 2)
-    cov, cond, weak, null = diagnostics(F, free, theta_ee, mass=mass)
+    cov, cond, weak, null = diagnostics(F, fit.free, theta_ee, mass=mass)
     active = active_constraints(
-        theta_ee, theta_ls, mass=mass, margin=margin, js=js, fixed=fixed, prior=prior
+        theta_ee, theta_ls, mass=mass, margin=fit.margin, js=js, fixed=fit.fixed, prior=prior
     )
-    std, status = std_status(cov, free, theta_ee, js=js, fixed=fixed, active=active, null=null)
+    std, status = std_status(
+        cov, fit.free, theta_ee, js=js, fixed=fit.fixed, active=active, null=null
+    )
     rss = stats.cost(theta_ee)
-    unit = "N m s" if form == "integrated" else "N m"
-    warn += excitation_warnings(cov, cond, weak, theta_ee, free)
+    warn += excitation_warnings(cov, cond, weak, theta_ee, fit.free)
     warn += _null_warning(status)
-    if "pseudo_inertia_lmi" in active:
-        warn.append(
-            "the data alone give a non-physical inertia (triangle inequality or positive "
-            "definiteness violated); the constrained answer lies on that boundary and its "
-            "standard errors ignore the constraint"
-        )
-    if testbed.effects:
-        warn.append(
-            f"equation error ignores the testbed's effects {sorted(testbed.effects)}; "
-            "the output-error stage includes them"
-        )
-    if not gyro:
-        warn.append(
-            "attitude-only logs: the equation-error stage uses rates from a smooth "
-            "differentiation of the attitude (a local cubic over 9 samples), whose noise "
-            "biases it; the output-error stage fits the attitude itself"
-        )
+    warn += _equation_error_warnings(fit, active)
     prior_z = {}
     if prior is not None:
         prior_z, pw = prior_check(theta_ee, std, prior)
         warn += pw
-    logs_json = _log_entries(data)
-    nseg = sum(len(d.segments) for d in data)
     ee = make_result(
         theta_ee,
         std,
         condition_number=cond,
         active_constraints=active,
         residual_rms=float(np.sqrt(rss.sum() / stats.rows.sum())),
-        residual_unit=unit,
+        residual_unit="N m s" if form == "integrated" else "N m",
         warnings=warn,
         method="equation-error",
         mass=mass,
         std_status=status,
-        segments=nseg,
-        logs=logs_json,
+        segments=sum(len(d.segments) for d in fit.data),
+        logs=_log_entries(fit.data),
         weak_directions=weak,
         prior_z=prior_z,
-        held=hold,
+        held=fit.hold,
         details={
             "form": form,
             "window_samples": int(window) if form == "integrated" else None,
@@ -334,22 +368,38 @@ def identify_platform(
             "unconstrained_least_squares": theta_ls.tolist(),
         },
     )
-    if method == "equation-error":
-        report("done", 3, 3)
-        return ee
+    return ee, active, null, weak
 
-    # stage 2: output error from the convex answer; parameters in an exact null direction
-    # of stage 1 stay at their stage-1 value (fitting them would only move along it)
-    report("output error (IPOPT)", 2, 3)
-    from airbearing.analysis.identification.output_error import refine_output_error
 
-    free_oe = free & np.array([n not in null for n in PARAM_NAMES])
-    oe = refine_output_error(
-        testbed, data, theta_ee, mass=mass, free=free_oe, margin=margin, segment=segment
-    )
-    theta = oe.theta
+def _equation_error_warnings(fit: _Fit, active) -> list[str]:
+    """What the equation-error stage cannot see: its boundary, effects, attitude-only rates."""
+    warn = []
+    if "pseudo_inertia_lmi" in active:
+        warn.append(
+            "the data alone give a non-physical inertia (triangle inequality or positive "
+            "definiteness violated); the constrained answer lies on that boundary and its "
+            "standard errors ignore the constraint"
+        )
+    if fit.testbed.effects:
+        warn.append(
+            f"equation error ignores the testbed's effects {sorted(fit.testbed.effects)}; "
+            "the output-error stage includes them"
+        )
+    if not fit.gyro:
+        warn.append(
+            "attitude-only logs: the equation-error stage uses rates from a smooth "
+            "differentiation of the attitude (a local cubic over 9 samples), whose noise "
+            "biases it; the output-error stage fits the attitude itself"
+        )
+    return warn
+
+
+def _output_error_errors(fit: _Fit, oe, free_oe, active, null, weak):
+    """Standard errors of the output-error answer and their status: the diagnostics of its
+    Fisher matrix, or "not identifiable" for all when that matrix is singular."""
+    theta, mass, js = oe.theta, fit.mass, fit.js
     active_oe = [n for n in active if n.startswith(("known_offset", "held_"))]
-    active_oe += face(theta, mass=mass, margin=margin, js=js)
+    active_oe += face(theta, mass=mass, margin=fit.margin, js=js)
     Fi = fisher_from_covariance(oe.cov, free_oe, np.where(np.arange(9) < 6, js, 1e-3))
     cov_oe, cond_oe, weak_oe, null_oe = diagnostics(Fi, free_oe, theta, mass=mass)
     # singular Fisher information: the white-noise covariance says it (the sandwich may not)
@@ -363,30 +413,46 @@ def identify_platform(
         null_oe = {PARAM_NAMES[i]: why for i in np.flatnonzero(free_oe)}
     null_oe.update({n: null[n] for n in null})
     std_oe, status_oe = std_status(
-        cov_oe, free_oe, theta, js=js, fixed=fixed, active=active_oe, null=null_oe
+        cov_oe, free_oe, theta, js=js, fixed=fit.fixed, active=active_oe, null=null_oe
     )
     warn_oe = list(oe.warnings)
-    spec = testbed.sensors.gyro_noise if gyro else testbed.sensors.attitude_noise
-    rms = oe.rms_w if gyro else oe.rms_q
+    spec = fit.testbed.sensors.gyro_noise if fit.gyro else fit.testbed.sensors.attitude_noise
+    rms = oe.rms_w if fit.gyro else oe.rms_q
     if spec > 0 and rms > RESIDUAL_WARN * spec:
         warn_oe.append(
-            f"the output-error residual {rms:.3g} {'rad/s' if gyro else 'rad'} is "
+            f"the output-error residual {rms:.3g} {'rad/s' if fit.gyro else 'rad'} is "
             f"{rms / spec:.1f} times the sensor noise of the testbed file: the model misses "
             "a torque or a known value is wrong (try airbearing discrepancy on these logs)"
         )
     if pd_oe:
         warn_oe += excitation_warnings(cov_oe, cond_oe, weak_oe, theta, free_oe)
     warn_oe += _null_warning(status_oe)
+    return std_oe, status_oe, cond_oe, weak_oe, active_oe, warn_oe
+
+
+def _output_error(fit: _Fit, ee, active, null, weak, segment):
+    """Stage 2: the output-error refinement from the equation-error answer, as a result."""
+    from airbearing.analysis.identification.output_error import refine_output_error
+
+    gyro, data = fit.gyro, fit.data
+    free_oe = fit.free & np.array([n not in null for n in PARAM_NAMES])
+    oe = refine_output_error(
+        fit.testbed, data, ee.theta, mass=fit.mass, free=free_oe, margin=fit.margin,
+        segment=segment,
+    )  # fmt: skip
+    theta = oe.theta
+    std_oe, status_oe, cond_oe, weak_oe, active_oe, warn_oe = _output_error_errors(
+        fit, oe, free_oe, active, null, weak
+    )
     prior_z_oe = {}
-    if prior is not None:
-        prior_z_oe, pw = prior_check(theta, std_oe, prior)
+    if fit.prior is not None:
+        prior_z_oe, pw = prior_check(theta, std_oe, fit.prior)
         warn_oe += pw
     std_white = np.sqrt(np.maximum(np.diag(oe.cov_white), 0))
     std_white = np.where(np.isfinite(std_oe), std_white, np.nan)
     crb = np.sqrt(np.maximum(np.diag(oe.cov_spec), 0))
     crb = np.where(np.isfinite(std_oe), crb, np.nan)
     ok = np.isfinite(std_oe)
-    report("done", 3, 3)
     return make_result(
         theta,
         std_oe,
@@ -396,16 +462,16 @@ def identify_platform(
         residual_unit="rad/s" if gyro else "rad",
         warnings=warn_oe,
         method="output-error",
-        mass=mass,
+        mass=fit.mass,
         std_status=status_oe,
-        segments=nseg,
-        logs=logs_json,
+        segments=ee.segments,
+        logs=ee.logs,
         equation_error=ee,
         weak_directions=weak_oe,
         cramer_rao_inertia=sym_from6(crb),
         cramer_rao_cm_offset=crb[6:9].copy(),
         prior_z=prior_z_oe,
-        held=hold,
+        held=fit.hold,
         std_white=std_white,
         details={
             "residual_rms_rate_rad_s": oe.rms_w if gyro else None,
