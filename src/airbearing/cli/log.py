@@ -192,13 +192,16 @@ def check(
             f"{'unexplained':<{width}}  rows {_rows(quality.unexplained_rows)} "
             "(runs of 3 or more samples off the smooth fit: kept, not outliers)"
         )
-    typer.echo("tools")
-    name_width = max(len(n) for n in TOOLS)
-    for name in TOOLS:
-        ok, why = tools[name]
-        typer.echo(f"  {name:<{name_width}}  {'yes' if ok else 'no ':<3}  {why}")
+    _echo_tools({name: tools[name] for name in TOOLS})
     if json_path is not None:
         typer.echo(f"wrote {json_path}")
+
+
+def _echo_tools(tools: dict) -> None:
+    """What each tool can use of the log, as a table: tool, usable, why."""
+    from airbearing.cli.tables import echo_table
+
+    echo_table([[name, ok, why] for name, (ok, why) in tools.items()], ["tool", "usable", "why"])
 
 
 def _report_bad_cells(out, json_path, log_file, tb, error) -> None:
@@ -225,10 +228,7 @@ def _report_bad_cells(out, json_path, log_file, tb, error) -> None:
     for c, r in error.bad.items():
         typer.echo(f"          column '{c}': rows {row_ranges(r)} ({len(r)} cells)")
     typer.echo(f"why       {one_line(error)}")
-    typer.echo("tools")
-    width = max(len(n) for n in TOOLS)
-    for name in TOOLS:
-        typer.echo(f"  {name:<{width}}  no   bad cells in rows {row_ranges(error.rows)}")
+    _echo_tools({name: (False, f"bad cells in rows {row_ranges(error.rows)}") for name in TOOLS})
     if json_path is not None:
         typer.echo(f"wrote {json_path}")
 
