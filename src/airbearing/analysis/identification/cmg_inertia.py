@@ -196,8 +196,6 @@ def identify_cmg_inertia(
     SolverError
         When Clarabel fails.
     """
-    import cvxpy as cp  # 1.4 s to import: only when this fit runs
-
     if testbed.kind != "cmg" or testbed.body.dof != 1:
         raise InputError(
             f"{testbed.source}: CMG inertia identification needs kind = 'cmg' and dof = 1, got "
@@ -209,76 +207,12 @@ def identify_cmg_inertia(
     if not logs:
         raise InputError("identify: expected at least one log, got none")
     h0, beta = testbed.cmg.h0, testbed.cmg.skew
-    H = cmg_functions()["H"]
     names = FRICTION[friction]
     nfr = len(names)
-    # segments (never integrated across a gap: each its own constant) and outlier rows
-    # (left out of the rows and of the friction integrals), io.quality's rule
-    pieces, entries = [], []
-    for log in logs:
-        t, w, d = _log_arrays(testbed, log)
-        segments, outliers = log_quality(log, testbed)
-        usable = np.ones(len(t), bool)
-        usable[list(outliers)] = False
-        entries.append(
-            {
-                "source": log.source,
-                "segments": len(segments),
-                "segment_rows": [list(sg) for sg in segments],
-                "outlier_rows": [int(r) for r in outliers],
-            }
-        )
-        # seed 001 eq. 12, z component, in N m s
-        hz = h0 * np.asarray(H.map(len(t))(d.T, beta))[2]
-        if np.ptp(hz) <= 0:
-            raise InputError(f"{log.source}: the gimbals do not move: no momentum exchange to use")
-        for a, b in segments:
-            k = np.arange(a, b)[usable[a:b]]
-            if len(k) >= 3:
-                pieces.append((t[k], w[k], hz[k]))
-    nl = len(pieces)
-    npar = 1 + nfr + nl  # a = 1/J_z, friction/J_z, alpha per segment
-    R = None
-    rows = 0
+    pieces, entries = _momentum_pieces(testbed, logs)
+    R, rows, npar = _reduced_regressor(pieces, friction, nfr)
+    beta_hat, xv, rss, Rm, A, col = _constrained_fit(R, npar, nfr, testbed)
     sigma = testbed.sensors.gyro_noise
-    for li, (t, w, hz) in enumerate(pieces):
-        dt = np.diff(t)
-        X = np.zeros((len(t), npar))
-        X[:, 0] = -hz
-        cols = []
-        if friction == "viscous":
-            cols.append(np.r_[0, np.cumsum(0.5 * dt * (w[1:] + w[:-1]))])  # int w dt
-        elif friction == "coulomb":
-            sg = np.tanh(w / COULOMB_SMOOTHING)  # as the model's coulomb_friction
-            cols.append(np.r_[0, np.cumsum(0.5 * dt * (sg[1:] + sg[:-1]))])
-        for k, c in enumerate(cols):
-            X[:, 1 + k] = -c
-        X[:, 1 + nfr + li] = 1.0
-        M = np.column_stack([X, w])
-        R = np.linalg.qr(M if R is None else np.vstack([R, M]), mode="r")
-        rows += len(t)
-    if rows <= npar:
-        raise InputError(f"identify: {rows} samples for {npar} unknowns; give longer logs")
-    Rm, z, e = R[:npar, :npar], R[:npar, npar], abs(R[npar, npar]) if R.shape[0] > npar else 0.0
-    # scale the unknowns to order one for Clarabel
-    col = np.linalg.norm(Rm, axis=0)
-    if np.any(col <= 0):
-        raise InputError("identify: the logs carry no information on J_z")
-    A = Rm / col
-    x = cp.Variable(npar)
-    cost = cp.sum_squares(A @ x - z)
-    a_nom = 1.0 / testbed.body.yaw_inertia
-    cons = [x[0] >= INV_INERTIA_FLOOR * a_nom * col[0]]
-    cons += [x[1 + k] >= 0 for k in range(nfr)]
-    prob = cp.Problem(cp.Minimize(cost), cons)
-    try:
-        prob.solve(solver=cp.CLARABEL)
-    except cp.error.SolverError as err:
-        raise SolverError(f"CMG inertia fit (cvxpy, Clarabel): {err}") from err
-    if prob.status not in (cp.OPTIMAL, cp.OPTIMAL_INACCURATE):
-        raise SolverError(f"CMG inertia fit (cvxpy, Clarabel): status {prob.status!r}")
-    beta_hat = np.asarray(x.value) / col
-    rss = float(np.sum((Rm @ beta_hat - z) ** 2) + e**2)
     var = rss / max(rows - npar, 1)
     cov = var * np.linalg.pinv(Rm.T @ Rm)
     a = beta_hat[0]
@@ -295,10 +229,11 @@ def identify_cmg_inertia(
     ev = np.linalg.eigvalsh(Fn)
     cond = float(np.sqrt(ev[-1] / max(ev[0], 1e-300)))
     active, warnings = [], []
-    if x.value[0] <= INV_INERTIA_FLOOR * a_nom * col[0] * (1 + 1e-6):
+    a_nom = 1.0 / testbed.body.yaw_inertia
+    if xv[0] <= INV_INERTIA_FLOOR * a_nom * col[0] * (1 + 1e-6):
         active.append("inertia_positive")
     for k, n in enumerate(names):
-        if beta_hat[1 + k] <= 1e-9 * max(abs(beta_hat[1 + k]), 1e-300) or x.value[1 + k] <= 1e-9:
+        if beta_hat[1 + k] <= 1e-9 * max(abs(beta_hat[1 + k]), 1e-300) or xv[1 + k] <= 1e-9:
             active.append(f"friction_nonnegative:{n}")
     if std[0] > RELATIVE_STD_WARN * abs(J) or "inertia_positive" in active:
         warnings.append(
@@ -337,3 +272,91 @@ def identify_cmg_inertia(
             "J_zz": "pinned by inertia_positive" if "inertia_positive" in active else "estimated"
         },
     )
+
+
+def _momentum_pieces(testbed: Testbed, logs):
+    """Per usable piece ``(t, w_z, h_z)`` and per log its JSON entry: segments (never
+    integrated across a gap: each its own constant) and outlier rows (left out of the rows
+    and of the friction integrals), io.quality's rule."""
+    h0, beta = testbed.cmg.h0, testbed.cmg.skew
+    H = cmg_functions()["H"]
+    pieces, entries = [], []
+    for log in logs:
+        t, w, d = _log_arrays(testbed, log)
+        segments, outliers = log_quality(log, testbed)
+        usable = np.ones(len(t), bool)
+        usable[list(outliers)] = False
+        entries.append(
+            {
+                "source": log.source,
+                "segments": len(segments),
+                "segment_rows": [list(sg) for sg in segments],
+                "outlier_rows": [int(r) for r in outliers],
+            }
+        )
+        # seed 001 eq. 12, z component, in N m s
+        hz = h0 * np.asarray(H.map(len(t))(d.T, beta))[2]
+        if np.ptp(hz) <= 0:
+            raise InputError(f"{log.source}: the gimbals do not move: no momentum exchange to use")
+        for a, b in segments:
+            k = np.arange(a, b)[usable[a:b]]
+            if len(k) >= 3:
+                pieces.append((t[k], w[k], hz[k]))
+    return pieces, entries
+
+
+def _reduced_regressor(pieces, friction, nfr: int):
+    """The R factor of ``[X | w]`` over all pieces (QR, one piece at a time), the rows and
+    the unknowns ``a = 1/J_z``, friction/J_z and one constant per piece."""
+    nl = len(pieces)
+    npar = 1 + nfr + nl  # a = 1/J_z, friction/J_z, alpha per segment
+    R = None
+    rows = 0
+    for li, (t, w, hz) in enumerate(pieces):
+        dt = np.diff(t)
+        X = np.zeros((len(t), npar))
+        X[:, 0] = -hz
+        cols = []
+        if friction == "viscous":
+            cols.append(np.r_[0, np.cumsum(0.5 * dt * (w[1:] + w[:-1]))])  # int w dt
+        elif friction == "coulomb":
+            sg = np.tanh(w / COULOMB_SMOOTHING)  # as the model's coulomb_friction
+            cols.append(np.r_[0, np.cumsum(0.5 * dt * (sg[1:] + sg[:-1]))])
+        for k, c in enumerate(cols):
+            X[:, 1 + k] = -c
+        X[:, 1 + nfr + li] = 1.0
+        M = np.column_stack([X, w])
+        R = np.linalg.qr(M if R is None else np.vstack([R, M]), mode="r")
+        rows += len(t)
+    if rows <= npar:
+        raise InputError(f"identify: {rows} samples for {npar} unknowns; give longer logs")
+    return R, rows, npar
+
+
+def _constrained_fit(R, npar: int, nfr: int, testbed: Testbed):
+    """Least squares with ``a > 0`` and non-negative friction (cvxpy, Clarabel) on the
+    column-scaled reduced problem: the unknowns, the scaled solution, the residual sum of
+    squares, the R block, the scaled regressor and the column scales."""
+    import cvxpy as cp  # 1.4 s to import: only when this fit runs
+
+    Rm, z, e = R[:npar, :npar], R[:npar, npar], abs(R[npar, npar]) if R.shape[0] > npar else 0.0
+    # scale the unknowns to order one for Clarabel
+    col = np.linalg.norm(Rm, axis=0)
+    if np.any(col <= 0):
+        raise InputError("identify: the logs carry no information on J_z")
+    A = Rm / col
+    x = cp.Variable(npar)
+    cost = cp.sum_squares(A @ x - z)
+    a_nom = 1.0 / testbed.body.yaw_inertia
+    cons = [x[0] >= INV_INERTIA_FLOOR * a_nom * col[0]]
+    cons += [x[1 + k] >= 0 for k in range(nfr)]
+    prob = cp.Problem(cp.Minimize(cost), cons)
+    try:
+        prob.solve(solver=cp.CLARABEL)
+    except cp.error.SolverError as err:
+        raise SolverError(f"CMG inertia fit (cvxpy, Clarabel): {err}") from err
+    if prob.status not in (cp.OPTIMAL, cp.OPTIMAL_INACCURATE):
+        raise SolverError(f"CMG inertia fit (cvxpy, Clarabel): status {prob.status!r}")
+    beta_hat = np.asarray(x.value) / col
+    rss = float(np.sum((Rm @ beta_hat - z) ** 2) + e**2)
+    return beta_hat, np.asarray(x.value), rss, Rm, A, col

@@ -194,8 +194,6 @@ def identify_yaw_inertia(
     InputError
         Wrong testbed, missing columns, no usable window.
     """
-    from airbearing.models.model import build_model
-
     if testbed.kind != "platform" or testbed.body.dof != 1:
         raise InputError(
             f"{testbed.source}: yaw-inertia identification needs kind = 'platform', dof = 1"
@@ -204,11 +202,53 @@ def identify_yaw_inertia(
     if not logs:
         raise InputError("identify: expected at least one log, got none")
     window = max(1, int(round(testbed.sensors.rate))) if window is None else int(window)
+    x, y, entries, nseg, any_dipole = _window_equations(testbed, logs, window)
+    J, std, reason, res = _equation_error(testbed, x, y, any_dipole)
+    warnings = []
+    if reason is not None:
+        warnings.append(f"J_zz: not identifiable from this log: {reason}")
+    details = {"windows": int(len(y)), "window_samples": window, "effects": dict(testbed.effects)}
+    method_used = "equation-error"
+    rms = float(np.sqrt(np.mean(res**2)))
+    unit = "rad/s"
+    if method == "output-error" and reason is None:
+        if progress is not None:
+            progress("output error (shooting engine)", 1, 2)
+        fit = _output_error(testbed, logs, float(J))
+        J, std = fit["inertia"], fit["std"]
+        rms, unit, method_used = fit["gap"], fit["gap_unit"], "output-error"
+        details.update(fit["details"])
+        if fit["reason"]:
+            reason = fit["reason"]
+            J, std = float("nan"), float("nan")
+            warnings.append(f"J_zz: not identifiable from this log: {reason}")
+        warnings += fit["warnings"]
+    why = "estimated" if reason is None else f"not identifiable from this log: {reason}"
+    return YawIdentification(
+        inertia=float(J),
+        std_inertia=float(std),
+        std_status={"J_zz": why},
+        residual_rms=rms,
+        residual_unit=unit,
+        segments=nseg,
+        logs=tuple(entries),
+        warnings=tuple(warnings),
+        method=method_used,
+        details=details,
+    )
+
+
+def _window_equations(testbed: Testbed, logs, window: int):
+    """The window equations ``w_z(t_b) - w_z(t_a) = a int tau_z dt`` of every stretch between
+    gaps and outliers: the torque integrals, the rate changes, the logs' JSON entries, the
+    segment count and whether a dipole acts."""
+    from airbearing.models.model import build_model
+
     model = build_model(testbed)
     J0 = testbed.body.yaw_inertia
     iw = model.index("wz")[0]
     iy = model.index("yaw")[0]
-    xs, dws, entries, warnings = [], [], [], []
+    xs, dws, entries = [], [], []
     nseg = 0
     any_dipole = False
     for log in logs:
@@ -251,7 +291,12 @@ def identify_yaw_inertia(
             f"identify: no stretch between gaps and outliers is longer than one window of "
             f"{window} samples"
         )
-    x, y = np.concatenate(xs), np.concatenate(dws)
+    return np.concatenate(xs), np.concatenate(dws), entries, nseg, any_dipole
+
+
+def _equation_error(testbed: Testbed, x, y, any_dipole: bool):
+    """Least squares of ``y = a x``: J_z = 1/a, its standard error (the residual's), the
+    reason when there is none, and the residual."""
     sxx = float(x @ x)
     reason = None
     if not testbed.effects and not any_dipole:
@@ -279,36 +324,7 @@ def identify_yaw_inertia(
         )
     if reason is not None:
         J, std = float("nan"), float("nan")
-        warnings.append(f"J_zz: not identifiable from this log: {reason}")
-    details = {"windows": int(len(y)), "window_samples": window, "effects": dict(testbed.effects)}
-    method_used = "equation-error"
-    rms = float(np.sqrt(np.mean(res**2)))
-    unit = "rad/s"
-    if method == "output-error" and reason is None:
-        if progress is not None:
-            progress("output error (shooting engine)", 1, 2)
-        fit = _output_error(testbed, logs, float(J))
-        J, std = fit["inertia"], fit["std"]
-        rms, unit, method_used = fit["gap"], fit["gap_unit"], "output-error"
-        details.update(fit["details"])
-        if fit["reason"]:
-            reason = fit["reason"]
-            J, std = float("nan"), float("nan")
-            warnings.append(f"J_zz: not identifiable from this log: {reason}")
-        warnings += fit["warnings"]
-    why = "estimated" if reason is None else f"not identifiable from this log: {reason}"
-    return YawIdentification(
-        inertia=float(J),
-        std_inertia=float(std),
-        std_status={"J_zz": why},
-        residual_rms=rms,
-        residual_unit=unit,
-        segments=nseg,
-        logs=tuple(entries),
-        warnings=tuple(warnings),
-        method=method_used,
-        details=details,
-    )
+    return J, std, reason, res
 
 
 def _output_error(testbed: Testbed, logs, J_start: float) -> dict:
