@@ -334,19 +334,16 @@ def _build(cc: str, name: str, source: str, lib: Path, side: Path) -> None:
         if res.returncode != 0 or not out.exists():
             raise RuntimeError(f"C compiler failed on {name}: {res.stderr.strip()[:500]}")
         digest = _digest_file(out)
-        # copy into the cache folder under a unique name, then rename into place
-        fd, part = tempfile.mkstemp(dir=lib.parent, prefix=f".{lib.stem}-", suffix=".tmp")
-        os.close(fd)
+        # copy into the cache folder under a unique name, then rename into place (the
+        # sidecar first: a library is never in place without its digest)
+        from airbearing.io.output import write_atomic, write_temp
+
+        part = write_temp(lib, write=lambda p: shutil.copyfile(out, p))
         try:
-            shutil.copyfile(out, part)
-            side_part = part + ".sha256.tmp"
-            Path(side_part).write_text(digest + "\n")
-            os.replace(side_part, side)
+            write_atomic(side, digest + "\n")
             os.replace(part, lib)
         finally:
-            for leftover in (part, part + ".sha256.tmp"):
-                with contextlib.suppress(FileNotFoundError):
-                    os.unlink(leftover)
+            part.unlink(missing_ok=True)
 
 
 def _source(fn) -> str:
@@ -469,14 +466,12 @@ def _via_ref(ref: Path, name: str, fn):
 
 
 def _write_ref(ref: Path, target: str) -> None:
-    part = ref.with_name(f".{ref.name}.{os.getpid()}.{threading.get_ident()}.tmp")
+    from airbearing.io.output import write_atomic
+
     try:
-        part.write_text(target + "\n")
-        os.replace(part, ref)
+        write_atomic(ref, target + "\n")
     except OSError as e:  # only a shortcut: the next process generates the C source again
         _log().warning("could not write %s (%s)", ref, e)
-        with contextlib.suppress(FileNotFoundError):
-            part.unlink()
 
 
 def _try_load(name: str, lib: Path, fn):
