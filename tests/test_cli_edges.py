@@ -312,6 +312,10 @@ def test_cli_choices_agree_with_the_library():
     from airbearing.design import loops, sizing, steering
 
     assert set(simulate.STEERING) == set(steering.STEERING_LAWS)
+    from airbearing.analysis.simulation.scenarios import SCENARIO_DURATIONS
+
+    durations = ", ".join(f"{k} {v:g}" for k, v in SCENARIO_DURATIONS.items())
+    assert simulate.DURATIONS_HELP == durations
     assert set(gains.LOOPS) == set(loops.LOOPS) and set(gains.SPLITS) == set(loops.SPLITS)
     t5 = sizing.TABLE5_DEFAULTS
     assert cmg.TABLE5["gimbal_rate_deg"] == pytest.approx(

@@ -31,6 +31,9 @@ SCENARIOS, STEERING, RATE_LIMITS = get_args(Scenario), get_args(Steering), get_a
 #: deg, largest slew: the attitude loop takes the shorter way round, so a larger angle
 #: would silently become a different slew (270 deg is a -90 deg slew).
 MAX_SLEW_DEG = 180.0
+#: Default run lengths, s, as --help shows them (airbearing.analysis.simulation.scenarios.
+#: SCENARIO_DURATIONS, which the command uses; a test checks they agree).
+DURATIONS_HELP = "slew 40, free 60, spindown 120"
 #: Glitch kinds of --glitch (airbearing.analysis.simulation.artefacts.GLITCH_KINDS; a test
 #: checks they agree; not imported here to keep start-up light).
 GLITCHES = "rate_zero|rate_spike|quat_wrong_frame|yaw_offset|yaw_zero"
@@ -50,7 +53,7 @@ def simulate(
     ] = 180.0,
     axis: Annotated[tuple[float, float, float], typer.Option(help="Slew axis, body.")] = (0, 0, 1),
     duration: Annotated[
-        float | None, typer.Option(help="Run length, s (slew 40, free 60, spindown 120).")
+        float | None, typer.Option(help=f"Run length, s ({DURATIONS_HELP}).")
     ] = None,
     seed: Annotated[
         int, typer.Option("--noise-seed", min=0, help="Seed of the sensor noise, >= 0.")
