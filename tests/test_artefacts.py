@@ -319,7 +319,7 @@ def test_rehearsal_log_and_its_answer_key(tmp_path):
     assert key["outlier_rows"] == [0, 10, 300, after, 700]
     assert parse_gap("150:20") == (150.0, 20.0)
     for bad in ("150", "a:b", "1:-2"):
-        with pytest.raises(InputError, match="--gap"):
+        with pytest.raises(InputError, match="^gap '"):
             parse_gap(bad)
     with pytest.raises(InputError, match="KIND:ROW"):
         parse_glitch("rate_drift:4")

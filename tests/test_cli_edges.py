@@ -448,3 +448,14 @@ def test_outputs_plan_refuses_before_work(tmp_path):
     out.text(p, "<html></html>")
     out.commit()
     assert (tmp_path / "new" / "r.html").read_text() == "<html></html>"
+
+
+@pytest.mark.parametrize(
+    ("option", "value", "words"),
+    [("--gap", "150", "expected START:LENGTH"), ("--glitch", "rate_drift:4", "KIND:ROW")],
+)
+def test_simulate_artefact_errors_name_the_flag(capfd, option, value, words):
+    """The library's parsers name their parameter (gap, glitch); the CLI names its flag."""
+    assert run(["simulate", "cmg-yaw", "--scenario", "free", option, value]) == 2
+    err = capfd.readouterr().err
+    assert f"{option} '{value}'" in err and words in err, err

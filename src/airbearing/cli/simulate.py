@@ -165,8 +165,11 @@ def _artefacts(scenario, jitter, gap, glitch, first_sample, times, duration):
     """The parsed ``--gap`` and ``--glitch`` values, and whether any artefact is asked for."""
     from airbearing.analysis.simulation.rehearsal import parse_gap, parse_glitch
 
-    gaps = [parse_gap(g) for g in gap or ()]
-    glitches = [parse_glitch(g) for g in glitch or ()]
+    try:  # the library names its parameters; the CLI names its flags
+        gaps = [parse_gap(g) for g in gap or ()]
+        glitches = [parse_glitch(g) for g in glitch or ()]
+    except InputError as e:
+        raise InputError(f"--{e}") from None
     artefacts = bool(jitter or gaps or glitches or first_sample or times)
     if artefacts and scenario == "slew":
         raise InputError(

@@ -90,16 +90,16 @@ def parse_glitch(text: str) -> tuple:
     kind, sep, rest = str(text).partition(":")
     if not sep or kind not in GLITCH_KINDS:
         raise InputError(
-            f"--glitch {text!r}: expected KIND:ROW[,ROW...] with KIND one of "
+            f"glitch {text!r}: expected KIND:ROW[,ROW...] with KIND one of "
             f"{', '.join(GLITCH_KINDS)} and 0-based rows"
         )
     rows, at, column = rest.partition("@")
     try:
         out = tuple(int(r) for r in rows.split(","))
     except ValueError:
-        raise InputError(f"--glitch {text!r}: rows must be 0-based integers") from None
+        raise InputError(f"glitch {text!r}: rows must be 0-based integers") from None
     if at and kind != "rate_spike":
-        raise InputError(f"--glitch {text!r}: only rate_spike takes @COLUMN (wx, wy or wz)")
+        raise InputError(f"glitch {text!r}: only rate_spike takes @COLUMN (wx, wy or wz)")
     return (kind, out, column) if at else (kind, out)
 
 
@@ -111,9 +111,9 @@ def parse_gap(text: str) -> tuple[float, float]:
             raise ValueError
         out = (float(start), float(length))
     except ValueError:
-        raise InputError(f"--gap {text!r}: expected START:LENGTH in s, e.g. 150:20") from None
+        raise InputError(f"gap {text!r}: expected START:LENGTH in s, e.g. 150:20") from None
     if not all(np.isfinite(out)) or out[1] <= 0:
-        raise InputError(f"--gap {text!r}: expected a finite start and a positive length in s")
+        raise InputError(f"gap {text!r}: expected a finite start and a positive length in s")
     return out
 
 
