@@ -259,30 +259,53 @@ def two_step(
     if balance_duration is None:
         balance_duration = step1_duration(testbed)
     check_inputs(testbed, method, balance_duration)
-    from airbearing.analysis.identification.platform import identify_platform
-
-    d = np.asarray(known_displacement, dtype=float).reshape(-1)
-    if d.shape != (3,) or not np.all(np.isfinite(d)) or not np.any(d != 0):
-        raise InputError(
-            f"known_displacement={known_displacement!r}: expected three finite slider "
-            "displacements in m, not all zero"
-        )
+    d = _displacement(known_displacement)
     model = build_model(testbed)
     b_lab = testbed.field.lab_vec if testbed.field is not None else np.zeros(3)
-    mass, m_i, A = testbed.body.mass, testbed.masses.mass_vec, testbed.masses.axes_matrix
-    travel = testbed.masses.travel
     r_true0 = testbed.body.cm_offset_vec
-
     report = _progress(progress)
     # step 1: in-plane balancing (seed 004 eqs. 34/51)
     report(f"step 1: in-plane balancing, {balance_duration:.0f} s", 0, 3)
+    r1, s1 = _step1(model, method, balance_duration, initial_rate, seed, noise)
+    # step 2: free oscillations before and after a known displacement, identification,
+    # iterated as seed 004 does: each round adds two free oscillations about the sliders'
+    # current positions to the data ("merged together") until the estimate stops moving
+    report("step 2: free oscillations and identification", 1, 3)
+    found, s_final, J_est = _step2(model, s1, d, b_lab, in_plane_known, identification_duration,
+                                   identify_method, seed, noise)  # fmt: skip
+    # step 3: kinetic-energy spread, seed 004 eqs. 52-54
+    report("step 3: kinetic energy before and after", 2, 3)
+    ke = _step3(model, s_final, J_est, b_lab, ke_duration, seed, noise)
+    return TwoStepResult(
+        **ke,
+        **found,
+        testbed=testbed.name,
+        method=method,
+        cm_offset_true_m=r_true0.tolist(),
+        identify_method=identify_method,
+        known_displacement_m=d.tolist(),
+        in_plane_known=bool(in_plane_known),
+        sliders_step1_m=s1.tolist(),
+        residual_offset_step1_m=true_offset(testbed, s1, r_true0).tolist(),
+        residual_offset_m=true_offset(testbed, s_final, r_true0).tolist(),
+        g_perp_rms_step1=balancing_metrics(r1).g_perp_rms,
+        balance_duration_s=float(balance_duration),
+        seed=seed,
+    )
+
+
+def _step1(model, method: str, duration: float, initial_rate, seed: int, noise: bool):
+    """In-plane balancing (seed 004 eqs. 34/51): the run and the balanced slider positions
+    (the mean of its last third, in whole steps)."""
+    testbed = model.testbed
+    travel, m_i, mass = testbed.masses.travel, testbed.masses.mass_vec, testbed.body.mass
     pid = tilt_pid_gains(testbed)
     gains = {"lyapunov": lyapunov_gains_from_pid(pid), "adaptive": (pid[1], pid[0])}.get(
         method, pid
     )
     ctl = balancing_controller(model, method, slider_start=np.zeros(3), gains=gains)
     x0 = model.x0(w=initial_rate)
-    r1 = simulate(model, ctl, duration=balance_duration, x0=x0, seed=seed, noise=noise)
+    r1 = simulate(model, ctl, duration=duration, x0=x0, seed=seed, noise=noise)
     names = r1.controller.extra_names
     motor = r1.extra[:, [names.index(f"motor{i}") for i in (1, 2, 3)]]
     if np.any(np.abs(motor[-1]) >= travel * (1 - 1e-9)):
@@ -294,14 +317,21 @@ def two_step(
     s1 = np.mean(last_third(motor), axis=0)  # the steady state's balanced positions
     if testbed.masses.step > 0:
         s1 = np.round(s1 / testbed.masses.step) * testbed.masses.step
-    M1 = A.T @ (m_i * s1)  # mass moment of the sliders, seed 004 eq. 5
-    known_xy = -M1[:2] / mass  # in-plane offset at zero sliders, known after step 1
+    return r1, s1
 
-    # step 2: free oscillations before and after a known displacement, identification,
-    # iterated as seed 004 does: each round adds two free oscillations about the sliders'
-    # current positions to the data ("merged together") until the estimate stops moving
-    report("step 2: free oscillations and identification", 1, 3)
-    step = testbed.masses.step
+
+def _step2(model, s1, d, b_lab, in_plane_known: bool, duration: float, identify_method: str,
+           seed: int, noise: bool):  # fmt: skip
+    """Identification rounds until the vertical offset stops moving: the result's fields of
+    step 2, the final slider positions (in whole steps) and the identified inertia."""
+    from airbearing.analysis.identification.platform import identify_platform
+
+    testbed = model.testbed
+    mass, m_i, A = testbed.body.mass, testbed.masses.mass_vec, testbed.masses.axes_matrix
+    travel, step = testbed.masses.travel, testbed.masses.step
+    M1 = A.T @ (m_i * s1)  # mass moment of the sliders, seed 004 eq. 5
+    # the in-plane offset at zero sliders is known after step 1
+    known_xy = tuple(-M1[:2] / mass) if in_plane_known else None
     # the CM shift of one step of the vertical rail: a finer change cannot be commanded
     tol = max(float(m_i[2] * step / mass), STEP1_RESIDUAL)
     logs, estimates = [], []
@@ -315,18 +345,11 @@ def two_step(
             )
         seeds = (seed + 1, seed + 2) if k == 0 else (seed + 10 + 2 * k, seed + 11 + 2 * k)
         logs += [
-            _free(model, s, b_lab, model.x0(w=SEED004_RATES[rate]), identification_duration,
-                  sd, noise).log
+            _free(model, s, b_lab, model.x0(w=SEED004_RATES[rate]), duration, sd, noise).log
             for s, rate, sd in ((s_cur, "balancing", seeds[0]), (s2, "balanced", seeds[1]))
-        ]  # fmt: skip
-        ident = identify_platform(
-            testbed,
-            logs,
-            known_offset_xy=tuple(known_xy) if in_plane_known else None,
-            method=identify_method,
-        )
+        ]
+        ident = identify_platform(testbed, logs, known_offset_xy=known_xy, method=identify_method)
         r_est = np.asarray(ident.cm_offset, float).reshape(3)
-        J_est = np.asarray(ident.inertia, float).reshape(3, 3)
         estimates.append(float(r_est[2]))
         r_tot = r_est + M1 / mass  # identified offset with the sliders at s1
         if in_plane_known:
@@ -343,13 +366,28 @@ def two_step(
         if k > 0 and abs(estimates[-1] - estimates[-2]) <= tol:
             break
         s_cur = s_final
+    J_est = np.asarray(ident.inertia, float).reshape(3, 3)
+    found = {
+        "vertical_offset_identified_m": float(r_est[2]),
+        "cm_offset_identified_m": r_est.tolist(),
+        "inertia_identified": J_est.tolist(),
+        "identify_warnings": list(ident.warnings),
+        "sliders_final_m": s_final.tolist(),
+        "iterations": len(estimates),
+        "vertical_offset_estimates_m": estimates,
+        "sliders_final_unrounded_m": s_exact.tolist(),
+    }
+    return found, s_final, J_est
 
-    # step 3: kinetic-energy spread, seed 004 eqs. 52-54
-    report("step 3: kinetic energy before and after", 2, 3)
+
+def _step3(model, s_final, J_est, b_lab, duration: float, seed: int, noise: bool):
+    """Kinetic-energy series before and after (seed 004 eqs. 52-54): true rates, measured
+    rates, and the spread the gyro noise alone leaves (J), as the result's fields."""
+    testbed = model.testbed
     before = _free(model, np.zeros(3), b_lab, model.x0(w=SEED004_RATES["unbalanced"]),
-                   ke_duration, seed + 3, noise)  # fmt: skip
+                   duration, seed + 3, noise)  # fmt: skip
     after = _free(model, s_final, b_lab, model.x0(w=SEED004_RATES["balanced"]),
-                  ke_duration, seed + 4, noise)  # fmt: skip
+                  duration, seed + 4, noise)  # fmt: skip
     J_b = inertia_with_sliders(testbed, np.zeros(3), J_est)
     J_a = inertia_with_sliders(testbed, s_final, J_est)
     w_idx = model.index(["wx", "wy", "wz"])
@@ -359,33 +397,24 @@ def two_step(
     ke_am = kinetic_energy(after.log.rates(), J_a)
     sigma = testbed.sensors.gyro_noise if noise else 0.0
     floor = 2.0 * sigma * float(np.sqrt(np.mean(np.sum((after.x[:-1, w_idx] @ J_a.T) ** 2, 1))))
-    return TwoStepResult(
-        testbed=testbed.name,
-        method=method,
-        ke_std_before=float(np.std(ke_b)),
-        ke_std_after=float(np.std(ke_a)),
-        ke_reduction=float(1 - np.std(ke_a) / np.std(ke_b)),
-        vertical_offset_identified_m=float(r_est[2]),
-        cm_offset_identified_m=r_est.tolist(),
-        cm_offset_true_m=r_true0.tolist(),
-        inertia_identified=J_est.tolist(),
-        identify_method=identify_method,
-        identify_warnings=list(ident.warnings),
-        known_displacement_m=d.tolist(),
-        in_plane_known=bool(in_plane_known),
-        sliders_step1_m=s1.tolist(),
-        sliders_final_m=s_final.tolist(),
-        residual_offset_step1_m=true_offset(testbed, s1, r_true0).tolist(),
-        residual_offset_m=true_offset(testbed, s_final, r_true0).tolist(),
-        g_perp_rms_step1=balancing_metrics(r1)["g_perp_rms"],
-        balance_duration_s=float(balance_duration),
-        seed=seed,
-        ke_rates="true",
-        ke_std_before_measured=float(np.std(ke_bm)),
-        ke_std_after_measured=float(np.std(ke_am)),
-        ke_reduction_measured=float(1 - np.std(ke_am) / np.std(ke_bm)),
-        ke_noise_floor=floor,
-        iterations=len(estimates),
-        vertical_offset_estimates_m=estimates,
-        sliders_final_unrounded_m=s_exact.tolist(),
-    )
+    return {
+        "ke_std_before": float(np.std(ke_b)),
+        "ke_std_after": float(np.std(ke_a)),
+        "ke_reduction": float(1 - np.std(ke_a) / np.std(ke_b)),
+        "ke_rates": "true",
+        "ke_std_before_measured": float(np.std(ke_bm)),
+        "ke_std_after_measured": float(np.std(ke_am)),
+        "ke_reduction_measured": float(1 - np.std(ke_am) / np.std(ke_bm)),
+        "ke_noise_floor": floor,
+    }
+
+
+def _displacement(known_displacement) -> np.ndarray:
+    """The known slider displacement of step 2 (m), checked."""
+    d = np.asarray(known_displacement, dtype=float).reshape(-1)
+    if d.shape != (3,) or not np.all(np.isfinite(d)) or not np.any(d != 0):
+        raise InputError(
+            f"known_displacement={known_displacement!r}: expected three finite slider "
+            "displacements in m, not all zero"
+        )
+    return d
