@@ -159,13 +159,7 @@ def write_temp(
     return tmp
 
 
-def write_atomic(
-    path: str | os.PathLike,
-    data: str | bytes | None = None,
-    *,
-    write: Callable[[Path], object] | None = None,
-    keep_mode: bool = False,
-) -> Path:
+def write_atomic(path: str | os.PathLike, data: str | bytes | None = None, **how) -> Path:
     """Write a file via a temporary file and rename, so no partial file is left on failure.
 
     Parameters
@@ -173,18 +167,17 @@ def write_atomic(
     path : str or path-like
         The file to write (its folder must exist).
     data : str or bytes, optional
-        The content; or give ``write`` instead.
-    write : callable, optional
-        ``write(tmp_path)`` writes the content (e.g. ``df.to_parquet``).
-    keep_mode : bool
-        Keep the mode of the file replaced (default: a new file's 0644).
+        The content; or give ``write=`` instead.
+    **how
+        ``write`` (``write(tmp_path)`` writes the content, e.g. ``df.to_parquet``) and
+        ``keep_mode``, as :func:`write_temp`.
 
     Returns
     -------
     pathlib.Path
         ``path``.
     """
-    tmp = write_temp(path, data, write=write, keep_mode=keep_mode)
+    tmp = write_temp(path, data, **how)
     try:
         os.replace(tmp, path)
     except BaseException:

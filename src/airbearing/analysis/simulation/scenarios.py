@@ -129,8 +129,8 @@ def slew(
         )
     if loop is None:
         loop = slew_loop(
-            testbed, ideal=ideal, steering=steering, steering_options=steering_options,
-            rate_limit_mode=rate_limit_mode, form=form, effects=effects, gains=gains,
+            testbed, effects, ideal=ideal, gains=gains, steering=steering,
+            steering_options=steering_options, rate_limit_mode=rate_limit_mode, form=form,
         )  # fmt: skip
     model, ctl = loop
     if testbed.body.dof == 1 and tuple(np.round(axis, 12)) != (0.0, 0.0, 1.0):
@@ -142,17 +142,13 @@ def slew(
 
 
 def slew_loop(
-    testbed: Testbed,
-    *,
-    ideal: bool = False,
-    steering: str = "mp",
-    steering_options: dict | None = None,
-    rate_limit_mode: str = "scale",
-    form: str = "normalised",
-    effects: Mapping | None = None,
-    gains=None,
+    testbed: Testbed, effects: Mapping | None = None, *, ideal: bool = False, gains=None, **steering
 ) -> tuple[Model, object]:
-    """The Model and seed-001 attitude controller a :func:`slew` runs (arguments as there).
+    """The Model and seed-001 attitude controller a :func:`slew` runs.
+
+    ``effects``, ``ideal`` and ``gains`` as in :func:`slew`; ``steering``: the controller's
+    ``steering``, ``steering_options``, ``rate_limit_mode`` and ``form``
+    (:func:`airbearing.design.attitude.cmg_attitude_controller`).
 
     Returns
     -------
@@ -160,15 +156,7 @@ def slew_loop(
     """
     model = build_model(testbed, effects)
     kwargs = {} if gains is None else {"gains": gains}
-    ctl = cmg_attitude_controller(
-        model,
-        steering=steering,
-        steering_options=steering_options,
-        lowpass=1.0 if ideal else None,
-        rate_limit_mode=rate_limit_mode,
-        form=form,
-        **kwargs,
-    )
+    ctl = cmg_attitude_controller(model, lowpass=1.0 if ideal else None, **steering, **kwargs)
     return model, ctl
 
 
