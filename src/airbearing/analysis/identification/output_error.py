@@ -165,45 +165,106 @@ def refine_output_error(
     SolverError
         When IPOPT fails (infeasible, iteration limit, numerical trouble).
     """
-    from airbearing.analysis.identification.regression import PARAM_NAMES, theta_to_body
     from airbearing.analysis.shooting import ShootingProblem
-    from airbearing.io.testbed import Body
-    from airbearing.models.model import build_model
 
     free = np.ones(9, bool) if free is None else np.asarray(free, bool)
     theta0 = np.asarray(theta0, float)
+    model, J0 = _model_at(testbed, theta0, mass)
+    windows = platform_windows(model, data, segment)
+    gyro = all(d.gyro for d in data)
+    spec_w, spec_q = testbed.sensors.gyro_noise, testbed.sensors.attitude_noise
+    sw = sigma_w if sigma_w is not None else (spec_w if spec_w > 0 else 1e-4)
+    sq = sigma_q if sigma_q is not None else (spec_q if spec_q > 0 else SIGMA_Q_START)
+    sw, sq = max(sw, SIGMA_FLOOR), max(sq, SIGMA_FLOOR)
+    outputs = ("rate", "quat") if gyro else ("quat",)
+    prob = ShootingProblem(
+        model, windows, outputs, sw, sq, substeps=substeps, theta_slots=THETA_SLOTS_OE
+    )
+    p_base, S, fidx = _free_parameters(model, free)
+    js = float(np.trace(J0) / 3)
+    phys = physical_constraint(theta0, free, mass=mass, margin=margin, js=js)
+    fit, noise, iterations, warnings = _fit_with_noise(
+        prob, p_base, S, theta0[fidx], phys, (sw, sq), gyro, max_iter, max_refits,
+        _FIT_NAME.format(logs=len(data), pieces=windows.n),
+    )  # fmt: skip
+    sw, sq, used_w, used_q, rms = noise
+    # Fisher information at the re-estimated noise and at the sensor specification (the
+    # Cramer-Rao bound for that noise); the fit's Jacobian is weighted by (sw, sq)
+    warnings += _spec_warnings(gyro, spec_w, spec_q)
+    spec_w_, spec_q_ = (spec_w if spec_w > 0 else sw), (spec_q if spec_q > 0 else sq)
+    cov, cov_spec, cov_white = _covariances(
+        prob, fit, free, fit_weights=((used_w / sw) ** 2, (used_q / sq) ** 2),
+        spec_weights=((used_w / spec_w_) ** 2, (used_q / spec_q_) ** 2),
+    )  # fmt: skip
+    theta_full = theta0.copy()
+    theta_full[fidx] = fit.theta
+    X0, first = prob.start_states(fit.delta), np.r_[True, ~windows.link]  # segment starts
+    return OutputErrorResult(
+        theta=theta_full,
+        cov=cov,
+        cov_spec=cov_spec,
+        sigma_w=float(sw) if gyro else float("nan"),
+        sigma_q=float(sq),
+        rms_w=rms["rate"] if gyro else float("nan"),
+        rms_q=rms["quat"],
+        x0=[X0[j] for j in np.flatnonzero(first)],
+        shooting_segments=int(windows.n),
+        iterations=iterations,
+        status=fit.status,
+        warnings=warnings,
+        cov_white=cov_white,
+    )
+
+
+#: What a failed fit says (with its logs and shooting pieces).
+_FIT_NAME = (
+    "output-error fit ({logs} logs, {pieces} shooting pieces; the equation-error estimate "
+    "may be too far off: try more logs, shorter segments or method='equation-error')"
+)
+
+
+def _model_at(testbed: Testbed, theta0: np.ndarray, mass: float):
+    """The Model of ``testbed`` with the start's inertia and offset, and that inertia."""
+    from airbearing.analysis.identification.regression import theta_to_body
+    from airbearing.io.testbed import Body
+    from airbearing.models.model import build_model
+
     J0, r0 = theta_to_body(theta0)
     tb = testbed.replace(
         body=Body(dof=3, mass=mass, inertia=tuple(map(tuple, J0)), cm_offset=tuple(r0),
                   torque_noise=testbed.body.torque_noise)
     )  # fmt: skip
-    model = build_model(tb)
-    windows = platform_windows(model, data, segment)
-    gyro = all(d.gyro for d in data)
-    outputs = ("rate", "quat") if gyro else ("quat",)
-    spec_w = testbed.sensors.gyro_noise
-    spec_q = testbed.sensors.attitude_noise
-    sw = sigma_w if sigma_w is not None else (spec_w if spec_w > 0 else 1e-4)
-    sq = sigma_q if sigma_q is not None else (spec_q if spec_q > 0 else SIGMA_Q_START)
-    sw, sq = max(sw, SIGMA_FLOOR), max(sq, SIGMA_FLOOR)
-    prob = ShootingProblem(
-        model, windows, outputs, sw, sq, substeps=substeps, theta_slots=THETA_SLOTS_OE
-    )
-    # p = p_base + S theta: theta are the free entries themselves (kg m^2, m)
+    return build_model(tb), J0
+
+
+def _spec_warnings(gyro: bool, spec_w: float, spec_q: float) -> list[str]:
+    """A sensor noise of zero in the testbed: the Cramer-Rao bound falls back to the fit's."""
+    if gyro and spec_w <= 0:
+        return ["testbed sensors.gyro_noise = 0: the Cramer-Rao bound uses the fitted noise"]
+    if not gyro and spec_q <= 0:
+        return ["testbed sensors.attitude_noise = 0: the Cramer-Rao bound uses the fitted noise"]
+    return []
+
+
+def _free_parameters(model, free):
+    """``p = p_base + S theta``: theta are the free entries themselves (kg m^2, m)."""
+    from airbearing.analysis.identification.regression import PARAM_NAMES
+
     idx = np.asarray(model.index(list(PARAM_NAMES), "p"))
     fidx = np.flatnonzero(free)
     p_base = model.p0.copy()
     p_base[idx[fidx]] = 0.0
     S = np.zeros((model.n_p, fidx.size))
     S[idx[fidx], np.arange(fidx.size)] = 1.0
-    js = float(np.trace(J0) / 3)
-    phys = physical_constraint(theta0, free, mass=mass, margin=margin, js=js)
-    name = (
-        f"output-error fit ({len(data)} logs, {windows.n} shooting pieces; the "
-        "equation-error estimate may be too far off: try more logs, shorter segments or "
-        "method='equation-error')"
-    )
-    theta, delta = theta0[fidx], None
+    return p_base, S, fidx
+
+
+def _fit_with_noise(prob, p_base, S, theta, phys, noise, gyro, max_iter, max_refits, name):
+    """IPOPT fits, the noise levels re-estimated from the residual between them until they
+    move by at most :data:`SIGMA_CHANGE`: the last fit, ``(sw, sq, used_w, used_q, rms)``,
+    the iterations and the warnings."""
+    sw, sq = noise
+    delta = None
     iterations, warnings = 0, []
     fit = None
     for i in range(max_refits + 1):
@@ -222,24 +283,17 @@ def refine_output_error(
         if max(abs(sq / used_q - 1), abs(sw / used_w - 1)) <= SIGMA_CHANGE or i == max_refits:
             break
         prob.set_noise(sw, sq)
-    # the Fisher information at the re-estimated noise, and at the sensor specification
-    # (the Cramer-Rao bound for that noise); the fit's Jacobian is weighted by (sw, sq)
-    if gyro and spec_w <= 0:
-        warnings.append(
-            "testbed sensors.gyro_noise = 0: the Cramer-Rao bound uses the fitted noise"
-        )
-    if not gyro and spec_q <= 0:
-        warnings.append(
-            "testbed sensors.attitude_noise = 0: the Cramer-Rao bound uses the fitted noise"
-        )
-    k = fidx.size
-    c_fit = _inverse(prob.fisher(fit, k, rate=(used_w / sw) ** 2, att=(used_q / sq) ** 2))
-    spec_w_ = spec_w if spec_w > 0 else sw
-    spec_q_ = spec_q if spec_q > 0 else sq
-    rate_spec, att_spec = (used_w / spec_w_) ** 2, (used_q / spec_q_) ** 2
-    c_spec = _inverse(prob.fisher(fit, k, rate=rate_spec, att=att_spec))
+    return fit, (sw, sq, used_w, used_q, rms), iterations, warnings
+
+
+def _covariances(prob, fit, free, *, fit_weights, spec_weights):
+    """The honest (HAC sandwich, never below white), white-noise and specification
+    covariances, (9, 9) with zero rows and columns for fixed parameters."""
     from airbearing.analysis.shooting.errors import honest_errors
 
+    k = int(np.count_nonzero(free))
+    c_fit = _inverse(prob.fisher(fit, k, rate=fit_weights[0], att=fit_weights[1]))
+    c_spec = _inverse(prob.fisher(fit, k, rate=spec_weights[0], att=spec_weights[1]))
     c_hac = honest_errors(prob, fit, k).cov
     sd_fit = np.sqrt(np.maximum(np.diag(c_fit), 0.0))
     sd_hac = np.sqrt(np.maximum(np.diag(c_hac), 0.0))
@@ -252,22 +306,4 @@ def refine_output_error(
     cov[np.ix_(free, free)] = c_honest
     cov_white[np.ix_(free, free)] = c_fit
     cov_spec[np.ix_(free, free)] = c_spec
-    theta_full = theta0.copy()
-    theta_full[fidx] = fit.theta
-    X0 = prob.start_states(fit.delta)
-    first = np.r_[True, ~windows.link]  # the first piece of each segment
-    return OutputErrorResult(
-        theta=theta_full,
-        cov=cov,
-        cov_spec=cov_spec,
-        sigma_w=float(sw) if gyro else float("nan"),
-        sigma_q=float(sq),
-        rms_w=rms["rate"] if gyro else float("nan"),
-        rms_q=rms["quat"],
-        x0=[X0[j] for j in np.flatnonzero(first)],
-        shooting_segments=int(windows.n),
-        iterations=iterations,
-        status=fit.status,
-        warnings=warnings,
-        cov_white=cov_white,
-    )
+    return cov, cov_spec, cov_white
