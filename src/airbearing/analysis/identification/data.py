@@ -263,17 +263,7 @@ def prepare_platform_logs(testbed: Testbed, logs) -> list[PlatformData]:
     for log in logs:
         _check_log(testbed, log)
         src = log.source
-        groups = [(("qw", "qx", "qy", "qz"), "the attitude quaternion qw, qx, qy, qz")]
-        if gyro:
-            groups.append((("wx", "wy", "wz"), "the body rates wx, wy, wz (rad/s)"))
-        if testbed.masses is not None:
-            groups.append((("s1", "s2", "s3"), "the known slider positions s1, s2, s3 (m)"))
-        for group, what in groups:
-            if not log.has(*group):
-                raise InputError(
-                    f"{src}: missing columns {', '.join(c for c in group if not log.has(c))}: "
-                    f"platform identification needs {what} in every log"
-                )
+        _check_columns(testbed, log, gyro)
         t = log.t
         if len(t) < 10:
             raise InputError(f"{src}: {len(t)} samples; identification needs at least 10")
@@ -288,27 +278,8 @@ def prepare_platform_logs(testbed: Testbed, logs) -> list[PlatformData]:
         else:
             w = rates_from_attitude(t, q, usable, segments)
         s = log.columns(["s1", "s2", "s3"]) if testbed.masses is not None else np.zeros((len(t), 3))
-        ok = usable & np.all(np.isfinite(w), axis=1)
-        spread = float(np.max(np.std(w[ok], axis=0))) if ok.sum() > 1 else 0.0
-        if gyro and spread < max(REST_SIGMAS * sigma, REST_FLOOR):
-            raise InputError(
-                f"{src}: the platform is at rest (measured rates vary by {spread:.3g} rad/s RMS, "
-                f"within {REST_SIGMAS:g} gyro sigmas of {sigma:g} rad/s): a log without motion "
-                "carries no information on inertia or CM offset; give it an initial rate or drop it"
-            )
-        if not gyro and spread < REST_FLOOR:
-            raise InputError(
-                f"{src}: the platform is at rest (attitude rates vary by {spread:.3g} rad/s): "
-                "a log without motion carries no information on inertia or CM offset"
-            )
-        travel = testbed.masses.travel if testbed.masses is not None else 0.0
-        off = np.any(np.abs(s) > travel * (1 + 1e-9), axis=1)
-        if np.any(off):
-            k = int(np.argmax(off))
-            raise InputError(
-                f"{src}: row {k}, columns s1..s3 = {s[k].tolist()} m: outside the rail "
-                f"travel +-{travel} m of testbed {testbed.name!r}"
-            )
+        _check_motion(src, w, usable & np.all(np.isfinite(w), axis=1), gyro, sigma)
+        _check_travel(testbed, src, s)
         # R(q) once for both rotations (quat.rotate / rotate_inverse form it each time)
         rot = quat.rotation_matrix(q)
         g_body = np.einsum("...ji,...j->...i", rot, g_lab)  # R^T g, as quat.rotate_inverse
@@ -331,3 +302,47 @@ def prepare_platform_logs(testbed: Testbed, logs) -> list[PlatformData]:
             )
         )  # fmt: skip
     return out
+
+
+def _check_columns(testbed: Testbed, log, gyro: bool) -> None:
+    """The columns platform identification needs in every log."""
+    groups = [(("qw", "qx", "qy", "qz"), "the attitude quaternion qw, qx, qy, qz")]
+    if gyro:
+        groups.append((("wx", "wy", "wz"), "the body rates wx, wy, wz (rad/s)"))
+    if testbed.masses is not None:
+        groups.append((("s1", "s2", "s3"), "the known slider positions s1, s2, s3 (m)"))
+    for group, what in groups:
+        if not log.has(*group):
+            raise InputError(
+                f"{log.source}: missing columns "
+                f"{', '.join(c for c in group if not log.has(c))}: "
+                f"platform identification needs {what} in every log"
+            )
+
+
+def _check_motion(src: str, w, ok, gyro: bool, sigma: float) -> None:
+    """A log in which the platform is at rest carries no information: refused."""
+    spread = float(np.max(np.std(w[ok], axis=0))) if ok.sum() > 1 else 0.0
+    if gyro and spread < max(REST_SIGMAS * sigma, REST_FLOOR):
+        raise InputError(
+            f"{src}: the platform is at rest (measured rates vary by {spread:.3g} rad/s RMS, "
+            f"within {REST_SIGMAS:g} gyro sigmas of {sigma:g} rad/s): a log without motion "
+            "carries no information on inertia or CM offset; give it an initial rate or drop it"
+        )
+    if not gyro and spread < REST_FLOOR:
+        raise InputError(
+            f"{src}: the platform is at rest (attitude rates vary by {spread:.3g} rad/s): "
+            "a log without motion carries no information on inertia or CM offset"
+        )
+
+
+def _check_travel(testbed: Testbed, src: str, s) -> None:
+    """Slider positions (m) within the rail travel."""
+    travel = testbed.masses.travel if testbed.masses is not None else 0.0
+    off = np.any(np.abs(s) > travel * (1 + 1e-9), axis=1)
+    if np.any(off):
+        k = int(np.argmax(off))
+        raise InputError(
+            f"{src}: row {k}, columns s1..s3 = {s[k].tolist()} m: outside the rail "
+            f"travel +-{travel} m of testbed {testbed.name!r}"
+        )
