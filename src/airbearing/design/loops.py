@@ -47,6 +47,7 @@ from airbearing.design.balancing import (
     MECHANICAL,
     MIXED,
     SEED000_GAINS,
+    BalancingGains,
     pid_balancing_controller,
 )
 from airbearing.design.controller import Controller
@@ -554,7 +555,8 @@ def balancing_loop(
     kwargs = {"sliders": ideal_sliders}
     if SPLITS[split].uses_magnetorquers:
         kwargs["magnetorquers"] = MagnetorquerActuator()
-    ctl = pid_balancing_controller(model, split=SPLITS[split], gains=tuple(g.values()), **kwargs)
+    gains_ = BalancingGains.from_json(g)
+    ctl = pid_balancing_controller(model, split=SPLITS[split], gains=gains_, **kwargs)
     cands = ("s1", "s2", "s3") + (("mx", "my", "mz") if split == "mixed" else ())
     channels = _active_channels(model, tp, ctl, cands)
     lc = _lin_ctrl_cached(model, ctl, tp, channels, "balancing")
