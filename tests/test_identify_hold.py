@@ -63,8 +63,8 @@ def test_hold_refuses_what_cannot_be(spin):
         identify_platform(SPIN_RIG, [spin.log], hold="mass")
     with pytest.raises(InputError, match="either"):
         identify_platform(SPIN_RIG, [spin.log], hold="cm", known_offset_xy=(0.0, 0.0))
-    # without anything held free motion cannot be identified; the message names the flag
-    with pytest.raises(InputError, match="--hold inertia"):
+    # without anything held free motion cannot be identified; the message names the parameter
+    with pytest.raises(InputError, match="hold='inertia'"):
         identify_platform(SPIN_RIG, [spin.log])
 
 

@@ -86,7 +86,7 @@ def rest_attitude(offset) -> np.ndarray:
         raise InputError(
             f"CR -> CM offset {r.tolist()} m: the CM is not below the CR (r_z >= 0), so the "
             "platform has no rest position near level; start it level or give a negative "
-            "--vertical-offset"
+            "vertical_offset"
         )
     q = quat.between(r, [0.0, 0.0, -1.0])
     tilt = float(quat.tilt_of(q))
@@ -94,7 +94,7 @@ def rest_attitude(offset) -> np.ndarray:
         raise InputError(
             f"CR -> CM offset {r.tolist()} m: the platform would rest at {math.degrees(tilt):.1f}"
             f" deg of tilt, beyond a tabletop bearing's {math.degrees(MAX_TILT):.0f} deg "
-            "(seed 001); start it level or give a more pendulous --vertical-offset"
+            "(seed 001); start it level or give a more pendulous vertical_offset"
         )
     return q
 

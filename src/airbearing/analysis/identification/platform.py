@@ -507,7 +507,7 @@ def _check_scale(testbed, data, fixed, prior, prior_weight) -> None:
         "identify: inertia and CM offset are not identifiable from these logs: free motion "
         "fixes them only up to a common scale (J w' + w x J w = m r x g is homogeneous in J "
         "and r) and nothing known breaks it; hold the testbed's inertia or CM offset as known "
-        "(--hold inertia, --hold cm), give the in-plane offset (--known-offset-xy), log with "
+        "(hold='inertia', hold='cm'), give the in-plane offset (known_offset_xy), log with "
         "the sliders at known non-zero positions, or command a known dipole"
     )
 
