@@ -25,7 +25,7 @@ anything else raises :class:`~airbearing.errors.SolverError`.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -82,18 +82,18 @@ class OutputErrorResult:
     """
 
     theta: np.ndarray
-    cov: np.ndarray
-    cov_spec: np.ndarray
+    cov: np.ndarray = field(repr=False)
+    cov_spec: np.ndarray = field(repr=False)
     sigma_w: float
     sigma_q: float
     rms_w: float
     rms_q: float
-    x0: list
+    x0: list = field(repr=False)
     shooting_segments: int
     iterations: int
     status: str
-    warnings: list
-    cov_white: np.ndarray | None = None
+    warnings: list = field(repr=False)
+    cov_white: np.ndarray | None = field(default=None, repr=False)
 
 
 def _inverse(F: np.ndarray) -> np.ndarray:
