@@ -285,19 +285,12 @@ def run_balancing(
             testbed, pid_gains, vertical_offset, start=start, offset_stays=offset_stays
         )
     metrics = dataclasses.replace(
-        metrics,
-        note=" ".join(notes) if notes else None,
-        method=method,
-        initial_offset_m=initial_offset,
-        seed=seed,
-        vertical_offset_m=vertical_offset,
-        start=start,
-        offset_stays=offset_stays,
-        duration_s=duration,
-        residual_offset_m=tuple(r_end.tolist()),
-        integral_time_constant_s=itc,
+        metrics, note=" ".join(notes) if notes else None, method=method,
+        initial_offset_m=initial_offset, seed=seed, vertical_offset_m=vertical_offset,
+        start=start, offset_stays=offset_stays, duration_s=duration,
+        residual_offset_m=tuple(r_end.tolist()), integral_time_constant_s=itc,
         settling_time_s=settle,
-    )
+    )  # fmt: skip
     return BalancingRun(method, result, free, metrics)
 
 

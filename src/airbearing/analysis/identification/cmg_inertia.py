@@ -235,17 +235,8 @@ def identify_cmg_inertia(
     for k, n in enumerate(names):
         if beta_hat[1 + k] <= 1e-9 * max(abs(beta_hat[1 + k]), 1e-300) or xv[1 + k] <= 1e-9:
             active.append(f"friction_nonnegative:{n}")
-    if std[0] > RELATIVE_STD_WARN * abs(J) or "inertia_positive" in active:
-        warnings.append(
-            f"unidentifiable parameters: J_z = {J:.4g} +- {std[0]:.2g} kg m^2; the logs exchange "
-            "too little momentum with the gimbals (slew further or faster)"
-        )
     rms = float(np.sqrt(rss / rows))
-    if sigma > 0 and rms > 3 * sigma:
-        warnings.append(
-            f"rate residual {rms:.3g} rad/s is {rms / sigma:.1f} gyro sigmas: the momentum "
-            "balance misses a torque (friction, cables: try friction='viscous' or 'coulomb')"
-        )
+    warnings += _fit_warnings(J, std[0], active, rms, sigma)
     return CMGIdentification(
         inertia=float(J),
         std_inertia=float(std[0]) if "inertia_positive" not in active else float("nan"),
@@ -265,7 +256,7 @@ def identify_cmg_inertia(
             "h0": float(h0),
             "beta_rad": float(beta),
             "per_log": entries,
-        },
+        },  # fmt: skip
         segments=int(sum(e["segments"] for e in entries)),
         outlier_rows_per_log=tuple(tuple(e["outlier_rows"]) for e in entries),
         std_status={
@@ -360,3 +351,19 @@ def _constrained_fit(R, npar: int, nfr: int, testbed: Testbed):
     beta_hat = np.asarray(x.value) / col
     rss = float(np.sum((Rm @ beta_hat - z) ** 2) + e**2)
     return beta_hat, np.asarray(x.value), rss, Rm, A, col
+
+
+def _fit_warnings(J: float, std_J: float, active, rms: float, sigma: float) -> list[str]:
+    """Too little momentum exchanged, or a residual the momentum balance does not explain."""
+    warnings = []
+    if std_J > RELATIVE_STD_WARN * abs(J) or "inertia_positive" in active:
+        warnings.append(
+            f"unidentifiable parameters: J_z = {J:.4g} +- {std_J:.2g} kg m^2; the logs exchange "
+            "too little momentum with the gimbals (slew further or faster)"
+        )
+    if sigma > 0 and rms > 3 * sigma:
+        warnings.append(
+            f"rate residual {rms:.3g} rad/s is {rms / sigma:.1f} gyro sigmas: the momentum "
+            "balance misses a torque (friction, cables: try friction='viscous' or 'coulomb')"
+        )
+    return warnings

@@ -234,23 +234,13 @@ def identify_platform(
     data = prepare_platform_logs(testbed, logs)
     _check_scale(testbed, data, fixed, prior, prior_weight)
     js = float(np.trace(testbed.body.inertia_matrix) / 3)
-    fit = _Fit(
-        testbed=testbed,
-        data=data,
-        mass=mass,
-        fixed=fixed,
-        prior=prior,
-        prior_weight=prior_weight,
-        js=js,
-        margin=MARGIN_FRACTION * js if margin is None else float(margin),
-        gyro=all(d.gyro for d in data),
-        hold=hold,
-        free=np.array([i not in fixed for i in range(9)]),
-    )
+    margin = MARGIN_FRACTION * js if margin is None else float(margin)
+    free = np.array([i not in fixed for i in range(9)])
+    fit = _Fit(testbed, data, mass, fixed, prior, prior_weight, js, margin,
+               all(d.gyro for d in data), hold, free)  # fmt: skip
     if point_o is None:
         point_o = 0.5 * testbed.body.cm_offset_vec  # seed 004: rho^o half the unbalance vector
-    if window is None:
-        window = max(1, int(round(testbed.sensors.rate)))
+    window = max(1, int(round(testbed.sensors.rate))) if window is None else window
     report("equation error (seed 004 eq. 47)", 1, 3)
     stats = regression_statistics(
         testbed, data, mass=mass, point_o=point_o, form=form, window=window
@@ -259,8 +249,6 @@ def identify_platform(
     if method == "equation-error":
         report("done", 3, 3)
         return ee
-    # stage 2: output error from the convex answer; parameters in an exact null direction
-    # of stage 1 stay at their stage-1 value (fitting them would only move along it)
     report("output error (IPOPT)", 2, 3)
     result = _output_error(fit, ee, active, null, weak, segment)
     report("done", 3, 3)
@@ -431,7 +419,10 @@ def _output_error_errors(fit: _Fit, oe, free_oe, active, null, weak):
 
 
 def _output_error(fit: _Fit, ee, active, null, weak, segment):
-    """Stage 2: the output-error refinement from the equation-error answer, as a result."""
+    """Stage 2: the output-error refinement from the equation-error answer, as a result.
+
+    Parameters in an exact null direction of stage 1 stay at their stage-1 value (fitting
+    them would only move along it)."""
     from airbearing.analysis.identification.output_error import refine_output_error
 
     gyro, data = fit.gyro, fit.data
