@@ -14,8 +14,12 @@ Three numbers per fitted parameter:
     ``std_white``: the sandwich is biased low in finite samples, and a white residual
     must not make an answer look more precise than its Fisher value. The bandwidth comes
     from the residuals: the Newey-West rule ``4 (n / 100)^(2/9)`` or three correlation
-    times, whichever is longer (capped at half the shortest segment). Process-noise rows
-    (:mod:`.process_noise`) enter the meat as independent scores.
+    times, whichever is longer (capped at half the shortest segment); the correlation time is
+    the longer of the residual's and of the process-noise defects' (a torque correlated over
+    several pieces, which the random walk of :mod:`.process_noise` does not describe). The
+    defects' scores enter the same series at their hand-over times. An in-model fit (the
+    intensity at the bottom of the grid) takes its scores from the constrained problem, one
+    trajectory per segment.
 ``crlb``
     The Cramer-Rao bound of the data: the Fisher information at the noise floor (the
     problem's weights, chi-square 1) of ONE trajectory per segment (the windows' continuity
@@ -177,6 +181,41 @@ def correlation_time(residuals: list[Residuals], dt: float | None = None) -> flo
     return float(max(lag - 1, 0) * h) if lag > 1 else 0.0
 
 
+def _defect_correlation_time(problem, d: np.ndarray) -> float:
+    """s, the lag (in pieces, times their mean length) at which the whitened defects' mean
+    autocorrelation within segments first falls below 1/e; 0 when they are independent."""
+    w = problem.windows
+    nd = problem.n_delta
+    D = d.reshape(-1, nd)
+    link = np.asarray(w.link, dtype=bool)
+    seg = w.segments()[:-1]
+    acc, wsum = np.zeros(0), 0.0
+    for sgm in np.unique(seg[link]):
+        rows = np.flatnonzero(link & (seg == sgm))
+        x = D[rows]
+        n = x.shape[0]
+        if n < 4:
+            continue
+        for a in range(nd):
+            y = x[:, a] - x[:, a].mean()
+            v = float(y @ y)
+            if not v > 0:
+                continue
+            c = np.array([float(y[h:] @ y[: n - h]) / v for h in range(min(n // 2, 20))])
+            if acc.size == 0:
+                acc = np.zeros(c.size)
+            m = min(acc.size, c.size)
+            acc = acc[:m] + n * c[:m]
+            wsum += n
+    if not wsum:
+        return 0.0
+    acc = acc / wsum
+    below = np.flatnonzero(acc < DECORRELATED)
+    lag = int(below[0]) if below.size else acc.size
+    T = np.mean(np.cumsum(w.dt, axis=1)[np.arange(w.n), np.maximum(np.asarray(w.end) - 1, 0)])
+    return float(lag * T) if lag > 1 else 0.0
+
+
 def _n_segments(problem) -> int:
     """Number of segments (trajectories) of the problem's windows."""
     return int(np.unique(problem.windows.segments()).size)
@@ -246,13 +285,22 @@ def honest_errors(problem, fit, k: int) -> HonestErrors:
     else:
         A = _projected(J, k, fit.extra.get("N"))
         scores = A * r[:, None]
-    per_sample = np.zeros((problem.windows.n * problem.windows.length, k))
+    w = problem.windows
+    per_sample = np.zeros((w.n * w.length, k))
     np.add.at(per_sample, problem.sample, scores[:n_meas])
-    dt = float(np.median(problem.windows.dt[problem.windows.weight[:, 1:] > 0]))
+    dt = float(np.median(w.dt[w.weight[:, 1:] > 0]))
+    meat = np.zeros((k, k))
+    if r.size > n_meas and w.link is not None:
+        # process-noise rows: each pair's whitened defect belongs to its hand-over time (the
+        # next window's first sample), so a torque the random walk does not describe (one
+        # correlated over several pieces) widens the errors through the same HAC sum
+        nd = problem.n_delta
+        pair = np.arange(r.size - n_meas) // nd
+        np.add.at(per_sample, (pair + 1) * w.length, scores[n_meas:])
+        tau = max(tau, _defect_correlation_time(problem, r[n_meas:]))
     order = _segment_order(problem)
     shortest = min(len(o[2]) for o in order)
     lags = []
-    meat = scores[n_meas:].T @ scores[n_meas:]  # process-noise rows: independent
     for _, _, idx, _ in order:
         x = per_sample[idx]
         n = x.shape[0]
