@@ -22,6 +22,7 @@ import os
 import time
 
 import numpy as np
+from spin_study import RIG as SPIN_RIG  # the study's rig (run from benchmarks/)
 
 from airbearing.analysis.discrepancy.search import discrepancy
 from airbearing.analysis.simulation.scenarios import free_oscillation, spindown
@@ -33,18 +34,6 @@ YAW_RIG = testbed_from_dict(
         "name": "coast-rig",
         "body": {"dof": 1, "mass": 4.2, "inertia": 0.05},
         "sensors": {"rate": 10.0, "gyro": False, "attitude_noise": 1.5e-3},
-    }
-)
-SPIN_RIG = testbed_from_dict(
-    {
-        "kind": "platform",
-        "name": "spin-rig",
-        "body": {
-            "dof": 3,
-            "mass": 2.686,
-            "inertia": [[0.0249, 0.0, 0.0], [0.0, 0.0112, 0.0], [0.0, 0.0, 0.0272]],
-        },
-        "sensors": {"rate": 10.0, "gyro": False, "attitude_noise": 1e-3},
     }
 )
 TILT = math.radians(5.0)

@@ -438,6 +438,20 @@ class _Call(ca.Callback):
         return self.jac(name)
 
 
+def ipopt_options(max_iter: int) -> dict:
+    """The IPOPT options every fit of the engine shares (quiet, scaled tolerances)."""
+    return {
+        "print_time": False,
+        "ipopt.print_level": 0,
+        "ipopt.sb": "yes",
+        "ipopt.max_iter": int(max_iter),
+        "ipopt.tol": IPOPT_TOL,
+        "ipopt.acceptable_tol": 1e-5,
+        "ipopt.acceptable_iter": 3,
+        "ipopt.mu_strategy": "adaptive",
+    }
+
+
 def _build_solver(model, L, nw, K, outputs, substeps, jit, max_iter=IPOPT_MAX_ITER):
     """IPOPT on ``z = v / scale``: objective 0.5 |r|^2, gradient J^T r, Hessian J^T J.
 
@@ -490,14 +504,7 @@ def _build_solver(model, L, nw, K, outputs, substeps, jit, max_iter=IPOPT_MAX_IT
             "calc_lam_p": False,
             "calc_lam_x": False,
             "calc_multipliers": False,
-            "print_time": False,
-            "ipopt.print_level": 0,
-            "ipopt.sb": "yes",
-            "ipopt.max_iter": int(max_iter),
-            "ipopt.tol": IPOPT_TOL,
-            "ipopt.acceptable_tol": 1e-5,
-            "ipopt.acceptable_iter": 3,
-            "ipopt.mu_strategy": "adaptive",
+            **ipopt_options(max_iter),
         },
     )
     return solver, (F, G, H, o)

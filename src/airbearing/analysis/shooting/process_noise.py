@@ -43,11 +43,11 @@ import numpy as np
 import scipy.sparse as sp
 
 from airbearing.analysis.shooting.functions import (
-    IPOPT_TOL,
     _cached,
     _Call,
     _problem_functions,
     delta_layout,
+    ipopt_options,
     structure_key,
     to_csc,
 )
@@ -292,14 +292,7 @@ def _build_penalised(model, L, nw, K, outputs, substeps, jit, max_iter):
         {
             "grad_f": GF,
             "hess_lag": H,
-            "print_time": False,
-            "ipopt.print_level": 0,
-            "ipopt.sb": "yes",
-            "ipopt.max_iter": int(max_iter),
-            "ipopt.tol": IPOPT_TOL,
-            "ipopt.acceptable_tol": 1e-5,
-            "ipopt.acceptable_iter": 3,
-            "ipopt.mu_strategy": "adaptive",
+            **ipopt_options(max_iter),
         },
     )
     return solver, (F, GF, H, f_jac, o)
