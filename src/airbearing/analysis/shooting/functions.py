@@ -441,6 +441,9 @@ class _Call(ca.Callback):
 def ipopt_options(max_iter: int) -> dict:
     """The IPOPT options every fit of the engine shares (quiet, scaled tolerances)."""
     return {
+        # a trial point whose replay is not finite is IPOPT's to reject; CasADi's "NaN
+        # detected" lines would only reach a notebook's output
+        "show_eval_warnings": False,
         "print_time": False,
         "ipopt.print_level": 0,
         "ipopt.sb": "yes",
