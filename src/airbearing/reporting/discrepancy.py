@@ -229,7 +229,7 @@ def _localisation_section(report: Report, result: Discrepancy, level: int) -> No
     """Where the nominal model and the logs disagree: words, residuals, windows, spectrum."""
     datas, unit = result.datas, result.gap_unit
     report.heading("Where the nominal model and the logs disagree", level)
-    for sentence in result.localisation.get("words", []):
+    for sentence in result.localisation.words:
         report.paragraph(sentence)
     _residual_figure(
         report,
@@ -241,15 +241,15 @@ def _localisation_section(report: Report, result: Discrepancy, level: int) -> No
         result.windows,
     )
     loc = result.localisation
-    na = loc["residual"].shape[1]
+    na = loc.residual.shape[1]
     fig, axes = plt.subplots(1, 3, figsize=(12, 3.2))
-    axes[0].plot(np.arange(len(loc["window_gap"])), loc["window_gap"], "o-")
+    axes[0].plot(np.arange(len(loc.window_gap)), loc.window_gap, "o-")
     axes[0].axhline(result.noise_floor, color="k", ls=":", lw=0.8)
     axes[0].set(xlabel="window", ylabel=f"gap ({unit})", title="over the windows")
-    axes[1].bar(["slowest", "2nd", "3rd", "fastest"], loc["vs_rate"])
+    axes[1].bar(["slowest", "2nd", "3rd", "fastest"], loc.vs_rate)
     axes[1].axhline(result.noise_floor * np.sqrt(na), color="k", ls=":", lw=0.8)
     axes[1].set(ylabel=f"|residual| RMS ({unit})", title="against |w| (quarters)")
-    f, pxx, white = loc["spectrum"]
+    f, pxx, white = loc.spectrum
     for a in range(na):
         axes[2].semilogy(f, pxx[:, a], lw=0.8)
     axes[2].axhline(float(np.sum(white)) / na, color="k", ls=":", lw=0.8, label="white noise")

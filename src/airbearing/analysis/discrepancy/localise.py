@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass, field, fields
+
 import numpy as np
 
 from airbearing.analysis.discrepancy.data import NoiseFloor
@@ -10,7 +12,7 @@ from airbearing.analysis.discrepancy.replay import primary_series
 from airbearing.analysis.shooting import Fit, ShootingProblem
 from airbearing.models import quaternion as quat
 
-__all__ = ["localise"]
+__all__ = ["Localisation", "localise"]
 
 #: The residual is "above the floor" when its RMS exceeds the floor by this factor.
 ABOVE = 1.1
@@ -23,13 +25,100 @@ def _rms(x) -> float:
     return float(np.sqrt(np.mean(x**2))) if x.size else float("nan")
 
 
-def localise(datas, problem: ShootingProblem, fit: Fit, floor: NoiseFloor) -> dict:
+def _jsonable(v):
+    if isinstance(v, np.ndarray):
+        return v.tolist()
+    if isinstance(v, tuple):
+        return [_jsonable(x) for x in v]
+    if isinstance(v, np.generic):
+        return v.item()
+    return v
+
+
+@dataclass(frozen=True, eq=False)
+class Localisation:
+    """Where the residual of a fit lives (:func:`localise`): sentences and the numbers behind.
+
+    Attributes
+    ----------
+    words : tuple of str
+        The sentences a person reads.
+    unit : str
+        The gap unit (rad/s with a gyro, rad for attitude-only logs).
+    residual : numpy.ndarray
+        The primary output residual at every usable sample (``unit``), one column per axis.
+    rows, source : numpy.ndarray
+        The log row and the log index of each residual sample.
+    axis_rms : numpy.ndarray
+        RMS residual per axis (``unit``).
+    window_gap, window_t, window_source : numpy.ndarray
+        Per window: its gap (``unit``), its start time (s) and its log.
+    vs_rate : numpy.ndarray
+        RMS of |residual| by quarter of |w|, slowest first (``unit``).
+    after_reversal, elsewhere : float or None
+        RMS of |residual| within 1 s after a rate reversal and elsewhere (``unit``).
+    tilt : tuple or None
+        dof 3: ``(lower quartile deg, RMS below, upper quartile deg, RMS above)``.
+    field_vertical : bool or None
+        dof 3 with a cage field: whether the field is vertical.
+    gimbal : tuple or None
+        cmg: ``(quartile deg, RMS below, quartile deg, RMS above)`` of mean |delta|.
+    gimbal_busy : tuple or None
+        cmg: RMS while the gimbals turn fast and while they hold (``unit``).
+    spectrum : tuple
+        ``(frequency Hz, PSD per axis, white-noise level per axis)``.
+    """
+
+    words: tuple
+    unit: str
+    residual: np.ndarray = field(repr=False)
+    rows: np.ndarray = field(repr=False)
+    source: np.ndarray = field(repr=False)
+    axis_rms: np.ndarray = field(repr=False)
+    window_gap: np.ndarray = field(repr=False)
+    window_t: np.ndarray = field(repr=False)
+    window_source: np.ndarray = field(repr=False)
+    vs_rate: np.ndarray = field(repr=False)
+    spectrum: tuple = field(repr=False)
+    after_reversal: float | None = field(default=None, repr=False)
+    elsewhere: float | None = field(default=None, repr=False)
+    tilt: tuple | None = field(default=None, repr=False)
+    field_vertical: bool | None = field(default=None, repr=False)
+    gimbal: tuple | None = field(default=None, repr=False)
+    gimbal_busy: tuple | None = field(default=None, repr=False)
+
+    def __str__(self) -> str:
+        return "\n".join(self.words)
+
+    def to_json(self) -> dict:
+        """Every number (lists) and the sentences; optional entries only when measured."""
+        out = {}
+        for f in fields(self):
+            v = getattr(self, f.name)
+            if v is None and f.default is None:
+                continue
+            out[f.name] = _jsonable(v)
+        return out
+
+
+def localise(datas, problem: ShootingProblem, fit: Fit, floor: NoiseFloor) -> Localisation:
     """Where the residual of ``fit`` lives, in words and numbers.
+
+    Parameters
+    ----------
+    datas : sequence of ReplayData
+        The logs of the fit.
+    problem : ShootingProblem
+        The problem ``fit`` solved.
+    fit : Fit
+        The fit whose residual is localised.
+    floor : NoiseFloor
+        The noise estimated from the data.
 
     Returns
     -------
-    dict
-        ``"words"`` (sentences) and the numbers behind them: ``axis_rms``,
+    Localisation
+        ``words`` (sentences) and the numbers behind them: ``axis_rms``,
         ``window_gap`` and ``window_t`` (per window), ``vs_rate`` (RMS by quartile of
         |w|), ``after_reversal`` / ``elsewhere``, ``tilt`` (dof 3), ``field_vertical``,
         ``gimbal`` (cmg), ``spectrum`` (frequency, PSD, white-noise level), ``unit``.
@@ -200,5 +289,5 @@ def localise(datas, problem: ShootingProblem, fit: Fit, floor: NoiseFloor) -> di
                     f"In frequency the excess error peaks near {float(f[int(np.argmax(exc))]):.2g} "
                     "Hz (the motion's own frequencies: a state-dependent torque)."
                 )
-    out["words"] = words
-    return out
+    out["words"] = tuple(words)
+    return Localisation(**out)

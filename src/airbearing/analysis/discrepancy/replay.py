@@ -19,7 +19,7 @@ The gap
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import lru_cache
 
 import numpy as np
@@ -201,6 +201,11 @@ def open_loop(model: Model, data: ReplayData, p: np.ndarray | None = None, *, su
     return Y[:, model.index(list(data.rate_names), "y")]
 
 
+#: A gap below this many noise floors is "at the floor" in the printed verdict (the same
+#: factor as :data:`.localise.ABOVE`: a 10 % excess is within the floor's own uncertainty).
+AT_FLOOR = 1.1
+
+
 @dataclass(frozen=True, eq=False)
 class Replay:
     """A replay of one or more logs by a Model: the window initial states fitted, and the gap.
@@ -219,15 +224,47 @@ class Replay:
         (:mod:`airbearing.analysis.shooting.process_noise`): its intensity, significance,
         the horizon over which the Model predicts to the noise, and ``gap_whole``, the gap
         of one trajectory per segment. None on fixed windows.
+
+    Printing one gives the verdict a person reads (``str``); its ``repr`` is one short line.
     """
 
-    model: Model
-    datas: tuple
-    windows: WindowSet
-    floor: NoiseFloor
-    fit: Fit
-    problem: ShootingProblem
-    process_noise: dict | None = None
+    model: Model = field(repr=False)
+    datas: tuple = field(repr=False)
+    windows: WindowSet = field(repr=False)
+    floor: NoiseFloor = field(repr=False)
+    fit: Fit = field(repr=False)
+    problem: ShootingProblem = field(repr=False)
+    process_noise: dict | None = field(default=None, repr=False)
+
+    def __repr__(self) -> str:
+        return (
+            f"Replay(testbed={self.data.testbed.name!r}, logs={len(self.datas)}, "
+            f"gap={self.gap:.3g}, noise_floor={self.floor.value:.3g} {self.gap_unit}, "
+            f"windows={self.windows.n})"
+        )
+
+    def __str__(self) -> str:
+        unit, ratio = self.gap_unit, self.gap / max(self.floor.value, 1e-300)
+        head = (
+            "The model replays the logs to the noise floor"
+            if ratio < AT_FLOOR
+            else "The model misses the logs"
+        )
+        lines = [
+            f"{head}: gap {self.gap:.4g} {unit}, {ratio:.2f} x the noise floor "
+            f"{self.floor.value:.4g} {unit} ({len(self.datas)} log(s), {self.windows.n} windows)"
+        ]
+        pn = self.process_noise
+        if pn and pn.get("significant"):
+            h = pn.get("horizon_s")
+            lines.append(
+                f"an unexplained torque is significant (intensity {pn.get('intensity', 0):.3g} "
+                f"{pn.get('unit', '')}, p {pn.get('p', math.nan):.2g})"
+                + (f"; the model predicts to the noise over about {h:.3g} s" if h else "")
+            )
+        elif pn is not None:
+            lines.append("no significant unexplained torque between the pieces")
+        return "\n".join(lines)
 
     @property
     def data(self) -> ReplayData:

@@ -57,7 +57,7 @@ from airbearing.analysis.discrepancy.data import (
     ReplayData,
 )
 from airbearing.analysis.discrepancy.honest import Errors, effect_errors, honest
-from airbearing.analysis.discrepancy.localise import localise
+from airbearing.analysis.discrepancy.localise import Localisation, localise
 from airbearing.analysis.discrepancy.replay import (
     log_gaps,
     model_for,
@@ -191,42 +191,67 @@ class Discrepancy:
     validation : tuple of Validation
         Logs not fitted, replayed with the nominal and the augmented Model.
     verdict : str
-    localisation : dict
-        Where the nominal residual lives (:func:`localise`), with ``"words"``.
+    localisation : Localisation
+        Where the nominal residual lives (:func:`localise`), with ``words``.
+
+    Printing one gives the verdict a person reads (``str``); its ``repr`` is one short line.
     """
 
-    testbed: Testbed
-    datas: tuple
-    windows: WindowSet
-    floor: NoiseFloor
+    testbed: Testbed = field(repr=False)
+    datas: tuple = field(repr=False)
+    windows: WindowSet = field(repr=False)
+    floor: NoiseFloor = field(repr=False)
     effects: dict
-    effect_std: dict
+    effect_std: dict = field(repr=False)
     gap_before: float
     gap_after: float
     noise_floor: float
-    candidates: tuple
-    rounds: tuple
-    confounded: tuple
-    experiments: dict
-    augmented_testbed: Testbed
-    augmented_model: Model
-    verdict: str
-    localisation: dict
-    nominal_fit: Fit
-    final_fit: Fit
-    nominal_problem: ShootingProblem
-    final_problem: ShootingProblem
-    stop_reason: str = ""
-    validation: tuple = ()
-    log_gaps_before: tuple = ()
-    log_gaps_after: tuple = ()
-    effect_std_white: dict = field(default_factory=dict)
-    effect_crlb: dict = field(default_factory=dict)
-    effect_efficiency: dict = field(default_factory=dict)
-    errors: Errors | None = None
-    adequacy: Adequacy | None = None
-    per_log: tuple = ()
-    consistency: tuple = ()
+    candidates: tuple = field(repr=False)
+    rounds: tuple = field(repr=False)
+    confounded: tuple = field(repr=False)
+    experiments: dict = field(repr=False)
+    augmented_testbed: Testbed = field(repr=False)
+    augmented_model: Model = field(repr=False)
+    verdict: str = field(repr=False)
+    localisation: Localisation = field(repr=False)
+    nominal_fit: Fit = field(repr=False)
+    final_fit: Fit = field(repr=False)
+    nominal_problem: ShootingProblem = field(repr=False)
+    final_problem: ShootingProblem = field(repr=False)
+    stop_reason: str = field(default="", repr=False)
+    validation: tuple = field(default=(), repr=False)
+    log_gaps_before: tuple = field(default=(), repr=False)
+    log_gaps_after: tuple = field(default=(), repr=False)
+    effect_std_white: dict = field(default_factory=dict, repr=False)
+    effect_crlb: dict = field(default_factory=dict, repr=False)
+    effect_efficiency: dict = field(default_factory=dict, repr=False)
+    errors: Errors | None = field(default=None, repr=False)
+    adequacy: Adequacy | None = field(default=None, repr=False)
+    per_log: tuple = field(default=(), repr=False)
+    consistency: tuple = field(default=(), repr=False)
+
+    def __repr__(self) -> str:
+        effects = ", ".join(f"{n}={_short(v)}" for n, v in self.effects.items())
+        return (
+            f"Discrepancy(testbed={self.testbed.name!r}, logs={len(self.datas)}, "
+            f"effects={{{effects}}}, gap_before={self.gap_before:.3g}, "
+            f"gap_after={self.gap_after:.3g}, noise_floor={self.noise_floor:.3g} {self.gap_unit})"
+        )
+
+    def __str__(self) -> str:
+        unit, floor = self.gap_unit, max(self.noise_floor, 1e-300)
+        lines = [
+            self.verdict,
+            f"gap before {self.gap_before:.4g} {unit} ({self.gap_before / floor:.2f} x the noise "
+            f"floor {self.noise_floor:.4g} {unit}), after {self.gap_after:.4g} {unit} "
+            f"({self.gap_after / floor:.2f} x)",
+        ]
+        if self.adequacy is not None:
+            lines.append(
+                "adequacy: "
+                + (self.adequacy.note or ("at the noise" if self.adequacy.at_noise else "-"))
+            )
+        return "\n".join(lines)
 
     @property
     def data(self) -> ReplayData:
@@ -321,11 +346,22 @@ class Discrepancy:
             "rate_noise": self.floor.rate,
             "logs": logs,
             "validation": [v.to_json() for v in self.validation],
-            "localisation": self.localisation.get("words", []),
+            "localisation": list(self.localisation.words),
             "adequacy": self.adequacy.to_json() if self.adequacy is not None else None,
             "per_log": [f.to_json() for f in self.per_log],
             "consistency": [c.to_json() for c in self.consistency],
         }
+
+
+def _short(v) -> str:
+    """A value in a few characters: a number to 3 digits, an array as its first entries."""
+    try:
+        a = np.atleast_1d(np.asarray(v, dtype=float))
+    except (TypeError, ValueError):
+        return repr(v)[:20]
+    if a.size == 1:
+        return f"{float(a[0]):.3g}"
+    return "[" + ", ".join(f"{x:.3g}" for x in a[:3]) + (", ...]" if a.size > 3 else "]")
 
 
 class _Search:
