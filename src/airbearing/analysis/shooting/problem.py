@@ -520,7 +520,6 @@ class ShootingProblem:
         """
         p_base = np.asarray(p_base, dtype=float)
         S = np.zeros((self.model.n_p, 0)) if S is None else np.asarray(S, dtype=float)
-        k = S.shape[1]
         if (
             (lower is not None or upper is not None)
             and constraint is None
@@ -531,6 +530,23 @@ class ShootingProblem:
             free = self._free_fit(p_base, S, theta0, lower, upper, delta0, name, max_iter)
             if free is not None:
                 return free
+        v0, Sp, lb, ub, scale = self._start(p_base, S, theta0, lower, upper, delta0, name)
+        ineq = None if constraint is None else Inequality(constraint)
+        mi = IPOPT_MAX_ITER if max_iter is None else int(max_iter)
+        z, stats, r, J, Jc = self._solve(v0, Sp, lb, ub, scale, p_base, ineq, mi)
+        status = str(stats.get("return_status", "?"))
+        level = classify_status(status)
+        if accept_max_iter and status == "Maximum_Iterations_Exceeded":
+            level = "warning"  # the last iterate, taken as it is (a baseline far from the data)
+        if level == "error":
+            raise SolverError(f"{name}: IPOPT did not converge ({status})")
+        if not np.all(np.isfinite(r)):
+            raise SolverError(f"{name}: the fitted replay is not finite")
+        return self._result(z * scale, Sp.shape[1], S, p_base, r, J, Jc, stats, status, level)
+
+    def _start(self, p_base, S, theta0, lower, upper, delta0, name):
+        """Start ``v0``, padded ``S``, bounds and the column scaling of a fit."""
+        k = S.shape[1]
         nd, nw = self.n_delta, self.windows.n
         d0 = np.zeros((nd, nw)) if delta0 is None else np.asarray(delta0, dtype=float)
         v0, Sp = self._v(d0, S, theta0)
@@ -550,61 +566,53 @@ class ShootingProblem:
         J0 = J0 if sp.issparse(J0) else to_csc(J0)
         col = np.sqrt(np.asarray(J0.power(2).sum(axis=0)).ravel())
         scale = np.where(col > 0, 1.0 / np.maximum(col, 1e-300), 1.0)
-        ineq = None if constraint is None else Inequality(constraint)
+        return v0, Sp, lb, ub, scale
+
+    def _solve(self, v0, Sp, lb, ub, scale, p_base, ineq, mi):
+        """IPOPT on the scaled variables: ``(z, stats, r, J, Jc)`` at its last iterate (``J``
+        unscaled; ``Jc`` the continuity Jacobian of equality-linked windows, else None)."""
+        K = Sp.shape[1]
         n_link = self.link_rows.size
         n_ineq = 0 if ineq is None else ineq.m
-        Jc = None
-        penalised = self.penalty is not None and self.link
-        if penalised:
+        x0, lbx, ubx = v0 / scale, lb / scale, ub / scale
+        unscale = sp.diags(1.0 / scale)
+        if self.penalty is not None and self.link:
             if ineq is not None:  # pragma: no cover - programming error
                 raise ValueError("process noise and inequality constraints together")
             from airbearing.analysis.shooting.process_noise import penalised_solver
 
-            mi = IPOPT_MAX_ITER if max_iter is None else int(max_iter)
             solver, _keep = penalised_solver(*self._key(K), mi)
             oracle = _keep[-1]
             oracle.set(p_base, Sp, scale, self._data, self.penalty)
-            sol = solver(x0=v0 / scale, lbx=lb / scale, ubx=ub / scale)
-        elif n_link or n_ineq:
-            mi = IPOPT_MAX_ITER if max_iter is None else int(max_iter)
+            z = solver(x0=x0, lbx=lbx, ubx=ubx)["x"].full().ravel()
+            r, J = oracle.rj_at(z)
+            return z, solver.stats(), r.copy(), J @ unscale, None
+        if n_link or n_ineq:
             solver, _keep = linked_solver(*self._key(K), self.link, n_link, n_ineq, mi)
             oracle = _keep[-1]
             oracle.set(p_base, Sp, scale, self._data, self.link_rows, ineq)
             lbg = np.zeros(n_link + n_ineq)
             ubg = np.r_[np.zeros(n_link), np.full(n_ineq, np.inf)]
-            sol = solver(x0=v0 / scale, lbx=lb / scale, ubx=ub / scale, lbg=lbg, ubg=ubg)
-        else:
-            mi = IPOPT_MAX_ITER if max_iter is None else int(max_iter)
-            solver, _keep = _problem_solver(*self._key(K), mi)
-            par = np.concatenate([p_base, Sp.reshape(-1, order="F"), scale, self._data])
-            oracle = _keep[-1]
-            oracle.set(par)
-            sol = solver(x0=v0 / scale, lbx=lb / scale, ubx=ub / scale)
-        stats = solver.stats()
-        status = str(stats.get("return_status", "?"))
-        level = classify_status(status)
-        if accept_max_iter and status == "Maximum_Iterations_Exceeded":
-            level = "warning"  # the last iterate, taken as it is (a baseline far from the data)
-        if level == "error":
-            raise SolverError(f"{name}: IPOPT did not converge ({status})")
-        z = sol["x"].full().ravel()
-        v = z * scale
-        if penalised:
-            r, J = oracle.rj_at(z)
-            r, J = r.copy(), J @ sp.diags(1.0 / scale)
-        elif n_link or n_ineq:
+            z = solver(x0=x0, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)["x"].full().ravel()
             oracle.derivatives(z)  # memoised when IPOPT's last iterate had them
-            r, J = oracle.r.copy(), oracle.J @ sp.diags(1.0 / scale)
-            if n_link:
-                Jc = oracle.Jc / scale
-        elif oracle.J is not None and oracle._same(z, par):
+            Jc = oracle.Jc / scale if n_link else None
+            return z, solver.stats(), oracle.r.copy(), oracle.J @ unscale, Jc
+        solver, _keep = _problem_solver(*self._key(K), mi)
+        par = np.concatenate([p_base, Sp.reshape(-1, order="F"), scale, self._data])
+        oracle = _keep[-1]
+        oracle.set(par)
+        z = solver(x0=x0, lbx=lbx, ubx=ubx)["x"].full().ravel()
+        if oracle.J is not None and oracle._same(z, par):
             # IPOPT's last iterate was evaluated with its Jacobian: reuse it
-            r, J = oracle.r.copy(), oracle.J @ sp.diags(1.0 / scale)
-        else:
-            r, J = self._eval(1, v, p_base, Sp)
-            r, J = r.full().ravel(), to_csc(J)
-        if not np.all(np.isfinite(r)):
-            raise SolverError(f"{name}: the fitted replay is not finite")
+            return z, solver.stats(), oracle.r.copy(), oracle.J @ unscale, None
+        r, J = self._eval(1, z * scale, p_base, Sp)
+        return z, solver.stats(), r.full().ravel(), to_csc(J), None
+
+    def _result(self, v, K, S, p_base, r, J, Jc, stats, status, level) -> Fit:
+        """The :class:`Fit` at ``v`` with its errors (module doc)."""
+        k = S.shape[1]
+        nd, nw = self.n_delta, self.windows.n
+        penalised = self.penalty is not None and self.link
         keep = np.r_[np.arange(k), np.arange(K, v.size)]
         v = v[keep]
         J = sp.csc_matrix(J)[:, keep]
@@ -612,7 +620,7 @@ class ShootingProblem:
         rss = float(r @ r)
         n_free = v.size
         theta = v[:k]
-        if Jc is not None and not penalised:  # errors on continuous trajectories: eliminate defects
+        if Jc is not None and not penalised:  # errors on continuous trajectories
             N = null_space_basis(Jc[:, keep], k)
             extra["N"] = N
             n_free = N.shape[1]
@@ -620,13 +628,11 @@ class ShootingProblem:
         else:
             Jr = J
         n_obs = self.n_res + (self.penalty.getnnz(axis=1) > 0).sum() if penalised else self.n_res
-        s2 = rss / max(n_obs - n_free, 1)
-        std, cov, reasons = theta_errors(Jr, k, s2)
-        p = p_base + S @ theta if k else p_base.copy()
+        std, cov, reasons = theta_errors(Jr, k, rss / max(n_obs - n_free, 1))
         return Fit(
             theta=theta,
             theta_std=std,
-            p=p,
+            p=p_base + S @ theta if k else p_base.copy(),
             delta=v[k:].reshape(nd, nw, order="F"),
             rss=rss,
             n_res=self.n_res,

@@ -369,46 +369,70 @@ def estimate_process_noise(
         The fit at the most likely intensity; ``fit.extra["process_noise"]`` is the
         :class:`ProcessNoise`, and ``problem`` is left at that intensity.
     """
-    from scipy import stats
+    k = 0 if S is None else np.asarray(S).shape[1]
 
+    def fit_at(kappa, th, d):
+        set_intensity(problem, kappa)
+        return problem.fit(
+            p_base, S, th, lower=lower, upper=upper, delta0=d, name=f"{name} ({kappa:g})"
+        )
+
+    fits = _descend(problem, fit_at, grid, theta0, delta0, start, k)
+    ll = {kappa: v[1] for kappa, v in fits.items()}
+    fits = {kappa: v[0] for kappa, v in fits.items()}
+    best = max(ll, key=ll.get)
+    bottom = min(ll)  # the smallest intensity reached
+    pn = _verdict(problem, ll, best, bottom)
+    fit = fits[best]
+    fit.extra["process_noise"] = {
+        **pn.to_json(),
+        # the gap of the most continuous fit reached (one trajectory per segment when the
+        # continuation reached the bottom of the grid)
+        "gap_whole": float(fits[bottom].gap),
+        "kappa_whole": float(bottom),
+        "gap_short": float(fits[max(fits)].gap),
+        "loglik": pn.loglik,
+    }
+    return fit
+
+
+def _descend(problem, fit_at, grid, theta0, delta0, start, k: int) -> dict:
+    """``kappa -> (fit, log-likelihood)`` down the grid (warm-started), then one decade
+    either side of the best; a solve that fails ends the descent (keeps what was found)."""
     from airbearing.errors import SolverError
 
-    k = 0 if S is None else np.asarray(S).shape[1]
-    fits, ll = {}, {}
+    out: dict = {}
     th, d = theta0, delta0
     for i, kappa in enumerate(grid):
-        set_intensity(problem, kappa)
         if i == 0 and start is not None:
+            set_intensity(problem, kappa)
             fit = start
         else:
             try:
-                fit = problem.fit(
-                    p_base, S, th, lower=lower, upper=upper, delta0=d, name=f"{name} ({kappa:g})"
-                )
+                fit = fit_at(kappa, th, d)
             except SolverError:
-                if not fits:
+                if not out:
                     raise
-                break  # a lower intensity the fit cannot reach: keep what was found
-        fits[kappa], ll[kappa] = fit, _loglik(problem, fit, k)
+                break  # a lower intensity the fit cannot reach
+        out[kappa] = (fit, _loglik(problem, fit, k))
         th, d = fit.theta, fit.delta
-
-    # refine between the coarse grid's points around the best (one decade each side)
-    best = max(ll, key=ll.get)
+    best = max(out, key=lambda a: out[a][1])
     for kappa in (best * 10.0, best / 10.0):
-        if not (min(grid) < kappa < max(grid)) or kappa in ll or len(ll) < 2:
+        if not (min(grid) < kappa < max(grid)) or kappa in out or len(out) < 2:
             continue
-        set_intensity(problem, kappa)
-        near = min(fits, key=lambda a, kappa=kappa: abs(math.log(a / kappa)))
+        near = out[min(out, key=lambda a, kappa=kappa: abs(math.log(a / kappa)))][0]
         try:
-            fit = problem.fit(
-                p_base, S, fits[near].theta, lower=lower, upper=upper, delta0=fits[near].delta,
-                name=f"{name} ({kappa:g})",
-            )  # fmt: skip
+            fit = fit_at(kappa, near.theta, near.delta)
         except SolverError:
             continue
-        fits[kappa], ll[kappa] = fit, _loglik(problem, fit, k)
-    best = max(ll, key=ll.get)
-    bottom = min(ll)  # the smallest intensity reached
+        out[kappa] = (fit, _loglik(problem, fit, k))
+    return out
+
+
+def _verdict(problem, ll: dict, best: float, bottom: float) -> ProcessNoise:
+    """The :class:`ProcessNoise` of the most likely intensity (the problem is left at it)."""
+    from scipy import stats
+
     lr = max(0.0, 2.0 * (ll[best] - ll[bottom]))
     p = 0.5 * float(stats.chi2.sf(lr, 1)) if lr > 0 else 1.0
     significant = p < SIGNIFICANCE
@@ -422,7 +446,7 @@ def estimate_process_noise(
             horizon = problem.sigma_rate**2 / sigma_w**2
     else:
         horizon = math.inf
-    pn = ProcessNoise(
+    return ProcessNoise(
         intensity=float(sigma_w),
         kappa=float(best),
         lr=float(lr),
@@ -432,14 +456,3 @@ def estimate_process_noise(
         piece_s=piece,
         loglik={float(a): float(b) for a, b in ll.items()},
     )
-    fit = fits[best]
-    fit.extra["process_noise"] = {
-        **pn.to_json(),
-        # the gap of the most continuous fit reached (one trajectory per segment when the
-        # continuation reached the bottom of the grid)
-        "gap_whole": float(fits[bottom].gap),
-        "kappa_whole": float(bottom),
-        "gap_short": float(fits[max(fits)].gap),
-        "loglik": pn.loglik,
-    }
-    return fit
