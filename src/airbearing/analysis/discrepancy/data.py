@@ -221,6 +221,46 @@ def _quality(log: Log):
     return tuple(q.segments), tuple(int(r) for r in q.outlier_rows), q.to_json()
 
 
+def _platform_inputs(testbed, log, q_att, u, ui, notes) -> None:
+    """Sliders, dipoles and the cage field (lab frame) of a platform log into ``u``."""
+    sl = log.sliders()
+    if sl is not None and "s1" in ui:
+        u[:, [ui["s1"], ui["s2"], ui["s3"]]] = sl
+    dip = log.dipoles()
+    if dip is not None and "mx" in ui:
+        u[:, [ui["mx"], ui["my"], ui["mz"]]] = dip
+    b_idx = [ui[k] for k in ("bx_lab", "by_lab", "bz_lab") if k in ui]
+    b_body = log.fields()
+    if b_body is not None and len(b_idx) == 3:
+        b_lab = quat.rotate(q_att, b_body)
+        mean = b_lab.mean(axis=0)
+        spread = float(np.sqrt(np.mean(np.sum((b_lab - mean) ** 2, axis=1))))
+        if spread <= FIELD_CONSTANT_RTOL * float(np.linalg.norm(mean)):
+            u[:, b_idx] = mean
+            notes.append("cage field: the mean of the log's bx, by, bz rotated to the lab")
+        else:
+            u[:, b_idx] = b_lab
+            notes.append("cage field: the log's bx, by, bz rotated to the lab frame")
+    elif testbed.field is not None and len(b_idx) == 3:
+        u[:, b_idx] = testbed.field.lab_vec
+        notes.append("cage field: the testbed's [field] lab (the log has no bx, by, bz)")
+
+
+def _cmg_inputs(log, u, ui, notes) -> np.ndarray:
+    """Gimbal rates of a CMG log into ``u``; the measured gimbal angles (extra states)."""
+    d = log.gimbals()
+    dd = log.gimbal_rates()
+    if dd is None:
+        step = np.diff(log.t)
+        dd = np.vstack([np.diff(d, axis=0) / step[:, None], np.zeros((1, 4))])
+        dd[-1] = dd[-2]
+        notes.append("gimbal rates: forward differences of the measured angles")
+    else:
+        notes.append("gimbal rates: the log's commanded dd1..dd4, applied from t_k")
+    u[:, [ui[f"dd{i}"] for i in range(1, 5)]] = dd
+    return d
+
+
 def replay_data(testbed: Testbed, log: Log) -> ReplayData:
     """Turn ``log`` into the inputs and measurements of ``testbed``'s Model.
 
@@ -271,39 +311,9 @@ def replay_data(testbed: Testbed, log: Log) -> ReplayData:
     ui = {name: i for i, name in enumerate(model.u_names)}
     extra = np.zeros((n, 0))
     if testbed.kind == "platform":
-        sl = log.sliders()
-        if sl is not None and "s1" in ui:
-            u[:, [ui["s1"], ui["s2"], ui["s3"]]] = sl
-        dip = log.dipoles()
-        if dip is not None and "mx" in ui:
-            u[:, [ui["mx"], ui["my"], ui["mz"]]] = dip
-        b_idx = [ui[k] for k in ("bx_lab", "by_lab", "bz_lab") if k in ui]
-        b_body = log.fields()
-        if b_body is not None and len(b_idx) == 3:
-            b_lab = quat.rotate(q_att, b_body)
-            mean = b_lab.mean(axis=0)
-            spread = float(np.sqrt(np.mean(np.sum((b_lab - mean) ** 2, axis=1))))
-            if spread <= FIELD_CONSTANT_RTOL * float(np.linalg.norm(mean)):
-                u[:, b_idx] = mean
-                notes.append("cage field: the mean of the log's bx, by, bz rotated to the lab")
-            else:
-                u[:, b_idx] = b_lab
-                notes.append("cage field: the log's bx, by, bz rotated to the lab frame")
-        elif testbed.field is not None and len(b_idx) == 3:
-            u[:, b_idx] = testbed.field.lab_vec
-            notes.append("cage field: the testbed's [field] lab (the log has no bx, by, bz)")
+        _platform_inputs(testbed, log, q_att, u, ui, notes)
     else:
-        d = log.gimbals()
-        dd = log.gimbal_rates()
-        if dd is None:
-            step = np.diff(log.t)
-            dd = np.vstack([np.diff(d, axis=0) / step[:, None], np.zeros((1, 4))])
-            dd[-1] = dd[-2]
-            notes.append("gimbal rates: forward differences of the measured angles")
-        else:
-            notes.append("gimbal rates: the log's commanded dd1..dd4, applied from t_k")
-        u[:, [ui[f"dd{i}"] for i in range(1, 5)]] = dd
-        extra = d
+        extra = _cmg_inputs(log, u, ui, notes)
     segments, outliers, qjson = _quality(log)
     mask = np.ones(n, dtype=bool)
     mask[list(outliers)] = False
