@@ -80,3 +80,18 @@ def test_replay_prints_short_and_reads_as_a_verdict(replayed):
     text = str(replayed)
     assert "x the noise floor" in text and "misses" in text  # 15 % inertia error hidden
     assert set(replayed.to_json()) >= {"gap", "ratio", "logs", "process_noise"}
+
+
+@pytest.mark.slow
+def test_discrepancy_and_replay_plot_a_figure(found, replayed):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.figure import Figure
+
+    for fig, n_lines in ((found.plot(), 3), (replayed.plot(), 2)):
+        assert isinstance(fig, Figure)
+        # left column: measured and each model; right: each model's residual (cmg-yaw: 1 row)
+        assert len(fig.axes) == 2 and len(fig.axes[0].lines) >= n_lines
+        plt.close(fig)

@@ -363,6 +363,24 @@ class LoopAnalysis:
         head = f"{self.name} ({kind}): {'stable' if self.stable else 'UNSTABLE'}"
         return "\n".join([head, *(f"  {m}" for m in self.channels.values())])
 
+    def plot(self, loop, *, which: str = "bode"):
+        """Figure: the Bode (``which="bode"``) or Nyquist (``"nyquist"``) plot of every
+        channel of ``loop`` (the Loop this analysis was made of).
+
+        Returns
+        -------
+        matplotlib.figure.Figure
+        """
+        from airbearing.reporting.stability import bode_nyquist
+
+        if which not in ("bode", "nyquist"):
+            raise InputError(f"which={which!r}: expected 'bode' or 'nyquist'")
+        import matplotlib.pyplot as plt
+
+        (bode, _), (nyquist, _) = bode_nyquist(self, loop)
+        plt.close(nyquist if which == "bode" else bode)  # only the one asked for stays open
+        return bode if which == "bode" else nyquist
+
     def to_pandas(self):
         """One row per channel: the margins of :meth:`LoopMargins.to_json` (None for inf)."""
         import pandas as pd

@@ -38,14 +38,15 @@ def plot_comparison(runs: dict):
     styles = {"mechanical": "-", "mixed": "--"}
     for method, run in runs.items():
         r = run.result
+        style = styles.get(method, "-")  # adaptive, lyapunov: solid
         names = r.controller.extra_names
         for i, c in ((0, "C0"), (1, "C1")):
             motor = r.extra[:, names.index(f"motor{i + 1}")]
-            axes[0].plot(r.t, motor * 1e3, styles[method], color=c, lw=0.9,
+            axes[0].plot(r.t, motor * 1e3, style, color=c, lw=0.9,
                          label=f"{method} s{i + 1}")  # fmt: skip
         g = r.y[:, r.model.index(["gx", "gy"], "y")]
-        axes[1].plot(r.t, g[:, 0], styles[method], color="C0", lw=0.7, label=f"{method} g_x")
-        axes[1].plot(r.t, g[:, 1], styles[method], color="C1", lw=0.7, label=f"{method} g_y")
+        axes[1].plot(r.t, g[:, 0], style, color="C0", lw=0.7, label=f"{method} g_x")
+        axes[1].plot(r.t, g[:, 1], style, color="C1", lw=0.7, label=f"{method} g_y")
         if method == "mixed":
             d = r.u[:, r.model.index(["mx", "my", "mz"], "u")]
             for i, k in enumerate("xyz"):

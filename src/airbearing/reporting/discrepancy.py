@@ -15,7 +15,14 @@ from airbearing.analysis.discrepancy.words import format_value
 from airbearing.reporting.html import Report
 from airbearing.reporting.html import sentence as as_sentence
 
-__all__ = ["add_discrepancy", "add_replay", "demo_section", "discrepancy_report", "replay_report"]
+__all__ = [
+    "add_discrepancy",
+    "add_replay",
+    "demo_section",
+    "discrepancy_report",
+    "replay_report",
+    "residual_figure",
+]
 
 
 def _series_names(data, problem) -> list[str]:
@@ -49,6 +56,20 @@ def _segments_paragraph(report: Report, datas) -> None:
 
 def _residual_figure(report: Report, datas, problem, fits, labels, floor, windows) -> None:
     """Measured and modelled primary output and residuals, one row per component."""
+    report.figure(
+        residual_figure(datas, problem, fits, labels, floor),
+        "Left: logged output (dots) and the models restarted at each window; right: residuals; "
+        "dotted: +-2 noise sigma; red lines: gaps (segments start afresh); orange dashed: "
+        "outlier rows, left out of every fit.",
+    )
+
+
+def residual_figure(datas, problem, fits, labels, floor):
+    """Figure: measured and modelled primary output and residuals, one row per component.
+
+    ``fits`` is a list of ``(problem, fit)``, ``labels`` their names; the noise ``floor``
+    draws the +-2 sigma band. Used by ``Replay.plot`` and ``Discrepancy.plot``.
+    """
     unit = datas[0].gap_unit
     series = [primary_series(problem_, f.delta, f.p) for problem_, f in fits]
     names = _series_names(datas[0], fits[0][0])
@@ -84,12 +105,7 @@ def _residual_figure(report: Report, datas, problem, fits, labels, floor, window
     axes[0, 0].legend(fontsize=8)
     axes[-1, 0].set_xlabel("t (s)" + (" (logs overlaid)" if multi else ""))
     axes[-1, 1].set_xlabel("t (s)")
-    report.figure(
-        fig,
-        "Left: logged output (dots) and the models restarted at each window; right: residuals; "
-        "dotted: +-2 noise sigma; red lines: gaps (segments start afresh); orange dashed: "
-        "outlier rows, left out of every fit.",
-    )
+    return fig
 
 
 def add_replay(report: Report, result: Replay, *, level: int = 2) -> None:

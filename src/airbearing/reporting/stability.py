@@ -22,7 +22,13 @@ from airbearing.design.tuning import Spec, evaluate, scenario_response, tune
 from airbearing.models import quaternion as quat
 from airbearing.reporting.html import Report, table_html
 
-__all__ = ["stability_report", "report_for_loop", "nonlinear_scenario", "demo_section"]
+__all__ = [
+    "bode_nyquist",
+    "stability_report",
+    "report_for_loop",
+    "nonlinear_scenario",
+    "demo_section",
+]
 
 _DIST_TORQUE = 7e-5  # N m, seed 000 Tables 1-2: residual torque after balancing (~7e-5 N m)
 #: The Bode plot of a discrete loop stops below Nyquist: at pi/dt the ZOH and delay put a
@@ -121,6 +127,14 @@ def nonlinear_scenario(loop: Loop, t_end: float):
         dq = quat.qmul(quat.qconj(loop.trim.x[0:4]), x[:, 0:4])
         out["true_th_x"], out["true_th_y"], out["true_th_z"] = (2 * dq[:, 1:4]).T
     return np.arange(n) * dt, out
+
+
+def bode_nyquist(analysis, loop: Loop):
+    """The Bode and the Nyquist figures of ``analysis`` (:func:`analyse_loop` of ``loop``).
+
+    Returns ``[(figure, caption), (figure, caption)]``; used by ``LoopAnalysis.plot``.
+    """
+    return _bode_nyquist(analysis, loop, analysis.discrete)
 
 
 def _bode_nyquist(analysis, loop: Loop, discrete: bool):

@@ -182,6 +182,17 @@ class BalancingRun:
     def __str__(self) -> str:
         return f"balancing run, {self.method}, {self.metrics.duration_s:g} s\n{self.metrics}"
 
+    def plot(self):
+        """Figure: slider positions, in-plane gravity and (mixed) dipole against time.
+
+        Returns
+        -------
+        matplotlib.figure.Figure
+        """
+        from airbearing.reporting.balancing import plot_comparison
+
+        return plot_comparison({self.method: self})
+
 
 def check_inputs(testbed: Testbed, method: str, duration: float) -> None:
     if method not in METHODS:

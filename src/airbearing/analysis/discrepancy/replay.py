@@ -266,6 +266,20 @@ class Replay:
             lines.append("no significant unexplained torque between the pieces")
         return "\n".join(lines)
 
+    def plot(self):
+        """Figure: the logged output, the Model restarted at each window, and the residual
+        against the noise band (matplotlib, imported only here).
+
+        Returns
+        -------
+        matplotlib.figure.Figure
+        """
+        from airbearing.reporting.discrepancy import residual_figure
+
+        return residual_figure(
+            self.datas, self.problem, [(self.problem, self.fit)], ["model"], self.floor
+        )
+
     @property
     def data(self) -> ReplayData:
         """The first log's data."""

@@ -253,6 +253,24 @@ class Discrepancy:
             )
         return "\n".join(lines)
 
+    def plot(self):
+        """Figure: the logged output with the nominal and the augmented Model, and their
+        residuals against the noise band (matplotlib, imported only here).
+
+        Returns
+        -------
+        matplotlib.figure.Figure
+        """
+        from airbearing.reporting.discrepancy import residual_figure
+
+        return residual_figure(
+            self.datas,
+            self.nominal_problem,
+            [(self.nominal_problem, self.nominal_fit), (self.final_problem, self.final_fit)],
+            ["nominal", "augmented"],
+            self.floor,
+        )
+
     @property
     def data(self) -> ReplayData:
         """The first log's data."""

@@ -83,6 +83,17 @@ class SimResult:
             f"{js['peak_rate_deg_s']:.4g} deg/s, final rate {js['final_rate_deg_s']:.4g} deg/s"
         )
 
+    def plot(self):
+        """Figure: every logged channel of the run against time (what ``ab.plot`` draws).
+
+        Returns
+        -------
+        matplotlib.figure.Figure
+        """
+        from airbearing.api.logs import plot_log
+
+        return plot_log(self.log, self.log.testbed)
+
     @property
     def duration_s(self) -> float:
         """s, from the first sample to the end of the last sample's interval."""
