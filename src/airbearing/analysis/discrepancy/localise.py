@@ -127,7 +127,6 @@ def localise(datas, problem: ShootingProblem, fit: Fit, floor: NoiseFloor) -> Lo
     unit = d0.gap_unit
     s = primary_series(problem, fit.delta, fit.p)
     res = s["residual"]
-    sig = floor.value
     w = problem.windows
     Y = problem.outputs_at(fit.delta, fit.p)[w.weight > 0]
     rate_rows = problem.model.index(list(d0.rate_names), "y")
@@ -138,8 +137,30 @@ def localise(datas, problem: ShootingProblem, fit: Fit, floor: NoiseFloor) -> Lo
     else:
         axis_floor = np.full(res.shape[1], floor.attitude)
         names = ("yaw",) if res.shape[1] == 1 else ("attitude x", "attitude y", "attitude z")
-    words = []
+    words: list = []
     out: dict = {"residual": res, "rows": s["rows"], "source": s["source"], "unit": unit}
+    ratio = _per_axis(out, words, floor.value, axis_floor, names)
+    _over_time(out, words, datas, s, w, ratio)
+    rmag = np.sqrt(np.sum(res**2, axis=1))
+    _against_rate(out, words, rates, rmag, ratio)
+    _after_reversals(out, words, d0.dt, s, w, rates, rmag, floor, ratio)
+    if d0.q is not None:
+        _tilt_and_field(out, words, datas, s, rmag, ratio)
+    if d0.testbed.kind == "cmg":
+        _gimbals(out, words, datas, s, rmag, ratio)
+    _spectrum(out, words, d0.dt, axis_floor, ratio)
+    out["words"] = tuple(words)
+    return Localisation(**out)
+
+
+def _series_of(datas, s, pick):
+    """``pick(data, row)`` at every residual sample (its log and row)."""
+    return np.array([pick(datas[i], r) for i, r in zip(s["source"], s["rows"], strict=True)])
+
+
+def _per_axis(out, words, sig, axis_floor, names) -> float:
+    """The gap against the floor, and the axis the excess is largest on; returns the ratio."""
+    res, unit = out["residual"], out["unit"]
     axis_rms = np.sqrt(np.mean(res**2, axis=0))
     out["axis_rms"] = axis_rms
     excess = np.sqrt(np.maximum(axis_rms**2 - axis_floor**2, 0.0))
@@ -162,7 +183,12 @@ def localise(datas, problem: ShootingProblem, fit: Fit, floor: NoiseFloor) -> Lo
             f"Per axis ({unit} RMS): {share}; the excess over the noise is largest on "
             f"{names[int(np.argmax(excess))]}."
         )
-    # over time: per window, and within windows
+    return ratio
+
+
+def _over_time(out, words, datas, s, w, ratio) -> None:
+    """Per window, and within windows (growing with the time since the restart)."""
+    res = out["residual"]
     wg = np.array([_rms(res[s["window"] == j]) for j in range(w.n)])
     out["window_gap"] = wg
     out["window_t"] = np.array([datas[w.source[j]].t[w.rows[j, 0]] for j in range(w.n)])
@@ -184,9 +210,12 @@ def localise(datas, problem: ShootingProblem, fit: Fit, floor: NoiseFloor) -> Lo
                 "Within each window it grows with the time since the restart: an unmodelled "
                 "torque (integrated by the dynamics), not a measurement offset."
             )
-    # against the rate magnitude
+
+
+def _against_rate(out, words, rates, rmag, ratio) -> None:
+    """The error by quarter of the rate magnitude |w|."""
+    unit = out["unit"]
     wabs = np.linalg.norm(rates, axis=1)
-    rmag = np.sqrt(np.sum(res**2, axis=1))
     qs = np.quantile(wabs, [0.25, 0.5, 0.75])
     bins = np.digitize(wabs, qs)
     vs_rate = np.array([_rms(rmag[bins == b]) for b in range(4)])
@@ -196,9 +225,13 @@ def localise(datas, problem: ShootingProblem, fit: Fit, floor: NoiseFloor) -> Lo
             f"The error grows with |w|: {vs_rate[3]:.3g} {unit} in the fastest quarter of the "
             f"samples against {vs_rate[0]:.3g} in the slowest."
         )
-    # after rate reversals (within each window, the rate of the model or the gyro)
+
+
+def _after_reversals(out, words, dt, s, w, rates, rmag, floor, ratio) -> None:
+    """The error within 1 s after a rate reversal (of the model or the gyro), and elsewhere."""
+    unit = out["unit"]
     after = np.zeros(len(rmag), dtype=bool)
-    horizon = max(1, int(round(1.0 / d0.dt)))
+    horizon = max(1, int(round(1.0 / dt)))
     start = 0
     for j in range(w.n):
         m = int((s["window"] == j).sum())
@@ -218,62 +251,65 @@ def localise(datas, problem: ShootingProblem, fit: Fit, floor: NoiseFloor) -> Lo
                 f"It is largest just after a rate reversal ({ra:.3g} {unit} within 1 s of one, "
                 f"{re_:.3g} elsewhere): a torque that depends on the sign of w."
             )
-    # tilt and the field (dof 3)
-    if d0.q is not None:
-        q = np.array([datas[i].q[r] for i, r in zip(s["source"], s["rows"], strict=True)])
-        tilt = quat.tilt_of(q)
-        qt = np.quantile(tilt, [0.25, 0.75])
-        t_lo, t_hi = _rms(rmag[tilt <= qt[0]]), _rms(rmag[tilt >= qt[1]])
-        out["tilt"] = (float(np.rad2deg(qt[0])), t_lo, float(np.rad2deg(qt[1])), t_hi)
-        if ratio >= ABOVE and t_hi > CONTRAST * t_lo:
-            words.append(
-                f"It grows with the tilt: {t_hi:.3g} {unit} above {np.rad2deg(qt[1]):.0f} deg "
-                f"against {t_lo:.3g} below {np.rad2deg(qt[0]):.0f} deg (a gravity torque)."
-            )
-        if "bx_lab" in d0.u_names:
-            idx = [d0.u_names.index(n) for n in ("bx_lab", "by_lab", "bz_lab")]
-            b_lab = np.array(
-                [datas[i].u[r, idx] for i, r in zip(s["source"], s["rows"], strict=True)]
-            )
-            if np.any(b_lab != 0):
-                vertical = np.allclose(b_lab[:, :2], 0, atol=1e-3 * float(np.abs(b_lab).max()))
-                out["field_vertical"] = bool(vertical)
-                if vertical:
-                    words.append(
-                        "The cage field is vertical: a torque from a residual dipole cannot be "
-                        "told from one of a CM offset in these logs."
-                    )
-    # gimbal angles (cmg)
-    if d0.testbed.kind == "cmg":
-        dm = np.array(
-            [
-                np.mean(np.abs(datas[i].extra_x[r]))
-                for i, r in zip(s["source"], s["rows"], strict=True)
-            ]
+
+
+def _tilt_and_field(out, words, datas, s, rmag, ratio) -> None:
+    """dof 3: the error against the tilt, and whether the cage field is vertical."""
+    unit, d0 = out["unit"], datas[0]
+    q = _series_of(datas, s, lambda d, r: d.q[r])
+    tilt = quat.tilt_of(q)
+    qt = np.quantile(tilt, [0.25, 0.75])
+    t_lo, t_hi = _rms(rmag[tilt <= qt[0]]), _rms(rmag[tilt >= qt[1]])
+    out["tilt"] = (float(np.rad2deg(qt[0])), t_lo, float(np.rad2deg(qt[1])), t_hi)
+    if ratio >= ABOVE and t_hi > CONTRAST * t_lo:
+        words.append(
+            f"It grows with the tilt: {t_hi:.3g} {unit} above {np.rad2deg(qt[1]):.0f} deg "
+            f"against {t_lo:.3g} below {np.rad2deg(qt[0]):.0f} deg (a gravity torque)."
         )
-        qd = np.quantile(dm, [0.25, 0.75])
-        g_lo, g_hi = _rms(rmag[dm <= qd[0]]), _rms(rmag[dm >= qd[1]])
-        out["gimbal"] = (float(np.rad2deg(qd[0])), g_lo, float(np.rad2deg(qd[1])), g_hi)
-        if ratio >= ABOVE and g_hi > CONTRAST * g_lo:
-            words.append(
-                f"It is largest when the gimbals are far from zero (mean |delta| above "
-                f"{np.rad2deg(qd[1]):.0f} deg: {g_hi:.3g} {unit}, against {g_lo:.3g})."
-            )
-        cols = [d0.u_names.index(f"dd{i}") for i in range(1, 5)]
-        dd = np.array([datas[i].u[r, cols] for i, r in zip(s["source"], s["rows"], strict=True)])
-        busy = np.max(np.abs(dd), axis=1) > 0.1 * np.max(np.abs(dd))
-        if busy.any() and (~busy).any():
-            rb, rq = _rms(rmag[busy]), _rms(rmag[~busy])
-            out["gimbal_busy"] = (rb, rq)
-            if ratio >= ABOVE and rb > CONTRAST * rq:
+    if "bx_lab" in d0.u_names:
+        idx = [d0.u_names.index(n) for n in ("bx_lab", "by_lab", "bz_lab")]
+        b_lab = _series_of(datas, s, lambda d, r: d.u[r, idx])
+        if np.any(b_lab != 0):
+            vertical = np.allclose(b_lab[:, :2], 0, atol=1e-3 * float(np.abs(b_lab).max()))
+            out["field_vertical"] = bool(vertical)
+            if vertical:
                 words.append(
-                    f"It is largest while the gimbals turn fast ({rb:.3g} {unit} against "
-                    f"{rq:.3g} when they hold): the CMG torque is off by a factor."
+                    "The cage field is vertical: a torque from a residual dipole cannot be "
+                    "told from one of a CM offset in these logs."
                 )
-    # frequency
+
+
+def _gimbals(out, words, datas, s, rmag, ratio) -> None:
+    """cmg: the error against the gimbal angles and while the gimbals turn fast."""
+    unit, d0 = out["unit"], datas[0]
+    dm = _series_of(datas, s, lambda d, r: np.mean(np.abs(d.extra_x[r])))
+    qd = np.quantile(dm, [0.25, 0.75])
+    g_lo, g_hi = _rms(rmag[dm <= qd[0]]), _rms(rmag[dm >= qd[1]])
+    out["gimbal"] = (float(np.rad2deg(qd[0])), g_lo, float(np.rad2deg(qd[1])), g_hi)
+    if ratio >= ABOVE and g_hi > CONTRAST * g_lo:
+        words.append(
+            f"It is largest when the gimbals are far from zero (mean |delta| above "
+            f"{np.rad2deg(qd[1]):.0f} deg: {g_hi:.3g} {unit}, against {g_lo:.3g})."
+        )
+    cols = [d0.u_names.index(f"dd{i}") for i in range(1, 5)]
+    dd = _series_of(datas, s, lambda d, r: d.u[r, cols])
+    busy = np.max(np.abs(dd), axis=1) > 0.1 * np.max(np.abs(dd))
+    if busy.any() and (~busy).any():
+        rb, rq = _rms(rmag[busy]), _rms(rmag[~busy])
+        out["gimbal_busy"] = (rb, rq)
+        if ratio >= ABOVE and rb > CONTRAST * rq:
+            words.append(
+                f"It is largest while the gimbals turn fast ({rb:.3g} {unit} against "
+                f"{rq:.3g} when they hold): the CMG torque is off by a factor."
+            )
+
+
+def _spectrum(out, words, dt, axis_floor, ratio) -> None:
+    """The residual's spectrum against the white noise of the floor: slow or oscillating."""
+    res = out["residual"]
     seg = min(256, len(res))
-    f, pxx = welch(res, 1.0 / d0.dt, seg)
-    white = 2 * d0.dt * axis_floor**2
+    f, pxx = welch(res, 1.0 / dt, seg)
+    white = 2 * dt * axis_floor**2
     out["spectrum"] = (f, pxx, white)
     if ratio >= ABOVE:
         exc = np.maximum(np.sum(pxx, axis=1) - np.sum(white), 0)
@@ -289,5 +325,3 @@ def localise(datas, problem: ShootingProblem, fit: Fit, floor: NoiseFloor) -> Lo
                     f"In frequency the excess error peaks near {float(f[int(np.argmax(exc))]):.2g} "
                     "Hz (the motion's own frequencies: a state-dependent torque)."
                 )
-    out["words"] = tuple(words)
-    return Localisation(**out)

@@ -678,17 +678,110 @@ def discrepancy(
         raise InputError(f"--max-effects {max_effects!r}: expected an integer >= 0")
     logs = [logs] if isinstance(logs, Log) else list(logs)
     validate = list(validate or ())
-    say = progress or (lambda *a, **k: None)
     datas, windows, floor = prepare(testbed, logs, window_s=window_s)
     cands = candidates_for(testbed, datas, only)
     # listed with their reason, never fitted (a spring on a yaw that turns many times)
     refused = [failed(c, "not offered", r) for c, r in unphysical_candidates(testbed, datas, only)]
     search = _Search(testbed, datas, windows, floor, cands, seed, jit)
-    total = 1 + len(cands) * max(max_effects, 1) + len(validate)
-    done = 0
-    unit = datas[0].gap_unit
+    prog = _Progress(progress, 1 + len(cands) * max(max_effects, 1) + len(validate))
+    base_problem, nominal = _nominal_replay(search, prog)
+    sel = _select(search, nominal, max_effects, screen, workers, prog)
+    named = _named(search, sel, prog)
+    judged = _judge(search, sel, named, logs, validate, window_s, jit, prog)
+    loc = localise(datas, base_problem, nominal, floor)
+    prog("done", prog.total)
+    return _result(search, refused, base_problem, sel, named, judged, loc)
 
-    say("nominal replay (compiling the window function once per model structure)", 0, total)
+
+def _result(search, refused, base_problem, sel, named, judged, loc) -> Discrepancy:
+    """The :class:`Discrepancy` of the stages' outputs."""
+    validation, per_log, agree, adq, text = judged
+    testbed, nominal = search.testbed, sel.nominal
+    augmented = testbed.with_effects(named.effects) if named.effects else testbed
+    return Discrepancy(
+        testbed=testbed,
+        datas=tuple(search.datas),
+        windows=search.windows,
+        floor=search.floor,
+        effects=named.effects,
+        effect_std=named.std,
+        gap_before=nominal.gap,
+        gap_after=sel.current.gap,
+        noise_floor=search.floor.value,
+        candidates=(sel.rounds[0] if sel.rounds else ()) + tuple(refused),
+        rounds=tuple(sel.rounds),
+        confounded=tuple(sel.confounded),
+        experiments=sel.experiments,
+        augmented_testbed=augmented,
+        augmented_model=build_model(augmented),
+        verdict=text,
+        localisation=loc,
+        nominal_fit=nominal,
+        final_fit=named.fit,
+        nominal_problem=base_problem,
+        final_problem=named.problem,
+        stop_reason=sel.stop_reason,
+        validation=validation,
+        log_gaps_before=tuple(log_gaps(base_problem, nominal)),
+        log_gaps_after=tuple(log_gaps(named.problem, sel.current)),
+        effect_std_white=named.std_white,
+        effect_crlb=named.crlb,
+        effect_efficiency=named.efficiency,
+        errors=named.errors,
+        adequacy=adq,
+        per_log=tuple(per_log),
+        consistency=tuple(agree),
+    )
+
+
+class _Progress:
+    """``progress(what, done, total)`` with the count of fits done so far."""
+
+    def __init__(self, progress, total: int):
+        self.say = progress or (lambda *a, **k: None)
+        self.total = total
+        self.done = 0
+
+    def __call__(self, what: str, done: int | None = None) -> None:
+        self.say(what, self.done if done is None else done, self.total)
+
+
+@dataclass
+class _Selection:
+    """The state of forward selection: the effects chosen so far and the current fit."""
+
+    nominal: Fit
+    current: Fit
+    ln_n: float
+    chosen: list = field(default_factory=list)
+    theta: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    lag: bool = False
+    rounds: list = field(default_factory=list)
+    confounded: list = field(default_factory=list)
+    experiments: dict = field(default_factory=dict)
+    stop_reason: str = ""
+    starts: dict = field(default_factory=dict)
+    dropped: set = field(default_factory=set)
+
+
+@dataclass
+class _Named:
+    """The named effects at the final fit, with their honest errors."""
+
+    fit: Fit
+    problem: ShootingProblem
+    errors: Errors
+    effects: dict
+    std: dict
+    std_white: dict
+    crlb: dict
+    efficiency: dict
+
+
+def _nominal_replay(search: _Search, prog: _Progress) -> tuple[ShootingProblem, Fit]:
+    """Stage 1: the nominal Model's replay of every log (the baseline of every candidate)."""
+    unit, floor = search.datas[0].gap_unit, search.floor
+    prog("nominal replay (compiling the window function once per model structure)")
     base_problem = search.problem(False)
     # far from the data the nominal replay may not converge: its last iterate is the baseline
     nominal = base_problem.fit(
@@ -696,189 +789,223 @@ def discrepancy(
         name="replay of the logs (nominal model)",
         accept_max_iter=True,
     )
-    done += 1
-    say(f"nominal gap {nominal.gap:.3g} {unit}, noise floor {floor.value:.3g} {unit}", done, total)
-    ln_n = math.log(nominal.n_res)
+    prog.done += 1
+    prog(f"nominal gap {nominal.gap:.3g} {unit}, noise floor {floor.value:.3g} {unit}")
+    return base_problem, nominal
 
-    chosen: list[Candidate] = []
-    theta_chosen = np.zeros(0)
-    current, current_lag = nominal, False
-    rounds, confounded, experiments = [], [], {}
-    stop_reason = "max_effects = 0" if max_effects == 0 else ""
-    starts: dict = {}
-    dropped: set = set()
+
+def _select(search, nominal, max_effects, screen, workers, prog) -> _Selection:
+    """Stage 3: forward selection, one round per effect added, up to ``max_effects``."""
+    unit = search.datas[0].gap_unit
+    sel = _Selection(nominal=nominal, current=nominal, ln_n=math.log(nominal.n_res))
+    sel.stop_reason = "max_effects = 0" if max_effects == 0 else ""
     # a noise-free log: below the smallest noise level the replay weighs with, what is left is
     # the integration's own error (~1e-6 rad/s on fast motion with 2 RK4 sub-steps), not an
     # effect; the likelihood ratio is scale-free and would name it
     resolution = RATE_SIGMA_MIN if unit == "rad/s" else ATTITUDE_SIGMA_MIN
     if max_effects and nominal.gap < resolution:
-        stop_reason = (
+        sel.stop_reason = (
             f"the nominal model replays the logs to {nominal.gap:.3g} {unit}, below the "
             f"{resolution:g} {unit} the replay resolves (a noise-free log): nothing to name"
         )
         max_effects = 0
-
-    while len(chosen) < max_effects:
-        taken = {c.name for c in chosen}
-        remaining = [c for c in cands if c.name not in taken and c.label not in dropped]
+    while len(sel.chosen) < max_effects:
+        taken = {c.name for c in sel.chosen}
+        remaining = [c for c in search.cands if c.name not in taken and c.label not in sel.dropped]
         if not remaining:
-            stop_reason = "every candidate is in the model"
+            sel.stop_reason = "every candidate is in the model"
             break
-        before = cross_validate(
-            search.problem(current_lag), current, len(theta_chosen), search.folds
-        )
-        # regression starts of this round (one residual-torque evaluation per candidate)
-        model = search.models[current_lag]
-        p_cur = model.p0 + (search.S(current_lag, chosen) @ theta_chosen if chosen else 0.0)
-        for c in remaining:
-            if c.smooth and not c.lag:
-                tau, phi = residual_torque(model, datas, p_cur, search.S(current_lag, [c]))
-                th, sd = regression_start(tau, phi)
-                starts[(c.label, len(chosen))] = (th, sd, explained_fraction(tau, phi, th))
-        # the lag problem (more states) is built before the threads share it
-        for c in remaining:
-            search.problem(current_lag or c.lag)
-        # one Jacobian at the current fit in every candidate's parameters: the score test
-        lin = None
-        if screen:
-            lin = linearise(
-                search.problem(current_lag),
-                current,
-                search.S(current_lag, chosen),
-                [c for c in remaining if c.smooth and not c.lag],
-            )
-
-        def run(
-            c, chosen=chosen, theta=theta_chosen, cur=current, lag=current_lag, b=before, lin=lin
-        ):
-            return _try(search, c, chosen, theta, cur, lag, ln_n, starts, b, lin)
-
-        def fit_all(group):
-            nonlocal done
-            out = []
-            if workers > 1 and len(group) > 1:
-                with ThreadPoolExecutor(max_workers=workers) as pool:
-                    out = list(pool.map(run, group))
-            else:
-                out = [run(c) for c in group]
-            for res in out:
-                done += 1
-                say(f"{res.label}: gap {res.gap:.3g} {unit}, {res.status}", done, total)
-            return out
-
-        # the per-axis form of an effect only when its one-value form is significant: an
-        # effect the logs do not see with one value is not seen with three either
-        results = fit_all([c for c in remaining if not c.per_axis])
-        seen = {r.name for r in results if r.significant}
-        per_axis = [c for c in remaining if c.per_axis and c.name in seen]
-        done += sum(1 for c in remaining if c.per_axis and c.name not in seen)
-        results += fit_all(per_axis)
-        # IPOPT where it can matter: a candidate judged on its Gauss-Newton step that could be
-        # named and whose BIC comes within MATTER_BIC of the best is fitted by IPOPT
-        while True:  # each pass refits at least one step, which is then an IPOPT fit
-            # near the best significant candidate, or near the best nameable one (the pick)
-            bests = [
-                min((r.delta_bic for r in results if test(r)), default=-math.inf)
-                for test in (lambda r: r.significant, lambda r: r.nameable)
-            ]
-            again = [
-                i
-                for i, r in enumerate(results)
-                if r.status == "screened"
-                and r.significant
-                and any(r.delta_bic <= b + MATTER_BIC for b in bests)
-            ]
-            if not again:
-                break
-            for i in again:
-                results[i] = run(results[i].candidate, lin=None)
-                say(f"{results[i].label}: fitted by IPOPT, {results[i].status}", done, total)
-        results.sort(key=lambda c: (not np.isfinite(c.delta_bic), c.delta_bic))
-        rounds.append(tuple(results))
+        results = _round(search, sel, remaining, screen, workers, prog)
+        sel.rounds.append(tuple(results))
         # what the logs cannot identify (nothing excites it) or what the fit pins at its
         # physical bound is not refitted in later rounds
-        dropped |= {
+        sel.dropped |= {
             r.label
             for r in results
             if r.status in ("not identifiable from this log", "at its physical bound")
         }
-        good = [c for c in results if c.nameable]
-        if not good:
-            stop_reason = (
-                "no further candidate may be named" if chosen else "no candidate may be named"
-            )
+        if not _add_best(sel, results, prog):
             break
-        best_bic = min(c.delta_bic for c in good)
-        group = [c for c in good if c.delta_bic - best_bic < CONFOUND_BIC]
-        order = {name: i for i, name in enumerate(REGISTRY)}
-        group.sort(key=lambda c: (c.k, order[c.name]))
-        pick = group[0]
-        # a pick is always an IPOPT fit: within MATTER_BIC (> CONFOUND_BIC) of the best
-        # nameable candidate, every step was refitted above
-        assert pick.status != "screened", pick.label
-        for other in (c for c in group[1:] if c.name != pick.name):
-            pair = (pick.name, other.name)
-            if pair not in confounded:
-                confounded.append(pair)
-                experiments[f"{pick.name} + {other.name}"] = experiment_for(*pair)
-        chosen.append(pick.candidate)
-        theta_chosen = pick.fit.theta.copy()
-        current = pick.fit
-        current_lag = current_lag or pick.candidate.lag
-        say(f"added {pick.candidate.label} = {format_value(pick.value)}", done, total)
     else:
-        stop_reason = stop_reason or f"reached max_effects = {max_effects}"
+        sel.stop_reason = sel.stop_reason or f"reached max_effects = {max_effects}"
+    return sel
 
-    # effects are named on short pieces (the detection study's calibration, robust far from
-    # the nominal); their values and errors come from the horizon the data support: the
-    # process noise estimated with the named effects, continued down from the short pieces
-    short = current
-    if windows.linked:
-        say("the horizon: how much torque the model still leaves unexplained", done, total)
-        current = search.horizon(current, current_lag, chosen, theta_chosen)
-    final_problem = search.problem(current_lag)
-    errs = honest(final_problem, current, len(current.theta))
+
+def _round(search, sel: _Selection, remaining, screen, workers, prog) -> list:
+    """One round: every remaining candidate judged at the current fit, best first."""
+    unit = search.datas[0].gap_unit
+    chosen, theta, current, lag = sel.chosen, sel.theta, sel.current, sel.lag
+    before = cross_validate(search.problem(lag), current, len(theta), search.folds)
+    # regression starts of this round (one residual-torque evaluation per candidate)
+    model = search.models[lag]
+    p_cur = model.p0 + (search.S(lag, chosen) @ theta if chosen else 0.0)
+    for c in remaining:
+        if c.smooth and not c.lag:
+            tau, phi = residual_torque(model, search.datas, p_cur, search.S(lag, [c]))
+            th, sd = regression_start(tau, phi)
+            sel.starts[(c.label, len(chosen))] = (th, sd, explained_fraction(tau, phi, th))
+    # the lag problem (more states) is built before the threads share it
+    for c in remaining:
+        search.problem(lag or c.lag)
+    # one Jacobian at the current fit in every candidate's parameters: the score test
+    lin = None
+    if screen:
+        lin = linearise(
+            search.problem(lag),
+            current,
+            search.S(lag, chosen),
+            [c for c in remaining if c.smooth and not c.lag],
+        )
+
+    def run(c, lin=lin):
+        return _try(search, c, chosen, theta, current, lag, sel.ln_n, sel.starts, before, lin)
+
+    def fit_all(group):
+        if workers > 1 and len(group) > 1:
+            with ThreadPoolExecutor(max_workers=workers) as pool:
+                out = list(pool.map(run, group))
+        else:
+            out = [run(c) for c in group]
+        for res in out:
+            prog.done += 1
+            prog(f"{res.label}: gap {res.gap:.3g} {unit}, {res.status}")
+        return out
+
+    # the per-axis form of an effect only when its one-value form is significant: an
+    # effect the logs do not see with one value is not seen with three either
+    results = fit_all([c for c in remaining if not c.per_axis])
+    seen = {r.name for r in results if r.significant}
+    per_axis = [c for c in remaining if c.per_axis and c.name in seen]
+    prog.done += sum(1 for c in remaining if c.per_axis and c.name not in seen)
+    results += fit_all(per_axis)
+    # IPOPT where it can matter: a candidate judged on its Gauss-Newton step that could be
+    # named and whose BIC comes within MATTER_BIC of the best is fitted by IPOPT
+    while True:  # each pass refits at least one step, which is then an IPOPT fit
+        # near the best significant candidate, or near the best nameable one (the pick)
+        bests = [
+            min((r.delta_bic for r in results if test(r)), default=-math.inf)
+            for test in (lambda r: r.significant, lambda r: r.nameable)
+        ]
+        again = [
+            i
+            for i, r in enumerate(results)
+            if r.status == "screened"
+            and r.significant
+            and any(r.delta_bic <= b + MATTER_BIC for b in bests)
+        ]
+        if not again:
+            break
+        for i in again:
+            results[i] = run(results[i].candidate, lin=None)
+            prog(f"{results[i].label}: fitted by IPOPT, {results[i].status}")
+    results.sort(key=lambda c: (not np.isfinite(c.delta_bic), c.delta_bic))
+    return results
+
+
+def _add_best(sel: _Selection, results, prog) -> bool:
+    """Add the round's pick to the model (False, with the stop reason, when none may be named).
+
+    Candidates within ``CONFOUND_BIC`` of the best are confounded; the registry's first of
+    them (fewest parameters first) is added.
+    """
+    good = [c for c in results if c.nameable]
+    if not good:
+        sel.stop_reason = (
+            "no further candidate may be named" if sel.chosen else "no candidate may be named"
+        )
+        return False
+    best_bic = min(c.delta_bic for c in good)
+    group = [c for c in good if c.delta_bic - best_bic < CONFOUND_BIC]
+    order = {name: i for i, name in enumerate(REGISTRY)}
+    group.sort(key=lambda c: (c.k, order[c.name]))
+    pick = group[0]
+    # a pick is always an IPOPT fit: within MATTER_BIC (> CONFOUND_BIC) of the best
+    # nameable candidate, every step was refitted above
+    assert pick.status != "screened", pick.label
+    for other in (c for c in group[1:] if c.name != pick.name):
+        pair = (pick.name, other.name)
+        if pair not in sel.confounded:
+            sel.confounded.append(pair)
+            sel.experiments[f"{pick.name} + {other.name}"] = experiment_for(*pair)
+    sel.chosen.append(pick.candidate)
+    sel.theta = pick.fit.theta.copy()
+    sel.current = pick.fit
+    sel.lag = sel.lag or pick.candidate.lag
+    prog(f"added {pick.candidate.label} = {format_value(pick.value)}")
+    return True
+
+
+def _named(search: _Search, sel: _Selection, prog: _Progress) -> _Named:
+    """Stage 5: the values and honest errors of the named effects, on the horizon the data
+    support.
+
+    Effects are named on short pieces (the detection study's calibration, robust far from
+    the nominal); their values and errors come from the process noise estimated with the
+    named effects, continued down from the short pieces.
+    """
+    current = sel.current
+    if search.windows.linked:
+        prog("the horizon: how much torque the model still leaves unexplained")
+        current = search.horizon(current, sel.lag, sel.chosen, sel.theta)
+    problem = search.problem(sel.lag)
+    errs = honest(problem, current, len(current.theta))
     effects, effect_std, white, crlb, eff = {}, {}, {}, {}, {}
     i = 0
-    for c in chosen:
+    for c in sel.chosen:
         effects[c.name] = c.value(current.theta[i : i + c.k])
         ee = effect_errors(c, errs, i)
         effect_std[c.name], white[c.name], crlb[c.name] = ee.std, ee.std_white, ee.crlb
         eff[c.name] = ee.efficiency
         i += c.k
-    if rounds:
-        rounds[0] = tuple(_with_honest(search, r) for r in rounds[0])
-    augmented = testbed.with_effects(effects) if effects else testbed
-    validation = _validate(testbed, effects, validate, window_s, jit) if validate else ()
-    done += len(validate)
-    runs = [(lg, "fitted") for lg in logs] + [(lg, "validation") for lg in validate]
-    per_log, agree = [], []
-    if effects and len(runs) >= 2:
-        say("each named effect on each log alone", done, total)
-        per_log = per_log_fits(
-            testbed,
-            [lg for lg, _ in runs],
-            [r for _, r in runs],
-            search.models[current_lag],
-            search.S(current_lag, chosen),
-            chosen,
-            current.theta,
-            np.r_[[lo for c in chosen for lo in c.lower]],
-            np.r_[[hi for c in chosen for hi in c.upper]],
-            window_s,
-            jit,
-            kappa=getattr(search, "kappa", None),
-        )
-        agree = consistency(chosen, per_log)
+    if sel.rounds:
+        sel.rounds[0] = tuple(_with_honest(search, r) for r in sel.rounds[0])
+    return _Named(current, problem, errs, effects, effect_std, white, crlb, eff)
+
+
+def _judge(search, sel, named, logs, validate, window_s, jit, prog) -> tuple:
+    """Stage 4-5: ``(validation, per_log, consistency, adequacy, verdict text)``."""
+    effects, nominal = named.effects, sel.nominal
+    validation = _validate(search.testbed, effects, validate, window_s, jit) if validate else ()
+    prog.done += len(validate)
+    per_log, agree = _agreement(search, sel, named, logs, validate, window_s, jit, prog)
     adq = adequacy(
-        final_problem,
-        current,
-        floor,
-        datas,
-        gap_before=_whole_gap(nominal, current) if effects else None,
+        named.problem,
+        named.fit,
+        search.floor,
+        search.datas,
+        gap_before=_whole_gap(nominal, named.fit) if effects else None,
     )
+    return validation, per_log, agree, adq, _verdict_text(sel, named, adq, agree, validation)
+
+
+def _agreement(search, sel, named, logs, validate, window_s, jit, prog) -> tuple[list, list]:
+    """With several runs: each named effect fitted on each log alone, and their agreement."""
+    runs = [(lg, "fitted") for lg in logs] + [(lg, "validation") for lg in validate]
+    if not (named.effects and len(runs) >= 2):
+        return [], []
+    prog("each named effect on each log alone")
+    chosen = sel.chosen
+    per_log = per_log_fits(
+        search.testbed,
+        [lg for lg, _ in runs],
+        [r for _, r in runs],
+        search.models[sel.lag],
+        search.S(sel.lag, chosen),
+        chosen,
+        named.fit.theta,
+        np.r_[[lo for c in chosen for lo in c.lower]],
+        np.r_[[hi for c in chosen for hi in c.upper]],
+        window_s,
+        jit,
+        kappa=getattr(search, "kappa", None),
+    )
+    return per_log, consistency(chosen, per_log)
+
+
+def _verdict_text(sel: _Selection, named: _Named, adq, agree, validation) -> str:
+    """The verdict in words: what was named, how well, what failed, and the validation."""
     unfit = {}
-    for rnd in rounds:
+    for rnd in sel.rounds:
         for r in rnd:
             if r.status in ("did not converge", "at its physical bound"):
                 _log.debug("candidate %s: %s: %s", r.label, r.status, r.reason)
@@ -887,57 +1014,22 @@ def discrepancy(
                 _log.debug("candidate %s: retry failed: %s", r.label, r.retry_reason)
                 unfit.setdefault(r.label, "a retry from another start did not converge either")
     text = verdict(
-        effects,
-        effect_std,
-        stop_reason,
-        efficiency=eff,
+        named.effects,
+        named.std,
+        sel.stop_reason,
+        efficiency=named.efficiency,
         adequacy=adq,
         unfit=tuple(unfit.items()),
         disagreements=[w for w in (c.words() for c in agree) if w],
     )
-    if validation and effects:
+    if validation and named.effects:
         bad = [v.log for v in validation if not v.shrinks]
         text += (
             f"; NOT confirmed on {', '.join(bad)} (the gap does not shrink)"
             if bad
             else f"; confirmed on {len(validation)} validation log(s) (the gap shrinks)"
         )
-    loc = localise(datas, base_problem, nominal, floor)
-    say("done", total, total)
-    return Discrepancy(
-        testbed=testbed,
-        datas=tuple(datas),
-        windows=windows,
-        floor=floor,
-        effects=effects,
-        effect_std=effect_std,
-        gap_before=nominal.gap,
-        gap_after=short.gap,
-        noise_floor=floor.value,
-        candidates=(rounds[0] if rounds else ()) + tuple(refused),
-        rounds=tuple(rounds),
-        confounded=tuple(confounded),
-        experiments=experiments,
-        augmented_testbed=augmented,
-        augmented_model=build_model(augmented),
-        verdict=text,
-        localisation=loc,
-        nominal_fit=nominal,
-        final_fit=current,
-        nominal_problem=base_problem,
-        final_problem=final_problem,
-        stop_reason=stop_reason,
-        validation=validation,
-        log_gaps_before=tuple(log_gaps(base_problem, nominal)),
-        log_gaps_after=tuple(log_gaps(final_problem, short)),
-        effect_std_white=white,
-        effect_crlb=crlb,
-        effect_efficiency=eff,
-        errors=errs,
-        adequacy=adq,
-        per_log=tuple(per_log),
-        consistency=tuple(agree),
-    )
+    return text
 
 
 def _whole_gap(nominal: Fit, final: Fit) -> float | None:
