@@ -148,4 +148,5 @@ def _check_catalogue() -> None:
     """Every entry's file exists and says the entry's name, kind and dof (used by tests)."""
     for b in BUILTINS:
         d = tomllib.loads(builtin_toml(b.name).decode("utf-8"))
-        assert d["name"] == b.name and d["kind"] == b.kind and d["body"]["dof"] == b.dof, b
+        if not (d["name"] == b.name and d["kind"] == b.kind and d["body"]["dof"] == b.dof):
+            raise RuntimeError(f"built-in {b.name!r}: its file says another name, kind or dof")

@@ -158,7 +158,8 @@ def main() -> None:
     fd = sys.stdin.fileno()
     try:
         kind, campaign, run_fn = _read(fd)
-        assert kind == "init"
+        if kind != "init":  # the parent's protocol always starts with init
+            raise RuntimeError(f"campaign child: expected 'init' first, got {kind!r}")
         _write(out, "ready")
         while True:
             run = _read(fd)

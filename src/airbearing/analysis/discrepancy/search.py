@@ -921,7 +921,8 @@ def _add_best(sel: _Selection, results, prog) -> bool:
     pick = group[0]
     # a pick is always an IPOPT fit: within MATTER_BIC (> CONFOUND_BIC) of the best
     # nameable candidate, every step was refitted above
-    assert pick.status != "screened", pick.label
+    if pick.status == "screened":  # pragma: no cover - an invariant of the refit loop
+        raise RuntimeError(f"{pick.label}: a named effect must be an IPOPT fit")
     for other in (c for c in group[1:] if c.name != pick.name):
         pair = (pick.name, other.name)
         if pair not in sel.confounded:

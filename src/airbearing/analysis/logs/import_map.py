@@ -68,7 +68,8 @@ def _quaternion_of_matrix(c: np.ndarray) -> np.ndarray:
 
     x, y, z, w = Rotation.from_matrix(c).as_quat()
     q = np.array([w, x, y, z])
-    assert np.allclose(quat.rotation_matrix(q), c, atol=1e-9)  # same convention as models
+    if not np.allclose(quat.rotation_matrix(q), c, atol=1e-9):  # same convention as models
+        raise RuntimeError("quaternion of a frame rotation: conventions disagree")
     return q
 
 
