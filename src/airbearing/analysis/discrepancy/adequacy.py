@@ -226,6 +226,19 @@ def follows(residual, yaw, rate, t, segment) -> dict:
     return out
 
 
+def torque_words(pn: dict) -> str:
+    """The sentence of a significant unexplained torque (``fit.extra["process_noise"]``)."""
+    p = pn.get("p", math.nan)
+    p_txt = "p < 1e-16" if p == 0 else f"p {p:.2g}"
+    h = pn.get("horizon_s")
+    return (
+        f"an unexplained torque is significant (intensity {pn.get('intensity', 0):.3g} "
+        f"{pn.get('unit', '')}, {p_txt}"
+        + (f"; the model predicts to the noise over about {h:.3g} s" if h else "")
+        + ")"
+    )
+
+
 @dataclass(frozen=True, eq=False)
 class Adequacy:
     """The adequacy verdict of one fit (module doc).
@@ -290,13 +303,7 @@ class Adequacy:
             )
         pn = self.process_noise
         if pn and pn.get("significant"):
-            h = pn.get("horizon_s")
-            parts.append(
-                f"an unexplained torque is significant (intensity {pn.get('intensity', 0):.3g} "
-                f"{pn.get('unit', '')}, p {pn.get('p', math.nan):.2g}"
-                + (f"; the model predicts to the noise over about {h:.3g} s" if h else "")
-                + ")"
-            )
+            parts.append(torque_words(pn))
             parts.append(f"over whole segments {self.gap_over_floor:.3g} x the noise floor remains")
         else:
             parts.append(f"{self.gap_over_floor:.3g} x the noise floor remains")

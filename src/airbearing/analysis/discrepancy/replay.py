@@ -256,12 +256,9 @@ class Replay:
         ]
         pn = self.process_noise
         if pn and pn.get("significant"):
-            h = pn.get("horizon_s")
-            lines.append(
-                f"an unexplained torque is significant (intensity {pn.get('intensity', 0):.3g} "
-                f"{pn.get('unit', '')}, p {pn.get('p', math.nan):.2g})"
-                + (f"; the model predicts to the noise over about {h:.3g} s" if h else "")
-            )
+            from airbearing.analysis.discrepancy.adequacy import torque_words
+
+            lines.append(torque_words(pn))
         elif pn is not None:
             lines.append("no significant unexplained torque between the pieces")
         return "\n".join(lines)

@@ -40,6 +40,7 @@ import scipy.sparse as sp
 
 from airbearing.analysis.shooting.functions import _problem_functions, to_csc
 from airbearing.analysis.shooting.problem import solve_gram
+from airbearing.analysis.shooting.process_noise import KAPPA_GRID
 
 __all__ = [
     "HonestErrors",
@@ -82,11 +83,6 @@ class Residuals:
     rows: np.ndarray  # (n,) log rows
     t: np.ndarray  # (n,) s from the segment's first usable row
     r: np.ndarray  # (n, n_axes), in noise units
-
-
-def _sample_index(problem):
-    """Per measurement residual row: its window sample (window * L + row)."""
-    return problem.sample
 
 
 def _segment_order(problem):
@@ -148,72 +144,55 @@ def normalised_residuals(problem, fit) -> list[Residuals]:
     return out
 
 
+def _decorrelation_lag(series, max_lag: int) -> int:
+    """The first lag at which the mean autocorrelation of ``series`` (1-D arrays, each
+    weighted by its length; ``statsmodels.tsa.stattools.acf``) falls below 1/e."""
+    from statsmodels.tsa.stattools import acf
+
+    acc, wsum = None, 0.0
+    for x in series:
+        n = x.size
+        if not np.any(x != x[0]):
+            continue
+        c = acf(x, nlags=min(n // 2, max_lag), fft=True)
+        acc = n * c if acc is None else acc[: c.size] + n * c[: acc.size]
+        wsum += n
+    if acc is None:
+        return 0
+    below = np.flatnonzero(acc / wsum < DECORRELATED)
+    return int(below[0]) if below.size else acc.size
+
+
 def correlation_time(residuals: list[Residuals], dt: float | None = None) -> float:
     """s, the lag at which the residuals' mean autocorrelation first falls below 1/e.
 
     The autocorrelation of each segment and axis (``statsmodels.tsa.stattools.acf``),
     averaged with the segments' lengths as weights; 0 for a white residual.
     """
-    from statsmodels.tsa.stattools import acf
-
-    acc, wsum, step = None, 0.0, []
-    for res in residuals:
-        n = res.r.shape[0]
-        if n < 8:
-            continue
-        nl = min(n // 2, 2000)
-        for a in range(res.r.shape[1]):
-            x = res.r[:, a]
-            if not np.any(x != x[0]):
-                continue
-            c = acf(x, nlags=nl, fft=True)
-            if acc is None or acc.size > c.size:
-                acc = acc[: c.size] if acc is not None else np.zeros(c.size)
-            acc[: c.size] += n * c[: acc.size]
-            wsum += n
-        step.append(float(np.median(np.diff(res.t))) if n > 1 else 0.0)
-    if acc is None or wsum == 0:
-        return 0.0
-    acc = acc / wsum
-    below = np.flatnonzero(acc < DECORRELATED)
-    lag = int(below[0]) if below.size else acc.size
+    used = [res for res in residuals if res.r.shape[0] >= 8]
+    lag = _decorrelation_lag([res.r[:, a] for res in used for a in range(res.r.shape[1])], 2000)
+    step = [float(np.median(np.diff(res.t))) for res in used]
     h = dt if dt is not None else (float(np.median(step)) if step else 0.0)
-    return float(max(lag - 1, 0) * h) if lag > 1 else 0.0
+    return float((lag - 1) * h) if lag > 1 else 0.0
 
 
 def _defect_correlation_time(problem, d: np.ndarray) -> float:
     """s, the lag (in pieces, times their mean length) at which the whitened defects' mean
     autocorrelation within segments first falls below 1/e; 0 when they are independent."""
+    from airbearing.analysis.shooting.process_noise import piece_durations
+
     w = problem.windows
     nd = problem.n_delta
     D = d.reshape(-1, nd)
     link = np.asarray(w.link, dtype=bool)
     seg = w.segments()[:-1]
-    acc, wsum = np.zeros(0), 0.0
+    series = []
     for sgm in np.unique(seg[link]):
-        rows = np.flatnonzero(link & (seg == sgm))
-        x = D[rows]
-        n = x.shape[0]
-        if n < 4:
-            continue
-        for a in range(nd):
-            y = x[:, a] - x[:, a].mean()
-            v = float(y @ y)
-            if not v > 0:
-                continue
-            c = np.array([float(y[h:] @ y[: n - h]) / v for h in range(min(n // 2, 20))])
-            if acc.size == 0:
-                acc = np.zeros(c.size)
-            m = min(acc.size, c.size)
-            acc = acc[:m] + n * c[:m]
-            wsum += n
-    if not wsum:
-        return 0.0
-    acc = acc / wsum
-    below = np.flatnonzero(acc < DECORRELATED)
-    lag = int(below[0]) if below.size else acc.size
-    T = np.mean(np.cumsum(w.dt, axis=1)[np.arange(w.n), np.maximum(np.asarray(w.end) - 1, 0)])
-    return float(lag * T) if lag > 1 else 0.0
+        x = D[np.flatnonzero(link & (seg == sgm))]
+        if x.shape[0] >= 4:
+            series += [x[:, a] for a in range(nd)]
+    lag = _decorrelation_lag(series, 20)
+    return float(lag * np.mean(piece_durations(problem)[:-1])) if lag > 1 else 0.0
 
 
 def _n_segments(problem) -> int:
@@ -273,7 +252,11 @@ def honest_errors(problem, fit, k: int) -> HonestErrors:
     # in-model (the intensity at the bottom of the grid): the fit is one trajectory per
     # segment, and its errors are those of the constrained problem (the stiff penalties of
     # the bottom intensity make the stacked Gram matrix lose the parameters' information)
-    whole = con is not None and problem.penalty is not None and pn and not pn["significant"]
+    # (a fit without its own estimate, e.g. one log alone at the joint intensity, is in-model
+    # when that intensity is the bottom of the grid)
+    kappa = problem.process_noise[0] if problem.process_noise else None
+    in_model = (not pn["significant"]) if pn else (kappa is not None and kappa <= KAPPA_GRID[-1])
+    whole = con is not None and problem.penalty is not None and in_model
     if whole:
         cov0, M = con
         rm = r[:n_meas]
@@ -290,7 +273,7 @@ def honest_errors(problem, fit, k: int) -> HonestErrors:
     np.add.at(per_sample, problem.sample, scores[:n_meas])
     dt = float(np.median(w.dt[w.weight[:, 1:] > 0]))
     meat = np.zeros((k, k))
-    if r.size > n_meas and w.link is not None:
+    if r.size > n_meas and w.link is not None and not whole:
         # process-noise rows: each pair's whitened defect belongs to its hand-over time (the
         # next window's first sample), so a torque the random walk does not describe (one
         # correlated over several pieces) widens the errors through the same HAC sum
