@@ -29,7 +29,14 @@ from airbearing.analysis.balancing.transient import (
 )
 from airbearing.design.balancing import SEED000_GAINS
 
-__all__ = ["demo_section", "plot_comparison", "plot_sweeps", "comparison_rows", "sweep_row"]
+__all__ = [
+    "demo_section",
+    "plot_comparison",
+    "plot_method_comparison",
+    "plot_sweeps",
+    "comparison_rows",
+    "sweep_row",
+]
 
 
 def plot_comparison(runs: dict):
@@ -56,6 +63,94 @@ def plot_comparison(runs: dict):
     axes[2].set(xlabel="t (s)", ylabel="dipole (A m^2)")
     for ax in axes:
         ax.legend(fontsize=7)
+    return fig
+
+
+def _seed000_row(offset: float, method: str) -> dict | None:
+    """Seed 000's Tables 1-2 row for this offset (m) and method, None when it has none."""
+    for off, table in SEED000_TABLES.items():
+        if math.isclose(off, offset, rel_tol=1e-9, abs_tol=1e-12) and method in table:
+            return table[method]
+    return None
+
+
+def _in_plane_p2p(metrics: dict) -> float:
+    """m, peak-to-peak of the in-plane sliders 1 and 2 averaged (as the ratios use it)."""
+    return float(np.mean(metrics["slider_p2p_m"][:2]))
+
+
+#: Panels of :func:`plot_method_comparison`: (metric of a table row, axis label, scale to
+#: the plotted unit).
+_COMPARISON_PANELS = (
+    (lambda m: m["g_perp_rms"], "g_perp rms (-)", 1.0),
+    (_in_plane_p2p, "slider peak-to-peak, s1-s2 mean (mm)", 1e3),
+    (lambda m: m["residual_torque_nm"], "residual torque (N m)", 1.0),
+)
+
+
+def plot_method_comparison(cmp: Comparison, *, seed000: bool = True):
+    """Figure: each method's averaged metrics per initial offset, beside seed 000's.
+
+    One panel per metric (g_perp rms, in-plane slider peak-to-peak and, when the runs had a
+    free float, the residual torque); in each, one bar per method and offset (the mean over
+    the comparison's seeds) and, where seed 000 Tables 1-2 have that offset and method, the
+    seed's value as a black diamond. The title gives the ratios and seed 000's.
+
+    Parameters
+    ----------
+    cmp : Comparison
+        From :func:`~airbearing.analysis.balancing.comparison.compare_methods`.
+    seed000 : bool
+        Draw seed 000's values where its tables have the offset and method.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    panels = [
+        p
+        for p in _COMPARISON_PANELS
+        if p[1] != "residual torque (N m)"
+        or any(m.get("residual_torque_nm") is not None for t in cmp.tables.values()
+               for m in t.values())
+    ]  # fmt: skip
+    offsets = list(cmp.tables)
+    fig, axes = plt.subplots(1, len(panels), figsize=(4.3 * len(panels), 3.6), squeeze=False)
+    axes = axes[0]
+    width = 0.8 / max(len(cmp.methods), 1)
+    x = np.arange(len(offsets))
+    for ax, (metric, label, scale) in zip(axes, panels, strict=True):
+        seed_x, seed_y = [], []
+        for j, method in enumerate(cmp.methods):
+            xs = x - 0.4 + width * (j + 0.5)
+            vals = [metric(cmp.tables[off][method]) for off in offsets]
+            ax.bar(xs, [np.nan if v is None else v * scale for v in vals], width,
+                   color=f"C{j}", label=method)  # fmt: skip
+            for xi, off in zip(xs, offsets, strict=True):
+                row = _seed000_row(off, method) if seed000 else None
+                if row is not None and metric(row) is not None:
+                    seed_x.append(xi)
+                    seed_y.append(metric(row) * scale)
+        if seed_x:
+            ax.plot(seed_x, seed_y, "D", color="k", ms=5, label="seed 000 Tables 1-2")
+        runs = [max(m["runs"] for m in cmp.tables[off].values()) for off in offsets]
+        ax.set_xticks(x, [f"{off * 1e3:+g} mm\n({n} run{'s' * (n != 1)})"
+                          for off, n in zip(offsets, runs, strict=True)])  # fmt: skip
+        ax.set(xlabel="initial slider offset", ylabel=label)
+        ax.legend(fontsize=7)
+    title = f"{' vs '.join(cmp.methods)}, {cmp.duration_s:g} s runs, metrics over the last third"
+    if cmp.ratios:
+        title += (
+            f"\nratios {cmp.ratios['of']}: g_perp rms {cmp.ratios['g_perp_rms']:.2f}, slider "
+            f"p2p {cmp.ratios['slider_p2p']:.2f}"
+        )
+        if seed000 and tuple(cmp.methods[:2]) == ("mechanical", "mixed"):
+            title += (
+                f" (seed 000: {SEED000_RATIOS['g_perp_rms']:.2f}, "
+                f"{SEED000_RATIOS['slider_p2p']:.2f})"
+            )
+    fig.suptitle(title, fontsize=9)
+    fig.tight_layout()
     return fig
 
 

@@ -1,10 +1,14 @@
-"""Identification in the demo report: the seed-004 platform and the seed-001 CMG yaw inertia.
+"""Identification pictures and the demo report's identification section.
 
-The section simulates its own logs with the package's simulator and fixed seeds.
+:func:`identification_figure` draws any identification result (``result.plot()``): each
+identified value with its error bar. The demo section identifies the seed-004 platform and
+the seed-001 CMG yaw inertia from logs it simulates with the package's simulator and fixed
+seeds.
 """
 
 from __future__ import annotations
 
+import matplotlib.pyplot as plt
 import numpy as np
 
 from airbearing.analysis.identification.cmg_inertia import identify_cmg_inertia
@@ -14,9 +18,143 @@ from airbearing.analysis.identification.platform import (
     seed004_testbed,
 )
 from airbearing.analysis.identification.regression import PARAM_NAMES
-from airbearing.io.testbed import Body
+from airbearing.analysis.identification.result import PRIOR_COVER_SIGMAS, Prior
+from airbearing.errors import InputError
+from airbearing.io.testbed import Body, Testbed
 
-__all__ = ["demo_section"]
+__all__ = ["demo_section", "identification_figure"]
+
+#: Rows of the dof-3 figure: (parameters, y label, scale from SI to the plotted unit).
+_PLATFORM_ROWS = (
+    (("J_xx", "J_yy", "J_zz"), "kg m^2", 1.0),
+    (("J_xy", "J_xz", "J_yz"), "kg m^2", 1.0),
+    (("r_x", "r_y", "r_z"), "mm", 1e3),
+)
+
+
+def _reference_theta(result, reference) -> np.ndarray | None:
+    """The reference values in the order of ``result.param_names`` (SI), or None."""
+    if reference is None:
+        return None
+    names = tuple(result.param_names)
+    if isinstance(reference, Testbed):
+        if names == tuple(PARAM_NAMES):
+            reference = Prior.from_testbed(reference)
+        else:
+            return np.array([reference.body.yaw_inertia], dtype=float)
+    if isinstance(reference, Prior):
+        if names != tuple(PARAM_NAMES):
+            raise InputError("reference: a Prior (3x3 inertia, offset) needs a dof-3 result")
+        return reference.theta()
+    theta = np.atleast_1d(np.asarray(reference, dtype=float)).reshape(-1)
+    if theta.shape != (len(names),):
+        raise InputError(
+            f"reference: expected a Testbed, a Prior or {len(names)} numbers "
+            f"({', '.join(names)}; kg m^2, m), got {theta.size}"
+        )
+    return theta
+
+
+def _value_axis(ax, name, estimates, ref, ref_label, status, unit, scale):
+    """One parameter: each estimate (label, value, std) with its 1-sigma bar at x = 0, 1, ...;
+    the reference as a dashed line; the ``std_status`` when there is no bar."""
+    labels = []
+    for k, (label, value, std) in enumerate(estimates):
+        bar = std * scale if np.isfinite(std) else None
+        ax.errorbar([k], [value * scale], yerr=bar, fmt="o", color=f"C{k}", capsize=4,
+                    mfc=f"C{k}" if bar is not None else "none", label=label)  # fmt: skip
+        labels.append(label)
+    if ref is not None:
+        ax.axhline(ref * scale, color="k", ls="--", lw=0.9, label=ref_label)
+    ax.set_xticks(range(len(labels)), labels, fontsize=7)
+    ax.set_xlim(-0.6, len(labels) - 0.4)
+    ax.set_title(name, fontsize=9)
+    ax.set_ylabel(unit, fontsize=8)
+    if status != "estimated":
+        ax.text(0.5, 0.04, status, transform=ax.transAxes, ha="center", va="bottom",
+                fontsize=6, wrap=True)  # fmt: skip
+
+
+def identification_figure(result, reference=None, *, reference_label: str = "reference"):
+    """Figure: each identified value with its 1-sigma error bar.
+
+    One small panel per parameter (dof 3: the principal and product inertias about CR and
+    the CM offset, a row each; dof 1: J_z, and each identified friction term of a CMG fit),
+    so that every error bar is visible at its own scale. A dof-3 output-error result shows
+    its equation-error stage beside it; a ``reference`` (the CAD values or the truth of a
+    simulation) is a dashed line; a parameter without a standard error (known, pinned, not
+    identifiable) is a hollow marker with its ``std_status``. When the fit was checked
+    against a prior (``prior_z``), a last panel gives each parameter's distance from it in
+    combined sigmas, with the +-3 sigma band inside which the errors cover it.
+
+    Parameters
+    ----------
+    result : PlatformIdentification, YawIdentification or CMGIdentification
+    reference : Testbed, Prior or array_like, optional
+        Values to compare with, in the order of ``result.param_names`` (kg m^2, m); a
+        Testbed gives its file's inertia (and, dof 3, CM offset).
+    reference_label : str
+        The reference's name in the legend (e.g. ``"truth"``, ``"CAD"``).
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+
+    Raises
+    ------
+    InputError
+        A reference that does not match the result's parameters.
+    """
+    names = tuple(result.param_names)
+    theta, std = result.theta, result.std
+    ref = _reference_theta(result, reference)
+    stage = getattr(result, "equation_error", None)
+    friction = dict(getattr(result, "friction", None) or {})
+    if names == tuple(PARAM_NAMES):
+        rows = _PLATFORM_ROWS
+    else:
+        rows = ((names, "kg m^2", 1.0),)
+    prior_z = dict(getattr(result, "prior_z", None) or {})
+    ncols = max(len(rows[0][0]), 1 + len(friction))
+    nrows = len(rows) + (1 if prior_z else 0)
+    fig = plt.figure(figsize=(3.2 * ncols, 2.6 * nrows))
+    grid = fig.add_gridspec(nrows, ncols)
+    for r, (params, unit, scale) in enumerate(rows):
+        for c, name in enumerate(params):
+            i = names.index(name)
+            estimates = [(result.method, theta[i], std[i])]
+            if stage is not None:
+                estimates.append((stage.method, stage.theta[i], stage.std[i]))
+            ax = fig.add_subplot(grid[r, c])
+            _value_axis(ax, name, estimates, None if ref is None else ref[i], reference_label,
+                        result.std_status.get(name, "estimated"), unit, scale)  # fmt: skip
+    std_friction = dict(getattr(result, "std_friction", None) or {})
+    for c, (effect, value) in enumerate(friction.items(), start=1):
+        ax = fig.add_subplot(grid[0, c])
+        unit = "N m s" if "viscous" in effect else "N m"
+        sf = std_friction.get(effect, np.nan)
+        _value_axis(ax, effect, [(result.method, value, np.nan if sf is None else sf)], None,
+                    None, "estimated", unit, 1.0)  # fmt: skip
+    if prior_z:
+        ax = fig.add_subplot(grid[-1, :])
+        ax.bar(range(len(prior_z)), list(prior_z.values()), color="0.45")
+        ax.axhspan(-PRIOR_COVER_SIGMAS, PRIOR_COVER_SIGMAS, color="0.9", zorder=0,
+                   label=f"+-{PRIOR_COVER_SIGMAS:g} sigma: the errors cover the prior")  # fmt: skip
+        ax.axhline(0.0, color="k", lw=0.5)
+        ax.set_xticks(range(len(prior_z)), list(prior_z))
+        ax.set_ylabel("(estimate - prior) / sigma", fontsize=8)
+        ax.set_title("distance from the prior (CAD), combined sigmas", fontsize=9)
+        ax.legend(fontsize=7)
+    fig.axes[0].legend(fontsize=6)
+    fig.suptitle(
+        f"{type(result).__name__} ({result.method}, {int(result.segments)} segment(s)): "
+        f"residual rms {result.residual_rms:.3g} {result.residual_unit}; bars 1 sigma",
+        fontsize=9,
+        x=0.02,
+        ha="left",
+    )
+    fig.tight_layout(rect=(0, 0, 1, 0.93))
+    return fig
 
 
 def demo_section(report, *, quick: bool) -> None:

@@ -98,6 +98,36 @@ class Comparison:
                 rows.append(row)
         return pd.DataFrame(rows)
 
+    def plot(self, *, seed000: bool = True):
+        """Figure: each method's metrics per initial offset, beside seed 000's Tables 1-2.
+
+        Panels: g_perp rms, the in-plane slider peak-to-peak (sliders 1 and 2 averaged, as
+        :attr:`ratios`) and, when the runs had a free float, the residual torque; one bar per
+        method and offset (the mean over the seeds), seed 000's value as a black diamond
+        where its tables have that offset and method; the ratios in the title.
+
+        Parameters
+        ----------
+        seed000 : bool
+            Draw seed 000's values (and ratios) beside the simulated ones.
+
+        Returns
+        -------
+        matplotlib.figure.Figure
+
+        Examples
+        --------
+        >>> import airbearing as ab
+        >>> cmp = ab.compare_methods(ab.load_testbed("platform-3dof"), seeds=(0,),
+        ...                          duration=20.0, free_duration=None)
+        >>> fig = cmp.plot()  # g_perp rms and slider peak-to-peak, per method and offset
+        >>> [ax.get_ylabel() for ax in fig.axes]
+        ['g_perp rms (-)', 'slider peak-to-peak, s1-s2 mean (mm)']
+        """
+        from airbearing.reporting.balancing import plot_method_comparison
+
+        return plot_method_comparison(self, seed000=seed000)
+
     def __repr__(self) -> str:
         r = self.ratios or {}
         ratios = ", ".join(f"{k}={v:.3g}" for k, v in r.items() if isinstance(v, float))

@@ -158,6 +158,41 @@ class IdentificationResult:
         key = "not identifiable from this log"
         return {n: s for n, s in self.std_status.items() if s.startswith(key)}
 
+    def plot(self, reference=None, *, reference_label: str = "reference"):
+        """Figure: each identified value with its 1-sigma error bar, one panel per parameter.
+
+        dof 3: the principal and product inertias and the CM offset (mm), with the
+        equation-error stage beside an output-error result and, when the fit was checked
+        against a prior, each parameter's distance from it in combined sigmas; dof 1: J_z
+        (and a CMG fit's friction terms). A parameter without a standard error is a hollow
+        marker with its ``std_status``. The result keeps no samples: the measured against
+        the predicted motion is :func:`airbearing.replay`'s picture.
+
+        Parameters
+        ----------
+        reference : Testbed, Prior or array_like, optional
+            Values drawn as a dashed line, in the order of :attr:`param_names` (kg m^2,
+            m): the CAD values or a simulation's truth (a Testbed gives its file's).
+        reference_label : str
+            Its name in the legend.
+
+        Returns
+        -------
+        matplotlib.figure.Figure
+
+        Examples
+        --------
+        >>> import airbearing as ab
+        >>> tb = ab.load_testbed("cmg-yaw")
+        >>> found = ab.identify(tb, [ab.slew(tb, angle_deg=90, duration=10.0, seed=5).log])
+        >>> fig = found.plot(reference=tb, reference_label="CAD")  # J_z +- 1 sigma
+        >>> [ax.get_title() for ax in fig.axes]
+        ['J_zz']
+        """
+        from airbearing.reporting.identification import identification_figure
+
+        return identification_figure(self, reference, reference_label=reference_label)
+
     def _value_lines(self) -> list[str]:
         """One line per identified value with its error (dof 1: J_z)."""
         reason = self.not_identifiable.get("J_zz")
