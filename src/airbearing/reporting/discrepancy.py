@@ -349,9 +349,15 @@ def _adequacy_section(report: Report, result: Discrepancy, level: int) -> None:
     report.heading("Is the fit adequate?", level)
     report.paragraph(a.note[:1].upper() + a.note[1:] + ".", note=True)
     f = a.follows
+    coloured = (
+        [{"quantity": "gap / coloured measurement noise", "value": a.gap_over_noise}]
+        if a.measurement_noise
+        else []
+    )
     report.table(
         [
             {"quantity": "gap / noise floor", "value": a.gap_over_floor},
+            *coloured,
             {"quantity": "whiteness p (Ljung-Box, Bonferroni)", "value": a.whiteness_p},
             {"quantity": "correlation time (s)", "value": a.correlation_time_s},
             {"quantity": "R^2 on functions of the yaw angle", "value": f.get("angle")},

@@ -12,8 +12,14 @@ Every discrepancy fit is judged on its residual:
     every axis at ``min(LB_LAGS, n // 5)`` lags, combined by the SMALLEST p-value times
     the number of tests (Bonferroni, capped at 1): the probability, for white residuals,
     that at least one segment looks as correlated as the worst one.
+``gap_over_noise``
+    The gap over the measurement noise: the floor when the noise is white; when the
+    estimator found it coloured (an AR(1) model of the primary output,
+    :mod:`airbearing.analysis.shooting.measurement_noise`), its marginal standard
+    deviation, which the floor (a difference estimate: it sees the noise's fast part only)
+    underestimates.
 ``structure_remains``
-    ``(whiteness_p < WHITENESS_ALPHA and gap_over_floor > GAP_ABOVE)`` or the fit's
+    ``(whiteness_p < WHITENESS_ALPHA and gap_over_noise > GAP_ABOVE)`` or the fit's
     process-noise intensity is significant (``fit.extra["process_noise"]["significant"]``,
     when the estimator provides it), or ``gap_over_floor > GAP_CLEAR`` (2: whatever the
     whiteness test says, twice the floor is not the noise). Both conditions are needed
@@ -264,6 +270,9 @@ class Adequacy:
         effects explain, ``(gap_0^2 - gap^2) / (gap_0^2 - floor^2)``; None without effects.
     process_noise : dict or None
         The fit's ``extra["process_noise"]`` when the estimator provides it.
+    measurement_noise : dict or None
+        The primary output's AR(1) noise when the estimator found it coloured: ``phi``,
+        ``s``, ``correlation_time_s``, ``lr``, ``p`` and ``noise_over_floor``.
     note : str
         The verdict in words.
     acf : ndarray
@@ -282,9 +291,32 @@ class Adequacy:
     explained_fraction: float | None
     process_noise: dict | None
     note: str
+    measurement_noise: dict | None = None
     acf: np.ndarray = field(repr=False, default_factory=lambda: np.ones(1))
     dt: float = 0.0
     series: dict = field(repr=False, default_factory=dict)
+
+    @property
+    def noise_over_floor(self) -> float:
+        """The measurement noise's standard deviation over the floor (1 when white)."""
+        m = self.measurement_noise
+        return float(m["noise_over_floor"]) if m else 1.0
+
+    @property
+    def gap_over_noise(self) -> float:
+        """The gap over the measurement noise (the floor when white; module doc)."""
+        return float(self.gap_over_floor / self.noise_over_floor)
+
+    def noise_words(self) -> str:
+        """The coloured measurement noise in words (empty when white)."""
+        m = self.measurement_noise
+        if not m:
+            return ""
+        return (
+            f"the measurement noise is coloured (AR(1), coefficient {m['phi']:.3g} per sample, "
+            f"correlated over {m['correlation_time_s']:.3g} s; {m['noise_over_floor']:.3g} x "
+            "the floor the data's differences see)"
+        )
 
     @property
     def at_noise(self) -> bool:
@@ -302,15 +334,27 @@ class Adequacy:
                 "excess over the noise"
             )
         pn = self.process_noise
+        if self.measurement_noise:
+            parts.append(self.noise_words())
+        what = "the measurement noise" if self.measurement_noise else "the noise floor"
+        of_floor = f" ({self.gap_over_floor:.3g} x the floor)" if self.measurement_noise else ""
         if pn and pn.get("significant"):
             parts.append(torque_words(pn))
-            parts.append(f"over whole segments {self.gap_over_floor:.3g} x the noise floor remains")
+            parts.append(
+                f"over whole segments {self.gap_over_noise:.3g} x {what} remains{of_floor}"
+            )
         else:
-            parts.append(f"{self.gap_over_floor:.3g} x the noise floor remains")
+            parts.append(f"{self.gap_over_noise:.3g} x {what} remains{of_floor}")
+        if self.measurement_noise and self.gap_over_noise <= GAP_CLEAR:
+            parts.append("which may be that noise alone (the data cannot tell it from a misfit)")
         if pn and pn.get("significant"):
             pass  # the pieces' residual is white by construction: the horizon says it
         elif self.dt and self.correlation_time_s < self.dt:
-            parts.append("uncorrelated from one sample to the next")
+            parts.append(
+                "the whitened residual uncorrelated from one sample to the next"
+                if self.measurement_noise
+                else "uncorrelated from one sample to the next"
+            )
         else:
             parts.append(f"correlated over {self.correlation_time_s:.3g} s")
         f = self.follows
@@ -333,6 +377,7 @@ class Adequacy:
 
         out = {
             "gap_over_floor": num(self.gap_over_floor),
+            "gap_over_noise": num(self.gap_over_noise),
             "pieces_gap_over_floor": num(self.pieces_gap_over_floor),
             "whiteness_p": num(self.whiteness_p),
             "whiteness_test": (
@@ -344,11 +389,17 @@ class Adequacy:
             "explained_fraction": num(self.explained_fraction),
             "follows": {k: (v if k in ("most", "of") else num(v)) for k, v in self.follows.items()},
             "rule": (
-                f"structure remains when whiteness_p < {WHITENESS_ALPHA:g} and gap_over_floor > "
+                f"structure remains when whiteness_p < {WHITENESS_ALPHA:g} and gap_over_noise > "
                 f"{GAP_ABOVE:g}, or the process noise is significant, or gap_over_floor > "
-                f"{GAP_CLEAR:g}"
+                f"{GAP_CLEAR:g} (gap_over_noise: over the measurement noise, the floor when "
+                "it is white)"
             ),
             "note": self.note,
+            "measurement_noise": (
+                None
+                if not self.measurement_noise
+                else {k: num(v) for k, v in self.measurement_noise.items()}
+            ),
         }
         if self.process_noise is not None:
             out["process_noise"] = {
@@ -385,15 +436,34 @@ def _states(problem, fit, datas):
     return s["residual"], yaw, rate, t, seg, src
 
 
-def structure_rule(whiteness_p: float, gap_over_floor: float, significant_noise: bool) -> bool:
-    """``structure_remains`` from the whiteness p-value, the gap over the floor and the
-    process-noise test (module doc)."""
+def structure_rule(
+    whiteness_p: float,
+    gap_over_floor: float,
+    significant_noise: bool,
+    gap_over_noise: float | None = None,
+) -> bool:
+    """``structure_remains`` from the whiteness p-value, the gap over the floor and over
+    the measurement noise (default: the floor) and the process-noise test (module doc).
+
+    A coloured noise model never hides a gap above twice the floor: that a correlated
+    residual is the sensor's and not a misfit is what the data cannot prove.
+    """
+    noise = gap_over_floor if gap_over_noise is None else gap_over_noise
     white_fails = bool(np.isfinite(whiteness_p) and whiteness_p < WHITENESS_ALPHA)
     return bool(
-        (white_fails and gap_over_floor > GAP_ABOVE)
-        or significant_noise
-        or gap_over_floor > GAP_CLEAR
+        (white_fails and noise > GAP_ABOVE) or significant_noise or gap_over_floor > GAP_CLEAR
     )
+
+
+def _measurement_noise(problem, fit, floor) -> dict | None:
+    """The primary output's coloured noise of ``fit`` with its level over the floor."""
+    mn = fit.extra.get("measurement_noise") if isinstance(fit.extra, dict) else None
+    m = (mn or {}).get(problem.outputs[0])
+    if not m or not 0.0 <= m["phi"] < 1.0:
+        return None
+    sigma = problem.sigma_rate if problem.outputs[0] == "rate" else problem.sigma_att
+    level = m["s"] / math.sqrt(1.0 - m["phi"] ** 2) * sigma / max(floor.value, 1e-300)
+    return {**m, "noise_over_floor": float(level)}
 
 
 def _defects(problem, fit, datas):
@@ -478,7 +548,9 @@ def adequacy(problem, fit, floor, datas, *, gap_before: float | None = None) -> 
         if dfx is not None:
             fol = {**follows(*dfx), "of": "the unexplained torque at the pieces' hand-overs"}
     significant_noise = bool(pn and pn.get("significant"))
-    remains = structure_rule(p, ratio, significant_noise)
+    mnoise = _measurement_noise(problem, fit, floor)
+    level = mnoise["noise_over_floor"] if mnoise else 1.0
+    remains = structure_rule(p, ratio, significant_noise, ratio / level)
     explained = None
     if gap_before is not None:
         # both over whole segments when the estimator reached them (the search passes the
@@ -497,6 +569,7 @@ def adequacy(problem, fit, floor, datas, *, gap_before: float | None = None) -> 
         explained_fraction=explained,
         process_noise=dict(pn) if pn else None,
         note="",
+        measurement_noise=mnoise,
         acf=acf,
         dt=dt,
         series={"residual": res, "yaw": yaw, "rate": rate, "t": t, "source": src},
@@ -504,10 +577,13 @@ def adequacy(problem, fit, floor, datas, *, gap_before: float | None = None) -> 
     if remains:
         note = a.words(named=explained is not None)
     else:
+        what = "the measurement noise" if mnoise else "the noise floor"
         note = (
-            f"the residual is at the noise: {ratio:.3g} x the noise floor, whiteness p "
+            f"the residual is at the noise: {ratio / level:.3g} x {what}, whiteness p "
             f"{p:.2g} (Ljung-Box, {tests} tests)"
         )
+        if mnoise:
+            note += "; " + a.noise_words()
     return _with_note(a, note)
 
 

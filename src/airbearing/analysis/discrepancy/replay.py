@@ -121,11 +121,15 @@ def problem_for(
     substeps: int | None = None,
     jit: bool | None = None,
     kappa: float | None = None,
+    noise=None,
 ) -> ShootingProblem:
     """The shooting problem of ``model`` on ``windows``, weighted by the noise ``floor``.
 
     On linked windows the defects are penalised at the dimensionless process-noise
-    intensity ``kappa`` (default the top of :data:`KAPPA_GRID`: nearly free pieces).
+    intensity ``kappa`` (default the top of :data:`KAPPA_GRID`: nearly free pieces), and
+    the measurement residual is whitened by ``noise`` (a
+    :class:`~airbearing.analysis.shooting.measurement_noise.MeasurementNoise`, default
+    white).
     """
     d0 = datas[0] if not isinstance(datas, ReplayData) else datas
     problem = ShootingProblem(
@@ -139,6 +143,10 @@ def problem_for(
     )
     if windows.linked:  # linked pieces start nearly free (the top of the intensity grid)
         set_intensity(problem, KAPPA_GRID[0] if kappa is None else kappa)
+        if noise is not None:
+            from airbearing.analysis.shooting.measurement_noise import set_measurement_noise
+
+            set_measurement_noise(problem, noise)
     return problem
 
 

@@ -95,6 +95,7 @@ from airbearing.analysis.discrepancy.words import (
     why,
 )
 from airbearing.analysis.shooting import Fit, ShootingProblem, WindowSet
+from airbearing.analysis.shooting.measurement_noise import set_measurement_noise
 from airbearing.analysis.shooting.process_noise import (
     KAPPA_GRID,
     estimate_process_noise,
@@ -395,6 +396,7 @@ class _Search:
             self.models[True] = model_for(testbed, {**self.base_effects, "sensor_lag": 0.0})
         self.problems: dict = {}
         self.kappa = None  # process-noise intensity of linked pieces (None: the grid's top)
+        self.noise = None  # the coloured measurement noise estimated with it (None: white)
         rng = np.random.default_rng(seed)
         folds = np.arange(windows.n) % min(windows.n, CV_FOLDS)
         self.folds = folds[rng.permutation(windows.n)]
@@ -403,7 +405,7 @@ class _Search:
         if lag not in self.problems:
             self.problems[lag] = problem_for(
                 self.models[lag], self.datas, self.windows, self.floor, jit=self.jit,
-                kappa=self.kappa,
+                kappa=self.kappa, noise=self.noise,
             )  # fmt: skip
         return self.problems[lag]
 
@@ -431,8 +433,10 @@ class _Search:
             name="process noise of the logs",
         )
         self.kappa = fit.extra["process_noise"]["kappa"]
+        self.noise = self.problem(lag).measurement_noise
         for pb in self.problems.values():
             set_intensity(pb, self.kappa)
+            set_measurement_noise(pb, self.noise)
         return fit
 
     def S(self, lag: bool, chosen) -> np.ndarray:
@@ -686,7 +690,7 @@ def discrepancy(
     prog = _Progress(progress, 1 + len(cands) * max(max_effects, 1) + len(validate))
     base_problem, nominal = _nominal_replay(search, prog)
     sel = _select(search, nominal, max_effects, screen, workers, prog)
-    named = _named(search, sel, prog)
+    named = _named(search, sel, prog, screen, workers)
     judged = _judge(search, sel, named, logs, validate, window_s, jit, prog)
     loc = localise(datas, base_problem, nominal, floor)
     prog("done", prog.total)
@@ -762,6 +766,8 @@ class _Selection:
     stop_reason: str = ""
     starts: dict = field(default_factory=dict)
     dropped: set = field(default_factory=set)
+    at_bound: set = field(default_factory=set)  # labels pinned at a bound on short pieces
+    max_effects: int = 0
 
 
 @dataclass
@@ -798,6 +804,7 @@ def _select(search, nominal, max_effects, screen, workers, prog) -> _Selection:
     """Stage 3: forward selection, one round per effect added, up to ``max_effects``."""
     unit = search.datas[0].gap_unit
     sel = _Selection(nominal=nominal, current=nominal, ln_n=math.log(nominal.n_res))
+    sel.max_effects = max_effects
     sel.stop_reason = "max_effects = 0" if max_effects == 0 else ""
     # a noise-free log: below the smallest noise level the replay weighs with, what is left is
     # the integration's own error (~1e-6 rad/s on fast motion with 2 RK4 sub-steps), not an
@@ -824,6 +831,7 @@ def _select(search, nominal, max_effects, screen, workers, prog) -> _Selection:
             for r in results
             if r.status in ("not identifiable from this log", "at its physical bound")
         }
+        sel.at_bound |= {r.label for r in results if r.status == "at its physical bound"}
         if not _add_best(sel, results, prog):
             break
     else:
@@ -936,18 +944,21 @@ def _add_best(sel: _Selection, results, prog) -> bool:
     return True
 
 
-def _named(search: _Search, sel: _Selection, prog: _Progress) -> _Named:
+def _named(search: _Search, sel: _Selection, prog: _Progress, screen=True, workers=1) -> _Named:
     """Stage 5: the values and honest errors of the named effects, on the horizon the data
     support.
 
     Effects are named on short pieces (the detection study's calibration, robust far from
     the nominal); their values and errors come from the process noise estimated with the
-    named effects, continued down from the short pieces.
+    named effects, continued down from the short pieces. A candidate the short pieces
+    pinned at its physical bound is tried once more on that horizon, where the longer
+    trajectories may free it (a Coulomb friction the slow end of a coast-down shows).
     """
     current = sel.current
     if search.windows.linked:
         prog("the horizon: how much torque the model still leaves unexplained")
         current = search.horizon(current, sel.lag, sel.chosen, sel.theta)
+        current = _retry_at_horizon(search, sel, current, screen, workers, prog)
     problem = search.problem(sel.lag)
     errs = honest(problem, current, len(current.theta))
     effects, effect_std, white, crlb, eff = {}, {}, {}, {}, {}
@@ -961,6 +972,25 @@ def _named(search: _Search, sel: _Selection, prog: _Progress) -> _Named:
     if sel.rounds:
         sel.rounds[0] = tuple(_with_honest(search, r) for r in sel.rounds[0])
     return _Named(current, problem, errs, effects, effect_std, white, crlb, eff)
+
+
+def _retry_at_horizon(search, sel, current, screen, workers, prog) -> Fit:
+    """The candidates pinned at a bound on short pieces, tried again at the horizon's
+    intensity when the process noise is significant and a slot is left (the current fit
+    otherwise); a pick is followed by the horizon estimated again."""
+    pn = current.extra.get("process_noise") or {}
+    taken = {c.name for c in sel.chosen}
+    retry = [c for c in search.cands if c.label in sel.at_bound and c.name not in taken]
+    if not (retry and pn.get("significant") and len(sel.chosen) < sel.max_effects):
+        return current
+    prog("at the horizon: the candidates short pieces held at a bound")
+    sel.current, sel.theta = current, current.theta.copy()
+    results = _round(search, sel, retry, screen, workers, prog)
+    sel.rounds.append(tuple(results))
+    if not _add_best(sel, results, prog):
+        return current
+    sel.at_bound -= {c.label for c in sel.chosen}
+    return search.horizon(sel.current, sel.lag, sel.chosen, sel.theta)
 
 
 def _judge(search, sel, named, logs, validate, window_s, jit, prog) -> tuple:
@@ -999,6 +1029,7 @@ def _agreement(search, sel, named, logs, validate, window_s, jit, prog) -> tuple
         window_s,
         jit,
         kappa=getattr(search, "kappa", None),
+        noise=getattr(search, "noise", None),
     )
     return per_log, consistency(chosen, per_log)
 
@@ -1006,8 +1037,11 @@ def _agreement(search, sel, named, logs, validate, window_s, jit, prog) -> tuple
 def _verdict_text(sel: _Selection, named: _Named, adq, agree, validation) -> str:
     """The verdict in words: what was named, how well, what failed, and the validation."""
     unfit = {}
+    named_now = {c.label for c in sel.chosen}
     for rnd in sel.rounds:
         for r in rnd:
+            if r.label in named_now:
+                continue
             if r.status in ("did not converge", "at its physical bound"):
                 _log.debug("candidate %s: %s: %s", r.label, r.status, r.reason)
                 unfit.setdefault(r.label, failure_words(r.status, r.reason))

@@ -207,7 +207,7 @@ class HeldOut:
         ss, cnt = float(self.ss[use].sum()), int(self.cnt[use].sum())
         return float(self.rss[use].sum()), self.sigma * math.sqrt(ss / max(cnt, 1))
 
-    def testable(self, theta: np.ndarray, lo: int, hi: int) -> np.ndarray:
+    def testable(self, theta: np.ndarray, lo: int, hi: int, s2: float = 1.0) -> np.ndarray:
         """The folds that can test parameters ``lo:hi`` at ``theta`` (module doc).
 
         A fold tests an effect when its training windows alone see it (Wald distance of
@@ -215,7 +215,10 @@ class HeldOut:
         its held-out windows; a fold without
         either cannot tell a good effect from a bad one (its training step is an
         extrapolation, or the held-out windows do not depend on the effect). An effect with
-        no derivative (a profile scan) is tested on every fold.
+        no derivative (a profile scan) is tested on every fold. ``s2``: the fit's reduced
+        chi-square (at least 1), which scales the information as it scales the standard
+        errors: a residual above the noise floor (coloured noise the floor does not see)
+        carries less information than its weights say.
         """
         th = np.asarray(theta, dtype=float)
         a = np.einsum("i,fij,j->f", th, self.info_train[:, lo:hi, lo:hi], th)
@@ -228,7 +231,8 @@ class HeldOut:
         b = np.einsum("i,fij,j->f", th, self.info_test[:, lo:hi, lo:hi], th)
         if not np.any(a + b > 0):
             return np.ones(self.rss.size, dtype=bool)
-        return (a >= MIN_SIGMAS**2) & (b >= MIN_SIGMAS**2)
+        need = MIN_SIGMAS**2 * max(float(s2), 1.0)
+        return (a >= need) & (b >= need)
 
 
 def cross_validate(problem: ShootingProblem, fit: Fit, k: int, folds: np.ndarray) -> HeldOut:
@@ -333,7 +337,10 @@ def judge(cand, fit, k_sel, current, ln_n, k_added, held: HeldOut, before: HeldO
     dbic = -lr + k_added * ln_n
     significant = bool(dbic < 0 and lr > chi2_threshold(k_added))
     th = fit.theta[k_sel:k]
-    use = held.testable(th, k_sel, k) if np.all(np.isfinite(th)) else np.ones(held.rss.size, bool)
+    s2 = fit.rss / max(fit.n_res - fit.n_free, 1)
+    use = (
+        held.testable(th, k_sel, k, s2) if np.all(np.isfinite(th)) else np.ones(held.rss.size, bool)
+    )
     if use.any():
         heldout, heldout_before = held.total(use), before.total(use)[1]
         if significant and not use.all():

@@ -340,6 +340,8 @@ def _constrained(problem, fit, k: int):
     out = fn(v, p_base, Sp, problem._data)
     keep = np.r_[np.arange(k), np.arange(K, v.size)]
     Jm = to_csc(out[1])[:, keep]
+    if problem.meas_whitening is not None:  # coloured measurement noise: its innovations
+        Jm = sp.csc_matrix(problem.meas_whitening @ Jm)
     pairs = np.flatnonzero(np.asarray(w.link, dtype=bool))
     nd = problem.n_delta
     rows = (pairs[:, None] * nd + np.arange(nd)).ravel()

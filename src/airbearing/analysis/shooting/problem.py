@@ -347,6 +347,12 @@ class ShootingProblem:
         self.penalty = None
         self.penalty_logdet = 0.0
         self.process_noise = None
+        # coloured measurement noise (:mod:`.measurement_noise`): the whitening of the
+        # measurement rows, or None (white)
+        self.meas_whitening = None
+        self.meas_logdet = 0.0
+        self.measurement_noise = None
+        self._meas_lu = None
         self.sample = np.tile(wrow, nw) + np.repeat(np.arange(nw) * L, group.size)
         self.usable = windows.weight.reshape(-1)[self.sample] > 0
         self.n_res = int(self.usable.sum())
@@ -412,12 +418,17 @@ class ShootingProblem:
         out = fn(v, p_base, S, self._data)
         if self.link and which < 2:  # the residual (and its Jacobian), not the defects
             if self.penalty is not None:  # with process noise: the weighted defects follow
+                P = self.meas_whitening
                 if which == 0:
                     c = out[1].full().ravel()
-                    return ca.DM(np.r_[out[0].full().ravel(), self.penalty @ c])
-                r = np.r_[out[0].full().ravel(), self.penalty @ out[2].full().ravel()]
+                    rm = out[0].full().ravel()
+                    return ca.DM(np.r_[rm if P is None else P @ rm, self.penalty @ c])
+                rm, Jm = out[0].full().ravel(), to_csc(out[1])
+                if P is not None:
+                    rm, Jm = P @ rm, P @ Jm
+                r = np.r_[rm, self.penalty @ out[2].full().ravel()]
                 Jc = self.penalty @ to_csc(out[3])
-                return r, sp.vstack([to_csc(out[1]), Jc]).tocsc()
+                return r, sp.vstack([Jm, Jc]).tocsc()
             return out[0] if which == 0 else tuple(out[:2])
         return out
 
@@ -443,8 +454,21 @@ class ShootingProblem:
         sigma = self.sigma_rate if self.outputs[0] == "rate" else self.sigma_att
         if not sel.any():
             return float("nan")
-        r = r[: self.n_meas]
+        r = self.raw_measurement(r)
         return float(sigma * np.sqrt(np.mean(r[sel] ** 2)))
+
+    def raw_measurement(self, r: np.ndarray) -> np.ndarray:
+        """The measurement rows of a residual ``r`` in noise units, unwhitened when the
+        measurement noise is coloured (:mod:`.measurement_noise`): what gaps are made of."""
+        r = np.asarray(r, dtype=float)[: self.n_meas]
+        P = self.meas_whitening
+        if P is None:
+            return r
+        if self._meas_lu is None or self._meas_lu[0] is not P:
+            from scipy.sparse.linalg import splu
+
+            self._meas_lu = (P, splu(sp.csc_matrix(P)))
+        return self._meas_lu[1].solve(r)
 
     def gap_of(self, delta: np.ndarray, p: np.ndarray) -> float:
         """RMS primary output error at ``delta``, ``p``."""
@@ -583,7 +607,7 @@ class ShootingProblem:
 
             solver, _keep = penalised_solver(*self._key(K), mi)
             oracle = _keep[-1]
-            oracle.set(p_base, Sp, scale, self._data, self.penalty)
+            oracle.set(p_base, Sp, scale, self._data, self.penalty, self.meas_whitening)
             z = solver(x0=x0, lbx=lbx, ubx=ubx)["x"].full().ravel()
             r, J = oracle.rj_at(z)
             return z, solver.stats(), r.copy(), J @ unscale, None
@@ -697,7 +721,7 @@ class ShootingProblem:
     def noise_rms(self, r: np.ndarray) -> dict:
         """RMS of each output group's UNWEIGHTED residual over usable rows (rad/s, rad)."""
         out = {}
-        r = r[: self.n_meas]
+        r = self.raw_measurement(r)
         for i, o in enumerate(self.outputs):
             sel = (self.group == i) & self.usable
             sigma = self.sigma_rate if o == "rate" else self.sigma_att

@@ -210,23 +210,28 @@ class _PenalisedOracle:
         self.fr, self.fj, self.n_v = fr, fj, n_v
         self.z = self.r = self.J = None
 
-    def set(self, p_base, S, scale, data, W) -> None:
+    def set(self, p_base, S, scale, data, W, P=None) -> None:
         self.pb, self.S, self.scale, self.data, self.W = p_base, S, scale, data, W
+        self.P = P  # whitening of the measurement rows (coloured noise), or None
         self.z = None
 
     def r_at(self, z):
         if self.z is None or not np.array_equal(z, self.z):
             r, c = self.fr(z * self.scale, self.pb, self.S, self.data)
             self.z, self.J = z.copy(), None
-            self.r = np.r_[r.full().ravel(), self.W @ c.full().ravel()]
+            rm = r.full().ravel()
+            self.r = np.r_[rm if self.P is None else self.P @ rm, self.W @ c.full().ravel()]
         return self.r
 
     def rj_at(self, z):
         if self.z is None or self.J is None or not np.array_equal(z, self.z):
             r, J, c, Jc = self.fj(z * self.scale, self.pb, self.S, self.data)
             self.z = z.copy()
-            self.r = np.r_[r.full().ravel(), self.W @ c.full().ravel()]
-            Js = sp.vstack([to_csc(J), self.W @ to_csc(Jc)]).tocsc()
+            rm, Jm = r.full().ravel(), to_csc(J)
+            if self.P is not None:
+                rm, Jm = self.P @ rm, self.P @ Jm
+            self.r = np.r_[rm, self.W @ c.full().ravel()]
+            Js = sp.vstack([Jm, self.W @ to_csc(Jc)]).tocsc()
             self.J = Js @ sp.diags(self.scale)
         return self.r, self.J
 
@@ -324,7 +329,12 @@ def _loglik(problem, fit, k: int) -> float:
         logdet = float(np.sum(np.log(np.abs(d)))) if np.all(d != 0) else np.inf
     except RuntimeError:  # singular: a state the data cannot fix at any intensity
         logdet = np.inf
-    return float(-0.5 * fit.rss + problem.penalty_logdet - 0.5 * (logdet + 2 * np.log(c).sum()))
+    return float(
+        -0.5 * fit.rss
+        + problem.penalty_logdet
+        + problem.meas_logdet
+        - 0.5 * (logdet + 2 * np.log(c).sum())
+    )
 
 
 def set_intensity(problem, kappa: float | None) -> None:
@@ -349,6 +359,7 @@ def estimate_process_noise(
     name: str = "process noise",
     grid=KAPPA_GRID,
     start=None,
+    measurement: bool = True,
 ):
     """Fit at each intensity of ``grid`` (top down, warm-started) and keep the most likely.
 
@@ -362,6 +373,9 @@ def estimate_process_noise(
         Dimensionless intensities, largest first.
     start : Fit, optional
         A fit at the top of the grid already made (saves one solve).
+    measurement : bool
+        First estimate an AR(1) model of coloured measurement noise on the top of the grid
+        (:mod:`.measurement_noise`) when the problem has none yet; ``problem`` keeps it.
 
     Returns
     -------
@@ -377,6 +391,22 @@ def estimate_process_noise(
             p_base, S, th, lower=lower, upper=upper, delta0=d, name=f"{name} ({kappa:g})"
         )
 
+    if measurement and problem.measurement_noise is None:
+        # coloured measurement noise first, on nearly free pieces (a trajectory error cannot
+        # pass for it there), then the intensity with the noise whitened
+        from airbearing.analysis.shooting.measurement_noise import (
+            estimate_measurement_noise,
+            set_measurement_noise,
+        )
+
+        if start is None:
+            start = fit_at(grid[0], theta0, delta0)
+        else:
+            set_intensity(problem, grid[0])
+        noise = estimate_measurement_noise(problem, start, k)
+        if noise is not None:
+            set_measurement_noise(problem, noise)
+            start = fit_at(grid[0], start.theta, start.delta)
     fits = _descend(problem, fit_at, grid, theta0, delta0, start, k)
     ll = {kappa: v[1] for kappa, v in fits.items()}
     fits = {kappa: v[0] for kappa, v in fits.items()}
@@ -393,6 +423,8 @@ def estimate_process_noise(
         "gap_short": float(fits[max(fits)].gap),
         "loglik": pn.loglik,
     }
+    noise = problem.measurement_noise
+    fit.extra["measurement_noise"] = None if noise is None else noise.to_json()
     return fit
 
 
