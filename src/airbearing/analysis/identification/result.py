@@ -166,7 +166,7 @@ class IdentificationResult:
         against a prior, each parameter's distance from it in combined sigmas; dof 1: J_z
         (and a CMG fit's friction terms). A parameter without a standard error is a hollow
         marker with its ``std_status``. The result keeps no samples: the measured against
-        the predicted motion is :func:`airbearing.replay`'s picture.
+        the predicted motion is ``ab.replay(result.to_testbed(testbed), logs).plot()``.
 
         Parameters
         ----------
