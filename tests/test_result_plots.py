@@ -298,3 +298,25 @@ def test_not_identifiable_yaw_plot():
     assert [t.get_text() for t in ax.texts] == [reason]
     assert _dashed(ax) == [pytest.approx(0.036)]
     _figure(fig)
+
+
+@pytest.mark.parametrize(
+    "where",
+    [
+        "airbearing.analysis.balancing.comparison.Comparison",
+        "airbearing.analysis.identification.result.IdentificationResult",
+    ],
+)
+def test_plot_examples_run(where):
+    """The Examples of the plot methods added here run (their modules are not among
+    test_docs' doctest modules)."""
+    import doctest
+    import importlib
+
+    module, name = where.rsplit(".", 1)
+    method = getattr(importlib.import_module(module), name).plot
+    (test,) = doctest.DocTestFinder().find(method, f"{name}.plot", globs={})
+    runner = doctest.DocTestRunner(optionflags=doctest.ELLIPSIS | doctest.NORMALIZE_WHITESPACE)
+    runner.run(test)
+    assert test.examples and runner.summarize(verbose=False).failed == 0
+    plt.close("all")
