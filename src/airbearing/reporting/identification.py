@@ -68,7 +68,7 @@ def _value_axis(ax, name, estimates, ref, ref_label, status, unit, scale):
         ax.axhline(ref * scale, color="k", ls="--", lw=0.9, label=ref_label)
     ax.set_xticks(range(len(labels)), labels, fontsize=7)
     ax.set_xlim(-0.6, len(labels) - 0.4)
-    ax.set_title(name, fontsize=9)
+    ax.set_title(name, fontsize=9, loc="right")  # the left corner holds the offset text
     ax.set_ylabel(unit, fontsize=8)
     if status != "estimated":
         ax.text(0.5, 0.04, status, transform=ax.transAxes, ha="center", va="bottom",
@@ -117,7 +117,7 @@ def identification_figure(result, reference=None, *, reference_label: str = "ref
     prior_z = dict(getattr(result, "prior_z", None) or {})
     ncols = max(len(rows[0][0]), 1 + len(friction))
     nrows = len(rows) + (1 if prior_z else 0)
-    fig = plt.figure(figsize=(3.2 * ncols, 2.6 * nrows))
+    fig = plt.figure(figsize=(max(3.2 * ncols, 6.4), 2.6 * nrows + 0.5))
     grid = fig.add_gridspec(nrows, ncols)
     for r, (params, unit, scale) in enumerate(rows):
         for c, name in enumerate(params):
@@ -147,13 +147,13 @@ def identification_figure(result, reference=None, *, reference_label: str = "ref
         ax.legend(fontsize=7)
     fig.axes[0].legend(fontsize=6)
     fig.suptitle(
-        f"{type(result).__name__} ({result.method}, {int(result.segments)} segment(s)): "
+        f"{type(result).__name__} ({result.method}, {int(result.segments)} segment(s))\n"
         f"residual rms {result.residual_rms:.3g} {result.residual_unit}; bars 1 sigma",
         fontsize=9,
         x=0.02,
         ha="left",
     )
-    fig.tight_layout(rect=(0, 0, 1, 0.93))
+    fig.tight_layout(rect=(0, 0, 1, 1 - 0.5 / (2.6 * nrows + 0.5)))
     return fig
 
 
