@@ -68,7 +68,7 @@ def _value_axis(ax, name, estimates, ref, ref_label, status, unit, scale):
         ax.axhline(ref * scale, color="k", ls="--", lw=0.9, label=ref_label)
     ax.set_xticks(range(len(labels)), labels, fontsize=7)
     ax.set_xlim(-0.6, len(labels) - 0.4)
-    ax.set_title(name, fontsize=9, loc="right")  # the left corner holds the offset text
+    ax.set_title(name, fontsize=9, pad=12)  # above the axis offset text
     ax.set_ylabel(unit, fontsize=8)
     if status != "estimated":
         ax.text(0.5, 0.04, status, transform=ax.transAxes, ha="center", va="bottom",
