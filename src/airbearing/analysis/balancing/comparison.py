@@ -293,6 +293,9 @@ def _mean_metrics(rows: list[dict]) -> dict:
         out[k] = np.mean([r[k] for r in rows], axis=0).tolist()
     rt = [r["residual_torque_nm"] for r in rows if r["residual_torque_nm"] is not None]
     out["residual_torque_nm"] = float(np.mean(rt)) if rt else None
+    ip = [r["residual_in_plane_torque_nm"] for r in rows if r.get("residual_in_plane_torque_nm")
+          is not None]  # fmt: skip
+    out["residual_in_plane_torque_nm"] = float(np.mean(ip)) if ip else None
     out["runs"] = len(rows)
     return out
 

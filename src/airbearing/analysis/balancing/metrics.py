@@ -9,7 +9,9 @@ Metrics (over the last third of the run, as the seed's "steady state")
     left-hand side of seed 000 eq. 1 from the measured rates of the free-floating platform
     after balancing (sliders held, magnetorquers off), RMS over the free run;
     ``residual_offset_m``: the true CR -> CM offset the run leaves (simulation truth, the
-    sliders where they end).
+    sliders where they end); ``residual_in_plane_torque_nm``: ``m |g|`` times its in-plane
+    part, the gravity torque the method leaves (the free float's estimate is
+    ``m |g| |r_z|`` times the swing's tilt from rest on top of it).
 """
 
 from __future__ import annotations
@@ -83,6 +85,7 @@ def _rms(a, axis=None) -> np.ndarray:
 _RUN_KEYS = (
     "method", "initial_offset_m", "seed", "vertical_offset_m", "start", "offset_stays",
     "duration_s", "residual_offset_m", "integral_time_constant_s", "settling_time_s",
+    "residual_in_plane_torque_nm",
 )  # fmt: skip
 
 
@@ -105,6 +108,10 @@ class BalancingMetrics(Mapping):
         A m^2.
     residual_torque_nm : float or None
         N m, from the free float (None without one).
+    residual_in_plane_torque_nm : float or None
+        N m, ``m |g| |r_perp|`` of the in-plane offset the run leaves (simulation truth):
+        the part of the residual torque the balancing method sets; the free float's
+        estimate adds the vertical offset's pendulum torque of whatever swing it has.
     steady_check : dict
         :func:`~.drift.window_drift`'s keys (``metrics_window_s``, ``steady``, ...).
     note : str or None
@@ -133,6 +140,7 @@ class BalancingMetrics(Mapping):
     residual_offset_m: tuple | None = field(default=None, repr=False)
     integral_time_constant_s: float | None = field(default=None, repr=False)
     settling_time_s: float | None = field(default=None, repr=False)
+    residual_in_plane_torque_nm: float | None = field(default=None, repr=False)
 
     def to_json(self) -> dict:
         """The metrics as the ``balance --json`` keys (lists for the per-slider values)."""

@@ -301,6 +301,7 @@ def run_balancing(
         start=start, offset_stays=offset_stays, duration_s=duration,
         residual_offset_m=tuple(r_end.tolist()), integral_time_constant_s=itc,
         settling_time_s=settle,
+        residual_in_plane_torque_nm=testbed.body.mass * testbed.gravity * math.hypot(*r_end[:2]),
     )  # fmt: skip
     return BalancingRun(method, result, free, metrics)
 
