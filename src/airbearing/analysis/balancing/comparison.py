@@ -53,7 +53,8 @@ class Comparison:
         s, run length.
     tables : dict
         ``{offset (m): {method: metrics}}``, metrics averaged over the seeds (keys of
-        :func:`~.metrics.balancing_metrics` plus ``residual_offset_m`` and ``runs``).
+        :func:`~.metrics.balancing_metrics` plus ``residual_offset_m``,
+        ``residual_in_plane_torque_nm`` and ``runs``).
     ratios : dict or None
         ``{"of": "b/a", "g_perp_rms": -, "slider_p2p": -}``, averaged over the offsets
         (in-plane sliders 1 and 2 averaged); None with a single method.
