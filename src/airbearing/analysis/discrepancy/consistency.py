@@ -119,12 +119,13 @@ class Consistency:
 
 def per_log_fits(
     testbed, logs, roles, model, S, chosen, theta0, lower, upper, window_s, jit, kappa=None,
-    noise=None,
+    noise=None, piece_s=None,
 ):  # fmt: skip
     """Each log fitted alone with the effects ``chosen`` (module doc).
 
     ``kappa``: the process-noise intensity of the joint fit (linked pieces), used for each
-    log alone too (None: the problem's default); ``noise`` its coloured measurement noise.
+    log alone too (None: the problem's default); ``noise`` its coloured measurement noise;
+    ``piece_s`` its pieces' length, s (None: the default).
 
     Returns
     -------
@@ -134,7 +135,7 @@ def per_log_fits(
     k = S.shape[1]
     for lg, role in zip(logs, roles, strict=True):
         try:
-            datas, windows, floor = prepare(testbed, [lg], window_s=window_s)
+            datas, windows, floor = prepare(testbed, [lg], window_s=window_s, piece_s=piece_s)
             problem = problem_for(model, datas, windows, floor, jit=jit, kappa=kappa, noise=noise)
             fit = problem.fit(
                 model.p0.copy(),

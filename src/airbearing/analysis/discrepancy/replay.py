@@ -342,14 +342,19 @@ def log_gaps(problem: ShootingProblem, fit: Fit) -> list[float]:
     return [problem.gap_of_residual(r, src == i) for i in range(n_logs)]
 
 
-def prepare(testbed: Testbed, logs, *, window_s: float | None = None):
-    """``(datas, windows, floor)`` of one or more logs of ``testbed``."""
+def prepare(testbed: Testbed, logs, *, window_s: float | None = None, piece_s: float | None = None):
+    """``(datas, windows, floor)`` of one or more logs of ``testbed``.
+
+    ``window_s``: fixed free windows of that length, s; else linked pieces (of ``piece_s``
+    when given, else the default length) whose horizon the process noise sets.
+    """
     logs = [logs] if isinstance(logs, Log) else list(logs)
     if not logs:
         raise InputError("replay: expected at least one log")
     datas = [replay_data(testbed, log) for log in logs]
     # no window given: linked pieces whose horizon the process noise sets (module doc)
-    windows = make_windows(datas, window_s=window_s, linked=window_s is None)
+    linked = window_s is None
+    windows = make_windows(datas, window_s=piece_s if linked else window_s, linked=linked)
     floor = noise_floor(datas)
     return datas, windows, floor
 

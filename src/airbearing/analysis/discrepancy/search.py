@@ -40,7 +40,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from airbearing.analysis.discrepancy.adequacy import Adequacy, adequacy
+from airbearing.analysis.discrepancy.adequacy import GAP_CLEAR, Adequacy, adequacy
 from airbearing.analysis.discrepancy.candidates import (
     Candidate,
     candidates_for,
@@ -52,9 +52,11 @@ from airbearing.analysis.discrepancy.candidates import (
 from airbearing.analysis.discrepancy.consistency import consistency, per_log_fits
 from airbearing.analysis.discrepancy.data import (
     ATTITUDE_SIGMA_MIN,
+    MIN_WINDOW_SAMPLES,
     RATE_SIGMA_MIN,
     NoiseFloor,
     ReplayData,
+    make_windows,
 )
 from airbearing.analysis.discrepancy.honest import Errors, effect_errors, honest
 from airbearing.analysis.discrepancy.localise import Localisation, localise
@@ -397,6 +399,9 @@ class _Search:
         self.problems: dict = {}
         self.kappa = None  # process-noise intensity of linked pieces (None: the grid's top)
         self.noise = None  # the coloured measurement noise estimated with it (None: white)
+        # shorter pieces for the horizon when the naming pieces cannot follow the data
+        self.final_problem = None
+        self.piece_s = None
         rng = np.random.default_rng(seed)
         folds = np.arange(windows.n) % min(windows.n, CV_FOLDS)
         self.folds = folds[rng.permutation(windows.n)]
@@ -437,7 +442,45 @@ class _Search:
         for pb in self.problems.values():
             set_intensity(pb, self.kappa)
             set_measurement_noise(pb, self.noise)
-        return fit
+        return self._shorter(fit, lag, chosen)
+
+    def _shorter(self, fit: Fit, lag: bool, chosen) -> Fit:
+        """The horizon on shorter pieces when even nearly free pieces leave more than
+        ``GAP_CLEAR`` times the measurement noise (the floor when it is white; the
+        unexplained torque acts faster than a piece: the
+        process noise, which acts at hand-overs, cannot follow it); ``fit`` otherwise.
+        The pieces shrink by that ratio, down to ``MIN_WINDOW_SAMPLES`` samples."""
+        pn = fit.extra.get("process_noise") or {}
+        level = _noise_level(self.problem(lag))  # the coloured noise's, over the floor
+        ratio = float(pn.get("gap_short", 0.0)) / max(self.floor.value * level, 1e-300)
+        piece = float(pn.get("piece_s", 0.0))
+        dt = self.datas[0].dt
+        shortest = MIN_WINDOW_SAMPLES * dt
+        if not (ratio > GAP_CLEAR and piece > 1.5 * shortest):
+            return fit
+        self.piece_s = max(piece / ratio, shortest)
+        windows = make_windows(self.datas, window_s=self.piece_s, linked=True)
+        model = self.models[lag]
+        problem = problem_for(
+            model, self.datas, windows, self.floor, jit=self.jit, noise=self.noise
+        )  # fmt: skip
+        k = len(fit.theta)
+        short = estimate_process_noise(
+            problem,
+            model.p0.copy(),
+            self.S(lag, chosen) if chosen else None,
+            fit.theta if chosen else None,
+            lower=np.r_[[lo for c in chosen for lo in c.lower]] if chosen else None,
+            upper=np.r_[[hi for c in chosen for hi in c.upper]] if chosen else None,
+            name="process noise of the logs on shorter pieces",
+            measurement=self.noise is None,
+        )
+        if k:
+            short.extra["pieces_from_s"] = piece
+        self.final_problem = problem
+        self.kappa = short.extra["process_noise"]["kappa"]
+        self.noise = problem.measurement_noise
+        return short
 
     def S(self, lag: bool, chosen) -> np.ndarray:
         m = self.models[lag]
@@ -727,7 +770,7 @@ def _result(search, refused, base_problem, sel, named, judged, loc) -> Discrepan
         stop_reason=sel.stop_reason,
         validation=validation,
         log_gaps_before=tuple(log_gaps(base_problem, nominal)),
-        log_gaps_after=tuple(log_gaps(named.problem, sel.current)),
+        log_gaps_after=tuple(log_gaps(search.problem(sel.lag), sel.current)),
         effect_std_white=named.std_white,
         effect_crlb=named.crlb,
         effect_efficiency=named.efficiency,
@@ -767,6 +810,7 @@ class _Selection:
     starts: dict = field(default_factory=dict)
     dropped: set = field(default_factory=set)
     at_bound: set = field(default_factory=set)  # labels pinned at a bound on short pieces
+    weak: set = field(default_factory=set)  # labels not significant in the last round
     max_effects: int = 0
 
 
@@ -832,6 +876,8 @@ def _select(search, nominal, max_effects, screen, workers, prog) -> _Selection:
             if r.status in ("not identifiable from this log", "at its physical bound")
         }
         sel.at_bound |= {r.label for r in results if r.status == "at its physical bound"}
+        # what short pieces found too weak may not be on the horizon (tried again there)
+        sel.weak = {r.label for r in results if str(r.reason).startswith("not significant")}
         if not _add_best(sel, results, prog):
             break
     else:
@@ -958,8 +1004,9 @@ def _named(search: _Search, sel: _Selection, prog: _Progress, screen=True, worke
     if search.windows.linked:
         prog("the horizon: how much torque the model still leaves unexplained")
         current = search.horizon(current, sel.lag, sel.chosen, sel.theta)
-        current = _retry_at_horizon(search, sel, current, screen, workers, prog)
-    problem = search.problem(sel.lag)
+        if search.final_problem is None:  # (rounds run on the naming pieces only)
+            current = _retry_at_horizon(search, sel, current, screen, workers, prog)
+    problem = search.final_problem or search.problem(sel.lag)
     errs = honest(problem, current, len(current.theta))
     effects, effect_std, white, crlb, eff = {}, {}, {}, {}, {}
     i = 0
@@ -974,16 +1021,25 @@ def _named(search: _Search, sel: _Selection, prog: _Progress, screen=True, worke
     return _Named(current, problem, errs, effects, effect_std, white, crlb, eff)
 
 
+def _noise_level(problem: ShootingProblem) -> float:
+    """The primary output's coloured measurement noise over the weights (1 when white)."""
+    mn = problem.measurement_noise
+    ar = (mn.ar if mn is not None else {}).get(problem.outputs[0])
+    return 1.0 if not ar else float(ar[1] / math.sqrt(1.0 - ar[0] ** 2))
+
+
 def _retry_at_horizon(search, sel, current, screen, workers, prog) -> Fit:
-    """The candidates pinned at a bound on short pieces, tried again at the horizon's
-    intensity when the process noise is significant and a slot is left (the current fit
-    otherwise); a pick is followed by the horizon estimated again."""
+    """The candidates pinned at a bound on short pieces, or not significant there in the
+    last round, tried again at the horizon's intensity when the process noise is
+    significant and a slot is left (the current fit otherwise); a pick is followed by the
+    horizon estimated again."""
     pn = current.extra.get("process_noise") or {}
     taken = {c.name for c in sel.chosen}
-    retry = [c for c in search.cands if c.label in sel.at_bound and c.name not in taken]
+    again = sel.at_bound | sel.weak
+    retry = [c for c in search.cands if c.label in again and c.name not in taken]
     if not (retry and pn.get("significant") and len(sel.chosen) < sel.max_effects):
         return current
-    prog("at the horizon: the candidates short pieces held at a bound")
+    prog("at the horizon: the candidates short pieces held at a bound or found too weak")
     sel.current, sel.theta = current, current.theta.copy()
     results = _round(search, sel, retry, screen, workers, prog)
     sel.rounds.append(tuple(results))
@@ -1030,6 +1086,7 @@ def _agreement(search, sel, named, logs, validate, window_s, jit, prog) -> tuple
         jit,
         kappa=getattr(search, "kappa", None),
         noise=getattr(search, "noise", None),
+        piece_s=getattr(search, "piece_s", None),
     )
     return per_log, consistency(chosen, per_log)
 

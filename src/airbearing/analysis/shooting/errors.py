@@ -53,6 +53,10 @@ __all__ = [
 
 #: Autocorrelation below which two residual samples count as uncorrelated (1/e).
 DECORRELATED = math.exp(-1.0)
+#: Fewest linked pieces whose score sums give the long-run covariance (else per sample).
+MIN_PIECES = 8
+#: Largest AR(1) coefficient of the prewhitening (Andrews & Monahan's bound).
+MAX_RHO = 0.97
 
 
 @dataclass(frozen=True)
@@ -269,6 +273,12 @@ def honest_errors(problem, fit, k: int) -> HonestErrors:
         A = _projected(J, k, fit.extra.get("N"))
         scores = A * r[:, None]
     w = problem.windows
+    if not whole and r.size > n_meas and w.link is not None:
+        pw = _piece_meat(problem, scores)
+        if pw is not None:  # an unexplained torque: scores summed per piece, prewhitened
+            meat, rho, nl = pw
+            tau = max(tau, _defect_correlation_time(problem, r[n_meas:]))
+            return _sandwich(A, meat, std_w, cov_w, bound, tau, nl)
     per_sample = np.zeros((w.n * w.length, k))
     np.add.at(per_sample, problem.sample, scores[:n_meas])
     dt = float(np.median(w.dt[w.weight[:, 1:] > 0]))
@@ -291,7 +301,16 @@ def honest_errors(problem, fit, k: int) -> HonestErrors:
         nl = max(0, min(nl, shortest // 2, n - 1))
         lags.append(nl)
         meat = meat + S_hac_simple(x, nlags=nl)
+    nl = int(max(lags) if lags else 0)
     if whole:  # the scores already carry the inverse: theta - theta_true ~ -M r
+        return _sandwich(None, meat, std_w, cov_w, bound, tau, nl)
+    return _sandwich(A, meat, std_w, cov_w, bound, tau, nl)
+
+
+def _sandwich(A, meat, std_w, cov_w, bound, tau: float, nlags: int) -> HonestErrors:
+    """``B^-1 M B^-1`` with ``B = A'A`` (``A`` None: ``meat`` is the covariance already),
+    never below the white-noise errors."""
+    if A is None:
         cov = meat
     else:
         bread = A.T @ A
@@ -310,8 +329,48 @@ def honest_errors(problem, fit, k: int) -> HonestErrors:
         cov_white=cov_w,
         crlb=bound,
         correlation_time_s=tau,
-        nlags=int(max(lags) if lags else 0),
+        nlags=int(nlags),
     )
+
+
+def _piece_meat(problem, scores: np.ndarray):
+    """``(meat, rho, nlags)``: the long-run covariance of the scores summed per piece
+    (module doc), or None with too few pieces to estimate it (fewer than
+    :data:`MIN_PIECES`).
+
+    A piece's sum holds every correlation within it exactly; between pieces the series of
+    each segment is prewhitened by one AR(1) coefficient ``rho`` pooled over segments and
+    parameters (each standardised), its Newey-West HAC taken, and recoloured by
+    ``1 / (1 - rho)^2`` (Andrews & Monahan 1992): a torque correlated over several pieces
+    makes the sums persistent, and a kernel alone, over a few pieces, misses most of it.
+    """
+    from statsmodels.stats.sandwich_covariance import S_hac_simple
+
+    w = problem.windows
+    n_meas, nd = problem.n_meas, problem.n_delta
+    if w.n < MIN_PIECES:
+        return None
+    piece = np.empty(scores.shape[0], dtype=int)
+    piece[:n_meas] = np.arange(n_meas) // problem.n_win_res
+    # a pair's defect belongs to the later piece (its hand-over is that piece's first row)
+    piece[n_meas:] = np.minimum(np.arange(scores.shape[0] - n_meas) // nd + 1, w.n - 1)
+    sums = np.zeros((w.n, scores.shape[1]))
+    np.add.at(sums, piece, scores)
+    seg = w.segments()
+    series = [sums[seg == s] for s in np.unique(seg)]
+    sd = np.where(sums.std(axis=0) > 0, sums.std(axis=0), 1.0)
+    num = sum(float(np.sum((x[1:] / sd) * (x[:-1] / sd))) for x in series if len(x) > 1)
+    den = sum(float(np.sum((x[:-1] / sd) ** 2)) for x in series if len(x) > 1)
+    rho = float(np.clip(num / den, 0.0, MAX_RHO)) if den > 0 else 0.0
+    meat = np.zeros((scores.shape[1], scores.shape[1]))
+    lags = []
+    for x in series:
+        e = np.vstack([x[:1], x[1:] - rho * x[:-1]])
+        n = e.shape[0]
+        nl = max(0, min(int(math.floor(4 * (n / 100.0) ** (2.0 / 9.0))), n - 1))
+        lags.append(nl)
+        meat = meat + S_hac_simple(e, nlags=nl)
+    return meat / (1.0 - rho) ** 2, rho, max(lags) if lags else 0
 
 
 def _constrained(problem, fit, k: int):

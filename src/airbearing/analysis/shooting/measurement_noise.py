@@ -25,9 +25,10 @@ value, no new IPOPT run. The model is adopted only when
 - the likelihood-ratio test against white noise (``phi = 0``, ``s`` free) is significant
   (chi-square with one degree of freedom, p < :data:`SIGNIFICANCE`): white noise stays
   white, and an in-model fit keeps its Cramer-Rao errors exactly;
-- and its correlation time ``-dt / ln(phi)`` is bounded by a third of a piece: a residual
-  correlated over longer than that cannot be told from a trajectory error within the
-  piece, and is left to the process noise (a misfit, not the sensor).
+- and its correlation time ``-dt / ln(phi)`` is below half a piece (the search's bound;
+  an estimate at the bound is not adopted): a residual correlated over longer than that
+  cannot be told from a trajectory error within the piece, and is left to the process
+  noise (a torque the model misses, not the sensor).
 
 What the noise model cannot do is prove that a correlated residual is the sensor's: the
 adequacy verdict therefore still says structure remains when the gap is above twice the
@@ -52,8 +53,9 @@ __all__ = [
 
 #: Likelihood-ratio p-value below which the AR(1) noise model replaces white noise.
 SIGNIFICANCE = 1e-3
-#: The noise's correlation time must stay below this fraction of a piece.
-MAX_CORRELATION_OF_PIECE = 1.0 / 3.0
+#: The noise's correlation time is searched up to this fraction of a piece; an estimate at
+#: that bound is a trajectory error (a misfit the process noise must take), not noise.
+MAX_CORRELATION_OF_PIECE = 0.5
 
 
 @dataclass(frozen=True)
@@ -287,7 +289,8 @@ def estimate_measurement_noise(problem, fit, k: int) -> MeasurementNoise | None:
         lr = max(0.0, 2.0 * (float(white.fun) - float(best.fun)))
         p = float(stats.chi2.sf(lr, 1))
         lrs[group], ps[group] = lr, p
-        if p < SIGNIFICANCE:
+        at_bound = phi_max - phi < 0.1 * (1.0 - phi_max)
+        if p < SIGNIFICANCE and not at_bound:
             ar[group] = (phi, s)
     if not ar:
         return None
