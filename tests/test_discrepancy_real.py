@@ -61,13 +61,15 @@ def _spindowns():
 @pytest.mark.slow
 def test_joint_spindowns_separate_coulomb_viscous_and_drag():
     logs = _spindowns()
-    # one fast log alone: drag dominates, and Coulomb and viscous friction both fit the
-    # rest of it; the answer is not the truth
+    # one fast log alone: on 10 s pieces drag dominates and Coulomb and viscous friction
+    # both fit the rest; on the horizon of whole segments (the rate falls from 5 to about
+    # 1 rad/s in 120 s: constant, linear and quadratic drag terms separate) the weak
+    # candidate is tried again. Whatever is named lies within 3.5 honest std of the truth
+    # (3 std and a margin for a single draw of three correlated values)
     alone = discrepancy(ROTOR, logs[0], max_effects=3)
-    assert not (
-        set(alone.effects) == set(SPIN_TRUTH)
-        and all(_rel(alone.effects[n], v) < 0.2 for n, v in SPIN_TRUTH.items())
-    ), alone.verdict
+    assert "aero_drag" in alone.effects, alone.verdict
+    for name, value in alone.effects.items():
+        assert abs(value - SPIN_TRUTH[name]) < 3.5 * alone.effect_std[name], alone.verdict
     # three logs at 5, 1.5 and 0.4 rad/s fitted jointly, each its own initial states:
     # all three named within 20 % (the acceptance for named effects)
     joint = discrepancy(ROTOR, logs, max_effects=3)
