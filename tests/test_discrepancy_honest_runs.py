@@ -131,13 +131,26 @@ def test_coverage_study_small():
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(
-    strict=True,
-    reason="on a slew the inertia error absorbs part of a slow disturbance torque: the truth "
-    "lies 3-11 honest std away (docs/explanation/honest-answers.md)",
-)
 def test_cmg_slew_ou_coverage():
+    # a torque faster than the 10 s pieces: the horizon is estimated on shorter pieces, and
+    # the honest errors cover the truth (1 miss in 4 allowed: the goal is 90 % over 20
+    # seeds, measured 90 % in docs/explanation/honest-answers.md)
     cs = _study()
     res = [cs.run_one("cmg", "c", s) for s in range(4)]
     (row,) = cs.summarise(res)
     assert row["truth within 3 std"] >= 0.75, row
+    assert row["structure_remains"] == 1.0, row
+
+
+@pytest.mark.slow
+def test_ar1_measurement_noise_coverage():
+    # AR(1) measurement noise of coefficient 0.95: estimated with the fit and whitened, so
+    # the true effects are named and covered (1 miss in the 9 coast-down pairs and 1 in 4
+    # slews allowed: the goal is 90 % over 20 seeds), and the verdict says the noise is
+    # coloured
+    cs = _study()
+    res = [cs.run_one("coast", "b", s, 150.0) for s in range(3)]
+    res += [cs.run_one("cmg", "b", s) for s in range(4)]
+    rows = {(r["set-up"], r["case"]): r for r in cs.summarise(res)}
+    assert rows[("coast", "b")]["truth within 3 std"] >= 8 / 9, rows
+    assert rows[("cmg", "b")]["truth within 3 std"] >= 0.75, rows
