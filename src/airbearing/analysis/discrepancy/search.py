@@ -876,8 +876,15 @@ def _select(search, nominal, max_effects, screen, workers, prog) -> _Selection:
             if r.status in ("not identifiable from this log", "at its physical bound")
         }
         sel.at_bound |= {r.label for r in results if r.status == "at its physical bound"}
-        # what short pieces found too weak may not be on the horizon (tried again there)
-        sel.weak = {r.label for r in results if str(r.reason).startswith("not significant")}
+        # what short pieces found too weak (not significant, too few standard errors from
+        # zero, no better on held-out pieces) may not be on the horizon: tried again there
+        sel.weak = {
+            r.label
+            for r in results
+            if not r.nameable
+            and r.status in ("converged", "warning", "screened")
+            and str(r.reason)
+        }
         if not _add_best(sel, results, prog):
             break
     else:
@@ -1029,8 +1036,9 @@ def _noise_level(problem: ShootingProblem) -> float:
 
 
 def _retry_at_horizon(search, sel, current, screen, workers, prog) -> Fit:
-    """The candidates pinned at a bound on short pieces, or not significant there in the
-    last round, tried again at the horizon's intensity when the process noise is
+    """The candidates pinned at a bound on short pieces, or too weak there in the last
+    round (fitted, but not significant, too close to zero or no better held out), tried
+    again at the horizon's intensity when the process noise is
     significant and a slot is left (the current fit otherwise); a pick is followed by the
     horizon estimated again."""
     pn = current.extra.get("process_noise") or {}
