@@ -26,7 +26,9 @@ Cases
 Each run is fitted by ``discrepancy(testbed, logs, only=<the true effects>,
 max_effects=<their number>)`` and tabulated: the fraction of (effect, run) pairs whose
 truth lies within 3 reported ``std`` (an effect not named counts as a miss), the median
-``std / crlb`` and the fraction of runs with ``structure_remains``. Goals (the honest-answers
+``std / crlb``, the median ``std`` over the real spread of the values about the truth
+(per effect, the range over the effects) and the fraction of runs with
+``structure_remains``. Goals (the honest-answers
 issue): truth within 3 std in >= 95 % of (a) and >= 90 % of (b), (c); std / crlb within
 0.8-1.25 in (a); structure_remains in >= 90 % of (c) and in <= 10 % of (a).
 """
@@ -213,6 +215,7 @@ def summarise(results: list[dict]) -> list[dict]:
                     "std/crlb 10-90 %": (
                         f"{np.quantile(eff, 0.1):.2f}-{np.quantile(eff, 0.9):.2f}" if eff else "-"
                     ),
+                    "std/spread": _std_over_spread(rs),
                     "structure_remains": sum(sr) / max(len(sr), 1),
                     "median gap/floor": float(np.median([r["gap_over_floor"] for r in rs])),
                     "s per run": float(np.mean([r["seconds"] for r in rs])),
@@ -237,6 +240,23 @@ def markdown(rows: list[dict]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _std_over_spread(rs: list[dict]) -> str:
+    """Per effect, the median reported std over the real spread of the values about the
+    truth (RMS over the runs that named it); the range over the effects."""
+    ratios = []
+    for name in rs[0]["effects"] if rs else ():
+        e = [r["effects"][name] for r in rs]
+        ok = [x for x in e if np.isfinite(x["value"]) and np.isfinite(x["std"])]
+        if len(ok) < 3:
+            continue
+        spread = math.sqrt(np.mean([(x["value"] - x["truth"]) ** 2 for x in ok]))
+        if spread > 0:
+            ratios.append(float(np.median([x["std"] for x in ok])) / spread)
+    if not ratios:
+        return "-"
+    return f"{min(ratios):.2f}-{max(ratios):.2f}" if len(ratios) > 1 else f"{ratios[0]:.2f}"
+
+
 def _job(args):
     return run_one(*args)
 
@@ -249,6 +269,7 @@ def main(argv=None) -> int:
     ap.add_argument("--kinds", default="coast,cmg")
     ap.add_argument("--cases", default="a,b,c")
     ap.add_argument("--out", default=None, help="write the Markdown table here")
+    ap.add_argument("--json", default=None, help="write every run's result here")
     a = ap.parse_args(argv)
     jobs = [
         (kind, case, seed, a.duration)
@@ -281,6 +302,11 @@ def main(argv=None) -> int:
     if a.out:
         with open(a.out, "w") as f:
             f.write(table)
+    if a.json:
+        import json
+
+        with open(a.json, "w") as f:
+            json.dump(results, f, indent=1)
     return 0
 
 

@@ -154,3 +154,21 @@ def test_ar1_measurement_noise_coverage():
     rows = {(r["set-up"], r["case"]): r for r in cs.summarise(res)}
     assert rows[("coast", "b")]["truth within 3 std"] >= 8 / 9, rows
     assert rows[("cmg", "b")]["truth within 3 std"] >= 0.75, rows
+
+
+@pytest.mark.slow
+def test_a_torque_faster_than_a_piece_gets_shorter_pieces():
+    # the slew's OU torque moves the gyro by several noise sigmas within a 10 s piece:
+    # nearly free pieces leave about 15 floors, so the horizon is estimated on shorter
+    # pieces (by that ratio), where the unexplained torque is significant
+    from airbearing.analysis.discrepancy.search import discrepancy
+
+    cs = _study()
+    tb, logs = cs.cmg_logs(5, "c")
+    d = discrepancy(tb, logs, only=list(cs.CMG_TRUTH), max_effects=1)
+    assert d.final_problem.windows.n > d.windows.n
+    pn = d.to_json()["adequacy"]["process_noise"]
+    assert pn["significant"] and pn["piece_s"] < 5.0, pn
+    assert d.adequacy.structure_remains
+    truth = cs.CMG_TRUTH["inertia_error"]
+    assert abs(d.effects["inertia_error"] - truth) < 3 * d.effect_std["inertia_error"], d.verdict

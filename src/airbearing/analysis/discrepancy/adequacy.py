@@ -73,7 +73,16 @@ MIN_SEGMENT = 25
 #: Most lags of the pooled autocorrelation (the correlation time and the report's plot).
 ACF_LAGS = 600
 #: The keys of the estimator's process-noise record that the JSON carries.
-PROCESS_NOISE_KEYS = ("intensity", "unit", "lr", "p", "significant", "horizon_s", "kappa")
+PROCESS_NOISE_KEYS = (
+    "intensity",
+    "unit",
+    "lr",
+    "p",
+    "significant",
+    "horizon_s",
+    "kappa",
+    "piece_s",
+)
 #: Smallest R^2 with which the residual is said to follow the angle, the rate or time.
 FOLLOWS_MIN = 0.05
 #: Names of the regressor groups of :func:`follows`, in words.
