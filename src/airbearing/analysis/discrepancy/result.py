@@ -1,0 +1,280 @@
+"""The result of a discrepancy search: :class:`Discrepancy` and its :class:`Validation` logs.
+
+What :func:`airbearing.analysis.discrepancy.search.discrepancy` returns: the named
+effects with their honest errors, the adequacy verdict, the agreement across runs, the
+candidates of every round and the fits behind them; ``str`` is the verdict a person
+reads, ``to_json()`` the contract of ``airbearing discrepancy --json``
+(docs/reference/discrepancy-json.md), ``plot()`` the report's figures.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from airbearing.analysis.discrepancy.adequacy import Adequacy
+from airbearing.analysis.discrepancy.data import NoiseFloor, ReplayData
+from airbearing.analysis.discrepancy.honest import Errors
+from airbearing.analysis.discrepancy.localise import Localisation
+from airbearing.analysis.discrepancy.trial import jsonable
+from airbearing.analysis.shooting import Fit, ShootingProblem, WindowSet
+from airbearing.io.log import Log
+from airbearing.io.testbed import Testbed
+from airbearing.models.model import Model
+
+__all__ = ["Discrepancy", "Validation"]
+
+
+@dataclass(frozen=True, eq=False)
+class Validation:
+    """The gap of one log that was not fitted, with the nominal and the augmented Model."""
+
+    log: str
+    gap_before: float
+    gap_after: float
+    noise_floor: float
+    gap_unit: str
+    segments: dict
+
+    @property
+    def shrinks(self) -> bool:
+        """True when the named effects shrink the gap of this log."""
+        return bool(self.gap_after < self.gap_before)
+
+    def to_json(self) -> dict:
+        return {
+            "log": self.log,
+            "gap_before": self.gap_before,
+            "gap_after": self.gap_after,
+            "noise_floor": self.noise_floor,
+            "gap_unit": self.gap_unit,
+            "shrinks": self.shrinks,
+            **self.segments,
+        }
+
+
+@dataclass(frozen=True, eq=False)
+class Discrepancy:
+    """The result of :func:`discrepancy`.
+
+    Attributes
+    ----------
+    effects : dict
+        Named missing effects, ``name -> value`` (FORMATS.md units), in the order found.
+    effect_std : dict
+        ``name -> 1-sigma`` of each value: the honest error (:mod:`.honest`, a HAC sandwich
+        with the residuals' autocovariance).
+    effect_std_white, effect_crlb, effect_efficiency : dict
+        ``name ->`` the white-noise Fisher error, the Cramer-Rao bound of the data for whole
+        segments, and ``std / crlb``.
+    adequacy : Adequacy
+        Whether the final fit's residual is at the noise, and what remains (:mod:`.adequacy`).
+    per_log : tuple of LogFit
+        With several runs (fitted or ``validate``), the named effects fitted on each alone.
+    consistency : tuple of Consistency
+        The chi-square test of each named effect across those runs (:mod:`.consistency`).
+    gap_before, gap_after : float
+        The gap of the nominal and of the augmented Model over all fitted logs
+        (``gap_unit``).
+    noise_floor : float
+        The measurement noise estimated from the data (``gap_unit``).
+    candidates : tuple of CandidateResult
+        The first round's candidates, best first.
+    rounds : tuple of tuple of CandidateResult
+    confounded : tuple of tuple
+        Pairs of effect names that explain the data equally well.
+    experiments : dict
+        ``"a + b" -> the experiment that separates them``.
+    validation : tuple of Validation
+        Logs not fitted, replayed with the nominal and the augmented Model.
+    verdict : str
+    localisation : Localisation
+        Where the nominal residual lives (:func:`localise`), with ``words``.
+
+    Printing one gives the verdict a person reads (``str``); its ``repr`` is one short line.
+    """
+
+    testbed: Testbed = field(repr=False)
+    datas: tuple = field(repr=False)
+    windows: WindowSet = field(repr=False)
+    floor: NoiseFloor = field(repr=False)
+    effects: dict
+    effect_std: dict = field(repr=False)
+    gap_before: float
+    gap_after: float
+    noise_floor: float
+    candidates: tuple = field(repr=False)
+    rounds: tuple = field(repr=False)
+    confounded: tuple = field(repr=False)
+    experiments: dict = field(repr=False)
+    augmented_testbed: Testbed = field(repr=False)
+    augmented_model: Model = field(repr=False)
+    verdict: str = field(repr=False)
+    localisation: Localisation = field(repr=False)
+    nominal_fit: Fit = field(repr=False)
+    final_fit: Fit = field(repr=False)
+    nominal_problem: ShootingProblem = field(repr=False)
+    final_problem: ShootingProblem = field(repr=False)
+    stop_reason: str = field(default="", repr=False)
+    validation: tuple = field(default=(), repr=False)
+    log_gaps_before: tuple = field(default=(), repr=False)
+    log_gaps_after: tuple = field(default=(), repr=False)
+    effect_std_white: dict = field(default_factory=dict, repr=False)
+    effect_crlb: dict = field(default_factory=dict, repr=False)
+    effect_efficiency: dict = field(default_factory=dict, repr=False)
+    errors: Errors | None = field(default=None, repr=False)
+    adequacy: Adequacy | None = field(default=None, repr=False)
+    per_log: tuple = field(default=(), repr=False)
+    consistency: tuple = field(default=(), repr=False)
+
+    def __repr__(self) -> str:
+        effects = ", ".join(f"{n}={_short(v)}" for n, v in self.effects.items())
+        return (
+            f"Discrepancy(testbed={self.testbed.name!r}, logs={len(self.datas)}, "
+            f"effects={{{effects}}}, gap_before={self.gap_before:.3g}, "
+            f"gap_after={self.gap_after:.3g}, noise_floor={self.noise_floor:.3g} {self.gap_unit})"
+        )
+
+    def __str__(self) -> str:
+        unit, floor = self.gap_unit, max(self.noise_floor, 1e-300)
+        lines = [
+            self.verdict,
+            f"gap before {self.gap_before:.4g} {unit} ({self.gap_before / floor:.2f} x the noise "
+            f"floor {self.noise_floor:.4g} {unit}), after {self.gap_after:.4g} {unit} "
+            f"({self.gap_after / floor:.2f} x)",
+        ]
+        if self.adequacy is not None:
+            lines.append(
+                "adequacy: "
+                + (self.adequacy.note or ("at the noise" if self.adequacy.at_noise else "-"))
+            )
+        return "\n".join(lines)
+
+    def plot(self):
+        """Figure: the logged output with the nominal and the augmented Model, and their
+        residuals against the noise band (matplotlib, imported only here).
+
+        Returns
+        -------
+        matplotlib.figure.Figure
+        """
+        from airbearing.reporting.discrepancy import residual_figure
+
+        return residual_figure(
+            self.datas,
+            self.nominal_problem,
+            [(self.nominal_problem, self.nominal_fit), (self.final_problem, self.final_fit)],
+            ["nominal", "augmented"],
+            self.floor,
+        )
+
+    @property
+    def data(self) -> ReplayData:
+        """The first log's data."""
+        return self.datas[0]
+
+    @property
+    def log(self) -> Log:
+        """The first log."""
+        return self.datas[0].log
+
+    @property
+    def gap_unit(self) -> str:
+        return self.data.gap_unit
+
+    @property
+    def no_missing_effect(self) -> bool:
+        """True when nothing was named."""
+        return not self.effects
+
+    def to_json(self) -> dict:
+        """The JSON document of ``airbearing discrepancy --json``."""
+        logs = []
+        for d, gb, ga in zip(self.datas, self.log_gaps_before, self.log_gaps_after, strict=True):
+            logs.append(
+                {"log": d.log.source, "gap_before": gb, "gap_after": ga, **d.segment_json()}
+            )
+        if len(self.datas) == 1:
+            seg = self.data.segment_json()
+        else:
+            seg = {
+                "segments": sum(len(d.segments) for d in self.datas),
+                "segment_rows": [d.segment_json()["segment_rows"] for d in self.datas],
+                "outlier_rows": [d.segment_json()["outlier_rows"] for d in self.datas],
+            }
+        fl = self.floor.to_json()
+        return {
+            "testbed": self.testbed.name,
+            "log": self.log.source,
+            "effects": [
+                {
+                    "name": n,
+                    "value": jsonable(v),
+                    "std": jsonable(self.effect_std[n]),
+                    "std_white": jsonable(self.effect_std_white.get(n)),
+                    "crlb": jsonable(self.effect_crlb.get(n)),
+                    "efficiency": jsonable(self.effect_efficiency.get(n)),
+                }
+                for n, v in self.effects.items()
+            ],
+            "gap_before": float(self.gap_before),
+            "gap_after": float(self.gap_after),
+            "noise_floor": float(self.noise_floor),
+            "gap_unit": self.gap_unit,
+            "noise_floor_source": fl["noise_floor_source"],
+            **seg,
+            "candidates": [
+                {
+                    key: c.row()[key]
+                    for key in (
+                        "name",
+                        "per_axis",
+                        "value",
+                        "std",
+                        "std_white",
+                        "crlb",
+                        "efficiency",
+                        "gap",
+                        "score",
+                        "heldout_gap",
+                        "sigmas",
+                        "significant",
+                        "nameable",
+                        "status",
+                        "reason",
+                        "start",
+                        "retried",
+                        "retry_reason",
+                        "retry_failed",
+                    )
+                }
+                for c in self.candidates
+            ],
+            "confounded": [list(p) for p in self.confounded],
+            "experiments": dict(self.experiments),
+            "no_missing_effect": self.no_missing_effect,
+            "verdict": self.verdict,
+            "stop_reason": self.stop_reason,
+            "rounds": [[c.row() for c in rnd] for rnd in self.rounds],
+            "windows": {"count": self.windows.n, "length_s": self.windows.length * self.data.dt},
+            "attitude_noise": self.floor.attitude,
+            "rate_noise": self.floor.rate,
+            "logs": logs,
+            "validation": [v.to_json() for v in self.validation],
+            "localisation": list(self.localisation.words),
+            "adequacy": self.adequacy.to_json() if self.adequacy is not None else None,
+            "per_log": [f.to_json() for f in self.per_log],
+            "consistency": [c.to_json() for c in self.consistency],
+        }
+
+
+def _short(v) -> str:
+    """A value in a few characters: a number to 3 digits, an array as its first entries."""
+    try:
+        a = np.atleast_1d(np.asarray(v, dtype=float))
+    except (TypeError, ValueError):
+        return repr(v)[:20]
+    if a.size == 1:
+        return f"{float(a[0]):.3g}"
+    return "[" + ", ".join(f"{x:.3g}" for x in a[:3]) + (", ...]" if a.size > 3 else "]")
