@@ -65,6 +65,7 @@ Standard errors
 """
 
 from airbearing.analysis.shooting.constrained import Inequality, null_space_basis
+from airbearing.analysis.shooting.fit import Fit, classify_status, theta_errors
 from airbearing.analysis.shooting.functions import (
     DEFAULT_SUBSTEPS,
     THETA_SLOTS,
@@ -75,13 +76,8 @@ from airbearing.analysis.shooting.functions import (
     step_function,
     structure_key,
 )
-from airbearing.analysis.shooting.problem import (
-    Fit,
-    ShootingProblem,
-    WindowSet,
-    classify_status,
-    theta_errors,
-)
+from airbearing.analysis.shooting.problem import ShootingProblem
+from airbearing.analysis.shooting.windows import WindowSet
 
 __all__ = [
     "DEFAULT_SUBSTEPS",

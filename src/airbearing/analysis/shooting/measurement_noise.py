@@ -26,7 +26,8 @@ value, no new IPOPT run. The model is adopted only when
   (chi-square with one degree of freedom, p < :data:`SIGNIFICANCE`): white noise stays
   white, and an in-model fit keeps its Cramer-Rao errors exactly;
 - and its correlation time ``-dt / ln(phi)`` is below half a piece (the search's bound;
-  an estimate at the bound is not adopted): a residual correlated over longer than that
+  an estimate at the bound with the likelihood still rising towards it is not adopted):
+  a residual correlated over longer than that
   cannot be told from a trajectory error within the piece, and is left to the process
   noise (a torque the model misses, not the sensor).
 
@@ -54,8 +55,12 @@ __all__ = [
 #: Likelihood-ratio p-value below which the AR(1) noise model replaces white noise.
 SIGNIFICANCE = 1e-3
 #: The noise's correlation time is searched up to this fraction of a piece; an estimate at
-#: that bound is a trajectory error (a misfit the process noise must take), not noise.
+#: that bound, the likelihood still rising to it, is a trajectory error (a misfit the
+#: process noise must take), not noise.
 MAX_CORRELATION_OF_PIECE = 0.5
+#: Log-likelihood gain from half the bound's correlation time to the bound above which the
+#: likelihood "still rises" (a likelihood ratio of e^2: about chi2(1) at p = 0.05).
+RISING = 2.0
 
 
 @dataclass(frozen=True)
@@ -242,6 +247,22 @@ def _max_phi(problem, dt: float) -> float:
     return math.exp(-dt / (MAX_CORRELATION_OF_PIECE * piece))
 
 
+def _still_rising(ll, phi: float, phi_max: float, dt: float, at_best: float) -> bool:
+    """True when the estimate sits at the correlation bound and the likelihood still rises
+    towards it: by more than :data:`RISING` over the coefficient of half that correlation
+    time (the data want a longer correlation than a sensor's: a misfit)."""
+    from scipy import optimize
+
+    if phi_max - phi > 0.1 * (1.0 - phi_max):
+        return False
+    tau_half = -dt / math.log(phi_max) / 2.0
+    phi_half = math.exp(-dt / tau_half)
+    half = optimize.minimize_scalar(
+        lambda ls: ll([ls], fixed=phi_half), bounds=(-5.0, 3.0), method="bounded"
+    )
+    return float(half.fun) - at_best > RISING
+
+
 def estimate_measurement_noise(problem, fit, k: int) -> MeasurementNoise | None:
     """The AR(1) noise of each output group from ``fit`` (module doc), or None (white).
 
@@ -289,8 +310,7 @@ def estimate_measurement_noise(problem, fit, k: int) -> MeasurementNoise | None:
         lr = max(0.0, 2.0 * (float(white.fun) - float(best.fun)))
         p = float(stats.chi2.sf(lr, 1))
         lrs[group], ps[group] = lr, p
-        at_bound = phi_max - phi < 0.1 * (1.0 - phi_max)
-        if p < SIGNIFICANCE and not at_bound:
+        if p < SIGNIFICANCE and not _still_rising(ll, phi, phi_max, dt, float(best.fun)):
             ar[group] = (phi, s)
     if not ar:
         return None

@@ -2,16 +2,20 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-
 import casadi as ca
 import numpy as np
 import scipy.sparse as sp
 
 from airbearing.analysis.shooting.constrained import Inequality, linked_solver, null_space_basis
+from airbearing.analysis.shooting.fit import (  # noqa: F401 - the problem's public names
+    Fit,
+    _reduced,
+    classify_status,
+    solve_gram,
+    theta_errors,
+)
 from airbearing.analysis.shooting.functions import (
     DEFAULT_SUBSTEPS,
-    FISHER_RCOND,
     IPOPT_MAX_ITER,
     OUTPUTS,
     THETA_SLOTS,
@@ -21,274 +25,9 @@ from airbearing.analysis.shooting.functions import (
     start_function,
     to_csc,
 )
+from airbearing.analysis.shooting.windows import WindowSet  # noqa: F401
 from airbearing.errors import SolverError
 from airbearing.models.model import Model
-
-_CONVERGED = ("Solve_Succeeded",)
-_WARNING = ("Solved_To_Acceptable_Level",)
-
-
-def classify_status(status: str) -> str:
-    """IPOPT return status -> ``"converged"``, ``"warning"`` or ``"error"`` (module doc)."""
-    if status in _CONVERGED:
-        return "converged"
-    if status in _WARNING:
-        return "warning"
-    return "error"
-
-
-# ----------------------------------------------------------------------------
-# window data
-
-
-@dataclass(frozen=True, eq=False)
-class WindowSet:
-    """The data of ``n`` windows of ``L`` rows, ready for the compiled window function.
-
-    Attributes
-    ----------
-    x0 : ndarray (n, nx_plant)
-        State estimate at each window's first row (attitude, rate, gimbal angles).
-    u : ndarray (n, L, nu)
-        Inputs held over each row's interval.
-    dt : ndarray (n, L - 1)
-        Logged intervals, s (padding rows: a tiny positive interval, weight 0).
-    weight : ndarray (n, L)
-        1 for a usable row, 0 for an outlier or padding.
-    rate : ndarray (n, L, na) or None
-        Measured rates (output ``rate``), rad/s.
-    quat : ndarray (n, L, 4) or None
-        Measured attitude quaternion (output ``quat``).
-    yaw : ndarray (n, L) or None
-        Measured yaw (output ``yaw``), rad.
-    rows : ndarray (n, L) of int
-        The log row of each window sample (padding repeats the last row).
-    source : ndarray (n,) of int
-        Which log (or segment group) each window comes from.
-    link : ndarray (n - 1,) of bool, optional
-        ``link[j]``: window ``j + 1`` continues window ``j`` (continuity constraint: the
-        state of window ``j`` at its row ``end[j]`` is window ``j + 1``'s start). None: every
-        window starts afresh.
-    end : ndarray (n,) of int, optional
-        Row (within its window) where each linked window hands over to the next one.
-    segment : ndarray (n,) of int, optional
-        The log segment (between gaps) of each window, numbered over all logs; None: windows
-        are grouped by ``source`` and ``link`` (:meth:`segments`).
-    """
-
-    x0: np.ndarray
-    u: np.ndarray
-    dt: np.ndarray
-    weight: np.ndarray
-    rate: np.ndarray | None
-    quat: np.ndarray | None
-    yaw: np.ndarray | None
-    rows: np.ndarray
-    source: np.ndarray
-    link: np.ndarray | None = None
-    end: np.ndarray | None = None
-    segment: np.ndarray | None = None
-
-    def segments(self) -> np.ndarray:
-        """Segment number of each window (``segment`` when given, else a new number at every
-        change of ``source`` and, with links, at every unlinked pair)."""
-        if self.segment is not None:
-            return np.asarray(self.segment, dtype=int)
-        new = np.r_[True, self.source[1:] != self.source[:-1]]
-        if self.link is not None:
-            new[1:] |= ~np.asarray(self.link, dtype=bool)
-        return np.cumsum(new) - 1
-
-    @property
-    def linked(self) -> bool:
-        """True when some window continues the previous one."""
-        return self.link is not None and bool(np.any(self.link))
-
-    @property
-    def n(self) -> int:
-        return self.x0.shape[0]
-
-    @property
-    def length(self) -> int:
-        return self.weight.shape[1]
-
-    def subset(self, which) -> WindowSet:
-        """The windows at positions ``which`` (each starting afresh: links are dropped)."""
-        which = np.asarray(which, dtype=int)
-
-        def pick(a):
-            return None if a is None else a[which]
-
-        return WindowSet(
-            x0=self.x0[which],
-            u=self.u[which],
-            dt=self.dt[which],
-            weight=self.weight[which],
-            rate=pick(self.rate),
-            quat=pick(self.quat),
-            yaw=pick(self.yaw),
-            rows=self.rows[which],
-            source=self.source[which],
-            segment=self.segments()[which],
-        )  # link, end: None
-
-
-# ----------------------------------------------------------------------------
-# fits
-
-
-@dataclass(frozen=True, eq=False)
-class Fit:
-    """One output-error fit of a :class:`ShootingProblem`.
-
-    Attributes
-    ----------
-    theta : ndarray (k,)
-        Fitted free parameters (SI units of the Model's parameters).
-    theta_std : ndarray (k,)
-        1-sigma (module doc); NaN where not identifiable.
-    not_identifiable : tuple of str
-        Per parameter: "" or the reason it cannot be identified from the data.
-    p : ndarray
-        The full parameter vector.
-    delta : ndarray (n_delta, n_windows)
-        Fitted initial-state perturbations.
-    rss : float
-        Weighted residual sum of squares.
-    n_res : int
-        Number of weighted residuals of usable rows.
-    n_free : int
-        Number of free variables (``k + delta.size``).
-    gap : float
-        RMS of the primary output's residual (rad/s for rates, rad for attitude).
-    iterations : int
-    status : str
-        IPOPT status; ``level`` its class (:func:`classify_status`).
-    cov : ndarray (k, k)
-        Covariance of ``theta`` (NaN rows where not identifiable).
-    """
-
-    theta: np.ndarray
-    theta_std: np.ndarray
-    p: np.ndarray
-    delta: np.ndarray
-    rss: float
-    n_res: int
-    n_free: int
-    gap: float
-    iterations: int
-    status: str = ""
-    level: str = "converged"
-    not_identifiable: tuple = ()
-    cov: np.ndarray | None = None
-    # "r", "J" (scipy CSC, unscaled) at the fit; with continuity also "N", the basis of the
-    # directions that keep it (theta first, :func:`~.constrained.null_space_basis`)
-    extra: dict = field(default_factory=dict)
-
-
-def solve_gram(G, B: np.ndarray) -> np.ndarray:
-    """``G^+ B`` for a symmetric positive semi-definite Gram matrix ``G`` (sparse or dense).
-
-    A sparse LU when ``G`` is sparse and non-singular (the window states couple only their
-    neighbours: linear in their number), else the pseudo-inverse (a singular ``G``: states
-    the data cannot fix).
-    """
-    B = np.asarray(B, dtype=float)
-    if sp.issparse(G) and G.shape[0] > 32:
-        from scipy.sparse.linalg import splu
-
-        try:
-            with np.errstate(all="ignore"):
-                X = splu(sp.csc_matrix(G)).solve(B if B.ndim == 2 else B[:, None])
-            X = X if B.ndim == 2 else X[:, 0]
-            R = G @ X - B
-            if np.all(np.isfinite(X)) and np.linalg.norm(R) <= 1e-8 * max(
-                np.linalg.norm(B), 1e-300
-            ):
-                return X
-        except RuntimeError:  # exactly singular
-            pass
-    Gd = G.toarray() if sp.issparse(G) else np.asarray(G)
-    return np.linalg.pinv(Gd, rcond=1e-12, hermitian=True) @ B
-
-
-def _reduced(Js, k: int):
-    """Schur complement of the nuisance block of ``Js^T Js`` (columns ``k:`` eliminated),
-    symmetrised, and the parameters' own block."""
-    F = Js.T @ Js
-    if sp.issparse(F):
-        F = sp.csc_matrix(F)
-        Ftt, Ftd, Fdd = F[:k, :k].toarray(), F[:k, k:].toarray(), F[k:, k:]
-    else:
-        F = np.asarray(F)
-        Ftt, Ftd, Fdd = F[:k, :k], F[:k, k:], F[k:, k:]
-    if Fdd.shape[0]:
-        Fr = Ftt - Ftd @ solve_gram(Fdd, Ftd.T)
-    else:
-        Fr = Ftt
-    return 0.5 * (Fr + Fr.T), Ftt
-
-
-def theta_errors(J, k: int, s2: float, names=None):
-    """Standard errors of the first ``k`` columns of ``J`` with the others eliminated.
-
-    Parameters
-    ----------
-    J : scipy sparse or ndarray (n_res, n_free)
-        Jacobian of the weighted residual at the fit.
-    k : int
-        Number of parameters (the leading columns); the rest are nuisance (initial states).
-    s2 : float
-        Residual variance factor (reduced chi-square).
-
-    Returns
-    -------
-    std : ndarray (k,)
-        1-sigma, NaN where not identifiable.
-    cov : ndarray (k, k)
-    reasons : tuple of str
-        "" or why the parameter cannot be identified.
-    """
-    if k == 0:
-        return np.zeros(0), np.zeros((0, 0)), ()
-    # the Gram matrix from the sparse Jacobian (windows are independent blocks): a dense
-    # product of the whole residual would cost more than the fit
-    Jd = sp.csc_matrix(J) if sp.issparse(J) else np.asarray(J)
-    col = (
-        np.sqrt(np.asarray(Jd.power(2).sum(axis=0)).ravel())
-        if sp.issparse(Jd)
-        else np.linalg.norm(Jd, axis=0)
-    )
-    reasons = ["" for _ in range(k)]
-    for i in range(k):
-        if not col[i] > 0:
-            reasons[i] = "no usable sample is sensitive to it (nothing in the log excites it)"
-    c = np.where(col > 0, col, 1.0)
-    Fr, Ftt = _reduced(Jd @ sp.diags(1.0 / c) if sp.issparse(Jd) else Jd / c, k)
-    ev, V = np.linalg.eigh(Fr)
-    ok = np.array([not r for r in reasons])
-    good = ev > FISHER_RCOND * max(float(np.max(np.diag(Ftt))), 1e-300)
-    for i in range(k):
-        if reasons[i]:
-            continue
-        # parameter i loads on a (near) null direction of the reduced Fisher matrix
-        load = np.abs(V[i, ~good])
-        if load.size and float(np.max(load)) > 1e-3:
-            reasons[i] = (
-                "its effect on the output cannot be told from the windows' initial states "
-                "or the other parameters (singular Fisher matrix)"
-            )
-            ok[i] = False
-    cov_s = (V[:, good] / ev[good]) @ V[:, good].T * s2
-    cov = cov_s / np.outer(c[:k], c[:k])
-    std = np.sqrt(np.maximum(np.diag(cov), 0.0))
-    for i in range(k):
-        if not ok[i] or not std[i] > 0:
-            std[i] = np.nan
-            cov[i, :] = cov[:, i] = np.nan
-            if not reasons[i]:
-                reasons[i] = "zero variance: not identifiable from this log"
-    return std, cov, tuple(reasons)
 
 
 class ShootingProblem:

@@ -1,0 +1,181 @@
+"""A fit of a shooting problem (:class:`Fit`), the solver-status policy and the
+Gauss-Newton errors of the parameters with the window states eliminated."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.sparse as sp
+
+from airbearing.analysis.shooting.functions import FISHER_RCOND
+
+_CONVERGED = ("Solve_Succeeded",)
+_WARNING = ("Solved_To_Acceptable_Level",)
+
+
+def classify_status(status: str) -> str:
+    """IPOPT return status -> ``"converged"``, ``"warning"`` or ``"error"`` (module doc)."""
+    if status in _CONVERGED:
+        return "converged"
+    if status in _WARNING:
+        return "warning"
+    return "error"
+
+
+# ----------------------------------------------------------------------------
+# fits
+
+
+@dataclass(frozen=True, eq=False)
+class Fit:
+    """One output-error fit of a :class:`ShootingProblem`.
+
+    Attributes
+    ----------
+    theta : ndarray (k,)
+        Fitted free parameters (SI units of the Model's parameters).
+    theta_std : ndarray (k,)
+        1-sigma (module doc); NaN where not identifiable.
+    not_identifiable : tuple of str
+        Per parameter: "" or the reason it cannot be identified from the data.
+    p : ndarray
+        The full parameter vector.
+    delta : ndarray (n_delta, n_windows)
+        Fitted initial-state perturbations.
+    rss : float
+        Weighted residual sum of squares.
+    n_res : int
+        Number of weighted residuals of usable rows.
+    n_free : int
+        Number of free variables (``k + delta.size``).
+    gap : float
+        RMS of the primary output's residual (rad/s for rates, rad for attitude).
+    iterations : int
+    status : str
+        IPOPT status; ``level`` its class (:func:`classify_status`).
+    cov : ndarray (k, k)
+        Covariance of ``theta`` (NaN rows where not identifiable).
+    """
+
+    theta: np.ndarray
+    theta_std: np.ndarray
+    p: np.ndarray
+    delta: np.ndarray
+    rss: float
+    n_res: int
+    n_free: int
+    gap: float
+    iterations: int
+    status: str = ""
+    level: str = "converged"
+    not_identifiable: tuple = ()
+    cov: np.ndarray | None = None
+    # "r", "J" (scipy CSC, unscaled) at the fit; with continuity also "N", the basis of the
+    # directions that keep it (theta first, :func:`~.constrained.null_space_basis`)
+    extra: dict = field(default_factory=dict)
+
+
+def solve_gram(G, B: np.ndarray) -> np.ndarray:
+    """``G^+ B`` for a symmetric positive semi-definite Gram matrix ``G`` (sparse or dense).
+
+    A sparse LU when ``G`` is sparse and non-singular (the window states couple only their
+    neighbours: linear in their number), else the pseudo-inverse (a singular ``G``: states
+    the data cannot fix).
+    """
+    B = np.asarray(B, dtype=float)
+    if sp.issparse(G) and G.shape[0] > 32:
+        from scipy.sparse.linalg import splu
+
+        try:
+            with np.errstate(all="ignore"):
+                X = splu(sp.csc_matrix(G)).solve(B if B.ndim == 2 else B[:, None])
+            X = X if B.ndim == 2 else X[:, 0]
+            R = G @ X - B
+            if np.all(np.isfinite(X)) and np.linalg.norm(R) <= 1e-8 * max(
+                np.linalg.norm(B), 1e-300
+            ):
+                return X
+        except RuntimeError:  # exactly singular
+            pass
+    Gd = G.toarray() if sp.issparse(G) else np.asarray(G)
+    return np.linalg.pinv(Gd, rcond=1e-12, hermitian=True) @ B
+
+
+def _reduced(Js, k: int):
+    """Schur complement of the nuisance block of ``Js^T Js`` (columns ``k:`` eliminated),
+    symmetrised, and the parameters' own block."""
+    F = Js.T @ Js
+    if sp.issparse(F):
+        F = sp.csc_matrix(F)
+        Ftt, Ftd, Fdd = F[:k, :k].toarray(), F[:k, k:].toarray(), F[k:, k:]
+    else:
+        F = np.asarray(F)
+        Ftt, Ftd, Fdd = F[:k, :k], F[:k, k:], F[k:, k:]
+    if Fdd.shape[0]:
+        Fr = Ftt - Ftd @ solve_gram(Fdd, Ftd.T)
+    else:
+        Fr = Ftt
+    return 0.5 * (Fr + Fr.T), Ftt
+
+
+def theta_errors(J, k: int, s2: float, names=None):
+    """Standard errors of the first ``k`` columns of ``J`` with the others eliminated.
+
+    Parameters
+    ----------
+    J : scipy sparse or ndarray (n_res, n_free)
+        Jacobian of the weighted residual at the fit.
+    k : int
+        Number of parameters (the leading columns); the rest are nuisance (initial states).
+    s2 : float
+        Residual variance factor (reduced chi-square).
+
+    Returns
+    -------
+    std : ndarray (k,)
+        1-sigma, NaN where not identifiable.
+    cov : ndarray (k, k)
+    reasons : tuple of str
+        "" or why the parameter cannot be identified.
+    """
+    if k == 0:
+        return np.zeros(0), np.zeros((0, 0)), ()
+    # the Gram matrix from the sparse Jacobian (windows are independent blocks): a dense
+    # product of the whole residual would cost more than the fit
+    Jd = sp.csc_matrix(J) if sp.issparse(J) else np.asarray(J)
+    col = (
+        np.sqrt(np.asarray(Jd.power(2).sum(axis=0)).ravel())
+        if sp.issparse(Jd)
+        else np.linalg.norm(Jd, axis=0)
+    )
+    reasons = ["" for _ in range(k)]
+    for i in range(k):
+        if not col[i] > 0:
+            reasons[i] = "no usable sample is sensitive to it (nothing in the log excites it)"
+    c = np.where(col > 0, col, 1.0)
+    Fr, Ftt = _reduced(Jd @ sp.diags(1.0 / c) if sp.issparse(Jd) else Jd / c, k)
+    ev, V = np.linalg.eigh(Fr)
+    ok = np.array([not r for r in reasons])
+    good = ev > FISHER_RCOND * max(float(np.max(np.diag(Ftt))), 1e-300)
+    for i in range(k):
+        if reasons[i]:
+            continue
+        # parameter i loads on a (near) null direction of the reduced Fisher matrix
+        load = np.abs(V[i, ~good])
+        if load.size and float(np.max(load)) > 1e-3:
+            reasons[i] = (
+                "its effect on the output cannot be told from the windows' initial states "
+                "or the other parameters (singular Fisher matrix)"
+            )
+            ok[i] = False
+    cov_s = (V[:, good] / ev[good]) @ V[:, good].T * s2
+    cov = cov_s / np.outer(c[:k], c[:k])
+    std = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    for i in range(k):
+        if not ok[i] or not std[i] > 0:
+            std[i] = np.nan
+            cov[i, :] = cov[:, i] = np.nan
+            if not reasons[i]:
+                reasons[i] = "zero variance: not identifiable from this log"
+    return std, cov, tuple(reasons)
