@@ -26,11 +26,11 @@ Cases
 Each run is fitted by ``discrepancy(testbed, logs, only=<the true effects>,
 max_effects=<their number>)`` and tabulated: the fraction of (effect, run) pairs whose
 truth lies within 3 reported ``std`` (an effect not named counts as a miss), the median
-``std / crlb``, the median ``std`` over the real spread of the values about the truth
-(per effect, the range over the effects) and the fraction of runs with
-``structure_remains``. Goals (the honest-answers
-issue): truth within 3 std in >= 95 % of (a) and >= 90 % of (b), (c); std / crlb within
-0.8-1.25 in (a); structure_remains in >= 90 % of (c) and in <= 10 % of (a).
+``std / crlb``, the RMS ``std`` over the real spread (RMS) of the values about the truth
+(per effect, over the runs that named every effect; the range over the effects) and the
+fraction of runs with ``structure_remains``. Goals: truth within 3 std in >= 95 % of (a)
+and >= 90 % of (b), (c); std / crlb within 0.8-1.25 in (a); std within 0.5-2x the real
+spread in (c); structure_remains in >= 90 % of (c) and in <= 10 % of (a).
 """
 
 from __future__ import annotations
@@ -241,17 +241,19 @@ def markdown(rows: list[dict]) -> str:
 
 
 def _std_over_spread(rs: list[dict]) -> str:
-    """Per effect, the median reported std over the real spread of the values about the
-    truth (RMS over the runs that named it); the range over the effects."""
+    """Per effect, the RMS reported std over the real spread of the values about the truth
+    (RMS), over the runs that named every effect (a run missing one has a misfit model,
+    whose errors the missing effect's bias dominates: counted as misses in the coverage);
+    the range over the effects."""
+    full = [r for r in rs if all(np.isfinite(e["value"]) for e in r["effects"].values())]
     ratios = []
-    for name in rs[0]["effects"] if rs else ():
-        e = [r["effects"][name] for r in rs]
-        ok = [x for x in e if np.isfinite(x["value"]) and np.isfinite(x["std"])]
-        if len(ok) < 3:
+    for name in full[0]["effects"] if full else ():
+        e = [r["effects"][name] for r in full]
+        if len(e) < 3:
             continue
-        spread = math.sqrt(np.mean([(x["value"] - x["truth"]) ** 2 for x in ok]))
+        spread = math.sqrt(np.mean([(x["value"] - x["truth"]) ** 2 for x in e]))
         if spread > 0:
-            ratios.append(float(np.median([x["std"] for x in ok])) / spread)
+            ratios.append(math.sqrt(np.mean([x["std"] ** 2 for x in e])) / spread)
     if not ratios:
         return "-"
     return f"{min(ratios):.2f}-{max(ratios):.2f}" if len(ratios) > 1 else f"{ratios[0]:.2f}"
