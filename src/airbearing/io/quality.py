@@ -166,6 +166,12 @@ _RELATIVE_FLOOR = 1e-9  # scale floor relative to the channel's magnitude
 #: sensor is this quiet; a noise-free simulated log is judged against it, not
 #: against the local fits' own rounding and misfit.
 ABSOLUTE_FLOOR = 1e-7
+#: Log columns that models take as inputs: a glitch in one breaks the segment there
+#: (:meth:`LogQuality.input_segments`).
+INPUT_COLUMNS = frozenset(
+    ("d1", "d2", "d3", "d4", "dd1", "dd2", "dd3", "dd4", "s1", "s2", "s3", "mx", "my", "mz")
+    + ("bx", "by", "bz")
+)
 _MAX_PASSES = 200
 _SCALE_ROWS = 2000  # rows spread over the log on which the noise scales are measured
 _MIN_SCALE_SAMPLES = 8  # fewer residuals than this give no scale (the floor is used)
@@ -267,6 +273,31 @@ class LogQuality:
     def n_segments(self) -> int:
         """Number of segments."""
         return len(self.segments)
+
+    @property
+    def input_rows(self) -> tuple[int, ...]:
+        """Outlier rows with a bad input column (:data:`INPUT_COLUMNS`), sorted."""
+        return tuple(sorted(o.row for o in self.outliers if INPUT_COLUMNS & set(o.columns)))
+
+    def input_segments(self) -> tuple[tuple[int, int], ...]:
+        """The segments broken at every :attr:`input_rows` row (stop exclusive).
+
+        A bad input is not a bad measurement: leaving its row out of a residual would still
+        integrate a model through it (held over its interval, or as the difference that
+        derives a gimbal rate). So a segment ends before the row and the next starts after
+        it; nothing is filled.
+        """
+        bad = self.input_rows
+        out = []
+        for a, b in self.segments:
+            start = a
+            for g in (r for r in bad if a <= r < b):
+                if g > start:
+                    out.append((start, g))
+                start = g + 1
+            if start < b:
+                out.append((start, b))
+        return tuple(out)
 
     def usable_mask(self) -> np.ndarray:
         """True for every row a fit may use (False at outlier rows), shape (n_rows,)."""

@@ -315,6 +315,14 @@ def replay_data(testbed: Testbed, log: Log) -> ReplayData:
     else:
         extra = _cmg_inputs(log, u, ui, notes)
     segments, outliers, qjson = _quality(log)
+    # a bad input breaks its segment (LogQuality.input_segments): nothing integrates it
+    breaks = log.quality.input_rows
+    segments = log.quality.input_segments()
+    if breaks:
+        notes.append(
+            "input glitch(es) at row(s) " + ", ".join(str(r) for r in breaks)
+            + ": the segments break there (no window integrates through a bad input)"
+        )  # fmt: skip
     mask = np.ones(n, dtype=bool)
     mask[list(outliers)] = False
     if outliers:

@@ -148,7 +148,8 @@ class PlatformData:
 
 
 def log_quality(log: Log, testbed: Testbed) -> tuple[tuple, tuple]:
-    """Segments ``((start, stop), ...)`` and outlier rows of ``log`` (0-based rows).
+    """Segments ``((start, stop), ...)`` and outlier rows of ``log`` (0-based rows); the
+    segments break at a bad input (:meth:`~airbearing.io.quality.LogQuality.input_segments`).
 
     From :func:`airbearing.io.quality.assess`, the package's one rule for gaps and
     outliers; the log's cached :attr:`~airbearing.io.log.Log.quality` when it was read
@@ -160,7 +161,8 @@ def log_quality(log: Log, testbed: Testbed) -> tuple[tuple, tuple]:
         from airbearing.io.quality import assess
 
         qual = assess(log, testbed)
-    segs = tuple((int(a), int(b)) for a, b in qual.segments)
+    # a bad input (slider, dipole, gimbal angle) breaks its segment: nothing integrates it
+    segs = tuple((int(a), int(b)) for a, b in qual.input_segments())
     return segs, tuple(int(r) for r in qual.outlier_rows)
 
 
