@@ -81,11 +81,16 @@ class TwoStepResult:
     ke_rates : str
         Which rates ``ke_std_before``/``ke_std_after`` use: ``"true"`` (simulation truth).
     ke_std_before_measured, ke_std_after_measured, ke_reduction_measured : float
-        J, J, -: the same from the measured (noisy) gyro rates, what a lab computes.
+        J, J, -: the same from the measured (noisy) rates, what a lab computes.
     ke_noise_floor : float
-        J, the spread the gyro noise alone adds to a measured kinetic energy:
-        ``2 sigma_gyro rms|J w|`` over the after run (the first-order term of
+        J, the spread the rate noise alone adds to a measured kinetic energy:
+        ``2 sigma rms|J w|`` over the after run (the first-order term of
         ``(w + n)^T J (w + n)``); a measured after-value near it is at the floor.
+        ``sigma``: the gyro's noise, or without a gyro the RMS error of the rates derived
+        from the logged attitude.
+    ke_measured_from : str
+        ``"gyro"``, or ``"attitude"`` (no gyro: rates by a local cubic derivative of the
+        logged attitude, as the identification takes them).
     iterations : int
         Identification rounds of step 2 (seed 004: "iterated until the data are
         consistent with respect the previous identification").
@@ -124,6 +129,7 @@ class TwoStepResult:
     iterations: int
     vertical_offset_estimates_m: list
     sliders_final_unrounded_m: list
+    ke_measured_from: str = "gyro"
 
     def to_json(self) -> dict:
         """The ``balance --two-step`` JSON: one key per attribute, in this order."""
@@ -393,10 +399,16 @@ def _step3(model, s_final, J_est, b_lab, duration: float, seed: int, noise: bool
     w_idx = model.index(["wx", "wy", "wz"])
     # seed 004 eq. 53 with the true rates, as its simulation ("neglecting the air friction")
     ke_b, ke_a = (kinetic_energy(r.x[:-1, w_idx], J) for r, J in ((before, J_b), (after, J_a)))
-    ke_bm = kinetic_energy(before.log.rates(), J_b)
-    ke_am = kinetic_energy(after.log.rates(), J_a)
-    sigma = testbed.sensors.gyro_noise if noise else 0.0
-    floor = 2.0 * sigma * float(np.sqrt(np.mean(np.sum((after.x[:-1, w_idx] @ J_a.T) ** 2, 1))))
+    w_bm, w_am = _measured_rates(before.log), _measured_rates(after.log)
+    fin = [np.all(np.isfinite(w), axis=1) for w in (w_bm, w_am)]
+    ke_bm, ke_am = kinetic_energy(w_bm[fin[0]], J_b), kinetic_energy(w_am[fin[1]], J_a)
+    w_true = after.x[:-1, w_idx]
+    if testbed.sensors.gyro:
+        sigma = testbed.sensors.gyro_noise if noise else 0.0
+    else:  # the derived rates' own error, per axis (a simulation knows the truth)
+        ok = fin[1][: len(w_true)]
+        sigma = float(np.sqrt(np.mean((w_am[: len(w_true)][ok] - w_true[ok]) ** 2)))
+    floor = 2.0 * sigma * float(np.sqrt(np.mean(np.sum((w_true @ J_a.T) ** 2, 1))))
     return {
         "ke_std_before": float(np.std(ke_b)),
         "ke_std_after": float(np.std(ke_a)),
@@ -406,7 +418,20 @@ def _step3(model, s_final, J_est, b_lab, duration: float, seed: int, noise: bool
         "ke_std_after_measured": float(np.std(ke_am)),
         "ke_reduction_measured": float(1 - np.std(ke_am) / np.std(ke_bm)),
         "ke_noise_floor": floor,
+        "ke_measured_from": "gyro" if testbed.sensors.gyro else "attitude",
     }
+
+
+def _measured_rates(log) -> np.ndarray:
+    """rad/s (n, 3): the gyro's rates, or without a gyro the rates derived from the logged
+    attitude (a local cubic, as the identification takes them; NaN where a segment is too
+    short for a slope)."""
+    w = log.rates()
+    if w is None:
+        from airbearing.analysis.identification.data import rates_from_attitude
+
+        w = rates_from_attitude(log.t, log.quaternions(), None, log.quality.segments)
+    return w
 
 
 def _displacement(known_displacement) -> np.ndarray:
