@@ -95,3 +95,17 @@ def test_discrepancy_and_replay_plot_a_figure(found, replayed):
         # left column: measured and each model; right: each model's residual (cmg-yaw: 1 row)
         assert len(fig.axes) == 2 and len(fig.axes[0].lines) >= n_lines
         plt.close(fig)
+
+
+@pytest.mark.slow
+def test_discrepancy_and_replay_as_tables(found, replayed, log):
+    cands = found.to_pandas()
+    assert {"name", "value", "std", "status", "reason"} <= set(cands.columns)
+    assert "inertia_error" in set(cands["name"]) and len(cands) == len(found.candidates)
+    series = replayed.to_pandas()
+    assert list(series.columns) == ["log", "row", "t", "residual"]
+    # every usable row once (hand-over rows of linked pieces are not repeated), in order
+    assert series["row"].is_unique and series["row"].is_monotonic_increasing
+    assert len(series) == log.data.shape[0] - len(replayed.data.outlier_rows)
+    rms = float(np.sqrt(np.mean(series["residual"] ** 2)))
+    assert rms == pytest.approx(replayed.gap, rel=1e-6)

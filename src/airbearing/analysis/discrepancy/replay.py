@@ -309,6 +309,26 @@ class Replay:
         t = np.array([self.datas[i].t[r] for i, r in zip(s["source"], s["rows"], strict=True)])
         return {**s, "t": t}
 
+    def to_pandas(self):
+        """The residual as a time series: one row per usable sample with ``log`` (its
+        source), ``row`` (log row), ``t`` (s) and ``residual`` per axis (``residual`` on
+        dof 1; ``residual_x, _y, _z`` on dof 3), in the gap's unit.
+
+        Returns
+        -------
+        pandas.DataFrame
+        """
+        import pandas as pd
+
+        s = self.residuals()
+        res = np.asarray(s["residual"]).reshape(len(s["rows"]), -1)
+        cols = ["residual"] if res.shape[1] == 1 else [f"residual_{a}" for a in "xyz"]
+        df = pd.DataFrame(res, columns=cols)
+        df.insert(0, "t", s["t"])
+        df.insert(0, "row", np.asarray(s["rows"], dtype=int))
+        df.insert(0, "log", [self.datas[i].log.source for i in s["source"]])
+        return df.sort_values(["log", "row"], kind="stable").reset_index(drop=True)
+
     def to_json(self) -> dict:
         """``airbearing replay --json``: gap, noise floor, unit, segments, outliers per log."""
         per = []

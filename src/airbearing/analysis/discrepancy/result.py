@@ -169,6 +169,19 @@ class Discrepancy:
             self.floor,
         )
 
+    def to_pandas(self):
+        """The candidates of the first round as a table, one row per candidate: its
+        ``name``, ``value`` and ``std`` (effect units), ``std_white``, ``crlb``, ``gap``
+        (gap unit), the scores and ``status``/``reason`` (the JSON's ``candidates``).
+
+        Returns
+        -------
+        pandas.DataFrame
+        """
+        import pandas as pd
+
+        return pd.DataFrame(self.to_json()["candidates"])
+
     @property
     def data(self) -> ReplayData:
         """The first log's data."""
