@@ -158,10 +158,12 @@ class _Search:
             )  # fmt: skip
         return self.problems[lag]
 
-    def horizon(self, fit: Fit, lag: bool, chosen, theta) -> Fit:
+    def horizon(self, fit: Fit, lag: bool, chosen, theta, *, fresh: bool = False) -> Fit:
         """``fit`` refitted at the most likely process-noise intensity at or below the current
         one (:func:`estimate_process_noise`, continued down from ``fit``); every problem of
-        the search takes that intensity. Unlinked (fixed) windows: ``fit`` unchanged."""
+        the search takes that intensity. ``fresh``: ``fit`` was made at another intensity
+        (the grid's first is fitted anew from it). Unlinked (fixed) windows: ``fit``
+        unchanged."""
         if not self.windows.linked:
             return fit
         top = KAPPA_GRID[0] if self.kappa is None else self.kappa
@@ -178,7 +180,7 @@ class _Search:
             upper=np.r_[[hi for c in chosen for hi in c.upper]] if chosen else None,
             delta0=fit.delta,
             grid=grid,
-            start=fit,
+            start=None if fresh else fit,
             name="process noise of the logs",
         )
         self.kappa = fit.extra["process_noise"]["kappa"]
@@ -780,23 +782,47 @@ def _noise_level(problem: ShootingProblem) -> float:
 def _retry_at_horizon(search, sel, current, screen, workers, prog) -> Fit:
     """The candidates pinned at a bound on short pieces, or too weak there in the last
     round (fitted, but not significant, too close to zero or no better held out), tried
-    again at the horizon's intensity when the process noise is
-    significant and a slot is left (the current fit otherwise); a pick is followed by the
-    horizon estimated again."""
+    again at the horizon's intensity when the process noise is significant or a coloured
+    noise model was adopted (either may hold what a candidate explains) and a slot is left
+    (the current fit otherwise). A pick is followed by the noise and the horizon estimated
+    again from the top of the grid, for the new model."""
     pn = current.extra.get("process_noise") or {}
     taken = {c.name for c in sel.chosen}
     again = sel.at_bound | sel.weak
     retry = [c for c in search.cands if c.label in again and c.name not in taken]
-    if not (retry and pn.get("significant") and len(sel.chosen) < sel.max_effects):
+    coloured = search.noise is not None  # a noise model may have taken a misfit
+    if not (retry and (pn.get("significant") or coloured) and len(sel.chosen) < sel.max_effects):
         return current
     prog("at the horizon: the candidates short pieces held at a bound or found too weak")
+    before = (sel.current, sel.theta)
     sel.current, sel.theta = current, current.theta.copy()
+    if coloured and search.noise.at_bound:
+        # a noise model at its correlation bound is the weakest explanation of a correlated
+        # residual: the candidates are judged without it (white noise, this intensity)
+        for pb in search.problems.values():
+            set_measurement_noise(pb, None)
+        sel.current = search.problem(sel.lag).fit(
+            search.models[sel.lag].p0.copy(),
+            search.S(sel.lag, sel.chosen) if sel.chosen else None,
+            sel.theta if sel.chosen else None,
+            lower=np.r_[[lo for c in sel.chosen for lo in c.lower]] if sel.chosen else None,
+            upper=np.r_[[hi for c in sel.chosen for hi in c.upper]] if sel.chosen else None,
+            delta0=current.delta,
+            name="the named effects at the horizon, white noise",
+        )
     results = _round(search, sel, retry, screen, workers, prog)
     sel.rounds.append(tuple(results))
     if not _add_best(sel, results, prog):
+        for pb in search.problems.values():  # as it was
+            set_measurement_noise(pb, search.noise)
+        sel.current, sel.theta = before
         return current
     sel.at_bound -= {c.label for c in sel.chosen}
-    return search.horizon(sel.current, sel.lag, sel.chosen, sel.theta)
+    search.kappa, search.noise = None, None
+    for pb in search.problems.values():
+        set_intensity(pb, KAPPA_GRID[0])
+        set_measurement_noise(pb, None)
+    return search.horizon(sel.current, sel.lag, sel.chosen, sel.theta, fresh=True)
 
 
 def _judge(search, sel, named, logs, validate, window_s, jit, prog) -> tuple:

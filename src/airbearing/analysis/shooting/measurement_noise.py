@@ -29,7 +29,9 @@ value, no new IPOPT run. The model is adopted only when
   an estimate at the bound with the likelihood still rising towards it is not adopted):
   a residual correlated over longer than that
   cannot be told from a trajectory error within the piece, and is left to the process
-  noise (a torque the model misses, not the sensor).
+  noise (a torque the model misses, not the sensor);
+- and its innovations have one variance in every piece (Levene's test): a sensor's noise is
+  stationary, a misfit taken for noise stands out where it acts.
 
 What the noise model cannot do is prove that a correlated residual is the sensor's: the
 adequacy verdict therefore still says structure remains when the gap is above twice the
@@ -76,12 +78,17 @@ class MeasurementNoise:
         s, the nominal sample interval ``phi`` refers to.
     lr, p : dict
         ``group -> `` likelihood-ratio statistic and p-value against white noise.
+    at_bound : tuple of str
+        Groups whose correlation time sits at the search's bound (half a piece) with a
+        flat likelihood there: adopted, but the weakest explanation of a correlated
+        residual (a candidate effect may take it, see the discrepancy search).
     """
 
     ar: dict
     dt: float
     lr: dict
     p: dict
+    at_bound: tuple = ()
 
     def correlation_time_s(self, group: str) -> float:
         """s, ``-dt / ln(phi)`` of ``group`` (0 when white)."""
@@ -228,6 +235,7 @@ class _Linearised:
         Dc = sp.diags(1.0 / c)
         step = solve_gram(Dc @ G @ Dc, (A.T @ b) / c) / c
         e = b - A @ step
+        self.innovations = e[: self.rm.size]  # the whitened measurement rows after the step
         Gd = sp.csc_matrix((Dc @ G @ Dc)[self.k :, self.k :])
         try:
             u = splu(Gd).U.diagonal()
@@ -263,6 +271,27 @@ def _still_rising(ll, phi: float, phi_max: float, dt: float, at_best: float) -> 
     return float(half.fun) - at_best > RISING
 
 
+def _homoscedastic(problem, innovations: np.ndarray, group: str) -> bool:
+    """True when the whitened residual of ``group`` has one variance in every piece
+    (Levene's test, ``scipy.stats.levene`` about the medians, p >= :data:`SIGNIFICANCE`).
+
+    A sensor's coloured noise is stationary: whitened by its model, every piece's
+    innovations have the same spread. A misfit the model took for noise is not (a missing
+    friction acts where the rate is high, a mis-scaled inertia during the slew), and the
+    pieces where it acts stand out.
+    """
+    from scipy import stats
+
+    g = problem.outputs.index(group)
+    rows = np.flatnonzero((problem.group == g) & problem.usable)
+    piece = rows // problem.n_win_res
+    groups = [innovations[rows[piece == j]] for j in np.unique(piece)]
+    groups = [x for x in groups if x.size >= 8]
+    if len(groups) < 2:
+        return True
+    return bool(stats.levene(*groups, center="median").pvalue >= SIGNIFICANCE)
+
+
 def estimate_measurement_noise(problem, fit, k: int) -> MeasurementNoise | None:
     """The AR(1) noise of each output group from ``fit`` (module doc), or None (white).
 
@@ -288,7 +317,7 @@ def estimate_measurement_noise(problem, fit, k: int) -> MeasurementNoise | None:
     dt = float(np.median(w.dt[ok]))
     lin = _Linearised(problem, fit, k)
     phi_max = _max_phi(problem, dt)
-    ar, lrs, ps = {}, {}, {}
+    ar, lrs, ps, bound = {}, {}, {}, []
     for group in problem.outputs:
 
         def ll(x, group=group, fixed=None):
@@ -311,7 +340,11 @@ def estimate_measurement_noise(problem, fit, k: int) -> MeasurementNoise | None:
         p = float(stats.chi2.sf(lr, 1))
         lrs[group], ps[group] = lr, p
         if p < SIGNIFICANCE and not _still_rising(ll, phi, phi_max, dt, float(best.fun)):
-            ar[group] = (phi, s)
+            lin.loglik({**ar, group: (phi, s)}, dt)
+            if _homoscedastic(problem, lin.innovations, group):
+                ar[group] = (phi, s)
+                if phi_max - phi <= 0.1 * (1.0 - phi_max):
+                    bound.append(group)
     if not ar:
         return None
-    return MeasurementNoise(ar=ar, dt=dt, lr=lrs, p=ps)
+    return MeasurementNoise(ar=ar, dt=dt, lr=lrs, p=ps, at_bound=tuple(bound))
