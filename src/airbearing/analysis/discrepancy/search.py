@@ -210,7 +210,6 @@ class _Search:
         problem = problem_for(
             model, self.datas, windows, self.floor, jit=self.jit, noise=self.noise
         )  # fmt: skip
-        k = len(fit.theta)
         short = estimate_process_noise(
             problem,
             model.p0.copy(),
@@ -221,8 +220,6 @@ class _Search:
             name="process noise of the logs on shorter pieces",
             measurement=self.noise is None,
         )
-        if k:
-            short.extra["pieces_from_s"] = piece
         self.final_problem = problem
         self.kappa = short.extra["process_noise"]["kappa"]
         self.noise = problem.measurement_noise
