@@ -63,6 +63,8 @@ MAX_CORRELATION_OF_PIECE = 0.5
 #: Log-likelihood gain from half the bound's correlation time to the bound above which the
 #: likelihood "still rises" (a likelihood ratio of e^2: about chi2(1) at p = 0.05).
 RISING = 2.0
+#: Search range of ``ln s`` (the innovation's level in noise-floor units: 0.007-150).
+LOG_S = (-5.0, 5.0)
 
 
 @dataclass(frozen=True)
@@ -266,7 +268,7 @@ def _still_rising(ll, phi: float, phi_max: float, dt: float, at_best: float) -> 
     tau_half = -dt / math.log(phi_max) / 2.0
     phi_half = math.exp(-dt / tau_half)
     half = optimize.minimize_scalar(
-        lambda ls: ll([ls], fixed=phi_half), bounds=(-5.0, 3.0), method="bounded"
+        lambda ls: ll([ls], fixed=phi_half), bounds=LOG_S, method="bounded"
     )
     return float(half.fun) - at_best > RISING
 
@@ -326,13 +328,13 @@ def estimate_measurement_noise(problem, fit, k: int) -> MeasurementNoise | None:
             return -lin.loglik({**ar, group: (phi, s)}, dt)
 
         white = optimize.minimize_scalar(
-            lambda ls, group=group: ll([ls], group, 0.0), bounds=(-3.0, 3.0), method="bounded"
+            lambda ls, group=group: ll([ls], group, 0.0), bounds=LOG_S, method="bounded"
         )
         best = optimize.minimize(
             ll,
             np.array([0.5, float(white.x)]),
             method="Nelder-Mead",
-            bounds=[(-0.9, phi_max), (-5.0, 3.0)],
+            bounds=[(-0.9, phi_max), LOG_S],
             options={"xatol": 1e-4, "fatol": 1e-3, "maxiter": 400},
         )
         phi, s = float(best.x[0]), math.exp(float(best.x[1]))
