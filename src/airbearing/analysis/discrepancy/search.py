@@ -781,8 +781,10 @@ def _retry_at_horizon(search, sel, current, screen, workers, prog) -> Fit:
     round (fitted, but not significant, too close to zero or no better held out), tried
     again at the horizon's intensity when the process noise is significant or a coloured
     noise model was adopted (either may hold what a candidate explains) and a slot is left
-    (the current fit otherwise). A pick is followed by the noise and the horizon estimated
-    again from the top of the grid, for the new model."""
+    (the current fit otherwise): under the adopted noise, then, when that model sits at its
+    correlation bound (the weakest explanation of a correlated residual), without it. A
+    pick is followed by the noise and the horizon estimated again from the top of the
+    grid, for the new model."""
     pn = current.extra.get("process_noise") or {}
     taken = {c.name for c in sel.chosen}
     again = sel.at_bound | sel.weak
@@ -792,34 +794,42 @@ def _retry_at_horizon(search, sel, current, screen, workers, prog) -> Fit:
         return current
     prog("at the horizon: the candidates short pieces held at a bound or found too weak")
     before = (sel.current, sel.theta)
+    modes = [search.noise] + ([None] if coloured and search.noise.at_bound else [])
+    for noise in modes:
+        if _retry_round(search, sel, current, retry, noise, (screen, workers, prog)):
+            sel.at_bound -= {c.label for c in sel.chosen}
+            search.kappa, search.noise = None, None
+            for pb in search.problems.values():
+                set_intensity(pb, KAPPA_GRID[0])
+                set_measurement_noise(pb, None)
+            return search.horizon(sel.current, sel.lag, sel.chosen, sel.theta, fresh=True)
+    for pb in search.problems.values():  # as it was
+        set_measurement_noise(pb, search.noise)
+    sel.current, sel.theta = before
+    return current
+
+
+def _retry_round(search, sel, current, retry, noise, run) -> bool:
+    """One round of ``retry`` at the horizon under the measurement ``noise`` (None:
+    white); True when it added a candidate. ``run``: ``(screen, workers, prog)``."""
+    screen, workers, prog = run
+    for pb in search.problems.values():
+        set_measurement_noise(pb, noise)
     sel.current, sel.theta = current, current.theta.copy()
-    if coloured and search.noise.at_bound:
-        # a noise model at its correlation bound is the weakest explanation of a correlated
-        # residual: the candidates are judged without it (white noise, this intensity)
-        for pb in search.problems.values():
-            set_measurement_noise(pb, None)
+    if noise is not search.noise:  # the named effects refitted under this noise
+        chosen = sel.chosen
         sel.current = search.problem(sel.lag).fit(
             search.models[sel.lag].p0.copy(),
-            search.S(sel.lag, sel.chosen) if sel.chosen else None,
-            sel.theta if sel.chosen else None,
-            lower=np.r_[[lo for c in sel.chosen for lo in c.lower]] if sel.chosen else None,
-            upper=np.r_[[hi for c in sel.chosen for hi in c.upper]] if sel.chosen else None,
+            search.S(sel.lag, chosen) if chosen else None,
+            sel.theta if chosen else None,
+            lower=np.r_[[lo for c in chosen for lo in c.lower]] if chosen else None,
+            upper=np.r_[[hi for c in chosen for hi in c.upper]] if chosen else None,
             delta0=current.delta,
             name="the named effects at the horizon, white noise",
         )
     results = _round(search, sel, retry, screen, workers, prog)
     sel.rounds.append(tuple(results))
-    if not _add_best(sel, results, prog):
-        for pb in search.problems.values():  # as it was
-            set_measurement_noise(pb, search.noise)
-        sel.current, sel.theta = before
-        return current
-    sel.at_bound -= {c.label for c in sel.chosen}
-    search.kappa, search.noise = None, None
-    for pb in search.problems.values():
-        set_intensity(pb, KAPPA_GRID[0])
-        set_measurement_noise(pb, None)
-    return search.horizon(sel.current, sel.lag, sel.chosen, sel.theta, fresh=True)
+    return _add_best(sel, results, prog)
 
 
 def _judge(search, sel, named, logs, validate, window_s, jit, prog) -> tuple:
