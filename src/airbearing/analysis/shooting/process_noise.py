@@ -392,8 +392,9 @@ def estimate_process_noise(
         )
 
     if measurement and problem.measurement_noise is None:
-        # coloured measurement noise first, on nearly free pieces (a trajectory error cannot
-        # pass for it there), then the intensity with the noise whitened
+        # coloured measurement noise first, on nearly free pieces (they absorb the slow part
+        # of a trajectory error; measurement_noise's tests catch the rest), then the
+        # intensity with the noise whitened
         from airbearing.analysis.shooting.measurement_noise import (
             estimate_measurement_noise,
             set_measurement_noise,
