@@ -465,13 +465,14 @@ def structure_rule(
 
 
 def _measurement_noise(problem, fit, floor) -> dict | None:
-    """The primary output's coloured noise of ``fit`` with its level over the floor."""
-    mn = fit.extra.get("measurement_noise") if isinstance(fit.extra, dict) else None
-    m = (mn or {}).get(problem.outputs[0])
-    if not m or not 0.0 <= m["phi"] < 1.0:
+    """The primary output's coloured noise of ``fit`` (the problem's, which ``fit`` was made
+    with) with its level over the floor."""
+    mn, g = getattr(problem, "measurement_noise", None), problem.outputs[0]
+    if mn is None or g not in mn.ar:
         return None
-    sigma = problem.sigma_rate if problem.outputs[0] == "rate" else problem.sigma_att
-    level = m["s"] / math.sqrt(1.0 - m["phi"] ** 2) * sigma / max(floor.value, 1e-300)
+    m = mn.to_json()[g]
+    sigma = problem.sigma_rate if g == "rate" else problem.sigma_att
+    level = mn.level(g) * sigma / max(floor.value, 1e-300)
     return {**m, "noise_over_floor": float(level)}
 
 

@@ -174,10 +174,7 @@ class _Search:
         fit = estimate_process_noise(
             self.problem(lag),
             model.p0.copy(),
-            self.S(lag, chosen) if chosen else None,
-            theta if chosen else None,
-            lower=np.r_[[lo for c in chosen for lo in c.lower]] if chosen else None,
-            upper=np.r_[[hi for c in chosen for hi in c.upper]] if chosen else None,
+            **self.free(lag, chosen, theta),
             delta0=fit.delta,
             grid=grid,
             start=None if fresh else fit,
@@ -197,7 +194,8 @@ class _Search:
         process noise, which acts at hand-overs, cannot follow it); ``fit`` otherwise.
         The pieces shrink by that ratio, down to ``MIN_WINDOW_SAMPLES`` samples."""
         pn = fit.extra.get("process_noise") or {}
-        level = _noise_level(self.problem(lag))  # the coloured noise's, over the floor
+        mn = self.problem(lag).measurement_noise  # the coloured noise's level, over the floor
+        level = 1.0 if mn is None else mn.level(self.problem(lag).outputs[0])
         ratio = float(pn.get("gap_short", 0.0)) / max(self.floor.value * level, 1e-300)
         piece = float(pn.get("piece_s", 0.0))
         dt = self.datas[0].dt
@@ -213,10 +211,7 @@ class _Search:
         short = estimate_process_noise(
             problem,
             model.p0.copy(),
-            self.S(lag, chosen) if chosen else None,
-            fit.theta if chosen else None,
-            lower=np.r_[[lo for c in chosen for lo in c.lower]] if chosen else None,
-            upper=np.r_[[hi for c in chosen for hi in c.upper]] if chosen else None,
+            **self.free(lag, chosen, fit.theta),
             name="process noise of the logs on shorter pieces",
             measurement=self.noise is None,
         )
@@ -224,6 +219,19 @@ class _Search:
         self.kappa = short.extra["process_noise"]["kappa"]
         self.noise = problem.measurement_noise
         return short
+
+    def free(self, lag: bool, chosen, theta) -> dict:
+        """``S``, ``theta0``, ``lower``, ``upper`` of a fit of the effects ``chosen`` from
+        ``theta`` (all None when nothing is chosen), as :meth:`ShootingProblem.fit` takes
+        them."""
+        if not chosen:
+            return {"S": None, "theta0": None, "lower": None, "upper": None}
+        return {
+            "S": self.S(lag, chosen),
+            "theta0": theta,
+            "lower": np.r_[[lo for c in chosen for lo in c.lower]],
+            "upper": np.r_[[hi for c in chosen for hi in c.upper]],
+        }
 
     def S(self, lag: bool, chosen) -> np.ndarray:
         m = self.models[lag]
@@ -769,13 +777,6 @@ def _named(search: _Search, sel: _Selection, prog: _Progress, screen=True, worke
     return _Named(current, problem, errs, effects, effect_std, white, crlb, eff)
 
 
-def _noise_level(problem: ShootingProblem) -> float:
-    """The primary output's coloured measurement noise over the weights (1 when white)."""
-    mn = problem.measurement_noise
-    ar = (mn.ar if mn is not None else {}).get(problem.outputs[0])
-    return 1.0 if not ar else float(ar[1] / math.sqrt(1.0 - ar[0] ** 2))
-
-
 def _retry_at_horizon(search, sel, current, screen, workers, prog) -> Fit:
     """The candidates pinned at a bound on short pieces, or too weak there in the last
     round (fitted, but not significant, too close to zero or no better held out), tried
@@ -817,13 +818,9 @@ def _retry_round(search, sel, current, retry, noise, run) -> bool:
         set_measurement_noise(pb, noise)
     sel.current, sel.theta = current, current.theta.copy()
     if noise is not search.noise:  # the named effects refitted under this noise
-        chosen = sel.chosen
         sel.current = search.problem(sel.lag).fit(
             search.models[sel.lag].p0.copy(),
-            search.S(sel.lag, chosen) if chosen else None,
-            sel.theta if chosen else None,
-            lower=np.r_[[lo for c in chosen for lo in c.lower]] if chosen else None,
-            upper=np.r_[[hi for c in chosen for hi in c.upper]] if chosen else None,
+            **search.free(sel.lag, sel.chosen, sel.theta),
             delta0=current.delta,
             name="the named effects at the horizon, white noise",
         )

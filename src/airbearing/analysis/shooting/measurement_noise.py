@@ -97,6 +97,14 @@ class MeasurementNoise:
         phi = self.ar.get(group, (0.0, 1.0))[0]
         return float(-self.dt / math.log(phi)) if 0.0 < phi < 1.0 else 0.0
 
+    def level(self, group: str) -> float:
+        """The marginal standard deviation of ``group``'s noise in noise-floor units,
+        ``s / sqrt(1 - phi^2)`` (1 when white)."""
+        if group not in self.ar:
+            return 1.0
+        phi, s = self.ar[group]
+        return float(s / math.sqrt(1.0 - phi**2))
+
     def to_json(self) -> dict:
         """The JSON form: per group ``phi``, ``s``, ``correlation_time_s``, ``lr``, ``p``."""
         return {
