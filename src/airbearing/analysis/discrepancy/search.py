@@ -803,7 +803,16 @@ def _retry_at_horizon(search, sel, current, screen, workers, prog) -> Fit:
             for pb in search.problems.values():
                 set_intensity(pb, KAPPA_GRID[0])
                 set_measurement_noise(pb, None)
-            return search.horizon(sel.current, sel.lag, sel.chosen, sel.theta, fresh=True)
+            # the named effects on the naming pieces again: gap_after stays the same
+            # short-piece gap as gap_before, and the horizon continues down from there
+            sel.current = search.problem(sel.lag).fit(
+                search.models[sel.lag].p0.copy(),
+                **search.free(sel.lag, sel.chosen, sel.theta),
+                delta0=sel.current.delta,
+                name="the named effects on short pieces",
+            )
+            sel.theta = sel.current.theta.copy()
+            return search.horizon(sel.current, sel.lag, sel.chosen, sel.theta)
     for pb in search.problems.values():  # as it was
         set_measurement_noise(pb, search.noise)
     sel.current, sel.theta = before
