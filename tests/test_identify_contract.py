@@ -73,7 +73,7 @@ def test_json_keys_kept():
         "residual_rms", "residual_unit", "residual_rms_unit", "method", "segments",
         "outlier_rows", "logs", "warnings", "details",
     } <= set(j)  # fmt: skip
-    assert np.isnan(j["std"]) and j["method"] == "equation-error"
+    assert j["std"] is None and j["method"] == "equation-error"  # NaN: null, as in --json
 
 
 def test_short_repr_and_readable_str():

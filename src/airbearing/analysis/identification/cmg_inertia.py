@@ -27,6 +27,7 @@ from airbearing.analysis.identification.data import log_quality
 from airbearing.analysis.identification.result import IdentificationResult
 from airbearing.errors import InputError, SolverError
 from airbearing.io.log import Log
+from airbearing.io.output import to_jsonable
 from airbearing.io.testbed import Body, Testbed
 from airbearing.models.cmg import cmg_functions
 from airbearing.models.effects import COULOMB_SMOOTHING
@@ -107,24 +108,26 @@ class CMGIdentification(IdentificationResult):
 
     def to_json(self) -> dict:
         """``inertia`` (J_z), ``std``, ``condition_number``, ``active_constraints``,
-        ``residual_rms`` and the friction terms."""
-        return {
-            "inertia": float(self.inertia),
-            "std": float(self.std_inertia),
-            "std_status": dict(self.std_status),
-            "condition_number": float(self.condition_number),
-            "active_constraints": list(self.active_constraints),
-            "residual_rms": float(self.residual_rms),
-            "residual_unit": self.residual_unit,
-            "residual_rms_unit": self.residual_unit,
-            "friction": dict(self.friction),
-            "std_friction": dict(self.std_friction),
-            "method": self.method,
-            "segments": int(self.segments),
-            "outlier_rows": self.outlier_rows,
-            "warnings": list(self.warnings),
-            "details": dict(self.details),
-        }
+        ``residual_rms`` and the friction terms (NaN: null, as in ``--json``)."""
+        return to_jsonable(
+            {
+                "inertia": float(self.inertia),
+                "std": float(self.std_inertia),
+                "std_status": dict(self.std_status),
+                "condition_number": float(self.condition_number),
+                "active_constraints": list(self.active_constraints),
+                "residual_rms": float(self.residual_rms),
+                "residual_unit": self.residual_unit,
+                "residual_rms_unit": self.residual_unit,
+                "friction": dict(self.friction),
+                "std_friction": dict(self.std_friction),
+                "method": self.method,
+                "segments": int(self.segments),
+                "outlier_rows": self.outlier_rows,
+                "warnings": list(self.warnings),
+                "details": dict(self.details),
+            }
+        )
 
     def to_testbed(self, testbed: Testbed) -> Testbed:
         """``testbed`` with ``J_z`` as its yaw inertia and the identified friction as effects.

@@ -22,6 +22,7 @@ import numpy as np
 
 from airbearing.analysis.identification.regression import PARAM_NAMES, theta_to_body
 from airbearing.errors import InputError
+from airbearing.io.output import to_jsonable
 from airbearing.io.testbed import Body, Testbed
 
 __all__ = [
@@ -382,7 +383,7 @@ class PlatformIdentification(IdentificationResult):
         out["details"] = dict(self.details)
         if self.equation_error is not None:
             out["equation_error"] = self.equation_error.to_json()
-        return out
+        return to_jsonable(out)  # a value not identifiable (NaN) is null, as in --json
 
     def to_testbed(self, testbed: Testbed) -> Testbed:
         """``testbed`` with the identified inertia, CM offset and mass.

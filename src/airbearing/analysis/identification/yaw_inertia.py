@@ -32,6 +32,7 @@ from airbearing.analysis.identification.data import log_quality as _quality
 from airbearing.analysis.identification.result import IdentificationResult
 from airbearing.errors import InputError
 from airbearing.io.log import Log
+from airbearing.io.output import to_jsonable
 from airbearing.io.testbed import Body, Testbed
 from airbearing.models import quaternion as quat
 
@@ -100,23 +101,26 @@ class YawIdentification(IdentificationResult):
 
     def to_json(self) -> dict:
         """``inertia``, ``std``, ``std_status``, ``residual_rms``, ``residual_unit``,
-        ``segments``, ``outlier_rows``, ``logs``, ``warnings``, ``method``."""
-        return {
-            "inertia": float(self.inertia),
-            "std": float(self.std_inertia),
-            "std_status": dict(self.std_status),
-            "condition_number": 1.0,
-            "active_constraints": [],
-            "residual_rms": float(self.residual_rms),
-            "residual_unit": self.residual_unit,
-            "residual_rms_unit": self.residual_unit,
-            "method": self.method,
-            "segments": int(self.segments),
-            "outlier_rows": self.outlier_rows,
-            "logs": [dict(lg) for lg in self.logs],
-            "warnings": list(self.warnings),
-            "details": dict(self.details),
-        }
+        ``segments``, ``outlier_rows``, ``logs``, ``warnings``, ``method`` (NaN: null, as in
+        ``--json``)."""
+        return to_jsonable(
+            {
+                "inertia": float(self.inertia),
+                "std": float(self.std_inertia),
+                "std_status": dict(self.std_status),
+                "condition_number": 1.0,
+                "active_constraints": [],
+                "residual_rms": float(self.residual_rms),
+                "residual_unit": self.residual_unit,
+                "residual_rms_unit": self.residual_unit,
+                "method": self.method,
+                "segments": int(self.segments),
+                "outlier_rows": self.outlier_rows,
+                "logs": [dict(lg) for lg in self.logs],
+                "warnings": list(self.warnings),
+                "details": dict(self.details),
+            }
+        )
 
     def to_testbed(self, testbed: Testbed) -> Testbed:
         """``testbed`` with J_z; an error when J_z was not identifiable."""
