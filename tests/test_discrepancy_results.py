@@ -102,6 +102,13 @@ def test_discrepancy_and_replay_as_tables(found, replayed, log):
     cands = found.to_pandas()
     assert {"name", "value", "std", "status", "reason"} <= set(cands.columns)
     assert "inertia_error" in set(cands["name"]) and len(cands) == len(found.candidates)
+    # the named effects are marked, with their joint values (str() and to_json()'s effects)
+    named = cands[cands["named"]]
+    assert set(named["name"]) == set(found.effects)
+    for _, row in named.iterrows():
+        assert row["named_value"] == pytest.approx(found.effects[row["name"]])
+        assert row["named_std"] == pytest.approx(found.effect_std[row["name"]])
+    assert cands.loc[~cands["named"], "named_value"].isna().all()
     series = replayed.to_pandas()
     assert list(series.columns) == ["log", "row", "t", "residual"]
     # every usable row once (hand-over rows of linked pieces are not repeated), in order

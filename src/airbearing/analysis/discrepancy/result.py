@@ -171,8 +171,10 @@ class Discrepancy:
 
     def to_pandas(self):
         """The candidates of the first round as a table, one row per candidate: its
-        ``name``, ``value`` and ``std`` (effect units), ``std_white``, ``crlb``, ``gap``
-        (gap unit), the scores and ``status``/``reason`` (the JSON's ``candidates``).
+        ``name``, ``value`` and ``std`` (effect units) fitted alone, ``std_white``,
+        ``crlb``, ``gap`` (gap unit), the scores and ``status``/``reason`` (the JSON's
+        ``candidates``), and whether it was ``named``, with the named effects' joint
+        values ``named_value`` and ``named_std`` (the JSON's ``effects``; None otherwise).
 
         Returns
         -------
@@ -180,7 +182,16 @@ class Discrepancy:
         """
         import pandas as pd
 
-        return pd.DataFrame(self.to_json()["candidates"])
+        table = pd.DataFrame(self.to_json()["candidates"])
+        if table.empty:
+            return table
+        table["named"] = table["name"].map(lambda n: n in self.effects)
+        for col, src in (("named_value", self.effects), ("named_std", self.effect_std)):
+            table[col] = [
+                jsonable(src[n]) if named else None
+                for n, named in zip(table["name"], table["named"], strict=True)
+            ]
+        return table
 
     @property
     def data(self) -> ReplayData:
