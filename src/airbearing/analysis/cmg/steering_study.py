@@ -121,7 +121,12 @@ class SteeringRun:
         done = (
             f"completed in {s['completion_time_s']:.3g} s"
             if s["completed"]
-            else f"not completed (final momentum error {s['final_momentum_error_h0']:.3g} h0)"
+            else f"not completed (final momentum error {s['final_momentum_error_h0']:.3g} h0"
+            + (
+                ", the reference still moves at the end of the run)"
+                if s["reference_moving"]
+                else ")"
+            )
         )
         return f"{self.law}: {done}, peak gimbal rate {s['peak_gimbal_rate_deg_s']:.3g} deg/s"
 
@@ -149,10 +154,16 @@ class SteeringRun:
         err = np.linalg.norm(self.H - self.H_ref, axis=1)
         terr = np.linalg.norm(self.h_out - self.h_cmd, axis=1)
         tt = np.append(self.t, self.t[-1] + (self.t[1] - self.t[0]))
+        # completion: the first time after which the reference has reached its final value
+        # and the error stays within the tolerance; a run that ends while the reference
+        # still moves has not completed the manoeuvre, however well it tracks
+        moving = np.nonzero(np.linalg.norm(np.diff(self.H_ref, axis=0), axis=1) > 1e-12)[0]
+        ref_final = int(moving[-1]) + 1 if moving.size else 0
+        ref_done = ref_final < len(err) - 1 or not moving.size
         inside = err < self.tolerance
-        # completion: the first time after which the error stays within the tolerance
+        inside[:ref_final] = False
         done = None
-        if inside[-1]:
+        if inside[-1] and ref_done:
             last_out = np.nonzero(~inside)[0]
             done = float(tt[last_out[-1] + 1]) if last_out.size else float(tt[0])
         s = singularity_summary(tt, self.m, threshold=NEAR_SINGULAR)
@@ -162,9 +173,10 @@ class SteeringRun:
             "max_torque_error_h0_s": float(terr.max()),
             "final_torque_error_h0_s": float(terr[-1]),
             "peak_gimbal_rate_deg_s": float(np.rad2deg(np.abs(self.delta_dot).max())),
-            "completed": bool(inside[-1]),
+            "completed": done is not None,
             "completion_time_s": done if done is not None else float("inf"),
             "final_Hx_h0": float(self.H[-1, 0]),
+            "reference_moving": not ref_done,
             **s,
         }
 
