@@ -13,10 +13,10 @@ The choice is the one ``airbearing identify`` has always made:
 
 from __future__ import annotations
 
-import os
 from collections.abc import Iterable
 
 from airbearing.errors import InputError
+from airbearing.io.coerce import as_logs, as_testbed  # noqa: F401 (their earlier home)
 
 __all__ = ["identify", "METHODS", "FORMS", "FRICTIONS"]
 
@@ -24,25 +24,6 @@ __all__ = ["identify", "METHODS", "FORMS", "FRICTIONS"]
 METHODS = ("output-error", "equation-error")
 FORMS = ("integrated", "acceleration")
 FRICTIONS = (None, "none", "viscous", "coulomb")
-
-
-def as_testbed(testbed):
-    """A :class:`~airbearing.io.testbed.Testbed` from itself, a file path or a built-in name."""
-    from airbearing.io.testbed import Testbed, load_testbed
-
-    return testbed if isinstance(testbed, Testbed) else load_testbed(testbed)
-
-
-def as_logs(logs, testbed, columns=None) -> list:
-    """A list of :class:`~airbearing.io.log.Log` from logs or paths (one or several)."""
-    from airbearing.io.log import Log, read_log
-
-    if isinstance(logs, Log | str | os.PathLike):
-        logs = [logs]
-    out = [log if isinstance(log, Log) else read_log(log, testbed, columns=columns) for log in logs]
-    if not out:
-        raise InputError("logs: expected at least one log, got none")
-    return out
 
 
 def identify(
@@ -130,7 +111,7 @@ def identify(
     from airbearing.analysis.identification.data import COLUMNS_USED
 
     tb = as_testbed(testbed)
-    loaded = as_logs(logs, tb, columns=COLUMNS_USED)
+    loaded = as_logs(logs, tb, columns=COLUMNS_USED, what="the testbed to identify")
     fr = None if friction in (None, "none") else friction
     if hold is not None and tb.body.dof == 1:
         raise InputError("hold applies to platform testbeds (dof 3), not to dof 1")

@@ -7,6 +7,7 @@
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, field
 
 from airbearing.errors import InputError
@@ -133,16 +134,15 @@ def check_log(log, testbed=None) -> LogCheck:
     >>> check.segments, check.outlier_rows
     (1, ())
     """
-    from airbearing.analysis.identify import as_testbed
-    from airbearing.io.log import Log, read_log
+    from airbearing.io.coerce import as_log, as_testbed
+    from airbearing.io.log import Log
     from airbearing.io.tool_use import tool_use
 
-    tb = None if testbed is None else as_testbed(testbed)
-    if not isinstance(log, Log):
-        if tb is None:
-            raise InputError("testbed: expected a testbed to read the log file with")
-        log = read_log(log, tb)
-    elif tb is not None and log.testbed is not tb:
+    tb = as_testbed(testbed, optional=True)
+    if not isinstance(log, Log) and tb is None and isinstance(log, str | os.PathLike):
+        raise InputError("testbed: expected a testbed to read the log file with")
+    log = as_log(log, tb, what="the testbed to check it with")
+    if tb is not None and log.testbed is not tb:
         log = Log._from_validated(log.data, log.source, tb)
     if log.testbed is None:
         raise InputError(f"{log.source}: testbed: expected a testbed (the log has none)")
@@ -172,13 +172,11 @@ def plot_log(log, testbed=None):
     -------
     matplotlib.figure.Figure
     """
-    from airbearing.analysis.identify import as_testbed
-    from airbearing.io.log import Log, read_log
+    from airbearing.io.coerce import as_log, as_testbed
     from airbearing.reporting.log_plot import log_figure
 
-    tb = None if testbed is None else as_testbed(testbed)
-    if not isinstance(log, Log):
-        log = read_log(log, tb)
+    tb = as_testbed(testbed, optional=True)
+    log = as_log(log, tb, what="the testbed to plot it with")
     tb = tb if tb is not None else log.testbed
     if tb is None:
         return log_figure(log, None)

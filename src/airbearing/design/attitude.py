@@ -8,6 +8,7 @@ import numpy as np
 from airbearing.design.controller import Controller
 from airbearing.design.steering import saturate_rates, steering_function
 from airbearing.errors import InputError
+from airbearing.io.coerce import as_gains
 from airbearing.models import quaternion as quat
 from airbearing.models.cmg import jacobian_normalised, momentum_normalised
 
@@ -15,6 +16,8 @@ __all__ = ["cmg_attitude_controller", "SEED001_GAINS"]
 
 #: K_p, K_i, K_w of seed 001 Table 6 (normalised form: torque per h0).
 SEED001_GAINS = (6.0, 0.001, 6.0)
+#: The gains' names, in order.
+GAIN_NAMES = ("K_p", "K_i", "K_w")
 #: What the controller logs each sample: attitude estimate, filtered rate, commanded torque,
 #: the estimate's yaw.
 EXTRA_NAMES = ("qe_w", "qe_x", "qe_y", "qe_z", "G_x", "G_y", "G_z", "Tc_x", "Tc_y", "Tc_z",
@@ -59,10 +62,12 @@ def cmg_attitude_controller(
         Attitude from gyro propagation (seed 001) or from the measured quaternion.
     encoder_resolution : float
         Gimbal-angle quantisation (rad); seed 001 Table 2 gives 0.0298 deg. 0 = exact.
-    gains : sequence of 3 floats
-        ``K_p, K_i, K_w``.
+    gains : dict or sequence of 3 floats
+        ``{"K_p": ..., "K_i": ..., "K_w": ...}`` (``TuningResult.gains``) or
+        ``(K_p, K_i, K_w)``, each >= 0.
     """
     fg = _checked_options(model, form, attitude, lowpass)
+    gains = as_gains(gains, GAIN_NAMES)
     tb = model.testbed
     dt = tb.sensors.dt
     beta, h0, limit = tb.cmg.skew, tb.cmg.h0, tb.cmg.max_gimbal_rate
@@ -114,8 +119,8 @@ def cmg_attitude_controller(
         name=f"cmg_attitude_{steering}",
         function=fn,
         c0=c0,
-        gains=np.asarray(gains, float),
-        gain_names=("K_p", "K_i", "K_w"),
+        gains=gains,
+        gain_names=GAIN_NAMES,
         ref_names=("qc_w", "qc_x", "qc_y", "qc_z"),
         extra_names=EXTRA_NAMES,
     )

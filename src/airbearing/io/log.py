@@ -764,8 +764,9 @@ def read_log(
     path : str or path-like
         A ``.csv`` (header row, comma separated, ``.`` decimal point) or
         ``.parquet`` file with the columns of FORMATS.md in SI units.
-    testbed : Testbed or None
-        The testbed the log belongs to; enables its column and sampling checks.
+    testbed : Testbed, str, path-like or None
+        The testbed the log belongs to (object, built-in name or testbed file); enables
+        its column and sampling checks.
     columns : iterable of str or None
         Read only these columns (those the file has), with ``t``, the columns the
         testbed requires and the rest of any column group named (all four of
@@ -790,6 +791,11 @@ def read_log(
     valid) is read again cell by cell as text, so that the message names the
     row, the line and the column of the first bad cell.
     """
+    from airbearing.io.coerce import as_testbed
+
+    testbed = as_testbed(testbed, optional=True)
+    if not isinstance(path, str | os.PathLike):
+        raise InputError(f"path={path!r}: expected a log file path (str or path-like)")
     p = Path(path)
     src = str(path)
     kind = _format(p)

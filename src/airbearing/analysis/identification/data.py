@@ -215,14 +215,9 @@ def rates_from_attitude(t, q, usable, segments, *, half_width: int = RATE_HALF_W
 def _check_log(testbed: Testbed, log) -> None:
     if not isinstance(log, Log):
         raise InputError(f"identify: expected Log objects, got {type(log).__name__}")
-    if log.testbed is not None and (
-        log.testbed.kind != testbed.kind or log.testbed.body.dof != testbed.body.dof
-    ):
-        raise InputError(
-            f"{log.source}: the log belongs to testbed {log.testbed.name!r} (kind = "
-            f"{log.testbed.kind!r}, dof = {log.testbed.body.dof}), but the testbed to "
-            f"identify {testbed.name!r} has kind = {testbed.kind!r}, dof = {testbed.body.dof}"
-        )
+    from airbearing.io.coerce import check_log_testbed
+
+    check_log_testbed(testbed, log, "the testbed to identify")
 
 
 def prepare_platform_logs(testbed: Testbed, logs) -> list[PlatformData]:

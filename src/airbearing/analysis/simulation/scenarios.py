@@ -11,6 +11,7 @@ from airbearing.analysis.simulation.simulate import SimResult, simulate
 from airbearing.design.attitude import cmg_attitude_controller
 from airbearing.design.controller import constant_input
 from airbearing.errors import InputError
+from airbearing.io.coerce import as_effects, as_float, as_int, as_testbed, as_vector
 from airbearing.io.testbed import Testbed
 from airbearing.models import quaternion as quat
 from airbearing.models.model import Model, build_model
@@ -25,6 +26,21 @@ __all__ = [
 SCENARIO_DURATIONS = {"slew": 40.0, "free": 60.0, "spindown": 120.0}
 #: The level attitude, qw qx qy qz: every scenario's default initial quaternion.
 LEVEL = (1.0, 0.0, 0.0, 0.0)
+#: What ``duration`` accepts, in messages.
+_POSITIVE_TIME = "a positive time in s"
+
+
+def _duration(duration) -> float:
+    return as_float(duration, "duration", positive=True, expected=_POSITIVE_TIME)
+
+
+def _quaternion(q0) -> np.ndarray:
+    """``q0`` as 4 finite numbers of non-zero norm (scalar first), or an InputError."""
+    what = "4 finite numbers qw qx qy qz, a non-zero quaternion (scalar first)"
+    q = as_vector(q0, "q0", 4, what)
+    if not np.linalg.norm(q) > 0:
+        raise InputError(f"q0={tuple(q0)!r}: expected {what}")
+    return q
 
 
 def initial_attitude(testbed: Testbed, q0=None):
@@ -68,8 +84,9 @@ def slew(
 
     Parameters
     ----------
-    testbed : Testbed
-        ``kind = "cmg"`` with a rate gyro (``sensors.gyro = true``).
+    testbed : Testbed, str or path-like
+        ``kind = "cmg"`` with a rate gyro (``sensors.gyro = true``); a built-in name or a
+        testbed file is loaded.
     angle_deg : float
         Slew angle, deg (the loop takes the shorter way round).
     axis : sequence of 3 float
@@ -89,8 +106,9 @@ def slew(
         Jacobian form of the steering law (``"normalised"`` or ``"eq15"``).
     effects : mapping, optional
         Effects acting in the truth (FORMATS.md names and units).
-    gains : dict, optional
-        Attitude gains (``K_p``, ``K_i``, ``K_w``); default seed 001's.
+    gains : dict or sequence of 3 float, optional
+        Attitude gains ``{"K_p": ..., "K_i": ..., "K_w": ...}`` (as ``tune(...).gains``
+        gives them) or ``(K_p, K_i, K_w)``, each >= 0; default seed 001's.
     loop : (Model, Controller), optional
         The loop to run, default :func:`slew_loop` of these arguments; a campaign passes
         one per structure with this run's values in the Model's ``p0``.
@@ -103,8 +121,8 @@ def slew(
     Raises
     ------
     InputError
-        Not a CMG testbed, no gyro, a non-positive duration, an axis a dof-1 bearing
-        cannot turn about.
+        Not a CMG testbed, no gyro, a non-positive duration, a zero axis or one a dof-1
+        bearing cannot turn about, a non-finite angle, gains that are not 3 values >= 0.
 
     Examples
     --------
@@ -115,13 +133,19 @@ def slew(
     >>> round(ab.slew_summary(run)["gimbal_min_deg"][0], 1)
     -33.2
     """
+    testbed = as_testbed(testbed)
     if testbed.kind != "cmg":
         raise InputError(
             f"{testbed.source}: the slew scenario needs a kind = 'cmg' testbed, "
             f"got '{testbed.kind}'"
         )
-    if duration <= 0:
-        raise InputError(f"duration={duration}: expected a positive time in s")
+    duration = _duration(duration)
+    angle = as_float(angle_deg, "angle_deg", "deg")
+    axis = as_vector(axis, "axis", 3, "3 finite numbers, the slew axis in body axes")
+    if not np.linalg.norm(axis) > 0:
+        raise InputError(f"axis={tuple(axis.tolist())}: expected a non-zero slew axis")
+    seed = as_int(seed, "seed")
+    effects = as_effects(effects)
     if not testbed.sensors.gyro:
         raise InputError(
             f"{testbed.source}: the seed-001 attitude loop feeds back the gyro rate (eqs. 3, 19), "
@@ -135,7 +159,7 @@ def slew(
     model, ctl = loop
     if testbed.body.dof == 1 and tuple(np.round(axis, 12)) != (0.0, 0.0, 1.0):
         raise InputError("a dof = 1 testbed slews about body z only: leave the axis at 0 0 1")
-    q_c = quat.from_axis_angle(axis, np.deg2rad(angle_deg))
+    q_c = quat.from_axis_angle(axis, np.deg2rad(angle))
     return simulate(
         model, ctl, duration=duration, x0=model.x0(), reference=q_c, seed=seed, noise=not ideal
     )
@@ -154,7 +178,7 @@ def slew_loop(
     -------
     (Model, Controller)
     """
-    model = build_model(testbed, effects)
+    model = build_model(as_testbed(testbed), as_effects(effects))
     kwargs = {} if gains is None else {"gains": gains}
     ctl = cmg_attitude_controller(model, lowpass=1.0 if ideal else None, **steering, **kwargs)
     return model, ctl
@@ -221,7 +245,8 @@ def free_oscillation(
 
     Parameters
     ----------
-    testbed : Testbed
+    testbed : Testbed, str or path-like
+        The testbed, a built-in name or a testbed file.
     initial_rate : sequence of 3 float
         Body rates at the start, rad/s.
     q0 : sequence of 4 float
@@ -264,8 +289,12 @@ def free_oscillation(
     ...
     airbearing.errors.InputError: duration=-1.0: expected a positive time in s
     """
-    if duration <= 0:
-        raise InputError(f"duration={duration}: expected a positive time in s")
+    testbed = as_testbed(testbed)
+    duration = _duration(duration)
+    seed = as_int(seed, "seed")
+    q0 = tuple(_quaternion(q0).tolist())
+    effects = as_effects(effects)
+    attitude_noise = as_float(attitude_noise, "attitude_noise", "rad", minimum=0.0, optional=True)
     model = build_model(testbed, effects) if model is None else model
     u = _free_inputs(testbed, model, sliders)
     w0 = _initial_rate(model, initial_rate, q0)
@@ -285,9 +314,7 @@ def _free_inputs(testbed: Testbed, model: Model, sliders) -> np.ndarray:
     """The held input of a free oscillation: sliders at ``sliders`` (m), the cage field on."""
     u = np.zeros(model.nu)
     if testbed.kind == "platform":
-        s = np.asarray(sliders, dtype=float)
-        if s.shape != (3,):
-            raise InputError(f"sliders: expected 3 positions in m, got {s.tolist()}")
+        s = as_vector(sliders, "sliders", 3, "3 finite slider positions in m")
         if testbed.masses is None and np.any(s != 0):
             raise InputError(
                 f"sliders={s.tolist()}: testbed '{testbed.name}' has no [masses] table "
@@ -301,16 +328,14 @@ def _free_inputs(testbed: Testbed, model: Model, sliders) -> np.ndarray:
         u[model.index(["s1", "s2", "s3"], "u")] = s
         if testbed.field is not None:
             u[model.index(["bx_lab", "by_lab", "bz_lab"], "u")] = testbed.field.lab_vec
-    elif any(v != 0 for v in sliders):
+    elif np.any(as_vector(sliders, "sliders", 3, "3 finite slider positions in m") != 0):
         raise InputError("sliders applies to kind = 'platform' testbeds only")
     return u
 
 
 def _initial_rate(model: Model, initial_rate, q0) -> np.ndarray:
     """``initial_rate`` (rad/s) checked against the bearing (dof 1: about z, from yaw 0)."""
-    w0 = np.asarray(initial_rate, dtype=float)
-    if w0.shape != (3,):
-        raise InputError(f"initial_rate: expected 3 rates WX WY WZ in rad/s, got {w0.tolist()}")
+    w0 = as_vector(initial_rate, "initial_rate", 3, "3 finite rates wx wy wz in rad/s")
     if model.dof == 1 and np.any(w0[:2] != 0):
         raise InputError(
             f"initial_rate={w0.tolist()}: a dof = 1 bearing turns about body z only; "
@@ -351,7 +376,8 @@ def spindown(
 
     Parameters
     ----------
-    testbed : Testbed
+    testbed : Testbed, str or path-like
+        The testbed, a built-in name or a testbed file.
     initial_rate : float
         rad/s about body z at the start.
     duration : float
@@ -385,9 +411,9 @@ def spindown(
     >>> bool(abs(w_end / math.exp(-1e-4 * run.t[-1] / J) - 1) < 1e-9)  # RK4 at 20 Hz
     True
     """
-    w = float(initial_rate)
-    if not np.isfinite(w):
-        raise InputError(f"initial_rate={initial_rate}: expected a finite rate in rad/s")
+    w = as_float(
+        initial_rate, "initial_rate", expected="a finite rate in rad/s about body z (one number)"
+    )
     return free_oscillation(
         testbed,
         initial_rate=(0.0, 0.0, w),
