@@ -79,6 +79,23 @@ def test_seed004_platform_two_step_reaches_the_papers_reduction():
         # 32x the paper's 2.7e-6 J): within 20 % of it, above the true-rate spread
         assert 0.8 * r.ke_noise_floor <= r.ke_std_after_measured <= 1.2 * r.ke_noise_floor, r
         assert r.ke_std_after < 0.5 * r.ke_std_after_measured, r
+        # the vertical offset's std carries step 1's in-plane uncertainty: it covers the
+        # truth (measured: errors 0.20-0.28 um, std 0.34-0.40 um; the identification's own
+        # std is 0.04 um, 7 times too small alone); nothing to warn about
+        z_true = tb.body.cm_offset_vec[2]
+        assert abs(r.vertical_offset_identified_m - z_true) < 3 * r.vertical_offset_std_m, r
+        assert r.vertical_offset_std_m < 1e-6 and r.warnings == [], r
+
+
+def test_a_short_two_step_says_it_is_doubtful():
+    """Step 1 too short to settle: the in-plane offset step 2 takes as known is wrong, the
+    estimate keeps moving and the spread hardly falls; the result says all three."""
+    r = two_step(load_testbed("seed004-platform"), balance_duration=30.0,
+                 identification_duration=20.0, ke_duration=10.0)  # fmt: skip
+    text = " ".join(r.warnings)
+    assert "step 1 ran 30 s, shorter than" in text, r.warnings
+    assert "not balanced" in text and "warning: step 1" in str(r), r.warnings
+    assert r.to_json()["warnings"] == r.warnings
 
 
 @pytest.mark.slow

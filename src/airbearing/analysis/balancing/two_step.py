@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, field, fields
 
 import numpy as np
 
@@ -35,6 +35,7 @@ __all__ = [
     "SEED004_RATES",
     "STEP1_RESIDUAL",
     "TwoStepResult",
+    "step1_offset_sigma",
     "step1_duration",
     "two_step",
 ]
@@ -56,6 +57,10 @@ class TwoStepResult:
         ``1 - ke_std_after / ke_std_before`` (seed 004: 99.75 % in simulation).
     vertical_offset_identified_m : float
         m, identified vertical CR -> CM offset (sliders at zero).
+    vertical_offset_std_m : float
+        m, its standard error: the identification's (last round's logs) and, when step 1's
+        in-plane offset is taken as known, that offset's uncertainty carried through
+        (:func:`step1_offset_sigma`).
     cm_offset_identified_m, cm_offset_true_m : list of 3 float
         m, identified and true CR -> CM offset, sliders at zero.
     inertia_identified : 3x3 list
@@ -99,6 +104,10 @@ class TwoStepResult:
     sliders_final_unrounded_m : list of 3 float
         m, the slider positions that cancel the identified offset before rounding to
         whole steps (``sliders_final_m``).
+    warnings : list of str
+        What makes the result doubtful, in words: a step 1 shorter than its integral needs
+        to settle, an estimate still moving after the last round, a measured kinetic-energy
+        spread that hardly fell (empty when none).
     """
 
     testbed: str
@@ -130,10 +139,14 @@ class TwoStepResult:
     vertical_offset_estimates_m: list
     sliders_final_unrounded_m: list
     ke_measured_from: str = "gyro"
+    vertical_offset_std_m: float = math.nan
+    warnings: list = field(default_factory=list)
 
     def to_json(self) -> dict:
         """The ``balance --two-step`` JSON: one key per attribute, in this order."""
-        return {f.name: getattr(self, f.name) for f in fields(self)}
+        from airbearing.io.output import to_jsonable
+
+        return to_jsonable({f.name: getattr(self, f.name) for f in fields(self)})
 
     def __repr__(self) -> str:
         return (
@@ -149,8 +162,10 @@ class TwoStepResult:
             f"two-step balancing of {self.testbed} ({self.method}, {self.iterations} round(s))",
             f"kinetic-energy spread {self.ke_std_before:.3g} -> {self.ke_std_after:.3g} J "
             f"({100 * self.ke_reduction:.2f} % less, {self.ke_rates} rates)",
-            f"vertical offset identified {1e6 * self.vertical_offset_identified_m:.2f} um",
+            f"vertical offset identified {1e6 * self.vertical_offset_identified_m:.2f} "
+            f"+- {1e6 * self.vertical_offset_std_m:.2g} um",
             "residual offset [" + ", ".join(f"{v:.3g}" for v in r) + "] um",
+            *(f"warning: {w}" for w in self.warnings),
         ])  # fmt: skip
 
 
@@ -282,9 +297,11 @@ def two_step(
     # step 3: kinetic-energy spread, seed 004 eqs. 52-54
     report("step 3: kinetic energy before and after", 2, 3)
     ke = _step3(model, s_final, J_est, b_lab, ke_duration, seed, noise)
+    warnings = _warnings(testbed, balance_duration, found, ke)
     return TwoStepResult(
         **ke,
         **found,
+        warnings=warnings,
         testbed=testbed.name,
         method=method,
         cm_offset_true_m=r_true0.tolist(),
@@ -373,8 +390,13 @@ def _step2(model, s1, d, b_lab, in_plane_known: bool, duration: float, identify_
             break
         s_cur = s_final
     J_est = np.asarray(ident.inertia, float).reshape(3, 3)
+    std_z = float(np.asarray(ident.std_cm_offset, float).reshape(3)[2])
+    if known_xy is not None:  # step 1's in-plane answer is uncertain too: propagated
+        std_z = float(np.hypot(std_z, _z_from_known_xy(testbed, logs, known_xy, r_est[2],
+                                                       identify_method)))  # fmt: skip
     found = {
         "vertical_offset_identified_m": float(r_est[2]),
+        "vertical_offset_std_m": std_z,
         "cm_offset_identified_m": r_est.tolist(),
         "inertia_identified": J_est.tolist(),
         "identify_warnings": list(ident.warnings),
@@ -382,8 +404,68 @@ def _step2(model, s1, d, b_lab, in_plane_known: bool, duration: float, identify_
         "iterations": len(estimates),
         "vertical_offset_estimates_m": estimates,
         "sliders_final_unrounded_m": s_exact.tolist(),
+        "still_moving": len(estimates) > 1 and abs(estimates[-1] - estimates[-2]) > tol,
     }
     return found, s_final, J_est
+
+
+def step1_offset_sigma(testbed: Testbed) -> np.ndarray:
+    """m, 1-sigma of the in-plane CM offset step 1 reports, per axis (x, y).
+
+    Step 1 reads the balanced positions off the steppers: each in-plane mass sits anywhere
+    within the backlash of its stepper, and the balance point anywhere within half a step
+    of the whole step it is rounded to (both uniform: ``width / sqrt(12)``), a CM shift of
+    ``m_i / M`` times that. The dither's average adds about 0.03 um (:func:`two_step`).
+    """
+    m = testbed.masses
+    width = np.hypot(m.backlash, m.step) / math.sqrt(12.0)
+    return width * m.mass_vec[:2] / testbed.body.mass
+
+
+def _z_from_known_xy(testbed, logs, known_xy, z, identify_method: str) -> float:
+    """m, the vertical offset's error from step 1's in-plane one: the identification
+    repeated with the known in-plane offset moved by its 1-sigma (:func:`step1_offset_sigma`)
+    along x, then y; the equation-error fit is linear in that constraint, so each change
+    is the derivative times the sigma."""
+    from airbearing.analysis.identification.platform import identify_platform
+
+    sigma = step1_offset_sigma(testbed)
+    out = 0.0
+    for axis in (0, 1):
+        xy = np.array(known_xy, float)
+        xy[axis] += sigma[axis]
+        alt = identify_platform(testbed, logs, known_offset_xy=tuple(xy), method=identify_method)
+        out += (float(np.asarray(alt.cm_offset, float).reshape(3)[2]) - z) ** 2
+    return math.sqrt(out)
+
+
+#: A measured kinetic-energy spread that falls by less than this has not been balanced
+#: (seed 004: 99.75 % in simulation; a gyro's noise floor stops a lab near 99 %).
+KE_REDUCTION_DOUBTFUL = 0.9
+
+
+def _warnings(testbed: Testbed, balance_duration: float, found: dict, ke: dict) -> list[str]:
+    """What makes a two-step result doubtful, in words (pops ``still_moving`` off ``found``)."""
+    out = []
+    needed = step1_duration(testbed)
+    if balance_duration < needed:
+        out.append(
+            f"step 1 ran {balance_duration:.0f} s, shorter than the {needed:.0f} s the tilt "
+            "loop's integral needs to settle: the in-plane offset it found, which step 2 "
+            "takes as known, is not the platform's"
+        )
+    if found.pop("still_moving"):
+        est = found["vertical_offset_estimates_m"]
+        out.append(
+            f"the vertical offset estimate still moved by {1e6 * abs(est[-1] - est[-2]):.3g} "
+            f"um in the last of {len(est)} rounds (more than one slider step's CM shift)"
+        )
+    if ke["ke_reduction_measured"] < KE_REDUCTION_DOUBTFUL:
+        out.append(
+            f"the measured kinetic-energy spread fell by only "
+            f"{100 * ke['ke_reduction_measured']:.3g} %: the platform is not balanced"
+        )
+    return out
 
 
 def _step3(model, s_final, J_est, b_lab, duration: float, seed: int, noise: bool):
