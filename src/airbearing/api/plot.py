@@ -18,10 +18,13 @@ def plot(result, **options):
 
     Parameters
     ----------
-    result : Log, SimResult, Rehearsal, LogCheck, SingularSurface or list of Sweep
+    result : Log, SimResult, Rehearsal, LogCheck, SingularSurface, list of Sweep, or any
+        result with a ``plot()`` method
         A log or a run: every logged channel against time (with a testbed, gaps shaded and
         outliers circled); a singular surface: the momentum envelope and the singular
-        surfaces of its skew; balancing sweeps: the mixed/mechanical ratios.
+        surfaces of its skew; balancing sweeps: the mixed/mechanical ratios; any other
+        result: its own ``plot(**options)`` (identification, discrepancy, replay,
+        comparison, ...).
     **options
         Passed to the drawing function (e.g. ``title``).
 
@@ -64,6 +67,8 @@ def plot(result, **options):
         from airbearing.reporting.balancing import plot_sweeps
 
         return plot_sweeps(list(result))
+    if callable(getattr(result, "plot", None)):  # results that draw themselves
+        return result.plot(**options)
     raise InputError(f"{type(result).__name__}: no picture for this result")
 
 

@@ -1,0 +1,23 @@
+"""``ab.plot(result)`` draws every result that can draw itself."""
+
+from __future__ import annotations
+
+import matplotlib
+import pytest
+
+import airbearing as ab
+
+matplotlib.use("Agg")
+
+
+def test_plot_draws_a_result_with_its_own_plot_method():
+    import matplotlib.pyplot as plt
+
+    tb = ab.load_testbed("seed004-platform")
+    log = ab.free_oscillation(tb, initial_rate=(0.3, -0.2, 0.5), duration=10.0, seed=2).log
+    found = ab.identify(tb, [log], known_offset_xy=(0.0004, 0.0007), method="equation-error")
+    fig = ab.plot(found)
+    assert type(fig).__name__ == "Figure" and len(fig.axes) >= 1
+    plt.close(fig)
+    with pytest.raises(ab.InputError, match="int: no picture"):
+        ab.plot(42)
