@@ -79,6 +79,12 @@ class SizingResult:
     flywheel_mass: float
     flywheel_thickness: float
 
+    def __repr__(self) -> str:
+        return (
+            f"SizingResult(torque={self.torque:.4g}, momentum={self.momentum:.4g}, "
+            f"flywheel_inertia={self.flywheel_inertia:.4g}, flywheel_mass={self.flywheel_mass:.4g})"
+        )
+
     def __str__(self) -> str:
         return (
             f"torque {self.torque * 1e3:.4g} mN m, momentum {self.momentum * 1e3:.4g} mN m s "

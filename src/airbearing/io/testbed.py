@@ -584,6 +584,13 @@ class Testbed:
     effects: dict[str, EffectValue] = dataclasses.field(default_factory=dict)
     source: str = dataclasses.field(default=_MEMORY, compare=False)
 
+    def __repr__(self) -> str:
+        effects = f", effects={sorted(self.effects)}" if self.effects else ""
+        return (
+            f"Testbed(name={self.name!r}, kind={self.kind!r}, dof={self.body.dof}, "
+            f"mass={self.body.mass:.4g}{effects}, source={self.source!r})"
+        )
+
     def __post_init__(self) -> None:
         src = self.source if isinstance(self.source, str) else repr(self.source)
         object.__setattr__(self, "source", src)

@@ -1,4 +1,4 @@
-"""``ab.plot(result)`` draws every result that can draw itself."""
+"""In a notebook: ``ab.plot(result)`` draws every result that can draw itself; reprs are one short line."""
 
 from __future__ import annotations
 
@@ -21,3 +21,12 @@ def test_plot_draws_a_result_with_its_own_plot_method():
     plt.close(fig)
     with pytest.raises(ab.InputError, match="int: no picture"):
         ab.plot(42)
+
+
+def test_testbed_and_sizing_reprs_are_one_short_line():
+    import math
+
+    tb = ab.load_testbed("cmg-yaw")
+    assert repr(tb).startswith("Testbed(name='cmg-yaw', kind='cmg', dof=1") and len(repr(tb)) < 120
+    sizing = ab.size_cluster(math.radians(30.0), 2.0, 0.0033)
+    assert repr(sizing).startswith("SizingResult(torque=0.001728") and len(repr(sizing)) < 120
