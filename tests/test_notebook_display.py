@@ -1,4 +1,4 @@
-"""In a notebook: ``ab.plot(result)`` draws every result that can draw itself; reprs are one short line."""
+"""In a notebook: ``ab.plot`` draws any result that draws itself; reprs are one short line."""
 
 from __future__ import annotations
 
