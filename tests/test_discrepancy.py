@@ -165,5 +165,5 @@ def test_bad_options():
         discrepancy(CMG, log, only=["friction"])
     with pytest.raises(InputError, match="cannot act"):
         discrepancy(CMG, log, only=["cm_offset_error"])
-    with pytest.raises(InputError, match="max-effects"):
+    with pytest.raises(InputError, match="max_effects=-1"):
         discrepancy(CMG, log, max_effects=-1)

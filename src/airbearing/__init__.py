@@ -13,9 +13,7 @@ so ``import airbearing as ab`` is fast and loads no numerical library::
 ``ab.__all__`` lists every name; each section of the API reference documents one group.
 """
 
-from __future__ import annotations
-
-import importlib
+from importlib import import_module as _import_module
 
 from airbearing.errors import AirbearingError, InputError, SolverError
 
@@ -100,10 +98,11 @@ def __getattr__(name: str):
     module = _WHERE.get(name)
     if module is None:
         raise AttributeError(f"module 'airbearing' has no attribute {name!r}")
-    value = getattr(importlib.import_module(module), name)
+    value = getattr(_import_module(module), name)
     globals()[name] = value  # the next access skips this function
     return value
 
 
 def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(_WHERE))
+    """The public names only (tab completion): ``__all__``, not the helpers of this module."""
+    return sorted(__all__)

@@ -160,12 +160,20 @@ def trim(model: Model, p=None, *, yaw: float = 0.0, gimbals=None) -> TrimPoint:
     >>> type(point).__name__
     'TrimPoint'
     """
+    from airbearing.io.coerce import as_float, as_vector
+
+    if not isinstance(model, Model):
+        raise InputError(f"model={model!r:.60}: expected a Model (airbearing.build_model(testbed))")
+    yaw = as_float(yaw, "yaw", "rad")
+    if p is not None:  # a column (CasADi DM, (n, 1) array) is as good as a row
+        flat = np.ravel(p) if np.ndim(p) == 2 and 1 in np.shape(p) else p
+        p = as_vector(flat, "p", model.n_p, f"{model.n_p} finite parameters {list(model.p_names)}")
+    if gimbals is not None:
+        gimbals = as_vector(gimbals, "gimbals", 4, "4 finite gimbal angles in rad")
     p = np.asarray(model.p0 if p is None else p, dtype=float)
     tb = model.testbed
     u = np.zeros(model.nu)
     if model.kind == "cmg":
-        if gimbals is not None and np.shape(gimbals) != (4,):
-            raise InputError(f"gimbals {gimbals}: expected 4 angles in rad")
         x = model.x0(q=quat.from_yaw(yaw), yaw=yaw, gimbals=gimbals)
         solved: tuple = ()
     else:

@@ -345,6 +345,29 @@ def _margins_ok(checks) -> bool:
     return all(c.met for c in checks[:4])
 
 
+def _as_spec(spec) -> Spec:
+    """``spec`` as a :class:`Spec`: itself, None (the default) or a dict of its fields."""
+    from collections.abc import Mapping
+    from dataclasses import fields
+
+    if spec is None:
+        return Spec()
+    if isinstance(spec, Spec):
+        return spec
+    names = [f.name for f in fields(Spec)]
+    if not isinstance(spec, Mapping):
+        raise InputError(
+            f"spec={spec!r:.60}: expected a Spec or a dict of its fields ({', '.join(names)})"
+        )
+    unknown = [k for k in spec if k not in names]
+    if unknown:
+        raise InputError(f"spec: unknown field(s) {unknown}; expected some of {', '.join(names)}")
+    try:
+        return Spec(**spec)
+    except TypeError as e:  # a value of the wrong type compared in Spec's checks
+        raise InputError(f"spec={dict(spec)!r:.80}: expected numbers in its fields ({e})") from e
+
+
 def tune(testbed, loop: str, spec: Spec | None = None, *, split: str = "mixed") -> TuningResult:
     """Gains of the ``loop`` (``"balancing"`` or ``"attitude"``) of ``testbed`` for ``spec``.
 
@@ -352,8 +375,9 @@ def tune(testbed, loop: str, spec: Spec | None = None, *, split: str = "mixed") 
     ----------
     testbed : Testbed
     loop : {"balancing", "attitude"}
-    spec : Spec, optional
-        Default :class:`Spec` (45 deg, 6 dB, |S| <= 2, fastest).
+    spec : Spec or dict, optional
+        Default :class:`Spec` (45 deg, 6 dB, |S| <= 2, fastest); a dict gives some of its
+        fields (``{"phase_margin_deg": 50}``), the others at their defaults.
     split : {"mixed", "mechanical"}
         Balancing PID split.
 
@@ -367,7 +391,8 @@ def tune(testbed, loop: str, spec: Spec | None = None, *, split: str = "mixed") 
     Raises
     ------
     InputError
-        An unknown loop, a loop the testbed does not have, a bandwidth at or above Nyquist.
+        An unknown loop, a loop the testbed does not have, a bandwidth at or above Nyquist,
+        a ``spec`` that is neither a Spec nor a dict of its fields.
 
     Examples
     --------
@@ -378,7 +403,7 @@ def tune(testbed, loop: str, spec: Spec | None = None, *, split: str = "mixed") 
     >>> print(tuned.checks[1])
     phase margin (deg) ... >= 45: pass
     """
-    spec = Spec() if spec is None else spec
+    spec = _as_spec(spec)
     opts = {"split": split} if loop == "balancing" else {}
     base = make_loop(testbed, loop, **opts)
     nyq = math.pi / base.dt

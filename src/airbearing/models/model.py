@@ -236,8 +236,8 @@ def build_model(testbed: Testbed, effects: Mapping | None = None) -> Model:
 
     Parameters
     ----------
-    testbed : Testbed
-        Validated testbed.
+    testbed : Testbed, str or path-like
+        Validated testbed, or a built-in name or testbed file to load.
     effects : mapping, optional
         Extra effects ``name -> value`` (FORMATS.md units) added to (or replacing)
         the testbed's own. A 3-list makes a per-axis effect with three parameters.
@@ -262,6 +262,9 @@ def build_model(testbed: Testbed, effects: Mapping | None = None) -> Model:
     >>> model.x_names[:2], "viscous_friction" in model.p_names
     (('yaw', 'wz'), True)
     """
+    from airbearing.io.coerce import as_effects, as_testbed
+
+    testbed, effects = as_testbed(testbed), as_effects(effects)
     kind, dof = testbed.kind, testbed.body.dof
     has_field = testbed.field is not None or kind == "platform"  # platform: field is an input
     effects = _effects_of(testbed, effects)

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -23,6 +23,7 @@ from airbearing.analysis.balancing.runs import FREE_FLOAT_DURATION, run_balancin
 from airbearing.analysis.balancing.transient import steady_state
 from airbearing.design.balancing import METHODS
 from airbearing.errors import InputError
+from airbearing.io.coerce import as_float, as_int, as_names, as_testbed
 from airbearing.io.testbed import Testbed
 from airbearing.progress import call as _progress
 
@@ -316,9 +317,10 @@ def compare_methods(
 
     Parameters
     ----------
-    testbed : Testbed
-        A platform testbed with sliders (see :func:`~.runs.run_balancing`).
-    methods : sequence of str
+    testbed : Testbed, str or path-like
+        A platform testbed with sliders (see :func:`~.runs.run_balancing`), its built-in
+        name or its file.
+    methods : str or sequence of str
         Methods to compare; the ratios are the second over the first.
     offsets : sequence of float
         m, initial in-plane slider positions (seed 000: -0.5 mm and +0.5 mm).
@@ -340,10 +342,11 @@ def compare_methods(
         seed 000 reports as "about 45 % lower g_perp_rms, about 90 % lower peak-to-peak";
         ``steady`` says whether the last third is past the integral transient.
     """
-    if len(methods) < 1 or any(m not in METHODS for m in methods):
-        raise InputError(f"methods={list(methods)!r}: expected names from {'|'.join(METHODS)}")
-    if not seeds:
-        raise InputError("compare: expected at least one seed")
+    testbed, methods, offsets, seeds, duration = _checked(
+        testbed, methods, offsets, seeds, duration
+    )
+    free_duration = as_float(free_duration, "free_duration", positive=True, optional=True,
+                             expected="a positive time in s, or None")  # fmt: skip
     report = _progress(progress)
     total, done = len(offsets) * len(methods) * len(seeds), 0
     tables: dict = {}
@@ -373,6 +376,27 @@ def compare_methods(
     ratios = _ratios(tables, methods)
     verdict = _verdict(ratios, steady) if ratios is not None and steady is not None else None
     return Comparison(tuple(methods), float(duration), tables, ratios, steady, verdict)
+
+
+def _checked(testbed, methods, offsets, seeds, duration) -> tuple:
+    """The arguments a comparison shares, checked: ``(testbed, methods, offsets, seeds,
+    duration)`` with a testbed loaded from a name or file and one method name as a list."""
+    testbed = as_testbed(testbed)
+    methods = as_names(methods, "methods")
+    if not methods or any(m not in METHODS for m in methods):
+        raise InputError(f"methods={methods!r}: expected names from {'|'.join(METHODS)}")
+    if isinstance(offsets, str) or not isinstance(offsets, Iterable):
+        raise InputError(f"offsets={offsets!r:.60}: expected a list of slider offsets in m")
+    offsets = [as_float(o, f"offsets[{i}]", "m") for i, o in enumerate(offsets)]
+    if not offsets:
+        raise InputError("offsets: expected at least one initial slider offset in m, got none")
+    if isinstance(seeds, str) or not isinstance(seeds, Iterable):
+        raise InputError(f"seeds={seeds!r:.60}: expected a list of integer seeds")
+    seeds = [as_int(s, f"seeds[{i}]") for i, s in enumerate(seeds)]
+    if not seeds:
+        raise InputError("seeds: expected at least one seed, got none")
+    duration = as_float(duration, "duration", positive=True, expected="a positive time in s")
+    return testbed, methods, offsets, seeds, duration
 
 
 def _steady(linear: dict | None, window, drifting: list, runs: int, unjudged: int = 0):
@@ -505,7 +529,15 @@ def sweep_comparison(
     """
     if name not in SWEEPS:
         raise InputError(f"name={name!r}: expected one of {', '.join(SWEEPS)}")
-    values = np.asarray(values, dtype=float)
+    testbed, methods, offsets, seeds, duration = _checked(
+        testbed, methods, offsets, seeds, duration
+    )
+    try:
+        values = np.atleast_1d(np.asarray(values, dtype=float))
+    except (TypeError, ValueError) as e:
+        raise InputError(f"values={values!r:.60}: expected a list of numbers") from e
+    if values.ndim != 1 or values.size == 0:
+        raise InputError(f"values={values.tolist()}: expected a non-empty list of numbers")
     if np.any(~np.isfinite(values)) or (name != "vertical_offset" and np.any(values < 0)):
         raise InputError(f"values={values.tolist()} ({name}): expected finite values >= 0")
     if name == "duration" and np.any(values <= 0):

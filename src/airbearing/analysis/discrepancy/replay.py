@@ -51,6 +51,7 @@ from airbearing.analysis.shooting.process_noise import (
     set_intensity,
 )
 from airbearing.errors import InputError
+from airbearing.io.coerce import as_effects, as_float, as_int, as_logs, as_testbed
 from airbearing.io.log import Log
 from airbearing.io.testbed import Testbed
 from airbearing.models import quaternion as quat
@@ -65,6 +66,7 @@ __all__ = [
     "Replay",
     "ReplayData",
     "WindowSet",
+    "checked_arguments",
     "jit_available",
     "make_windows",
     "model_for",
@@ -379,6 +381,17 @@ def prepare(testbed: Testbed, logs, *, window_s: float | None = None, piece_s: f
     return datas, windows, floor
 
 
+def checked_arguments(testbed, logs, window_s, what: str) -> tuple:
+    """``(testbed, logs, window_s)`` of :func:`replay` and ``discrepancy`` checked: the
+    testbed from a name or file, the logs from Log objects or files (of a testbed of the
+    same kind and dof, ``what`` naming ``testbed`` in the message), ``window_s`` > 0 s."""
+    testbed = as_testbed(testbed)
+    logs = as_logs(logs, testbed, what=what)
+    window_s = as_float(window_s, "window_s", positive=True, optional=True,
+                        expected="a positive window length in s, or None")  # fmt: skip
+    return testbed, logs, window_s
+
+
 def replay(
     testbed: Testbed,
     logs,
@@ -393,16 +406,17 @@ def replay(
 
     Parameters
     ----------
-    testbed : Testbed
-        The testbed (its ``[effects]`` included).
-    logs : Log or sequence of Log
-        Measured runs; each segment of each log starts afresh.
+    testbed : Testbed, str or path-like
+        The testbed (its ``[effects]`` included); a built-in name or a testbed file is loaded.
+    logs : Log, path-like, or a sequence of them
+        Measured runs (files are read with the testbed); each segment of each log starts
+        afresh. A log of a testbed of another kind or dof is refused.
     effects : mapping, optional
         Extra effects (FORMATS.md names and units) in the Model.
     window_s : float, optional
         Multiple-shooting window, s (see :func:`make_windows`).
     substeps : int, optional
-        RK4 sub-steps per sample (default :func:`substeps_for`).
+        RK4 sub-steps per sample, >= 1 (default :func:`substeps_for`).
     progress : callable, optional
         ``progress(what, done, total)``.
 
@@ -410,7 +424,19 @@ def replay(
     -------
     Replay
         ``.gap`` and ``.floor.value`` in ``.gap_unit``, ``.residuals()``, ``.to_json()``.
+
+    Raises
+    ------
+    InputError
+        A testbed, log or option that is not what is described above (the message names
+        the argument), a log of another kind of testbed, an effect that is unknown, not
+        finite or cannot act on the testbed.
+    SolverError
+        The fit of the windows' initial states failed.
     """
+    testbed, logs, window_s = checked_arguments(testbed, logs, window_s, "the testbed replayed")
+    effects = as_effects(effects)
+    substeps = as_int(substeps, "substeps", minimum=1, optional=True)
     say = progress or (lambda *a, **k: None)
     datas, windows, floor = prepare(testbed, logs, window_s=window_s)
     model = model_for(testbed, effects)

@@ -59,6 +59,7 @@ from airbearing.analysis.discrepancy.data import (
 from airbearing.analysis.discrepancy.honest import Errors, effect_errors, honest
 from airbearing.analysis.discrepancy.localise import localise
 from airbearing.analysis.discrepancy.replay import (
+    checked_arguments,
     log_gaps,
     model_for,
     prepare,
@@ -101,7 +102,8 @@ from airbearing.analysis.shooting.process_noise import (
     estimate_process_noise,
     set_intensity,
 )
-from airbearing.errors import InputError, SolverError
+from airbearing.errors import SolverError
+from airbearing.io.coerce import as_int, as_logs, as_names
 from airbearing.io.log import Log
 from airbearing.io.testbed import Testbed
 from airbearing.models.effects import REGISTRY
@@ -436,16 +438,17 @@ def discrepancy(
 
     Parameters
     ----------
-    testbed : Testbed
-        The nominal testbed (its ``[effects]`` are taken as known).
-    logs : Log or sequence of Log
-        Runs of the testbed, fitted jointly (one effect set).
-    validate : sequence of Log
+    testbed : Testbed, str or path-like
+        The nominal testbed (its ``[effects]`` are taken as known); a built-in name or a
+        testbed file is loaded.
+    logs : Log, path-like, or a sequence of them
+        Runs of the testbed, fitted jointly (one effect set); files are read with it.
+    validate : sequence of Log or path-like
         Runs not fitted, on which the named effects must also shrink the gap.
     max_effects : int
         Most effects forward selection may add (>= 0).
-    only : iterable of str, optional
-        Search only these effect names.
+    only : str or iterable of str, optional
+        Search only this effect name, or these.
     seed : int
         Seed of the random split of the windows into the held-out folds.
     window_s : float, optional
@@ -453,7 +456,7 @@ def discrepancy(
     jit : bool, optional
         Compile the Model to C (default: when a compiler is available).
     workers : int
-        Threads fitting the candidates of a round side by side (1: one after the other).
+        (>= 1) Threads fitting the candidates of a round side by side (1: one after the other).
     screen : bool
         Screen the candidates of each round by the score test of :mod:`.screen` (one shared
         Jacobian) and fit by IPOPT only those that can be named; False fits every candidate.
@@ -472,10 +475,11 @@ def discrepancy(
     SolverError
         The nominal replay cannot be fitted.
     """
-    if not isinstance(max_effects, int | np.integer) or max_effects < 0:
-        raise InputError(f"--max-effects {max_effects!r}: expected an integer >= 0")
-    logs = [logs] if isinstance(logs, Log) else list(logs)
-    validate = list(validate or ())
+    testbed, logs, window_s = checked_arguments(testbed, logs, window_s, "the testbed searched")
+    validate = as_logs(validate or (), testbed, name="validate", allow_empty=True)
+    max_effects = as_int(max_effects, "max_effects", minimum=0)
+    workers, seed = as_int(workers, "workers", minimum=1), as_int(seed, "seed")
+    only = as_names(only, "only", optional=True)
     datas, windows, floor = prepare(testbed, logs, window_s=window_s)
     cands = candidates_for(testbed, datas, only)
     # listed with their reason, never fitted (a spring on a yaw that turns many times)

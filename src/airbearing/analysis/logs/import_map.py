@@ -12,13 +12,22 @@ the raw file is row ``i`` of the log.
 from __future__ import annotations
 
 import os
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from airbearing.errors import InputError
-from airbearing.io.import_map import ImportMap, raw_columns, read_import_map, read_raw, unwrap
+from airbearing.io.coerce import as_testbed
+from airbearing.io.import_map import (
+    ImportMap,
+    import_map_from_dict,
+    raw_columns,
+    read_import_map,
+    read_raw,
+    unwrap,
+)
 from airbearing.io.log import LOG_COLUMNS, QUATERNION_NORM_TOL, RATE_COLUMNS, Log
 from airbearing.io.testbed import Testbed
 from airbearing.models import quaternion as quat
@@ -112,12 +121,14 @@ def import_log_with_notes(
     ----------
     raw : path or pandas.DataFrame
         The raw file (CSV, or Parquet by suffix) or its table (cells as read).
-    import_map : ImportMap or path
-        The map (a TOML file is read with :func:`airbearing.io.import_map.read_import_map`).
-    testbed : Testbed or None
-        If given, the log is validated against it (required columns, gaps) and,
-        with ``sensors.gyro = false``, the map's rate columns are ignored (said in
-        :attr:`ImportResult.notes`).
+    import_map : ImportMap, path or dict
+        The map (a TOML file is read with :func:`airbearing.io.import_map.read_import_map`;
+        a dict in the TOML layout is checked by
+        :func:`~airbearing.io.import_map.import_map_from_dict`).
+    testbed : Testbed, str, path-like or None
+        A testbed, a built-in name or a testbed file. If given, the log is validated
+        against it (required columns, gaps) and, with ``sensors.gyro = false``, the map's
+        rate columns are ignored (said in :attr:`ImportResult.notes`).
     source : str or None
         Name of the raw data in messages (default: the path, or ``"<raw>"``).
 
@@ -139,11 +150,18 @@ def import_log_with_notes(
     """
     import pandas as pd
 
-    if not isinstance(import_map, ImportMap):
-        import_map = read_import_map(import_map)
+    import_map = _as_import_map(import_map)
+    testbed = as_testbed(testbed, optional=True)
+    if source is not None and not isinstance(source, str):
+        raise InputError(f"source={source!r}: expected a str (the raw data's name) or None")
     if isinstance(raw, pd.DataFrame):
         src = source or "<raw>"
         table = raw
+    elif not isinstance(raw, str | os.PathLike):
+        raise InputError(
+            f"raw={raw!r:.60}: expected a raw log file path (str or path-like) or a "
+            "pandas.DataFrame"
+        )
     else:
         src = source or str(raw)
         table = read_raw(Path(raw))  # type: ignore[arg-type]
@@ -190,6 +208,20 @@ def import_log_with_notes(
     return ImportResult(log, tuple(notes), skip)
 
 
+def _as_import_map(import_map) -> ImportMap:
+    """``import_map`` as an :class:`ImportMap` (itself, a TOML file or a dict), or InputError."""
+    if isinstance(import_map, ImportMap):
+        return import_map
+    if isinstance(import_map, Mapping):
+        return import_map_from_dict(import_map, "import_map")
+    if isinstance(import_map, str | os.PathLike):
+        return read_import_map(import_map)
+    raise InputError(
+        f"import_map={import_map!r:.60}: expected an ImportMap, an import map file path or a "
+        "dict in its TOML layout"
+    )
+
+
 def import_log(
     raw: str | os.PathLike[str] | object,
     import_map: ImportMap | str | os.PathLike[str],
@@ -202,10 +234,12 @@ def import_log(
     raw : path-like or pandas.DataFrame
         The lab's export (``.csv``, with a byte-order mark, tab or semicolon separators
         allowed, or ``.parquet``).
-    import_map : ImportMap or path-like
-        Its columns, units, frames and yaw unwrapping (FORMATS.md "Import map").
-    testbed : Testbed, optional
-        Validates the log against the testbed (columns, sampling) and finds its outliers.
+    import_map : ImportMap, path-like or dict
+        Its columns, units, frames and yaw unwrapping (FORMATS.md "Import map"): a map, its
+        TOML file or a dict in the TOML layout.
+    testbed : Testbed, str or path-like, optional
+        A testbed, a built-in name or a testbed file. Validates the log against the
+        testbed (columns, sampling) and finds its outliers.
 
     Returns
     -------
