@@ -384,3 +384,21 @@ def test_detection_says_not_found_up_to_the_largest_size_and_why():
     assert row["named"] == 0 and row["size_95"] is None
     assert row["note"] == f"not found up to size {s[-1]:.3g} rad/s"  # the largest size swept
     assert row["why_missed"] == "not identifiable (10 of 10 missed runs)"
+
+
+def test_a_dispersion_across_zero_is_checked_and_drawn():
+    # a uniform or normal whose bounds or mean are of opposite signs (gimbal angles about
+    # zero) is an ordinary dispersion: its centre is checked, then each run draws from it
+    doc = {
+        "testbed": "cmg-yaw",
+        "command": "simulate",
+        "runs": 20,
+        "seed": 3,
+        "dispersions": {
+            "cmg.gimbal_angles": {"uniform": [-0.01, 0.01]},
+            "sensors.gyro_noise": {"normal": [1e-4, 1e-5]},
+        },
+    }
+    c = parse_campaign(doc)
+    angles = [d.values["cmg.gimbal_angles[0]"] for d in (draw_run(c, i) for i in range(c.runs))]
+    assert -0.01 <= min(angles) < 0 < max(angles) <= 0.01

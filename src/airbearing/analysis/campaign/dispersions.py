@@ -139,7 +139,11 @@ def _central(d, nominal: float | None) -> float:
     if d.kind == "relative_normal":
         return float(nominal)
     a, b = d.params
-    return {"normal": a, "uniform": 0.5 * (a + b), "loguniform": math.sqrt(a * b)}[d.kind]
+    if d.kind == "normal":
+        return a
+    if d.kind == "uniform":
+        return 0.5 * (a + b)
+    return math.sqrt(a * b)  # loguniform (its bounds are checked positive)
 
 
 def _apply(doc: dict, dispersions, pick) -> dict:
