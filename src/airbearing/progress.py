@@ -24,7 +24,11 @@ class Progress(Protocol):
 
 
 def silent(what: str, done: float | None = None, total: float | None = None) -> None:
-    """A :class:`Progress` that shows nothing."""
+    """A :class:`Progress` that shows nothing (but stops the work after a Ctrl-C that a
+    solver swallowed, :func:`airbearing.interrupt.check`)."""
+    from airbearing.interrupt import check
+
+    check()
 
 
 def call(progress: Callable | None) -> Progress:

@@ -247,14 +247,39 @@ def main(argv: list[str] | None = None) -> None:
 
 
 def _run(args: list[str]) -> None:
-    """Run the app on ``args``; every error leaves as one line and an exit status."""
+    """Run the app on ``args``; every error leaves as one line and an exit status.
+
+    A Ctrl-C is final (:mod:`airbearing.interrupt`): whatever the command did after it
+    (a solver that swallowed it and returned, an error that followed), the run ends with
+    "interrupted; nothing written" and status 130.
+    """
+    from airbearing import interrupt
+
+    interrupt.install()
+    try:
+        _run_app(args)
+        interrupt.check()
+    except BaseException as e:
+        if interrupt.interrupted() and not (isinstance(e, SystemExit) and e.code == 130):
+            print("airbearing: interrupted; nothing written", file=sys.stderr)
+            raise SystemExit(130) from None
+        raise
+    finally:
+        interrupt.uninstall()
+
+
+def _run_app(args: list[str]) -> None:
+    from airbearing import interrupt
+
     try:
         _register()
         app(args=args, prog_name="airbearing", standalone_mode=False)
     except InputError as e:
+        interrupt.check()
         print(f"airbearing: error: {one_line(e)}", file=sys.stderr)
         raise SystemExit(2) from None
     except AirbearingError as e:
+        interrupt.check()
         print(f"airbearing: failed: {one_line(e)}", file=sys.stderr)
         raise SystemExit(1) from None
     except typer.Exit as e:
@@ -265,6 +290,7 @@ def _run(args: list[str]) -> None:
     except SystemExit:
         raise
     except Exception as e:
+        interrupt.check()
         # the parser's own errors (typer's vendored click: ClickException, UsageError, ...)
         if type(e).__name__ == "NoArgsIsHelpError":
             # a group called without its command (e.g. `airbearing cmg`): its help

@@ -188,8 +188,15 @@ class Outputs:
             self.text(path, dumps_json(obj))
 
     def commit(self) -> list[Path]:
-        """Write every queued output; all or nothing. Returns the paths written."""
+        """Write every queued output; all or nothing. Returns the paths written.
+
+        Nothing is written after a Ctrl-C, even one a solver swallowed
+        (:func:`airbearing.interrupt.check` raises :class:`KeyboardInterrupt`).
+        """
+        from airbearing.interrupt import check
         from airbearing.io.output import write_temp
+
+        check()
 
         temps: list[tuple[Path, Path]] = []
         done: list[tuple[Path, Path | None]] = []
@@ -206,6 +213,7 @@ class Outputs:
                 # the temporary name keeps the suffix: writers that choose the format by
                 # suffix (write_log: .csv or .parquet) see the real one
                 temps.append((path, write_temp(path, write=write)))
+            check()
             for path, tmp in temps:
                 backup = None
                 if path.exists():

@@ -15,6 +15,8 @@ import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 
+from airbearing.interrupt import check as check_interrupt
+
 __all__ = ["QUIET", "PLAIN_DELAY", "progress_display", "set_quiet"]
 
 QUIET = {"on": False}
@@ -70,6 +72,7 @@ class _Plain:
             self.pending = None
 
     def __call__(self, what: str, done=None, total=None) -> None:
+        check_interrupt()
         if _repeated_compile_notice(what):
             return
         now = time.monotonic()
@@ -101,6 +104,7 @@ class _Rich:
         self.left = TimeLeft(time.monotonic())
 
     def __call__(self, what: str, done=None, total=None) -> None:
+        check_interrupt()
         if _repeated_compile_notice(what):
             return
         kw = {"description": f"{self.label}: {what}"}
@@ -115,7 +119,7 @@ class _Rich:
 
 
 def _silent(what: str, done=None, total=None) -> None:
-    pass
+    check_interrupt()
 
 
 @contextmanager
