@@ -137,3 +137,13 @@ def test_residuals_come_back_per_segment_in_time_order():
     assert np.all(np.diff(res[0].t) > 0)
     # noise units: the residual's spread is about one
     assert 0.7 < float(np.std(res[0].r)) < 1.3
+
+
+def test_a_window_longer_than_every_segment_is_as_long_as_the_longest_segment():
+    # two logs of 30 and 20 s: a 1e6 s window cuts each into one window, and the window set
+    # holds no more rows than the longest (it padded every window to 1e7 rows and hung)
+    logs = [_coast(2.0, 1e-4, 30.0, 1), _coast(2.0, 1e-4, 20.0, 2)]
+    datas = [replay_data(ROTOR, lg) for lg in logs]
+    for linked in (False, True):
+        ws = make_windows(datas, window_s=1e6, linked=linked)
+        assert ws.u.shape[:2] == (2, 300), ws.u.shape

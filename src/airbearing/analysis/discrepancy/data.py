@@ -429,7 +429,7 @@ def make_windows(datas, *, window_s: float | None = None, linked: bool = False) 
             f"{src}: {len(cuts)} window(s) of up to {L} samples inside its segments; need at "
             f"least {MIN_WINDOWS}: use a shorter window (now {window_s:g} s) or a longer log"
         )
-    return _window_set(datas, cuts, L, linked)
+    return _window_set(datas, cuts, linked)
 
 
 def _hand_over(cuts, linked: bool):
@@ -444,11 +444,13 @@ def _hand_over(cuts, linked: bool):
     return out
 
 
-def _window_set(datas, cuts, L: int, linked: bool = False) -> WindowSet:
+def _window_set(datas, cuts, linked: bool = False) -> WindowSet:
     d0 = datas[0]
     nw = len(cuts)
     hand = _hand_over(cuts, linked)
-    L = max(L, max(m for m, _ in hand))
+    # as long as the longest window cut (a window asked longer than every segment would
+    # otherwise allocate and integrate its padding: 2e7 rows for --window 1e6 at 20 Hz)
+    L = max(m for m, _ in hand)
     nu = d0.u.shape[1]
     x0 = []
     U = np.zeros((nw, L, nu))
