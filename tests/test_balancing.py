@@ -415,14 +415,14 @@ def test_cli_start_and_initial_rate(tmp_path):
     data = json.loads(out.read_text())
     assert data["start"] == "level" and "note" not in data and data["offset_stays"] is False
     cli.main(["balance", "platform-3dof", "--method", "adaptive", "--duration", "20",
-              "--offset-stays", "--json", str(out)])  # fmt: skip
+              "--offset-stays", "--json", str(out), "--force"])  # fmt: skip
     data = json.loads(out.read_text())
     assert data["offset_stays"] is True and "nothing is learnt" in data["note"]
     # default vertical offset: 2 % of the testbed's -2.6 mm; the z slider moves it a little
     assert data["residual_offset_m"][2] == pytest.approx(0.02 * -2.6e-3, abs=1e-6)
     # a top-heavy platform has no rest position: auto starts it level and says so
     cli.main(["balance", "platform-3dof", "--duration", "20", "--vertical-offset", "1e-5",
-              "--json", str(out)])  # fmt: skip
+              "--json", str(out), "--force"])  # fmt: skip
     data = json.loads(out.read_text())
     assert data["start"] == "level" and "not below the CR" in data["note"]
     for bad in (["--start", "upside-down"], ["--start", "rest", "--vertical-offset", "1e-5"]):

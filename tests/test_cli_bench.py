@@ -6,8 +6,10 @@ import signal
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import pytest
+from cli_run import run
 
 
 def _sigint_after(delay: float, args: list[str], cwd) -> tuple[int, str]:
@@ -42,3 +44,82 @@ def test_ctrl_c_during_a_solve_writes_nothing_and_exits_130(tmp_path, example_ca
     assert rc == 130, err
     assert err.strip().splitlines()[-1] == "airbearing: interrupted; nothing written"
     assert sorted(p.name for p in tmp_path.iterdir()) == []
+
+
+# ------------------------------------------------------------ existing files are not replaced
+
+EXISTS = "the file exists; give --force to replace it"
+
+#: Commands with one output that exists already ({X} is that file); refused before any work.
+EXISTING = [
+    ["testbed", "export", "cmg-yaw", "-o", "{X}.toml"],
+    ["simulate", "cmg-yaw", "--duration", "1", "-o", "{X}.csv"],
+    ["simulate", "cmg-yaw", "--duration", "1", "--json", "{X}.json"],
+    ["gains", "cmg-yaw", "--json", "{X}.json"],
+    ["report", "cmg-yaw", "-o", "{X}.html"],
+    ["balance", "seed004-platform", "--two-step", "--json", "{X}.json"],
+    ["cmg", "size", "--json", "{X}.json"],
+    ["discrepancy", "cmg-yaw", "{LOG}", "--report", "{X}.html"],
+    ["discrepancy", "cmg-yaw", "{LOG}", "--write-testbed", "{X}.toml"],
+    ["replay", "cmg-yaw", "{LOG}", "--json", "{X}.json"],
+    ["identify", "seed004-platform", "{LOG}", "--json", "{X}.json"],
+    ["log", "check", "cmg-yaw", "{LOG}", "--json", "{X}.json"],
+    ["log", "plot", "{LOG}", "-o", "{X}.png"],
+    ["testbed", "list", "--json", "{X}.json"],
+]
+
+
+@pytest.mark.parametrize("args", EXISTING, ids=[" ".join(a[:2]) + " " + a[-2] for a in EXISTING])
+def test_an_existing_output_is_refused_without_force(tmp_path, capsys, args):
+    log = tmp_path / "in.csv"
+    log.write_text("t,wz\n0,0\n")
+    target = next(a for a in args if "{X}" in a).replace("{X}", str(tmp_path / "lab"))
+    Path(target).write_text("a lab's file\n")
+    args = [a.replace("{X}", str(tmp_path / "lab")).replace("{LOG}", str(log)) for a in args]
+    assert run(args) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    option = args[args.index(target) - 1]
+    assert err == [
+        f"airbearing: error: {option} {target}: the file exists; give --force to replace it"
+    ]
+    assert Path(target).read_text() == "a lab's file\n"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["in.csv", Path(target).name]
+
+
+def test_force_replaces_an_output_but_never_an_input(tmp_path, capsys):
+    tb = tmp_path / "tb.toml"
+    assert run(["testbed", "export", "cmg-yaw", "-o", str(tb)]) == 0
+    tb.write_text(tb.read_text() + "# the lab's note\n")
+    assert run(["testbed", "export", "cmg-yaw", "-o", str(tb)]) == 2
+    assert tb.read_text().endswith("# the lab's note\n")
+    assert run(["testbed", "export", "cmg-yaw", "-o", str(tb), "--force"]) == 0
+    assert "# the lab's note" not in tb.read_text()
+    capsys.readouterr()
+    # an input is refused with --force too
+    assert run(["gains", str(tb), "--json", str(tb), "--force"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "an input of this command" in err[0]
+
+
+def test_demo_reuses_its_own_folder_but_not_another_report(tmp_path, capsys):
+    from airbearing.cli.demo import _demo_report
+    from airbearing.cli.outputs import Outputs
+
+    d = tmp_path / "demo-out"
+    d.mkdir()
+    report = d / "report.html"
+    report.write_text("<!DOCTYPE html><html><head><title>my report</title></head></html>")
+    assert run(["demo", "--out", str(d), "--quick"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [
+        f"airbearing: error: --out {report}: the file exists; give --force to replace it"
+    ]
+    assert "my report" in report.read_text()
+    # the demo's own report from an earlier run may be replaced (the README's first command)
+    report.write_text(
+        "<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'/>"
+        "<title>airbearing demo on the built-in testbeds</title></head></html>"
+    )
+    assert _demo_report(report)
+    own = Outputs().plan(report, "--out", (".html",), create_folder=True, own=_demo_report)
+    assert own == report

@@ -410,7 +410,7 @@ def test_outputs_all_or_nothing(tmp_path):
 
     keep = tmp_path / "keep.json"
     keep.write_text("old")
-    out = Outputs()
+    out = Outputs(force=True)  # keep.json is replaced on success (--force)
     a = out.plan(tmp_path / "a.csv", "-o", (".csv",))
     k = out.plan(keep, "--json", (".json",))
     b = out.plan(tmp_path / "b.html", "--report", (".html",))

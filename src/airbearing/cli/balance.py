@@ -10,7 +10,7 @@ import typer
 
 from airbearing.cli import app
 from airbearing.cli.common import check_log_size, number, numbers, testbed_arg, testbed_input
-from airbearing.cli.outputs import Outputs
+from airbearing.cli.outputs import Force, Outputs
 from airbearing.cli.show_progress import progress_display
 from airbearing.cli.tables import dict_table
 from airbearing.errors import InputError
@@ -126,9 +126,10 @@ def balance(
     log: Annotated[
         Path | None, typer.Option("-o", "--out", help="Run log, .csv or .parquet.")
     ] = None,
+    force: Force = False,
 ) -> None:
     """Balance a platform testbed automatically (seeds 000 and 004) and report the metrics."""
-    out = Outputs()
+    out = Outputs(force=force)
     testbed_input(out, testbed)
     json_path = out.plan(json_out, "--json", (".json",))
     log_path = out.plan(log, "-o", (".csv", ".parquet"))

@@ -8,6 +8,7 @@ from typing import Annotated, Literal
 import typer
 
 from airbearing.cli import app
+from airbearing.cli.outputs import Force
 
 
 def _campaign_inputs(out, campaign_file: Path) -> None:
@@ -59,6 +60,7 @@ def campaign(
         Literal["detection"] | None,
         typer.Option(help="detection: each run hides one dispersed effect, or nothing."),
     ] = None,
+    force: Force = False,
 ) -> None:
     """Run CAMPAIGN_FILE's runs (local cluster or --scheduler), write the results table."""
     import math
@@ -70,7 +72,7 @@ def campaign(
     from airbearing.cli.show_progress import progress_display
     from airbearing.errors import InputError
 
-    out = Outputs()
+    out = Outputs(force=force)
     _campaign_inputs(out, campaign_file)
     if output is None:
         raise InputError("-o/--out: the campaign needs a results file ending in .parquet")

@@ -10,7 +10,7 @@ import typer
 
 from airbearing.cli import app
 from airbearing.cli.common import number, testbed_arg, testbed_input
-from airbearing.cli.outputs import Outputs
+from airbearing.cli.outputs import Force, Outputs
 from airbearing.cli.show_progress import progress_display
 from airbearing.cli.tables import echo_table
 from airbearing.errors import InputError
@@ -60,13 +60,14 @@ def size(
     ],
     density: Annotated[float, typer.Option(help="Flywheel density, kg/m^3.")] = TABLE5["density"],
     json_out: Annotated[Path | None, typer.Option("--json", help="Result JSON.")] = None,
+    force: Force = False,
 ) -> None:
     """Size the flywheels for a manoeuvre (seed 001 eqs. 5-9).
 
     Every default is seed 001's Table 5 (and Table 6): with no option the command
     reproduces Table 5 (N_req 1.728 mN m, h0 0.8661 mN m s, m_f 14.1 g, L_f 5.8 mm).
     """
-    out = Outputs()
+    out = Outputs(force=force)
     json_path = out.plan(json_out, "--json", (".json",))
     number("--angle-deg", angle_deg, lo=0, hi=360, lo_open=True, unit="deg")
     number("--time", time, lo=0, lo_open=True, unit="s")
@@ -125,9 +126,10 @@ def envelope(
     resolution: Annotated[
         int, typer.Option(min=5, max=400, help="Elevations of the direction grid, 5 to 400.")
     ] = 41,
+    force: Force = False,
 ) -> None:
     """Momentum envelope and internal singular surfaces of the testbed's pyramid."""
-    out = Outputs()
+    out = Outputs(force=force)
     testbed_input(out, testbed)
     fig_path = out.plan(output, "-o", (".png", ".svg", ".pdf"))
     data_path = out.plan(data, "--data", (".csv",))

@@ -11,8 +11,19 @@ from typing import Annotated
 import typer
 
 from airbearing.cli import app
-from airbearing.cli.outputs import Outputs
+from airbearing.cli.outputs import Force, Outputs
 from airbearing.cli.show_progress import progress_display
+
+
+def _demo_report(path: Path) -> bool:
+    """``path`` is a report an earlier ``airbearing demo`` wrote (its page title says so):
+    the demo may be run again into the same folder."""
+    try:
+        with open(path, encoding="utf-8", errors="replace") as fh:
+            head = fh.read(4096)
+    except OSError:
+        return False
+    return head.startswith("<!DOCTYPE html>") and "<title>airbearing demo " in head
 
 
 @app.command()
@@ -21,14 +32,17 @@ def demo(
         Path, typer.Option("-o", "--out", help="Folder for the report (created if missing).")
     ] = Path("demo-out"),
     quick: Annotated[bool, typer.Option(help="Shorter runs (for tests).")] = False,
+    force: Force = False,
 ) -> None:
     """Run every capability on the built-in testbeds and write DIR/report.html."""
-    outputs = Outputs()
+    outputs = Outputs(force=force)
     if out.exists() and not out.is_dir():
         from airbearing.errors import InputError
 
         raise InputError(f"--out {out}: is a file, expected a folder")
-    report = outputs.plan(out / "report.html", "--out", (".html",), create_folder=True)
+    report = outputs.plan(
+        out / "report.html", "--out", (".html",), create_folder=True, own=_demo_report
+    )
 
     from airbearing.reporting.demo import run_demo
 

@@ -8,7 +8,7 @@ from typing import Annotated
 import typer
 
 from airbearing.cli import app
-from airbearing.cli.outputs import Outputs
+from airbearing.cli.outputs import Force, Outputs
 from airbearing.errors import InputError
 
 
@@ -39,13 +39,14 @@ def discrepancy(
     window: Annotated[
         float | None, typer.Option(help="Multiple-shooting window, s (default min(10, T/4)).")
     ] = None,
+    force: Force = False,
 ) -> None:
     """Replay LOGS with TESTBED's model, localise the gap and name the missing effects.
 
     Every log (and every segment between gaps) has its own initial states; one effect
     set is fitted to all logs together. Outlier rows are left out and reported.
     """
-    out = Outputs()
+    out = Outputs(force=force)
     from airbearing.cli.common import testbed_input
 
     testbed_input(out, testbed)

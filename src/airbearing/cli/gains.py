@@ -10,7 +10,7 @@ import typer
 
 from airbearing.cli import app
 from airbearing.cli.common import number, numbers, testbed_arg, testbed_input
-from airbearing.cli.outputs import Outputs
+from airbearing.cli.outputs import Force, Outputs
 from airbearing.cli.show_progress import progress_display
 from airbearing.cli.tables import cell, echo_table
 from airbearing.errors import InputError
@@ -52,9 +52,10 @@ def gains(
     json_out: Annotated[
         Path | None, typer.Option("--json", help="Gains and verdict, JSON.")
     ] = None,
+    force: Force = False,
 ) -> None:
     """Tune the balancing PID or the CMG attitude PID to a specification."""
-    out = Outputs()
+    out = Outputs(force=force)
     testbed_input(out, testbed)
     json_path = out.plan(json_out, "--json", (".json",))
     number("--phase-margin-deg", phase_margin_deg, lo=0, hi=90, lo_open=True, hi_open=True,
@@ -118,11 +119,12 @@ def report(
     ] = None,
     output: Annotated[Path | None, typer.Option("-o", "--out", help="Report, .html.")] = None,
     json_out: Annotated[Path | None, typer.Option("--json", help="Margins, JSON.")] = None,
+    force: Force = False,
 ) -> None:
     """Linear stability report (HTML) of a loop, with its margins as JSON."""
     if output is None:
         raise InputError("-o/--out: the report needs an output file ending in .html")
-    out = Outputs()
+    out = Outputs(force=force)
     testbed_input(out, testbed)
     out.input(gains_file, "the gains file")
     html_path = out.plan(output, "-o", (".html",))

@@ -9,7 +9,7 @@ import typer
 
 from airbearing.cli import app
 from airbearing.cli.common import testbed_arg, testbed_input
-from airbearing.cli.outputs import Outputs
+from airbearing.cli.outputs import Force, Outputs
 from airbearing.cli.show_progress import progress_display
 from airbearing.errors import InputError
 
@@ -55,9 +55,10 @@ def identify(
     write_testbed_path: Annotated[
         Path | None, typer.Option("--write-testbed", help="Testbed file with identified values.")
     ] = None,
+    force: Force = False,
 ) -> None:
     """Identify inertia (and CM offset) from free-oscillation, spin-down or slew logs."""
-    out = Outputs()
+    out = Outputs(force=force)
     testbed_input(out, testbed)
     out.inputs(logs, "log")
     p_json = out.plan(json_out, "--json", (".json",))

@@ -8,6 +8,7 @@ from typing import Annotated
 import typer
 
 from airbearing.cli import app
+from airbearing.cli.outputs import Force
 
 __all__ = ["log_app"]
 
@@ -89,12 +90,13 @@ def import_(
     output: Annotated[
         Path, typer.Option("-o", "--out", metavar="LOG", help="Log to write, .csv or .parquet.")
     ],
+    force: Force = False,
 ) -> None:
     """Convert a lab's raw log into a log (FORMATS.md import map) and summarise it."""
     from airbearing.cli.outputs import Outputs
 
     testbed, raw = _testbed_and_file(args, "import", "RAW", testbed_required=False)
-    out = Outputs()
+    out = Outputs(force=force)
     _declare_inputs(out, testbed, [(raw, "the raw log"), (map_path, "the import map")])
     log_path = out.plan(output, "-o", _LOG_SUFFIXES)
     tb = _testbed(testbed)
@@ -130,6 +132,7 @@ def check(
     json_out: Annotated[
         Path | None, typer.Option("--json", metavar="PATH", help="Result JSON.")
     ] = None,
+    force: Force = False,
 ) -> None:
     """Rows, rate, segments, jitter, outlier rows and what each tool can use.
 
@@ -140,7 +143,7 @@ def check(
     from airbearing.cli.outputs import Outputs
 
     testbed, log_file = _testbed_and_file(args, "check", "LOG", testbed_required=True)
-    out = Outputs()
+    out = Outputs(force=force)
     _declare_inputs(out, testbed, [(log_file, "the log")])
     json_path = out.plan(json_out, "--json", (".json",))
     tb = _testbed(testbed)
@@ -246,12 +249,13 @@ def plot(
     output: Annotated[
         Path, typer.Option("-o", "--out", metavar="PLOT", help="Plot, .png or .html.")
     ],
+    force: Force = False,
 ) -> None:
     """The logged channels against time; gaps shown as breaks, outliers circled (with a testbed)."""
     from airbearing.cli.outputs import Outputs
 
     testbed, log_file = _testbed_and_file(args, "plot", "LOG", testbed_required=False)
-    out = Outputs()
+    out = Outputs(force=force)
     _declare_inputs(out, testbed, [(log_file, "the log")])
     plot_path = out.plan(output, "-o", (".png", ".html"))
     tb = _testbed(testbed)

@@ -10,7 +10,13 @@ outputs already renamed are taken back, so a failure leaves nothing new behind.
 
 Inputs are never written: every file a command reads is declared
 (:meth:`Outputs.input`), and an output that is the same file (same real path, or
-the same file through a hard link) is refused before any work, naming both.
+the same file through a hard link) is refused before any work, naming both, even
+with ``--force``.
+
+A file that exists is never replaced without a word: an output path that exists is
+refused before any work unless the command was given ``--force`` (``Outputs(force=True)``),
+except a file the command itself wrote before and marks as its own
+(``plan(..., own=...)``: the demo's report in its folder).
 """
 
 from __future__ import annotations
@@ -19,10 +25,22 @@ import os
 import tempfile
 from collections.abc import Callable
 from pathlib import Path
+from typing import Annotated
+
+import typer
 
 from airbearing.errors import InputError
 
-__all__ = ["Outputs"]
+__all__ = ["Outputs", "Force"]
+
+#: The ``--force`` option of every command that writes files.
+Force = Annotated[
+    bool,
+    typer.Option(
+        "--force",
+        help="Replace output files that exist (an input of the command is never replaced).",
+    ),
+]
 
 
 def _probe(folder: Path, message: str) -> None:
@@ -56,7 +74,8 @@ def _same_file(a: Path, b: Path) -> bool:
 class Outputs:
     """The output files of one command run."""
 
-    def __init__(self) -> None:
+    def __init__(self, force: bool = False) -> None:
+        self.force = bool(force)
         self._inputs: list[tuple[Path, str]] = []
         self._planned: dict[Path, str] = {}
         self._writers: list[tuple[Path, str, Callable[[Path], None]]] = []
@@ -69,8 +88,12 @@ class Outputs:
         suffixes: tuple[str, ...],
         *,
         create_folder: bool = False,
+        own: Callable[[Path], bool] | None = None,
     ) -> Path | None:
         """Check an output path before any work; returns it as a Path (``None`` passes).
+
+        A path that exists is refused unless ``force`` was given, or ``own(path)`` says
+        it is this command's own earlier output.
 
         ``create_folder=True`` (an option that names a folder, e.g. ``demo --out DIR``):
         the file's folder may be missing if its own parent exists and can be written;
@@ -80,12 +103,19 @@ class Outputs:
         ------
         InputError
             Wrong extension, a folder that does not exist or cannot be written, a path
-            that is a folder, or the same path given for two outputs.
+            that is a folder, the same path given for two outputs, or a file that
+            exists without ``force``.
         """
         if path is None:
             return None
         path = Path(path)
         self._check_not_input(path, option)
+        if (
+            not self.force
+            and (path.is_file() or path.is_symlink())
+            and not (own is not None and own(path))
+        ):
+            raise InputError(f"{option} {path}: the file exists; give --force to replace it")
         if suffixes and path.suffix.lower() not in suffixes:
             raise InputError(f"{option} {path}: expected a file ending in {' or '.join(suffixes)}")
         folder = path.parent

@@ -8,7 +8,7 @@ from typing import Annotated
 import typer
 
 from airbearing.cli import app
-from airbearing.cli.outputs import Outputs
+from airbearing.cli.outputs import Force, Outputs
 
 
 @app.command()
@@ -20,13 +20,14 @@ def replay(
     window: Annotated[
         float | None, typer.Option(help="Multiple-shooting window, s (default min(10, T/4)).")
     ] = None,
+    force: Force = False,
 ) -> None:
     """Replay LOGS with TESTBED's model (its [effects] included) and report the gap.
 
     Only each window's initial state is fitted. Use it to check an augmented testbed
     (discrepancy --write-testbed) on a new log.
     """
-    out = Outputs()
+    out = Outputs(force=force)
     from airbearing.cli.common import testbed_input
 
     testbed_input(out, testbed)

@@ -17,7 +17,7 @@ from airbearing.cli.common import (
     testbed_arg,
     testbed_input,
 )
-from airbearing.cli.outputs import Outputs
+from airbearing.cli.outputs import Force, Outputs
 from airbearing.cli.tables import echo_summary
 from airbearing.errors import InputError
 
@@ -104,9 +104,10 @@ def simulate(
         Path | None, typer.Option("-o", "--out", help="Log, .csv or .parquet.")
     ] = None,
     json_out: Annotated[Path | None, typer.Option("--json", help="Summary JSON.")] = None,
+    force: Force = False,
 ) -> None:
     """Simulate a testbed and write the log (FORMATS.md) and a summary JSON."""
-    out = Outputs()
+    out = Outputs(force=force)
     testbed_input(out, testbed)
     out.input(times, "the --times log")
     log_path = out.plan(output, "-o", (".csv", ".parquet"))

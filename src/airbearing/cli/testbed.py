@@ -9,7 +9,7 @@ from typing import Annotated
 import typer
 
 from airbearing.cli import app
-from airbearing.cli.outputs import Outputs
+from airbearing.cli.outputs import Force, Outputs
 from airbearing.cli.tables import echo_table
 from airbearing.errors import InputError
 
@@ -44,11 +44,12 @@ def list_(
             help="Write the list as JSON ({name, kind, dof, description}); '-' for stdout.",
         ),
     ] = None,
+    force: Force = False,
 ) -> None:
     """List the built-in testbeds, one line each (--json PATH: as JSON)."""
     from airbearing.io.builtins import BUILTINS, builtin_names, find
 
-    out = Outputs()
+    out = Outputs(force=force)
     json_path = None if json_ in (None, "-") else out.plan(Path(json_), "--json", (".json",))
     entries = [*BUILTINS, *(find(a) for a in builtin_names() if find(a).alias_of)]
     if json_ == "-":
@@ -80,11 +81,12 @@ def show(
 def export(
     name: Annotated[str, typer.Argument(help="Built-in name (see 'airbearing testbed list').")],
     output: Annotated[Path, typer.Option("-o", "--out", help="Testbed file to write, .toml.")],
+    force: Force = False,
 ) -> None:
     """Write a built-in testbed as a starting template for your own testbed file."""
     from airbearing.io.builtins import builtin_toml
 
-    out = Outputs()
+    out = Outputs(force=force)
     path = out.plan(output, "-o", (".toml",))
     _entry(name)
     text = builtin_toml(name).decode("utf-8")
