@@ -294,7 +294,6 @@ def free_oscillation(
     seed = as_int(seed, "seed")
     q0 = tuple(_quaternion(q0).tolist())
     effects = as_effects(effects)
-    attitude_noise = as_float(attitude_noise, "attitude_noise", "rad", minimum=0.0, optional=True)
     model = build_model(testbed, effects) if model is None else model
     u = _free_inputs(testbed, model, sliders)
     w0 = _initial_rate(model, initial_rate, q0)
