@@ -154,13 +154,9 @@ def _log_arrays(testbed: Testbed, log: Log):
     src = log.source
     if not isinstance(log, Log):
         raise InputError(f"identify: expected Log objects, got {type(log).__name__}")
-    if log.testbed is not None and (
-        log.testbed.kind != testbed.kind or log.testbed.body.dof != testbed.body.dof
-    ):
-        raise InputError(
-            f"{src}: the log belongs to testbed {log.testbed.name!r} (kind = {log.testbed.kind!r}, "
-            f"dof = {log.testbed.body.dof}), not to a kind = 'cmg', dof = 1 testbed"
-        )
+    from airbearing.io.coerce import check_log_testbed
+
+    check_log_testbed(testbed, log, "the testbed to identify")
     for cols, what in (
         (("wz",), "the yaw rate wz (rad/s)"),
         (("d1", "d2", "d3", "d4"), "the measured gimbal angles d1..d4 (rad)"),
