@@ -123,3 +123,63 @@ def test_demo_reuses_its_own_folder_but_not_another_report(tmp_path, capsys):
     assert _demo_report(report)
     own = Outputs().plan(report, "--out", (".html",), create_folder=True, own=_demo_report)
     assert own == report
+
+
+# ------------------------------------------------------------ options that do not apply
+
+#: (arguments, the option named): refused before any work, exit 2, one line.
+NOT_APPLYING = [
+    (["balance", "seed004-platform", "--two-step", "--duration", "5"], "--duration"),
+    (
+        ["balance", "seed004-platform", "--two-step", "--initial-offset-mm", "1"],
+        "--initial-offset-mm",
+    ),
+    (["balance", "seed004-platform", "--two-step", "--start", "level"], "--start"),
+    # given explicitly at its default value: still not used
+    (["balance", "seed004-platform", "--two-step", "--duration", "300"], "--duration"),
+    (["balance", "seed000-tabletop", "--seeds", "3", "--duration", "10"], "--seeds"),
+    (
+        ["balance", "seed000-tabletop", "--compare", "mechanical,mixed", "--method", "lyapunov"],
+        "--method",
+    ),
+    (
+        ["simulate", "cmg-yaw", "--scenario", "slew", "--initial-rate", "1", "0", "0"],
+        "--initial-rate",
+    ),
+    (["simulate", "cmg-yaw", "--scenario", "slew", "--spin-rate", "1"], "--spin-rate"),
+    (["simulate", "cmg-yaw", "--sliders", "0", "0", "0"], "--sliders"),
+    (["simulate", "cmg-yaw", "--initial-quaternion", "1", "0", "0", "0"], "--initial-quaternion"),
+    (["simulate", "seed004-platform", "--scenario", "free", "--yaw-deg", "30"], "--yaw-deg"),
+    (["simulate", "seed004-platform", "--scenario", "free", "--steering", "sr"], "--steering"),
+    (["gains", "cmg-yaw", "--offset-range-mm", "1", "2"], "--offset-range-mm"),
+    (["gains", "cmg-yaw", "--split", "mechanical"], "--split"),
+    (["report", "cmg-yaw", "--split", "mechanical", "-o", "{tmp}/r.html"], "--split"),
+    (["identify", "seed004-platform", "{log}", "--form", "acceleration"], "--form"),
+    (
+        ["identify", "cmg-yaw", "{log}", "--method", "equation-error", "--form", "integrated"],
+        "--form",
+    ),
+]
+
+
+@pytest.mark.parametrize(
+    "args, option", NOT_APPLYING, ids=[" ".join(a[:1] + a[2:6]) for a, _ in NOT_APPLYING]
+)
+def test_an_option_that_does_not_apply_is_refused(tmp_path, capsys, args, option):
+    log = tmp_path / "in.csv"
+    log.write_text("t,wz\n0,0\n")
+    args = [a.replace("{tmp}", str(tmp_path)).replace("{log}", str(log)) for a in args]
+    assert run(args) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith(f"airbearing: error: {option}: "), err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["in.csv"]
+
+
+def test_options_at_their_defaults_are_not_refused(tmp_path):
+    # the slew's defaults include --initial-rate 0 0 0 and --spin-rate 2: not given, not refused
+    out = tmp_path / "s.json"
+    assert (
+        run(["--quiet", "simulate", "cmg-yaw", "--duration", "0.5", "--ideal", "--json", str(out)])
+        == 0
+    )
+    assert out.exists()

@@ -53,8 +53,8 @@ app = typer.Typer(
     rich_markup_mode=None,
 )
 
-#: Global flags of this process (set by the callback below).
-GLOBAL = {"debug": False, "verbose": False}
+#: Global flags of this process (set by the callback below) and the arguments as typed.
+GLOBAL: dict = {"debug": False, "verbose": False, "argv": []}
 
 
 def _version(value: bool) -> None:
@@ -238,6 +238,7 @@ def main(argv: list[str] | None = None) -> None:
 
     install()
     args, notes = rewrite(args)
+    GLOBAL["argv"] = list(args)
     for note in notes:
         print(f"airbearing: {note}", file=sys.stderr)
     _path, start = command_path(args)

@@ -9,7 +9,14 @@ from typing import Annotated
 import typer
 
 from airbearing.cli import app
-from airbearing.cli.common import check_log_size, number, numbers, testbed_arg, testbed_input
+from airbearing.cli.common import (
+    check_log_size,
+    number,
+    numbers,
+    refuse_given,
+    testbed_arg,
+    testbed_input,
+)
 from airbearing.cli.outputs import Force, Outputs
 from airbearing.cli.show_progress import progress_display
 from airbearing.cli.tables import dict_table
@@ -189,6 +196,7 @@ def _check_options(duration, initial_offset_mm, vertical_offset, initial_rate, s
         )
     if two_step_ and compare is not None:
         raise InputError("--two-step and --compare are different runs: give one of them")
+    _refuse_what_does_not_apply(two_step_, compare)
     methods = None
     if compare is not None:
         methods = [m.strip() for m in compare.split(",") if m.strip()]
@@ -205,6 +213,26 @@ def _check_options(duration, initial_offset_mm, vertical_offset, initial_rate, s
         except InputError as e:  # the library names its parameter, the CLI its flag
             raise InputError(f"--sweep {sweep!r}: {str(e).split(': ', 1)[-1]}") from None
     return methods, sweep_spec
+
+
+def _refuse_what_does_not_apply(two_step_: bool, compare) -> None:
+    """An option given that the run asked for would ignore: one line naming it."""
+    if two_step_:
+        refuse_given(
+            ("duration", "initial_offset_mm", "vertical_offset", "start", "initial_rate",
+             "offset_stays", "seeds"),
+            "not used with --two-step (seed 004's procedure sets its own runs, start and "
+            "offsets)",
+        )  # fmt: skip
+    elif compare is not None:
+        refuse_given(("method",), "not used with --compare (the methods are --compare's list)")
+        refuse_given(
+            ("initial_offset_mm",),
+            "not used with --compare (the comparison starts at seed 000's -0.5 and +0.5 mm)",
+        )
+        refuse_given(("seed",), "not used with --compare (its runs use seeds 0 to --seeds - 1)")
+    else:
+        refuse_given(("seeds",), "applies only to --compare (seeds per offset)")
 
 
 def _compare(tb, methods, sweep_spec, seeds, duration, options) -> tuple[dict, str]:

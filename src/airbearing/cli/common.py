@@ -23,6 +23,8 @@ __all__ = [
     "numbers",
     "check_log_size",
     "MEMORY_FRACTION",
+    "given",
+    "refuse_given",
 ]
 
 #: Largest share of the machine's memory a command's log may need before it is refused.
@@ -178,3 +180,49 @@ def check_output_path(path: Path | None, option: str, suffixes: tuple[str, ...])
     from airbearing.cli.outputs import Outputs
 
     Outputs().plan(path, option, suffixes)
+
+
+def _current_context():
+    """The parser's context of the command being run, or ``None`` outside a command."""
+    try:
+        from typer._click.globals import get_current_context
+    except ImportError:  # a typer that uses click itself
+        from click import get_current_context
+    return get_current_context(silent=True)
+
+
+def given(*names: str) -> list[str]:
+    """The options among parameters ``names`` that were given on the command line.
+
+    Each is named as the user typed it (``-o`` or ``--out``); an option left at its
+    default is not given, even when the default is written out on the command line's
+    help. Outside a command (a direct call in a test), nothing is given.
+    """
+    ctx = _current_context()
+    if ctx is None:
+        return []
+    try:
+        from typer._click.core import ParameterSource
+    except ImportError:
+        from click.core import ParameterSource
+    from airbearing.cli import GLOBAL
+
+    argv = GLOBAL.get("argv") or []
+    out = []
+    for param in ctx.command.params:
+        if param.name not in names or not getattr(param, "opts", None):
+            continue
+        if ctx.get_parameter_source(param.name) != ParameterSource.COMMANDLINE:
+            continue
+        opts = list(param.opts) + list(getattr(param, "secondary_opts", []))
+        typed = [o for o in opts if any(a == o or a.startswith(o + "=") for a in argv)]
+        out.append(typed[0] if typed else max(opts, key=len))
+    return out
+
+
+def refuse_given(names, why: str) -> None:
+    """Refuse the first option among ``names`` given on the command line: one line
+    ``OPTION: why`` (an option that does not apply to what was asked)."""
+    found = given(*names)
+    if found:
+        raise InputError(f"{found[0]}: {why}")

@@ -9,7 +9,7 @@ from typing import Annotated, Literal, get_args
 import typer
 
 from airbearing.cli import app
-from airbearing.cli.common import number, numbers, testbed_arg, testbed_input
+from airbearing.cli.common import number, numbers, refuse_given, testbed_arg, testbed_input
 from airbearing.cli.outputs import Force, Outputs
 from airbearing.cli.show_progress import progress_display
 from airbearing.cli.tables import cell, echo_table
@@ -27,6 +27,12 @@ def _call(fn, *args, progress=None, **kw):
     if progress is not None and "progress" in inspect.signature(fn).parameters:
         kw["progress"] = progress
     return fn(*args, **kw)
+
+
+def _refuse_balancing_options(loop, names) -> None:
+    """Options of the balancing loop given for the attitude loop: one line naming them."""
+    if str(getattr(loop, "value", loop)) != "balancing":
+        refuse_given(names, "applies only to --loop balancing (the platform's balancing PID)")
 
 
 @app.command()
@@ -58,6 +64,7 @@ def gains(
     out = Outputs(force=force)
     testbed_input(out, testbed)
     json_path = out.plan(json_out, "--json", (".json",))
+    _refuse_balancing_options(loop, ("split", "offset_range_mm"))
     number("--phase-margin-deg", phase_margin_deg, lo=0, hi=90, lo_open=True, hi_open=True,
            unit="deg")  # fmt: skip
     number("--gain-margin-db", gain_margin_db, lo=0, lo_open=True, unit="dB")
@@ -117,7 +124,9 @@ def report(
     gains_file: Annotated[
         Path | None, typer.Option("--gains", help="Gains JSON of 'airbearing gains'.")
     ] = None,
-    output: Annotated[Path | None, typer.Option("-o", "--out", help="Report, .html.")] = None,
+    output: Annotated[
+        Path | None, typer.Option("-o", "--out", help="Report, .html (required).")
+    ] = None,
     json_out: Annotated[Path | None, typer.Option("--json", help="Margins, JSON.")] = None,
     force: Force = False,
 ) -> None:
@@ -129,6 +138,7 @@ def report(
     out.input(gains_file, "the gains file")
     html_path = out.plan(output, "-o", (".html",))
     json_path = out.plan(json_out, "--json", (".json",))
+    _refuse_balancing_options(loop, ("split",))
     spec_dict = None
     g = None
     if gains_file is not None:

@@ -8,7 +8,7 @@ from typing import Annotated, Literal
 import typer
 
 from airbearing.cli import app
-from airbearing.cli.common import testbed_arg, testbed_input
+from airbearing.cli.common import number, refuse_given, testbed_arg, testbed_input
 from airbearing.cli.outputs import Force, Outputs
 from airbearing.cli.show_progress import progress_display
 from airbearing.errors import InputError
@@ -72,8 +72,15 @@ def identify(
     from airbearing.io.log import read_log
     from airbearing.io.testbed import write_testbed
 
+    number("--known-mass", known_mass, lo=0, lo_open=True, unit="kg")
     reuse_freed_memory()
     tb = testbed_arg(testbed)
+    if tb.kind != "platform" or tb.body.dof != 3 or method != "equation-error":
+        refuse_given(
+            ("form",),
+            "applies only to --method equation-error on a platform testbed (dof 3), "
+            "the regression of seed 004 eqs. 45 and 47",
+        )
     loaded = [read_log(p, tb, columns=COLUMNS_USED) for p in logs]
     from airbearing.analysis.identify import identify as identify_logs
 
@@ -85,7 +92,7 @@ def identify(
             )  # fmt: skip
         except InputError as e:  # the library names parameters; the CLI names its flags
             msg = str(e)
-            for param in ("known_offset_xy", "friction", "method", "form", "hold"):
+            for param in ("known_offset_xy", "known_mass", "friction", "method", "form", "hold"):
                 if msg.startswith(param):
                     msg = "--" + param.replace("_", "-") + msg[len(param) :].replace("=", " ", 1)
             raise InputError(msg) from None

@@ -14,6 +14,7 @@ from airbearing.cli.common import (
     number,
     numbers,
     parse_effects,
+    refuse_given,
     testbed_arg,
     testbed_input,
 )
@@ -112,6 +113,7 @@ def simulate(
     out.input(times, "the --times log")
     log_path = out.plan(output, "-o", (".csv", ".parquet"))
     json_path = out.plan(json_out, "--json", (".json",))
+    _refuse_what_does_not_apply(scenario)
     _check_numbers(yaw_deg, axis, duration, initial_rate, initial_quaternion, sliders,
                    attitude_noise, spin_rate, jitter)  # fmt: skip
     gaps, glitches, artefacts = _artefacts(scenario, jitter, gap, glitch,
@@ -139,6 +141,26 @@ def simulate(
         )  # fmt: skip
     _write(out, log_path, json_path, result,
            {"testbed": tb.name, "scenario": scenario, "seed": seed, **summary})  # fmt: skip
+
+
+#: Options that only some scenarios use: (parameter names, the scenarios that use them).
+_SCENARIO_OPTIONS = (
+    (("yaw_deg", "axis", "steering", "rate_limit"), ("slew",)),
+    (("initial_rate",), ("free",)),
+    (("initial_quaternion", "attitude_noise"), ("free", "spindown")),
+    (("sliders",), ("free",)),
+    (("spin_rate",), ("spindown",)),
+)
+
+
+def _refuse_what_does_not_apply(scenario: str) -> None:
+    """An option given that ``scenario`` would ignore: one line naming it."""
+    for names, used in _SCENARIO_OPTIONS:
+        if scenario not in used:
+            refuse_given(
+                names,
+                f"not used by --scenario {scenario} (only by --scenario {' and '.join(used)})",
+            )
 
 
 def _check_numbers(yaw_deg, axis, duration, initial_rate, initial_quaternion, sliders,

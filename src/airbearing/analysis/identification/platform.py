@@ -241,7 +241,7 @@ def identify_platform(
     if point_o is None:
         point_o = 0.5 * testbed.body.cm_offset_vec  # seed 004: rho^o half the unbalance vector
     window = max(1, int(round(testbed.sensors.rate))) if window is None else window
-    report("equation error (seed 004 eq. 47)", 1, 3)
+    report(f"equation error (seed 004 eq. {47 if form == 'integrated' else 45})", 1, 3)
     stats = regression_statistics(
         testbed, data, mass=mass, point_o=point_o, form=form, window=window
     )
