@@ -183,3 +183,53 @@ def test_options_at_their_defaults_are_not_refused(tmp_path):
         == 0
     )
     assert out.exists()
+
+
+# ------------------------------------------------------------ values checked
+
+
+@pytest.mark.parametrize(
+    "q, ok",
+    [
+        (("2", "0", "0", "0"), False),
+        (("0", "0", "0", "0"), False),
+        (("0.7071", "0.7071", "0", "0"), True),
+    ],
+)
+def test_initial_quaternion_must_be_a_unit_quaternion(tmp_path, capsys, q, ok):
+    # 0.7071 typed to 4 decimals: norm 0.99999 (within 1e-3); 2 0 0 0 is no rotation quaternion
+    out = tmp_path / "f.json"
+    args = ["--quiet", "simulate", "seed004-platform", "--scenario", "free", "--duration", "0.2",
+            "--initial-quaternion", *q, "--json", str(out)]  # fmt: skip
+    assert run(args) == (0 if ok else 2)
+    err = capsys.readouterr().err.strip().splitlines()
+    if not ok:
+        assert err == [
+            f"airbearing: error: --initial-quaternion {' '.join(q)}: expected a unit quaternion "
+            f"qw qx qy qz (norm {2 if q[0] == '2' else 0}, 1 within 0.001)"
+        ]
+    assert out.exists() == ok
+
+
+@pytest.mark.parametrize("name", ["viscous_friction", "coulomb_friction", "aero_drag"])
+def test_a_negative_dissipative_effect_is_refused(tmp_path, capsys, name):
+    # FORMATS.md: only inertia_error may be negative; negative friction feeds energy in
+    from airbearing.io.vocabulary import EFFECTS
+
+    unit = EFFECTS[name].unit
+    assert (
+        run(["simulate", "seed004-platform", "--scenario", "free", "--effect", f"{name}=-1e-3"])
+        == 2
+    )
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [
+        f"airbearing: error: --effect {name}=-1e-3: expected a value >= 0 {unit}, got -0.001"
+    ]
+    tb = tmp_path / "tb.toml"
+    assert run(["testbed", "export", "seed004-platform", "-o", str(tb)]) == 0
+    tb.write_text(tb.read_text() + f"\n[effects]\n{name} = [1e-6, -1e-6, 0]\n")
+    capsys.readouterr()
+    assert run(["simulate", str(tb), "--scenario", "free", "--json", str(tmp_path / "x.json")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and f"effects.{name}" in err[0] and f">= 0 {unit}" in err[0], err
+    assert not (tmp_path / "x.json").exists()

@@ -77,7 +77,10 @@ def parse_effects(items: list[str] | None, *, option: str = "--effect") -> dict:
             raise InputError(f"{option} '{item}': expected {want}, got {len(nums)}")
         if not all(math.isfinite(v) for v in nums):
             raise InputError(f"{option} '{item}': expected finite numbers")
-        out[name] = nums[0] if len(nums) == 1 else tuple(nums)
+        from airbearing.io.vocabulary import validate_effect_value
+
+        value = nums[0] if len(nums) == 1 else tuple(nums)
+        out[name] = validate_effect_value(name, value, f"{option} {item}")  # bounds, unit
     return out
 
 

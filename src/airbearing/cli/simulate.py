@@ -11,6 +11,7 @@ import typer
 from airbearing.cli import app
 from airbearing.cli.common import (
     check_log_size,
+    fmt,
     number,
     numbers,
     parse_effects,
@@ -143,6 +144,11 @@ def simulate(
            {"testbed": tb.name, "scenario": scenario, "seed": seed, **summary})  # fmt: skip
 
 
+#: Largest | |q| - 1 | of --initial-quaternion: four components typed to 4 decimals are off
+#: by at most 5e-5 each, so their norm by at most 2e-4; 1e-3 accepts that and refuses a
+#: quaternion that is not one (2 0 0 0), which the simulation would silently normalise.
+QUATERNION_TOLERANCE = 1e-3
+
 #: Options that only some scenarios use: (parameter names, the scenarios that use them).
 _SCENARIO_OPTIONS = (
     (("yaw_deg", "axis", "steering", "rate_limit"), ("slew",)),
@@ -176,8 +182,13 @@ def _check_numbers(yaw_deg, axis, duration, initial_rate, initial_quaternion, sl
     number("--duration", duration, lo=0, lo_open=True, unit="s")
     numbers("--initial-rate", initial_rate, unit="rad/s")
     numbers("--initial-quaternion", initial_quaternion)
-    if math.hypot(*initial_quaternion) == 0:
-        raise InputError("--initial-quaternion 0 0 0 0: expected a unit quaternion qw qx qy qz")
+    norm = math.hypot(*initial_quaternion)
+    if abs(norm - 1.0) > QUATERNION_TOLERANCE:
+        shown = " ".join(fmt(v) for v in initial_quaternion)
+        raise InputError(
+            f"--initial-quaternion {shown}: expected a unit quaternion qw qx qy qz "
+            f"(norm {fmt(norm)}, 1 within {fmt(QUATERNION_TOLERANCE)})"
+        )
     numbers("--sliders", sliders, unit="m")
     number("--attitude-noise", attitude_noise, lo=0, unit="rad")
     number("--spin-rate", spin_rate, unit="rad/s")

@@ -75,18 +75,21 @@ _SPECS: tuple[EffectSpec, ...] = (
         "N m s",
         "tau_i = -c_i * w_i, per body axis",
         "scalar_or_axes",
+        lower=0.0,  # dissipative: a negative value feeds energy in (FORMATS.md)
     ),
     EffectSpec(
         "coulomb_friction",
         "N m",
         "tau_i = -f_i * sign(w_i), per body axis (smoothed near zero rate)",
         "scalar_or_axes",
+        lower=0.0,  # dissipative: a negative value feeds energy in (FORMATS.md)
     ),
     EffectSpec(
         "aero_drag",
         "N m s^2",
         "tau_i = -k_i * abs(w_i) * w_i, per body axis",
         "scalar_or_axes",
+        lower=0.0,  # dissipative: a negative value feeds energy in (FORMATS.md)
     ),
     EffectSpec(
         "spring_torque",
@@ -150,10 +153,11 @@ def _component(spec: EffectSpec, value: object, where: str) -> float:
     if not math.isfinite(x):
         raise InputError(f"{where}: expected a finite number ({spec.unit}), got {value!r}")
     if spec.lower is not None:
+        unit = "" if spec.unit == "-" else f" {spec.unit}"
         if spec.lower_strict and not x > spec.lower:
-            raise InputError(f"{where}: expected a value > {spec.lower:g}, got {value!r}")
+            raise InputError(f"{where}: expected a value > {spec.lower:g}{unit}, got {value!r}")
         if not spec.lower_strict and not x >= spec.lower:
-            raise InputError(f"{where}: expected a value >= {spec.lower:g}, got {value!r}")
+            raise InputError(f"{where}: expected a value >= {spec.lower:g}{unit}, got {value!r}")
     return x
 
 
