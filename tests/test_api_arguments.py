@@ -243,6 +243,15 @@ CMG3 = ab.load_testbed("cmg-3dof")
         (lambda lg, f: ab.compare_methods(S4, "nope"), "methods=['nope']"),
         (lambda lg, f: ab.discrepancy(ROTOR, [lg["rig"]], only="nope"), "nope"),
         (lambda lg, f: ab.sweep_comparison(S4, "lag", []), "values="),
+        (lambda lg, f: ab.discrepancy(ROTOR, [lg["rig"]], only="frction"), "only='frction'"),
+        (lambda lg, f: ab.discrepancy(ROTOR, [lg["rig"]], only=[1]), "only"),
+        (lambda lg, f: ab.replay(ROTOR, [lg["rig"]], progress=5), "progress=5"),
+        (lambda lg, f: ab.identify(S4, [lg["s4"]], known_mass="x"), "known_mass='x'"),
+        (lambda lg, f: ab.identify(S4, [lg["s4"]], known_offset_xy=1.0), "known_offset_xy=1.0"),
+        (lambda lg, f: ab.slew(CY, steering_options=5, duration=1.0), "steering_options=5"),
+        (lambda lg, f: ab.slew(CY, loop=5, duration=1.0), "loop=5"),
+        (lambda lg, f: ab.free_oscillation(S4, model=5, duration=1.0), "model=5"),
+        (lambda lg, f: ab.build_model(CY, {"nope": 1.0}), "effects['nope']"),
     ],
 )
 def test_other_bad_arguments_name_themselves(logs, files, call, argument):

@@ -16,9 +16,11 @@ from __future__ import annotations
 from collections.abc import Iterable
 
 from airbearing.errors import InputError
-from airbearing.io.coerce import as_logs, as_testbed  # noqa: F401 (their earlier home)
+from airbearing.io.coerce import as_float, as_logs, as_testbed, as_vector
 
 __all__ = ["identify", "METHODS", "FORMS", "FRICTIONS"]
+# as_testbed and as_logs lived here first; they are airbearing.io.coerce's now
+__all__ += ["as_logs", "as_testbed"]
 
 #: Accepted values of ``method``, ``form`` and ``friction`` (``None`` = no friction term).
 METHODS = ("output-error", "equation-error")
@@ -108,6 +110,13 @@ def identify(
     airbearing.errors.InputError: method='fast': expected one of output-error, equation-error
     """
     _check_choices(method, form, friction)
+    if known_offset_xy is not None:
+        xy = as_vector(known_offset_xy, "known_offset_xy", 2, "2 finite offsets x, y in m")
+        known_offset_xy = (float(xy[0]), float(xy[1]))
+    known_mass = as_float(known_mass, "known_mass", positive=True, optional=True,
+                          expected="a positive mass in kg, or None")  # fmt: skip
+    if progress is not None and not callable(progress):
+        raise InputError(f"progress={progress!r:.60}: expected a callable or None")
     from airbearing.analysis.identification.data import COLUMNS_USED
 
     tb = as_testbed(testbed)

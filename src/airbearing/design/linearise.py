@@ -166,7 +166,8 @@ def trim(model: Model, p=None, *, yaw: float = 0.0, gimbals=None) -> TrimPoint:
         raise InputError(f"model={model!r:.60}: expected a Model (airbearing.build_model(testbed))")
     yaw = as_float(yaw, "yaw", "rad")
     if p is not None:  # a column (CasADi DM, (n, 1) array) is as good as a row
-        flat = np.ravel(p) if np.ndim(p) == 2 and 1 in np.shape(p) else p
+        flat = p.full() if isinstance(p, ca.DM) else p
+        flat = np.ravel(flat) if np.ndim(flat) == 2 and 1 in np.shape(flat) else flat
         p = as_vector(flat, "p", model.n_p, f"{model.n_p} finite parameters {list(model.p_names)}")
     if gimbals is not None:
         gimbals = as_vector(gimbals, "gimbals", 4, "4 finite gimbal angles in rad")

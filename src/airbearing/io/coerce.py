@@ -240,18 +240,37 @@ def as_gains(gains, names: tuple[str, ...], name: str = "gains") -> np.ndarray:
     return out
 
 
-def as_names(value, name: str, *, optional: bool = False) -> list[str] | None:
-    """A list of names from one string (one name) or an iterable of strings."""
+def as_names(
+    value,
+    name: str,
+    *,
+    optional: bool = False,
+    choices: Iterable[str] | None = None,
+    kind: str = "name",
+) -> list[str] | None:
+    """A list of names from one string (one name) or an iterable of strings.
+
+    ``choices``: the names allowed (an unknown one is an InputError listing them, calling
+    it an unknown ``kind``).
+    """
     if optional and value is None:
         return None
     if isinstance(value, str):
-        return [value]
-    if isinstance(value, Mapping) or not isinstance(value, Iterable):
+        out = [value]
+    elif isinstance(value, Mapping) or not isinstance(value, Iterable):
         raise InputError(f"{name}={_short(value)}: expected a name or a list of names")
-    out = list(value)
+    else:
+        out = list(value)
     bad = [v for v in out if not isinstance(v, str)]
     if bad:
         raise InputError(f"{name}: expected names (str), got {_short(bad[0])}")
+    if choices is not None:
+        allowed = list(choices)
+        unknown = [v for v in out if v not in allowed]
+        if unknown:
+            raise InputError(
+                f"{name}={_short(unknown[0])}: unknown {kind}; expected one of {', '.join(allowed)}"
+            )
     return out
 
 

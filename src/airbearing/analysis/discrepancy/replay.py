@@ -381,10 +381,12 @@ def prepare(testbed: Testbed, logs, *, window_s: float | None = None, piece_s: f
     return datas, windows, floor
 
 
-def checked_arguments(testbed, logs, window_s, what: str) -> tuple:
+def checked_arguments(testbed, logs, window_s, what: str, progress=None) -> tuple:
     """``(testbed, logs, window_s)`` of :func:`replay` and ``discrepancy`` checked: the
     testbed from a name or file, the logs from Log objects or files (of a testbed of the
     same kind and dof, ``what`` naming ``testbed`` in the message), ``window_s`` > 0 s."""
+    if progress is not None and not callable(progress):
+        raise InputError(f"progress={progress!r:.60}: expected a callable or None")
     testbed = as_testbed(testbed)
     logs = as_logs(logs, testbed, what=what)
     window_s = as_float(window_s, "window_s", positive=True, optional=True,
@@ -434,7 +436,9 @@ def replay(
     SolverError
         The fit of the windows' initial states failed.
     """
-    testbed, logs, window_s = checked_arguments(testbed, logs, window_s, "the testbed replayed")
+    testbed, logs, window_s = checked_arguments(
+        testbed, logs, window_s, "the testbed replayed", progress
+    )
     effects = as_effects(effects)
     substeps = as_int(substeps, "substeps", minimum=1, optional=True)
     say = progress or (lambda *a, **k: None)

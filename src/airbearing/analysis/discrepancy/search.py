@@ -106,6 +106,7 @@ from airbearing.errors import SolverError
 from airbearing.io.coerce import as_int, as_logs, as_names
 from airbearing.io.log import Log
 from airbearing.io.testbed import Testbed
+from airbearing.io.vocabulary import EFFECTS
 from airbearing.models.effects import REGISTRY
 from airbearing.models.model import build_model
 
@@ -475,11 +476,13 @@ def discrepancy(
     SolverError
         The nominal replay cannot be fitted.
     """
-    testbed, logs, window_s = checked_arguments(testbed, logs, window_s, "the testbed searched")
+    testbed, logs, window_s = checked_arguments(
+        testbed, logs, window_s, "the testbed searched", progress
+    )
     validate = as_logs(validate or (), testbed, name="validate", allow_empty=True)
     max_effects = as_int(max_effects, "max_effects", minimum=0)
     workers, seed = as_int(workers, "workers", minimum=1), as_int(seed, "seed")
-    only = as_names(only, "only", optional=True)
+    only = as_names(only, "only", optional=True, choices=EFFECTS, kind="effect")
     datas, windows, floor = prepare(testbed, logs, window_s=window_s)
     cands = candidates_for(testbed, datas, only)
     # listed with their reason, never fitted (a spring on a yaw that turns many times)
@@ -616,6 +619,13 @@ def _select(search, nominal, max_effects, screen, workers, prog) -> _Selection:
         )
         max_effects = 0
     while len(sel.chosen) < max_effects:
+        if sel.chosen and sel.current.gap < resolution:  # the same, after a named effect
+            sel.stop_reason = (
+                f"the named effects replay the logs to {sel.current.gap:.3g} {unit}, below "
+                f"the {resolution:g} {unit} the replay resolves (a noise-free log): nothing "
+                "more to name"
+            )
+            break
         taken = {c.name for c in sel.chosen}
         remaining = [c for c in search.cands if c.name not in taken and c.label not in sel.dropped]
         if not remaining:

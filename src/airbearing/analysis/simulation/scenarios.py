@@ -146,6 +146,13 @@ def slew(
         raise InputError(f"axis={tuple(axis.tolist())}: expected a non-zero slew axis")
     seed = as_int(seed, "seed")
     effects = as_effects(effects)
+    if steering_options is not None and not isinstance(steering_options, Mapping):
+        raise InputError(
+            f"steering_options={steering_options!r:.60}: expected a dict of the steering "
+            "law's options, or None"
+        )
+    if loop is not None and not (isinstance(loop, tuple | list) and len(loop) == 2):
+        raise InputError(f"loop={loop!r:.60}: expected a (Model, Controller) pair, or None")
     if not testbed.sensors.gyro:
         raise InputError(
             f"{testbed.source}: the seed-001 attitude loop feeds back the gyro rate (eqs. 3, 19), "
@@ -294,6 +301,8 @@ def free_oscillation(
     seed = as_int(seed, "seed")
     q0 = tuple(_quaternion(q0).tolist())
     effects = as_effects(effects)
+    if model is not None and not isinstance(model, Model):
+        raise InputError(f"model={model!r:.60}: expected a Model (build_model(testbed)), or None")
     model = build_model(testbed, effects) if model is None else model
     u = _free_inputs(testbed, model, sliders)
     w0 = _initial_rate(model, initial_rate, q0)
