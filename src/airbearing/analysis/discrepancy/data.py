@@ -520,13 +520,30 @@ class NoiseFloor:
     testbed_attitude: float = 0.0
 
     @property
-    def value(self) -> float:
-        """The floor the gap is compared with, in :attr:`gap_unit`."""
+    def measured(self) -> float:
+        """The noise the data show, in :attr:`gap_unit`."""
         return float(self.rate if self.gap_unit == "rad/s" else self.attitude)
+
+    @property
+    def resolution(self) -> float:
+        """The smallest noise level the replay weighs with, in :attr:`gap_unit`."""
+        return RATE_SIGMA_MIN if self.gap_unit == "rad/s" else ATTITUDE_SIGMA_MIN
+
+    @property
+    def value(self) -> float:
+        """The floor the gap is compared with, in :attr:`gap_unit`: the noise the data show,
+        never below the replay's :attr:`resolution` (under it a noise-free log shows the
+        integration's own error, not noise)."""
+        return max(self.measured, self.resolution)
 
     @property
     def source(self) -> str:
         """How the floor was obtained, in words."""
+        if self.measured < self.resolution:
+            return (
+                f"the replay's resolution: the data show {self.measured:.3g} {self.gap_unit} "
+                "of noise, less than the integration's own error (a noise-free log)"
+            )
         if self.gap_unit == "rad/s":
             return (
                 "data: median absolute deviation of the unit-norm fourth divided differences "

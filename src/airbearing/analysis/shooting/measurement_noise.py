@@ -31,7 +31,11 @@ value, no new IPOPT run. The model is adopted only when
   cannot be told from a trajectory error within the piece, and is left to the process
   noise (a torque the model misses, not the sensor);
 - and its innovations have one variance in every piece (Levene's test): a sensor's noise is
-  stationary, a misfit taken for noise stands out where it acts.
+  stationary, a misfit taken for noise stands out where it acts;
+- and its marginal level is at least :data:`MIN_LEVEL` of the floor the weights assume:
+  coloured noise is never smaller than what the data's differences see (they
+  underestimate it), so a weaker one is no noise of the log but the integration's own
+  error on a noise-free one (whose floor is the replay's resolution).
 
 What the noise model cannot do is prove that a correlated residual is the sensor's: the
 adequacy verdict therefore still says structure remains when the gap is above twice the
@@ -63,6 +67,8 @@ MAX_CORRELATION_OF_PIECE = 0.5
 #: Log-likelihood gain from half the bound's correlation time to the bound above which the
 #: likelihood "still rises" (a likelihood ratio of e^2: about chi2(1) at p = 0.05).
 RISING = 2.0
+#: Smallest marginal level (noise-floor units) of an adopted noise model.
+MIN_LEVEL = 0.5
 #: Search range of ``ln s`` (the innovation's level in noise-floor units: 0.007-150).
 LOG_S = (-5.0, 5.0)
 
@@ -349,7 +355,8 @@ def estimate_measurement_noise(problem, fit, k: int) -> MeasurementNoise | None:
         lr = max(0.0, 2.0 * (float(white.fun) - float(best.fun)))
         p = float(stats.chi2.sf(lr, 1))
         lrs[group], ps[group] = lr, p
-        if p < SIGNIFICANCE and not _still_rising(ll, phi, phi_max, dt, float(best.fun)):
+        strong = s / math.sqrt(1.0 - phi**2) >= MIN_LEVEL
+        if p < SIGNIFICANCE and strong and not _still_rising(ll, phi, phi_max, dt, float(best.fun)):
             lin.loglik({**ar, group: (phi, s)}, dt)
             if _homoscedastic(problem, lin.innovations, group):
                 ar[group] = (phi, s)
