@@ -445,9 +445,36 @@ def stability_report(
     spec: Spec | None = None,
     progress=None,
 ):
-    """The report of ``loop`` (``"balancing"``/``"attitude"``) of ``testbed`` with ``gains``
-    (default the seed gains). Returns ``(Report, dict)``; write with ``Report.write`` and
-    :func:`airbearing.reporting.html.write_json`. ``progress``: see :mod:`airbearing.progress`.
+    """The linear stability report of one loop of a testbed: Bode, Nyquist, margins, responses.
+
+    Parameters
+    ----------
+    testbed : Testbed
+        A built-in or a testbed file's :class:`~airbearing.io.testbed.Testbed`.
+    loop : {"balancing", "attitude"}
+        The in-plane balancing loop (platforms with sliders) or the CMG attitude loop.
+    gains : mapping or sequence, optional
+        The loop's gains in SI (balancing: K_p N m, K_d N m s, K_d K_i N m/s; attitude:
+        K_p, K_i, K_w as :func:`~airbearing.design.attitude.cmg_attitude_controller` takes
+        them); default the seed papers' gains.
+    split : {"mixed", "mechanical"}
+        How the balancing PID is shared between sliders and magnetorquers (balancing only).
+    spec : Spec, optional
+        The specification the checks are made against (margins in dB and deg, bandwidth
+        in rad/s); default :class:`~airbearing.design.tuning.Spec`'s.
+    progress : callable, optional
+        ``progress(what, done, total)`` (:mod:`airbearing.progress`).
+
+    Returns
+    -------
+    (Report, dict)
+        The report (write it with ``Report.write``) and its JSON document (margins with
+        their units, ``null`` for a margin that does not exist).
+
+    Raises
+    ------
+    InputError
+        An unknown loop, a loop the testbed does not have, or bad gains.
     """
     from airbearing.progress import call
 
