@@ -233,3 +233,91 @@ def test_a_negative_dissipative_effect_is_refused(tmp_path, capsys, name):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and f"effects.{name}" in err[0] and f">= 0 {unit}" in err[0], err
     assert not (tmp_path / "x.json").exists()
+
+
+# ------------------------------------------------------------ messages name the flag
+
+TWO_ROWS = (
+    "t,yaw,wz,d1,d2,d3,d4,dd1,dd2,dd3,dd4,yaw_ref\n"
+    "0,0,-0.00074,0,0,0,0,-1.1257,-1.1257,-1.1257,-1.1257,3.141592654\n"
+    "0.05,0.0028,0.056,-0.056,-0.056,-0.056,-0.056,-1.1257,-1.1257,-1.1257,-1.1257,3.141592654\n"
+)
+
+#: (arguments, the one error line; "..." ends a prefix).
+MESSAGES = [
+    (["simulate", "cmg-yaw", "--noise-seed", "-1"], "--noise-seed -1: expected a value >= 0"),
+    (["simulate", "cmg-yaw", "--noise-seed", "x"], "--noise-seed x: expected an integer"),
+    (
+        ["simulate", "cmg-yaw", "--scenario", "bad"],
+        "--scenario bad: expected one of slew, free, spindown",
+    ),
+    (["cmg", "size", "--angle-deg=x"], "--angle-deg x: expected a number"),
+    (
+        ["balance", "seed000-tabletop", "--initial-offset-mm", "100"],
+        "--initial-offset-mm 100: expected a finite number from -...",
+    ),
+    (
+        ["simulate", "seed004-platform", "--scenario", "free", "--sliders", "1", "0", "0"],
+        "--sliders 1 0 0: each must lie within...",
+    ),
+    (
+        ["simulate", "cmg-yaw", "--scenario", "free", "--initial-rate", "1", "0", "0"],
+        "--initial-rate 1 0 0: a dof = 1 bearing...",
+    ),
+    (
+        ["identify", "seed004-platform", "{log}", "--known-mass", "-3"],
+        "--known-mass -3: expected a finite number > 0 kg",
+    ),
+    (
+        ["discrepancy", "cmg-yaw", "{log}", "--window", "0"],
+        "--window 0: expected a finite number > 0 s",
+    ),
+    (["replay", "cmg-yaw", "{log}", "--window", "0"], "--window 0: expected a finite number > 0 s"),
+    (["identify", "cmg-yaw", "{log}"], "{log}: 0 samples for 1 unknowns; give longer logs"),
+]
+
+
+@pytest.mark.parametrize("args, line", MESSAGES, ids=[" ".join(a[:4]) for a, _ in MESSAGES])
+def test_a_bad_value_is_one_plain_line_naming_the_flag(tmp_path, capsys, args, line):
+    log = tmp_path / "tworows.csv"
+    log.write_text(TWO_ROWS)
+    args = [a.replace("{log}", str(log)) for a in args]
+    line = line.replace("{log}", str(log))
+    assert run(args) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1, err
+    if line.endswith("..."):
+        assert err[0].startswith(f"airbearing: error: {line[:-3]}"), err
+    else:
+        assert err[0] == f"airbearing: error: {line}"
+
+
+def test_progress_does_not_repeat_the_command(monkeypatch, capsys):
+    from airbearing.cli import show_progress
+
+    monkeypatch.setattr(show_progress, "PLAIN_DELAY", 0.0)
+    monkeypatch.setattr(show_progress, "QUIET", {"on": False})
+    with show_progress.progress_display("replay") as progress:
+        progress("replay: compiling and fitting the windows' initial states", 0, 1)
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == ["replay: compiling and fitting the windows' initial states [0/1]"]
+
+
+def test_identify_says_what_it_wrote(tmp_path, example_case, capsys):
+    case = example_case("identify_platform")
+    out, tb = tmp_path / "id.json", tmp_path / "id.toml"
+    args = [
+        "--quiet",
+        "identify",
+        str(case / "testbed.toml"),
+        str(case / "log1.csv"),
+        "--method",
+        "equation-error",
+        "--json",
+        str(out),
+        "--write-testbed",
+        str(tb),
+    ]
+    assert run(args) == 0
+    lines = capsys.readouterr().out.strip().splitlines()
+    assert lines[-2:] == [f"wrote {out}", f"wrote {tb}"]

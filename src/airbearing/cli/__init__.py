@@ -299,11 +299,9 @@ def _run_app(args: list[str]) -> None:
             typer.echo(ctx.get_help() if ctx is not None else e.format_message())
             raise SystemExit(0) from None
         if hasattr(e, "format_message") and hasattr(e, "exit_code"):
-            msg = one_line(e.format_message()).replace("Value error, ", "")
-            ctx = getattr(e, "ctx", None)
-            if ctx is not None and ctx.command_path:
-                msg = f"{ctx.command_path}: {msg}"
-            print(f"airbearing: error: {msg}", file=sys.stderr)
+            from airbearing.cli.usage import usage_line
+
+            print(f"airbearing: error: {usage_line(e, args)}", file=sys.stderr)
             raise SystemExit(2) from None
         if _debug_requested(args):
             traceback.print_exc()

@@ -10,6 +10,7 @@ import typer
 
 from airbearing.cli import app
 from airbearing.cli.common import (
+    as_flags,
     check_log_size,
     number,
     numbers,
@@ -155,6 +156,7 @@ def balance(
     options = dict(vertical_offset=vertical_offset, start=start.value,
                    initial_rate=initial_rate, offset_stays=offset_stays)  # fmt: skip
     table = ""
+    flags = as_flags(initial_rate="--initial-rate", vertical_offset="--vertical-offset")
     if two_step_:
         from airbearing.analysis.balancing.two_step import two_step
 
@@ -162,9 +164,16 @@ def balance(
             result = two_step(tb, method=method.value, seed=seed, progress=progress)
         summary = result.to_json()
     elif methods is not None:
-        summary, table = _compare(tb, methods, sweep_spec, seeds, duration, options)
+        with flags:
+            summary, table = _compare(tb, methods, sweep_spec, seeds, duration, options)
     else:
-        summary = _single(out, log_path, tb, method, duration, initial_offset_mm, seed, options)
+        if tb.masses is not None:  # the library checks it in m; the flag is in mm
+            travel = tb.masses.travel * 1e3
+            number("--initial-offset-mm", initial_offset_mm, lo=-travel, hi=travel, unit="mm",
+                   why="the sliders' travel (masses.travel)")  # fmt: skip
+        with flags:
+            summary = _single(out, log_path, tb, method, duration, initial_offset_mm, seed,
+                              options)  # fmt: skip
     out.json(json_path, summary)
     out.commit()
     from airbearing.cli.tables import human_summary

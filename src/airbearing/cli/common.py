@@ -7,6 +7,7 @@ import it at start-up. Numbers in messages are printed plainly (:func:`fmt`), ne
 
 from __future__ import annotations
 
+import contextlib
 import math
 import os
 from pathlib import Path
@@ -25,6 +26,7 @@ __all__ = [
     "MEMORY_FRACTION",
     "given",
     "refuse_given",
+    "as_flags",
 ]
 
 #: Largest share of the machine's memory a command's log may need before it is refused.
@@ -229,3 +231,41 @@ def refuse_given(names, why: str) -> None:
     found = given(*names)
     if found:
         raise InputError(f"{found[0]}: {why}")
+
+
+def _typed_values(flag: str) -> str | None:
+    """The value(s) typed after ``flag`` on the command line (up to the next option)."""
+    from airbearing.cli import GLOBAL
+
+    argv = list(GLOBAL.get("argv") or [])
+    for i in range(len(argv) - 1, -1, -1):
+        if argv[i].startswith(flag + "="):
+            return argv[i][len(flag) + 1 :]
+        if argv[i] == flag:
+            vals = []
+            for a in argv[i + 1 :]:
+                if a.startswith("-") and len(a) > 1 and not (a[1].isdigit() or a[1] == "."):
+                    break
+                vals.append(a)
+            return " ".join(vals)
+    return None
+
+
+@contextlib.contextmanager
+def as_flags(**flags: str):
+    """The library's messages about its parameters, named by the command's flags.
+
+    ``as_flags(sliders="--sliders")``: an :class:`InputError` ``sliders=[1.0, 0.0, 0.0]:
+    each must lie within ...`` leaves as ``--sliders 1 0 0: each must lie within ...``
+    (the value as typed). Only for parameters in the same unit as their flag.
+    """
+    try:
+        yield
+    except InputError as e:
+        msg = str(e)
+        for param, flag in flags.items():
+            if msg.startswith(param + "=") and ": " in msg:
+                typed = _typed_values(flag)
+                if typed is not None:
+                    raise InputError(f"{flag} {typed}: {msg.split(': ', 1)[1]}") from None
+        raise

@@ -57,6 +57,9 @@ def discrepancy(
     p_tb = out.plan(write_tb, "--write-testbed", (".toml",))
     if max_effects < 0:
         raise InputError(f"--max-effects {max_effects}: expected an integer >= 0")
+    from airbearing.cli.common import number
+
+    number("--window", window, lo=0, lo_open=True, unit="s")
     from airbearing.cli.process_settings import one_blas_thread
 
     one_blas_thread()
@@ -86,7 +89,7 @@ def discrepancy(
             out.text(p_html, discrepancy_report(result).html())
     out.json(p_json, result.to_json())
     out.file(p_tb, lambda tmp: write_testbed(result.augmented_testbed, tmp))
-    out.commit()
+    written = out.commit()
     unit = result.gap_unit
     typer.echo(result.verdict)
     typer.echo(
@@ -104,3 +107,5 @@ def discrepancy(
         )
     for pair, text in result.experiments.items():
         typer.echo(f"confounded: {pair}: {text}")
+    for p in written:
+        typer.echo(f"wrote {p}")

@@ -95,6 +95,8 @@ def identify(
             for param in ("known_offset_xy", "known_mass", "friction", "method", "form", "hold"):
                 if msg.startswith(param):
                     msg = "--" + param.replace("_", "-") + msg[len(param) :].replace("=", " ", 1)
+            if msg.startswith("identify: "):  # about the logs together: name them
+                msg = f"{', '.join(str(p) for p in logs)}: {msg[len('identify: ') :]}"
             raise InputError(msg) from None
     _echo_estimates(tb, result)
     js = result.to_json()
@@ -109,7 +111,8 @@ def identify(
     if p_tb is not None:
         new_tb = result.to_testbed(tb)
         out.file(p_tb, lambda tmp: write_testbed(new_tb, tmp))
-    out.commit()
+    for p in out.commit():
+        typer.echo(f"wrote {p}")
 
 
 def _echo_estimates(tb, result) -> None:

@@ -34,6 +34,9 @@ def replay(
     out.inputs(logs, "log")
     p_json = out.plan(json_out, "--json", (".json",))
     p_html = out.plan(report, "--report", (".html",))
+    from airbearing.cli.common import number
+
+    number("--window", window, lo=0, lo_open=True, unit="s")
     from airbearing.cli.process_settings import one_blas_thread
 
     one_blas_thread()
@@ -51,7 +54,7 @@ def replay(
 
             out.text(p_html, replay_report(result).html())
     out.json(p_json, result.to_json())
-    out.commit()
+    written = out.commit()
     unit = result.gap_unit
     doc = result.to_json()
     typer.echo(
@@ -64,3 +67,5 @@ def replay(
             f"{entry['log']}: gap {entry['gap']:.4g} {unit}, {entry['segments']} segment(s), "
             f"outlier rows left out: {rows}"
         )
+    for p in written:
+        typer.echo(f"wrote {p}")

@@ -35,6 +35,13 @@ def _repeated_compile_notice(what: str) -> bool:
     return False
 
 
+def _own_words(label: str, what: str) -> str:
+    """``what`` without a leading ``LABEL:`` (a library step that names its command):
+    the display adds the label itself (not ``replay: replay: ...``)."""
+    prefix = f"{label}: "
+    return what[len(prefix) :] if what.startswith(prefix) else what
+
+
 def set_quiet(on: bool) -> None:
     """Silence (or restore) progress output for this process."""
     QUIET["on"] = bool(on)
@@ -75,6 +82,7 @@ class _Plain:
         check_interrupt()
         if _repeated_compile_notice(what):
             return
+        what = _own_words(self.label, what)
         now = time.monotonic()
         if what == self.last_what and now - self.last_t < 1.0:
             return
@@ -107,6 +115,7 @@ class _Rich:
         check_interrupt()
         if _repeated_compile_notice(what):
             return
+        what = _own_words(self.label, what)
         kw = {"description": f"{self.label}: {what}"}
         if done is not None and total:
             left = self.left.update(done, total, time.monotonic())

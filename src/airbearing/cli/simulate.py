@@ -10,6 +10,7 @@ import typer
 
 from airbearing.cli import app
 from airbearing.cli.common import (
+    as_flags,
     check_log_size,
     fmt,
     number,
@@ -130,16 +131,19 @@ def simulate(
         q0=initial_quaternion, sliders=sliders, spin_rate=spin_rate,
         attitude_noise=attitude_noise,
     )  # fmt: skip
-    if artefacts:  # a log as a real testbed writes it, with its answer key in the summary
-        result, summary = _rehearsal(
-            tb, scenario, length=None if times else length, times=times, jitter=jitter,
-            gaps=gaps, glitches=glitches, first_sample=first_sample_artefact, **kw,
-        )  # fmt: skip
-    else:
-        result, summary = _scenario(
-            tb, scenario, length, yaw_deg=yaw_deg, axis=axis, steering=steering,
-            rate_limit=rate_limit, **kw,
-        )  # fmt: skip
+    flags = as_flags(sliders="--sliders", initial_rate="--initial-rate",
+                     q0="--initial-quaternion", attitude_noise="--attitude-noise")  # fmt: skip
+    with flags:
+        if artefacts:  # a log as a real testbed writes it, with its answer key in the summary
+            result, summary = _rehearsal(
+                tb, scenario, length=None if times else length, times=times, jitter=jitter,
+                gaps=gaps, glitches=glitches, first_sample=first_sample_artefact, **kw,
+            )  # fmt: skip
+        else:
+            result, summary = _scenario(
+                tb, scenario, length, yaw_deg=yaw_deg, axis=axis, steering=steering,
+                rate_limit=rate_limit, **kw,
+            )  # fmt: skip
     _write(out, log_path, json_path, result,
            {"testbed": tb.name, "scenario": scenario, "seed": seed, **summary})  # fmt: skip
 
