@@ -286,6 +286,8 @@ def as_effects(effects, name: str = "effects") -> dict | None:
     from airbearing.io.vocabulary import validate_effect_value
 
     for k, v in effects.items():
+        if isinstance(v, np.ndarray | np.generic):  # numpy values as the vocabulary's types
+            v = v.tolist()
         validate_effect_value(k, v, f"{name}[{k!r}]")
     return dict(effects)
 
