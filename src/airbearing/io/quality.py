@@ -111,6 +111,14 @@ that their physics asks for:
   steering law that chatters near a singularity (the gimbals stepping back and forth
   every sample) cannot be told from glitches: they are not tested.
 
+The platform answers a command that switches: its rate has a kink there and its attitude
+a change of curvature, which a centred fit cannot follow either. Rows within ``k`` of a
+switch of a logged command (a commanded gimbal rate or dipole whose change between two
+samples exceeds :data:`SWITCH_RATIO` times its median change; a slider whose speed does)
+are therefore scored by the same best of three fits on the rates and the yaw (not the
+quaternion, whose chi-square test takes no side per channel). A one-sided fit needs its
+``2k`` neighbours unbroken, so a glitch right beside a switch may take one neighbour with it.
+
 Scale floors: sliders at ``masses.step`` (a stepper position moves in whole steps: a
 slow move is a staircase whose misfit from a smooth curve reaches a step or two,
 not random rounding of ``step / sqrt(12)``), others at :data:`ABSOLUTE_FLOOR` and
@@ -345,6 +353,8 @@ class _Group:
     floor: np.ndarray  # (c,) or (1,) scale floor
     wrap: bool = False  # residual modulo 2 pi (yaw)
     sided: bool = False  # inputs: the best of the centred and one-sided fits (module doc)
+    # rows next to a command's switch: the best of the three fits there too (module doc)
+    switch_rows: np.ndarray | None = None
 
 
 def _normalised(
@@ -652,6 +662,10 @@ class _Scorer:
             d[at], scale[at] = d_f, self.scales[(kf, pf)][np.clip(shapes_f, 0, 2 * kf)]
         if g.sided:
             d, scale = self._sided(rows, good, d, scale)
+        elif g.switch_rows is not None:
+            at = np.flatnonzero(g.switch_rows[rows])
+            if at.size:
+                d[at], scale[at] = self._sided(rows[at], good, d[at], scale[at])
         if exact:
             return _score(g, d, scale * self.local_at(rows))
         score, over = _score(g, d, scale)  # local factor 1: an upper bound of each score
@@ -769,8 +783,44 @@ def _groups(log: Log, testbed: Testbed | None, segments) -> list[_Group]:
         q = continuous_signs(log.quaternions(), segments)
         floor = np.array([0.5 * max(sensors.attitude_noise, ABSOLUTE_FLOOR)])
         groups.append(_Group("attitude", ("qw", "qx", "qy", "qz"), q, True, floor))
+    switch = _switch_rows(log, segments, max(k for k, _ in FITS))
+    if switch is not None:
+        for g in groups:  # (a quaternion's chi-square test takes no per-channel side)
+            g.switch_rows = None if g.vector else switch
     groups += _input_groups(log, testbed, segments, t)
     return groups
+
+
+#: A command switches where its change between two samples exceeds this many times its
+#: median change (a reference step, a bang-bang switch, a stepper starting or stopping).
+SWITCH_RATIO = 20.0
+
+
+def _switch_rows(log: Log, segments, k: int) -> np.ndarray | None:
+    """Rows within ``k`` of a switch of a logged command (module doc, "Inputs"), or None.
+
+    Commanded gimbal rates and dipoles switch where they step; slider positions where
+    their speed does (a stepper starting or stopping). The platform's response has a kink
+    there (its rate) or a change of curvature (its attitude), which a centred smooth fit
+    cannot follow.
+    """
+    from airbearing.io.log import _DIPOLES, _GIMBAL_RATES, _SLIDERS
+
+    n = len(log.data)
+    out = np.zeros(n, dtype=bool)
+    for cols, order in ((_GIMBAL_RATES, 1), (_DIPOLES, 1), (_SLIDERS, 2)):
+        if not log.has(*cols):
+            continue
+        u = np.stack([log.column(c) for c in cols], axis=1).astype(float)
+        for start, stop in segments:
+            if stop - start <= order + 1:
+                continue
+            du = np.abs(np.diff(u[start:stop], order, axis=0))
+            typical = np.median(du, axis=0)
+            big = du > SWITCH_RATIO * np.maximum(typical, 1e-12 * np.max(np.abs(u), axis=0))
+            for j in np.flatnonzero(big.any(axis=1)) + start + order:
+                out[max(j - k, start) : min(j + k + 1, stop)] = True
+    return out if out.any() else None
 
 
 def _changing(values: np.ndarray, segments) -> np.ndarray:
