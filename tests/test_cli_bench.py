@@ -321,3 +321,52 @@ def test_identify_says_what_it_wrote(tmp_path, example_case, capsys):
     assert run(args) == 0
     lines = capsys.readouterr().out.strip().splitlines()
     assert lines[-2:] == [f"wrote {out}", f"wrote {tb}"]
+
+
+# ------------------------------------------------------------ what a person reads
+
+
+def test_json_to_stdout_is_for_testbed_list_only(tmp_path, capsys):
+    assert run(["gains", "cmg-yaw", "--json", "-"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [
+        "airbearing: error: --json -: standard output is for 'testbed list --json -' only; "
+        "give a file name"
+    ]
+    assert run(["testbed", "list", "--json", "-"]) == 0
+    assert capsys.readouterr().out.lstrip().startswith("[")
+
+
+def test_report_help_says_the_output_is_required(capsys):
+    assert run(["report", "--help"]) == 0
+    assert "(required)" in " ".join(capsys.readouterr().out.split())
+
+
+def test_gains_table_has_units(capsys):
+    assert run(["--quiet", "gains", "cmg-yaw"]) == 0
+    lines = [line.split() for line in capsys.readouterr().out.splitlines()[:5] if line.strip()]
+    rows = {line[0]: line[1:] for line in lines}
+    assert rows["gain"] == ["value", "unit"]
+    assert rows["K_p"][1] == "1/s" and rows["K_i"][1] == "1/s^2" and rows["K_w"][1] == "-"
+
+
+def test_summary_ratios_and_dipole_have_their_unit_and_no_stray_row():
+    from airbearing.cli.tables import human_summary
+
+    text = human_summary(
+        {"dipole_rms": 0.04, "ratios": {"of": "mixed/mechanical", "g_perp_rms": 1.05}}
+    )
+    lines = [line.split() for line in text.splitlines()]
+    assert ["dipole", "rms", "0.04", "A", "m^2"] in lines
+    assert "ratios (mixed/mechanical):" in text.splitlines()
+    assert not any(line and line[0] == "of" for line in lines)
+
+
+def test_a_toml_boolean_is_shown_as_toml_writes_it(tmp_path, capsys):
+    tb = tmp_path / "tb.toml"
+    assert run(["testbed", "export", "cmg-yaw", "-o", str(tb)]) == 0
+    tb.write_text(tb.read_text().replace("\ndof = 1\n", "\ndof = true\n", 1))
+    capsys.readouterr()
+    assert run(["gains", str(tb)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.endswith("key 'body.dof': expected one of 1, 3, got true"), err

@@ -82,7 +82,10 @@ def campaign(
         raise InputError(f"--workers {workers}: expected at least 1")
     if run_timeout is not None and not (math.isfinite(run_timeout) and run_timeout > 0):
         raise InputError(f"--run-timeout {run_timeout}: expected a time > 0 in s")
-    spec = with_study(read_campaign(campaign_file), study)
+    from airbearing.cli.common import as_flags
+
+    with as_flags(study="--study"):
+        spec = with_study(read_campaign(campaign_file), study)
     parts = parts_dir(res_path)
     if parts.exists() and not resume:
         raise InputError(
@@ -115,12 +118,12 @@ def campaign(
     remove_parts(parts)
     n_failed = int((df["error"] != "").sum()) if "error" in df.columns else 0
     typer.echo(f"runs: {len(df)} ({n_failed} failed)")
-    typer.echo(f"results: {output}")
     for entry in spec.spec:
         if entry.metric in df.columns:
             met = sum(entry.met(v) for v in df[entry.metric])
             typer.echo(f"spec {entry.describe()}: {met}/{len(df)} runs")
         else:
             typer.echo(f"spec {entry.describe()}: not a result column, not checked")
-    if rep_path is not None:
-        typer.echo(f"report: {report}")
+    for p in (res_path, rep_path):
+        if p is not None:
+            typer.echo(f"wrote {p}")

@@ -29,6 +29,15 @@ def _call(fn, *args, progress=None, **kw):
     return fn(*args, **kw)
 
 
+#: Units of the gains. Balancing (seed 000 Tables 1-2): torque from tilt. Attitude
+#: (seed 001 Table 6, normalised by the momentum h0): torque / h0 = K_p q_v + K_i int q_v
+#: + K_w w, with q_v the quaternion's vector part (dimensionless) and w in rad/s.
+GAIN_UNITS = {
+    "balancing": {"K_p": "N m", "K_d": "N m s", "K_dK_i": "N m/s"},
+    "attitude": {"K_p": "1/s", "K_i": "1/s^2", "K_w": "-"},
+}
+
+
 def _refuse_balancing_options(loop, names) -> None:
     """Options of the balancing loop given for the attitude loop: one line naming them."""
     if str(getattr(loop, "value", loop)) != "balancing":
@@ -95,7 +104,8 @@ def gains(
     data = res.to_dict()
     out.json(json_path, data)
     out.commit()
-    echo_table([[k, v] for k, v in res.gains.items()], ["gain", "value"])
+    units = GAIN_UNITS.get(loop, {})
+    echo_table([[k, v, units.get(k, "")] for k, v in res.gains.items()], ["gain", "value", "unit"])
     typer.echo("")
     checks = data.get("checks") or []
     if checks:

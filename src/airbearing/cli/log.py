@@ -177,7 +177,10 @@ def check(
         ),
         ("segments", f"{quality.n_segments}"),
     ]
-    width = max(len(k) for k, _ in lines)
+    labels = [k for k, _ in lines] + ["outliers"]
+    if quality.unexplained_rows:
+        labels.append("unexplained")  # its own label, in the same column
+    width = max(len(k) for k in labels)
     for key, value in lines:
         typer.echo(f"{key:<{width}}  {value}")
     for i, ((a, b), (t0, t1)) in enumerate(

@@ -108,6 +108,10 @@ class Outputs:
         """
         if path is None:
             return None
+        if str(path) == "-":
+            raise InputError(
+                f"{option} -: standard output is for 'testbed list --json -' only; give a file name"
+            )
         path = Path(path)
         self._check_not_input(path, option)
         if (

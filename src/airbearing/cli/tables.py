@@ -41,8 +41,14 @@ _SUFFIX_UNITS = (
 )
 
 
+#: Units of JSON keys named without a unit suffix.
+_KEY_UNITS = {"dipole_rms": "A m^2"}  # magnetorquer dipole (seed 000)
+
+
 def unit_of(key: str) -> tuple[str, str]:
     """``(label, unit)`` of a JSON key named with a unit suffix (``t_peak_s`` -> ``t peak``, s)."""
+    if key in _KEY_UNITS:
+        return key.replace("_", " "), _KEY_UNITS[key]
     low = key.lower()
     for suffix, unit in _SUFFIX_UNITS:
         if low.endswith(suffix) and len(low) > len(suffix):
@@ -135,9 +141,11 @@ def human_summary(summary: Mapping, skip: Iterable[str] = (), digits: int = 4) -
             vectors.append([label, *[cell(x, digits) for x in v], unit, len(v)])
         elif isinstance(v, Mapping):
             if v and all(not isinstance(x, Mapping | list | tuple) for x in v.values()):
+                of = v.get("of") if isinstance(v.get("of"), str) else None
                 rows = [[shown(k, x)[0], cell(shown(k, x)[2], digits), shown(k, x)[1]]
-                        for k, x in v.items()]  # fmt: skip
-                blocks.append(f"{label}:\n" + table(rows, ["quantity", "value", "unit"]))
+                        for k, x in v.items() if not (of and k == "of")]  # fmt: skip
+                head = f"{label} ({of})" if of else label  # ratios of mixed/mechanical
+                blocks.append(f"{head}:\n" + table(rows, ["quantity", "value", "unit"]))
         elif isinstance(v, list | tuple) and all(isinstance(x, str) for x in v):
             if v:
                 blocks.append(f"{label}:\n" + "\n".join(f"  - {x}" for x in v))

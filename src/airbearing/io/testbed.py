@@ -78,7 +78,8 @@ def _is_number(value: object) -> bool:
 
 
 def _fail(src: str, key: str, expected: str, got: object) -> InputError:
-    return InputError(f"{src}: key '{key}': expected {expected}, got {got!r}")
+    shown = str(got).lower() if isinstance(got, bool) else repr(got)  # TOML's true/false
+    return InputError(f"{src}: key '{key}': expected {expected}, got {shown}")
 
 
 def _number(

@@ -148,7 +148,8 @@ def _is_number(value: object) -> bool:
 
 def _component(spec: EffectSpec, value: object, where: str) -> float:
     if not _is_number(value):
-        raise InputError(f"{where}: expected a number ({spec.unit}), got {value!r}")
+        shown = str(value).lower() if isinstance(value, bool) else repr(value)  # TOML true
+        raise InputError(f"{where}: expected a number ({spec.unit}), got {shown}")
     x = float(value)  # type: ignore[arg-type]
     if not math.isfinite(x):
         raise InputError(f"{where}: expected a finite number ({spec.unit}), got {value!r}")
