@@ -292,3 +292,21 @@ def test_dir_lists_only_the_public_names():
         assert helper not in names
     assert {"__version__", "AirbearingError", "InputError", "SolverError", "slew"} <= set(names)
     assert ab.errors.InputError is InputError  # still importable
+
+
+# ------------------------------------------------------------------ the rest of the API
+def test_loops_balancing_and_two_step_take_names_and_check_gains():
+    assert ab.make_loop("cmg-yaw", "attitude").model.testbed.name == "cmg-yaw"
+    assert set(ab.tune("cmg-yaw", "attitude").gains) == {"K_p", "K_i", "K_w"}
+    run = ab.run_balancing("seed000-tabletop", "mixed", duration=20.0, free_duration=None)
+    assert run.metrics["method"] == "mixed"
+    short = ab.two_step("seed004-platform", balance_duration=20.0,
+                        identification_duration=10.0, ke_duration=5.0)  # fmt: skip
+    assert short.testbed == "seed004-platform" and short.warnings  # far too short: says so
+    for bad in (42, None):
+        with pytest.raises(InputError, match="testbed="):
+            ab.make_loop(bad, "attitude")
+    for gains, words in ((5.0, "expected K_p, K_d, K_d\\*K_i"), ("x", "gains='x'"),
+                         ((-1.0, 1.0, 1.0), "gains=\\(-1.0")):  # fmt: skip
+        with pytest.raises(InputError, match=words):
+            ab.run_balancing("seed000-tabletop", "mixed", duration=20.0, gains=gains)

@@ -34,6 +34,7 @@ negative feedback: the closed loop is stable iff ``1 + L`` has no unstable zeros
 from __future__ import annotations
 
 import math
+import os
 from dataclasses import dataclass, field, replace
 from functools import lru_cache
 
@@ -486,7 +487,14 @@ def _as_model(testbed_or_model) -> Model:
         return testbed_or_model
     if isinstance(testbed_or_model, Testbed):
         return _model_of(testbed_or_model)
-    raise InputError(f"expected a Testbed or a Model, got {type(testbed_or_model).__name__}")
+    if isinstance(testbed_or_model, str | os.PathLike):  # a built-in name or a testbed file
+        from airbearing.io.coerce import as_testbed
+
+        return _model_of(as_testbed(testbed_or_model))
+    raise InputError(
+        f"testbed={testbed_or_model!r}: expected a Testbed, a Model, a built-in testbed name "
+        "or a testbed file path"
+    )
 
 
 @lru_cache(maxsize=8)

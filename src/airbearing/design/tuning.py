@@ -406,6 +406,7 @@ def tune(testbed, loop: str, spec: Spec | None = None, *, split: str = "mixed") 
     spec = _as_spec(spec)
     opts = {"split": split} if loop == "balancing" else {}
     base = make_loop(testbed, loop, **opts)
+    testbed = base.model.testbed  # a name or a file: the testbed it named
     nyq = math.pi / base.dt
     w_lo, w_hi = 1e-3, 0.5 * nyq
 

@@ -272,6 +272,10 @@ def run_balancing(
         The Model to run, default the one of ``testbed`` and ``effects``; a campaign passes
         one Model per structure with this run's values in ``p0``.
     """
+    from airbearing.io.coerce import as_testbed
+
+    testbed = as_testbed(testbed)
+    gains = _checked_gains(gains)
     _check_run(testbed, method, duration, initial_offset, start)
     if vertical_offset is None:
         vertical_offset = balanced_vertical_offset(testbed)
@@ -304,6 +308,22 @@ def run_balancing(
         residual_in_plane_torque_nm=testbed.body.mass * testbed.gravity * math.hypot(*r_end[:2]),
     )  # fmt: skip
     return BalancingRun(method, result, free, metrics)
+
+
+def _checked_gains(gains):
+    """``gains`` as a tuple of finite non-negative numbers (the law checks how many), or None."""
+    if gains is None:
+        return None
+    try:
+        g = np.asarray(gains, dtype=float).reshape(-1)
+    except (TypeError, ValueError):
+        g = np.array([np.nan])
+    if g.size == 0 or not np.all(np.isfinite(g)) or np.any(g < 0):
+        raise InputError(
+            f"gains={gains!r}: expected a sequence of finite gains >= 0 in SI units (the "
+            "PID laws: K_p N m, K_d N m s, K_d K_i N m/s)"
+        )
+    return tuple(g.tolist())
 
 
 def _check_run(testbed: Testbed, method: str, duration: float, initial_offset: float, start):

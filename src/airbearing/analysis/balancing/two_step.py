@@ -277,6 +277,9 @@ def two_step(
     -------
     TwoStepResult
     """
+    from airbearing.io.coerce import as_testbed
+
+    testbed = as_testbed(testbed)
     if balance_duration is None:
         balance_duration = step1_duration(testbed)
     check_inputs(testbed, method, balance_duration)
