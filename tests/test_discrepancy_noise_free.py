@@ -24,3 +24,8 @@ def test_a_noise_free_spin_down_names_the_friction_and_nothing_below_the_resolut
     doc = found.to_json()
     assert "resolution" in doc["noise_floor_source"] and doc["rate_noise"] < RATE_SIGMA_MIN
     assert doc["adequacy"]["measurement_noise"] is None  # no coloured noise in a perfect log
+    # its error is the bound at the resolution (the residual alone gave 3e-20: std / bound
+    # 3.5e-9), which still covers the truth
+    (effect,) = doc["effects"]
+    assert effect["std"] == effect["crlb"] > 0
+    assert abs(effect["value"] - 1e-4) < 3 * effect["std"]

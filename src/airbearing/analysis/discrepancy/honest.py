@@ -43,12 +43,24 @@ class EffectErrors:
     efficiency: object
 
 
-def honest(problem, fit, k: int) -> Errors:
+def honest(problem, fit, k: int, *, noise_free: bool = False) -> Errors:
     """The honest errors of the first ``k`` parameters of ``fit`` (module doc).
 
     Where the estimator gives no number (a parameter without a derivative, e.g. a profile
-    scan's threshold) the fit's own error is kept.
+    scan's threshold) the fit's own error is kept. ``noise_free``: the log shows less noise
+    than the replay resolves (its floor is the resolution), so no error is below the
+    bound at that resolution (the residual, the integration's own error, would make it
+    as small as 1e-20).
     """
+    errs = _honest(problem, fit, k)
+    if noise_free:
+        floor = np.where(np.isfinite(errs.crlb), errs.crlb, 0.0)
+        errs = Errors(np.maximum(errs.std, floor), errs.std_white, errs.crlb, errs.cov,
+                      errs.correlation_time_s)  # fmt: skip
+    return errs
+
+
+def _honest(problem, fit, k: int) -> Errors:
     white = np.asarray(fit.theta_std[:k], dtype=float)
     cov_w = np.asarray(fit.cov[:k, :k], dtype=float) if fit.cov is not None else np.diag(white**2)
     nan = np.full(k, np.nan)

@@ -777,7 +777,8 @@ def _named(search: _Search, sel: _Selection, prog: _Progress, screen=True, worke
         if search.final_problem is None:  # (rounds run on the naming pieces only)
             current = _retry_at_horizon(search, sel, current, screen, workers, prog)
     problem = search.final_problem or search.problem(sel.lag)
-    errs = honest(problem, current, len(current.theta))
+    noise_free = search.floor.measured < search.floor.resolution
+    errs = honest(problem, current, len(current.theta), noise_free=noise_free)
     effects, effect_std, white, crlb, eff = {}, {}, {}, {}, {}
     i = 0
     for c in sel.chosen:
