@@ -370,3 +370,17 @@ def test_a_toml_boolean_is_shown_as_toml_writes_it(tmp_path, capsys):
     assert run(["gains", str(tb)]) == 2
     err = capsys.readouterr().err.strip()
     assert err.endswith("key 'body.dof': expected one of 1, 3, got true"), err
+
+
+def test_log_check_tool_table_says_each_answer_once(example_case, capsys):
+    case = example_case("platform_viscous")
+    assert run(["--quiet", "log", "check", str(case / "testbed.toml"), str(case / "log.csv")]) == 0
+    out = capsys.readouterr().out.splitlines()
+    start = next(i for i, line in enumerate(out) if line.startswith("tool "))
+    rows = [line for line in out[start + 2 :] if line.strip()]
+    whys = [line.split(maxsplit=1)[1] for line in rows]
+    assert len(set(whys)) == len(whys), rows
+    names = " ".join(rows)
+    for tool in ("simulate replay", "identify", "discrepancy", "replay", "balance"):
+        assert tool in names
+    assert not any(w.count("segment(s)") > 1 for w in whys), rows

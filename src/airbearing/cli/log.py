@@ -207,7 +207,13 @@ def _echo_tools(tools: dict) -> None:
     """What each tool can use of the log, as a table: tool, usable, why."""
     from airbearing.cli.tables import echo_table
 
-    echo_table([[name, ok, why] for name, (ok, why) in tools.items()], ["tool", "usable", "why"])
+    rows: dict[tuple, list[str]] = {}  # tools with the same answer share one row
+    for name, (ok, why) in tools.items():
+        rows.setdefault((ok, why), []).append(name)
+    echo_table(
+        [[", ".join(names), ok, why] for (ok, why), names in rows.items()],
+        ["tool", "usable", "why"],
+    )
 
 
 def _report_bad_cells(out, json_path, log_file, tb, error) -> None:

@@ -53,8 +53,9 @@ def tool_use(log: Log, quality: LogQuality) -> dict[str, tuple[bool, str]]:
     )
     out["simulate replay"] = (replay_ok, why_replay)
     if n_fit:
-        why_fit = (
-            f"{n_fit} segment(s) of >= {MIN_FIT_SAMPLES} usable samples; fits {measured}; {segs}"
+        why_fit = (  # each count said once
+            f"{n_fit} of {quality.n_segments} segment(s) with >= {MIN_FIT_SAMPLES} usable "
+            f"samples, {len(quality.outlier_rows)} outlier row(s) left out; fits {measured}"
         )
         out["identify"] = (True, why_fit)
         out["discrepancy"] = (True, why_fit)
