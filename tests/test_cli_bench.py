@@ -384,3 +384,15 @@ def test_log_check_tool_table_says_each_answer_once(example_case, capsys):
     for tool in ("simulate replay", "identify", "discrepancy", "replay", "balance"):
         assert tool in names
     assert not any(w.count("segment(s)") > 1 for w in whys), rows
+
+
+def test_a_fit_pinned_at_zero_is_read_as_zero_not_refused():
+    # an interior-point fit at its bound ends a roundoff below it (-7e-19 N m seen in a
+    # discrepancy campaign); 1e-10 SI is 3 orders below any real rig's friction or drag
+    from airbearing.errors import InputError
+    from airbearing.io.vocabulary import ROUNDOFF, validate_effect_value
+
+    assert validate_effect_value("coulomb_friction", -7e-19, "x") == 0.0
+    assert validate_effect_value("aero_drag", [1e-6, -ROUNDOFF / 2, 0], "x") == (1e-6, 0.0, 0.0)
+    with pytest.raises(InputError, match=">= 0 N m s, got -1e-09"):
+        validate_effect_value("viscous_friction", -1e-9, "x")

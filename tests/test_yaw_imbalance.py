@@ -121,7 +121,8 @@ def test_simulate_cli_effect(tmp_path, capsys):
         assert exc.value.code == 2
         assert "expected 2 numbers A_S,A_C" in capsys.readouterr().err
     with pytest.raises(SystemExit) as exc:
-        cli.main(["simulate", "cmg-3dof", "--effect", "yaw_imbalance=1e-4,0", "-o", str(out)])
+        cli.main(["simulate", "cmg-3dof", "--effect", "yaw_imbalance=1e-4,0", "-o",
+                  str(tmp_path / "no.csv")])  # fmt: skip
     assert exc.value.code == 2 and "dof = 1" in capsys.readouterr().err
 
 

@@ -22,6 +22,12 @@ EffectValue = float | tuple[float, float] | tuple[float, float, float]
 
 _SHAPES: tuple[str, ...] = ("scalar", "scalar_or_axes", "vector3", "pair")
 
+#: SI: a value this little below a non-strict bound (0 for friction and drag) is the
+#: roundoff of a solver that ended at the bound (an interior-point fit: -7e-19 seen) and
+#: is read as the bound. Real rigs' friction and drag are 1e-7 or more (effect-ranges.md),
+#: so 1e-10 never hides a genuinely negative value.
+ROUNDOFF = 1e-10
+
 
 @dataclass(frozen=True)
 class EffectSpec:
@@ -157,6 +163,8 @@ def _component(spec: EffectSpec, value: object, where: str) -> float:
         unit = "" if spec.unit == "-" else f" {spec.unit}"
         if spec.lower_strict and not x > spec.lower:
             raise InputError(f"{where}: expected a value > {spec.lower:g}{unit}, got {value!r}")
+        if not spec.lower_strict and spec.lower - ROUNDOFF <= x < spec.lower:
+            x = spec.lower  # a fit pinned at its bound, ended a roundoff beyond it
         if not spec.lower_strict and not x >= spec.lower:
             raise InputError(f"{where}: expected a value >= {spec.lower:g}{unit}, got {value!r}")
     return x
