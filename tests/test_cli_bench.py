@@ -396,3 +396,18 @@ def test_a_fit_pinned_at_zero_is_read_as_zero_not_refused():
     assert validate_effect_value("aero_drag", [1e-6, -ROUNDOFF / 2, 0], "x") == (1e-6, 0.0, 0.0)
     with pytest.raises(InputError, match=">= 0 N m s, got -1e-09"):
         validate_effect_value("viscous_friction", -1e-9, "x")
+
+
+def test_balance_note_names_the_flag(capsys):
+    args = [
+        "--quiet",
+        "balance",
+        "seed000-tabletop",
+        "--vertical-offset",
+        "1e-5",
+        "--duration",
+        "5",
+    ]
+    assert run(args) == 0
+    note = [line for line in capsys.readouterr().out.splitlines() if line.startswith("note:")]
+    assert note and "--vertical-offset" in note[0] and "vertical_offset" not in note[0]

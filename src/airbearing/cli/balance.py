@@ -181,7 +181,10 @@ def balance(
     if table:
         typer.echo(table)
         typer.echo("")
-    typer.echo(human_summary(summary, skip=("points", "tables", "values")))
+    shown = dict(summary)
+    if isinstance(shown.get("note"), str):  # the library's words name its parameters
+        shown["note"] = shown["note"].replace("vertical_offset", "--vertical-offset")
+    typer.echo(human_summary(shown, skip=("points", "tables", "values")))
     for p in (log_path, json_path):
         if p is not None:
             typer.echo(f"wrote {p}")
