@@ -79,7 +79,7 @@ def test_cli_writes_json_report_and_testbed(story, tmp_path):
 @pytest.mark.parametrize(
     "args, message",
     [
-        (["--only", "friction"], "unknown effect"),
+        (["--only", "friction"], "--only friction: unknown effect"),
         (["--json", "{tmp}/out.txt"], "--json"),
         (["--report", "{tmp}/missing/out.html"], "does not exist"),
     ],

@@ -162,7 +162,7 @@ def test_spring_not_offered_on_a_spinning_log():
     # jointly, one spinning log is enough, and the reason names it
     both = not_physical(ROTOR, d_slow + d_spin)["spring_torque"]
     assert both.startswith(f"not physical on {spinning.source}:")
-    with pytest.raises(InputError, match="--only spring_torque: not physical on this log"):
+    with pytest.raises(InputError, match="only='spring_torque': not physical on this log"):
         candidates_for(ROTOR, d_spin, only=["spring_torque"])
     # dof 3: no spring at all, nothing refused
     assert not_physical(SPHERE, d_spin) == {}

@@ -10,6 +10,7 @@ from __future__ import annotations
 import contextlib
 import math
 import os
+import re
 from pathlib import Path
 
 from airbearing.errors import InputError
@@ -27,6 +28,7 @@ __all__ = [
     "given",
     "refuse_given",
     "as_flags",
+    "only_as_flag",
 ]
 
 #: Largest share of the machine's memory a command's log may need before it is refused.
@@ -269,3 +271,16 @@ def as_flags(**flags: str):
                 if typed is not None:
                     raise InputError(f"{flag} {typed}: {msg.split(': ', 1)[1]}") from None
         raise
+
+
+@contextlib.contextmanager
+def only_as_flag():
+    """The library's ``only='NAME': ...`` messages as ``--only NAME: ...`` (each name of a
+    repeated ``--only`` is its own)."""
+    try:
+        yield
+    except InputError as e:
+        m = re.match(r"only='([^']*)': (.*)", str(e), re.S)
+        if m is None:
+            raise
+        raise InputError(f"--only {m.group(1)}: {m.group(2)}") from None

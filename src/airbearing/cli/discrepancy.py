@@ -64,7 +64,7 @@ def discrepancy(
 
     one_blas_thread()
     from airbearing.analysis.discrepancy.search import discrepancy as run
-    from airbearing.cli.common import testbed_arg
+    from airbearing.cli.common import only_as_flag, testbed_arg
     from airbearing.cli.show_progress import progress_display
     from airbearing.io.log import read_log
     from airbearing.io.testbed import write_testbed
@@ -72,7 +72,7 @@ def discrepancy(
     tb = testbed_arg(testbed)
     fitted = [read_log(p, tb) for p in logs]
     held = [read_log(p, tb) for p in validate or []]
-    with progress_display("discrepancy") as progress:
+    with progress_display("discrepancy") as progress, only_as_flag():
         result = run(
             tb,
             fitted,

@@ -268,16 +268,16 @@ def _candidates(testbed: Testbed, datas, only) -> tuple[list, list]:
         for name in only:
             if name not in REGISTRY:
                 raise InputError(
-                    f"--only {name}: unknown effect; expected one of {', '.join(REGISTRY)}"
+                    f"only={name!r}: unknown effect; expected one of {', '.join(REGISTRY)}"
                 )
             if name not in names:
                 if name in GYRO_EFFECTS and not gyro:
                     reason = "the testbed has no gyro (sensors.gyro = false)"
                 else:
                     reason = REGISTRY[name].applies(kind, dof, has_field) or "not applicable"
-                raise InputError(f"--only {name}: cannot act on testbed '{testbed.name}': {reason}")
+                raise InputError(f"only={name!r}: cannot act on testbed '{testbed.name}': {reason}")
             if name in refused:
-                raise InputError(f"--only {name}: {refused[name]}")
+                raise InputError(f"only={name!r}: {refused[name]}")
         names = [n for n in names if n in only]
     out, unphysical = [], []
     for name in names:
