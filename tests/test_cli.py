@@ -223,6 +223,8 @@ def test_table_cells_are_plain():
     assert cell(np.float64(5.0)) == "5" and cell(0.123456789) == "0.1235"
     assert cell(None) == "—" and cell(float("nan")) == "—" and cell(float("inf")) == "∞"
     assert cell(True) == "yes" and cell([1.0, 2.5]) == "1 2.5"
+    # from 1e4 on every integer digit (a 19 mm offset in um with a 0.3 um std: not -1.9e+04)
+    assert cell(-19002.7) == "-19003" and cell(12345.6) == "12346" and cell(2e9) == "2e+09"
     assert unit_of("peak_rate_deg_s") == ("peak rate", "deg/s")
     assert unit_of("gimbal_min_deg") == ("gimbal min", "deg")
     lines = summary_table({"t_peak_s": 1.6, "testbed": "cmg-yaw"}).splitlines()

@@ -171,7 +171,8 @@ def human_summary(summary: Mapping, skip: Iterable[str] = (), digits: int = 4) -
 
 
 def cell(value, digits: int = 4) -> str:
-    """One value as text: 4 significant digits, ``—`` for none, yes/no, lists space-separated."""
+    """One value as text: 4 significant digits (every integer digit from 1e4 to 1e9), ``—``
+    for none, yes/no, lists space-separated."""
     if value is None:
         return "—"
     if isinstance(value, bool):
@@ -187,6 +188,8 @@ def cell(value, digits: int = 4) -> str:
             return "—"
         if math.isinf(v):
             return "∞" if v > 0 else "-∞"
+        if 10**digits <= abs(v) < 1e9:  # every integer digit: -19003 um, not -1.9e+04
+            return f"{v + 0.0:.0f}"
         return f"{v + 0.0:.{digits}g}"  # + 0.0: no "-0"
     if isinstance(value, Mapping):
         return ", ".join(f"{k} {cell(v, digits)}" for k, v in value.items())
