@@ -111,3 +111,15 @@ def test_attitude_loop_has_a_yaw_loop_and_the_discrete_loop_is_worse():
     # sampling, the low-pass and the delay only remove phase at the crossover
     assert yd.phase_margin_deg < yc.phase_margin_deg
     assert yd.delay_margin_s < yc.delay_margin_s
+
+
+def test_discrete_min_damping_counts_a_delay_pole_at_the_origin_as_fully_damped():
+    from airbearing.design.margins import pole_damping
+
+    # z = 0 (one sample of computation delay): infinitely fast, damping 1 (it was NaN, and
+    # the discrete channels' min_damping was null in the report's JSON)
+    wn, zeta = pole_damping([0.0, 0.9 + 0.1j], 0.05)
+    assert np.isinf(wn[0]) and zeta[0] == 1.0
+    assert 0 < zeta[1] < 1  # the other pole as before: -Re(s)/|s| with s = ln(z)/dt
+    s = np.log(0.9 + 0.1j) / 0.05
+    assert zeta[1] == pytest.approx(-s.real / abs(s))

@@ -161,6 +161,8 @@ def pole_damping(poles, dt: float | None):
     wn = np.abs(s)
     with np.errstate(invalid="ignore", divide="ignore"):
         zeta = np.where(wn > 0, -s.real / wn, -np.sign(s.real + 0.0) + (s.real == 0))
+    # a pole at z = 0 (a sample of computation delay) is infinitely fast: damping 1, not NaN
+    zeta = np.where(np.isinf(wn), 1.0, zeta)
     return wn, zeta
 
 
