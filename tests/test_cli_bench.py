@@ -411,3 +411,16 @@ def test_balance_note_names_the_flag(capsys):
     assert run(args) == 0
     note = [line for line in capsys.readouterr().out.splitlines() if line.startswith("note:")]
     assert note and "--vertical-offset" in note[0] and "vertical_offset" not in note[0]
+
+
+def test_defaults_that_depend_on_the_testbed_are_ones_it_accepts(tmp_path):
+    import json
+
+    # --scenario: slew needs a CMG, so a platform simulates a free oscillation
+    assert run(["simulate", "seed004-platform", "--duration", "2", "--json",
+                str(tmp_path / "s.json")]) == 0  # fmt: skip
+    assert json.loads((tmp_path / "s.json").read_text())["scenario"] == "free"
+    # --loop and --split: a platform without a cage field tunes the mechanical balancing PID
+    assert run(["gains", "seed004-platform", "--json", str(tmp_path / "g.json")]) == 0
+    doc = json.loads((tmp_path / "g.json").read_text())
+    assert doc["loop"] == "balancing" and doc["split"] == "mechanical"

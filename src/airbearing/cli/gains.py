@@ -22,6 +22,28 @@ Split = Literal["mixed", "mechanical"]
 LOOPS, SPLITS = get_args(Loop), get_args(Split)
 
 
+#: --loop's help: the default depends on the testbed.
+LOOP_HELP = "The loop to {}; default: attitude on a CMG testbed, balancing on a platform."
+
+
+def default_loop(testbed) -> str:
+    """The loop a testbed has: the CMG attitude loop, or a platform's balancing loop."""
+    return "attitude" if testbed.kind == "cmg" else "balancing"
+
+
+#: --split's help: the default depends on the testbed.
+SPLIT_HELP = (
+    "Balancing PID split (seed 000); default: mixed on a testbed with magnetorquers and a "
+    "cage field, mechanical otherwise."
+)
+
+
+def default_split(testbed) -> str:
+    """The seed-000 split a platform can run: mixed needs magnetorquers and a field."""
+    magnetic = testbed.magnetorquers is not None and testbed.field is not None
+    return "mixed" if magnetic else "mechanical"
+
+
 def _call(fn, *args, progress=None, **kw):
     """``fn(*args, **kw)``, passing ``progress`` when ``fn`` takes it."""
     if progress is not None and "progress" in inspect.signature(fn).parameters:
@@ -47,8 +69,8 @@ def _refuse_balancing_options(loop, names) -> None:
 @app.command()
 def gains(
     testbed: Annotated[str, typer.Argument(help="Testbed file or built-in name.")],
-    loop: Annotated[Loop, typer.Option(help="The loop to tune.")] = "attitude",
-    split: Annotated[Split, typer.Option(help="Balancing PID split (seed 000).")] = "mixed",
+    loop: Annotated[Loop | None, typer.Option(help=LOOP_HELP.format("tune"))] = None,
+    split: Annotated[Split | None, typer.Option(help=SPLIT_HELP)] = None,
     phase_margin_deg: Annotated[
         float, typer.Option(help="Minimum phase margin, deg, 0 to 90.")
     ] = 45.0,
@@ -73,7 +95,10 @@ def gains(
     out = Outputs(force=force)
     testbed_input(out, testbed)
     json_path = out.plan(json_out, "--json", (".json",))
+    tb = testbed_arg(testbed)
+    loop = loop or default_loop(tb)
     _refuse_balancing_options(loop, ("split", "offset_range_mm"))
+    split = split or default_split(tb)
     number("--phase-margin-deg", phase_margin_deg, lo=0, hi=90, lo_open=True, hi_open=True,
            unit="deg")  # fmt: skip
     number("--gain-margin-db", gain_margin_db, lo=0, lo_open=True, unit="dB")
@@ -86,7 +111,6 @@ def gains(
             f"--offset-range-mm {cell(offset_range_mm[0])} {cell(offset_range_mm[1])}: "
             "expected LO <= HI"
         )
-    tb = testbed_arg(testbed)
 
     from airbearing.design.tuning import Spec, tune
 
@@ -129,8 +153,8 @@ def gains(
 @app.command()
 def report(
     testbed: Annotated[str, typer.Argument(help="Testbed file or built-in name.")],
-    loop: Annotated[Loop, typer.Option(help="The loop to report.")] = "attitude",
-    split: Annotated[Split, typer.Option(help="Balancing PID split (seed 000).")] = "mixed",
+    loop: Annotated[Loop | None, typer.Option(help=LOOP_HELP.format("report"))] = None,
+    split: Annotated[Split | None, typer.Option(help=SPLIT_HELP)] = None,
     gains_file: Annotated[
         Path | None, typer.Option("--gains", help="Gains JSON of 'airbearing gains'.")
     ] = None,
@@ -148,7 +172,10 @@ def report(
     out.input(gains_file, "the gains file")
     html_path = out.plan(output, "-o", (".html",))
     json_path = out.plan(json_out, "--json", (".json",))
+    tb = testbed_arg(testbed)
+    loop = loop or default_loop(tb)
     _refuse_balancing_options(loop, ("split",))
+    split = split or default_split(tb)
     spec_dict = None
     g = None
     if gains_file is not None:
@@ -163,7 +190,6 @@ def report(
             split = data["split"]
         if isinstance(data.get("spec"), dict):
             spec_dict = data["spec"]
-    tb = testbed_arg(testbed)
 
     from airbearing.design.tuning import Spec
     from airbearing.reporting.stability import stability_report

@@ -46,11 +46,12 @@ GLITCHES = "rate_zero|rate_spike|quat_wrong_frame|yaw_offset|yaw_zero"
 def simulate(
     testbed: Annotated[str, typer.Argument(help="Testbed file or built-in name.")],
     scenario: Annotated[
-        Scenario,
+        Scenario | None,
         typer.Option(
-            help="slew (CMG), free (free oscillation) or spindown (spun about z, coasting)."
+            help="slew (CMG), free (free oscillation) or spindown (spun about z, coasting); "
+            "default: slew on a CMG testbed, free on a platform."
         ),
-    ] = "slew",
+    ] = None,
     yaw_deg: Annotated[
         float, typer.Option(help=f"Slew angle, deg, within +-{MAX_SLEW_DEG:g}.")
     ] = 180.0,
@@ -115,6 +116,8 @@ def simulate(
     out.input(times, "the --times log")
     log_path = out.plan(output, "-o", (".csv", ".parquet"))
     json_path = out.plan(json_out, "--json", (".json",))
+    tb = testbed_arg(testbed)
+    scenario = scenario or ("slew" if tb.kind == "cmg" else "free")
     _refuse_what_does_not_apply(scenario)
     _check_numbers(yaw_deg, axis, duration, initial_rate, initial_quaternion, sliders,
                    attitude_noise, spin_rate, jitter)  # fmt: skip
@@ -123,7 +126,6 @@ def simulate(
     from airbearing.analysis.simulation.scenarios import SCENARIO_DURATIONS
 
     effects = parse_effects(effect)
-    tb = testbed_arg(testbed)
     length = SCENARIO_DURATIONS[scenario] if duration is None else duration
     check_log_size("--duration", length, tb.sensors.rate)
     kw = dict(
