@@ -186,7 +186,8 @@ def add_discrepancy(report: Report, result: Discrepancy, *, level: int = 2) -> N
         f"{result.windows.length * data.dt:.3g} s of (logged {what} - model {what}), each window "
         "restarted from the measured state corrected by a fitted initial-state perturbation, "
         "integrated on the logged times; no window spans a gap, outlier rows weigh zero. "
-        f"Noise floor: {result.floor.source}. " + " ".join(as_sentence(n) for n in data.notes)
+        f"Noise floor: {result.floor.source}. "
+        + " ".join(as_sentence(n[:1].upper() + n[1:]) for n in data.notes)
     )
     _segments_paragraph(report, datas)
     _validation_section(report, result, level + 1)
@@ -363,7 +364,7 @@ def _adequacy_section(report: Report, result: Discrepancy, level: int) -> None:
             {"quantity": "R^2 on functions of the yaw angle", "value": f.get("angle")},
             {"quantity": "R^2 on functions of the rate", "value": f.get("rate")},
             {"quantity": "R^2 on functions of time", "value": f.get("time")},
-            {"quantity": "structure remains", "value": str(bool(a.structure_remains))},
+            {"quantity": "structure remains", "value": "yes" if a.structure_remains else "no"},
         ]
     )
     ser = a.series

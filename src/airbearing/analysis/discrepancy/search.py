@@ -651,7 +651,10 @@ def _select(search, nominal, max_effects, screen, workers, prog) -> _Selection:
         if not _add_best(sel, results, prog):
             break
     else:
-        sel.stop_reason = sel.stop_reason or f"reached max_effects = {max_effects}"
+        sel.stop_reason = (
+            sel.stop_reason
+            or f"it named the most effects asked for ({max_effects}; max_effects, --max-effects)"
+        )
     return sel
 
 
