@@ -204,8 +204,8 @@ def _bode_nyquist(analysis, loop: Loop, discrete: bool):
 
 
 _MARGIN_LEGEND = (
-    "none: the loop never crosses that line (|L| = 1 for the phase and delay margins, "
-    "-180 deg for the gain margin), so the margin is unlimited; null in JSON."
+    "unlimited: the loop never crosses that line (|L| = 1 for the phase and delay margins, "
+    "-180 deg for the gain margin; for w_B, |S| never reaches 1/sqrt(2)); null in JSON"
 )
 
 
@@ -314,8 +314,7 @@ def _margin_tables(rep: Report, d, c, checks, per, spec: Spec) -> None:
     """Margins of the discrete and continuous loops, the specification at its worst
     corner, and the margins at every corner."""
     rep.heading("Margins, discrete loop (ZOH, 1 sample delay, as implemented)", 3)
-    rep.table(_margin_rows(d, spec))
-    rep.paragraph(_MARGIN_LEGEND)
+    rep.table(_margin_rows(d, spec), legend=_MARGIN_LEGEND)
     if d.multiloop:
         ml = d.multiloop
         rep.paragraph(
@@ -324,12 +323,11 @@ def _margin_tables(rep: Report, d, c, checks, per, spec: Spec) -> None:
             f"{ml['disk_phase_margin_deg']:.3g} deg."
         )
     rep.heading("Margins, continuous design model (no sampling, no delay)", 3)
-    rep.table(_margin_rows(c, None))
-    rep.paragraph(_MARGIN_LEGEND)
+    rep.table(_margin_rows(c, None), legend=_MARGIN_LEGEND)
     rep.heading("Specification, worst case over the uncertainty box", 3)
     rep.table(
-        [ch.to_dict() for ch in checks],
-        ["name", "value", "limit", "sense", "met", "by"],
+        [_check_row(ch.to_dict()) for ch in checks],
+        ["check", "value", "required", "verdict", "by"],
         legend="not evaluated, or unlimited (no crossing)",
     )
     rep.table(
@@ -405,6 +403,21 @@ def _disturbance_response(rep: Report, loop: Loop, t_end: float) -> None:
     )
 
 
+def _check_row(c: dict) -> dict:
+    """A specification check as words: the requirement ``>= 45``, the verdict pass/fail."""
+    limit = json_number(c.get("limit"))
+    required = None if limit is None else f"{c.get('sense')} {limit:.4g}"
+    verdict = None if c.get("met") is None else ("pass" if c.get("met") else "fail")
+    return {"check": c.get("name"), "value": c.get("value"), "required": required,
+            "verdict": verdict, "by": c.get("by")}  # fmt: skip
+
+
+def _pole_text(p: complex) -> str:
+    """A z-plane pole as a person writes it: ``0.8945 +0.06j``, ``0.961``, ``0``."""
+    re_, im = (0.0 if abs(x) < 1e-12 else x for x in (p.real, p.imag))
+    return f"{re_ + 0.0:.4g}" if im == 0 else f"{re_ + 0.0:.4g} {im:+.4g}j"
+
+
 def _pole_map(rep: Report, poles, dt: float) -> None:
     """The discrete closed-loop poles in the z-plane, their natural frequency and damping."""
     fig, ax = plt.subplots(figsize=(5.5, 5.5))
@@ -426,7 +439,7 @@ def _pole_map(rep: Report, poles, dt: float) -> None:
         at_origin = abs(p) < 1e-12
         rows.append(
             {
-                "pole (z)": f"{p.real:.6g} {p.imag:+.4g}j",
+                "pole (z)": _pole_text(p),
                 "w_n (rad/s)": 0.0 if integrator else (None if at_origin else float(a)),
                 "damping": "integrator" if integrator else (
                     "delay (z = 0)" if at_origin else (float(b) if np.isfinite(b) else None)
@@ -487,7 +500,7 @@ def stability_report(
         "Loops broken at the actuator input; margins of the discrete loop (zero-order hold, "
         "one sample of computation delay, the controller as implemented) and of the "
         "continuous design model. A margin that does not exist (the loop never crosses) prints as "
-        "'none' and is null in JSON."
+        "'—' (unlimited) and is null in JSON."
     )
     return report_for_loop(lp, spec, report=rep, progress=progress)
 
