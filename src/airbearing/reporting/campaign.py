@@ -17,7 +17,7 @@ import numpy as np
 
 from airbearing.analysis.campaign import studies
 from airbearing.analysis.campaign.dispersions import dispersed_columns
-from airbearing.reporting.html import Report
+from airbearing.reporting.html import Report, pretty_key
 
 __all__ = [
     "campaign_report",
@@ -150,6 +150,35 @@ def _detection(report: Report, campaign, df) -> dict:
     return det
 
 
+#: Column names of the studies' rows, as a reader says them.
+_WORDS = {
+    "spec": "specification",
+    "fraction": "fraction met",
+    "ci_low": "95 % interval, low",
+    "ci_high": "95 % interval, high",
+    "rank_corr": "rank correlation",
+    "p_value": "p-value",
+    "miss_rate_low_third": "miss rate, lowest third",
+    "miss_rate_high_third": "miss rate, highest third",
+    "miss_rank_corr": "rank correlation with a miss",
+}
+
+
+def _in_words(row: dict) -> dict:
+    """A studies row with its column names in words."""
+    return {_WORDS.get(k, k.replace("_", " ")): v for k, v in row.items()}
+
+
+def _law(d) -> str:
+    """A dispersion's law in words, numbers to 4 digits: ``uniform 0 to 0.002``."""
+    p = [float(v) for v in d.params]
+    if d.kind == "relative_normal":
+        return f"normal, {p[0]:.4g} of the nominal (1 sigma)"
+    if d.kind == "normal":
+        return f"normal, mean {p[0]:.4g}, sigma {p[1]:.4g}"
+    return f"{d.kind} {p[0]:.4g} to {p[1]:.4g}"
+
+
 def campaign_report(
     campaign, df, *, report: Report | None = None, level: int = 2, max_plotted: int = MAX_PLOTTED
 ) -> Report:
@@ -172,15 +201,15 @@ def campaign_report(
     disp = dispersed_columns(campaign.testbed, campaign.dispersions)
     if campaign.dispersions:
         rep.heading("Dispersions", h)
-        rep.table([{"key": d.key, "distribution": d.describe()} for d in campaign.dispersions])
+        rep.table([{"testbed key": d.key, "distribution": _law(d)} for d in campaign.dispersions])
     if campaign.spec:
         rep.heading("Specification", h)
-        rep.table([studies.spec_rate(df, e) for e in campaign.spec])
+        rep.table([_in_words(studies.spec_rate(df, e)) for e in campaign.spec])
         rep.paragraph("A failed run does not meet the specification; interval: exact 95 %.")
         for e in campaign.spec:
             if e.metric in df.columns and disp:
-                rep.paragraph(f"What drives {e.metric} and its misses:")
-                rep.table(studies.drivers(df, e.metric, disp, e))
+                rep.paragraph(f"What drives the {pretty_key(e.metric)} and its misses:")
+                rep.table([_in_words(r) for r in studies.drivers(df, e.metric, disp, e)])
     if campaign.study == "detection":
         _detection(rep, campaign, df)
     metrics = _metrics(campaign, df)
@@ -190,7 +219,7 @@ def campaign_report(
         for m in metrics[:MAX_TABLE]:
             v = df.loc[ok, m].astype(float).to_numpy()
             v = v[np.isfinite(v)]
-            row = {"metric": m, "runs": int(v.size)}
+            row = {"metric": pretty_key(m), "runs": int(v.size)}
             for q, val in zip(PERCENTILES, np.percentile(v, PERCENTILES) if v.size else
                               [None] * len(PERCENTILES), strict=True):  # fmt: skip
                 row[f"p{q}"] = None if val is None else float(val)
@@ -201,7 +230,9 @@ def campaign_report(
         entries = {e.metric: e for e in campaign.spec}
         for m in metrics[:max_plotted]:
             fig = _hist_cdf(df.loc[ok, m].astype(float).to_numpy(), m, entries.get(m))
-            rep.figure(fig, f"{m}: histogram and empirical CDF over the successful runs")
+            rep.figure(
+                fig, f"{pretty_key(m)}: histogram and empirical CDF over the successful runs"
+            )
         if disp and campaign.study != "detection":
             sel = metrics[: max(1, len(entries))][:3]
             log_cols = {

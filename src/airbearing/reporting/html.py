@@ -124,6 +124,24 @@ def column_label(name: str) -> str:
     return f"{text} ({unit})" if unit else text
 
 
+_KEY_UNITS = (
+    ("_rad_s", "rad/s"), ("_deg_s", "deg/s"), ("_db", "dB"), ("_deg", "deg"), ("_nm", "N m"),
+    ("_m", "m"), ("_s", "s"),
+)  # fmt: skip
+
+
+def pretty_key(key: str) -> str:
+    """A JSON key or result column as a header: ``gain_margin_db`` -> ``gain margin (dB)``,
+    ``gimbal_min_deg[0]`` -> ``gimbal min [0] (deg)``."""
+    index = ""
+    if key.endswith("]") and "[" in key:
+        key, index = key[: key.index("[")], " " + key[key.index("[") :]
+    for suffix, unit in _KEY_UNITS:
+        if key.endswith(suffix):
+            return f"{key[: -len(suffix)].replace('_', ' ')}{index} ({unit})"
+    return key.replace("_", " ") + index
+
+
 def sentence(text: str) -> str:
     """``text`` ending as a sentence (a full stop added unless it ends in . ! ? or :)."""
     text = str(text).strip()

@@ -20,7 +20,7 @@ from airbearing.design.loops import Loop, make_loop, with_delay
 from airbearing.design.margins import _response, analyse_loop, frequency_grid, json_number
 from airbearing.design.tuning import Spec, evaluate, scenario_response, tune
 from airbearing.models import quaternion as quat
-from airbearing.reporting.html import Report, table_html
+from airbearing.reporting.html import Report, pretty_key, table_html
 
 __all__ = [
     "bode_nyquist",
@@ -59,17 +59,6 @@ _WORDS = {
 def words(name: str) -> str:
     """A signal or channel name as a reader says it, with its unit (``s1`` -> slider 1 (m))."""
     return _WORDS.get(name, name.replace("_", " "))
-
-
-_KEY_UNITS = (("_rad_s", "rad/s"), ("_db", "dB"), ("_deg", "deg"), ("_s", "s"))
-
-
-def _pretty_key(key: str) -> str:
-    """A JSON key as a column header: ``gain_margin_db`` -> ``gain margin (dB)``."""
-    for suffix, unit in _KEY_UNITS:
-        if key.endswith(suffix):
-            return f"{key[: -len(suffix)].replace('_', ' ')} ({unit})"
-    return key.replace("_", " ")
 
 
 def _margin_text(value, what: str = "none"):
@@ -335,7 +324,7 @@ def _margin_tables(rep: Report, d, c, checks, per, spec: Spec) -> None:
             {
                 "corner": lbl,
                 **{
-                    _pretty_key(k): (json_number(v) if isinstance(v, float) else v)
+                    pretty_key(k): (json_number(v) if isinstance(v, float) else v)
                     for k, v in w.items()
                 },
             }
