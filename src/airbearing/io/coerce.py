@@ -30,6 +30,7 @@ __all__ = [
     "as_names",
     "as_testbed",
     "as_vector",
+    "check_gyro_agrees",
     "check_log_testbed",
 ]
 
@@ -102,6 +103,14 @@ def check_log_testbed(testbed, log, what: str = "the testbed") -> None:
             f"dof = {other.body.dof}), but {what} {testbed.name!r} has kind = "
             f"{testbed.kind!r}, dof = {testbed.body.dof}"
         )
+
+
+def check_gyro_agrees(log) -> None:
+    """Refuse a log whose gyro disagrees with its attitude (a dead, reversed, mis-scaled or
+    saturated axis: :mod:`airbearing.io.gyro_check`): a fit on it is confidently wrong."""
+    why = log.quality.gyro_disagreement
+    if why:
+        raise InputError(f"{log.source}: {why[0]}")
 
 
 def as_log(log, testbed=None, *, columns=None, name: str = "log", what: str = "the testbed"):

@@ -261,6 +261,10 @@ class LogQuality:
         as ``d - D``, module doc).
     unchecked_rows : tuple of int
         Rows of segments too short for any local fit (fewer than 4 samples).
+    gyro_disagreement : tuple of str
+        Why the gyro and the logged attitude disagree (a dead, reversed, mis-scaled or
+        saturated axis: :mod:`airbearing.io.gyro_check`), empty when they agree; no fit
+        takes such a log.
     """
 
     n_rows: int
@@ -276,6 +280,7 @@ class LogQuality:
     noise: dict[str, float] = field(default_factory=dict)
     fits: dict[str, tuple[int, int]] = field(default_factory=dict)
     unchecked_rows: tuple[int, ...] = ()
+    gyro_disagreement: tuple[str, ...] = ()
 
     @property
     def n_segments(self) -> int:
@@ -323,8 +328,8 @@ class LogQuality:
             exclusive), ``segment_times`` ([[t0, t1], ...], s), ``outlier_rows``,
             ``outliers`` ([{row, t, columns, reason, score}]), ``jitter``,
             ``median_interval`` (s), ``period`` (s), ``n_rows``, ``irregular_rows``,
-            ``unexplained_rows``, ``unchecked_rows``, ``noise`` (per channel) and
-            ``fits`` (per group, ``[k, p]``).
+            ``unexplained_rows``, ``unchecked_rows``, ``noise`` (per channel),
+            ``fits`` (per group, ``[k, p]``) and ``gyro_disagreement`` (sentences).
         """
         return {
             "n_rows": self.n_rows,
@@ -341,6 +346,7 @@ class LogQuality:
             "unchecked_rows": list(self.unchecked_rows),
             "noise": dict(self.noise),
             "fits": {k: list(v) for k, v in self.fits.items()},
+            "gyro_disagreement": list(self.gyro_disagreement),
         }
 
 
@@ -946,6 +952,14 @@ def assess(log: Log, testbed: Testbed | None) -> LogQuality:
         for i in sorted(flagged_cols)
     )
     unchecked = tuple(r for start, stop in segments if stop - start < 4 for r in range(start, stop))
+    usable = np.ones(n, dtype=bool)
+    usable[[o.row for o in outliers]] = False
+    disagree = ()
+    if log.rates() is not None and (noise.get("yaw") or noise.get("quaternion")):
+        from airbearing.io.gyro_check import gyro_disagreement
+
+        att_noise = noise.get("yaw") or noise["quaternion"]
+        disagree = gyro_disagreement(log, segments, usable, att_noise)
     return LogQuality(
         n_rows=n,
         period=period,
@@ -962,4 +976,5 @@ def assess(log: Log, testbed: Testbed | None) -> LogQuality:
         noise=noise,
         fits=fits,
         unchecked_rows=unchecked,
+        gyro_disagreement=disagree,
     )

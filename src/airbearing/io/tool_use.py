@@ -64,6 +64,10 @@ def tool_use(log: Log, quality: LogQuality) -> dict[str, tuple[bool, str]]:
         out["identify"] = (False, why)
         out["discrepancy"] = (False, why)
     out["replay"] = (replay_ok, why_replay)
+    if quality.gyro_disagreement:  # a fit on it would be confidently wrong
+        why = quality.gyro_disagreement[0]
+        for tool in ("simulate replay", "identify", "discrepancy", "replay"):
+            out[tool] = (False, why)
     if tb is None:
         out["balance"] = (False, "no testbed given")
     elif tb.kind != "platform":

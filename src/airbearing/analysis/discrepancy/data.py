@@ -49,6 +49,7 @@ import numpy as np
 
 from airbearing.analysis.shooting import WindowSet
 from airbearing.errors import InputError
+from airbearing.io.coerce import check_gyro_agrees
 from airbearing.io.log import Log
 from airbearing.io.testbed import Testbed
 from airbearing.models import quaternion as quat
@@ -286,6 +287,7 @@ def replay_data(testbed: Testbed, log: Log) -> ReplayData:
     if not isinstance(log, Log):
         raise InputError(f"replay: expected a Log, got {type(log).__name__}")
     log = Log(log.data, log.source, testbed)
+    check_gyro_agrees(log)  # a fit on a dead or reversed gyro axis is confidently wrong
     model = build_model(testbed.replace(effects={}))
     n = log.n
     dof = testbed.body.dof

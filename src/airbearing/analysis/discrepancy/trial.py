@@ -385,7 +385,9 @@ def judge(cand, fit, k_sel, current, ln_n, k_added, held: HeldOut, before: HeldO
     lo = np.asarray(cand.lower, dtype=float)
     # within a thousandth of a standard error of the bound: pinned there by the constraint
     near = 1e-3 * np.where(np.isfinite(sd), sd, np.abs(th))
-    at_bound = np.isfinite(lo) & (th - lo <= near)
+    hi = np.asarray(cand.upper, dtype=float)
+    at_low = np.isfinite(lo) & (th - lo <= near)
+    at_high = np.isfinite(hi) & (hi - th <= near)
     cov = fit.cov[k_sel:k, k_sel:k]
     try:
         sig = float(math.sqrt(max(float(th @ np.linalg.solve(cov, th)), 0.0)))
@@ -395,12 +397,26 @@ def judge(cand, fit, k_sel, current, ln_n, k_added, held: HeldOut, before: HeldO
         fit.level, "converged"
     )
     reason = ""
-    if np.any(at_bound):
+    # pinned where the effect vanishes (a friction at 0), or at the most it can be (a dipole
+    # the magnetorquers' size, a 1 s lag, either sign of a symmetric range)
+    vanishes = at_low & (lo == 0)
+    extreme = (at_low & (lo != 0)) | at_high
+    if np.any(vanishes):
         status, reason = (
             "at its physical bound",
             (
-                f"pinned at its physical bound {lo[at_bound][0]:g}: the fit wants a value at "
+                f"pinned at its physical bound {lo[vanishes][0]:g}: the fit wants a value at "
                 "or beyond it (nothing of this effect in the logs)"
+            ),
+        )
+    elif np.any(extreme):
+        value = np.where(at_high, hi, lo)[extreme][0]
+        status, reason = (
+            "at its physical bound",
+            (
+                f"pinned at its largest physical value {value:g}: the fit wants more than this "
+                "testbed can have (another effect, or a log that is not what the testbed "
+                "says: a dead or reversed gyro axis, a unit)"
             ),
         )
     elif not significant:

@@ -154,9 +154,10 @@ def _log_arrays(testbed: Testbed, log: Log):
     src = log.source
     if not isinstance(log, Log):
         raise InputError(f"identify: expected Log objects, got {type(log).__name__}")
-    from airbearing.io.coerce import check_log_testbed
+    from airbearing.io.coerce import check_gyro_agrees, check_log_testbed
 
     check_log_testbed(testbed, log, "the testbed to identify")
+    check_gyro_agrees(log)  # a fit on a dead or reversed gyro axis is confidently wrong
     for cols, what in (
         (("wz",), "the yaw rate wz (rad/s)"),
         (("d1", "d2", "d3", "d4"), "the measured gimbal angles d1..d4 (rad)"),

@@ -215,9 +215,10 @@ def rates_from_attitude(t, q, usable, segments, *, half_width: int = RATE_HALF_W
 def _check_log(testbed: Testbed, log) -> None:
     if not isinstance(log, Log):
         raise InputError(f"identify: expected Log objects, got {type(log).__name__}")
-    from airbearing.io.coerce import check_log_testbed
+    from airbearing.io.coerce import check_gyro_agrees, check_log_testbed
 
     check_log_testbed(testbed, log, "the testbed to identify")
+    check_gyro_agrees(log)  # a fit on a dead or reversed gyro axis is confidently wrong
 
 
 def prepare_platform_logs(testbed: Testbed, logs) -> list[PlatformData]:

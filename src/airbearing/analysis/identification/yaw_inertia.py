@@ -205,6 +205,10 @@ def identify_yaw_inertia(
     logs = list(logs)
     if not logs:
         raise InputError("identify: expected at least one log, got none")
+    from airbearing.io.coerce import check_gyro_agrees
+
+    for log in logs:  # a fit on a dead or reversed gyro is confidently wrong
+        check_gyro_agrees(log)
     window = max(1, int(round(testbed.sensors.rate))) if window is None else int(window)
     x, y, entries, nseg, any_dipole = _window_equations(testbed, logs, window)
     J, std, reason, res = _equation_error(testbed, x, y, any_dipole)
