@@ -180,6 +180,8 @@ def check(
     labels = [k for k, _ in lines] + ["outliers"]
     if quality.unexplained_rows:
         labels.append("unexplained")  # its own label, in the same column
+    if quality.noise_warnings:
+        labels.append("noise")
     width = max(len(k) for k in labels)
     for key, value in lines:
         typer.echo(f"{key:<{width}}  {value}")
@@ -198,6 +200,8 @@ def check(
             f"{'unexplained':<{width}}  rows {_rows(quality.unexplained_rows)} "
             "(runs of 3 or more samples off the smooth fit: kept, not outliers)"
         )
+    for warning in quality.noise_warnings:
+        typer.echo(f"{'noise':<{width}}  {warning}")
     _echo_tools({name: tools[name] for name in TOOLS})
     if json_path is not None:
         typer.echo(f"wrote {json_path}")

@@ -265,6 +265,9 @@ class LogQuality:
         Why the gyro and the logged attitude disagree (a dead, reversed, mis-scaled or
         saturated axis: :mod:`airbearing.io.gyro_check`), empty when they agree; no fit
         takes such a log.
+    noise_warnings : tuple of str
+        Channels whose noise is more than :data:`NOISE_RATIO` times the testbed's
+        ``gyro_noise`` or ``attitude_noise`` (a unit read wrong, the wrong testbed).
     """
 
     n_rows: int
@@ -281,6 +284,7 @@ class LogQuality:
     fits: dict[str, tuple[int, int]] = field(default_factory=dict)
     unchecked_rows: tuple[int, ...] = ()
     gyro_disagreement: tuple[str, ...] = ()
+    noise_warnings: tuple[str, ...] = ()
 
     @property
     def n_segments(self) -> int:
@@ -347,6 +351,7 @@ class LogQuality:
             "noise": dict(self.noise),
             "fits": {k: list(v) for k, v in self.fits.items()},
             "gyro_disagreement": list(self.gyro_disagreement),
+            "noise_warnings": list(self.noise_warnings),
         }
 
 
@@ -977,4 +982,28 @@ def assess(log: Log, testbed: Testbed | None) -> LogQuality:
         fits=fits,
         unchecked_rows=unchecked,
         gyro_disagreement=disagree,
+        noise_warnings=_noise_warnings(noise, testbed),
     )
+
+
+#: A channel whose noise exceeds the testbed's declared one this many times is named.
+NOISE_RATIO = 10.0
+
+
+def _noise_warnings(noise: dict, testbed) -> tuple[str, ...]:
+    """Channels far noisier than the testbed says its sensors are (module doc)."""
+    if testbed is None:
+        return ()
+    s = testbed.sensors
+    declared = {c: (s.gyro_noise, "gyro_noise", "rad/s") for c in ("wx", "wy", "wz")}
+    declared |= {c: (s.attitude_noise, "attitude_noise", "rad") for c in ("yaw", "quaternion")}
+    out = []
+    for ch, value in noise.items():
+        ref, key, unit = declared.get(ch, (0.0, "", ""))
+        if ref > 0 and value > NOISE_RATIO * ref:
+            out.append(
+                f"{ch} noise {value:.3g} {unit} is {value / ref:.3g} x the testbed's "
+                f"sensors.{key} {ref:.3g} {unit} (a unit read wrong, e.g. deg as rad? the "
+                "wrong testbed?)"
+            )
+    return tuple(out)

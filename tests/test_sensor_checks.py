@@ -1,5 +1,6 @@
-"""The gyro against the attitude logged beside it: a dead, reversed, mis-scaled or saturated
-axis is found, named, and refused by the fits; a bias or a clean log is not."""
+"""The sensors against each other and the testbed: a dead, reversed, mis-scaled or saturated
+gyro axis is found, named and refused by the fits (a bias or a clean log is not); a
+channel far noisier than the testbed says is named."""
 
 from __future__ import annotations
 
@@ -75,3 +76,17 @@ def test_a_gyro_integrated_yaw_agrees_and_a_dead_gyro_does_not():
     assert ok.quality.gyro_disagreement == ()
     dead = Log(pd.DataFrame(cols | {"wz": 0 * wz}), source="cmg.csv", testbed=tb)
     assert dead.quality.gyro_disagreement[0].startswith("gyro wz reads 0 x")
+
+
+def test_a_channel_far_noisier_than_the_testbed_says_is_named():
+    # motion capture of the README's rig: 1 mrad declared; the same log in degrees reads
+    # 57 mrad of "noise" (a unit read wrong), which log check names
+    rig = ab.read_testbed("examples/mocap-spin/rig.toml")
+    t = np.arange(600) / rig.sensors.rate
+    yaw = 2.0 * t - 0.01 * t**2 + 1e-3 * np.random.default_rng(2).standard_normal(t.size)
+    ok = Log(pd.DataFrame({"t": t, "yaw": yaw}), source="rad.csv", testbed=rig)
+    assert ok.quality.noise_warnings == ()
+    deg = Log(pd.DataFrame({"t": t, "yaw": np.degrees(yaw)}), source="deg.csv", testbed=rig)
+    (why,) = deg.quality.noise_warnings
+    assert why.startswith("yaw noise") and "x the testbed's sensors.attitude_noise 0.001" in why
+    assert ab.check_log(deg).to_json()["noise_warnings"] == [why]
