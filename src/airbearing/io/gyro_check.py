@@ -41,8 +41,11 @@ _AXES = ("x", "y", "z")
 
 def _pairs(segments, usable: np.ndarray) -> np.ndarray:
     """Rows ``k`` whose interval ``(k, k + 1)`` lies in a segment, both rows usable."""
-    out = [k for a, b in segments for k in range(a, b - 1) if usable[k] and usable[k + 1]]
-    return np.asarray(out, dtype=int)
+    inside = np.zeros(usable.size, dtype=bool)
+    for a, b in segments:
+        inside[a : b - 1] = True  # the last row of a segment starts no interval
+    ok = inside[:-1] & usable[:-1] & usable[1:]
+    return np.flatnonzero(ok)
 
 
 def _increments(q0: np.ndarray, q1: np.ndarray) -> np.ndarray:
@@ -137,20 +140,15 @@ def _saturated(w: np.ndarray, a: np.ndarray, k: np.ndarray, noise: float) -> str
     if top == 0:
         return ""
     at = np.abs(w) == top
-    runs, start = [], None
-    for i, flag in enumerate(np.append(at, False)):
-        if flag and start is None:
-            start = i
-        elif not flag and start is not None:
-            if i - start >= FLAT_RUN:
-                runs.append((start, i))
-            start = None
+    edges = np.diff(np.concatenate([[0], at.astype(np.int8), [0]]))
+    starts, stops = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
+    long = stops - starts >= FLAT_RUN
+    # the attitude's rate over each run's intervals (k: the intervals compared)
     faster = []
-    pos = {int(r): n for n, r in enumerate(k)}
-    for s, e in runs:
-        idx = [pos[r] for r in range(s, e - 1) if r in pos]
-        if idx and np.mean(np.abs(a[idx])) > top + 3 * noise:
-            faster.append((s, e))
+    for s, e in zip(starts[long], stops[long], strict=True):
+        inside = (k >= s) & (k < e - 1)
+        if inside.any() and np.mean(np.abs(a[inside])) > top + 3 * noise:
+            faster.append((int(s), int(e)))
     if not faster:
         return ""
     n = sum(e - s for s, e in faster)

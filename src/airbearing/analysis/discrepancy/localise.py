@@ -253,13 +253,18 @@ def _after_reversals(out, words, dt, s, w, rates, rmag, floor, ratio) -> None:
             )
 
 
+def _quartile_rms(x: np.ndarray, rmag: np.ndarray):
+    """The quartiles of ``x`` and the RMS error below the first and above the third."""
+    q = np.quantile(x, [0.25, 0.75])
+    return q, _rms(rmag[x <= q[0]]), _rms(rmag[x >= q[1]])
+
+
 def _tilt_and_field(out, words, datas, s, rmag, ratio) -> None:
     """dof 3: the error against the tilt, and whether the cage field is vertical."""
     unit, d0 = out["unit"], datas[0]
     q = _series_of(datas, s, lambda d, r: d.q[r])
     tilt = quat.tilt_of(q)
-    qt = np.quantile(tilt, [0.25, 0.75])
-    t_lo, t_hi = _rms(rmag[tilt <= qt[0]]), _rms(rmag[tilt >= qt[1]])
+    qt, t_lo, t_hi = _quartile_rms(tilt, rmag)
     out["tilt"] = (float(np.rad2deg(qt[0])), t_lo, float(np.rad2deg(qt[1])), t_hi)
     if ratio >= ABOVE and t_hi > CONTRAST * t_lo:
         words.append(
@@ -283,8 +288,7 @@ def _gimbals(out, words, datas, s, rmag, ratio) -> None:
     """cmg: the error against the gimbal angles and while the gimbals turn fast."""
     unit, d0 = out["unit"], datas[0]
     dm = _series_of(datas, s, lambda d, r: np.mean(np.abs(d.extra_x[r])))
-    qd = np.quantile(dm, [0.25, 0.75])
-    g_lo, g_hi = _rms(rmag[dm <= qd[0]]), _rms(rmag[dm >= qd[1]])
+    qd, g_lo, g_hi = _quartile_rms(dm, rmag)
     out["gimbal"] = (float(np.rad2deg(qd[0])), g_lo, float(np.rad2deg(qd[1])), g_hi)
     if ratio >= ABOVE and g_hi > CONTRAST * g_lo:
         words.append(

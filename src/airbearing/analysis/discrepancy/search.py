@@ -51,9 +51,7 @@ from airbearing.analysis.discrepancy.candidates import (
 )
 from airbearing.analysis.discrepancy.consistency import consistency, per_log_fits
 from airbearing.analysis.discrepancy.data import (
-    ATTITUDE_SIGMA_MIN,
     MIN_WINDOW_SAMPLES,
-    RATE_SIGMA_MIN,
     make_windows,
 )
 from airbearing.analysis.discrepancy.honest import Errors, effect_errors, honest
@@ -609,21 +607,17 @@ def _select(search, nominal, max_effects, screen, workers, prog) -> _Selection:
     sel.max_effects = max_effects
     sel.stop_reason = "max_effects = 0" if max_effects == 0 else ""
     # a noise-free log: below the smallest noise level the replay weighs with, what is left is
-    # the integration's own error (~1e-6 rad/s on fast motion with 2 RK4 sub-steps), not an
-    # effect; the likelihood ratio is scale-free and would name it
-    resolution = RATE_SIGMA_MIN if unit == "rad/s" else ATTITUDE_SIGMA_MIN
-    if max_effects and nominal.gap < resolution:
-        sel.stop_reason = (
-            f"the nominal model replays the logs to {nominal.gap:.3g} {unit}, below the "
-            f"{resolution:g} {unit} the replay resolves (a noise-free log): nothing to name"
-        )
-        max_effects = 0
+    # the integration's own error, not an effect; the likelihood ratio is scale-free and
+    # would name it
+    resolution = search.floor.resolution
     while len(sel.chosen) < max_effects:
-        if sel.chosen and sel.current.gap < resolution:  # the same, after a named effect
+        if sel.current.gap < resolution:
+            what = "the named effects replay" if sel.chosen else "the nominal model replays"
+            more = "more " if sel.chosen else ""
             sel.stop_reason = (
-                f"the named effects replay the logs to {sel.current.gap:.3g} {unit}, below "
-                f"the {resolution:g} {unit} the replay resolves (a noise-free log): nothing "
-                "more to name"
+                f"{what} the logs to {sel.current.gap:.3g} {unit}, below the "
+                f"{resolution:g} {unit} the replay resolves (a noise-free log): nothing "
+                f"{more}to name"
             )
             break
         taken = {c.name for c in sel.chosen}
