@@ -661,3 +661,22 @@ def test_diagnostics_of_logs_without_information():
     assert cond == float("inf")
     assert set(null) == set(ir.PARAM_NAMES)
     assert [w["relative_excitation"] for w in weak] == [0.0, 0.0]
+
+
+def test_weak_hint_does_not_ask_for_the_offset_it_was_given():
+    """Inertia and offset that scale together: the hint offers the in-plane offset as a way
+    out only while r_x, r_y are fitted; given (not free) it names only the slider logs."""
+    from airbearing.analysis.identification.convex import diagnostics
+
+    rng = np.random.default_rng(1)
+    A = rng.standard_normal((60, 9)) * np.r_[np.full(6, 1e4), np.full(3, 1e2)]
+    A[:, 8] = -A[:, 2] * 1e2  # J_zz and r_z enter as one combination (scaled columns)
+    A[:, 8] += 1e-6 * rng.standard_normal(60)
+    F = A.T @ A
+    free = np.ones(9, bool)
+    _, _, weak, _ = diagnostics(F, free, TRUTH, mass=6.3)
+    assert "known_offset_xy" in weak[0]["hint"]
+    free[6:8] = False
+    _, _, weak, _ = diagnostics(F, free, TRUTH, mass=6.3)
+    assert "inertia and offset scale together" in weak[0]["hint"]
+    assert "known_offset_xy" not in weak[0]["hint"]

@@ -223,9 +223,10 @@ def diagnostics(F, free, theta, *, mass):
         on_j = sum(abs(v[k]) for k, n in enumerate(names) if n in ("J_xx", "J_yy", "J_zz"))
         on_r = sum(abs(v[k]) for k, n in enumerate(names) if n.startswith("r_"))
         if on_j >= 0.3 and on_r >= 0.3:
+            xy_free = "r_x" in names or "r_y" in names
             hint.append(
-                "inertia and offset scale together: log with different known slider "
-                "positions, or give the in-plane offset (known_offset_xy)"
+                "inertia and offset scale together: log with different known slider positions"
+                + (", or give the in-plane offset (known_offset_xy)" if xy_free else "")
             )
         elif rot:
             many = len(rot) > 1
