@@ -115,9 +115,13 @@ The platform answers a command that switches: its rate has a kink there and its 
 a change of curvature, which a centred fit cannot follow either. Rows within ``k`` of a
 switch of a logged command (a commanded gimbal rate or dipole whose change between two
 samples exceeds :data:`SWITCH_RATIO` times its median change; a slider whose speed does)
-are therefore scored by the same best of three fits on the rates and the yaw (not the
-quaternion, whose chi-square test takes no side per channel). A one-sided fit needs its
-``2k`` neighbours unbroken, so a glitch right beside a switch may take one neighbour with it.
+are therefore scored by the best of the centred and one-sided fits on the rates and the
+yaw (not the quaternion, whose chi-square test takes no side per channel). The motion may
+change its character there (a rate limit reached and left at once), so each side takes
+the first fit of :data:`FITS`, in order of degree, that explains that side's next sample:
+the lowest degree that follows the motion, chosen without the tested row, so a glitch
+cannot choose the fit that hides it. A one-sided fit needs its ``2k`` neighbours
+unbroken, so a glitch right beside a switch may take one neighbour with it.
 
 Scale floors: sliders at ``masses.step`` (a stepper position moves in whole steps: a
 slow move is a staircase whose misfit from a smooth curve reaches a step or two,
@@ -620,23 +624,52 @@ class _Scorer:
     def noise(self) -> np.ndarray:
         return self.scales[self.fit][self.fit[0]]
 
-    def _sided(self, rows, good, d, scale):
+    def _sided(self, rows, good, d, scale, fits=None):
         """Per row and channel, the fit (centred, all-left, all-right) that explains the
-        sample best, in its own scale (module doc, "Inputs")."""
+        sample best, in its own scale (module doc, "Inputs").
+
+        ``fits`` (default: the group's own fit only): on each side, the first of them (in
+        order of degree) that explains that side's next sample (scored by the same
+        one-sided fit, which leaves the tested row out) is that side's fit; where none
+        does, the one that explains the row best. A glitch cannot choose its own fit.
+        """
         g, t, segs, sc = self.group, self.t, self.segments, self.scale
-        k, p = self.fit
         z = np.abs(d) / scale
         z = np.where(np.isfinite(z), z, np.inf)
-        for a in (0, 2 * k):  # all neighbours after, all before
-            d_a, _ = _normalised(g, t, segs, good, k, p, sc, rows, shape=a)
-            # no one-sided fit (too near the segment's end): not judged (module doc)
-            side = self.from_end[rows] if a == 0 else self.from_start[rows]
-            d_a[side < 2 * k] = 0.0
-            s_a = np.broadcast_to(self.scales[self.fit][a], d_a.shape)
-            z_a = np.abs(d_a) / s_a
-            better = np.isfinite(z_a) & (z_a < z)
+        fits = fits or (self.fit,)
+        n = t.size
+        for right in (True, False):  # all neighbours after, all before
+            chosen = np.zeros(rows.size, dtype=bool)
+            side_d = np.full(d.shape, np.nan)
+            side_s = np.ones(d.shape)
+            side_z = np.full(d.shape, np.inf)
+            for k, p in fits:
+                a = 0 if right else 2 * k
+                d_a, _ = _normalised(g, t, segs, good, k, p, sc, rows, shape=a)
+                # no one-sided fit (too near the segment's end): not judged (module doc)
+                room = self.from_end[rows] if right else self.from_start[rows]
+                d_a[room < 2 * k] = 0.0
+                s_a = np.broadcast_to(self.scales[(k, p)][a], d_a.shape)
+                z_a = np.abs(d_a) / s_a
+                z_a = np.where(np.isfinite(z_a), z_a, np.inf)
+                if len(fits) > 1:
+                    nxt = rows + (1 if right else -1)
+                    inside = (room > 2 * k) & (nxt >= 0) & (nxt < n)
+                    d_n, _ = _normalised(
+                        g, t, segs, good, k, p, sc, np.clip(nxt, 0, n - 1), shape=a
+                    )
+                    fine = inside & np.all(np.abs(d_n) / s_a <= Z_THRESHOLD, axis=1)
+                else:
+                    fine = np.ones(rows.size, dtype=bool)
+                take = (fine & ~chosen)[:, None] | (~chosen[:, None] & (z_a < side_z))
+                side_d, side_s, side_z = (
+                    np.where(take, x_a, x)
+                    for x_a, x in ((d_a, side_d), (s_a, side_s), (z_a, side_z))
+                )
+                chosen |= fine
+            better = side_z < z
             d, scale, z = (
-                np.where(better, x_a, x) for x_a, x in ((d_a, d), (s_a, scale), (z_a, z))
+                np.where(better, x_a, x) for x_a, x in ((side_d, d), (side_s, scale), (side_z, z))
             )
         return d, scale
 
@@ -676,7 +709,9 @@ class _Scorer:
         elif g.switch_rows is not None:
             at = np.flatnonzero(g.switch_rows[rows])
             if at.size:
-                d[at], scale[at] = self._sided(rows[at], good, d[at], scale[at])
+                # the motion changes its character at a switch (a rate limit reached
+                # or left): every fit's one-sided form, the higher degrees follow it
+                d[at], scale[at] = self._sided(rows[at], good, d[at], scale[at], FITS)
         if exact:
             return _score(g, d, scale * self.local_at(rows))
         score, over = _score(g, d, scale)  # local factor 1: an upper bound of each score
