@@ -128,16 +128,46 @@ def test_rows_do_not_depend_on_order_or_chunks(tmp_path):
     assert "summary.seed" not in full.columns
 
 
-def test_a_raising_run_is_a_row_and_the_campaign_goes_on(tmp_path):
-    doc = dict(SLEW, runs=8, dispersions={"body.inertia": {"relative_normal": 3.0}})
+def _raising_above(monkeypatch, inertia: float) -> None:
+    """Runs whose drawn yaw inertia exceeds ``inertia`` raise inside the command."""
+    import airbearing.analysis.campaign.runner as runner
+
+    real = runner.run_command
+
+    def command(campaign, testbed, seed):
+        if testbed.body.inertia_matrix[2, 2] > inertia:
+            raise InputError("this run's command refused its testbed")
+        return real(campaign, testbed, seed)
+
+    monkeypatch.setattr(runner, "run_command", command)
+
+
+def test_a_raising_run_is_a_row_and_the_campaign_goes_on(tmp_path, monkeypatch):
+    doc = dict(SLEW, runs=8, dispersions={"body.inertia": {"relative_normal": 0.2}})
+    nominal = parse_campaign(doc).testbed.body.inertia_matrix[2, 2]
+    _raising_above(monkeypatch, nominal)  # about half the runs raise
     df = run_campaign(parse_campaign(doc), tmp_path / "r.parquet")
     assert len(df) == 8 and sorted(df.run) == list(range(8))
     bad = df[df.error != ""]
-    # P(1 + 3 N < 0) = 37 %: with this seed some runs draw a negative yaw inertia
     assert len(bad) and len(bad) < 8
     assert bad.error.str.startswith("InputError").all()
-    assert (df.loc[bad.index, "body.inertia"] <= 0).all()
+    assert (df.loc[bad.index, "body.inertia"] > nominal).all()
     assert df.loc[df.error == "", "final_yaw_error_deg"].notna().all()
+
+
+def test_a_law_that_draws_invalid_testbeds_is_refused_before_any_run():
+    # a normal law 3 sigma below zero for a friction (>= 0): 0.13 % of its draws at least
+    # would be refused by the testbed, each a failed run; refused up front instead
+    doc = dict(SLEW, dispersions={"effects.viscous_friction": {"normal": [1e-5, 5e-6]}})
+    with pytest.raises(InputError, match=r"viscous_friction' draws values the testbed "
+                       r"refuses at mean - 3 sigma .*>= 0"):  # fmt: skip
+        parse_campaign(doc)
+    doc = dict(SLEW, dispersions={"sensors.gyro_noise": {"uniform": [-1e-4, 1e-4]}})
+    with pytest.raises(InputError, match="gyro_noise' draws values the testbed refuses at its "
+                       "lower bound"):  # fmt: skip
+        parse_campaign(doc)
+    ok = dict(SLEW, dispersions={"effects.viscous_friction": {"normal": [1e-5, 2e-6]}})
+    assert parse_campaign(ok).dispersions
 
 
 def test_resume_runs_only_the_missing_runs(tmp_path):
@@ -261,11 +291,12 @@ def test_detection_analysis_finds_the_threshold():
 
 
 @pytest.mark.slow
-def test_report_has_spec_rate_and_failures(tmp_path):
+def test_report_has_spec_rate_and_failures(tmp_path, monkeypatch):
     from airbearing.reporting.campaign import campaign_report
 
-    doc = dict(SLEW, runs=8, dispersions={"body.inertia": {"relative_normal": 3.0}})
+    doc = dict(SLEW, runs=8, dispersions={"body.inertia": {"relative_normal": 0.2}})
     c = parse_campaign(doc)
+    _raising_above(monkeypatch, c.testbed.body.inertia_matrix[2, 2])
     df = run_campaign(c, tmp_path / "r.parquet")
     html = campaign_report(c, df).html()
     n_met = sum(c.spec[0].met(v) for v in df.final_yaw_error_deg)

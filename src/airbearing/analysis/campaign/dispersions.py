@@ -202,6 +202,43 @@ def check_dispersions(src: str, testbed: Testbed, dispersions) -> None:
         testbed_from_dict(central, source=testbed.source)
     except InputError as e:
         raise InputError(f"{src}: [dispersions]: {e}") from None
+    for d in dispersions:  # each law at its ends, the others at their centres
+        for side in (-1, 1):
+            ends, _ = _apply(doc, dispersions, lambda dd, nom, d=d, side=side: (
+                _end(dd, nom, side) if dd is d else _central(dd, nom)))  # fmt: skip
+            try:
+                testbed_from_dict(ends, source=testbed.source)
+            except InputError as e:
+                raise InputError(
+                    f"{src}: [dispersions] '{d.key}' draws values the testbed refuses at "
+                    f"{_END_WORDS[d.kind][side]} ({e}); choose a law whose draws stay valid "
+                    "(uniform or loguniform bounds, or a smaller sigma)"
+                ) from None
+
+
+#: Where :func:`_end` puts a law, in words, per side (-1 low, +1 high).
+_END_WORDS = {
+    "relative_normal": {
+        -1: "the nominal times 1 - 3 sigma (a draw beyond it has probability 1.3e-3)",
+        1: "the nominal times 1 + 3 sigma (a draw beyond it has probability 1.3e-3)",
+    },
+    "normal": {
+        -1: "mean - 3 sigma (a draw below it has probability 1.3e-3)",
+        1: "mean + 3 sigma (a draw above it has probability 1.3e-3)",
+    },
+    "uniform": {-1: "its lower bound", 1: "its upper bound"},
+    "loguniform": {-1: "its lower bound", 1: "its upper bound"},
+}
+
+
+def _end(d, nominal: float | None, side: int) -> float:
+    """A law's end on ``side``: its bounds, or 3 sigma from the centre of a normal one."""
+    if d.kind == "relative_normal":
+        return float(nominal) * (1.0 + side * 3.0 * d.params[0])
+    a, b = d.params
+    if d.kind == "normal":
+        return a + side * 3.0 * b
+    return a if side < 0 else b
 
 
 def draw_run(campaign, run: int) -> RunDraw:
