@@ -15,6 +15,21 @@ measured rate is the dependent variable, so gyro noise does not bias the estimat
 ``J_z > 0`` (``a > 0``) and non-negative friction as constraints; this answers
 seed 001's question (CAD ``J = 0.00283`` vs the ``0.00323 kg m^2`` that explained
 the measured slews).
+
+Standard errors: the white-noise least-squares value (``std_white``) is right only when
+the rate residual is white gyro noise. A torque the balance misses (friction, cables) or
+a drifting gyro bias leaves a slow residual, and coloured gyro noise a correlated one;
+both make the white value too small by up to an order of magnitude. The reported
+``std`` is a sandwich ``B^-1 M B^-1`` of the regression (the per-segment constants
+projected off) whose meat is a prewhitened HAC estimate (Andrews & Monahan 1992): an
+AR(p) model of the residual (Yule-Walker over the segments, order by AIC,
+``statsmodels.tsa.stattools``) whitens it, the regressors are passed through the inverse
+of the same filter so the recolouring is exact for any regressor, and the whitened scores
+get a Bartlett-kernel HAC (``statsmodels.stats.sandwich_covariance.S_hac_simple``) with
+Andrews' (1991) AR(1) plug-in bandwidth. Both the AR order and the bandwidth come from the
+data. ``std`` is never below ``std_white`` (the sandwich is biased low in small samples).
+A misfit the fitted terms absorb shows in no residual: a missing viscous friction biases
+J_z by more than even this ``std`` (the residual warning names it).
 """
 
 from __future__ import annotations
@@ -40,6 +55,12 @@ FRICTION = {None: (), "viscous": ("viscous_friction",), "coulomb": ("coulomb_fri
 INV_INERTIA_FLOOR = 1e-6
 #: Relative standard error of J_z above which it is called unidentified.
 RELATIVE_STD_WARN = 0.05
+#: Rate residual RMS, in gyro sigmas, above which the momentum balance misses something:
+#: a white residual sits at 1 (+- 1/sqrt(2 n), 0.03 for 800 samples); 1.5, as the output
+#: error's warning, still catches a gyro drifting 1e-4 rad/s/s over 40 s (2.2 sigmas).
+RESIDUAL_SIGMAS_WARN = 1.5
+#: ``std / std_white`` above which the residual is called correlated (white: 1 to 1.2).
+CORRELATED_RATIO_WARN = 2.0
 
 
 @dataclass(frozen=True, eq=False, repr=False)
@@ -47,19 +68,23 @@ class CMGIdentification(IdentificationResult):
     """Identified yaw inertia of a dof-1 CMG testbed.
 
     The shape of every identification result (:class:`.result.IdentificationResult`):
-    :attr:`std` is the ndarray ``[std_inertia]``; ``cm_offset``, ``std_cm_offset``,
-    ``held`` and ``std_white`` are None (dof 1, nothing held, no output error).
+    :attr:`std` is the ndarray ``[std_inertia]``; ``cm_offset``, ``std_cm_offset``
+    and ``held`` are None (dof 1, nothing held).
 
     Attributes
     ----------
     inertia : float
         J_z, kg m^2, about the bearing axis.
     std_inertia : float
-        1-sigma standard error of J_z, kg m^2 (NaN when a constraint pins it).
+        1-sigma standard error of J_z, kg m^2 (NaN when a constraint pins it): the
+        prewhitened HAC sandwich (module doc), never below the white-noise value.
     friction : dict
         Effect name -> identified value (N m s or N m), for the chosen friction model.
     std_friction : dict
-        Effect name -> 1-sigma standard error.
+        Effect name -> 1-sigma standard error (the same sandwich).
+    std_white : ndarray (1,) or None
+        ``[std of J_z]`` from the white-noise least squares, kg m^2 (right only when the
+        rate residual is white); the friction terms' in ``details["std_white_friction"]``.
     condition_number : float
         Of the column-scaled regressor.
     active_constraints : tuple of str
@@ -98,7 +123,7 @@ class CMGIdentification(IdentificationResult):
     cm_offset: None = None
     std_cm_offset: None = None
     held: None = None
-    std_white: None = None
+    std_white: np.ndarray | None = field(default=None, repr=False)
 
     @property
     def outlier_rows(self) -> list:
@@ -107,12 +132,15 @@ class CMGIdentification(IdentificationResult):
         return rows[0] if len(rows) == 1 else rows
 
     def to_json(self) -> dict:
-        """``inertia`` (J_z), ``std``, ``condition_number``, ``active_constraints``,
-        ``residual_rms`` and the friction terms (NaN: null, as in ``--json``)."""
+        """``inertia`` (J_z), ``std``, ``std_white``, ``condition_number``,
+        ``active_constraints``, ``residual_rms`` and the friction terms (NaN: null, as in
+        ``--json``)."""
+        sw = self.std_white
         return to_jsonable(
             {
                 "inertia": float(self.inertia),
                 "std": float(self.std_inertia),
+                "std_white": None if sw is None else float(np.asarray(sw).reshape(-1)[0]),
                 "std_status": dict(self.std_status),
                 "condition_number": float(self.condition_number),
                 "active_constraints": list(self.active_constraints),
@@ -188,6 +216,8 @@ def identify_cmg_inertia(
     Returns
     -------
     CMGIdentification
+        ``std_inertia`` and ``std_friction`` are the prewhitened HAC sandwich's (module
+        doc), ``std_white`` the white-noise least squares'.
 
     Raises
     ------
@@ -214,7 +244,8 @@ def identify_cmg_inertia(
     beta_hat, xv, rss, Rm, A, col = _constrained_fit(R, npar, nfr, testbed)
     sigma = testbed.sensors.gyro_noise
     var = rss / max(rows - npar, 1)
-    cov = var * np.linalg.pinv(Rm.T @ Rm)
+    cov_white = var * np.linalg.pinv(Rm.T @ Rm)
+    cov_hac, hac = _honest_cov(pieces, beta_hat, friction, nfr)
     a = beta_hat[0]
     J = 1.0 / a
     # delta method: J = 1/a, friction_k = b_k / a
@@ -223,8 +254,10 @@ def identify_cmg_inertia(
     for k in range(nfr):
         G[1 + k, 0] = -beta_hat[1 + k] / a**2
         G[1 + k, 1 + k] = 1.0 / a
-    cov_p = G @ cov @ G.T
-    std = np.sqrt(np.maximum(np.diag(cov_p), 0))
+    k = 1 + nfr
+    std_w = np.sqrt(np.maximum(np.diag(G @ cov_white @ G.T), 0))
+    std_h = np.sqrt(np.maximum(np.diag(G[:, :k] @ cov_hac @ G[:, :k].T), 0))
+    std = np.maximum(std_h, std_w)  # never below white: the sandwich is biased low
     Fn = A.T @ A
     ev = np.linalg.eigvalsh(Fn)
     cond = float(np.sqrt(ev[-1] / max(ev[0], 1e-300)))
@@ -236,7 +269,7 @@ def identify_cmg_inertia(
         if beta_hat[1 + k] <= 1e-9 * max(abs(beta_hat[1 + k]), 1e-300) or xv[1 + k] <= 1e-9:
             active.append(f"friction_nonnegative:{n}")
     rms = float(np.sqrt(rss / rows))
-    warnings += _fit_warnings(J, std[0], active, rms, sigma)
+    warnings += _fit_warnings(J, std[0], active, rms, sigma, std[0] / max(std_w[0], 1e-300))
     return CMGIdentification(
         inertia=float(J),
         std_inertia=float(std[0]) if "inertia_positive" not in active else float("nan"),
@@ -256,12 +289,15 @@ def identify_cmg_inertia(
             "h0": float(h0),
             "beta_rad": float(beta),
             "per_log": entries,
+            "std_white_friction": {n: float(std_w[1 + k]) for k, n in enumerate(names)},
+            "covariance": {"method": "AR-prewhitened HAC sandwich", **hac},
         },  # fmt: skip
         segments=int(sum(e["segments"] for e in entries)),
         outlier_rows_per_log=tuple(tuple(e["outlier_rows"]) for e in entries),
         std_status={
             "J_zz": "pinned by inertia_positive" if "inertia_positive" in active else "estimated"
         },
+        std_white=np.array([std_w[0] if "inertia_positive" not in active else np.nan]),
     )
 
 
@@ -304,17 +340,8 @@ def _reduced_regressor(pieces, friction, nfr: int):
     R = None
     rows = 0
     for li, (t, w, hz) in enumerate(pieces):
-        dt = np.diff(t)
         X = np.zeros((len(t), npar))
-        X[:, 0] = -hz
-        cols = []
-        if friction == "viscous":
-            cols.append(np.r_[0, np.cumsum(0.5 * dt * (w[1:] + w[:-1]))])  # int w dt
-        elif friction == "coulomb":
-            sg = np.tanh(w / COULOMB_SMOOTHING)  # as the model's coulomb_friction
-            cols.append(np.r_[0, np.cumsum(0.5 * dt * (sg[1:] + sg[:-1]))])
-        for k, c in enumerate(cols):
-            X[:, 1 + k] = -c
+        X[:, : 1 + nfr] = _piece_columns(t, w, hz, friction, nfr)
         X[:, 1 + nfr + li] = 1.0
         M = np.column_stack([X, w])
         R = np.linalg.qr(M if R is None else np.vstack([R, M]), mode="r")
@@ -322,6 +349,99 @@ def _reduced_regressor(pieces, friction, nfr: int):
     if rows <= npar:
         raise InputError(f"identify: {rows} samples for {npar} unknowns; give longer logs")
     return R, rows, npar
+
+
+def _piece_columns(t, w, hz, friction, nfr: int) -> np.ndarray:
+    """The columns of ``a = 1/J_z`` and friction/J_z of one piece: ``-h_z`` and minus the
+    friction integral (``int w dt`` or ``int sign(w) dt``, trapezoidal, from its start)."""
+    dt = np.diff(t)
+    X = np.zeros((len(t), 1 + nfr))
+    X[:, 0] = -hz
+    if friction == "viscous":
+        X[:, 1] = -np.r_[0, np.cumsum(0.5 * dt * (w[1:] + w[:-1]))]  # int w dt
+    elif friction == "coulomb":
+        sg = np.tanh(w / COULOMB_SMOOTHING)  # as the model's coulomb_friction
+        X[:, 1] = -np.r_[0, np.cumsum(0.5 * dt * (sg[1:] + sg[:-1]))]
+    return X
+
+
+def _ar_model(series, maxlag: int) -> np.ndarray:
+    """AR(p) coefficients ``phi`` (p,) of the pooled residual pieces: Yule-Walker
+    (Levinson-Durbin on the length-weighted autocovariances, ``statsmodels.tsa.stattools``),
+    the order by AIC (0: white). Yule-Walker keeps the filter stable."""
+    from statsmodels.tsa.stattools import acovf, levinson_durbin
+
+    used = [x for x in series if x.size > 2 * maxlag and np.any(x != x[0])]
+    if maxlag < 1 or not used:
+        return np.zeros(0)
+    n = sum(x.size for x in used)
+    g = sum(x.size * acovf(x, demean=False, fft=True, nlag=maxlag) for x in used) / n
+    if g[0] <= 0:
+        return np.zeros(0)
+    _, _, pacf, _, phi = levinson_durbin(g, nlags=maxlag, isacov=True)
+    innov = g[0] * np.cumprod(np.r_[1.0, 1.0 - pacf[1:] ** 2])  # innovation variance per order
+    aic = n * np.log(np.maximum(innov, 1e-300)) + 2.0 * np.arange(innov.size)
+    p = int(np.argmin(aic))
+    return np.asarray(phi[1 : p + 1, p], dtype=float) if p > 0 else np.zeros(0)
+
+
+def _andrews_lags(scores: np.ndarray) -> int:
+    """Bartlett-kernel bandwidth (lags) of Andrews (1991) with his AR(1) plug-in, the score
+    columns weighted equally; at most ``n - 1``."""
+    n = scores.shape[0]
+    num = den = 0.0
+    for x in scores.T:
+        d = float(x[:-1] @ x[:-1])
+        if d <= 0:
+            continue
+        rho = float(np.clip((x[1:] @ x[:-1]) / d, -0.97, 0.97))
+        s4 = float(np.mean((x[1:] - rho * x[:-1]) ** 2)) ** 2
+        num += 4.0 * rho**2 * s4 / ((1 - rho) ** 6 * (1 + rho) ** 2)
+        den += s4 / (1 - rho) ** 4
+    if den <= 0:
+        return 0
+    return int(min(np.floor(1.1447 * (num / den * n) ** (1.0 / 3.0)), n - 1))
+
+
+def _honest_cov(pieces, beta_hat, friction, nfr: int):
+    """Prewhitened HAC sandwich of ``[a, friction/J_z]`` (module doc): the covariance
+    (k, k) and what it used (AR order and coefficient sum, largest bandwidth).
+
+    With the residual ``e = Phi^-1 u`` (``Phi`` the causal AR filter, ``u`` its
+    innovations) the score sum is ``X'e = (Phi^-T X)' u``: the regressors, each segment's
+    constant projected off (demeaned), are filtered backwards in time by ``1/Phi``, and the
+    nearly white scores ``z_i u_i`` get a short Bartlett HAC. Segments are independent.
+    """
+    from scipy.signal import lfilter
+    from statsmodels.stats.sandwich_covariance import S_hac_simple
+
+    k = 1 + nfr
+    cols, res = [], []
+    for li, (t, w, hz) in enumerate(pieces):
+        X = _piece_columns(t, w, hz, friction, nfr)
+        res.append(w - X @ beta_hat[:k] - beta_hat[k + li])
+        cols.append(X - X.mean(axis=0))
+    n_all = sum(r.size for r in res)
+    # the longest AR order tried: Schwert's rule 12 (n/100)^(1/4)
+    maxlag = int(min(12 * (n_all / 100.0) ** 0.25, max(r.size for r in res) // 2))
+    phi = _ar_model(res, maxlag)
+    ar = np.r_[1.0, -phi]
+    bread = np.zeros((k, k))
+    meat = np.zeros((k, k))
+    lags = 0
+    for Xd, r in zip(cols, res, strict=True):
+        bread += Xd.T @ Xd
+        u = lfilter(ar, [1.0], r)
+        Z = lfilter([1.0], ar, Xd[::-1], axis=0)[::-1]
+        sc = Z * u[:, None]
+        nl = _andrews_lags(sc) if sc.shape[0] > 2 else 0
+        lags = max(lags, nl)
+        meat += S_hac_simple(sc, nlags=nl)
+    c = np.sqrt(np.maximum(np.diag(bread), 1e-300))
+    Binv = np.linalg.pinv(bread / np.outer(c, c), hermitian=True) / np.outer(c, c)
+    cov = Binv @ meat @ Binv
+    info = {"ar_order": int(phi.size), "ar_sum": float(phi.sum()), "hac_lags": int(lags)}
+    return 0.5 * (cov + cov.T), info
 
 
 def _constrained_fit(R, npar: int, nfr: int, testbed: Testbed):
@@ -353,17 +473,26 @@ def _constrained_fit(R, npar: int, nfr: int, testbed: Testbed):
     return beta_hat, np.asarray(x.value), rss, Rm, A, col
 
 
-def _fit_warnings(J: float, std_J: float, active, rms: float, sigma: float) -> list[str]:
-    """Too little momentum exchanged, or a residual the momentum balance does not explain."""
+def _fit_warnings(
+    J: float, std_J: float, active, rms: float, sigma: float, ratio: float
+) -> list[str]:
+    """Too little momentum exchanged, a residual the momentum balance does not explain, or
+    a correlated residual (``ratio``: std over its white-noise value)."""
     warnings = []
     if std_J > RELATIVE_STD_WARN * abs(J) or "inertia_positive" in active:
         warnings.append(
             f"unidentifiable parameters: J_z = {J:.4g} +- {std_J:.2g} kg m^2; the logs exchange "
             "too little momentum with the gimbals (slew further or faster)"
         )
-    if sigma > 0 and rms > 3 * sigma:
+    if sigma > 0 and rms > RESIDUAL_SIGMAS_WARN * sigma:
         warnings.append(
             f"rate residual {rms:.3g} rad/s is {rms / sigma:.1f} gyro sigmas: the momentum "
-            "balance misses a torque (friction, cables: try friction='viscous' or 'coulomb')"
+            "balance misses a torque (friction, cables: try friction='viscous' or 'coulomb') "
+            "or the gyro drifts"
+        )
+    if ratio > CORRELATED_RATIO_WARN:
+        warnings.append(
+            f"the rate residual is correlated: the standard errors are {ratio:.1f} times their "
+            "white-noise values (std_white); coloured gyro noise, a drift or a missing torque"
         )
     return warnings
