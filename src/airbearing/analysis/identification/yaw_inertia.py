@@ -18,7 +18,10 @@ residual (the rate noise of the window ends dominates it). The default ``output-
 then refines J_z on the one multiple-shooting engine (:mod:`airbearing.analysis.shooting`:
 windows within segments with their own initial states, logged intervals, outlier rows
 weighted 0; the yaw and the rate, or the yaw alone for attitude-only logs), with its
-Fisher standard error (initial states eliminated) or its "not identifiable" reason.
+standard error or its "not identifiable" reason: the engine's HAC sandwich (coloured gyro
+noise widens it), never below the Fisher one (initial states eliminated), kept as
+``std_white``. A torque the testbed does not know of, or a drifting gyro, biases J_z in
+both methods by its share of the known torque, and no residual shows it.
 """
 
 from __future__ import annotations
@@ -69,8 +72,11 @@ class YawIdentification(IdentificationResult):
         ``"equation-error"`` or ``"output-error"``.
     residual_unit : str
     details : dict
-    std_white : None
-        No separate white-noise error (the output error's is its Fisher one).
+    std_white : ndarray (1,) or None
+        Output error: ``[Fisher (white-noise) standard error of J_z]``, kg m^2, beside
+        ``std_inertia``, the engine's HAC sandwich never below it
+        (:func:`airbearing.analysis.shooting.errors.honest_errors`); None for equation
+        error (its ``std_inertia`` is the least-squares one).
     """
 
     inertia: float
@@ -86,7 +92,7 @@ class YawIdentification(IdentificationResult):
     cm_offset: None = None
     std_cm_offset: None = None
     held: None = None
-    std_white: None = None
+    std_white: np.ndarray | None = field(default=None, repr=False)
 
     @property
     def active_constraints(self) -> tuple:
@@ -100,13 +106,15 @@ class YawIdentification(IdentificationResult):
         return rows[0] if len(rows) == 1 else rows
 
     def to_json(self) -> dict:
-        """``inertia``, ``std``, ``std_status``, ``residual_rms``, ``residual_unit``,
-        ``segments``, ``outlier_rows``, ``logs``, ``warnings``, ``method`` (NaN: null, as in
-        ``--json``)."""
+        """``inertia``, ``std``, ``std_white``, ``std_status``, ``residual_rms``,
+        ``residual_unit``, ``segments``, ``outlier_rows``, ``logs``, ``warnings``, ``method``
+        (NaN: null, as in ``--json``)."""
+        sw = self.std_white
         return to_jsonable(
             {
                 "inertia": float(self.inertia),
                 "std": float(self.std_inertia),
+                "std_white": None if sw is None else float(np.asarray(sw).reshape(-1)[0]),
                 "std_status": dict(self.std_status),
                 "condition_number": 1.0,
                 "active_constraints": [],
@@ -212,6 +220,7 @@ def identify_yaw_inertia(
     window = max(1, int(round(testbed.sensors.rate))) if window is None else int(window)
     x, y, entries, nseg, any_dipole = _window_equations(testbed, logs, window)
     J, std, reason, res = _equation_error(testbed, x, y, any_dipole)
+    std_white = None
     warnings = []
     if reason is not None:
         warnings.append(f"J_zz: not identifiable from this log: {reason}")
@@ -224,17 +233,19 @@ def identify_yaw_inertia(
             progress("output error (shooting engine)", 1, 2)
         fit = _output_error(testbed, logs, float(J))
         J, std = fit["inertia"], fit["std"]
+        std_white = np.array([fit["std_white"]])
         rms, unit, method_used = fit["gap"], fit["gap_unit"], "output-error"
         details.update(fit["details"])
         if fit["reason"]:
             reason = fit["reason"]
-            J, std = float("nan"), float("nan")
+            J, std, std_white = float("nan"), float("nan"), np.array([np.nan])
             warnings.append(f"J_zz: not identifiable from this log: {reason}")
         warnings += fit["warnings"]
     why = "estimated" if reason is None else f"not identifiable from this log: {reason}"
     return YawIdentification(
         inertia=float(J),
         std_inertia=float(std),
+        std_white=std_white,
         std_status={"J_zz": why},
         residual_rms=rms,
         residual_unit=unit,
@@ -363,13 +374,23 @@ def _output_error(testbed: Testbed, logs, J_start: float) -> dict:
     fit = prob.fit(model.p0, S, np.zeros(1), lower=np.array([-0.9 * J_start]),
                    name="dof-1 yaw inertia (output error)")  # fmt: skip
     reason = fit.not_identifiable[0] if fit.not_identifiable else ""
+    std_white = float(fit.theta_std[0])
+    std = std_white
+    if not reason and np.isfinite(std_white):
+        from airbearing.analysis.shooting.errors import honest_errors
+
+        # coloured gyro noise (or a slow torque the windows do not absorb) leaves a correlated
+        # residual the Fisher (white-noise) error ignores: the engine's HAC sandwich, never below
+        he = honest_errors(prob, fit, 1)
+        std = float(he.std[0]) if np.isfinite(he.std[0]) else std_white
     warnings = []
     if fit.level == "warning":
         warnings.append(f"output error: IPOPT stopped at an acceptable level ({fit.status})")
     gyro = datas[0].outputs[0] == "rate"
     return {
         "inertia": float(J_start + fit.theta[0]),
-        "std": float(fit.theta_std[0]),
+        "std": std,
+        "std_white": std_white,
         "reason": reason,
         "gap": float(fit.gap),
         "gap_unit": "rad/s" if gyro else "rad",
