@@ -6,10 +6,21 @@ measurement effects ``gyro_bias`` and ``sensor_lag`` cannot act) is a candidate;
 on dof 3 an effect that FORMATS.md allows as one number or three (friction, drag,
 gyro bias) is two candidates, one value for every axis and one per body axis.
 
+An effect the testbed's ``[effects]`` already has is a candidate too, as a *correction*
+of its nominal value (a lab's testbed file often carries last year's friction): the Model
+holds the nominal in its parameters, the fitted ``theta`` is the correction added to it
+(``Candidate.nominal``), so the significance tests (likelihood ratio, standard errors
+from zero) are those of the correction, while the value reported and written to the
+augmented testbed is the total (``Candidate.value``; errors are ``Candidate.spread``).
+Corrections are offered for the effects the output is smooth in and that add no
+states (not ``sensor_lag``, ``gimbal_deadzone``: :data:`NOT_CORRECTED`); on dof 3 the
+one-value form only when the nominal is the same on every axis.
+
 Effects with a physical sign are fitted inside their physical range
-(``PHYSICAL_LOWER``: friction, drag, lag and dead zone are >= 0), and every effect within
-what real rigs have (``PHYSICAL_RANGE``, e.g. a CM offset within +-0.1 m: several cm
-before balancing).
+(``PHYSICAL_LOWER``: friction, drag, lag and dead zone are >= 0, and so is a spring,
+``tau_z = -k yaw``, which pulls towards rest and cannot push away from it), and every
+effect within what real rigs have (``PHYSICAL_RANGE``, e.g. a CM offset within +-0.1 m:
+several cm before balancing). The range bounds the total of a correction.
 
 Only physical candidates are offered (:func:`not_physical`): a linear
 ``spring_torque`` (``tau_z = -k yaw``: cables, an umbilical) is not offered on logs
@@ -53,6 +64,7 @@ from airbearing.models.effects import REGISTRY, applicable_effects, effect_param
 from airbearing.models.model import Model
 
 __all__ = [
+    "NOT_CORRECTED",
     "PHYSICAL_LOWER",
     "PHYSICAL_RANGE",
     "SPRING_MAX_SPAN",
@@ -70,6 +82,7 @@ PHYSICAL_LOWER = {
     "viscous_friction": 0.0,
     "coulomb_friction": 0.0,
     "aero_drag": 0.0,
+    "spring_torque": 0.0,  # -k yaw pulls towards rest (cables): it cannot push away
     "sensor_lag": 0.0,
     "gimbal_deadzone": 0.0,
 }
@@ -81,13 +94,16 @@ PHYSICAL_RANGE = {
     "viscous_friction": (0.0, 1.0),  # N m s; air bearings 1e-7..1e-4
     "coulomb_friction": (0.0, 1.0),  # N m; air bearings 1e-6..1e-3
     "aero_drag": (0.0, 1.0),  # N m s^2; 1e-7..1e-4, on every axis of a platform
-    "spring_torque": (-10.0, 10.0),  # N m / rad; cables and umbilicals 1e-5..1e-2
+    "spring_torque": (0.0, 10.0),  # N m / rad; cables and umbilicals 1e-5..1e-2, restoring
     "cm_offset_error": (-0.1, 0.1),  # m per axis; several cm before balancing
     "residual_dipole": (-10.0, 10.0),  # A m^2 per axis; CubeSats 1e-3..1e-1
     "gyro_bias": (-0.1, 0.1),  # rad/s per axis; MEMS gyros 1e-4..1e-2
     "sensor_lag": (0.0, 1.0),  # s
     "gimbal_deadzone": (0.0, 1.0),  # rad/s
 }
+#: Effects of the testbed's ``[effects]`` whose nominal value is not corrected: the output
+#: has no derivative in a dead zone, and a lag's value changes the Model's states.
+NOT_CORRECTED = ("sensor_lag", "gimbal_deadzone")
 #: Effects that change the measured rate only: they need a gyro.
 GYRO_EFFECTS = ("gyro_bias", "sensor_lag")
 #: rad, the largest yaw span within a segment on which a linear spring_torque is offered:
@@ -120,6 +136,11 @@ class Candidate:
         True for ``sensor_lag`` (fitted with a Model that has lag states).
     per_axis : bool
         One value per body axis for an effect that is one number or three.
+    nominal : tuple of float or None
+        A correction of an effect the testbed's ``[effects]`` already has: its nominal
+        value in ``theta`` space (the Model holds it in its parameters, so ``theta`` is
+        the correction added to it; ``lower``, ``upper`` are shifted by it). None for an
+        effect the testbed does not have.
     """
 
     name: str
@@ -130,6 +151,7 @@ class Candidate:
     smooth: bool = True
     lag: bool = False
     per_axis: bool = False
+    nominal: tuple | None = None
 
     @property
     def k(self) -> int:
@@ -141,12 +163,32 @@ class Candidate:
         """The effect name, with ``(per axis)`` for the three-value form."""
         return f"{self.name} (per axis)" if self.per_axis else self.name
 
+    @property
+    def correction(self) -> bool:
+        """True for a correction of a nominal effect (``nominal`` is set)."""
+        return self.nominal is not None
+
     def value(self, theta: np.ndarray):
-        """FORMATS.md value: a float, a 3-tuple (vector or per-axis effect) or a pair."""
+        """FORMATS.md value of ``theta``: the total (nominal plus correction) for a correction.
+
+        A float, a 3-tuple (vector or per-axis effect) or a pair.
+        """
         theta = np.asarray(theta, dtype=float)
+        if self.nominal is not None:
+            theta = theta + np.asarray(self.nominal, dtype=float)
+        return self.spread(theta)
+
+    def spread(self, x: np.ndarray):
+        """``x`` (a standard error, a bound, a ratio) in the value form, no nominal added."""
+        x = np.asarray(x, dtype=float)
         if self.per_axis or VOCABULARY[self.name].shape in ("vector3", "pair"):
-            return tuple(float(x) for x in theta)
-        return float(theta[0])
+            return tuple(float(v) for v in x)
+        return float(x[0])
+
+    @property
+    def nominal_value(self):
+        """The nominal value in the value form (None for a new effect)."""
+        return None if self.nominal is None else self.spread(self.nominal)
 
 
 def universal_effects(testbed: Testbed, names: Iterable[str]) -> dict:
@@ -226,7 +268,8 @@ def not_physical(testbed: Testbed, datas=None) -> dict:
 
 
 def candidates_for(testbed: Testbed, datas=None, only=None) -> list[Candidate]:
-    """The registry's effects that can act on ``testbed`` and are not already in its ``[effects]``.
+    """The registry's effects that can act on ``testbed``, those of its ``[effects]`` as
+    corrections of their nominal value (module doc).
 
     Effects whose form is not physical on the logs (:func:`not_physical`) are left out.
 
@@ -242,8 +285,9 @@ def candidates_for(testbed: Testbed, datas=None, only=None) -> list[Candidate]:
     Raises
     ------
     InputError
-        If a name of ``only`` is not a registered effect, cannot act on the testbed, or is
-        not physical on the logs.
+        If a name of ``only`` is not a registered effect, cannot act on the testbed, is
+        not physical on the logs, or is a nominal effect that is not corrected
+        (:data:`NOT_CORRECTED`).
     """
     return _candidates(testbed, datas, only)[0]
 
@@ -278,10 +322,17 @@ def _candidates(testbed: Testbed, datas, only) -> tuple[list, list]:
                 raise InputError(f"only={name!r}: cannot act on testbed '{testbed.name}': {reason}")
             if name in refused:
                 raise InputError(f"only={name!r}: {refused[name]}")
+            if name in testbed.effects and name in NOT_CORRECTED:
+                raise InputError(
+                    f"only={name!r}: already in the [effects] of testbed '{testbed.name}' "
+                    f"({name} = {testbed.effects[name]!r}), and its value is not corrected "
+                    "(a correction is offered for effects the output is smooth in, "
+                    "without lag states); remove it from [effects] to fit it anew"
+                )
         names = [n for n in names if n in only]
     out, unphysical = [], []
     for name in names:
-        if name in testbed.effects:
+        if name in testbed.effects and name in NOT_CORRECTED:
             continue
         spec = VOCABULARY[name]
         shape = spec.shape
@@ -300,21 +351,54 @@ def _candidates(testbed: Testbed, datas, only) -> tuple[list, list]:
             lo = -0.9  # (1 + value) > 0 with a margin
         rng = PHYSICAL_RANGE.get(name, (-math.inf, math.inf))
         lo, hi = max(lo, rng[0]), rng[1]
+        known = _nominal_params(testbed, name, len(params)) if name in testbed.effects else None
         for tie, per_axis in forms:
             k = tie.shape[1]
+            nominal, lower, upper = None, (lo,) * k, (hi,) * k
+            if known is not None:
+                nominal = _nominal_theta(tie, known)
+                if nominal is None:  # one value for axes whose nominals differ: per axis only
+                    continue
+                # theta is the correction; the range stays the total's, widened to hold
+                # the nominal (the user's value is where the fit starts)
+                lower = tuple(min(lo - v, 0.0) for v in nominal)
+                upper = tuple(max(hi - v, 0.0) for v in nominal)
             (unphysical if name in refused else out).append(
                 Candidate(
                     name=name,
                     params=params,
                     tie=tie,
-                    lower=(lo,) * k,
-                    upper=(hi,) * k,
+                    lower=lower,
+                    upper=upper,
                     smooth=name != "gimbal_deadzone",
                     lag=name == "sensor_lag",
                     per_axis=per_axis,
+                    nominal=nominal,
                 )
             )
     return out, [(c, refused[c.name]) for c in unphysical]
+
+
+def _nominal_params(testbed: Testbed, name: str, n: int) -> np.ndarray:
+    """The Model parameters' values of the testbed's effect ``name`` (``n`` of them).
+
+    A dof-1 Model takes the z (yaw) axis of a three-value friction or drag, a dof-3 one
+    the same number on every axis of a single value.
+    """
+    v = np.ravel(np.asarray(testbed.effects[name], dtype=float))
+    if v.size == n:
+        return v
+    if n == 1 and v.size == 3:
+        return v[2:]
+    return np.full(n, float(v[0]))
+
+
+def _nominal_theta(tie: np.ndarray, known: np.ndarray) -> tuple | None:
+    """``theta`` with ``tie @ theta`` the nominal parameters (None when no theta gives them)."""
+    theta = np.linalg.lstsq(tie, known, rcond=None)[0]
+    if not np.allclose(tie @ theta, known, rtol=1e-12, atol=0.0):
+        return None
+    return tuple(float(x) for x in theta)
 
 
 # ----------------------------------------------------------------------------

@@ -98,8 +98,8 @@ def effect_errors(cand, errors: Errors, lo: int) -> EffectErrors:
     with np.errstate(invalid="ignore", divide="ignore"):
         eff = std / crlb
     return EffectErrors(
-        std=cand.value(std),
-        std_white=cand.value(white),
-        crlb=cand.value(crlb),
-        efficiency=cand.value(eff),
+        std=cand.spread(std),  # no nominal added: these are spreads, not values
+        std_white=cand.spread(white),
+        crlb=cand.spread(crlb),
+        efficiency=cand.spread(eff),
     )

@@ -317,7 +317,7 @@ def screened_lag(problem, current, cand, datas, ln_n, k_added, before):
     return CandidateResult(
         name=cand.name,
         value=cand.value(np.array([tau])),
-        std=cand.value(np.array([std])),
+        std=cand.spread(np.array([std])),
         theta=np.r_[current.theta, tau],
         gap=problem.gap_of_residual(e),
         rss=rss,

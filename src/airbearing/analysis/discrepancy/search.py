@@ -696,6 +696,9 @@ def _round(search, sel: _Selection, remaining, screen, workers, prog) -> list:
     # effect the logs do not see with one value is not seen with three either
     results = fit_all([c for c in remaining if not c.per_axis])
     seen = {r.name for r in results if r.significant}
+    # ... or when it has none (a correction of axes whose nominals differ)
+    one = {c.name for c in search.cands if not c.per_axis}
+    seen |= {c.name for c in search.cands if c.per_axis} - one
     per_axis = [c for c in remaining if c.per_axis and c.name in seen]
     prog.done += sum(1 for c in remaining if c.per_axis and c.name not in seen)
     results += fit_all(per_axis)
@@ -914,6 +917,7 @@ def _verdict_text(sel: _Selection, named: _Named, adq, agree, validation) -> str
         adequacy=adq,
         unfit=tuple(unfit.items()),
         disagreements=[w for w in (c.words() for c in agree) if w],
+        nominal={c.name: c.nominal_value for c in sel.chosen if c.correction},
     )
     if validation and named.effects:
         bad = [v.log for v in validation if not v.shrinks]

@@ -79,6 +79,8 @@ class CandidateResult:
     value, std : float, tuple or None
         FORMATS.md value and 1-sigma; None when not identifiable or not fitted. The
         search replaces ``std`` by the honest error (:mod:`.honest`) once a round is done.
+        For a correction of a nominal effect (``nominal``) the value is the total; ``theta``,
+        the likelihood ratio and ``sigmas`` are the correction's.
     std_white, crlb, efficiency : float, tuple or None
         The white-noise Fisher error, the Cramer-Rao bound of the data for whole segments
         and ``std / crlb`` (None until the search sets them, or without a fit).
@@ -139,12 +141,18 @@ class CandidateResult:
     def per_axis(self) -> bool:
         return bool(self.candidate is not None and self.candidate.per_axis)
 
+    @property
+    def nominal(self):
+        """The testbed's value of a correction (``value`` is the total); None otherwise."""
+        return None if self.candidate is None else self.candidate.nominal_value
+
     def row(self) -> dict:
         """A flat summary (JSON and report tables)."""
         return {
             "name": self.name,
             "per_axis": self.per_axis,
             "value": jsonable(self.value),
+            "nominal": jsonable(self.nominal),
             "std": jsonable(self.std),
             "std_white": jsonable(self.std_white),
             "crlb": jsonable(self.crlb),
@@ -169,6 +177,13 @@ class CandidateResult:
 
     def to_json(self) -> dict:
         return self.row()
+
+
+def _g(v) -> str:
+    """A number or a vector in ``:g`` form."""
+    if isinstance(v, tuple | list | np.ndarray):
+        return "[" + ", ".join(f"{float(x):g}" for x in v) + "]"
+    return f"{float(v):g}"
 
 
 def chi2_threshold(k: int) -> float:
@@ -388,6 +403,8 @@ def judge(cand, fit, k_sel, current, ln_n, k_added, held: HeldOut, before: HeldO
     hi = np.asarray(cand.upper, dtype=float)
     at_low = np.isfinite(lo) & (th - lo <= near)
     at_high = np.isfinite(hi) & (hi - th <= near)
+    # the words speak of the total: a correction's bounds are shifted by its nominal
+    nom = np.zeros(lo.size) if cand.nominal is None else np.asarray(cand.nominal, dtype=float)
     cov = fit.cov[k_sel:k, k_sel:k]
     try:
         sig = float(math.sqrt(max(float(th @ np.linalg.solve(cov, th)), 0.0)))
@@ -399,23 +416,31 @@ def judge(cand, fit, k_sel, current, ln_n, k_added, held: HeldOut, before: HeldO
     reason = ""
     # pinned where the effect vanishes (a friction at 0), or at the most it can be (a dipole
     # the magnetorquers' size, a 1 s lag, either sign of a symmetric range)
-    vanishes = at_low & (lo == 0)
-    extreme = (at_low & (lo != 0)) | at_high
+    vanishes = at_low & (lo + nom == 0)
+    extreme = (at_low & (lo + nom != 0)) | at_high
     if np.any(vanishes):
+        nothing = (
+            f"the logs show less of this effect than its nominal {_g(cand.nominal_value)}, "
+            "down to none"
+            if cand.correction
+            else "nothing of this effect in the logs"
+        )
         status, reason = (
             "at its physical bound",
             (
-                f"pinned at its physical bound {lo[vanishes][0]:g}: the fit wants a value at "
-                "or beyond it (nothing of this effect in the logs)"
+                f"pinned at its physical bound {(lo + nom)[vanishes][0]:g}: the fit wants a "
+                f"value at or beyond it ({nothing})"
             ),
         )
     elif np.any(extreme):
-        value = np.where(at_high, hi, lo)[extreme][0]
+        high = bool(np.any(at_high & extreme))  # the upper end when both are pinned
+        value = (hi + nom)[at_high][0] if high else (lo + nom)[extreme][0]
+        most, more = ("largest", "more") if high else ("smallest", "less")
         status, reason = (
             "at its physical bound",
             (
-                f"pinned at its largest physical value {value:g}: the fit wants more than this "
-                "testbed can have (another effect, or a log that is not what the testbed "
+                f"pinned at its {most} physical value {value:g}: the fit wants {more} than "
+                "this testbed can have (another effect, or a log that is not what the testbed "
                 "says: a dead or reversed gyro axis, a unit)"
             ),
         )
@@ -433,7 +458,7 @@ def judge(cand, fit, k_sel, current, ln_n, k_added, held: HeldOut, before: HeldO
         )
     return CandidateResult(
         value=cand.value(th),
-        std=cand.value(sd),
+        std=cand.spread(sd),
         sigmas=sig,
         nameable=not reason,
         status=status,

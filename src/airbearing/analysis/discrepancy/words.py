@@ -142,6 +142,7 @@ def verdict(
     adequacy=None,
     unfit=(),
     disagreements=(),
+    nominal: dict | None = None,
 ) -> str:
     """The verdict: named effects with errors and efficiency, or what the model leaves.
 
@@ -160,15 +161,21 @@ def verdict(
         Candidates that did not converge or sat at a bound, and why.
     disagreements : sequence of str
         Effects the runs disagree on, in words.
+    nominal : dict, optional
+        ``name -> nominal value`` of the named effects that correct the testbed's own
+        (their ``effects`` value is the total).
     """
-    efficiency = efficiency or {}
+    efficiency, nominal = efficiency or {}, nominal or {}
     remains = adequacy is not None and adequacy.structure_remains
     if effects:
         parts = [
-            f"{n} = {format_value(v, effect_std[n])}{_efficiency_words(efficiency.get(n))}"
+            f"{n} = {format_value(v, effect_std[n])}"
+            + (f" (nominal {format_value(nominal[n])})" if n in nominal else "")
+            + _efficiency_words(efficiency.get(n))
             for n, v in effects.items()
         ]
-        text = "missing effect" + ("s" if len(effects) > 1 else "") + ": " + "; ".join(parts)
+        what = "corrected effect" if set(effects) <= set(nominal) else "missing effect"
+        text = what + ("s" if len(effects) > 1 else "") + ": " + "; ".join(parts)
         if remains:
             text += "; " + adequacy.words(named=True)
     elif not remains:
