@@ -93,12 +93,12 @@ def test_only_a_nominal_effect_fits_its_correction(logs):
 
 
 def test_a_right_nominal_leaves_nothing_to_name(logs):
-    d = ab.discrepancy(_rig({"viscous_friction": TRUTH}), logs[:1], only=["viscous_friction"])
-    assert d.effects == {}, d.verdict
-    (r,) = d.rounds[0]
-    # the correction is what the tests judge: not significant (or pinned by chance at 0
-    # on the far side would be a bug: the nominal is inside the range)
-    assert not r.nameable and r.status != "at its physical bound", (r.status, r.reason)
+    d = ab.discrepancy(_rig({"viscous_friction": TRUTH}), logs)
+    assert d.effects == {} and not d.adequacy.structure_remains, d.verdict
+    (r,) = [r for r in d.rounds[0] if r.name == "viscous_friction"]
+    # the correction is what the tests judge: not significant, and near zero (the nominal
+    # lies inside the range: no bound pins it)
+    assert not r.significant and r.status != "at its physical bound", (r.status, r.reason)
     assert abs(r.theta[-1]) < 3 * r.std, (r.value, r.std)
 
 
