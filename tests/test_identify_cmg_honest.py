@@ -62,11 +62,13 @@ def _z(res) -> float:
 
 
 def test_white_noise_keeps_the_white_error():
-    """Within the model the sandwich is the white-noise error (measured 1.00-1.10 times it:
-    the HAC's own sampling error on 800 samples), the truth is covered, nothing is warned."""
+    """Within the model the sandwich is the white-noise error (measured 1.00-1.10 times it
+    on these seeds, 1.00-1.22 on 30 more, median 1.00: the HAC's own sampling error on 800
+    samples), the truth is covered, nothing is warned."""
     runs = _runs("clean")
     ratio = np.array([r.std_inertia / r.std_white[0] for r in runs])
-    assert np.all(ratio >= 1.0) and np.all(ratio <= 1.15), ratio
+    assert np.all(ratio >= 1.0) and np.all(ratio <= 1.25), ratio
+    assert np.median(ratio) <= 1.05, ratio
     assert sum(abs(_z(r)) <= COVER_SIGMAS for r in runs) >= MIN_COVERED
     assert not any(r.warnings for r in runs), [r.warnings for r in runs if r.warnings]
     j = runs[0].to_json()
