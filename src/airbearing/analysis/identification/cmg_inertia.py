@@ -255,9 +255,9 @@ def identify_cmg_inertia(
     for k in range(nfr):
         G[1 + k, 0] = -beta_hat[1 + k] / a**2
         G[1 + k, 1 + k] = 1.0 / a
-    k = 1 + nfr
+    Gp = G[:, : 1 + nfr]  # the sandwich is of [a, friction/J_z] alone (constants projected off)
     std_w = np.sqrt(np.maximum(np.diag(G @ cov_white @ G.T), 0))
-    std_h = np.sqrt(np.maximum(np.diag(G[:, :k] @ cov_hac @ G[:, :k].T), 0))
+    std_h = np.sqrt(np.maximum(np.diag(Gp @ cov_hac @ Gp.T), 0))
     std = np.maximum(std_h, std_w)  # never below white: the sandwich is biased low
     Fn = A.T @ A
     ev = np.linalg.eigvalsh(Fn)
@@ -290,7 +290,10 @@ def identify_cmg_inertia(
             "h0": float(h0),
             "beta_rad": float(beta),
             "per_log": entries,
-            "std_white_friction": {n: float(std_w[1 + k]) for k, n in enumerate(names)},
+            "std_white_friction": {
+                n: None if f"friction_nonnegative:{n}" in active else float(std_w[1 + k])
+                for k, n in enumerate(names)
+            },
             "covariance": {"method": "AR-prewhitened HAC sandwich", **hac},
         },  # fmt: skip
         segments=int(sum(e["segments"] for e in entries)),
