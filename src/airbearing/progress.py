@@ -37,16 +37,24 @@ def call(progress: Callable | None) -> Progress:
 
 
 class TimeLeft:
-    """An estimate of the time left that never jumps up by more than its own uncertainty.
+    """An estimate of the time left that never jumps up by more than its own uncertainty,
+    and says nothing once it has run out.
 
-    The raw estimate assumes the steps left take as long as the steps done on average:
-    ``left = elapsed * (total - done) / done``. Its uncertainty is ``left / sqrt(done)``
-    (the standard error of a mean of ``done`` step times whose spread is as large as the
-    mean: a conservative coefficient of variation of 1). A new estimate is shown as is
-    when it is lower; when it is higher it is capped at the previous one, less the time
-    since, plus the previous uncertainty. So the number a person reads counts down and
-    only rises when the work has clearly slowed, and then by no more than the ``+-`` it
-    carried.
+    When a step finishes, the raw estimate assumes the steps left take as long as the
+    steps done on average: ``left = elapsed * (total - done) / done``. Its uncertainty is
+    ``left / sqrt(done)`` (the standard error of a mean of ``done`` step times whose
+    spread is as large as the mean: a conservative coefficient of variation of 1). A new
+    estimate is shown as is when it is lower; when it is higher it is capped at the
+    previous one, less the time since, plus the previous uncertainty. Between two
+    finished steps the estimate counts down with the clock. So the number a person reads
+    counts down and only rises when the work has clearly slowed, and then by no more
+    than the ``+-`` it carried.
+
+    An estimate that has counted down to zero while its step is still running is known
+    to be wrong (the step is longer than the average of those before it): :meth:`update`
+    then returns ``None`` (the display shows the elapsed time instead of "about 0 s
+    left"), and the next finished step starts a fresh estimate, not capped by the one
+    that ran out.
 
     Parameters
     ----------
@@ -54,23 +62,33 @@ class TimeLeft:
         Time the work started, s (``time.monotonic()``).
     """
 
+    #: s: an estimate that counts down below this has run out (it would read "about 0 s
+    #: left" while the step runs on).
+    RUN_OUT = 0.5
+
     def __init__(self, start: float) -> None:
         self.start = start
         self.shown: float | None = None
         self.uncertainty = 0.0
         self.at = start
+        self.done: float | None = None
 
     def update(self, done: float, total: float, now: float) -> tuple[float, float] | None:
         """``(left, uncertainty)`` in s at ``now`` after ``done`` of ``total`` steps, or
-        ``None`` before the first step is done or after the last."""
+        ``None`` when there is no honest estimate: before the first step is done, after
+        the last, or once the estimate has run out while a step is still running."""
         if not total or done <= 0 or done >= total:
             return None
-        elapsed = max(now - self.start, 0.0)
-        raw = elapsed * (total - done) / done
-        unc = raw / done**0.5
-        if self.shown is not None:
-            cap = max(self.shown - (now - self.at), 0.0) + self.uncertainty
-            if raw > cap:
-                raw = cap
-        self.shown, self.uncertainty, self.at = raw, unc, now
-        return raw, unc
+        if done != self.done:  # a step finished: a new estimate
+            elapsed = max(now - self.start, 0.0)
+            raw = elapsed * (total - done) / done
+            unc = raw / done**0.5
+            if self.shown is not None:
+                before = self.shown - (now - self.at)
+                if before >= self.RUN_OUT:  # a previous estimate that ran out caps nothing
+                    raw = min(raw, before + self.uncertainty)
+            self.shown, self.uncertainty, self.at, self.done = raw, unc, now, done
+        left = self.shown - (now - self.at)
+        if now > self.at and left < self.RUN_OUT:  # counted down to nothing: ran out
+            return None
+        return left, self.uncertainty

@@ -1,9 +1,12 @@
 """How the CLI shows :mod:`airbearing.progress` updates.
 
-On a terminal: a ``rich`` bar with what is being done, steps and ETA. Not on a
-terminal (a pipe, a log file, CI): plain one-line updates on stderr, at most one a
-second unless the step description changes, starting once the work has run
-:data:`PLAIN_DELAY` s (a command refused at once prints only its error line).
+On a terminal: a ``rich`` bar with what is being done, steps, elapsed time and ETA. Not
+on a terminal (a pipe, a log file, CI): plain one-line updates on stderr, at most one a
+second unless the step description changes or the last step is done, starting once the
+work has run :data:`PLAIN_DELAY` s (a command refused at once prints only its error
+line). The count says ``about 40 s left`` while the estimate is honest, ``2 min 38 s so
+far`` once it has run out (a step longer than those before it), ``done in ...`` at the
+end.
 ``--quiet`` (global) silences both.
 """
 
@@ -52,6 +55,29 @@ def set_quiet(on: bool) -> None:
 PLAIN_DELAY = 1.0
 
 
+def _duration(seconds: float) -> str:
+    """``seconds`` in words a person reads at a glance: ``42 s``, ``2 min 38 s``, ``1 h 5 min``."""
+    s = max(int(round(seconds)), 0)
+    if s < 60:
+        return f"{s} s"
+    if s < 3600:
+        return f"{s // 60} min {s % 60} s"
+    return f"{s // 3600} h {s % 3600 // 60} min"
+
+
+def _when(left, done: float, total: float, now: float) -> str:
+    """The time part of a plain progress count: the estimate left when there is an
+    honest one (:class:`airbearing.progress.TimeLeft`), else the time spent so far, and
+    ``done in ...`` after the last step."""
+    elapsed = _duration(now - left.start)
+    if done >= total:
+        return f", done in {elapsed}"
+    estimate = left.update(done, total, now)
+    if estimate is not None:
+        return f", about {_duration(estimate[0])} left"
+    return f", {elapsed} so far" if done > 0 or now - left.start >= 1.0 else ""
+
+
 class _Plain:
     def __init__(self, label: str, stream) -> None:
         self.label, self.stream = label, stream
@@ -84,14 +110,13 @@ class _Plain:
             return
         what = _own_words(self.label, what)
         now = time.monotonic()
-        if what == self.last_what and now - self.last_t < 1.0:
+        last = done is not None and bool(total) and done >= total  # always shown
+        if what == self.last_what and now - self.last_t < 1.0 and not last:
             return
         self.last_what, self.last_t = what, now
         count = ""
         if done is not None and total:
-            left = self.left.update(done, total, now)
-            eta = f", about {left[0]:.0f} s left" if left is not None else ""
-            count = f" [{done:g}/{total:g}{eta}]"
+            count = f" [{done:g}/{total:g}{_when(self.left, done, total, now)}]"
         with self.lock:
             self.pending = f"{self.label}: {what}{count}"
         if now - self.t0 >= PLAIN_DELAY:
@@ -119,7 +144,8 @@ class _Rich:
         kw = {"description": f"{self.label}: {what}"}
         if done is not None and total:
             left = self.left.update(done, total, time.monotonic())
-            kw["left"] = f"about {left[0]:.0f} s left" if left is not None else ""
+            # no honest estimate: nothing (the bar's own column shows the elapsed time)
+            kw["left"] = f"about {_duration(left[0])} left" if left is not None else ""
         if total is not None:
             kw["total"] = total
         if done is not None:
