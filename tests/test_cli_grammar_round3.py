@@ -4,9 +4,11 @@ follow the testbed, defaults typed as shown, the grammar everywhere, messages an
 from __future__ import annotations
 
 import io
+import json
 import sys
 
 import pytest
+from cli_run import run
 
 from airbearing.cli import show_progress
 from airbearing.progress import TimeLeft
@@ -78,3 +80,42 @@ def test_plain_progress_always_prints_the_last_step(monkeypatch):
     assert lines[0] == f"identify: {what} [0/30]"
     assert lines[-1] == f"identify: {what} [30/30, done in 0 s]"
     assert len(lines) == 2  # throttled in between, the last one not
+
+
+# --- defaults that follow the testbed; defaults typed as shown ---------------------------
+
+
+def test_balance_method_follows_the_testbed(tmp_path):
+    # seed 004's platform has no magnetorquers and no cage field: mechanical, not mixed
+    out = tmp_path / "b.json"
+    assert run(["balance", "seed004-platform", "--duration", "5", "--json", str(out)]) == 0
+    assert json.loads(out.read_text())["method"] == "mechanical"
+
+
+@pytest.mark.parametrize(
+    "extra",
+    [
+        ["--duration", "300"],
+        ["--seeds", "4"],
+        ["--start", "auto"],
+        ["--initial-rate", "0", "0", "0"],
+    ],  # fmt: skip
+    ids=["duration", "seeds", "start", "initial-rate"],
+)
+def test_two_step_accepts_a_default_typed_as_shown(extra, tmp_path, capsys):
+    args = ["balance", "seed004-platform", "--two-step", *extra, "--json", str(tmp_path / "t.json")]
+    assert run(args) == 0, capsys.readouterr().err
+
+
+def test_two_step_still_refuses_a_value_it_would_ignore(capsys):
+    assert run(["balance", "seed004-platform", "--two-step", "--duration", "5"]) == 2
+    assert "--duration: not used with --two-step" in capsys.readouterr().err
+
+
+def test_identify_accepts_its_default_form_where_no_regression_runs(tmp_path, capsys):
+    log = tmp_path / "slew.csv"
+    assert run(["simulate", "cmg-yaw", "--duration", "10", "-o", str(log)]) == 0
+    assert run(["identify", "cmg-yaw", str(log), "--form", "integrated"]) == 0
+    capsys.readouterr()
+    assert run(["identify", "cmg-yaw", str(log), "--form", "acceleration"]) == 2
+    assert "--form: applies only to --method equation-error" in capsys.readouterr().err

@@ -83,7 +83,10 @@ def balance(
     testbed: Annotated[str, typer.Argument(help="Testbed file or built-in name.")],
     method: Annotated[
         Method | None,
-        typer.Option(help="Balancing law (default: mixed; with --two-step seed 004's lyapunov)."),
+        typer.Option(
+            help="Balancing law; default: mixed on a testbed with magnetorquers and a cage "
+            "field, mechanical otherwise (with --two-step: seed 004's lyapunov)."
+        ),
     ] = None,
     duration: Annotated[float, typer.Option(help="Run length, s (seed 000: 300).")] = 300.0,
     initial_offset_mm: Annotated[
@@ -145,9 +148,11 @@ def balance(
         duration, initial_offset_mm, vertical_offset, initial_rate, seeds, sweep, compare, log,
         two_step_,
     )  # fmt: skip
-    if method is None:
-        method = Method.lyapunov if two_step_ else Method.mixed
     tb = testbed_arg(testbed)
+    if method is None:  # the law the testbed can run (as gains --split)
+        from airbearing.cli.gains import default_split
+
+        method = Method.lyapunov if two_step_ else Method(default_split(tb))
     if not two_step_:  # each run keeps its whole log in memory
         longest = duration
         if sweep_spec is not None and sweep_spec[0] == "duration":
