@@ -119,3 +119,70 @@ def test_identify_accepts_its_default_form_where_no_regression_runs(tmp_path, ca
     capsys.readouterr()
     assert run(["identify", "cmg-yaw", str(log), "--form", "acceleration"]) == 2
     assert "--form: applies only to --method equation-error" in capsys.readouterr().err
+
+
+# --- the grammar everywhere; options named as typed --------------------------------------
+
+
+@pytest.mark.parametrize(
+    "args",
+    [
+        ["balance", "seed000-tabletop", "--duration", "1", "--output", "{tmp}/b.csv"],
+        ["demo", "--quick", "--output", "{tmp}/d.txt", "--help"],
+    ],  # fmt: skip
+    ids=["balance", "demo"],
+)
+def test_old_output_spelling_works_everywhere_cli_md_says(args, tmp_path, capsys):
+    args = [a.replace("{tmp}", str(tmp_path)) for a in args]
+    assert run(args) == 0
+    assert f"'{args[0]} --output' is now '--out'" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    "args, typed",
+    [
+        (["balance", "seed000-tabletop", "--log", "dep.txt"], "--log dep.txt"),
+        (["cmg", "envelope", "cmg-yaw", "--output", "x"], "--output x"),
+        (["cmg", "envelope", "cmg-yaw", "--out", "x"], "--out x"),
+        (["cmg", "envelope", "cmg-yaw", "-o", "x"], "-o x"),
+    ],  # fmt: skip
+)
+def test_output_errors_name_the_option_as_typed(args, typed, capsys):
+    assert run(args) == 2
+    err = capsys.readouterr().err.splitlines()[-1]
+    assert err.startswith(f"airbearing: error: {typed}: expected a file ending in"), err
+
+
+def test_global_switches_after_the_command(tmp_path, capsys, monkeypatch):
+    monkeypatch.setattr(show_progress, "PLAIN_DELAY", 0.0)
+    log = tmp_path / "s.csv"
+    assert run(["simulate", "cmg-yaw", "--duration", "5", "-o", str(log), "-q"]) == 0
+    err = capsys.readouterr().err
+    assert not any(line.startswith("simulate:") for line in err.splitlines()), err
+    assert run(["log", "check", "cmg-yaw", str(log), "--quiet"]) == 0
+
+
+@pytest.mark.parametrize("words", [[], ["simulate"], ["cmg"], ["cmg", "size"], ["log", "check"]])
+def test_dash_h_is_help_everywhere(words, capsys):
+    assert run([*words, "-h"]) == 0
+    assert capsys.readouterr().out.startswith("Usage: airbearing")
+
+
+def test_usage_errors_name_the_program_once(capsys):
+    assert run(["simulate"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == "airbearing: error: simulate: Missing argument 'TESTBED'."
+    assert run(["cmg", "envelope"]) == 2
+    assert capsys.readouterr().err.startswith("airbearing: error: cmg envelope: Missing")
+
+
+def test_campaign_options_named_with_values_as_typed(tmp_path, capsys):
+    c = tmp_path / "c.toml"
+    c.write_text('testbed = "cmg-yaw"\ncommand = "simulate"\nruns = 2\n[args]\nduration = 2\n')
+    out = str(tmp_path / "r.parquet")
+    assert run(["campaign", str(c), "-o", out, "--run-timeout", "0"]) == 2
+    assert "error: --run-timeout 0: expected a time > 0 in s" in capsys.readouterr().err
+    assert run(["campaign", str(c), "-o", out, "--scheduler", "bogus"]) == 2
+    err = capsys.readouterr().err
+    assert "error: --scheduler bogus: expected a Dask scheduler address" in err
+    assert "tried" not in err

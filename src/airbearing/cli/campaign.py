@@ -33,6 +33,25 @@ def _campaign_inputs(out, campaign_file: Path) -> None:
                 out.input(path, what)
 
 
+def _check_address(address: str) -> None:
+    """A Dask scheduler address that can be parsed (``tcp://host:8786``, ``host:8786``);
+    a malformed one is refused at once, not after a connection attempt."""
+    from distributed.comm.addressing import parse_address, parse_host_port
+
+    from airbearing.errors import InputError
+
+    try:
+        scheme, location = parse_address(address)
+        if scheme in ("tcp", "tls", "ws", "wss"):
+            parse_host_port(location)
+    except (ValueError, TypeError) as e:
+        reason = str(e).splitlines()[0] if str(e) else type(e).__name__
+        raise InputError(
+            f"--scheduler {address}: expected a Dask scheduler address such as "
+            f"tcp://host:8786 ({reason})"
+        ) from None
+
+
 @app.command()
 def campaign(
     campaign_file: Annotated[Path, typer.Argument(help="Campaign file (TOML, FORMATS.md).")],
@@ -80,9 +99,13 @@ def campaign(
     rep_path = out.plan(report, "--report", (".html",))
     if workers is not None and workers < 1:
         raise InputError(f"--workers {workers}: expected at least 1")
+    from airbearing.cli.common import as_flags, typed_value
+
     if run_timeout is not None and not (math.isfinite(run_timeout) and run_timeout > 0):
-        raise InputError(f"--run-timeout {run_timeout}: expected a time > 0 in s")
-    from airbearing.cli.common import as_flags
+        shown = typed_value("--run-timeout", run_timeout)
+        raise InputError(f"--run-timeout {shown}: expected a time > 0 in s")
+    if scheduler is not None:
+        _check_address(scheduler)
 
     with as_flags(study="--study"):
         spec = with_study(read_campaign(campaign_file), study)
@@ -92,7 +115,7 @@ def campaign(
             f"-o {output}: {parts} holds the runs of an interrupted campaign: pass --resume "
             "to finish it, or delete the folder to start again"
         )
-    with open_client(workers, scheduler) as client:
+    with as_flags(scheduler="--scheduler"), open_client(workers, scheduler) as client:
         try:
             with progress_display("campaign") as progress:
                 df = run_campaign(

@@ -29,6 +29,8 @@ __all__ = [
     "refuse_given",
     "as_flags",
     "only_as_flag",
+    "as_typed",
+    "typed_value",
 ]
 
 #: Largest share of the machine's memory a command's log may need before it is refused.
@@ -198,6 +200,28 @@ def _current_context():
     return get_current_context(silent=True)
 
 
+def as_typed(option: str) -> str:
+    """``option`` (any spelling of one option of the running command, ``-o``) as the
+    user typed it: ``--out``, or the old spelling rewritten to it (``--log``,
+    ``--output``). ``option`` itself outside a command or when it was not typed."""
+    from airbearing.cli import GLOBAL
+    from airbearing.cli.grammar import TYPED
+
+    ctx = _current_context()
+    if ctx is None:
+        return option
+    argv = GLOBAL.get("argv") or []
+    for param in ctx.command.params:
+        opts = list(getattr(param, "opts", []) or []) + list(getattr(param, "secondary_opts", []))
+        if option not in opts:
+            continue
+        for a in reversed(argv):  # the last one given is the one that counts
+            for o in opts:
+                if a == o or (o.startswith("--") and a.startswith(o + "=")):
+                    return TYPED.get(o, o)
+    return option
+
+
 def given(*names: str) -> list[str]:
     """The options among parameters ``names`` that were given on the command line.
 
@@ -226,7 +250,7 @@ def given(*names: str) -> list[str]:
             continue
         opts = list(param.opts) + list(getattr(param, "secondary_opts", []))
         typed = [o for o in opts if any(a == o or a.startswith(o + "=") for a in argv)]
-        out.append(typed[0] if typed else max(opts, key=len))
+        out.append(as_typed(typed[0]) if typed else max(opts, key=len))
     return out
 
 
@@ -267,6 +291,13 @@ def _typed_values(flag: str) -> str | None:
                 vals.append(a)
             return " ".join(vals)
     return None
+
+
+def typed_value(flag: str, value) -> str:
+    """The value(s) of ``flag`` as typed on the command line (``0``, not the parsed
+    ``0.0``), or ``value`` written plainly (:func:`fmt`) outside a command."""
+    typed = _typed_values(flag)
+    return typed if typed else fmt(value)
 
 
 @contextlib.contextmanager

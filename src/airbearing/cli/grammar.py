@@ -15,12 +15,17 @@ the previous release keep running. Light to import (no numpy, no typer).
 
 from __future__ import annotations
 
-__all__ = ["RENAMED", "TESTBED_OPTION", "GLOBAL_FLAGS", "rewrite", "command_path"]
+__all__ = ["RENAMED", "TESTBED_OPTION", "GLOBAL_FLAGS", "rewrite", "command_path", "TYPED"]
+
+#: New spelling -> old spelling the user typed, of the last :func:`rewrite` (so a
+#: message names the option as typed: ``--log dep.txt: ...``, not ``-o dep.txt``).
+TYPED: dict[str, str] = {}
 
 #: Old option spelling -> new one, per command path.
 RENAMED: dict[tuple[str, ...], dict[str, str]] = {
     ("simulate",): {"--output": "--out", "--seed": "--noise-seed"},
-    ("balance",): {"--log": "--out", "--seed": "--noise-seed"},
+    ("balance",): {"--log": "--out", "--output": "--out", "--seed": "--noise-seed"},
+    ("demo",): {"--output": "--out"},
     ("discrepancy",): {"--seed": "--split-seed"},
     ("cmg", "envelope"): {"--output": "--out"},
     ("testbed", "export"): {"--output": "--out"},
@@ -32,7 +37,9 @@ RENAMED: dict[tuple[str, ...], dict[str, str]] = {
 #: Commands whose testbed was an option ``--testbed X`` and is now the first positional.
 TESTBED_OPTION: tuple[tuple[str, ...], ...] = (("log", "import"), ("log", "check"), ("log", "plot"))
 #: Options of ``airbearing`` itself (before the command).
-GLOBAL_FLAGS = ("--quiet", "-q", "--debug", "--verbose", "-v", "--version", "--help")
+GLOBAL_FLAGS = ("--quiet", "-q", "--debug", "--verbose", "-v", "--version", "--help", "-h")
+#: Global switches that may also be typed after the command (moved before it).
+_ANYWHERE = ("--quiet", "-q", "--debug", "--verbose", "-v")
 _GROUPS = ("log", "cmg", "testbed")
 _NOTE = "the old spelling works until the next release"
 
@@ -52,10 +59,13 @@ def command_path(argv: list[str]) -> tuple[tuple[str, ...], int]:
 def rewrite(argv: list[str]) -> tuple[list[str], list[str]]:
     """``argv`` in the current grammar, and one deprecation line per old spelling used.
 
-    Examples: ``simulate cmg-yaw --seed 3`` -> ``... --noise-seed 3``; ``log check
+    Global switches typed after the command (``--quiet``, ``-q``, ``--verbose``,
+    ``-v``, ``--debug``) move before it. Examples: ``simulate cmg-yaw --seed 3`` ->
+    ``... --noise-seed 3``; ``simulate cmg-yaw -q`` -> ``-q simulate cmg-yaw``; ``log check
     LOG --testbed TB`` -> ``log check TB LOG``; ``testbed list --json`` (a switch) ->
     ``testbed list --json -`` (JSON on stdout).
     """
+    TYPED.clear()
     path, start = command_path(argv)
     if not path:
         return list(argv), []
@@ -72,6 +82,10 @@ def rewrite(argv: list[str]) -> tuple[list[str], list[str]]:
             out.extend(rest[i:])
             break
         name, eq, value = tok.partition("=")
+        if tok in _ANYWHERE:  # `airbearing simulate cmg-yaw -q`: a global switch
+            head.insert(0, tok)
+            i += 1
+            continue
         if path in TESTBED_OPTION and name == "--testbed":
             if eq:
                 testbed = value
@@ -91,6 +105,7 @@ def rewrite(argv: list[str]) -> tuple[list[str], list[str]]:
         if name in renamed:
             new = renamed[name]
             notes.append(f"deprecated: '{cmd} {name}' is now '{new}'; {_NOTE}")
+            TYPED[new] = name
             out.append(new + (f"={value}" if eq else ""))
             i += 1
             continue

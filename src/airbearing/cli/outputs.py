@@ -108,6 +108,9 @@ class Outputs:
         """
         if path is None:
             return None
+        from airbearing.cli.common import as_typed
+
+        option = as_typed(option)  # "--log dep.txt: ..." when --log was typed, not "-o"
         if str(path) == "-":
             raise InputError(
                 f"{option} -: standard output is for 'testbed list --json -' only; give a file name"

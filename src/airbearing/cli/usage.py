@@ -70,5 +70,8 @@ def usage_line(error, args: list[str]) -> str:
             return f"{option} {value}: {_plain(error.message)}"
     msg = " ".join(error.format_message().split()).replace("Value error, ", "")
     if ctx is not None and ctx.command_path:
-        msg = f"{ctx.command_path}: {msg}"
+        # the command's words only: the line already starts "airbearing: error: "
+        command = ctx.command_path.split(" ", 1)[1] if " " in ctx.command_path else ""
+        if command:
+            msg = f"{command}: {msg}"
     return msg
