@@ -116,7 +116,7 @@ def test_required_columns_passive_and_motion_capture():
     # FORMATS.md: no s1..s3 without [masses]; no rate columns when sensors.gyro = false
     passive = PLATFORM.replace(masses=None, magnetorquers=None)
     assert REQUIRED_COLUMNS(passive) == ["t", "qw", "qx", "qy", "qz", "wx", "wy", "wz"]
-    mocap = passive.replace(sensors=passive.sensors.__class__(rate=10.0, gyro=False))
+    mocap = passive.replace(sensors=passive.sensors.__class__(rate=20.0, gyro=False))
     assert REQUIRED_COLUMNS(mocap) == ["t", "qw", "qx", "qy", "qz"]
     yaw_only = CMG_YAW.replace(sensors=CMG_YAW.sensors.__class__(gyro=False))
     assert REQUIRED_COLUMNS(yaw_only) == ["t", "yaw", "d1", "d2", "d3", "d4"]
@@ -259,8 +259,9 @@ def test_all_gaps_is_one_error():
     assert message(e).startswith("run.csv: the log is all gaps")
     assert "\n" not in message(e)
     validate_log(df, SRC)  # without a testbed there is no sample rate to judge gaps by
-    df.loc[4, "t"] = 3.05  # one segment of 2 samples is enough (io.log.MIN_SEGMENT_ROWS)
-    assert Log(df, SRC, CMG_YAW).segments == ((0, 1), (1, 2), (2, 3), (3, 5))
+    df.loc[4, "t"] = 3.05  # one segment of 2 samples, but a median interval of 20 periods:
+    with pytest.raises(InputError, match="median sample interval 1 s"):  # another rate
+        Log(df, SRC, CMG_YAW)
 
 
 def test_quaternion_norm():

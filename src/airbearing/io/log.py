@@ -50,6 +50,7 @@ __all__ = [
     "COLUMN_GROUPS",
     "OVERFLOW_LIMIT",
     "GAP_FACTORS",
+    "RATE_MISMATCH_FACTOR",
     "LOG_COLUMNS",
     "MIN_SEGMENT_ROWS",
     "QUATERNION_NORM_TOL",
@@ -402,8 +403,10 @@ def _validate(
                 f"{GAP_FACTORS[1]:g} / sensors.rate = {GAP_FACTORS[1] * period:.6g} s from its "
                 f"neighbours (testbed {testbed.name!r}, sensors.rate = {testbed.sensors.rate:g} "
                 f"Hz), so no segment has {MIN_SEGMENT_ROWS} samples; expected samples every "
-                f"{period:.6g} s"
+                f"{period:.6g} s (median interval {float(np.median(dt)):.6g} s: "
+                f"{_unit_hint(float(np.median(dt)), period)})"
             )
+        _check_rate(t, src, testbed)
     if all(q in out.columns for q in _QUATERNION):
         qw, qx, qy, qz = (out[c].to_numpy() for c in _QUATERNION)
         norm = np.sqrt(qw * qw + qx * qx + qy * qy + qz * qz)
@@ -418,6 +421,52 @@ def _validate(
                 {"qw, qx, qy, qz": rows},
             )
     return out
+
+
+#: The median sample interval of a log must lie within this factor of ``1 / sensors.rate``
+#: either way (:func:`_check_rate`).
+RATE_MISMATCH_FACTOR = 1.5
+
+
+def _check_rate(t: np.ndarray, src: str, testbed: Testbed) -> None:
+    """The log's median interval against ``1 / sensors.rate``: beyond a factor
+    :data:`RATE_MISMATCH_FACTOR` either way is an error.
+
+    Jitter moves the median interval of a log sampled at the testbed's rate by a few
+    percent at most; the nearest rates a lab mixes up differ by 2x (10 and 20 Hz) or
+    more, and a time column in the wrong unit by 1000x. A median interval beyond 1.5
+    periods makes most intervals gaps (the gap rule's own factor); below 1 / 1.5 of a
+    period most samples are far closer than the testbed's sensors deliver. Either way
+    the gaps, the noise per sample and every discrete-time model would be wrong.
+    """
+    dt = np.diff(t)
+    if dt.size == 0:
+        return
+    median = float(np.median(dt))
+    period = testbed.sensors.dt
+    ratio = median / period
+    if 1.0 / RATE_MISMATCH_FACTOR <= ratio <= RATE_MISMATCH_FACTOR:
+        return
+    raise InputError(
+        f"{src}: column 't': median sample interval {median:.6g} s ({1.0 / median:.6g} Hz) "
+        f"is {ratio:.3g} x the testbed's 1 / sensors.rate = {period:.6g} s (testbed "
+        f"{testbed.name!r}, sensors.rate = {testbed.sensors.rate:g} Hz); expected within a "
+        f"factor {RATE_MISMATCH_FACTOR:g} either way ({_unit_hint(median, period)})"
+    )
+
+
+def _unit_hint(median: float, period: float) -> str:
+    """The likely cause of a median interval far from the period, in words."""
+    ratio = median / period
+    for factor, hint in (
+        (1e3, 'looks like ms: use airbearing log import with [units] t = "ms" in the map'),
+        (1e6, 'looks like us: use airbearing log import with [units] t = "us" in the map'),
+        (1e-3, 'looks like s read as ms: [units] t = "s" in the import map'),
+        (1e-6, 'looks like s read as us: [units] t = "s" in the import map'),
+    ):
+        if 1.0 / RATE_MISMATCH_FACTOR <= ratio / factor <= RATE_MISMATCH_FACTOR:
+            return f"t {hint}"
+    return "t in another unit, or another testbed's log (its sensors.rate)?"
 
 
 def validate_log(
@@ -673,13 +722,15 @@ def _format(path: Path) -> str:
 
 def _read_csv(path: Path, src: str) -> tuple[pd.DataFrame, list[int] | None]:
     try:
-        text = path.read_text(encoding="utf-8")
+        # utf-8-sig: a byte-order mark (Excel's "CSV UTF-8") is not part of the first name
+        text = path.read_text(encoding="utf-8-sig")
     except UnicodeDecodeError as e:
         raise InputError(f"{src}: not a UTF-8 text file ({e})") from e
     raw_lines = text.split("\n")
     content = [i + 1 for i, line in enumerate(raw_lines) if line.strip()]
     if not content:
         raise InputError(f"{src}: the log is empty; expected a header row and data rows")
+    _check_separator(raw_lines[content[0] - 1], src, content[0])
     header = next(csv.reader([raw_lines[content[0] - 1]]))
     names = [h.strip() for h in header]
     seen: set[str] = set()
@@ -704,6 +755,21 @@ def _read_csv(path: Path, src: str) -> tuple[pd.DataFrame, list[int] | None]:
     return df, lines
 
 
+def _check_separator(header: str, src: str, line: int) -> None:
+    """A log is comma separated (FORMATS.md): a header with tabs or semicolons and no
+    comma is another separator, named instead of one long column name."""
+    if "," in header:
+        return
+    for sep, name in (("\t", "tabs"), (";", "semicolons")):
+        if sep in header:
+            raise InputError(
+                f"{src}: line {line}: not comma separated: {name} found in the header "
+                f"({header.strip()[:60]!r}); a log is comma separated (FORMATS.md): save it "
+                "with commas, or convert it with 'airbearing log import' (which reads tab "
+                "and semicolon separated files)"
+            )
+
+
 def _to_pandas(table) -> pd.DataFrame:
     """An Arrow table as a DataFrame: one block per column (no consolidating copy) where
     pandas copies on write (pandas >= 3), so the arrays may stay Arrow's own."""
@@ -717,7 +783,10 @@ def _read_csv_fast(path: Path, wanted: set[str] | None) -> pd.DataFrame:
     import pyarrow.csv as pacsv
 
     with path.open("rb") as fh:
-        header = next(csv.reader([fh.readline().decode("utf-8")]))
+        first = fh.readline()
+    if first.startswith(b"\xef\xbb\xbf"):
+        raise ValueError("a byte-order mark needs the careful reader")
+    header = next(csv.reader([first.decode("utf-8")]))
     names = [h.strip() for h in header]
     if len(set(names)) != len(names) or any(h != n for h, n in zip(header, names, strict=True)):
         raise ValueError("header needs the careful reader")
