@@ -186,3 +186,48 @@ def test_campaign_options_named_with_values_as_typed(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "error: --scheduler bogus: expected a Dask scheduler address" in err
     assert "tried" not in err
+
+
+# --- small wordings ----------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    "args, expected",
+    [
+        (["identify", "cmg-yaw", "{d}"], "{d}: is a directory, expected a log file"),
+        (["log", "check", "cmg-yaw", "{d}"], "{d}: is a directory, expected a log file"),
+    ],  # fmt: skip
+)
+def test_a_directory_given_as_a_log(args, expected, tmp_path, capsys):
+    d = str(tmp_path)
+    assert run([a.replace("{d}", d) for a in args]) == 2
+    assert capsys.readouterr().err.strip() == "airbearing: error: " + expected.replace("{d}", d)
+
+
+def test_an_output_that_is_the_log_says_the_log(tmp_path, capsys):
+    log = tmp_path / "in.csv"
+    assert run(["simulate", "cmg-yaw", "--duration", "5", "-o", str(log)]) == 0
+    capsys.readouterr()
+    assert run(["identify", "cmg-yaw", str(log), "--write-testbed", str(log)]) == 2
+    assert f"is the log {log}, an input" in capsys.readouterr().err
+
+
+def test_an_angle_unit_with_its_article(tmp_path, capsys):
+    raw = tmp_path / "raw.csv"
+    raw.write_text("time,yaw\n0,0\n0.1,0\n")
+    m = tmp_path / "map.toml"
+    m.write_text('[columns]\nt = "time"\nyaw = "yaw"\n[units]\nyaw = "furlong"\n')
+    assert (
+        run(["log", "import", "cmg-yaw", str(raw), "--map", str(m), "-o", str(tmp_path / "o.csv")])
+        == 2
+    )
+    err = capsys.readouterr().err
+    assert "expected an angle unit" in err, err
+
+
+def test_report_with_gains_of_another_loop_says_to_pass_loop(tmp_path, capsys):
+    g = tmp_path / "g.json"
+    g.write_text(json.dumps({"loop": "balancing", "gains": {"kp": 0.1}}))
+    assert run(["report", "cmg-yaw", "--gains", str(g), "-o", str(tmp_path / "r.html")]) == 2
+    err = capsys.readouterr().err
+    assert "gains of the balancing loop" in err and "pass --loop balancing" in err, err

@@ -3,13 +3,21 @@
 from __future__ import annotations
 
 import inspect
+import re
 from pathlib import Path
 from typing import Annotated, Literal, get_args
 
 import typer
 
 from airbearing.cli import app
-from airbearing.cli.common import number, numbers, refuse_given, testbed_arg, testbed_input
+from airbearing.cli.common import (
+    given,
+    number,
+    numbers,
+    refuse_given,
+    testbed_arg,
+    testbed_input,
+)
 from airbearing.cli.outputs import Force, Outputs
 from airbearing.cli.show_progress import progress_display
 from airbearing.cli.tables import cell, echo_table
@@ -184,7 +192,15 @@ def report(
         try:
             data = read_gains(gains_file, loop)
         except InputError as e:  # the library names the file; the CLI names the flag
-            raise InputError(f"--gains {e}") from None
+            theirs = re.search(r"key 'loop' is '(\w+)', but loop is", str(e))
+            if theirs is None:
+                raise InputError(f"--gains {e}") from None
+            ours = f"the {loop} loop" if given("loop") else f"{tb.name}'s default {loop} loop"
+            raise InputError(
+                f"--gains {gains_file}: gains of the {theirs.group(1)} loop, but the report is "
+                f"of {ours}; pass --loop {theirs.group(1)} to report on the loop they "
+                "belong to"
+            ) from None
         g = data["gains"]
         if data.get("split") and loop == "balancing":
             split = data["split"]

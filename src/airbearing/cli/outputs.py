@@ -71,6 +71,20 @@ def _same_file(a: Path, b: Path) -> bool:
         return False
 
 
+def _a_file(what: str) -> str:
+    """``"the log"``/``"log 2"`` -> ``"a log file"``; ``"the campaign file"`` -> ``"a
+    campaign file"``: what an input should have been."""
+    words = what.split()
+    if words and words[0] == "the":
+        words = words[1:]
+    if words and words[-1].isdigit():
+        words = words[:-1]
+    name = " ".join(words) or "file"
+    if not name.endswith("file"):
+        name += " file"
+    return f"{'an' if name[0] in 'aeiou' else 'a'} {name}"
+
+
 class Outputs:
     """The output files of one command run."""
 
@@ -176,6 +190,8 @@ class Outputs:
         if path is None:
             return
         path = Path(path)
+        if path.is_dir():
+            raise InputError(f"{path}: is a directory, expected {_a_file(what)}")
         for key, option in self._planned.items():
             if _same_file(key, path):
                 raise self._clash(option, key, what, path)
@@ -185,7 +201,7 @@ class Outputs:
         """:meth:`input` for each path of a list; ``what`` is numbered when there are several."""
         paths = list(paths or [])
         for i, p in enumerate(paths):
-            self.input(p, what if len(paths) == 1 else f"{what} {i + 1}")
+            self.input(p, f"the {what}" if len(paths) == 1 else f"{what} {i + 1}")
 
     @staticmethod
     def _clash(option: str, out: Path, what: str, inp: Path) -> InputError:

@@ -209,7 +209,8 @@ def import_map_from_dict(data: Mapping[str, Any], source: str = _MEMORY) -> Impo
             raise _fail(
                 src,
                 f"units.{name}",
-                f"a {COLUMN_QUANTITY[name]} unit, one of {', '.join(valid_units)}",
+                f"{'an' if COLUMN_QUANTITY[name][0] in 'aeiou' else 'a'} "
+                f"{COLUMN_QUANTITY[name]} unit, one of {', '.join(valid_units)}",
                 unit,
             )
         units[name] = unit
