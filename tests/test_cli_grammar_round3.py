@@ -231,3 +231,25 @@ def test_report_with_gains_of_another_loop_says_to_pass_loop(tmp_path, capsys):
     assert run(["report", "cmg-yaw", "--gains", str(g), "-o", str(tmp_path / "r.html")]) == 2
     err = capsys.readouterr().err
     assert "gains of the balancing loop" in err and "pass --loop balancing" in err, err
+
+
+# --- output shape ------------------------------------------------------------------------
+
+
+def test_report_prints_its_margins_then_what_it_wrote(tmp_path, capsys):
+    html, js = tmp_path / "r.html", tmp_path / "r.json"
+    assert run(["-q", "report", "cmg-yaw", "-o", str(html), "--json", str(js)]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[0].split() == ["check", "value", "required", "verdict"]
+    assert any(line.startswith("phase margin (deg)") for line in lines)
+    met = json.loads(js.read_text())["met"]
+    assert f"specification met: {'yes' if met else 'no'}" in lines or not met
+    assert lines[-2:] == [f"wrote {html}", f"wrote {js}"]
+
+
+def test_an_unmet_specification_is_one_line(capsys):
+    assert run(["-q", "gains", "cmg-yaw", "--max-sensitivity", "1.01", "--bandwidth-hz", "5"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    verdicts = [line for line in lines if line.startswith("specification")]
+    assert len(verdicts) == 1 and verdicts[0].startswith("specification NOT met: "), verdicts
+    assert "bandwidth (Hz)" in verdicts[0] and "short by" in verdicts[0]

@@ -139,7 +139,14 @@ def gains(
     units = GAIN_UNITS.get(loop, {})
     echo_table([[k, v, units.get(k, "")] for k, v in res.gains.items()], ["gain", "value", "unit"])
     typer.echo("")
-    checks = data.get("checks") or []
+    _echo_checks(data.get("checks") or [], res.met)
+    if json_path is not None:
+        typer.echo(f"wrote {json_path}")
+
+
+def _echo_checks(checks: list[dict], met: bool) -> None:
+    """The specification's checks as a table, then one verdict line: ``specification
+    met: yes``, or ``specification NOT met: `` and what falls short, by how much."""
     if checks:
         echo_table(
             [
@@ -151,11 +158,21 @@ def gains(
             ["check", "value", "required", "verdict"],
         )  # fmt: skip
         typer.echo("")
-    typer.echo(f"specification met: {'yes' if res.met else 'no'}")
-    if not res.message.lower().startswith("specification met"):
-        typer.echo(res.message)
-    if json_path is not None:
-        typer.echo(f"wrote {json_path}")
+    if met:
+        typer.echo("specification met: yes")
+        return
+    short = []
+    for c in checks:
+        if c.get("met"):
+            continue
+        if c.get("value") is None:
+            short.append(f"{c.get('name')}: unstable")
+        else:
+            by = "" if c.get("by") is None else f", short by {cell(abs(c['by']))}"
+            short.append(
+                f"{c.get('name')} {cell(c['value'])} vs {c.get('sense')} {cell(c.get('limit'))}{by}"
+            )
+    typer.echo("specification NOT met" + (": " + "; ".join(short) if short else ""))
 
 
 @app.command()
@@ -232,5 +249,7 @@ def report(
         out.file(html_path, rep.write)
     out.json(json_path, data)
     out.commit()
-    typer.echo(f"specification met: {'yes' if data.get('met') else 'no'}")
-    typer.echo(f"wrote {html_path}" + (f" and {json_path}" if json_path is not None else ""))
+    _echo_checks(data.get("checks") or [], bool(data.get("met")))
+    for p in (html_path, json_path):
+        if p is not None:
+            typer.echo(f"wrote {p}")
