@@ -25,7 +25,7 @@ DISCREPANCY_KEYS = {
     "noise_floor_source", "segments", "segment_rows", "outlier_rows", "candidates",
     "confounded", "experiments", "no_missing_effect", "verdict", "stop_reason", "rounds",
     "windows", "attitude_noise", "rate_noise", "logs", "validation", "localisation",
-    "adequacy", "per_log", "consistency",
+    "adequacy", "per_log", "consistency", "revisions", "alternatives", "testbed_attitude_noise",
 }  # fmt: skip
 
 

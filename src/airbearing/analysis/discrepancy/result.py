@@ -74,6 +74,13 @@ class Discrepancy:
         With several runs (fitted or ``validate``), the named effects fitted on each alone.
     consistency : tuple of Consistency
         The chi-square test of each named effect across those runs (:mod:`.consistency`).
+    revisions : tuple of revise.Move
+        How the named effects changed on the horizon (:mod:`.revise`: dropped, swapped or
+        added when the process noise estimated with them says so).
+    alternatives : tuple of revise.Neighbour
+        Models one move from the named one that the horizon scores within
+        ``ALTERNATIVE_BIC`` of it; ``effect_std`` then includes the choice among them
+        (``effect_std_within_model``: the named model's own error).
     gap_before, gap_after : float
         The gap of the nominal and of the augmented Model over all fitted logs
         (``gap_unit``).
@@ -127,6 +134,9 @@ class Discrepancy:
     adequacy: Adequacy | None = field(default=None, repr=False)
     per_log: tuple = field(default=(), repr=False)
     consistency: tuple = field(default=(), repr=False)
+    effect_std_within_model: dict = field(default_factory=dict, repr=False)
+    revisions: tuple = field(default=(), repr=False)
+    alternatives: tuple = field(default=(), repr=False)
 
     def __repr__(self) -> str:
         effects = ", ".join(f"{n}={_short(v)}" for n, v in self.effects.items())
@@ -193,6 +203,10 @@ class Discrepancy:
             ]
         return table
 
+    def _candidates_by_label(self):
+        """Every candidate object of the rounds (for the alternatives' value forms)."""
+        return [r.candidate for rnd in self.rounds for r in rnd if r.candidate is not None]
+
     @property
     def data(self) -> ReplayData:
         """The first log's data."""
@@ -239,8 +253,15 @@ class Discrepancy:
                     "std_white": jsonable(self.effect_std_white.get(n)),
                     "crlb": jsonable(self.effect_crlb.get(n)),
                     "efficiency": jsonable(self.effect_efficiency.get(n)),
+                    "std_within_model": jsonable(self.effect_std_within_model.get(n)),
+                    "nominal": jsonable(self.testbed.effects.get(n)),
                 }
                 for n, v in self.effects.items()
+            ],
+            "revisions": [m.to_json() for m in self.revisions],
+            "alternatives": [
+                nb.to_json({c.label: c for c in self._candidates_by_label()})
+                for nb in self.alternatives
             ],
             "gap_before": float(self.gap_before),
             "gap_after": float(self.gap_after),
@@ -284,6 +305,7 @@ class Discrepancy:
             "windows": {"count": self.windows.n, "length_s": self.windows.length * self.data.dt},
             "attitude_noise": self.floor.attitude,
             "rate_noise": self.floor.rate,
+            "testbed_attitude_noise": fl["testbed_attitude_noise"],
             "logs": logs,
             "validation": [v.to_json() for v in self.validation],
             "localisation": list(self.localisation.words),

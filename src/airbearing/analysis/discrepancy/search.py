@@ -64,6 +64,12 @@ from airbearing.analysis.discrepancy.replay import (
     problem_for,
 )
 from airbearing.analysis.discrepancy.result import Discrepancy, Validation
+from airbearing.analysis.discrepancy.revise import (
+    close_alternatives,
+    model_averaged_std,
+    occams_window,
+    revise,
+)
 from airbearing.analysis.discrepancy.screen import (
     MATTER_BIC,
     linearise,
@@ -79,6 +85,7 @@ from airbearing.analysis.discrepancy.starts import (
 )
 from airbearing.analysis.discrepancy.trial import (
     CV_FOLDS,
+    MIN_SIGMAS,
     CandidateResult,
     cross_validate,
     failed,
@@ -534,6 +541,9 @@ def _result(search, refused, base_problem, sel, named, judged, loc) -> Discrepan
         adequacy=adq,
         per_log=tuple(per_log),
         consistency=tuple(agree),
+        effect_std_within_model=named.std_within,
+        revisions=tuple(sel.revisions),
+        alternatives=tuple(sorted(occams_window(sel.neighbours), key=lambda nb: nb.delta_bic)),
     )
 
 
@@ -568,6 +578,8 @@ class _Selection:
     at_bound: set = field(default_factory=set)  # labels pinned at a bound on short pieces
     weak: set = field(default_factory=set)  # labels not significant in the last round
     max_effects: int = 0
+    revisions: list = field(default_factory=list)  # .revise.Move, on the horizon
+    neighbours: list = field(default_factory=list)  # .revise.Neighbour of the final model
 
 
 @dataclass
@@ -582,6 +594,7 @@ class _Named:
     std_white: dict
     crlb: dict
     efficiency: dict
+    std_within: dict = field(default_factory=dict)  # before the model choice widened it
 
 
 def _nominal_replay(search: _Search, prog: _Progress) -> tuple[ShootingProblem, Fit]:
@@ -776,20 +789,35 @@ def _named(search: _Search, sel: _Selection, prog: _Progress, screen=True, worke
         current = search.horizon(current, sel.lag, sel.chosen, sel.theta)
         if search.final_problem is None:  # (rounds run on the naming pieces only)
             current = _retry_at_horizon(search, sel, current, screen, workers, prog)
+        current = _revise_on_horizon(search, sel, current, prog)
     problem = search.final_problem or search.problem(sel.lag)
     noise_free = search.floor.measured < search.floor.resolution
     errs = honest(problem, current, len(current.theta), noise_free=noise_free)
-    effects, effect_std, white, crlb, eff = {}, {}, {}, {}, {}
+    effects, effect_std, white, crlb, eff, within = {}, {}, {}, {}, {}, {}
     i = 0
     for c in sel.chosen:
         effects[c.name] = c.value(current.theta[i : i + c.k])
         ee = effect_errors(c, errs, i)
         effect_std[c.name], white[c.name], crlb[c.name] = ee.std, ee.std_white, ee.crlb
         eff[c.name] = ee.efficiency
+        if sel.neighbours:  # the choice among models the horizon scored alike (.revise)
+            within[c.name] = ee.std
+            sd = model_averaged_std(
+                c, current.theta[i : i + c.k], errs.std[i : i + c.k], sel.neighbours
+            )
+            effect_std[c.name] = _as_value(c, sd)
+            with np.errstate(invalid="ignore", divide="ignore"):
+                eff[c.name] = _as_value(c, sd / errs.crlb[i : i + c.k])
         i += c.k
     if sel.rounds:
         sel.rounds[0] = tuple(_with_honest(search, r) for r in sel.rounds[0])
-    return _Named(current, problem, errs, effects, effect_std, white, crlb, eff)
+    return _Named(current, problem, errs, effects, effect_std, white, crlb, eff, within)
+
+
+def _as_value(cand, x: np.ndarray):
+    """A theta-space spread in ``cand``'s FORMATS.md value form (no nominal added)."""
+    spread = getattr(cand, "spread", None)
+    return spread(x) if spread is not None else cand.value(x)
 
 
 def _retry_at_horizon(search, sel, current, screen, workers, prog) -> Fit:
@@ -832,6 +860,71 @@ def _retry_at_horizon(search, sel, current, screen, workers, prog) -> Fit:
         set_measurement_noise(pb, search.noise)
     sel.current, sel.theta = before
     return current
+
+
+def _revise_on_horizon(search, sel, current, prog) -> Fit:
+    """The named effects revised on the horizon (:mod:`.revise`) when it has reason to doubt
+    them: the process noise is significant (they leave something), a named effect is not
+    significant there, or two candidates were confounded on the short pieces. A change is
+    followed by the horizon estimated afresh for the new model (as a retry's pick)."""
+    pn = current.extra.get("process_noise") or {}
+    th, sd = np.asarray(current.theta, float), np.asarray(current.theta_std, float)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        weak = bool(np.any(np.abs(th) < MIN_SIGMAS * sd)) if th.size else False
+    if not (pn.get("significant") or weak or sel.confounded) or not pn:
+        return current
+    if sel.max_effects == 0:
+        return current
+    problem = search.final_problem or search.problem(sel.lag)
+    # what is doubted sets the moves (each one a horizon fit): something unexplained, any
+    # effect that explained something alone on short pieces, in or for a named one; a
+    # confounded pair, the swap between them; a weak effect, its drop (always tried)
+    targets = set()
+    if pn.get("significant") and sel.rounds:
+        targets = {r.label for r in sel.rounds[0] if r.significant}
+    by_name = {}
+    for c in search.cands:
+        by_name.setdefault(c.name, []).append(c.label)
+    partners: dict = {}
+    for a, b in sel.confounded:
+        for x, y in ((a, b), (b, a)):
+            for label in by_name.get(x, ()):
+                partners.setdefault(label, set()).update(by_name.get(y, ()))
+    prog("on the horizon: do other effects explain whole segments better?")
+    chosen, theta, fit, moves, neighbours = revise(
+        search, sel, current, problem, max_effects=sel.max_effects, targets=targets,
+        partners=partners, prog=prog,
+    )  # fmt: skip
+    sel.neighbours = neighbours
+    # confounded now means alike on the horizon (short pieces may tell apart less, or more)
+    by_label = {c.label: c for c in search.cands}
+    sel.confounded, sel.experiments = [], {}
+    for a, b in close_alternatives(neighbours, chosen, CONFOUND_BIC):
+        pair = (by_label[a].name, by_label[b].name)
+        if pair not in sel.confounded and pair[::-1] not in sel.confounded:
+            sel.confounded.append(pair)
+            sel.experiments[f"{pair[0]} + {pair[1]}"] = experiment_for(*pair)
+    if not moves:
+        set_intensity(problem, current.extra["process_noise"]["kappa"])
+        return current
+    sel.revisions += moves
+    sel.chosen, sel.theta = chosen, np.asarray(theta, float)
+    sel.lag = any(c.lag for c in chosen)
+    search.kappa, search.noise = None, None
+    search.final_problem, search.piece_s = None, None
+    for pb in search.problems.values():
+        set_intensity(pb, KAPPA_GRID[0])
+        set_measurement_noise(pb, None)
+    # the revised effects on the naming pieces (gap_after, as after a retry's pick), then
+    # the horizon continued down from there for the new model
+    sel.current = search.problem(sel.lag).fit(
+        search.models[sel.lag].p0.copy(),
+        **search.free(sel.lag, sel.chosen, sel.theta),
+        delta0=sel.current.delta,
+        name="the revised effects on short pieces",
+    )
+    sel.theta = sel.current.theta.copy()
+    return search.horizon(sel.current, sel.lag, sel.chosen, sel.theta)
 
 
 def _retry_round(search, sel, current, retry, noise, run) -> bool:
@@ -898,7 +991,8 @@ def _agreement(search, sel, named, logs, validate, window_s, jit, prog) -> tuple
 def _verdict_text(sel: _Selection, named: _Named, adq, agree, validation) -> str:
     """The verdict in words: what was named, how well, what failed, and the validation."""
     unfit = {}
-    named_now = {c.label for c in sel.chosen}
+    # a candidate fitted on the horizon as an alternative is not "at a bound" (short pieces)
+    named_now = {c.label for c in sel.chosen} | {lb for nb in sel.neighbours for lb in nb.values}
     for rnd in sel.rounds:
         for r in rnd:
             if r.label in named_now:
@@ -919,6 +1013,14 @@ def _verdict_text(sel: _Selection, named: _Named, adq, agree, validation) -> str
         disagreements=[w for w in (c.words() for c in agree) if w],
         nominal={c.name: c.nominal_value for c in sel.chosen if c.correction},
     )
+    if sel.revisions:
+        text += "; revised over whole segments: " + ", ".join(m.words() for m in sel.revisions)
+    for a, b in sel.confounded:
+        if a in named.effects or b in named.effects:
+            text += (
+                f"; {a} and {b} explain these logs about equally well (the errors include "
+                "the choice between them)"
+            )
     if validation and named.effects:
         bad = [v.log for v in validation if not v.shrinks]
         text += (

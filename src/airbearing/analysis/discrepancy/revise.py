@@ -1,0 +1,364 @@
+"""The named effects revised on the horizon, where the process noise is estimated with them.
+
+Forward selection names effects on short pieces (:mod:`.search`): robust far from the
+nominal, but a piece of a few seconds barely tells a viscous friction from a drag or a
+Coulomb friction, which differ in how the torque changes over a whole coast-down. The
+first pick may then be the wrong one, and once the process noise is estimated for it
+(its misfit taken for an unexplained torque) a later candidate is judged against that
+torque, which hides what it would explain.
+
+So, when the horizon says the named effects leave something (the process noise is
+significant), or a named effect is not significant there, or two candidates were
+confounded, each move of one step is scored on the horizon's own terms: drop a named
+effect, swap one for a candidate not named, or add one while ``max_effects`` allows.
+Every model is refitted with its own process noise (the intensity continued down the grid
+from the current one, :func:`~airbearing.analysis.shooting.process_noise.estimate_process_noise`),
+and models are compared by the BIC of that marginal likelihood (window states integrated
+out, effects at their maximum):
+
+    BIC = -2 max_q l(q) + k ln n
+
+A move is taken when it lowers the BIC by more than :data:`MOVE_BIC` (a drop by any
+amount: an effect that does not pay for its parameter on the horizon is not named); the
+best move is taken, then the moves are scored again, at most :data:`MAX_MOVES` times. A
+candidate whose fit sits at its physical bound is not a move.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from airbearing.analysis.discrepancy.candidates import regression_start, residual_torque
+from airbearing.analysis.discrepancy.words import format_value
+from airbearing.analysis.shooting.process_noise import KAPPA_GRID, _loglik, set_intensity
+from airbearing.errors import SolverError
+
+__all__ = [
+    "MAX_MOVES",
+    "MOVE_BIC",
+    "Move",
+    "Neighbour",
+    "best_loglik",
+    "close_alternatives",
+    "model_averaged_std",
+    "occams_window",
+    "revise",
+]
+
+_log = logging.getLogger(__name__)
+
+#: BIC drop a swap or an addition must make: more than "a bare mention" (Kass & Raftery
+#: 1995); models closer than this are confounded, and the errors include the choice.
+MOVE_BIC = 2.0
+#: Most moves made on one horizon.
+MAX_MOVES = 3
+#: Models much worse than the named one carry no weight: a BIC more than this above it
+#: (posterior odds below 1 : 20, Madigan & Raftery 1994's Occam's window).
+WINDOW_BIC = 2.0 * math.log(20.0)
+#: A named effect is swapped only for a candidate whose regressors make at least this
+#: fraction of its torque on the logs (R^2): effects the logs can mistake for one another.
+SWAP_R2 = 0.5
+
+
+@dataclass(frozen=True)
+class Move:
+    """One revision of the named effects on the horizon."""
+
+    kind: str  # "drop", "swap" or "add"
+    removed: str | None  # label of the named effect taken out
+    added: str | None  # label of the candidate put in
+    delta_bic: float  # of the new model against the old, on the horizon
+
+    def words(self) -> str:
+        """The move in words, with its BIC change."""
+        how = {
+            "drop": f"{self.removed} dropped (not significant over whole segments)",
+            "swap": f"{self.removed} replaced by {self.added}",
+            "add": f"{self.added} added",
+        }[self.kind]
+        return f"{how} (BIC {self.delta_bic:+.3g})"
+
+    def to_json(self) -> dict:
+        return {
+            "kind": self.kind,
+            "removed": self.removed,
+            "added": self.added,
+            "delta_bic": float(self.delta_bic),
+            "words": self.words(),
+        }
+
+
+def best_loglik(fit) -> float:
+    """The process-noise estimate's largest log marginal likelihood (-inf without one)."""
+    pn = fit.extra.get("process_noise") or {}
+    ll = pn.get("loglik") or {}
+    return max(ll.values()) if ll else -math.inf
+
+
+def _start(search, lag, chosen, theta, cand) -> np.ndarray:
+    """Start of ``cand`` beside ``chosen`` at ``theta``: the residual-torque regression."""
+    model = search.models[lag]
+    p_cur = model.p0 + (search.S(lag, chosen) @ theta if chosen else 0.0)
+    tau, phi = residual_torque(model, search.datas, p_cur, search.S(lag, [cand]))
+    th, sd = regression_start(tau, phi)
+    if not np.all(np.isfinite(sd)):
+        th = np.zeros(cand.k)
+    return np.clip(th, cand.lower, cand.upper)
+
+
+def _at_bound(cand, th: np.ndarray, sd: np.ndarray) -> bool:
+    lo, hi = np.asarray(cand.lower, float), np.asarray(cand.upper, float)
+    near = 1e-3 * np.where(np.isfinite(sd), sd, np.abs(th))
+    return bool(
+        np.any(np.isfinite(lo) & (th - lo <= near)) or np.any(np.isfinite(hi) & (hi - th <= near))
+    )
+
+
+def _refit(search, problem, lag, chosen, theta, kappa: float, delta0, up: bool = True):
+    """``(fit, log-likelihood, kappa)``: ``chosen`` from ``theta`` with its own process
+    noise, the most likely intensity of the grid found from ``kappa`` by stepping down
+    (or, when the first step down loses and ``up``, up) while the likelihood grows (it is
+    unimodal along the grid in practice; :func:`estimate_process_noise` walks the whole
+    grid). A model that explains more than the current one (a swap, an addition) leaves
+    less unexplained, so it does not step up (``up=False``)."""
+    free = search.free(lag, chosen, theta)
+    k = 0 if free["S"] is None else free["S"].shape[1]
+    p0 = search.models[lag].p0.copy()
+
+    def at(q, th, d):
+        set_intensity(problem, q)
+        f = problem.fit(p0, free["S"], th, lower=free["lower"], upper=free["upper"],
+                        delta0=d, name="revising the named effects on the horizon")  # fmt: skip
+        return f, _loglik(problem, f, k)
+
+    grid = sorted(set(KAPPA_GRID) | {kappa}, reverse=True)
+    i = grid.index(kappa)
+    best = (*at(kappa, free["theta0"], delta0), kappa)
+    for step in (1, -1) if up else (1,):
+        j, moved = i + step, False
+        while 0 <= j < len(grid):
+            try:
+                f, ll = at(grid[j], best[0].theta, best[0].delta)
+            except SolverError:
+                break
+            if ll <= best[1]:
+                break
+            best, moved, j = (f, ll, grid[j]), True, j + step
+        if moved:
+            break
+    return best
+
+
+def _moves(search, lag, chosen, theta, slots: int, targets: set, partners: dict):
+    """``(kind, removed index or None, candidate or None)`` of the one-step moves: every
+    drop, swaps of a named effect to its ``partners`` (label -> labels) or to any of
+    ``targets`` (labels) whose regressors make most of its torque (:data:`SWAP_R2`), and
+    additions of ``targets`` while ``slots`` are left."""
+    taken = {c.name for c in chosen}
+    by_label = {c.label: c for c in search.cands if c.smooth and not c.lag and c.name not in taken}
+    out = [("drop", i, None) for i in range(len(chosen))]
+    parts = _split(chosen, theta)
+    for i, m in enumerate(chosen):
+        if m.lag:
+            continue
+        mine = set(partners.get(m.label, ()))
+        for label in sorted(targets | mine):
+            if label in by_label and (
+                label in mine
+                or _r2(search, lag, chosen, theta, m, parts[i], by_label[label]) >= SWAP_R2
+            ):
+                out.append(("swap", i, by_label[label]))
+    if slots > 0:
+        out += [("add", None, by_label[lb]) for lb in sorted(targets) if lb in by_label]
+    return out
+
+
+def _r2(search, lag, chosen, theta, named, th_named, cand) -> float:
+    """Fraction of ``named``'s torque on the logs (at ``th_named``) that ``cand``'s
+    regressors make (uncentred R^2 of the least squares)."""
+    model = search.models[lag]
+    p_cur = model.p0 + (search.S(lag, chosen) @ theta if chosen else 0.0)
+    _, phi_m = residual_torque(model, search.datas, p_cur, search.S(lag, [named]))
+    _, phi_c = residual_torque(model, search.datas, p_cur, search.S(lag, [cand]))
+    y = (phi_m @ np.asarray(th_named, float)).reshape(-1)
+    X = phi_c.reshape(-1, phi_c.shape[2])
+    yy = float(y @ y)
+    if y.size == 0 or yy <= 0 or not np.any(X):
+        return 0.0
+    b = np.linalg.lstsq(X, y, rcond=None)[0]
+    r = y - X @ b
+    return float(1.0 - (r @ r) / yy)
+
+
+@dataclass(frozen=True)
+class Neighbour:
+    """A model one move from the final one, scored on the same horizon."""
+
+    delta_bic: float  # against the final model (> 0: worse)
+    kind: str  # the move that makes it: "drop", "swap" or "add"
+    values: dict  # label -> theta part
+    std: dict  # label -> its 1-sigma at its own horizon
+    names: frozenset  # effect names in it (a label's other form counts as the name)
+
+    def to_json(self, chosen_by_label) -> dict:
+        return {
+            "delta_bic": float(self.delta_bic),
+            "effects": {
+                label: jsonable_value(chosen_by_label.get(label), v)
+                for label, v in self.values.items()
+            },
+        }
+
+
+def jsonable_value(cand, theta):
+    """A theta part as its FORMATS.md value (the candidate's form when known)."""
+    if cand is not None:
+        v = cand.value(theta)
+        return list(v) if isinstance(v, tuple) else v
+    t = np.asarray(theta, float).tolist()
+    return t[0] if len(t) == 1 else t
+
+
+def revise(search, sel, current, problem, *, max_effects: int, targets=(), partners=None,
+           prog=None):  # fmt: skip
+    """Moves of the named effects on ``problem`` at the horizon (module doc).
+
+    ``targets``: labels of the candidates that may be swapped in or added; ``partners``:
+    named label -> labels it may be swapped for (its confounded candidates).
+
+    Returns
+    -------
+    (chosen, theta, fit, moves, neighbours)
+        The revised effects, their values, the fit of the last model on ``problem`` (with
+        its process noise), the :class:`Move` list (empty: nothing changed) and the
+        :class:`Neighbour` models of the final one (every one-step move, scored).
+    """
+    lag = sel.lag
+    chosen, theta, fit = list(sel.chosen), np.asarray(current.theta, float), current
+    n = max(int(current.n_res), 2)
+    ln_n = math.log(n)
+    pn = current.extra.get("process_noise") or {}
+    kappa = float(pn.get("kappa", KAPPA_GRID[0]))
+    moves: list[Move] = []
+    neighbours: list[Neighbour] = []
+    ll0 = best_loglik(current)
+    for it in range(MAX_MOVES + 1):
+        k0 = len(theta)
+        if not np.isfinite(ll0):
+            break
+        best, scored = None, []
+        for kind, i, cand in _moves(
+            search, lag, chosen, theta, max_effects - len(chosen), set(targets), partners or {}
+        ):
+            new = list(chosen)
+            th_parts = _split(chosen, theta)
+            removed = None
+            if kind in ("drop", "swap"):
+                removed = new.pop(i)
+                th_parts.pop(i)
+            if cand is not None:
+                start = _start(search, lag, new, _join(th_parts), cand)
+                new.append(cand)
+                th_parts.append(start)
+            try:
+                f, ll, q = _refit(search, problem, lag, new, _join(th_parts), kappa, fit.delta,
+                                  up=kind == "drop")  # fmt: skip
+            except SolverError as e:
+                _log.debug("revision %s %s: %s", kind, cand and cand.label, e)
+                continue
+            if cand is not None and _at_bound(cand, f.theta[-cand.k :], f.theta_std[-cand.k :]):
+                continue
+            dbic = -2.0 * (ll - ll0) + (len(f.theta) - k0) * ln_n
+            scored.append(
+                Neighbour(
+                    dbic,
+                    kind,
+                    dict(zip([c.label for c in new], _split(new, f.theta), strict=True)),
+                    dict(zip([c.label for c in new], _split(new, f.theta_std), strict=True)),
+                    frozenset(c.name for c in new),
+                )
+            )
+            need = 0.0 if kind == "drop" else -MOVE_BIC
+            if dbic < need and (best is None or dbic < best[0]):
+                best = (dbic, kind, removed, cand, new, f, ll, q)
+        if best is None or it == MAX_MOVES:
+            neighbours = scored
+            break
+        dbic, kind, removed, cand, chosen, fit, ll0, kappa = best
+        theta = np.asarray(fit.theta, float)
+        move = Move(kind, removed and removed.label, cand and cand.label, dbic)
+        moves.append(move)
+        _log.debug("revision: %s", move.words())
+        if prog is not None:
+            what = ", ".join(
+                f"{c.label} = {format_value(c.value(v))}" for c, v in zip(
+                    chosen, _split(chosen, theta), strict=True)
+            )  # fmt: skip
+            prog(f"on the horizon: {move.words()}" + (f"; now {what}" if what else ""))
+    return chosen, theta, fit, moves, neighbours
+
+
+def model_averaged_std(cand, theta, std, neighbours) -> np.ndarray:
+    """1-sigma of the named ``cand``'s value ``theta`` (its own ``std``) that includes the
+    choice of model: the root of the mean squared deviation from ``theta`` over the final
+    model (weight 1) and its :class:`Neighbour` models (weight ``exp(-dBIC / 2)``, the BIC
+    approximation of their posterior odds, Raftery 1995), each contributing its own
+    variance plus its squared offset (a model without the effect: its value 0). A neighbour
+    with the effect in another form (one value against per axis) is left out. Never below
+    ``std``.
+    """
+    theta, std = np.asarray(theta, float), np.asarray(std, float)
+    num, den = std**2, 1.0
+    for nb in occams_window(neighbours):
+        w = math.exp(-0.5 * min(max(nb.delta_bic, -50.0), 700.0))
+        if cand.label in nb.values:
+            v, s = np.asarray(nb.values[cand.label], float), np.asarray(nb.std[cand.label], float)
+        elif cand.name in nb.names:
+            continue
+        else:
+            v, s = np.zeros_like(theta), np.zeros_like(theta)
+        s = np.where(np.isfinite(s), s, 0.0)
+        num = num + w * (s**2 + (v - theta) ** 2)
+        den += w
+    return np.maximum(std, np.sqrt(num / den))
+
+
+def occams_window(neighbours) -> list:
+    """The neighbours that share the named model's weight (Madigan & Raftery 1994): not
+    much worse (BIC within :data:`WINDOW_BIC`), and not a larger model that does no better
+    than the named one it contains (an effect added without lowering the BIC)."""
+    return [
+        nb for nb in neighbours
+        if nb.delta_bic < WINDOW_BIC and not (nb.kind == "add" and nb.delta_bic >= 0)
+    ]  # fmt: skip
+
+
+def close_alternatives(neighbours, chosen, within: float) -> list[tuple[str, str]]:
+    """``(named label, other label)`` of swaps that score within ``within`` of the final
+    model: two effects these logs cannot tell apart on the horizon."""
+    named = {c.label for c in chosen}
+    out = []
+    for nb in neighbours:
+        if nb.delta_bic >= within:
+            continue
+        gone = named - set(nb.values)
+        new = set(nb.values) - named
+        if len(gone) == 1 and len(new) == 1:
+            out.append((gone.pop(), new.pop()))
+    return out
+
+
+def _split(chosen, theta) -> list:
+    out, i = [], 0
+    for c in chosen:
+        out.append(np.asarray(theta[i : i + c.k], float))
+        i += c.k
+    return out
+
+
+def _join(parts) -> np.ndarray:
+    return np.concatenate(parts) if parts else np.zeros(0)
