@@ -339,7 +339,7 @@ def test_json_to_stdout_is_for_testbed_list_only(tmp_path, capsys):
 
 def test_report_help_says_the_output_is_required(capsys):
     assert run(["report", "--help"]) == 0
-    assert "(required)" in " ".join(capsys.readouterr().out.split())
+    assert "[required]" in " ".join(capsys.readouterr().out.split())
 
 
 def test_gains_table_has_units(capsys):

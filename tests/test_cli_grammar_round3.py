@@ -253,3 +253,59 @@ def test_an_unmet_specification_is_one_line(capsys):
     verdicts = [line for line in lines if line.startswith("specification")]
     assert len(verdicts) == 1 and verdicts[0].startswith("specification NOT met: "), verdicts
     assert "bandwidth (Hz)" in verdicts[0] and "short by" in verdicts[0]
+
+
+# --- help texts --------------------------------------------------------------------------
+
+
+def _help(words, capsys) -> str:
+    assert run([*words, "--help"]) == 0
+    return capsys.readouterr().out
+
+
+def _option_help(text: str, option: str) -> str:
+    """The help of ``option`` (its lines up to the next option), on one line."""
+    block: list[str] = []
+    for line in text.splitlines():
+        starts = line.startswith("  -")
+        if block and starts:
+            break
+        if block or starts and option in line.split("  ")[1].replace(",", " ").split():
+            block.append(line)
+    return " ".join(" ".join(block).split())
+
+
+@pytest.mark.parametrize(
+    "words, option",
+    [
+        (["identify"], "--friction"),
+        (["identify"], "--hold"),
+        (["identify"], "--known-mass"),
+        (["identify"], "--known-offset-xy"),
+        (["discrepancy"], "--only"),
+        (["gains"], "--offset-range-mm"),
+        (["campaign"], "--run-timeout"),
+    ],  # fmt: skip
+)
+def test_help_states_the_default_of_options_without_one_shown(words, option, capsys):
+    assert "default" in _option_help(_help(words, capsys), option)
+
+
+@pytest.mark.parametrize("words", [["simulate"], ["balance"], ["discrepancy"], ["cmg", "envelope"]])
+def test_help_says_a_range_once(words, capsys):
+    text = " ".join(_help(words, capsys).split())
+    assert "x>=" not in text and "<=x" not in text and "; x" not in text
+
+
+def test_help_details(capsys):
+    assert "--compare" in _option_help(_help(["balance"], capsys), "--sweep")
+    assert "[required]" in _option_help(_help(["report"], capsys), "--out")
+    identify = _help(["identify"], capsys)
+    assert "default" not in _option_help(identify, "--method").split("[default")[0]
+
+
+@pytest.mark.parametrize("words", [[], ["cmg"], ["log"], ["testbed"]])
+def test_command_lists_are_not_cut_mid_phrase(words, capsys):
+    assert run([*words, "--help"]) == 0
+    listing = capsys.readouterr().out.split("Commands:")[1]
+    assert "..." not in listing and "eqs.\n" not in listing, listing

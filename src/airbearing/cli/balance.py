@@ -130,7 +130,11 @@ def balance(
         str | None, typer.Option(help="Methods to compare, e.g. mechanical,mixed.")
     ] = None,
     sweep: Annotated[
-        str | None, typer.Option(help="NAME=START:STOP:N, e.g. backlash=0:5e-5:6.")
+        str | None,
+        typer.Option(
+            help="With --compare: the comparison over one parameter, NAME=START:STOP:N, "
+            "e.g. backlash=0:5e-5:6."
+        ),
     ] = None,
     seeds: Annotated[int, typer.Option(help="Seeds per offset in --compare (>= 1).")] = 4,
     json_out: Annotated[Path | None, typer.Option("--json", help="Summary JSON.")] = None,

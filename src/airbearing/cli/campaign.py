@@ -72,7 +72,8 @@ def campaign(
         float | None,
         typer.Option(
             "--run-timeout",
-            help="s: a run still going after this is stopped and is a row with its error.",
+            help="s: a run still going after this is stopped and is a row with its error "
+            "(default: no limit).",
         ),
     ] = None,
     study: Annotated[

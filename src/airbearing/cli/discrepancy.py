@@ -34,7 +34,8 @@ def discrepancy(
         int, typer.Option("--split-seed", min=0, help="Seed of the held-out window split, >= 0.")
     ] = 0,
     only: Annotated[
-        list[str] | None, typer.Option(help="Search only this effect (repeatable).")
+        list[str] | None,
+        typer.Option(help="Search only this effect (repeatable; default: every effect)."),
     ] = None,
     window: Annotated[
         float | None, typer.Option(help="Multiple-shooting window, s (default min(10, T/4)).")

@@ -92,7 +92,10 @@ def gains(
     ] = 0.15,
     offset_range_mm: Annotated[
         tuple[float, float] | None,
-        typer.Option(help="Vertical CM offset range LO HI, mm (platform)."),
+        typer.Option(
+            help="Platform: vertical CM offset range LO HI, mm (default: the testbed's "
+            "offset +- 50 %)."
+        ),
     ] = None,
     json_out: Annotated[
         Path | None, typer.Option("--json", help="Gains and verdict, JSON.")
@@ -183,15 +186,11 @@ def report(
     gains_file: Annotated[
         Path | None, typer.Option("--gains", help="Gains JSON of 'airbearing gains'.")
     ] = None,
-    output: Annotated[
-        Path | None, typer.Option("-o", "--out", help="Report, .html (required).")
-    ] = None,
+    output: Annotated[Path, typer.Option("-o", "--out", help="Report, .html.")] = ...,
     json_out: Annotated[Path | None, typer.Option("--json", help="Margins, JSON.")] = None,
     force: Force = False,
 ) -> None:
     """Linear stability report (HTML) of a loop, with its margins as JSON."""
-    if output is None:
-        raise InputError("-o/--out: the report needs an output file ending in .html")
     out = Outputs(force=force)
     testbed_input(out, testbed)
     out.input(gains_file, "the gains file")

@@ -5,17 +5,19 @@ typer prints an option's Python annotation as its value name (``<list[str]>``,
 replaces that with the names a person reads: the choices ``slew|free|spindown``, or
 ``NUM``, ``INT``, ``TEXT``, ``PATH``, and for a tuple one name per value
 (``NUM NUM NUM``). The unit is in each option's help sentence. Positional arguments
-show their upper-case name only (``TESTBED``, ``LOG...``). Called once at start-up.
+show their upper-case name only (``TESTBED``, ``LOG...``). A number's range is said
+in its help sentence, not repeated after the default. Called once at start-up.
 """
 
 from __future__ import annotations
 
 import datetime
 import enum
+import re
 from pathlib import Path
 from typing import get_args, get_origin
 
-__all__ = ["install", "value_name"]
+__all__ = ["install", "value_name", "short_help"]
 
 _INSTALLED = {"done": False}
 
@@ -53,6 +55,27 @@ def value_name(param) -> str:
     return _name_of(annotation)
 
 
+#: Abbreviations whose period ends no sentence ("seed 001 eqs. 1-3", "e.g. ...").
+_ABBREVIATIONS = ("eq.", "eqs.", "e.g.", "i.e.", "Fig.", "cf.", "vs.", "approx.")
+
+
+def short_help(text: str, limit: int = 60) -> str:
+    """A command's line in its group's list: its help's first sentence, never cut in
+    the middle of a phrase. A sentence longer than ``limit`` loses its parenthetical
+    details; what is still longer wraps on the next line instead of ending in "..."."""
+    words = " ".join(str(text or "").split()).split(" ")
+    sentence: list[str] = []
+    for w in words:
+        sentence.append(w)
+        if w.endswith(".") and not w.endswith(_ABBREVIATIONS):
+            break
+    first = " ".join(sentence).strip()
+    if len(first) > limit:
+        plain = re.sub(r"\s*\([^()]*\)", "", first)
+        first = plain if plain else first
+    return first
+
+
 def install() -> None:
     """Make every typer option show :func:`value_name` (once per process)."""
     if _INSTALLED["done"]:
@@ -78,6 +101,17 @@ def install() -> None:
             name += "..."
         return name if self.required else f"[{name}]"
 
+    # the help sentence states an option's range in words ("Seed of the sensor noise,
+    # >= 0."): not again as "[default: 0; x>=0]"
+    core.TyperOption._get_number_range_help_str = lambda self: None
+
+    def get_short_help_str(self, limit: int = 45) -> str:
+        if self.short_help:
+            return " ".join(str(self.short_help).split())
+        return short_help(self.help or "")
+
+    core.TyperCommand.get_short_help_str = get_short_help_str
+    core.TyperGroup.get_short_help_str = get_short_help_str
     core.TyperArgument._usage_display_name = usage_name
     core.TyperArgument.display_name_raw = property(
         lambda self: self.metavar if self.metavar is not None else str(self.name).upper()

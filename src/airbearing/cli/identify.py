@@ -31,24 +31,36 @@ def identify(
     logs: Annotated[list[Path], typer.Argument(help="Logs (.csv or .parquet).")],
     known_offset_xy: Annotated[
         tuple[float, float] | None,
-        typer.Option(help="Platform: CR->CM offset x y with sliders at zero, m (from balancing)."),
+        typer.Option(
+            help="Platform: CR->CM offset x y with sliders at zero, m (from balancing; "
+            "default: fitted)."
+        ),
     ] = None,
-    known_mass: Annotated[float | None, typer.Option(help="Total mass, kg.")] = None,
+    known_mass: Annotated[
+        float | None, typer.Option(help="Platform: total mass, kg (default: the testbed's).")
+    ] = None,
     method: Annotated[
-        Method, typer.Option(help="output-error (refined, default) or equation-error (fast).")
+        Method, typer.Option(help="output-error (refined) or equation-error (fast).")
     ] = "output-error",
     form: Annotated[
-        Form, typer.Option(help="integrated (seed 004 eq. 47) or acceleration (eq. 45).")
+        Form,
+        typer.Option(
+            help="Platform (dof 3) with --method equation-error: integrated (seed 004 eq. "
+            "47) or acceleration (eq. 45)."
+        ),
     ] = "integrated",
     friction: Annotated[
         Literal["none", "viscous", "coulomb"] | None,
-        typer.Option(help="CMG: none, viscous or coulomb friction with J_z."),
+        typer.Option(
+            help="CMG: a viscous or coulomb friction term identified with J_z (default: "
+            "none, no friction term)."
+        ),
     ] = None,
     hold: Annotated[
         Literal["inertia", "cm"] | None,
         typer.Option(
             help="Platform: take the testbed's inertia (fit the CM offset) or CM offset "
-            "(fit the inertia) as known."
+            "(fit the inertia) as known (default: neither, both fitted)."
         ),
     ] = None,
     json_out: Annotated[Path | None, typer.Option("--json", help="Result JSON.")] = None,

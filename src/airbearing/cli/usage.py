@@ -68,7 +68,17 @@ def usage_line(error, args: list[str]) -> str:
         if getattr(param, "param_type_name", "") == "option" and found is not None:
             option, value = found
             return f"{option} {value}: {_plain(error.message)}"
-    msg = " ".join(error.format_message().split()).replace("Value error, ", "")
+    if (
+        type(error).__name__ == "MissingParameter"
+        and getattr(param, "param_type_name", "") == "option"
+    ):
+        # a required option, as the rest of the grammar says it: "-o/--out: required, ..."
+        what = " ".join(str(getattr(param, "help", "") or "").split()).rstrip(".")
+        msg = f"{'/'.join(param.opts)}: required" + (
+            f" ({what[:1].lower() + what[1:]})" if what else ""
+        )
+    else:
+        msg = " ".join(error.format_message().split()).replace("Value error, ", "")
     if ctx is not None and ctx.command_path:
         # the command's words only: the line already starts "airbearing: error: "
         command = ctx.command_path.split(" ", 1)[1] if " " in ctx.command_path else ""
