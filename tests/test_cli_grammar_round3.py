@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import io
 import json
+import re
 import sys
 
 import pytest
@@ -309,3 +310,47 @@ def test_command_lists_are_not_cut_mid_phrase(words, capsys):
     assert run([*words, "--help"]) == 0
     listing = capsys.readouterr().out.split("Commands:")[1]
     assert "..." not in listing and "eqs.\n" not in listing, listing
+
+
+# --- tables ------------------------------------------------------------------------------
+
+
+def _scalar_rows(out: str) -> dict[str, str]:
+    rows = {}
+    for line in out.splitlines():
+        parts = [p for p in line.split("  ") if p.strip()]
+        if len(parts) >= 2:
+            rows[parts[0].strip()] = parts[1].strip()
+    return rows
+
+
+def test_balance_table_of_a_loop_that_is_not_stable(tmp_path, capsys):
+    js = tmp_path / "u.json"
+    args = ["-q", "balance", "seed000-tabletop", "--vertical-offset", "1e-4", "--duration", "5",
+            "--json", str(js)]  # fmt: skip
+    assert run(args) == 0
+    out = capsys.readouterr().out
+    data = json.loads(js.read_text())
+    assert data["integral_time_constant_s"] is None  # the loop is not stable
+    rows = _scalar_rows(out)
+    assert rows["integral time constant"].startswith("none")
+    assert rows["settling time"] == "does not settle"
+    note = next(line for line in out.splitlines() if line.startswith("note:"))
+    assert re.search(r"\d\.\d{5,}", note) is None, note  # 4 significant digits
+
+
+def test_two_step_table_in_words(capsys):
+    assert run(["-q", "balance", "seed004-platform", "--two-step"]) == 0
+    out = capsys.readouterr().out
+    for raw in ("ke rates", "in plane known", "ke std", "sliders step1", "identify method"):
+        assert raw not in out, raw
+    rows = _scalar_rows(out)
+    assert rows["kinetic energy from"] == "true rates (simulation)"
+    assert rows["in-plane offset of step 1 used"] == "yes"
+
+
+def test_long_numbers_in_sentences_are_tidied():
+    from airbearing.cli.tables import tidy_numbers
+
+    text = "offset [-3.690476190476191e-05, 0.0001, 45.1] m in run_1.csv, seed 004 eq. 47"
+    assert tidy_numbers(text) == "offset [-3.69e-05, 0.0001, 45.1] m in run_1.csv, seed 004 eq. 47"

@@ -190,13 +190,29 @@ def balance(
     if table:
         typer.echo(table)
         typer.echo("")
-    shown = dict(summary)
-    if isinstance(shown.get("note"), str):  # the library's words name its parameters
-        shown["note"] = shown["note"].replace("vertical_offset", "--vertical-offset")
+    shown = _in_words(summary)
     typer.echo(human_summary(shown, skip=("points", "tables", "values")))
     for p in (log_path, json_path):
         if p is not None:
             typer.echo(f"wrote {p}")
+
+
+def _in_words(summary: dict) -> dict:
+    """The summary as a person reads it: the transient of a loop that is not stable
+    (the JSON's null, inf in memory) in words, the note naming the flags."""
+    import math
+
+    shown = dict(summary)
+    if isinstance(shown.get("note"), str):  # the library's words name its parameters
+        shown["note"] = shown["note"].replace("vertical_offset", "--vertical-offset")
+    itc = shown.get("integral_time_constant_s", 0.0)
+    unstable = "integral_time_constant_s" in shown and (itc is None or math.isinf(itc))
+    if unstable:  # no integral time constant, and nothing settles (not "0 s")
+        shown["integral_time_constant_s"] = "none (loop not stable)"
+    settle = shown.get("settling_time_s", 0.0)
+    if "settling_time_s" in shown and (unstable or settle is None or math.isinf(settle)):
+        shown["settling_time_s"] = "does not settle"
+    return shown
 
 
 def _check_options(duration, initial_offset_mm, vertical_offset, initial_rate, seeds, sweep,

@@ -7,6 +7,7 @@ at import time (start-up).
 from __future__ import annotations
 
 import math
+import re
 from collections.abc import Iterable, Mapping, Sequence
 
 import typer
@@ -21,6 +22,7 @@ __all__ = [
     "shown",
     "human_summary",
     "matrix_table",
+    "tidy_numbers",
 ]
 
 #: Units taken from a key's suffix (the JSON contract's naming): ``peak_rate_deg_s`` -> deg/s.
@@ -44,9 +46,45 @@ _SUFFIX_UNITS = (
 #: Units of JSON keys named without a unit suffix.
 _KEY_UNITS = {"dipole_rms": "A m^2"}  # magnetorquer dipole (seed 000)
 
+#: Words for JSON keys whose name alone reads as code (the two-step's ``ke_rates``,
+#: ``in_plane_known``); the JSON keeps its keys.
+_LABELS = {
+    "ke_std_before": "kinetic energy std before",
+    "ke_std_after": "kinetic energy std after",
+    "ke_reduction": "kinetic energy reduction",
+    "ke_rates": "kinetic energy from",
+    "ke_std_before_measured": "kinetic energy std before, measured",
+    "ke_std_after_measured": "kinetic energy std after, measured",
+    "ke_reduction_measured": "kinetic energy reduction, measured",
+    "ke_noise_floor": "measured kinetic energy noise floor",
+    "ke_measured_from": "measured kinetic energy from",
+    "in_plane_known": "in-plane offset of step 1 used",
+    "identify_method": "identification method",
+    "identify_warnings": "identification warnings",
+    "iterations": "identification rounds",
+    "g_perp_rms_step1": "g perp rms, step 1",
+    "balance_duration_s": "step 1 duration",
+    "sliders_step1_m": "sliders after step 1",
+    "residual_offset_step1_m": "residual offset after step 1",
+    "vertical_offset_estimates_m": "vertical offset, each round",
+    "sliders_final_unrounded_m": "sliders final, unrounded",
+    "drift_p_g": "drift p-value of g",
+    "drift_p_stepper": "drift p-value of the steppers",
+}
+#: Values that read as code, in words, by key.
+_VALUES = {
+    "ke_rates": {"true": "true rates (simulation)", "measured": "measured rates"},
+    "ke_measured_from": {"gyro": "gyro rates", "attitude": "attitude derivative"},
+}
+
 
 def unit_of(key: str) -> tuple[str, str]:
     """``(label, unit)`` of a JSON key named with a unit suffix (``t_peak_s`` -> ``t peak``, s)."""
+    label, unit = _unit_of(key)
+    return _LABELS.get(key, label), unit
+
+
+def _unit_of(key: str) -> tuple[str, str]:
     if key in _KEY_UNITS:
         return key.replace("_", " "), _KEY_UNITS[key]
     low = key.lower()
@@ -54,6 +92,16 @@ def unit_of(key: str) -> tuple[str, str]:
         if low.endswith(suffix) and len(low) > len(suffix):
             return key[: -len(suffix)].replace("_", " "), unit
     return key.replace("_", " "), ""
+
+
+#: A number written with more digits than a person reads (``-3.690476190476191e-05``).
+_LONG_NUMBER = re.compile(r"(?<![\w.])-?\d+\.\d{5,}(?:e[+-]?\d+)?(?![\w.])")
+
+
+def tidy_numbers(text: str, digits: int = 4) -> str:
+    """``text`` with its long numbers at ``digits`` significant digits (a library's
+    sentence that quotes a value: ``offset [-3.69e-05, ...] m``)."""
+    return _LONG_NUMBER.sub(lambda m: cell(float(m.group()), digits), str(text))
 
 
 #: Lengths in the unit a person uses: CM offsets and residual offsets in um (they are
@@ -135,6 +183,8 @@ def human_summary(summary: Mapping, skip: Iterable[str] = (), digits: int = 4) -
         if key in skip:
             continue
         label, unit, v = shown(key, value)
+        if isinstance(v, str) and v in _VALUES.get(key, {}):
+            v = _VALUES[key][v]
         if _is_matrix(v):
             blocks.append(f"{label}:\n" + matrix_table(v, unit, digits=digits))
         elif _is_vector(v):
@@ -148,13 +198,15 @@ def human_summary(summary: Mapping, skip: Iterable[str] = (), digits: int = 4) -
                 blocks.append(f"{head}:\n" + table(rows, ["quantity", "value", "unit"]))
         elif isinstance(v, list | tuple) and all(isinstance(x, str) for x in v):
             if v:
-                blocks.append(f"{label}:\n" + "\n".join(f"  - {x}" for x in v))
+                blocks.append(f"{label}:\n" + "\n".join(f"  - {tidy_numbers(x)}" for x in v))
             else:
                 scalars.append([label, "none", unit])
         elif isinstance(v, list | tuple):
             continue  # long series: in the JSON
         elif isinstance(v, str) and len(v) > 40:
-            sentences.append(f"{label}: {v}")
+            sentences.append(f"{label}: {tidy_numbers(v, digits)}")
+        elif isinstance(v, str) and unit:  # words in place of a number: no unit
+            scalars.append([label, v, ""])
         else:
             scalars.append([label, cell(v, digits), unit])
     parts = []
