@@ -354,3 +354,23 @@ def test_long_numbers_in_sentences_are_tidied():
 
     text = "offset [-3.690476190476191e-05, 0.0001, 45.1] m in run_1.csv, seed 004 eq. 47"
     assert tidy_numbers(text) == "offset [-3.69e-05, 0.0001, 45.1] m in run_1.csv, seed 004 eq. 47"
+
+
+# --- testbed show/export take a file, as every command does --------------------------------
+
+
+def test_testbed_show_and_export_take_a_file(tmp_path, capsys):
+    first, second = tmp_path / "mine.toml", tmp_path / "copy.toml"
+    assert run(["testbed", "export", "cmg-yaw", "-o", str(first)]) == 0
+    capsys.readouterr()
+    assert run(["testbed", "show", str(first)]) == 0
+    assert capsys.readouterr().out == first.read_text()
+    assert run(["testbed", "export", str(first), "-o", str(second)]) == 0
+    text = second.read_text()
+    assert text.count("# Exported from") == 1 and f"'{first}'" in text.splitlines()[0]
+    assert run(["testbed", "export", str(first), "-o", str(first), "--force"]) == 2
+    bad = tmp_path / "bad.toml"
+    bad.write_text("x = 1\n")
+    capsys.readouterr()
+    assert run(["testbed", "show", str(bad)]) == 2
+    assert "unknown key 'x'" in capsys.readouterr().err

@@ -29,9 +29,39 @@ def _entry(name: str):
     entry = find(name)
     if entry is None:
         raise InputError(
-            f"testbed '{name}': not a built-in; built-in testbeds are: {', '.join(builtin_names())}"
+            f"testbed '{name}': neither a built-in nor a testbed file; built-in testbeds are: "
+            f"{', '.join(builtin_names())}"
         )
     return entry
+
+
+def _toml(name: str) -> tuple[str, str]:
+    """The TOML text of a testbed given as a built-in name or a file (checked to load),
+    and where it came from in words."""
+    path = Path(name)
+    if path.is_file() and find_builtin(name) is None:
+        from airbearing.io.testbed import load_testbed
+
+        load_testbed(path)  # a file that is not a testbed is refused, naming its key
+        text = path.read_text()
+        lines = text.splitlines(keepends=True)
+        if lines and lines[0].startswith("# Exported from "):  # not one header per export
+            text = "".join(lines[2:])
+        return text, f"the testbed file '{path}'"
+    from airbearing.io.builtins import builtin_toml
+
+    _entry(name)
+    return builtin_toml(name).decode("utf-8"), f"the built-in '{name}'"
+
+
+def find_builtin(name: str):
+    from airbearing.io.builtins import find
+
+    return find(name)
+
+
+#: The testbed argument of show and export.
+_NAME_HELP = "Built-in name (see 'airbearing testbed list') or testbed file."
 
 
 @testbed_app.command("list")
@@ -68,30 +98,28 @@ def list_(
 
 @testbed_app.command("show")
 def show(
-    name: Annotated[str, typer.Argument(help="Built-in name (see 'airbearing testbed list').")],
+    name: Annotated[str, typer.Argument(metavar="TESTBED", help=_NAME_HELP)],
 ) -> None:
-    """Print a built-in testbed file (TOML, FORMATS.md) with its sources."""
-    from airbearing.io.builtins import builtin_toml
-
-    _entry(name)
-    typer.echo(builtin_toml(name).decode("utf-8"), nl=False)
+    """Print a testbed file (TOML, FORMATS.md), a built-in one with its sources."""
+    text, _ = _toml(name)
+    typer.echo(text, nl=False)
 
 
 @testbed_app.command("export")
 def export(
-    name: Annotated[str, typer.Argument(help="Built-in name (see 'airbearing testbed list').")],
+    name: Annotated[str, typer.Argument(metavar="TESTBED", help=_NAME_HELP)],
     output: Annotated[Path, typer.Option("-o", "--out", help="Testbed file to write, .toml.")],
     force: Force = False,
 ) -> None:
-    """Write a built-in testbed as a starting template for your own testbed file."""
-    from airbearing.io.builtins import builtin_toml
+    """Write a testbed (a built-in one, or a file) as a starting template for your own."""
+    from airbearing.cli.common import testbed_input
 
     out = Outputs(force=force)
+    testbed_input(out, name)
     path = out.plan(output, "-o", (".toml",))
-    _entry(name)
-    text = builtin_toml(name).decode("utf-8")
+    text, source = _toml(name)
     header = (
-        f"# Exported from the built-in '{name}' by 'airbearing testbed export'. Edit the values\n"
+        f"# Exported from {source} by 'airbearing testbed export'. Edit the values\n"
         "# for your testbed (FORMATS.md, 'Testbed file'); the comments say where each came from.\n"
     )
     out.text(path, header + text)
