@@ -116,3 +116,15 @@ def test_discrepancy_and_replay_as_tables(found, replayed, log):
     assert len(series) == log.data.shape[0] - len(replayed.data.outlier_rows)
     rms = float(np.sqrt(np.mean(series["residual"] ** 2)))
     assert rms == pytest.approx(replayed.gap, rel=1e-6)
+
+
+def test_progress_never_counts_past_its_total():
+    # retries and IPOPT refits are not known in advance: "[10/9]" was printed
+    from airbearing.analysis.discrepancy.search import _Progress
+
+    seen = []
+    prog = _Progress(lambda what, done, total: seen.append((done, total)), 9)
+    prog.done = 10
+    prog("a refit")
+    prog("done", 12)
+    assert all(d <= t for d, t in seen) and seen[-1] == (12, 12)

@@ -556,7 +556,10 @@ class _Progress:
         self.done = 0
 
     def __call__(self, what: str, done: int | None = None) -> None:
-        self.say(what, self.done if done is None else done, self.total)
+        done = self.done if done is None else done
+        # retries and refits are not known in advance: the count never passes its total
+        self.total = max(self.total, done)
+        self.say(what, done, self.total)
 
 
 @dataclass
