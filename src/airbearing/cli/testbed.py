@@ -43,11 +43,7 @@ def _toml(name: str) -> tuple[str, str]:
         from airbearing.io.testbed import load_testbed
 
         load_testbed(path)  # a file that is not a testbed is refused, naming its key
-        text = path.read_text()
-        lines = text.splitlines(keepends=True)
-        if lines and lines[0].startswith("# Exported from "):  # not one header per export
-            text = "".join(lines[2:])
-        return text, f"the testbed file '{path}'"
+        return path.read_text(), f"the testbed file '{path}'"
     from airbearing.io.builtins import builtin_toml
 
     _entry(name)
@@ -118,6 +114,9 @@ def export(
     testbed_input(out, name)
     path = out.plan(output, "-o", (".toml",))
     text, source = _toml(name)
+    lines = text.splitlines(keepends=True)
+    if lines and lines[0].startswith("# Exported from "):  # one header, not one per export
+        text = "".join(lines[2:])
     header = (
         f"# Exported from {source} by 'airbearing testbed export'. Edit the values\n"
         "# for your testbed (FORMATS.md, 'Testbed file'); the comments say where each came from.\n"
