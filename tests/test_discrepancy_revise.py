@@ -54,6 +54,8 @@ def test_two_frictions_on_a_narrow_speed_range_are_both_named_or_honestly_confou
     assert any(m.kind == "add" for m in found.revisions)
     # Coulomb friction makes the same torque over 5 % of speed: the errors include that choice
     assert found.confounded and "explain these logs about equally well" in found.verdict
+    # a coast-down has no input: the verdict says what it cannot show at all
+    assert "these logs cannot show inertia_error" in found.verdict
     j = found.to_json()
     assert j["revisions"] and j["alternatives"] and j["effects"][0]["std_within_model"] > 0
 

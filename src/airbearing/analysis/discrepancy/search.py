@@ -1016,6 +1016,13 @@ def _verdict_text(sel: _Selection, named: _Named, adq, agree, validation) -> str
         disagreements=[w for w in (c.words() for c in agree) if w],
         nominal={c.name: c.nominal_value for c in sel.chosen if c.correction},
     )
+    hidden = [
+        r.label
+        for r in (sel.rounds[0] if sel.rounds else ())
+        if r.status == "not identifiable from this log" and r.label not in named_now
+    ]
+    if hidden:  # what no answer here can say anything about (reasons in the JSON)
+        text += "; these logs cannot show " + ", ".join(hidden)
     if sel.revisions:
         text += "; revised over whole segments: " + ", ".join(m.words() for m in sel.revisions)
     for a, b in sel.confounded:
