@@ -8,13 +8,19 @@ second run appended with ``t += duration``, every other sample dropped after a t
 
 from __future__ import annotations
 
-import numpy as np
-import pytest
-from test_log_quality import mocap_yaw_log, platform, tumble_log
+import json
 
+import numpy as np
+import pandas as pd
+import pytest
+from cli_run import run
+from test_log_quality import MOTIONS, mocap_yaw_log, platform, tumble_log
+
+from airbearing.cli.log import SHOWN_SEGMENTS
 from airbearing.errors import InputError
 from airbearing.io import Log
 from airbearing.io.log import read_log
+from airbearing.io.testbed import write_testbed
 
 
 def _message(e) -> str:
@@ -91,3 +97,100 @@ def test_other_separator_is_named(tmp_path, sep, name):
         read_log(path, tb)
     assert _message(e).startswith(f"{path}: line 1: not comma separated: {name} found")
     assert "log import" in _message(e)
+
+
+# ----------------------------------------------------------------------------
+# 2. two runs joined with continuous time: a step, the segment breaks there
+
+
+def _joined(n=1200):
+    first, tb = tumble_log(seed=4, n=n, jitter=0.0)
+    second, _ = tumble_log(seed=5, n=n, w0=(0.3, -0.5, 1.1), jitter=0.0)
+    second["t"] += first["t"].iloc[-1] + 1.0 / tb.sensors.rate  # time made continuous
+    return pd.concat([first, second], ignore_index=True), tb
+
+
+def test_two_runs_joined_break_the_segment_at_the_join():
+    df, tb = _joined()
+    q = Log(df, "run.csv", tb).quality
+    assert [d.row for d in q.discontinuities] == [1200]
+    assert q.segments == ((0, 1200), (1200, 2400))
+    assert set(q.discontinuities[0].columns) >= {"qw", "qx", "qy", "qz"}
+    assert q.outlier_rows == () and q.unexplained_rows == ()  # nothing else is made of it
+    out = q.to_json()
+    assert out["discontinuity_rows"] == [1200] and out["segment_rows"][1] == [1200, 2400]
+
+
+def test_mocap_yaw_with_one_sample_cut_out_breaks_there():
+    # the milder splice: one sample removed, the time column made continuous again
+    df, tb = mocap_yaw_log(seed=8, n=2000)
+    spliced = pd.concat([df.iloc[:1500], df.iloc[1501:]], ignore_index=True)
+    spliced["t"] = df["t"].iloc[: len(spliced)].to_numpy()
+    q = Log(spliced, "run.csv", tb).quality
+    assert [d.row for d in q.discontinuities] == [1500]
+    assert q.segments == ((0, 1500), (1500, 1999))
+    assert Log(df, "run.csv", tb).quality.discontinuities == ()  # the uncut log has none
+
+
+@pytest.mark.parametrize("make", MOTIONS, ids=lambda f: f.__name__)
+def test_fast_smooth_motion_is_no_step(make):
+    # a 4 rad/s spin at 10 Hz, a 1.6 rad/s swing, a spin-down seen by motion capture:
+    # smooth, however fast for the sample rate
+    df, tb = make(seed=12)
+    assert Log(df, "run.csv", tb).quality.discontinuities == ()
+
+
+def test_cli_check_names_the_step_and_import_says_it(tmp_path, capsys):
+    df, tb = _joined()
+    path, tb_path = tmp_path / "run.csv", tmp_path / "tb.toml"
+    df.to_csv(path, index=False)
+    write_testbed(tb, tb_path)
+    assert run(["log", "check", str(tb_path), str(path), "--json", str(tmp_path / "c.json")]) == 0
+    text = capsys.readouterr().out
+    assert "step      row 1200" in text and "a new segment starts" in text
+    assert "segments  2" in text
+    summary = json.loads((tmp_path / "c.json").read_text())
+    assert summary["discontinuity_rows"] == [1200]
+
+
+# ----------------------------------------------------------------------------
+# 3. a logger that halves its rate mid-log
+
+
+def _halved():
+    df, tb = tumble_log(seed=6, n=1200, jitter=0.0)
+    return pd.concat([df.iloc[:600], df.iloc[600:].iloc[::2]], ignore_index=True), tb
+
+
+def test_rate_drop_is_one_statement_and_the_segments_are_kept():
+    df, tb = _halved()
+    q = Log(df, "run.csv", tb).quality
+    assert len(q.rate_changes) == 1
+    change = q.rate_changes[0]
+    assert change["first_row"] == 601 and change["last_row"] == 899
+    assert change["interval"] == pytest.approx(0.1, rel=1e-9)
+    assert "10 Hz" in change["reason"] and "from row 601" in change["reason"]
+    assert q.n_segments == 300  # every 10 Hz interval is a gap: nothing filled
+
+
+def test_cli_check_caps_the_segment_list_and_plot_draws_every_row(tmp_path, capsys):
+    from airbearing.reporting.log_plot import log_figure
+
+    df, tb = _halved()
+    path, tb_path = tmp_path / "run.csv", tmp_path / "tb.toml"
+    df.to_csv(path, index=False)
+    write_testbed(tb, tb_path)
+    assert run(["log", "check", str(tb_path), str(path), "--json", str(tmp_path / "c.json")]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert len([ln for ln in lines if " rows " in ln and "#" in ln]) == SHOWN_SEGMENTS
+    assert sum("more segment(s) (all in the JSON)" in ln for ln in lines) == 1
+    assert sum("the sample interval is 0.1 s (10 Hz)" in ln for ln in lines) == 1
+    assert len(lines) < 40
+    assert len(json.loads((tmp_path / "c.json").read_text())["segment_rows"]) == 300
+    log = read_log(path, tb)
+    fig = log_figure(log, log.quality)
+    drawn = set()
+    for line in fig.axes[0].get_lines():  # the quaternion panel: lines and lone dots
+        x = np.asarray(line.get_xdata(), dtype=float)
+        drawn |= set(np.round(x[np.isfinite(x)], 9))
+    assert drawn >= set(np.round(log.t, 9))  # every row of the log is on the figure

@@ -21,6 +21,9 @@ log_app = typer.Typer(
 app.add_typer(log_app, name="log")
 
 _LOG_SUFFIXES = (".csv", ".parquet")
+#: ``log check`` warns when the median interval is off ``1 / sensors.rate`` by more than
+#: this fraction (within the factor 1.5 that is an error): jitter moves it by far less.
+_RATE_WARNING = 0.1
 
 
 def _testbed(value: str | None):
@@ -113,14 +116,36 @@ def import_(
         typer.echo(f"note: {note}")
     typer.echo(f"rows: {log.n} (t = {log.t[0]:g} .. {log.t[-1]:g} s)")
     typer.echo(f"segments: {quality.n_segments} (rows {_segments_text(quality)})")
+    for d in quality.discontinuities:
+        typer.echo(f"discontinuity: row {d.row}: {d.reason}")
+    for change in quality.rate_changes:
+        typer.echo(f"rate change: {change['reason']}")
     typer.echo(f"outlier rows: {_rows(quality.outlier_rows)}")
     if tb is None:
         typer.echo("note: no testbed: gaps judged by the median interval, no sensor noise floor")
     typer.echo(f"wrote {log_path}")
 
 
+#: Segments printed by ``log check`` and ``log import`` (the first ones and the last);
+#: the JSON keeps them all.
+SHOWN_SEGMENTS = 12
+
+
+def _shown(segments) -> tuple[list[int], int]:
+    """Indices of the segments to print and how many are left out."""
+    n = len(segments)
+    if n <= SHOWN_SEGMENTS:
+        return list(range(n)), 0
+    head = SHOWN_SEGMENTS - 2
+    return [*range(head), n - 2, n - 1], n - SHOWN_SEGMENTS
+
+
 def _segments_text(quality) -> str:
-    return ", ".join(f"{a}-{b - 1}" for a, b in quality.segments)
+    shown, hidden = _shown(quality.segments)
+    parts = [f"{a}-{b - 1}" for a, b in (quality.segments[i] for i in shown)]
+    if hidden:
+        parts.insert(len(parts) - 2, f"... ({hidden} more)")
+    return ", ".join(parts)
 
 
 @log_app.command("check")
@@ -177,7 +202,7 @@ def check(
         ),
         ("segments", f"{quality.n_segments}"),
     ]
-    labels = [k for k, _ in lines] + ["outliers"]
+    labels = [k for k, _ in lines] + ["outliers", "warning"]
     if quality.unexplained_rows:
         labels.append("unexplained")  # its own label, in the same column
     if quality.noise_warnings:
@@ -185,12 +210,25 @@ def check(
     width = max(len(k) for k in labels)
     for key, value in lines:
         typer.echo(f"{key:<{width}}  {value}")
-    for i, ((a, b), (t0, t1)) in enumerate(
-        zip(quality.segments, quality.segment_times, strict=True)
-    ):
+    shown, hidden = _shown(quality.segments)
+    for i in shown:
+        (a, b), (t0, t1) = quality.segments[i], quality.segment_times[i]
+        if hidden and i == shown[-2]:
+            typer.echo(f"{'':<{width}}  ... {hidden} more segment(s) (all in the JSON)")
         typer.echo(
             f"{'':<{width}}  #{i:<3} rows {a:>6} - {b - 1:<6} t = {t0:>9.6g} .. {t1:<9.6g} s "
             f"({b - a} samples)"
+        )
+    for d in quality.discontinuities:
+        typer.echo(f"{'step':<{width}}  row {d.row:<6} t = {d.t:<9.6g} s  {d.reason}")
+    for change in quality.rate_changes:
+        typer.echo(f"{'warning':<{width}}  {change['reason']}")
+    ratio = quality.median_interval / quality.period
+    if not quality.rate_changes and abs(ratio - 1.0) > _RATE_WARNING:
+        typer.echo(
+            f"{'warning':<{width}}  median interval {quality.median_interval:.6g} s is "
+            f"{ratio:.3g} x 1 / sensors.rate: is sensors.rate = {tb.sensors.rate:g} Hz this "
+            "log's rate? (gaps and the noise per sample are judged by it)"
         )
     typer.echo(f"{'outliers':<{width}}  {len(quality.outliers)} row(s)")
     for o in quality.outliers:

@@ -240,7 +240,7 @@ class LogQuality:
         s, median of the logged intervals.
     segments : tuple of (int, int)
         ``(start, stop)`` rows of each segment (0-based, stop exclusive); a gap is an
-        interval longer than 1.5 periods.
+        interval longer than 1.5 periods, or a step (:attr:`discontinuities`).
     segment_times : tuple of (float, float)
         s, first and last logged time of each segment.
     jitter : float
@@ -272,6 +272,12 @@ class LogQuality:
     noise_warnings : tuple of str
         Channels whose noise is more than :data:`NOISE_RATIO` times the testbed's
         ``gyro_noise`` or ``attitude_noise`` (a unit read wrong, the wrong testbed).
+    discontinuities : tuple of airbearing.io.discontinuity.Discontinuity
+        Steps no smooth motion explains (two runs joined, samples cut out): a segment
+        ends before each one's row and the next starts at it, as at a gap.
+    rate_changes : tuple of dict
+        Stretches sampled at another rate than ``sensors.rate``
+        (:func:`airbearing.io.discontinuity.rate_changes`).
     """
 
     n_rows: int
@@ -289,6 +295,8 @@ class LogQuality:
     unchecked_rows: tuple[int, ...] = ()
     gyro_disagreement: tuple[str, ...] = ()
     noise_warnings: tuple[str, ...] = ()
+    discontinuities: tuple = ()
+    rate_changes: tuple[dict, ...] = ()
 
     @property
     def n_segments(self) -> int:
@@ -356,6 +364,9 @@ class LogQuality:
             "fits": {k: list(v) for k, v in self.fits.items()},
             "gyro_disagreement": list(self.gyro_disagreement),
             "noise_warnings": list(self.noise_warnings),
+            "discontinuity_rows": [d.row for d in self.discontinuities],
+            "discontinuities": [d.to_json() for d in self.discontinuities],
+            "rate_changes": [dict(r) for r in self.rate_changes],
         }
 
 
@@ -757,10 +768,13 @@ def _best_explanation(
     return best
 
 
-def find_outliers(group: _Group, t: np.ndarray, segments, scale: float) -> _GroupResult:
-    """Run the rule of the module docstring on one channel group."""
+def find_outliers(
+    group: _Group, t: np.ndarray, segments, scale: float, scorer: _Scorer | None = None
+) -> _GroupResult:
+    """Run the rule of the module docstring on one channel group (``scorer``: the group's,
+    already built on the same segments)."""
     n = t.size
-    scorer = _Scorer(group, t, segments, scale)
+    scorer = scorer if scorer is not None else _Scorer(group, t, segments, scale)
     k = max(f[0] for f in FITS)
     seg_id = np.zeros(n, dtype=int)
     for i, (start, stop) in enumerate(segments):
@@ -947,6 +961,7 @@ def assess(log: Log, testbed: Testbed | None) -> LogQuality:
     InputError
         If ``testbed`` is not a Testbed.
     """
+    from airbearing.io.discontinuity import rate_changes
     from airbearing.io.log import segments_of
     from airbearing.io.testbed import Testbed
 
@@ -956,6 +971,12 @@ def assess(log: Log, testbed: Testbed | None) -> LogQuality:
     n = t.size
     period = testbed.sensors.dt if testbed is not None else float(np.median(np.diff(t)))
     segments = segments_of(t, period)
+    groups, scorers, steps = _steps(log, testbed, segments, t, period)
+    if steps:  # a step breaks the segment there as a gap does (nothing filled)
+        from airbearing.io.discontinuity import split_at
+
+        segments = split_at(segments, [s.row for s in steps])
+        groups, scorers = _groups(log, testbed, segments), {}
     dt = np.diff(t)
     inside = dt <= 1.5 * period
     jitter = float(np.max(np.abs(dt[inside] / period - 1.0))) if inside.any() else 0.0
@@ -966,8 +987,8 @@ def assess(log: Log, testbed: Testbed | None) -> LogQuality:
     unexplained = np.zeros(n, dtype=bool)
     noise: dict[str, float] = {}
     fits: dict[str, tuple[int, int]] = {}
-    for group in _groups(log, testbed, segments):
-        res = find_outliers(group, t, segments, period)
+    for group in groups:
+        res = find_outliers(group, t, segments, period, scorers.get(group.name))
         fits[group.name] = res.fit
         if group.vector:
             noise["quaternion"] = float(res.noise[0])
@@ -1018,7 +1039,41 @@ def assess(log: Log, testbed: Testbed | None) -> LogQuality:
         unchecked_rows=unchecked,
         gyro_disagreement=disagree,
         noise_warnings=_noise_warnings(noise, testbed),
+        discontinuities=steps,
+        rate_changes=() if testbed is None else rate_changes(t, period, testbed.sensors.rate),
     )
+
+
+def _steps(log: Log, testbed, segments, t, period):
+    """The channel groups, the scorers of the rates and attitude, and the steps found
+    on them (:mod:`airbearing.io.discontinuity`), merged by row."""
+    from airbearing.io.discontinuity import Discontinuity, find_steps
+
+    groups = _groups(log, testbed, segments)
+    scorers: dict[str, _Scorer] = {}
+    found: dict[int, tuple[list[str], float]] = {}
+    for g in groups:
+        if g.name not in ("rates", "attitude"):
+            continue
+        scorer = scorers[g.name] = _Scorer(g, t, segments, period)
+        for row, cols, score in find_steps(scorer, t, period):
+            have = found.setdefault(row, ([], 0.0))
+            found[row] = (have[0] + list(cols), max(have[1], score))
+    steps = tuple(
+        Discontinuity(
+            row=r,
+            t=float(t[r]),
+            columns=tuple(cols),
+            reason=(
+                f"step between rows {r - 1} and {r} (t = {t[r - 1]:.6g} .. {t[r]:.6g} s): "
+                f"{', '.join(cols)} {score:.3g} noise scales apart where the smooth fits "
+                "of each side meet (two runs joined? samples cut out?): a new segment starts"
+            ),
+            score=score,
+        )
+        for r, (cols, score) in sorted(found.items())
+    )
+    return groups, scorers, steps
 
 
 #: A channel whose noise exceeds the testbed's declared one this many times is named.

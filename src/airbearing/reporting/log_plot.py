@@ -165,12 +165,20 @@ def log_figure(log: Log, quality: LogQuality | None = None, *, title: str | None
     outlier_cols: dict[int, tuple[str, ...]] = {}
     if quality is not None:
         outlier_cols = {o.row: o.columns for o in quality.outliers}
+    # a one-sample segment (a stretch sampled slower than the testbed's rate) has no line:
+    # its samples are drawn as dots, so every row of the log is on the figure
+    lone = np.array([a for a, b in segments if b - a == 1], dtype=int)
+    steps = [] if quality is None else [d.row for d in quality.discontinuities]
     for ax, (name, label, lines) in zip(axes, series, strict=False):
         for c, y, _raw in lines:
             tb, yb = with_breaks(t, y, segments)
             if name.startswith("yaw, wrapped"):
                 tb, yb = _break_at_wraps(tb, yb)
-            ax.plot(tb, yb, lw=0.8, label=c)
+            (line,) = ax.plot(tb, yb, lw=0.8, label=c)
+            if lone.size:
+                ax.plot(t[lone], y[lone], ".", ms=3, color=line.get_color())
+        for row in steps:  # a step breaks the segment: marked where the new one starts
+            ax.axvline(t[row], color="red", ls="--", lw=0.8, zorder=0)
         for (_, b), (a2, _) in zip(segments[:-1], segments[1:], strict=True):
             ax.axvspan(t[b - 1], t[a2], color="0.85", zorder=0)
         for row, ocols in outlier_cols.items():
@@ -186,6 +194,8 @@ def log_figure(log: Log, quality: LogQuality | None = None, *, title: str | None
     note = f" — {len(segments)} segment(s), gaps shown as breaks"
     if quality is not None:
         note += f", {len(quality.outlier_rows)} outlier row(s) (red circles)"
+        if steps:
+            note += f", {len(steps)} step(s) (red dashes)"
     fig.suptitle((title or log.source) + note, fontsize=10)
     fig.align_ylabels(axes)
     return fig

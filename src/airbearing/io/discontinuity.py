@@ -1,0 +1,351 @@
+"""Discontinuities of a log: steps that no smooth motion explains, and stretches at another rate.
+
+**Steps.** Two runs joined with continuous time (a second file appended, a block of
+samples cut out) leave the logged rates and attitude with a jump at the join: the
+samples before it follow one smooth motion, those after it another, and the two do
+not meet. At a boundary between rows ``b - 1`` and ``b`` of a segment:
+
+1. the *left fit* (the group's local polynomial ``(k, p)`` of the outlier rule,
+   :mod:`airbearing.io.quality`, on the ``2k`` samples ``b - 2k .. b - 1``) and the
+   *right fit* (on ``b .. b + 2k - 1``) are each extrapolated over the interval
+   ``[t_{b-1}, t_b]``;
+2. each must explain its own side: the left fit of the ``2k`` samples before ``b - 1``
+   predicts ``b - 1``, the right fit of the ``2k`` samples after ``b`` predicts ``b``,
+   both within the outlier threshold (so an isolated glitch, which disagrees with one
+   side's own fit, is not a step: it is an outlier);
+3. their disagreement ``D(tau) = x_L(tau) - x_R(tau)``, whose standard deviation under
+   white noise of scale ``s`` is ``s * sqrt(sum w_L^2 + sum w_R^2)``, is scored at five
+   times across the interval and the *smallest* score is kept: a kink (a torque
+   switched, a rate limit reached between two samples) is continuous, so the two fits
+   cross somewhere in the interval and its smallest score is noise; a step never
+   meets;
+4. the noise scale ``s`` is the outlier rule's own, for the extrapolated window shapes
+   (all neighbours on one side: it includes their misfit of fast motion, measured on
+   the log), times the local roughness factor at the row, so fast motion (a 4 rad/s
+   spin at 10 Hz, a slew) is judged against the misfit it really leaves;
+5. a step is a smallest score above :data:`STEP_THRESHOLD` (10 noise scales, against
+   the outlier rule's 6: the min over the interval and the extrapolation make the
+   score's tail heavier than a Gaussian's, and a missed step of 6-10 scales costs
+   little, a false one breaks a segment) on any rate channel or the attitude.
+
+Only boundaries next to an outlier suspect (the first pass of the rule) are tested,
+and only where each side has ``2k + 1`` samples of the segment: a join within ``2k``
+samples of a gap or of the log's ends is not found. A step breaks the segment there
+as a gap does (the samples are kept; nothing is filled). Input channels (gimbals,
+sliders, dipoles) are commanded and may step: they are not tested.
+
+**Rate changes.** A stretch whose running median interval (over
+``2 * _RATE_HALF + 1`` intervals) is beyond :data:`~airbearing.io.log.RATE_MISMATCH_FACTOR`
+of ``1 / sensors.rate`` was sampled at another rate (a logger that slowed down): at a
+slower rate every interval there is a gap, so its rows are one-sample segments no
+tool uses. It is named once, with the row where it starts and the rate that follows.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["Discontinuity", "STEP_THRESHOLD", "find_steps", "rate_changes", "split_at"]
+
+#: Smallest normalised disagreement (noise scales) between the left and right fits over
+#: an interval above which the interval holds a step (module doc, step 5).
+STEP_THRESHOLD = 10.0
+_TAU = np.linspace(0.0, 1.0, 5)  # fractions of the interval at which D is scored
+_RATE_HALF = 5  # half-width (intervals) of the running median interval
+
+
+@dataclass(frozen=True)
+class Discontinuity:
+    """A step between row ``row - 1`` and row ``row``: a new segment starts at ``row``.
+
+    Attributes
+    ----------
+    row : int
+        0-based data row where the new segment starts.
+    t : float
+        s, its logged time.
+    columns : tuple of str
+        The log columns that step.
+    reason : str
+        In words.
+    score : float
+        The smallest normalised disagreement over the interval, noise scales.
+    """
+
+    row: int
+    t: float
+    columns: tuple[str, ...]
+    reason: str
+    score: float
+
+    def to_json(self) -> dict:
+        """``{"row", "t", "columns", "reason", "score"}``."""
+        return {
+            "row": self.row,
+            "t": self.t,
+            "columns": list(self.columns),
+            "reason": self.reason,
+            "score": self.score,
+        }
+
+
+def _weights(t, first, count, p, at, origin, period, slope=False):
+    """Least-squares polynomial (degree ``p``) weights predicting the values (``slope``:
+    the slopes, per ``period``) at times ``at`` (m, j) from the ``count`` samples starting
+    at rows ``first`` (m,).
+
+    Returns the weights (m, j, count) and the rows (m, count)."""
+    rows = first[:, None] + np.arange(count)
+    u = (t[rows] - origin[:, None]) / period
+    powers = np.arange(p + 1)
+    pinv = np.linalg.pinv(u[..., None] ** powers)  # (m, p + 1, count)
+    at = (at - origin[:, None]) / period
+    if slope:
+        v = powers * at[..., None] ** np.maximum(powers - 1, 0)
+    else:
+        v = at[..., None] ** powers  # (m, j, p + 1)
+    return v @ pinv, rows
+
+
+def _predict(w, rows, x):
+    """sum_j w_j x_j: (m, j, count) weights, (m, count) rows -> (m, j, c)."""
+    return np.einsum("mjc,mcd->mjd", w, x[rows])
+
+
+#: The side fits tried, ``(samples, degree)``, besides the outlier rule's own ``(2k, p)``:
+#: longer windows extrapolate with less noise where the motion allows a low degree.
+SIDE_FITS: tuple[tuple[int, int], ...] = ((12, 2), (24, 3))
+
+
+def _side(t, x, b, count, p, period, wrap):
+    """Left and right fits of ``count`` samples at boundaries ``b``: the disagreement at the
+    interval's middle in value and slope with their noise gains, and each side's own
+    one-step residual (normalised by ``sqrt(1 + h)``) of its last sample."""
+    t0, t1 = t[b - 1], t[b]
+    mid = 0.5 * (t0 + t1)[:, None]
+    w_l, r_l = _weights(t, b - count, count, p, mid, t0, period)
+    w_r, r_r = _weights(t, b, count, p, mid, t0, period)
+    v_l, _ = _weights(t, b - count, count, p, mid, t0, period, slope=True)
+    v_r, _ = _weights(t, b, count, p, mid, t0, period, slope=True)
+    d = _predict(w_l, r_l, x)[:, 0] - _predict(w_r, r_r, x)[:, 0]
+    dv = _predict(v_l, r_l, x)[:, 0] - _predict(v_r, r_r, x)[:, 0]
+    h = np.sum(w_l[:, 0] ** 2, axis=-1) + np.sum(w_r[:, 0] ** 2, axis=-1)
+    hv = np.sum(v_l[:, 0] ** 2, axis=-1) + np.sum(v_r[:, 0] ** 2, axis=-1)
+    s_l, q_l = _weights(t, b - count - 1, count, p, t0[:, None], t0, period)
+    s_r, q_r = _weights(t, b + 1, count, p, t1[:, None], t0, period)
+    e_l = x[b - 1] - _predict(s_l, q_l, x)[:, 0]
+    e_r = x[b] - _predict(s_r, q_r, x)[:, 0]
+    if wrap:
+        d, e_l, e_r = (np.mod(v + np.pi, 2 * np.pi) - np.pi for v in (d, e_l, e_r))
+    e_l = e_l / np.sqrt(1.0 + np.sum(s_l[:, 0] ** 2, axis=-1))[:, None]
+    e_r = e_r / np.sqrt(1.0 + np.sum(s_r[:, 0] ** 2, axis=-1))[:, None]
+    return d, dv, h, hv, e_l, e_r
+
+
+def _in_window(t, x, b, count, p, period, wrap):
+    """Residuals of the left and right fits on their own samples, (m, 2 count, c): a side
+    that one polynomial does not explain (a block of glitches in it) is no side of a step."""
+    t0 = t[b - 1]
+    out = []
+    for first in (b - count, b):
+        rows = first[:, None] + np.arange(count)
+        w, r = _weights(t, first, count, p, t[rows], t0, period)
+        e = x[r] - _predict(w, r, x)
+        out.append(np.mod(e + np.pi, 2 * np.pi) - np.pi if wrap else e)
+    return np.concatenate(out, axis=1)
+
+
+def _calibrate(g, t, segments, count, p, period):
+    """Robust scale of the one-step residuals of a side fit, per channel (or one for a
+    vector group), over up to 2000 boundaries spread over the log: noise plus the
+    fit's own misfit of the motion, measured on the log. None if too few."""
+    from airbearing.io.quality import _CHI2_3_MEDIAN, _MAD_TO_SIGMA
+
+    rows = []
+    for a, b in segments:
+        if b - a > 2 * count + 2:
+            rows.append(np.arange(a + count + 1, b - count))
+    if not rows:
+        return None
+    rows = np.concatenate(rows)
+    rows = rows[np.unique(np.linspace(0, rows.size - 1, min(rows.size, 2000)).astype(int))]
+    if rows.size < 8:
+        return None
+    *_, e_l, e_r = _side(t, g.values, rows, count, p, period, g.wrap)
+    e = np.concatenate([e_l, e_r])
+    if g.vector:
+        return np.array([np.sqrt(np.median(np.sum(e**2, axis=1)) / _CHI2_3_MEDIAN)])
+    return _MAD_TO_SIGMA * np.median(np.abs(e - np.median(e, axis=0)), axis=0)
+
+
+def find_steps(scorer, t: np.ndarray, period: float) -> list[tuple[int, tuple[str, ...], float]]:
+    """Steps of one channel group (module doc): ``(row, columns, score)`` each.
+
+    Parameters
+    ----------
+    scorer : airbearing.io.quality._Scorer
+        The outlier rule's scorer of the group on the log's gap segments.
+    t : numpy.ndarray
+        s, sample times, shape (n,).
+    period : float
+        s, nominal sample interval (only scales the time axis of the fits).
+    """
+    from airbearing.io.quality import CHI2_3_THRESHOLD, Z_THRESHOLD
+
+    g = scorer.group
+    k, p = scorer.fit
+    n = t.size
+    _, over = scorer(np.arange(n), np.ones(n, dtype=bool), exact=False)
+    suspect = over.any(axis=1)
+    cand = np.flatnonzero(suspect[:-1] | suspect[1:]) + 1
+    cand = np.unique(np.clip(cand[:, None] + np.arange(-1, 2), 1, n - 1))
+    best = None  # the most sensitive side fit: smallest step it detects (value)
+    for count, deg in ((2 * k, p), *SIDE_FITS):
+        scale = _calibrate(g, t, scorer.segments, count, deg, period)
+        if scale is None:
+            continue
+        scale = np.maximum(scale, g.floor)
+        mid = np.array([count + 1])  # a regular interior boundary
+        tt = np.arange(2 * count + 3, dtype=float) * period
+        *_, h0 = _side(tt, np.zeros((tt.size, 1)), mid, count, deg, period, False)[:3]
+        key = float(np.sum(np.log(scale))) + 0.5 * scale.size * float(np.log(h0[0]))
+        if best is None or key < best[0]:
+            best = (key, count, deg, scale)
+    if best is None:
+        return []
+    _, count, deg, base = best
+    lo, hi = scorer._seg_lo[cand], scorer._seg_hi[cand]
+    b = cand[(cand - count - 1 >= lo) & (cand + count <= hi - 1) & (scorer._seg_lo[cand - 1] == lo)]
+    if b.size == 0:
+        return []
+    x = g.values
+    d, dv, h, hv, e_l, e_r = _side(t, x, b, count, deg, period, g.wrap)
+    # the local roughness a window's away on each side: a glitch (or the step itself)
+    # right at the boundary must not inflate the scale that is to judge it
+    local = np.maximum(scorer.local_at(b - count), scorer.local_at(b + count - 1))  # (m, c)
+    # a noise-free channel's local factor is the outlier rule's change-of-slope floor
+    # over its own noise scale (quality module doc, step 4): that floor itself, not
+    # multiplied by this fit's misfit
+    quiet = scorer._quiet[None, :]
+    scale = np.where(quiet, np.maximum(base, scorer.noise * local), base[None, :] * local)
+    e_in = _in_window(t, x, b, count, deg, period, g.wrap)
+    if g.vector:
+        explained = (np.sum(e_l**2, axis=1) / scale[:, 0] ** 2 <= CHI2_3_THRESHOLD) & (
+            np.sum(e_r**2, axis=1) / scale[:, 0] ** 2 <= CHI2_3_THRESHOLD
+        )
+        z_in = np.sum(e_in**2, axis=2) / scale[:, :1] ** 2
+        explained &= np.all(z_in <= CHI2_3_THRESHOLD, axis=1)
+        z = np.linalg.norm(d, axis=1) / (scale[:, 0] * np.sqrt(h))
+        z = np.maximum(z, np.linalg.norm(dv, axis=1) / (scale[:, 0] * np.sqrt(hv)))
+        z = np.repeat(z[:, None], len(g.columns), axis=1)
+    else:
+        explained = np.all(np.abs(e_l) / scale <= Z_THRESHOLD, axis=1)
+        explained &= np.all(np.abs(e_r) / scale <= Z_THRESHOLD, axis=1)
+        explained &= np.all(np.abs(e_in) / scale[:, None, :] <= Z_THRESHOLD, axis=(1, 2))
+        z = np.abs(d) / (scale * np.sqrt(h)[:, None])
+        if g.name == "attitude":  # no finite torque makes the rate jump: slopes meet too
+            z = np.maximum(z, np.abs(dv) / (scale * np.sqrt(hv)[:, None]))
+    stepping = (z > STEP_THRESHOLD) & explained[:, None]
+    score = np.where(stepping, z, 0.0).max(axis=1)
+    # an interval shorter than half a period is a timing fault (reported as irregular):
+    # values logged at shifted times are not a step of the motion
+    irregular = np.diff(t) < 0.5 * period
+    out = []
+    for i in np.flatnonzero(score > 0):
+        if irregular[max(b[i] - 4, 0) : b[i] + 3].any():
+            continue
+        near = np.abs(b - b[i]) <= count // 2
+        if score[i] < np.max(score[near]):
+            continue  # one step, one row: the best within half a window
+        cols = tuple(c for c, s in zip(g.columns, stepping[i], strict=True) if s)
+        row = _change_point(t, x, int(b[i]), count, deg, lo=int(scorer._seg_lo[b[i]]),
+                            hi=int(scorer._seg_hi[b[i]]), period=period)  # fmt: skip
+        out.append((row, cols, float(score[i])))
+    return out
+
+
+def _change_point(t, x, b, count, deg, *, lo, hi, period, reach=3) -> int:
+    """The row within ``reach`` of ``b`` where two fits of degree ``deg``, one on each side
+    of the break, leave the smallest sum of squared residuals on one fixed span: the
+    disagreement tests find that a step is near, this says where (the side checks let a
+    window straddle the step by a sample or two)."""
+    a, z = max(lo, b - count - reach), min(hi, b + count + reach)
+    best, best_rss = b, np.inf
+    for c in range(max(b - reach, a + deg + 2), min(b + reach, z - deg - 2) + 1):
+        rss = 0.0
+        for s, e in ((a, c), (c, z)):
+            u = (t[s:e] - t[c]) / period
+            v = u[:, None] ** np.arange(deg + 1)
+            coef, *_ = np.linalg.lstsq(v, x[s:e], rcond=None)
+            rss += float(np.sum((x[s:e] - v @ coef) ** 2))
+        if rss < best_rss:
+            best, best_rss = c, rss
+    return best
+
+
+def split_at(segments, rows) -> tuple[tuple[int, int], ...]:
+    """``segments`` with a new segment starting at each of ``rows`` (nothing dropped)."""
+    rows = sorted(set(int(r) for r in rows))
+    out = []
+    for a, b in segments:
+        start = a
+        for r in (r for r in rows if a < r < b):
+            out.append((start, r))
+            start = r
+        out.append((start, b))
+    return tuple(out)
+
+
+def rate_changes(t: np.ndarray, period: float, rate: float) -> tuple[dict, ...]:
+    """Stretches sampled at another rate (module doc), each as a dict.
+
+    Returns
+    -------
+    tuple of dict
+        ``{"first_row", "last_row", "t0", "t1", "interval", "reason"}``: the rows of the
+        stretch (the first is the first row after an interval at the other rate), its
+        logged times (s), its median interval (s) and one sentence.
+    """
+    from airbearing.io.log import RATE_MISMATCH_FACTOR
+
+    dt = np.diff(t)
+    width = 2 * _RATE_HALF + 1
+    if dt.size < width:
+        return ()
+    from numpy.lib.stride_tricks import sliding_window_view
+
+    running = np.median(sliding_window_view(dt, width), axis=1)
+    running = np.r_[np.full(_RATE_HALF, running[0]), running, np.full(_RATE_HALF, running[-1])]
+    ratio = running / period
+    off = (ratio > RATE_MISMATCH_FACTOR) | (ratio < 1.0 / RATE_MISMATCH_FACTOR)
+    out = []
+    edges = np.flatnonzero(np.diff(np.r_[0, off.astype(int), 0]))
+    for a, b in zip(edges[::2], edges[1::2], strict=True):  # intervals a .. b - 1
+        if b - a < width:
+            continue
+        median = float(np.median(dt[a:b]))
+        first, last = int(a) + 1, int(b)
+        gaps = median > period * RATE_MISMATCH_FACTOR
+        what = (
+            "every interval there is a gap (> 1.5 / rate): one-sample segments no tool uses"
+            if gaps
+            else "intervals there are irregular (< 0.5 / rate)"
+        )
+        out.append(
+            {
+                "first_row": first,
+                "last_row": last,
+                "t0": float(t[first]),
+                "t1": float(t[last]),
+                "interval": median,
+                "reason": (
+                    f"from row {first} (t = {t[first]:.6g} s) to row {last} "
+                    f"(t = {t[last]:.6g} s) the sample interval is {median:.6g} s "
+                    f"({1.0 / median:.6g} Hz), {median / period:.3g} x 1 / sensors.rate "
+                    f"({rate:g} Hz): {what}; a logger that changed its rate?"
+                ),
+            }
+        )
+    return tuple(out)
