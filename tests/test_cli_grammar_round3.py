@@ -374,3 +374,12 @@ def test_testbed_show_and_export_take_a_file(tmp_path, capsys):
     capsys.readouterr()
     assert run(["testbed", "show", str(bad)]) == 2
     assert "unknown key 'x'" in capsys.readouterr().err
+
+
+def test_identify_hint_names_the_flags(tmp_path, capsys):
+    log = tmp_path / "free.csv"
+    assert run(["-q", "simulate", "seed004-platform", "--duration", "10", "-o", str(log)]) == 0
+    assert run(["identify", "seed004-platform", str(log), "--method", "equation-error"]) == 2
+    err = capsys.readouterr().err
+    assert "--hold inertia" in err and "(--known-offset-xy)" in err, err
+    assert "hold='" not in err and "known_offset_xy" not in err

@@ -107,6 +107,9 @@ def identify(
             for param in ("known_offset_xy", "known_mass", "friction", "method", "form", "hold"):
                 if msg.startswith(param):
                     msg = "--" + param.replace("_", "-") + msg[len(param) :].replace("=", " ", 1)
+            for word, flag in (("hold='inertia'", "--hold inertia"), ("hold='cm'", "--hold cm"),
+                               ("(known_offset_xy)", "(--known-offset-xy)")):  # fmt: skip
+                msg = msg.replace(word, flag)  # a hint in the library's words: the flags
             if msg.startswith("identify: "):  # about the logs together: name them
                 msg = f"{', '.join(str(p) for p in logs)}: {msg[len('identify: ') :]}"
             raise InputError(msg) from None
