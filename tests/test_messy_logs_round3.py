@@ -75,6 +75,25 @@ def test_integer_ms_time_gets_the_import_hint(tmp_path):
     assert 'looks like ms: use airbearing log import with [units] t = "ms"' in _message(e)
 
 
+@pytest.mark.parametrize("with_testbed", [False, True])
+def test_import_of_a_file_in_s_with_a_map_in_ms_is_one_error(tmp_path, capsys, with_testbed):
+    from rigs import MOCAP_MAP_TOML
+
+    df, tb = mocap_yaw_log(seed=2, n=400)
+    raw, mp, tb_path = tmp_path / "raw.csv", tmp_path / "map.toml", tmp_path / "tb.toml"
+    pd.DataFrame({"Time (ms)": df["t"], "Yaw (deg)": np.degrees(df["yaw"])}).to_csv(
+        raw, index=False
+    )  # the clock exported in s, the map says ms
+    mp.write_text(MOCAP_MAP_TOML)
+    write_testbed(tb, tb_path)
+    out = tmp_path / "log.csv"
+    args = ["log", "import", *([str(tb_path)] if with_testbed else []), str(raw)]
+    assert run([*args, "--map", str(mp), "-o", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "median interval 0.0001 s" in err and "is the time column in s?" in err
+    assert len(err.strip().splitlines()) == 1 and not out.exists()
+
+
 # ----------------------------------------------------------------------------
 # 4. byte-order mark, tabs
 

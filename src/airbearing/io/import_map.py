@@ -360,7 +360,8 @@ def raw_columns(raw, import_map: ImportMap, src: str, skip: tuple[str, ...] = ()
         columns), a cell that is not a finite number or is overflow-sized (the log's
         rule, :func:`airbearing.io.log.bad_mask`; rows and column named), or a time
         column in s by default whose median interval is :data:`SLOWEST_INTERVAL` or
-        more (the message asks whether it is in ms).
+        more (the message asks whether it is in ms), or one in ms, us or ns whose
+        median interval is shorter than ``1 / FASTEST_RATE`` s (asks whether it is in s).
     """
     import pandas as pd
 
@@ -397,6 +398,8 @@ def raw_columns(raw, import_map: ImportMap, src: str, skip: tuple[str, ...] = ()
             )
         if name == "t" and "t" not in import_map.given_units and len(values) > 1:
             _check_seconds(values, src, actual, import_map.source)
+        elif name == "t" and import_map.units[name] != "s" and len(values) > 1:
+            _check_sub_unit(values, src, actual, import_map.units[name], import_map.source)
         factor = import_map.factor(name)
         inverse = round(1.0 / factor)
         if factor < 1.0 and abs(1.0 / factor - inverse) < 1e-9 * inverse:
@@ -426,6 +429,28 @@ def _check_seconds(t: np.ndarray, src: str, header: str, map_src: str) -> None:
         f"{src}: column {header!r} (log column 't'): median interval {median:.4g} s; is the "
         f'time column in {guess}? set [units] t = "{guess}" in {map_src} (or t = "s" if '
         "the samples really are that far apart)"
+    )
+
+
+#: Hz: a time column in ms, us or ns whose median interval is shorter than 1 / this is
+#: taken for seconds (or a larger unit) mislabelled: air-bearing loggers sample at 1 Hz to
+#: 1 kHz, while a 10-100 Hz log in s read as ms gives 10-100 kHz.
+FASTEST_RATE = 5000.0
+
+
+def _check_sub_unit(t: np.ndarray, src: str, header: str, unit: str, map_src: str) -> None:
+    dt = np.diff(t)
+    dt = dt[dt > 0]
+    if not dt.size:
+        return
+    median = float(np.median(dt)) * UNITS["time"][unit]  # s
+    if median * FASTEST_RATE >= 1.0:
+        return
+    raise InputError(
+        f"{src}: column {header!r} (log column 't'): median interval {median:.4g} s "
+        f"({1.0 / median:.4g} Hz) read as {unit} ([units] t = {unit!r} in {map_src}); "
+        f"faster than {FASTEST_RATE:g} Hz, which no air-bearing logger samples at: is the "
+        f'time column in s? set [units] t = "s" (or the unit the file really uses)'
     )
 
 
