@@ -85,30 +85,44 @@ def balance(
         Method | None,
         typer.Option(
             help="Balancing law; default: mixed on a testbed with magnetorquers and a cage "
-            "field, mechanical otherwise (with --two-step: seed 004's lyapunov)."
+            "field, mechanical otherwise (with --two-step: seed 004's lyapunov). Not with "
+            "--compare (its list names the methods)."
         ),
     ] = None,
-    duration: Annotated[float, typer.Option(help="Run length, s (seed 000: 300).")] = 300.0,
+    duration: Annotated[
+        float,
+        typer.Option(
+            help="Length of a run and of each --compare run, s (seed 000: 300); not with "
+            "--two-step, which sets its own runs."
+        ),
+    ] = 300.0,
     initial_offset_mm: Annotated[
-        float, typer.Option(help="In-plane slider start, mm (seed 000: -0.5, +0.5).")
+        float,
+        typer.Option(
+            help="In-plane slider start of a run, mm (seed 000: -0.5, +0.5); not with "
+            "--compare (it runs both) or --two-step."
+        ),
     ] = -0.5,
     vertical_offset: Annotated[
         float | None,
         typer.Option(
             help="CR->CM vertical offset of the balanced platform, m "
-            "(default: 2 % of the testbed's, what seed 004's two-step leaves)."
+            "(default: 2 % of the testbed's, what seed 004's two-step leaves); not with "
+            "--two-step."
         ),
     ] = None,
     start: Annotated[
         Start,
         typer.Option(
             help="rest (seed 000: the offset platform's rest position) | level | auto "
-            "(rest if the platform has one, else level)."
+            "(rest if the platform has one, else level); not with --two-step."
         ),
     ] = Start.auto,
     initial_rate: Annotated[
         tuple[float, float, float],
-        typer.Option(help="Initial body rate, rad/s (seed 000: null; seed 004: a spin)."),
+        typer.Option(
+            help="Initial body rate, rad/s (seed 000: null; seed 004: a spin); not with --two-step."
+        ),
     ] = (0.0, 0.0, 0.0),
     offset_stays: Annotated[
         bool,
@@ -117,11 +131,17 @@ def balance(
             help="Keep the initial offset as an imbalance the law must find (its "
             "displacements are added to the offset positions); default: the law commands "
             "positions from the balanced rail zero, seed 000 eq. 5, and the offset only "
-            "sets the initial rest attitude.",
+            "sets the initial rest attitude. Not with --two-step.",
         ),
     ] = False,
     seed: Annotated[
-        int, typer.Option("--noise-seed", min=0, help="Seed of the sensor noise, >= 0.")
+        int,
+        typer.Option(
+            "--noise-seed",
+            min=0,
+            help="Seed of the sensor noise of a run or of --two-step, >= 0; not with "
+            "--compare (its runs use seeds 0 to --seeds - 1).",
+        ),
     ] = 0,
     two_step_: Annotated[
         bool, typer.Option("--two-step", help="Seed 004's two-step procedure.")
@@ -136,7 +156,9 @@ def balance(
             "e.g. backlash=0:5e-5:6."
         ),
     ] = None,
-    seeds: Annotated[int, typer.Option(help="Seeds per offset in --compare (>= 1).")] = 4,
+    seeds: Annotated[
+        int, typer.Option(help="Seeds per offset of --compare, >= 1; only with --compare.")
+    ] = 4,
     json_out: Annotated[Path | None, typer.Option("--json", help="Summary JSON.")] = None,
     log: Annotated[
         Path | None, typer.Option("-o", "--out", help="Run log, .csv or .parquet.")

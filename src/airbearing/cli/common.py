@@ -225,10 +225,11 @@ def as_typed(option: str) -> str:
 def given(*names: str) -> list[str]:
     """The options among parameters ``names`` that were given on the command line.
 
-    Each is named as the user typed it (``-o`` or ``--out``); an option left at its
-    default is not given, and neither is one typed with its default value (the default
-    the help shows: ``balance --two-step --duration 300`` asks for nothing the two-step
-    would ignore). Outside a command (a direct call in a test), nothing is given.
+    Each is named as the user typed it (``-o`` or ``--out``, or the old spelling
+    typed); an option left at its default is not given. One typed with its default value
+    is: ``balance --two-step --duration 300`` asks for a run length the two-step does not
+    use (the help says which modes an option's default belongs to). Outside a command (a
+    direct call in a test), nothing is given.
     """
     ctx = _current_context()
     if ctx is None:
@@ -246,25 +247,10 @@ def given(*names: str) -> list[str]:
             continue
         if ctx.get_parameter_source(param.name) != ParameterSource.COMMANDLINE:
             continue
-        if _is_default(param, ctx.params.get(param.name)):
-            continue
         opts = list(param.opts) + list(getattr(param, "secondary_opts", []))
         typed = [o for o in opts if any(a == o or a.startswith(o + "=") for a in argv)]
         out.append(as_typed(typed[0]) if typed else max(opts, key=len))
     return out
-
-
-def _is_default(param, value) -> bool:
-    """``value`` equals ``param``'s default (a tuple option entry by entry)."""
-    default = param.default
-    if default is None or callable(default):
-        return False
-    if isinstance(default, list | tuple):
-        return isinstance(value, list | tuple) and list(value) == list(default)
-    try:
-        return bool(value == default)
-    except Exception:  # a value that cannot be compared is a value given
-        return False
 
 
 def refuse_given(names, why: str) -> None:

@@ -53,25 +53,25 @@ def simulate(
         ),
     ] = None,
     yaw_deg: Annotated[
-        float, typer.Option(help=f"Slew angle, deg, within +-{MAX_SLEW_DEG:g}.")
+        float, typer.Option(help=f"Slew: angle, deg, within +-{MAX_SLEW_DEG:g}.")
     ] = 180.0,
-    axis: Annotated[tuple[float, float, float], typer.Option(help="Slew axis, body.")] = (0, 0, 1),
+    axis: Annotated[tuple[float, float, float], typer.Option(help="Slew: axis, body.")] = (0, 0, 1),
     duration: Annotated[
         float | None, typer.Option(help=f"Run length, s ({DURATIONS_HELP}).")
     ] = None,
     seed: Annotated[
         int, typer.Option("--noise-seed", min=0, help="Seed of the sensor noise, >= 0.")
     ] = 0,
-    steering: Annotated[Steering, typer.Option(help="Steering law (seed 001).")] = "mp",
+    steering: Annotated[Steering, typer.Option(help="Slew: steering law (seed 001).")] = "mp",
     rate_limit: Annotated[
-        RateLimit, typer.Option(help="Gimbal-rate limit: scale (seed 001 eq. 4) or clip.")
+        RateLimit, typer.Option(help="Slew: gimbal-rate limit, scale (seed 001 eq. 4) or clip.")
     ] = "scale",
     ideal: Annotated[bool, typer.Option(help="No noise, no low-pass.")] = False,
     initial_rate: Annotated[
         tuple[float, float, float], typer.Option(help="Free: initial body rate, rad/s.")
     ] = (0.0, 0.0, 0.0),
     initial_quaternion: Annotated[
-        tuple[float, float, float, float], typer.Option(help="Free: initial qw qx qy qz.")
+        tuple[float, float, float, float], typer.Option(help="Free/spindown: initial qw qx qy qz.")
     ] = (1.0, 0.0, 0.0, 0.0),
     sliders: Annotated[
         tuple[float, float, float], typer.Option(help="Free: slider positions, m.")
@@ -84,7 +84,9 @@ def simulate(
     ] = 2.0,
     attitude_noise: Annotated[
         float | None,
-        typer.Option(help="Attitude noise, rad (1 sigma); default sensors.attitude_noise."),
+        typer.Option(
+            help="Free/spindown: attitude noise, rad (1 sigma); default sensors.attitude_noise."
+        ),
     ] = None,
     jitter: Annotated[
         float, typer.Option(help="Free/spindown: sample intervals vary by up to this fraction.")
