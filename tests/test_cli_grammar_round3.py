@@ -386,3 +386,11 @@ def test_identify_hint_names_the_flags(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "--hold inertia" in err and "(--known-offset-xy)" in err, err
     assert "hold='" not in err and "known_offset_xy" not in err
+
+
+@pytest.mark.parametrize("flag", ["-o", "--out", "--output"])
+def test_demo_names_its_folder_option_as_typed(flag, tmp_path, capsys):
+    afile = tmp_path / "afile"
+    afile.write_text("")
+    assert run(["demo", flag, str(afile)]) == 2
+    assert f"error: {flag} {afile}: is a file, expected a folder" in capsys.readouterr().err

@@ -37,9 +37,10 @@ def demo(
     """Run every capability on the built-in testbeds and write DIR/report.html."""
     outputs = Outputs(force=force)
     if out.exists() and not out.is_dir():
+        from airbearing.cli.common import as_typed
         from airbearing.errors import InputError
 
-        raise InputError(f"--out {out}: is a file, expected a folder")
+        raise InputError(f"{as_typed('--out')} {out}: is a file, expected a folder")
     report = outputs.plan(
         out / "report.html", "--out", (".html",), create_folder=True, own=_demo_report
     )
