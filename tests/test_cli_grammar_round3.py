@@ -35,6 +35,13 @@ def test_time_left_says_nothing_once_run_out():
         assert left.update(2, 3, now) is None
 
 
+def test_no_estimate_from_a_step_that_took_no_time():
+    # report: a 0.1 s first step of three said "about 0 s left" while the next took seconds
+    left = TimeLeft(0.0)
+    assert left.update(1, 3, 0.1) is None
+    assert left.update(2, 3, 4.0)[0] == pytest.approx(2.0)
+
+
 def test_a_fresh_estimate_after_one_ran_out_is_not_capped_by_it():
     left = TimeLeft(0.0)
     left.update(1, 4, 1.0)  # 3 s left

@@ -62,8 +62,9 @@ class TimeLeft:
         Time the work started, s (``time.monotonic()``).
     """
 
-    #: s: an estimate that counts down below this has run out (it would read "about 0 s
-    #: left" while the step runs on).
+    #: s: an estimate below this says nothing (it would read "about 0 s left": a step
+    #: that took no time predicts nothing about the next, and one that has counted down
+    #: to it has run out while its step runs on).
     RUN_OUT = 0.5
 
     def __init__(self, start: float) -> None:
@@ -76,7 +77,8 @@ class TimeLeft:
     def update(self, done: float, total: float, now: float) -> tuple[float, float] | None:
         """``(left, uncertainty)`` in s at ``now`` after ``done`` of ``total`` steps, or
         ``None`` when there is no honest estimate: before the first step is done, after
-        the last, or once the estimate has run out while a step is still running."""
+        the last, below :attr:`RUN_OUT` (steps that took no time so far, or an estimate
+        that has run out while a step is still running)."""
         if not total or done <= 0 or done >= total:
             return None
         if done != self.done:  # a step finished: a new estimate
@@ -89,6 +91,6 @@ class TimeLeft:
                     raw = min(raw, before + self.uncertainty)
             self.shown, self.uncertainty, self.at, self.done = raw, unc, now, done
         left = self.shown - (now - self.at)
-        if now > self.at and left < self.RUN_OUT:  # counted down to nothing: ran out
+        if left < self.RUN_OUT:  # "about 0 s left" is never an honest estimate
             return None
         return left, self.uncertainty

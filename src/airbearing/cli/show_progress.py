@@ -75,7 +75,7 @@ def _when(left, done: float, total: float, now: float) -> str:
     estimate = left.update(done, total, now)
     if estimate is not None:
         return f", about {_duration(estimate[0])} left"
-    return f", {elapsed} so far" if done > 0 or now - left.start >= 1.0 else ""
+    return f", {elapsed} so far" if now - left.start >= 1.0 else ""
 
 
 class _Plain:
