@@ -213,3 +213,15 @@ def test_cli_check_caps_the_segment_list_and_plot_draws_every_row(tmp_path, caps
         x = np.asarray(line.get_xdata(), dtype=float)
         drawn |= set(np.round(x[np.isfinite(x)], 9))
     assert drawn >= set(np.round(log.t, 9))  # every row of the log is on the figure
+
+
+@pytest.mark.parametrize(("method", "seed"), [("mechanical", 1), ("lyapunov", 1)])
+def test_stepper_moves_of_a_balancing_run_are_no_step(method, seed):
+    # stepper sliders moving at every sample: each move is an impulse on the platform
+    # (a change of slope of its noise-free attitude), smooth motion all the same
+    from airbearing.analysis.balancing.runs import run_balancing
+    from airbearing.io.testbed import load_testbed
+
+    log = run_balancing(load_testbed("seed000-tabletop"), method, duration=300.0, seed=seed)
+    q = log.result.log.quality
+    assert q.discontinuities == () and q.n_segments == 1

@@ -53,6 +53,7 @@ __all__ = ["Discontinuity", "STEP_THRESHOLD", "find_steps", "rate_changes", "spl
 #: an interval above which the interval holds a step (module doc, step 5).
 STEP_THRESHOLD = 10.0
 _TAU = np.linspace(0.0, 1.0, 5)  # fractions of the interval at which D is scored
+_MID = 2  # the middle of _TAU
 _RATE_HALF = 5  # half-width (intervals) of the running median interval
 
 
@@ -120,18 +121,20 @@ SIDE_FITS: tuple[tuple[int, int], ...] = ((12, 2), (24, 3))
 
 
 def _side(t, x, b, count, p, period, wrap):
-    """Left and right fits of ``count`` samples at boundaries ``b``: the disagreement at the
-    interval's middle in value and slope with their noise gains, and each side's own
-    one-step residual (normalised by ``sqrt(1 + h)``) of its last sample."""
+    """Left and right fits of ``count`` samples at boundaries ``b``: their disagreement in
+    value at :data:`_TAU` across the interval (m, tau, c) and in slope at its middle
+    (m, c), with their noise gains, and each side's own one-step residual (normalised by
+    ``sqrt(1 + h)``) of its last sample."""
     t0, t1 = t[b - 1], t[b]
+    at = t0[:, None] + (t1 - t0)[:, None] * _TAU
     mid = 0.5 * (t0 + t1)[:, None]
-    w_l, r_l = _weights(t, b - count, count, p, mid, t0, period)
-    w_r, r_r = _weights(t, b, count, p, mid, t0, period)
+    w_l, r_l = _weights(t, b - count, count, p, at, t0, period)
+    w_r, r_r = _weights(t, b, count, p, at, t0, period)
     v_l, _ = _weights(t, b - count, count, p, mid, t0, period, slope=True)
     v_r, _ = _weights(t, b, count, p, mid, t0, period, slope=True)
-    d = _predict(w_l, r_l, x)[:, 0] - _predict(w_r, r_r, x)[:, 0]
+    d = _predict(w_l, r_l, x) - _predict(w_r, r_r, x)
     dv = _predict(v_l, r_l, x)[:, 0] - _predict(v_r, r_r, x)[:, 0]
-    h = np.sum(w_l[:, 0] ** 2, axis=-1) + np.sum(w_r[:, 0] ** 2, axis=-1)
+    h = np.sum(w_l**2, axis=-1) + np.sum(w_r**2, axis=-1)
     hv = np.sum(v_l[:, 0] ** 2, axis=-1) + np.sum(v_r[:, 0] ** 2, axis=-1)
     s_l, q_l = _weights(t, b - count - 1, count, p, t0[:, None], t0, period)
     s_r, q_r = _weights(t, b + 1, count, p, t1[:, None], t0, period)
@@ -180,7 +183,9 @@ def _calibrate(g, t, segments, count, p, period):
     return _MAD_TO_SIGMA * np.median(np.abs(e - np.median(e, axis=0)), axis=0)
 
 
-def find_steps(scorer, t: np.ndarray, period: float) -> list[tuple[int, tuple[str, ...], float]]:
+def find_steps(
+    scorer, t: np.ndarray, period: float, switch: np.ndarray | None = None
+) -> list[tuple[int, tuple[str, ...], float]]:
     """Steps of one channel group (module doc): ``(row, columns, score)`` each.
 
     Parameters
@@ -191,6 +196,11 @@ def find_steps(scorer, t: np.ndarray, period: float) -> list[tuple[int, tuple[st
         s, sample times, shape (n,).
     period : float
         s, nominal sample interval (only scales the time axis of the fits).
+    switch : numpy.ndarray or None
+        (n,) bool: rows near a switch of a logged command (``quality._switch_rows``).
+        There a moving mass or a gimbal's momentum exchange may make the rate jump: the
+        rates are not tested and the attitude only for a jump in value (its two fits
+        may meet anywhere in the interval).
     """
     from airbearing.io.quality import CHI2_3_THRESHOLD, Z_THRESHOLD
 
@@ -209,8 +219,8 @@ def find_steps(scorer, t: np.ndarray, period: float) -> list[tuple[int, tuple[st
         scale = np.maximum(scale, g.floor)
         mid = np.array([count + 1])  # a regular interior boundary
         tt = np.arange(2 * count + 3, dtype=float) * period
-        *_, h0 = _side(tt, np.zeros((tt.size, 1)), mid, count, deg, period, False)[:3]
-        key = float(np.sum(np.log(scale))) + 0.5 * scale.size * float(np.log(h0[0]))
+        h0 = _side(tt, np.zeros((tt.size, 1)), mid, count, deg, period, False)[2][0, _MID]
+        key = float(np.sum(np.log(scale))) + 0.5 * scale.size * float(np.log(h0))
         if best is None or key < best[0]:
             best = (key, count, deg, scale)
     if best is None:
@@ -231,22 +241,32 @@ def find_steps(scorer, t: np.ndarray, period: float) -> list[tuple[int, tuple[st
     quiet = scorer._quiet[None, :]
     scale = np.where(quiet, np.maximum(base, scorer.noise * local), base[None, :] * local)
     e_in = _in_window(t, x, b, count, deg, period, g.wrap)
+    at_switch = np.zeros(b.size, dtype=bool) if switch is None else switch[b - 1] | switch[b]
     if g.vector:
         explained = (np.sum(e_l**2, axis=1) / scale[:, 0] ** 2 <= CHI2_3_THRESHOLD) & (
             np.sum(e_r**2, axis=1) / scale[:, 0] ** 2 <= CHI2_3_THRESHOLD
         )
         z_in = np.sum(e_in**2, axis=2) / scale[:, :1] ** 2
         explained &= np.all(z_in <= CHI2_3_THRESHOLD, axis=1)
-        z = np.linalg.norm(d, axis=1) / (scale[:, 0] * np.sqrt(h))
-        z = np.maximum(z, np.linalg.norm(dv, axis=1) / (scale[:, 0] * np.sqrt(hv)))
+        z_tau = np.linalg.norm(d, axis=-1) / (scale[:, :1] * np.sqrt(h))  # (m, tau)
+        z_slope = np.linalg.norm(dv, axis=-1) / (scale[:, 0] * np.sqrt(hv))
+        z_slope = np.where(scorer._quiet[0], 0.0, z_slope)  # see below
+        z = np.where(at_switch, np.min(z_tau, axis=1), np.maximum(z_tau[:, _MID], z_slope))
         z = np.repeat(z[:, None], len(g.columns), axis=1)
     else:
         explained = np.all(np.abs(e_l) / scale <= Z_THRESHOLD, axis=1)
         explained &= np.all(np.abs(e_r) / scale <= Z_THRESHOLD, axis=1)
         explained &= np.all(np.abs(e_in) / scale[:, None, :] <= Z_THRESHOLD, axis=(1, 2))
-        z = np.abs(d) / (scale * np.sqrt(h)[:, None])
+        z_tau = np.abs(d) / (scale[:, None, :] * np.sqrt(h)[..., None])  # (m, tau, c)
+        z_min = np.min(z_tau, axis=1)
         if g.name == "attitude":  # no finite torque makes the rate jump: slopes meet too
-            z = np.maximum(z, np.abs(dv) / (scale * np.sqrt(hv)[:, None]))
+            z_slope = np.abs(dv) / (scale * np.sqrt(hv)[:, None])
+            # a noise-free (simulated) attitude shows every impulse of a moving mass as a
+            # change of slope far above its floor: its slope is not tested, only its value
+            z_slope = np.where(scorer._quiet[None, :], 0.0, z_slope)
+            z = np.where(at_switch[:, None], z_min, np.maximum(z_tau[:, _MID], z_slope))
+        else:  # a rate may kink (a torque switched): the two fits cross in the interval
+            z = np.where(at_switch[:, None], 0.0, z_min)
     stepping = (z > STEP_THRESHOLD) & explained[:, None]
     score = np.where(stepping, z, 0.0).max(axis=1)
     # an interval shorter than half a period is a timing fault (reported as irregular):

@@ -1052,11 +1052,12 @@ def _steps(log: Log, testbed, segments, t, period):
     groups = _groups(log, testbed, segments)
     scorers: dict[str, _Scorer] = {}
     found: dict[int, tuple[list[str], float]] = {}
+    switch = _switch_rows(log, segments, max(k for k, _ in FITS))
     for g in groups:
         if g.name not in ("rates", "attitude"):
             continue
         scorer = scorers[g.name] = _Scorer(g, t, segments, period)
-        for row, cols, score in find_steps(scorer, t, period):
+        for row, cols, score in find_steps(scorer, t, period, switch):
             have = found.setdefault(row, ([], 0.0))
             found[row] = (have[0] + list(cols), max(have[1], score))
     steps = tuple(
