@@ -225,3 +225,26 @@ def test_stepper_moves_of_a_balancing_run_are_no_step(method, seed):
     log = run_balancing(load_testbed("seed000-tabletop"), method, duration=300.0, seed=seed)
     q = log.result.log.quality
     assert q.discontinuities == () and q.n_segments == 1
+
+
+# ----------------------------------------------------------------------------
+# 5. what log check says identify can use is what identify does
+
+
+@pytest.mark.parametrize("n", [5, 3])
+def test_check_says_of_a_short_cmg_log_what_identify_does(n):
+    from airbearing.analysis.identification.cmg_inertia import identify_cmg_inertia
+    from airbearing.analysis.simulation.scenarios import slew
+    from airbearing.io.testbed import load_testbed
+    from airbearing.io.tool_use import tool_use
+
+    tb = load_testbed("cmg-yaw")
+    full = slew(tb, angle_deg=90, duration=5, seed=1).log
+    log = Log(full.data.iloc[10 : 10 + n], "short.csv", tb)
+    ok, why = tool_use(log, log.quality)["identify"]
+    try:
+        identify_cmg_inertia(tb, [log])
+        answered = True
+    except InputError:
+        answered = False
+    assert ok == answered, why

@@ -63,6 +63,8 @@ def tool_use(log: Log, quality: LogQuality) -> dict[str, tuple[bool, str]]:
         why = f"no segment has {MIN_FIT_SAMPLES} usable samples (longest: {longest})"
         out["identify"] = (False, why)
         out["discrepancy"] = (False, why)
+        if tb is not None and tb.kind == "cmg" and tb.body.dof == 1:
+            out["identify"] = _cmg_identify_minimum(quality, usable)
     out["replay"] = (replay_ok, why_replay)
     if quality.gyro_disagreement:  # a fit on it would be confidently wrong
         why = quality.gyro_disagreement[0]
@@ -79,3 +81,20 @@ def tool_use(log: Log, quality: LogQuality) -> dict[str, tuple[bool, str]]:
     else:
         out["balance"] = (replay_ok, "sliders and attitude logged: balancing runs can be checked")
     return out
+
+
+def _cmg_identify_minimum(quality: LogQuality, usable: np.ndarray) -> tuple[bool, str]:
+    """``identify``'s own minimum for a dof-1 CMG log (its momentum regression,
+    analysis/identification/cmg_inertia.py): the usable rows of each segment with at least
+    3 of them, more rows than unknowns (1/J_z and one constant per segment, without
+    friction)."""
+    counts = [int(np.sum(usable[a:b])) for a, b in quality.segments]
+    pieces = [c for c in counts if c >= 3]
+    rows, unknowns = sum(pieces), 1 + len(pieces)
+    if rows > unknowns:
+        return True, (
+            f"{rows} usable sample(s) in {len(pieces)} segment(s), more than the momentum "
+            f"regression's {unknowns} unknowns; no segment has {MIN_FIT_SAMPLES} usable "
+            "samples: a weak fit"
+        )
+    return False, f"{rows} usable sample(s) for {unknowns} unknowns (1/J_z, one per segment)"
