@@ -911,8 +911,8 @@ def _revise_on_horizon(search, sel, current, prog) -> Fit:
         set_intensity(problem, current.extra["process_noise"]["kappa"])
         return current
     sel.revisions += moves
+    # (a dropped sensor lag leaves the lag states in the model, at zero lag: sel.lag stays)
     sel.chosen, sel.theta = chosen, np.asarray(theta, float)
-    sel.lag = any(c.lag for c in chosen)
     search.kappa, search.noise = None, None
     search.final_problem, search.piece_s = None, None
     for pb in search.problems.values():
