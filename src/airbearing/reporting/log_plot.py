@@ -211,6 +211,10 @@ def log_report_html(log: Log, quality: LogQuality | None = None) -> str:
             f"{log.n} rows in {quality.n_segments} segment(s). Jitter {quality.jitter:.3f}. "
             f"Outlier rows: {outliers}."
         )
+        for d in quality.discontinuities:
+            report.paragraph(f"Row {d.row}: {d.reason}.")
+        for change in quality.rate_changes:
+            report.paragraph(f"Rate change: {change['reason']}")
         if quality.outliers:
             report.table(
                 [
