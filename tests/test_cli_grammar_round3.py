@@ -401,3 +401,14 @@ def test_demo_names_its_folder_option_as_typed(flag, tmp_path, capsys):
     afile.write_text("")
     assert run(["demo", flag, str(afile)]) == 2
     assert f"error: {flag} {afile}: is a file, expected a folder" in capsys.readouterr().err
+
+
+def test_identify_of_several_logs_prints_no_list_repr(tmp_path, capsys):
+    logs = [tmp_path / "a.csv", tmp_path / "b.csv"]
+    for i, log in enumerate(logs):
+        args = ["-q", "simulate", "cmg-yaw", "--duration", "5", "--noise-seed", str(i)]
+        assert run([*args, "-o", str(log)]) == 0
+    capsys.readouterr()
+    assert run(["-q", "identify", "cmg-yaw", *map(str, logs)]) == 0
+    out = capsys.readouterr().out
+    assert "outlier rows: none" in out and "[]" not in out, out

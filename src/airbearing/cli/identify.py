@@ -116,10 +116,9 @@ def identify(
     _echo_estimates(tb, result)
     js = result.to_json()
     typer.echo(f"active constraints: {', '.join(result.active_constraints) or 'none'}")
-    typer.echo(f"residual rms: {result.residual_rms:.3g} {js['residual_unit']}")
+    typer.echo(f"residual rms: {result.residual_rms:.4g} {js['residual_unit']}")
     if "segments" in js:
-        rows = ", ".join(str(r) for r in js["outlier_rows"] or []) or "none"
-        typer.echo(f"segments: {js['segments']}, outlier rows: {rows}")
+        typer.echo(f"segments: {js['segments']}, outlier rows: {_outlier_rows(js)}")
     for w in result.warnings:
         typer.echo(f"warning: {w}")
     out.json(p_json, js)
@@ -128,6 +127,21 @@ def identify(
         out.file(p_tb, lambda tmp: write_testbed(new_tb, tmp))
     for p in out.commit():
         typer.echo(f"wrote {p}")
+
+
+def _outlier_rows(js: dict) -> str:
+    """The rows left out in words: ``613, 2135``, ``none``, or per log for several logs
+    (the JSON's list of lists, never printed as one)."""
+    rows = js.get("outlier_rows") or []
+    if not any(isinstance(r, list) for r in rows):
+        return ", ".join(str(r) for r in rows) or "none"
+    if not any(rows):
+        return "none"
+    names = [Path(str(lg.get("source", f"log {i + 1}"))).name for i, lg in enumerate(js["logs"])]
+    return "; ".join(
+        f"{name}: {', '.join(str(x) for x in r) or 'none'}"
+        for name, r in zip(names, rows, strict=False)
+    )
 
 
 def _echo_estimates(tb, result) -> None:
@@ -154,7 +168,7 @@ def _echo_estimates(tb, result) -> None:
                 ["axis", "offset (um)", "std (um)"],
             )
         )  # fmt: skip
-        typer.echo(f"condition number: {result.condition_number:.3g}")
+        typer.echo(f"condition number: {result.condition_number:.4g}")
         if getattr(result, "held", None):
             typer.echo(f"held: {result.held} (from the testbed file)")
         for name, why in result.std_status.items():
