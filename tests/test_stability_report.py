@@ -111,8 +111,9 @@ def test_cli_gains_then_report(tmp_path, capsys):
         _main(["report", "platform-3dof", "--loop", "balancing", "--gains", str(g), "-o", str(bad)])
         == 2
     )
-    # one gains reader (io.gains): it names the key, what it holds and what was asked
-    assert "key 'loop' is 'attitude', but loop is 'balancing'" in capsys.readouterr().err
+    # it names what the gains are for, what was asked, and the option that fixes it
+    err = capsys.readouterr().err
+    assert "the report is of the balancing loop; pass --loop attitude" in err
     assert not bad.exists()
     assert _main(["gains", "cmg-yaw", "--loop", "roll"]) == 2
     assert _main(["gains", "cmg-yaw", "--phase-margin-deg", "-5"]) == 2
