@@ -59,6 +59,9 @@ MAX_MOVES = 3
 #: Models much worse than the named one carry no weight: a BIC more than this above it
 #: (posterior odds below 1 : 20, Madigan & Raftery 1994's Occam's window).
 WINDOW_BIC = 2.0 * math.log(20.0)
+#: A named effect more than this many of its (white, horizon) errors from zero is not
+#: dropped: the drop would raise the BIC by about z^2 - ln n, and weigh exp(-z^2 / 2).
+DROP_Z = 10.0
 #: A named effect is swapped only for a candidate whose regressors make at least this
 #: fraction of its torque on the logs (R^2): effects the logs can mistake for one another.
 SWAP_R2 = 0.5
@@ -153,15 +156,19 @@ def _refit(search, problem, lag, chosen, theta, kappa: float, delta0, up: bool =
     return best
 
 
-def _moves(search, lag, chosen, theta, slots: int, targets: set, partners: dict):
-    """``(kind, removed index or None, candidate or None)`` of the one-step moves: every
-    drop, swaps of a named effect to its ``partners`` (label -> labels) or to any of
-    ``targets`` (labels) whose regressors make most of its torque (:data:`SWAP_R2`), and
-    additions of ``targets`` while ``slots`` are left."""
+def _moves(search, lag, chosen, theta, std, slots: int, targets: set, partners: dict):
+    """``(kind, removed index or None, candidate or None)`` of the one-step moves: drops
+    (of effects within :data:`DROP_Z` of their errors from zero; a drop farther off raises
+    the BIC by about ``z^2`` and never weighs), swaps of a named effect to its ``partners``
+    (label -> labels) or to any of ``targets`` (labels) whose regressors make most of its
+    torque (:data:`SWAP_R2`), and additions of ``targets`` while ``slots`` are left."""
     taken = {c.name for c in chosen}
     by_label = {c.label: c for c in search.cands if c.smooth and not c.lag and c.name not in taken}
-    out = [("drop", i, None) for i in range(len(chosen))]
     parts = _split(chosen, theta)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        z = [np.max(np.abs(t) / s) if t.size else 0.0 for t, s in zip(parts, _split(chosen, std),
+             strict=True)]  # fmt: skip
+    out = [("drop", i, None) for i in range(len(chosen)) if not z[i] > DROP_Z]
     for i, m in enumerate(chosen):
         if m.lag:
             continue
@@ -251,9 +258,11 @@ def revise(search, sel, current, problem, *, max_effects: int, targets=(), partn
         if not np.isfinite(ll0):
             break
         best, scored = None, []
+        std = np.asarray(fit.theta_std, float)
         for kind, i, cand in _moves(
-            search, lag, chosen, theta, max_effects - len(chosen), set(targets), partners or {}
-        ):
+            search, lag, chosen, theta, std, max_effects - len(chosen), set(targets),
+            partners or {},
+        ):  # fmt: skip
             new = list(chosen)
             th_parts = _split(chosen, theta)
             removed = None
