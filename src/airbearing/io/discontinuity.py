@@ -47,6 +47,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from airbearing.io.quality import RowFinding
+
 __all__ = ["Discontinuity", "STEP_THRESHOLD", "find_steps", "rate_changes", "split_at"]
 
 #: Smallest normalised disagreement (noise scales) between the left and right fits over
@@ -58,7 +60,7 @@ _RATE_HALF = 5  # half-width (intervals) of the running median interval
 
 
 @dataclass(frozen=True)
-class Discontinuity:
+class Discontinuity(RowFinding):
     """A step between row ``row - 1`` and row ``row``: a new segment starts at ``row``.
 
     Attributes
@@ -74,22 +76,6 @@ class Discontinuity:
     score : float
         The smallest normalised disagreement over the interval, noise scales.
     """
-
-    row: int
-    t: float
-    columns: tuple[str, ...]
-    reason: str
-    score: float
-
-    def to_json(self) -> dict:
-        """``{"row", "t", "columns", "reason", "score"}``."""
-        return {
-            "row": self.row,
-            "t": self.t,
-            "columns": list(self.columns),
-            "reason": self.reason,
-            "score": self.score,
-        }
 
 
 def _weights(t, first, count, p, at, origin, period, slope=False):

@@ -192,22 +192,9 @@ _ROUGH = 0.2  # noise-free channels: scale floor per unit median |second differe
 
 
 @dataclass(frozen=True)
-class Outlier:
-    """One outlier row.
-
-    Attributes
-    ----------
-    row : int
-        0-based data row.
-    t : float
-        Logged time, s.
-    columns : tuple of str
-        The log columns whose value no smooth motion explains.
-    reason : str
-        In words: which channel, how far from the local smooth fit.
-    score : float
-        The largest normalised residual, in robust noise scales.
-    """
+class RowFinding:
+    """Something found at one row of a log (an outlier, a step): where, in which columns,
+    why and how strongly (see the subclasses)."""
 
     row: int
     t: float
@@ -224,6 +211,25 @@ class Outlier:
             "reason": self.reason,
             "score": self.score,
         }
+
+
+@dataclass(frozen=True)
+class Outlier(RowFinding):
+    """One outlier row.
+
+    Attributes
+    ----------
+    row : int
+        0-based data row.
+    t : float
+        Logged time, s.
+    columns : tuple of str
+        The log columns whose value no smooth motion explains.
+    reason : str
+        In words: which channel, how far from the local smooth fit.
+    score : float
+        The largest normalised residual, in robust noise scales.
+    """
 
 
 @dataclass(frozen=True)

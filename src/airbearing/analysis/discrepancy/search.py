@@ -845,20 +845,7 @@ def _retry_at_horizon(search, sel, current, screen, workers, prog) -> Fit:
     for noise in modes:
         if _retry_round(search, sel, current, retry, noise, (screen, workers, prog)):
             sel.at_bound -= {c.label for c in sel.chosen}
-            search.kappa, search.noise = None, None
-            for pb in search.problems.values():
-                set_intensity(pb, KAPPA_GRID[0])
-                set_measurement_noise(pb, None)
-            # the named effects on the naming pieces again: gap_after stays the same
-            # short-piece gap as gap_before, and the horizon continues down from there
-            sel.current = search.problem(sel.lag).fit(
-                search.models[sel.lag].p0.copy(),
-                **search.free(sel.lag, sel.chosen, sel.theta),
-                delta0=sel.current.delta,
-                name="the named effects on short pieces",
-            )
-            sel.theta = sel.current.theta.copy()
-            return search.horizon(sel.current, sel.lag, sel.chosen, sel.theta)
+            return _horizon_afresh(search, sel)
     for pb in search.problems.values():  # as it was
         set_measurement_noise(pb, search.noise)
     sel.current, sel.theta = before
@@ -913,18 +900,24 @@ def _revise_on_horizon(search, sel, current, prog) -> Fit:
     sel.revisions += moves
     # (a dropped sensor lag leaves the lag states in the model, at zero lag: sel.lag stays)
     sel.chosen, sel.theta = chosen, np.asarray(theta, float)
-    search.kappa, search.noise = None, None
     search.final_problem, search.piece_s = None, None
+    return _horizon_afresh(search, sel)
+
+
+def _horizon_afresh(search, sel) -> Fit:
+    """The horizon estimated afresh after the named effects changed (a retry's pick, a
+    revision): the problems back at the top of the grid with white noise, the named effects
+    refitted on the naming pieces (``gap_after`` stays the short-piece gap, as
+    ``gap_before``), and the horizon continued down from there for the new model."""
+    search.kappa, search.noise = None, None
     for pb in search.problems.values():
         set_intensity(pb, KAPPA_GRID[0])
         set_measurement_noise(pb, None)
-    # the revised effects on the naming pieces (gap_after, as after a retry's pick), then
-    # the horizon continued down from there for the new model
     sel.current = search.problem(sel.lag).fit(
         search.models[sel.lag].p0.copy(),
         **search.free(sel.lag, sel.chosen, sel.theta),
         delta0=sel.current.delta,
-        name="the revised effects on short pieces",
+        name="the named effects on short pieces",
     )
     sel.theta = sel.current.theta.copy()
     return search.horizon(sel.current, sel.lag, sel.chosen, sel.theta)
