@@ -13,10 +13,9 @@ noise) with viscous friction 2e-5 N m s, 100 times the nominal 2e-7.
 
 from __future__ import annotations
 
-from types import SimpleNamespace
-
 import numpy as np
 import pytest
+from judging import judged
 
 import airbearing as ab
 from airbearing.analysis.discrepancy.candidates import (
@@ -24,7 +23,6 @@ from airbearing.analysis.discrepancy.candidates import (
     Candidate,
     candidates_for,
 )
-from airbearing.analysis.discrepancy.trial import judge
 from airbearing.errors import InputError
 
 TRUTH = 2e-5  # N m s
@@ -148,17 +146,7 @@ def test_a_spring_cannot_push_away_from_rest():
 
 
 def _judged(cand, theta):
-    std = 1e-3 * max(abs(theta), 1e-9)
-    fit = SimpleNamespace(
-        n_res=1000, rss=1.0, theta=np.array([theta]), n_free=1, gap=1e-3,
-        not_identifiable=[None], theta_std=np.array([std]), cov=np.array([[std**2]]),
-        level="ok", status="ok",
-    )  # fmt: skip
-    held = SimpleNamespace(
-        rss=np.ones(3), testable=lambda *a: np.ones(3, bool), total=lambda use=None: (1.0, 1e-3)
-    )
-    before = SimpleNamespace(total=lambda use=None: (4.0, 2e-3))
-    return judge(cand, fit, 0, SimpleNamespace(rss=4.0), np.log(1000), 1, held, before, None, "")
+    return judged(cand, theta, 1e-3 * max(abs(theta), 1e-9))
 
 
 INERTIA = Candidate(name="inertia_error", params=("inertia_error",), tie=np.ones((1, 1)),
