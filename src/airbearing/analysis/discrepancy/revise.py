@@ -10,11 +10,13 @@ torque, which hides what it would explain.
 So, when the horizon says the named effects leave something (the process noise is
 significant), or a named effect is not significant there, or two candidates were
 confounded, each move of one step is scored on the horizon's own terms: drop a named
-effect, swap one for a candidate not named, or add one while ``max_effects`` allows.
-Every model is refitted with its own process noise (the intensity continued down the grid
-from the current one, :func:`~airbearing.analysis.shooting.process_noise.estimate_process_noise`),
-and models are compared by the BIC of that marginal likelihood (window states integrated
-out, effects at their maximum):
+effect (unless it lies more than :data:`DROP_Z` errors from zero), swap one for a
+candidate whose regressors make most of its torque (:data:`SWAP_R2`) or for its
+confounded partner, or add one while ``max_effects`` allows. Every model is refitted with
+its own process noise (the intensity stepped along the grid of
+:mod:`~airbearing.analysis.shooting.process_noise` from the current one while the
+likelihood grows), and models are compared by the BIC of that marginal likelihood (window
+states integrated out, effects at their maximum):
 
     BIC = -2 max_q l(q) + k ln n
 
@@ -22,6 +24,11 @@ A move is taken when it lowers the BIC by more than :data:`MOVE_BIC` (a drop by 
 amount: an effect that does not pay for its parameter on the horizon is not named); the
 best move is taken, then the moves are scored again, at most :data:`MAX_MOVES` times. A
 candidate whose fit sits at its physical bound is not a move.
+
+The moves of the final model that were not taken are its :class:`Neighbour` models. Those
+inside Occam's window (:func:`occams_window`) share its weight, ``exp(-dBIC / 2)``, and
+the named values' errors include the choice among them (:func:`model_averaged_std`);
+swaps within ``CONFOUND_BIC`` of it are confounded pairs (:func:`close_alternatives`).
 """
 
 from __future__ import annotations
