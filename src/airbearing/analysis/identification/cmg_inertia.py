@@ -136,18 +136,9 @@ class CMGIdentification(IdentificationResult):
         """``inertia`` (J_z), ``std``, ``std_white``, ``condition_number``,
         ``active_constraints``, ``residual_rms`` and the friction terms (NaN: null, as in
         ``--json``)."""
-        sw = self.std_white
         return to_jsonable(
             {
-                "inertia": float(self.inertia),
-                "std": float(self.std_inertia),
-                "std_white": None if sw is None else float(np.asarray(sw).reshape(-1)[0]),
-                "std_status": dict(self.std_status),
-                "condition_number": float(self.condition_number),
-                "active_constraints": list(self.active_constraints),
-                "residual_rms": float(self.residual_rms),
-                "residual_unit": self.residual_unit,
-                "residual_rms_unit": self.residual_unit,
+                **self._yaw_json(self.condition_number, self.active_constraints),
                 "friction": dict(self.friction),
                 "std_friction": dict(self.std_friction),
                 "method": self.method,

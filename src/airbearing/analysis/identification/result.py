@@ -159,6 +159,21 @@ class IdentificationResult:
         key = "not identifiable from this log"
         return {n: s for n, s in self.std_status.items() if s.startswith(key)}
 
+    def _yaw_json(self, condition_number: float, active_constraints) -> dict:
+        """The keys every dof-1 (J_z) result's JSON shares, in their order."""
+        sw = self.std_white
+        return {
+            "inertia": float(self.inertia),
+            "std": float(self.std_inertia),
+            "std_white": None if sw is None else float(np.asarray(sw).reshape(-1)[0]),
+            "std_status": dict(self.std_status),
+            "condition_number": float(condition_number),
+            "active_constraints": list(active_constraints),
+            "residual_rms": float(self.residual_rms),
+            "residual_unit": self.residual_unit,
+            "residual_rms_unit": self.residual_unit,
+        }
+
     def plot(self, reference=None, *, reference_label: str = "reference"):
         """Figure: each identified value with its 1-sigma error bar, one panel per parameter.
 

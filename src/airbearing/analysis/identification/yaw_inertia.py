@@ -109,18 +109,9 @@ class YawIdentification(IdentificationResult):
         """``inertia``, ``std``, ``std_white``, ``std_status``, ``residual_rms``,
         ``residual_unit``, ``segments``, ``outlier_rows``, ``logs``, ``warnings``, ``method``
         (NaN: null, as in ``--json``)."""
-        sw = self.std_white
         return to_jsonable(
             {
-                "inertia": float(self.inertia),
-                "std": float(self.std_inertia),
-                "std_white": None if sw is None else float(np.asarray(sw).reshape(-1)[0]),
-                "std_status": dict(self.std_status),
-                "condition_number": 1.0,
-                "active_constraints": [],
-                "residual_rms": float(self.residual_rms),
-                "residual_unit": self.residual_unit,
-                "residual_rms_unit": self.residual_unit,
+                **self._yaw_json(1.0, ()),
                 "method": self.method,
                 "segments": int(self.segments),
                 "outlier_rows": self.outlier_rows,
