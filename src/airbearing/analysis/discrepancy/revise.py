@@ -176,28 +176,41 @@ def _moves(search, lag, chosen, theta, std, slots: int, targets: set, partners: 
         z = [np.max(np.abs(t) / s) if t.size else 0.0 for t, s in zip(parts, _split(chosen, std),
              strict=True)]  # fmt: skip
     out = [("drop", i, None) for i in range(len(chosen)) if not z[i] > DROP_Z]
+    swappable = [m for m in chosen if not m.lag]
+    targets_in = [by_label[lb] for lb in sorted(targets) if lb in by_label]
+    phi = _regressors(search, lag, chosen, theta, swappable + targets_in) if targets_in else {}
     for i, m in enumerate(chosen):
         if m.lag:
             continue
         mine = set(partners.get(m.label, ()))
         for label in sorted(targets | mine):
             if label in by_label and (
-                label in mine
-                or _r2(search, lag, chosen, theta, m, parts[i], by_label[label]) >= SWAP_R2
+                label in mine or _r2(phi[m.label], parts[i], phi[label]) >= SWAP_R2
             ):
                 out.append(("swap", i, by_label[label]))
     if slots > 0:
-        out += [("add", None, by_label[lb]) for lb in sorted(targets) if lb in by_label]
+        out += [("add", None, c) for c in targets_in]
     return out
 
 
-def _r2(search, lag, chosen, theta, named, th_named, cand) -> float:
-    """Fraction of ``named``'s torque on the logs (at ``th_named``) that ``cand``'s
-    regressors make (uncentred R^2 of the least squares)."""
+def _regressors(search, lag, chosen, theta, cands) -> dict:
+    """``label -> `` the torque regressors (rows, axes, k) of each of ``cands`` at the
+    current model (one residual-torque evaluation for all of them)."""
     model = search.models[lag]
     p_cur = model.p0 + (search.S(lag, chosen) @ theta if chosen else 0.0)
-    _, phi_m = residual_torque(model, search.datas, p_cur, search.S(lag, [named]))
-    _, phi_c = residual_torque(model, search.datas, p_cur, search.S(lag, [cand]))
+    _, phi = residual_torque(model, search.datas, p_cur, search.S(lag, cands))
+    out, j = {}, 0
+    for c in cands:
+        out[c.label] = phi[:, :, j : j + c.k]
+        j += c.k
+    return out
+
+
+def _r2(phi_named, th_named, phi_cand) -> float:
+    """Fraction of the named effect's torque on the logs (its regressors ``phi_named`` at
+    ``th_named``) that a candidate's regressors ``phi_cand`` make (uncentred R^2 of the
+    least squares)."""
+    phi_m, phi_c = phi_named, phi_cand
     y = (phi_m @ np.asarray(th_named, float)).reshape(-1)
     X = phi_c.reshape(-1, phi_c.shape[2])
     yy = float(y @ y)
