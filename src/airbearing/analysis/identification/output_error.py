@@ -99,15 +99,18 @@ class OutputErrorResult:
 def _inverse(F: np.ndarray) -> np.ndarray:
     """The covariance: ``F^-1`` (scaled by its diagonal for conditioning), NaN if singular.
 
-    A numerically singular ``F`` gives a covariance that is not positive definite; the
-    caller (:func:`~.platform.identify_platform`) reads that as "not identifiable".
+    Singular means rank-deficient to working precision (numpy's ``matrix_rank`` tolerance,
+    largest singular value x size x eps, on the diagonally scaled matrix): the inverse of
+    such a matrix is round-off, positive definite or not by chance of the platform's
+    BLAS, so it is never returned. The caller (:func:`~.platform.identify_platform`)
+    reads NaN as "not identifiable".
     """
     d = np.sqrt(np.maximum(np.diag(F), 0))
     d = np.where(d > 0, d, 1.0)
-    try:
-        return np.linalg.inv(F / np.outer(d, d)) / np.outer(d, d)
-    except np.linalg.LinAlgError:
+    Fs = F / np.outer(d, d)
+    if not np.all(np.isfinite(Fs)) or np.linalg.matrix_rank(Fs, hermitian=True) < len(Fs):
         return np.full(F.shape, np.nan)
+    return np.linalg.inv(Fs) / np.outer(d, d)
 
 
 def _rms(a) -> float:
