@@ -300,6 +300,8 @@ def test_settling_time_of_a_pd_loop_is_the_envelope_time():
     assert envelope - np.pi / wd <= t <= envelope + 1e-6
     assert settling_time(tb, (kp, kd, 2e-5), r_z, start="level") == 0.0
     assert settling_time(tb, (kp, -kd, 2e-5), r_z, start="rest") == np.inf
+    # started level an unstable loop does not settle either (it was reported as 0 s)
+    assert settling_time(tb, (kp, -kd, 2e-5), r_z, start="level") == np.inf
 
 
 def test_seed000_comparison_with_the_offset_kept_reports_the_transient():

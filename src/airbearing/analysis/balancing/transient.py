@@ -78,11 +78,9 @@ def settling_time(
     constant torque, ``tau = k_g theta_r`` (what holds the platform there), or any ``tau``
     from level; an offset the law removes, none. Settled: ``|theta|`` stays within
     :data:`STEADY_TRANSIENT` of its peak (python-control's forced response), the later of
-    the two axes; 0 when nothing is excited (started level, offset removed), ``inf`` when
-    the loop is unstable.
+    the two axes; ``inf`` when the loop is unstable (also started level: the noise grows
+    without bound), else 0 when nothing is excited (started level, offset removed).
     """
-    if start == "level" and not offset_stays:
-        return 0.0
     J = testbed.body.inertia_matrix
     k_g = -testbed.body.mass * testbed.gravity * vertical_offset
     # a comparison runs the same loop many times: the forced response is cached by value
