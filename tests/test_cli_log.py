@@ -109,3 +109,21 @@ def test_check_wrong_output_suffix_before_work(tmp_path, capsys):
     raw, _, tb = lab_files(tmp_path)
     assert run(["log", "check", str(tb), str(raw), "--json", str(tmp_path / "x.txt")]) == 2
     assert "--json" in capsys.readouterr().err
+
+
+def test_check_tells_epoch_time_stamps_apart(tmp_path, capsys):
+    """A log timed from the Unix epoch: the first and last stamps and each segment's ends
+    are written so they differ (six significant digits made both '1.7e+09')."""
+    raw, mp, tb = lab_files(tmp_path)
+    log = tmp_path / "log.csv"
+    assert run(["log", "import", str(tb), str(raw), "--map", str(mp), "-o", str(log)]) == 0
+    data = pd.read_csv(log)
+    data["t"] += 1.7e9
+    data.to_csv(log, index=False)
+    capsys.readouterr()
+    assert run(["log", "check", str(tb), str(log)]) == 0
+    text = capsys.readouterr().out
+    assert "1.7e+09" not in text
+    # 10 Hz: one decimal resolves a sample; the gap makes two segments
+    assert "t = 1700000000.0 .. 1700000079.9 s" in text
+    assert "1700000029.9" in text and "1700000050.0" in text

@@ -72,13 +72,15 @@ class LogCheck:
         }
 
     def __str__(self) -> str:
+        from airbearing.io.log import time_text
+
         q = self.quality
         lines = [
             f"{self.log}: {self.rows} rows, {self.duration:.6g} s at {self.rate:g} Hz, "
             f"{len(q.segments)} segment(s), outlier rows: {_rows_text(q.outlier_rows)}"
         ]
         for o in q.outliers:
-            lines.append(f"  row {o.row} (t = {o.t:.6g} s): {o.reason}")
+            lines.append(f"  row {o.row} (t = {time_text(o.t, q.period)} s): {o.reason}")
         for name, (ok, why) in self.tools.items():
             lines.append(f"  {name}: {'yes' if ok else 'no'} ({why})")
         return "\n".join(lines)

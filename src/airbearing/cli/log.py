@@ -173,7 +173,7 @@ def check(
     json_path = out.plan(json_out, "--json", (".json",))
     tb = _testbed(testbed)
     from airbearing.api.logs import check_log
-    from airbearing.io.log import BadCellsError, read_log
+    from airbearing.io.log import BadCellsError, read_log, time_text
     from airbearing.io.tool_use import TOOLS
 
     try:
@@ -183,13 +183,17 @@ def check(
         return
     result = check_log(log)
     quality, tools, t = result.quality, result.tools, log.t
+
+    def _t(value: float) -> str:
+        return time_text(value, quality.period)
+
     summary = {**result.to_json(), "log": str(log_file)}
     out.json(json_path, summary)
     out.commit()
     lines = [
         ("log", f"{log_file} (testbed {tb.name!r})"),
         ("rows", f"{log.n}"),
-        ("duration", f"{t[-1] - t[0]:.6g} s (t = {t[0]:.6g} .. {t[-1]:.6g} s)"),
+        ("duration", f"{t[-1] - t[0]:.6g} s (t = {_t(t[0])} .. {_t(t[-1])} s)"),
         (
             "rate",
             f"{tb.sensors.rate:g} Hz (period {quality.period:.6g} s; "
@@ -216,11 +220,11 @@ def check(
         if hidden and i == shown[-2]:
             typer.echo(f"{'':<{width}}  ... {hidden} more segment(s) (all in the JSON)")
         typer.echo(
-            f"{'':<{width}}  #{i:<3} rows {a:>6} - {b - 1:<6} t = {t0:>9.6g} .. {t1:<9.6g} s "
+            f"{'':<{width}}  #{i:<3} rows {a:>6} - {b - 1:<6} t = {_t(t0):>9} .. {_t(t1):<9} s "
             f"({b - a} samples)"
         )
     for d in quality.discontinuities:
-        typer.echo(f"{'step':<{width}}  row {d.row:<6} t = {d.t:<9.6g} s  {d.reason}")
+        typer.echo(f"{'step':<{width}}  row {d.row:<6} t = {_t(d.t):<9} s  {d.reason}")
     for change in quality.rate_changes:
         typer.echo(f"{'warning':<{width}}  {change['reason']}")
     ratio = quality.median_interval / quality.period
@@ -232,7 +236,7 @@ def check(
         )
     typer.echo(f"{'outliers':<{width}}  {len(quality.outliers)} row(s)")
     for o in quality.outliers:
-        typer.echo(f"{'':<{width}}  row {o.row:<6} t = {o.t:<9.6g} s  {o.reason}")
+        typer.echo(f"{'':<{width}}  row {o.row:<6} t = {_t(o.t):<9} s  {o.reason}")
     if quality.unexplained_rows:
         typer.echo(
             f"{'unexplained':<{width}}  rows {_rows(quality.unexplained_rows)} "

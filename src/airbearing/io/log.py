@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import csv
 import io
+import math
 import os
 from collections.abc import Iterable, Sequence
 from pathlib import Path
@@ -58,6 +59,7 @@ __all__ = [
     "REQUIRED_COLUMNS",
     "Log",
     "read_log",
+    "time_text",
     "segments_of",
     "validate_log",
     "write_log",
@@ -959,3 +961,15 @@ def write_log(log: Log | pd.DataFrame, path: str | os.PathLike[str]) -> Path:
         pq.write_table(pa.Table.from_pandas(data, preserve_index=False), buffer)
         content = buffer.getvalue()
     return _atomic_write_bytes(p, content)
+
+
+def time_text(t: float, period: float) -> str:
+    """A time stamp as text that tells samples apart: ``12.35``, ``1700000012.35``.
+
+    Logs timed from an epoch (1.7e9 s) read as ``1.7e+09`` with six significant digits, the
+    same at both ends of the log; from 1e5 s on the stamp is written in fixed point with
+    the decimals that resolve ``period`` (s, the sample interval).
+    """
+    if abs(t) < 1e5 or not (period > 0 and math.isfinite(period)):
+        return f"{t:.6g}"
+    return f"{t:.{max(0, math.ceil(-math.log10(period)))}f}"

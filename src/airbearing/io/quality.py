@@ -1054,6 +1054,7 @@ def _steps(log: Log, testbed, segments, t, period):
     """The channel groups, the scorers of the rates and attitude, and the steps found
     on them (:mod:`airbearing.io.discontinuity`), merged by row."""
     from airbearing.io.discontinuity import Discontinuity, find_steps
+    from airbearing.io.log import time_text
 
     groups = _groups(log, testbed, segments)
     scorers: dict[str, _Scorer] = {}
@@ -1072,7 +1073,8 @@ def _steps(log: Log, testbed, segments, t, period):
             t=float(t[r]),
             columns=tuple(cols),
             reason=(
-                f"step between rows {r - 1} and {r} (t = {t[r - 1]:.6g} .. {t[r]:.6g} s): "
+                f"step between rows {r - 1} and {r} (t = {time_text(t[r - 1], period)} .. "
+                f"{time_text(t[r], period)} s): "
                 f"{', '.join(cols)} {score:.3g} noise scales apart where the smooth fits "
                 "of each side meet (two runs joined? samples cut out?): a new segment starts"
             ),
