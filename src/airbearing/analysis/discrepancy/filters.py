@@ -5,7 +5,7 @@ They give the numbers of ``scipy.signal.savgol_filter(..., mode="interp")`` and
 ``scipy.signal.welch`` (defaults: periodic Hann window, half overlap, constant detrend,
 one-sided density), checked against scipy in ``tests/test_discrepancy_filters.py``.
 Importing ``scipy.signal`` costs about 1 s of CPU (it pulls ``scipy.stats`` in), a
-sixth of a whole ``airbearing discrepancy`` run once the search is screened (issue 15).
+sixth of a whole ``airbearing discrepancy`` run once the search is screened.
 """
 
 from __future__ import annotations

@@ -20,7 +20,7 @@ residual-torque regression start. It is scored by
   ~1e3 times the value, and the held-out gap 1e3 times the noise); a fold whose
   held-out windows do not see it tests nothing.
 
-Honest naming (issue 13): a candidate may be NAMED only when its fit converged,
+Honest naming: a candidate may be NAMED only when its fit converged,
 every parameter is identifiable from the logs (no zero Jacobian column, no
 singular Fisher matrix), it is not pinned at its physical bound, the LR exceeds
 the chi-square quantile ``1 - SIGNIFICANCE`` with the BIC dropping, its value is

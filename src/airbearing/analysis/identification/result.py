@@ -6,7 +6,7 @@ of ``airbearing identify`` (keys ``inertia``, ``cm_offset``, ``std``,
 ``condition_number``, ``active_constraints``, ``residual_rms``, ``residual_unit``,
 ``segments``, ``outlier_rows``, ...).
 
-Honest errors (issue 13 item 6): a standard error is never reported as zero. A
+Honest errors: a standard error is never reported as zero. A
 parameter that is known (``known_offset_xy``) or pinned by an active constraint (a
 prior bound) has no standard error (``null`` in JSON) and its reason in
 ``std_status``; a parameter the logs cannot separate (a singular Fisher matrix) is
