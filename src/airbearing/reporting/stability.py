@@ -11,14 +11,21 @@ ideal actuators and the same one-sample delay) overlaid; the closed-loop pole ma
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import matplotlib.pyplot as plt
 import numpy as np
 
 from airbearing.analysis.simulation.simulate import closed_loop_rollout
 from airbearing.design.loops import Loop, make_loop, with_delay
-from airbearing.design.margins import _response, analyse_loop, frequency_grid, json_number
-from airbearing.design.tuning import Spec, evaluate, scenario_response, tune
+from airbearing.design.margins import (
+    _response,
+    analyse_loop,
+    frequency_grid,
+    json_number,
+    multiloop_worst_corner,
+)
+from airbearing.design.tuning import Check, Spec, corners, evaluate, scenario_response, tune
 from airbearing.models import quaternion as quat
 from airbearing.reporting.html import Report, pretty_key, table_html
 
@@ -249,7 +256,12 @@ def report_for_loop(
     progress("margins and the worst case over the uncertainty box", 1, 3)
     d = analyse_loop(loop, discrete=True)
     c = analyse_loop(loop, discrete=False)
+    undelayed = analyse_loop(replace(loop, delay_samples=0), discrete=True)
     checks, worst, per = evaluate(loop, spec)
+    ml_worst = None
+    if d.multiloop is not None and worst["stable"]:
+        ml_worst = multiloop_worst_corner(loop, corners(loop, spec))
+    checks = [*checks, *_simultaneous_checks(d, ml_worst, spec, worst["stable"])]
     met = all(ch.met for ch in checks)
     rep.paragraph(
         (
@@ -259,7 +271,8 @@ def report_for_loop(
         ),
         note=True,
     )
-    _margin_tables(rep, d, c, checks, per, spec)
+    _margin_tables(rep, d, c, checks, per, spec, ml_worst)
+    _delay_note(rep, loop, d, undelayed)
     for fig, cap in _bode_nyquist(d, loop, True):
         rep.figure(fig, cap)
     # responses
@@ -278,12 +291,93 @@ def report_for_loop(
         "checks": [ch.to_dict() for ch in checks],
         **d.to_dict(),
         "continuous": c.to_dict(),
+        "delay_samples": loop.delay_samples,
+        "without_delay": undelayed.to_dict(),
         "worst_case": {
-            k: (json_number(v) if isinstance(v, float) else v) for k, v in worst.items()
+            k: (json_number(v) if isinstance(v, float) else v)
+            for k, v in {**worst, **_multiloop_worst_keys(ml_worst)}.items()
         },
         "notes": list(loop.notes),
     }
     return rep, data
+
+
+#: Names of the checks of the simultaneous (multi-loop disk) margins.
+SIMULTANEOUS_GAIN = "gain margin, all channels at once (dB)"
+SIMULTANEOUS_PHASE = "phase margin, all channels at once (deg)"
+
+
+def _limit_check(name: str, value: float, limit: float) -> Check:
+    """``value >= limit`` as a :class:`~airbearing.design.tuning.Check` (``by`` in the
+    value's unit; an unlimited margin passes by an unlimited amount)."""
+    by = math.inf if math.isinf(value) else value - limit
+    return Check(name, value, limit, ">=", bool(by >= 0), by)
+
+
+def _simultaneous_checks(d, ml_worst, spec: Spec, stable: bool) -> list[Check]:
+    """The multi-loop disk margin's gain and phase, worst over the uncertainty box,
+    against the specification's gain and phase margins.
+
+    The balanced disk margin covers gain or phase errors of every channel at once (gain
+    within ``+-disk_gain_margin_db`` or phase within ``+-disk_phase_margin_deg``), so it
+    is the margin to compare when the channels' errors come together, e.g. the slider
+    mass and the cage field of the mixed balancing split, whose sliders and
+    magnetorquers act on the same axes. None for a loop with one channel; not evaluated
+    (a failed check) when a corner is unstable.
+    """
+    if d.multiloop is None:
+        return []
+    if not stable or ml_worst is None:
+        return [Check("margins, all channels at once (unstable: not evaluated)",
+                      None, None, "", False, None)]  # fmt: skip
+    return [
+        _limit_check(SIMULTANEOUS_GAIN, ml_worst["disk_gain_margin_db"], spec.gain_margin_db),
+        _limit_check(SIMULTANEOUS_PHASE, ml_worst["disk_phase_margin_deg"], spec.phase_margin_deg),
+    ]
+
+
+def _multiloop_worst_keys(ml_worst) -> dict:
+    """The ``worst_case`` keys of the multi-loop disk margin (none for one channel)."""
+    if ml_worst is None:
+        return {}
+    return {
+        "multiloop_disk_margin": ml_worst["disk_margin"],
+        "multiloop_disk_gain_margin_db": ml_worst["disk_gain_margin_db"],
+        "multiloop_disk_phase_margin_deg": ml_worst["disk_phase_margin_deg"],
+        "multiloop_corner": ml_worst["corner"],
+    }
+
+
+def _delay_note(rep: Report, loop: Loop, d, undelayed) -> None:
+    """What the computation delay of these margins means for ``airbearing simulate``,
+    whose loop applies each command in the sample it is computed."""
+    with_d = d.worst()["phase_margin_deg"]
+    without = undelayed.worst()["phase_margin_deg"]
+    n = loop.delay_samples
+    delay = f"{n} sample{'s' if n != 1 else ''} ({n * loop.dt:g} s)"
+    if not (math.isfinite(with_d) and math.isfinite(without)):
+        compare = "the loop does not cross |L| = 1, with or without the delay"
+    elif without >= with_d:
+        compare = (
+            f"without the delay the smallest phase margin (nominal plant) is {without:.4g} "
+            f"deg against {with_d:.4g} deg with it, so the margins above are conservative "
+            "for simulate's loop"
+        )
+    else:
+        compare = (
+            f"without the delay the smallest phase margin (nominal plant) is {without:.4g} "
+            f"deg against {with_d:.4g} deg with it: here the delay does not make the "
+            "margins above conservative for simulate's loop"
+        )
+    rep.paragraph(
+        f"Delay: the margins and the tuning are for the loop with {delay} of computation "
+        "delay between the measurement and the actuator command, as on a lab computer "
+        "that applies each command at the next sample. airbearing simulate (and slew) "
+        "apply each command in the sample it is computed, with no delay (only the "
+        f"nonlinear response of this report adds it); {compare}. The JSON has the loop "
+        "without the delay under without_delay.",
+        note=True,
+    )
 
 
 def _gains_table(rep: Report, loop: Loop) -> None:
@@ -299,17 +393,39 @@ def _gains_table(rep: Report, loop: Loop) -> None:
     rep.table(gains)
 
 
-def _margin_tables(rep: Report, d, c, checks, per, spec: Spec) -> None:
-    """Margins of the discrete and continuous loops, the specification at its worst
-    corner, and the margins at every corner."""
-    rep.heading("Margins, discrete loop (ZOH, 1 sample delay, as implemented)", 3)
+def _margin_tables(rep: Report, d, c, checks, per, spec: Spec, ml_worst=None) -> None:
+    """Margins of the discrete and continuous loops, the multi-loop disk margin (nominal
+    and worst over the box), the specification at its worst corner, and the margins at
+    every corner."""
+    rep.heading("Margins, discrete loop (ZOH, one sample of computation delay)", 3)
     rep.table(_margin_rows(d, spec), legend=_MARGIN_LEGEND)
     if d.multiloop:
         ml = d.multiloop
+        text = (
+            f"Multi-loop disk margin (all {len(ml['channels'])} channels, "
+            f"{', '.join(ml['channels'])}, perturbed at once), nominal plant: alpha = "
+            f"{ml['disk_margin']:.3g}, i.e. +-{ml['disk_gain_margin_db']:.3g} dB or "
+            f"+-{ml['disk_phase_margin_deg']:.3g} deg"
+        )
+        if ml_worst is not None:
+            text += (
+                f"; worst over the uncertainty box ({ml_worst['corner']}): alpha = "
+                f"{ml_worst['disk_margin']:.3g}, +-{ml_worst['disk_gain_margin_db']:.3g} dB "
+                f"or +-{ml_worst['disk_phase_margin_deg']:.3g} deg"
+            )
+        chans = ml["channels"]
+        mixed = any(ch.startswith("s") for ch in chans) and any(ch.startswith("m") for ch in chans)
+        together = (
+            "sliders and magnetorquers act on the same axes, and a slider mass error or a "
+            "cage field error moves every channel of its kind at once"
+            if mixed
+            else "one error common to every channel, e.g. a flywheel speed or a mass error"
+        )
         rep.paragraph(
-            f"Multi-loop disk margin (all {len(ml['channels'])} channels perturbed at once): "
-            f"alpha = {ml['disk_margin']:.3g}, i.e. {ml['disk_gain_margin_db']:.3g} dB and "
-            f"{ml['disk_phase_margin_deg']:.3g} deg."
+            text + ". The table above perturbs one channel at a time, the others at their "
+            f"nominal gain; when the channels' gain errors come together ({together}) the "
+            "margin that counts is this one, and the specification checks it against its "
+            f"{spec.gain_margin_db:g} dB and {spec.phase_margin_deg:g} deg."
         )
     rep.heading("Margins, continuous design model (no sampling, no delay)", 3)
     rep.table(_margin_rows(c, None), legend=_MARGIN_LEGEND)
@@ -319,6 +435,7 @@ def _margin_tables(rep: Report, d, c, checks, per, spec: Spec) -> None:
         ["check", "value", "required", "verdict", "by"],
         legend="not evaluated, or unlimited (no crossing)",
     )
+    at_once = {} if ml_worst is None else ml_worst["per_corner"]
     rep.table(
         [
             {
@@ -327,6 +444,11 @@ def _margin_tables(rep: Report, d, c, checks, per, spec: Spec) -> None:
                     pretty_key(k): (json_number(v) if isinstance(v, float) else v)
                     for k, v in w.items()
                 },
+                **(
+                    {"disk margin, all channels at once": json_number(at_once[lbl])}
+                    if lbl in at_once
+                    else {}
+                ),
             }
             for lbl, w in per
         ],
@@ -487,9 +609,10 @@ def stability_report(
     rep = Report(f"Stability report: {lp.name} on {testbed.name}")
     rep.paragraph(
         "Loops broken at the actuator input; margins of the discrete loop (zero-order hold, "
-        "one sample of computation delay, the controller as implemented) and of the "
-        "continuous design model. A margin that does not exist (the loop never crosses) prints as "
-        "'—' (unlimited) and is null in JSON."
+        "one sample of computation delay, the controller as implemented; airbearing "
+        "simulate has no delay: see 'Delay' below) and of the continuous design model. "
+        "A margin that does not exist (the loop never crosses) prints as '—' (unlimited) "
+        "and is null in JSON."
     )
     return report_for_loop(lp, spec, report=rep, progress=progress)
 
