@@ -1,4 +1,4 @@
-"""Seed 004's two-step balancing, verified by the kinetic-energy spread (eqs. 52-54)."""
+"""Seed 004's two-step balancing, verified by the spread of E = w^T J w (eqs. 52-54)."""
 
 from __future__ import annotations
 
@@ -28,7 +28,7 @@ def test_two_step_reduces_kinetic_energy_spread(seed):
     tb = _seed004_masses()
     out = two_step(tb, seed=seed)
     assert isinstance(out, TwoStepResult)
-    assert len(repr(out)) < 300 and "kinetic-energy spread" in str(out)
+    assert len(repr(out)) < 300 and "spread of E = w^T J w" in str(out)
     # seed 004: 99.75 % in simulation (true rates, as ke_reduction now is)
     assert out.ke_reduction >= 0.9975, out
     # the vertical offset the KE spread needs: a residual of 2 um leaves a spread of about
@@ -85,6 +85,38 @@ def test_seed004_platform_two_step_reaches_the_papers_reduction():
         z_true = tb.body.cm_offset_vec[2]
         assert abs(r.vertical_offset_identified_m - z_true) < 3 * r.vertical_offset_std_m, r
         assert r.vertical_offset_std_m < 1e-6 and r.warnings == [], r
+
+
+def test_E_is_eq_53_as_written_twice_the_kinetic_energy():
+    """Seed 004 eq. 53 writes E_kin = w^T J w; the rotational kinetic energy of a rigid
+    body is (1/2) w^T J w. kinetic_energy returns the paper's E (so the spreads compare
+    with its 0.0011 -> 2.7142e-6), twice the physical one; a ratio of spreads is the same."""
+    from airbearing.analysis.balancing.metrics import kinetic_energy
+
+    J = np.array([[0.0241, -0.001, 0.0], [-0.001, 0.0332, -0.004], [0.0, -0.004, 0.0363]])
+    w = np.array([[0.3076, 0.1898, -1.5010], [-0.5171, 0.0742, -1.7770]])  # seed 004 rates
+    physical = np.array([0.5 * x @ J @ x for x in w])
+    assert kinetic_energy(w, J) == pytest.approx(2 * physical, rel=1e-15)
+    # a spread ratio is unaffected by the factor 2
+    E = kinetic_energy(np.vstack([w, 1.1 * w]), J)
+    T = 0.5 * E
+    assert np.std(E[2:]) / np.std(E[:2]) == pytest.approx(np.std(T[2:]) / np.std(T[:2]))
+
+
+def test_cli_says_what_E_is(capsys):
+    """The terminal names the number: E = w^T J w (seed 004 eq. 53), twice the kinetic
+    energy, in J; the JSON keys stay (contract)."""
+    from cli_run import run
+
+    assert run(["-q", "balance", "seed004-platform", "--two-step"]) == 0
+    out = capsys.readouterr().out
+    rows = {ln.split("  ")[0]: ln for ln in out.splitlines()}
+    assert rows["std of E = w^T J w before"].rstrip().endswith("J")
+    assert rows["std of E = w^T J w after"].rstrip().endswith("J")
+    assert "kinetic energy std" not in out
+    note = next(ln for ln in out.splitlines() if ln.startswith("note:"))
+    assert "seed 004's eq. 53" in note and "twice the rotational kinetic energy" in note
+    assert "(1/2) w^T J w" in note and "ratios" in note
 
 
 def test_a_short_two_step_says_it_is_doubtful():

@@ -355,7 +355,7 @@ def test_two_step_table_in_words(capsys):
     for raw in ("ke rates", "in plane known", "ke std", "sliders step1", "identify method"):
         assert raw not in out, raw
     rows = _scalar_rows(out)
-    assert rows["kinetic energy from"] == "true rates (simulation)"
+    assert rows["E from"] == "true rates (simulation)"
     assert rows["in-plane offset of step 1 used"] == "yes"
 
 

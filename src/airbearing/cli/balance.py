@@ -214,9 +214,21 @@ def balance(
         typer.echo("")
     shown = _in_words(summary)
     typer.echo(human_summary(shown, skip=("points", "tables", "values")))
+    if two_step_:
+        typer.echo("")
+        typer.echo(f"note: {E_DEFINITION}")
     for p in (log_path, json_path):
         if p is not None:
             typer.echo(f"wrote {p}")
+
+
+#: What the two-step's energy numbers are (seed 004 eqs. 52-54).
+E_DEFINITION = (
+    "E = w^T J w is seed 004's eq. 53 as the paper writes it (its 0.0011 -> 2.7142e-6, "
+    "99.75 %, are spreads of this E): twice the rotational kinetic energy (1/2) w^T J w, "
+    "so every std of E in J is twice the kinetic energy's; the reductions are ratios, "
+    "the same for both."
+)
 
 
 def _in_words(summary: dict) -> dict:

@@ -49,15 +49,16 @@ _KEY_UNITS = {"dipole_rms": "A m^2"}  # magnetorquer dipole (seed 000)
 #: Words for JSON keys whose name alone reads as code (the two-step's ``ke_rates``,
 #: ``in_plane_known``); the JSON keeps its keys.
 _LABELS = {
-    "ke_std_before": "kinetic energy std before",
-    "ke_std_after": "kinetic energy std after",
-    "ke_reduction": "kinetic energy reduction",
-    "ke_rates": "kinetic energy from",
-    "ke_std_before_measured": "kinetic energy std before, measured",
-    "ke_std_after_measured": "kinetic energy std after, measured",
-    "ke_reduction_measured": "kinetic energy reduction, measured",
-    "ke_noise_floor": "measured kinetic energy noise floor",
-    "ke_measured_from": "measured kinetic energy from",
+    # the two-step's E = w^T J w, seed 004 eq. 53 as written: twice the kinetic energy
+    "ke_std_before": "std of E = w^T J w before",
+    "ke_std_after": "std of E = w^T J w after",
+    "ke_reduction": "reduction of std E",
+    "ke_rates": "E from",
+    "ke_std_before_measured": "std of E before, measured",
+    "ke_std_after_measured": "std of E after, measured",
+    "ke_reduction_measured": "reduction of std E, measured",
+    "ke_noise_floor": "noise floor of measured std E",
+    "ke_measured_from": "measured E from",
     "in_plane_known": "in-plane offset of step 1 used",
     "identify_method": "identification method",
     "identify_warnings": "identification warnings",
@@ -120,7 +121,7 @@ def shown(key: str, value):
     """
     label, unit = unit_of(key)
     if not unit and key.startswith(("ke_std", "ke_noise")):
-        unit = "J"  # spreads of the kinetic energy w^T J w (seed 004 eqs. 53-54)
+        unit = "J"  # spreads of E = w^T J w (seed 004 eqs. 53-54), twice the kinetic energy
     if unit == "m":
         low = key.lower()
         for words, new, factor in _LENGTHS:

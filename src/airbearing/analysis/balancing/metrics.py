@@ -273,6 +273,22 @@ def residual_torque(free: SimResult, *, window_s: float = _SG_WINDOW_S) -> float
 
 
 def kinetic_energy(w: np.ndarray, J: np.ndarray) -> np.ndarray:
-    """Rotational kinetic energy ``w^T J w`` per sample (seed 004 eq. 53, as written), J."""
+    """Seed 004's ``E = w^T J w`` per sample (eq. 53 as the paper writes it), J.
+
+    Twice the rotational kinetic energy ``(1/2) w^T J w``; the two-step's spreads are of
+    this ``E``, so they compare with the paper's (ratios are the same for both).
+
+    Parameters
+    ----------
+    w : (n, 3) array
+        rad/s, body rates.
+    J : (3, 3) array
+        kg m^2, inertia about the centre of rotation.
+
+    Returns
+    -------
+    (n,) array
+        J, ``w_k^T J w_k``.
+    """
     w = np.asarray(w, dtype=float)
     return np.einsum("ni,ij,nj->n", w, np.asarray(J, float), w)

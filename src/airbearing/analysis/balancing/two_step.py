@@ -1,4 +1,10 @@
-"""Seed 004's two-step balancing, verified by the kinetic-energy spread (eqs. 52-54)."""
+"""Seed 004's two-step balancing, verified by the spread of ``E = w^T J w`` (eqs. 52-54).
+
+``E`` is seed 004's eq. 53 as the paper writes it, its "rotational kinetic energy": twice
+the physical one, ``(1/2) w^T J w``. The absolute spreads (``ke_std_*``, ``ke_noise_floor``,
+J) are of this ``E``, to compare with the paper's 0.0011 -> 2.7142e-6; the reductions are
+ratios and the same for both.
+"""
 
 from __future__ import annotations
 
@@ -50,9 +56,10 @@ class TwoStepResult:
     testbed, method : str
         Testbed name and the step-1 balancing law.
     ke_std_before, ke_std_after : float
-        J, standard deviation of the kinetic energy ``w^T J w`` (seed 004 eqs. 53-54) of
-        the free oscillations before (sliders at zero) and after balancing, from the true
-        rates, as seed 004's simulation (``ke_rates``: ``"true"``).
+        J, standard deviation of ``E = w^T J w`` (seed 004 eq. 53 as written, twice the
+        rotational kinetic energy ``(1/2) w^T J w``; eq. 54) of the free oscillations
+        before (sliders at zero) and after balancing, from the true rates, as seed 004's
+        simulation (``ke_rates``: ``"true"``).
     ke_reduction : float
         ``1 - ke_std_after / ke_std_before`` (seed 004: 99.75 % in simulation).
     vertical_offset_identified_m : float
@@ -88,7 +95,7 @@ class TwoStepResult:
     ke_std_before_measured, ke_std_after_measured, ke_reduction_measured : float
         J, J, -: the same from the measured (noisy) rates, what a lab computes.
     ke_noise_floor : float
-        J, the spread the rate noise alone adds to a measured kinetic energy:
+        J, the spread the rate noise alone adds to a measured ``E = w^T J w``:
         ``2 sigma rms|J w|`` over the after run (the first-order term of
         ``(w + n)^T J (w + n)``); a measured after-value near it is at the floor.
         ``sigma``: the gyro's noise, or without a gyro the RMS error of the rates derived
@@ -106,8 +113,8 @@ class TwoStepResult:
         whole steps (``sliders_final_m``).
     warnings : list of str
         What makes the result doubtful, in words: a step 1 shorter than its integral needs
-        to settle, an estimate still moving after the last round, a measured kinetic-energy
-        spread that hardly fell (empty when none).
+        to settle, an estimate still moving after the last round, a measured spread of
+        ``E`` that hardly fell (empty when none).
     """
 
     testbed: str
@@ -160,7 +167,8 @@ class TwoStepResult:
         r = np.asarray(self.residual_offset_m, dtype=float) * 1e6
         return "\n".join([
             f"two-step balancing of {self.testbed} ({self.method}, {self.iterations} round(s))",
-            f"kinetic-energy spread {self.ke_std_before:.3g} -> {self.ke_std_after:.3g} J "
+            f"spread of E = w^T J w (seed 004 eq. 53, twice the kinetic energy) "
+            f"{self.ke_std_before:.3g} -> {self.ke_std_after:.3g} J "
             f"({100 * self.ke_reduction:.2f} % less, {self.ke_rates} rates)",
             f"vertical offset identified {1e6 * self.vertical_offset_identified_m:.2f} "
             f"+- {1e6 * self.vertical_offset_std_m:.2g} um",
@@ -228,7 +236,7 @@ def two_step(
     in_plane_known: bool = True,
     progress=None,
 ) -> TwoStepResult:
-    """Seed 004's two-step balancing, verified by the kinetic-energy spread (eqs. 52-54).
+    """Seed 004's two-step balancing, verified by the spread of ``E = w^T J w`` (eqs. 52-54).
 
     1. In-plane balancing with ``method`` from the testbed's true offset, sliders at zero,
        from rest (``initial_rate``), gains from :func:`tilt_pid_gains` for the testbed's
@@ -263,7 +271,8 @@ def two_step(
        step 1 leaves (about a backlash times ``m_i / M``), so the vertical offset comes out
        wrong by that fraction (3 % for a 0.5 mm displacement, 37 um of CM shift); with two
        logs, from the displacement alone.
-    3. Kinetic energy ``w^T J w`` (eq. 53, identified ``J`` plus the sliders' point
+    3. ``E = w^T J w`` (eq. 53 as the paper writes it: twice the rotational kinetic
+       energy ``(1/2) w^T J w``; identified ``J`` plus the sliders' point
        masses where they are, seed 004 eqs. 6-7) of ``ke_duration`` s free oscillations
        before (sliders at zero) and after, from seed 004's initial rates; its standard
        deviation (eq. 54: constant for a balanced platform). From the true rates, as seed
@@ -298,7 +307,7 @@ def two_step(
     found, s_final, J_est = _step2(model, s1, d, b_lab, in_plane_known, identification_duration,
                                    identify_method, seed, noise)  # fmt: skip
     # step 3: kinetic-energy spread, seed 004 eqs. 52-54
-    report("step 3: kinetic energy before and after", 2, 3)
+    report("step 3: E = w^T J w before and after", 2, 3)
     ke = _step3(model, s_final, J_est, b_lab, ke_duration, seed, noise)
     warnings = _warnings(testbed, balance_duration, found, ke)
     return TwoStepResult(
@@ -465,7 +474,7 @@ def _warnings(testbed: Testbed, balance_duration: float, found: dict, ke: dict) 
         )
     if ke["ke_reduction_measured"] < KE_REDUCTION_DOUBTFUL:
         out.append(
-            f"the measured kinetic-energy spread fell by only "
+            f"the measured spread of E = w^T J w fell by only "
             f"{100 * ke['ke_reduction_measured']:.3g} %: the platform is not balanced"
         )
     return out
