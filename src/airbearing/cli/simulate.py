@@ -282,7 +282,26 @@ def _write(out, log_path, json_path, result, summary: dict) -> None:
         out.file(log_path, lambda tmp: write_log(log, tmp))
     out.json(json_path, summary)
     out.commit()
-    echo_summary(summary)
+    echo_summary(_episodes_in_words(summary), skip=("warnings",))
+    for w in summary.get("warnings") or ():
+        typer.echo(f"warning: {w}")
     for p in (log_path, json_path):
         if p is not None:
             typer.echo(f"wrote {p}")
+
+
+#: A slew summary's episode lists and the row each becomes in the terminal table.
+_EPISODES = {"saturation": "momentum saturated", "gimbal_rate_chatter": "gimbal-rate chatter"}
+
+
+def _episodes_in_words(summary: dict) -> dict:
+    """A slew's saturation and chatter episodes as one row each: ``1.30-9.60 s``, or
+    ``none`` (the JSON keeps the episodes; the warnings say them in words)."""
+    shown = {}
+    for key, value in summary.items():
+        if key in _EPISODES and isinstance(value, list):
+            spans = ", ".join(f"{e['start_s']:.2f}-{e['end_s']:.2f} s" for e in value)
+            shown[_EPISODES[key]] = spans or "none"
+        else:
+            shown[key] = value
+    return shown

@@ -39,6 +39,7 @@ _SUFFIX_UNITS = (
     ("_db", "dB"),
     ("_kg", "kg"),
     ("_nm", "N m"),
+    ("_nms", "N m s"),
     ("_j", "J"),
 )
 

@@ -204,7 +204,14 @@ def slew_summary(result: SimResult) -> dict:
     dict
         ``peak_rate_deg_s`` and ``t_peak_s`` (s), ``gimbal_min_deg``, ``gimbal_max_deg``,
         ``gimbal_final_deg`` (4 each), ``final_yaw_error_deg``, ``final_yaw_deg``,
-        ``duration_s`` (s): the ``airbearing simulate --scenario slew --json`` keys.
+        ``duration_s`` (s): the ``airbearing simulate --scenario slew --json`` keys; and
+        what the slew ran into (:mod:`~airbearing.analysis.simulation.slew_checks`):
+        ``momentum_capacity_nms`` (N m s, the most the cluster stores along the slew
+        axis), ``momentum_peak_fraction`` (-, the largest share of it the run used),
+        ``saturation`` (episodes ``{"start_s", "end_s"}`` when the cluster was at that
+        envelope while the loop asked for more), ``gimbal_rate_chatter`` (episodes
+        ``{"start_s", "end_s", "samples", "reversal_samples"}`` when the gimbal-rate
+        command reversed sign sample after sample) and ``warnings`` (both in words).
     """
     m = result.model
     w_idx = m.index(["wx", "wy", "wz"] if m.dof == 3 else ["wz"])
@@ -225,6 +232,42 @@ def slew_summary(result: SimResult) -> dict:
         "final_yaw_error_deg": final_err,
         "final_yaw_deg": float(np.rad2deg(quat.yaw_of(q_end))),
         "duration_s": float(t[-1]),
+        **_saturation_and_chatter(result, d),
+    }
+
+
+def _saturation_and_chatter(result: SimResult, d: np.ndarray) -> dict:
+    """The envelope and chatter keys of :func:`slew_summary` (``d``: true gimbal angles,
+    rad, at ``t_0 .. t_N``)."""
+    from airbearing.analysis.cmg.singularity import measure, pyramid_geometry
+    from airbearing.analysis.simulation import slew_checks as sc
+
+    m = result.model
+    cmg = m.testbed.cmg
+    u = np.array([0.0, 0.0, 1.0])
+    if m.dof == 3:  # the slew axis: the reference rotation's, fixed in body axes
+        v = np.asarray(result.reference[-1, 1:4], float)
+        u = v / np.linalg.norm(v) if np.linalg.norm(v) > 1e-12 else u
+    cap = sc.envelope_capacity(cmg.skew, u)
+    H = pyramid_geometry(cmg.skew).momentum_vectors(d[:-1]).sum(axis=-2)  # seed 001 eq. 12
+    names = list(result.controller.extra_names)
+    torque = result.extra[:, [names.index(f"Tc_{a}") for a in "xyz"]]
+    peak, saturation = sc.saturation_episodes(result.t, H, torque, u, cap)
+    dd = result.u[:, m.index(["dd1", "dd2", "dd3", "dd4"], "u")]
+    chatter = sc.chatter_episodes(result.t, dd, cmg.max_gimbal_rate)
+    J = np.asarray(m.testbed.body.inertia_matrix, float)
+    cap_nms = cap * cmg.h0
+    warnings = sc.slew_warnings(
+        saturation, chatter, capacity_nms=cap_nms, capacity_h0=cap,
+        rate_cap_deg_s=float(np.rad2deg(cap_nms / (u @ J @ u))),
+        gimbals_deg=(result.t, np.rad2deg(d[:-1])), measure=measure(d[:-1], cmg.skew),
+    )  # fmt: skip
+    return {
+        "momentum_capacity_nms": cap_nms,
+        "momentum_peak_fraction": peak,
+        "saturation": saturation,
+        "gimbal_rate_chatter": chatter,
+        "warnings": warnings,
     }
 
 
