@@ -8,6 +8,7 @@ report; synthetic rate commands for the chatter rule.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 
@@ -152,3 +153,23 @@ def test_cli_slew_prints_the_episodes_and_warnings(tmp_path, capsys, big_inertia
     rows = {ln.split("  ")[0]: ln for ln in out.splitlines()}
     assert rows["momentum saturated"].split()[-1] == "none"
     assert "warning:" not in out
+
+
+@pytest.mark.parametrize("tilt_deg, noted", [(30.0, False), (60.0, True)])
+def test_free_run_notes_a_tilt_past_the_bearings_stop(tilt_deg, noted):
+    """A balanced platform (no CM offset: no torque) at rest keeps its initial tilt exactly;
+    past the +-45 deg of a spherical air bearing (seed 001 Sec. 2; MAX_TILT) the summary
+    says the run is not what a testbed would do."""
+    from airbearing.analysis.simulation.scenarios import free_oscillation, free_summary
+
+    tb = load_testbed("seed004-platform")
+    tb = tb.replace(body=dataclasses.replace(tb.body, cm_offset=(0.0, 0.0, 0.0)))
+    half = math.radians(tilt_deg) / 2
+    run = free_oscillation(tb, q0=(math.cos(half), math.sin(half), 0.0, 0.0), duration=1.0,
+                           noise=False)  # fmt: skip
+    s = free_summary(run)
+    assert s["max_tilt_deg"] == pytest.approx(tilt_deg, abs=1e-6)
+    assert ("tilt_note" in s) is noted
+    if noted:
+        assert s["tilt_note"].startswith(f"the platform tilted {tilt_deg:.1f} deg")
+        assert "+-45 deg" in s["tilt_note"]

@@ -282,9 +282,11 @@ def _write(out, log_path, json_path, result, summary: dict) -> None:
         out.file(log_path, lambda tmp: write_log(log, tmp))
     out.json(json_path, summary)
     out.commit()
-    echo_summary(_episodes_in_words(summary), skip=("warnings",))
+    echo_summary(_episodes_in_words(summary), skip=("warnings", "tilt_note"))
     for w in summary.get("warnings") or ():
         typer.echo(f"warning: {w}")
+    if summary.get("tilt_note"):
+        typer.echo(f"note: {summary['tilt_note']}")
     for p in (log_path, json_path):
         if p is not None:
             typer.echo(f"wrote {p}")

@@ -24,6 +24,7 @@ from airbearing.analysis.simulation.artefacts import (
     with_jitter,
 )
 from airbearing.analysis.simulation.on_times import simulate_on_times
+from airbearing.analysis.simulation.scenarios import tilt_note
 from airbearing.errors import InputError
 from airbearing.io.log import Log
 from airbearing.io.testbed import Testbed
@@ -199,4 +200,5 @@ def rehearsal_summary(r: Rehearsal) -> dict:
     q_names = ["true_qw", "true_qx", "true_qy", "true_qz"]
     if log.has(*q_names):  # the same keys as scenarios.free_summary
         out["max_tilt_deg"] = float(np.rad2deg(quat.tilt_of(log.columns(q_names)).max()))
+        out.update(tilt_note(out["max_tilt_deg"]))
     return {**out, **r.to_json()}

@@ -18,7 +18,7 @@ from airbearing.models.model import Model, build_model
 
 __all__ = [
     "SCENARIO_DURATIONS", "LEVEL", "initial_attitude", "slew", "slew_loop", "slew_summary",
-    "free_oscillation", "free_summary", "spindown",
+    "free_oscillation", "free_summary", "tilt_note", "spindown",
 ]  # fmt: skip
 
 #: s, the default run length of each scenario (a seed-001 slew and its settling, a free
@@ -488,7 +488,8 @@ def free_summary(result: SimResult) -> dict:
     -------
     dict
         ``peak_rate_deg_s``, ``final_rate_deg_s`` (deg/s), ``duration_s`` (s), ``samples``
-        and, on dof 3, ``max_tilt_deg``.
+        and, on dof 3, ``max_tilt_deg`` (deg, body z from lab z) with ``tilt_note`` when it
+        passes what a spherical air bearing allows (:func:`tilt_note`).
     """
     m = result.model
     w = result.x[:, m.index(["wx", "wy", "wz"] if m.dof == 3 else ["wz"])]
@@ -500,4 +501,36 @@ def free_summary(result: SimResult) -> dict:
     }
     if m.dof == 3:
         out["max_tilt_deg"] = float(np.rad2deg(quat.tilt_of(result.x[:, 0:4]).max()))
+        out.update(tilt_note(out["max_tilt_deg"]))
     return out
+
+
+def tilt_note(max_tilt_deg: float) -> dict:
+    """``{"tilt_note": words}`` when a dof-3 run tilts past what a spherical bearing allows.
+
+    The simulated bearing has no tilt stop, so a free run can swing past the +-45 deg of a
+    tabletop spherical air bearing (seed 001 Sec. 2 cites +-45 and +-50 deg;
+    :data:`airbearing.analysis.balancing.runs.MAX_TILT`), where a testbed would hit its
+    stop. Empty within it.
+
+    Parameters
+    ----------
+    max_tilt_deg : float
+        deg, the run's largest angle between body z and lab z.
+
+    Returns
+    -------
+    dict
+    """
+    from airbearing.analysis.balancing.runs import MAX_TILT
+
+    limit = float(np.rad2deg(MAX_TILT))
+    if not max_tilt_deg > limit:
+        return {}
+    return {
+        "tilt_note": (
+            f"the platform tilted {max_tilt_deg:.1f} deg; a spherical air bearing stops at "
+            f"about +-{limit:.0f} deg (seed 001 Sec. 2: +-45 to +-50 deg) and the simulated "
+            "bearing has none, so past that this run is not what a testbed would do"
+        )
+    }
