@@ -109,6 +109,22 @@ def size(
         ],
         ["quantity (seed 001 eqs. 5-9)", "value", "unit"],
     )
+    typer.echo("")
+    rate_needed = "none" if r.gimbal_rate_needed is None else math.degrees(r.gimbal_rate_needed)
+    echo_table(
+        [
+            ["peak body rate, at t/2 (eq. 5)", math.degrees(r.peak_body_rate), "deg/s"],
+            ["momentum the body needs then, J w", r.momentum_needed * 1e3, "mN m s"],
+            ["gimbal angle then, at the largest rate", math.degrees(r.gimbal_angle_reached),
+             "deg"],
+            ["cluster momentum there (eq. 12)", r.cluster_momentum * 1e3, "mN m s"],
+            ["share of what is needed", 100 * r.momentum_fraction, "%"],
+            ["gimbal rate that holds it", rate_needed, "deg/s"],
+        ],
+        ["feasibility at t/2", "value", "unit"],
+    )  # fmt: skip
+    for w in r.warnings:
+        typer.echo(f"warning: {w}")
     if json_path is not None:
         typer.echo(f"wrote {json_path}")
 
