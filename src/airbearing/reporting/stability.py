@@ -356,19 +356,23 @@ def _delay_note(rep: Report, loop: Loop, d, undelayed) -> None:
     without = undelayed.worst()["phase_margin_deg"]
     n = loop.delay_samples
     delay = f"{n} sample{'s' if n != 1 else ''} ({n * loop.dt:g} s)"
-    if not (math.isfinite(with_d) and math.isfinite(without)):
+
+    def deg(v):
+        return f"{v:.4g} deg" if math.isfinite(v) else "unlimited"
+
+    if not (math.isfinite(with_d) or math.isfinite(without)):
         compare = "the loop does not cross |L| = 1, with or without the delay"
     elif without >= with_d:
         compare = (
-            f"without the delay the smallest phase margin (nominal plant) is {without:.4g} "
-            f"deg against {with_d:.4g} deg with it, so the margins above are conservative "
-            "for simulate's loop"
+            f"without the delay the smallest phase margin (nominal plant) is {deg(without)} "
+            f"against {deg(with_d)} with it, so the margins above are conservative for "
+            "simulate's loop"
         )
     else:
         compare = (
-            f"without the delay the smallest phase margin (nominal plant) is {without:.4g} "
-            f"deg against {with_d:.4g} deg with it: here the delay does not make the "
-            "margins above conservative for simulate's loop"
+            f"without the delay the smallest phase margin (nominal plant) is {deg(without)} "
+            f"against {deg(with_d)} with it: here the delay does not make the margins above "
+            "conservative for simulate's loop"
         )
     rep.paragraph(
         f"Delay: the margins and the tuning are for the loop with {delay} of computation "
@@ -594,7 +598,12 @@ def stability_report(
     -------
     (Report, dict)
         The report (write it with ``Report.write``) and its JSON document (margins with
-        their units, ``null`` for a margin that does not exist).
+        their units, ``null`` for a margin that does not exist). The margins are the
+        loop's with one sample of computation delay (``delay_samples``), the loop the
+        tuner designs; ``without_delay`` has them for the loop ``airbearing simulate``
+        runs. Beside the loop-at-a-time checks, ``checks`` has the multi-loop disk
+        margin's gain and phase (every channel at once, worst over the uncertainty box)
+        against the specification, and ``met`` needs them.
 
     Raises
     ------
