@@ -424,7 +424,7 @@ def _margin_tables(rep: Report, d, c, checks, per, spec: Spec, ml_worst=None) ->
             "sliders and magnetorquers act on the same axes, and a slider mass error or a "
             "cage field error moves every channel of its kind at once"
             if mixed
-            else "one error common to every channel, e.g. a flywheel speed or a mass error"
+            else "one error common to every channel, e.g. the flywheel speed in every gimbal's gain"
         )
         rep.paragraph(
             text + ". The table above perturbs one channel at a time, the others at their "
