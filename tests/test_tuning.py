@@ -99,3 +99,31 @@ def test_bad_loop_and_gains_are_input_errors(cmg_tb):
     with pytest.raises(InputError, match="Nyquist"):
         tune(cmg_tb, "attitude", Spec(bandwidth_hz=15.0))
     assert np.isfinite(make_loop(cmg_tb, "attitude").gain_vector).all()
+
+
+#: what `airbearing gains seed004-platform --offset-range-mm -3.9 0.5` returns: K_p = 0
+#: cannot hold r_z = +0.5 mm (the CM above the bearing, an inverted pendulum)
+UNSTABLE_BALANCING = {"K_p": 0.0, "K_d": 0.008969, "K_dK_i": 3.197e-05}
+
+
+def test_an_unstable_loop_shows_no_met_margin(capsys):
+    """Margins of an unstable closed loop mean nothing: not met, no value, the reason."""
+    from airbearing.cli.gains import _echo_checks
+
+    tb = load_testbed("seed004-platform")
+    lp = make_loop(tb, "balancing", split="mechanical", gains=UNSTABLE_BALANCING)
+    checks, worst, _ = evaluate(lp, Spec(offset_range=(-3.9e-3, 0.5e-3)))
+    assert not worst["stable"]
+    stable, rest = checks[0], checks[1:]
+    assert stable.name == "stable at every corner" and not stable.met
+    assert "r_z = 0.5 mm" in stable.note and "r_z = -3.9 mm" not in stable.note
+    names = {c.name for c in rest}
+    assert {"phase margin (deg)", "gain margin (dB)", "sensitivity peak"} <= names
+    for c in rest:
+        assert not c.met and c.value is None and c.note.startswith("not applicable"), c
+    _echo_checks([c.to_json() for c in checks], False)
+    lines = capsys.readouterr().out.splitlines()
+    rows = [line for line in lines if line.startswith(("phase", "gain", "sensitivity"))]
+    assert len(rows) == 3 and all(line.split()[-1] == "n/a" for line in rows), rows
+    assert not any(line.rstrip().endswith(" met") and "NOT" not in line for line in lines)
+    assert "not applicable to an unstable loop" in lines[-1]

@@ -147,15 +147,24 @@ def gains(
         typer.echo(f"wrote {json_path}")
 
 
+def _check_verdict(c: dict) -> str:
+    """A check's verdict word: ``met``, ``NOT met``, or ``n/a`` (not met: its value means
+    nothing, e.g. a margin of an unstable loop)."""
+    if c.get("value") is None and str(c.get("note") or "").startswith("not applicable"):
+        return "n/a"
+    return "met" if c.get("met") else "NOT met"
+
+
 def _echo_checks(checks: list[dict], met: bool) -> None:
     """The specification's checks as a table, then one verdict line: ``specification
-    met: yes``, or ``specification NOT met: `` and what falls short, by how much."""
+    met: yes``, or ``specification NOT met: `` and what falls short, by how much (checks
+    that do not apply to an unstable loop are named once, as such)."""
     if checks:
         echo_table(
             [
                 [c.get("name"), c.get("value"),
                  f"{c.get('sense')} {cell(c.get('limit'))}" if c.get("limit") is not None else "",
-                 "met" if c.get("met") else "NOT met"]
+                 _check_verdict(c)]
                 for c in checks
             ],
             ["check", "value", "required", "verdict"],
@@ -164,17 +173,21 @@ def _echo_checks(checks: list[dict], met: bool) -> None:
     if met:
         typer.echo("specification met: yes")
         return
-    short = []
+    short, moot = [], []
     for c in checks:
         if c.get("met"):
             continue
-        if c.get("value") is None:
-            short.append(f"{c.get('name')}: unstable")
+        if c.get("value") is None and str(c.get("note") or "").startswith("not applicable"):
+            moot.append(str(c.get("name")).split(" (")[0])
+        elif c.get("value") is None:
+            short.append(f"{c.get('name')}: {c.get('note') or 'unstable'}")
         else:
             by = "" if c.get("by") is None else f", short by {cell(abs(c['by']))}"
             short.append(
                 f"{c.get('name')} {cell(c['value'])} vs {c.get('sense')} {cell(c.get('limit'))}{by}"
             )
+    if moot:
+        short.append(f"{', '.join(moot)}: not applicable to an unstable loop")
     typer.echo("specification NOT met" + (": " + "; ".join(short) if short else ""))
 
 

@@ -78,7 +78,11 @@ class Spec:
 
 @dataclass(frozen=True)
 class Check:
-    """One line of the verdict: ``value`` against ``limit`` (``sense`` ">=" or "<=")."""
+    """One line of the verdict: ``value`` against ``limit`` (``sense`` ">=" or "<=").
+
+    ``value`` None: not evaluated or not applicable, and ``note`` says why (margins of an
+    unstable closed loop mean nothing).
+    """
 
     name: str
     value: float | None
@@ -86,17 +90,20 @@ class Check:
     sense: str
     met: bool
     by: float | None  # how far inside (+) or outside (-) the limit, in the value's unit
+    note: str | None = None
 
     def __str__(self) -> str:
         if self.value is None:
-            return f"{self.name}: {'pass' if self.met else 'FAIL'}"
+            verdict = "pass" if self.met else "FAIL"
+            return f"{self.name}: {verdict}" + (f" ({self.note})" if self.note else "")
         return (
             f"{self.name} {self.value:.4g} {self.sense} {self.limit:.4g}: "
             f"{'pass' if self.met else 'FAIL'}"
         )
 
     def to_json(self) -> dict:
-        """``name``, ``value``, ``limit``, ``sense``, ``met``, ``by`` (None for inf/NaN)."""
+        """``name``, ``value``, ``limit``, ``sense``, ``met``, ``by`` (None for inf/NaN) and
+        ``note`` (None, or why the value is missing)."""
 
         def num(v):
             return None if v is None or not math.isfinite(v) else float(v)
@@ -108,6 +115,7 @@ class Check:
             "sense": self.sense,
             "met": self.met,
             "by": num(self.by),
+            "note": self.note,
         }
 
     to_dict = to_json  # the earlier name
@@ -291,26 +299,41 @@ def evaluate(
         "delay_margin_s": min(w["delay_margin_s"] for _, w in per),
         "bandwidth_rad_s": min((w["bandwidth_rad_s"] or 0.0 for _, w in per), default=0.0),
     }
+    unstable = [label for label, w in per if not w["stable"]]
+
+    def req(name, value, limit, sense):
+        # margins of an unstable closed loop mean nothing: not met, and why
+        if unstable:
+            return Check(name, None, limit, sense, False, None, _NOT_APPLICABLE)
+        return _check(name, value, limit, sense)
+
     checks = [
-        Check("stable at every corner", None, None, "", worst["stable"], None),
-        _check("phase margin (deg)", worst["phase_margin_deg"], spec.phase_margin_deg, ">="),
-        _check("gain margin (dB)", worst["gain_margin_db"], spec.gain_margin_db, ">="),
-        _check("sensitivity peak", worst["sensitivity_peak"], spec.max_sensitivity, "<="),
+        Check(
+            "stable at every corner",
+            None,
+            None,
+            "",
+            not unstable,
+            None,
+            f"unstable at {'; '.join(unstable)}" if unstable else None,
+        ),
+        req("phase margin (deg)", worst["phase_margin_deg"], spec.phase_margin_deg, ">="),
+        req("gain margin (dB)", worst["gain_margin_db"], spec.gain_margin_db, ">="),
+        req("sensitivity peak", worst["sensitivity_peak"], spec.max_sensitivity, "<="),
     ]
     if spec.bandwidth_hz is not None:
         checks.append(
-            _check(
-                "bandwidth (Hz)", worst["bandwidth_rad_s"] / (2 * math.pi), spec.bandwidth_hz, ">="
-            )
+            req("bandwidth (Hz)", worst["bandwidth_rad_s"] / (2 * math.pi), spec.bandwidth_hz, ">=")
         )
     if actuators:
         if worst["stable"]:
             checks += actuator_checks(loop)
         else:
-            checks.append(
-                Check("actuator limits (unstable: not evaluated)", None, None, "", False, None)
-            )
+            checks.append(Check("actuator limits", None, None, "", False, None, _NOT_APPLICABLE))
     return checks, worst, per
+
+
+_NOT_APPLICABLE = "not applicable: the closed loop is unstable"
 
 
 def _design_gains(loop: Loop, w: float) -> dict:
@@ -464,7 +487,13 @@ def tune(testbed, loop: str, spec: Spec | None = None, *, split: str = "mixed") 
 
 
 def _verdict(checks: list) -> str:
-    """The tuning verdict in words: every value against its limit, or what falls short."""
+    """The tuning verdict in words: every value against its limit, or what falls short
+    (an unstable loop: where, and that nothing else applies)."""
+    if checks and not checks[0].met and checks[0].name == "stable at every corner":
+        return (
+            f"specification NOT met: the closed loop is {checks[0].note}; its margins and "
+            "actuator peaks do not apply"
+        )
     if all(c.met for c in checks):
         return "specification met: " + "; ".join(
             f"{c.name} {c.value:.4g} (limit {c.limit:.4g})" for c in checks if c.value is not None
