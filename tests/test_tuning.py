@@ -365,3 +365,15 @@ def test_bad_loop_and_gains_are_input_errors(cmg_tb):
     with pytest.raises(InputError, match="Nyquist"):
         tune(cmg_tb, "attitude", Spec(bandwidth_hz=15.0))
     assert np.isfinite(make_loop(cmg_tb, "attitude").gain_vector).all()
+
+
+def test_a_settling_time_that_never_comes_says_so(capsys):
+    """inf is null in JSON (none): the note and the table say what it means."""
+    from airbearing.design.tuning import Check, _check
+
+    c = _check("settling time, 2 % (s)", math.inf, None, "<=")
+    assert c.met and c.to_json()["value"] is None  # reported, no limit: nothing to fail
+    c = Check(c.name, c.value, None, "<=", True, None, "does not settle within 2400 s")
+    _echo_checks([c.to_json()], True)
+    row = next(x for x in capsys.readouterr().out.splitlines() if x.startswith("settling"))
+    assert "does not settle" in row and row.split()[-1] == "reported"

@@ -174,6 +174,14 @@ def _check_verdict(c: dict) -> str:
     return "met" if c.get("met") else "NOT met"
 
 
+def _check_value(c: dict):
+    """A check's value for the table: the number, or ``does not settle`` for a settling
+    time that is none (the JSON's ``null``)."""
+    if c.get("value") is None and str(c.get("note") or "").startswith("does not settle"):
+        return "does not settle"
+    return c.get("value")
+
+
 def _echo_checks(checks: list[dict], met: bool) -> None:
     """The specification's checks as a table, then one verdict line: ``specification
     met: yes``, or ``specification NOT met: `` and what falls short, by how much (checks
@@ -181,7 +189,7 @@ def _echo_checks(checks: list[dict], met: bool) -> None:
     if checks:
         echo_table(
             [
-                [c.get("name"), c.get("value"),
+                [c.get("name"), _check_value(c),
                  f"{c.get('sense')} {cell(c.get('limit'))}" if c.get("limit") is not None else "",
                  _check_verdict(c)]
                 for c in checks

@@ -636,7 +636,11 @@ def evaluate(
     def req(name, key, limit, sense, scale=1.0):
         if why is not None:
             return Check(name, None, limit, sense, False, None, why)
-        return _check(name, worst[key] * scale, limit, sense)
+        c = _check(name, worst[key] * scale, limit, sense)
+        if key.endswith("settling_time_s") and math.isinf(worst[key]):
+            run = _SLEW_HORIZON if key.startswith("slew") else _HORIZON_MAX
+            c = replace(c, note=f"does not settle within {run:g} s")
+        return c
 
     checks = [
         Check(
