@@ -85,7 +85,10 @@ def gains(
     gain_margin_db: Annotated[float, typer.Option(help="Minimum gain margin, dB, > 0.")] = 6.0,
     max_sensitivity: Annotated[float, typer.Option(help="Largest |S| peak, > 1.")] = 2.0,
     bandwidth_hz: Annotated[
-        float | None, typer.Option(help="Wanted bandwidth, Hz (default: fastest).")
+        float | None,
+        typer.Option(
+            help="Wanted worst-case bandwidth w_B, Hz: the design at it (default: fastest)."
+        ),
     ] = None,
     inertia_uncertainty: Annotated[
         float, typer.Option(help="Relative inertia uncertainty, 0 to 1.")
@@ -97,12 +100,22 @@ def gains(
             "offset +- 50 %)."
         ),
     ] = None,
+    max_overshoot_pct: Annotated[
+        float,
+        typer.Option(help="Largest overshoot of the linear step response, % of the step, >= 0."),
+    ] = 5.0,
+    max_settling_time_s: Annotated[
+        float | None,
+        typer.Option(help="Longest 2 % settling time of the step, s (default: reported only)."),
+    ] = None,
     json_out: Annotated[
         Path | None, typer.Option("--json", help="Gains and verdict, JSON.")
     ] = None,
     force: Force = False,
 ) -> None:
-    """Tune the balancing PID or the CMG attitude PID to a specification."""
+    """Tune the balancing PID or the CMG attitude PID to a specification: the fastest
+    design (shortest worst-case settling of the linear step) that meets every check at
+    every corner of the uncertainty box."""
     out = Outputs(force=force)
     testbed_input(out, testbed)
     json_path = out.plan(json_out, "--json", (".json",))
@@ -117,6 +130,8 @@ def gains(
     number("--bandwidth-hz", bandwidth_hz, lo=0, lo_open=True, unit="Hz")
     number("--inertia-uncertainty", inertia_uncertainty, lo=0, hi=1, hi_open=True)
     numbers("--offset-range-mm", offset_range_mm, lo=-100, hi=100, unit="mm")
+    number("--max-overshoot-pct", max_overshoot_pct, lo=0, hi=1000, unit="%")
+    number("--max-settling-time-s", max_settling_time_s, lo=0, hi=1e6, lo_open=True, unit="s")
     if offset_range_mm is not None and offset_range_mm[0] > offset_range_mm[1]:
         raise InputError(
             f"--offset-range-mm {cell(offset_range_mm[0])} {cell(offset_range_mm[1])}: "
@@ -132,6 +147,8 @@ def gains(
         bandwidth_hz=bandwidth_hz,
         inertia_uncertainty=inertia_uncertainty,
         offset_range=None if offset_range_mm is None else tuple(v * 1e-3 for v in offset_range_mm),
+        max_overshoot=max_overshoot_pct,
+        max_settling_time=max_settling_time_s,
     )
     with progress_display("gains") as progress:
         progress(f"tuning the {loop} loop of {tb.name}")
@@ -147,15 +164,34 @@ def gains(
         typer.echo(f"wrote {json_path}")
 
 
+def _check_verdict(c: dict) -> str:
+    """A check's verdict word: ``met``, ``NOT met``, ``n/a`` (not met: its value means
+    nothing, e.g. a margin of an unstable loop) or ``reported`` (a value without a limit)."""
+    if c.get("value") is None and str(c.get("note") or "").startswith("not applicable"):
+        return "n/a"
+    if c.get("limit") is None and c.get("sense") and c.get("met"):
+        return "reported"
+    return "met" if c.get("met") else "NOT met"
+
+
+def _check_value(c: dict):
+    """A check's value for the table: the number, or ``does not settle`` for a settling
+    time that is none (the JSON's ``null``)."""
+    if c.get("value") is None and str(c.get("note") or "").startswith("does not settle"):
+        return "does not settle"
+    return c.get("value")
+
+
 def _echo_checks(checks: list[dict], met: bool) -> None:
     """The specification's checks as a table, then one verdict line: ``specification
-    met: yes``, or ``specification NOT met: `` and what falls short, by how much."""
+    met: yes``, or ``specification NOT met: `` and what falls short, by how much (checks
+    that do not apply to an unstable loop are named once, as such)."""
     if checks:
         echo_table(
             [
-                [c.get("name"), c.get("value"),
+                [c.get("name"), _check_value(c),
                  f"{c.get('sense')} {cell(c.get('limit'))}" if c.get("limit") is not None else "",
-                 "met" if c.get("met") else "NOT met"]
+                 _check_verdict(c)]
                 for c in checks
             ],
             ["check", "value", "required", "verdict"],
@@ -164,17 +200,21 @@ def _echo_checks(checks: list[dict], met: bool) -> None:
     if met:
         typer.echo("specification met: yes")
         return
-    short = []
+    short, moot = [], []
     for c in checks:
         if c.get("met"):
             continue
-        if c.get("value") is None:
-            short.append(f"{c.get('name')}: unstable")
+        if c.get("value") is None and str(c.get("note") or "").startswith("not applicable"):
+            moot.append(str(c.get("name")).split(" (")[0])
+        elif c.get("value") is None:
+            short.append(f"{c.get('name')}: {c.get('note') or 'unstable'}")
         else:
             by = "" if c.get("by") is None else f", short by {cell(abs(c['by']))}"
             short.append(
                 f"{c.get('name')} {cell(c['value'])} vs {c.get('sense')} {cell(c.get('limit'))}{by}"
             )
+    if moot:
+        short.append(f"{', '.join(moot)}: not applicable to an unstable loop")
     typer.echo("specification NOT met" + (": " + "; ".join(short) if short else ""))
 
 
