@@ -287,7 +287,66 @@ def _data_shapes(model: Model, L: int, nw: int, na: int, link: bool = False) -> 
 
 def _problem_functions(model, L, nw, K, outputs, substeps, jit, link=False):
     key = ("problem", structure_key(model), L, nw, K, outputs, substeps, jit, link)
-    return _cached(key, lambda: _build_problem(model, L, nw, K, outputs, substeps, jit, link))
+    return _cached(key, lambda: _build_problem(model, L, nw, K, outputs, substeps, jit, link))[:3]
+
+
+def window_jacobian(model, L, nw, K, outputs, substeps, jit, link=False) -> WindowJacobian:
+    """The :class:`WindowJacobian` of the problem :func:`_problem_functions` builds."""
+    key = ("problem", structure_key(model), L, nw, K, outputs, substeps, jit, link)
+    return _cached(key, lambda: _build_problem(model, L, nw, K, outputs, substeps, jit, link))[3]
+
+
+class WindowJacobian:
+    """The residual and its Jacobian in ``v = [theta; vec(delta)]`` from the windows' own
+    blocks: one compiled map writes each window's Jacobian (its rows by the ``K`` parameter
+    slots and its own ``nd`` initial-state entries) side by side, and NumPy places them in
+    the sparse matrix (``fj`` of :func:`_problem_functions` does the same in CasADi's
+    virtual machine, through copies of every block: twice the time and several times the
+    memory on long logs). Same numbers.
+
+    Attributes
+    ----------
+    fn : casadi.Function
+        ``(v, p_base, S, data) -> (r, blocks[, c, Jc])``: the residual, the window blocks
+        (``m x nw (K + nd)``), and on linked windows the defects and their Jacobian.
+    shape : tuple of int
+        ``(m nw, K + nd nw)``, the Jacobian's shape.
+    """
+
+    def __init__(self, fn: ca.Function, block: ca.Sparsity, nw: int, K: int) -> None:
+        self.fn, self.nw, self.K = fn, nw, K
+        m = block.size1()
+        row = np.asarray(block.row(), dtype=np.int64)
+        self._colind = col = np.asarray(block.colind(), dtype=np.int64)
+        counts = np.diff(col)
+        self.shape = (m * nw, K + (block.size2() - K) * nw)
+        big = max(m * nw, int(col[-1]) * nw) >= np.iinfo(np.int32).max
+        itype = np.int64 if big else np.int32
+        off = (np.arange(nw, dtype=np.int64) * m)[:, None]
+        # theta columns: every window's rows in turn; then each window's own columns
+        parts = [(row[col[c] : col[c + 1]][None, :] + off).ravel() for c in range(K)]
+        parts.append((row[col[K] :][None, :] + off).ravel())
+        self._indices = np.concatenate(parts).astype(itype)
+        sizes = np.r_[counts[:K] * nw, np.tile(counts[K:], nw)]
+        self._indptr = np.r_[0, np.cumsum(sizes)].astype(itype)
+
+    def matrix(self, blocks: np.ndarray) -> sp.csc_matrix:
+        """The Jacobian (CSC) from the nonzeros of the window blocks (``fn``'s second output)."""
+        B = np.asarray(blocks).reshape(self.nw, -1)
+        col = self._colind
+        parts = [B[:, col[c] : col[c + 1]].ravel() for c in range(self.K)]
+        parts.append(B[:, col[self.K] :].ravel())
+        return sp.csc_matrix(
+            (np.concatenate(parts), self._indices, self._indptr), shape=self.shape, copy=False
+        )
+
+    def __call__(self, v, p_base, S, data) -> tuple:
+        """``(r, J)``, and on linked windows ``(r, J, c, Jc)`` (``J``, ``Jc`` scipy CSC)."""
+        out = evaluate(self.fn, v, p_base, S, data)
+        J = self.matrix(out[1])
+        if len(out) == 2:
+            return out[0], J
+        return out[0], J, out[2], csc_of(out[3], self.fn.sparsity_out(3))
 
 
 def _build_problem(model, L, nw, K, outputs, substeps, jit, link=False):
@@ -332,15 +391,17 @@ def _build_problem(model, L, nw, K, outputs, substeps, jit, link=False):
         JC_d = JC_d + ca.horzcat(ca.MX(m, nd), ca.diagcat(*b_blocks))
         JC = ca.horzcat(JC_th, JC_d)
         fr = ca.Function("r", [v, pb, S, data], [ca.vec(R), C])
-        fj = ca.Function("rj", [v, pb, S, data], [ca.vec(Rj), J, ca.vec(Cj), JC])
+        defects = [ca.vec(Cj), JC]
     elif link:  # one window: nothing to join
         fr = ca.Function("r", [v, pb, S, data], [ca.vec(R), ca.MX(0, 1)])
-        fj = ca.Function("rj", [v, pb, S, data], [ca.vec(Rj), J, ca.MX(0, 1), ca.MX(0, v.shape[0])])
+        defects = [ca.MX(0, 1), ca.MX(0, v.shape[0])]
     else:
         fr = ca.Function("r", [v, pb, S, data], [ca.vec(R)])
-        fj = ca.Function("rj", [v, pb, S, data], [ca.vec(Rj), J])
+        defects = []
+    fj = ca.Function("rj", [v, pb, S, data], [ca.vec(Rj), J, *defects])
+    fw = ca.Function("rj_blocks", [v, pb, S, data], [ca.vec(Rj), Jj, *defects])
     fy = ca.Function("y", [v, pb, S, data], [Y])
-    return fr, fj, fy
+    return fr, fj, fy, WindowJacobian(fw, win_rj.sparsity_out(1), nw, K)
 
 
 def _problem_solver(model, L, nw, K, outputs, substeps, jit, max_iter=IPOPT_MAX_ITER):
@@ -352,9 +413,8 @@ def _problem_solver(model, L, nw, K, outputs, substeps, jit, max_iter=IPOPT_MAX_
 _PATTERNS: OrderedDict = OrderedDict()
 
 
-def to_csc(J: ca.DM) -> sp.csc_matrix:
-    """A CasADi sparse matrix as scipy CSC, its (constant) pattern converted once."""
-    spy = J.sparsity()
+def _pattern_of(spy: ca.Sparsity) -> tuple:
+    """``(row, colind)`` of a CasADi sparsity as int64 arrays, converted once per pattern."""
     key = (spy.hash(), spy.size1(), spy.size2(), spy.nnz())
     pat = _PATTERNS.get(key)
     if pat is None:
@@ -362,8 +422,84 @@ def to_csc(J: ca.DM) -> sp.csc_matrix:
         _PATTERNS[key] = pat
         while len(_PATTERNS) > CACHE_SIZE:
             _PATTERNS.popitem(last=False)
-    data = np.asarray(J.nonzeros(), dtype=float)
-    return sp.csc_matrix((data, pat[0], pat[1]), shape=(spy.size1(), spy.size2()))
+    return pat
+
+
+def to_csc(J: ca.DM) -> sp.csc_matrix:
+    """A CasADi sparse matrix as scipy CSC, its (constant) pattern converted once."""
+    return csc_of(np.asarray(J.nonzeros(), dtype=float), J.sparsity())
+
+
+def csc_of(nz: np.ndarray, spy: ca.Sparsity) -> sp.csc_matrix:
+    """The nonzeros ``nz`` (CasADi's column-major order) of a matrix of sparsity ``spy`` as
+    scipy CSC, sharing ``nz`` (no copy)."""
+    row, colind = _pattern_of(spy)
+    return sp.csc_matrix((nz, row, colind), shape=(spy.size1(), spy.size2()), copy=False)
+
+
+def scale_columns(J: sp.csc_matrix, scale: np.ndarray) -> sp.csc_matrix:
+    """``J @ diag(scale)`` for a CSC ``J``, in place (each column times its factor: the
+    same numbers as the product, without a copy of ``J``)."""
+    J.data *= np.repeat(np.asarray(scale, dtype=float), np.diff(J.indptr))
+    return J
+
+
+def vstack_csc(A: sp.csc_matrix, B: sp.csc_matrix) -> sp.csc_matrix:
+    """``[A; B]`` as CSC for a small ``B`` (each column: ``A``'s entries, then ``B``'s): the
+    entries of ``B`` inserted into ``A``'s arrays, without scipy's detour through COO and a
+    sort of every entry (a few hundred MB and most of a second on an hour of samples)."""
+    A, B = sp.csc_matrix(A), sp.csc_matrix(B)
+    if A.shape[1] != B.shape[1]:  # pragma: no cover - programming error
+        raise ValueError("vstack_csc: the matrices have different numbers of columns")
+    A.sort_indices()
+    B.sort_indices()
+    col = np.repeat(np.arange(B.shape[1]), np.diff(B.indptr))
+    at = A.indptr[col + 1]
+    data = np.insert(A.data, at, B.data)
+    indices = np.insert(A.indices.astype(np.int64), at, B.indices.astype(np.int64) + A.shape[0])
+    return sp.csc_matrix(
+        (data, indices, A.indptr.astype(np.int64) + B.indptr),
+        shape=(A.shape[0] + B.shape[0], A.shape[1]),
+    )
+
+
+def evaluate(fn: ca.Function, *args) -> list:
+    """The nonzeros of every output of ``fn(*args)``, written by CasADi straight into new
+    NumPy arrays (:meth:`casadi.Function.buffer`).
+
+    A call through ``fn(...)`` converts every input to a DM and every output back, element
+    by element through Python lists: on an hour of samples that costs several times the
+    compiled evaluation itself and a transient Python list of every Jacobian entry (32 bytes
+    each). Same values as the call.
+
+    Parameters
+    ----------
+    fn : casadi.Function
+        Dense inputs.
+    *args : array-like
+        One per input, its entries in column-major (Fortran) order.
+
+    Returns
+    -------
+    list of ndarray
+        Per output, its nonzeros in CasADi's column-major order (:func:`csc_of` makes a
+        sparse one a matrix).
+    """
+    buf, run = fn.buffer()
+    keep = []
+    for i, a in enumerate(args):
+        x = np.ascontiguousarray(np.asarray(a, dtype=float).reshape(-1, order="F"))
+        if x.size != fn.nnz_in(i):  # pragma: no cover - programming error
+            raise ValueError(f"{fn.name()}: input {i} has {x.size} entries, not {fn.nnz_in(i)}")
+        keep.append(x)
+        buf.set_arg(i, memoryview(x))
+    out = [np.empty(fn.nnz_out(i)) for i in range(fn.n_out())]
+    for i, o in enumerate(out):
+        buf.set_res(i, memoryview(o))
+    run()
+    if buf.ret() != 0:
+        raise RuntimeError(f"{fn.name()}: evaluation failed (return code {buf.ret()})")
+    return out
 
 
 class _Oracle:
@@ -390,11 +526,18 @@ class _Oracle:
     def _same(self, z, par) -> bool:
         return self.z is not None and par is self.par and np.array_equal(z, self.z)
 
+    def release(self) -> None:
+        """Forget the last iterate (its Jacobian is large on long logs; the cached solver
+        keeps this oracle)."""
+        self.z = self.r = self.J = None
+        if hasattr(self, "Jc"):
+            self.c = self.Jc = None
+
     def r_at(self, z, par) -> np.ndarray:
         if not self._same(z, par):
             v, pb, S, data, _ = self._args(z, par)
             self.z, self.par, self.J = z.copy(), par, None
-            self.r = self.fr(v, pb, S, data).full().ravel()
+            self.r = evaluate(self.fr, v, pb, S, data)[0]
         return self.r
 
     def rj_at(self, z, par):
@@ -402,8 +545,8 @@ class _Oracle:
             v, pb, S, data, scale = self._args(z, par)
             r, J = self.fj(v, pb, S, data)
             self.z, self.par = z.copy(), par
-            self.r = r.full().ravel()
-            self.J = to_csc(J) @ sp.diags(scale)  # scipy CSC (sparse windows)
+            self.r = r
+            self.J = scale_columns(J, scale)  # scipy CSC (sparse windows)
         return self.r, self.J
 
 
@@ -464,7 +607,8 @@ def _build_solver(model, L, nw, K, outputs, substeps, jit, max_iter=IPOPT_MAX_IT
     objective's derivative in the solver parameters is declared structurally zero: IPOPT
     never uses it (no multipliers of the parameters are computed).
     """
-    fr, fj, _ = _problem_functions(model, L, nw, K, outputs, substeps, jit)
+    fr, _, _ = _problem_functions(model, L, nw, K, outputs, substeps, jit)
+    fj = window_jacobian(model, L, nw, K, outputs, substeps, jit)
     nd = sum(delta_layout(model, outputs))
     n_v = K + nd * nw
     n_p = model.n_p

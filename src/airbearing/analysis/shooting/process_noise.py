@@ -47,9 +47,12 @@ from airbearing.analysis.shooting.functions import (
     _Call,
     _problem_functions,
     delta_layout,
+    evaluate,
     ipopt_options,
+    scale_columns,
     structure_key,
-    to_csc,
+    vstack_csc,
+    window_jacobian,
 )
 
 __all__ = [
@@ -215,24 +218,28 @@ class _PenalisedOracle:
         self.P = P  # whitening of the measurement rows (coloured noise), or None
         self.z = None
 
+    def release(self) -> None:
+        """Forget the last iterate (its Jacobian is large on long logs; the cached solver
+        keeps this oracle)."""
+        self.z = self.r = self.J = None
+        if hasattr(self, "Jc"):
+            self.c = self.Jc = None
+
     def r_at(self, z):
         if self.z is None or not np.array_equal(z, self.z):
-            r, c = self.fr(z * self.scale, self.pb, self.S, self.data)
+            rm, c = evaluate(self.fr, z * self.scale, self.pb, self.S, self.data)
             self.z, self.J = z.copy(), None
-            rm = r.full().ravel()
-            self.r = np.r_[rm if self.P is None else self.P @ rm, self.W @ c.full().ravel()]
+            self.r = np.r_[rm if self.P is None else self.P @ rm, self.W @ c]
         return self.r
 
     def rj_at(self, z):
         if self.z is None or self.J is None or not np.array_equal(z, self.z):
-            r, J, c, Jc = self.fj(z * self.scale, self.pb, self.S, self.data)
+            rm, Jm, c, Jc = self.fj(z * self.scale, self.pb, self.S, self.data)
             self.z = z.copy()
-            rm, Jm = r.full().ravel(), to_csc(J)
             if self.P is not None:
                 rm, Jm = self.P @ rm, self.P @ Jm
-            self.r = np.r_[rm, self.W @ c.full().ravel()]
-            Js = sp.vstack([Jm, self.W @ to_csc(Jc)]).tocsc()
-            self.J = Js @ sp.diags(self.scale)
+            self.r = np.r_[rm, self.W @ c]
+            self.J = scale_columns(vstack_csc(Jm, self.W @ Jc), self.scale)
         return self.r, self.J
 
 
@@ -263,7 +270,7 @@ def _build_penalised(model, L, nw, K, outputs, substeps, jit, max_iter):
     fr, fj, _ = _problem_functions(model, L, nw, K, outputs, substeps, jit, True)
     nd = sum(delta_layout(model, outputs))
     n_v = K + nd * nw
-    o = _PenalisedOracle(fr, fj, n_v)
+    o = _PenalisedOracle(fr, window_jacobian(model, L, nw, K, outputs, substeps, jit, True), n_v)
     Hp = hessian_pattern(fj, nd, nw)
     h_spy = ca.Sparsity(n_v, n_v, Hp.indptr.tolist(), Hp.indices.tolist())
     h_rows = Hp.indices
