@@ -32,7 +32,6 @@ from airbearing.analysis.shooting.functions import (
     ipopt_options,
     scale_columns,
     structure_key,
-    window_jacobian,
 )
 
 __all__ = ["Inequality", "null_space_basis"]
@@ -134,16 +133,16 @@ def _spy(P: sp.csc_matrix) -> tuple:
     return spy, P.indices.copy(), np.repeat(np.arange(P.shape[1]), np.diff(P.indptr))
 
 
-def _linked_patterns(fj, wj, rows: np.ndarray, K: int, n_ineq: int):
+def _linked_patterns(wj, rows: np.ndarray, K: int, n_ineq: int):
     """Sparsity of the constraint Jacobian (the linked pairs' defect rows, then ``n_ineq``
     rows on the ``K`` parameter slots) and of the Hessian's upper triangle (``J^T J``, the
     parameter block dense for the inequalities): the window states couple only through
     their neighbours, so IPOPT's factorisation stays linear in the number of windows."""
-    ones = sp.csc_matrix((np.ones(len(wj._indices)), wj._indices, wj._indptr), shape=wj.shape)
+    ones = wj.pattern()
     n_v = wj.shape[1]
     blocks = []
     if rows.size:
-        spy = fj.sparsity_out(3)
+        spy = wj.fn.sparsity_out(3)
         C = sp.csc_matrix(
             (np.ones(spy.nnz()), np.asarray(spy.row()), np.asarray(spy.colind())),
             shape=(spy.size1(), spy.size2()),
@@ -166,8 +165,7 @@ def _linked_patterns(fj, wj, rows: np.ndarray, K: int, n_ineq: int):
 def _build_linked_solver(model, L, nw, K, outputs, substeps, jit, link, rows, n_ineq, max_iter):
     """IPOPT on ``z = v / scale`` with the continuity rows ``rows`` (of the defects of
     every consecutive pair) and ``n_ineq`` inequalities."""
-    fr, fj, _ = _problem_functions(model, L, nw, K, outputs, substeps, jit, link)
-    wj = window_jacobian(model, L, nw, K, outputs, substeps, jit, link)
+    fr, wj, _ = _problem_functions(model, L, nw, K, outputs, substeps, jit, link)
     rows = np.asarray(rows, dtype=int)
     n_link = rows.size
     nd = sum(delta_layout(model, outputs))
@@ -176,7 +174,7 @@ def _build_linked_solver(model, L, nw, K, outputs, substeps, jit, link, rows, n_
     o = _LinkedOracle(fr, wj, model.n_p, K, n_v, link)
     dv, one = ca.Sparsity.dense(n_v, 1), ca.Sparsity.dense(1, 1)
     dg = ca.Sparsity.dense(ng, 1)
-    (jg, g_rows, g_cols), (h_spy, h_rows, h_cols) = _linked_patterns(fj, wj, rows, K, n_ineq)
+    (jg, g_rows, g_cols), (h_spy, h_rows, h_cols) = _linked_patterns(wj, rows, K, n_ineq)
 
     def f(z):
         r, _ = o.r_g(z)

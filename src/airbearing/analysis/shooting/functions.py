@@ -286,23 +286,22 @@ def _data_shapes(model: Model, L: int, nw: int, na: int, link: bool = False) -> 
 
 
 def _problem_functions(model, L, nw, K, outputs, substeps, jit, link=False):
+    """``(fr, fj, fy)`` of :func:`_build_problem`, from the one bounded cache."""
     key = ("problem", structure_key(model), L, nw, K, outputs, substeps, jit, link)
-    return _cached(key, lambda: _build_problem(model, L, nw, K, outputs, substeps, jit, link))[:3]
+    return _cached(key, lambda: _build_problem(model, L, nw, K, outputs, substeps, jit, link))
 
 
 def window_jacobian(model, L, nw, K, outputs, substeps, jit, link=False) -> WindowJacobian:
-    """The :class:`WindowJacobian` of the problem :func:`_problem_functions` builds."""
-    key = ("problem", structure_key(model), L, nw, K, outputs, substeps, jit, link)
-    return _cached(key, lambda: _build_problem(model, L, nw, K, outputs, substeps, jit, link))[3]
+    """The :class:`WindowJacobian` ``fj`` of :func:`_problem_functions`."""
+    return _problem_functions(model, L, nw, K, outputs, substeps, jit, link)[1]
 
 
 class WindowJacobian:
     """The residual and its Jacobian in ``v = [theta; vec(delta)]`` from the windows' own
     blocks: one compiled map writes each window's Jacobian (its rows by the ``K`` parameter
     slots and its own ``nd`` initial-state entries) side by side, and NumPy places them in
-    the sparse matrix (``fj`` of :func:`_problem_functions` does the same in CasADi's
-    virtual machine, through copies of every block: twice the time and several times the
-    memory on long logs). Same numbers.
+    the sparse matrix (assembled in CasADi's virtual machine, through copies of every
+    block, it took twice the time and 1 GB more memory on an hour of 50 Hz samples).
 
     Attributes
     ----------
@@ -330,6 +329,11 @@ class WindowJacobian:
         sizes = np.r_[counts[:K] * nw, np.tile(counts[K:], nw)]
         self._indptr = np.r_[0, np.cumsum(sizes)].astype(itype)
 
+    def pattern(self) -> sp.csc_matrix:
+        """The Jacobian's structure: a CSC matrix of ones."""
+        ones = np.ones(self._indices.size)
+        return sp.csc_matrix((ones, self._indices, self._indptr), shape=self.shape)
+
     def matrix(self, blocks: np.ndarray) -> sp.csc_matrix:
         """The Jacobian (CSC) from the nonzeros of the window blocks (``fn``'s second output)."""
         B = np.asarray(blocks).reshape(self.nw, -1)
@@ -349,10 +353,40 @@ class WindowJacobian:
         return out[0], J, out[2], csc_of(out[3], self.fn.sparsity_out(3))
 
 
+#: Threads evaluating the windows side by side.
+THREADS = 2
+
+
+def map_windows(fn: ca.Function, nw: int, args: list) -> list:
+    """``fn`` over ``nw`` windows (``args`` as :meth:`casadi.Function.map` takes them: a
+    window's inputs side by side, or one for all), ``THREADS`` windows at a time.
+
+    CasADi's threaded map keeps a work vector per window it maps, not per thread: for the
+    Jacobian of an hour of 50 Hz pieces, 570 MB. A serial map of threaded maps of
+    ``THREADS`` windows keeps ``THREADS`` (the remaining windows are one more call)."""
+    if nw < 2 * THREADS:
+        return fn.map(nw, "thread", THREADS).call(args)
+    per = [fn.size2_in(i) for i in range(fn.n_in())]
+    m = (nw // THREADS) * THREADS
+    mapped = fn.map(THREADS, "thread", THREADS).map(m // THREADS, "serial")
+
+    def part(a, w, lo, hi):
+        return a[:, lo * w : hi * w] if a.shape[1] == w * nw and w * nw != w else a
+
+    out = mapped.call([part(a, w, 0, m) for a, w in zip(args, per, strict=True)])
+    if m == nw:
+        return out
+    rest = fn.map(nw - m, "thread", THREADS).call(
+        [part(a, w, m, nw) for a, w in zip(args, per, strict=True)]
+    )
+    return [ca.horzcat(a, b) for a, b in zip(out, rest, strict=True)]
+
+
 def _build_problem(model, L, nw, K, outputs, substeps, jit, link=False):
-    """``fr, fj, fy`` of all windows: ``(v, p_base, S, data) -> `` residual (and with
-    ``link`` the continuity defects of every consecutive pair of windows), their Jacobians
-    in ``v = [theta; vec(delta)]``, the outputs."""
+    """``fr, fj, fy`` of all windows: ``fr`` and ``fy`` CasADi Functions ``(v, p_base, S,
+    data) -> `` the residual (and with ``link`` the continuity defects of every consecutive
+    pair of windows), the outputs; ``fj`` the :class:`WindowJacobian` (the same and their
+    Jacobians in ``v = [theta; vec(delta)]``, NumPy and scipy CSC)."""
     win_r, win_rj, win_y = _window_functions(model, L, K, outputs, substeps, jit, link)
     n_att, n_rate, n_lag = delta_layout(model, outputs)
     nd = n_att + n_rate + n_lag
@@ -367,14 +401,10 @@ def _build_problem(model, L, nw, K, outputs, substeps, jit, link=False):
         i += a * b
     th, D = v[:K], ca.reshape(v[K:], nd, nw)
     args = [D, *pieces[:7], pb, S, th, pieces[-1], *(pieces[7:8] if link else [])]
-    out_r = win_r.map(nw, "thread", 2)(*args)
-    out_rj = win_rj.map(nw, "thread", 2)(*args)
-    R, (Rj, Jj) = (out_r[0], out_rj[:2]) if link else (out_r, out_rj)
-    n = Rj.shape[0]
-    blocks = [Jj[:, j * (K + nd) : (j + 1) * (K + nd)] for j in range(nw)]
-    J_th = ca.vertcat(*[blk[:, :K] for blk in blocks]) if K else ca.MX(n * nw, 0)
-    J = ca.horzcat(J_th, ca.diagcat(*[blk[:, K:] for blk in blocks]))
-    Y = win_y.map(nw, "thread", 2)(D, pieces[0], pieces[1], pieces[2], pb, S, th)
+    out_r = map_windows(win_r, nw, args)
+    out_rj = map_windows(win_rj, nw, args)
+    R, (Rj, Jj) = (out_r[0], out_rj[:2]) if link else (out_r[0], out_rj)
+    Y = map_windows(win_y, nw, [D, pieces[0], pieces[1], pieces[2], pb, S, th])[0]
     if link and nw > 1:
         lf = _link_function(model, K, outputs).map(nw - 1)
         sig = ca.repmat(pieces[-1], 1, nw - 1)
@@ -398,10 +428,9 @@ def _build_problem(model, L, nw, K, outputs, substeps, jit, link=False):
     else:
         fr = ca.Function("r", [v, pb, S, data], [ca.vec(R)])
         defects = []
-    fj = ca.Function("rj", [v, pb, S, data], [ca.vec(Rj), J, *defects])
     fw = ca.Function("rj_blocks", [v, pb, S, data], [ca.vec(Rj), Jj, *defects])
     fy = ca.Function("y", [v, pb, S, data], [Y])
-    return fr, fj, fy, WindowJacobian(fw, win_rj.sparsity_out(1), nw, K)
+    return fr, WindowJacobian(fw, win_rj.sparsity_out(1), nw, K), fy
 
 
 def _problem_solver(model, L, nw, K, outputs, substeps, jit, max_iter=IPOPT_MAX_ITER):
@@ -607,8 +636,7 @@ def _build_solver(model, L, nw, K, outputs, substeps, jit, max_iter=IPOPT_MAX_IT
     objective's derivative in the solver parameters is declared structurally zero: IPOPT
     never uses it (no multipliers of the parameters are computed).
     """
-    fr, _, _ = _problem_functions(model, L, nw, K, outputs, substeps, jit)
-    fj = window_jacobian(model, L, nw, K, outputs, substeps, jit)
+    fr, fj, _ = _problem_functions(model, L, nw, K, outputs, substeps, jit)
     nd = sum(delta_layout(model, outputs))
     n_v = K + nd * nw
     n_p = model.n_p

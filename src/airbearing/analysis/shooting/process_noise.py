@@ -52,7 +52,6 @@ from airbearing.analysis.shooting.functions import (
     scale_columns,
     structure_key,
     vstack_csc,
-    window_jacobian,
 )
 
 __all__ = [
@@ -252,11 +251,12 @@ def _pattern(spy: ca.Sparsity) -> sp.csc_matrix:
 
 
 def hessian_pattern(fj, nd: int, nw: int) -> sp.csc_matrix:
-    """Upper triangle of the structure of ``J^T J + Jc^T W^T W Jc`` (``W`` dense within each
-    pair's ``nd x nd`` block): fixed for a problem structure, so IPOPT gets a sparse Hessian
-    (the window states couple only their neighbours)."""
-    J = _pattern(fj.sparsity_out(1))
-    Jc = _pattern(fj.sparsity_out(3))
+    """Upper triangle of the structure of ``J^T J + Jc^T W^T W Jc`` (``fj`` the problem's
+    :class:`~.functions.WindowJacobian`; ``W`` dense within each pair's ``nd x nd`` block):
+    fixed for a problem structure, so IPOPT gets a sparse Hessian (the window states couple
+    only their neighbours)."""
+    J = fj.pattern()
+    Jc = _pattern(fj.fn.sparsity_out(3))
     m = nd * max(nw - 1, 0)
     Wp = sp.block_diag([np.ones((nd, nd))] * max(nw - 1, 0), format="csc") if m else None
     H = (J.T @ J) + ((Wp @ Jc).T @ (Wp @ Jc) if m else 0 * (J.T @ J))
@@ -270,7 +270,7 @@ def _build_penalised(model, L, nw, K, outputs, substeps, jit, max_iter):
     fr, fj, _ = _problem_functions(model, L, nw, K, outputs, substeps, jit, True)
     nd = sum(delta_layout(model, outputs))
     n_v = K + nd * nw
-    o = _PenalisedOracle(fr, window_jacobian(model, L, nw, K, outputs, substeps, jit, True), n_v)
+    o = _PenalisedOracle(fr, fj, n_v)
     Hp = hessian_pattern(fj, nd, nw)
     h_spy = ca.Sparsity(n_v, n_v, Hp.indptr.tolist(), Hp.indices.tolist())
     h_rows = Hp.indices
@@ -455,6 +455,7 @@ def _descend(problem, fit_at, grid, theta0, delta0, start, k: int) -> dict:
                     raise
                 break  # a lower intensity the fit cannot reach
         out[kappa] = (fit, _loglik(problem, fit, k))
+        _keep_best_jacobian(out, start)
         th, d = fit.theta, fit.delta
     best = max(out, key=lambda a: out[a][1])
     for kappa in (best * 10.0, best / 10.0):
@@ -466,7 +467,18 @@ def _descend(problem, fit_at, grid, theta0, delta0, start, k: int) -> dict:
         except SolverError:
             continue
         out[kappa] = (fit, _loglik(problem, fit, k))
+        _keep_best_jacobian(out, start)
     return out
+
+
+def _keep_best_jacobian(out: dict, start) -> None:
+    """Drop the Jacobian of every fit of the descent but the most likely so far (only its
+    fit is returned; the others give their gap and likelihood): on an hour of 50 Hz samples
+    each is about 150 MB. ``start`` is the caller's and keeps its own."""
+    best = max(out, key=lambda a: out[a][1])
+    for kappa, (fit, _) in out.items():
+        if kappa != best and fit is not start:
+            fit.extra.pop("J", None)
 
 
 def _verdict(problem, ll: dict, best: float, bottom: float) -> ProcessNoise:
