@@ -4,8 +4,9 @@
         [--only replay,discrepancy,identify] [--keep DIR] [--src PATH]
 
 The logs are simulated once with the package (``seed004-platform`` at 50 Hz, a free
-oscillation from the rates and slider positions of ``bench_identify.py``'s first run, a
-viscous friction of 1e-5 N m s that the testbed does not have) and written as CSV; each
+oscillation from the rates and slider positions of ``bench_identify.py``'s first run) and
+written as CSV: for ``replay`` and ``discrepancy`` with a viscous friction of 1e-5 N m s
+that the testbed does not have, for ``identify`` without (it fits the testbed's model); each
 command then runs as a NEW process (``python -m airbearing --quiet ...``, imports and the
 log's reading included), and the benchmark prints its wall time, CPU time (user + system)
 and peak resident memory (``ru_maxrss`` of the process itself, from ``os.wait4``).
@@ -48,12 +49,13 @@ def make_inputs(folder: Path, minutes: list[float]) -> tuple[Path, dict]:
         write_testbed(tb, tb_path)
     logs = {}
     for m in minutes:
-        path = folder / f"osc{m:g}min.csv"
-        if not path.exists():
-            run = free_oscillation(tb, initial_rate=INITIAL_RATE, sliders=SLIDERS,
-                                   duration=60.0 * m, seed=1, effects=HIDDEN)  # fmt: skip
-            write_log(run.log, path)
-        logs[m] = path
+        for name, effects in (("osc", HIDDEN), ("free", None)):
+            path = folder / f"{name}{m:g}min.csv"
+            if not path.exists():
+                run = free_oscillation(tb, initial_rate=INITIAL_RATE, sliders=SLIDERS,
+                                       duration=60.0 * m, seed=1, effects=effects)  # fmt: skip
+                write_log(run.log, path)
+            logs[name, m] = path
     return tb_path, logs
 
 
@@ -91,12 +93,10 @@ def main() -> None:
         print(f"{'command':12s} {'log':>7s} {'rows':>7s} {'wall s':>8s} {'cpu s':>8s} "
               f"{'peak MB':>8s} {'load':>5s}")  # fmt: skip
         for what in which:
-            for m, log in logs.items():
-                cmd = {
-                    "replay": ["replay", str(tb), str(log)],
-                    "discrepancy": ["discrepancy", str(tb), str(log)],
-                    "identify": ["identify", str(tb), str(log)],
-                }[what]
+            for m in args.minutes:
+                # identify fits the testbed's own model: the log without the hidden friction
+                log = logs["free" if what == "identify" else "osc", m]
+                cmd = [what, str(tb), str(log)]
                 wall, cpu, mb = run([*cmd, "--json", str(out), "--force"], args.src)
                 rows = int(round(60.0 * m * RATE_HZ))
                 print(f"{what:12s} {m:5g} m {rows:7d} {wall:8.1f} {cpu:8.1f} {mb:8.0f} "
