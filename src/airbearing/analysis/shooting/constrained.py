@@ -142,7 +142,7 @@ def _linked_patterns(wj, rows: np.ndarray, K: int, n_ineq: int):
     n_v = wj.shape[1]
     blocks = []
     if rows.size:
-        spy = wj.fn.sparsity_out(3)
+        spy = wj.defect_sparsity()
         C = sp.csc_matrix(
             (np.ones(spy.nnz()), np.asarray(spy.row()), np.asarray(spy.colind())),
             shape=(spy.size1(), spy.size2()),

@@ -298,22 +298,22 @@ def window_jacobian(model, L, nw, K, outputs, substeps, jit, link=False) -> Wind
 
 class WindowJacobian:
     """The residual and its Jacobian in ``v = [theta; vec(delta)]`` from the windows' own
-    blocks: one compiled map writes each window's Jacobian (its rows by the ``K`` parameter
-    slots and its own ``nd`` initial-state entries) side by side, and NumPy places them in
-    the sparse matrix (assembled in CasADi's virtual machine, through copies of every
-    block, it took twice the time and 1 GB more memory on an hour of 50 Hz samples).
+    blocks: the compiled window function runs on ``THREADS`` windows at a time, each call
+    writing straight into its windows' slices of the result (:meth:`casadi.Function.buffer`),
+    and NumPy places the blocks in the sparse matrix. On an hour of 50 Hz pieces the same
+    in one CasADi map cost 0.6 GB for the map's output pattern and work vectors, and its
+    assembly in CasADi's virtual machine 1 GB more.
 
     Attributes
     ----------
-    fn : casadi.Function
-        ``(v, p_base, S, data) -> (r, blocks[, c, Jc])``: the residual, the window blocks
-        (``m x nw (K + nd)``), and on linked windows the defects and their Jacobian.
     shape : tuple of int
         ``(m nw, K + nd nw)``, the Jacobian's shape.
     """
 
-    def __init__(self, fn: ca.Function, block: ca.Sparsity, nw: int, K: int) -> None:
-        self.fn, self.nw, self.K = fn, nw, K
+    def __init__(self, win_rj: ca.Function, nw: int, K: int, shapes: list, defects=None):
+        self.win_rj, self.nw, self.K, self.defects = win_rj, nw, K, defects
+        self.pair = win_rj.map(THREADS, "thread", THREADS) if nw >= THREADS else None
+        block = win_rj.sparsity_out(1)
         m = block.size1()
         row = np.asarray(block.row(), dtype=np.int64)
         self._colind = col = np.asarray(block.colind(), dtype=np.int64)
@@ -328,14 +328,43 @@ class WindowJacobian:
         self._indices = np.concatenate(parts).astype(itype)
         sizes = np.r_[counts[:K] * nw, np.tile(counts[K:], nw)]
         self._indptr = np.r_[0, np.cumsum(sizes)].astype(itype)
+        # where each input of the window function lives: (source, offset, entries per
+        # window or None when shared); sources 0 v, 1 p_base, 2 S, 3 data
+        nd = win_rj.size1_in(0)
+        pieces, off = [], 0
+        for a, b in shapes:
+            pieces.append((off, a * b // nw if b % nw == 0 and b >= nw else None))
+            off += a * b
+        x0, U, dt, wt, W, Q, YW, *rest = pieces
+        sigma = rest[-1]
+        self._where = [
+            (0, K, nd),
+            (3, *x0),
+            (3, *U),
+            (3, *dt),
+            (3, *wt),
+            (3, *W),
+            (3, *Q),
+            (3, *YW),
+            (1, 0, None),
+            (2, 0, None),
+            (0, 0, None),
+            (3, sigma[0], None),
+        ]
+        if len(rest) == 2:  # the hand-over row selector of linked windows
+            self._where.append((3, *rest[0]))  # fmt: skip
 
     def pattern(self) -> sp.csc_matrix:
         """The Jacobian's structure: a CSC matrix of ones."""
         ones = np.ones(self._indices.size)
         return sp.csc_matrix((ones, self._indices, self._indptr), shape=self.shape)
 
+    def defect_sparsity(self) -> ca.Sparsity:
+        """The structure of the defects' Jacobian (linked windows)."""
+        return self.defects.sparsity_out(1)
+
     def matrix(self, blocks: np.ndarray) -> sp.csc_matrix:
-        """The Jacobian (CSC) from the nonzeros of the window blocks (``fn``'s second output)."""
+        """The Jacobian (CSC) from the nonzeros of the window blocks, window after window."""
         B = np.asarray(blocks).reshape(self.nw, -1)
         col = self._colind
         parts = [B[:, col[c] : col[c + 1]].ravel() for c in range(self.K)]
@@ -344,13 +373,54 @@ class WindowJacobian:
             (np.concatenate(parts), self._indices, self._indptr), shape=self.shape, copy=False
         )
 
+    def _windows(self, src: list) -> list:
+        """Every output of the window function for all windows, window after window."""
+        f = self.win_rj
+        out = [np.empty(f.nnz_out(i) * self.nw) for i in range(f.n_out())]
+        buffers: dict = {}
+        # shared inputs (parameters, noise levels) once per mapped window
+        shared = {
+            i: src[s][off : off + f.nnz_in(i)]
+            for i, (s, off, per) in enumerate(self._where)
+            if per is None
+        }
+        for fn, j0, count in self._calls():
+            if count not in buffers:
+                tiled = {i: np.tile(a, count) for i, a in shared.items()}
+                buffers[count] = (*fn.buffer(), tiled)
+            buf, run, tiled = buffers[count]
+            for i, (s, off, per) in enumerate(self._where):
+                if per is None:
+                    piece = tiled[i]
+                else:
+                    piece = src[s][off + j0 * per : off + (j0 + count) * per]
+                buf.set_arg(i, memoryview(piece))
+            for i, o in enumerate(out):
+                n = f.nnz_out(i)
+                buf.set_res(i, memoryview(o[j0 * n : (j0 + count) * n]))
+            run()
+            if buf.ret() != 0:
+                raise RuntimeError(f"{f.name()}: evaluation failed (return code {buf.ret()})")
+        return out
+
+    def _calls(self):
+        """``(function, first window, windows)`` of each evaluation."""
+        m = (self.nw // THREADS) * THREADS if self.pair is not None else 0
+        for j0 in range(0, m, THREADS):
+            yield self.pair, j0, THREADS
+        for j0 in range(m, self.nw):
+            yield self.win_rj, j0, 1
+
     def __call__(self, v, p_base, S, data) -> tuple:
         """``(r, J)``, and on linked windows ``(r, J, c, Jc)`` (``J``, ``Jc`` scipy CSC)."""
-        out = evaluate(self.fn, v, p_base, S, data)
+        src = [np.ascontiguousarray(np.asarray(a, dtype=float).reshape(-1, order="F"))
+               for a in (v, p_base, S, data)]  # fmt: skip
+        out = self._windows(src)
         J = self.matrix(out[1])
-        if len(out) == 2:
+        if self.defects is None:
             return out[0], J
-        return out[0], J, out[2], csc_of(out[3], self.fn.sparsity_out(3))
+        c, Jc = evaluate(self.defects, out[2], out[3], *src)
+        return out[0], J, c, csc_of(Jc, self.defects.sparsity_out(1))
 
 
 #: Threads evaluating the windows side by side.
@@ -371,7 +441,8 @@ def map_windows(fn: ca.Function, nw: int, args: list) -> list:
     mapped = fn.map(THREADS, "thread", THREADS).map(m // THREADS, "serial")
 
     def part(a, w, lo, hi):
-        return a[:, lo * w : hi * w] if a.shape[1] == w * nw and w * nw != w else a
+        whole = (lo, hi) == (0, nw)
+        return a[:, lo * w : hi * w] if a.shape[1] == w * nw != w and not whole else a
 
     out = mapped.call([part(a, w, 0, m) for a, w in zip(args, per, strict=True)])
     if m == nw:
@@ -402,35 +473,37 @@ def _build_problem(model, L, nw, K, outputs, substeps, jit, link=False):
     th, D = v[:K], ca.reshape(v[K:], nd, nw)
     args = [D, *pieces[:7], pb, S, th, pieces[-1], *(pieces[7:8] if link else [])]
     out_r = map_windows(win_r, nw, args)
-    out_rj = map_windows(win_rj, nw, args)
-    R, (Rj, Jj) = (out_r[0], out_rj[:2]) if link else (out_r[0], out_rj)
+    R = out_r[0]
     Y = map_windows(win_y, nw, [D, pieces[0], pieces[1], pieces[2], pb, S, th])[0]
-    if link and nw > 1:
-        lf = _link_function(model, K, outputs).map(nw - 1)
-        sig = ca.repmat(pieces[-1], 1, nw - 1)
-        C = ca.vec(lf(out_r[1][:, :-1], ca.DM.zeros(model.nx, (K + nd) * (nw - 1)),
-                      D[:, 1:], pieces[0][:, 1:], sig)[0])  # fmt: skip
-        dX = out_rj[3]
-        Cj, A, B = lf(out_rj[2][:, :-1], dX[:, : (K + nd) * (nw - 1)], D[:, 1:],
-                      pieces[0][:, 1:], sig)  # fmt: skip
-        m = nd * (nw - 1)
-        a_blocks = [A[:, j * (K + nd) : (j + 1) * (K + nd)] for j in range(nw - 1)]
-        b_blocks = [B[:, j * nd : (j + 1) * nd] for j in range(nw - 1)]
-        JC_th = ca.vertcat(*[blk[:, :K] for blk in a_blocks]) if K else ca.MX(m, 0)
-        JC_d = ca.horzcat(ca.diagcat(*[blk[:, K:] for blk in a_blocks]), ca.MX(m, nd))
-        JC_d = JC_d + ca.horzcat(ca.MX(m, nd), ca.diagcat(*b_blocks))
-        JC = ca.horzcat(JC_th, JC_d)
-        fr = ca.Function("r", [v, pb, S, data], [ca.vec(R), C])
-        defects = [ca.vec(Cj), JC]
-    elif link:  # one window: nothing to join
-        fr = ca.Function("r", [v, pb, S, data], [ca.vec(R), ca.MX(0, 1)])
-        defects = [ca.MX(0, 1), ca.MX(0, v.shape[0])]
+    defects = None
+    if link:
+        # the defects and their Jacobian from every window's end state and its Jacobian
+        XE = ca.MX.sym("x_end", model.nx, nw)
+        DX = ca.MX.sym("dx_end", ca.repmat(win_rj.sparsity_out(3), 1, nw))
+        if nw > 1:
+            lf = _link_function(model, K, outputs).map(nw - 1)
+            sig = ca.repmat(pieces[-1], 1, nw - 1)
+            C = ca.vec(lf(out_r[1][:, :-1], ca.DM.zeros(model.nx, (K + nd) * (nw - 1)),
+                          D[:, 1:], pieces[0][:, 1:], sig)[0])  # fmt: skip
+            Cj, A, B = lf(XE[:, :-1], DX[:, : (K + nd) * (nw - 1)], D[:, 1:],
+                          pieces[0][:, 1:], sig)  # fmt: skip
+            m = nd * (nw - 1)
+            a_blocks = [A[:, j * (K + nd) : (j + 1) * (K + nd)] for j in range(nw - 1)]
+            b_blocks = [B[:, j * nd : (j + 1) * nd] for j in range(nw - 1)]
+            JC_th = ca.vertcat(*[blk[:, :K] for blk in a_blocks]) if K else ca.MX(m, 0)
+            JC_d = ca.horzcat(ca.diagcat(*[blk[:, K:] for blk in a_blocks]), ca.MX(m, nd))
+            JC_d = JC_d + ca.horzcat(ca.MX(m, nd), ca.diagcat(*b_blocks))
+            JC = ca.horzcat(JC_th, JC_d)
+            fr = ca.Function("r", [v, pb, S, data], [ca.vec(R), C])
+            outs = [ca.vec(Cj), JC]
+        else:  # one window: nothing to join
+            fr = ca.Function("r", [v, pb, S, data], [ca.vec(R), ca.MX(0, 1)])
+            outs = [ca.MX(0, 1), ca.MX(0, v.shape[0])]
+        defects = ca.Function("defects", [XE, DX, v, pb, S, data], outs)
     else:
         fr = ca.Function("r", [v, pb, S, data], [ca.vec(R)])
-        defects = []
-    fw = ca.Function("rj_blocks", [v, pb, S, data], [ca.vec(Rj), Jj, *defects])
     fy = ca.Function("y", [v, pb, S, data], [Y])
-    return fr, WindowJacobian(fw, win_rj.sparsity_out(1), nw, K), fy
+    return fr, WindowJacobian(win_rj, nw, K, shapes, defects), fy
 
 
 def _problem_solver(model, L, nw, K, outputs, substeps, jit, max_iter=IPOPT_MAX_ITER):

@@ -256,7 +256,7 @@ def hessian_pattern(fj, nd: int, nw: int) -> sp.csc_matrix:
     fixed for a problem structure, so IPOPT gets a sparse Hessian (the window states couple
     only their neighbours)."""
     J = fj.pattern()
-    Jc = _pattern(fj.fn.sparsity_out(3))
+    Jc = _pattern(fj.defect_sparsity())
     m = nd * max(nw - 1, 0)
     Wp = sp.block_diag([np.ones((nd, nd))] * max(nw - 1, 0), format="csc") if m else None
     H = (J.T @ J) + ((Wp @ Jc).T @ (Wp @ Jc) if m else 0 * (J.T @ J))
