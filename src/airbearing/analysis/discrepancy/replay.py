@@ -38,6 +38,7 @@ from airbearing.analysis.discrepancy.data import (
 )
 from airbearing.analysis.shooting import (
     DEFAULT_SUBSTEPS,
+    THETA_SLOTS,
     Fit,
     ShootingProblem,
     WindowSet,
@@ -124,6 +125,7 @@ def problem_for(
     jit: bool | None = None,
     kappa: float | None = None,
     noise=None,
+    theta_slots: int = THETA_SLOTS,
 ) -> ShootingProblem:
     """The shooting problem of ``model`` on ``windows``, weighted by the noise ``floor``.
 
@@ -131,7 +133,8 @@ def problem_for(
     intensity ``kappa`` (default the top of :data:`KAPPA_GRID`: nearly free pieces), and
     the measurement residual is whitened by ``noise`` (a
     :class:`~airbearing.analysis.shooting.measurement_noise.MeasurementNoise`, default
-    white).
+    white). ``theta_slots``: parameter slots of its compiled Jacobian (0 for fits of the
+    initial states alone).
     """
     d0 = datas[0] if not isinstance(datas, ReplayData) else datas
     problem = ShootingProblem(
@@ -142,6 +145,7 @@ def problem_for(
         max(floor.attitude or 0.0, ATTITUDE_SIGMA_MIN),
         substeps=substeps_for(model, windows) if substeps is None else substeps,
         jit=jit,
+        theta_slots=theta_slots,
     )
     if windows.linked:  # linked pieces start nearly free (the top of the intensity grid)
         set_intensity(problem, KAPPA_GRID[0] if kappa is None else kappa)
@@ -445,7 +449,11 @@ def replay(
     datas, windows, floor = prepare(testbed, logs, window_s=window_s)
     model = model_for(testbed, effects)
     say("replay: compiling and fitting the windows' initial states", 0, 1)
-    problem = problem_for(model, datas, windows, floor, substeps=substeps, jit=jit)
+    # a replay fits no parameter: no parameter slots in its window Jacobian (half the AD
+    # directions, half the Jacobian's memory; one compilation per model structure and window
+    # length that the discrepancy search, which needs the slots, does not share)
+    problem = problem_for(model, datas, windows, floor, substeps=substeps, jit=jit,
+                          theta_slots=0)  # fmt: skip
     names = ", ".join(d.log.source for d in datas)
     fit = problem.fit(model.p0, name=f"replay of {names}: initial states of the windows")
     pn = None

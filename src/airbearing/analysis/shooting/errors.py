@@ -38,7 +38,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from airbearing.analysis.shooting.functions import _problem_functions, to_csc
+from airbearing.analysis.shooting.functions import _problem_functions
 from airbearing.analysis.shooting.problem import solve_gram
 from airbearing.analysis.shooting.process_noise import KAPPA_GRID
 
@@ -396,15 +396,15 @@ def _constrained(problem, fit, k: int):
     delta = np.asarray(fit.delta).reshape(-1, order="F")
     v = np.concatenate([fit.theta[:k], np.zeros(K - k), delta])
     p_base = fit.p - np.asarray(S_fit) @ fit.theta[:k]
-    out = fn(v, p_base, Sp, problem._data)
+    out = fn(v, p_base, Sp, problem._data)  # r, J, c, Jc (NumPy, scipy CSC)
     keep = np.r_[np.arange(k), np.arange(K, v.size)]
-    Jm = to_csc(out[1])[:, keep]
+    Jm = out[1][:, keep]
     if problem.meas_whitening is not None:  # coloured measurement noise: its innovations
         Jm = sp.csc_matrix(problem.meas_whitening @ Jm)
     pairs = np.flatnonzero(np.asarray(w.link, dtype=bool))
     nd = problem.n_delta
     rows = (pairs[:, None] * nd + np.arange(nd)).ravel()
-    C = to_csc(out[3])[rows][:, keep]
+    C = out[3][rows][:, keep]
     F = sp.csc_matrix(Jm.T @ Jm)
     c = np.sqrt(np.maximum(F.diagonal(), 0.0))
     if not np.all(c[:k] > 0):

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import casadi as ca
 import numpy as np
 import scipy.sparse as sp
 
@@ -22,12 +21,20 @@ from airbearing.analysis.shooting.functions import (
     _problem_functions,
     _problem_solver,
     delta_layout,
+    evaluate,
+    scale_columns,
     start_function,
-    to_csc,
+    vstack_csc,
+    window_jacobian,
 )
 from airbearing.analysis.shooting.windows import WindowSet  # noqa: F401
 from airbearing.errors import SolverError
 from airbearing.models.model import Model
+
+
+def unscale_columns(J: sp.csc_matrix, scale: np.ndarray) -> sp.csc_matrix:
+    """``J @ diag(1 / scale)`` in place: the Jacobian in the unscaled variables."""
+    return scale_columns(sp.csc_matrix(J), 1.0 / np.asarray(scale, dtype=float))
 
 
 class ShootingProblem:
@@ -153,23 +160,28 @@ class ShootingProblem:
         return np.hstack([S, np.zeros((S.shape[0], K - k))]), K
 
     def _eval(self, which: int, v, p_base, S):
-        fn = _problem_functions(*self._key(S.shape[1]), self.link)[which]
-        out = fn(v, p_base, S, self._data)
-        if self.link and which < 2:  # the residual (and its Jacobian), not the defects
-            if self.penalty is not None:  # with process noise: the weighted defects follow
-                P = self.meas_whitening
-                if which == 0:
-                    c = out[1].full().ravel()
-                    rm = out[0].full().ravel()
-                    return ca.DM(np.r_[rm if P is None else P @ rm, self.penalty @ c])
-                rm, Jm = out[0].full().ravel(), to_csc(out[1])
-                if P is not None:
-                    rm, Jm = P @ rm, P @ Jm
-                r = np.r_[rm, self.penalty @ out[2].full().ravel()]
-                Jc = self.penalty @ to_csc(out[3])
-                return r, sp.vstack([Jm, Jc]).tocsc()
+        """``which`` 0: the residual (ndarray); 1: ``(r, J)`` (``J`` scipy CSC); 2: the
+        outputs ``(ny, L n_windows)``. Linked windows: the measurement rows, and with
+        process noise the whitened defects after them."""
+        key = self._key(S.shape[1])
+        if which == 2:
+            fy = _problem_functions(*key, self.link)[2]
+            return evaluate(fy, v, p_base, S, self._data)[0].reshape(fy.size_out(0), order="F")
+        if which == 0:
+            out = evaluate(_problem_functions(*key, self.link)[0], v, p_base, S, self._data)
+        else:
+            out = window_jacobian(*key, self.link)(v, p_base, S, self._data)
+        if not (self.link and self.penalty is not None):
             return out[0] if which == 0 else tuple(out[:2])
-        return out
+        # with process noise: the (whitened) measurement rows, then the weighted defects
+        P = self.meas_whitening
+        if which == 0:
+            rm, c = out
+            return np.r_[rm if P is None else P @ rm, self.penalty @ c]
+        rm, Jm, c, Jc = out
+        if P is not None:
+            rm, Jm = P @ rm, P @ Jm
+        return np.r_[rm, self.penalty @ c], vstack_csc(Jm, self.penalty @ Jc)
 
     def _v(self, delta, S, theta=None):
         Sp, K = self._pad(np.zeros((self.model.n_p, 0)) if S is None else S)
@@ -183,7 +195,7 @@ class ShootingProblem:
         """Weighted residual at ``delta`` (n_delta, n_windows) and parameters ``p`` (with
         process noise, :attr:`n_meas` measurement rows then the whitened defects)."""
         v, Sp = self._v(delta, None)
-        return self._eval(0, v, np.asarray(p, dtype=float), Sp).full().ravel()
+        return self._eval(0, v, np.asarray(p, dtype=float), Sp)
 
     def gap_of_residual(self, r: np.ndarray, mask: np.ndarray | None = None) -> float:
         """RMS of the primary output's residual over usable rows (its unit)."""
@@ -216,7 +228,7 @@ class ShootingProblem:
     def outputs_at(self, delta: np.ndarray, p: np.ndarray) -> np.ndarray:
         """Model measurement at every window sample: (n_windows, L, ny)."""
         v, Sp = self._v(delta, None)
-        Y = np.asarray(self._eval(2, v, np.asarray(p, dtype=float), Sp))
+        Y = self._eval(2, v, np.asarray(p, dtype=float), Sp)
         nw, L = self.windows.n, self.windows.length
         return Y.T.reshape(nw, L, -1)
 
@@ -229,9 +241,7 @@ class ShootingProblem:
         p_base = fit.p - S @ fit.theta if k else fit.p
         r, J = self._eval(1, v, p_base, Sp)
         keep = np.r_[np.arange(k), np.arange(K, J.shape[1])]
-        if self.penalty is not None and self.link:
-            return r, J[:, keep]
-        return r.full().ravel(), to_csc(J)[:, keep]
+        return r, J[:, keep]
 
     def fit(
         self,
@@ -323,11 +333,10 @@ class ShootingProblem:
         lb[k:K] = ub[k:K] = 0.0  # unused slots
         v0 = np.clip(v0, lb, ub)
         r0, J0 = self._eval(1, v0, p_base, Sp)
-        r0 = r0.full().ravel() if hasattr(r0, "full") else np.asarray(r0)
         if not np.all(np.isfinite(r0)):
             raise SolverError(f"{name}: the replay is not finite at the starting point")
-        J0 = J0 if sp.issparse(J0) else to_csc(J0)
         col = np.sqrt(np.asarray(J0.power(2).sum(axis=0)).ravel())
+        del J0  # an hour of samples: the Jacobian is 100s of MB
         scale = np.where(col > 0, 1.0 / np.maximum(col, 1e-300), 1.0)
         return v0, Sp, lb, ub, scale
 
@@ -338,7 +347,6 @@ class ShootingProblem:
         n_link = self.link_rows.size
         n_ineq = 0 if ineq is None else ineq.m
         x0, lbx, ubx = v0 / scale, lb / scale, ub / scale
-        unscale = sp.diags(1.0 / scale)
         if self.penalty is not None and self.link:
             if ineq is not None:  # pragma: no cover - programming error
                 raise ValueError("process noise and inequality constraints together")
@@ -349,17 +357,20 @@ class ShootingProblem:
             oracle.set(p_base, Sp, scale, self._data, self.penalty, self.meas_whitening)
             z = solver(x0=x0, lbx=lbx, ubx=ubx)["x"].full().ravel()
             r, J = oracle.rj_at(z)
-            return z, solver.stats(), r.copy(), J @ unscale, None
+            oracle.release()
+            return z, solver.stats(), r, unscale_columns(J, scale), None
         if n_link or n_ineq:
-            solver, _keep = linked_solver(*self._key(K), self.link, n_link, n_ineq, mi)
+            solver, _keep = linked_solver(*self._key(K), self.link, self.link_rows, n_ineq, mi)
             oracle = _keep[-1]
             oracle.set(p_base, Sp, scale, self._data, self.link_rows, ineq)
             lbg = np.zeros(n_link + n_ineq)
             ubg = np.r_[np.zeros(n_link), np.full(n_ineq, np.inf)]
             z = solver(x0=x0, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)["x"].full().ravel()
             oracle.derivatives(z)  # memoised when IPOPT's last iterate had them
-            Jc = oracle.Jc / scale if n_link else None
-            return z, solver.stats(), oracle.r.copy(), oracle.J @ unscale, Jc
+            r, J, Jc = oracle.r, oracle.J, oracle.Jc
+            oracle.release()
+            Jc = unscale_columns(Jc, scale) if n_link else None
+            return z, solver.stats(), r, unscale_columns(J, scale), Jc
         solver, _keep = _problem_solver(*self._key(K), mi)
         par = np.concatenate([p_base, Sp.reshape(-1, order="F"), scale, self._data])
         oracle = _keep[-1]
@@ -367,9 +378,12 @@ class ShootingProblem:
         z = solver(x0=x0, lbx=lbx, ubx=ubx)["x"].full().ravel()
         if oracle.J is not None and oracle._same(z, par):
             # IPOPT's last iterate was evaluated with its Jacobian: reuse it
-            return z, solver.stats(), oracle.r.copy(), oracle.J @ unscale, None
+            r, J = oracle.r, oracle.J
+            oracle.release()
+            return z, solver.stats(), r, unscale_columns(J, scale), None
+        oracle.release()
         r, J = self._eval(1, z * scale, p_base, Sp)
-        return z, solver.stats(), r.full().ravel(), to_csc(J), None
+        return z, solver.stats(), r, J, None
 
     def _result(self, v, K, S, p_base, r, J, Jc, stats, status, level) -> Fit:
         """The :class:`Fit` at ``v`` with its errors (module doc)."""
@@ -384,7 +398,7 @@ class ShootingProblem:
         n_free = v.size
         theta = v[:k]
         if Jc is not None and not penalised:  # errors on continuous trajectories
-            N = null_space_basis(Jc[:, keep], k)
+            N = null_space_basis(Jc[:, keep], k, self.n_delta)
             extra["N"] = N
             n_free = N.shape[1]
             Jr = J @ N

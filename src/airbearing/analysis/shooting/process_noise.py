@@ -47,9 +47,11 @@ from airbearing.analysis.shooting.functions import (
     _Call,
     _problem_functions,
     delta_layout,
+    evaluate,
     ipopt_options,
+    scale_columns,
     structure_key,
-    to_csc,
+    vstack_csc,
 )
 
 __all__ = [
@@ -215,24 +217,28 @@ class _PenalisedOracle:
         self.P = P  # whitening of the measurement rows (coloured noise), or None
         self.z = None
 
+    def release(self) -> None:
+        """Forget the last iterate (its Jacobian is large on long logs; the cached solver
+        keeps this oracle)."""
+        self.z = self.r = self.J = None
+        if hasattr(self, "Jc"):
+            self.c = self.Jc = None
+
     def r_at(self, z):
         if self.z is None or not np.array_equal(z, self.z):
-            r, c = self.fr(z * self.scale, self.pb, self.S, self.data)
+            rm, c = evaluate(self.fr, z * self.scale, self.pb, self.S, self.data)
             self.z, self.J = z.copy(), None
-            rm = r.full().ravel()
-            self.r = np.r_[rm if self.P is None else self.P @ rm, self.W @ c.full().ravel()]
+            self.r = np.r_[rm if self.P is None else self.P @ rm, self.W @ c]
         return self.r
 
     def rj_at(self, z):
         if self.z is None or self.J is None or not np.array_equal(z, self.z):
-            r, J, c, Jc = self.fj(z * self.scale, self.pb, self.S, self.data)
+            rm, Jm, c, Jc = self.fj(z * self.scale, self.pb, self.S, self.data)
             self.z = z.copy()
-            rm, Jm = r.full().ravel(), to_csc(J)
             if self.P is not None:
                 rm, Jm = self.P @ rm, self.P @ Jm
-            self.r = np.r_[rm, self.W @ c.full().ravel()]
-            Js = sp.vstack([Jm, self.W @ to_csc(Jc)]).tocsc()
-            self.J = Js @ sp.diags(self.scale)
+            self.r = np.r_[rm, self.W @ c]
+            self.J = scale_columns(vstack_csc(Jm, self.W @ Jc), self.scale)
         return self.r, self.J
 
 
@@ -245,11 +251,12 @@ def _pattern(spy: ca.Sparsity) -> sp.csc_matrix:
 
 
 def hessian_pattern(fj, nd: int, nw: int) -> sp.csc_matrix:
-    """Upper triangle of the structure of ``J^T J + Jc^T W^T W Jc`` (``W`` dense within each
-    pair's ``nd x nd`` block): fixed for a problem structure, so IPOPT gets a sparse Hessian
-    (the window states couple only their neighbours)."""
-    J = _pattern(fj.sparsity_out(1))
-    Jc = _pattern(fj.sparsity_out(3))
+    """Upper triangle of the structure of ``J^T J + Jc^T W^T W Jc`` (``fj`` the problem's
+    :class:`~.functions.WindowJacobian`; ``W`` dense within each pair's ``nd x nd`` block):
+    fixed for a problem structure, so IPOPT gets a sparse Hessian (the window states couple
+    only their neighbours)."""
+    J = fj.pattern()
+    Jc = _pattern(fj.defect_sparsity())
     m = nd * max(nw - 1, 0)
     Wp = sp.block_diag([np.ones((nd, nd))] * max(nw - 1, 0), format="csc") if m else None
     H = (J.T @ J) + ((Wp @ Jc).T @ (Wp @ Jc) if m else 0 * (J.T @ J))
@@ -448,6 +455,7 @@ def _descend(problem, fit_at, grid, theta0, delta0, start, k: int) -> dict:
                     raise
                 break  # a lower intensity the fit cannot reach
         out[kappa] = (fit, _loglik(problem, fit, k))
+        _keep_best_jacobian(out, start)
         th, d = fit.theta, fit.delta
     best = max(out, key=lambda a: out[a][1])
     for kappa in (best * 10.0, best / 10.0):
@@ -459,7 +467,18 @@ def _descend(problem, fit_at, grid, theta0, delta0, start, k: int) -> dict:
         except SolverError:
             continue
         out[kappa] = (fit, _loglik(problem, fit, k))
+        _keep_best_jacobian(out, start)
     return out
+
+
+def _keep_best_jacobian(out: dict, start) -> None:
+    """Drop the Jacobian of every fit of the descent but the most likely so far (only its
+    fit is returned; the others give their gap and likelihood): on an hour of 50 Hz samples
+    each is about 150 MB. ``start`` is the caller's and keeps its own."""
+    best = max(out, key=lambda a: out[a][1])
+    for kappa, (fit, _) in out.items():
+        if kappa != best and fit is not start:
+            fit.extra.pop("J", None)
 
 
 def _verdict(problem, ll: dict, best: float, bottom: float) -> ProcessNoise:
