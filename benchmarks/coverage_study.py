@@ -200,16 +200,21 @@ def run_one(kind: str, case: str, seed: int, duration: float = 150.0) -> dict:
     d = discrepancy(tb, logs, only=list(truth), max_effects=len(truth))
     rows = {}
     for name, true in truth.items():
-        if name in d.effects:
-            rows[name] = {
-                "value": float(d.effects[name]),
-                "std": float(d.effect_std[name]),
-                "std_white": float(d.effect_std_white.get(name, math.nan)),
-                "crlb": float(d.effect_crlb.get(name, math.nan)),
-                "truth": true,
-            }
-        else:
+        if name not in d.effects:
             rows[name] = {"value": math.nan, "std": math.nan, "truth": true}
+            continue
+        # a three-axis platform may name a scalar effect per axis: one pair per axis
+        value = np.atleast_1d(np.asarray(d.effects[name], dtype=float))
+        parts = {
+            "value": value,
+            "std": np.atleast_1d(np.asarray(d.effect_std[name], dtype=float)),
+            "std_white": np.atleast_1d(np.asarray(d.effect_std_white.get(name, math.nan))),
+            "crlb": np.atleast_1d(np.asarray(d.effect_crlb.get(name, math.nan))),
+        }
+        for i in range(value.size):
+            key = name if value.size == 1 else f"{name}[{i}]"
+            rows[key] = {k: float(v[min(i, v.size - 1)]) for k, v in parts.items()}
+            rows[key]["truth"] = true
     a = d.adequacy
     return {
         "kind": kind,
@@ -286,8 +291,8 @@ def _std_over_spread(rs: list[dict]) -> str:
     the range over the effects."""
     full = [r for r in rs if all(np.isfinite(e["value"]) for e in r["effects"].values())]
     ratios = []
-    for name in full[0]["effects"] if full else ():
-        e = [r["effects"][name] for r in full]
+    for name in sorted({n for r in full for n in r["effects"]}):
+        e = [r["effects"][name] for r in full if name in r["effects"]]
         if len(e) < 3:
             continue
         spread = math.sqrt(np.mean([(x["value"] - x["truth"]) ** 2 for x in e]))
