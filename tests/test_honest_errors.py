@@ -117,10 +117,12 @@ def test_ar_model_of_a_residual_is_corrected_for_the_windows_initial_states():
     truth = 1 + (1 + phi) / (1 - phi)
     assert long_run(ar_coefficients([x], maxlag)) < 0.7 * truth
     assert 0.8 * truth <= long_run(ar_coefficients([x], maxlag, n_free=windows)) <= 1.35 * truth
-    # white noise stays white: at most a weak AR model (1 / sqrt(40000) = 0.005 a lag)
+    # white noise stays white: no AR model beats it in the likelihood-ratio test (p < 1e-3;
+    # AIC alone picked orders 11 and 23 in the identify-platform tutorial's residuals; here
+    # order 0 on seeds 0-9)
     w = np.random.default_rng(1).standard_normal((windows, length))
     coef = ar_coefficients([(w - w.mean(axis=1, keepdims=True)).ravel()], maxlag, windows)
-    assert abs(coef.sum()) < 0.05, coef
+    assert coef.size == 0, coef
 
 
 def _spin_down_fit(monkeypatch, seed, case):
