@@ -152,12 +152,15 @@ def _spin_down(seed: int, coloured: bool) -> tuple:
 
 def test_spin_down_output_error_keeps_both_errors():
     """Output error reports the engine's sandwich beside its Fisher value: equal within the
-    HAC's sampling error on white noise (measured 1.00-1.09 over 10 seeds), wider under
-    AR(1) gyro noise (measured 1.54-2.20), where the Fisher value left 4 of 10 seeds beyond
-    3 sigmas."""
+    HAC's sampling error on white noise (measured 1.00-1.09 over 40 seeds), wider under
+    AR(1) gyro noise, where the Fisher value left 4 of 10 seeds beyond 3 sigmas. There the
+    exact ratio (the linearised fit's variance under the simulated noise covariance,
+    tests/test_honest_errors.py) is 3.50 and 3.57 on seeds 0 and 1: the sandwich said 1.76
+    and 1.54 while its bandwidth ended at the residual's 1/e lag, and its old upper limit
+    of 3.0 stood below the exact value; now 4.10 and 3.28 (2.4-4.8 over 40 seeds)."""
     from airbearing.analysis.identification.yaw_inertia import identify_yaw_inertia
 
-    for coloured, lo, hi in ((False, 1.0, 1.15), (True, 1.4, 3.0)):
+    for coloured, lo, hi in ((False, 1.0, 1.15), (True, 2.5, 5.0)):
         for seed in (0, 1):
             tb, log = _spin_down(seed, coloured)
             res = identify_yaw_inertia(tb, [log])

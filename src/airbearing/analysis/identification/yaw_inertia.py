@@ -373,7 +373,8 @@ def _output_error(testbed: Testbed, logs, J_start: float) -> dict:
         # coloured gyro noise (or a slow torque the windows do not absorb) leaves a correlated
         # residual the Fisher (white-noise) error ignores: the engine's HAC sandwich, never below
         he = honest_errors(prob, fit, 1)
-        std = float(he.std[0]) if np.isfinite(he.std[0]) else std_white
+        if np.isfinite(he.std[0]):  # the pair from one computation: std >= std_white exactly
+            std, std_white = float(he.std[0]), float(he.std_white[0])
     warnings = []
     if fit.level == "warning":
         warnings.append(f"output error: IPOPT stopped at an acceptable level ({fit.status})")
