@@ -360,44 +360,6 @@ def _piece_columns(t, w, hz, friction, nfr: int) -> np.ndarray:
     return X
 
 
-def _ar_model(series, maxlag: int) -> np.ndarray:
-    """AR(p) coefficients ``phi`` (p,) of the pooled residual pieces: Yule-Walker
-    (Levinson-Durbin on the length-weighted autocovariances, ``statsmodels.tsa.stattools``),
-    the order by AIC (0: white). Yule-Walker keeps the filter stable."""
-    from statsmodels.tsa.stattools import acovf, levinson_durbin
-
-    used = [x for x in series if x.size > 2 * maxlag and np.any(x != x[0])]
-    if maxlag < 1 or not used:
-        return np.zeros(0)
-    n = sum(x.size for x in used)
-    g = sum(x.size * acovf(x, demean=False, fft=True, nlag=maxlag) for x in used) / n
-    if g[0] <= 0:
-        return np.zeros(0)
-    _, _, pacf, _, phi = levinson_durbin(g, nlags=maxlag, isacov=True)
-    innov = g[0] * np.cumprod(np.r_[1.0, 1.0 - pacf[1:] ** 2])  # innovation variance per order
-    aic = n * np.log(np.maximum(innov, 1e-300)) + 2.0 * np.arange(innov.size)
-    p = int(np.argmin(aic))
-    return np.asarray(phi[1 : p + 1, p], dtype=float) if p > 0 else np.zeros(0)
-
-
-def _andrews_lags(scores: np.ndarray) -> int:
-    """Bartlett-kernel bandwidth (lags) of Andrews (1991) with his AR(1) plug-in, the score
-    columns weighted equally; at most ``n - 1``."""
-    n = scores.shape[0]
-    num = den = 0.0
-    for x in scores.T:
-        d = float(x[:-1] @ x[:-1])
-        if d <= 0:
-            continue
-        rho = float(np.clip((x[1:] @ x[:-1]) / d, -0.97, 0.97))
-        s4 = float(np.mean((x[1:] - rho * x[:-1]) ** 2)) ** 2
-        num += 4.0 * rho**2 * s4 / ((1 - rho) ** 6 * (1 + rho) ** 2)
-        den += s4 / (1 - rho) ** 4
-    if den <= 0:
-        return 0
-    return int(min(np.floor(1.1447 * (num / den * n) ** (1.0 / 3.0)), n - 1))
-
-
 def _honest_cov(pieces, beta_hat, friction, nfr: int):
     """Prewhitened HAC sandwich of ``[a, friction/J_z]`` (module doc): the covariance
     (k, k) and what it used (AR order and coefficient sum, largest bandwidth).
@@ -410,6 +372,8 @@ def _honest_cov(pieces, beta_hat, friction, nfr: int):
     from scipy.signal import lfilter
     from statsmodels.stats.sandwich_covariance import S_hac_simple
 
+    from airbearing.analysis.shooting.errors import andrews_bandwidth, ar_coefficients
+
     k = 1 + nfr
     cols, res = [], []
     for li, (t, w, hz) in enumerate(pieces):
@@ -419,7 +383,7 @@ def _honest_cov(pieces, beta_hat, friction, nfr: int):
     n_all = sum(r.size for r in res)
     # the longest AR order tried: Schwert's rule 12 (n/100)^(1/4)
     maxlag = int(min(12 * (n_all / 100.0) ** 0.25, max(r.size for r in res) // 2))
-    phi = _ar_model(res, maxlag)
+    phi = ar_coefficients(res, maxlag)
     ar = np.r_[1.0, -phi]
     bread = np.zeros((k, k))
     meat = np.zeros((k, k))
@@ -429,7 +393,7 @@ def _honest_cov(pieces, beta_hat, friction, nfr: int):
         u = lfilter(ar, [1.0], r)
         Z = lfilter([1.0], ar, Xd[::-1], axis=0)[::-1]
         sc = Z * u[:, None]
-        nl = _andrews_lags(sc) if sc.shape[0] > 2 else 0
+        nl = andrews_bandwidth(sc)
         lags = max(lags, nl)
         meat += S_hac_simple(sc, nlags=nl)
     c = np.sqrt(np.maximum(np.diag(bread), 1e-300))
