@@ -232,6 +232,7 @@ def main(argv: list[str] | None = None) -> None:
     console = argv is None
     args = list(sys.argv[1:] if argv is None else argv)
     GLOBAL["debug"] = False
+    GLOBAL["interrupt_said"] = False
     if not args:
         args = ["--help"]  # a bare `airbearing` is a request for help, not an error
     from airbearing.cli.grammar import command_path, rewrite
@@ -244,8 +245,41 @@ def main(argv: list[str] | None = None) -> None:
         print(f"airbearing: {note}", file=sys.stderr)
     _path, start = command_path(args)
     verbose = any(a in ("--verbose", "-v") for a in args[: max(start - len(_path), 0)])
-    with chatter_to_debug_log(verbose, fds=console):
-        _run(args)
+    try:
+        with chatter_to_debug_log(verbose, fds=console):
+            _run(args)
+    except KeyboardInterrupt:  # a second one, or one past the run's own handling
+        _say_interrupted()
+        _leave_interrupted(console)
+        raise SystemExit(130) from None
+    except SystemExit as e:
+        if e.code == 130:
+            _leave_interrupted(console)
+        raise
+
+
+def _say_interrupted() -> None:
+    """Print the interrupt's one line (once per run)."""
+    if not GLOBAL.get("interrupt_said"):
+        GLOBAL["interrupt_said"] = True
+        print("airbearing: interrupted; nothing written", file=sys.stderr)
+
+
+def _leave_interrupted(console: bool) -> None:
+    """End an interrupted console run now, with status 130.
+
+    A solver thread the interrupt did not reach may still be running; waiting for it at
+    the interpreter's shutdown delays the exit, and a late ``KeyboardInterrupt`` there
+    would end the process by the signal instead of the status. Nothing is left to
+    write (outputs are committed only at the end of a run), so the process leaves at
+    once. Called from a test (``argv`` given) it does nothing.
+    """
+    if not console:
+        return
+    for stream in (sys.stdout, sys.stderr):
+        with contextlib.suppress(Exception):
+            stream.flush()
+    os._exit(130)
 
 
 def _run(args: list[str]) -> None:
@@ -263,7 +297,7 @@ def _run(args: list[str]) -> None:
         interrupt.check()
     except BaseException as e:
         if interrupt.interrupted() and not (isinstance(e, SystemExit) and e.code == 130):
-            print("airbearing: interrupted; nothing written", file=sys.stderr)
+            _say_interrupted()
             raise SystemExit(130) from None
         raise
     finally:
@@ -287,7 +321,7 @@ def _run_app(args: list[str]) -> None:
     except typer.Exit as e:
         raise SystemExit(e.exit_code) from None
     except (typer.Abort, KeyboardInterrupt):
-        print("airbearing: interrupted; nothing written", file=sys.stderr)
+        _say_interrupted()
         raise SystemExit(130) from None
     except SystemExit:
         raise
