@@ -11,7 +11,10 @@ from airbearing.analysis.simulation.scenarios import slew
 from airbearing.cli.gains import _echo_checks
 from airbearing.design.loops import make_loop
 from airbearing.design.margins import analyse_loop
-from airbearing.design.tuning import Spec, _corner_grid, _Fast, _scenario_run, evaluate, tune
+from airbearing.design.tuning import Spec, evaluate, tune
+from airbearing.design.tuning.box import _corner_grid
+from airbearing.design.tuning.responses import _scenario_run
+from airbearing.design.tuning.screening import _Fast
 from airbearing.errors import InputError
 from airbearing.io.testbed import load_testbed
 from airbearing.models import quaternion as quat
@@ -277,7 +280,7 @@ def test_the_rate_limited_slew_agrees_with_the_nonlinear_simulation(cmg_tb, tune
     001's gains, the tuned gains and gains whose integral winds up (K_i / K_p = 0.1):
     settling into 1.5 deg to 0.5 s (the quaternion error's sine and the gimbals' drift
     are what the linear loop leaves out), overshoot to 5 points of percent."""
-    from airbearing.design.tuning import _loop_slew
+    from airbearing.design.tuning.slew import _loop_slew
 
     winding = {"K_p": 3.64, "K_i": 0.375, "K_w": 3.45}
     for gains in (SEED001_TABLE6, tuned_attitude.gains, winding):
@@ -369,7 +372,8 @@ def test_bad_loop_and_gains_are_input_errors(cmg_tb):
 
 def test_a_settling_time_that_never_comes_says_so(capsys):
     """inf is null in JSON (none): the note and the table say what it means."""
-    from airbearing.design.tuning import Check, _check
+    from airbearing.design.tuning import Check
+    from airbearing.design.tuning.spec import _check
 
     c = _check("settling time, 2 % (s)", math.inf, None, "<=")
     assert c.met and c.to_json()["value"] is None  # reported, no limit: nothing to fail
