@@ -17,11 +17,15 @@ from airbearing.design.tuning.responses import (
 from airbearing.design.tuning.slew import _A_ERR_DEG, _SLEW_DEG, _SLEW_HORIZON, _loop_slew
 from airbearing.design.tuning.spec import _NOT_APPLICABLE, Check, Spec, _check
 
-__all__ = ["evaluate"]
+__all__ = ["evaluate", "SIMULTANEOUS_GAIN", "SIMULTANEOUS_PHASE"]
+
+#: Names of the checks of the simultaneous (multi-loop disk) margins.
+SIMULTANEOUS_GAIN = "gain margin, all channels at once (dB)"
+SIMULTANEOUS_PHASE = "phase margin, all channels at once (deg)"
 
 
 def evaluate(
-    loop: Loop, spec: Spec, *, actuators: bool = True, corner_set=None
+    loop: Loop, spec: Spec, *, actuators: bool = True, corner_set=None, multiloop: bool = True
 ) -> tuple[list[Check], dict, list]:
     """Check ``loop`` (its gains) against ``spec`` at every uncertainty corner.
 
@@ -34,6 +38,12 @@ def evaluate(
         Also the actuator peaks of the reference scenario against the testbed's limits.
     corner_set : list of (str, ndarray), optional
         The corners (default :func:`corners`).
+    multiloop : bool
+        Also the margin with every channel perturbed at once (loops with more than one
+        channel): the multi-loop disk margin's gain and phase at the worst corner
+        (:func:`~airbearing.design.margins.multiloop_worst_corner`) against the
+        specification's gain and phase margins, checks :data:`SIMULTANEOUS_GAIN` and
+        :data:`SIMULTANEOUS_PHASE`.
 
     Returns
     -------
@@ -44,11 +54,15 @@ def evaluate(
         the discrete loop's, loop-at-a-time over every channel; the step response is the
         linear scenario of :func:`scenario_response` on the same discrete loop; an
         attitude loop also reports seed 001's 180 deg slew on that loop with the gimbal
-        rates limited (``slew_overshoot_pct``, ``slew_settling_time_s``). When the
-        closed loop is unstable at a corner, margins and responses mean nothing: those
-        checks have no value, are not met and say why.
+        rates limited (``slew_overshoot_pct``, ``slew_settling_time_s``). With
+        ``multiloop`` and several channels, the worst values add
+        ``multiloop_disk_margin`` (alpha), ``multiloop_disk_gain_margin_db`` (dB),
+        ``multiloop_disk_phase_margin_deg`` (deg) and ``multiloop_corner`` (its label),
+        and each corner its ``multiloop_disk_margin``. When the closed loop is unstable
+        at a corner, margins and responses mean nothing: those checks have no value, are
+        not met and say why.
     """
-    from airbearing.design.margins import analyse_loop
+    from airbearing.design.margins import analyse_loop, multiloop_worst_corner
 
     per, peaks = [], {}
     todo = corners(loop, spec) if corner_set is None else corner_set
@@ -135,4 +149,35 @@ def evaluate(
                 checks.append(Check(name, None, limit, "<=", False, None, why))
             elif name in peaks:
                 checks.append(_check(name, peaks[name], limit, "<="))
+    if multiloop and len(loop.channels) > 1:
+        ml = None if why is not None else multiloop_worst_corner(loop, todo)
+        checks += _simultaneous_checks(ml, spec, why)
+        if ml is not None:
+            worst.update(
+                multiloop_disk_margin=ml["disk_margin"],
+                multiloop_disk_gain_margin_db=ml["disk_gain_margin_db"],
+                multiloop_disk_phase_margin_deg=ml["disk_phase_margin_deg"],
+                multiloop_corner=ml["corner"],
+            )
+            for label, w in per:
+                w["multiloop_disk_margin"] = ml["per_corner"][label]
     return checks, worst, per
+
+
+def _simultaneous_checks(ml: dict | None, spec: Spec, why: str | None) -> list[Check]:
+    """The multi-loop disk margin's gain and phase, worst over the uncertainty box
+    (``ml``: :func:`~airbearing.design.margins.multiloop_worst_corner`), against the
+    specification's gain and phase margins.
+
+    The balanced disk margin covers gain or phase errors of every channel at once (gain
+    within ``+-disk_gain_margin_db`` or phase within ``+-disk_phase_margin_deg``), so it
+    is the margin to compare when the channels' errors come together: the slider mass
+    and the cage field of the mixed balancing split, whose sliders and magnetorquers act
+    on the same axes, or the flywheel speed in every gimbal's gain. With a corner
+    unstable (``why``) they have no value and are not met.
+    """
+    limits = ((SIMULTANEOUS_GAIN, "disk_gain_margin_db", spec.gain_margin_db),
+              (SIMULTANEOUS_PHASE, "disk_phase_margin_deg", spec.phase_margin_deg))  # fmt: skip
+    if ml is None:
+        return [Check(name, None, limit, ">=", False, None, why) for name, _, limit in limits]
+    return [_check(name, ml[key], limit, ">=") for name, key, limit in limits]
