@@ -382,3 +382,47 @@ def test_a_settling_time_that_never_comes_says_so(capsys):
     _echo_checks([c.to_json()], True)
     row = next(x for x in capsys.readouterr().out.splitlines() if x.startswith("settling"))
     assert "does not settle" in row and row.split()[-1] == "reported"
+
+
+#: Gains the tuner gives with the margin of all channels at once in its checks and, for
+#: the balancing loops, the box of the offset before and after seed 004's step two
+#: (`airbearing gains TESTBED --json`, this version): each sits at the edge of that margin.
+AT_THE_EDGE = {
+    "cmg-yaw": ("attitude", None, {"K_p": 8.113, "K_i": 0.00856, "K_w": 6.555}),
+    "seed004-platform": ("balancing", "mechanical",
+                         {"K_p": 0.0162, "K_d": 0.0966, "K_dK_i": 0.00371}),
+    "seed000-tabletop": ("balancing", "mixed", {"K_p": 0.00294, "K_d": 0.033, "K_dK_i": 0.000208}),
+}  # fmt: skip
+
+
+@pytest.mark.parametrize("name", sorted(AT_THE_EDGE))
+def test_the_searchs_simultaneous_margin_agrees_with_the_verdicts(name):
+    """Agreement between methods: the search's screening of the margin with every channel
+    at once (a Perron-scaled bound of mu on its grid, D-scaled where it would fail,
+    refined only near the limit) against the verdict's multiloop_disk_margin (mu's
+    D-scaled bound, every peak refined), at every corner of the default box, for gains at
+    the edge of the 45 deg limit. Near the limit they agree to 0.05 deg, the search's
+    tolerance (_INSIDE), and what the screening passes the verdict passes."""
+    from airbearing.design.margins import multiloop_disk_margin
+    from airbearing.design.tuning.screening import _INSIDE
+
+    loop, split, gains = AT_THE_EDGE[name]
+    base = make_loop(load_testbed(name), loop, **({} if split is None else {"split": split}))
+    spec = Spec(offset_range=(-3.9e-3, -0.052e-3)) if loop == "balancing" else Spec()
+    grid = _corner_grid(base, spec)
+    fast = _Fast(base, spec, grid, set())
+    K, K_fr = fast._controller(gains)
+    near = 0
+    for c, (label, p, _) in zip(fast.corners, grid, strict=True):
+        m = fast.margins(c, K, K_fr)
+        exact = multiloop_disk_margin(base.with_params(p).with_gains(gains).loop_transfer(None))
+        pm, gm = exact["disk_phase_margin_deg"], exact["disk_gain_margin_db"]
+        if abs(pm - spec.phase_margin_deg) < 5:
+            near += 1
+            assert m["ml_pm"] == pytest.approx(pm, abs=_INSIDE["pm"]), label
+            assert m["ml_gm"] == pytest.approx(gm, abs=_INSIDE["gm"]), label
+        if m["ml_pm"] >= spec.phase_margin_deg + _INSIDE["pm"]:
+            assert pm >= spec.phase_margin_deg, label
+        if m["ml_gm"] >= spec.gain_margin_db + _INSIDE["gm"]:
+            assert gm >= spec.gain_margin_db, label
+    assert near >= 1  # the gains are at the edge somewhere in the box
