@@ -39,6 +39,10 @@ TABLETOP_TUNED = {
     "K_d": 0.1331004119720732,
     "K_dK_i": 0.10445568451080606,
 }
+#: The uncertainty box the reviewer judged them on: the default of the time, the
+#: testbed's vertical offset +-50 % (the default now runs on to the offset seed 004's step
+#: two leaves, -0.052 mm, where these gains have 31.4 deg one channel at a time).
+REVIEWER_BOX = Spec(offset_range=(-3.9e-3, -1.3e-3))
 #: Gains ``airbearing gains cmg-yaw --loop attitude`` gave the reviewer.
 CMG_TUNED = {"K_p": 3.637545995058573, "K_i": 0.3748341291072149, "K_w": 3.447290664378075}
 
@@ -76,7 +80,7 @@ def test_pruned_search_finds_the_bound_of_every_frequency(tabletop_mixed):
     assert _grid_mu(M)[0] == pytest.approx(exhaustive, rel=1e-12)
     ml = multiloop_disk_margin(L)
     assert 1 / ml["disk_margin"] >= exhaustive * (1 - 1e-12)
-    near = np.geomspace(ml["frequency_rad_s"] / 1.05, ml["frequency_rad_s"] * 1.05, 2001)
+    near = np.geomspace(ml["frequency_rad_s"] / 1.005, ml["frequency_rad_s"] * 1.005, 201)
     dense = max(_mu_upper(Mk) for Mk in _sensitivity_minus_half(tabletop_mixed, near))
     assert 1 / ml["disk_margin"] == pytest.approx(dense, rel=1e-6)  # grid step 5e-5 in w
     # nominal plant: alpha 0.717, +-6.52 dB or +-39.4 deg (the reviewer's finding)
@@ -114,7 +118,7 @@ def test_the_bound_is_tight_doyles_lower_bound(tabletop_mixed):
 
 
 def test_worst_corner_is_the_smallest_over_the_box(tabletop_mixed):
-    spec = Spec()
+    spec = REVIEWER_BOX
     todo = corners(tabletop_mixed, spec)
     worst = multiloop_worst_corner(tabletop_mixed, todo)
     each = {
@@ -133,7 +137,9 @@ def test_worst_corner_is_the_smallest_over_the_box(tabletop_mixed):
 
 @pytest.fixture(scope="module")
 def tabletop_report():
-    _, data = stability_report(load_testbed("seed000-tabletop"), "balancing", gains=TABLETOP_TUNED)
+    _, data = stability_report(
+        load_testbed("seed000-tabletop"), "balancing", gains=TABLETOP_TUNED, spec=REVIEWER_BOX
+    )
     return data
 
 
@@ -157,7 +163,7 @@ def test_report_checks_the_simultaneous_margins(tabletop_report):
     )
     assert data["met"] is False
     assert data["worst_case"]["multiloop_corner"] in {lbl for lbl, _ in corners(
-        make_loop(load_testbed("seed000-tabletop"), "balancing"), Spec())}  # fmt: skip
+        make_loop(load_testbed("seed000-tabletop"), "balancing"), REVIEWER_BOX)}  # fmt: skip
 
 
 def test_report_cli_verdict_names_the_simultaneous_margin(tmp_path, capsys):
@@ -166,7 +172,9 @@ def test_report_cli_verdict_names_the_simultaneous_margin(tmp_path, capsys):
     from cli_run import run
 
     g = tmp_path / "g.json"
-    g.write_text(json.dumps({"loop": "balancing", "split": "mixed", "gains": TABLETOP_TUNED}))
+    box = list(REVIEWER_BOX.offset_range)
+    g.write_text(json.dumps({"loop": "balancing", "split": "mixed", "gains": TABLETOP_TUNED,
+                             "spec": {"offset_range": box}}))  # fmt: skip
     code = run(["report", "seed000-tabletop", "--loop", "balancing", "--gains", str(g),
                 "-o", str(tmp_path / "r.html")])  # fmt: skip
     out = capsys.readouterr().out

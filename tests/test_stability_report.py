@@ -128,16 +128,10 @@ def test_cli_gains_then_report(tmp_path, capsys):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize(
-    ("name", "split"),
-    [("seed004-platform", "mechanical"), ("seed000-tabletop", "mixed")],
-    ids=["seed004-platform", "seed000-tabletop-mixed"],
-)
-def test_gains_and_report_agree_on_balancing_loops(name, split, tmp_path):
-    """``gains`` then ``report --gains`` on the balancing loops: the same checks, values
-    and verdict (seed000-tabletop: not met, its sliders cannot reach the trim at the
-    testbed's own offset; everything else met, the margin of all four channels at once
-    included, which the gains of the previous tuner missed by 15.6 deg)."""
+def test_gains_and_report_agree_on_a_balancing_loop(tmp_path):
+    """``gains`` then ``report --gains`` on seed 004's platform: the same checks, values
+    and verdict (seed000-tabletop's mixed loop: test_tuning's unreachable-trim test)."""
+    name, split = "seed004-platform", "mechanical"
     g, m = tmp_path / "g.json", tmp_path / "m.json"
     assert _main(["gains", name, "--loop", "balancing", "--split", split, "--json", str(g)]) == 0
     assert _main(["report", name, "--loop", "balancing", "--gains", str(g),
@@ -148,8 +142,7 @@ def test_gains_and_report_agree_on_balancing_loops(name, split, tmp_path):
         assert (a["name"], a["met"]) == (b["name"], b["met"])
         if a["value"] is not None:
             assert a["value"] == pytest.approx(b["value"], rel=1e-9)
-    failed = [c["name"] for c in report["checks"] if not c["met"]]
-    assert failed == ([] if name == "seed004-platform" else ["slider travel (m)"])
+    assert report["met"] is True
 
 
 def test_margins_of_an_unstable_loop_are_not_marked_ok():

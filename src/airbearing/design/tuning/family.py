@@ -27,12 +27,20 @@ def _stiffness(loop: Loop) -> tuple[float, float]:
     return float(Jd.max()), float(min(-A[3, 0] * Jd[0], -A[4, 1] * Jd[1]))
 
 
-def _family(loop: Loop):
+def _family(loop: Loop, stiffness: float | None = None):
     """``gains(w, zeta, r)``: the PID placing the design model's poles at
-    ``(s^2 + 2 zeta w s + w^2)(s + r w)`` (w in rad/s)."""
+    ``(s^2 + 2 zeta w s + w^2)(s + r w)`` (w in rad/s).
+
+    ``stiffness``: the balancing design model's pendulum stiffness k, N m/rad (default
+    ``loop``'s own). The tuner passes the softest corner's: every stiffer plant only adds
+    to ``K_p + k``, so no ``K_p`` is clipped and every design stabilises the design model
+    at every corner of the box, which spans a stiffness 75 times the softest by default
+    (the offset before and after seed 004's step two).
+    """
     m, p = loop.model, loop.p
     if loop.kind == "balancing":
         J, k = _stiffness(loop)
+        k = k if stiffness is None else stiffness
 
         def gains(w, zeta, ratio):
             a = ratio * w

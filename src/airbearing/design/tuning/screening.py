@@ -296,7 +296,7 @@ class _Fast:
         worst = {"pm": math.inf, "gm": math.inf, "ms": 0.0, "wb": math.inf}
         if self.simultaneous:
             worst.update(ml_pm=math.inf, ml_gm=math.inf)
-        worst.update(overshoot=0.0, settling=0.0, stable=True)
+        worst.update(overshoot=0.0, settling=0.0, stable=True, unsettled=0, settled=0.0)
         miss = 0.0
         todo = list(self.order) + (list(self.rest) if every else [])
         for i in todo:
@@ -321,6 +321,13 @@ class _Fast:
             if s is not None:
                 for k, v in s.items():
                     worst[k] = max(worst.get(k, 0.0), v)
+                # the objective: corners that never settle, and the longest settling of
+                # the others (step or slew)
+                settles = max(s["settling"], s.get("slew_settling", 0.0))
+                if math.isinf(settles):
+                    worst["unsettled"] += 1
+                else:
+                    worst["settled"] = max(worst["settled"], settles)
             miss += short
             if short > 0:
                 if i in self.rest:

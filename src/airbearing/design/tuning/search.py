@@ -14,7 +14,7 @@ __all__: list[str] = []
 
 # the design family's box and the search grid on it (see the package docstring)
 _ZETA_RANGE = (0.3, 3.0)
-_RATIO_RANGE = (1e-4, 3.0)
+_RATIO_RANGE = (1e-4, 30.0)
 _ZETA_GRID = (0.4, 0.7, 1.1, 1.8)
 _RATIO_GRID = (1e-4, 3e-3, 0.1, 1.0)
 _COMPASS = (0.2, math.log(10) / 2)  # first compass steps: ln zeta, ln r
@@ -34,14 +34,20 @@ class _Candidate:
     worst: dict
 
     @property
+    def unsettled(self) -> int:
+        """Corners of the box where the response does not settle within its longest run."""
+        return self.worst.get("unsettled", 0)
+
+    @property
     def settling(self) -> float:
         """The objective, s: the worst-case settling of the linear step or, when longer,
-        of the rate-limited 180 deg slew."""
-        return max(self.worst["settling"], self.worst.get("slew_settling", 0.0))
+        of the rate-limited 180 deg slew, over the corners where it settles."""
+        return self.worst.get("settled", 0.0)
 
     def key(self) -> tuple:
-        """Smaller is faster: settling time, then the larger bandwidth."""
-        return (round(self.settling, 9), -self.worst["wb"])
+        """Smaller is faster: corners that never settle, then the settling time, then the
+        larger bandwidth."""
+        return (self.unsettled, round(self.settling, 9), -self.worst["wb"])
 
 
 def _fastest_at(fast: _Fast, family, zeta, ratio, w0, w_hi) -> _Candidate | None:
@@ -165,9 +171,12 @@ def _search(fast: _Fast, family, w_hi, target, progress) -> tuple:
 
 
 def _choose(found: list) -> _Candidate:
-    """The design to return among the shapes' fastest: settling times within
-    ``_EQUALLY_FAST`` of the shortest count as equally fast, and among those the least
-    worst-case overshoot wins, then the larger w_B."""
+    """The design to return among the shapes' fastest: the fewest corners where the
+    response never settles, then settling times within ``_EQUALLY_FAST`` of the shortest
+    count as equally fast, and among those the least worst-case overshoot wins, then the
+    larger w_B."""
+    fewest = min(c.unsettled for c in found)
+    found = [c for c in found if c.unsettled == fewest]
     shortest = min(c.settling for c in found)
     fast_enough = [c for c in found if c.settling <= shortest * (1 + _EQUALLY_FAST)]
     return min(fast_enough, key=lambda c: (c.worst["overshoot"], -c.worst["wb"]))

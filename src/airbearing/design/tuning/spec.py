@@ -31,8 +31,11 @@ class Spec:
     inertia_uncertainty : float
         Relative inertia uncertainty, 0 <= u < 1 (corners at ``1 -+ u``).
     offset_range : (float, float) or None
-        Vertical CM offset range ``r_z`` (lo, hi), m (platforms; default the testbed's
-        offset +-50 %).
+        Vertical CM offset range ``r_z`` (lo, hi), m (platforms). Default: every offset the
+        in-plane balancing runs at, from the testbed's own offset +50 % (before seed 004's
+        step two identifies it) to 2 % of it (what step two leaves, the offset ``airbearing
+        balance`` simulates): -3.9 to -0.052 mm on seed 004's platform
+        (:func:`~airbearing.design.tuning.box.offset_range`).
     max_overshoot : float
         Largest overshoot of the linear step response, percent of the step, >= 0. Default
         5 %: on seed 001's 30 deg sizing manoeuvre (Table 5) that is 1.5 deg, the accuracy

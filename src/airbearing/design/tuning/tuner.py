@@ -8,7 +8,7 @@ from dataclasses import replace
 
 from airbearing.design.loops import make_loop
 from airbearing.design.tuning.box import _corner_grid
-from airbearing.design.tuning.family import _family
+from airbearing.design.tuning.family import _family, _stiffness
 from airbearing.design.tuning.result import TuningResult, _verdict
 from airbearing.design.tuning.screening import _Fast
 from airbearing.design.tuning.search import _search
@@ -91,7 +91,11 @@ def tune(
     grid = _corner_grid(base, spec)
     corner_set = [(label, p) for label, p, _ in grid]
     fast = _Fast(base, spec, grid, fixed)
-    family = _family(base)
+    # the balancing design model at the softest corner of the box (family.py)
+    soft = None
+    if loop == "balancing":
+        soft = min(_stiffness(base.with_params(p))[1] for _, p, _ in grid)
+    family = _family(base, soft)
     w_hi = 0.5 * nyq
     best, shapes = _search(fast, family, w_hi, target, progress)
     relaxed = best is None and (target is not None or spec.max_settling_time is not None)
