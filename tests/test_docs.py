@@ -31,7 +31,7 @@ DOCTEST_MODULES = [
     "airbearing.api.logs",
     "airbearing.api.plot",
     "airbearing.design.sizing",
-    "airbearing.design.tuning",
+    "airbearing.design.tuning.tuner",
     "airbearing.design.margins",
     "airbearing.design.loops",
     "airbearing.analysis.simulation.scenarios",

@@ -42,10 +42,15 @@ def test_double_integrator_pd_analytic_margins():
     gm, pm_ct, _, _, wc_ct, _ = ct.stability_margins(Lc)
     assert pm_ct == pytest.approx(m.phase_margin_deg, rel=1e-6)
     assert wc_ct == pytest.approx(wc, rel=1e-6)
-    # disk margin: python-control's SISO disk_margins on the same grid
+    # disk margin: python-control's SISO disk_margins takes its grid's largest |S - 1/2|;
+    # on a grid of 2e6 points it reads 1.41421356237 = sqrt(2). loop_margins refines the
+    # peak between the points of its own 2000-point grid (where python-control reads
+    # 1.4142154, 1.3e-6 high) and finds it to 1e-9
     w = np.logspace(-2, 3, 2000)
     alpha, _, _ = ct.disk_margins(Lc, w)
-    assert loop_margins(Lc, omega=w).disk_margin == pytest.approx(alpha, rel=1e-9)
+    refined = loop_margins(Lc, omega=w).disk_margin
+    assert refined == pytest.approx(math.sqrt(2), rel=1e-9)
+    assert refined <= alpha
 
 
 @pytest.mark.parametrize("T", [0.05, 0.01], ids=["20Hz", "100Hz"])
@@ -123,3 +128,36 @@ def test_discrete_min_damping_counts_a_delay_pole_at_the_origin_as_fully_damped(
     assert 0 < zeta[1] < 1  # the other pole as before: -Re(s)/|s| with s = ln(z)/dt
     s = np.log(0.9 + 0.1j) / 0.05
     assert zeta[1] == pytest.approx(-s.real / abs(s))
+
+
+def test_a_lightly_damped_sensitivity_peak_is_not_read_low():
+    """seed000-tabletop's mixed loop, seed 000 gains, at J x 1.15 and r_z = -1.3 mm: the
+    pendulum mode's |S| peak falls between the points of a 1000-point grid, whose largest
+    value is 1.2200; the refined peak equals the largest value on a dense grid (40001
+    points over the two decades around it, a step of 1.2e-4 in ln w: 1.24771), and so
+    does the disk margin's |S - 1/2|."""
+    from airbearing.design.linearise import scaled_params
+    from airbearing.design.margins import _response, frequency_grid
+
+    loop = balancing_loop(load_testbed("seed000-tabletop"), split="mixed")
+    loop = loop.with_params(scaled_params(loop.model, loop.p, inertia_scale=1.15, r_z=-1.3e-3))
+    L = loop.loop_transfer("s1")
+    grid = frequency_grid(L, 1000)
+    S_grid = np.abs(1 / (1 + _response(L, grid)))
+    at = grid[np.argmax(S_grid)]
+    window = (grid > at / 10) & (grid < at * 10)
+    # outside the two decades both peaks are far lower
+    assert S_grid[~window].max() < 1.1
+    assert np.abs(1 / (1 + _response(L, grid[~window])) - 0.5).max() < 0.8
+    dense = _response(L, np.geomspace(at / 10, at * 10, 40001))
+    m = analyse_loop(loop, multiloop=False, n_freq=1000).channels["s1"]
+    assert S_grid.max() == pytest.approx(1.2200, abs=1e-4)  # the grid alone: 2.2 % low
+    # a grid reads a peak low, never high; this one by 1.5e-6 relative (the peak's
+    # curvature over half a step): the refined peak is at least the dense grid's, within 1e-5
+    peaks = (
+        (m.sensitivity_peak, np.abs(1 / (1 + dense)).max()),
+        (1 / m.disk_margin, np.abs(1 / (1 + dense) - 0.5).max()),
+    )
+    for refined, on_dense in peaks:
+        assert on_dense * (1 - 1e-12) <= refined <= on_dense * (1 + 1e-5)
+    assert m.sensitivity_peak == pytest.approx(1.24771, abs=1e-5)

@@ -104,7 +104,15 @@ def test_cli_gains_then_report(tmp_path, capsys):
         )
         == 0
     )
-    assert html.exists() and json.loads(m.read_text())["gains"] == data["gains"]
+    report = json.loads(m.read_text())
+    assert html.exists() and report["gains"] == data["gains"]
+    # the tuner checks what the report checks, all channels at once included, and the
+    # two agree on every check and on the verdict
+    assert report["met"] is data["met"] is True
+    assert [(c["name"], c["met"]) for c in report["checks"]] == [
+        (c["name"], c["met"]) for c in data["checks"]
+    ]
+    assert "phase margin, all channels at once (deg)" in {c["name"] for c in data["checks"]}
     # gains of the wrong loop: a clear error, exit 2, no output written
     bad = tmp_path / "bad.html"
     assert (
@@ -117,3 +125,55 @@ def test_cli_gains_then_report(tmp_path, capsys):
     assert not bad.exists()
     assert _main(["gains", "cmg-yaw", "--loop", "roll"]) == 2
     assert _main(["gains", "cmg-yaw", "--phase-margin-deg", "-5"]) == 2
+
+
+@pytest.mark.slow
+def test_gains_and_report_agree_on_a_balancing_loop(tmp_path):
+    """``gains`` then ``report --gains`` on seed 004's platform: the same checks, values
+    and verdict (seed000-tabletop's mixed loop: test_tuning's unreachable-trim test)."""
+    name, split = "seed004-platform", "mechanical"
+    g, m = tmp_path / "g.json", tmp_path / "m.json"
+    assert _main(["gains", name, "--loop", "balancing", "--split", split, "--json", str(g)]) == 0
+    assert _main(["report", name, "--loop", "balancing", "--gains", str(g),
+                  "-o", str(tmp_path / "r.html"), "--json", str(m)]) == 0  # fmt: skip
+    tuned, report = json.loads(g.read_text()), json.loads(m.read_text())
+    assert report["met"] is tuned["met"]
+    for a, b in zip(tuned["checks"], report["checks"], strict=True):
+        assert (a["name"], a["met"]) == (b["name"], b["met"])
+        if a["value"] is not None:
+            assert a["value"] == pytest.approx(b["value"], rel=1e-9)
+    assert report["met"] is True
+
+
+def test_margins_of_an_unstable_loop_are_not_marked_ok():
+    """The per-channel table of an unstable loop: its margins are numbers, not verdicts
+    (as the tuner's checks say: n/a), and its legend says why."""
+    from airbearing.design.linearise import scaled_params
+    from airbearing.design.loops import make_loop
+    from airbearing.design.margins import analyse_loop
+    from airbearing.design.tuning import Spec
+    from airbearing.reporting.stability import _margin_legend, _margin_rows
+
+    # K_p = 0 cannot hold the CM 0.5 mm above the bearing (test_tuning's UNSTABLE_BALANCING)
+    lp = make_loop(load_testbed("seed004-platform"), "balancing", split="mechanical",
+                   gains={"K_p": 0.0, "K_d": 0.008969, "K_dK_i": 3.197e-05})  # fmt: skip
+    lp = lp.with_params(scaled_params(lp.model, lp.p, r_z=0.5e-3))
+    a = analyse_loop(lp, multiloop=False)
+    assert not a.stable
+    rows = _margin_rows(a, Spec())
+    assert rows and all(r[k] == "n/a" for r in rows for k in ("GM ok", "PM ok", "Ms ok"))
+    assert "n/a: the closed loop is unstable" in _margin_legend(a)
+    stable = analyse_loop(make_loop(load_testbed("cmg-yaw"), "attitude"), multiloop=False)
+    assert all(isinstance(r["PM ok"], bool) for r in _margin_rows(stable, Spec()))
+    assert "n/a" not in _margin_legend(stable)
+
+
+def test_per_corner_columns_have_their_units():
+    """The per-corner table's headers: every key's unit in words (was 'overshoot pct')."""
+    from airbearing.reporting.html import pretty_key
+    from airbearing.reporting.stability import _CORNER_COLUMNS
+
+    assert pretty_key("overshoot_pct") == "overshoot (%)"
+    assert pretty_key("slew_overshoot_pct") == "slew overshoot (%)"
+    assert pretty_key("settling_time_s") == "settling time (s)"
+    assert _CORNER_COLUMNS["multiloop_disk_margin"] == "disk margin, all channels at once"

@@ -96,8 +96,9 @@ def gains(
     offset_range_mm: Annotated[
         tuple[float, float] | None,
         typer.Option(
-            help="Platform: vertical CM offset range LO HI, mm (default: the testbed's "
-            "offset +- 50 %)."
+            help="Platform: vertical CM offset range LO HI, mm (default: from the testbed's "
+            "offset + 50 %, before seed 004's step two, to 2 % of it, what step two leaves "
+            "and balance simulates)."
         ),
     ] = None,
     max_overshoot_pct: Annotated[

@@ -12,7 +12,13 @@ state-space loop, evaluated on ``z = exp(j w T)`` for a discrete loop); crossove
 bracketed on a dense logarithmic grid and refined with Brent's method on the same
 python-control evaluation. (``control.stability_margins`` converts to polynomials, which
 loses all accuracy for these loops whose integral poles sit within 1e-6 of ``z = 1``;
-the test suite checks the two agree where both are accurate.)
+the test suite checks the two agree where both are accurate.) The peaks (of ``|S|``,
+``|T|``, ``|S - 1/2|`` and of ``mu``) are refined the same way: every local maximum of the
+grid within :data:`_PEAK_FRACTION` of the largest is maximised between its two
+neighbours by a bounded scalar search in ``ln w`` (scipy ``minimize_scalar``), so a
+lightly damped peak that falls between grid points is not read low (seed000-tabletop's
+mixed loop with tuned gains: |S| 1.220 on a 1000-point grid, 1.248 refined and on a
+dense grid).
 
 For a MIMO loop, :func:`multiloop_disk_margin` gives the disk margin for simultaneous
 independent perturbations of every channel: ``1 / max_w mu(S - I/2)`` with ``mu``
@@ -27,7 +33,7 @@ import math
 from dataclasses import asdict, dataclass, field
 
 import numpy as np
-from scipy.optimize import brentq, minimize
+from scipy.optimize import brentq, minimize, minimize_scalar
 
 from airbearing.design import _control as ct
 from airbearing.errors import InputError
@@ -47,6 +53,11 @@ __all__ = [
 
 _N_GRID = 3000  # points of the logarithmic frequency grid
 _SQRT_HALF = 1 / math.sqrt(2)
+#: A local maximum of a peak's grid values at least this fraction of the largest is
+#: refined between its neighbours: a lightly damped peak can rise that much between two
+#: points of the grid.
+_PEAK_FRACTION = 0.8
+_PEAK_XTOL = 1e-7  # the refined peak's frequency, in ln w
 
 
 @dataclass(frozen=True)
@@ -183,10 +194,33 @@ def _crossovers(Lof, w, Lw, mag) -> tuple[list, list]:
     return gc, pc
 
 
-def _disk_margin(S) -> tuple[float, float, float]:
-    """Balanced disk margin (skew 0) from the sensitivity on the grid, as
+def _peak(f, w, values) -> tuple[float, float]:
+    """The largest value of ``f`` (a function of the frequency, rad/s), refined from its
+    ``values`` on the grid ``w``: each interior local maximum of the grid within
+    :data:`_PEAK_FRACTION` of the largest is maximised between its two neighbours
+    (bounded Brent search in ``ln w``). Returns ``(peak, frequency rad/s)``."""
+    values = np.asarray(values, dtype=float)
+    k = int(np.argmax(values))
+    best, at = float(values[k]), float(w[k])
+    lw = np.log(w)
+    inner = values[1:-1]
+    local = np.nonzero((inner >= values[:-2]) & (inner >= values[2:]))[0] + 1
+    for i in local[values[local] >= _PEAK_FRACTION * best]:
+        r = minimize_scalar(
+            lambda x: -f(math.exp(x)),
+            bounds=(lw[i - 1], lw[i + 1]),
+            method="bounded",
+            options={"xatol": _PEAK_XTOL},
+        )
+        if -r.fun > best:
+            best, at = float(-r.fun), math.exp(float(r.x))
+    return best, at
+
+
+def _disk_margin(peak: float) -> tuple[float, float, float]:
+    """Balanced disk margin (skew 0) from the peak of ``|S - 1/2|``, as
     control.disk_margins: ``alpha = 1 / max |S - 1/2|``, its gain (dB) and phase (deg)."""
-    alpha = 1 / float(np.max(np.abs(S - 0.5)))
+    alpha = 1 / peak
     if alpha >= 2:
         return alpha, math.inf, 90.0
     return (
@@ -254,8 +288,8 @@ def loop_margins(
         pm_deg = min(pms)
     S = 1 / (1 + Lw)
     T = Lw / (1 + Lw)
-    ms = float(np.max(np.abs(S)))
-    mt = float(np.max(np.abs(T)))
+    ms = _peak(lambda x: abs(1 / (1 + Lof(x))), w, np.abs(S))[0]
+    mt = _peak(lambda x: abs(Lof(x) / (1 + Lof(x))), w, np.abs(T))[0]
     below = np.abs(S) < _SQRT_HALF
     wb = None
     if below[0]:
@@ -269,7 +303,8 @@ def loop_margins(
         dm = 0.0
         if gms:  # as control.stability_margins: the (negative) margin to the crossing
             gm_db = 20 * math.log10(min(gms))
-    alpha, dgm, dpm = _disk_margin(S)
+    off_half = _peak(lambda x: abs(1 / (1 + Lof(x)) - 0.5), w, np.abs(S - 0.5))[0]
+    alpha, dgm, dpm = _disk_margin(off_half)
     return LoopMargins(
         name=name,
         discrete=discrete,
@@ -328,6 +363,53 @@ def _perron_bounds(M: np.ndarray) -> np.ndarray:
     return np.linalg.norm(scaled, 2, axis=(1, 2))
 
 
+def _grid_mu(M: np.ndarray) -> tuple[float, int | None, np.ndarray]:
+    """The largest D-scaled bound of ``mu`` over the frequencies of ``M`` (``(n, m, m)``),
+    by branch and bound: frequencies in the order of a cheap upper bound (the unstructured
+    ``sigma_max``, or the Perron-scaled one), stopping when the bound falls below the
+    largest ``mu`` found. Returns ``(mu, its index or None, the cheap bounds)``."""
+    sig = np.linalg.norm(M, 2, axis=(1, 2))  # unstructured bound, >= mu
+    if M.shape[1] > 1:  # the Perron-scaled bound, tighter, is where _mu_upper starts
+        sig = np.minimum(sig, _perron_bounds(M))
+    worst, k_worst = 0.0, None
+    for k in np.argsort(-sig):  # branch and bound: mu <= the bound
+        if sig[k] <= worst:
+            break
+        mu = _mu_upper(M[k])
+        if mu > worst:
+            worst, k_worst = mu, int(k)
+    return worst, k_worst, sig
+
+
+def _refine_mu(L, w, bound, worst: float, w_worst: float, k_worst: int) -> tuple[float, float]:
+    """The peak of ``mu(S - I/2)`` between grid points: around the worst grid frequency
+    and every local maximum of the grid's upper ``bound`` that comes within
+    :data:`_PEAK_FRACTION` of ``worst``, a bounded scalar search in ``ln w`` between the
+    neighbours (as :func:`_peak`). Returns ``(mu, frequency rad/s)``."""
+    eye = np.eye(L.ninputs)
+
+    def mu_at(x):
+        Lx = _response(L, [x])[..., 0]
+        return _mu_upper(np.linalg.inv(eye + Lx) - 0.5 * eye)
+
+    inner = bound[1:-1]
+    local = np.nonzero((inner >= bound[:-2]) & (inner >= bound[2:]))[0] + 1
+    todo = {int(k) for k in local[bound[local] >= _PEAK_FRACTION * worst]}
+    if 0 < k_worst < len(w) - 1:
+        todo.add(k_worst)
+    lw = np.log(w)
+    for i in sorted(todo):
+        r = minimize_scalar(
+            lambda x: -mu_at(math.exp(x)),
+            bounds=(lw[i - 1], lw[i + 1]),
+            method="bounded",
+            options={"xatol": _PEAK_XTOL},
+        )
+        if -r.fun > worst:
+            worst, w_worst = float(-r.fun), math.exp(float(r.x))
+    return worst, w_worst
+
+
 def multiloop_disk_margin(L: ct.StateSpace, omega=None, *, n_freq: int = 400) -> dict:
     """Disk margin for simultaneous independent perturbations of every channel.
 
@@ -359,16 +441,10 @@ def multiloop_disk_margin(L: ct.StateSpace, omega=None, *, n_freq: int = 400) ->
     Lw = np.moveaxis(_response(L, w), -1, 0)  # (n, m, m)
     eye = np.eye(m)
     M = np.linalg.solve(eye[None] + Lw, np.broadcast_to(eye, Lw.shape)) - 0.5 * eye
-    sig = np.linalg.norm(M, 2, axis=(1, 2))  # unstructured bound, >= mu
-    if m > 1:  # the Perron-scaled bound, tighter, is where _mu_upper starts
-        sig = np.minimum(sig, _perron_bounds(M))
-    worst, w_worst = 0.0, float("nan")
-    for k in np.argsort(-sig):  # branch and bound: mu <= the bound
-        if sig[k] <= worst:
-            break
-        mu = _mu_upper(M[k])
-        if mu > worst:
-            worst, w_worst = mu, float(w[k])
+    worst, k_worst, sig = _grid_mu(M)
+    w_worst = float("nan")
+    if k_worst is not None:
+        worst, w_worst = _refine_mu(L, w, sig, worst, float(w[k_worst]), k_worst)
     alpha = 1 / worst if worst > 0 else math.inf
     # balanced disk (skew 0): gain in [(1 - a/2)/(1 + a/2), (1 + a/2)/(1 - a/2)]
     if alpha >= 2:

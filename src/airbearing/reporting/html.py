@@ -126,7 +126,7 @@ def column_label(name: str) -> str:
 
 _KEY_UNITS = (
     ("_rad_s", "rad/s"), ("_deg_s", "deg/s"), ("_db", "dB"), ("_deg", "deg"), ("_nm", "N m"),
-    ("_m", "m"), ("_s", "s"),
+    ("_m", "m"), ("_s", "s"), ("_pct", "%"),
 )  # fmt: skip
 
 

@@ -18,18 +18,15 @@ import numpy as np
 
 from airbearing.analysis.simulation.simulate import closed_loop_rollout
 from airbearing.design.loops import Loop, make_loop, with_delay
-from airbearing.design.margins import (
-    _response,
-    analyse_loop,
-    frequency_grid,
-    json_number,
-    multiloop_worst_corner,
-)
-from airbearing.design.tuning import Check, Spec, corners, evaluate, scenario_response, tune
+from airbearing.design.margins import _response, analyse_loop, frequency_grid, json_number
+from airbearing.design.tuning import Spec, evaluate, scenario_response, tune
+from airbearing.design.tuning.verdict import SIMULTANEOUS_GAIN, SIMULTANEOUS_PHASE
 from airbearing.models import quaternion as quat
 from airbearing.reporting.html import Report, pretty_key, table_html
 
 __all__ = [
+    "SIMULTANEOUS_GAIN",
+    "SIMULTANEOUS_PHASE",
     "bode_nyquist",
     "stability_report",
     "report_for_loop",
@@ -203,9 +200,17 @@ _MARGIN_LEGEND = (
     "unlimited: the loop never crosses that line (|L| = 1 for the phase and delay margins, "
     "-180 deg for the gain margin; for w_B, |S| never reaches 1/sqrt(2)); null in JSON"
 )
+#: The verdict of a margin of an unstable closed loop (as the tuner's checks say it).
+_NOT_APPLICABLE = "n/a"
+_UNSTABLE_LEGEND = (
+    "; n/a: the closed loop is unstable, so its margins say nothing about robustness and "
+    "no margin is met"
+)
 
 
 def _margin_rows(analysis, spec: Spec | None):
+    """One row per channel: its margins and, against ``spec``, whether each is met
+    (``n/a`` when the closed loop is unstable: the tuner's checks say the same)."""
     rows = []
     for name, m in analysis.channels.items():
         r = {
@@ -219,12 +224,18 @@ def _margin_rows(analysis, spec: Spec | None):
             "w_B (rad/s)": _margin_text(m.bandwidth_rad_s, "—"),
             "stable": m.stable,
         }
-        if spec is not None:
+        if spec is not None and not analysis.stable:
+            r["GM ok"] = r["PM ok"] = r["Ms ok"] = _NOT_APPLICABLE
+        elif spec is not None:
             r["GM ok"] = m.gain_margin_db >= spec.gain_margin_db
             r["PM ok"] = m.phase_margin_deg >= spec.phase_margin_deg
             r["Ms ok"] = m.sensitivity_peak <= spec.max_sensitivity
         rows.append(r)
     return rows
+
+
+def _margin_legend(analysis) -> str:
+    return _MARGIN_LEGEND + ("" if analysis.stable else _UNSTABLE_LEGEND)
 
 
 def report_for_loop(
@@ -257,12 +268,7 @@ def report_for_loop(
     d = analyse_loop(loop, discrete=True)
     c = analyse_loop(loop, discrete=False)
     undelayed = analyse_loop(replace(loop, delay_samples=0), discrete=True)
-    checks, worst, per = evaluate(loop, spec)
-    ml_worst = None
-    if d.multiloop is not None and worst["stable"]:
-        ml_worst = multiloop_worst_corner(loop, corners(loop, spec))
-    checks = [*checks, *_simultaneous_checks(d.multiloop is not None, ml_worst, spec,
-                                             worst["stable"])]  # fmt: skip
+    checks, worst, per = evaluate(loop, spec)  # with the margins of all channels at once
     met = all(ch.met for ch in checks)
     rep.paragraph(
         (
@@ -272,7 +278,7 @@ def report_for_loop(
         ),
         note=True,
     )
-    _margin_tables(rep, d, c, checks, per, spec, ml_worst)
+    _margin_tables(rep, d, c, checks, per, spec, worst)
     _delay_note(rep, loop, d, undelayed)
     for fig, cap in _bode_nyquist(d, loop, True):
         rep.figure(fig, cap)
@@ -295,58 +301,11 @@ def report_for_loop(
         "delay_samples": loop.delay_samples,
         "without_delay": undelayed.to_dict(),
         "worst_case": {
-            k: (json_number(v) if isinstance(v, float) else v)
-            for k, v in {**worst, **_multiloop_worst_keys(ml_worst)}.items()
+            k: (json_number(v) if isinstance(v, float) else v) for k, v in worst.items()
         },
         "notes": list(loop.notes),
     }
     return rep, data
-
-
-#: Names of the checks of the simultaneous (multi-loop disk) margins.
-SIMULTANEOUS_GAIN = "gain margin, all channels at once (dB)"
-SIMULTANEOUS_PHASE = "phase margin, all channels at once (deg)"
-
-
-def _limit_check(name: str, value: float, limit: float) -> Check:
-    """``value >= limit`` as a :class:`~airbearing.design.tuning.Check` (``by`` in the
-    value's unit; an unlimited margin passes by an unlimited amount)."""
-    by = math.inf if math.isinf(value) else value - limit
-    return Check(name, value, limit, ">=", bool(by >= 0), by)
-
-
-def _simultaneous_checks(several: bool, ml_worst, spec: Spec, stable: bool) -> list[Check]:
-    """The multi-loop disk margin's gain and phase, worst over the uncertainty box,
-    against the specification's gain and phase margins.
-
-    The balanced disk margin covers gain or phase errors of every channel at once (gain
-    within ``+-disk_gain_margin_db`` or phase within ``+-disk_phase_margin_deg``), so it
-    is the margin to compare when the channels' errors come together, e.g. the slider
-    mass and the cage field of the mixed balancing split, whose sliders and
-    magnetorquers act on the same axes. None for a loop with one channel (``several``
-    false); not evaluated (a failed check) when a corner is unstable.
-    """
-    if not several:
-        return []
-    if not stable or ml_worst is None:
-        return [Check("margins, all channels at once (unstable: not evaluated)",
-                      None, None, "", False, None)]  # fmt: skip
-    return [
-        _limit_check(SIMULTANEOUS_GAIN, ml_worst["disk_gain_margin_db"], spec.gain_margin_db),
-        _limit_check(SIMULTANEOUS_PHASE, ml_worst["disk_phase_margin_deg"], spec.phase_margin_deg),
-    ]
-
-
-def _multiloop_worst_keys(ml_worst) -> dict:
-    """The ``worst_case`` keys of the multi-loop disk margin (none for one channel)."""
-    if ml_worst is None:
-        return {}
-    return {
-        "multiloop_disk_margin": ml_worst["disk_margin"],
-        "multiloop_disk_gain_margin_db": ml_worst["disk_gain_margin_db"],
-        "multiloop_disk_phase_margin_deg": ml_worst["disk_phase_margin_deg"],
-        "multiloop_corner": ml_worst["corner"],
-    }
 
 
 def _delay_note(rep: Report, loop: Loop, d, undelayed) -> None:
@@ -398,12 +357,12 @@ def _gains_table(rep: Report, loop: Loop) -> None:
     rep.table(gains)
 
 
-def _margin_tables(rep: Report, d, c, checks, per, spec: Spec, ml_worst=None) -> None:
+def _margin_tables(rep: Report, d, c, checks, per, spec: Spec, worst: dict) -> None:
     """Margins of the discrete and continuous loops, the multi-loop disk margin (nominal
-    and worst over the box), the specification at its worst corner, and the margins at
-    every corner."""
+    and, from ``worst``, worst over the box), the specification at its worst corner, and
+    the margins at every corner."""
     rep.heading("Margins, discrete loop (ZOH, one sample of computation delay)", 3)
-    rep.table(_margin_rows(d, spec), legend=_MARGIN_LEGEND)
+    rep.table(_margin_rows(d, spec), legend=_margin_legend(d))
     if d.multiloop:
         ml = d.multiloop
         text = (
@@ -412,11 +371,12 @@ def _margin_tables(rep: Report, d, c, checks, per, spec: Spec, ml_worst=None) ->
             f"{ml['disk_margin']:.3g}, i.e. +-{ml['disk_gain_margin_db']:.3g} dB or "
             f"+-{ml['disk_phase_margin_deg']:.3g} deg"
         )
-        if ml_worst is not None:
+        if "multiloop_corner" in worst:
             text += (
-                f"; worst over the uncertainty box ({ml_worst['corner']}): alpha = "
-                f"{ml_worst['disk_margin']:.3g}, +-{ml_worst['disk_gain_margin_db']:.3g} dB "
-                f"or +-{ml_worst['disk_phase_margin_deg']:.3g} deg"
+                f"; worst over the uncertainty box ({worst['multiloop_corner']}): alpha = "
+                f"{worst['multiloop_disk_margin']:.3g}, "
+                f"+-{worst['multiloop_disk_gain_margin_db']:.3g} dB "
+                f"or +-{worst['multiloop_disk_phase_margin_deg']:.3g} deg"
             )
         chans = ml["channels"]
         mixed = any(ch.startswith("s") for ch in chans) and any(ch.startswith("m") for ch in chans)
@@ -433,32 +393,32 @@ def _margin_tables(rep: Report, d, c, checks, per, spec: Spec, ml_worst=None) ->
             f"{spec.gain_margin_db:g} dB and {spec.phase_margin_deg:g} deg."
         )
     rep.heading("Margins, continuous design model (no sampling, no delay)", 3)
-    rep.table(_margin_rows(c, None), legend=_MARGIN_LEGEND)
+    rep.table(_margin_rows(c, None), legend=_margin_legend(c))
     rep.heading("Specification, worst case over the uncertainty box", 3)
     rep.table(
         [_check_row(ch.to_dict()) for ch in checks],
         ["check", "value", "required", "verdict", "by"],
         legend="not evaluated, or unlimited (no crossing)",
     )
-    at_once = {} if ml_worst is None else ml_worst["per_corner"]
     rep.table(
         [
             {
                 "corner": lbl,
                 **{
-                    pretty_key(k): (json_number(v) if isinstance(v, float) else v)
+                    _CORNER_COLUMNS.get(k, pretty_key(k)): (
+                        json_number(v) if isinstance(v, float) else v
+                    )
                     for k, v in w.items()
                 },
-                **(
-                    {"disk margin, all channels at once": json_number(at_once[lbl])}
-                    if lbl in at_once
-                    else {}
-                ),
             }
             for lbl, w in per
         ],
         legend="no crossing: the margin is unlimited",
     )
+
+
+#: Columns of the per-corner table that a key's words do not say.
+_CORNER_COLUMNS = {"multiloop_disk_margin": "disk margin, all channels at once"}
 
 
 def _responses(rep: Report, loop: Loop, nonlinear: bool) -> float:
@@ -635,8 +595,11 @@ def demo_section(report: Report, *, quick: bool = False) -> None:
     spec = Spec()
     report.paragraph(
         f"Specification: phase margin >= {spec.phase_margin_deg} deg, gain margin >= "
-        f"{spec.gain_margin_db} dB, |S| <= {spec.max_sensitivity}, inertia +-15 %, testbed "
-        "actuator limits; the worst case over the uncertainty box counts."
+        f"{spec.gain_margin_db} dB, both one channel at a time and with every channel "
+        f"perturbed at once, |S| <= {spec.max_sensitivity}, overshoot <= "
+        f"{spec.max_overshoot:g} %, testbed actuator limits; inertia +-15 % and, on a "
+        "platform, the vertical offset from the testbed's + 50 % (before seed 004's step "
+        "two) to 2 % of it (after it); the worst case over this uncertainty box counts."
     )
     if quick:
         report.paragraph(
@@ -662,15 +625,13 @@ def demo_section(report: Report, *, quick: bool = False) -> None:
         res = tune(tb, name, spec, **opts)
         for label, lp in (("seed", seed), ("tuned", seed.with_gains(res.gains))):
             checks, worst, _ = evaluate(lp, spec)
-            ml = multiloop_worst_corner(lp, corners(lp, spec)) if worst["stable"] else None
-            checks += _simultaneous_checks(len(lp.channels) > 1, ml, spec, worst["stable"])
             rows.append(
                 {
                     "loop": f"{lp.name} ({label})",
                     **{k: float(v) for k, v in lp.gains.items()},
                     "worst PM (deg)": json_number(worst["phase_margin_deg"]),
-                    "worst PM, all at once (deg)": (
-                        None if ml is None else json_number(ml["disk_phase_margin_deg"])
+                    "worst PM, all at once (deg)": json_number(
+                        worst.get("multiloop_disk_phase_margin_deg")
                     ),
                     "worst GM (dB)": json_number(worst["gain_margin_db"]),
                     "worst Ms": worst["sensitivity_peak"],
