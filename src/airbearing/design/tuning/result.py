@@ -57,8 +57,14 @@ class TuningResult:
 
     def __str__(self) -> str:
         gains = ", ".join(f"{k} = {v:.4g}" for k, v in self.gains.items())
-        lines = [f"{self.loop} loop of {self.testbed}: {gains}", self.message]
-        lines += [f"  {c}" for c in self.checks]
+        # at a glance: the verdict once (the checks below give the values), the checks with
+        # a limit one per line, the values without a limit on one line
+        verdict = "specification met" if self.met else self.message
+        lines = [f"{self.loop} loop of {self.testbed}: {gains}", verdict]
+        info = [c for c in self.checks if c.limit is None and c.met and c.value is not None]
+        lines += [f"  {c}" for c in self.checks if all(c is not i for i in info)]
+        if info:
+            lines.append("  also: " + "; ".join(f"{c.name} {c.value:.4g}" for c in info))
         return "\n".join(lines)
 
     def to_json(self) -> dict:

@@ -3,7 +3,10 @@ specification, judged in the end by :func:`~airbearing.design.tuning.verdict.eva
 
 from __future__ import annotations
 
+import copy
 import math
+import threading
+from collections import OrderedDict
 from dataclasses import replace
 
 from airbearing.design.loops import make_loop
@@ -17,6 +20,13 @@ from airbearing.design.tuning.verdict import evaluate
 from airbearing.errors import InputError
 
 __all__ = ["tune"]
+
+#: Results of this process's recent tunings, keyed by what decides them (testbed, loop,
+#: split, spec): a notebook cell run again, or ``report`` after ``gains``, does not search
+#: again. Every input is a frozen value, so an equal key is the same computation.
+_DONE: OrderedDict = OrderedDict()
+_DONE_SIZE = 16
+_DONE_LOCK = threading.Lock()
 
 
 def tune(
@@ -76,6 +86,12 @@ def tune(
     opts = {"split": split} if loop == "balancing" else {}
     base = make_loop(testbed, loop, **opts)
     testbed = base.model.testbed  # a name or a file: the testbed it named
+    key = (testbed, loop, split if loop == "balancing" else None, spec)
+    with _DONE_LOCK:
+        done = _DONE.get(key)
+    if done is not None:
+        progress("tuned before in this session: the same answer", 1, 1)
+        return copy.deepcopy(done)  # a caller may change its dicts and lists
     nyq = math.pi / base.dt
     target = None
     if spec.bandwidth_hz is not None:
@@ -136,7 +152,7 @@ def tune(
         shapes=shapes,
     )
     met = all(c.met for c in checks)
-    return TuningResult(
+    result = TuningResult(
         loop=loop,
         split=split if loop == "balancing" else None,
         testbed=testbed.name,
@@ -149,6 +165,11 @@ def tune(
         corners=[(label, w) for label, w in per],
         design=design,
     )
+    with _DONE_LOCK:
+        _DONE[key] = copy.deepcopy(result)
+        while len(_DONE) > _DONE_SIZE:
+            _DONE.popitem(last=False)
+    return result
 
 
 def _met(checks, fixed) -> bool:
