@@ -64,6 +64,11 @@ def tune(
         (+-``spec.inertia_uncertainty``) and offset range; ``met`` is False, with the reason
         in ``message``, when the specification cannot be met.
 
+    Notes
+    -----
+    The last 16 results of a process are kept: the same testbed, loop, split (balancing)
+    and spec give a copy of the earlier answer at once.
+
     Raises
     ------
     InputError
