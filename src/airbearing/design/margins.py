@@ -202,10 +202,22 @@ def _peak(f, w, values) -> tuple[float, float]:
     values = np.asarray(values, dtype=float)
     k = int(np.argmax(values))
     best, at = float(values[k]), float(w[k])
-    lw = np.log(w)
+    return _maximise_between(f, w, _local_maxima(values, _PEAK_FRACTION * best), best, at)
+
+
+def _local_maxima(values: np.ndarray, at_least: float) -> set[int]:
+    """Indices of the interior local maxima of ``values`` that reach ``at_least``."""
     inner = values[1:-1]
     local = np.nonzero((inner >= values[:-2]) & (inner >= values[2:]))[0] + 1
-    for i in local[values[local] >= _PEAK_FRACTION * best]:
+    return {int(k) for k in local[values[local] >= at_least]}
+
+
+def _maximise_between(f, w, indices, best: float, at: float) -> tuple[float, float]:
+    """``f`` maximised between the grid neighbours of each of ``indices`` (bounded Brent
+    search in ``ln w``), starting from the value ``best`` at frequency ``at`` (rad/s).
+    Returns ``(largest value, its frequency rad/s)``."""
+    lw = np.log(w)
+    for i in sorted(indices):
         r = minimize_scalar(
             lambda x: -f(math.exp(x)),
             bounds=(lw[i - 1], lw[i + 1]),
@@ -392,22 +404,10 @@ def _refine_mu(L, w, bound, worst: float, w_worst: float, k_worst: int) -> tuple
         Lx = _response(L, [x])[..., 0]
         return _mu_upper(np.linalg.inv(eye + Lx) - 0.5 * eye)
 
-    inner = bound[1:-1]
-    local = np.nonzero((inner >= bound[:-2]) & (inner >= bound[2:]))[0] + 1
-    todo = {int(k) for k in local[bound[local] >= _PEAK_FRACTION * worst]}
+    todo = _local_maxima(bound, _PEAK_FRACTION * worst)
     if 0 < k_worst < len(w) - 1:
         todo.add(k_worst)
-    lw = np.log(w)
-    for i in sorted(todo):
-        r = minimize_scalar(
-            lambda x: -mu_at(math.exp(x)),
-            bounds=(lw[i - 1], lw[i + 1]),
-            method="bounded",
-            options={"xatol": _PEAK_XTOL},
-        )
-        if -r.fun > worst:
-            worst, w_worst = float(-r.fun), math.exp(float(r.x))
-    return worst, w_worst
+    return _maximise_between(mu_at, w, todo, worst, w_worst)
 
 
 def multiloop_disk_margin(L: ct.StateSpace, omega=None, *, n_freq: int = 400) -> dict:
