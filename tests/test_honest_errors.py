@@ -13,14 +13,9 @@ import pytest
 
 
 def _study():
-    import importlib.util
-    from pathlib import Path
+    from bench_scripts import load
 
-    path = Path(__file__).resolve().parents[1] / "benchmarks" / "coverage_study.py"
-    spec = importlib.util.spec_from_file_location("coverage_study", path)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return load("coverage_study")
 
 
 def _effect(doc, name):
@@ -128,16 +123,12 @@ def test_ar_model_of_a_residual_is_corrected_for_the_windows_initial_states():
 def _spin_down_fit(monkeypatch, seed, case):
     """The dof-1 spin-down of ``benchmarks/identify_coverage.py`` identified, with the
     engine's problem, fit and errors caught on the way."""
-    import importlib.util
-    from pathlib import Path
+    from bench_scripts import load
 
     import airbearing.analysis.shooting.errors as errors
     from airbearing.analysis.identification.yaw_inertia import identify_yaw_inertia
 
-    path = Path(__file__).resolve().parents[1] / "benchmarks" / "identify_coverage.py"
-    spec = importlib.util.spec_from_file_location("identify_coverage", path)
-    ic = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(ic)
+    ic = load("identify_coverage")
     seen = {}
     honest = errors.honest_errors
 
