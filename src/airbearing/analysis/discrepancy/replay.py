@@ -166,13 +166,15 @@ def _integration_tolerance(windows: WindowSet, floor: NoiseFloor):
     its noise) over the square root of the longest segment's usable samples. The attitude
     keeps the resolution whatever its floor: a floor from the attitude's differences sees
     the motion of a fast rig (3.4e-5 rad on seed 004's noise-free attitude) and a
-    noise-free attitude's errors are computed at the resolution."""
+    noise-free attitude's errors are computed at the resolution. No bound (inf) on a
+    quantity the log does not measure."""
     seg = windows.segments()
     usable = (windows.weight > 0).sum(axis=1)
     n = max(int(usable[seg == s].sum()) for s in np.unique(seg))
     root = math.sqrt(max(n, 1))
-    rate = max(floor.rate or 0.0, RATE_SIGMA_MIN)
-    return ATTITUDE_SIGMA_MIN / root, rate / root
+    att = ATTITUDE_SIGMA_MIN / root if floor.attitude is not None else math.inf
+    rate = max(floor.rate, RATE_SIGMA_MIN) / root if floor.rate is not None else math.inf
+    return att, rate
 
 
 def _accurate_substeps(model: Model, windows: WindowSet, n: int, tol) -> int:
