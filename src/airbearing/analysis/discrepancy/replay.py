@@ -68,6 +68,7 @@ __all__ = [
     "Replay",
     "ReplayData",
     "WindowSet",
+    "attitude_noise",
     "checked_arguments",
     "integration_error",
     "jit_available",
@@ -118,16 +119,18 @@ def substeps_for(model: Model, windows: WindowSet, floor: NoiseFloor | None = No
     """RK4 sub-steps per sample: ``DEFAULT_SUBSTEPS``, more for a fast three-axis spin.
 
     With the noise ``floor`` (three-axis rigs), also enough sub-steps for the replay to
-    integrate to its resolution: the number is doubled until the integration error
-    over each segment, measured by step doubling from each window's start (the windows'
-    errors summed over the segment), is at most the resolution over the square root of
-    the segment's samples (:func:`_integration_tolerance`). The error is smooth, so it
-    acts on a fitted value coherently over the whole segment, as one of ``sqrt(n)`` times
-    its size that is white; below that tolerance its effect on any value is below one
-    standard error at the resolution. A noise-free attitude is weighted at that resolution
-    (:data:`~airbearing.analysis.shooting.errors.RESOLUTION`): on seed 004's free
-    oscillation (rates to 1.5 rad/s at 20 Hz) two sub-steps left 3.8e-6 rad of attitude
-    error over 30 s and put per-axis viscous frictions up to 3.2 standard errors off.
+    integrate to the noise its errors assume: the number is doubled until the integration
+    error over each segment, measured by step doubling from each window's start (the
+    windows' errors summed over the segment), is at most each output's noise (never below
+    the replay's resolution) over the square root of the segment's samples
+    (:func:`_integration_tolerance`). The error is smooth, so it acts on a fitted value
+    coherently over the whole segment, as ``sqrt(n)`` white errors of its size would;
+    within that tolerance its effect on any value is at most about one standard error. A
+    noise-free attitude is weighted at the resolution
+    (:data:`~airbearing.analysis.shooting.errors.RESOLUTION`, 1e-6 rad): on seed 004's
+    free oscillation (rates to 1.5 rad/s at 20 Hz) two sub-steps drifted 3.9e-6 rad over
+    30 s and put per-axis viscous frictions up to 3.2 standard errors off; eight drift
+    1.5e-8 rad. A motion-capture attitude (1e-3 rad) keeps two.
 
     Parameters
     ----------
@@ -160,21 +163,62 @@ def substeps_for(model: Model, windows: WindowSet, floor: NoiseFloor | None = No
     return cache[key]
 
 
+#: Orders of the attitude's differences whose smallest floor is its noise in
+#: :func:`_integration_tolerance` (a smooth motion leaks into low orders, noise is the same
+#: in every order).
+ATTITUDE_NOISE_ORDERS = (4, 6, 8)
+
+
 def _integration_tolerance(windows: WindowSet, floor: NoiseFloor):
     """``(rad, rad/s)``: the largest integration error over a segment of the attitude and
-    of the rates: the resolution (the floor for a noisy gyro, whose weights never go below
-    its noise) over the square root of the longest segment's usable samples. The attitude
-    keeps the resolution whatever its floor: a floor from the attitude's differences sees
-    the motion of a fast rig (3.4e-5 rad on seed 004's noise-free attitude) and a
-    noise-free attitude's errors are computed at the resolution. No bound (inf) on a
-    quantity the log does not measure."""
+    of the rates: the noise each is weighted at, never below the resolution, over the
+    square root of the longest segment's usable samples (inf for a quantity the log does
+    not measure). The rates' noise is the floor's; the attitude's is
+    :func:`attitude_noise` (the floor of an attitude beside a gyro comes from the gyro's
+    integral: 3.3e-5 rad on seed 004's noise-free attitude under AR(1) gyro noise, whose
+    8th differences show 8e-10)."""
     seg = windows.segments()
     usable = (windows.weight > 0).sum(axis=1)
     n = max(int(usable[seg == s].sum()) for s in np.unique(seg))
     root = math.sqrt(max(n, 1))
-    att = ATTITUDE_SIGMA_MIN / root if floor.attitude is not None else math.inf
+    att = math.inf
+    if floor.attitude is not None:
+        att = max(attitude_noise(windows) or 0.0, ATTITUDE_SIGMA_MIN) / root
     rate = max(floor.rate, RATE_SIGMA_MIN) / root if floor.rate is not None else math.inf
     return att, rate
+
+
+def attitude_noise(windows: WindowSet) -> float | None:
+    """rad, the attitude's white noise per axis seen by the windows: the smallest over
+    :data:`ATTITUDE_NOISE_ORDERS` of the median absolute deviation of its unit-norm
+    divided differences (as :func:`noise_floor`'s, on each window's usable rows). A smooth
+    motion leaks into a low order (on seed 004's free oscillation at 20 Hz, 6.9e-6 rad at
+    order 4 for a noise-free attitude, 8e-10 at order 8); white noise is the same in every
+    order. None without attitude or with too few usable rows.
+    """
+    from airbearing.analysis.discrepancy.data import MAD_TO_SIGMA, _attitude_diff
+
+    if windows.quat is None:
+        return None
+    best = None
+    for k in ATTITUDE_NOISE_ORDERS:
+        parts = []
+        for j in range(windows.n):
+            ok = windows.weight[j] > 0
+            t = np.r_[0.0, np.cumsum(windows.dt[j])]
+            run = np.ones(windows.length - k, dtype=bool)
+            for i in range(k + 1):
+                run &= ok[i : windows.length - k + i]
+            idx = np.flatnonzero(run)
+            if idx.size:
+                parts.append(_attitude_diff(windows.quat[j], t, idx, k))
+        if not parts or sum(p.shape[0] for p in parts) < 10:
+            continue
+        d = np.concatenate(parts)
+        mad = MAD_TO_SIGMA * np.median(np.abs(d - np.median(d, axis=0)), axis=0)
+        sigma = float(np.sqrt(np.mean(mad**2)))
+        best = sigma if best is None else min(best, sigma)
+    return best
 
 
 def _accurate_substeps(model: Model, windows: WindowSet, n: int, tol) -> int:
