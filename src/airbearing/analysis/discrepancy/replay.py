@@ -109,7 +109,7 @@ MAX_SUBSTEP_ROTATION = 0.08
 #: Most RK4 sub-steps per sample the accuracy check of :func:`substeps_for` may ask for.
 MAX_SUBSTEPS = 32
 
-#: Per windows object: ``(model, attitude tolerance, rate tolerance) -> sub-steps`` (the
+#: Per windows object: ``(states, inputs, rate floor, no attitude) -> sub-steps`` (the
 #: accuracy check integrates every window twice per candidate number; a search builds many
 #: problems on the same windows).
 _ACCURATE = weakref.WeakKeyDictionary()
@@ -155,11 +155,12 @@ def substeps_for(model: Model, windows: WindowSet, floor: NoiseFloor | None = No
     n = max(DEFAULT_SUBSTEPS, math.ceil(w * dt / MAX_SUBSTEP_ROTATION - 1e-9))
     if floor is None or windows.x0.shape[1] != model.nx:
         return n
-    tol = _integration_tolerance(windows, floor)
-    key = (model, tol)
+    # the motion the logs record sets the error; the candidate effects (small torques) do
+    # not: one check per windows, whichever Model asks first
+    key = (model.nx, model.nu, floor.rate, floor.attitude is None)
     cache = _ACCURATE.setdefault(windows, {})
     if key not in cache:
-        cache[key] = _accurate_substeps(model, windows, n, tol)
+        cache[key] = _accurate_substeps(model, windows, n, _integration_tolerance(windows, floor))
     return cache[key]
 
 
@@ -194,7 +195,17 @@ def attitude_noise(windows: WindowSet) -> float | None:
     divided differences (as :func:`noise_floor`'s, on each window's usable rows). A smooth
     motion leaks into a low order (on seed 004's free oscillation at 20 Hz, 6.9e-6 rad at
     order 4 for a noise-free attitude, 8e-10 at order 8); white noise is the same in every
-    order. None without attitude or with too few usable rows.
+    order.
+
+    Parameters
+    ----------
+    windows : WindowSet
+        Windows with a measured attitude (``quat``).
+
+    Returns
+    -------
+    float or None
+        rad, 1-sigma per axis; None without attitude or with too few usable rows.
     """
     from airbearing.analysis.discrepancy.data import MAD_TO_SIGMA, _attitude_diff
 
