@@ -22,6 +22,9 @@ platform with a noise-free attitude
     004's free oscillation for 30 s, viscous friction 2e-4 N m s in the truth; the gyro
     is noisy, the attitude ideal (noise-free), so the two output groups' residuals stand
     at very different levels of their weights (``--kinds platform``, not in the default).
+platform with a motion-capture attitude
+    The same with white attitude noise of ``PLATFORM_MOCAP_NOISE`` rad per axis, as a lab's
+    motion capture gives (``--kinds platform-mocap``, not in the default).
 
 Cases
     (a) white measurement noise; (b) AR(1) measurement noise with coefficient 0.95 (the
@@ -70,6 +73,8 @@ PLATFORM_W0 = (0.3676, 0.1265, -1.4835)
 PLATFORM_Q0 = (0.99458, 0.024955, -0.014973, 0.099819)
 PLATFORM_TRUTH = {"viscous_friction": 2e-4}
 PLATFORM_DURATION = 30.0  # s
+#: rad, 1-sigma white attitude noise per axis of the ``platform-mocap`` set-up.
+PLATFORM_MOCAP_NOISE = 1e-3
 #: AR(1) coefficient of case (b).
 AR_PHI = 0.95
 #: s, correlation time, and N m, standard deviation of the OU torque of case (c).
@@ -161,8 +166,9 @@ def cmg_logs(seed: int, case: str):
     return tb, [Log(df, source=f"slew-{seed}.csv", testbed=tb)]
 
 
-def platform_logs(seed: int, case: str):
-    """``(testbed, logs)`` of the platform set-up (module doc): gyro noise, ideal attitude."""
+def platform_logs(seed: int, case: str, attitude_noise: float = 0.0):
+    """``(testbed, logs)`` of the platform set-up (module doc): gyro noise, the attitude
+    ideal or with white noise of ``attitude_noise`` rad per axis (a small rotation)."""
     from airbearing.analysis.simulation.artefacts import sample_times
     from airbearing.analysis.simulation.on_times import simulate_on_times
     from airbearing.io.log import Log
@@ -181,6 +187,13 @@ def platform_logs(seed: int, case: str):
     df = lg.data.copy()
     for axis in ("wx", "wy", "wz"):
         df[axis] = df[f"true_{axis}"] + _noise(rng, case, t.size, tb.sensors.gyro_noise)
+    if attitude_noise > 0:
+        from airbearing.models import quaternion as quat
+
+        half = 0.5 * attitude_noise * rng.standard_normal((t.size, 3))
+        dq = np.column_stack([np.sqrt(1.0 - np.sum(half**2, axis=1)), half])
+        q = quat.qmul(df[["true_qw", "true_qx", "true_qy", "true_qz"]].to_numpy(), dq)
+        df[["qw", "qx", "qy", "qz"]] = q
     return tb, [Log(df, source=f"free-{seed}.csv", testbed=tb)]
 
 
@@ -192,8 +205,9 @@ def run_one(kind: str, case: str, seed: int, duration: float = 150.0) -> dict:
     if kind == "coast":
         tb, logs = coast_logs(seed, case, duration)
         truth = COAST_TRUTH
-    elif kind == "platform":
-        tb, logs = platform_logs(seed, case)
+    elif kind in ("platform", "platform-mocap"):
+        noise = PLATFORM_MOCAP_NOISE if kind == "platform-mocap" else 0.0
+        tb, logs = platform_logs(seed, case, noise)
         truth = PLATFORM_TRUTH
     else:
         tb, logs = cmg_logs(seed, case)
@@ -232,7 +246,7 @@ def run_one(kind: str, case: str, seed: int, duration: float = 150.0) -> dict:
 def summarise(results: list[dict]) -> list[dict]:
     """One row per (set-up, case): coverage, std / crlb, structure_remains rate."""
     out = []
-    for kind in ("coast", "cmg", "platform"):
+    for kind in ("coast", "cmg", "platform", "platform-mocap"):
         for case in CASES:
             rs = [r for r in results if r["kind"] == kind and r["case"] == case]
             if not rs:

@@ -19,6 +19,7 @@ The gap
 from __future__ import annotations
 
 import math
+import weakref
 from dataclasses import dataclass, field
 from functools import lru_cache
 
@@ -67,7 +68,9 @@ __all__ = [
     "Replay",
     "ReplayData",
     "WindowSet",
+    "attitude_noise",
     "checked_arguments",
+    "integration_error",
     "jit_available",
     "make_windows",
     "model_for",
@@ -103,8 +106,45 @@ def model_for(testbed: Testbed, effects=None) -> Model:
 MAX_SUBSTEP_ROTATION = 0.08
 
 
-def substeps_for(model: Model, windows: WindowSet) -> int:
-    """RK4 sub-steps per sample: ``DEFAULT_SUBSTEPS``, more for a fast three-axis spin."""
+#: Most RK4 sub-steps per sample the accuracy check of :func:`substeps_for` may ask for.
+MAX_SUBSTEPS = 32
+
+#: Per windows object: ``(states, inputs, rate floor, no attitude) -> sub-steps`` (the
+#: accuracy check integrates every window twice per candidate number; a search builds many
+#: problems on the same windows).
+_ACCURATE = weakref.WeakKeyDictionary()
+
+
+def substeps_for(model: Model, windows: WindowSet, floor: NoiseFloor | None = None) -> int:
+    """RK4 sub-steps per sample: ``DEFAULT_SUBSTEPS``, more for a fast three-axis spin.
+
+    With the noise ``floor`` (three-axis rigs), also enough sub-steps for the replay to
+    integrate to the noise its errors assume: the number is doubled until the integration
+    error over each segment, measured by step doubling from each window's start (the
+    windows' errors summed over the segment), is at most each output's noise (never below
+    the replay's resolution) over the square root of the segment's samples
+    (:func:`_integration_tolerance`). The error is smooth, so it acts on a fitted value
+    coherently over the whole segment, as ``sqrt(n)`` white errors of its size would;
+    within that tolerance its effect on any value is at most about one standard error. A
+    noise-free attitude is weighted at the resolution
+    (:data:`~airbearing.analysis.shooting.errors.RESOLUTION`, 1e-6 rad): on seed 004's
+    free oscillation (rates to 1.5 rad/s at 20 Hz) two sub-steps drifted 3.9e-6 rad over
+    30 s and put per-axis viscous frictions up to 3.2 standard errors off; eight drift
+    1.5e-8 rad. A motion-capture attitude (1e-3 rad) keeps two.
+
+    Parameters
+    ----------
+    model : Model
+    windows : WindowSet
+    floor : NoiseFloor, optional
+        The noise floor the problem's weights come from (None: the rotation rule alone).
+
+    Returns
+    -------
+    int
+        Sub-steps per sample, at most :data:`MAX_SUBSTEPS` (unless the rotation rule asks
+        for more).
+    """
     if model.dof != 3 or windows.x0.shape[1] < 7:
         return DEFAULT_SUBSTEPS
     w = float(np.max(np.linalg.norm(windows.x0[:, 4:7], axis=1)))
@@ -112,7 +152,141 @@ def substeps_for(model: Model, windows: WindowSet) -> int:
     dt = float(np.median(windows.dt[used])) if used.any() else 0.0
     if not (np.isfinite(w) and dt > 0):
         return DEFAULT_SUBSTEPS
-    return max(DEFAULT_SUBSTEPS, math.ceil(w * dt / MAX_SUBSTEP_ROTATION - 1e-9))
+    n = max(DEFAULT_SUBSTEPS, math.ceil(w * dt / MAX_SUBSTEP_ROTATION - 1e-9))
+    if floor is None or windows.x0.shape[1] != model.nx:
+        return n
+    # the motion the logs record sets the error; the candidate effects (small torques) do
+    # not: one check per windows, whichever Model asks first
+    key = (model.nx, model.nu, floor.rate, floor.attitude is None)
+    cache = _ACCURATE.setdefault(windows, {})
+    if key not in cache:
+        cache[key] = _accurate_substeps(model, windows, n, _integration_tolerance(windows, floor))
+    return cache[key]
+
+
+#: Orders of the attitude's differences whose smallest floor is its noise in
+#: :func:`_integration_tolerance` (a smooth motion leaks into low orders, noise is the same
+#: in every order).
+ATTITUDE_NOISE_ORDERS = (4, 6, 8)
+
+
+def _integration_tolerance(windows: WindowSet, floor: NoiseFloor):
+    """``(rad, rad/s)``: the largest integration error over a segment of the attitude and
+    of the rates: the noise each is weighted at, never below the resolution, over the
+    square root of the longest segment's usable samples (inf for a quantity the log does
+    not measure). The rates' noise is the floor's; the attitude's is
+    :func:`attitude_noise` (the floor of an attitude beside a gyro comes from the gyro's
+    integral: 3.3e-5 rad on seed 004's noise-free attitude under AR(1) gyro noise, whose
+    8th differences show 8e-10)."""
+    seg = windows.segments()
+    usable = (windows.weight > 0).sum(axis=1)
+    n = max(int(usable[seg == s].sum()) for s in np.unique(seg))
+    root = math.sqrt(max(n, 1))
+    att = math.inf
+    if floor.attitude is not None:
+        att = max(attitude_noise(windows) or 0.0, ATTITUDE_SIGMA_MIN) / root
+    rate = max(floor.rate, RATE_SIGMA_MIN) / root if floor.rate is not None else math.inf
+    return att, rate
+
+
+def attitude_noise(windows: WindowSet) -> float | None:
+    """rad, the attitude's white noise per axis seen by the windows: the smallest over
+    :data:`ATTITUDE_NOISE_ORDERS` of the median absolute deviation of its unit-norm
+    divided differences (as :func:`noise_floor`'s, on each window's usable rows). A smooth
+    motion leaks into a low order (on seed 004's free oscillation at 20 Hz, 6.9e-6 rad at
+    order 4 for a noise-free attitude, 8e-10 at order 8); white noise is the same in every
+    order.
+
+    Parameters
+    ----------
+    windows : WindowSet
+        Windows with a measured attitude (``quat``).
+
+    Returns
+    -------
+    float or None
+        rad, 1-sigma per axis; None without attitude or with too few usable rows.
+    """
+    from airbearing.analysis.discrepancy.data import MAD_TO_SIGMA, _attitude_diff
+
+    if windows.quat is None:
+        return None
+    best = None
+    for k in ATTITUDE_NOISE_ORDERS:
+        parts = []
+        for j in range(windows.n):
+            ok = windows.weight[j] > 0
+            t = np.r_[0.0, np.cumsum(windows.dt[j])]
+            run = np.ones(windows.length - k, dtype=bool)
+            for i in range(k + 1):
+                run &= ok[i : windows.length - k + i]
+            idx = np.flatnonzero(run)
+            if idx.size:
+                parts.append(_attitude_diff(windows.quat[j], t, idx, k))
+        if not parts or sum(p.shape[0] for p in parts) < 10:
+            continue
+        d = np.concatenate(parts)
+        mad = MAD_TO_SIGMA * np.median(np.abs(d - np.median(d, axis=0)), axis=0)
+        sigma = float(np.sqrt(np.mean(mad**2)))
+        best = sigma if best is None else min(best, sigma)
+    return best
+
+
+def _accurate_substeps(model: Model, windows: WindowSet, n: int, tol) -> int:
+    """The fewest sub-steps from ``n`` on (doubling, at most :data:`MAX_SUBSTEPS`) whose
+    integration error over each segment (:func:`integration_error`) is within ``tol``."""
+    start = n
+    while n < MAX_SUBSTEPS:
+        att, rate = integration_error(model, windows, n)
+        if att <= tol[0] and rate <= tol[1]:
+            break
+        n *= 2
+    return min(n, max(MAX_SUBSTEPS, start))
+
+
+def integration_error(model: Model, windows: WindowSet, substeps: int):
+    """The largest integration error over a segment of a three-axis replay, by step doubling.
+
+    Each window is integrated from its start (the Model's nominal parameters, the window's
+    inputs and logged intervals) with ``substeps`` and twice as many RK4 sub-steps; the
+    largest difference over its usable rows (16/15 of it: RK4's error falls 16-fold when
+    the sub-step halves) is the window's error, and a segment's error the sum over its
+    windows (an integration error grows along the trajectory).
+
+    Parameters
+    ----------
+    model : Model
+        A three-axis Model whose states are the windows' (no lag state).
+    windows : WindowSet
+    substeps : int
+        RK4 sub-steps per sample.
+
+    Returns
+    -------
+    tuple of float
+        ``(rad, rad/s)``: the attitude error (the small rotation) and the largest rate
+        error of any axis, the largest over segments.
+    """
+    from airbearing.analysis.simulation.on_times import rollout_dt
+
+    L = windows.length
+    coarse = rollout_dt(model, L - 1, substeps)
+    fine = rollout_dt(model, L - 1, 2 * substeps)
+    att = np.zeros(windows.n)
+    rate = np.zeros(windows.n)
+    for j in range(windows.n):
+        args = (windows.x0[j], windows.u[j, : L - 1].T, model.p0, windows.dt[j][None, :])
+        a = np.asarray(coarse(*args)).T
+        b = np.asarray(fine(*args)).T
+        keep = windows.weight[j, 1:] > 0
+        if not keep.any():
+            continue
+        e = quat.qmul(quat.qconj(a[keep, :4]), b[keep, :4])
+        att[j] = 16 / 15 * float(np.max(np.linalg.norm(2 * e[:, 1:], axis=1)))
+        rate[j] = 16 / 15 * float(np.max(np.abs(a[keep, 4:7] - b[keep, 4:7])))
+    seg = windows.segments()
+    per_seg = [(att[seg == s].sum(), rate[seg == s].sum()) for s in np.unique(seg)]
+    return max(p[0] for p in per_seg), max(p[1] for p in per_seg)
 
 
 def problem_for(
@@ -143,7 +317,7 @@ def problem_for(
         d0.outputs,
         max(floor.rate or 0.0, RATE_SIGMA_MIN),
         max(floor.attitude or 0.0, ATTITUDE_SIGMA_MIN),
-        substeps=substeps_for(model, windows) if substeps is None else substeps,
+        substeps=substeps_for(model, windows, floor) if substeps is None else substeps,
         jit=jit,
         theta_slots=theta_slots,
     )
