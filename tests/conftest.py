@@ -145,9 +145,8 @@ def demo_run(tmp_path_factory):
 
     Returns ``(out_dir, completed_process)``. Every test about the demo (the report, its
     rendering, the progress lines, the README's demo command) reads this one run instead of
-    running the demo again (it is the longest run in the suite). Tests that use it carry
-    ``@pytest.mark.xdist_group("demo")`` so pytest-xdist (``--dist loadgroup``) sends them to
-    one worker.
+    running the demo again (it is the longest run in the suite). They are all in
+    ``tests/test_demo.py``, which pytest-xdist (``--dist loadfile``) sends to one worker.
     """
     import subprocess
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 import pytest
 from html_check import bad_text, check_layout, render, require_chromium
 
-pytestmark = [pytest.mark.slow, pytest.mark.xdist_group("demo")]
+pytestmark = [pytest.mark.slow]
 
 
 def test_demo_runs_and_reports_every_section(demo_run):
