@@ -15,14 +15,9 @@ import numpy as np
 
 
 def _platform(attitude_noise=0.0):
-    import importlib.util
-    from pathlib import Path
+    from bench_scripts import load
 
-    path = Path(__file__).resolve().parents[1] / "benchmarks" / "coverage_study.py"
-    spec = importlib.util.spec_from_file_location("coverage_study", path)
-    cs = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(cs)
-    return cs.platform_logs(14, "a", attitude_noise)
+    return load("coverage_study").platform_logs(14, "a", attitude_noise)
 
 
 def test_a_noise_free_attitude_is_integrated_to_the_resolution():
