@@ -315,5 +315,5 @@ def test_every_formats_effect_is_checked():
     from airbearing.io.vocabulary import EFFECTS
 
     # the wheel_* effects act on reaction wheels, which none of these testbeds has: their
-    # oracles are in tests/wheels/test_wheel_effects.py
+    # oracles are in tests/wheels/test_wheel_model.py
     assert set(VALUES) == {n for n in EFFECTS if not n.startswith("wheel_")}
