@@ -85,12 +85,18 @@ PHYSICAL_LOWER = {
     "spring_torque": 0.0,  # -k yaw pulls towards rest (cables): it cannot push away
     "sensor_lag": 0.0,
     "gimbal_deadzone": 0.0,
+    "wheel_viscous_friction": 0.0,  # a wheel's bearing takes energy, never gives it
+    "wheel_coulomb_friction": 0.0,
 }
 #: The range a fit may take each effect's value in: what real rigs have, with a wide margin
 #: (sources in docs/reference/effect-ranges.md).
 #: Each entry is ``(lower, upper)`` per component, FORMATS.md units.
 PHYSICAL_RANGE = {
     "inertia_error": (-0.9, 9.0),  # (1 + value) in [0.1, 10]: CAD within a factor of ten
+    "wheel_inertia_error": (-0.9, 9.0),  # a wheel's data sheet within a factor of ten
+    "wheel_viscous_friction": (0.0, 1e-2),  # N m s per wheel; CubeSat wheels 1e-9..1e-6
+    "wheel_coulomb_friction": (0.0, 0.1),  # N m per wheel; CubeSat wheels 1e-6..1e-3
+    "wheel_torque_error": (-0.9, 9.0),  # the motor gives 0.1 to 10 times the command
     "viscous_friction": (0.0, 1.0),  # N m s; air bearings 1e-7..1e-4
     "coulomb_friction": (0.0, 1.0),  # N m; air bearings 1e-6..1e-3
     "aero_drag": (0.0, 1.0),  # N m s^2; 1e-7..1e-4, on every axis of a platform
@@ -303,7 +309,11 @@ def _candidates(testbed: Testbed, datas, only) -> tuple[list, list]:
     kind, dof = testbed.kind, testbed.body.dof
     gyro = bool(getattr(testbed.sensors, "gyro", True))
     has_field = _has_field(testbed, datas) if datas else testbed.field is not None
-    names = applicable_effects(kind, dof, has_field)
+    wheels = testbed.wheels
+    n_wheels = wheels.n if wheels is not None else 0
+    names = applicable_effects(
+        kind, dof, has_field, wheel_command=wheels.command if wheels is not None else None
+    )
     if not gyro:
         names = [n for n in names if n not in GYRO_EFFECTS]
     refused = not_physical(testbed, datas)
@@ -318,7 +328,9 @@ def _candidates(testbed: Testbed, datas, only) -> tuple[list, list]:
                 if name in GYRO_EFFECTS and not gyro:
                     reason = "the testbed has no gyro (sensors.gyro = false)"
                 else:
-                    reason = REGISTRY[name].applies(kind, dof, has_field) or "not applicable"
+                    reason = REGISTRY[name].applies(
+                        kind, dof, has_field, gyro, wheels.command if wheels else None
+                    ) or "not applicable"
                 raise InputError(f"only={name!r}: cannot act on testbed '{testbed.name}': {reason}")
             if name in refused:
                 raise InputError(f"only={name!r}: {refused[name]}")
@@ -338,7 +350,12 @@ def _candidates(testbed: Testbed, datas, only) -> tuple[list, list]:
         shape = spec.shape
         axes = shape == "scalar_or_axes" and dof == 3
         params = tuple(effect_param_names(name, dof, axes or shape == "vector3"))
-        if shape == "vector3":
+        if shape == "scalar_or_wheels":  # one value for every wheel, or one per wheel
+            params = tuple(effect_param_names(name, dof, n_wheels > 1, n_wheels))
+            forms = [(np.ones((len(params), 1)), False)]
+            if n_wheels > 1:
+                forms.append((np.eye(n_wheels), True))
+        elif shape == "vector3":
             forms = [(np.eye(3), False)]
         elif shape == "pair":  # yaw_imbalance: [A_s, A_c], regressors sin(yaw), cos(yaw)
             forms = [(np.eye(2), False)]
@@ -347,7 +364,7 @@ def _candidates(testbed: Testbed, datas, only) -> tuple[list, list]:
         else:
             forms = [(np.ones((len(params), 1)), False)]
         lo = PHYSICAL_LOWER.get(name, -math.inf if spec.lower is None else spec.lower)
-        if name == "inertia_error":
+        if name in ("inertia_error", "wheel_inertia_error"):
             lo = -0.9  # (1 + value) > 0 with a margin
         rng = PHYSICAL_RANGE.get(name, (-math.inf, math.inf))
         lo, hi = max(lo, rng[0]), rng[1]

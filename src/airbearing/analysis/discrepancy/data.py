@@ -262,6 +262,26 @@ def _cmg_inputs(log, u, ui, notes) -> np.ndarray:
     return d
 
 
+def _wheel_inputs(testbed, log, u, ui, notes) -> np.ndarray:
+    """Wheel commands of a reaction-wheel log into ``u``; the measured wheel speeds (extra
+    states, the start of every window)."""
+    n = testbed.wheels.n
+    ws = [f"ws{i}" for i in range(1, n + 1)]
+    wc = [f"wc{i}" for i in range(1, n + 1)]
+    missing = [c for c in ws if not log.has(c)]
+    if missing:
+        raise InputError(
+            f"{log.source}: missing {', '.join(missing)}: a reaction-wheel testbed's log needs "
+            f"the measured wheel speeds ws1..ws{n} (rad/s) to replay or fit it"
+        )
+    if log.has(*wc):
+        u[:, [ui[c] for c in wc]] = log.columns(wc)
+        notes.append(f"wheel commands: the log's wc1..wc{n} ({testbed.wheels.command}), held from t_k")
+    else:
+        notes.append("wheel commands: none in the log (wc columns absent): the wheels coast")
+    return log.columns(ws)
+
+
 def replay_data(testbed: Testbed, log: Log) -> ReplayData:
     """Turn ``log`` into the inputs and measurements of ``testbed``'s Model.
 
@@ -314,6 +334,8 @@ def replay_data(testbed: Testbed, log: Log) -> ReplayData:
     extra = np.zeros((n, 0))
     if testbed.kind == "platform":
         _platform_inputs(testbed, log, q_att, u, ui, notes)
+        if testbed.wheels is not None:
+            extra = _wheel_inputs(testbed, log, u, ui, notes)
     else:
         extra = _cmg_inputs(log, u, ui, notes)
     segments, outliers, qjson = _quality(log)
