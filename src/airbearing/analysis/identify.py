@@ -4,6 +4,9 @@ The choice is the one ``airbearing identify`` has always made:
 
 * ``kind = "cmg"``, ``dof = 1``: yaw inertia (and optional friction) from slew logs by
   momentum exchange (:func:`~airbearing.analysis.identification.cmg_inertia.identify_cmg_inertia`);
+* a ``dof = 1`` platform with ``[wheels]``: yaw inertia from momentum exchange with the
+  wheels, whose inertia fixes the scale
+  (:func:`~airbearing.analysis.identification.wheel_inertia.identify_wheel_inertia`);
 * any other ``dof = 1`` testbed: yaw inertia from spin-down logs with the testbed's known
   torques (:func:`~airbearing.analysis.identification.yaw_inertia.identify_yaw_inertia`);
 * ``dof = 3``: inertia about the centre of rotation and the CM offset
@@ -119,8 +122,11 @@ def identify(
         raise InputError(f"progress={progress!r:.60}: expected a callable or None")
     from airbearing.analysis.identification.data import COLUMNS_USED
 
+    from airbearing.analysis.identification.wheel_inertia import wheel_columns
+
     tb = as_testbed(testbed)
-    loaded = as_logs(logs, tb, columns=COLUMNS_USED, what="the testbed to identify")
+    columns = (*COLUMNS_USED, *wheel_columns(tb))
+    loaded = as_logs(logs, tb, columns=columns, what="the testbed to identify")
     fr = None if friction in (None, "none") else friction
     if hold is not None and tb.body.dof == 1:
         raise InputError("hold applies to platform testbeds (dof 3), not to dof 1")
@@ -155,8 +161,12 @@ def _identify_dof1(tb, loaded, known_offset_xy, method, friction, progress):
         from airbearing.analysis.identification.cmg_inertia import identify_cmg_inertia
 
         return identify_cmg_inertia(tb, loaded, friction=friction)
+    if tb.wheels is not None:
+        from airbearing.analysis.identification.wheel_inertia import identify_wheel_inertia
+
+        return identify_wheel_inertia(tb, loaded, friction=friction)
     if friction is not None:
-        raise InputError("friction applies to dof-1 CMG testbeds")
+        raise InputError("friction applies to dof-1 CMG and reaction-wheel testbeds")
     from airbearing.analysis.identification.yaw_inertia import identify_yaw_inertia
 
     return identify_yaw_inertia(tb, loaded, method=method, progress=progress)

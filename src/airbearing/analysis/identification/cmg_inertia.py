@@ -47,7 +47,7 @@ from airbearing.io.testbed import Body, Testbed
 from airbearing.models.cmg import cmg_functions
 from airbearing.models.effects import COULOMB_SMOOTHING
 
-__all__ = ["CMGIdentification", "identify_cmg_inertia"]
+__all__ = ["CMGIdentification", "fit_momentum_exchange", "identify_cmg_inertia"]
 
 #: Friction models and the effect each identifies (FORMATS.md names).
 FRICTION = {None: (), "viscous": ("viscous_friction",), "coulomb": ("coulomb_friction",)}
@@ -229,9 +229,36 @@ def identify_cmg_inertia(
     if not logs:
         raise InputError("identify: expected at least one log, got none")
     h0, beta = testbed.cmg.h0, testbed.cmg.skew
+    pieces, entries = _momentum_pieces(testbed, logs)
+    fields = fit_momentum_exchange(testbed, pieces, entries, friction)
+    fields["details"] = {"h0": float(h0), "beta_rad": float(beta), **fields["details"]}
+    return CMGIdentification(**fields)
+
+
+def fit_momentum_exchange(testbed: Testbed, pieces, entries, friction: str | None) -> dict:
+    """The momentum-exchange fit of J_z (module doc) on ``pieces`` ``(t, w_z, h_z)``.
+
+    Shared by the CMG and the reaction-wheel identifications (``h_z`` from the gimbal
+    angles or from the wheel speeds).
+
+    Parameters
+    ----------
+    testbed : Testbed
+        dof 1; its yaw inertia scales the positivity constraint.
+    pieces : list of (ndarray, ndarray, ndarray)
+        Per usable piece the times (s), the yaw rate (rad/s) and the exchanged momentum
+        ``h_z`` (N m s).
+    entries : list of dict
+        Per log its ``segments``, ``segment_rows`` and ``outlier_rows``.
+    friction : {None, "viscous", "coulomb"}
+
+    Returns
+    -------
+    dict
+        The fields of a :class:`CMGIdentification` (``details`` without the actuator's).
+    """
     names = FRICTION[friction]
     nfr = len(names)
-    pieces, entries = _momentum_pieces(testbed, logs)
     R, rows, npar = _reduced_regressor(pieces, friction, nfr)
     beta_hat, xv, rss, Rm, A, col = _constrained_fit(R, npar, nfr, testbed)
     sigma = testbed.sensors.gyro_noise
@@ -262,7 +289,7 @@ def identify_cmg_inertia(
             active.append(f"friction_nonnegative:{n}")
     rms = float(np.sqrt(rss / rows))
     warnings += _fit_warnings(J, std[0], active, rms, sigma, std[0] / max(std_w[0], 1e-300))
-    return CMGIdentification(
+    return dict(
         inertia=float(J),
         std_inertia=float(std[0]) if "inertia_positive" not in active else float("nan"),
         friction={n: float(beta_hat[1 + k] / a) for k, n in enumerate(names)},
@@ -277,9 +304,7 @@ def identify_cmg_inertia(
         warnings=tuple(warnings),
         details={
             "samples": int(rows),
-            "logs": len(logs),
-            "h0": float(h0),
-            "beta_rad": float(beta),
+            "logs": len(entries),
             "per_log": entries,
             "std_white_friction": {
                 n: None if f"friction_nonnegative:{n}" in active else float(std_w[1 + k])

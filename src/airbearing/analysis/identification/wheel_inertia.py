@@ -1,0 +1,161 @@
+"""Yaw inertia of a reaction-wheel testbed (dof 1) from momentum exchange with its wheels.
+
+On a yaw bearing the total angular momentum about the vertical (FORMATS.md, reaction
+wheels) is ``H_z = J_z w_z + sum_i Iw_i s_i W_i`` (``s_i = +-1`` the sign of wheel
+``i``'s axis along body z, ``W_i`` its measured speed relative to the body, ``J_z`` the
+inertia with the wheels locked). The motors and the wheels' own bearing friction are
+internal: they move momentum between the wheels and the body and leave ``H_z`` alone, so
+only the table's bearing friction changes it, ``dH_z/dt = -c w_z - f sign(w_z)``.
+This is the balance the CMG identification fits with the cluster's momentum
+(:mod:`.cmg_inertia`): with ``h_z = sum_i Iw_i s_i W_i`` from the logged ``ws`` columns
+the same regression
+
+    w_z(t_k) = alpha - (1/J_z) h_z(t_k) - (c/J_z) int w_z dt - (f/J_z) int sign(w_z) dt
+
+fixes the absolute ``J_z``: the wheel's data-sheet inertia and its measured speed carry
+the scale, which free motion alone cannot (no scale ambiguity). Its errors are the same
+prewhitened HAC sandwich, never below the white-noise value.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from airbearing.analysis.identification.cmg_inertia import (
+    FRICTION,
+    CMGIdentification,
+    fit_momentum_exchange,
+)
+from airbearing.analysis.identification.data import log_quality
+from airbearing.errors import InputError
+from airbearing.io.coerce import check_gyro_agrees, check_log_testbed
+from airbearing.io.log import Log
+from airbearing.io.testbed import Testbed
+
+__all__ = ["WheelIdentification", "identify_wheel_inertia", "wheel_columns"]
+
+
+def wheel_columns(testbed: Testbed) -> tuple[str, ...]:
+    """The log columns of ``testbed``'s wheels: ``ws1..wsn`` and ``wc1..wcn``."""
+    n = testbed.wheels.n if testbed.wheels is not None else 0
+    return tuple(f"ws{i}" for i in range(1, n + 1)) + tuple(f"wc{i}" for i in range(1, n + 1))
+
+
+@dataclass(frozen=True, eq=False, repr=False)
+class WheelIdentification(CMGIdentification):
+    """Identified yaw inertia of a dof-1 reaction-wheel testbed (momentum exchange).
+
+    The fields of :class:`~airbearing.analysis.identification.cmg_inertia.CMGIdentification`
+    (``inertia`` J_z in kg m^2 with the wheels locked, ``std_inertia``, ``friction``,
+    ``std_friction``, ``std_white`` ...); ``details["wheel_inertia"]`` lists the wheels'
+    inertias (kg m^2) that fixed the scale.
+
+    Examples
+    --------
+    >>> import airbearing as ab
+    >>> found = ab.identify("rw-yaw", [log])  # doctest: +SKIP
+    >>> found.inertia, found.std_inertia  # doctest: +SKIP
+    """
+
+
+def _wheel_momentum(testbed: Testbed, log: Log) -> np.ndarray:
+    """``h_z = sum_i Iw_i s_i W_i`` of every row, N m s."""
+    wh = testbed.wheels
+    names = [f"ws{i}" for i in range(1, wh.n + 1)]
+    missing = [c for c in names if not log.has(c)]
+    if missing:
+        raise InputError(
+            f"{log.source}: missing {', '.join(missing)}: the inertia of a reaction-wheel "
+            f"testbed is identified from the measured wheel speeds ws1..ws{wh.n} (rad/s)"
+        )
+    W = log.columns(names)
+    return W @ (wh.inertia_vec * wh.axes_matrix[:, 2])
+
+
+def _pieces(testbed: Testbed, logs):
+    """Per usable piece ``(t, w_z, h_z)`` and per log its JSON entry (segments, outliers)."""
+    pieces, entries = [], []
+    for log in logs:
+        if not isinstance(log, Log):
+            raise InputError(f"identify: expected Log objects, got {type(log).__name__}")
+        check_log_testbed(testbed, log, "the testbed to identify")
+        check_gyro_agrees(log)
+        if not log.has("wz"):
+            raise InputError(
+                f"{log.source}: missing wz: the momentum exchange needs the yaw rate (rad/s)"
+            )
+        t, w = log.t, log.column("wz")
+        hz = _wheel_momentum(testbed, log)
+        segments, outliers = log_quality(log, testbed)
+        usable = np.ones(len(t), bool)
+        usable[list(outliers)] = False
+        entries.append(
+            {
+                "source": log.source,
+                "segments": len(segments),
+                "segment_rows": [list(sg) for sg in segments],
+                "outlier_rows": [int(r) for r in outliers],
+            }
+        )
+        if np.ptp(hz[usable]) <= 0:
+            raise InputError(
+                f"{log.source}: the wheel speeds do not change: no momentum exchange to use "
+                "(drive the wheels, e.g. a slew, to identify the inertia)"
+            )
+        for a, b in segments:
+            k = np.arange(a, b)[usable[a:b]]
+            if len(k) >= 3:
+                pieces.append((t[k], w[k], hz[k]))
+    return pieces, entries
+
+
+def identify_wheel_inertia(
+    testbed: Testbed, logs, *, friction: str | None = None
+) -> WheelIdentification:
+    """Yaw inertia J_z of a dof-1 reaction-wheel testbed from its logs (momentum exchange).
+
+    Parameters
+    ----------
+    testbed : Testbed
+        ``kind = "platform"``, ``dof = 1``, with ``[wheels]``: their inertias fix the scale.
+    logs : list of Log
+        Runs with the yaw rate ``wz`` and the measured wheel speeds ``ws1..wsn`` in which
+        the wheels exchange momentum with the table (a slew, steps of the yaw).
+    friction : {None, "viscous", "coulomb"}
+        The table's bearing friction identified with J_z (FORMATS.md ``viscous_friction``
+        N m s, ``coulomb_friction`` N m). The wheels' own friction is internal and needs
+        no term.
+
+    Returns
+    -------
+    WheelIdentification
+        ``inertia`` (kg m^2, the wheels locked) with its honest ``std_inertia``.
+
+    Raises
+    ------
+    InputError
+        Not a dof-1 wheel testbed, missing ``wz`` or ``ws`` columns, wheels at constant
+        speed (no exchange).
+    SolverError
+        When Clarabel fails.
+    """
+    if testbed.kind != "platform" or testbed.body.dof != 1 or testbed.wheels is None:
+        raise InputError(
+            f"{testbed.source}: wheel inertia identification needs a dof = 1 platform with "
+            f"[wheels], got kind = {testbed.kind!r}, dof = {testbed.body.dof}"
+            + ("" if testbed.wheels is not None else ", no [wheels]")
+        )
+    if friction not in FRICTION:
+        raise InputError(f"friction={friction!r}: expected None, 'viscous' or 'coulomb'")
+    logs = list(logs)
+    if not logs:
+        raise InputError("identify: expected at least one log, got none")
+    pieces, entries = _pieces(testbed, logs)
+    fields = fit_momentum_exchange(testbed, pieces, entries, friction)
+    fields["details"] = {
+        "wheel_inertia": [float(v) for v in testbed.wheels.inertia_vec],
+        **fields["details"],
+    }
+    return WheelIdentification(**fields)

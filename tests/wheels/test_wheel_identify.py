@@ -1,0 +1,115 @@
+"""Yaw inertia of a reaction-wheel rig by momentum exchange (identification/wheel_inertia.py).
+
+The oracle is the simulation itself: a table of known J_z turned by one torque-commanded
+wheel (pulses of torque, the table free on its bearing); the wheel's data-sheet inertia
+and its measured speed fix the absolute J_z. Checked: the value within 1 % and 3 std,
+the std's coverage over 20 noise draws (white and coloured gyro noise: the sum of the
+squared z-scores is a chi-square with 20 degrees of freedom, tested at the 0.1 % level),
+and the refusals of logs that cannot tell.
+"""
+
+import numpy as np
+import pandas as pd
+import pytest
+from scipy import stats
+
+import airbearing as ab
+from airbearing.errors import InputError
+from airbearing.io.log import Log
+from airbearing.io.testbed import load_testbed
+from airbearing.models.model import build_model
+
+DT = 0.05  # s, rw-yaw's 20 Hz
+N = 1200  # 60 s
+
+
+@pytest.fixture(scope="module")
+def truth():
+    """A 60 s run of rw-yaw with J_z 3 % off its file value, noise-free: times, states."""
+    tb = load_testbed("rw-yaw")
+    J_true = 1.03 * tb.body.yaw_inertia
+    model = build_model(tb)
+    p = model.params(J_zz=J_true)
+    U = np.zeros((model.nu, N))
+    i = model.index("wc1", "u")[0]
+    t = np.arange(N) * DT
+    tmax = tb.wheels.max_torque
+    # torque pulses of both signs: the wheel speeds up and slows down, the table turns
+    U[i] = 0.6 * tmax * np.sign(np.sin(2 * np.pi * t / 15.0)) * (np.sin(2 * np.pi * t / 5) > 0)
+    x0 = model.x0(wheels=[50.0])
+    X = np.asarray(model.rollout(N - 1, DT)(x0, U[:, :-1], p)).T
+    X = np.vstack([x0, X])
+    return tb, J_true, t, X, U[i]
+
+
+def _log(tb, t, X, wc, seed, ar=0.0):
+    """The run as a log with the testbed's noise (gyro noise AR(1) with coefficient ``ar``,
+    the same marginal sigma)."""
+    rng = np.random.default_rng(seed)
+    s = tb.sensors
+    e = rng.standard_normal(len(t))
+    if ar:
+        e = np.asarray(pd.Series(e).ewm(alpha=1 - ar, adjust=False).mean()) * np.sqrt(
+            (1 + ar) / (1 - ar)
+        )
+    cols = {
+        "t": t,
+        "yaw": X[:, 0] + s.attitude_noise * rng.standard_normal(len(t)),
+        "wz": X[:, 1] + s.gyro_noise * e,
+        "ws1": X[:, 2] + tb.wheels.speed_noise * rng.standard_normal(len(t)),
+        "wc1": wc,
+    }
+    return Log(pd.DataFrame(cols), source=f"<rw seed {seed}>", testbed=tb)
+
+
+def test_yaw_inertia_within_one_percent_and_three_std(truth):
+    tb, J_true, t, X, wc = truth
+    found = ab.identify(tb, [_log(tb, t, X, wc, seed=1)])
+    assert type(found).__name__ == "WheelIdentification"
+    # 1 %: the tolerance the reaction-wheel issue asks for; 3 std: the errors are honest
+    assert abs(found.inertia / J_true - 1) < 0.01
+    assert abs(found.inertia - J_true) < 3 * found.std_inertia
+    assert found.details["wheel_inertia"] == [tb.wheels.inertia_vec[0]]
+    assert not found.warnings  # a white residual at the gyro and wheel-speed noise
+
+
+@pytest.mark.parametrize("ar", [0.0, 0.9])
+def test_std_covers_the_truth_over_twenty_draws(truth, ar):
+    tb, J_true, t, X, wc = truth
+    z = []
+    for seed in range(20):
+        found = ab.identify(tb, [_log(tb, t, X, wc, seed=100 + seed, ar=ar)])
+        z.append((found.inertia - J_true) / found.std_inertia)
+    z = np.asarray(z)
+    # sum z^2 ~ chi2(20) when the std is right: refuse only what is off at the 0.1 % level
+    # (a std half the truth's spread gives sum z^2 near 80, beyond 45.3)
+    lo, hi = stats.chi2.ppf([0.0005, 0.9995], df=len(z))
+    assert float(np.sum(z**2)) < hi
+    assert np.all(np.abs(z) < 4)
+    if ar == 0.0:  # white noise: the std is not inflated either
+        assert float(np.sum(z**2)) > lo
+
+
+def test_friction_of_the_table_with_the_inertia(truth):
+    tb, J_true, t, X, wc = truth
+    found = ab.identify(tb, [_log(tb, t, X, wc, seed=3)], friction="viscous")
+    assert abs(found.inertia - J_true) < 3 * found.std_inertia
+    c = found.friction["viscous_friction"]
+    assert abs(c) < 3 * (found.std_friction["viscous_friction"] or 1e-12) or c == 0.0
+
+
+def test_a_log_without_wheel_speeds_is_refused(truth):
+    tb, J_true, t, X, wc = truth
+    log = _log(tb, t, X, wc, seed=4)
+    bare = Log(log.data.drop(columns=["ws1"]), source="bare.csv", testbed=tb)
+    with pytest.raises(InputError, match=r"bare\.csv: missing ws1"):
+        ab.identify(tb, [bare])
+
+
+def test_wheels_at_constant_speed_are_refused(truth):
+    tb, J_true, t, X, wc = truth
+    log = _log(tb, t, X, wc, seed=5)
+    data = log.data.copy()
+    data["ws1"] = 50.0
+    with pytest.raises(InputError, match="wheel speeds do not change"):
+        ab.identify(tb, [Log(data, source="still.csv", testbed=tb)])
