@@ -121,7 +121,6 @@ def identify(
     if progress is not None and not callable(progress):
         raise InputError(f"progress={progress!r:.60}: expected a callable or None")
     from airbearing.analysis.identification.data import COLUMNS_USED
-
     from airbearing.analysis.identification.wheel_inertia import wheel_columns
 
     tb = as_testbed(testbed)

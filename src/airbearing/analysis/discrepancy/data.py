@@ -276,7 +276,8 @@ def _wheel_inputs(testbed, log, u, ui, notes) -> np.ndarray:
         )
     if log.has(*wc):
         u[:, [ui[c] for c in wc]] = log.columns(wc)
-        notes.append(f"wheel commands: the log's wc1..wc{n} ({testbed.wheels.command}), held from t_k")
+        how = testbed.wheels.command
+        notes.append(f"wheel commands: the log's wc1..wc{n} ({how}), held from t_k")
     else:
         notes.append("wheel commands: none in the log (wc columns absent): the wheels coast")
     return log.columns(ws)
