@@ -113,3 +113,65 @@ def test_wheels_at_constant_speed_are_refused(truth):
     data["ws1"] = 50.0
     with pytest.raises(InputError, match="wheel speeds do not change"):
         ab.identify(tb, [Log(data, source="still.csv", testbed=tb)])
+
+
+# ---------------------------------------------------------------------------- dof 3
+
+J3 = np.array([[0.061, 0.0012, -0.0008], [0.0012, 0.066, 0.0005], [-0.0008, 0.0005, 0.079]])
+R3 = np.array([1.5e-5, -1.0e-5, -2.0e-4])  # m: a pendulous platform, slightly off in-plane
+
+
+@pytest.fixture(scope="module")
+def spherical():
+    """A 60 s run of rw-3axis, its inertia and CM offset off the file's, the four wheels
+    pulsed at different periods (no dipole: the field does nothing)."""
+    from airbearing.io.testbed import Body
+
+    tb = load_testbed("rw-3axis")
+    truth = tb.replace(body=Body(dof=3, mass=tb.body.mass, inertia=tuple(map(tuple, J3)),
+                                 cm_offset=tuple(R3)))  # fmt: skip
+    model = build_model(truth)
+    p = model.params()
+    t = np.arange(N) * DT
+    U = np.zeros((model.nu, N))
+    tmax = tb.wheels.max_torque
+    for k, period in enumerate((11.0, 13.0, 17.0, 7.0)):
+        U[model.index(f"wc{k + 1}", "u")[0]] = 0.5 * tmax * np.sign(np.sin(2 * np.pi * t / period))
+    x0 = model.x0(wheels=[40.0, -30.0, 20.0, 60.0])
+    X = np.vstack([x0, np.asarray(model.rollout(N - 1, DT)(x0, U[:, :-1], p)).T])
+    Y = np.asarray(model.h.map(N)(X.T, U, p)).T
+    rng = np.random.default_rng(7)
+    s = tb.sensors
+    cols = {"t": t}
+    for i, name in enumerate(model.y_names):
+        if name in ("qw", "qx", "qy", "qz", "wx", "wy", "wz", "gx", "gy", "gz"):
+            cols[name] = Y[:, i]
+    for name, sig in (("wx", s.gyro_noise), ("wy", s.gyro_noise), ("wz", s.gyro_noise)):
+        cols[name] = cols[name] + sig * rng.standard_normal(N)
+    for k in range(4):
+        ws = X[:, model.index(f"W{k + 1}")[0]]
+        cols[f"ws{k + 1}"] = ws + tb.wheels.speed_noise * rng.standard_normal(N)
+        cols[f"wc{k + 1}"] = U[model.index(f"wc{k + 1}", "u")[0]]
+    return tb, Log(pd.DataFrame(cols), source="<rw-3axis>", testbed=tb)
+
+
+def test_inertia_matrix_and_cm_offset_of_a_spherical_rig(spherical):
+    """Free motion fixes (J, r) only up to a scale; the wheels' momentum fixes it."""
+    tb, log = spherical
+    found = ab.identify(tb, [log], method="equation-error", prior=False)
+    J = np.asarray(found.inertia)
+    std = np.asarray(found.std)
+    principal = np.diag(J)
+    assert np.all(np.abs(principal / np.diag(J3) - 1) < 0.01)
+    z = (np.r_[np.diag(J), J[0, 1], J[0, 2], J[1, 2]] - np.r_[np.diag(J3), J3[0, 1], J3[0, 2],
+                                                              J3[1, 2]]) / std[:6]  # fmt: skip
+    assert np.all(np.abs(z) < 3), z
+    r = np.asarray(found.cm_offset)
+    assert np.all(np.abs(r - R3) < 3 * np.asarray(found.std_cm_offset) + 1e-7)
+
+
+def test_spherical_log_without_wheel_speeds_is_refused(spherical):
+    tb, log = spherical
+    bare = Log(log.data.drop(columns=["ws2"]), source="bare3.csv", testbed=tb)
+    with pytest.raises(InputError, match=r"bare3\.csv: missing columns ws2"):
+        ab.identify(tb, [bare], method="equation-error")

@@ -84,6 +84,11 @@ class PlatformData:
         True when ``w`` was logged, False when estimated from the attitude.
     row0 : int
         Row of the original log that row 0 here is (for slices).
+    ws, wc : ndarray (N, n) or None
+        Reaction wheels: measured speeds relative to the body (rad/s) and the logged
+        commands (zeros when not logged), None without ``[wheels]``.
+    h_wheels : ndarray (N, 3) or None
+        The wheels' angular momentum in body axes, ``sum_i Iw_i ws_i a_i`` (N m s).
     """
 
     source: str
@@ -100,6 +105,9 @@ class PlatformData:
     usable: np.ndarray | None = None
     gyro: bool = True
     row0: int = 0
+    ws: np.ndarray | None = None
+    wc: np.ndarray | None = None
+    h_wheels: np.ndarray | None = None
 
     @property
     def n(self) -> int:
@@ -144,6 +152,9 @@ class PlatformData:
             segments=((0, b - a),),
             usable=us,
             row0=self.row0 + a,
+            ws=None if self.ws is None else self.ws[a:b],
+            wc=None if self.wc is None else self.wc[a:b],
+            h_wheels=None if self.h_wheels is None else self.h_wheels[a:b],
         )
 
 
@@ -293,13 +304,28 @@ def prepare_platform_logs(testbed: Testbed, logs) -> list[PlatformData]:
             b_body = np.einsum("...ji,...j->...i", rot, b_lab)
         del rot
         g_meas = log.columns(["gx", "gy", "gz"]) if log.has("gx", "gy", "gz") else None
+        ws, wc, h_wheels = _wheel_arrays(testbed, log)
         out.append(
             PlatformData(
                 src, t, q, w, s, g_body, dipole, b_body, b_lab, g_meas,
                 segments=segments, usable=usable, gyro=gyro,
+                ws=ws, wc=wc, h_wheels=h_wheels,
             )
         )  # fmt: skip
     return out
+
+
+def _wheel_arrays(testbed: Testbed, log):
+    """Measured wheel speeds (rad/s), commands (zeros when not logged) and the wheels'
+    body-axes momentum ``sum_i Iw_i ws_i a_i`` (N m s); three Nones without wheels."""
+    wh = testbed.wheels
+    if wh is None:
+        return None, None, None
+    ws_names = [f"ws{i}" for i in range(1, wh.n + 1)]
+    wc_names = [f"wc{i}" for i in range(1, wh.n + 1)]
+    ws = log.columns(ws_names)
+    wc = log.columns(wc_names) if log.has(*wc_names) else np.zeros_like(ws)
+    return ws, wc, (ws * wh.inertia_vec) @ wh.axes_matrix
 
 
 def _check_columns(testbed: Testbed, log, gyro: bool) -> None:
@@ -309,6 +335,10 @@ def _check_columns(testbed: Testbed, log, gyro: bool) -> None:
         groups.append((("wx", "wy", "wz"), "the body rates wx, wy, wz (rad/s)"))
     if testbed.masses is not None:
         groups.append((("s1", "s2", "s3"), "the known slider positions s1, s2, s3 (m)"))
+    if testbed.wheels is not None:
+        n = testbed.wheels.n
+        ws = tuple(f"ws{i}" for i in range(1, n + 1))
+        groups.append((ws, f"the measured wheel speeds ws1..ws{n} (rad/s) of the wheels"))
     for group, what in groups:
         if not log.has(*group):
             raise InputError(

@@ -94,6 +94,8 @@ def platform_inputs(model, d: PlatformData) -> np.ndarray:
     U[:, model.index(["s1", "s2", "s3"], "u")] = d.s
     U[:, model.index(["mx", "my", "mz"], "u")] = d.dipole
     U[:, model.index(["bx_lab", "by_lab", "bz_lab"], "u")] = d.b_lab
+    if d.wc is not None:
+        U[:, model.index([f"wc{i}" for i in range(1, d.wc.shape[1] + 1)], "u")] = d.wc
     return U
 
 
@@ -118,7 +120,8 @@ def platform_windows(model, data: list[PlatformData], segment: float | None) -> 
                 cuts.append((li, a + k0, n, n if last else n + 1, last))
     L = max(2, max(c[3] for c in cuts))
     nw = len(cuts)
-    x0 = np.zeros((nw, 7))
+    n_wheels = 0 if data[0].ws is None else data[0].ws.shape[1]
+    x0 = np.zeros((nw, 7 + n_wheels))  # attitude, rate and the measured wheel speeds
     U = np.zeros((nw, L, model.nu))
     DT = np.zeros((nw, L - 1))
     M = np.zeros((nw, L))
@@ -133,7 +136,8 @@ def platform_windows(model, data: list[PlatformData], segment: float | None) -> 
         usable = d.usable if d.usable is not None else np.ones(d.n, bool)
         r = np.r_[np.arange(s, s + m), np.full(L - m, s + m - 1)]
         ref = _nearest_usable(d, s, s + n)
-        x0[j] = np.r_[d.q[ref], np.nan_to_num(d.w[ref])]
+        wheels = () if d.ws is None else d.ws[ref]
+        x0[j] = np.r_[d.q[ref], np.nan_to_num(d.w[ref]), wheels]
         rows[j], source[j], end[j] = r, li, m - 1
         U[j] = inputs[li][r]
         DT[j] = PAD_DT * float(np.median(np.diff(d.t)))

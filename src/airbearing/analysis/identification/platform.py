@@ -492,14 +492,17 @@ def _check_scale(testbed, data, fixed, prior, prior_weight) -> None:
     """
     sliders = testbed.masses is not None and any(np.any(d.s != 0) for d in data)
     dipole = any(np.any(d.dipole != 0) and np.any(d.b_body != 0) for d in data)
-    if fixed or sliders or dipole or (prior is not None and prior_weight > 0):
+    # reaction wheels: their known momentum exchanged with the body fixes the scale
+    wheels = any(d.h_wheels is not None and np.ptp(d.h_wheels) > 0 for d in data)
+    if fixed or sliders or dipole or wheels or (prior is not None and prior_weight > 0):
         return
     raise InputError(
         "identify: inertia and CM offset are not identifiable from these logs: free motion "
         "fixes them only up to a common scale (J w' + w x J w = m r x g is homogeneous in J "
         "and r) and nothing known breaks it; hold the testbed's inertia or CM offset as known "
         "(hold='inertia', hold='cm'), give the in-plane offset (known_offset_xy), log with "
-        "the sliders at known non-zero positions, or command a known dipole"
+        "the sliders at known non-zero positions, command a known dipole, or drive reaction "
+        "wheels (their known momentum fixes the scale)"
     )
 
 

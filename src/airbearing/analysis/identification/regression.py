@@ -238,7 +238,19 @@ def _rows_integrated(d: PlatformData, k0: int, k1: int, window: int, r_o, mass, 
     P = _point_terms(w, r_o, mass)
     Phi = P[b] - P[a] + IA[b] - IA[a]  # eq. 47, left
     rhs = -(w[b] - w[a]) @ C.T + Iy[b] - Iy[a] + Iy_s[b] - Iy_s[a]  # eq. 47, right
+    if d.h_wheels is not None:
+        rhs = rhs - _wheel_integral(d.h_wheels[idx], w, dt, a, b)
     return Phi, rhs
+
+
+def _wheel_integral(h: np.ndarray, w: np.ndarray, dt: np.ndarray, a, b) -> np.ndarray:
+    """The wheels' part of eq. 47 over windows ``[a, b]``: ``h(t_b) - h(t_a)`` plus the
+    trapezoidal ``int w x h dt`` (FORMATS.md: ``dH/dt + w x H`` with ``H = J w + h``).
+
+    ``h`` is measured: the wheels' known momentum fixes the scale of ``(J, r)``."""
+    wxh = np.cross(w, h)
+    cum = np.concatenate([np.zeros((1, 3)), np.cumsum(0.5 * dt[:, None] * (wxh[1:] + wxh[:-1]), 0)])
+    return h[b] - h[a] + cum[b] - cum[a]
 
 
 def _monomial_coefficients(fn):
@@ -324,6 +336,8 @@ def _rows_integrated_fast(d: PlatformData, k0: int, k1: int, window: int, r_o, m
         + Tw
         - np.einsum("nij,nj->ni", dJ, dw)  # sliders: -dJ (w_b - w_a)
     )  # eq. 47, right
+    if d.h_wheels is not None:
+        rhs = rhs - _wheel_integral(d.h_wheels[idx], w, dt, a, b)
     return Phi, rhs
 
 
@@ -342,6 +356,10 @@ def _rows_acceleration(d: PlatformData, k0: int, k1: int, r_o, mass, testbed):
     C = _c_matrix(r_o, mass)
     Phi = _point_terms(wd, r_o, mass) + _rate_terms(w, g, r_o, mass)  # eq. 45, left
     rhs = _rate_rhs(w, g, dJ, dr, tau, r_o, mass, C) - wd @ C.T - np.einsum("nij,nj->ni", dJ, wd)
+    if d.h_wheels is not None:  # the wheels' h' + w x h (FORMATS.md), h' by central differences
+        h = d.h_wheels
+        hd = (h[k + 1] - h[k - 1]) / (d.t[k + 1] - d.t[k - 1])[:, None]
+        rhs = rhs - hd - np.cross(w, h[k])
     return Phi, rhs
 
 
