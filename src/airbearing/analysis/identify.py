@@ -21,7 +21,7 @@ from collections.abc import Iterable
 from airbearing.errors import InputError
 from airbearing.io.coerce import as_float, as_logs, as_testbed, as_vector
 
-__all__ = ["identify", "METHODS", "FORMS", "FRICTIONS"]
+__all__ = ["identify", "columns_used", "METHODS", "FORMS", "FRICTIONS"]
 # as_testbed and as_logs lived here first; they are airbearing.io.coerce's now
 __all__ += ["as_logs", "as_testbed"]
 
@@ -140,6 +140,26 @@ def identify(
         form=form, prior=tb if prior is True else (prior or None), progress=progress,
         hold=hold,
     )  # fmt: skip
+
+
+def columns_used(testbed) -> tuple[str, ...]:
+    """The log columns identification reads for ``testbed``: those of FORMATS.md, the
+    accelerometer's ``gx, gy, gz`` and, with ``[wheels]``, ``ws1..wsn`` and ``wc1..wcn``.
+
+    ``read_log(path, testbed, columns=columns_used(testbed))`` leaves a log's other columns
+    (simulation truth, notes) unread.
+
+    Examples
+    --------
+    >>> import airbearing as ab
+    >>> from airbearing.analysis.identify import columns_used
+    >>> columns_used(ab.load_testbed("rw-yaw"))[-2:]
+    ('ws1', 'wc1')
+    """
+    from airbearing.analysis.identification.data import COLUMNS_USED
+    from airbearing.analysis.identification.wheel_inertia import wheel_columns
+
+    return (*COLUMNS_USED, *wheel_columns(as_testbed(testbed)))
 
 
 def _check_choices(method, form, friction) -> None:

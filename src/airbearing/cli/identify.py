@@ -79,7 +79,7 @@ def identify(
         raise InputError(f"--method {method}: expected output-error or equation-error")
     if form not in ("integrated", "acceleration"):
         raise InputError(f"--form {form}: expected integrated or acceleration")
-    from airbearing.analysis.identification.data import COLUMNS_USED
+    from airbearing.analysis.identify import columns_used
     from airbearing.cli.process_settings import reuse_freed_memory
     from airbearing.io.log import read_log
     from airbearing.io.testbed import write_testbed
@@ -93,7 +93,7 @@ def identify(
             "applies only to --method equation-error on a platform testbed (dof 3), "
             "the regression of seed 004 eqs. 45 and 47",
         )
-    loaded = [read_log(p, tb, columns=COLUMNS_USED) for p in logs]
+    loaded = [read_log(p, tb, columns=columns_used(tb)) for p in logs]
     from airbearing.analysis.identify import identify as identify_logs
 
     with progress_display("identify") as progress:

@@ -328,9 +328,12 @@ def _candidates(testbed: Testbed, datas, only) -> tuple[list, list]:
                 if name in GYRO_EFFECTS and not gyro:
                     reason = "the testbed has no gyro (sensors.gyro = false)"
                 else:
-                    reason = REGISTRY[name].applies(
-                        kind, dof, has_field, gyro, wheels.command if wheels else None
-                    ) or "not applicable"
+                    reason = (
+                        REGISTRY[name].applies(
+                            kind, dof, has_field, gyro, wheels.command if wheels else None
+                        )
+                        or "not applicable"
+                    )
                 raise InputError(f"only={name!r}: cannot act on testbed '{testbed.name}': {reason}")
             if name in refused:
                 raise InputError(f"only={name!r}: {refused[name]}")

@@ -235,7 +235,9 @@ def identify_cmg_inertia(
     return CMGIdentification(**fields)
 
 
-def fit_momentum_exchange(testbed: Testbed, pieces, entries, friction: str | None) -> dict:
+def fit_momentum_exchange(
+    testbed: Testbed, pieces, entries, friction: str | None, sigma: float | None = None
+) -> dict:
     """The momentum-exchange fit of J_z (module doc) on ``pieces`` ``(t, w_z, h_z)``.
 
     Shared by the CMG and the reaction-wheel identifications (``h_z`` from the gimbal
@@ -251,6 +253,9 @@ def fit_momentum_exchange(testbed: Testbed, pieces, entries, friction: str | Non
     entries : list of dict
         Per log its ``segments``, ``segment_rows`` and ``outlier_rows``.
     friction : {None, "viscous", "coulomb"}
+    sigma : float, optional
+        The noise of the rate residual, rad/s, that the residual warning compares with
+        (default: the gyro's; a noisy ``h_z`` adds its own).
 
     Returns
     -------
@@ -261,7 +266,7 @@ def fit_momentum_exchange(testbed: Testbed, pieces, entries, friction: str | Non
     nfr = len(names)
     R, rows, npar = _reduced_regressor(pieces, friction, nfr)
     beta_hat, xv, rss, Rm, A, col = _constrained_fit(R, npar, nfr, testbed)
-    sigma = testbed.sensors.gyro_noise
+    sigma = testbed.sensors.gyro_noise if sigma is None else sigma
     var = rss / max(rows - npar, 1)
     cov_white = var * np.linalg.pinv(Rm.T @ Rm)
     cov_hac, hac = _honest_cov(pieces, beta_hat, friction, nfr)

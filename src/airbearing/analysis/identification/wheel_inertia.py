@@ -153,7 +153,11 @@ def identify_wheel_inertia(
     if not logs:
         raise InputError("identify: expected at least one log, got none")
     pieces, entries = _pieces(testbed, logs)
-    fields = fit_momentum_exchange(testbed, pieces, entries, friction)
+    wh = testbed.wheels
+    # the wheel-speed noise enters the residual through h_z / J_z
+    h_noise = wh.speed_noise * np.linalg.norm(wh.inertia_vec * wh.axes_matrix[:, 2])
+    sigma = float(np.hypot(testbed.sensors.gyro_noise, h_noise / testbed.body.yaw_inertia))
+    fields = fit_momentum_exchange(testbed, pieces, entries, friction, sigma)
     fields["details"] = {
         "wheel_inertia": [float(v) for v in testbed.wheels.inertia_vec],
         **fields["details"],
