@@ -61,6 +61,13 @@ from airbearing.design.linearise import (
     prune_states,
     trim,
 )
+from airbearing.design.wheels import (
+    DEFAULT_WHEEL_GAINS,
+    WHEEL_GAIN_NAMES,
+    has_wheels,
+    trim_wheel_speeds,
+    wheel_attitude_controller,
+)
 from airbearing.errors import InputError
 from airbearing.io.testbed import Testbed
 from airbearing.models import quaternion as quat
@@ -72,6 +79,7 @@ __all__ = [
     "SPLITS",
     "BALANCING_GAINS",
     "ATTITUDE_GAINS",
+    "WHEEL_GAINS",
     "balancing_loop",
     "attitude_loop",
     "make_loop",
@@ -86,6 +94,9 @@ SPLITS = {"mechanical": MECHANICAL, "mixed": MIXED}
 BALANCING_GAINS = SEED000_GAINS.to_json()
 #: Seed 001 Table 6 (normalised form: torque = h0 times the command).
 ATTITUDE_GAINS = dict(zip(("K_p", "K_i", "K_w"), SEED001_GAINS, strict=True))
+#: The reaction-wheel attitude loop's default gains, N m, N m/s, N m s
+#: (:data:`airbearing.design.wheels.DEFAULT_WHEEL_GAINS`).
+WHEEL_GAINS = dict(zip(WHEEL_GAIN_NAMES, DEFAULT_WHEEL_GAINS, strict=True))
 _TRIM_TOL = 1e-9  # relative residual accepted for the controller's trim state
 
 
@@ -149,6 +160,33 @@ class Loop:
     @property
     def dt(self) -> float:
         return self.model.testbed.sensors.dt
+
+    @property
+    def wheels(self) -> bool:
+        """True for the attitude loop of a reaction-wheel rig."""
+        return self.kind == "attitude" and has_wheels(self.model.testbed)
+
+    @property
+    def channel_limit(self) -> float:
+        """The limit of each actuator channel: the gimbal-rate limit (rad/s) of a CMG, the
+        motor torque limit (N m) of torque-commanded wheels, the speed limit (rad/s) of
+        speed-commanded ones; inf for the balancing loop."""
+        tb = self.model.testbed
+        if self.kind != "attitude":
+            return math.inf
+        if self.wheels:
+            wh = tb.wheels
+            return wh.max_torque if wh.command == "torque" else wh.max_speed
+        return tb.cmg.max_gimbal_rate
+
+    @property
+    def channel_quantity(self) -> str:
+        """What an actuator channel carries, with its unit (the actuator-peak check's name)."""
+        if self.wheels:
+            if self.model.testbed.wheels.command == "torque":
+                return "wheel torque (N m)"
+            return "wheel speed command (rad/s)"
+        return "gimbal rate (rad/s)"
 
     @property
     def gain_vector(self) -> np.ndarray:
@@ -594,16 +632,19 @@ def attitude_loop(
     gimbals=None,
     steering: str = "mp",
     delay_samples: int = 1,
+    wheel_options: dict | None = None,
 ) -> Loop:
-    """The CMG attitude loop of seed 001 at a gimbal set.
+    """The attitude loop: seed 001's on a CMG testbed at a gimbal set, or the same
+    quaternion PID on reaction wheels (:mod:`airbearing.design.wheels`).
 
     Parameters
     ----------
     testbed_or_model : Testbed or Model
-        A ``kind = "cmg"`` testbed (dof 1 or 3).
+        A ``kind = "cmg"`` testbed (dof 1 or 3), or a testbed with ``[wheels]``.
     gains : mapping or sequence, optional
-        ``K_p, K_i, K_w`` in the normalised form (torque = h0 times the command);
-        default seed 001 Table 6 (6, 0.001, 6).
+        ``K_p, K_i, K_w``: CMG in the normalised form (torque = h0 times the command),
+        default seed 001 Table 6 (6, 0.001, 6); wheels in N m, N m/s, N m s, default
+        :data:`WHEEL_GAINS`.
     p : ndarray, optional
         Plant parameters.
     gimbals : (4,) rad, optional
@@ -612,18 +653,37 @@ def attitude_loop(
         Steering law (:data:`airbearing.design.steering.STEERING_LAWS`).
     delay_samples : int
         Computation delay of the discrete loop, samples.
+    wheel_options : dict, optional
+        Wheels only: options of
+        :func:`~airbearing.design.wheels.wheel_attitude_controller` (``attitude``,
+        ``lowpass``, ``saturation``, ``bias_gain``, ``bias_fraction``, ``bias``,
+        ``dump_gain``, ``gyroscopic``). The wheels are trimmed at the speeds the loop
+        holds (the testbed's, with the null-space part at the bias).
     """
     model = _as_model(testbed_or_model)
     tb = model.testbed
-    if model.kind != "cmg":
-        raise InputError(
-            f"{tb.source}: the attitude loop needs a kind = 'cmg' testbed; '{tb.name}' is "
-            f"kind = '{model.kind}'"
-        )
-    g = _gain_dict(tuple(ATTITUDE_GAINS), ATTITUDE_GAINS if gains is None else gains)
-    tp = trim(model, p, gimbals=gimbals)
-    ctl = cmg_attitude_controller(model, steering=steering, gains=tuple(g.values()))
-    channels = _active_channels(model, tp, ctl, ("dd1", "dd2", "dd3", "dd4"))
+    if has_wheels(tb):
+        g = _gain_dict(WHEEL_GAIN_NAMES, WHEEL_GAINS if gains is None else gains)
+        opts = dict(wheel_options or {})
+        wheel_kw = {k: opts[k] for k in ("bias_fraction", "bias") if k in opts}
+        tp = trim(model, p, wheel_speeds=trim_wheel_speeds(tb, **wheel_kw))
+        ctl = wheel_attitude_controller(model, gains=tuple(g.values()), **opts)
+        if opts:  # the Jacobian cache is keyed by the controller's name
+            ctl = replace(ctl, name=f"{ctl.name}{sorted(opts.items())!r}")
+        cands = tuple(f"wc{i}" for i in range(1, tb.wheels.n + 1))
+        channels = _active_channels(model, tp, ctl, cands)
+    else:
+        if model.kind != "cmg":
+            raise InputError(
+                f"{tb.source}: the attitude loop needs a kind = 'cmg' testbed or a [wheels] "
+                f"table; '{tb.name}' is kind = '{model.kind}' without wheels"
+            )
+        if wheel_options:
+            raise InputError(f"wheel_options: testbed '{tb.name}' has no [wheels] table")
+        g = _gain_dict(tuple(ATTITUDE_GAINS), ATTITUDE_GAINS if gains is None else gains)
+        tp = trim(model, p, gimbals=gimbals)
+        ctl = cmg_attitude_controller(model, steering=steering, gains=tuple(g.values()))
+        channels = _active_channels(model, tp, ctl, ("dd1", "dd2", "dd3", "dd4"))
     lc = _lin_ctrl_cached(model, ctl, tp, channels, "attitude")
     refs = ("yaw_ref",) if model.dof == 1 else ("ref_x", "ref_y", "ref_z")
     dist = ("tau_z",) if model.dof == 1 else DISTURBANCE_INPUTS
@@ -690,7 +750,8 @@ def make_loop(testbed_or_model, loop: str, **options) -> Loop:
     ----------
     testbed_or_model : Testbed or Model
     loop : {"balancing", "attitude"}
-        The balancing loop of a platform with sliders, or the attitude loop of a CMG testbed.
+        The balancing loop of a platform with sliders, or the attitude loop of a CMG
+        testbed or of a reaction-wheel rig.
     **options
         Passed on: ``gains`` (dict, SI; default the seed's), ``split`` (balancing).
 

@@ -133,6 +133,10 @@ def _actuator_values(loop: Loop, t, y: dict) -> dict:
         mg = [c for c in loop.channels if c.startswith("m")]
         if mg and tb.magnetorquers is not None:
             out["dipole (A m^2)"] = float(max(np.max(np.abs(y[c])) for c in mg))
+    elif loop.wheels:  # about the trim: a speed command's trim is the wheel's speed
+        out[loop.channel_quantity] = float(
+            max(np.max(np.abs(y[c] + loop.trim.value(c))) for c in loop.channels)
+        )
     else:
         out["gimbal rate (rad/s)"] = float(max(np.max(np.abs(y[c])) for c in loop.channels))
     return out
@@ -142,7 +146,7 @@ def _actuator_limits(loop: Loop) -> dict:
     """The testbed's actuator limits, by check name (SI)."""
     tb = loop.model.testbed
     if loop.kind == "attitude":
-        return {"gimbal rate (rad/s)": tb.cmg.max_gimbal_rate}
+        return {loop.channel_quantity: loop.channel_limit}
     out = {}
     if tb.masses is not None:
         out["slider speed (m/s)"] = tb.masses.speed

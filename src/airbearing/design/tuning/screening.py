@@ -22,7 +22,7 @@ from airbearing.design.tuning.responses import (
     _scenario_inputs,
     _step_metrics,
 )
-from airbearing.design.tuning.slew import _slew_response
+from airbearing.design.tuning.slew import _slew_response, slew_limit
 from airbearing.design.tuning.spec import Spec
 
 __all__: list[str] = []
@@ -93,8 +93,7 @@ class _Fast:
         self.rest = [i for i, (_, _, vertex) in enumerate(corner_set) if not vertex]
         names = list(base.disturbances) + list(base.references)
         self.u = _scenario_inputs(base, names)
-        limit = base.model.testbed.cmg.max_gimbal_rate if base.kind == "attitude" else math.inf
-        self.slew_limit = limit if math.isfinite(limit) else None
+        self.slew_limit = slew_limit(base)
 
     # -------------------------------------------------------------- pieces
 
