@@ -84,6 +84,7 @@ __all__ = [
     "attitude_loop",
     "make_loop",
     "with_delay",
+    "without_momentum_poles",
 ]
 
 #: Loop kinds the package builds.
@@ -169,23 +170,20 @@ class Loop:
     @property
     def channel_limit(self) -> float:
         """The limit of each actuator channel: the gimbal-rate limit (rad/s) of a CMG, the
-        motor torque limit (N m) of torque-commanded wheels, the speed limit (rad/s) of
-        speed-commanded ones; inf for the balancing loop."""
+        motor torque limit (N m) of wheels (of speed-commanded ones, the torque their
+        driver gives, ``Iw (wc - W) / speed_loop_tau``); inf for the balancing loop."""
         tb = self.model.testbed
         if self.kind != "attitude":
             return math.inf
         if self.wheels:
-            wh = tb.wheels
-            return wh.max_torque if wh.command == "torque" else wh.max_speed
+            return tb.wheels.max_torque
         return tb.cmg.max_gimbal_rate
 
     @property
     def channel_quantity(self) -> str:
         """What an actuator channel carries, with its unit (the actuator-peak check's name)."""
         if self.wheels:
-            if self.model.testbed.wheels.command == "torque":
-                return "wheel torque (N m)"
-            return "wheel speed command (rad/s)"
+            return "wheel torque (N m)"
         return "gimbal rate (rad/s)"
 
     @property
@@ -227,6 +225,7 @@ class Loop:
         ]
         ins = list(self.channels) + list(self.disturbances)
         sys = prune_states(full, keep_out, ins)
+        states = list(sys.state_labels)  # indexing the outputs renames the states
         sys = sys[[list(sys.output_labels).index(o) for o in keep_out], :]
         idx = [list(full.input_labels).index(n) for n in ins]
         sys = ct.ss(
@@ -234,7 +233,7 @@ class Loop:
             sys.B[:, idx],
             sys.C,
             sys.D[:, idx],
-            states=list(sys.state_labels),
+            states=states,
             inputs=ins,
             outputs=keep_out,
             name="plant",
@@ -364,12 +363,30 @@ class Loop:
 
     def default_outputs(self) -> list[str]:
         if self.kind == "attitude":
-            return (
+            out = (
                 ["true_yaw", "true_wz"]
                 if self.model.dof == 1
                 else ["true_th_x", "true_th_y", "true_th_z"]
             )
+            if self.wheels and self.model.testbed.wheels.command == "speed":
+                # the wheel speeds: with the commands, the torque the drivers give
+                out += [f"true_W{i}" for i in range(1, self.model.testbed.wheels.n + 1)]
+            return out
         return ["true_th_x", "true_th_y"]
+
+    def stability_poles(self, *, discrete: bool = True) -> np.ndarray:
+        """The closed-loop poles the loop is judged on (:meth:`stability_system`'s).
+
+        On reaction wheels, without the poles of the wheels' stored momentum: a constant
+        wheel speed is an equilibrium at any value, so each momentum direction the loop
+        does not regulate is a pole at z = 1 (s = 0) whose mode moves the wheel speeds
+        (and a speed command with them) and nothing else; it is neutral, not unstable
+        (momentum dumping, not the attitude loop, takes it away).
+        """
+        sys = self.stability_system(discrete=discrete)
+        if not self.wheels:
+            return sys.poles()
+        return without_momentum_poles(sys.A, _body_state_mask(sys.state_labels), discrete)
 
     def stability_system(self, *, discrete: bool = True) -> ct.StateSpace:
         """The closed loop restricted to the states the loop acts on (for its poles)."""
@@ -383,6 +400,48 @@ class Loop:
             check_unused=False,
             name=f"{self.name}_poles",
         )
+
+
+#: |z - 1| (or |s| times the sample time) within which a pole is the wheels' momentum,
+#: and the largest share of its mode on the body and PID states.
+_MOMENTUM_TOL = 1e-8
+_MOMENTUM_SHARE = 1e-6
+
+
+def _body_state_mask(labels) -> np.ndarray:
+    """True for the states of an interconnected wheel loop that a stored-momentum mode
+    leaves at rest: the body's (not ``W<i>``) and the PID's (controller states ``c0..c9``,
+    :data:`~airbearing.design.attitude.PID_STATES`); the delay's and the speed targets'
+    states may move with the wheels."""
+    from airbearing.design.attitude import PID_STATES
+
+    out = []
+    for lbl in labels:
+        name = lbl.split("_", 1)[1] if "_" in lbl else lbl
+        if lbl.startswith("plant_"):
+            out.append(not (name.startswith("W") and name[1:].isdigit()))
+        elif lbl.startswith("controller_c") and name[1:].isdigit():
+            out.append(int(name[1:]) < PID_STATES)
+        else:
+            out.append(False)
+    return np.array(out, dtype=bool)
+
+
+def without_momentum_poles(A, body_mask, discrete: bool = True, dt: float = 1.0) -> np.ndarray:
+    """The eigenvalues of the closed-loop ``A`` without those of stored wheel momentum:
+    at z = 1 (s = 0) within :data:`_MOMENTUM_TOL`, with a mode that leaves the states of
+    ``body_mask`` at rest (share below :data:`_MOMENTUM_SHARE`)."""
+    A = np.asarray(A, dtype=float)
+    if A.size == 0:
+        return np.zeros(0, complex)
+    lam, V = np.linalg.eig(A)
+    at = np.abs(lam - 1) if discrete else np.abs(lam) * dt
+    keep = np.ones(lam.size, dtype=bool)
+    for i in np.nonzero(at < _MOMENTUM_TOL)[0]:
+        v = np.abs(V[:, i])
+        if v[body_mask].max(initial=0.0) <= _MOMENTUM_SHARE * v.max():
+            keep[i] = False
+    return lam[keep]
 
 
 def _gain_dict(names, gains) -> dict:
