@@ -62,8 +62,8 @@ from airbearing.design.linearise import (
     trim,
 )
 from airbearing.design.wheels import (
-    DEFAULT_WHEEL_GAINS,
     WHEEL_GAIN_NAMES,
+    default_wheel_gains,
     has_wheels,
     trim_wheel_speeds,
     wheel_attitude_controller,
@@ -79,7 +79,6 @@ __all__ = [
     "SPLITS",
     "BALANCING_GAINS",
     "ATTITUDE_GAINS",
-    "WHEEL_GAINS",
     "balancing_loop",
     "attitude_loop",
     "make_loop",
@@ -95,9 +94,6 @@ SPLITS = {"mechanical": MECHANICAL, "mixed": MIXED}
 BALANCING_GAINS = SEED000_GAINS.to_json()
 #: Seed 001 Table 6 (normalised form: torque = h0 times the command).
 ATTITUDE_GAINS = dict(zip(("K_p", "K_i", "K_w"), SEED001_GAINS, strict=True))
-#: The reaction-wheel attitude loop's default gains, N m, N m/s, N m s
-#: (:data:`airbearing.design.wheels.DEFAULT_WHEEL_GAINS`).
-WHEEL_GAINS = dict(zip(WHEEL_GAIN_NAMES, DEFAULT_WHEEL_GAINS, strict=True))
 _TRIM_TOL = 1e-9  # relative residual accepted for the controller's trim state
 
 
@@ -703,7 +699,7 @@ def attitude_loop(
     gains : mapping or sequence, optional
         ``K_p, K_i, K_w``: CMG in the normalised form (torque = h0 times the command),
         default seed 001 Table 6 (6, 0.001, 6); wheels in N m, N m/s, N m s, default
-        :data:`WHEEL_GAINS`.
+        :func:`~airbearing.design.wheels.default_wheel_gains`.
     p : ndarray, optional
         Plant parameters.
     gimbals : (4,) rad, optional
@@ -722,7 +718,7 @@ def attitude_loop(
     model = _as_model(testbed_or_model)
     tb = model.testbed
     if has_wheels(tb):
-        g = _gain_dict(WHEEL_GAIN_NAMES, WHEEL_GAINS if gains is None else gains)
+        g = _gain_dict(WHEEL_GAIN_NAMES, default_wheel_gains(tb) if gains is None else gains)
         opts = dict(wheel_options or {})
         wheel_kw = {k: opts[k] for k in ("bias_fraction", "bias") if k in opts}
         tp = trim(model, p, wheel_speeds=trim_wheel_speeds(tb, **wheel_kw))

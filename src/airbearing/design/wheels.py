@@ -60,14 +60,17 @@ __all__ = [
     "dump_dipole",
     "wheel_attitude_controller",
     "has_wheels",
+    "default_wheel_gains",
+    "wheel_bias",
+    "trim_wheel_speeds",
 ]
 
 #: The wheel loop's gains: ``T_c = -(K_p q_v + K_i int q_v dt + K_w G)`` in N m
 #: (K_p N m, K_i N m/s, K_w N m s), seed 001 eq. 19 in physical units.
 WHEEL_GAIN_NAMES = ("K_p", "K_i", "K_w")
-#: Default gains: the rigid-body loop's poles near 0.5 rad/s on a 0.01 kg m^2 body
-#: (``airbearing gains`` tunes them to a specification).
-DEFAULT_WHEEL_GAINS = (5e-3, 1e-5, 1e-2)
+#: Shape of the default design (:func:`default_wheel_gains`): damping of the placed pair
+#: and the integral pole's ratio to its speed.
+DEFAULT_DAMPING, DEFAULT_INTEGRAL_RATIO = 0.9, 0.01
 #: Default speed of the bias management, 1/s (a 20 s time constant, well below the
 #: attitude loop's bandwidth).
 BIAS_GAIN = 0.05
@@ -76,6 +79,28 @@ BIAS_FRACTION = 0.2
 #: Default dumping rate, 1/s.
 DUMP_GAIN = 0.02
 _RANK_TOL = 1e-9
+
+
+def default_wheel_gains(testbed) -> dict:
+    """Starting gains of a wheel rig before ``airbearing gains`` tunes them: K_p, K_i, K_w.
+
+    The rigid body ``J s^2`` (``J`` the largest principal inertia on the free axes)
+    closed by the PID has its poles at ``(s^2 + 2 zeta w s + w^2)(s + r w)`` with
+    ``zeta = 0.9``, ``r = 0.01`` and the speed ``w = sqrt(max_torque / (J pi/2))`` (rad/s),
+    at which a 90 deg step asks the wheels for about ``max_torque`` (``K_p q_v ~ 2 J w^2
+    theta / 2``); at most a tenth of the Nyquist frequency.
+    """
+    J = np.asarray(testbed.body.inertia_matrix, float)
+    Jm = float(J[2, 2] if testbed.body.dof == 1 else np.linalg.eigvalsh(J).max())
+    w = min(
+        np.sqrt(testbed.wheels.max_torque / (Jm * np.pi / 2)), 0.1 * np.pi * testbed.sensors.rate
+    )
+    z, a = DEFAULT_DAMPING, DEFAULT_INTEGRAL_RATIO * w
+    return {
+        "K_p": 2 * Jm * (w * w + 2 * z * w * a),
+        "K_i": 2 * Jm * w * w * a,
+        "K_w": Jm * (2 * z * w + a),
+    }
 
 
 def has_wheels(testbed) -> bool:
@@ -181,7 +206,7 @@ WHEEL_EXTRA_NAMES = ("qe_w", "qe_x", "qe_y", "qe_z", "G_x", "G_y", "G_z", "Tc_x"
 def wheel_attitude_controller(
     model,
     *,
-    gains=DEFAULT_WHEEL_GAINS,
+    gains=None,
     lowpass: float | None = None,
     attitude: str = "gyro",
     saturation: str = "scale",
@@ -205,8 +230,9 @@ def wheel_attitude_controller(
     ----------
     model : Model
         A testbed with ``[wheels]`` and a rate gyro.
-    gains : dict or sequence of 3 float
-        ``K_p`` (N m), ``K_i`` (N m/s), ``K_w`` (N m s), each >= 0.
+    gains : dict or sequence of 3 float, optional
+        ``K_p`` (N m), ``K_i`` (N m/s), ``K_w`` (N m s), each >= 0; default
+        :func:`default_wheel_gains`.
     lowpass : float, optional
         ``f_g`` of seed 001 eq. 3; default ``sensors.lowpass``.
     attitude : {"gyro", "measured"}
@@ -244,7 +270,7 @@ def wheel_attitude_controller(
     for name, v in (("bias_gain", bias_gain), ("dump_gain", dump_gain)):
         if v is not None and not (np.isfinite(v) and v >= 0):
             raise InputError(f"{name} {v}: expected a rate >= 0 in 1/s")
-    gains = as_gains(gains, WHEEL_GAIN_NAMES)
+    gains = as_gains(default_wheel_gains(tb) if gains is None else gains, WHEEL_GAIN_NAMES)
     wh = tb.wheels
     n, dt = wh.n, tb.sensors.dt
     axes = np.asarray(wh.axes_matrix, float)

@@ -117,7 +117,7 @@ def slew(
     gains : dict or sequence of 3 float, optional
         Attitude gains ``{"K_p": ..., "K_i": ..., "K_w": ...}`` (as ``tune(...).gains``
         gives them) or ``(K_p, K_i, K_w)``, each >= 0; default seed 001's (wheels: N m,
-        N m/s, N m s, default :data:`airbearing.design.wheels.DEFAULT_WHEEL_GAINS`).
+        N m/s, N m s, default :func:`airbearing.design.wheels.default_wheel_gains`).
     loop : (Model, Controller), optional
         The loop to run, default :func:`slew_loop` of these arguments; a campaign passes
         one per structure with this run's values in the Model's ``p0``.
