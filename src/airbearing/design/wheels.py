@@ -70,7 +70,7 @@ __all__ = [
 WHEEL_GAIN_NAMES = ("K_p", "K_i", "K_w")
 #: Shape of the default design (:func:`default_wheel_gains`): damping of the placed pair
 #: and the integral pole's ratio to its speed.
-DEFAULT_DAMPING, DEFAULT_INTEGRAL_RATIO = 0.9, 0.01
+DEFAULT_DAMPING, DEFAULT_INTEGRAL_RATIO = 0.9, 0.001
 #: Default speed of the bias management, 1/s (a 20 s time constant, well below the
 #: attitude loop's bandwidth).
 BIAS_GAIN = 0.05
@@ -86,7 +86,7 @@ def default_wheel_gains(testbed) -> dict:
 
     The rigid body ``J s^2`` (``J`` the largest principal inertia on the free axes)
     closed by the PID has its poles at ``(s^2 + 2 zeta w s + w^2)(s + r w)`` with
-    ``zeta = 0.9``, ``r = 0.01`` and the speed ``w = sqrt(max_torque / (J pi/2))`` (rad/s),
+    ``zeta = 0.9``, ``r = 0.001`` and the speed ``w = sqrt(max_torque / (J pi/2))`` (rad/s),
     at which a 90 deg step asks the wheels for about ``max_torque`` (``K_p q_v ~ 2 J w^2
     theta / 2``); at most a tenth of the Nyquist frequency.
     """
