@@ -14,6 +14,7 @@ import math
 
 import numpy as np
 import pytest
+from cli_run import run
 
 import airbearing as ab
 from airbearing.analysis.simulation.scenarios import slew, slew_summary
@@ -27,7 +28,6 @@ from airbearing.design.wheels import (
 )
 from airbearing.errors import InputError
 from airbearing.models import quaternion as quat
-from cli_run import run
 
 
 def _wheel_speeds(result):
@@ -57,7 +57,8 @@ def test_compiled_controller_allocates_the_commanded_torque_exactly():
     y[[Y["wx"], Y["wy"], Y["wz"]]] = w
     W = np.array([30.0, -20.0, 10.0, 50.0])
     y[[Y[f"ws{i}"] for i in range(1, 5)]] = W
-    u, _, extra = (np.asarray(v).ravel() for v in ctl.function(y, ctl.c0, [1, 0, 0, 0], ctl.gains, 0))
+    out = ctl.function(y, ctl.c0, [1, 0, 0, 0], ctl.gains, 0)
+    u, _, extra = (np.asarray(v).ravel() for v in out)
     tau = u[m.index([f"wc{i}" for i in range(1, 5)], "u")]
     A = np.asarray(tb.wheels.axes_matrix)
     T_c = extra[list(ctl.extra_names).index("Tc_x") :][:3]
@@ -98,8 +99,14 @@ def test_dumping_takes_the_momentum_across_the_field_away():
     k_d, duration = 0.1, 30.0
     gains = default_wheel_gains(tb)
     runs = {
-        kd: slew(tb, angle_deg=0.0, duration=duration, ideal=True, gains=gains,
-                 wheel_options={"bias_gain": 0.0, "dump_gain": kd})  # fmt: skip
+        kd: slew(
+            tb,
+            angle_deg=0.0,
+            duration=duration,
+            ideal=True,
+            gains=gains,
+            wheel_options={"bias_gain": 0.0, "dump_gain": kd},
+        )  # fmt: skip
         for kd in (0.0, k_d)
     }
     b = np.asarray(tb.field.lab_vec) / np.linalg.norm(tb.field.lab_vec)
