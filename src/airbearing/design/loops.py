@@ -718,6 +718,10 @@ def attitude_loop(
     model = _as_model(testbed_or_model)
     tb = model.testbed
     if has_wheels(tb):
+        if gimbals is not None or steering != "mp":
+            raise InputError(
+                f"gimbals, steering: CMG options; testbed '{tb.name}' turns on reaction wheels"
+            )
         g = _gain_dict(WHEEL_GAIN_NAMES, default_wheel_gains(tb) if gains is None else gains)
         opts = dict(wheel_options or {})
         wheel_kw = {k: opts[k] for k in ("bias_fraction", "bias") if k in opts}
