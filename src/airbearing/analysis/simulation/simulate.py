@@ -417,7 +417,7 @@ def log_from_arrays(model, t, x, y, u, extra, controller, ref) -> Log:
     """Assemble a FORMATS.md log from a run's arrays (plus ``true_*`` and controller columns)."""
     E = dict(zip(controller.extra_names, extra.T, strict=True))
     cols = log_columns(model, t, x, y, u, yaw=E.get("yaw_est"))
-    if model.kind == "cmg" and model.dof == 1 and "qc_w" in controller.ref_names:
+    if model.dof == 1 and "qc_w" in controller.ref_names:  # a slew: CMG or wheels
         cols["yaw_ref"] = quat.yaw_of(ref[:, :4])
     for k, v in E.items():
         cols.setdefault(k, v)
