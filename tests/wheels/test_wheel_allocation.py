@@ -10,7 +10,13 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from airbearing.design.wheels import allocation, bias_speeds, dump_dipole, saturate_torques
+from airbearing.design.wheels import (
+    allocation,
+    allocation_function,
+    bias_speeds,
+    dump_dipole,
+    saturate_torques,
+)
 from airbearing.errors import InputError
 
 _S = np.sqrt(0.5)
@@ -90,3 +96,23 @@ def test_dumping_torque_removes_the_momentum_across_the_field():
     # the dipole limit scales, keeping the direction
     small = np.asarray(dump_dipole(ca.DM(h), ca.DM(b), 0.1, 1.0)).ravel()
     assert np.isclose(np.abs(small).max(), 1.0) and np.allclose(small / small[0], m / m[0])
+
+
+def test_allocation_function_adds_only_torque_free_bias_and_reports_saturation():
+    axes, dof = SETS["pyramid"]
+    A = np.asarray(axes, float)
+    Iw = np.full(4, 2e-5)
+    Wb = bias_speeds(A, dof, 100.0)
+    f = allocation_function(A, dof, Iw, 1e-3, bias_gain=0.05, bias=Wb)
+    T = np.array([2e-4, -1e-4, 3e-4])
+    W = np.array([10.0, -40.0, 5.0, 0.0])
+    tau, wsat = (np.asarray(v).ravel() for v in f(T, W))
+    assert wsat[0] < 1  # unsaturated
+    assert np.allclose(-A.T @ tau, T, rtol=0, atol=1e-15)  # the bias turns nothing
+    _, N = allocation(A, dof)
+    assert np.allclose(tau - allocation(A, dof)[0] @ T, -0.05 * 2e-5 * N @ (W - Wb), atol=1e-18)
+    assert wsat[0] == pytest.approx(np.abs(tau).max() / 1e-3)
+    tau_big, wsat_big = (np.asarray(v).ravel() for v in f(100 * T, W))
+    assert wsat_big[0] > 1 and np.isclose(np.abs(tau_big).max(), 1e-3)
+    assert np.allclose(-A.T @ tau_big / np.linalg.norm(A.T @ tau_big), 100 * T / np.linalg.norm(
+        100 * T), atol=1e-3)  # fmt: skip

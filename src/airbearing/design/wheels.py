@@ -55,6 +55,7 @@ __all__ = [
     "WHEEL_EXTRA_NAMES",
     "free_axes",
     "allocation",
+    "allocation_function",
     "bias_speeds",
     "saturate_torques",
     "dump_dipole",
@@ -186,6 +187,54 @@ def saturate_torques(tau, limit: float, mode: str = "scale"):
     return ca.fmin(ca.fmax(tau, -limit), limit)
 
 
+def allocation_function(
+    axes,
+    dof: int,
+    inertia,
+    max_torque: float,
+    *,
+    bias_gain: float = BIAS_GAIN,
+    bias=None,
+    saturation: str = "scale",
+) -> ca.Function:
+    """The wheel allocation as a CasADi Function ``(T[3], W[n]) -> (tau_m[n], wsat)``.
+
+    ``tau_m = M T - k_b Iw N (W - W_b)`` (:func:`allocation`; ``Iw`` the mean wheel
+    inertia), limited to ``max_torque`` by :func:`saturate_torques`; ``wsat`` is the
+    largest ``|tau_m_i| / max_torque`` asked for (above 1: saturated).
+
+    Parameters
+    ----------
+    axes : array (n, 3)
+        Spin axes, body axes.
+    dof : {1, 3}
+        Free axes of the bearing.
+    inertia : array (n,)
+        Spin-axis inertias, kg m^2.
+    max_torque : float
+        N m, each wheel.
+    bias_gain : float
+        1/s, null-space speed management (0: off).
+    bias : array (n,), optional
+        rad/s, bias speeds ``W_b`` (default zeros).
+    saturation : {"scale", "clip"}
+    """  # fmt: skip
+    A = np.asarray(axes, dtype=float)
+    n = A.shape[0]
+    M, N = allocation(A, dof)
+    Iw = np.asarray(inertia, dtype=float).reshape(n)
+    W_b = np.zeros(n) if bias is None else np.asarray(bias, dtype=float).reshape(n)
+    T = ca.SX.sym("T", 3)
+    W = ca.SX.sym("W", n)
+    tau = ca.mtimes(ca.DM(M), T)
+    if bias_gain > 0 and np.any(N != 0):
+        tau = tau - bias_gain * float(Iw.mean()) * ca.mtimes(ca.DM(N), W - ca.DM(W_b))
+    limit = float(max_torque)
+    wsat = ca.mmax(ca.fabs(tau)) / limit
+    tau = saturate_torques(tau, limit, saturation)
+    return ca.Function("wheel_allocation", [T, W], [tau, wsat], ["T", "W"], ["tau_m", "wsat"])
+
+
 def dump_dipole(h, b_body, gain: float, max_dipole: float):
     """Momentum-dumping dipole ``m = gain (h x b) / |b|^2`` (A m^2), scaled to ``max_dipole``.
 
@@ -275,7 +324,6 @@ def wheel_attitude_controller(
     n, dt = wh.n, tb.sensors.dt
     axes = np.asarray(wh.axes_matrix, float)
     Iw = np.asarray(wh.inertia_vec, float)
-    M, N = allocation(axes, model.dof)
     W_b = wheel_bias(tb, bias_fraction, bias)
     mag = tb.magnetorquers is not None and tb.field is not None and model.kind == "platform"
     k_d = (DUMP_GAIN if mag else 0.0) if dump_gain is None else float(dump_gain)
@@ -298,12 +346,9 @@ def wheel_attitude_controller(
     h_w = ca.mtimes(ca.DM(axes.T), Iw * W)  # N m s, body axes
     T_want = T_c + (ca.cross(G, h_w) if gyroscopic else 0)
     # -A^T tau = T_c + G x h_w: the wheels' momentum rate is -T_c - G x h_w (seed 001 eq. 11)
-    tau = ca.mtimes(ca.DM(M), T_want)
-    if bias_gain > 0 and np.any(N != 0):
-        tau = tau - bias_gain * float(Iw.mean()) * ca.mtimes(ca.DM(N), W - W_b)
-    limit = float(wh.max_torque)
-    wsat = ca.mmax(ca.fabs(tau)) / limit
-    tau = saturate_torques(tau, limit, saturation)
+    alloc = allocation_function(axes, model.dof, Iw, wh.max_torque, bias_gain=bias_gain,
+                                bias=W_b, saturation=saturation)  # fmt: skip
+    tau, wsat = alloc(T_want, W)
     u = ca.SX.zeros(model.nu)
     wc_idx = model.index([f"wc{i}" for i in range(1, n + 1)], "u")
     c_next = [G, q_est, integral_next]
