@@ -140,3 +140,26 @@ def test_simulated_wheel_log_has_ws_and_wc():
     rate = 1e-6 * J / (Iw * (J - Iw))  # models/wheels.py: viscous spin-down, body free
     # RK4 at 20 Hz with rate x dt = 2e-3: error far below 1e-9
     assert_allclose(data["ws1"], 300.0 * np.exp(-rate * data["t"]), rtol=1e-9)
+
+
+def test_speed_command_steps_are_not_outliers():
+    # a speed-commanded wheel follows each step of wc within a few samples (tau = 0.1 s at
+    # 20 Hz): a kink at a command switch, which the outlier search must not flag
+    tb = load_testbed("rw-yaw")
+    w = tb.wheels
+    tb = tb.replace(wheels=type(w)(axes=w.axes, inertia=w.inertia, max_torque=w.max_torque,
+                                   max_speed=w.max_speed, command="speed", speed_loop_tau=0.1,
+                                   speed_noise=0.01))  # fmt: skip
+    m = build_model(tb)
+    rng = np.random.default_rng(2)
+    n = 600
+    U = np.zeros((m.nu, n))
+    U[m.index("wc1", "u")] = np.repeat(rng.uniform(-300, 300, n // 60), 60)
+    X = np.vstack([m.x0(), np.asarray(m.rollout(n, tb.sensors.dt)(m.x0(), U, m.p0)).T])[:-1]
+    Y = np.asarray(m.h(X.T, U, m.p0)).T
+    noise = rng.normal(size=(n, 3)) * [1.7e-3, 3.86e-4, 0.01]
+    df = pd.DataFrame({"t": tb.sensors.dt * np.arange(n), "yaw": Y[:, 0] + noise[:, 0],
+                       "wz": Y[:, 1] + noise[:, 1], "ws1": Y[:, 2] + noise[:, 2],
+                       "wc1": U[m.index("wc1", "u")[0]]})  # fmt: skip
+    q = assess(Log(df, testbed=tb), tb)
+    assert q.outlier_rows == () and q.discontinuities == ()
