@@ -195,7 +195,7 @@ def _wheel_testbeds(draw):
     return from_dict(doc)
 
 
-@settings(max_examples=100, deadline=None)
+@settings(max_examples=40, deadline=None)
 @given(tb=_wheel_testbeds())
 def test_wheel_testbeds_round_trip(tb, tmp_path_factory):
     assert from_dict(to_dict(tb)) == tb
