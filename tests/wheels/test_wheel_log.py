@@ -163,3 +163,26 @@ def test_speed_command_steps_are_not_outliers():
                        "wc1": U[m.index("wc1", "u")[0]]})  # fmt: skip
     q = assess(Log(df, testbed=tb), tb)
     assert q.outlier_rows == () and q.discontinuities == ()
+
+
+def test_log_check_and_plot_show_the_wheels(tmp_path, capsys):
+    from cli_run import run
+
+    tb, df = _wheel_log(RW3, n=200)
+    df.loc[[5, 6], "wc2"] = -3e-3
+    path = tmp_path / "wheels.csv"
+    df.to_csv(path, index=False)
+    assert run(["log", "check", RW3, str(path), "--json", str(tmp_path / "c.json")]) == 0
+    out = capsys.readouterr().out
+    assert "wheels    4: speeds ws1..ws4" in out and "torque commands wc1..wc4 (N m)" in out
+    assert "wc2 beyond wheels.max_torque = 0.001 N m in 2 row(s) (5-6" in out
+    from airbearing.reporting.log_plot import log_figure
+
+    fig = log_figure(Log(df, testbed=tb))
+    panels = {ax.get_title(loc="left"): ax for ax in fig.axes}
+    speeds, commands = panels["wheel speeds"], panels["wheel commands"]
+    assert [ln.get_label() for ln in speeds.lines] == ["ws1", "ws2", "ws3", "ws4"]
+    assert commands.get_ylabel() == "torque command (mN m)"
+    # plotted in rpm and mN m
+    assert_allclose(speeds.lines[0].get_ydata(), df["ws1"] * 60 / (2 * math.pi), rtol=1e-12)
+    assert_allclose(commands.lines[1].get_ydata(), df["wc2"] * 1e3, rtol=1e-12)
