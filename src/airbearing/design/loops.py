@@ -9,7 +9,10 @@
 * **Attitude loop** (seed 001): the CMG testbed linearised at a gimbal set, the
   quaternion PID of seed 001 eq. 19 with the gyro low-pass (eq. 3), the attitude
   propagation (eq. 21) and the steering law (eq. 16), as implemented by
-  :func:`airbearing.design.attitude.cmg_attitude_controller`.
+  :func:`airbearing.design.attitude.cmg_attitude_controller`; on a reaction-wheel rig
+  the same quaternion PID drives the wheels
+  (:func:`airbearing.design.wheels.wheel_attitude_controller`), the loop broken at each
+  wheel's command, the wheels trimmed at the speeds the loop holds.
 
 The controllers are the very CasADi Functions the nonlinear simulation runs: their
 linear models are their exact Jacobians (``ca.jacobian``) about the trim, with the gains
@@ -129,7 +132,8 @@ class Loop:
     gains : dict
         Gain name -> value.
     channels : tuple of str
-        Actuator inputs the loop is broken at (``s1 s2``, ``mx my``, ``dd1..dd4``).
+        Actuator inputs the loop is broken at (``s1 s2``, ``mx my``, ``dd1..dd4``,
+        ``wc1..``).
     references : tuple of str
         Reference inputs of the closed loop (``yaw_ref`` for the attitude loop).
     disturbances : tuple of str
