@@ -21,7 +21,7 @@ from airbearing.analysis.simulation.scenarios import free_oscillation, slew
 from airbearing.errors import InputError
 from airbearing.io.log import read_log
 from airbearing.io.testbed import Field, Sensors, load_testbed
-from airbearing.models.effects import REGISTRY
+from airbearing.models.effects import REGISTRY, WHEEL_EFFECTS
 
 W0 = (0.3676, 0.1265, -1.4835)  # seed-004 initial rate (public example platform_viscous)
 Q0 = (0.99458, 0.024955, -0.014973, 0.099819)
@@ -76,7 +76,9 @@ def _rel_error(found, truth) -> float:
 
 
 def test_every_registered_effect_has_a_hidden_effect_case():
-    assert set(HIDDEN) == set(REGISTRY)
+    # the wheel_* effects act on reaction wheels only; the search does not take wheel
+    # logs yet (log check says so), so they have no hidden-effect case here yet
+    assert set(HIDDEN) == set(REGISTRY) - set(WHEEL_EFFECTS)
     for name, (tb, _) in HIDDEN.items():
         # each is tested on a testbed kind where it can act (effects.applicable_effects)
         assert name in [c.name for c in candidates_for(tb)]

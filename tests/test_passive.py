@@ -19,7 +19,7 @@ from airbearing.analysis.simulation.scenarios import free_oscillation, free_summ
 from airbearing.errors import InputError
 from airbearing.io.testbed import testbed_from_dict as make_testbed
 from airbearing.models import quaternion as quat
-from airbearing.models.effects import REGISTRY, applicable_effects
+from airbearing.models.effects import REGISTRY, WHEEL_EFFECTS, applicable_effects
 from airbearing.models.model import build_model
 
 # seed 004: the 6.3 kg platform, its J_CR and offset r^o (the values of the platform built-in)
@@ -114,18 +114,21 @@ def test_residual_dipole_on_a_passive_platform_sees_the_logged_field():
 
 
 def test_effects_that_act_on_a_passive_platform():
-    # FORMATS.md table: everything but the CMG dead zone; the spring on dof 1 only;
-    # the CM offset error on dof 3 only; rate-sensor effects only with a gyro
+    # FORMATS.md table: everything but the CMG dead zone and the wheel effects (no
+    # [wheels]); the spring on dof 1 only; the CM offset error on dof 3 only; rate-sensor
+    # effects only with a gyro
     assert set(applicable_effects("platform", 3, True)) == set(REGISTRY) - {
         "spring_torque",
         "yaw_imbalance",
         "gimbal_deadzone",
+        *WHEEL_EFFECTS,
     }
     assert set(applicable_effects("platform", 1, True, gyro=False)) == set(REGISTRY) - {
         "cm_offset_error",
         "gimbal_deadzone",
         "gyro_bias",
         "sensor_lag",
+        *WHEEL_EFFECTS,
     }
     values = {
         "cm_offset_error": (1e-5, 0, 0),

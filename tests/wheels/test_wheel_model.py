@@ -283,3 +283,24 @@ def test_wheel_effects_are_refused_without_wheels_and_torque_error_on_speed_whee
         build_model(_yaw(command="speed", speed_loop_tau=0.1), {"wheel_torque_error": 0.1})
     with pytest.raises(InputError, match="list of 4 numbers"):
         build_model(load_testbed("rw-3axis"), {"wheel_inertia_error": [0.1, 0.2]})
+
+
+def test_wheel_values_are_run_values_of_one_structure():
+    # Iw, the initial speeds and the speed noise enter as p, x0 and noise: one compiled
+    # structure serves dispersed wheels, and gives what a freshly built Model gives
+    from airbearing.analysis.simulation.scenarios import free_oscillation
+    from airbearing.models.structure_cache import model_for, structure_key
+
+    tb = _yaw().with_effects({"wheel_viscous_friction": 1e-6})
+    variants = [
+        tb.replace(wheels=Wheels(**{**tb.wheels.__dict__, "inertia": iw, "speeds": w0,
+                                    "speed_noise": sn}))
+        for iw, w0, sn in ((2e-5, 300.0, 0.01), (4e-5, 100.0, 0.02))
+    ]  # fmt: skip
+    assert structure_key(variants[0]) == structure_key(variants[1])
+    assert structure_key(variants[0]) != structure_key(_yaw(max_torque=2e-3))
+    for t in variants:
+        shared = free_oscillation(t, duration=1.0, model=model_for(t), seed=3).log.data
+        fresh = free_oscillation(t, duration=1.0, seed=3).log.data
+        assert_allclose(shared["ws1"], fresh["ws1"], rtol=0, atol=0)  # the same arithmetic
+        assert shared["true_W1"].iloc[0] == t.wheels.speeds[0]

@@ -4,6 +4,8 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from airbearing.errors import InputError
 from airbearing.io import testbed as tbio
@@ -145,3 +147,58 @@ def test_builtin_wheel_testbeds(name):
         # 3 + 1: the skew wheel along (1, 1, 1)/sqrt(3), rank 3
         np.testing.assert_allclose(w.axes_matrix[3], [S3, S3, S3], rtol=1e-15)
         assert np.linalg.matrix_rank(w.axes_matrix) == 3
+
+
+# ---------------------------------------------------------------- property: write -> read
+
+_pos = st.floats(1e-7, 1e-2, allow_nan=False)
+
+
+@st.composite
+def _wheel_testbeds(draw):
+    dof = draw(st.sampled_from((1, 3)))
+    n = draw(st.integers(1, 6))
+    if dof == 1:
+        axes = [[0.0, 0.0, draw(st.sampled_from((1.0, -1.0)))] for _ in range(n)]
+    else:
+        axes = []
+        for _ in range(n):
+            v = np.array(draw(st.lists(st.floats(-1, 1, allow_nan=False), min_size=3,
+                                       max_size=3)))  # fmt: skip
+            v = v if np.linalg.norm(v) > 1e-3 else np.array([0.0, 0.0, 1.0])
+            axes.append((v / np.linalg.norm(v)).tolist())
+    command = draw(st.sampled_from(("torque", "speed")))
+    per_wheel = st.lists(_pos, min_size=n, max_size=n)
+    table = {
+        "axes": axes,
+        "inertia": draw(st.one_of(_pos, per_wheel)),
+        "max_torque": draw(_pos),
+        "max_speed": draw(st.floats(1.0, 2000.0)),
+        "command": command,
+        "speed_noise": draw(st.floats(0.0, 1.0)),
+        "speeds": draw(st.one_of(st.floats(-600, 600), st.lists(st.floats(-600, 600),
+                                                                min_size=n, max_size=n))),
+    }  # fmt: skip
+    if command == "speed":
+        table["speed_loop_tau"] = draw(st.floats(1e-3, 1.0))
+    names = ["wheel_viscous_friction", "wheel_coulomb_friction", "wheel_inertia_error"]
+    if command == "torque":
+        names.append("wheel_torque_error")
+    effects = {
+        name: draw(st.one_of(st.floats(0.0, 0.5), st.lists(st.floats(0.0, 0.5), min_size=n,
+                                                           max_size=n)))
+        for name in draw(st.lists(st.sampled_from(names), unique=True))
+    }  # fmt: skip
+    doc = _doc(dof=dof, **table)
+    if effects:
+        doc["effects"] = effects
+    return from_dict(doc)
+
+
+@settings(max_examples=40, deadline=None)
+@given(tb=_wheel_testbeds())
+def test_wheel_testbeds_round_trip(tb, tmp_path_factory):
+    assert from_dict(to_dict(tb)) == tb
+    path = write_testbed(tb, tmp_path_factory.mktemp("rt") / "wheels.toml")
+    assert read_testbed(path) == tb
+    assert len(tb.wheels.inertia) == len(tb.wheels.speeds) == tb.wheels.n

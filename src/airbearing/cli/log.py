@@ -206,7 +206,7 @@ def check(
         ),
         ("segments", f"{quality.n_segments}"),
     ]
-    labels = [k for k, _ in lines] + ["outliers", "warning"]
+    labels = [k for k, _ in lines] + ["outliers", "warning", "wheels"]
     if quality.unexplained_rows:
         labels.append("unexplained")  # its own label, in the same column
     if quality.noise_warnings:
@@ -223,6 +223,8 @@ def check(
             f"{'':<{width}}  #{i:<3} rows {a:>6} - {b - 1:<6} t = {_t(t0):>9} .. {_t(t1):<9} s "
             f"({b - a} samples)"
         )
+    if tb.wheels is not None:
+        typer.echo(f"{'wheels':<{width}}  {_wheels_text(log, quality)}")
     for d in quality.discontinuities:
         typer.echo(f"{'step':<{width}}  row {d.row:<6} t = {_t(d.t):<9} s  {d.reason}")
     for change in quality.rate_changes:
@@ -234,6 +236,8 @@ def check(
             f"{ratio:.3g} x 1 / sensors.rate: is sensors.rate = {tb.sensors.rate:g} Hz this "
             "log's rate? (gaps and the noise per sample are judged by it)"
         )
+    for saturated in result.wheel_saturation:
+        typer.echo(f"{'warning':<{width}}  {saturated['reason']}")
     typer.echo(f"{'outliers':<{width}}  {len(quality.outliers)} row(s)")
     for o in quality.outliers:
         typer.echo(f"{'':<{width}}  row {o.row:<6} t = {_t(o.t):<9} s  {o.reason}")
@@ -247,6 +251,20 @@ def check(
     _echo_tools({name: tools[name] for name in TOOLS})
     if json_path is not None:
         typer.echo(f"wrote {json_path}")
+
+
+def _wheels_text(log, quality) -> str:
+    """The wheel columns of a log: speeds (with their noise) and commands."""
+    from airbearing.io.log import wheel_columns
+
+    wheels = log.testbed.wheels
+    ws, wc = wheel_columns(wheels.n)
+    noise = ", ".join(f"{quality.noise[c]:.3g}" for c in ws if c in quality.noise)
+    text = f"{wheels.n}: speeds {ws[0]}..{ws[-1]} (rad/s" + (f"; noise {noise})" if noise else ")")
+    unit = "N m" if wheels.command == "torque" else "rad/s"
+    if log.has(*wc):
+        return text + f", {wheels.command} commands {wc[0]}..{wc[-1]} ({unit})"
+    return text + ", no commands (wc) logged"
 
 
 def _echo_tools(tools: dict) -> None:

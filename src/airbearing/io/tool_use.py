@@ -70,6 +70,13 @@ def tool_use(log: Log, quality: LogQuality) -> dict[str, tuple[bool, str]]:
         why = quality.gyro_disagreement[0]
         for tool in ("simulate replay", "identify", "discrepancy", "replay"):
             out[tool] = (False, why)
+    if tb is not None and tb.wheels is not None:
+        why = (
+            "reaction-wheel logs are not replayed or fitted yet: the wheel speeds ws and "
+            "commands wc do not reach the model's states and inputs there"
+        )
+        for tool in ("simulate replay", "identify", "discrepancy", "replay"):
+            out[tool] = (False, why)
     if tb is None:
         out["balance"] = (False, "no testbed given")
     elif tb.kind != "platform":

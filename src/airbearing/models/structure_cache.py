@@ -26,6 +26,7 @@ _RUN_VALUES = {
     "body": ("mass", "inertia", "cm_offset", "torque_noise"),
     "cmg": ("flywheel_inertia", "flywheel_speed", "gimbal_angles"),
     "sensors": ("gyro_noise", "accel_noise", "attitude_noise"),
+    "wheels": ("inertia", "speeds", "speed_noise"),  # Iw_i, the initial W, the ws noise
 }
 _STRUCTURES: dict = {}
 _MAX_STRUCTURES = 16
