@@ -76,8 +76,8 @@ def _rel_error(found, truth) -> float:
 
 
 def test_every_registered_effect_has_a_hidden_effect_case():
-    # the wheel_* effects act on reaction wheels only; the search does not take wheel
-    # logs yet (log check says so), so they have no hidden-effect case here yet
+    # the wheel_* effects act on reaction wheels only: their cases are in
+    # tests/wheels/test_wheel_discrepancy.py
     assert set(HIDDEN) == set(REGISTRY) - set(WHEEL_EFFECTS)
     for name, (tb, _) in HIDDEN.items():
         # each is tested on a testbed kind where it can act (effects.applicable_effects)

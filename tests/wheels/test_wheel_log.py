@@ -100,8 +100,10 @@ def test_saturated_commands_are_reported_not_clipped():
     assert_allclose(log.column("wc1"), df["wc1"])  # kept as logged
     check = check_log(log)
     assert check.to_json()["wheel_saturation"][0]["rows"] == [10, 11, 12, 40]
-    # replay and the fits do not take wheel logs yet: said, not attempted
-    assert not check.tools["replay"][0] and "reaction-wheel" in check.tools["replay"][1]
+    # replay and the fits take wheel logs with their wheel speeds, and say so without
+    assert check.tools["replay"][0] and check.tools["discrepancy"][0]
+    bare = check_log(Log(df.drop(columns=["ws1"]), source="bare.csv", testbed=log.testbed))
+    assert not bare.tools["identify"][0] and "missing ws1" in bare.tools["identify"][1]
 
 
 def test_import_map_knows_rpm_and_mN_m(tmp_path):

@@ -71,12 +71,19 @@ def tool_use(log: Log, quality: LogQuality) -> dict[str, tuple[bool, str]]:
         for tool in ("simulate replay", "identify", "discrepancy", "replay"):
             out[tool] = (False, why)
     if tb is not None and tb.wheels is not None:
-        why = (
-            "reaction-wheel logs are not replayed or fitted yet: the wheel speeds ws and "
-            "commands wc do not reach the model's states and inputs there"
+        ws = [f"ws{i}" for i in range(1, tb.wheels.n + 1)]
+        missing = [c for c in ws if not log.has(c)]
+        if missing:
+            why = (
+                f"missing {', '.join(missing)}: a reaction-wheel rig's fits start from the "
+                "measured wheel speeds"
+            )
+            for tool in ("identify", "discrepancy", "replay"):
+                out[tool] = (False, why)
+        out["simulate replay"] = (
+            False,
+            "a reaction-wheel log is replayed with `replay` (the wheel commands drive the model)",
         )
-        for tool in ("simulate replay", "identify", "discrepancy", "replay"):
-            out[tool] = (False, why)
     if tb is None:
         out["balance"] = (False, "no testbed given")
     elif tb.kind != "platform":
