@@ -60,6 +60,5 @@ def test_wheel_coulomb_friction_is_named(friction_log):
 
 def test_a_wheel_log_without_wheel_speeds_is_refused(friction_log):
     tb, log = friction_log
-    bare = Log(log.data.drop(columns=["ws1"]), source="nows.csv", testbed=tb)
-    with pytest.raises(InputError, match=r"nows\.csv: missing ws1"):
-        ab.discrepancy(tb, [bare])
+    with pytest.raises(InputError, match=r"nows\.csv: missing column 'ws1'"):
+        ab.discrepancy(tb, [Log(log.data.drop(columns=["ws1"]), source="nows.csv", testbed=tb)])

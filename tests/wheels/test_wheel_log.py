@@ -102,8 +102,6 @@ def test_saturated_commands_are_reported_not_clipped():
     assert check.to_json()["wheel_saturation"][0]["rows"] == [10, 11, 12, 40]
     # replay and the fits take wheel logs with their wheel speeds, and say so without
     assert check.tools["replay"][0] and check.tools["discrepancy"][0]
-    bare = check_log(Log(df.drop(columns=["ws1"]), source="bare.csv", testbed=log.testbed))
-    assert not bare.tools["identify"][0] and "missing ws1" in bare.tools["identify"][1]
 
 
 def test_import_map_knows_rpm_and_mN_m(tmp_path):

@@ -70,16 +70,7 @@ def tool_use(log: Log, quality: LogQuality) -> dict[str, tuple[bool, str]]:
         why = quality.gyro_disagreement[0]
         for tool in ("simulate replay", "identify", "discrepancy", "replay"):
             out[tool] = (False, why)
-    if tb is not None and tb.wheels is not None:
-        ws = [f"ws{i}" for i in range(1, tb.wheels.n + 1)]
-        missing = [c for c in ws if not log.has(c)]
-        if missing:
-            why = (
-                f"missing {', '.join(missing)}: a reaction-wheel rig's fits start from the "
-                "measured wheel speeds"
-            )
-            for tool in ("identify", "discrepancy", "replay"):
-                out[tool] = (False, why)
+    if tb is not None and tb.wheels is not None:  # a wheel log always has its ws (io.log)
         out["simulate replay"] = (
             False,
             "a reaction-wheel log is replayed with `replay` (the wheel commands drive the model)",
