@@ -24,8 +24,8 @@ from airbearing.design.export import ExportSpec, c_sources
 from airbearing.errors import InputError
 from airbearing.io.log import Log, read_log
 
-__all__ = ["DOUBLE_BOUND", "FLOAT_BOUND", "CFLAGS", "ReplayCheck", "find_compiler",
-           "compile_harness", "replay_check"]  # fmt: skip
+__all__ = ["DOUBLE_BOUND", "FLOAT_BOUND", "CFLAGS", "CompiledStep", "ReplayCheck",
+           "find_compiler", "compile_harness", "replay_check"]  # fmt: skip
 
 #: Largest command difference accepted in double precision (units of the command).
 DOUBLE_BOUND = 1e-9
@@ -123,6 +123,75 @@ def _columns(log: Log, names, source: str) -> np.ndarray:
     return data[list(names)].to_numpy(dtype=float)
 
 
+class CompiledStep:
+    """``NAME_step`` of ``spec`` compiled with its harness in a temporary folder.
+
+    Use as a context manager (the folder is removed on exit), or call :meth:`close`.
+
+    Parameters
+    ----------
+    spec : ExportSpec
+    real : {"double", "float"}
+    name : str
+        The C name of the temporary build.
+    compiler : str, optional
+        Default :func:`find_compiler`.
+    """
+
+    def __init__(self, spec: ExportSpec, real: str = "double", name: str = "ctl",
+                 compiler: str | None = None) -> None:  # fmt: skip
+        self.spec, self.real, self.name = spec, real, name
+        self._tmp = tempfile.TemporaryDirectory(prefix="airbearing-export-")
+        self.files = c_sources(spec, name, real, harness=True)
+        self.exe = compile_harness(self.files, name, Path(self._tmp.name), compiler)
+
+    def __enter__(self) -> CompiledStep:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def close(self) -> None:
+        self._tmp.cleanup()
+
+    def run(self, rows) -> np.ndarray:
+        """Commands ``(n, NU)`` for measurement and reference rows ``(n, NY + NR)``, from
+        ``NAME_init``'s state."""
+        rows = np.atleast_2d(np.asarray(rows, dtype=float))
+        text = "\n".join(",".join(repr(float(v)) for v in row) for row in rows) + "\n"
+        proc = subprocess.run([str(self.exe)], input=text, capture_output=True, text=True,
+                              check=False)  # fmt: skip
+        if proc.returncode != 0:
+            raise RuntimeError(f"the compiled controller failed: {proc.stderr.strip()}")
+        lines = [ln for ln in proc.stdout.splitlines() if ln.strip()]
+        nu = len(self.spec.u)
+        got = np.array([[float(v) for v in ln.split(",")] for ln in lines]).reshape(-1, nu)
+        if got.shape[0] != rows.shape[0]:
+            raise RuntimeError(f"the compiled controller gave {got.shape[0]} rows for {len(rows)}")
+        return got
+
+    def check(self, log) -> ReplayCheck:
+        """Replay ``log`` (a Log or a log file) and compare with its command columns."""
+        source = "<log>"
+        if not isinstance(log, Log):
+            source = os.fspath(log)
+            log = read_log(log)
+        spec = self.spec
+        ins = _columns(log, [s.name for s in spec.y] + [s.name for s in spec.r], source)
+        want = _columns(log, [s.name for s in spec.u], source)
+        got = self.run(ins)
+        diff = np.abs(got - want)
+        per = {s.name: float(diff[:, i].max(initial=0.0)) for i, s in enumerate(spec.u)}
+        return ReplayCheck(
+            max_diff=float(diff.max(initial=0.0)),
+            per_command=per,
+            rows=len(want),
+            bound=DOUBLE_BOUND if self.real == "double" else FLOAT_BOUND,
+            real=self.real,
+            commands=got,
+        )
+
+
 def replay_check(spec: ExportSpec, log, *, real: str = "double", name: str = "ctl",
                  compiler: str | None = None) -> ReplayCheck:  # fmt: skip
     """Replay ``log`` row by row through the compiled C of ``spec``.
@@ -142,31 +211,11 @@ def replay_check(spec: ExportSpec, log, *, real: str = "double", name: str = "ct
     Returns
     -------
     ReplayCheck
+
+    Raises
+    ------
+    InputError
+        No C compiler, a log without the columns the controller reads or writes.
     """
-    source = "<log>"
-    if not isinstance(log, Log):
-        source = os.fspath(log)
-        log = read_log(log)
-    ins = _columns(log, [s.name for s in spec.y] + [s.name for s in spec.r], source)
-    want = _columns(log, [s.name for s in spec.u], source)
-    files = c_sources(spec, name, real, harness=True)
-    with tempfile.TemporaryDirectory(prefix="airbearing-export-") as tmp:
-        exe = compile_harness(files, name, Path(tmp), compiler)
-        text = "\n".join(",".join(repr(float(v)) for v in row) for row in ins) + "\n"
-        proc = subprocess.run([str(exe)], input=text, capture_output=True, text=True, check=False)
-    if proc.returncode != 0:
-        raise RuntimeError(f"the compiled controller failed: {proc.stderr.strip()}")
-    lines = [ln for ln in proc.stdout.splitlines() if ln.strip()]
-    got = np.array([[float(v) for v in ln.split(",")] for ln in lines]).reshape(-1, len(spec.u))
-    if got.shape != want.shape:
-        raise RuntimeError(f"the compiled controller gave {got.shape[0]} rows for {len(want)}")
-    diff = np.abs(got - want)
-    per = {s.name: float(diff[:, i].max(initial=0.0)) for i, s in enumerate(spec.u)}
-    return ReplayCheck(
-        max_diff=float(diff.max(initial=0.0)),
-        per_command=per,
-        rows=len(want),
-        bound=DOUBLE_BOUND if real == "double" else FLOAT_BOUND,
-        real=real,
-        commands=got,
-    )
+    with CompiledStep(spec, real, name, compiler) as step:
+        return step.check(log)

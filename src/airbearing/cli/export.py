@@ -133,13 +133,31 @@ def export(
             f"({worst}), bound {res.bound:g} ({real})"
         )
         if not res.ok:
+            hint = _ideal_hint(tb, loop, g, steering, ideal, check, real, name)
             raise InputError(
                 f"--check {check}: largest command difference {res.max_diff:.3g} exceeds the "
                 f"bound {res.bound:g}: the log is not a run of this controller (testbed, law, "
-                "gains, --ideal) from its first sample"
+                f"gains, --ideal) from its first sample{hint}"
             )
     for f, p in paths.items():
         out.text(p, sources[f])
     out.commit()
     for p in paths.values():
         typer.echo(f"wrote {p}")
+
+
+def _ideal_hint(tb, loop, gains, steering, ideal, log, real, name) -> str:
+    """``; it is a run of the --ideal controller ...`` when the other variant matches."""
+    if loop != "attitude" or ideal:
+        return ""
+    from airbearing.analysis.export_check import replay_check
+    from airbearing.design.export import export_spec
+
+    other = replay_check(export_spec(tb, loop, gains=gains, steering=steering, ideal=True), log,
+                         real=real, name=name)  # fmt: skip
+    if other.ok:
+        return (
+            f" (it matches the controller of 'simulate --ideal', {other.max_diff:.3g}: "
+            "export with --ideal to replay it)"
+        )
+    return ""
