@@ -170,9 +170,8 @@ class CompiledStep:
             raise RuntimeError(f"the compiled controller gave {got.shape[0]} rows for {len(rows)}")
         return got
 
-    def check(self, log) -> ReplayCheck:
+    def check(self, log, source: str = "<log>") -> ReplayCheck:
         """Replay ``log`` (a Log or a log file) and compare with its command columns."""
-        source = "<log>"
         if not isinstance(log, Log):
             source = os.fspath(log)
             log = read_log(log)
@@ -217,5 +216,11 @@ def replay_check(spec: ExportSpec, log, *, real: str = "double", name: str = "ct
     InputError
         No C compiler, a log without the columns the controller reads or writes.
     """
+    source = "<log>"
+    if not isinstance(log, Log):
+        source = os.fspath(log)
+        log = read_log(log)
+    names = [s.name for s in spec.y + spec.r + spec.u]
+    _columns(log, names, source)  # before compiling: a log of another loop is bad input
     with CompiledStep(spec, real, name, compiler) as step:
-        return step.check(log)
+        return step.check(log, source)
