@@ -29,10 +29,12 @@ __all__ = ["DOUBLE_BOUND", "FLOAT_BOUND", "CFLAGS", "CompiledStep", "ReplayCheck
 
 #: Largest command difference accepted in double precision (units of the command).
 DOUBLE_BOUND = 1e-9
-#: Largest command difference accepted in float: measured on the 180 deg slews of cmg-yaw
-#: (all four steering laws, 40 s) and the balancing runs, with a margin; see
-#: docs/how-to/export.md.
-FLOAT_BOUND = 1e-5
+#: Largest command difference accepted in float (units of the command: rad/s, m, A m^2).
+#: Measured on cmg-yaw's 90 and 180 deg ideal slews, 40 s, all four steering laws, seed 001's
+#: and tuned gains: at most 1.5e-5 rad/s (of the 1.13 rad/s rate limit; float rounding in
+#: the attitude estimate and integral, amplified near singular gimbal sets), and on the
+#: balancing runs: 2e-9 A m^2, 1e-11 m; a bound 7 times the worst measured.
+FLOAT_BOUND = 1e-4
 #: The flags every export must compile with.
 CFLAGS = ("-std=c99", "-pedantic", "-Wall", "-Wextra", "-Werror")
 

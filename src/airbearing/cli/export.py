@@ -66,7 +66,7 @@ def export(
         Path | None,
         typer.Option(
             help="Replay this closed-loop log through the compiled C and print the largest "
-            "command difference (exit 2 beyond the bound: 1e-9 double, 1e-5 float)."
+            "command difference (exit 2 beyond the bound: 1e-9 double, 1e-4 float)."
         ),
     ] = None,
     force: Force = False,
