@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import subprocess
+from pathlib import Path
 from typing import get_args
 
 import numpy as np
@@ -162,3 +163,22 @@ def test_balancing_gains_file_reaches_the_law(tmp_path):
         "static const balancing_mixed_real balancing_mixed_gains[3] = {0.002, 0.003, 4e-05};"
         in (out / "balancing_mixed.c").read_text()
     )
+
+
+def test_the_tutorial_chain_runs_as_written(tmp_path, monkeypatch):
+    """The commands of the tutorial's "Tune, simulate, export, fly" step, verbatim, on a gains
+    file like step 2's (tuning itself is tested with the tuner)."""
+    c_compiler()
+    page = Path(__file__).parents[2] / "docs" / "tutorials" / "slew-tune-report.md"
+    section = page.read_text().split("## 4. Tune, simulate, export, fly", 1)[1]
+    block = section.split("```sh", 1)[1].split("```", 1)[0]
+    commands = [ln.split() for ln in block.strip().splitlines()]
+    assert [c[1] for c in commands] == ["simulate", "export", "export"]
+    monkeypatch.chdir(tmp_path)
+    _gains_file(tmp_path).rename(tmp_path / "gains.json")
+    for cmd in commands:
+        assert cmd[0] == "airbearing"
+        assert run(cmd[1:]) == 0, " ".join(cmd)
+    assert (tmp_path / "rig" / "yaw_ctl_main.c").is_file()
+    meta = json.loads((tmp_path / "rig" / "yaw_ctl.json").read_text())
+    assert meta["real"] == "float" and meta["lowpass"] == 0.25 and meta["gains"] == TUNED
