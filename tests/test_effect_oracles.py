@@ -314,4 +314,6 @@ def test_effect_matches_its_formats_formula(tb_id, name, value, applies):
 def test_every_formats_effect_is_checked():
     from airbearing.io.vocabulary import EFFECTS
 
-    assert set(VALUES) == set(EFFECTS)
+    # the wheel_* effects act on reaction wheels, which none of these testbeds has: their
+    # oracles are in tests/wheels/test_wheel_model.py
+    assert set(VALUES) == {n for n in EFFECTS if not n.startswith("wheel_")}

@@ -137,6 +137,8 @@ def test_cmg_3dof_conserves_total_momentum_in_lab_frame(cmg):
 def test_every_effect_changes_the_model(name, platform, cmg):
     """Each registered effect, switched on, changes xdot or y at a generic state."""
     tb = cmg if name in ("spring_torque", "yaw_imbalance", "gimbal_deadzone") else platform
+    if name.startswith("wheel_"):  # the wheel effects need reaction wheels
+        tb = load_testbed("rw-3axis")
     value = {
         "cm_offset_error": (1e-4, -2e-4, 3e-4),
         "residual_dipole": (0.01, 0.02, 0.03),
@@ -154,6 +156,9 @@ def test_every_effect_changes_the_model(name, platform, cmg):
         u[0:4] = 0.01
     else:
         u[m.index(["bx_lab", "by_lab", "bz_lab"], "u")] = [2e-4, 0, 6e-4]
+    if tb.wheels is not None:  # spinning wheels under a torque command
+        x[m.index(["W1", "W2", "W3", "W4"])] = [50.0, -30.0, 20.0, 10.0]
+        u[m.index(["wc1", "wc2", "wc3", "wc4"], "u")] = [5e-4, -2e-4, 1e-4, 3e-4]
     nb = base.nx
     f0 = np.asarray(base.f(x[:nb], u, base.p0)).ravel()
     f1 = np.asarray(m.f(x, u, m.p0)).ravel()[:nb]

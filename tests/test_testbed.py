@@ -65,7 +65,8 @@ def mutated(kind: str, key: str, value: object) -> dict:
 
 def test_builtin_names():
     assert BUILTIN_TESTBEDS == (
-        "seed000-tabletop", "seed004-platform", "cmg-yaw", "cmg-3dof", "platform-3dof"
+        "seed000-tabletop", "seed004-platform", "cmg-yaw", "cmg-3dof", "rw-yaw", "rw-3axis",
+        "platform-3dof",
     )  # fmt: skip
 
 
@@ -494,6 +495,10 @@ FORMATS_EFFECTS = (
     "gyro_bias",
     "sensor_lag",
     "gimbal_deadzone",
+    "wheel_viscous_friction",
+    "wheel_coulomb_friction",
+    "wheel_torque_error",
+    "wheel_inertia_error",
 )
 SHAPES = {
     "inertia_error": "scalar",
@@ -507,6 +512,10 @@ SHAPES = {
     "gyro_bias": "scalar_or_axes",
     "sensor_lag": "scalar",
     "gimbal_deadzone": "scalar",
+    "wheel_viscous_friction": "scalar_or_wheels",
+    "wheel_coulomb_friction": "scalar_or_wheels",
+    "wheel_torque_error": "scalar_or_wheels",
+    "wheel_inertia_error": "scalar_or_wheels",
 }
 
 
@@ -520,6 +529,14 @@ def test_vocabulary_matches_formats():
 @pytest.mark.parametrize("name", FORMATS_EFFECTS)
 def test_validate_effect_value_by_shape(name):
     shape = EFFECTS[name].shape
+    if shape == "scalar_or_wheels":  # a number, or one per wheel (1 to 6)
+        assert validate_effect_value(name, 0.5, "here") == 0.5
+        assert validate_effect_value(name, [0.5, 0, 0.25, 0], "here") == (0.5, 0.0, 0.25, 0.0)
+        with pytest.raises(InputError, match=r"here: expected a number or a list of 3 numbers"):
+            validate_effect_value(name, [0.5, 0.0], "here", n_wheels=3)
+        with pytest.raises(InputError, match=r"here: expected a number or a list of 1 to 6"):
+            validate_effect_value(name, [0.5] * 7, "here")
+        return
     if shape in ("scalar", "scalar_or_axes"):
         assert validate_effect_value(name, 1, "here") == 1.0
         assert type(validate_effect_value(name, 1, "here")) is float

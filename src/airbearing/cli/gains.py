@@ -31,12 +31,16 @@ LOOPS, SPLITS = get_args(Loop), get_args(Split)
 
 
 #: --loop's help: the default depends on the testbed.
-LOOP_HELP = "The loop to {}; default: attitude on a CMG testbed, balancing on a platform."
+LOOP_HELP = (
+    "The loop to {}; default: attitude on a CMG or reaction-wheel testbed, balancing on a platform."
+)
 
 
 def default_loop(testbed) -> str:
-    """The loop a testbed has: the CMG attitude loop, or a platform's balancing loop."""
-    return "attitude" if testbed.kind == "cmg" else "balancing"
+    """The loop a testbed has: the attitude loop of a CMG or reaction-wheel testbed, or a
+    platform's balancing loop."""
+    wheels = getattr(testbed, "wheels", None) is not None
+    return "attitude" if testbed.kind == "cmg" or wheels else "balancing"
 
 
 #: --split's help: the default depends on the testbed.
@@ -66,6 +70,16 @@ GAIN_UNITS = {
     "balancing": {"K_p": "N m", "K_d": "N m s", "K_dK_i": "N m/s"},
     "attitude": {"K_p": "1/s", "K_i": "1/s^2", "K_w": "-"},
 }
+#: Units of the reaction-wheel attitude gains: the torque itself, T_c = K_p q_v + K_i
+#: int q_v + K_w w in N m.
+WHEEL_GAIN_UNITS = {"K_p": "N m", "K_i": "N m/s", "K_w": "N m s"}
+
+
+def gain_units(testbed, loop: str) -> dict:
+    """The gains' units of ``loop`` on ``testbed`` (:data:`GAIN_UNITS`, wheels apart)."""
+    if loop == "attitude" and getattr(testbed, "wheels", None) is not None:
+        return WHEEL_GAIN_UNITS
+    return GAIN_UNITS.get(loop, {})
 
 
 def _refuse_balancing_options(loop, names) -> None:
@@ -114,7 +128,8 @@ def gains(
     ] = None,
     force: Force = False,
 ) -> None:
-    """Tune the balancing PID or the CMG attitude PID to a specification: the fastest
+    """Tune the balancing PID or the attitude PID (CMG or reaction wheels) to a
+    specification: the fastest
     design (shortest worst-case settling of the linear step) that meets every check at
     every corner of the uncertainty box."""
     out = Outputs(force=force)
@@ -157,7 +172,7 @@ def gains(
     data = res.to_dict()
     out.json(json_path, data)
     out.commit()
-    units = GAIN_UNITS.get(loop, {})
+    units = gain_units(tb, loop)
     echo_table([[k, v, units.get(k, "")] for k, v in res.gains.items()], ["gain", "value", "unit"])
     typer.echo("")
     _echo_checks(data.get("checks") or [], res.met)

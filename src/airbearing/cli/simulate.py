@@ -1,4 +1,5 @@
-"""``airbearing simulate``: a slew of a CMG testbed or a free oscillation of a platform."""
+"""``airbearing simulate``: a slew of a CMG or reaction-wheel testbed or a free oscillation
+of a platform."""
 
 from __future__ import annotations
 
@@ -48,8 +49,8 @@ def simulate(
     scenario: Annotated[
         Scenario | None,
         typer.Option(
-            help="slew (CMG), free (free oscillation) or spindown (spun about z, coasting); "
-            "default: slew on a CMG testbed, free on a platform."
+            help="slew (CMG or reaction wheels), free (free oscillation) or spindown (spun "
+            "about z, coasting); default: slew on a CMG or wheel testbed, free on a platform."
         ),
     ] = None,
     yaw_deg: Annotated[
@@ -64,7 +65,10 @@ def simulate(
     ] = 0,
     steering: Annotated[Steering, typer.Option(help="Slew: steering law (seed 001).")] = "mp",
     rate_limit: Annotated[
-        RateLimit, typer.Option(help="Slew: gimbal-rate limit, scale (seed 001 eq. 4) or clip.")
+        RateLimit,
+        typer.Option(
+            help="Slew: gimbal-rate (CMG) or wheel-torque limit, scale (seed 001 eq. 4) or clip."
+        ),
     ] = "scale",
     ideal: Annotated[bool, typer.Option(help="No noise, no low-pass.")] = False,
     gains: Annotated[
@@ -127,8 +131,11 @@ def simulate(
     log_path = out.plan(output, "-o", (".csv", ".parquet"))
     json_path = out.plan(json_out, "--json", (".json",))
     tb = testbed_arg(testbed)
-    scenario = scenario or ("slew" if tb.kind == "cmg" else "free")
+    wheels = getattr(tb, "wheels", None) is not None
+    scenario = scenario or ("slew" if tb.kind == "cmg" or wheels else "free")
     _refuse_what_does_not_apply(scenario)
+    if wheels:
+        refuse_given(("steering",), f"a CMG steering law; testbed '{tb.name}' turns on wheels")
     _check_numbers(yaw_deg, axis, duration, initial_rate, initial_quaternion, sliders,
                    attitude_noise, spin_rate, jitter)  # fmt: skip
     gaps, glitches, artefacts = _artefacts(scenario, jitter, gap, glitch,

@@ -12,7 +12,7 @@ from airbearing.io.coerce import as_gains
 from airbearing.models import quaternion as quat
 from airbearing.models.cmg import jacobian_normalised, momentum_normalised
 
-__all__ = ["cmg_attitude_controller", "SEED001_GAINS"]
+__all__ = ["cmg_attitude_controller", "SEED001_GAINS", "quaternion_pid", "pid_c0", "PID_STATES"]
 
 #: K_p, K_i, K_w of seed 001 Table 6 (normalised form: torque per h0).
 SEED001_GAINS = (6.0, 0.001, 6.0)
@@ -69,35 +69,20 @@ def cmg_attitude_controller(
     fg = _checked_options(model, form, attitude, lowpass)
     gains = as_gains(gains, GAIN_NAMES)
     tb = model.testbed
-    dt = tb.sensors.dt
     beta, h0, limit = tb.cmg.skew, tb.cmg.h0, tb.cmg.max_gimbal_rate
     opts = {"skew": beta, **(steering_options or {})}  # null motion needs the pyramid's skew
     steer = steering_function(steering, **opts)
 
     y = ca.SX.sym("y", model.ny)
-    c = ca.SX.sym("c", 10)  # filtered rate G (3), attitude estimate (4), PID integral (3)
+    c = ca.SX.sym("c", PID_STATES)  # filtered rate G (3), attitude estimate (4), integral (3)
     ref = ca.SX.sym("q_c", 4)
     g = ca.SX.sym("gains", 3)
     t = ca.SX.sym("t")
     Y = dict(zip(model.y_names, ca.vertsplit(y), strict=True))
-    G_prev, q_prev, integral = c[0:3], c[3:7], c[7:10]
-    if model.dof == 3:
-        w_meas = ca.vertcat(Y["wx"], Y["wy"], Y["wz"])
-    else:
-        w_meas = ca.vertcat(0, 0, Y["wz"])
     delta = ca.vertcat(*[Y[f"d{i}"] for i in range(1, 5)])
     if encoder_resolution > 0:
         delta = encoder_resolution * ca.floor(delta / encoder_resolution + 0.5)
-
-    if attitude == "measured":
-        q_est = ca.vertcat(Y["qw"], Y["qx"], Y["qy"], Y["qz"])
-    else:
-        q_est = quat.normalize(quat.qmul(q_prev, quat.qexp(G_prev * dt)))  # seed 001 eq. 21
-    G = (1 - fg) * G_prev + fg * w_meas  # seed 001 eq. 3
-    q_err = quat.qmul(quat.qconj(quat.normalize(ref)), q_est)  # seed 001 eq. 20
-    qv = q_err[1:4]
-    integral_next = integral + qv * dt
-    T_c = -(g[0] * qv + g[1] * integral_next + g[2] * G)  # seed 001 eq. 19
+    T_c, G, q_est, integral_next = quaternion_pid(model, Y, c, ref, g, fg=fg, attitude=attitude)
     A = jacobian_normalised(delta, beta)
     H = momentum_normalised(delta, beta)
     if form == "normalised":
@@ -113,8 +98,7 @@ def cmg_attitude_controller(
     extra = ca.vertcat(q_est, G, T_c, quat.yaw_of(q_est))
     fn = ca.Function("cmg_attitude", [y, c, ref, g, t], [u, c_next, extra],
                      ["y", "c", "ref", "gains", "t"], ["u", "c_next", "extra"])  # fmt: skip
-    c0 = np.zeros(10)
-    c0[3] = 1.0  # the attitude estimate starts at the identity quaternion
+    c0 = pid_c0()  # the attitude estimate starts at the identity quaternion
     return Controller(
         name=f"cmg_attitude_{steering}",
         function=fn,
@@ -124,6 +108,69 @@ def cmg_attitude_controller(
         ref_names=("qc_w", "qc_x", "qc_y", "qc_z"),
         extra_names=EXTRA_NAMES,
     )
+
+
+#: Controller states of :func:`quaternion_pid`: filtered rate (3), attitude estimate (4),
+#: integral of the quaternion error (3).
+PID_STATES = 10
+
+
+def quaternion_pid(model, Y: dict, c, ref, g, *, fg: float, attitude: str = "gyro"):
+    """The quaternion PID of seed 001 as CasADi expressions, shared by every attitude loop.
+
+    The gyro is low-pass filtered (seed 001 eq. 3); the attitude estimate is propagated with
+    the previous filtered rate (eq. 21) or taken from the measurement (``attitude =
+    "measured"``: the quaternion, or the yaw of a dof-1 bearing); the error quaternion
+    ``q_err = q_c* (x) q`` (eq. 20) feeds ``T_c = -(K_p q_v + K_i int q_v dt + K_w G)``
+    (eq. 19).
+
+    Parameters
+    ----------
+    model : Model
+        Its ``y_names`` name the entries of ``Y``; its testbed gives the sample time.
+    Y : dict
+        Measurement name -> CasADi scalar (rates rad/s, attitude).
+    c : casadi.SX (PID_STATES,)
+        ``G_prev`` (rad/s), the attitude estimate, the integral of ``q_v`` (s).
+    ref : casadi.SX (4,)
+        Commanded quaternion ``q_c`` (scalar first, need not be normalised).
+    g : casadi.SX (3,)
+        ``K_p, K_i, K_w`` in the unit of ``T_c`` (per unit of ``q_v``, ``q_v s``, rad/s).
+    fg : float
+        Low-pass factor ``f_g`` of eq. 3, 0 < f_g <= 1.
+    attitude : {"gyro", "measured"}
+
+    Returns
+    -------
+    T_c, G, q_est, integral_next : casadi.SX
+        Commanded torque (3; the unit of the gains), filtered rate (3), attitude estimate
+        (4) and the next integral (3): ``c_next = [G; q_est; integral_next]``.
+    """
+    dt = model.testbed.sensors.dt
+    G_prev, q_prev, integral = c[0:3], c[3:7], c[7:10]
+    if model.dof == 3:
+        w_meas = ca.vertcat(Y["wx"], Y["wy"], Y["wz"])
+    else:
+        w_meas = ca.vertcat(0, 0, Y["wz"])
+    if attitude == "measured" and model.dof == 3:
+        q_est = ca.vertcat(Y["qw"], Y["qx"], Y["qy"], Y["qz"])
+    elif attitude == "measured":
+        q_est = quat.from_yaw(Y["yaw"])
+    else:
+        q_est = quat.normalize(quat.qmul(q_prev, quat.qexp(G_prev * dt)))  # seed 001 eq. 21
+    G = (1 - fg) * G_prev + fg * w_meas  # seed 001 eq. 3
+    q_err = quat.qmul(quat.qconj(quat.normalize(ref)), q_est)  # seed 001 eq. 20
+    qv = q_err[1:4]
+    integral_next = integral + qv * dt
+    T_c = -(g[0] * qv + g[1] * integral_next + g[2] * G)  # seed 001 eq. 19
+    return T_c, G, q_est, integral_next
+
+
+def pid_c0() -> np.ndarray:
+    """The PID's initial state: no filtered rate, the identity attitude, no integral."""
+    c0 = np.zeros(PID_STATES)
+    c0[3] = 1.0
+    return c0
 
 
 def _checked_options(model, form: str, attitude: str, lowpass: float | None) -> float:

@@ -126,7 +126,7 @@ def scaled_params(
 # --------------------------------------------------------------------------- trim
 
 
-def trim(model: Model, p=None, *, yaw: float = 0.0, gimbals=None) -> TrimPoint:
+def trim(model: Model, p=None, *, yaw: float = 0.0, gimbals=None, wheel_speeds=None) -> TrimPoint:
     """An equilibrium of ``model`` found with CasADi.
 
     Platform: body z along the gravity direction (level, at heading ``yaw``), at rest,
@@ -145,6 +145,9 @@ def trim(model: Model, p=None, *, yaw: float = 0.0, gimbals=None) -> TrimPoint:
         Heading of the trim attitude, rad.
     gimbals : sequence of 4 floats, optional
         Gimbal angles, rad (CMG only).
+    wheel_speeds : sequence of n floats, optional
+        Reaction-wheel speeds relative to the body, rad/s (default the testbed's
+        ``wheels.speeds``); with ``command = "speed"`` the trim commands hold them.
 
     Raises
     ------
@@ -181,9 +184,11 @@ def trim(model: Model, p=None, *, yaw: float = 0.0, gimbals=None) -> TrimPoint:
         x = model.x0(q=quat.from_yaw(yaw), yaw=yaw)
         if tb.field is not None:
             u[model.index(["bx_lab", "by_lab", "bz_lab"], "u")] = tb.field.lab_vec
-        solved = ("s1", "s2", "s3")
-        if model.dof == 3:
+        solved = ("s1", "s2", "s3") if tb.masses is not None else ()
+        if model.dof == 3 and tb.masses is not None:
             u = _solve_sliders(model, x, u, p)
+    if getattr(tb, "wheels", None) is not None:
+        _trim_wheels(model, x, u, wheel_speeds)
     res = float(np.max(np.abs(np.asarray(model.f(x, u, p)).ravel())))
     if res > _TRIM_TOL:
         raise InputError(
@@ -200,6 +205,19 @@ def trim(model: Model, p=None, *, yaw: float = 0.0, gimbals=None) -> TrimPoint:
                     f"+-{tb.masses.travel * 1e3:g} mm"
                 )
     return TrimPoint(model, x, u, p, solved, res, tuple(violations))
+
+
+def _trim_wheels(model: Model, x, u, wheel_speeds) -> None:
+    """Set the wheel speeds of the trim state ``x`` and, for speed-commanded wheels, the
+    commands ``u`` that hold them (in place)."""
+    from airbearing.io.coerce import as_vector
+
+    wh = model.testbed.wheels
+    idx = model.index([f"W{i}" for i in range(1, wh.n + 1)])
+    if wheel_speeds is not None:
+        x[idx] = as_vector(wheel_speeds, "wheel_speeds", wh.n, f"{wh.n} wheel speeds in rad/s")
+    if wh.command == "speed":
+        u[model.index([f"wc{i}" for i in range(1, wh.n + 1)], "u")] = x[idx]
 
 
 def _solve_sliders(model: Model, x, u0, p) -> np.ndarray:

@@ -61,6 +61,13 @@ from airbearing.design.linearise import (
     prune_states,
     trim,
 )
+from airbearing.design.wheels import (
+    WHEEL_GAIN_NAMES,
+    default_wheel_gains,
+    has_wheels,
+    trim_wheel_speeds,
+    wheel_attitude_controller,
+)
 from airbearing.errors import InputError
 from airbearing.io.testbed import Testbed
 from airbearing.models import quaternion as quat
@@ -76,6 +83,7 @@ __all__ = [
     "attitude_loop",
     "make_loop",
     "with_delay",
+    "without_momentum_poles",
 ]
 
 #: Loop kinds the package builds.
@@ -151,6 +159,30 @@ class Loop:
         return self.model.testbed.sensors.dt
 
     @property
+    def wheels(self) -> bool:
+        """True for the attitude loop of a reaction-wheel rig."""
+        return self.kind == "attitude" and has_wheels(self.model.testbed)
+
+    @property
+    def channel_limit(self) -> float:
+        """The limit of each actuator channel: the gimbal-rate limit (rad/s) of a CMG, the
+        motor torque limit (N m) of wheels (of speed-commanded ones, the torque their
+        driver gives, ``Iw (wc - W) / speed_loop_tau``); inf for the balancing loop."""
+        tb = self.model.testbed
+        if self.kind != "attitude":
+            return math.inf
+        if self.wheels:
+            return tb.wheels.max_torque
+        return tb.cmg.max_gimbal_rate
+
+    @property
+    def channel_quantity(self) -> str:
+        """What an actuator channel carries, with its unit (the actuator-peak check's name)."""
+        if self.wheels:
+            return "wheel torque (N m)"
+        return "gimbal rate (rad/s)"
+
+    @property
     def gain_vector(self) -> np.ndarray:
         return np.array([self.gains[k] for k in self.controller.gain_names], dtype=float)
 
@@ -189,6 +221,7 @@ class Loop:
         ]
         ins = list(self.channels) + list(self.disturbances)
         sys = prune_states(full, keep_out, ins)
+        states = list(sys.state_labels)  # indexing the outputs renames the states
         sys = sys[[list(sys.output_labels).index(o) for o in keep_out], :]
         idx = [list(full.input_labels).index(n) for n in ins]
         sys = ct.ss(
@@ -196,7 +229,7 @@ class Loop:
             sys.B[:, idx],
             sys.C,
             sys.D[:, idx],
-            states=list(sys.state_labels),
+            states=states,
             inputs=ins,
             outputs=keep_out,
             name="plant",
@@ -326,12 +359,30 @@ class Loop:
 
     def default_outputs(self) -> list[str]:
         if self.kind == "attitude":
-            return (
+            out = (
                 ["true_yaw", "true_wz"]
                 if self.model.dof == 1
                 else ["true_th_x", "true_th_y", "true_th_z"]
             )
+            if self.wheels and self.model.testbed.wheels.command == "speed":
+                # the wheel speeds: with the commands, the torque the drivers give
+                out += [f"true_W{i}" for i in range(1, self.model.testbed.wheels.n + 1)]
+            return out
         return ["true_th_x", "true_th_y"]
+
+    def stability_poles(self, *, discrete: bool = True) -> np.ndarray:
+        """The closed-loop poles the loop is judged on (:meth:`stability_system`'s).
+
+        On reaction wheels, without the poles of the wheels' stored momentum: a constant
+        wheel speed is an equilibrium at any value, so each momentum direction the loop
+        does not regulate is a pole at z = 1 (s = 0) whose mode moves the wheel speeds
+        (and a speed command with them) and nothing else; it is neutral, not unstable
+        (momentum dumping, not the attitude loop, takes it away).
+        """
+        sys = self.stability_system(discrete=discrete)
+        if not self.wheels:
+            return sys.poles()
+        return without_momentum_poles(sys.A, _body_state_mask(sys.state_labels), discrete)
 
     def stability_system(self, *, discrete: bool = True) -> ct.StateSpace:
         """The closed loop restricted to the states the loop acts on (for its poles)."""
@@ -345,6 +396,48 @@ class Loop:
             check_unused=False,
             name=f"{self.name}_poles",
         )
+
+
+#: |z - 1| (or |s| times the sample time) within which a pole is the wheels' momentum,
+#: and the largest share of its mode on the body and PID states.
+_MOMENTUM_TOL = 1e-8
+_MOMENTUM_SHARE = 1e-6
+
+
+def _body_state_mask(labels) -> np.ndarray:
+    """True for the states of an interconnected wheel loop that a stored-momentum mode
+    leaves at rest: the body's (not ``W<i>``) and the PID's (controller states ``c0..c9``,
+    :data:`~airbearing.design.attitude.PID_STATES`); the delay's and the speed targets'
+    states may move with the wheels."""
+    from airbearing.design.attitude import PID_STATES
+
+    out = []
+    for lbl in labels:
+        name = lbl.split("_", 1)[1] if "_" in lbl else lbl
+        if lbl.startswith("plant_"):
+            out.append(not (name.startswith("W") and name[1:].isdigit()))
+        elif lbl.startswith("controller_c") and name[1:].isdigit():
+            out.append(int(name[1:]) < PID_STATES)
+        else:
+            out.append(False)
+    return np.array(out, dtype=bool)
+
+
+def without_momentum_poles(A, body_mask, discrete: bool = True, dt: float = 1.0) -> np.ndarray:
+    """The eigenvalues of the closed-loop ``A`` without those of stored wheel momentum:
+    at z = 1 (s = 0) within :data:`_MOMENTUM_TOL`, with a mode that leaves the states of
+    ``body_mask`` at rest (share below :data:`_MOMENTUM_SHARE`)."""
+    A = np.asarray(A, dtype=float)
+    if A.size == 0:
+        return np.zeros(0, complex)
+    lam, V = np.linalg.eig(A)
+    at = np.abs(lam - 1) if discrete else np.abs(lam) * dt
+    keep = np.ones(lam.size, dtype=bool)
+    for i in np.nonzero(at < _MOMENTUM_TOL)[0]:
+        v = np.abs(V[:, i])
+        if v[body_mask].max(initial=0.0) <= _MOMENTUM_SHARE * v.max():
+            keep[i] = False
+    return lam[keep]
 
 
 def _gain_dict(names, gains) -> dict:
@@ -594,16 +687,19 @@ def attitude_loop(
     gimbals=None,
     steering: str = "mp",
     delay_samples: int = 1,
+    wheel_options: dict | None = None,
 ) -> Loop:
-    """The CMG attitude loop of seed 001 at a gimbal set.
+    """The attitude loop: seed 001's on a CMG testbed at a gimbal set, or the same
+    quaternion PID on reaction wheels (:mod:`airbearing.design.wheels`).
 
     Parameters
     ----------
     testbed_or_model : Testbed or Model
-        A ``kind = "cmg"`` testbed (dof 1 or 3).
+        A ``kind = "cmg"`` testbed (dof 1 or 3), or a testbed with ``[wheels]``.
     gains : mapping or sequence, optional
-        ``K_p, K_i, K_w`` in the normalised form (torque = h0 times the command);
-        default seed 001 Table 6 (6, 0.001, 6).
+        ``K_p, K_i, K_w``: CMG in the normalised form (torque = h0 times the command),
+        default seed 001 Table 6 (6, 0.001, 6); wheels in N m, N m/s, N m s, default
+        :func:`~airbearing.design.wheels.default_wheel_gains`.
     p : ndarray, optional
         Plant parameters.
     gimbals : (4,) rad, optional
@@ -612,18 +708,41 @@ def attitude_loop(
         Steering law (:data:`airbearing.design.steering.STEERING_LAWS`).
     delay_samples : int
         Computation delay of the discrete loop, samples.
+    wheel_options : dict, optional
+        Wheels only: options of
+        :func:`~airbearing.design.wheels.wheel_attitude_controller` (``attitude``,
+        ``lowpass``, ``saturation``, ``bias_gain``, ``bias_fraction``, ``bias``,
+        ``dump_gain``, ``gyroscopic``). The wheels are trimmed at the speeds the loop
+        holds (the testbed's, with the null-space part at the bias).
     """
     model = _as_model(testbed_or_model)
     tb = model.testbed
-    if model.kind != "cmg":
-        raise InputError(
-            f"{tb.source}: the attitude loop needs a kind = 'cmg' testbed; '{tb.name}' is "
-            f"kind = '{model.kind}'"
-        )
-    g = _gain_dict(tuple(ATTITUDE_GAINS), ATTITUDE_GAINS if gains is None else gains)
-    tp = trim(model, p, gimbals=gimbals)
-    ctl = cmg_attitude_controller(model, steering=steering, gains=tuple(g.values()))
-    channels = _active_channels(model, tp, ctl, ("dd1", "dd2", "dd3", "dd4"))
+    if has_wheels(tb):
+        if gimbals is not None or steering != "mp":
+            raise InputError(
+                f"gimbals, steering: CMG options; testbed '{tb.name}' turns on reaction wheels"
+            )
+        g = _gain_dict(WHEEL_GAIN_NAMES, default_wheel_gains(tb) if gains is None else gains)
+        opts = dict(wheel_options or {})
+        wheel_kw = {k: opts[k] for k in ("bias_fraction", "bias") if k in opts}
+        tp = trim(model, p, wheel_speeds=trim_wheel_speeds(tb, **wheel_kw))
+        ctl = wheel_attitude_controller(model, gains=tuple(g.values()), **opts)
+        if opts:  # the Jacobian cache is keyed by the controller's name
+            ctl = replace(ctl, name=f"{ctl.name}{sorted(opts.items())!r}")
+        cands = tuple(f"wc{i}" for i in range(1, tb.wheels.n + 1))
+        channels = _active_channels(model, tp, ctl, cands)
+    else:
+        if model.kind != "cmg":
+            raise InputError(
+                f"{tb.source}: the attitude loop needs a kind = 'cmg' testbed or a [wheels] "
+                f"table; '{tb.name}' is kind = '{model.kind}' without wheels"
+            )
+        if wheel_options:
+            raise InputError(f"wheel_options: testbed '{tb.name}' has no [wheels] table")
+        g = _gain_dict(tuple(ATTITUDE_GAINS), ATTITUDE_GAINS if gains is None else gains)
+        tp = trim(model, p, gimbals=gimbals)
+        ctl = cmg_attitude_controller(model, steering=steering, gains=tuple(g.values()))
+        channels = _active_channels(model, tp, ctl, ("dd1", "dd2", "dd3", "dd4"))
     lc = _lin_ctrl_cached(model, ctl, tp, channels, "attitude")
     refs = ("yaw_ref",) if model.dof == 1 else ("ref_x", "ref_y", "ref_z")
     dist = ("tau_z",) if model.dof == 1 else DISTURBANCE_INPUTS
@@ -690,7 +809,8 @@ def make_loop(testbed_or_model, loop: str, **options) -> Loop:
     ----------
     testbed_or_model : Testbed or Model
     loop : {"balancing", "attitude"}
-        The balancing loop of a platform with sliders, or the attitude loop of a CMG testbed.
+        The balancing loop of a platform with sliders, or the attitude loop of a CMG
+        testbed or of a reaction-wheel rig.
     **options
         Passed on: ``gains`` (dict, SI; default the seed's), ``split`` (balancing).
 

@@ -612,7 +612,11 @@ def analyse_loop(
     >>> 40 < result.channels["yaw"].phase_margin_deg < 60  # seed gains: 51.7 deg
     True
     """
-    poles = loop.stability_system(discrete=discrete).poles()
+    poles = (
+        loop.stability_poles(discrete=discrete)
+        if hasattr(loop, "stability_poles")
+        else loop.stability_system(discrete=discrete).poles()
+    )
     chans = {}
     for ch in loop.channels:
         Lj = loop.loop_transfer(ch, discrete=discrete)

@@ -16,8 +16,8 @@ _WHERE = {
     ),
     **dict.fromkeys(
         ["BUILTIN_TESTBEDS", "CMG", "DEFAULT_GRAVITY", "DEFAULT_SKEW_DEG", "KINDS", "Body",
-         "Field", "Magnetorquers", "Masses", "Sensors", "Testbed", "load_testbed",
-         "read_testbed", "testbed_from_dict", "testbed_to_dict", "write_testbed"],
+         "Field", "Magnetorquers", "Masses", "Sensors", "Testbed", "WHEEL_COMMANDS", "Wheels",
+         "load_testbed", "read_testbed", "testbed_from_dict", "testbed_to_dict", "write_testbed"],
         "testbed",
     ),
     **dict.fromkeys(
@@ -52,6 +52,8 @@ __all__ = [
     "Masses",
     "Sensors",
     "Testbed",
+    "WHEEL_COMMANDS",
+    "Wheels",
     "load_testbed",
     "read_log",
     "read_testbed",

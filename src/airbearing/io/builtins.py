@@ -7,7 +7,10 @@ Each built-in is one real testbed, its values sourced in comments of its file:
 - ``seed004-platform``: the platform of seed 004's simulations (6.3 kg, 0.465 kg
   balancing masses that reach its 2.6 mm offset, BNO055), dof 3, the two-step testbed;
 - ``cmg-yaw``: seed 001's 4-CMG pyramid on a yaw-only bearing, dof 1;
-- ``cmg-3dof``: the same cluster on a spherical bearing, dof 3.
+- ``cmg-3dof``: the same cluster on a spherical bearing, dof 3;
+- ``rw-yaw``: one reaction wheel (Rocket Lab RW-0.01 values) on a yaw-only bearing, dof 1;
+- ``rw-3axis``: four reaction wheels (3 orthogonal + 1 skew), magnetorquers and a cage
+  field on a spherical bearing, dof 3.
 
 Aliases (:data:`ALIASES`) are older names that load a built-in under their own name:
 ``platform-3dof`` is ``seed000-tabletop``. Light to import (no numpy): the CLI lists
@@ -83,6 +86,18 @@ BUILTINS: tuple[Builtin, ...] = (
         "(seed 001 Table 5).",
         "cmg-3dof.toml",
     ),
+    Builtin(
+        "rw-yaw", "platform", 1,
+        "One reaction wheel (RW-0.01: 1 mN m, 6000 rpm, 0.018 N m s) on a yaw-only "
+        "bearing, J_z = 0.02 kg m^2, gyro and camera yaw.",
+        "rw-yaw.toml",
+    ),
+    Builtin(
+        "rw-3axis", "platform", 3,
+        "Four reaction wheels (3 orthogonal + 1 skew, RW-0.01 values), 0.2 A m^2 "
+        "magnetorquers in an Earth-like cage field, on a spherical bearing.",
+        "rw-3axis.toml",
+    ),
 )  # fmt: skip
 
 #: Older names: alias -> built-in it loads (under the alias's name).
@@ -105,7 +120,7 @@ def builtin_names(*, aliases: bool = True) -> tuple[str, ...]:
     --------
     >>> import airbearing as ab
     >>> ab.builtin_names(aliases=False)
-    ('seed000-tabletop', 'seed004-platform', 'cmg-yaw', 'cmg-3dof')
+    ('seed000-tabletop', 'seed004-platform', 'cmg-yaw', 'cmg-3dof', 'rw-yaw', 'rw-3axis')
     >>> ab.load_testbed("cmg-yaw").body.dof
     1
     """

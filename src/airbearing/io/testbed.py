@@ -41,6 +41,8 @@ __all__ = [
     "Masses",
     "Sensors",
     "Testbed",
+    "Wheels",
+    "WHEEL_COMMANDS",
     "load_testbed",
     "read_testbed",
     "testbed_from_dict",
@@ -63,6 +65,9 @@ _SYMMETRY_RTOL = 1e-9  # relative tolerance of the inertia symmetry check
 _UNIT_NORM_TOL = 1e-6  # |norm - 1| allowed for a rail axis
 _N_GIMBALS = 4
 _IDENTITY3 = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))
+_MAX_WHEELS = 6
+#: Values of ``wheels.command``: the logged command is a motor torque or a wheel speed.
+WHEEL_COMMANDS: tuple[str, ...] = ("torque", "speed")
 _DEG_SEARCH_ULPS = 8  # neighbours tried to find a degree value that reads back exactly
 
 
@@ -257,6 +262,81 @@ def _norm_magnetorquers(raw: Mapping[str, Any], src: str) -> dict[str, Any]:
     }
 
 
+def _per_wheel(value: object, n: int, src: str, key: str, unit: str, **bounds: float) -> tuple:
+    """A number broadcast to ``n`` wheels, or a list of one number per wheel."""
+    if isinstance(value, list | tuple | np.ndarray):
+        if len(value) != n:
+            raise _fail(
+                src,
+                key,
+                f"a number or one per wheel ({n} numbers, {unit}; wheels.axes has {n})",
+                value if not isinstance(value, np.ndarray) else value.tolist(),
+            )
+        return tuple(_number(v, src, key, unit, **bounds) for v in value)
+    return (_number(value, src, key, unit, **bounds),) * n
+
+
+def _norm_wheels(raw: Mapping[str, Any], src: str) -> dict[str, Any]:
+    value = raw["axes"]
+    if isinstance(value, np.ndarray):
+        value = value.tolist()
+    what = (
+        f"1 to {_MAX_WHEELS} spin-axis unit vectors (a list of [x, y, z] rows, one per "
+        "wheel, body axes)"
+    )
+    if not isinstance(value, list | tuple) or not 1 <= len(value) <= _MAX_WHEELS:
+        raise _fail(src, "wheels.axes", what, value)
+    axes = []
+    for i, row in enumerate(value):
+        if isinstance(row, np.ndarray):
+            row = row.tolist()
+        if not isinstance(row, list | tuple) or len(row) != 3:
+            raise _fail(src, "wheels.axes", what, value)
+        if not all(_is_number(v) and math.isfinite(float(v)) for v in row):
+            raise _fail(src, "wheels.axes", what, value)
+        axis = tuple(float(v) for v in row)
+        norm = math.sqrt(sum(a * a for a in axis))
+        if abs(norm - 1.0) > _UNIT_NORM_TOL:
+            raise InputError(
+                f"{src}: key 'wheels.axes': expected unit vectors (norm within "
+                f"{_UNIT_NORM_TOL:g} of 1), got wheel {i + 1} = {list(row)!r} with norm "
+                f"{norm:.9g}; normalise it in the file"
+            )
+        axes.append(axis)
+    n = len(axes)
+    command = raw["command"]
+    if not isinstance(command, str) or command not in WHEEL_COMMANDS:
+        raise _fail(
+            src, "wheels.command", "one of " + ", ".join(repr(c) for c in WHEEL_COMMANDS), command
+        )
+    tau = raw["speed_loop_tau"]
+    if command == "speed":
+        if tau is None:
+            raise InputError(
+                f"{src}: key 'wheels.speed_loop_tau' is required with wheels.command = "
+                "'speed' (s, time constant of the wheel driver's speed loop)"
+            )
+        tau = _number(tau, src, "wheels.speed_loop_tau", "s", gt=0.0)
+    elif tau is not None:
+        raise InputError(
+            f"{src}: key 'wheels.speed_loop_tau' is only for wheels.command = 'speed', but "
+            "command = 'torque'; remove it or set command = 'speed'"
+        )
+    speeds = raw["speeds"]
+    return {
+        "axes": tuple(axes),
+        "inertia": _per_wheel(raw["inertia"], n, src, "wheels.inertia", "kg m^2", gt=0.0),
+        "max_torque": _number(raw["max_torque"], src, "wheels.max_torque", "N m", gt=0.0),
+        "max_speed": _number(raw["max_speed"], src, "wheels.max_speed", "rad/s", gt=0.0),
+        "command": command,
+        "speed_loop_tau": tau,
+        "speed_noise": _number(raw["speed_noise"], src, "wheels.speed_noise", "rad/s", ge=0.0),
+        "speeds": (0.0,) * n
+        if speeds is None or (isinstance(speeds, tuple) and len(speeds) == 0)
+        else _per_wheel(speeds, n, src, "wheels.speeds", "rad/s"),
+    }
+
+
 def _norm_field(raw: Mapping[str, Any], src: str) -> dict[str, Any]:
     return {"lab": _vector3(raw["lab"], src, "field.lab", "T, lab frame")}
 
@@ -432,6 +512,72 @@ class Magnetorquers:
 
 
 @dataclass(frozen=True)
+class Wheels:
+    """Reaction wheels on the platform (kind ``"platform"`` only; FORMATS.md ``[wheels]``).
+
+    Wheel ``i`` spins about the unit vector ``axes[i]`` (body axes) at the speed ``W_i``
+    relative to the body. ``body.inertia`` includes the wheels as if locked.
+
+    Parameters
+    ----------
+    axes : tuple of 3-tuples of float
+        Spin-axis unit vectors, body axes, one per wheel (1 to 6 wheels; norm within
+        1e-6 of 1, never normalised silently). For ``dof = 1`` each is ``(0, 0, +-1)``
+        (checked by :class:`Testbed`).
+    inertia : float or tuple of float
+        kg m^2, each wheel about its spin axis; > 0. A number applies to every wheel;
+        stored as one value per wheel.
+    max_torque : float
+        N m, largest motor torque of each wheel; > 0.
+    max_speed : float
+        rad/s, largest wheel speed relative to the body; > 0.
+    command : {"torque", "speed"}
+        What a logged command ``wc_i`` is: the motor torque (N m), or the wheel speed
+        (rad/s) that the wheel's driver holds.
+    speed_loop_tau : float or None
+        s, time constant of the driver's speed loop; required (> 0) with
+        ``command = "speed"``, None with ``"torque"``.
+    speed_noise : float
+        rad/s, 1-sigma white noise of each logged wheel speed; >= 0, default 0.
+    speeds : tuple of float
+        rad/s, wheel speeds at t = 0 when simulating, one per wheel (a number applies to
+        every wheel); default 0.
+    """
+
+    axes: tuple[tuple[float, ...], ...]
+    inertia: float | tuple[float, ...]
+    max_torque: float
+    max_speed: float
+    command: str = "torque"
+    speed_loop_tau: float | None = None
+    speed_noise: float = 0.0
+    speeds: float | tuple[float, ...] = ()
+
+    def __post_init__(self) -> None:
+        _apply(self, _norm_wheels(_fields_of(self), _MEMORY))
+
+    @property
+    def n(self) -> int:
+        """Number of wheels."""
+        return len(self.axes)
+
+    @property
+    def axes_matrix(self) -> np.ndarray:
+        """Spin-axis unit vectors, body axes, shape (n, 3), one wheel per row."""
+        return np.array(self.axes, dtype=float)
+
+    @property
+    def inertia_vec(self) -> np.ndarray:
+        """Wheel inertias about their spin axes, kg m^2, shape (n,)."""
+        return np.array(self.inertia, dtype=float)
+
+    @property
+    def speeds_vec(self) -> np.ndarray:
+        """Wheel speeds at t = 0, rad/s, shape (n,)."""
+        return np.array(self.speeds, dtype=float)
+
+
+@dataclass(frozen=True)
 class Field:
     """Helmholtz-cage magnetic field, constant in the lab frame.
 
@@ -531,9 +677,10 @@ _TABLE_TYPES: dict[str, type] = {
     "magnetorquers": Magnetorquers,
     "field": Field,
     "cmg": CMG,
+    "wheels": Wheels,
     "sensors": Sensors,
 }
-_PLATFORM_ONLY = ("masses", "magnetorquers")
+_PLATFORM_ONLY = ("masses", "magnetorquers", "wheels")
 _CMG_ONLY = ("cmg",)
 
 
@@ -559,6 +706,8 @@ class Testbed:
         Helmholtz-cage field, if any.
     cmg : CMG or None
         Required for kind ``"cmg"``, not allowed otherwise.
+    wheels : Wheels or None
+        Reaction wheels; only for kind ``"platform"``.
     sensors : Sensors
     effects : dict of str to float, 3-tuple or (yaw_imbalance) 2-tuple of float
         Effects already known to act, by name (:data:`airbearing.io.vocabulary.EFFECTS`).
@@ -581,6 +730,7 @@ class Testbed:
     magnetorquers: Magnetorquers | None = None
     field: Field | None = None
     cmg: CMG | None = None
+    wheels: Wheels | None = None
     sensors: Sensors = dataclasses.field(default_factory=Sensors)
     effects: dict[str, EffectValue] = dataclasses.field(default_factory=dict)
     source: str = dataclasses.field(default=_MEMORY, compare=False)
@@ -621,16 +771,27 @@ class Testbed:
                 f"{src}: table [cmg] is required for kind = 'cmg' (with keys "
                 "'flywheel_inertia' and 'flywheel_speed')"
             )
+        if self.wheels is not None and self.body.dof == 1:
+            for i, axis in enumerate(self.wheels.axes):
+                if not (abs(axis[0]) <= _UNIT_NORM_TOL and abs(axis[1]) <= _UNIT_NORM_TOL):
+                    raise InputError(
+                        f"{src}: key 'wheels.axes': expected [0, 0, 1] or [0, 0, -1] for every "
+                        f"wheel of a dof = 1 bearing (it turns about body z only), got wheel "
+                        f"{i + 1} = {list(axis)!r}"
+                    )
         if not isinstance(self.effects, Mapping):
             raise _fail(src, "effects", "a table of effect names to values", self.effects)
         effects: dict[str, EffectValue] = {}
+        n_wheels = None if self.wheels is None else self.wheels.n
         for effect_name, value in self.effects.items():
             where = f"{src}: key 'effects.{effect_name}'"
             if effect_name not in EFFECTS:
                 raise InputError(
                     f"{where}: unknown effect; valid effects are: {', '.join(EFFECTS)}"
                 )
-            effects[effect_name] = validate_effect_value(effect_name, value, where)
+            effects[effect_name] = validate_effect_value(
+                effect_name, value, where, n_wheels=n_wheels
+            )
         object.__setattr__(self, "effects", effects)
 
     def __hash__(self) -> int:
@@ -717,6 +878,16 @@ _TABLE_KEYS: dict[str, tuple[str, ...]] = {
         "max_gimbal_rate_deg",
         "gimbal_angles",
     ),
+    "wheels": (
+        "axes",
+        "inertia",
+        "max_torque",
+        "max_speed",
+        "command",
+        "speed_loop_tau",
+        "speed_noise",
+        "speeds",
+    ),
     "sensors": ("rate", "gyro_noise", "accel_noise", "lowpass", "gyro", "attitude_noise"),
 }
 #: Optional [masses] keys written by :func:`testbed_to_dict` only when non-zero.
@@ -726,6 +897,7 @@ _REQUIRED: dict[str, tuple[str, ...]] = {
     "masses": ("mass",),
     "field": ("lab",),
     "cmg": ("flywheel_inertia", "flywheel_speed"),
+    "wheels": ("axes", "inertia", "max_torque", "max_speed"),
 }
 _DEFAULT_DOF = 3
 _NORMALISERS = {
@@ -734,6 +906,7 @@ _NORMALISERS = {
     "magnetorquers": _norm_magnetorquers,
     "field": _norm_field,
     "cmg": _norm_cmg,
+    "wheels": _norm_wheels,
     "sensors": _norm_sensors,
 }
 
@@ -828,7 +1001,7 @@ def testbed_from_dict(data: Mapping[str, Any], source: str = _MEMORY) -> Testbed
     data : mapping
         The parsed TOML document (FORMATS.md layout: ``kind``, ``name``,
         ``gravity`` and the tables ``body``, ``masses``, ``magnetorquers``,
-        ``field``, ``cmg``, ``sensors``, ``effects``). SI units; the keys
+        ``field``, ``cmg``, ``wheels``, ``sensors``, ``effects``). SI units; the keys
         ``cmg.skew_deg`` and ``cmg.max_gimbal_rate_deg`` are in degrees and
         deg/s. Missing keys take the documented defaults (``body.dof`` = 3).
     source : str
@@ -984,6 +1157,19 @@ def testbed_to_dict(testbed: Testbed) -> dict[str, Any]:
             _angle_out(cmg, "max_gimbal_rate", c.max_gimbal_rate)
         cmg["gimbal_angles"] = list(c.gimbal_angles)
         out["cmg"] = cmg
+    if testbed.wheels is not None:
+        wh = testbed.wheels
+        out["wheels"] = {
+            "axes": [list(a) for a in wh.axes],
+            "inertia": list(wh.inertia),
+            "max_torque": wh.max_torque,
+            "max_speed": wh.max_speed,
+            "command": wh.command,
+        }
+        if wh.speed_loop_tau is not None:
+            out["wheels"]["speed_loop_tau"] = wh.speed_loop_tau
+        out["wheels"]["speed_noise"] = wh.speed_noise
+        out["wheels"]["speeds"] = list(wh.speeds)
     s = testbed.sensors
     out["sensors"] = {
         "rate": s.rate,

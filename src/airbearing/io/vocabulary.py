@@ -15,12 +15,14 @@ from typing import Literal
 
 from airbearing.errors import InputError
 
-__all__ = ["EFFECTS", "EffectSpec", "EffectValue", "validate_effect_value"]
+__all__ = ["EFFECTS", "MAX_WHEELS", "EffectSpec", "EffectValue", "validate_effect_value"]
 
-Shape = Literal["scalar", "scalar_or_axes", "vector3", "pair"]
-EffectValue = float | tuple[float, float] | tuple[float, float, float]
+Shape = Literal["scalar", "scalar_or_axes", "vector3", "pair", "scalar_or_wheels"]
+EffectValue = float | tuple[float, ...]
 
-_SHAPES: tuple[str, ...] = ("scalar", "scalar_or_axes", "vector3", "pair")
+_SHAPES: tuple[str, ...] = ("scalar", "scalar_or_axes", "vector3", "pair", "scalar_or_wheels")
+#: Most reaction wheels of a testbed (FORMATS.md: 1 to 6 rows of ``wheels.axes``).
+MAX_WHEELS = 6
 
 #: SI: a value this little below a non-strict bound (0 for friction and drag) is the
 #: roundoff of a solver that ended at the bound (an interior-point fit: -7e-19 seen) and
@@ -45,7 +47,8 @@ class EffectSpec:
         ``"scalar"``: one number. ``"scalar_or_axes"``: one number that applies
         to every free body axis, or a list of three (one per body axis).
         ``"vector3"``: a 3-vector in body axes. ``"pair"``: two numbers (the
-        sine and cosine amplitudes of ``yaw_imbalance``).
+        sine and cosine amplitudes of ``yaw_imbalance``). ``"scalar_or_wheels"``: one
+        number for every reaction wheel, or a list with one entry per wheel.
     lower : float or None
         Smallest admissible value of each component, or None for no bound.
     lower_strict : bool
@@ -142,6 +145,36 @@ _SPECS: tuple[EffectSpec, ...] = (
         "scalar",
         lower=0.0,
     ),
+    EffectSpec(
+        "wheel_viscous_friction",
+        "N m s",
+        "wheel bearing: tau_f_i = c_i * W_i, per wheel",
+        "scalar_or_wheels",
+        lower=0.0,  # dissipative
+    ),
+    EffectSpec(
+        "wheel_coulomb_friction",
+        "N m",
+        "wheel bearing: tau_f_i = f_i * sign(W_i), per wheel (smoothed near zero speed)",
+        "scalar_or_wheels",
+        lower=0.0,  # dissipative
+    ),
+    EffectSpec(
+        "wheel_torque_error",
+        "-",
+        "the motor gives (1 + value_i) times the commanded torque, command = torque",
+        "scalar_or_wheels",
+        lower=-1.0,  # (1 + value) > 0: a motor that turns the other way is no error
+        lower_strict=True,
+    ),
+    EffectSpec(
+        "wheel_inertia_error",
+        "-",
+        "Iw_i is (1 + value_i) * Iw_i",
+        "scalar_or_wheels",
+        lower=-1.0,  # (1 + value) > 0 keeps the wheel inertia positive
+        lower_strict=True,
+    ),
 )
 
 #: Every effect name of FORMATS.md, in the order of its table.
@@ -170,7 +203,9 @@ def _component(spec: EffectSpec, value: object, where: str) -> float:
     return x
 
 
-def validate_effect_value(name: str, value: object, where: str) -> EffectValue:
+def validate_effect_value(
+    name: str, value: object, where: str, *, n_wheels: int | None = None
+) -> EffectValue:
     """Check one effect value against the vocabulary and return it normalised.
 
     Parameters
@@ -183,13 +218,17 @@ def validate_effect_value(name: str, value: object, where: str) -> EffectValue:
     where : str
         Location used as the prefix of error messages, for example
         ``"bench.toml: key 'effects.viscous_friction'"``.
+    n_wheels : int, optional
+        Number of reaction wheels of the testbed, when known: a per-wheel list of a
+        ``wheel_*`` effect must have that many entries.
 
     Returns
     -------
     float or tuple of 2 or 3 float
         The value in the unit of :attr:`EffectSpec.unit`: a float for a single
         number, a tuple of three floats (body axes x, y, z) for a list, a tuple of
-        two floats ``(A_s, A_c)`` for a pair.
+        two floats ``(A_s, A_c)`` for a pair, a tuple of one float per wheel for a
+        per-wheel list.
 
     Raises
     ------
@@ -207,6 +246,19 @@ def validate_effect_value(name: str, value: object, where: str) -> EffectValue:
         return _component(spec, value, where)
     if spec.shape == "scalar_or_axes" and _is_number(value):
         return _component(spec, value, where)
+    if spec.shape == "scalar_or_wheels":
+        if _is_number(value):
+            return _component(spec, value, where)
+        count = f"{n_wheels}" if n_wheels is not None else f"1 to {MAX_WHEELS}"
+        expected = f"a number or a list of {count} numbers (one per wheel)"
+        if not isinstance(value, list | tuple) or not 1 <= len(value) <= MAX_WHEELS:
+            raise InputError(f"{where}: expected {expected}, got {value!r}")
+        if n_wheels is not None and len(value) != n_wheels:
+            raise InputError(
+                f"{where}: expected {expected} (wheels.axes has {n_wheels} wheels), "
+                f"got {len(value)} values {list(value)!r}"
+            )
+        return tuple(_component(spec, v, where) for v in value)
     if spec.shape == "pair":
         if not isinstance(value, list | tuple) or len(value) != 2:
             raise InputError(f"{where}: expected a list of 2 numbers [A_s, A_c], got {value!r}")

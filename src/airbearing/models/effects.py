@@ -6,7 +6,12 @@ An effect is a small final object. While a Model is built it sees a
 * ``inertia_scale`` (inertia_error),
 * ``gimbal_rates`` (gimbal_deadzone),
 * ``torque`` (friction, drag, springs, the yaw imbalance, offsets, dipoles),
-* ``rate_measured`` and ``lag`` states (gyro_bias, sensor_lag).
+* ``rate_measured`` and ``lag`` states (gyro_bias, sensor_lag),
+* the reaction wheels' ``wheel_friction`` (bearing torque ``tau_f``), ``wheel_gain`` (the
+  motor's torque factor) and ``wheel_inertia_scale`` (the ``wheel_*`` effects).
+
+A ``wheel_*`` effect has one parameter ``<name>`` for a number (every wheel) or one per
+wheel, ``<name>_1 .. <name>_n``, for a list.
 
 The discrepancy workflow walks :data:`REGISTRY`; a test checks that it names
 exactly the vocabulary of FORMATS.md, so forgetting to register an effect fails.
@@ -22,10 +27,27 @@ import casadi as ca
 from airbearing.errors import InputError
 from airbearing.io.vocabulary import EFFECTS as VOCABULARY
 
-__all__ = ["REGISTRY", "Effect", "EffectContext", "applicable_effects", "effect_param_names"]
+__all__ = [
+    "REGISTRY",
+    "WHEEL_EFFECTS",
+    "Effect",
+    "EffectContext",
+    "applicable_effects",
+    "effect_param_names",
+]
 
 #: Rate within which Coulomb friction is smoothed to zero (FORMATS.md: "about 1e-3 rad/s").
 COULOMB_SMOOTHING = 1e-3
+#: Wheel speed within which a wheel's Coulomb friction is smoothed to zero, rad/s
+#: (FORMATS.md: "about 0.1 rad/s"): ``f tanh(W / 0.1)``.
+WHEEL_COULOMB_SMOOTHING = 0.1
+#: The effects that act on reaction wheels (they need a ``[wheels]`` table).
+WHEEL_EFFECTS = (
+    "wheel_viscous_friction",
+    "wheel_coulomb_friction",
+    "wheel_torque_error",
+    "wheel_inertia_error",
+)
 _AXES = "xyz"
 
 
@@ -46,6 +68,11 @@ class EffectContext:
     gimbal_rates: Any = None  # (4,) cmg only
     rate_measured: Any = None  # same shape as w
     lag_states: list = field(default_factory=list)  # (symbol, derivative, time constant)
+    n_wheels: int = 0
+    wheel_speeds: Any = None  # (n,) W, rad/s, relative to the body
+    wheel_friction: Any = None  # (n,) bearing torque tau_f, N m (opposes W)
+    wheel_gain: Any = None  # (n,) the motor gives gain x the requested torque
+    wheel_inertia_scale: Any = None  # (n,) Iw_i is scale_i x Iw_i
 
 
 @dataclass(frozen=True)
@@ -55,8 +82,11 @@ class Effect:
     name: str
     stage: str  # "plant" (changes dynamics) or "sensor" (changes the measurement)
 
-    def n_params(self, dof: int, per_axis: bool) -> int:
+    def n_params(self, dof: int, per_axis: bool, n_wheels: int = 0) -> int:
+        """Number of parameters; for a ``wheel_*`` effect ``per_axis`` means per wheel."""
         shape = VOCABULARY[self.name].shape
+        if shape == "scalar_or_wheels":
+            return n_wheels if per_axis and n_wheels else 1
         if shape == "vector3":
             return 3
         if shape == "pair":
@@ -65,12 +95,31 @@ class Effect:
             return 3
         return 1
 
-    def applies(self, kind: str, dof: int, has_field: bool, gyro: bool = True) -> str | None:
+    def applies(
+        self,
+        kind: str,
+        dof: int,
+        has_field: bool,
+        gyro: bool = True,
+        wheel_command: str | None = None,
+    ) -> str | None:
         """None when the effect can act on this testbed, else the reason it cannot.
 
         ``gyro`` is ``sensors.gyro``: without a rate sensor (attitude-only logs) the
         rate-sensor effects ``gyro_bias`` and ``sensor_lag`` have nothing to act on.
+        ``wheel_command`` is ``wheels.command`` (``"torque"`` or ``"speed"``), or None for
+        a testbed without reaction wheels: the ``wheel_*`` effects then have nothing to
+        act on, and ``wheel_torque_error`` needs torque-commanded wheels.
         """
+        if self.name in WHEEL_EFFECTS:
+            if wheel_command is None:
+                return f"{self.name} acts on reaction wheels, and this testbed has no [wheels]"
+            if self.name == "wheel_torque_error" and wheel_command != "torque":
+                return (
+                    "wheel_torque_error scales a commanded motor torque; these wheels are "
+                    "speed-commanded (wheels.command = 'speed'), their driver's loop hides it"
+                )
+            return None
         if self.stage == "sensor" and not gyro:
             return (
                 f"{self.name} changes the measured rate, and this testbed has no rate sensor "
@@ -101,6 +150,29 @@ def _per_axis(ctx: EffectContext, theta):
     if ctx.dof == 1:
         return theta[theta.shape[0] - 1] if theta.shape[0] == 3 else theta[0]
     return theta if theta.shape[0] == 3 else ca.repmat(theta, 3, 1)
+
+
+def _per_wheel(ctx: EffectContext, theta):
+    """Broadcast a 1- or n-parameter vector onto the wheels."""
+    n = ctx.n_wheels
+    return theta if theta.shape[0] == n else ca.repmat(theta[0], n, 1)
+
+
+def _wheel_viscous(ctx, th):
+    ctx.wheel_friction = ctx.wheel_friction + _per_wheel(ctx, th) * ctx.wheel_speeds
+
+
+def _wheel_coulomb(ctx, th):
+    smooth = ca.tanh(ctx.wheel_speeds / WHEEL_COULOMB_SMOOTHING)
+    ctx.wheel_friction = ctx.wheel_friction + _per_wheel(ctx, th) * smooth
+
+
+def _wheel_torque_error(ctx, th):
+    ctx.wheel_gain = ctx.wheel_gain * (1 + _per_wheel(ctx, th))
+
+
+def _wheel_inertia_error(ctx, th):
+    ctx.wheel_inertia_scale = ctx.wheel_inertia_scale * (1 + _per_wheel(ctx, th))
 
 
 def _inertia_error(ctx, th):
@@ -166,6 +238,10 @@ _APPLY = {
     "gyro_bias": _gyro_bias,
     "sensor_lag": _sensor_lag,
     "gimbal_deadzone": _gimbal_deadzone,
+    "wheel_viscous_friction": _wheel_viscous,
+    "wheel_coulomb_friction": _wheel_coulomb,
+    "wheel_torque_error": _wheel_torque_error,
+    "wheel_inertia_error": _wheel_inertia_error,
 }
 _STAGE = {"gyro_bias": "sensor", "sensor_lag": "sensor"}
 
@@ -185,15 +261,23 @@ def get_effect(name: str) -> Effect:
         ) from None
 
 
-def effect_param_names(name: str, dof: int, per_axis: bool) -> list[str]:
-    """Parameter names of effect ``name`` as they appear in a Model's ``p_names``."""
-    n = get_effect(name).n_params(dof, per_axis)
+def effect_param_names(name: str, dof: int, per_axis: bool, n_wheels: int = 0) -> list[str]:
+    """Parameter names of effect ``name`` as they appear in a Model's ``p_names``.
+
+    For a ``wheel_*`` effect ``per_axis`` means one parameter per wheel
+    (``<name>_1 .. <name>_n``, ``n = n_wheels``); else one, ``<name>``.
+    """
+    n = get_effect(name).n_params(dof, per_axis, n_wheels)
+    if name in WHEEL_EFFECTS:
+        return [name] if not per_axis else [f"{name}_{i}" for i in range(1, n + 1)]
     if n == 2:  # a pair: yaw_imbalance's sine and cosine amplitudes
         return [f"{name}_s", f"{name}_c"]
     return [name] if n == 1 else [f"{name}_{a}" for a in _AXES]
 
 
-def applicable_effects(kind: str, dof: int, has_field: bool, gyro: bool = True) -> list[str]:
+def applicable_effects(
+    kind: str, dof: int, has_field: bool, gyro: bool = True, wheel_command: str | None = None
+) -> list[str]:
     """Names of the registered effects that can act on a testbed of this kind.
 
     Parameters
@@ -204,5 +288,12 @@ def applicable_effects(kind: str, dof: int, has_field: bool, gyro: bool = True) 
         A magnetic field acts (a ``[field]`` table, or a platform whose log may carry one).
     gyro : bool
         ``sensors.gyro``; False drops ``gyro_bias`` and ``sensor_lag`` (no rate sensor).
+    wheel_command : {"torque", "speed"} or None
+        ``wheels.command`` of a testbed with reaction wheels, None without: the
+        ``wheel_*`` effects apply only with wheels.
     """
-    return [n for n, e in REGISTRY.items() if e.applies(kind, dof, has_field, gyro) is None]
+    return [
+        n
+        for n, e in REGISTRY.items()
+        if e.applies(kind, dof, has_field, gyro, wheel_command) is None
+    ]

@@ -5,15 +5,24 @@ simulated, linearised, fitted and differentiated without being rebuilt.
 
 States ``x``
     platform, dof 3: ``qw qx qy qz wx wy wz``; dof 1: ``yaw wz``;
-    cmg adds ``d1 d2 d3 d4`` (gimbal angles); ``sensor_lag`` adds lagged rates.
+    cmg adds ``d1 d2 d3 d4`` (gimbal angles); a platform with ``[wheels]`` adds
+    ``W1 .. Wn`` (wheel speeds relative to the body, rad/s); ``sensor_lag`` adds lagged
+    rates (always last).
 Inputs ``u`` (held constant over a sample, zero-order hold)
     platform: ``s1 s2 s3`` slider positions (m), ``mx my mz`` dipole (A m^2, body),
     ``bx_lab by_lab bz_lab`` cage field (T, lab frame), ``tau_x tau_y tau_z``
-    disturbance torque (N m, body);
+    disturbance torque (N m, body), then with ``[wheels]`` ``wc1 .. wcn`` (the logged
+    wheel commands: motor torque, N m, or with ``wheels.command = "speed"`` wheel speed,
+    rad/s);
     cmg: ``dd1..dd4`` gimbal rates (rad/s), ``tau_x tau_y tau_z``.
+Parameters ``p``
+    dof 3: ``J_xx J_yy J_zz J_xy J_xz J_yz r_x r_y r_z``; dof 1: ``J_zz``; then ``mass
+    gravity``; ``m_1 m_2 m_3`` with ``[masses]``, ``h0 beta`` for a cmg; ``Iw_1 .. Iw_n``
+    (wheel inertias, kg m^2) with ``[wheels]``; then the effects' parameters.
 Measurement ``y`` (noise free; noise is added by the simulation)
     dof 3: ``qw qx qy qz wx wy wz gx gy gz`` (``g`` the unit gravity direction in body axes);
-    dof 1: ``yaw wz``; cmg adds ``d1..d4``. ``y`` keeps the rates when ``sensors.gyro`` is
+    dof 1: ``yaw wz``; cmg adds ``d1..d4``; ``[wheels]`` adds ``ws1 .. wsn`` (the wheel
+    speeds ``W_i``). ``y`` keeps the rates when ``sensors.gyro`` is
     false (an attitude-only log simply has no rate columns); the rate-sensor effects
     ``gyro_bias`` and ``sensor_lag`` are then refused.
 
@@ -23,6 +32,9 @@ Passive platforms (kind ``"platform"`` without ``[masses]``, usually without
 are no slider parameters ``m_1 m_2 m_3`` in ``p`` and no slider terms without
 ``[masses]``, and no commanded-dipole torque without ``[magnetorquers]``. A passive
 platform is a free rigid body (dof 3) or a yaw-only rotor (dof 1) under its effects.
+
+Reaction wheels (``[wheels]``): the coupled body-wheel dynamics, the motor torque and its
+limits are derived and documented in :mod:`airbearing.models.wheels`.
 """
 
 from __future__ import annotations
@@ -38,10 +50,12 @@ from airbearing.io.testbed import Testbed
 from airbearing.models import quaternion as quat
 from airbearing.models.cmg import momentum_normalised
 from airbearing.models.effects import (
+    WHEEL_EFFECTS,
     EffectContext,
     effect_param_names,
     get_effect,
 )
+from airbearing.models.wheels import body_wheel_rates, motor_torque
 
 __all__ = ["Model", "build_model", "parameter_values", "inertia_from_params", "INERTIA_NAMES"]
 
@@ -145,8 +159,10 @@ class Model:
             p[self.index(k, "p")[0]] = v
         return p
 
-    def x0(self, *, q=None, yaw=0.0, w=None, gimbals=None) -> np.ndarray:
-        """A state vector: attitude, rate (body, rad/s), gimbal angles (default: testbed's)."""
+    def x0(self, *, q=None, yaw=0.0, w=None, gimbals=None, wheels=None) -> np.ndarray:
+        """A state vector: attitude, rate (body, rad/s), gimbal angles and wheel speeds
+        (rad/s, relative to the body; default: the testbed's ``cmg.gimbal_angles`` and
+        ``wheels.speeds``)."""
         x = np.zeros(self.nx)
         if self.dof == 3:
             x[0:4] = [1, 0, 0, 0] if q is None else quat.normalize(np.asarray(q, float))
@@ -160,6 +176,10 @@ class Model:
             i = self.index("d1")[0]
             g = self.testbed.cmg.gimbal_angles if gimbals is None else gimbals
             x[i : i + 4] = g
+        if self.testbed.wheels is not None:
+            i = self.index("W1")[0]
+            n = self.testbed.wheels.n
+            x[i : i + n] = self.testbed.wheels.speeds_vec if wheels is None else wheels
         for i in self.lag_index:  # the lagged gyro starts at the true rate
             x[i] = x[self.index(self.x_names[i].replace("lag_", ""))[0]]
         return x
@@ -271,7 +291,8 @@ def build_model(testbed: Testbed, effects: Mapping | None = None) -> Model:
     p_names, p0, effect_slices = parameter_values(testbed, effects)
     p = ca.SX.sym("p", len(p_names))
     P = {n: p[i] for i, n in enumerate(p_names)}
-    x_names, u_names = _state_input_names(kind, dof)
+    n_wheels = 0 if testbed.wheels is None else testbed.wheels.n
+    x_names, u_names = _state_input_names(kind, dof, n_wheels)
     xp = ca.SX.sym("x", len(x_names))
     u = ca.SX.sym("u", len(u_names))
     U = {n: u[i] for i, n in enumerate(u_names)}
@@ -281,7 +302,7 @@ def build_model(testbed: Testbed, effects: Mapping | None = None) -> Model:
         eff = get_effect(name)
         if eff.stage == "plant":
             eff.apply(ctx, p[effect_slices[name]])
-    f_plant = _plant(kind, dof, ctx, ctx.inertia_scale * J_cr, q, xp, X, u, p, P)
+    f_plant = _plant(testbed, ctx, ctx.inertia_scale * J_cr, q, xp, X, U, u, p, P)
     # ---- measurement effects (may add lag states)
     for name in effects:
         eff = get_effect(name)
@@ -296,7 +317,7 @@ def build_model(testbed: Testbed, effects: Mapping | None = None) -> Model:
         ["x", "u", "p"],
         ["xdot"],
     )
-    y_names, h_fn = _measurement(kind, dof, ctx, q, X, x_all, u, p, P)
+    y_names, h_fn = _measurement(kind, dof, ctx, q, X, x_all, u, p, P, n_wheels)
     n_plant = len(x_names)
     return Model(
         testbed=testbed,
@@ -342,23 +363,37 @@ def parameter_values(testbed: Testbed, effects: Mapping) -> tuple[list, list, di
         par(["m_1", "m_2", "m_3"], testbed.masses.mass_vec)
     elif kind == "cmg":
         par(["h0", "beta"], [testbed.cmg.h0, testbed.cmg.skew])
+    wheels = testbed.wheels
+    n_wheels = 0 if wheels is None else wheels.n
+    if wheels is not None:
+        par([f"Iw_{i}" for i in range(1, n_wheels + 1)], wheels.inertia_vec)
+    command = None if wheels is None else wheels.command
     effect_slices = {}
     for name, value in effects.items():
-        reason = get_effect(name).applies(kind, dof, has_field, testbed.sensors.gyro)
+        reason = get_effect(name).applies(kind, dof, has_field, testbed.sensors.gyro, command)
         if reason:
             raise InputError(f"effect '{name}' cannot act on testbed '{testbed.name}': {reason}")
-        per_axis = np.ndim(value) == 1 and len(value) == 3
-        per_axis = per_axis and name not in ("cm_offset_error", "residual_dipole")
-        names = effect_param_names(name, dof, per_axis)
+        if name in WHEEL_EFFECTS:
+            per_axis = np.ndim(value) == 1
+            if per_axis and len(value) != n_wheels:
+                raise InputError(
+                    f"effect '{name}' on testbed '{testbed.name}': expected a number or a list "
+                    f"of {n_wheels} numbers (one per wheel), got {len(value)} values"
+                )
+        else:
+            per_axis = np.ndim(value) == 1 and len(value) == 3
+            per_axis = per_axis and name not in ("cm_offset_error", "residual_dipole")
+        names = effect_param_names(name, dof, per_axis, n_wheels)
         vals = np.atleast_1d(np.asarray(value, dtype=float))
-        if len(names) == 1 and vals.size == 3:  # per-axis value on a dof-1 bearing: z axis
+        if name not in WHEEL_EFFECTS and len(names) == 1 and vals.size == 3:
+            # a per-axis value on a dof-1 bearing: its z axis
             vals = vals[2:]
         effect_slices[name] = slice(len(p_names), len(p_names) + len(names))
         par(names, vals)
     return p_names, p0, effect_slices
 
 
-def _state_input_names(kind: str, dof: int) -> tuple[list[str], list[str]]:
+def _state_input_names(kind: str, dof: int, n_wheels: int = 0) -> tuple[list[str], list[str]]:
     """The plant's state names and the input names (the layout of the module docstring)."""
     if dof == 3:
         x_names = ["qw", "qx", "qy", "qz", "wx", "wy", "wz"]
@@ -370,6 +405,8 @@ def _state_input_names(kind: str, dof: int) -> tuple[list[str], list[str]]:
     else:
         u_names = ["s1", "s2", "s3", "mx", "my", "mz", "bx_lab", "by_lab", "bz_lab"]
         u_names += ["tau_x", "tau_y", "tau_z"]
+    x_names += [f"W{i}" for i in range(1, n_wheels + 1)]
+    u_names += [f"wc{i}" for i in range(1, n_wheels + 1)]
     return x_names, u_names
 
 
@@ -433,12 +470,23 @@ def _nominal_physics(testbed: Testbed, has_field: bool, xp, X, U, P):
         gimbal_rates=ca.vertcat(*[U[f"dd{i}"] for i in range(1, 5)]) if kind == "cmg" else None,
         rate_measured=w,
     )
+    if testbed.wheels is not None:
+        n = testbed.wheels.n
+        ctx.n_wheels = n
+        ctx.wheel_speeds = ca.vertcat(*[X[f"W{i}"] for i in range(1, n + 1)])
+        ctx.wheel_friction = ca.SX.zeros(n)
+        ctx.wheel_gain = ca.SX.ones(n)
+        ctx.wheel_inertia_scale = ca.SX.ones(n)
     return ctx, J_cr, q
 
 
-def _plant(kind: str, dof: int, ctx, J_eff, q, xp, X, u, p, P) -> ca.Function:
-    """``f_plant(x, u, p) -> xdot``: Euler's equations with the CMG momentum (seed 001)."""
+def _plant(testbed: Testbed, ctx, J_eff, q, xp, X, U, u, p, P) -> ca.Function:
+    """``f_plant(x, u, p) -> xdot``: Euler's equations with the CMG momentum (seed 001) or
+    the reaction wheels (:mod:`airbearing.models.wheels`)."""
+    kind, dof = testbed.kind, testbed.body.dof
     w = ctx.w
+    if testbed.wheels is not None:
+        return _plant_wheels(testbed, ctx, J_eff, q, xp, u, p, P, U)
     if kind == "cmg":
         delta = ca.vertcat(*[X[f"d{i}"] for i in range(1, 5)])
         dd = ctx.gimbal_rates
@@ -458,6 +506,34 @@ def _plant(kind: str, dof: int, ctx, J_eff, q, xp, X, u, p, P) -> ca.Function:
         x_dot = [w, rhs / J_eff]
     if kind == "cmg":
         x_dot.append(dd)
+    return ca.Function("f_plant", [xp, u, p], [ca.vertcat(*x_dot)], ["x", "u", "p"], ["xdot"])
+
+
+def _plant_wheels(testbed: Testbed, ctx, J_locked, q, xp, u, p, P, U) -> ca.Function:
+    """``f_plant`` of a platform with reaction wheels: eqs. (3)-(4) of models/wheels.py."""
+    wh = testbed.wheels
+    n = wh.n
+    Iw = ctx.wheel_inertia_scale * ca.vertcat(*[P[f"Iw_{i}"] for i in range(1, n + 1)])
+    W = ctx.wheel_speeds
+    command = ca.vertcat(*[U[f"wc{i}"] for i in range(1, n + 1)])
+    tau_m = motor_torque(
+        command,
+        W,
+        Iw,
+        ctx.wheel_gain,
+        mode=wh.command,
+        max_torque=wh.max_torque,
+        max_speed=wh.max_speed,
+        speed_loop_tau=wh.speed_loop_tau,
+    )
+    g = tau_m - ctx.wheel_friction
+    w_dot, W_dot = body_wheel_rates(
+        J_locked, ctx.w, ctx.torque, W, Iw, wh.axes_matrix, g, testbed.body.dof
+    )
+    if testbed.body.dof == 3:
+        x_dot = [quat.qdot(q, ctx.w), w_dot, W_dot]
+    else:
+        x_dot = [ctx.w, w_dot, W_dot]
     return ca.Function("f_plant", [xp, u, p], [ca.vertcat(*x_dot)], ["x", "u", "p"], ["xdot"])
 
 
@@ -497,9 +573,9 @@ def _lag_states(ctx, dof: int, xp, u, p, f_plant):
     return lag_names, x_all, lag_fn, lag_init
 
 
-def _measurement(kind: str, dof: int, ctx, q, X, x_all, u, p, P):
+def _measurement(kind: str, dof: int, ctx, q, X, x_all, u, p, P, n_wheels: int = 0):
     """The output names and ``h(x, u, p) -> y``: attitude, measured rate, gravity direction
-    (dof 3) and gimbal angles (CMG)."""
+    (dof 3), gimbal angles (CMG) and wheel speeds (``[wheels]``)."""
     if dof == 3:
         y = [q, ctx.rate_measured, ctx.g_body / P["gravity"]]
         y_names = ["qw", "qx", "qy", "qz", "wx", "wy", "wz", "gx", "gy", "gz"]
@@ -509,5 +585,8 @@ def _measurement(kind: str, dof: int, ctx, q, X, x_all, u, p, P):
     if kind == "cmg":
         y.append(ca.vertcat(*[X[f"d{i}"] for i in range(1, 5)]))
         y_names += ["d1", "d2", "d3", "d4"]
+    if n_wheels:
+        y.append(ctx.wheel_speeds)
+        y_names += [f"ws{i}" for i in range(1, n_wheels + 1)]
     h_fn = ca.Function("h", [x_all, u, p], [ca.vertcat(*y)], ["x", "u", "p"], ["y"])
     return y_names, h_fn

@@ -57,6 +57,7 @@ _WORDS = {
     "dd3": "gimbal 3 rate (rad/s)",
     "dd4": "gimbal 4 rate (rad/s)",
     "yaw": "yaw axis",
+    **{f"wc{i}": f"wheel {i} command" for i in range(1, 7)},
 }
 
 
@@ -264,6 +265,8 @@ def report_for_loop(
     _gains_table(rep, loop)
     for note in loop.notes:
         rep.paragraph(note, note=True)
+    if loop.wheels:
+        rep.paragraph(wheel_note(loop), note=True)
     progress("margins and the worst case over the uncertainty box", 1, 3)
     d = analyse_loop(loop, discrete=True)
     c = analyse_loop(loop, discrete=False)
@@ -344,6 +347,31 @@ def _delay_note(rep: Report, loop: Loop, d, undelayed) -> None:
     )
 
 
+def wheel_note(loop: Loop) -> str:
+    """What the report's loop of a reaction-wheel rig holds: where it is broken, the
+    torque limit, the speed loop's lag, the null-space management."""
+    wh = loop.model.testbed.wheels
+    if wh.command == "torque":
+        act = (
+            f"The loop is broken at each wheel's motor torque command (N m), limited to "
+            f"max_torque = {wh.max_torque:g} N m: the actuator check compares the peak "
+            "torque of the step with it, and the 180 deg slew scales the torques to it"
+        )
+    else:
+        act = (
+            "The loop is broken at each wheel's speed command (rad/s): the wheel's driver "
+            f"holds it with the lag speed_loop_tau = {wh.speed_loop_tau:g} s, which is in "
+            "the plant of every margin here; the controller integrates the wanted torque, "
+            f"limited to max_torque = {wh.max_torque:g} N m, into that command"
+        )
+    idx = loop.model.index([f"W{i}" for i in range(1, wh.n + 1)])
+    speeds = ", ".join(f"{v:.4g}" for v in loop.trim.x[idx])
+    return (
+        f"{act}. The trim holds the {wh.n} wheel(s) at {speeds} rad/s (the testbed's "
+        "speeds with the null-space part at the bias)."
+    )
+
+
 def _gains_table(rep: Report, loop: Loop) -> None:
     """The gains, and for the balancing loop its integral rate K_i = K_dK_i / K_d."""
     gains = [{"gain": k, "value": v} for k, v in loop.gains.items()]
@@ -384,7 +412,10 @@ def _margin_tables(rep: Report, d, c, checks, per, spec: Spec, worst: dict) -> N
             "sliders and magnetorquers act on the same axes, and a slider mass error or a "
             "cage field error moves every channel of its kind at once"
             if mixed
-            else "one error common to every channel, e.g. the flywheel speed in every gimbal's gain"
+            else (
+                "one error common to every channel, e.g. the flywheel speed in every gimbal's "
+                "gain or a torque-constant error of every wheel"
+            )
         )
         rep.paragraph(
             text + ". The table above perturbs one channel at a time, the others at their "

@@ -10,6 +10,7 @@ import numpy as np
 from airbearing.analysis.simulation.simulate import SimResult, simulate
 from airbearing.design.attitude import cmg_attitude_controller
 from airbearing.design.controller import constant_input
+from airbearing.design.wheels import has_wheels, wheel_attitude_controller
 from airbearing.errors import InputError
 from airbearing.io.coerce import as_effects, as_float, as_int, as_testbed, as_vector
 from airbearing.io.testbed import Testbed
@@ -18,7 +19,8 @@ from airbearing.models.model import Model, build_model
 
 __all__ = [
     "SCENARIO_DURATIONS", "LEVEL", "initial_attitude", "slew", "slew_loop", "slew_summary",
-    "free_oscillation", "free_summary", "tilt_note", "spindown",
+    "free_oscillation", "free_summary", "tilt_note", "spindown", "wheel_slew_summary",
+    "SETTLE_BAND_DEG",
 ]  # fmt: skip
 
 #: s, the default run length of each scenario (a seed-001 slew and its settling, a free
@@ -79,14 +81,19 @@ def slew(
     effects: Mapping | None = None,
     gains=None,
     loop: tuple | None = None,
+    wheel_options: dict | None = None,
 ) -> SimResult:
     """A rest-to-rest slew of ``angle_deg`` about ``axis`` with the seed-001 attitude loop.
+
+    On a reaction-wheel rig the same quaternion PID drives the wheels
+    (:func:`~airbearing.design.wheels.wheel_attitude_controller`); the log then has the
+    wheel speeds ``ws1..`` and commands ``wc1..``.
 
     Parameters
     ----------
     testbed : Testbed, str or path-like
-        ``kind = "cmg"`` with a rate gyro (``sensors.gyro = true``); a built-in name or a
-        testbed file is loaded.
+        ``kind = "cmg"`` or with ``[wheels]``, with a rate gyro (``sensors.gyro = true``);
+        a built-in name or a testbed file is loaded.
     angle_deg : float
         Slew angle, deg (the loop takes the shorter way round).
     axis : sequence of 3 float
@@ -102,16 +109,21 @@ def slew(
         Steering law (:mod:`airbearing.design.steering`); ``steering_options`` its options.
     rate_limit_mode : {"scale", "clip"}
         Gimbal-rate limiting: seed 001 eq. 4 scales the whole command, or clip each rate.
+        On wheels: the same choice for the motor torques against ``max_torque``.
     form : str
         Jacobian form of the steering law (``"normalised"`` or ``"eq15"``).
     effects : mapping, optional
         Effects acting in the truth (FORMATS.md names and units).
     gains : dict or sequence of 3 float, optional
         Attitude gains ``{"K_p": ..., "K_i": ..., "K_w": ...}`` (as ``tune(...).gains``
-        gives them) or ``(K_p, K_i, K_w)``, each >= 0; default seed 001's.
+        gives them) or ``(K_p, K_i, K_w)``, each >= 0; default seed 001's (wheels: N m,
+        N m/s, N m s, default :func:`airbearing.design.wheels.default_wheel_gains`).
     loop : (Model, Controller), optional
         The loop to run, default :func:`slew_loop` of these arguments; a campaign passes
         one per structure with this run's values in the Model's ``p0``.
+    wheel_options : dict, optional
+        Wheels only: further options of the wheel controller (``attitude``,
+        ``bias_gain``, ``bias_fraction``, ``bias``, ``dump_gain``, ``gyroscopic``).
 
     Returns
     -------
@@ -134,10 +146,15 @@ def slew(
     -33.2
     """
     testbed = as_testbed(testbed)
-    if testbed.kind != "cmg":
+    if testbed.kind != "cmg" and not has_wheels(testbed):
         raise InputError(
-            f"{testbed.source}: the slew scenario needs a kind = 'cmg' testbed, "
-            f"got '{testbed.kind}'"
+            f"{testbed.source}: the slew scenario needs a kind = 'cmg' testbed or reaction "
+            f"wheels ([wheels]); '{testbed.name}' is kind = '{testbed.kind}' without wheels"
+        )
+    if has_wheels(testbed) and (steering != "mp" or steering_options or form != "normalised"):
+        raise InputError(
+            f"steering '{steering}', steering_options, form: CMG steering options; testbed "
+            f"'{testbed.name}' turns on reaction wheels (allocated by the pseudo-inverse)"
         )
     duration = _duration(duration)
     angle = as_float(angle_deg, "angle_deg", "deg")
@@ -158,7 +175,14 @@ def slew(
             f"{testbed.source}: the seed-001 attitude loop feeds back the gyro rate (eqs. 3, 19), "
             f"and testbed '{testbed.name}' has none (sensors.gyro = false)"
         )
-    if loop is None:
+    if wheel_options is not None and not has_wheels(testbed):
+        raise InputError(f"wheel_options: testbed '{testbed.name}' has no [wheels] table")
+    if loop is None and has_wheels(testbed):
+        loop = slew_loop(
+            testbed, effects, ideal=ideal, gains=gains, saturation=rate_limit_mode,
+            **(wheel_options or {}),
+        )  # fmt: skip
+    elif loop is None:
         loop = slew_loop(
             testbed, effects, ideal=ideal, gains=gains, steering=steering,
             steering_options=steering_options, rate_limit_mode=rate_limit_mode, form=form,
@@ -179,7 +203,9 @@ def slew_loop(
 
     ``effects``, ``ideal`` and ``gains`` as in :func:`slew`; ``steering``: the controller's
     ``steering``, ``steering_options``, ``rate_limit_mode`` and ``form``
-    (:func:`airbearing.design.attitude.cmg_attitude_controller`).
+    (:func:`airbearing.design.attitude.cmg_attitude_controller`), or on a reaction-wheel
+    rig the wheel controller's options
+    (:func:`airbearing.design.wheels.wheel_attitude_controller`).
 
     Returns
     -------
@@ -187,6 +213,9 @@ def slew_loop(
     """
     model = build_model(as_testbed(testbed), as_effects(effects))
     kwargs = {} if gains is None else {"gains": gains}
+    if has_wheels(model.testbed):  # steering: the wheel controller's options
+        ctl = wheel_attitude_controller(model, lowpass=1.0 if ideal else None, **steering, **kwargs)
+        return model, ctl
     ctl = cmg_attitude_controller(model, lowpass=1.0 if ideal else None, **steering, **kwargs)
     return model, ctl
 
@@ -214,6 +243,8 @@ def slew_summary(result: SimResult) -> dict:
         command reversed sign sample after sample) and ``warnings`` (both in words).
     """
     m = result.model
+    if has_wheels(m.testbed):
+        return wheel_slew_summary(result)
     w_idx = m.index(["wx", "wy", "wz"] if m.dof == 3 else ["wz"])
     w = result.x[:, w_idx]
     rate = np.linalg.norm(w, axis=1)
@@ -233,6 +264,82 @@ def slew_summary(result: SimResult) -> dict:
         "final_yaw_deg": float(np.rad2deg(quat.yaw_of(q_end))),
         "duration_s": float(t[-1]),
         **_saturation_and_chatter(result, d),
+    }
+
+
+#: deg, the settling band of a slew: seed 001 Table 6's a_err.
+SETTLE_BAND_DEG = 1.5
+
+
+def wheel_slew_summary(result: SimResult) -> dict:
+    """A reaction-wheel slew's numbers: the attitude ones of :func:`slew_summary` and the
+    wheels'.
+
+    Parameters
+    ----------
+    result : SimResult
+        A :func:`slew` of a testbed with ``[wheels]``.
+
+    Returns
+    -------
+    dict
+        ``peak_rate_deg_s``, ``t_peak_s`` (s), ``final_yaw_error_deg``, ``final_yaw_deg``,
+        ``settling_time_s`` (s: from the start until the attitude error stays within
+        :data:`SETTLE_BAND_DEG`; None when it never does), ``duration_s`` (s);
+        ``wheel_speed_min_rad_s``, ``wheel_speed_max_rad_s``, ``wheel_speed_final_rad_s``
+        (rad/s, one per wheel), ``wheel_momentum_peak_nms`` (N m s, the largest ``|A^T Iw
+        W|``), ``torque_saturated_s`` (s the wheels spent at ``max_torque`` while the
+        loop asked for more) and ``warnings``.
+    """
+    m = result.model
+    wh = m.testbed.wheels
+    w = result.x[:, m.index(["wx", "wy", "wz"] if m.dof == 3 else ["wz"])]
+    rate = np.linalg.norm(w, axis=1)
+    k = int(np.argmax(rate))
+    dt = m.testbed.sensors.dt
+    t = np.append(result.t, result.t[-1] + dt)
+    q = result.x[:, 0:4] if m.dof == 3 else quat.from_yaw(result.x[:, 0])
+    q_ref = quat.normalize(np.vstack([result.reference[:, :4], result.reference[-1:, :4]]))
+    err = quat.qmul(quat.qconj(q_ref), q)
+    err_deg = np.rad2deg(2 * np.arccos(np.minimum(1.0, np.abs(err[:, 0]))))
+    out_of_band = np.nonzero(err_deg > SETTLE_BAND_DEG)[0]
+    if out_of_band.size == 0:
+        settling = 0.0
+    elif out_of_band[-1] == len(err_deg) - 1:
+        settling = None
+    else:
+        settling = float(t[out_of_band[-1] + 1])
+    W = result.x[:, m.index([f"W{i}" for i in range(1, wh.n + 1)])]
+    h = (W * np.asarray(wh.inertia_vec, float)) @ np.asarray(wh.axes_matrix, float)
+    names = list(result.controller.extra_names)
+    sat_s = 0.0
+    if "wsat" in names:
+        sat_s = float(np.count_nonzero(result.extra[:, names.index("wsat")] > 1.0) * dt)
+    warnings = []
+    if sat_s > 0:
+        warnings.append(
+            f"the wheels were at max_torque = {wh.max_torque:g} N m for {sat_s:.2f} s while "
+            "the loop asked for more: the slew was torque-limited"
+        )
+    top = float(np.abs(W).max())
+    if top >= 0.99 * wh.max_speed:
+        warnings.append(
+            f"a wheel reached {top:.4g} rad/s, its max_speed {wh.max_speed:g}: the wheels "
+            "saturated in momentum and could not give the torque asked for"
+        )
+    return {
+        "peak_rate_deg_s": float(np.rad2deg(rate[k])),
+        "t_peak_s": float(t[k]),
+        "final_yaw_error_deg": float(err_deg[-1]),
+        "final_yaw_deg": float(np.rad2deg(quat.yaw_of(q[-1]))),
+        "settling_time_s": settling,
+        "duration_s": float(t[-1]),
+        "wheel_speed_min_rad_s": W.min(axis=0).tolist(),
+        "wheel_speed_max_rad_s": W.max(axis=0).tolist(),
+        "wheel_speed_final_rad_s": W[-1].tolist(),
+        "wheel_momentum_peak_nms": float(np.linalg.norm(h, axis=1).max()),
+        "torque_saturated_s": sat_s,
+        "warnings": warnings,
     }
 
 

@@ -139,6 +139,8 @@ def noise_sigmas(model: Model, attitude_noise: float | None = None) -> np.ndarra
             sig[i] = sensors.accel_noise
         elif name in ("qw", "qx", "qy", "yaw"):  # qw..qy slots carry the rotation vector
             sig[i] = att
+        elif name.startswith("ws") and getattr(model.testbed, "wheels", None) is not None:
+            sig[i] = model.testbed.wheels.speed_noise
     return sig
 
 
@@ -414,7 +416,7 @@ def log_from_arrays(model, t, x, y, u, extra, controller, ref) -> Log:
     """Assemble a FORMATS.md log from a run's arrays (plus ``true_*`` and controller columns)."""
     E = dict(zip(controller.extra_names, extra.T, strict=True))
     cols = log_columns(model, t, x, y, u, yaw=E.get("yaw_est"))
-    if model.kind == "cmg" and model.dof == 1 and "qc_w" in controller.ref_names:
+    if model.dof == 1 and "qc_w" in controller.ref_names:  # a slew: CMG or wheels
         cols["yaw_ref"] = quat.yaw_of(ref[:, :4])
     for k, v in E.items():
         cols.setdefault(k, v)
@@ -445,7 +447,8 @@ def log_columns(model: Model, t, x, y, u, *, yaw=None) -> dict[str, np.ndarray]:
         or ``wz``) only when ``sensors.gyro`` (no rate columns in an attitude-only log);
         ``gx gy gz`` with a gyro on a platform or with accelerometer noise (dof 3);
         ``s1 s2 s3`` only with ``[masses]``, ``mx my mz`` only with ``[magnetorquers]``,
-        ``bx by bz`` when a field is applied; gimbals for a CMG; ``true_*`` states and any
+        ``bx by bz`` when a field is applied, ``ws1..`` with ``[wheels]`` and ``wc1..``
+        when they are driven; gimbals for a CMG; ``true_*`` states and any
         non-zero disturbance torque ``true_tau_*``.
     """
     tb = model.testbed
@@ -483,6 +486,13 @@ def log_columns(model: Model, t, x, y, u, *, yaw=None) -> dict[str, np.ndarray]:
             )
             b_body = quat.rotate_inverse(q, b_lab)
             cols.update(bx=b_body[:, 0], by=b_body[:, 1], bz=b_body[:, 2])
+        if getattr(tb, "wheels", None) is not None:
+            n = tb.wheels.n
+            for i in range(1, n + 1):
+                cols[f"ws{i}"] = Y[f"ws{i}"]
+            if any(np.any(U[f"wc{i}"] != 0) for i in range(1, n + 1)):  # the wheels driven
+                for i in range(1, n + 1):
+                    cols[f"wc{i}"] = U[f"wc{i}"]
     else:
         for i in range(1, 5):
             cols[f"d{i}"] = Y[f"d{i}"]

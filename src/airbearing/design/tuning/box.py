@@ -33,10 +33,13 @@ def offset_range(loop: Loop, spec: Spec) -> tuple[float, float] | None:
     balancing runs: from before seed 004's step two, the testbed's own offset ``r_z`` and
     50 % beyond it (not yet identified), to after it, ``0.02 r_z`` (what step two leaves
     in the worst case, the platform ``airbearing balance`` and seed 000's experiments
-    run on). For seed 004's platform, -3.9 mm to -0.052 mm.
+    run on). For seed 004's platform, -3.9 mm to -0.052 mm. The attitude loop of a
+    reaction-wheel rig keeps the testbed's offset unless ``spec.offset_range`` is given.
     """
     m = loop.model
     if not (m.dof == 3 and m.kind == "platform"):
+        return None
+    if loop.wheels and spec.offset_range is None:  # no balancing run: the testbed's offset
         return None
     if spec.offset_range is not None:
         return tuple(spec.offset_range)

@@ -2,7 +2,8 @@
 ``(s^2 + 2 zeta w s + w^2)(s + r w)``.
 
 The per-axis design model (a pendulum ``J s^2 + k`` for balancing, a rigid body ``J s^2``
-driven by ``h0`` times the command for the CMG loop, seed 001 eq. 19) closed by a PID
+driven by ``h0`` times the command for the CMG loop, seed 001 eq. 19, or by the torque
+itself on reaction wheels) closed by a PID
 has a third-order characteristic polynomial, so ``(w, zeta, r)`` map one to one onto the
 three gains (a balancing ``K_p`` that would be negative is clipped at 0).
 """
@@ -51,6 +52,21 @@ def _family(loop: Loop, stiffness: float | None = None):
             }
 
         return gains
+    if loop.wheels:
+        # torque = K_p q_v + K_i int q_v + K_w w in N m, q_v ~ theta / 2 (seed 001 eq. 19);
+        # the design model the stiffest-to-turn axis (dof 3) or yaw (dof 1)
+        axes = ("J_xx", "J_yy", "J_zz") if m.dof == 3 else ("J_zz",)
+        Jw = max(float(p[m.index(n, "p")[0]]) for n in axes)
+
+        def wheel_gains(w, zeta, ratio):
+            a = ratio * w
+            return {
+                "K_p": 2 * Jw * (w * w + 2 * zeta * w * a),
+                "K_i": 2 * Jw * w * w * a,
+                "K_w": Jw * (2 * zeta * w + a),
+            }
+
+        return wheel_gains
     J = float(p[m.index("J_zz", "p")[0]])
     h0 = float(p[m.index("h0", "p")[0]])
 

@@ -133,16 +133,34 @@ def _actuator_values(loop: Loop, t, y: dict) -> dict:
         mg = [c for c in loop.channels if c.startswith("m")]
         if mg and tb.magnetorquers is not None:
             out["dipole (A m^2)"] = float(max(np.max(np.abs(y[c])) for c in mg))
+    elif loop.wheels:
+        out[loop.channel_quantity] = float(max(np.max(np.abs(v)) for v in wheel_torques(loop, y)))
     else:
         out["gimbal rate (rad/s)"] = float(max(np.max(np.abs(y[c])) for c in loop.channels))
     return out
+
+
+def wheel_torques(loop: Loop, y: dict) -> list:
+    """The motor torque of each active wheel channel (N m) in a response ``y`` (deviations
+    from the trim, where the torques are zero): the command itself, or with ``command =
+    "speed"`` what the driver gives, ``Iw_i (wc_i - W_i) / speed_loop_tau`` (FORMATS.md)."""
+    wh = loop.model.testbed.wheels
+    if wh.command == "torque":
+        return [np.asarray(y[c]) for c in loop.channels]
+    Iw = np.asarray(wh.inertia_vec, float)
+    return [
+        Iw[int(c[2:]) - 1]
+        * (np.asarray(y[c]) - np.asarray(y[f"true_W{c[2:]}"]))
+        / wh.speed_loop_tau
+        for c in loop.channels
+    ]
 
 
 def _actuator_limits(loop: Loop) -> dict:
     """The testbed's actuator limits, by check name (SI)."""
     tb = loop.model.testbed
     if loop.kind == "attitude":
-        return {"gimbal rate (rad/s)": tb.cmg.max_gimbal_rate}
+        return {loop.channel_quantity: loop.channel_limit}
     out = {}
     if tb.masses is not None:
         out["slider speed (m/s)"] = tb.masses.speed

@@ -8,7 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from airbearing.design.linearise import prune_states
-from airbearing.design.loops import Loop
+from airbearing.design.loops import Loop, without_momentum_poles
 from airbearing.design.margins import _PEAK_FRACTION, _disk_margin, _mu_upper, _perron_bounds
 from airbearing.design.tuning.fast_loop import _assemble, _freq, _mats, _step_response
 from airbearing.design.tuning.fast_margins import _SUBGRID, _siso_margins
@@ -22,7 +22,7 @@ from airbearing.design.tuning.responses import (
     _scenario_inputs,
     _step_metrics,
 )
-from airbearing.design.tuning.slew import _slew_response
+from airbearing.design.tuning.slew import _slew_response, slew_limit
 from airbearing.design.tuning.spec import Spec
 
 __all__: list[str] = []
@@ -73,6 +73,8 @@ class _Fast:
             lc = base.with_params(p)
             po = lc.plant(discrete=True, outputs=outs)
             pm = prune_states(po, self.meas, ins)
+            # the body's states (not a wheel speed W<i>): stored momentum leaves them at rest
+            body = np.array([not (x.startswith("W") and x[1:].isdigit()) for x in pm.state_labels])
             pm = pm[list(range(len(self.meas))), :]
             A, B, C, D = _mats(pm)
             nch = len(self.ch)
@@ -83,6 +85,7 @@ class _Fast:
                     "Po": _mats(po),
                     "po_out": list(po.output_labels) + self.ch,
                     "Pm": (A, B, C, D),
+                    "body": body,
                     "P_fr": _freq(A, B[:, :nch], C, D[:, :nch], self.z),
                 }
             )
@@ -93,8 +96,10 @@ class _Fast:
         self.rest = [i for i, (_, _, vertex) in enumerate(corner_set) if not vertex]
         names = list(base.disturbances) + list(base.references)
         self.u = _scenario_inputs(base, names)
-        limit = base.model.testbed.cmg.max_gimbal_rate if base.kind == "attitude" else math.inf
-        self.slew_limit = limit if math.isfinite(limit) else None
+        self.slew_limit = slew_limit(base)
+        # speed-commanded wheels: the controller's last states are the speed targets
+        wh = base.model.testbed.wheels if base.wheels else None
+        self.n_targets = wh.n if wh is not None and wh.command == "speed" else 0
 
     # -------------------------------------------------------------- pieces
 
@@ -199,7 +204,13 @@ class _Fast:
         margin's gain (dB) and phase (deg), ``ml_gm`` and ``ml_pm`` (else they can be added
         later by :meth:`add_simultaneous`)."""
         A = _assemble(c["Pm"], K, self.delay, len(self.meas), len(self.ch))[0]
-        stable = bool(np.all(np.abs(np.linalg.eigvals(A)) < 1))
+        if self.base.wheels:  # without the neutral poles of stored wheel momentum
+            nk, nd = K[0].shape[0], self.delay[0].shape[0]
+            ctrl = np.arange(nk) < nk - self.n_targets
+            mask = np.concatenate([c["body"], ctrl, np.zeros(nd, bool)])
+            stable = bool(np.all(np.abs(without_momentum_poles(A, mask)) < 1))
+        else:
+            stable = bool(np.all(np.abs(np.linalg.eigvals(A)) < 1))
         Lw = self._mimo(c, K, K_fr)
         n = Lw.shape[1]
         S = np.linalg.inv(np.eye(n)[None] + Lw) if n > 1 else None

@@ -68,11 +68,24 @@ def _slew_response(P, K, Dl, nmeas: int, nch: int, iy: int, limit: float, dt: fl
     return overshoot, float((out[-1] + 1) * dt) if out.size else 0.0
 
 
+def slew_limit(loop: Loop) -> float | None:
+    """The channel limit the rate-limited slew scales the commands by: a CMG's gimbal-rate
+    limit (rad/s), torque-commanded wheels' ``max_torque`` (N m, the wheel controller
+    scales its torques the same way); None for other loops and for speed-commanded wheels
+    (their torque limit acts inside the controller, before the target speed)."""
+    if loop.kind != "attitude":
+        return None
+    if loop.wheels and loop.model.testbed.wheels.command != "torque":
+        return None
+    limit = loop.channel_limit
+    return limit if math.isfinite(limit) else None
+
+
 def _loop_slew(loop: Loop):
     """:func:`_slew_response` on ``loop``'s python-control pieces (attitude loops with a
-    gimbal-rate limit; None otherwise)."""
-    limit = loop.model.testbed.cmg.max_gimbal_rate if loop.kind == "attitude" else math.inf
-    if not math.isfinite(limit):
+    limit on their channels, :func:`slew_limit`; None otherwise)."""
+    limit = slew_limit(loop)
+    if limit is None:
         return None
     meas = list(loop.used_measurements())
     target = loop.default_outputs()[0]

@@ -14,7 +14,13 @@ from airbearing.design.tuning.responses import (
     _actuator_values,
     _scenario_run,
 )
-from airbearing.design.tuning.slew import _A_ERR_DEG, _SLEW_DEG, _SLEW_HORIZON, _loop_slew
+from airbearing.design.tuning.slew import (
+    _A_ERR_DEG,
+    _SLEW_DEG,
+    _SLEW_HORIZON,
+    _loop_slew,
+    slew_limit,
+)
 from airbearing.design.tuning.spec import _NOT_APPLICABLE, Check, Spec, _check
 
 __all__ = ["evaluate", "SIMULTANEOUS_GAIN", "SIMULTANEOUS_PHASE"]
@@ -66,7 +72,7 @@ def evaluate(
 
     per, peaks = [], {}
     todo = corners(loop, spec) if corner_set is None else corner_set
-    slew = loop.kind == "attitude" and math.isfinite(loop.model.testbed.cmg.max_gimbal_rate)
+    slew = slew_limit(loop) is not None
     for label, p in todo:
         lc = loop.with_params(p)
         a = analyse_loop(lc, multiloop=False, n_freq=1000)
