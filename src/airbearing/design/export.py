@@ -38,6 +38,12 @@ from airbearing.design.balancing import (
     lyapunov_gains_from_pid,
 )
 from airbearing.design.controller import Controller
+from airbearing.design.wheels import (
+    WHEEL_GAIN_NAMES,
+    default_wheel_gains,
+    has_wheels,
+    wheel_attitude_controller,
+)
 from airbearing.errors import InputError
 from airbearing.io.coerce import as_testbed
 from airbearing.models import quaternion as quat
@@ -231,19 +237,8 @@ def _attitude_spec(testbed, gains, steering: str, ideal: bool) -> ExportSpec:
     ctl = cmg_attitude_controller(
         model, steering=steering, lowpass=1.0 if ideal else None, gains=tuple(g.values())
     )
-    states = _signals(
-        ["G_x", "G_y", "G_z", "qe_w", "qe_x", "qe_y", "qe_z", "i_x", "i_y", "i_z"],
-        {
-            **{f"G_{a}": ("rad/s", f"low-pass filtered rate, body {a}") for a in "xyz"},
-            **{f"qe_{a}": ("-", f"attitude estimate (gyro propagation), {a}") for a in "wxyz"},
-            **{f"i_{a}": ("s", f"integral of the attitude error's vector part, {a}")
-               for a in "xyz"},
-        },
-    )  # fmt: skip
-    if model.dof == 1:
-        r_names, ref_of = ("yaw_ref",), quat.from_yaw  # the log's yaw_ref (simulate.py)
-    else:
-        r_names, ref_of = ("qc_w", "qc_x", "qc_y", "qc_z"), None
+    states = _pid_states()
+    r_names, ref_of = _attitude_reference(model)  # the log's yaw_ref (simulate.py)
     fn, y, r, x, x0 = controller_step(
         model, ctl, u_names=("dd1", "dd2", "dd3", "dd4"), r_names=r_names, ref_of=ref_of,
         x_names=states,
@@ -260,6 +255,62 @@ def _attitude_spec(testbed, gains, steering: str, ideal: bool) -> ExportSpec:
     u = _signals(("dd1", "dd2", "dd3", "dd4"))
     return ExportSpec(fn, _signals(y), _signals(r), x, u, x0, g, testbed.sensors.dt,
                       {"testbed": testbed.name, **meta})  # fmt: skip
+
+
+def _wheel_spec(testbed, gains, ideal: bool) -> ExportSpec:
+    """The reaction-wheel attitude loop as ``simulate`` flies it (``slew_loop``)."""
+    model = build_model(testbed)
+    wh = testbed.wheels
+    n = wh.n
+    g = _gain_values(WHEEL_GAIN_NAMES, default_wheel_gains(testbed) if gains is None else gains,
+                     "attitude")  # fmt: skip
+    ctl = wheel_attitude_controller(model, lowpass=1.0 if ideal else None, gains=g)
+    states = list(_pid_states())
+    speed = wh.command == "speed"
+    if speed:
+        states += [Signal(f"wc{i}_held", "rad/s", f"speed command of wheel {i} (integrated)")
+                   for i in range(1, n + 1)]  # fmt: skip
+    cmd_unit, cmd_what = ("rad/s", "speed") if speed else ("N m", "motor torque")
+    table = {
+        **COLUMNS,
+        **{f"ws{i}": ("rad/s", f"measured speed of wheel {i} relative to the body")
+           for i in range(1, n + 1)},
+        **{f"wc{i}": (cmd_unit, f"{cmd_what} command of wheel {i}, after the torque limit")
+           for i in range(1, n + 1)},
+    }  # fmt: skip
+    u_names = tuple(f"wc{i}" for i in range(1, n + 1))
+    # momentum dumping (a platform with magnetorquers in a cage field): the dipole too
+    dumping = testbed.magnetorquers is not None and testbed.field is not None
+    u_names += ("mx", "my", "mz") if dumping else ()
+    r_names, ref_of = _attitude_reference(model)
+    fn, y, r, x, x0 = controller_step(model, ctl, u_names=u_names, r_names=r_names,
+                                      ref_of=ref_of, x_names=states)  # fmt: skip
+    meta = {"testbed": testbed.name, "loop": "attitude", "actuators": "reaction wheels",
+            "command": wh.command, "max_torque": wh.max_torque, "max_speed": wh.max_speed,
+            "lowpass": 1.0 if ideal else testbed.sensors.lowpass, "ideal": ideal}  # fmt: skip
+    return ExportSpec(fn, _signals(y, table), _signals(r, table), x, _signals(u_names, table),
+                      x0, g, testbed.sensors.dt, meta)  # fmt: skip
+
+
+def _pid_states() -> tuple:
+    """The quaternion PID's states (seed 001 eqs. 3, 19-21), as both attitude loops hold them."""
+    return _signals(
+        ["G_x", "G_y", "G_z", "qe_w", "qe_x", "qe_y", "qe_z", "i_x", "i_y", "i_z"],
+        {
+            **{f"G_{a}": ("rad/s", f"low-pass filtered rate, body {a}") for a in "xyz"},
+            **{f"qe_{a}": ("-", f"attitude estimate (gyro propagation), {a}") for a in "wxyz"},
+            **{f"i_{a}": ("s", f"integral of the attitude error's vector part, {a}")
+               for a in "xyz"},
+        },
+    )  # fmt: skip
+
+
+def _attitude_reference(model):
+    """The attitude loops' reference as logged: ``yaw_ref`` on a yaw bearing (the log's
+    column, turned into the controller's quaternion), else the quaternion ``qc_w..qc_z``."""
+    if model.dof == 1:
+        return ("yaw_ref",), quat.from_yaw
+    return ("qc_w", "qc_x", "qc_y", "qc_z"), None
 
 
 def _balancing_spec(testbed, gains, method: str) -> ExportSpec:
@@ -353,11 +404,18 @@ def export_spec(
         A loop the testbed cannot run, gains that do not fit the loop, an unknown law.
     """
     tb = as_testbed(testbed)
+    if loop == "attitude" and has_wheels(tb):
+        if steering != "mp" or method is not None:
+            raise InputError(
+                f"{tb.source}: '{tb.name}' turns on reaction wheels (pseudo-inverse allocation);"
+                " steering and method are not its options"
+            )
+        return _wheel_spec(tb, gains, bool(ideal))
     if loop == "attitude":
         if tb.kind != "cmg":
             raise InputError(
-                f"{tb.source}: the attitude loop exports the CMG controller of seed 001; "
-                f"'{tb.name}' is kind = '{tb.kind}'"
+                f"{tb.source}: the attitude loop needs a CMG testbed or reaction wheels; "
+                f"'{tb.name}' is kind = '{tb.kind}' without [wheels]"
             )
         from airbearing.design.steering import STEERING_LAWS
 
