@@ -85,3 +85,15 @@ def test_cmg_options_refused_on_wheels():
         export_spec("rw-yaw", "attitude", steering="gsr")
     with pytest.raises(InputError, match="do not fit the attitude loop"):
         export_spec("rw-yaw", "attitude", gains={"K_p": 1.0})
+
+
+def test_cli_refuses_steering_on_wheels_and_names_the_file(tmp_path, capsys):
+    from cli_run import run
+
+    out = tmp_path / "out"
+    assert run(["export", "rw-yaw", "--loop", "attitude", "--steering", "gsr", "-o", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "--steering" in err and "reaction wheels" in err
+    assert not out.exists()
+    assert run(["export", "rw-yaw", "--loop", "attitude", "-o", str(out)]) == 0
+    assert (out / "attitude_wheels.json").is_file()

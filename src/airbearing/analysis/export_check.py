@@ -116,6 +116,11 @@ class ReplayCheck:
 def _columns(log: Log, names, source: str) -> np.ndarray:
     data = log.data
     missing = [n for n in names if n not in data.columns]
+    if missing and missing[0].startswith("qc_"):
+        raise InputError(
+            f"{source}: no column {missing[0]!r}: a dof-3 slew logs no reference; replay it "
+            "from Python with the run's reference (CompiledStep.run)"
+        )
     if missing:
         raise InputError(
             f"{source}: no column {', '.join(repr(m) for m in missing)}; the exported controller "

@@ -26,7 +26,10 @@ def export(
     testbed: Annotated[str, typer.Argument(help="Testbed file or built-in name.")],
     loop: Annotated[
         ExportLoop,
-        typer.Option(help="attitude (CMG, seed 001) or balancing (platform, seeds 000/004)."),
+        typer.Option(
+            help="attitude (seed 001's loop on CMGs or reaction wheels) or balancing "
+            "(platform with sliders, seeds 000/004)."
+        ),
     ],
     output: Annotated[
         Path | None, typer.Option("-o", "--out", help="Folder for NAME.c, NAME.h, NAME.json.")
@@ -38,7 +41,7 @@ def export(
             "simulate and balance use (the seed's)."
         ),
     ] = None,
-    steering: Annotated[Steering, typer.Option(help="Attitude: steering law.")] = "mp",
+    steering: Annotated[Steering, typer.Option(help="Attitude, CMG: steering law.")] = "mp",
     method: Annotated[
         Method | None,
         typer.Option(
@@ -57,7 +60,10 @@ def export(
     real: Annotated[Real, typer.Option(help="C type of every number.")] = "double",
     name: Annotated[
         str | None,
-        typer.Option(help="C name of the controller and its files; default LOOP_LAW."),
+        typer.Option(
+            help="C name of the controller and its files; default attitude_STEERING, "
+            "attitude_wheels or balancing_METHOD."
+        ),
     ] = None,
     harness: Annotated[
         bool, typer.Option(help="Also NAME_main.c: CSV rows on stdin, commands on stdout.")
@@ -85,6 +91,8 @@ def export(
     from airbearing.design.export import check_c_name
 
     tb = testbed_arg(testbed)
+    if loop == "attitude" and getattr(tb, "wheels", None) is not None:
+        refuse_given(("steering",), f"CMG only: '{tb.name}' turns on reaction wheels")
     g = None
     if gains is not None:
         from airbearing.io.gains import read_gains
@@ -100,7 +108,10 @@ def export(
         from airbearing.cli.gains import default_split
 
         method = default_split(tb)
-    name = name or (f"attitude_{steering}" if loop == "attitude" else f"balancing_{method}")
+    if name is None and loop == "attitude":
+        wheels = getattr(tb, "wheels", None) is not None
+        name = "attitude_wheels" if wheels else f"attitude_{steering}"
+    name = name or f"balancing_{method}"
     try:
         check_c_name(name)
     except InputError as e:
