@@ -15,7 +15,7 @@ generated function, as in the simulation, where they are an input of the compile
 
 :func:`export_spec` builds the step for a testbed and a loop; :func:`c_sources` turns it
 into ``NAME.h``, ``NAME.c``, ``NAME.json`` (and ``NAME_main.c``, a CSV harness) with
-CasADi's :class:`casadi.CodeGenerator`: C99, static work arrays on the stack, no heap,
+CasADi's :class:`casadi.CodeGenerator`: C99, fixed-size work arrays on the stack, no heap,
 libm only.
 """
 
