@@ -200,6 +200,22 @@ def test_speed_commanded_wheel_slews_and_logs_speed_commands():
     assert np.abs(log["wc1"] - log["true_W1"]).max() < lag
 
 
+def test_torque_limit_is_respected_and_saturation_reported():
+    # gains four times the default ask for more than max_torque at the start of a 90 deg
+    # slew: the command is held at the limit exactly when the controller logs wsat > 1
+    tb = ab.load_testbed("rw-yaw")
+    g = {k: 4 * v for k, v in default_wheel_gains(tb).items()}
+    r = slew(tb, angle_deg=90.0, duration=10.0, ideal=True, gains=g)
+    log, limit = r.log.data, tb.wheels.max_torque
+    sat = log["wsat"].to_numpy() > 1
+    assert sat.any() and np.abs(log["wc1"]).max() <= limit * (1 + 1e-12)
+    assert np.allclose(np.abs(log["wc1"][sat]), limit, rtol=1e-12)
+    assert np.all(np.abs(log["wc1"][~sat]) < limit)
+    s = slew_summary(r)
+    assert s["torque_saturated_s"] == pytest.approx(sat.sum() * tb.sensors.dt)
+    assert any("max_torque" in w for w in s["warnings"])
+
+
 def test_slew_summary_and_refusals():
     tb = ab.load_testbed("rw-yaw")
     with pytest.raises(InputError, match="CMG steering options"):

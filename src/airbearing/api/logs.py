@@ -39,6 +39,9 @@ class LogCheck:
         Segments, jitter and outliers (:func:`airbearing.io.quality.assess`).
     tools : dict of str to (bool, str)
         Whether each tool can use the log, and why.
+    wheel_saturation : tuple of dict
+        Wheel commands beyond the wheels' limit (:func:`airbearing.io.log.wheel_saturation`:
+        ``column``, ``rows``, ``limit``, ``largest``, ``reason``); reported, not clipped.
     """
 
     log: str
@@ -48,6 +51,7 @@ class LogCheck:
     rate: float
     quality: object = field(repr=False)
     tools: dict = field(repr=False)
+    wheel_saturation: tuple = field(default=(), repr=False)
 
     @property
     def outlier_rows(self) -> tuple[int, ...]:
@@ -59,8 +63,11 @@ class LogCheck:
         """Number of segments (a gap longer than 1.5 sample periods splits the log)."""
         return len(self.quality.segments)
 
+    _wheels: bool = field(default=False, repr=False)
+
     def to_json(self) -> dict:
-        """The ``airbearing log check --json`` contract."""
+        """The ``airbearing log check --json`` contract (``wheel_saturation``: a list, on a
+        testbed with reaction wheels only)."""
         return {
             "log": self.log,
             "testbed": self.testbed,
@@ -68,6 +75,7 @@ class LogCheck:
             "duration": self.duration,
             "rate": self.rate,
             **self.quality.to_json(),
+            **({"wheel_saturation": list(self.wheel_saturation)} if self._wheels else {}),
             "tools": {name: {"usable": ok, "why": why} for name, (ok, why) in self.tools.items()},
         }
 
@@ -81,6 +89,8 @@ class LogCheck:
         ]
         for o in q.outliers:
             lines.append(f"  row {o.row} (t = {time_text(o.t, q.period)} s): {o.reason}")
+        for s in self.wheel_saturation:
+            lines.append(f"  warning: {s['reason']}")
         for name, (ok, why) in self.tools.items():
             lines.append(f"  {name}: {'yes' if ok else 'no'} ({why})")
         return "\n".join(lines)
@@ -137,7 +147,7 @@ def check_log(log, testbed=None) -> LogCheck:
     (1, ())
     """
     from airbearing.io.coerce import as_log, as_testbed
-    from airbearing.io.log import Log
+    from airbearing.io.log import Log, wheel_saturation
     from airbearing.io.tool_use import tool_use
 
     tb = as_testbed(testbed, optional=True)
@@ -158,6 +168,8 @@ def check_log(log, testbed=None) -> LogCheck:
         rate=log.testbed.sensors.rate,
         quality=quality,
         tools=tool_use(log, quality),
+        wheel_saturation=wheel_saturation(log),
+        _wheels=log.testbed.wheels is not None,
     )
 
 

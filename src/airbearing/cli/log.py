@@ -234,6 +234,8 @@ def check(
             f"{ratio:.3g} x 1 / sensors.rate: is sensors.rate = {tb.sensors.rate:g} Hz this "
             "log's rate? (gaps and the noise per sample are judged by it)"
         )
+    for saturated in result.wheel_saturation:
+        typer.echo(f"{'warning':<{width}}  {saturated['reason']}")
     typer.echo(f"{'outliers':<{width}}  {len(quality.outliers)} row(s)")
     for o in quality.outliers:
         typer.echo(f"{'':<{width}}  row {o.row:<6} t = {_t(o.t):<9} s  {o.reason}")

@@ -31,6 +31,7 @@ __all__ = [
     "MAPS",
     "UNITS",
     "ImportMap",
+    "check_wheel_units",
     "import_map_from_dict",
     "raw_columns",
     "read_import_map",
@@ -51,6 +52,15 @@ UNITS: dict[str, dict[str, float]] = {
     "dipole": {"A m^2": 1.0},
     "field": {"T": 1.0},
     "quaternion": {"-": 1.0},
+    "torque": {"N m": 1.0, "mN m": 1e-3},
+    # a wheel command wc is a torque, or a speed for speed-commanded wheels
+    "wheel command": {
+        "N m": 1.0,
+        "mN m": 1e-3,
+        "rad/s": 1.0,
+        "deg/s": math.pi / 180.0,
+        "rpm": 2.0 * math.pi / 60.0,
+    },
 }
 #: The quantity of each log column (its unit table in :data:`UNITS`).
 COLUMN_QUANTITY: dict[str, str] = {
@@ -64,6 +74,8 @@ COLUMN_QUANTITY: dict[str, str] = {
     **{c: "field" for c in ("bx", "by", "bz")},
     **{c: "angle" for c in ("d1", "d2", "d3", "d4")},
     **{c: "rate" for c in ("dd1", "dd2", "dd3", "dd4")},
+    **{f"ws{i}": "rate" for i in range(1, 7)},  # wheel speeds (per wheel: no [frames])
+    **{f"wc{i}": "wheel command" for i in range(1, 7)},
 }
 #: Values of ``[quaternion] maps``.
 MAPS: tuple[str, ...] = ("body_to_lab", "lab_to_body")
@@ -502,3 +514,29 @@ def unwrap(angle: np.ndarray, t: np.ndarray) -> np.ndarray:
         k = np.round((u - s) / (2.0 * np.pi))
         out[seg] = s + 2.0 * np.pi * k
     return out
+
+
+def check_wheel_units(import_map: ImportMap, testbed) -> None:
+    """A wheel command's unit against ``wheels.command``: a torque unit (N m, mN m) for
+    torque-commanded wheels, a rate unit (rad/s, deg/s, rpm) for speed-commanded ones.
+
+    Raises
+    ------
+    InputError
+        Naming the map's key ``units.wcN`` and what the testbed's wheels take.
+    """
+    wheels = getattr(testbed, "wheels", None)
+    if wheels is None:
+        return
+    torque = wheels.command == "torque"
+    valid = UNITS["torque"] if torque else UNITS["rate"]
+    for name in import_map.given_units:
+        if COLUMN_QUANTITY.get(name) != "wheel command":
+            continue
+        unit = import_map.units[name]
+        if unit not in valid:
+            raise InputError(
+                f"{import_map.source}: key 'units.{name}': expected a "
+                f"{'torque' if torque else 'rate'} unit, one of {', '.join(valid)} (testbed "
+                f"{testbed.name!r} has wheels.command = {wheels.command!r}), got {unit!r}"
+            )

@@ -57,11 +57,15 @@ __all__ = [
     "QUATERNION_NORM_TOL",
     "RATE_COLUMNS",
     "REQUIRED_COLUMNS",
+    "WHEEL_COMMAND_COLUMNS",
+    "WHEEL_SPEED_COLUMNS",
     "Log",
     "read_log",
     "time_text",
     "segments_of",
     "validate_log",
+    "wheel_columns",
+    "wheel_saturation",
     "write_log",
 ]
 
@@ -72,6 +76,12 @@ _DIPOLES = ("mx", "my", "mz")
 _FIELDS = ("bx", "by", "bz")
 _GIMBALS = ("d1", "d2", "d3", "d4")
 _GIMBAL_RATES = ("dd1", "dd2", "dd3", "dd4")
+_MAX_WHEELS = 6  # FORMATS.md: 1 to 6 rows of wheels.axes
+#: Measured wheel speeds ``ws1 .. ws6`` (rad/s, relative to the body); a log has
+#: ``ws1 .. wsn`` for the n wheels of its testbed.
+WHEEL_SPEED_COLUMNS: tuple[str, ...] = tuple(f"ws{i}" for i in range(1, _MAX_WHEELS + 1))
+#: Wheel commands ``wc1 .. wc6`` (N m, or rad/s for speed-commanded wheels).
+WHEEL_COMMAND_COLUMNS: tuple[str, ...] = tuple(f"wc{i}" for i in range(1, _MAX_WHEELS + 1))
 
 #: Every column that FORMATS.md defines (all numeric, SI units).
 LOG_COLUMNS: tuple[str, ...] = (
@@ -85,6 +95,8 @@ LOG_COLUMNS: tuple[str, ...] = (
     *_GIMBALS,
     *_GIMBAL_RATES,
     "yaw_ref",
+    *WHEEL_SPEED_COLUMNS,
+    *WHEEL_COMMAND_COLUMNS,
 )
 #: The measured angular-rate columns (rad/s, body axes).
 RATE_COLUMNS: tuple[str, ...] = _RATES
@@ -132,7 +144,9 @@ def REQUIRED_COLUMNS(testbed: Testbed | None = None) -> list[str]:  # noqa: N802
         ``sensors.gyro`` is true (``wx, wy, wz`` for dof 3, ``wz`` for dof 1),
         none when it is false (motion capture); the sliders ``s1, s2, s3`` for
         kind ``"platform"`` with ``[masses]`` (none for a passive platform);
-        the gimbal angles ``d1 .. d4`` for kind ``"cmg"``.
+        the gimbal angles ``d1 .. d4`` for kind ``"cmg"``; the wheel speeds
+        ``ws1 .. wsn`` with ``[wheels]`` (the commands ``wc1 .. wcn`` are optional:
+        all or none).
 
     Notes
     -----
@@ -152,7 +166,98 @@ def REQUIRED_COLUMNS(testbed: Testbed | None = None) -> list[str]:  # noqa: N802
         columns += list(_SLIDERS if testbed.masses is not None else ())
     else:
         columns += list(_GIMBALS)
+    if testbed.wheels is not None:
+        columns += list(wheel_columns(testbed.wheels.n)[0])
     return columns
+
+
+def wheel_columns(n: int) -> tuple[tuple[str, ...], tuple[str, ...]]:
+    """The log columns of ``n`` wheels: ``(ws1 .. wsn, wc1 .. wcn)``."""
+    return WHEEL_SPEED_COLUMNS[:n], WHEEL_COMMAND_COLUMNS[:n]
+
+
+def _check_wheel_columns(data: pd.DataFrame, src: str, testbed: Testbed | None) -> None:
+    """``ws``/``wc`` columns against the testbed's wheel count (FORMATS.md: one per row of
+    ``wheels.axes``); without a testbed, each family must run 1, 2, .. without a hole."""
+    present = set(data.columns)
+    n = None if testbed is None else (0 if testbed.wheels is None else testbed.wheels.n)
+    for family, what in ((WHEEL_SPEED_COLUMNS, "speeds"), (WHEEL_COMMAND_COLUMNS, "commands")):
+        have = [c for c in family if c in present]
+        if not have:
+            continue
+        if n is not None:
+            extra = [c for c in have if int(c[2:]) > n]
+            if extra:
+                if n == 0:
+                    expected = "no wheel columns (the testbed has no [wheels])"
+                else:
+                    ws, wc = wheel_columns(n)
+                    expected = (
+                        f"{ws[0]} .. {ws[-1]} and {wc[0]} .. {wc[-1]} (its {n} wheel(s), one "
+                        "per row of wheels.axes)"
+                    )
+                raise InputError(
+                    f"{src}: column {extra[0]!r}: testbed {testbed.name!r} has {n} reaction "
+                    f"wheel(s), so a log has {expected}; got wheel {what} {_present(have)}"
+                )
+        k = n if n else int(have[-1][2:])
+        missing = [c for c in family[:k] if c not in present]
+        if missing:
+            raise InputError(
+                f"{src}: missing column {missing[0]!r}: the wheel {what} {family[0]} .. "
+                f"{family[k - 1]} come together (all or none), but only {_present(have)} given"
+            )
+
+
+def wheel_saturation(log: Log) -> tuple[dict, ...]:
+    """Logged wheel commands beyond the wheels' limit: reported, never clipped.
+
+    A torque command (``wheels.command = "torque"``) beyond ``max_torque``, or a speed
+    command beyond ``max_speed``, is what the controller asked for; the wheel gave the
+    limit (the Model clips it the same way).
+
+    Parameters
+    ----------
+    log : Log
+        A log read with its testbed.
+
+    Returns
+    -------
+    tuple of dict
+        One per saturated column: ``column``, ``rows`` (0-based data rows), ``limit``
+        (N m or rad/s), ``largest`` (the largest logged magnitude) and ``reason``; empty
+        without wheels or wheel commands.
+    """
+    tb = log.testbed
+    if tb is None or tb.wheels is None:
+        return ()
+    wheels = tb.wheels
+    torque = wheels.command == "torque"
+    limit = wheels.max_torque if torque else wheels.max_speed
+    unit, key = ("N m", "max_torque") if torque else ("rad/s", "max_speed")
+    out = []
+    for column in wheel_columns(wheels.n)[1]:
+        if column not in log.data.columns:
+            continue
+        values = log.column(column)
+        beyond = np.flatnonzero(np.abs(values) > limit)
+        if beyond.size:
+            rows = [int(r) for r in beyond]
+            largest = float(np.max(np.abs(values[beyond])))
+            out.append(
+                {
+                    "column": column,
+                    "rows": rows,
+                    "limit": limit,
+                    "largest": largest,
+                    "reason": (
+                        f"{column} beyond wheels.{key} = {limit:g} {unit} in {len(rows)} row(s) "
+                        f"({row_ranges(rows)}; largest {largest:.4g} {unit}): saturated, the "
+                        "wheel gave the limit (the log is kept as is)"
+                    ),
+                }
+            )
+    return tuple(out)
 
 
 def segments_of(t: np.ndarray, period: float) -> tuple[tuple[int, int], ...]:
@@ -353,6 +458,7 @@ def _validate(
         raise InputError(f"{src}: a log needs at least {_MIN_ROWS} rows, got {len(data)}")
     if testbed is not None:
         _check_required(data, src, testbed, columns)
+    _check_wheel_columns(data, src, testbed)
     for group in COLUMN_GROUPS:
         have = [c for c in group if c in data.columns]
         if have and len(have) != len(group):
@@ -702,6 +808,23 @@ class Log:
         """Commanded gimbal rates, rad/s, shape (n, 4), or None."""
         return self._optional(_GIMBAL_RATES)
 
+    def _wheel_family(self, family: tuple[str, ...]) -> np.ndarray | None:
+        if self.testbed is not None:
+            n = 0 if self.testbed.wheels is None else self.testbed.wheels.n
+        else:
+            n = sum(1 for c in family if c in self.data.columns)
+        return self._optional(family[:n]) if n else None
+
+    def wheel_speeds(self) -> np.ndarray | None:
+        """Measured wheel speeds ``ws1 .. wsn``, rad/s (relative to the body), shape (n, k),
+        or None."""
+        return self._wheel_family(WHEEL_SPEED_COLUMNS)
+
+    def wheel_commands(self) -> np.ndarray | None:
+        """Wheel commands ``wc1 .. wcn`` (N m, or rad/s for ``wheels.command = "speed"``),
+        shape (n, k), or None."""
+        return self._wheel_family(WHEEL_COMMAND_COLUMNS)
+
 
 # ----------------------------------------------------------------------------
 # files
@@ -816,6 +939,8 @@ def _wanted(columns: Iterable[str] | None, testbed: Testbed | None) -> set[str] 
     wanted = {"t", *columns, *REQUIRED_COLUMNS(testbed)}
     if testbed is not None and testbed.body.dof == 1:
         wanted |= set(_QUATERNION)  # accepted in place of yaw
+    if testbed is not None and testbed.wheels is not None:  # the commands come together
+        wanted |= set(wheel_columns(testbed.wheels.n)[1])
     for group in COLUMN_GROUPS:
         if wanted & set(group):
             wanted |= set(group)

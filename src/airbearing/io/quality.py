@@ -18,7 +18,9 @@ segment (never across a gap) and each channel group:
 1. **Channel groups.** The rates ``wx, wy, wz`` (``wz`` for dof 1) when the testbed
    has a gyro, each channel tested on its own; the attitude, either the quaternion
    (its four components as one vector, signs made continuous, see below) or the yaw
-   (unwrapped within the segment, an isolated jump keeping the branch). The input
+   (unwrapped within the segment, an isolated jump keeping the branch). The wheel
+   speeds ``ws1..wsn`` of a reaction-wheel testbed, each on its own, with the noise
+   floor ``wheels.speed_noise`` (a switch of a command ``wc`` is a kink as below). The input
    channels too (see "Inputs" below): the gimbal angles ``d1..d4``, the sliders
    ``s1..s3`` and the dipoles ``mx..mz``, each channel on its own.
 2. **Leave-one-out residual.** Sample ``i`` is predicted by a polynomial in time of
@@ -834,6 +836,14 @@ def _groups(log: Log, testbed: Testbed | None, segments) -> list[_Group]:
         mag = np.maximum(np.max(np.abs(rates), axis=0), 1.0)
         floor = np.maximum(max(sensors.gyro_noise, ABSOLUTE_FLOOR), _RELATIVE_FLOOR * mag)
         groups.append(_Group("rates", cols, rates, False, floor))
+    speeds = log.wheel_speeds()
+    if speeds is not None:  # measured like the rates, with the wheels' own noise
+        wheels = testbed.wheels if testbed is not None else None
+        cols = tuple(f"ws{i}" for i in range(1, speeds.shape[1] + 1))
+        mag = np.maximum(np.max(np.abs(speeds), axis=0), 1.0)
+        sigma = wheels.speed_noise if wheels is not None else 0.0
+        floor = np.maximum(max(sigma, ABSOLUTE_FLOOR), _RELATIVE_FLOOR * mag)
+        groups.append(_Group("wheel_speeds", cols, speeds, False, floor))
     dof = testbed.body.dof if testbed is not None else (3 if log.has("qw") else 1)
     use_yaw = dof == 1 and log.has("yaw")
     if use_yaw:
@@ -874,7 +884,12 @@ def _switch_rows(log: Log, segments, k: int) -> np.ndarray | None:
 
     n = len(log.data)
     out = np.zeros(n, dtype=bool)
-    for cols, order in ((_GIMBAL_RATES, 1), (_DIPOLES, 1), (_SLIDERS, 2)):
+    from airbearing.io.log import WHEEL_COMMAND_COLUMNS
+
+    wc = tuple(c for c in WHEEL_COMMAND_COLUMNS if c in log.data.columns)
+    for cols, order in ((_GIMBAL_RATES, 1), (_DIPOLES, 1), (_SLIDERS, 2), (wc, 1)):
+        if not cols:
+            continue
         if not log.has(*cols):
             continue
         u = np.stack([log.column(c) for c in cols], axis=1).astype(float)
@@ -934,6 +949,7 @@ def _input_groups(log: Log, testbed: Testbed | None, segments, t: np.ndarray) ->
 
 
 _WHAT = {"rates": "rate", "gimbals": "gimbal angle", "sliders": "slider", "dipoles": "dipole"}
+_WHAT["wheel_speeds"] = "wheel speed"
 
 
 def _reason(group: _Group, cols: tuple[str, ...], score: float, logged_zero: bool) -> str:
@@ -1096,13 +1112,17 @@ def _noise_warnings(noise: dict, testbed) -> tuple[str, ...]:
     s = testbed.sensors
     declared = {c: (s.gyro_noise, "gyro_noise", "rad/s") for c in ("wx", "wy", "wz")}
     declared |= {c: (s.attitude_noise, "attitude_noise", "rad") for c in ("yaw", "quaternion")}
+    if testbed.wheels is not None:  # the wheel speeds: wheels.speed_noise
+        sigma = testbed.wheels.speed_noise
+        declared |= {f"ws{i}": (sigma, "speed_noise", "rad/s") for i in range(1, 7)}
     out = []
     for ch, value in noise.items():
         ref, key, unit = declared.get(ch, (0.0, "", ""))
         if ref > 0 and value > NOISE_RATIO * ref:
             out.append(
                 f"{ch} noise {value:.3g} {unit} is {value / ref:.3g} x the testbed's "
-                f"sensors.{key} {ref:.3g} {unit} (a unit read wrong, e.g. deg as rad? the "
+                f"{'wheels' if key == 'speed_noise' else 'sensors'}.{key} {ref:.3g} {unit} "
+                "(a unit read wrong, e.g. deg as rad? the "
                 "wrong testbed?)"
             )
     return tuple(out)

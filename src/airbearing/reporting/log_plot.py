@@ -17,13 +17,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from airbearing.io.log import Log, segments_of
+from airbearing.io.log import WHEEL_COMMAND_COLUMNS, WHEEL_SPEED_COLUMNS, Log, segments_of
 from airbearing.io.quality import LogQuality
 from airbearing.reporting.html import Report, figure_html, plt
 
 __all__ = ["log_figure", "log_report_html", "with_breaks", "local_residual", "TREND_WINDOW"]
 
 _DEG = 180.0 / np.pi
+_RPM = 60.0 / (2.0 * np.pi)  # rad/s -> rpm
 # (title, columns, y label, scale to the plotted unit)
 _PANELS: tuple[tuple[str, tuple[str, ...], str, float], ...] = (
     ("attitude quaternion", ("qw", "qx", "qy", "qz"), "quaternion component (-)", 1.0),
@@ -113,6 +114,26 @@ def _yaw_rate(t: np.ndarray, yaw: np.ndarray, segments) -> np.ndarray:
     return out
 
 
+def _wheel_series(log: Log) -> list:
+    """Panels of the reaction wheels: measured speeds (rpm) and commands (mN m or rpm)."""
+    out = []
+    ws = [c for c in WHEEL_SPEED_COLUMNS if c in log.data.columns]
+    if ws:
+        out.append(("wheel speeds", "wheel speed (rpm)",
+                    [(c, log.column(c) * _RPM, None) for c in ws]))  # fmt: skip
+    wc = [c for c in WHEEL_COMMAND_COLUMNS if c in log.data.columns]
+    if wc:
+        wheels = log.testbed.wheels if log.testbed is not None else None
+        if wheels is None:
+            label, factor = "command (N m or rad/s)", 1.0
+        elif wheels.command == "speed":
+            label, factor = "speed command (rpm)", _RPM
+        else:
+            label, factor = "torque command (mN m)", 1e3
+        out.append(("wheel commands", label, [(c, log.column(c) * factor, None) for c in wc]))
+    return out
+
+
 def log_figure(log: Log, quality: LogQuality | None = None, *, title: str | None = None):
     """A figure of every logged channel against time.
 
@@ -157,6 +178,7 @@ def log_figure(log: Log, quality: LogQuality | None = None, *, title: str | None
             ))  # fmt: skip
             continue
         series.append((name, label, [(c, log.column(c) * factor, None) for c in cols]))
+    series += _wheel_series(log)
     n_panels = max(len(series), 1)
     fig, axes = plt.subplots(
         n_panels, 1, sharex=True, figsize=(9, 2.3 * n_panels + 0.6), layout="constrained"

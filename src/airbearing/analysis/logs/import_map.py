@@ -22,6 +22,7 @@ from airbearing.errors import InputError
 from airbearing.io.coerce import as_testbed
 from airbearing.io.import_map import (
     ImportMap,
+    check_wheel_units,
     import_map_from_dict,
     raw_columns,
     read_import_map,
@@ -175,6 +176,7 @@ def import_log_with_notes(
                 f"sensors.gyro = false in testbed {testbed.name!r}: rate column(s) {named} "
                 "ignored (attitude-only log)"
             )
+    check_wheel_units(import_map, testbed)
     values = raw_columns(table, import_map, src, skip)
     c = import_map.body_matrix
 

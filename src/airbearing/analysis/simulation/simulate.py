@@ -122,7 +122,8 @@ class SimResult:
 def noise_sigmas(model: Model, attitude_noise: float | None = None) -> np.ndarray:
     """1-sigma measurement noise per entry of ``model.y_names`` (SI units).
 
-    Rates get ``sensors.gyro_noise``, the gravity direction ``sensors.accel_noise``,
+    Rates get ``sensors.gyro_noise``, the gravity direction ``sensors.accel_noise``, the
+    wheel speeds ``wheels.speed_noise``,
     the attitude ``attitude_noise`` (default ``sensors.attitude_noise``, rad): for dof 3
     the slots ``qw qx qy`` carry the three components of the small rotation vector
     (``qz`` stays 0), for dof 1 the slot ``yaw``.
@@ -139,7 +140,7 @@ def noise_sigmas(model: Model, attitude_noise: float | None = None) -> np.ndarra
             sig[i] = sensors.accel_noise
         elif name in ("qw", "qx", "qy", "yaw"):  # qw..qy slots carry the rotation vector
             sig[i] = att
-        elif name.startswith("ws") and getattr(model.testbed, "wheels", None) is not None:
+        elif name.startswith("ws"):  # wheel speeds
             sig[i] = model.testbed.wheels.speed_noise
     return sig
 
@@ -447,8 +448,8 @@ def log_columns(model: Model, t, x, y, u, *, yaw=None) -> dict[str, np.ndarray]:
         or ``wz``) only when ``sensors.gyro`` (no rate columns in an attitude-only log);
         ``gx gy gz`` with a gyro on a platform or with accelerometer noise (dof 3);
         ``s1 s2 s3`` only with ``[masses]``, ``mx my mz`` only with ``[magnetorquers]``,
-        ``bx by bz`` when a field is applied, ``ws1..`` with ``[wheels]`` and ``wc1..``
-        when they are driven; gimbals for a CMG; ``true_*`` states and any
+        ``bx by bz`` when a field is applied; ``ws1..wsn`` and ``wc1..wcn`` with
+        ``[wheels]``; gimbals for a CMG; ``true_*`` states and any
         non-zero disturbance torque ``true_tau_*``.
     """
     tb = model.testbed
@@ -486,13 +487,11 @@ def log_columns(model: Model, t, x, y, u, *, yaw=None) -> dict[str, np.ndarray]:
             )
             b_body = quat.rotate_inverse(q, b_lab)
             cols.update(bx=b_body[:, 0], by=b_body[:, 1], bz=b_body[:, 2])
-        if getattr(tb, "wheels", None) is not None:
-            n = tb.wheels.n
-            for i in range(1, n + 1):
+        if tb.wheels is not None:  # measured speeds, and the commands the wheels were given
+            for i in range(1, tb.wheels.n + 1):
                 cols[f"ws{i}"] = Y[f"ws{i}"]
-            if any(np.any(U[f"wc{i}"] != 0) for i in range(1, n + 1)):  # the wheels driven
-                for i in range(1, n + 1):
-                    cols[f"wc{i}"] = U[f"wc{i}"]
+            for i in range(1, tb.wheels.n + 1):
+                cols[f"wc{i}"] = U[f"wc{i}"]
     else:
         for i in range(1, 5):
             cols[f"d{i}"] = Y[f"d{i}"]
