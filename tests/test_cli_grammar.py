@@ -78,6 +78,12 @@ CASES = [
     (["balance", "{tb.toml}", "--json", "{tb.toml}"], "tb.toml"),
     (["balance", "{tb.toml}", "--log", "{tb.toml}"], "tb.toml"),  # the old spelling too
     (["gains", "{tb.toml}", "--json", "{tb.toml}"], "tb.toml"),
+    (
+        ["export", "cmg-yaw", "--loop", "attitude", "--gains", "{gains.json}", "--name", "gains",
+         "-o", "{.}", "--force"],
+        "gains.json",
+    ),  # fmt: skip
+    (["simulate", "cmg-yaw", "--gains", "{gains.json}", "--json", "{gains.json}"], "gains.json"),
     (["report", "{tb.toml}", "-o", "{tb.toml}"], "tb.toml"),
     (
         ["report", "cmg-yaw", "--gains", "{gains.json}", "-o", "r.html", "--json", "{gains.json}"],

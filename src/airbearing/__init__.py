@@ -59,6 +59,9 @@ _WHERE: dict[str, str] = {
     # tuning, linearisation, margins, stability report
     **dict.fromkeys(["Spec", "TuningResult", "tune", "evaluate"], "airbearing.design.tuning"),
     "read_gains": "airbearing.io.gains",
+    # C export of the controllers, checked against the simulation
+    **dict.fromkeys(["ExportSpec", "export_spec", "c_sources"], "airbearing.design.export"),
+    **dict.fromkeys(["ReplayCheck", "replay_check"], "airbearing.analysis.export_check"),
     **dict.fromkeys(["Loop", "make_loop"], "airbearing.design.loops"),
     **dict.fromkeys(["TrimPoint", "trim", "linearise"], "airbearing.design.linearise"),
     **dict.fromkeys(

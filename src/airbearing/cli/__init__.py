@@ -200,6 +200,7 @@ def _register() -> None:
         cmg,
         demo,
         discrepancy,
+        export,
         gains,
         identify,
         simulate,

@@ -71,6 +71,13 @@ def simulate(
         ),
     ] = "scale",
     ideal: Annotated[bool, typer.Option(help="No noise, no low-pass.")] = False,
+    gains: Annotated[
+        Path | None,
+        typer.Option(
+            help="Slew: gains file of the attitude loop (what 'airbearing gains --json' "
+            "writes); default seed 001's."
+        ),
+    ] = None,
     initial_rate: Annotated[
         tuple[float, float, float], typer.Option(help="Free: initial body rate, rad/s.")
     ] = (0.0, 0.0, 0.0),
@@ -120,6 +127,7 @@ def simulate(
     out = Outputs(force=force)
     testbed_input(out, testbed)
     out.input(times, "the --times log")
+    out.input(gains, "the --gains file")
     log_path = out.plan(output, "-o", (".csv", ".parquet"))
     json_path = out.plan(json_out, "--json", (".json",))
     tb = testbed_arg(testbed)
@@ -144,6 +152,7 @@ def simulate(
     )  # fmt: skip
     flags = as_flags(sliders="--sliders", initial_rate="--initial-rate",
                      q0="--initial-quaternion", attitude_noise="--attitude-noise")  # fmt: skip
+    tuned = _gains_file(gains)
     with flags:
         if artefacts:  # a log as a real testbed writes it, with its answer key in the summary
             result, summary = _rehearsal(
@@ -153,8 +162,10 @@ def simulate(
         else:
             result, summary = _scenario(
                 tb, scenario, length, yaw_deg=yaw_deg, axis=axis, steering=steering,
-                rate_limit=rate_limit, **kw,
+                rate_limit=rate_limit, gains=tuned, **kw,
             )  # fmt: skip
+    if tuned is not None:
+        summary = {**summary, "gains": tuned}
     _write(out, log_path, json_path, result,
            {"testbed": tb.name, "scenario": scenario, "seed": seed, **summary})  # fmt: skip
 
@@ -166,7 +177,7 @@ QUATERNION_TOLERANCE = 1e-3
 
 #: Options that only some scenarios use: (parameter names, the scenarios that use them).
 _SCENARIO_OPTIONS = (
-    (("yaw_deg", "axis", "steering", "rate_limit"), ("slew",)),
+    (("yaw_deg", "axis", "steering", "rate_limit", "gains"), ("slew",)),
     (("initial_rate",), ("free",)),
     (("initial_quaternion", "attitude_noise"), ("free", "spindown")),
     (("sliders",), ("free",)),
@@ -247,8 +258,28 @@ def _rehearsal(tb, scenario, *, length, times, jitter, gaps, glitches, first_sam
     return result, rehearsal_summary(result)
 
 
+def _gains_file(path) -> dict | None:
+    """The gains of an attitude-loop gains file (``gains --json``), or None."""
+    if path is None:
+        return None
+    from airbearing.design.attitude import GAIN_NAMES
+    from airbearing.io.coerce import as_gains
+    from airbearing.io.gains import read_gains
+
+    try:
+        g = read_gains(path, "attitude")["gains"]
+    except InputError as e:  # the library names the file; the CLI names the flag
+        raise InputError(f"--gains {e}") from None
+    try:
+        as_gains(g, GAIN_NAMES)
+    except InputError as e:
+        raise InputError(f"--gains {path}: {e}") from None
+    return g
+
+
 def _scenario(tb, scenario, length, *, yaw_deg, axis, steering, rate_limit, effects, seed,
-              ideal, initial_rate, q0, sliders, spin_rate, attitude_noise):  # fmt: skip
+              ideal, initial_rate, q0, sliders, spin_rate, attitude_noise,
+              gains=None):  # fmt: skip
     """A slew, spin-down or free oscillation of ``length`` s, and its summary."""
     from airbearing.analysis.simulation.scenarios import (
         free_oscillation,
@@ -261,7 +292,7 @@ def _scenario(tb, scenario, length, *, yaw_deg, axis, steering, rate_limit, effe
     if scenario == "slew":
         result = slew(
             tb, angle_deg=yaw_deg, axis=axis, duration=length, seed=seed, ideal=ideal,
-            steering=steering, rate_limit_mode=rate_limit, effects=effects,
+            steering=steering, rate_limit_mode=rate_limit, effects=effects, gains=gains,
         )  # fmt: skip
         return result, slew_summary(result)
     if scenario == "spindown":
