@@ -76,7 +76,7 @@ def test_tune_simulate_export_check_chain(tmp_path, capsys):
                 "-o", str(log)]) == 0  # fmt: skip
     out = tmp_path / "rig"
     capsys.readouterr()
-    assert run(["export", "cmg-yaw", "--loop", "attitude", "--steering", "gsr", "--ideal",
+    assert run(["export", "cmg-yaw", "--loop", "attitude", "--steering", "gsr",
                 "--gains", str(gains), "--name", "yaw_ctl", "--harness", "--check", str(log),
                 "-o", str(out)]) == 0  # fmt: skip
     said = capsys.readouterr().out
@@ -99,15 +99,18 @@ def test_tune_simulate_export_check_chain(tmp_path, capsys):
     assert np.abs(got - want).max() <= 1e-9
 
 
-def test_check_fails_with_exit_2_and_names_the_ideal_variant(tmp_path, capsys):
+def test_check_fails_with_exit_2_and_names_the_lowpass_variant(tmp_path, capsys):
+    """A run with the gyro low-pass (simulate without --ideal) is not a run of the default
+    export (the control law alone): exit 2, nothing written, and the fix named."""
     c_compiler()
-    log = tmp_path / "ideal.csv"
-    assert run(["simulate", "cmg-yaw", "--ideal", "--duration", "5", "-o", str(log)]) == 0
+    log = tmp_path / "rig.csv"
+    assert run(["simulate", "cmg-yaw", "--scenario", "slew", "--yaw-deg", "90", "--duration",
+                "5", "-o", str(log)]) == 0  # fmt: skip
     capsys.readouterr()
     assert run(["export", "cmg-yaw", "--loop", "attitude", "--check", str(log),
                 "-o", str(tmp_path / "out")]) == 2  # fmt: skip
     err = capsys.readouterr().err
-    assert "exceeds the bound" in err and "--ideal" in err
+    assert "exceeds the bound" in err and "export with --lowpass" in err
     assert not (tmp_path / "out").exists()
 
 

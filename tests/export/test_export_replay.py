@@ -75,7 +75,7 @@ def balancing_runs():
 @pytest.mark.parametrize("real", ["double", "float"])
 @pytest.mark.parametrize("law", list(STEERING_LAWS))
 def test_cmg_attitude_replays_the_slew(cc, slews, law, real):
-    spec = export_spec("cmg-yaw", "attitude", steering=law, ideal=True)
+    spec = export_spec("cmg-yaw", "attitude", steering=law)
     res = replay_check(spec, slews[law].log, real=real, compiler=cc)
     assert res.rows == int(SLEW_S * 20)
     assert res.max_diff <= BOUND[real], res.per_command
@@ -95,20 +95,21 @@ def test_balancing_replays_the_run(cc, balancing_runs, case, real):
 
 
 def test_rig_controller_replays_a_noisy_run_with_the_lowpass(cc):
-    """Without --ideal: the testbed's gyro low-pass (f_g = 0.25), and gyro noise in the log."""
+    """With --lowpass: the testbed's gyro low-pass (f_g = 0.25), as simulate flies it with
+    gyro noise in the log."""
     tb = ab.load_testbed("cmg-yaw")
     import dataclasses
 
     noisy = dataclasses.replace(tb, sensors=dataclasses.replace(tb.sensors, gyro_noise=1e-3))
     run = slew(noisy, angle_deg=90.0, duration=10.0, steering="gsr", seed=3)
-    spec = export_spec(noisy, "attitude", steering="gsr")
+    spec = export_spec(noisy, "attitude", steering="gsr", lowpass=True)
     assert spec.meta["lowpass"] == tb.sensors.lowpass
     assert replay_check(spec, run.log, compiler=cc).max_diff <= DOUBLE_BOUND
 
 
 def test_the_check_tells_other_gains_apart(cc, slews):
     """A controller with other gains does not replay the run: the check can fail."""
-    spec = export_spec("cmg-yaw", "attitude", steering="mp", ideal=True,
+    spec = export_spec("cmg-yaw", "attitude", steering="mp",
                        gains={"K_p": 5.0, "K_i": 0.001, "K_w": 6.0})  # fmt: skip
     assert replay_check(spec, slews["mp"].log, compiler=cc).max_diff > 1e-3
 
@@ -145,7 +146,7 @@ def test_json_names_are_log_columns(slews, balancing_runs):
     simulated stepper targets motor1..3 of a balancing log)."""
     formats = {"wx", "wy", "wz", "qw", "qx", "qy", "qz", "gx", "gy", "gz", "yaw_ref", "mx", "my",
                "mz", "d1", "d2", "d3", "d4", "dd1", "dd2", "dd3", "dd4"}  # fmt: skip
-    cases = [(export_spec("cmg-yaw", "attitude", ideal=True), slews["mp"].log)]
+    cases = [(export_spec("cmg-yaw", "attitude"), slews["mp"].log)]
     cases += [(export_spec(tb, "balancing", method=m), run.result.log)
               for (tb, m), run in balancing_runs.items()]  # fmt: skip
     for spec, log in cases:
@@ -158,7 +159,7 @@ def test_json_names_are_log_columns(slews, balancing_runs):
 def test_one_compile_serves_many_rows(cc, slews):
     """The harness keeps the state between rows: a run split in two halves is not the
     same as the whole (the second half starts from NAME_init again)."""
-    spec = export_spec("cmg-yaw", "attitude", steering="mp", ideal=True)
+    spec = export_spec("cmg-yaw", "attitude", steering="mp")
     log = slews["mp"].log.data
     rows = log[[s.name for s in spec.y + spec.r]].to_numpy()
     with CompiledStep(spec, compiler=cc) as step:

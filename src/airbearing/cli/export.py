@@ -50,11 +50,12 @@ def export(
             "magnetorquers and a cage field, else mechanical."
         ),
     ] = None,
-    ideal: Annotated[
+    lowpass: Annotated[
         bool,
         typer.Option(
-            help="Attitude: the controller of 'simulate --ideal' (no gyro low-pass); for "
-            "replaying an --ideal run, not for the rig."
+            help="Attitude: include the testbed's gyro low-pass (sensors.lowpass, seed 001 "
+            "eq. 3) in the step, as 'simulate' flies it; default the control law alone, as "
+            "'simulate --ideal' flies it (for a gyro driver that smooths the rate itself)."
         ),
     ] = False,
     real: Annotated[Real, typer.Option(help="C type of every number.")] = "double",
@@ -87,7 +88,7 @@ def export(
     if loop == "attitude":
         refuse_given(("method",), "applies only to --loop balancing")
     else:
-        refuse_given(("steering", "ideal"), "applies only to --loop attitude")
+        refuse_given(("steering", "lowpass"), "applies only to --loop attitude")
     from airbearing.design.export import check_c_name
 
     tb = testbed_arg(testbed)
@@ -128,7 +129,7 @@ def export(
     from airbearing.design.export import c_sources, export_spec
 
     try:
-        spec = export_spec(tb, loop, gains=g, steering=steering, method=method, ideal=ideal)
+        spec = export_spec(tb, loop, gains=g, steering=steering, method=method, lowpass=lowpass)
     except InputError as e:
         raise InputError(
             f"--gains {gains}: {e}" if gains and "gains" in str(e) else str(e)
@@ -144,11 +145,11 @@ def export(
             f"({worst}), bound {res.bound:g} ({real})"
         )
         if not res.ok:
-            hint = _ideal_hint(tb, loop, g, steering, ideal, check, real, name)
+            hint = _lowpass_hint(tb, loop, g, steering, lowpass, check, real, name)
             raise InputError(
                 f"--check {check}: largest command difference {res.max_diff:.3g} exceeds the "
                 f"bound {res.bound:g}: the log is not a run of this controller (testbed, law, "
-                f"gains, --ideal) from its first sample{hint}"
+                f"gains, --lowpass) from its first sample{hint}"
             )
     for f, p in paths.items():
         out.text(p, sources[f])
@@ -157,18 +158,26 @@ def export(
         typer.echo(f"wrote {p}")
 
 
-def _ideal_hint(tb, loop, gains, steering, ideal, log, real, name) -> str:
-    """``; it is a run of the --ideal controller ...`` when the other variant matches."""
-    if loop != "attitude" or ideal:
+def _lowpass_hint(tb, loop, gains, steering, lowpass, log, real, name) -> str:
+    """``(it matches the controller with the gyro low-pass ...)`` when the other variant
+    of the attitude controller replays the log."""
+    if loop != "attitude" or tb.sensors.lowpass == 1.0:
         return ""
     from airbearing.analysis.export_check import replay_check
     from airbearing.design.export import export_spec
 
-    other = replay_check(export_spec(tb, loop, gains=gains, steering=steering, ideal=True), log,
-                         real=real, name=name)  # fmt: skip
-    if other.ok:
+    other = replay_check(
+        export_spec(tb, loop, gains=gains, steering=steering, lowpass=not lowpass), log,
+        real=real, name=name,
+    )  # fmt: skip
+    if not other.ok:
+        return ""
+    if lowpass:
         return (
-            f" (it matches the controller of 'simulate --ideal', {other.max_diff:.3g}: "
-            "export with --ideal to replay it)"
+            f" (it matches the control law without the gyro low-pass, {other.max_diff:.3g}: "
+            "a 'simulate --ideal' run; export without --lowpass to replay it)"
         )
-    return ""
+    return (
+        f" (it matches the controller with the testbed's gyro low-pass, {other.max_diff:.3g}: "
+        "a 'simulate' run with sensor noise; export with --lowpass to replay it)"
+    )

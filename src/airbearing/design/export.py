@@ -229,13 +229,13 @@ def controller_step(
     return fn, tuple(model.y_names[i] for i in used), r_names, tuple(states), x0
 
 
-def _attitude_spec(testbed, gains, steering: str, ideal: bool) -> ExportSpec:
+def _attitude_spec(testbed, gains, steering: str, lowpass: bool) -> ExportSpec:
     model = build_model(testbed)
     g = _gain_values(ATTITUDE_GAIN_NAMES, SEED001_GAINS if gains is None else gains, "attitude")
-    # the controller of `simulate` (analysis.simulation.scenarios.slew_loop): --ideal turns
-    # the gyro low-pass off
+    # the controller of `simulate` (analysis.simulation.scenarios.slew_loop): the testbed's
+    # gyro low-pass with `lowpass`, as `simulate` flies it; without, as `simulate --ideal`
     ctl = cmg_attitude_controller(
-        model, steering=steering, lowpass=1.0 if ideal else None, gains=tuple(g.values())
+        model, steering=steering, lowpass=None if lowpass else 1.0, gains=tuple(g.values())
     )
     states = _pid_states()
     r_names, ref_of = _attitude_reference(model)  # the log's yaw_ref (simulate.py)
@@ -249,22 +249,21 @@ def _attitude_spec(testbed, gains, steering: str, ideal: bool) -> ExportSpec:
         "steering": steering,
         "rate_limit": "scale",
         "max_gimbal_rate": cmg.max_gimbal_rate,
-        "lowpass": 1.0 if ideal else testbed.sensors.lowpass,
-        "ideal": ideal,
+        "lowpass": testbed.sensors.lowpass if lowpass else 1.0,
     }
     u = _signals(("dd1", "dd2", "dd3", "dd4"))
     return ExportSpec(fn, _signals(y), _signals(r), x, u, x0, g, testbed.sensors.dt,
                       {"testbed": testbed.name, **meta})  # fmt: skip
 
 
-def _wheel_spec(testbed, gains, ideal: bool) -> ExportSpec:
+def _wheel_spec(testbed, gains, lowpass: bool) -> ExportSpec:
     """The reaction-wheel attitude loop as ``simulate`` flies it (``slew_loop``)."""
     model = build_model(testbed)
     wh = testbed.wheels
     n = wh.n
     g = _gain_values(WHEEL_GAIN_NAMES, default_wheel_gains(testbed) if gains is None else gains,
                      "attitude")  # fmt: skip
-    ctl = wheel_attitude_controller(model, lowpass=1.0 if ideal else None, gains=g)
+    ctl = wheel_attitude_controller(model, lowpass=None if lowpass else 1.0, gains=g)
     states = list(_pid_states())
     speed = wh.command == "speed"
     if speed:
@@ -287,7 +286,7 @@ def _wheel_spec(testbed, gains, ideal: bool) -> ExportSpec:
                                       ref_of=ref_of, x_names=states)  # fmt: skip
     meta = {"testbed": testbed.name, "loop": "attitude", "actuators": "reaction wheels",
             "command": wh.command, "max_torque": wh.max_torque, "max_speed": wh.max_speed,
-            "lowpass": 1.0 if ideal else testbed.sensors.lowpass, "ideal": ideal}  # fmt: skip
+            "lowpass": testbed.sensors.lowpass if lowpass else 1.0}  # fmt: skip
     return ExportSpec(fn, _signals(y, table), _signals(r, table), x, _signals(u_names, table),
                       x0, g, testbed.sensors.dt, meta)  # fmt: skip
 
@@ -374,7 +373,7 @@ def export_spec(
     gains=None,
     steering: str = "mp",
     method: str | None = None,
-    ideal: bool = False,
+    lowpass: bool = False,
 ) -> ExportSpec:
     """The controller of ``loop`` on ``testbed`` as an :class:`ExportSpec`.
 
@@ -395,8 +394,12 @@ def export_spec(
         Balancing loop: the law; default mixed with magnetorquers and a field, else
         mechanical. ``lyapunov`` takes the PID gains through
         :func:`~airbearing.design.balancing.lyapunov_gains_from_pid`.
-    ideal : bool
-        Attitude loop: the controller of ``simulate --ideal`` (no gyro low-pass).
+    lowpass : bool
+        Attitude loop: include the testbed's gyro low-pass (``sensors.lowpass``, the
+        smoothing ``f_g`` of seed 001 eq. 3) in the step, as ``simulate`` flies it. Default
+        False: the control law alone, as ``simulate --ideal`` flies it, for a rig whose
+        gyro driver smooths the rate itself (FORMATS.md: ``lowpass`` is a sensor setting);
+        filtering twice would add lag the margins did not see.
 
     Raises
     ------
@@ -410,7 +413,7 @@ def export_spec(
                 f"{tb.source}: '{tb.name}' turns on reaction wheels (pseudo-inverse allocation);"
                 " steering and method are not its options"
             )
-        return _wheel_spec(tb, gains, bool(ideal))
+        return _wheel_spec(tb, gains, bool(lowpass))
     if loop == "attitude":
         if tb.kind != "cmg":
             raise InputError(
@@ -423,7 +426,7 @@ def export_spec(
             raise InputError(f"steering '{steering}': expected one of {'|'.join(STEERING_LAWS)}")
         if method is not None:
             raise InputError("method: only for the balancing loop")
-        return _attitude_spec(tb, gains, steering, bool(ideal))
+        return _attitude_spec(tb, gains, steering, bool(lowpass))
     if loop == "balancing":
         if tb.kind != "platform" or tb.body.dof != 3 or tb.masses is None:
             raise InputError(
