@@ -393,9 +393,11 @@ def _validate(
         raise BadCellsError(
             f"{src}: {_at(i, lines)}, column 't': time must be strictly increasing, "
             f"but t = {float(t[i])!r} s follows t = {float(t[i - 1])!r} s of row {i - 1}"
-            + (f"; {len(rows)} such rows: {row_ranges(rows)}" if len(rows) > 1 else ""),
+            + (f"; {len(rows)} such rows: {row_ranges(rows)}" if len(rows) > 1 else "")
+            + _restart_hint(t, rows),
             {"t": rows},
         )
+    _check_yaw_wraps(out, src, lines, testbed)
     if testbed is not None:
         period = testbed.sensors.dt
         segments = segments_of(t, period)
@@ -423,6 +425,64 @@ def _validate(
                 {"qw, qx, qy, qz": rows},
             )
     return out
+
+
+def _restart_hint(t: np.ndarray, rows: Sequence[int]) -> str:
+    """When time goes back to or before the start of its run (two runs joined), say where
+    to split; ``""`` for a repeated or out-of-order time."""
+    starts = [0]
+    for i in rows:
+        if not (t[i] <= t[starts[-1]] and i - starts[-1] >= 2):
+            return ""
+        starts.append(i)
+    if len(t) - starts[-1] < 2:
+        return ""
+    at = ", ".join(str(i) for i in starts[1:])
+    n = len(starts)
+    return (
+        f": time restarts, {'two' if n == 2 else n} runs in one file: split at "
+        f'row{"s" if n > 2 else ""} {at} (or import the raw file with restart = "split" in '
+        "its import map: one log per run)"
+    )
+
+
+#: rad: a step of the logged yaw between two samples of a segment larger than this, which
+#: is within :data:`_WRAP_SLACK` of a whole turn, is the angle wrapped (to [-pi, pi) or
+#: [0, 2 pi)), not motion: no air bearing turns by pi within one sample.
+_WRAP_STEP = math.pi
+_WRAP_SLACK = math.pi / 2
+
+
+def _check_yaw_wraps(
+    out: pd.DataFrame, src: str, lines: Sequence[int] | None, testbed: Testbed | None
+) -> None:
+    """A logged ``yaw`` is continuous (FORMATS.md): one that jumps by about a whole turn
+    (more than pi, within pi/2 of 2 pi k) between two samples of a segment was written
+    wrapped: refused with the fix (the import unwraps it). A glitch (a frame exported as 0)
+    jumps by other amounts and is left to the outlier rule."""
+    if "yaw" not in out.columns or len(out) < 2:
+        return
+    yaw = out["yaw"].to_numpy()
+    t = out["t"].to_numpy()
+    period = testbed.sensors.dt if testbed is not None else float(np.median(np.diff(t)))
+    step = np.diff(yaw)
+    near = np.abs(np.mod(step + math.pi, 2 * math.pi) - math.pi) < _WRAP_SLACK
+    jump = (np.abs(step) > _WRAP_STEP) & near & (np.diff(t) <= GAP_FACTORS[1] * period)
+    if not jump.any():
+        return
+    wraps = np.flatnonzero(jump) + 1
+    i = int(wraps[0])
+    rows = [int(r) for r in wraps]
+    raise BadCellsError(
+        f"{src}: {_at(i, lines)}, column 'yaw': the yaw jumps by {step[i - 1]:.4g} rad from row "
+        f"{i - 1}: an angle written wrapped"
+        + (f" ({len(rows)} such jumps: rows {row_ranges(rows[:10])}" if len(rows) > 1 else "")
+        + ("...)" if len(rows) > 10 else (")" if len(rows) > 1 else ""))
+        + "; a log's yaw is continuous (FORMATS.md): import the raw file with "
+        "'airbearing log import RAW --map MAP.toml -o LOG' (it unwraps the yaw), or unwrap it "
+        "(numpy.unwrap) before use",
+        {"yaw": rows},
+    )
 
 
 #: The median sample interval of a log must lie within this factor of ``1 / sensors.rate``
