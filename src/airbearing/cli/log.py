@@ -193,7 +193,7 @@ def check(
     json_path = out.plan(json_out, "--json", (".json",))
     tb = _testbed(testbed)
     from airbearing.api.logs import check_log
-    from airbearing.io.log import BadCellsError, read_log, time_text
+    from airbearing.io.log import BadCellsError, read_log, time_text, yaw_unwrapped_words
     from airbearing.io.tool_use import TOOLS
 
     try:
@@ -202,13 +202,13 @@ def check(
         _report_bad_cells(log_file, tb, e)
     result = check_log(log)
     quality, tools, t = result.quality, result.tools, log.t
-    usable = any(ok for ok, _ in tools.values())
+    usable = result.usable
 
     def _t(value: float) -> str:
         return time_text(value, quality.period)
 
     if usable:  # exit 2 (no tool can use the log) writes nothing
-        summary = {**result.to_json(), "log": str(log_file), "usable": True}
+        summary = {**result.to_json(), "log": str(log_file)}
         out.json(json_path, summary)
         out.commit()
     lines = [
@@ -257,6 +257,8 @@ def check(
             f"{ratio:.3g} x 1 / sensors.rate: is sensors.rate = {tb.sensors.rate:g} Hz this "
             "log's rate? (gaps and the noise per sample are judged by it)"
         )
+    if result.yaw_unwrapped_rows:
+        typer.echo(f"{'yaw':<{width}}  {yaw_unwrapped_words(result.yaw_unwrapped_rows)}")
     typer.echo(f"{'outliers':<{width}}  {len(quality.outliers)} row(s)")
     for o in quality.outliers:
         typer.echo(f"{'':<{width}}  row {o.row:<6} t = {_t(o.t):<9} s  {o.reason}")

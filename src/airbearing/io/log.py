@@ -57,10 +57,12 @@ __all__ = [
     "QUATERNION_NORM_TOL",
     "RATE_COLUMNS",
     "REQUIRED_COLUMNS",
+    "YAW_UNWRAPPED",
     "Log",
     "read_log",
     "time_text",
     "segments_of",
+    "yaw_unwrapped_words",
     "validate_log",
     "write_log",
 ]
@@ -397,7 +399,7 @@ def _validate(
             + _restart_hint(t, rows),
             {"t": rows},
         )
-    _check_yaw_wraps(out, src, lines, testbed)
+    _unwrap_yaw(out, testbed)
     if testbed is not None:
         period = testbed.sensors.dt
         segments = segments_of(t, period)
@@ -446,42 +448,64 @@ def _restart_hint(t: np.ndarray, rows: Sequence[int]) -> str:
     )
 
 
-#: rad: a step of the logged yaw between two samples of a segment larger than this, which
-#: is within :data:`_WRAP_SLACK` of a whole turn, is the angle wrapped (to [-pi, pi) or
-#: [0, 2 pi)), not motion: no air bearing turns by pi within one sample.
+#: rad: a step of the logged yaw between two samples larger than this, which is within
+#: :data:`_WRAP_SLACK` of a whole turn, in a yaw that stays within one turn, is the angle
+#: written wrapped (to [-pi, pi) or [0, 2 pi)), not motion: no air bearing turns by pi within
+#: one sample.
 _WRAP_STEP = math.pi
 _WRAP_SLACK = math.pi / 2
+#: rad: a yaw is judged only if its median step between samples is below this (a rig
+#: turning 0.4 rad per sample, 4 rad/s at 10 Hz, is; white noise of 1 rad is not).
+_SMOOTH_STEP = math.pi / 4
+#: Key of ``Log.data.attrs``: the rows where a yaw written wrapped was unwrapped on read.
+YAW_UNWRAPPED = "yaw_unwrapped_rows"
 
 
-def _check_yaw_wraps(
-    out: pd.DataFrame, src: str, lines: Sequence[int] | None, testbed: Testbed | None
-) -> None:
-    """A logged ``yaw`` is continuous (FORMATS.md): one that jumps by about a whole turn
-    (more than pi, within pi/2 of 2 pi k) between two samples of a segment was written
-    wrapped: refused with the fix (the import unwraps it). A glitch (a frame exported as 0)
-    jumps by other amounts and is left to the outlier rule."""
-    if "yaw" not in out.columns or len(out) < 2:
+def _unwrap_yaw(out: pd.DataFrame, testbed: Testbed | None) -> None:
+    """A logged ``yaw`` written wrapped is unwrapped on read, and said.
+
+    The signature of a wrapped yaw: it stays within one turn (its range is at most 2 pi),
+    moves smoothly (median step below :data:`_SMOOTH_STEP`) and jumps by about a whole turn
+    (more than pi, within pi/2 of 2 pi k) between two samples of a segment. Such a yaw is
+    unwrapped as the import map does (:func:`airbearing.io.import_map.unwrap`: each segment
+    on its own, an isolated jump keeping the branch), and the rows where its branch changes
+    are kept in ``out.attrs[YAW_UNWRAPPED]`` for ``log check`` and the tools to say. A
+    glitch (a frame exported as 0) on a spinning yaw is not one: the yaw spans more than a
+    turn.
+    """
+    if "yaw" not in out.columns or len(out) < 3:
         return
     yaw = out["yaw"].to_numpy()
+    if not float(np.ptp(yaw)) <= 2 * math.pi + 1e-9:
+        return
     t = out["t"].to_numpy()
     period = testbed.sensors.dt if testbed is not None else float(np.median(np.diff(t)))
     step = np.diff(yaw)
-    near = np.abs(np.mod(step + math.pi, 2 * math.pi) - math.pi) < _WRAP_SLACK
-    jump = (np.abs(step) > _WRAP_STEP) & near & (np.diff(t) <= GAP_FACTORS[1] * period)
-    if not jump.any():
+    wrapped = np.abs(np.mod(step + math.pi, 2 * math.pi) - math.pi)
+    inside = np.diff(t) <= GAP_FACTORS[1] * period
+    jump = (np.abs(step) > _WRAP_STEP) & (wrapped < _WRAP_SLACK) & inside
+    if not jump.any() or not np.median(wrapped[inside]) < _SMOOTH_STEP:
         return
-    wraps = np.flatnonzero(jump) + 1
-    i = int(wraps[0])
-    rows = [int(r) for r in wraps]
-    raise BadCellsError(
-        f"{src}: {_at(i, lines)}, column 'yaw': the yaw jumps by {step[i - 1]:.4g} rad from row "
-        f"{i - 1}: an angle written wrapped"
-        + (f" ({len(rows)} such jumps: rows {row_ranges(rows[:10])}" if len(rows) > 1 else "")
-        + ("...)" if len(rows) > 10 else (")" if len(rows) > 1 else ""))
-        + "; a log's yaw is continuous (FORMATS.md): import the raw file with "
-        "'airbearing log import RAW --map MAP.toml -o LOG' (it unwraps the yaw), or unwrap it "
-        "(numpy.unwrap) before use",
-        {"yaw": rows},
+    from airbearing.io.import_map import unwrap
+
+    new = unwrap(yaw, t)
+    turns = np.round((new - yaw) / (2 * math.pi))
+    rows = [int(r) for r in np.flatnonzero(np.diff(turns) != 0) + 1]
+    if not rows:
+        return
+    out["yaw"] = new
+    out.attrs[YAW_UNWRAPPED] = rows
+
+
+def yaw_unwrapped_words(rows: Sequence[int]) -> str:
+    """The sentence that says a yaw was unwrapped on read (``""`` for no rows)."""
+    if not rows:
+        return ""
+    shown = row_ranges(list(rows)[:10]) + (" ..." if len(rows) > 10 else "")
+    return (
+        f"yaw written wrapped (to one turn): unwrapped on read, {len(rows)} jump(s) of 2 pi "
+        f"removed at row(s) {shown}; the file is unchanged (import raw files with 'airbearing "
+        "log import', which writes the yaw unwrapped)"
     )
 
 

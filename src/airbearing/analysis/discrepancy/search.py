@@ -109,7 +109,7 @@ from airbearing.analysis.shooting.process_noise import (
 )
 from airbearing.errors import InputError, SolverError
 from airbearing.io.coerce import as_int, as_logs, as_names
-from airbearing.io.log import Log
+from airbearing.io.log import YAW_UNWRAPPED, Log, yaw_unwrapped_words
 from airbearing.io.motion import no_motion
 from airbearing.io.testbed import Testbed
 from airbearing.io.vocabulary import EFFECTS
@@ -500,6 +500,7 @@ def discrepancy(
     sel = _select(search, nominal, max_effects, screen, workers, prog)
     named = _named(search, sel, prog, screen, workers)
     judged = _judge(search, sel, named, logs, validate, window_s, jit, prog)
+    judged = (*judged[:4], judged[4] + _unwrapped_words(logs))
     loc = localise(datas, base_problem, nominal, floor)
     prog("done", prog.total)
     return _result(search, refused, base_problem, sel, named, judged, loc)
@@ -512,6 +513,16 @@ def _refuse_still(testbed: Testbed, logs) -> None:
     if all(still):
         names = ", ".join(log.source for log in logs)
         raise InputError(f"{names}: discrepancy: {still[0]}")
+
+
+def _unwrapped_words(logs) -> str:
+    """ "; LOG: yaw written wrapped ... unwrapped on read" for each such log (or "")."""
+    words = [
+        f"; {log.source}: {yaw_unwrapped_words(log.data.attrs[YAW_UNWRAPPED])}"
+        for log in logs
+        if log.data.attrs.get(YAW_UNWRAPPED)
+    ]
+    return "".join(words)
 
 
 def _result(search, refused, base_problem, sel, named, judged, loc) -> Discrepancy:
