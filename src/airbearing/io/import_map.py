@@ -467,7 +467,7 @@ def raw_columns(raw, import_map: ImportMap, src: str, skip: tuple[str, ...] = ()
         blank = missing_cells(cells, values) if bad.any() else bad
         if import_map.missing == "gap":
             bad &= ~blank  # left out as a gap by the import (reported by rows)
-            values[blank] = np.nan
+            values = np.where(blank, np.nan, values)
         if bad.any():
             i = int(np.argmax(bad))
             rows = np.flatnonzero(bad)

@@ -363,7 +363,8 @@ def time_runs(
             f"{src}: column {header!r}: time restarts at row {raw_rows[first]} (t = "
             f"{t[first]:.6g} s after {t[first - 1]:.6g} s): {_count(len(starts))} runs in one "
             f"file, split at row{'s' if len(starts) > 2 else ''} {at}; set restart = "
-            f'"split"{where} to import one log per run, or cut the file there'
+            f'"split"{where} to import one log per run (-o LOG writes LOG-run1, LOG-run2, ...), '
+            "or cut the file there"
         )
     return list(zip(starts, stops, strict=True))
 
