@@ -11,6 +11,10 @@ does not increase, a log that is all gaps or a non-unit quaternion raises
 Rows are 0-based data-row indices (the header is not counted), the same in a raw
 file, its imported log and every report; CSV messages add the line of the file.
 
+A ``yaw`` written wrapped (within one turn, jumping by about 2 pi between samples) is
+unwrapped on read and said (:func:`_unwrap_yaw`, ``data.attrs[YAW_UNWRAPPED]``): the
+built-in CMG simulation and many loggers write it so, and no fit can use it wrapped.
+
 Sampling (FORMATS.md, "Real logs are not perfect"), with ``T = 1 / sensors.rate``:
 
 - an interval within ``[0.5 T, 1.5 T]`` is normal jitter: used with its logged times;
