@@ -303,9 +303,16 @@ def _bad_cell(
         more = f"; {n} such cells: " + "; ".join(
             f"column '{c}' rows {row_ranges(r)}" for c, r in bad.items()
         )
+    dropout = not big and (got == "an empty cell" or got.startswith("NaN") or got == "'nan'")
     return BadCellsError(
         f"{src}: {_at(i, lines)}, column '{name}': expected a finite number{limit}, "
-        f"got {got}{more}",
+        f"got {got}{more}"
+        + (
+            "; if these are dropouts, remove those rows (the time across them is a gap) or "
+            'import the raw file with missing = "gap" in its import map'
+            if dropout
+            else ""
+        ),
         bad,
     )
 
@@ -856,7 +863,7 @@ def _check_separator(header: str, src: str, line: int) -> None:
                 f"{src}: line {line}: not comma separated: {name} found in the header "
                 f"({header.strip()[:60]!r}); a log is comma separated (FORMATS.md): save it "
                 "with commas, or convert it with 'airbearing log import' (which reads tab "
-                "and semicolon separated files)"
+                'and semicolon separated files, with decimal = "," for decimal commas)'
             )
 
 
