@@ -377,7 +377,7 @@ def _unwrap_note(shift: np.ndarray, raw_rows: np.ndarray, import_map: ImportMap)
     """A note when the import unwrapped the yaw (FORMATS.md: it always does): where."""
     from airbearing.io.log import row_ranges
 
-    jumps = np.flatnonzero(np.diff(shift) != 0) + 1
+    jumps = np.flatnonzero(np.diff(np.round(shift / (2.0 * np.pi))) != 0) + 1
     if not jumps.size:
         return []
     shown = row_ranges(raw_rows[jumps][:10]) + (" ..." if jumps.size > 10 else "")
