@@ -455,9 +455,11 @@ def raw_columns(raw, import_map: ImportMap, src: str, skip: tuple[str, ...] = ()
             continue
         actual = header if header in headers else stripped.get(header.strip())
         if actual is None:
+            glued = len(headers) == 1 and any(c in headers[0] for c in ",;\t")
             raise InputError(
                 f"{src}: no column {header!r} (map {import_map.source}, key 'columns.{name}'); "
                 f"the file has: {', '.join(repr(h) for h in headers)}"
+                + ("; is the map's separator the file's?" if glued else "")
             )
         cells = raw[actual]
         if pd.api.types.is_bool_dtype(cells.dtype):
