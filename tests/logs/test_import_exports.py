@@ -239,7 +239,7 @@ def test_a_quaternion_of_norm_two_exits_2(tmp_path, capsys):
     )
     js = tmp_path / "c.json"
     code = run(["log", "check", str(tb), str(path), "--json", str(js)])
-    _refused(capsys, code, "no tool can use this log", "unit quaternion", "norm 2")
+    _refused(capsys, code, "no tool can use this log", "unit quaternion", "every row has norm 2")
     assert not js.exists()
 
 
