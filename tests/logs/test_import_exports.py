@@ -274,3 +274,16 @@ def test_motion_and_stillness_against_the_declared_noise():
     smooth = Log(pd.DataFrame({"t": t, "yaw": 0.1 * t}), "<smooth>", ROTOR)
     (words,) = still_channels(smooth, ROTOR, smooth.segments)
     assert "noise-free" in words and no_motion(smooth, ROTOR) == ""
+
+
+def test_a_dropout_held_as_the_last_value_is_named(tmp_path):
+    # an exporter that repeats the last sample through a tracking dropout: rows 100-139
+    from airbearing.io.log import Log
+    from airbearing.io.motion import still_channels
+
+    t = np.arange(N) * 0.1
+    yaw = 0.2 * t + 1e-3 * np.random.default_rng(7).normal(size=N)
+    yaw[100:140] = yaw[99]
+    log = Log(pd.DataFrame({"t": t, "yaw": yaw}), "<held>", ROTOR)
+    (words,) = still_channels(log, ROTOR, log.segments)
+    assert "holds one value over rows 99-139 (41 samples)" in words

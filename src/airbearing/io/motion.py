@@ -7,7 +7,9 @@ gyro, the attitude: ``yaw`` or the quaternion), against the noise its testbed de
 - **Still channels** (:func:`still_channels`): a channel whose sample-to-sample scatter is
   far below its declared noise is not the sensor the testbed describes: a frozen value
   (an exporter that held the last sample, a dead sensor), a noise-free simulated log, or
-  the wrong testbed. The scatter is ``1.4826 * median(|second difference|) / sqrt(6)``
+  the wrong testbed. A noisy channel that repeats one value for :data:`HELD_RUN` samples
+  or more (an exporter that held the last sample through a dropout) is named with those
+  rows. The scatter is ``1.4826 * median(|second difference|) / sqrt(6)``
   within segments: under white noise of ``sigma`` a second difference has standard
   deviation ``sqrt(6) sigma``, while a smooth motion adds only ``accel * dt^2``
   (4e-5 rad at 0.1 rad/s^2 and 50 Hz), so the scatter measures the noise. Reported, not
@@ -35,7 +37,7 @@ if TYPE_CHECKING:
     from airbearing.io.log import Log
     from airbearing.io.testbed import Testbed
 
-__all__ = ["NO_MOTION_SIGMAS", "STILL_RATIO", "no_motion", "still_channels"]
+__all__ = ["HELD_RUN", "NO_MOTION_SIGMAS", "STILL_RATIO", "no_motion", "still_channels"]
 
 #: A channel whose scatter is below its declared noise divided by this is reported as still.
 STILL_RATIO = 10.0
@@ -46,6 +48,8 @@ NO_MOTION_SIGMAS = 12.0
 #: rad or rad/s: the noise scale of a channel whose testbed declares none (quieter than
 #: any real sensor, as :data:`airbearing.io.quality.ABSOLUTE_FLOOR`).
 _FLOOR = 1e-7
+#: Samples of one repeated value that a noisy channel never gives by chance.
+HELD_RUN = 20
 _EXTREMES = 5  # samples of each end of a channel's range set aside (isolated glitches)
 _MAD_TO_SIGMA = 1.4826
 _INPUTS = (
@@ -111,6 +115,7 @@ def still_channels(log: Log, testbed: Testbed | None, segments) -> tuple[str, ..
             continue
         s = _scatter(x, segments)
         if not s < noise / STILL_RATIO:
+            out += _held_runs(name, x, key)
             continue
         unit = "rad/s" if key == "gyro_noise" else "rad"
         declared = 2 * noise if name == "quaternion" else noise
@@ -126,6 +131,25 @@ def still_channels(log: Log, testbed: Testbed | None, segments) -> tuple[str, ..
             f"{STILL_RATIO:g} of the testbed's sensors.{key} = {declared:.3g} {unit}: {what}"
         )
     return tuple(out)
+
+
+def _held_runs(name: str, x: np.ndarray, key: str) -> list[str]:
+    """Stretches of a noisy channel that repeat one value for :data:`HELD_RUN` samples or
+    more (an exporter holding the last sample through a dropout): one sentence."""
+    same = np.all(np.diff(x, axis=0) == 0, axis=1)  # same[i]: row i + 1 repeats row i
+    if same.sum() < HELD_RUN - 1:
+        return []
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], same.astype(np.int8), [0]])))
+    runs = [(a, b + 1) for a, b in zip(edges[::2], edges[1::2], strict=True)]  # rows a..b-1
+    runs = [(a, b) for a, b in runs if b - a >= HELD_RUN]
+    if not runs:
+        return []
+    shown = ", ".join(f"{a}-{b - 1}" for a, b in runs[:5]) + (" ..." if len(runs) > 5 else "")
+    return [
+        f"{name} holds one value over rows {shown} ({sum(b - a for a, b in runs)} samples) "
+        f"although the testbed's sensors.{key} says it is noisy: a dropout exported as the "
+        "last value? (those rows are not measurements; the fits use them)"
+    ]
 
 
 def _span(x: np.ndarray) -> float:
