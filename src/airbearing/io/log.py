@@ -347,9 +347,12 @@ def _validate(
     lines: Sequence[int] | None = None,
     *,
     fresh: bool = False,
+    unwrap_yaw: bool = True,
 ) -> pd.DataFrame:
     """The checks of :func:`validate_log`; ``fresh``: ``data`` was just read from a file
-    and nobody else holds it, so it is normalised in place instead of copied."""
+    and nobody else holds it, so it is normalised in place instead of copied;
+    ``unwrap_yaw``: a yaw written wrapped is unwrapped (:func:`_unwrap_yaw`; not when
+    writing: a file holds what it was given)."""
     if not isinstance(data, pd.DataFrame):
         raise InputError(f"{src}: expected a pandas DataFrame, got {type(data).__name__}")
     if testbed is not None and not isinstance(testbed, Testbed):
@@ -411,7 +414,8 @@ def _validate(
             + _restart_hint(t, rows),
             {"t": rows},
         )
-    _unwrap_yaw(out, testbed)
+    if unwrap_yaw:
+        _unwrap_yaw(out, testbed)
     if testbed is not None:
         period = testbed.sensors.dt
         segments = segments_of(t, period)
@@ -1059,7 +1063,7 @@ def write_log(log: Log | pd.DataFrame, path: str | os.PathLike[str]) -> Path:
     if isinstance(log, Log):
         data = log.data
     elif isinstance(log, pd.DataFrame):
-        data = _validate(log, str(path), None)
+        data = _validate(log, str(path), None, unwrap_yaw=False)
     else:
         raise InputError(f"{path}: expected a Log or a pandas DataFrame, got {type(log).__name__}")
     if kind == "csv":
