@@ -608,7 +608,9 @@ def validate_log(
     Returns
     -------
     pandas.DataFrame
-        A copy with a fresh RangeIndex and every FORMATS.md column as float64.
+        A copy with a fresh RangeIndex and every FORMATS.md column as float64; a ``yaw``
+        written wrapped is unwrapped, its rows in ``.attrs["yaw_unwrapped_rows"]``
+        (module doc).
 
     Raises
     ------
