@@ -42,6 +42,8 @@ class LogCheck:
     wheel_saturation : tuple of dict
         Wheel commands beyond the wheels' limit (:func:`airbearing.io.log.wheel_saturation`:
         ``column``, ``rows``, ``limit``, ``largest``, ``reason``); reported, not clipped.
+    yaw_unwrapped_rows : tuple of int
+        Rows where a yaw written wrapped was unwrapped on read (the file unchanged).
     """
 
     log: str
@@ -52,6 +54,12 @@ class LogCheck:
     quality: object = field(repr=False)
     tools: dict = field(repr=False)
     wheel_saturation: tuple = field(default=(), repr=False)
+    yaw_unwrapped_rows: tuple[int, ...] = ()
+
+    @property
+    def usable(self) -> bool:
+        """Whether some tool can use the log (``log check`` exits 2 when none can)."""
+        return any(ok for ok, _ in self.tools.values())
 
     @property
     def outlier_rows(self) -> tuple[int, ...]:
@@ -76,11 +84,13 @@ class LogCheck:
             "rate": self.rate,
             **self.quality.to_json(),
             **({"wheel_saturation": list(self.wheel_saturation)} if self._wheels else {}),
+            "yaw_unwrapped_rows": list(self.yaw_unwrapped_rows),
+            "usable": self.usable,
             "tools": {name: {"usable": ok, "why": why} for name, (ok, why) in self.tools.items()},
         }
 
     def __str__(self) -> str:
-        from airbearing.io.log import time_text
+        from airbearing.io.log import time_text, yaw_unwrapped_words
 
         q = self.quality
         lines = [
@@ -91,6 +101,11 @@ class LogCheck:
             lines.append(f"  row {o.row} (t = {time_text(o.t, q.period)} s): {o.reason}")
         for s in self.wheel_saturation:
             lines.append(f"  warning: {s['reason']}")
+        if self.yaw_unwrapped_rows:
+            lines.append(f"  {yaw_unwrapped_words(self.yaw_unwrapped_rows)}")
+        for words in (*q.still_channels, q.no_motion):
+            if words:
+                lines.append(f"  {words}")
         for name, (ok, why) in self.tools.items():
             lines.append(f"  {name}: {'yes' if ok else 'no'} ({why})")
         return "\n".join(lines)
@@ -147,7 +162,7 @@ def check_log(log, testbed=None) -> LogCheck:
     (1, ())
     """
     from airbearing.io.coerce import as_log, as_testbed
-    from airbearing.io.log import Log, wheel_saturation
+    from airbearing.io.log import YAW_UNWRAPPED, Log, wheel_saturation
     from airbearing.io.tool_use import tool_use
 
     tb = as_testbed(testbed, optional=True)
@@ -170,6 +185,7 @@ def check_log(log, testbed=None) -> LogCheck:
         tools=tool_use(log, quality),
         wheel_saturation=wheel_saturation(log),
         _wheels=log.testbed.wheels is not None,
+        yaw_unwrapped_rows=tuple(log.data.attrs.get(YAW_UNWRAPPED, ())),
     )
 
 

@@ -11,6 +11,10 @@ does not increase, a log that is all gaps or a non-unit quaternion raises
 Rows are 0-based data-row indices (the header is not counted), the same in a raw
 file, its imported log and every report; CSV messages add the line of the file.
 
+A ``yaw`` written wrapped (within one turn, jumping by about 2 pi between samples) is
+unwrapped on read and said (:func:`_unwrap_yaw`, ``data.attrs[YAW_UNWRAPPED]``): the
+built-in CMG simulation and many loggers write it so, and no fit can use it wrapped.
+
 Sampling (FORMATS.md, "Real logs are not perfect"), with ``T = 1 / sensors.rate``:
 
 - an interval within ``[0.5 T, 1.5 T]`` is normal jitter: used with its logged times;
@@ -59,10 +63,13 @@ __all__ = [
     "REQUIRED_COLUMNS",
     "WHEEL_COMMAND_COLUMNS",
     "WHEEL_SPEED_COLUMNS",
+    "YAW_UNWRAPPED",
     "Log",
     "read_log",
     "time_text",
+    "quaternion_norm_hint",
     "segments_of",
+    "yaw_unwrapped_words",
     "validate_log",
     "wheel_columns",
     "wheel_saturation",
@@ -402,9 +409,16 @@ def _bad_cell(
         more = f"; {n} such cells: " + "; ".join(
             f"column '{c}' rows {row_ranges(r)}" for c, r in bad.items()
         )
+    dropout = not big and (got == "an empty cell" or got.startswith("NaN") or got == "'nan'")
     return BadCellsError(
         f"{src}: {_at(i, lines)}, column '{name}': expected a finite number{limit}, "
-        f"got {got}{more}",
+        f"got {got}{more}"
+        + (
+            "; if these are dropouts, remove those rows (the time across them is a gap) or "
+            'import the raw file with missing = "gap" in its import map'
+            if dropout
+            else ""
+        ),
         bad,
     )
 
@@ -438,9 +452,12 @@ def _validate(
     lines: Sequence[int] | None = None,
     *,
     fresh: bool = False,
+    unwrap_yaw: bool = True,
 ) -> pd.DataFrame:
     """The checks of :func:`validate_log`; ``fresh``: ``data`` was just read from a file
-    and nobody else holds it, so it is normalised in place instead of copied."""
+    and nobody else holds it, so it is normalised in place instead of copied;
+    ``unwrap_yaw``: a yaw written wrapped is unwrapped (:func:`_unwrap_yaw`; not when
+    writing: a file holds what it was given)."""
     if not isinstance(data, pd.DataFrame):
         raise InputError(f"{src}: expected a pandas DataFrame, got {type(data).__name__}")
     if testbed is not None and not isinstance(testbed, Testbed):
@@ -499,9 +516,12 @@ def _validate(
         raise BadCellsError(
             f"{src}: {_at(i, lines)}, column 't': time must be strictly increasing, "
             f"but t = {float(t[i])!r} s follows t = {float(t[i - 1])!r} s of row {i - 1}"
-            + (f"; {len(rows)} such rows: {row_ranges(rows)}" if len(rows) > 1 else ""),
+            + (f"; {len(rows)} such rows: {row_ranges(rows)}" if len(rows) > 1 else "")
+            + _restart_hint(t, rows),
             {"t": rows},
         )
+    if unwrap_yaw:
+        _unwrap_yaw(out, testbed)
     if testbed is not None:
         period = testbed.sensors.dt
         segments = segments_of(t, period)
@@ -525,10 +545,105 @@ def _validate(
             raise BadCellsError(
                 f"{src}: {_at(i, lines)}, columns qw, qx, qy, qz: expected a unit "
                 f"quaternion (norm within {QUATERNION_NORM_TOL:g} of 1), got norm {norm[i]:.9g}"
-                + (f"; {len(rows)} such rows: {row_ranges(rows)}" if len(rows) > 1 else ""),
+                + (f"; {len(rows)} such rows: {row_ranges(rows)}" if len(rows) > 1 else "")
+                + quaternion_norm_hint(norm),
                 {"qw, qx, qy, qz": rows},
             )
     return out
+
+
+def quaternion_norm_hint(norm: np.ndarray) -> str:
+    """The fix of a quaternion whose norm is off 1, in words: a whole log at one norm is a
+    scaled export; a few rows are cells that are not a quaternion."""
+    good = norm[np.isfinite(norm)]
+    if good.size and float(np.ptp(good)) <= QUATERNION_NORM_TOL * float(np.mean(good)):
+        x = float(np.mean(good))
+        return (
+            f"; every row has norm {x:.6g}: a quaternion exported scaled, or another quantity "
+            f"(divide qw, qx, qy, qz by {x:.6g} if they are a scaled attitude; the tools "
+            f"renormalise only within {QUATERNION_NORM_TOL:g} of 1)"
+        )
+    return "; fix those rows (a unit quaternion qw, qx, qy, qz, scalar first) or remove them"
+
+
+def _restart_hint(t: np.ndarray, rows: Sequence[int]) -> str:
+    """When time goes back to or before the start of its run (two runs joined), say where
+    to split; ``""`` for a repeated or out-of-order time."""
+    starts = [0]
+    for i in rows:
+        if not (t[i] <= t[starts[-1]] and i - starts[-1] >= 2):
+            return ""
+        starts.append(i)
+    if len(t) - starts[-1] < 2:
+        return ""
+    at = ", ".join(str(i) for i in starts[1:])
+    n = len(starts)
+    return (
+        f": time restarts, {'two' if n == 2 else n} runs in one file: split at "
+        f'row{"s" if n > 2 else ""} {at} (or import the raw file with restart = "split" in '
+        "its import map: one log per run)"
+    )
+
+
+#: rad: a step of the logged yaw between two samples larger than this, which is within
+#: :data:`_WRAP_SLACK` of a whole turn, in a yaw that stays within one turn, is the angle
+#: written wrapped (to [-pi, pi) or [0, 2 pi)), not motion: no air bearing turns by pi within
+#: one sample.
+_WRAP_STEP = math.pi
+_WRAP_SLACK = math.pi / 2
+#: rad: a yaw is judged only if its median step between samples is below this (a rig
+#: turning 0.4 rad per sample, 4 rad/s at 10 Hz, is; white noise of 1 rad is not).
+_SMOOTH_STEP = math.pi / 4
+#: Key of ``Log.data.attrs``: the rows where a yaw written wrapped was unwrapped on read.
+YAW_UNWRAPPED = "yaw_unwrapped_rows"
+
+
+def _unwrap_yaw(out: pd.DataFrame, testbed: Testbed | None) -> None:
+    """A logged ``yaw`` written wrapped is unwrapped on read, and said.
+
+    The signature of a wrapped yaw: it stays within one turn (its range is at most 2 pi),
+    moves smoothly (median step below :data:`_SMOOTH_STEP`) and jumps by about a whole turn
+    (more than pi, within pi/2 of 2 pi k) between two samples of a segment. Such a yaw is
+    unwrapped as the import map does (:func:`airbearing.io.import_map.unwrap`: each segment
+    on its own, an isolated jump keeping the branch), and the rows where its branch changes
+    are kept in ``out.attrs[YAW_UNWRAPPED]`` for ``log check`` and the tools to say. A
+    glitch (a frame exported as 0) on a spinning yaw is not one: the yaw spans more than a
+    turn.
+    """
+    if "yaw" not in out.columns or len(out) < 3:
+        return
+    yaw = out["yaw"].to_numpy()
+    if not float(np.ptp(yaw)) <= 2 * math.pi + 1e-9:
+        return
+    t = out["t"].to_numpy()
+    period = testbed.sensors.dt if testbed is not None else float(np.median(np.diff(t)))
+    step = np.diff(yaw)
+    wrapped = np.abs(np.mod(step + math.pi, 2 * math.pi) - math.pi)
+    inside = np.diff(t) <= GAP_FACTORS[1] * period
+    jump = (np.abs(step) > _WRAP_STEP) & (wrapped < _WRAP_SLACK) & inside
+    if not jump.any() or not np.median(wrapped[inside]) < _SMOOTH_STEP:
+        return
+    from airbearing.io.import_map import unwrap
+
+    new = unwrap(yaw, t)
+    turns = np.round((new - yaw) / (2 * math.pi))
+    rows = [int(r) for r in np.flatnonzero(np.diff(turns) != 0) + 1]
+    if not rows:
+        return
+    out["yaw"] = new
+    out.attrs[YAW_UNWRAPPED] = rows
+
+
+def yaw_unwrapped_words(rows: Sequence[int]) -> str:
+    """The sentence that says a yaw was unwrapped on read (``""`` for no rows)."""
+    if not rows:
+        return ""
+    shown = row_ranges(list(rows)[:10]) + (" ..." if len(rows) > 10 else "")
+    return (
+        f"yaw written wrapped (to one turn): unwrapped on read, {len(rows)} jump(s) of 2 pi "
+        f"removed at row(s) {shown}; the file is unchanged (import raw files with 'airbearing "
+        "log import', which writes the yaw unwrapped)"
+    )
 
 
 #: The median sample interval of a log must lie within this factor of ``1 / sensors.rate``
@@ -599,7 +714,9 @@ def validate_log(
     Returns
     -------
     pandas.DataFrame
-        A copy with a fresh RangeIndex and every FORMATS.md column as float64.
+        A copy with a fresh RangeIndex and every FORMATS.md column as float64; a ``yaw``
+        written wrapped is unwrapped, its rows in ``.attrs["yaw_unwrapped_rows"]``
+        (module doc).
 
     Raises
     ------
@@ -891,7 +1008,7 @@ def _check_separator(header: str, src: str, line: int) -> None:
                 f"{src}: line {line}: not comma separated: {name} found in the header "
                 f"({header.strip()[:60]!r}); a log is comma separated (FORMATS.md): save it "
                 "with commas, or convert it with 'airbearing log import' (which reads tab "
-                "and semicolon separated files)"
+                'and semicolon separated files, with decimal = "," for decimal commas)'
             )
 
 
@@ -1073,7 +1190,7 @@ def write_log(log: Log | pd.DataFrame, path: str | os.PathLike[str]) -> Path:
     if isinstance(log, Log):
         data = log.data
     elif isinstance(log, pd.DataFrame):
-        data = _validate(log, str(path), None)
+        data = _validate(log, str(path), None, unwrap_yaw=False)
     else:
         raise InputError(f"{path}: expected a Log or a pandas DataFrame, got {type(log).__name__}")
     if kind == "csv":
