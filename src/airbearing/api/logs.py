@@ -39,6 +39,8 @@ class LogCheck:
         Segments, jitter and outliers (:func:`airbearing.io.quality.assess`).
     tools : dict of str to (bool, str)
         Whether each tool can use the log, and why.
+    checked : Log or None
+        The log that was checked, for :meth:`plot` (not part of :meth:`to_json`).
     """
 
     log: str
@@ -48,6 +50,7 @@ class LogCheck:
     rate: float
     quality: object = field(repr=False)
     tools: dict = field(repr=False)
+    checked: object = field(default=None, repr=False, compare=False)
 
     @property
     def outlier_rows(self) -> tuple[int, ...]:
@@ -90,9 +93,10 @@ class LogCheck:
 
         Parameters
         ----------
-        log : Log
-            The log that was checked (its samples are not kept in the result).
+        log : Log, optional
+            The log that was checked; by default the one :func:`check_log` was given.
         """
+        log = self.checked if log is None else log
         if log is None:
             raise InputError("log: LogCheck.plot needs the Log that was checked")
         from airbearing.reporting.log_plot import log_figure
@@ -158,6 +162,7 @@ def check_log(log, testbed=None) -> LogCheck:
         rate=log.testbed.sensors.rate,
         quality=quality,
         tools=tool_use(log, quality),
+        checked=log,
     )
 
 

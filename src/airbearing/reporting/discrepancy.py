@@ -151,13 +151,21 @@ def replay_report(result: Replay, *, title: str | None = None) -> Report:
     return report
 
 
+def _log_name(log) -> str:
+    """A log's file name, or "a simulated log" (not "<simulation>")."""
+    src = str(log.source)
+    if src.startswith("<") and src.endswith(">"):
+        return "a simulated log" if "simul" in src else "a log in memory"
+    return src
+
+
 def add_discrepancy(report: Report, result: Discrepancy, *, level: int = 2) -> None:
     """Append the sections of one discrepancy result to ``report``."""
     data = result.data
     datas = result.datas
     unit = result.gap_unit
-    names = ", ".join(d.log.source for d in datas)
-    report.heading(f"Discrepancy: {result.testbed.name} vs {names}", level)
+    names = ", ".join(_log_name(d.log) for d in datas)
+    report.heading(f"Discrepancy: {result.testbed.name} against {names}", level)
     ratio_b = result.gap_before / result.noise_floor
     ratio_a = result.gap_after / result.noise_floor
     report.paragraph(result.verdict + ".", note=True)
