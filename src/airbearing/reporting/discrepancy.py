@@ -14,6 +14,7 @@ from airbearing.analysis.discrepancy.search import Discrepancy, discrepancy
 from airbearing.analysis.discrepancy.words import format_value
 from airbearing.reporting.html import Report
 from airbearing.reporting.html import sentence as as_sentence
+from airbearing.reporting.style import plain
 
 __all__ = [
     "add_discrepancy",
@@ -94,7 +95,7 @@ def residual_figure(datas, problem, fits, labels, floor):
         sig = floor.rate_axes[a] if unit == "rad/s" else floor.attitude
         ax.axhline(2 * sig, color="gray", lw=0.5, ls=":")
         ax.axhline(-2 * sig, color="gray", lw=0.5, ls=":")
-        ax.set_ylabel(f"residual ({unit})")
+        ax.set_ylabel(f"{names[a]} residual ({unit})")
     for d in datas[:1]:
         for a_, _ in d.segments[1:]:
             for ax in axes.ravel():
@@ -103,8 +104,17 @@ def residual_figure(datas, problem, fits, labels, floor):
             for ax in axes[:, 0]:
                 ax.axvline(d.t[r], color="orange", lw=0.6, ls="--", alpha=0.8)
     axes[0, 0].legend(fontsize=8)
-    axes[-1, 0].set_xlabel("t (s)" + (" (logs overlaid)" if multi else ""))
-    axes[-1, 1].set_xlabel("t (s)")
+    axes[0, 1].legend(fontsize=8)
+    axes[0, 0].set_title("measured and modelled", fontsize=10, loc="left")
+    axes[0, 1].set_title("residual, dotted: +-2 sigma of the noise floor", fontsize=10, loc="left")
+    for ax in axes.ravel():
+        plain(ax)
+    axes[-1, 0].set_xlabel("time (s)" + (" (logs overlaid)" if multi else ""))
+    axes[-1, 1].set_xlabel("time (s)")
+    logs = ", ".join(_log_name(d.log) for d in datas)
+    tb = getattr(getattr(problem, "model", None), "testbed", None)
+    fig.suptitle(f"{tb.name if tb is not None else 'model'} against {logs}: " + ", ".join(labels))
+    fig.tight_layout()
     return fig
 
 
@@ -225,6 +235,23 @@ def _validation_section(report: Report, result: Discrepancy, level: int) -> None
     )
 
 
+def _meaning(name: str, value, testbed) -> str:
+    """An effect's value as the physical quantity it changes (``inertia_error`` 0.1413 ->
+    "+14.1 % of J_zz = +4.0e-04 kg m^2"); "" where the value is that quantity already."""
+    if name == "inertia_error":
+        e = float(np.ravel(value)[0])
+        body = testbed.body
+        if body.dof == 1:
+            j = float(body.yaw_inertia)
+            return f"{100 * e:+.1f} % of J_zz = {e * j:+.1e} kg m^2"
+        jzz = float(np.asarray(body.inertia, dtype=float)[2, 2])
+        return f"{100 * e:+.1f} % of every inertia term (J_zz {e * jzz:+.1e} kg m^2)"
+    if name == "cm_offset_error":
+        mm = np.ravel(value) * 1e3
+        return "CM moved by [" + ", ".join(f"{x:+.3f}" for x in mm) + "] mm"
+    return ""
+
+
 def _effects_section(report: Report, result: Discrepancy, level: int) -> None:
     """The named effects with their honest, white-noise and Cramer-Rao errors."""
     if not result.effects:
@@ -237,6 +264,7 @@ def _effects_section(report: Report, result: Discrepancy, level: int) -> None:
             "Cramer-Rao bound": format_value(result.effect_crlb.get(n)),
             "std / bound": format_value(result.effect_efficiency.get(n)),
             "unit": _unit(n),
+            "what it means": _meaning(n, v, result.testbed),
         }
         for n, v in result.effects.items()
     ]
@@ -292,7 +320,10 @@ def _candidates_section(report: Report, result: Discrepancy, level: int) -> None
         "pinned at its physical bound, it passes the likelihood-ratio and BIC tests, it lies at "
         "least 3 standard errors from zero (errors from the Gauss-Newton covariance with the "
         "windows' initial states eliminated) and it shrinks the gap on held-out windows. "
-        "The values below carry their honest standard errors."
+        "The values below carry their honest standard errors. They are the first round's: "
+        "each effect fitted alone on the nominal model, so a named effect's value here "
+        "differs from its final value under 'Named effects' (fitted together with the "
+        "others)."
     )
     rows = []
     for c in result.candidates:
