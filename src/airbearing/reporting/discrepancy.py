@@ -45,7 +45,7 @@ def _segments_paragraph(report: Report, datas) -> None:
         j = d.segment_json()
         rows.append(
             {
-                "log": d.log.source,
+                "log": _log_name(d.log),
                 "rows": d.n,
                 "segments": j["segments"],
                 "segment rows": ", ".join(f"{a}-{b - 1}" for a, b in j["segment_rows"]),
@@ -130,7 +130,7 @@ def add_replay(report: Report, result: Replay, *, level: int = 2) -> None:
         + ". No effect is fitted: only each window's initial state."
     )
     rows = [
-        {"log": d.log.source, f"gap ({unit})": g, "x noise floor": g / result.floor.value}
+        {"log": _log_name(d.log), f"gap ({unit})": g, "x noise floor": g / result.floor.value}
         for d, g in zip(datas, result.log_gaps(), strict=True)
     ]
     rows.append(
@@ -416,7 +416,7 @@ def _adequacy_section(report: Report, result: Discrepancy, level: int) -> None:
     multi = len(result.datas) > 1
     for i in np.unique(ser["source"]):
         m = ser["source"] == i
-        lab = result.datas[int(i)].log.source if multi else None
+        lab = _log_name(result.datas[int(i)].log) if multi else None
         axes[0].plot(ser["t"][m], res[m, 0], ".", ms=1, label=lab)
         axes[2].plot(np.mod(ser["yaw"][m], 2 * np.pi), res[m, 0], ".", ms=1)
         axes[3].plot(rate[m, -1], res[m, 0], ".", ms=1)

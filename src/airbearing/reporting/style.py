@@ -15,7 +15,7 @@ from matplotlib.ticker import MaxNLocator
 
 from airbearing.reporting.html import pretty_key
 
-__all__ = ["trace", "plain", "axis_label", "legend_outside", "MARKERS", "MARKS"]
+__all__ = ["trace", "chatters", "plain", "axis_label", "legend_outside", "MARKERS", "MARKS"]
 
 #: One marker per trace of a panel, in order.
 MARKERS = ("o", "s", "^", "D", "v", "P", "X", "*")
@@ -34,8 +34,29 @@ def trace(ax, x, y, label: str | None = None, k: int = 0, **kw):
         "mfc": "none",
     }
     opts.update(kw)
+    x, y = np.asarray(x), np.asarray(y)
+    if chatters(y):
+        # a line joining samples that jump between two levels fills a band and hides the
+        # other traces: every few samples as a marker shows both levels
+        step = max(n // 120, 1)
+        opts.update(ls="none", markevery=None, ms=3)
+        (line,) = ax.plot(x[::step], y[::step], label=f"{label} (chatters: samples)", **opts)
+        return line
     (line,) = ax.plot(x, y, label=label, **opts)
     return line
+
+
+def chatters(y, share: float = 0.3) -> bool:
+    """Whether ``y`` turns back at more than ``share`` of its samples (a sample-to-sample
+    chatter), on a span not negligible against its size."""
+    y = np.asarray(y, dtype=float)
+    y = y[np.isfinite(y)]
+    if y.size < 20:
+        return False
+    d = np.diff(y)
+    big = np.abs(d) > 1e-6 * max(float(np.max(np.abs(y))), 1e-300)
+    turns = np.sum((d[1:] * d[:-1] < 0) & big[1:] & big[:-1])
+    return bool(turns > share * (y.size - 2))
 
 
 def plain(ax, *, ticks: int | None = None) -> None:
