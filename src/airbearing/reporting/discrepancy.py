@@ -429,10 +429,13 @@ def _adequacy_section(report: Report, result: Discrepancy, level: int) -> None:
     axes[1].axhline(0.0, color="gray", lw=0.5)
     axes[1].set(xlabel="lag (s)", ylabel="autocorrelation", title="its autocorrelation")
     axes[1].legend(fontsize=8)
-    axes[2].set(xlabel="yaw mod 2 pi (rad)", title="against the angle")
-    axes[3].set(xlabel="rate (rad/s)", title="against the rate")
+    axes[2].set(xlabel="yaw mod 2 pi (rad)", ylabel=f"residual ({unit})", title="against the angle")
+    axes[3].set(xlabel="rate (rad/s)", ylabel=f"residual ({unit})", title="against the rate")
     for ax in axes[2:]:
         ax.axhline(0.0, color="gray", lw=0.5)
+    for ax in axes:
+        plain(ax)
+    fig.tight_layout()
     report.figure(
         fig,
         "The residual the named effects leave (first axis), its autocorrelation (normalised "
