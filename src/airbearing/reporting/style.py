@@ -46,15 +46,16 @@ def trace(ax, x, y, label: str | None = None, k: int = 0, **kw):
     return line
 
 
-def chatters(y, share: float = 0.3) -> bool:
+def chatters(y, share: float = 0.1) -> bool:
     """Whether ``y`` turns back at more than ``share`` of its samples (a sample-to-sample
-    chatter), on a span not negligible against its size."""
+    chatter) by steps of at least 1 % of its range."""
     y = np.asarray(y, dtype=float)
     y = y[np.isfinite(y)]
     if y.size < 20:
         return False
     d = np.diff(y)
-    big = np.abs(d) > 1e-6 * max(float(np.max(np.abs(y))), 1e-300)
+    # a turn counts when its step is visible: 1 % of the trace's range (not roundoff)
+    big = np.abs(d) > 1e-2 * max(float(np.ptp(y)), 1e-300)
     turns = np.sum((d[1:] * d[:-1] < 0) & big[1:] & big[:-1])
     return bool(turns > share * (y.size - 2))
 
