@@ -268,18 +268,18 @@ def run_demo(out_dir: str | Path, *, quick: bool = False, progress=None) -> Path
 
 #: Relative length of each section: (warm compile cache, first run compiling its C code,
 #: ``--quick`` with a warm cache).
-#: The first-run column is a first run's seconds on the shared 2-core machine (load ~10,
+#: Each column is one run's seconds per section on the shared 2-core machine (load 10-19,
 #: docs/benchmarks.md); only the ratios matter (the display scales them by the pace it
 #: sees).
 SECTION_COST = {
-    "Foundation": (2.0, 13.0, 24.0),
-    "CMG cluster": (4.0, 28.0, 21.0),
-    "Balancing": (40.0, 258.0, 27.0),
-    "Linear stability": (200.0, 1414.0, 59.0),
-    "Identification": (60.0, 455.0, 37.0),
-    "Model discrepancy": (20.0, 146.0, 43.0),
-    "Campaign: robust verification": (6.0, 40.0, 134.0),
-    "Campaign: detection rate": (35.0, 248.0, 24.0),
+    "Foundation": (11.0, 13.0, 24.0),
+    "CMG cluster": (18.0, 28.0, 21.0),
+    "Balancing": (42.0, 258.0, 27.0),
+    "Linear stability": (612.0, 1414.0, 59.0),
+    "Identification": (55.0, 455.0, 37.0),
+    "Model discrepancy": (59.0, 146.0, 43.0),
+    "Campaign: robust verification": (39.0, 40.0, 134.0),
+    "Campaign: detection rate": (98.0, 248.0, 24.0),
 }
 #: Compiled libraries a first run of the demo leaves in the cache (fewer: a first run).
 FIRST_RUN_LIBRARIES = 20
