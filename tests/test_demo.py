@@ -24,6 +24,10 @@ def test_demo_runs_and_reports_every_section(demo_run):
     assert html.count("<img") >= 10  # every section has its figures, embedded
     assert "http://" not in html and "https://" not in html  # self-contained
     assert bad_text(html) == [], "nan/inf text in the demo report"
+    # it opens with the summary and the contents, and no failure goes unexplained
+    assert html.index("<h2>Summary</h2>") < html.index("<h2>Contents</h2>") < html.index("Seed 001")
+    assert "NOT expected" not in html
+    assert "platform-3dof" not in html and "&lt;simulation&gt;" not in html
 
 
 def test_demo_says_which_section_it_is_in(demo_run):

@@ -10,16 +10,32 @@ commit of a command's outputs), so an interrupt swallowed by a solver still stop
 run before anything is written.
 
 Only the command line installs the handler; the library never changes a process's
-signal handling.
+signal handling. The console command runs its work in a worker thread and waits for it
+in the main thread, where Python runs signal handlers: a Ctrl-C then ends the process
+at once, wherever the work is (inside IPOPT, a compiled rollout, a cvxpy solve, a
+compiler run), with no exception raised inside a solver. :func:`writing` keeps that
+exit from cutting a command's outputs in half.
 """
 
 from __future__ import annotations
 
+import contextlib
 import signal
+import threading
+from collections.abc import Iterator
 
-__all__ = ["install", "uninstall", "check", "interrupted", "clear"]
+__all__ = [
+    "install",
+    "uninstall",
+    "check",
+    "interrupted",
+    "clear",
+    "writing",
+    "stop_writing",
+]
 
-_STATE = {"hit": False, "previous": None, "installed": False}
+_STATE = {"hit": False, "previous": None, "installed": False, "written": False}
+_WRITE = threading.Lock()
 
 
 def _handler(signum, frame) -> None:
@@ -60,8 +76,41 @@ def interrupted() -> bool:
 
 
 def clear() -> None:
-    """Forget an earlier interrupt."""
+    """Forget an earlier interrupt (and earlier writes)."""
     _STATE["hit"] = False
+    _STATE["written"] = False
+
+
+@contextlib.contextmanager
+def writing() -> Iterator[None]:
+    """Write outputs: after a Ctrl-C nothing starts, and once started they finish.
+
+    Raises
+    ------
+    KeyboardInterrupt
+        SIGINT arrived before the writing started.
+    """
+    with _WRITE:
+        check()
+        yield
+        _STATE["written"] = True
+
+
+def stop_writing() -> bool:
+    """Wait for outputs being written; then, unless some were written, let no more start
+    (the process is ending).
+
+    Returns
+    -------
+    bool
+        Whether some output was written already (the run is past "nothing written";
+        later writes are still refused by :func:`writing` after the interrupt).
+    """
+    _WRITE.acquire()
+    if _STATE["written"]:
+        _WRITE.release()
+        return True
+    return False
 
 
 def check() -> None:

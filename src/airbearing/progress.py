@@ -12,7 +12,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Protocol
 
-__all__ = ["Progress", "silent", "call", "TimeLeft"]
+__all__ = ["Progress", "silent", "call", "expect", "TimeLeft"]
 
 
 class Progress(Protocol):
@@ -36,6 +36,19 @@ def call(progress: Callable | None) -> Progress:
     return silent if progress is None else progress
 
 
+def expect(progress: Callable | None, weights) -> None:
+    """Tell ``progress`` how long each step is expected to take, relative to the others.
+
+    ``weights[k]`` is the expected length of step ``k`` (any unit; a display uses only
+    their ratios), so an estimate of the time left counts the work left rather than the
+    steps left (the demo's sections differ 100-fold). A ``progress`` without an
+    ``expect`` method (a plain function) is not told.
+    """
+    tell = getattr(progress, "expect", None)
+    if callable(tell):
+        tell([float(w) for w in weights])
+
+
 class TimeLeft:
     """An estimate of the time left that never jumps up by more than its own uncertainty,
     and says nothing once it has run out.
@@ -56,10 +69,18 @@ class TimeLeft:
     left"), and the next finished step starts a fresh estimate, not capped by the one
     that ran out.
 
+    Steps of unequal length: with :meth:`expect` weights the share of the work done
+    replaces ``done / total`` (the steps' expected lengths, e.g. a first run's compiling
+    included). Without them, the time spent compiling (``excluded``) is left out of the
+    pace: it happens once, and the steps after it run at the pace of a warm cache.
+
     Parameters
     ----------
     start : float
         Time the work started, s (``time.monotonic()``).
+    excluded : callable, optional
+        ``excluded() -> s``: a clock of time not to count in the pace (the process's
+        compiling, :func:`airbearing.models.compiled.compile_seconds`).
     """
 
     #: s: an estimate below this says nothing (it would read "about 0 s left": a step
@@ -67,8 +88,11 @@ class TimeLeft:
     #: to it has run out while its step runs on).
     RUN_OUT = 0.5
 
-    def __init__(self, start: float) -> None:
+    def __init__(self, start: float, *, excluded: Callable[[], float] | None = None) -> None:
         self.start = start
+        self.excluded = excluded
+        self.excluded0 = excluded() if excluded is not None else 0.0
+        self.weights: list[float] | None = None
         self.shown: float | None = None
         self.uncertainty = 0.0
         self.at = start
@@ -83,7 +107,12 @@ class TimeLeft:
             return None
         if done != self.done:  # a step finished: a new estimate
             elapsed = max(now - self.start, 0.0)
-            raw = elapsed * (total - done) / done
+            work, whole = self._share(done, total)
+            if self.weights is None and self.excluded is not None:
+                elapsed = max(elapsed - (self.excluded() - self.excluded0), 0.0)
+            if work <= 0:
+                return None
+            raw = elapsed * (whole - work) / work
             unc = raw / done**0.5
             if self.shown is not None:
                 before = self.shown - (now - self.at)
@@ -94,3 +123,17 @@ class TimeLeft:
         if left < self.RUN_OUT:  # "about 0 s left" is never an honest estimate
             return None
         return left, self.uncertainty
+
+    def expect(self, weights) -> None:
+        """The steps' expected lengths (relative): see :func:`airbearing.progress.expect`."""
+        weights = [max(float(w), 0.0) for w in weights]
+        self.weights = weights if sum(weights) > 0 else None
+
+    def _share(self, done: float, total: float) -> tuple[float, float]:
+        """``(work done, whole work)``: weighted when the weights match the steps."""
+        w = self.weights
+        if w is None or len(w) != int(total):
+            return float(done), float(total)
+        k = int(done)
+        part = sum(w[:k]) + (done - k) * (w[k] if k < len(w) else 0.0)
+        return part, sum(w)

@@ -44,6 +44,8 @@ class LogCheck:
         ``column``, ``rows``, ``limit``, ``largest``, ``reason``); reported, not clipped.
     yaw_unwrapped_rows : tuple of int
         Rows where a yaw written wrapped was unwrapped on read (the file unchanged).
+    checked : Log or None
+        The log that was checked, for :meth:`plot` (not part of :meth:`to_json`).
     """
 
     log: str
@@ -60,6 +62,7 @@ class LogCheck:
     def usable(self) -> bool:
         """Whether some tool can use the log (``log check`` exits 2 when none can)."""
         return any(ok for ok, _ in self.tools.values())
+    checked: object = field(default=None, repr=False, compare=False)
 
     @property
     def outlier_rows(self) -> tuple[int, ...]:
@@ -115,9 +118,10 @@ class LogCheck:
 
         Parameters
         ----------
-        log : Log
-            The log that was checked (its samples are not kept in the result).
+        log : Log, optional
+            The log that was checked; by default the one :func:`check_log` was given.
         """
+        log = self.checked if log is None else log
         if log is None:
             raise InputError("log: LogCheck.plot needs the Log that was checked")
         from airbearing.reporting.log_plot import log_figure
@@ -186,6 +190,7 @@ def check_log(log, testbed=None) -> LogCheck:
         wheel_saturation=wheel_saturation(log),
         _wheels=log.testbed.wheels is not None,
         yaw_unwrapped_rows=tuple(log.data.attrs.get(YAW_UNWRAPPED, ())),
+        checked=log,
     )
 
 

@@ -42,7 +42,7 @@ import typer
 
 from airbearing.errors import AirbearingError, InputError
 
-__all__ = ["app", "main", "one_line", "chatter_to_debug_log", "debug_log_path"]
+__all__ = ["app", "main", "one_line", "chatter_to_debug_log", "debug_log_path", "fast_help"]
 
 app = typer.Typer(
     name="airbearing",
@@ -245,10 +245,17 @@ def main(argv: list[str] | None = None) -> None:
     for note in notes:
         print(f"airbearing: {note}", file=sys.stderr)
     _path, start = command_path(args)
+    help_text = fast_help(args, one_module=console)
+    if help_text is not None:
+        typer.echo(help_text)
+        return
     verbose = any(a in ("--verbose", "-v") for a in args[: max(start - len(_path), 0)])
     try:
         with chatter_to_debug_log(verbose, fds=console):
-            _run(args)
+            if console:
+                _run_watched(args)
+            else:
+                _run(args)
     except KeyboardInterrupt:  # a second one, or one past the run's own handling
         _say_interrupted()
         _leave_interrupted(console)
@@ -259,11 +266,102 @@ def main(argv: list[str] | None = None) -> None:
         raise
 
 
+#: Command modules not named by their command (``airbearing report`` lives in gains.py).
+_MODULE_OF = {"report": "gains"}
+
+
+def fast_help(args: list[str], *, one_module: bool = False) -> str | None:
+    """The help ``args`` ask for, or ``None`` (not a request for help, or a command that
+    does not exist: the parser says so).
+
+    The same text the parser prints, built from the same command tree, but without the
+    parser's processing of the help option: that loads pydantic (typer coerces every
+    parameter through it), a third of the start-up of ``airbearing CMD --help``.
+    ``one_module``: import only the asked command's module (a process that ends after
+    the help; the command list of ``airbearing --help`` still imports them all).
+    """
+    from airbearing.cli.grammar import command_path
+
+    words = args[: args.index("--")] if "--" in args else args
+    if not any(a in ("--help", "-h") for a in words):
+        return None
+    path, start = command_path(args)
+    if any(a.startswith("-") and a not in ("--help", "-h") for a in words[start:]):
+        return None  # other options: let the parser see them (a typo is reported)
+    from typer import _click as click  # typer's own click
+    from typer.main import get_command
+
+    if one_module and path:
+        try:
+            __import__(f"airbearing.cli.{_MODULE_OF.get(path[0], path[0])}")
+        except ModuleNotFoundError:
+            return None
+    else:
+        _register()
+    cmd = get_command(app)
+    ctx = click.Context(cmd, info_name="airbearing", **cmd.context_settings)
+    for word in path:
+        sub = getattr(cmd, "commands", {}).get(word)
+        if sub is None:
+            return None
+        cmd = sub
+        ctx = click.Context(cmd, info_name=word, parent=ctx, **cmd.context_settings)
+    return cmd.get_help(ctx)
+
+
 def _say_interrupted() -> None:
-    """Print the interrupt's one line (once per run)."""
+    """Print the interrupt's one line (once per run): the command's own
+    (``GLOBAL["interrupt_line"]``, e.g. a campaign's "finished runs are kept") or
+    "interrupted; nothing written"."""
     if not GLOBAL.get("interrupt_said"):
         GLOBAL["interrupt_said"] = True
-        print("airbearing: interrupted; nothing written", file=sys.stderr)
+        line = GLOBAL.get("interrupt_line") or "airbearing: interrupted; nothing written"
+        print(line, file=sys.stderr)
+
+
+def _run_watched(args: list[str]) -> None:
+    """Run the command in a worker thread while the main thread waits for Ctrl-C.
+
+    Python runs signal handlers in the main thread only, and only between bytecodes: a
+    command running there does not see a Ctrl-C until IPOPT, a compiled rollout, a cvxpy
+    solve or the C compiler returns, and CasADi turns the ``KeyboardInterrupt`` it meets
+    in a Python callback into a warning and a solve that looks finished. Here the main
+    thread only waits, so the interrupt is answered at once (the worker is not told: it
+    ends with the process), and CasADi's own signal checks in the worker find nothing
+    (no warning). Outputs being written are finished first
+    (:func:`airbearing.interrupt.stop_writing`); a run that has written outputs already
+    ends as it would have.
+    """
+    import threading
+
+    from airbearing import interrupt
+
+    box: dict = {}
+
+    def work() -> None:
+        try:
+            _run(args, handler=False)
+        except BaseException as e:  # handed to the main thread
+            box["exc"] = e
+
+    worker = threading.Thread(target=work, name="airbearing-command", daemon=True)
+    interrupt.install()
+    try:
+        worker.start()
+        while worker.is_alive():
+            try:
+                worker.join(0.05)
+            except KeyboardInterrupt:
+                if not interrupt.stop_writing():
+                    _say_interrupted()
+                    _leave_interrupted(True)
+                # outputs are written: the run finishes (a second Ctrl-C ends it)
+                interrupt.uninstall()
+    finally:
+        interrupt.uninstall()
+        GLOBAL["interrupt_line"] = None
+    if "exc" in box:
+        raise box["exc"]
 
 
 def _leave_interrupted(console: bool) -> None:
@@ -283,16 +381,18 @@ def _leave_interrupted(console: bool) -> None:
     os._exit(130)
 
 
-def _run(args: list[str]) -> None:
+def _run(args: list[str], *, handler: bool = True) -> None:
     """Run the app on ``args``; every error leaves as one line and an exit status.
 
     A Ctrl-C is final (:mod:`airbearing.interrupt`): whatever the command did after it
     (a solver that swallowed it and returned, an error that followed), the run ends with
-    "interrupted; nothing written" and status 130.
+    "interrupted; nothing written" and status 130. ``handler=False``: the caller
+    (:func:`_run_watched`, in the main thread) installed the SIGINT handler.
     """
     from airbearing import interrupt
 
-    interrupt.install()
+    if handler:
+        interrupt.install()
     try:
         _run_app(args)
         interrupt.check()
@@ -302,7 +402,8 @@ def _run(args: list[str]) -> None:
             raise SystemExit(130) from None
         raise
     finally:
-        interrupt.uninstall()
+        if handler:
+            interrupt.uninstall()
 
 
 def _run_app(args: list[str]) -> None:

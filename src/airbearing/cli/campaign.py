@@ -116,6 +116,13 @@ def campaign(
             f"-o {output}: {parts} holds the runs of an interrupted campaign: pass --resume "
             "to finish it, or delete the folder to start again"
         )
+    from airbearing.cli import GLOBAL
+
+    # what a Ctrl-C answered at once by the main thread says (cli.main)
+    GLOBAL["interrupt_line"] = (
+        f"campaign: interrupted; finished runs are kept in {parts}: run again with "
+        "--resume to do the rest"
+    )
     with as_flags(scheduler="--scheduler"), open_client(workers, scheduler) as client:
         try:
             with progress_display("campaign") as progress:

@@ -69,7 +69,7 @@ def identify(
     ] = None,
     force: Force = False,
 ) -> None:
-    """Identify inertia (and CM offset) from free-oscillation, spin-down or slew logs."""
+    """Identify inertia and CM offset, or a yaw inertia, from free, spin-down or slew logs."""
     out = Outputs(force=force)
     testbed_input(out, testbed)
     out.inputs(logs, "log")

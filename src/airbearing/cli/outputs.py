@@ -244,12 +244,17 @@ class Outputs:
         """Write every queued output; all or nothing. Returns the paths written.
 
         Nothing is written after a Ctrl-C, even one a solver swallowed
-        (:func:`airbearing.interrupt.check` raises :class:`KeyboardInterrupt`).
+        (:func:`airbearing.interrupt.check` raises :class:`KeyboardInterrupt`), and a
+        Ctrl-C during the writing waits for it to finish (:func:`airbearing.interrupt.writing`).
         """
+        from airbearing.interrupt import writing
+
+        with writing():
+            return self._commit()
+
+    def _commit(self) -> list[Path]:
         from airbearing.interrupt import check
         from airbearing.io.output import write_temp
-
-        check()
 
         temps: list[tuple[Path, Path]] = []
         done: list[tuple[Path, Path | None]] = []

@@ -78,18 +78,28 @@ def _when(left, done: float, total: float, now: float) -> str:
     return f", {elapsed} so far" if now - left.start >= 1.0 else ""
 
 
+def _time_left(start: float):
+    """An estimate of the time left that leaves this process's compiling out of the pace."""
+    from airbearing.models.compiled import compile_seconds  # stdlib only at import
+    from airbearing.progress import TimeLeft
+
+    return TimeLeft(start, excluded=compile_seconds)
+
+
 class _Plain:
     def __init__(self, label: str, stream) -> None:
         self.label, self.stream = label, stream
         self.last_what: str | None = None
         self.last_t = 0.0
         self.t0 = time.monotonic()
-        from airbearing.progress import TimeLeft
-
-        self.left = TimeLeft(self.t0)
+        self.left = _time_left(self.t0)
         self.pending: str | None = None
         self.timer: threading.Timer | None = None
         self.lock = threading.Lock()
+
+    def expect(self, weights) -> None:
+        """The steps' expected lengths (:func:`airbearing.progress.expect`)."""
+        self.left.expect(weights)
 
     def _flush(self) -> None:
         with self.lock:
@@ -132,9 +142,11 @@ class _Rich:
         self.bar = bar
         self.task = bar.add_task(label, total=None, left="")
         self.label = label
-        from airbearing.progress import TimeLeft
+        self.left = _time_left(time.monotonic())
 
-        self.left = TimeLeft(time.monotonic())
+    def expect(self, weights) -> None:
+        """The steps' expected lengths (:func:`airbearing.progress.expect`)."""
+        self.left.expect(weights)
 
     def __call__(self, what: str, done=None, total=None) -> None:
         check_interrupt()

@@ -10,7 +10,6 @@ import typer
 
 from airbearing.cli import app
 from airbearing.cli.outputs import Force, Outputs
-from airbearing.cli.tables import echo_table
 from airbearing.errors import InputError
 
 __all__ = ["testbed_app"]
@@ -86,10 +85,38 @@ def list_(
         out.commit()
         typer.echo(f"wrote {json_path}")
         return
-    echo_table(
-        [[e.name, e.kind, str(e.dof), e.description] for e in entries],
-        ["name", "kind", "dof", "description"],
-    )
+    typer.echo(_listing(entries))
+
+
+#: Columns of ``testbed list``: a terminal's 100, with descriptions wrapped under their column.
+LIST_WIDTH = 100
+
+
+def _listing(entries) -> str:
+    """The ``testbed list`` table, no line wider than :data:`LIST_WIDTH`; an alias says
+    only what it stands for (its description is the built-in's, one row up)."""
+    import textwrap
+
+    rows = [
+        [e.name, e.kind, str(e.dof)]
+        + [f"alias of {e.alias_of} (its earlier name)" if e.alias_of else e.description]
+        for e in entries
+    ]
+    head = ["name", "kind", "dof", "description"]
+    w = [max(len(r[i]) for r in [head, *rows]) for i in range(3)]
+    left = sum(w) + 3 * 2
+    width = max(LIST_WIDTH - left, 30)
+
+    def line(r, text):
+        cells = [r[0].ljust(w[0]), r[1].ljust(w[1]), r[2].rjust(w[2]), text]
+        return "  ".join(cells).rstrip()
+
+    out = [line(head, head[3]), line(["-" * w[0], "-" * w[1], "-" * w[2]], "-" * width)]
+    for r in rows:
+        parts = textwrap.wrap(r[3], width, break_on_hyphens=False) or [""]
+        out.append(line(r, parts[0]))
+        out += [" " * left + p for p in parts[1:]]
+    return "\n".join(out)
 
 
 @testbed_app.command("show")

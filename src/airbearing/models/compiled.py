@@ -42,6 +42,7 @@ import contextlib
 import os
 import sys
 import threading
+import time
 import weakref
 from collections import OrderedDict
 from collections.abc import Callable, Iterator
@@ -58,6 +59,7 @@ __all__ = [
     "compile_notices",
     "compiled",
     "compiler",
+    "compile_seconds",
 ]
 
 #: Environment variable naming the airbearing cache folder.
@@ -92,6 +94,8 @@ _default_sink: list[Callable] = []
 #: Sinks that have had their one notice (weakly held; ids for sinks without weakrefs).
 _told = weakref.WeakSet()
 _told_ids: set[int] = set()
+#: Wall time spent compiling in this process: finished builds, and the start of a running one.
+_compile_time = {"done": 0.0, "running_since": None}
 _counts = {"memory_hits": 0, "disk_hits": 0, "compiled": 0, "rebuilt": 0, "uncompiled": 0}
 
 
@@ -146,6 +150,16 @@ def cache_info() -> CacheInfo:
     """Counters of this process's calls to :func:`compiled` (see :class:`CacheInfo`)."""
     with _lock:
         return CacheInfo(**_counts, folder=str(cache_dir()), last=_last["what"])
+
+
+def compile_seconds() -> float:
+    """Wall time this process has spent compiling so far, s (a running build included).
+
+    A progress display leaves it out of the pace of the work: a first run's compiling
+    happens once, and the steps after it run at the pace of a warm cache.
+    """
+    since = _compile_time["running_since"]
+    return _compile_time["done"] + (time.monotonic() - since if since is not None else 0.0)
 
 
 def _count(what: str) -> None:
@@ -430,7 +444,15 @@ def compiled(fn, *, key: str = "", progress: Callable | None = None):
                         with contextlib.suppress(FileNotFoundError):
                             stale.unlink()
                     try:
-                        _build(cc, name, source, lib, side)
+                        _compile_time["running_since"] = time.monotonic()
+                        try:
+                            _build(cc, name, source, lib, side)
+                        finally:
+                            t0, _compile_time["running_since"] = (
+                                _compile_time["running_since"],
+                                None,
+                            )
+                            _compile_time["done"] += time.monotonic() - t0
                         f = _load(name, lib, fn)
                     except (RuntimeError, OSError) as e:
                         # the virtual machine computes the same values, only slower

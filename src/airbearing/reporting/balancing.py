@@ -188,10 +188,10 @@ def comparison_rows(cmp: Comparison) -> list[dict]:
 
 
 def demo_section(report, *, quick: bool = False) -> None:
-    """Seed-000 balancing comparison and the imperfection sweeps on ``platform-3dof``."""
+    """Seed-000 balancing comparison and the imperfection sweeps on ``seed000-tabletop``."""
     from airbearing.io.testbed import load_testbed
 
-    tb = load_testbed("platform-3dof")
+    tb = load_testbed("seed000-tabletop")
     report.heading("Automatic balancing: mechanical vs mixed (seed 000)")
     # fewer runs than the tests and the README (4 seeds per offset, 6-point grids, 2 seeds
     # x 2 offsets per point): the same findings in seconds; the text says what was run
@@ -199,7 +199,7 @@ def demo_section(report, *, quick: bool = False) -> None:
     duration = 300.0
     runs = {m: run_balancing(tb, m, duration=duration, seed=0) for m in ("mechanical", "mixed")}
     report.paragraph(
-        "platform-3dof, seed-000 gains (K_p = 1e-3 N m, K_d = 1.8e-3 N m s, K_d K_i = 2e-5 "
+        "seed000-tabletop, seed-000 gains (K_p = 1e-3 N m, K_d = 1.8e-3 N m s, K_d K_i = 2e-5 "
         "N m/s), 300 s at 20 Hz, on a platform balanced in-plane with vertical offset "
         f"{balanced_vertical_offset(tb) * 1e6:.0f} um (2 % of the testbed's, what seed 004's "
         "two-step leaves in the worst case). As in seed 000 Sec. 3, the in-plane sliders are "
@@ -258,15 +258,15 @@ def demo_section(report, *, quick: bool = False) -> None:
         f"{len(next(iter(grids.values())))} points with {len(DEMO_SWEEP_SEEDS)} seed from the "
         f"{DEMO_SWEEP_OFFSETS[0] * 1e3:g} mm offset per point (the README's numbers come from "
         "4 seeds per offset and 6-point grids over both offsets). `airbearing balance "
-        "platform-3dof --compare mechanical,mixed --sweep NAME=START:STOP:N` runs any sweep "
+        "seed000-tabletop --compare mechanical,mixed --sweep NAME=START:STOP:N` runs any sweep "
         "in full, also of the slider lag, the step and the run length."
     )
     report.figure(plot_sweeps(sweeps), "Mixed/mechanical ratios across each imperfection, "
-                  "the others at the platform-3dof defaults (dotted: seed 000's measured "
+                  "the others at the seed000-tabletop defaults (dotted: seed 000's measured "
                   f"ratios); {len(DEMO_SWEEP_SEEDS)} seed x {len(DEMO_SWEEP_OFFSETS)} offset "
                   "per point.")  # fmt: skip
     report.table([sweep_row(sw) for sw in sweeps])
-    report.paragraph(_sweep_statement(sweeps, "at the platform-3dof defaults"))
+    report.paragraph(_sweep_statement(sweeps, "at the seed000-tabletop defaults"))
     if quick:
         return
     # second level: the rate noise in the D term, without backlash, against the slider speed
@@ -288,7 +288,7 @@ def demo_section(report, *, quick: bool = False) -> None:
     report.paragraph(_sweep_statement(combos, "with no backlash and a noisier rate signal"))
 
 
-#: Demo grids: the seed-000 imperfections around the platform-3dof defaults. Speeds start
+#: Demo grids: the seed-000 imperfections around the seed000-tabletop defaults. Speeds start
 #: at one 2 um step per 0.05 s sample (4e-5 m/s); torque noise (per axis and sample) up to
 #: about seed 000's residual torque estimate (7-8e-5 N m, Tables 1-2).
 #: Three points each (the ends and the middle of the README's 6-point grids): the lag and

@@ -18,6 +18,7 @@ import numpy as np
 from airbearing.analysis.campaign import studies
 from airbearing.analysis.campaign.dispersions import dispersed_columns
 from airbearing.reporting.html import Report, pretty_key
+from airbearing.reporting.style import axis_label, plain
 
 __all__ = [
     "campaign_report",
@@ -52,12 +53,14 @@ def _hist_cdf(values: np.ndarray, name: str, entry=None):
     fig, (a1, a2) = plt.subplots(1, 2, figsize=(8, 2.6))
     v = values[np.isfinite(values)]
     a1.hist(v, bins=min(30, max(5, v.size // 4)), color="#4477aa")
-    a1.set_xlabel(name)
+    a1.set_xlabel(axis_label(name))
     a1.set_ylabel("runs")
     xs = np.sort(v)
     a2.step(xs, np.arange(1, xs.size + 1) / max(xs.size, 1), where="post", color="#4477aa")
-    a2.set_xlabel(name)
+    a2.set_xlabel(axis_label(name))
     a2.set_ylabel("fraction of runs <= x")
+    for a in (a1, a2):
+        plain(a, ticks=5)
     for bound in (entry.min, entry.max) if entry is not None else ():
         if bound is not None:
             for a in (a1, a2):
@@ -81,10 +84,11 @@ def _scatter(df, metrics: list[str], cols: list[str], log_cols: set[str]):
             if c in log_cols:
                 ax.set_xscale("log")
             if i == len(metrics) - 1:
-                ax.set_xlabel(c, fontsize=8)
+                ax.set_xlabel(axis_label(c), fontsize=8)
             if j == 0:
-                ax.set_ylabel(m, fontsize=8)
+                ax.set_ylabel(axis_label(m), fontsize=8)
             ax.tick_params(labelsize=7)
+            plain(ax, ticks=3)
     fig.tight_layout()
     return fig
 

@@ -30,6 +30,7 @@ from airbearing.analysis.cmg.steering_study import (
 )
 from airbearing.design.steering import STEERING_LAWS, check_skew
 from airbearing.io.testbed import load_testbed
+from airbearing.reporting.style import legend_outside, plain, trace
 
 __all__ = ["demo_section", "envelope_figure"]
 
@@ -103,15 +104,20 @@ def _internal_singularity(report, laws, quick: bool) -> None:
     )
     report.table([{k: r[k] for k in cols} for r in rows], cols)
     fig, ax = plt.subplots(1, 2, figsize=(11, 3.6))
-    for law, r in runs.items():
+    for k, (law, r) in enumerate(runs.items()):
         tt = np.append(r.t, r.t[-1] + r.info["dt"])
-        ax[0].plot(tt, r.H[:, 0], label=law)
-        ax[1].semilogy(tt, np.maximum(r.m, 1e-6), label=law)
+        trace(ax[0], tt, r.H[:, 0], law, k)
+        trace(ax[1], tt, np.maximum(r.m, 1e-6), law, k)
+    ax[1].set_yscale("log")
     ax[0].plot(tt, r.H_ref[:, 0], "k--", lw=0.8, label="reference")
-    ax[0].set(xlabel="t (s)", ylabel="Hx / h0")
+    ax[0].set(xlabel="t (s)", ylabel="momentum along x, Hx / h0 (-)")
     ax[1].axhline(NEAR_SINGULAR, color="gray", lw=0.8)
-    ax[1].set(xlabel="t (s)", ylabel="m = sqrt(det A A^T)")
-    ax[0].legend()
+    ax[1].set(xlabel="t (s)", ylabel="singularity measure m = sqrt(det A A^T) (-)")
+    for a in ax:
+        plain(a)
+    legend_outside(ax[1])
+    ax[0].legend(fontsize=8, loc="best")
+    fig.tight_layout()
     report.figure(fig, "Momentum along x and the singularity measure for each law.")
 
 
@@ -136,15 +142,18 @@ def _slews(report, laws, quick: bool):
     ]  # fmt: skip
     report.table([{k: r[k] for k in cols3} for r in rows3], cols3)
     fig, ax = plt.subplots(1, 2, figsize=(11, 3.6))
-    for law, r in runs3.items():
+    for k, (law, r) in enumerate(runs3.items()):
         tt = np.append(r.t, r.t[-1] + tb3.sensors.dt)
         q_ref = np.vstack([r.reference[:, :4], r.reference[-1:, :4]])
-        ax[0].plot(tt, rotation_error_deg(q_ref, r.x[:, 0:4]), label=law)
+        trace(ax[0], tt, rotation_error_deg(q_ref, r.x[:, 0:4]), law, k)
         m_ = r.model
-        ax[1].plot(tt, measure(r.x[:, m_.index(["d1", "d2", "d3", "d4"])], tb3.cmg.skew), label=law)
+        trace(ax[1], tt, measure(r.x[:, m_.index(["d1", "d2", "d3", "d4"])], tb3.cmg.skew), law, k)
     ax[0].set(xlabel="t (s)", ylabel="pointing error (deg)")
-    ax[1].set(xlabel="t (s)", ylabel="singularity measure m")
-    ax[0].legend()
+    ax[1].set(xlabel="t (s)", ylabel="singularity measure m (-)")
+    for a in ax:
+        plain(a)
+    legend_outside(ax[1])
+    fig.tight_layout()
     report.figure(fig, "3-DoF 180 deg slew about x: pointing error and singularity measure.")
 
     if not quick:

@@ -26,13 +26,14 @@ from airbearing.analysis.simulation.scenarios import (
 )
 from airbearing.io.testbed import load_testbed
 from airbearing.progress import call as _progress
+from airbearing.progress import expect
 from airbearing.reporting.html import Report
 
 __all__ = ["run_demo", "SECTIONS", "foundation_section"]
 
 
 def foundation_section(report: Report, *, quick: bool = False) -> None:
-    """Seed-001 slews on ``cmg-yaw`` and a free oscillation of ``platform-3dof``."""
+    """Seed-001 slews on ``cmg-yaw`` and a free oscillation of ``seed000-tabletop``."""
     report.heading("Seed 001: the CMG yaw slews")
     tb = load_testbed("cmg-yaw")
     rows = []
@@ -55,7 +56,7 @@ def foundation_section(report: Report, *, quick: bool = False) -> None:
         axes[1].plot(t, np.rad2deg(r.x[:, 2]), label=f"{angle} deg, J={J}")
     axes[0].set(xlabel="t (s)", ylabel="yaw rate (deg/s)", xlim=(0, 20))
     axes[1].set(xlabel="t (s)", ylabel="gimbal angle d1 (deg)", xlim=(0, 20))
-    axes[0].legend()
+    axes[0].legend(loc="upper right", fontsize=8)
     report.paragraph(
         "Ideal sensors, seed-001 gains (Kp, Ki, Kw = 6, 0.001, 6), Moore-Penrose steering with the "
         "normalised Jacobian, eq. 4 rate limit 64.498 deg/s. Seed 001 Tables 6-8 (theory): "
@@ -68,7 +69,7 @@ def foundation_section(report: Report, *, quick: bool = False) -> None:
     )
 
     report.heading("Free oscillation of the seed-004 platform")
-    tbp = load_testbed("platform-3dof")
+    tbp = load_testbed("seed004-platform")
     r = free_oscillation(
         tbp, initial_rate=(0.3676, 0.1265, -1.4835), duration=20 if quick else 60, seed=1
     )
@@ -76,13 +77,13 @@ def foundation_section(report: Report, *, quick: bool = False) -> None:
     fig, ax = plt.subplots(figsize=(11, 3.2))
     for k in ("wx", "wy", "wz"):
         ax.plot(r.t, r.log.data[k], lw=0.8, label=k)
-    ax.set(xlabel="t (s)", ylabel="measured rate (rad/s)")
-    ax.legend()
+    ax.set(xlabel="t (s)", ylabel="measured rate, body axes (rad/s)")
+    ax.legend(loc="upper left", bbox_to_anchor=(1.0, 1.0))
     report.paragraph(
         f"Initial rate of the seed-004 experiment, sliders at zero, XSens MTi-1 gyro noise. "
         f"Largest tilt {s['max_tilt_deg']:.1f} deg."
     )
-    report.figure(fig, "Measured body rates of a free oscillation (platform-3dof).")
+    report.figure(fig, "Measured body rates of a free oscillation (seed004-platform).")
 
 
 def _section(module: str, name: str = "demo_section") -> Callable:
@@ -93,6 +94,105 @@ def _section(module: str, name: str = "demo_section") -> Callable:
 
     section.__qualname__ = section.__name__ = f"{module}.{name}"
     return section
+
+
+#: What each section shows, in a sentence of the summary.
+SHOWS = {
+    "Foundation": "the seed-001 CMG yaw slews against the paper's Tables 6-8, and a free "
+    "oscillation of the seed-004 platform",
+    "CMG cluster": "steering laws near singularities, closed-loop slews on a 3-DoF bearing, "
+    "null motion and the momentum envelope of the 4-CMG pyramid",
+    "Balancing": "automatic balancing with sliders alone and with magnetorquers (seed 000 "
+    "Tables 1-2), and which imperfections give the measured ratios",
+    "Linear stability": "the seed gains and the tuned gains of the attitude and balancing "
+    "loops against one specification, worst case over inertia and offset",
+    "Identification": "inertia and CM offset identified from free oscillations (seed 004) "
+    "and the yaw inertia of the CMG testbed (seed 001)",
+    "Model discrepancy": "the seed-001 story: a log whose inertia differs from the file, and "
+    "the effect the search names",
+    "Campaign: robust verification": "a Monte Carlo campaign of the tuned loop over the "
+    "uncertainty box",
+    "Campaign: detection rate": "how often the discrepancy search finds an effect of a given "
+    "size in noise",
+}
+#: Checks a section shows failing on purpose, and why (the summary says so beside them).
+EXPECTED = {
+    "Linear stability": "the balancing loop (mixed split) is checked over the whole "
+    "uncertainty box, the vertical offset up to 1.5 times the file's: the best gains the "
+    "tuner finds still need more slider travel than the rails give there (its line in the "
+    "section says by how much), so the seed and the tuned balancing gains both miss the "
+    "specification; the attitude loop meets it",
+}
+
+
+def _anchor(text: str) -> str:
+    return "s-" + "-".join("".join(c if c.isalnum() else " " for c in text.lower()).split())
+
+
+def _summary_html(results: list[dict]) -> str:
+    """The report's opening: a table of what each section shows and what passed, and the
+    contents (every heading of level 2 and 3, linked)."""
+    import html as _html
+
+    rows = []
+    for r in results:
+        fails = r["fail"]
+        if fails == 0:
+            verdict = "all checks pass" if r["pass"] else "no pass/fail checks"
+        elif r["title"] in EXPECTED:
+            verdict = f"{fails} not met, expected: {EXPECTED[r['title']]}"
+        else:
+            verdict = f"{fails} not met: NOT expected, look at this section"
+        rows.append(
+            f'<tr><td class="l"><a href="#{r["anchor"]}">{_html.escape(r["title"])}</a></td>'
+            f'<td class="l" style="white-space:normal">{_html.escape(SHOWS.get(r["title"], ""))}'
+            f'</td><td>{r["pass"]}</td><td class="{"fail" if fails else ""}">{fails}</td>'
+            f'<td class="l" style="white-space:normal">{_html.escape(verdict)}</td>'
+            f"<td>{r['time']:.0f}</td></tr>"
+        )
+    table = (
+        '<div class="scroll"><table><tr><th class="l">section</th><th class="l">what it '
+        'shows</th><th>checks passed</th><th>not met</th><th class="l">verdict</th>'
+        "<th>time (s)</th></tr>" + "".join(rows) + "</table></div>"
+    )
+    items = []
+    for r in results:
+        sub = "".join(
+            f'<li><a href="#{a}">{_html.escape(t)}</a></li>'
+            for t, a, lvl in r["headings"]
+            if lvl == 3
+        )
+        tops = [(t, a) for t, a, lvl in r["headings"] if lvl == 2] or [(r["title"], r["anchor"])]
+        first = "".join(f'<a href="#{a}">{_html.escape(t)}</a><br/>' for t, a in tops)
+        items.append(f"<li>{first}{f'<ul>{sub}</ul>' if sub else ''}</li>")
+    return (
+        "<h2>Summary</h2><p>Each section runs one capability on the built-in testbeds and "
+        "checks its numbers against the seed papers or its own specification. A check is a "
+        "pass/FAIL cell of a table; 'not met' counts the FAIL cells.</p>"
+        + table
+        + "<h2>Contents</h2><ol>"
+        + "".join(items)
+        + "</ol>"
+    )
+
+
+def _section_facts(parts: list[str]) -> tuple[list[str], list[tuple[str, str, int]], int, int]:
+    """``(parts with anchored headings, (heading, anchor, level), passes, fails)``."""
+    import re
+
+    out, heads = [], []
+    for part in parts:
+        m = re.fullmatch(r"<h([23])>(.*)</h\1>", part, re.S)
+        if m:
+            import html as _html
+
+            text = _html.unescape(m.group(2))
+            a = _anchor(text)
+            heads.append((text, a, int(m.group(1))))
+            part = f'<h{m.group(1)} id="{a}">{m.group(2)}</h{m.group(1)}>'
+        out.append(part)
+    blob = "".join(parts)
+    return out, heads, blob.count('class="pass"'), blob.count('class="fail"')
 
 
 #: The demo's sections, in order: (title, function).
@@ -133,19 +233,67 @@ def run_demo(out_dir: str | Path, *, quick: bool = False, progress=None) -> Path
     out_dir = Path(out_dir)
     report = Report("airbearing demo on the built-in testbeds")
     report.paragraph(
-        "Built-in testbeds: cmg-yaw (seed 001) and platform-3dof (seeds 000 and 004). "
+        "Built-in testbeds: cmg-yaw (seed 001), seed000-tabletop (seed 000) and "
+        "seed004-platform (seed 004). "
         "Every number below is computed by this run."
     )
-    timings = []
+    expect(progress, section_weights(quick))
+    results = []
+    intro = len(report.parts)
     for i, (title, section) in enumerate(SECTIONS):
         report_progress(title, i, len(SECTIONS))
         t0 = time.perf_counter()
+        start = len(report.parts)
         section(report, quick=quick)
-        timings.append({"section": title, "time (s)": time.perf_counter() - t0})
+        parts, heads, n_pass, n_fail = _section_facts(report.parts[start:])
+        report.parts[start:] = parts
+        results.append(
+            {
+                "title": title,
+                "anchor": heads[0][1] if heads else _anchor(title),
+                "headings": heads,
+                "pass": n_pass,
+                "fail": n_fail,
+                "time": time.perf_counter() - t0,
+            }
+        )
+        plt.close("all")
     report_progress("writing the report", len(SECTIONS), len(SECTIONS))
-    report.heading("Run times")
-    report.table(timings)
+    report.parts.insert(intro, _summary_html(results))
     path = out_dir / "report.html"
     out_dir.mkdir(parents=True, exist_ok=True)
     report.write(path)
     return path
+
+
+#: Relative length of each section: (warm compile cache, first run compiling its C code,
+#: ``--quick`` with a warm cache).
+#: Each column is one run's seconds per section on the shared 2-core machine (load 10-19,
+#: docs/benchmarks.md); only the ratios matter (the display scales them by the pace it
+#: sees).
+SECTION_COST = {
+    "Foundation": (11.0, 13.0, 24.0),
+    "CMG cluster": (18.0, 28.0, 21.0),
+    "Balancing": (42.0, 258.0, 27.0),
+    "Linear stability": (612.0, 1414.0, 59.0),
+    "Identification": (55.0, 455.0, 37.0),
+    "Model discrepancy": (59.0, 146.0, 43.0),
+    "Campaign: robust verification": (39.0, 40.0, 134.0),
+    "Campaign: detection rate": (98.0, 248.0, 24.0),
+}
+#: Compiled libraries a first run of the demo leaves in the cache (fewer: a first run).
+FIRST_RUN_LIBRARIES = 20
+
+
+def section_weights(quick: bool = False) -> list[float]:
+    """Expected length of each section, relative (:func:`airbearing.progress.expect`):
+    with the compiling of a first run when the compile cache holds fewer libraries than
+    the demo builds."""
+    from airbearing.models.compiled import cache_dir
+
+    try:
+        libs = sum(1 for p in cache_dir().glob("*") if p.suffix in (".so", ".dylib", ".dll"))
+    except OSError:
+        libs = 0
+    column = 2 if quick else (1 if libs < FIRST_RUN_LIBRARIES else 0)
+    return [SECTION_COST.get(title, (10.0, 30.0, 30.0))[column] for title, _ in SECTIONS]

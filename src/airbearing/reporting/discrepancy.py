@@ -14,6 +14,7 @@ from airbearing.analysis.discrepancy.search import Discrepancy, discrepancy
 from airbearing.analysis.discrepancy.words import format_value
 from airbearing.reporting.html import Report
 from airbearing.reporting.html import sentence as as_sentence
+from airbearing.reporting.style import plain
 
 __all__ = [
     "add_discrepancy",
@@ -44,7 +45,7 @@ def _segments_paragraph(report: Report, datas) -> None:
         j = d.segment_json()
         rows.append(
             {
-                "log": d.log.source,
+                "log": _log_name(d.log),
                 "rows": d.n,
                 "segments": j["segments"],
                 "segment rows": ", ".join(f"{a}-{b - 1}" for a, b in j["segment_rows"]),
@@ -94,7 +95,7 @@ def residual_figure(datas, problem, fits, labels, floor):
         sig = floor.rate_axes[a] if unit == "rad/s" else floor.attitude
         ax.axhline(2 * sig, color="gray", lw=0.5, ls=":")
         ax.axhline(-2 * sig, color="gray", lw=0.5, ls=":")
-        ax.set_ylabel(f"residual ({unit})")
+        ax.set_ylabel(f"{names[a]} residual ({unit})")
     for d in datas[:1]:
         for a_, _ in d.segments[1:]:
             for ax in axes.ravel():
@@ -103,8 +104,17 @@ def residual_figure(datas, problem, fits, labels, floor):
             for ax in axes[:, 0]:
                 ax.axvline(d.t[r], color="orange", lw=0.6, ls="--", alpha=0.8)
     axes[0, 0].legend(fontsize=8)
-    axes[-1, 0].set_xlabel("t (s)" + (" (logs overlaid)" if multi else ""))
-    axes[-1, 1].set_xlabel("t (s)")
+    axes[0, 1].legend(fontsize=8)
+    axes[0, 0].set_title("measured and modelled", fontsize=10, loc="left")
+    axes[0, 1].set_title("residual, dotted: +-2 sigma of the noise floor", fontsize=10, loc="left")
+    for ax in axes.ravel():
+        plain(ax)
+    axes[-1, 0].set_xlabel("time (s)" + (" (logs overlaid)" if multi else ""))
+    axes[-1, 1].set_xlabel("time (s)")
+    logs = ", ".join(_log_name(d.log) for d in datas)
+    tb = getattr(getattr(problem, "model", None), "testbed", None)
+    fig.suptitle(f"{tb.name if tb is not None else 'model'} against {logs}: " + ", ".join(labels))
+    fig.tight_layout()
     return fig
 
 
@@ -120,7 +130,7 @@ def add_replay(report: Report, result: Replay, *, level: int = 2) -> None:
         + ". No effect is fitted: only each window's initial state."
     )
     rows = [
-        {"log": d.log.source, f"gap ({unit})": g, "x noise floor": g / result.floor.value}
+        {"log": _log_name(d.log), f"gap ({unit})": g, "x noise floor": g / result.floor.value}
         for d, g in zip(datas, result.log_gaps(), strict=True)
     ]
     rows.append(
@@ -151,13 +161,21 @@ def replay_report(result: Replay, *, title: str | None = None) -> Report:
     return report
 
 
+def _log_name(log) -> str:
+    """A log's file name, or "a simulated log" (not "<simulation>")."""
+    src = str(log.source)
+    if src.startswith("<") and src.endswith(">"):
+        return "a simulated log" if "simul" in src else "a log in memory"
+    return src
+
+
 def add_discrepancy(report: Report, result: Discrepancy, *, level: int = 2) -> None:
     """Append the sections of one discrepancy result to ``report``."""
     data = result.data
     datas = result.datas
     unit = result.gap_unit
-    names = ", ".join(d.log.source for d in datas)
-    report.heading(f"Discrepancy: {result.testbed.name} vs {names}", level)
+    names = ", ".join(_log_name(d.log) for d in datas)
+    report.heading(f"Discrepancy: {result.testbed.name} against {names}", level)
     ratio_b = result.gap_before / result.noise_floor
     ratio_a = result.gap_after / result.noise_floor
     report.paragraph(result.verdict + ".", note=True)
@@ -217,6 +235,23 @@ def _validation_section(report: Report, result: Discrepancy, level: int) -> None
     )
 
 
+def _meaning(name: str, value, testbed) -> str:
+    """An effect's value as the physical quantity it changes (``inertia_error`` 0.1413 ->
+    "+14.1 % of J_zz = +4.0e-04 kg m^2"); "" where the value is that quantity already."""
+    if name == "inertia_error":
+        e = float(np.ravel(value)[0])
+        body = testbed.body
+        if body.dof == 1:
+            j = float(body.yaw_inertia)
+            return f"{100 * e:+.1f} % of J_zz = {e * j:+.1e} kg m^2"
+        jzz = float(np.asarray(body.inertia, dtype=float)[2, 2])
+        return f"{100 * e:+.1f} % of every inertia term (J_zz {e * jzz:+.1e} kg m^2)"
+    if name == "cm_offset_error":
+        mm = np.ravel(value) * 1e3
+        return "CM moved by [" + ", ".join(f"{x:+.3f}" for x in mm) + "] mm"
+    return ""
+
+
 def _effects_section(report: Report, result: Discrepancy, level: int) -> None:
     """The named effects with their honest, white-noise and Cramer-Rao errors."""
     if not result.effects:
@@ -229,6 +264,7 @@ def _effects_section(report: Report, result: Discrepancy, level: int) -> None:
             "Cramer-Rao bound": format_value(result.effect_crlb.get(n)),
             "std / bound": format_value(result.effect_efficiency.get(n)),
             "unit": _unit(n),
+            "what it means": _meaning(n, v, result.testbed),
         }
         for n, v in result.effects.items()
     ]
@@ -284,7 +320,10 @@ def _candidates_section(report: Report, result: Discrepancy, level: int) -> None
         "pinned at its physical bound, it passes the likelihood-ratio and BIC tests, it lies at "
         "least 3 standard errors from zero (errors from the Gauss-Newton covariance with the "
         "windows' initial states eliminated) and it shrinks the gap on held-out windows. "
-        "The values below carry their honest standard errors."
+        "The values below carry their honest standard errors. They are the first round's: "
+        "each effect fitted alone on the nominal model, so a named effect's value here "
+        "differs from its final value under 'Named effects' (fitted together with the "
+        "others)."
     )
     rows = []
     for c in result.candidates:
@@ -377,7 +416,7 @@ def _adequacy_section(report: Report, result: Discrepancy, level: int) -> None:
     multi = len(result.datas) > 1
     for i in np.unique(ser["source"]):
         m = ser["source"] == i
-        lab = result.datas[int(i)].log.source if multi else None
+        lab = _log_name(result.datas[int(i)].log) if multi else None
         axes[0].plot(ser["t"][m], res[m, 0], ".", ms=1, label=lab)
         axes[2].plot(np.mod(ser["yaw"][m], 2 * np.pi), res[m, 0], ".", ms=1)
         axes[3].plot(rate[m, -1], res[m, 0], ".", ms=1)
@@ -390,10 +429,13 @@ def _adequacy_section(report: Report, result: Discrepancy, level: int) -> None:
     axes[1].axhline(0.0, color="gray", lw=0.5)
     axes[1].set(xlabel="lag (s)", ylabel="autocorrelation", title="its autocorrelation")
     axes[1].legend(fontsize=8)
-    axes[2].set(xlabel="yaw mod 2 pi (rad)", title="against the angle")
-    axes[3].set(xlabel="rate (rad/s)", title="against the rate")
+    axes[2].set(xlabel="yaw mod 2 pi (rad)", ylabel=f"residual ({unit})", title="against the angle")
+    axes[3].set(xlabel="rate (rad/s)", ylabel=f"residual ({unit})", title="against the rate")
     for ax in axes[2:]:
         ax.axhline(0.0, color="gray", lw=0.5)
+    for ax in axes:
+        plain(ax)
+    fig.tight_layout()
     report.figure(
         fig,
         "The residual the named effects leave (first axis), its autocorrelation (normalised "

@@ -158,7 +158,7 @@ def identification_figure(result, reference=None, *, reference_label: str = "ref
 
 
 def demo_section(report, *, quick: bool) -> None:
-    """Identify platform-3dof (seed-004 truth) from simulated free oscillations, and the
+    """Identify seed000-tabletop (seed-004 truth) from simulated free oscillations, and the
     cmg-yaw inertia (seed 001's J = 0.00323 kg m^2) from a simulated slew.
 
     Parameters
@@ -186,7 +186,7 @@ def demo_section(report, *, quick: bool) -> None:
         ).log
         for i, (w, s) in enumerate(runs)
     ]
-    prior = load_testbed("platform-3dof")
+    prior = load_testbed("seed000-tabletop")
     t0 = time.perf_counter()
     res = identify_platform(prior, logs, known_offset_xy=SEED004_TRUTH[6:8])
     elapsed = time.perf_counter() - t0
@@ -216,7 +216,7 @@ def demo_section(report, *, quick: bool) -> None:
             }
         )
     report.paragraph(
-        f"Three {duration:.0f} s free oscillations of platform-3dof with the seed-004 truth "
+        f"Three {duration:.0f} s free oscillations of seed000-tabletop with the seed-004 truth "
         "x_true, known slider displacements, gyro noise 3.86e-4 rad/s and 1e-3 rad attitude "
         "noise; the in-plane offset is known from balancing (seed 004). The equation-error stage "
         "(eq. 47 about point O, cvxpy/Clarabel with the pseudo-inertia LMI) is biased by the "

@@ -21,7 +21,14 @@ from airbearing.io.log import WHEEL_COMMAND_COLUMNS, WHEEL_SPEED_COLUMNS, Log, s
 from airbearing.io.quality import LogQuality
 from airbearing.reporting.html import Report, figure_html, plt
 
-__all__ = ["log_figure", "log_report_html", "with_breaks", "local_residual", "TREND_WINDOW"]
+__all__ = [
+    "log_figure",
+    "log_report_html",
+    "with_breaks",
+    "local_residual",
+    "source_name",
+    "TREND_WINDOW",
+]
 
 _DEG = 180.0 / np.pi
 _RPM = 60.0 / (2.0 * np.pi)  # rad/s -> rpm
@@ -165,7 +172,8 @@ def log_figure(log: Log, quality: LogQuality | None = None, *, title: str | None
     for name, cols, label, factor in panels:
         if name == "yaw":
             yaw = _unwrap(log.column("yaw"), segments)
-            wrapped = (np.mod(yaw + np.pi, 2 * np.pi) - np.pi) * factor
+            # (-180, 180]: a slew that ends at 180 deg stays at +180
+            wrapped = (np.pi - np.mod(np.pi - yaw, 2 * np.pi)) * factor
             series.append(("yaw, wrapped to +-180 deg", "yaw angle (deg)",
                            [("yaw", wrapped, log.column("yaw") * factor)]))  # fmt: skip
             series.append(("yaw rate from the logged yaw", "yaw rate (deg/s)",
@@ -179,6 +187,13 @@ def log_figure(log: Log, quality: LogQuality | None = None, *, title: str | None
             continue
         series.append((name, label, [(c, log.column(c) * factor, None) for c in cols]))
     series += _wheel_series(log)
+    # an ideal log's residual from its trend is roundoff (1e-14 deg): a panel of it would
+    # draw a "glitch" that is not in the data
+    series = [
+        sr
+        for sr in series
+        if not (sr[1] == "yaw residual (deg)" and _roundoff(sr[2][0][1], scale=180.0))
+    ]
     n_panels = max(len(series), 1)
     fig, axes = plt.subplots(
         n_panels, 1, sharex=True, figsize=(9, 2.3 * n_panels + 0.6), layout="constrained"
@@ -208,6 +223,7 @@ def log_figure(log: Log, quality: LogQuality | None = None, *, title: str | None
                 if c in ocols:
                     ax.plot(t[row], y[row], "o", mfc="none", mec="red", ms=8)
         ax.set_ylabel(label)
+        _plain_axis(ax, [y for _c, y, _raw in lines])
         ax.set_title(name, fontsize=10, loc="left")
         if len(lines) > 1:
             ax.legend(loc="upper right", fontsize=8, ncol=len(lines))
@@ -218,9 +234,41 @@ def log_figure(log: Log, quality: LogQuality | None = None, *, title: str | None
         note += f", {len(quality.outlier_rows)} outlier row(s) (red circles)"
         if steps:
             note += f", {len(steps)} step(s) (red dashes)"
-    fig.suptitle((title or log.source) + note, fontsize=10)
+    fig.suptitle((title or source_name(log)) + note, fontsize=10)
     fig.align_ylabels(axes)
     return fig
+
+
+def source_name(log: Log) -> str:
+    """What a log is, for a title: its file, or "TESTBED, simulated" (not "<simulation>")."""
+    src = str(log.source)
+    if src.startswith("<") and src.endswith(">"):
+        tb = log.testbed.name if log.testbed is not None else "log"
+        return f"{tb}, {'simulated' if 'simul' in src else 'in memory'}"
+    return src
+
+
+def _roundoff(y: np.ndarray, scale: float) -> bool:
+    """Whether every finite value of ``y`` is roundoff next to ``scale`` (or there is none)."""
+    y = np.asarray(y, dtype=float)
+    y = y[np.isfinite(y)]
+    return y.size == 0 or float(np.max(np.abs(y))) <= 1e-9 * scale
+
+
+def _plain_axis(ax, ys) -> None:
+    """Tick labels a person reads: no offset ("1e-10+5.7e1"), and a channel constant to
+    roundoff drawn as a flat line in a window of its own size, not magnified noise."""
+    ax.ticklabel_format(axis="y", useOffset=False, style="plain")
+    values = np.concatenate([np.asarray(y, dtype=float).ravel() for y in ys]) if ys else []
+    values = values[np.isfinite(values)] if len(values) else values
+    if len(values) == 0:
+        return
+    lo, hi = float(values.min()), float(values.max())
+    size = max(abs(lo), abs(hi))
+    if hi - lo <= 1e-9 * max(size, 1e-300) or (size == 0.0):
+        mid = 0.5 * (lo + hi)
+        half = 0.1 * abs(mid) if mid != 0 else 1.0
+        ax.set_ylim(mid - half, mid + half)
 
 
 def log_report_html(log: Log, quality: LogQuality | None = None) -> str:

@@ -648,7 +648,7 @@ def demo_section(report: Report, *, quick: bool = False) -> None:
         return
     cases = [
         ("attitude", load_testbed("cmg-yaw"), {}),
-        ("balancing", load_testbed("platform-3dof"), {"split": "mixed"}),
+        ("balancing", load_testbed("seed000-tabletop"), {"split": "mixed"}),
     ]
     rows = []
     for name, tb, opts in cases:

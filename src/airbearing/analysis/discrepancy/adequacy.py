@@ -588,10 +588,13 @@ def adequacy(problem, fit, floor, datas, *, gap_before: float | None = None) -> 
         note = a.words(named=explained is not None)
     else:
         what = "the measurement noise" if mnoise else "the noise floor"
-        note = (
-            f"the residual is at the noise: {ratio / level:.3g} x {what}, whiteness p "
-            f"{p:.2g} (Ljung-Box, {tests} tests)"
+        # no test when the segments are too short for Ljung-Box: said, never "p nan"
+        white = (
+            f"whiteness p {p:.2g} (Ljung-Box, {tests} tests)"
+            if np.isfinite(p)
+            else "whiteness not tested (segments too short for Ljung-Box)"
         )
+        note = f"the residual is at the noise: {ratio / level:.3g} x {what}, {white}"
         if mnoise:
             note += "; " + a.noise_words()
     return _with_note(a, note)

@@ -1,0 +1,49 @@
+"""The spin-test tutorial's printed lines are what its commands print (step 3, both cameras)."""
+
+from __future__ import annotations
+
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+PAGE = Path(__file__).resolve().parents[2] / "docs" / "tutorials" / "spin-test.md"
+
+
+def _named(line: str) -> list[str]:
+    """The effects a "missing effects:" line names (before "not converged ...")."""
+    head = line.split("missing effects:", 1)[1].split("not converged", 1)[0]
+    return sorted(set(re.findall(r"(\w+) = ", head)))
+
+
+def _airbearing(args: list[str], cwd: Path) -> str:
+    out = subprocess.run(
+        [sys.executable, "-m", "airbearing", "--quiet", *args],
+        cwd=cwd, capture_output=True, text=True, timeout=1800,
+    )  # fmt: skip
+    assert out.returncode == 0, out.stderr[-2000:]
+    return out.stdout
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("noise", [None, "0.01"], ids=["camera", "noisy camera"])
+def test_spin_tutorial_names_what_it_says(tmp_path, noise):
+    text = PAGE.read_text()
+    toml = re.search(r"```toml\n# file: spin-rig.toml\n(.*?)```", text, re.S).group(1)
+    (tmp_path / "spin-rig.toml").write_text(toml)
+    sim = re.search(r"^airbearing simulate spin-rig.toml .*$", text, re.M).group(0).split()[1:]
+    if noise:
+        sim += ["--attitude-noise", noise]
+    _airbearing(sim, tmp_path)
+    out = _airbearing(["discrepancy", "spin-rig.toml", "spin.csv"], tmp_path)
+    ran = next(line for line in out.splitlines() if line.startswith("missing effects:"))
+    blocks = [b for b in re.findall(r"```text\n(.*?)```", text, re.S) if "missing effects:" in b]
+    page = blocks[0 if noise is None else 1]
+    said = next(line for line in page.splitlines() if line.startswith("missing effects:"))
+    assert _named(ran) == _named(said), (ran, said)
+    confounded = [line for line in out.splitlines() if line.startswith("confounded:")]
+    promised = re.search(r"noisier.*?```text\n.*?```\n\n(.*?)\n\n", text, re.S).group(1)
+    # the page promises a confounded line only when the two laws come within 2 BIC units
+    assert bool(confounded) == ("confounded:" in page), (confounded, promised)
