@@ -54,8 +54,8 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from airbearing.analysis.discrepancy.data import ReplayData
-from airbearing.analysis.discrepancy.filters import _savgol_weights, savgol
+from airbearing.analysis.shooting.filters import _savgol_weights, savgol
+from airbearing.analysis.shooting.logs import ReplayData
 from airbearing.errors import InputError
 from airbearing.io.testbed import Testbed
 from airbearing.io.vocabulary import EFFECTS as VOCABULARY

@@ -1,4 +1,8 @@
-"""A log as a testbed's Model sees it: inputs, measurements, segments, outliers, windows, noise.
+"""The engine's front end: a log as a testbed's Model sees it (inputs, measurements,
+segments, outliers, windows, noise floor).
+
+The replay, the discrepancy search and the output-error identifications take their arrays,
+windows and noise floor from here, so they sit side by side above the one engine.
 
 Inputs (zero-order hold over each logged interval, FORMATS.md)
     platform: ``s1..s3`` from the log (zero for a passive platform without ``[masses]``);
@@ -47,7 +51,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from airbearing.analysis.shooting import WindowSet
+from airbearing.analysis.shooting.windows import WindowSet
 from airbearing.errors import InputError
 from airbearing.io.coerce import check_gyro_agrees
 from airbearing.io.log import Log
