@@ -62,7 +62,7 @@ def run(paths: list[Path], out: Path, method: str) -> tuple[float, float, float]
     cmd = [sys.executable, "-m", "airbearing", "--quiet", "identify", "platform-3dof"]
     cmd += [str(p) for p in paths]
     cmd += ["--method", method, "--known-offset-xy", str(SEED004_TRUTH[6]), str(SEED004_TRUTH[7])]
-    cmd += ["--json", str(out)]
+    cmd += ["--json", str(out), "--force"]
     with tempfile.TemporaryFile() as err:
         t0 = time.perf_counter()
         proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=err)

@@ -7,7 +7,7 @@ from __future__ import annotations
 import warnings
 
 import airbearing as ab
-from airbearing.analysis.discrepancy.data import RATE_SIGMA_MIN
+from airbearing.analysis.shooting.logs import RATE_SIGMA_MIN
 
 
 def test_a_noise_free_spin_down_names_the_friction_and_nothing_below_the_resolution():

@@ -98,8 +98,8 @@ def test_an_input_glitch_breaks_the_replay_segment_and_is_not_integrated():
     N m for one sample, which leaves the replay at 4 noise floors). The segment breaks at
     the row instead (nothing filled), and the replay stays at the floor of the clean log
     (within 5 %: the floor's own estimate on 1200 samples)."""
-    from airbearing.analysis.discrepancy.data import replay_data
     from airbearing.analysis.discrepancy.replay import replay
+    from airbearing.analysis.shooting.logs import replay_data
     from airbearing.analysis.simulation.scenarios import free_oscillation
 
     tb = load_testbed("seed004-platform")

@@ -12,9 +12,9 @@ import pandas as pd
 import pytest
 from rigs import ROTOR
 
-from airbearing.analysis.discrepancy.data import make_windows, noise_floor, replay_data
 from airbearing.analysis.discrepancy.replay import model_for, problem_for
 from airbearing.analysis.shooting.errors import honest_errors
+from airbearing.analysis.shooting.logs import make_windows, noise_floor, replay_data
 from airbearing.analysis.shooting.measurement_noise import (
     MeasurementNoise,
     estimate_measurement_noise,

@@ -12,9 +12,9 @@ import pytest
 from rigs import ROTOR
 from scipy.integrate import solve_ivp
 
-from airbearing.analysis.discrepancy.data import make_windows, noise_floor, replay_data
 from airbearing.analysis.discrepancy.replay import model_for, problem_for
 from airbearing.analysis.shooting.errors import honest_errors, normalised_residuals
+from airbearing.analysis.shooting.logs import make_windows, noise_floor, replay_data
 from airbearing.analysis.shooting.process_noise import (
     KAPPA_GRID,
     defect_whitening,

@@ -132,3 +132,16 @@ def test_one_sign_continuity_routine_one_and_three_lags():
     assert glitched[20] @ q[19] > 0 > glitched[20] @ q[21]
     assert_allclose(continuous_signs(glitched, lags=3)[21:], q[21:], atol=1e-15)
     assert_allclose(continuous_signs(glitched, lags=1)[21:], -q[21:], atol=1e-15)
+
+
+def test_log_inverts_exp_the_shortest_way():
+    """qlog(qexp(v)) = v for |v| < pi (the shortest rotation), for q and -q alike, and the
+    identity maps to zero (rounding tolerance)."""
+    rng = np.random.default_rng(0)
+    axis = rng.normal(size=(50, 3))
+    axis /= np.linalg.norm(axis, axis=1, keepdims=True)
+    v = axis * rng.uniform(0.0, np.pi - 1e-3, size=(50, 1))
+    q = quat.qexp(v)
+    assert_allclose(quat.qlog(q), v, atol=1e-12)
+    assert_allclose(quat.qlog(-q), v, atol=1e-12)
+    assert_allclose(quat.qlog(np.array([1.0, 0, 0, 0])), np.zeros(3), atol=0)

@@ -15,8 +15,8 @@ import pytest
 from rigs import Q0, ROTOR, SLIDERS, SPHERE, W0
 from rigs import jittered_platform as _jittered_platform
 
-from airbearing.analysis.discrepancy.data import make_windows, noise_floor, replay_data
 from airbearing.analysis.discrepancy.replay import open_loop, replay
+from airbearing.analysis.shooting.logs import make_windows, noise_floor, replay_data
 from airbearing.analysis.simulation.artefacts import (
     sample_times,
     with_gap,

@@ -39,7 +39,6 @@ from __future__ import annotations
 import math
 import os
 from dataclasses import dataclass, field, replace
-from functools import lru_cache
 
 import casadi as ca
 import numpy as np
@@ -74,7 +73,8 @@ from airbearing.design.wheels import (
 from airbearing.errors import InputError
 from airbearing.io.testbed import Testbed
 from airbearing.models import quaternion as quat
-from airbearing.models.model import Model, build_model
+from airbearing.models.model import Model
+from airbearing.models.structure_cache import built_model
 
 __all__ = [
     "Loop",
@@ -594,9 +594,8 @@ def _as_model(testbed_or_model) -> Model:
     )
 
 
-@lru_cache(maxsize=8)
 def _model_of(testbed: Testbed) -> Model:
-    return build_model(testbed)
+    return built_model(testbed)
 
 
 def _active_channels(model, trim_point, controller, candidates) -> tuple:

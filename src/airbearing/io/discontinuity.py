@@ -78,6 +78,10 @@ class Discontinuity(RowFinding):
     """
 
 
+#: Relative sample times equal to within 1 / this (periods) share their fit weights.
+_PATTERN_GRID = 1e9
+
+
 def _weights(t, first, count, p, at, origin, period, slope=False):
     """Least-squares polynomial (degree ``p``) weights predicting the values (``slope``:
     the slopes, per ``period``) at times ``at`` (m, j) from the ``count`` samples starting
@@ -86,14 +90,24 @@ def _weights(t, first, count, p, at, origin, period, slope=False):
     Returns the weights (m, j, count) and the rows (m, count)."""
     rows = first[:, None] + np.arange(count)
     u = (t[rows] - origin[:, None]) / period
-    powers = np.arange(p + 1)
-    pinv = np.linalg.pinv(u[..., None] ** powers)  # (m, p + 1, count)
     at = (at - origin[:, None]) / period
+    # The weights depend only on the sample and target times relative to the origin: on a
+    # regular grid every boundary has the same ones. One pseudo-inverse per distinct
+    # pattern (times equal to 1e-9 of a period, far below any time a log resolves)
+    # instead of one per boundary (a batched SVD per row was most of a log check).
+    key = np.round(np.concatenate([u, at], axis=1) * _PATTERN_GRID)
+    if np.all(key == key[:1]):
+        first_of, inverse = np.zeros(1, dtype=int), np.zeros(len(key), dtype=int)
+    else:
+        _, first_of, inverse = np.unique(key, axis=0, return_index=True, return_inverse=True)
+    u, at = u[first_of], at[first_of]
+    powers = np.arange(p + 1)
+    pinv = np.linalg.pinv(u[..., None] ** powers)  # (distinct, p + 1, count)
     if slope:
         v = powers * at[..., None] ** np.maximum(powers - 1, 0)
     else:
-        v = at[..., None] ** powers  # (m, j, p + 1)
-    return v @ pinv, rows
+        v = at[..., None] ** powers  # (distinct, j, p + 1)
+    return (v @ pinv)[inverse.reshape(-1)], rows
 
 
 def _predict(w, rows, x):

@@ -139,6 +139,19 @@ def qexp(rotvec):
     return np.concatenate([np.cos(t / 2), half * v], axis=-1)
 
 
+def qlog(q):
+    """Rotation vector ``theta * axis`` (rad) of unit quaternions ``q`` (..., 4), the
+    shortest way (the inverse of :func:`qexp`; NumPy only).
+
+    ``q`` and ``-q`` give the same vector; the identity gives zero.
+    """
+    e = np.asarray(q, dtype=float)
+    e = e * np.sign(e[..., :1] + (e[..., :1] == 0))
+    s = np.linalg.norm(e[..., 1:], axis=-1, keepdims=True)
+    ang = 2 * np.arctan2(s, e[..., :1])
+    return e[..., 1:] * np.where(s > 0, ang / np.maximum(s, 1e-300), 2.0)
+
+
 def from_axis_angle(axis, angle):
     """Unit quaternion for a rotation of ``angle`` (rad) about the unit ``axis``."""
     axis = np.asarray(axis, dtype=float)

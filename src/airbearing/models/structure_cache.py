@@ -18,7 +18,16 @@ import numpy as np
 
 from airbearing.io.testbed import Testbed, testbed_to_dict
 
-__all__ = ["structure_key", "cached", "model_for", "with_values", "params_of", "structure_stats"]
+__all__ = [
+    "built_model",
+    "cached",
+    "effects_key",
+    "model_for",
+    "params_of",
+    "structure_key",
+    "structure_stats",
+    "with_values",
+]
 
 # parameters and per-run values: everything else in the testbed decides the structure
 _RUN_VALUES = {
@@ -121,3 +130,48 @@ def with_values(structure, tb: Testbed):
     m = _run_model_class()(**{**fields, "testbed": tb, "p0": params_of(structure, tb)})
     object.__setattr__(m, "_structure", structure)
     return m
+
+
+def effects_key(effects) -> tuple:
+    """A hashable form of ``effects`` (``name -> number or sequence``): sorted names with
+    their values as tuples of floats; ``()`` for none."""
+    if not effects:
+        return ()
+    items = dict(effects).items()
+    return tuple(sorted((k, tuple(np.atleast_1d(np.asarray(v, float)).tolist())) for k, v in items))
+
+
+@functools.lru_cache(maxsize=32)
+def _built(testbed: Testbed, key: tuple):
+    from airbearing.models.model import build_model
+
+    effects = {k: (v[0] if len(v) == 1 else tuple(v)) for k, v in key}
+    return build_model(testbed, effects or None)
+
+
+def built_model(testbed: Testbed, effects=None):
+    """``build_model(testbed, effects)`` once per process for an equal testbed and equal
+    effects (its values included: unlike :func:`model_for`, the Model is the one built,
+    not a structure carrying other values).
+
+    The one cache of built Models of the replay, the discrepancy search, the balancing
+    runs and the loops of the design tools (32 entries, least recently used dropped).
+
+    Parameters
+    ----------
+    testbed : Testbed
+    effects : mapping, optional
+        Extra effects ``name -> value`` (FORMATS.md units), as ``build_model`` takes them.
+
+    Returns
+    -------
+    Model
+    """
+    try:
+        key = effects_key(effects)
+        hash(testbed)
+    except (TypeError, ValueError):  # something unhashable or not numeric: build afresh
+        from airbearing.models.model import build_model
+
+        return build_model(testbed, effects)
+    return _built(testbed, key)

@@ -20,9 +20,9 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.signal import savgol_filter
 
 from airbearing.analysis.balancing.drift import window_drift
+from airbearing.analysis.shooting.filters import savgol
 from airbearing.analysis.simulation.simulate import SimResult
 from airbearing.errors import InputError
 from airbearing.io.testbed import Testbed
@@ -263,8 +263,8 @@ def residual_torque(free: SimResult, *, window_s: float = _SG_WINDOW_S) -> float
             f"free-floating run of {w.shape[0]} samples is shorter than the {window_s} s "
             "derivative window"
         )
-    w_dot = savgol_filter(w, n, 2, deriv=1, delta=dt, axis=0)
-    w_s = savgol_filter(w, n, 2, axis=0)
+    w_dot = savgol(w, n, 2, deriv=1, delta=dt)
+    w_s = savgol(w, n, 2)
     s = free.u[0, free.model.index(["s1", "s2", "s3"], "u")]
     J = inertia_with_sliders(tb, s)
     tau = w_dot @ J.T + np.cross(w_s, w_s @ J.T)  # seed 000 eq. 1, left-hand side

@@ -42,7 +42,8 @@ from airbearing.design.controller import constant_input
 from airbearing.errors import InputError
 from airbearing.io.testbed import Testbed
 from airbearing.models import quaternion as quat
-from airbearing.models.model import Model, build_model
+from airbearing.models.model import Model
+from airbearing.models.structure_cache import built_model
 
 __all__ = [
     "FREE_FLOAT_DURATION",
@@ -111,15 +112,7 @@ def _key(value):
 def _model(testbed: Testbed, effects) -> Model:
     """The Model of a run; the same one for the same testbed and effects, so a comparison's
     runs (which differ only in noise seed) share one compiled closed loop."""
-    try:
-        return _cached_model(testbed, _key(effects))
-    except TypeError:  # something unhashable: build it afresh
-        return build_model(testbed, effects)
-
-
-@lru_cache(maxsize=32)
-def _cached_model(testbed: Testbed, effects_key) -> Model:
-    return build_model(testbed, dict(effects_key) if effects_key else None)
+    return built_model(testbed, effects)
 
 
 @lru_cache(maxsize=64)

@@ -54,8 +54,8 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from airbearing.analysis.discrepancy.data import ReplayData
-from airbearing.analysis.discrepancy.filters import _savgol_weights, savgol
+from airbearing.analysis.shooting.filters import _savgol_weights, savgol
+from airbearing.analysis.shooting.logs import ReplayData
 from airbearing.errors import InputError
 from airbearing.io.testbed import Testbed
 from airbearing.io.vocabulary import EFFECTS as VOCABULARY
@@ -467,14 +467,6 @@ def smoothed(data: ReplayData):
     return w_s, w_dot, ok
 
 
-def _rotvec(e: np.ndarray) -> np.ndarray:
-    """Rotation vectors (rad) of unit quaternions ``e`` (N, 4), shortest way."""
-    e = e * np.sign(e[:, :1] + (e[:, :1] == 0))
-    s = np.linalg.norm(e[:, 1:], axis=1)
-    ang = 2 * np.arctan2(s, e[:, 0])
-    return e[:, 1:] * np.where(s > 0, ang / np.maximum(s, 1e-300), 2.0)[:, None]
-
-
 def _smoothed_attitude(data: ReplayData, w_s, w_dot, ok):
     """Body rate and its derivative of a dof-3 attitude-only log (:func:`smoothed`).
 
@@ -504,7 +496,7 @@ def _smoothed_attitude(data: ReplayData, w_s, w_dot, ok):
         for i, j in enumerate(range(-half, half + 1)):
             if j == 0:
                 continue
-            phi = _rotvec(quat.qmul(qc, q[centre + j]))
+            phi = quat.qlog(quat.qmul(qc, q[centre + j]))
             w1 += c1[i] * phi
             w2 += c2[i] * phi
         w_s[a + centre] = w1

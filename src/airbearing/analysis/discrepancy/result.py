@@ -14,11 +14,11 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from airbearing.analysis.discrepancy.adequacy import Adequacy
-from airbearing.analysis.discrepancy.data import NoiseFloor, ReplayData
 from airbearing.analysis.discrepancy.honest import Errors
 from airbearing.analysis.discrepancy.localise import Localisation
 from airbearing.analysis.discrepancy.trial import jsonable
 from airbearing.analysis.shooting import Fit, ShootingProblem, WindowSet
+from airbearing.analysis.shooting.logs import NoiseFloor, ReplayData
 from airbearing.io.log import Log
 from airbearing.io.testbed import Testbed
 from airbearing.models.model import Model

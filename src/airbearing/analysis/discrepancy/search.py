@@ -50,10 +50,6 @@ from airbearing.analysis.discrepancy.candidates import (
     unphysical_candidates,
 )
 from airbearing.analysis.discrepancy.consistency import consistency, per_log_fits
-from airbearing.analysis.discrepancy.data import (
-    MIN_WINDOW_SAMPLES,
-    make_windows,
-)
 from airbearing.analysis.discrepancy.honest import Errors, effect_errors, honest
 from airbearing.analysis.discrepancy.localise import localise
 from airbearing.analysis.discrepancy.replay import (
@@ -101,6 +97,10 @@ from airbearing.analysis.discrepancy.words import (
     why,
 )
 from airbearing.analysis.shooting import Fit, ShootingProblem
+from airbearing.analysis.shooting.logs import (
+    MIN_WINDOW_SAMPLES,
+    make_windows,
+)
 from airbearing.analysis.shooting.measurement_noise import set_measurement_noise
 from airbearing.analysis.shooting.process_noise import (
     KAPPA_GRID,

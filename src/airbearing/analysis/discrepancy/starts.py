@@ -38,8 +38,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from airbearing.analysis.discrepancy.data import make_windows
 from airbearing.analysis.discrepancy.trial import jsonable
+from airbearing.analysis.shooting.logs import make_windows
 from airbearing.errors import InputError, SolverError
 
 __all__ = [

@@ -40,6 +40,7 @@ import numpy as np
 
 from airbearing.analysis.identification.data import log_quality
 from airbearing.analysis.identification.result import IdentificationResult
+from airbearing.analysis.shooting.fit import information_inverse
 from airbearing.errors import InputError, SolverError
 from airbearing.io.log import Log
 from airbearing.io.output import to_jsonable
@@ -268,7 +269,7 @@ def fit_momentum_exchange(
     beta_hat, xv, rss, Rm, A, col = _constrained_fit(R, npar, nfr, testbed)
     sigma = testbed.sensors.gyro_noise if sigma is None else sigma
     var = rss / max(rows - npar, 1)
-    cov_white = var * np.linalg.pinv(Rm.T @ Rm)
+    cov_white = var * information_inverse(Rm.T @ Rm)[0]
     cov_hac, hac = _honest_cov(pieces, beta_hat, friction, nfr)
     a = beta_hat[0]
     J = 1.0 / a
@@ -426,8 +427,7 @@ def _honest_cov(pieces, beta_hat, friction, nfr: int):
         nl = andrews_bandwidth(sc)
         lags = max(lags, nl)
         meat += S_hac_simple(sc, nlags=nl)
-    c = np.sqrt(np.maximum(np.diag(bread), 1e-300))
-    Binv = np.linalg.pinv(bread / np.outer(c, c), hermitian=True) / np.outer(c, c)
+    Binv = information_inverse(bread)[0]
     cov = Binv @ meat @ Binv
     info = {"ar_order": int(phi.size), "ar_sum": float(phi.sum()), "hac_lags": int(lags)}
     return 0.5 * (cov + cov.T), info

@@ -31,6 +31,7 @@ import numpy as np
 
 from airbearing.analysis.identification.data import PlatformData
 from airbearing.analysis.identification.oe_problem import physical_constraint, platform_windows
+from airbearing.analysis.shooting.fit import information_inverse
 from airbearing.io.testbed import Testbed
 
 __all__ = ["OutputErrorResult", "refine_output_error"]
@@ -99,18 +100,14 @@ class OutputErrorResult:
 def _inverse(F: np.ndarray) -> np.ndarray:
     """The covariance: ``F^-1`` (scaled by its diagonal for conditioning), NaN if singular.
 
-    Singular means rank-deficient to working precision (numpy's ``matrix_rank`` tolerance,
-    largest singular value x size x eps, on the diagonally scaled matrix): the inverse of
-    such a matrix is round-off, positive definite or not by chance of the platform's
-    BLAS, so it is never returned. The caller (:func:`~.platform.identify_platform`)
+    Singular means an eigenvalue of the diagonally scaled matrix below ``PINV_RCOND`` of
+    the largest (:func:`~airbearing.analysis.shooting.fit.information_inverse`, the rule of
+    every information matrix the package inverts): the inverse of such a matrix is mostly
+    round-off, so it is never returned. The caller (:func:`~.platform.identify_platform`)
     reads NaN as "not identifiable".
     """
-    d = np.sqrt(np.maximum(np.diag(F), 0))
-    d = np.where(d > 0, d, 1.0)
-    Fs = F / np.outer(d, d)
-    if not np.all(np.isfinite(Fs)) or np.linalg.matrix_rank(Fs, hermitian=True) < len(Fs):
-        return np.full(F.shape, np.nan)
-    return np.linalg.inv(Fs) / np.outer(d, d)
+    inv, rank = information_inverse(F)
+    return inv if rank == len(F) else np.full(F.shape, np.nan)
 
 
 def _rms(a) -> float:
@@ -155,7 +152,7 @@ def refine_output_error(
         RK4 sub-steps per logged interval; default 2, more for a fast spin (at most 0.08
         rad of rotation per sub-step: two left a 19 mm CM offset 2.6 um, 10 errors, off
         at 3.2 rad/s and 10 Hz), as the replay takes them
-        (:func:`~airbearing.analysis.discrepancy.replay.substeps_for`).
+        (:func:`~airbearing.analysis.shooting.accuracy.substeps_for`).
     sigma_w, sigma_q : float, optional
         Rate (rad/s) and attitude (rad) noise to start the weights with; default the
         testbed's gyro and attitude noise (1e-3 rad when zero). Re-estimated.
@@ -178,7 +175,7 @@ def refine_output_error(
     model, J0 = _model_at(testbed, theta0, mass)
     windows = platform_windows(model, data, segment)
     if substeps is None:
-        from airbearing.analysis.discrepancy.replay import substeps_for
+        from airbearing.analysis.shooting.accuracy import substeps_for
 
         substeps = substeps_for(model, windows)
     gyro = all(d.gyro for d in data)

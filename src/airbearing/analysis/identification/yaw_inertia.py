@@ -344,8 +344,8 @@ def _output_error(testbed: Testbed, logs, J_start: float) -> dict:
     outlier rows weighted 0, logged intervals), the Model's yaw and rate (or the yaw
     alone, attitude-only) compared with the log, J_z the one free parameter.
     """
-    from airbearing.analysis.discrepancy.data import make_windows, replay_data
     from airbearing.analysis.shooting import ShootingProblem
+    from airbearing.analysis.shooting.logs import make_windows, replay_data
     from airbearing.models.model import build_model
 
     b = testbed.body

@@ -60,6 +60,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
+from airbearing.analysis.shooting.fit import information_inverse
 from airbearing.analysis.shooting.functions import _problem_functions
 from airbearing.analysis.shooting.problem import solve_gram
 from airbearing.analysis.shooting.process_noise import KAPPA_GRID
@@ -416,10 +417,7 @@ def honest_errors(problem, fit, k: int) -> HonestErrors:
 
 def _bread_inverse(A: np.ndarray) -> np.ndarray:
     """``(A'A)^+`` column-scaled (the bread of the sandwich)."""
-    bread = A.T @ A
-    c = np.sqrt(np.maximum(np.diag(bread), 1e-300))
-    Binv = np.linalg.pinv(bread / np.outer(c, c), rcond=1e-12, hermitian=True)
-    return Binv / np.outer(c, c)
+    return information_inverse(A.T @ A)[0]
 
 
 def ar_coefficients(series, maxlag: int, n_free: float = 0.0) -> np.ndarray:

@@ -119,6 +119,47 @@ def _reduced(Js, k: int):
     return 0.5 * (Fr + Fr.T), Ftt
 
 
+#: Relative eigenvalue below which a scaled information matrix is singular in that
+#: direction (the one rule of the package's pseudo-inverses of information matrices).
+PINV_RCOND = 1e-12
+
+
+def information_inverse(F: np.ndarray, rcond: float = PINV_RCOND) -> tuple[np.ndarray, int]:
+    """The pseudo-inverse of an information (Gram, Fisher) matrix and its rank.
+
+    ``F`` is scaled by its diagonal (each parameter's own information; units and
+    magnitudes differ by many decades), eigen-decomposed, and the directions with an
+    eigenvalue below ``rcond`` times the largest are dropped (the same as
+    ``numpy.linalg.pinv(..., rcond, hermitian=True)`` of the scaled matrix); the result is
+    scaled back. A caller that must not report a number on a rank-deficient matrix tests
+    ``rank < len(F)``.
+
+    Parameters
+    ----------
+    F : numpy.ndarray (k, k)
+        Symmetric positive semi-definite, in the parameters' units.
+    rcond : float
+        Relative eigenvalue cut-off.
+
+    Returns
+    -------
+    inverse : numpy.ndarray (k, k)
+        In the inverse units of ``F``; NaN everywhere when ``F`` is not finite.
+    rank : int
+        Directions kept (0 when ``F`` is not finite).
+    """
+    F = np.asarray(F, dtype=float)
+    c = np.sqrt(np.maximum(np.diag(F), 0.0))
+    c = np.where(c > 0, c, 1.0)
+    Fs = F / np.outer(c, c)
+    if not np.all(np.isfinite(Fs)):
+        return np.full(F.shape, np.nan), 0
+    ev, V = np.linalg.eigh(0.5 * (Fs + Fs.T))
+    good = ev > rcond * max(float(np.max(np.abs(ev), initial=0.0)), 1e-300)
+    inv = (V[:, good] / ev[good]) @ V[:, good].T
+    return inv / np.outer(c, c), int(np.count_nonzero(good))
+
+
 def theta_errors(J, k: int, s2: float, names=None):
     """Standard errors of the first ``k`` columns of ``J`` with the others eliminated.
 

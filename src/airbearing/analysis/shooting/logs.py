@@ -1,4 +1,8 @@
-"""A log as a testbed's Model sees it: inputs, measurements, segments, outliers, windows, noise.
+"""The engine's front end: a log as a testbed's Model sees it (inputs, measurements,
+segments, outliers, windows, noise floor).
+
+The replay, the discrepancy search and the output-error identifications take their arrays,
+windows and noise floor from here, so they sit side by side above the one engine.
 
 Inputs (zero-order hold over each logged interval, FORMATS.md)
     platform: ``s1..s3`` from the log (zero for a passive platform without ``[masses]``);
@@ -47,7 +51,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from airbearing.analysis.shooting import WindowSet
+from airbearing.analysis.shooting.windows import WindowSet
 from airbearing.errors import InputError
 from airbearing.io.coerce import check_gyro_agrees
 from airbearing.io.log import Log
@@ -206,11 +210,7 @@ class ReplayData:
         if self.q is None:
             y = self.att[use, :1] - self.att[row, 0]
         else:
-            e = quat.qmul(quat.qconj(self.q[row])[None, :], self.q[use])
-            e = e * np.sign(e[:, :1] + (e[:, :1] == 0))
-            s = np.linalg.norm(e[:, 1:], axis=1)
-            ang = 2 * np.arctan2(s, e[:, 0])
-            y = e[:, 1:] * np.where(s > 0, ang / np.maximum(s, 1e-300), 2.0)[:, None]
+            y = quat.qlog(quat.qmul(quat.qconj(self.q[row])[None, :], self.q[use]))
         A = np.column_stack([np.ones_like(tau), tau, 0.5 * tau**2])
         coef, *_ = np.linalg.lstsq(A, y, rcond=None)
         return coef[1]
@@ -634,20 +634,13 @@ def _diff_at(x: np.ndarray, t: np.ndarray, idx: np.ndarray, k: int) -> np.ndarra
     return sum(c[:, j : j + 1] * x2[idx + j] for j in range(k + 1))
 
 
-def _rotvec(e: np.ndarray) -> np.ndarray:
-    e = e * np.sign(e[:, :1] + (e[:, :1] == 0))
-    s = np.linalg.norm(e[:, 1:], axis=1)
-    ang = 2 * np.arctan2(s, e[:, 0])
-    return e[:, 1:] * np.where(s > 0, ang / np.maximum(s, 1e-300), 2.0)[:, None]
-
-
 def _attitude_diff(q: np.ndarray, t: np.ndarray, idx: np.ndarray, k: int) -> np.ndarray:
     """Divided differences of the attitude as rotation vectors from each stencil's first sample."""
     c = _weights(t, idx, k)
     q0c = quat.qconj(q[idx])
     out = np.zeros((idx.size, 3))
     for j in range(1, k + 1):
-        out += c[:, j : j + 1] * _rotvec(quat.qmul(q0c, q[idx + j]))
+        out += c[:, j : j + 1] * quat.qlog(quat.qmul(q0c, q[idx + j]))
     return out
 
 

@@ -1,0 +1,228 @@
+"""How many RK4 sub-steps a replay needs: the engine's integration accuracy rule.
+
+A fast three-axis spin needs more sub-steps than the default, and a noise-free attitude
+needs enough for the integration error over a segment to stay below its noise
+(:func:`substeps_for`). Used by the replay and the discrepancy search
+(:mod:`airbearing.analysis.discrepancy.replay`) and the platform output error
+(:mod:`airbearing.analysis.identification.output_error`).
+"""
+
+from __future__ import annotations
+
+import math
+import weakref
+
+import numpy as np
+
+from airbearing.analysis.shooting.functions import DEFAULT_SUBSTEPS
+from airbearing.analysis.shooting.logs import (
+    ATTITUDE_SIGMA_MIN,
+    MAD_TO_SIGMA,
+    RATE_SIGMA_MIN,
+    NoiseFloor,
+    _attitude_diff,
+)
+from airbearing.analysis.shooting.windows import WindowSet
+from airbearing.models import quaternion as quat
+from airbearing.models.model import Model
+
+__all__ = [
+    "ATTITUDE_NOISE_ORDERS",
+    "MAX_SUBSTEPS",
+    "MAX_SUBSTEP_ROTATION",
+    "attitude_noise",
+    "integration_error",
+    "substeps_for",
+]
+
+
+#: rad, largest rotation of a three-axis rig per RK4 sub-step of a replay. The coupled Euler
+#: dynamics of a fast spin turn at the spin rate: at 3.2 rad/s and 10 Hz two sub-steps
+#: (0.16 rad each) left a 0.01-0.04 % bias on a 19 mm CM offset, 6-14 of its errors once
+#: whole segments are fitted; four (0.08 rad) leave it within one.
+MAX_SUBSTEP_ROTATION = 0.08
+
+
+#: Most RK4 sub-steps per sample the accuracy check of :func:`substeps_for` may ask for.
+MAX_SUBSTEPS = 32
+
+#: Per windows object: ``(states, inputs, rate floor, no attitude) -> sub-steps`` (the
+#: accuracy check integrates every window twice per candidate number; a search builds many
+#: problems on the same windows).
+_ACCURATE = weakref.WeakKeyDictionary()
+
+
+def substeps_for(model: Model, windows: WindowSet, floor: NoiseFloor | None = None) -> int:
+    """RK4 sub-steps per sample: ``DEFAULT_SUBSTEPS``, more for a fast three-axis spin.
+
+    With the noise ``floor`` (three-axis rigs), also enough sub-steps for the replay to
+    integrate to the noise its errors assume: the number is doubled until the integration
+    error over each segment, measured by step doubling from each window's start (the
+    windows' errors summed over the segment), is at most each output's noise (never below
+    the replay's resolution) over the square root of the segment's samples
+    (:func:`_integration_tolerance`). The error is smooth, so it acts on a fitted value
+    coherently over the whole segment, as ``sqrt(n)`` white errors of its size would;
+    within that tolerance its effect on any value is at most about one standard error. A
+    noise-free attitude is weighted at the resolution
+    (:data:`~airbearing.analysis.shooting.errors.RESOLUTION`, 1e-6 rad): on seed 004's
+    free oscillation (rates to 1.5 rad/s at 20 Hz) two sub-steps drifted 3.9e-6 rad over
+    30 s and put per-axis viscous frictions up to 3.2 standard errors off; eight drift
+    1.5e-8 rad. A motion-capture attitude (1e-3 rad) keeps two.
+
+    Parameters
+    ----------
+    model : Model
+    windows : WindowSet
+    floor : NoiseFloor, optional
+        The noise floor the problem's weights come from (None: the rotation rule alone).
+
+    Returns
+    -------
+    int
+        Sub-steps per sample, at most :data:`MAX_SUBSTEPS` (unless the rotation rule asks
+        for more).
+    """
+    if model.dof != 3 or windows.x0.shape[1] < 7:
+        return DEFAULT_SUBSTEPS
+    w = float(np.max(np.linalg.norm(windows.x0[:, 4:7], axis=1)))
+    used = windows.weight[:, 1:] > 0
+    dt = float(np.median(windows.dt[used])) if used.any() else 0.0
+    if not (np.isfinite(w) and dt > 0):
+        return DEFAULT_SUBSTEPS
+    n = max(DEFAULT_SUBSTEPS, math.ceil(w * dt / MAX_SUBSTEP_ROTATION - 1e-9))
+    if floor is None or windows.x0.shape[1] != model.nx:
+        return n
+    # the motion the logs record sets the error; the candidate effects (small torques) do
+    # not: one check per windows, whichever Model asks first
+    key = (model.nx, model.nu, floor.rate, floor.attitude is None)
+    cache = _ACCURATE.setdefault(windows, {})
+    if key not in cache:
+        cache[key] = _accurate_substeps(model, windows, n, _integration_tolerance(windows, floor))
+    return cache[key]
+
+
+#: Orders of the attitude's differences whose smallest floor is its noise in
+#: :func:`_integration_tolerance` (a smooth motion leaks into low orders, noise is the same
+#: in every order).
+ATTITUDE_NOISE_ORDERS = (4, 6, 8)
+
+
+def _integration_tolerance(windows: WindowSet, floor: NoiseFloor):
+    """``(rad, rad/s)``: the largest integration error over a segment of the attitude and
+    of the rates: the noise each is weighted at, never below the resolution, over the
+    square root of the longest segment's usable samples (inf for a quantity the log does
+    not measure). The rates' noise is the floor's; the attitude's is
+    :func:`attitude_noise` (the floor of an attitude beside a gyro comes from the gyro's
+    integral: 3.3e-5 rad on seed 004's noise-free attitude under AR(1) gyro noise, whose
+    8th differences show 8e-10)."""
+    seg = windows.segments()
+    usable = (windows.weight > 0).sum(axis=1)
+    n = max(int(usable[seg == s].sum()) for s in np.unique(seg))
+    root = math.sqrt(max(n, 1))
+    att = math.inf
+    if floor.attitude is not None:
+        att = max(attitude_noise(windows) or 0.0, ATTITUDE_SIGMA_MIN) / root
+    rate = max(floor.rate, RATE_SIGMA_MIN) / root if floor.rate is not None else math.inf
+    return att, rate
+
+
+def attitude_noise(windows: WindowSet) -> float | None:
+    """rad, the attitude's white noise per axis seen by the windows: the smallest over
+    :data:`ATTITUDE_NOISE_ORDERS` of the median absolute deviation of its unit-norm
+    divided differences (as :func:`noise_floor`'s, on each window's usable rows). A smooth
+    motion leaks into a low order (on seed 004's free oscillation at 20 Hz, 6.9e-6 rad at
+    order 4 for a noise-free attitude, 8e-10 at order 8); white noise is the same in every
+    order.
+
+    Parameters
+    ----------
+    windows : WindowSet
+        Windows with a measured attitude (``quat``).
+
+    Returns
+    -------
+    float or None
+        rad, 1-sigma per axis; None without attitude or with too few usable rows.
+    """
+    if windows.quat is None:
+        return None
+    best = None
+    for k in ATTITUDE_NOISE_ORDERS:
+        parts = []
+        for j in range(windows.n):
+            ok = windows.weight[j] > 0
+            t = np.r_[0.0, np.cumsum(windows.dt[j])]
+            run = np.ones(windows.length - k, dtype=bool)
+            for i in range(k + 1):
+                run &= ok[i : windows.length - k + i]
+            idx = np.flatnonzero(run)
+            if idx.size:
+                parts.append(_attitude_diff(windows.quat[j], t, idx, k))
+        if not parts or sum(p.shape[0] for p in parts) < 10:
+            continue
+        d = np.concatenate(parts)
+        mad = MAD_TO_SIGMA * np.median(np.abs(d - np.median(d, axis=0)), axis=0)
+        sigma = float(np.sqrt(np.mean(mad**2)))
+        best = sigma if best is None else min(best, sigma)
+    return best
+
+
+def _accurate_substeps(model: Model, windows: WindowSet, n: int, tol) -> int:
+    """The fewest sub-steps from ``n`` on (doubling, at most :data:`MAX_SUBSTEPS`) whose
+    integration error over each segment (:func:`integration_error`) is within ``tol``."""
+    start = n
+    while n < MAX_SUBSTEPS:
+        att, rate = integration_error(model, windows, n)
+        if att <= tol[0] and rate <= tol[1]:
+            break
+        n *= 2
+    return min(n, max(MAX_SUBSTEPS, start))
+
+
+def integration_error(model: Model, windows: WindowSet, substeps: int):
+    """The largest integration error over a segment of a three-axis replay, by step doubling.
+
+    Each window is integrated from its start (the Model's nominal parameters, the window's
+    inputs and logged intervals) with ``substeps`` and twice as many RK4 sub-steps; the
+    largest difference over its usable rows (16/15 of it: RK4's error falls 16-fold when
+    the sub-step halves) is the window's error, and a segment's error the sum over its
+    windows (an integration error grows along the trajectory).
+
+    Parameters
+    ----------
+    model : Model
+        A three-axis Model whose states are the windows' (no lag state).
+    windows : WindowSet
+    substeps : int
+        RK4 sub-steps per sample.
+
+    Returns
+    -------
+    tuple of float
+        ``(rad, rad/s)``: the attitude error (the small rotation) and the largest rate
+        error of any axis, the largest over segments.
+    """
+    from airbearing.analysis.simulation.on_times import rollout_dt
+
+    L, n = windows.length, windows.n
+    # every window in one call of each rollout (map: the windows side by side)
+    args = (
+        windows.x0.T,
+        windows.u[:, : L - 1].transpose(2, 0, 1).reshape(model.nu, -1),
+        model.p0,
+        windows.dt.reshape(1, -1),
+    )
+
+    def states(k):  # (windows, samples, states) at k sub-steps
+        X = np.asarray(rollout_dt(model, L - 1, k).map(n)(*args))
+        return X.reshape(model.nx, n, L - 1).transpose(1, 2, 0)
+
+    a, b = states(substeps), states(2 * substeps)
+    keep = windows.weight[:, 1:] > 0
+    e = quat.qmul(quat.qconj(a[..., :4]), b[..., :4])
+    # the largest error over each window's usable rows, 16/15 of it (RK4)
+    att = 16 / 15 * np.max(np.where(keep, np.linalg.norm(2 * e[..., 1:], axis=-1), 0.0), axis=1)
+    rate = 16 / 15 * np.max(np.where(keep, np.max(np.abs(a[..., 4:7] - b[..., 4:7]), -1), 0.0), 1)
+    seg = windows.segments()
+    per_seg = [(att[seg == s].sum(), rate[seg == s].sum()) for s in np.unique(seg)]
+    return max(p[0] for p in per_seg), max(p[1] for p in per_seg)
