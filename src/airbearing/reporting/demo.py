@@ -106,6 +106,9 @@ SHOWS = {
     "Tables 1-2), and which imperfections give the measured ratios",
     "Linear stability": "the seed gains and the tuned gains of the attitude and balancing "
     "loops against one specification, worst case over inertia and offset",
+    "Reaction wheels": "a yaw rig turned by one reaction wheel: gains tuned with the "
+    "wheel's torque limit, a slew, the wheel's bearing friction named from its log and the "
+    "table's inertia identified by momentum exchange",
     "Identification": "inertia and CM offset identified from free oscillations (seed 004) "
     "and the yaw inertia of the CMG testbed (seed 001)",
     "Model discrepancy": "the seed-001 story: a log whose inertia differs from the file, and "
@@ -201,6 +204,7 @@ SECTIONS = [
     ("CMG cluster", _section("airbearing.reporting.cmg")),
     ("Balancing", _section("airbearing.reporting.balancing")),
     ("Linear stability", _section("airbearing.reporting.stability")),
+    ("Reaction wheels", _section("airbearing.reporting.wheels")),
     ("Identification", _section("airbearing.reporting.identification")),
     ("Model discrepancy", _section("airbearing.reporting.discrepancy")),
     (
@@ -276,6 +280,7 @@ SECTION_COST = {
     "CMG cluster": (18.0, 28.0, 21.0),
     "Balancing": (42.0, 258.0, 27.0),
     "Linear stability": (612.0, 1414.0, 59.0),
+    "Reaction wheels": (30.0, 120.0, 25.0),
     "Identification": (55.0, 455.0, 37.0),
     "Model discrepancy": (59.0, 146.0, 43.0),
     "Campaign: robust verification": (39.0, 40.0, 134.0),
