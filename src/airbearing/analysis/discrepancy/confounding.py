@@ -252,9 +252,8 @@ def constant_torque_confounding(model, datas, p, named, S_of, axes, rates) -> li
             text = (
                 f"the rate about {AXES[i]} stays near {w:.3g} rad/s over the logs (within "
                 f"{100 * sine:.0f} %), so {a.name} about {AXES[i]} makes a nearly constant "
-                "torque there, and so does the slowly varying torque the model leaves "
-                "unexplained; its error includes a free constant torque about "
-                f"{AXES[i]}. Repeat the run at another "
+                "torque there, as would a torque the model does not hold (the bearing's "
+                "own air-flow torque, a slow drift); repeat the run at another "
                 f"rate about {AXES[i]} (or let it coast down, or slew it) and fit the logs "
                 "together: a friction or drag scales with the rate, the unexplained torque "
                 "does not"

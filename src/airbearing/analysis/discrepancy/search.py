@@ -877,34 +877,42 @@ def _confounding(search: _Search, sel: _Selection, named: _Named) -> None:
             sel.confounded.append(pair)
         sel.experiments[f"{pair[0]} + {pair[1]}"] = c.experiment
     pn = named.fit.extra.get("process_noise") or {}
+    axes, rates = steady_axes(search.datas)
     const = []
-    if pn.get("significant"):
-        axes, rates = steady_axes(search.datas)
-        if axes:
-            const = constant_torque_confounding(
-                model, search.datas, p, named_th, S_of, axes, rates
-            )  # fmt: skip
-        if const:
-            f = constant_torque_inflation(model, search.datas, p, named_th, S_of, axes)
-            i = 0
-            for c in sel.chosen:
-                fc = f[i : i + c.k]
-                if np.any(fc > 1.0):
-                    sd = np.atleast_1d(np.asarray(named.std[c.name], float))
-                    named.std_within.setdefault(c.name, named.std[c.name])
-                    named.std[c.name] = _as_value(c, sd * fc)
-                    with np.errstate(invalid="ignore", divide="ignore"):
-                        e = np.atleast_1d(np.asarray(named.efficiency[c.name], float)) * fc
-                    named.efficiency[c.name] = _as_value(c, e)
-                i += c.k
-            factors = {c.name: f for c, f in _split(sel.chosen, f)}
-            const = [replace(c, std_factor=_as_value(_cand(sel, c), factors[c.effects[0]]))
-                     for c in const]  # fmt: skip
-            for c in const:
-                pair = c.effects
-                if pair not in sel.confounded:
-                    sel.confounded.append(pair)
-                sel.experiments[f"{pair[0]} + {pair[1]}"] = c.experiment
+    if axes:  # said whenever it holds: a fact of the logs' motion
+        const = constant_torque_confounding(
+            model, search.datas, p, named_th, S_of, axes, rates
+        )  # fmt: skip
+    if const and pn.get("significant"):  # widened when the logs show an unexplained torque
+        f = constant_torque_inflation(model, search.datas, p, named_th, S_of, axes)
+        i = 0
+        for c in sel.chosen:
+            fc = f[i : i + c.k]
+            if np.any(fc > 1.0):
+                sd = np.atleast_1d(np.asarray(named.std[c.name], float))
+                named.std_within.setdefault(c.name, named.std[c.name])
+                named.std[c.name] = _as_value(c, sd * fc)
+                with np.errstate(invalid="ignore", divide="ignore"):
+                    e = np.atleast_1d(np.asarray(named.efficiency[c.name], float)) * fc
+                named.efficiency[c.name] = _as_value(c, e)
+            i += c.k
+        factors = {c.name: f for c, f in _split(sel.chosen, f)}
+        const = [
+                replace(
+                    c,
+                    std_factor=_as_value(_cand(sel, c), factors[c.effects[0]]),
+                    experiment=c.experiment + (
+                        "; an unexplained torque is significant, so the error includes a "
+                        "free constant torque there"
+                    ),
+                )
+                for c in const
+            ]  # fmt: skip
+    for c in const:
+        pair = c.effects
+        if pair not in sel.confounded:
+            sel.confounded.append(pair)
+        sel.experiments[f"{pair[0]} + {pair[1]}"] = c.experiment
     sel.confounding = found + const
 
 
@@ -1122,9 +1130,9 @@ def _verdict_text(sel: _Selection, named: _Named, adq, agree, validation) -> str
         text += "; these logs cannot show " + ", ".join(hidden)
     if sel.revisions:
         text += "; revised over whole segments: " + ", ".join(m.words() for m in sel.revisions)
-    said = {c.effects for c in sel.confounding}
+    constant = {c.effects for c in sel.confounding if not c.equivalent}
     for a, b in sel.confounded:
-        if (a, b) in said or (b, a) in said:
+        if (a, b) in constant:  # said by the verdict with its experiment
             continue
         if a in named.effects or b in named.effects:
             text += (
