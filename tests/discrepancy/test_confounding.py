@@ -16,6 +16,7 @@ from airbearing.analysis.discrepancy.candidates import candidates_for, universal
 from airbearing.analysis.discrepancy.confounding import (
     EXACT_SINE,
     NEAR_SINE,
+    constant_torque_confounding,
     constant_torque_inflation,
     steady_axes,
     structural_confounding,
@@ -134,3 +135,26 @@ def test_steady_axis_and_the_constant_torque_it_hides():
     assert np.allclose(f[:2], 1.0, atol=1e-6)
     # 1 / sine of the angle between w_z and a constant: about 1 / 0.12
     assert 5.0 < f[2] < 20.0
+
+
+def test_the_verdict_names_a_constant_torque_about_a_steady_axis():
+    log = free_oscillation(
+        PLATFORM, initial_rate=W0, q0=Q0, sliders=(0.003, -0.002, 0.004),
+        effects={"viscous_friction": 2e-4}, seed=3, attitude_noise=1e-3, duration=8.0,
+    ).log  # fmt: skip
+    datas, _, _ = prepare(PLATFORM, [log])
+    axes, rates = steady_axes(datas)
+    cands = candidates_for(PLATFORM, datas)
+    model = model_for(PLATFORM, universal_effects(PLATFORM, ["viscous_friction"]))
+    c = next(c for c in cands if c.name == "viscous_friction" and not c.per_axis)
+    S = np.zeros((model.n_p, 1))
+    S[model.index(list(c.params), "p")] = c.tie
+    found = constant_torque_confounding(
+        model, datas, model.p0, [(c, np.array([2e-4]))], lambda _: S, axes, rates
+    )  # fmt: skip
+    assert [f.effects for f in found] == [("viscous_friction", "constant torque about z")]
+    text = verdict({"viscous_friction": 2e-4}, {"viscous_friction": 1e-6}, "", confounding=found)
+    assert "cannot be told from a constant torque about z" in text
+    assert "another rate about z" in text
+    js = found[0].to_json()
+    assert js["kind"] == "near" and js["equivalent"] == {} and js["std_factor"] is None
