@@ -892,9 +892,10 @@ def _confounding(search: _Search, sel: _Selection, named: _Named) -> None:
                 sd = np.atleast_1d(np.asarray(named.std[c.name], float))
                 named.std_within.setdefault(c.name, named.std[c.name])
                 named.std[c.name] = _as_value(c, sd * fc)
-                with np.errstate(invalid="ignore", divide="ignore"):
-                    e = np.atleast_1d(np.asarray(named.efficiency[c.name], float)) * fc
-                named.efficiency[c.name] = _as_value(c, e)
+                if named.efficiency.get(c.name) is not None:
+                    with np.errstate(invalid="ignore", divide="ignore"):
+                        e = np.atleast_1d(np.asarray(named.efficiency[c.name], float)) * fc
+                    named.efficiency[c.name] = _as_value(c, e)
             i += c.k
         factors = {c.name: f for c, f in _split(sel.chosen, f)}
         const = [
