@@ -66,6 +66,9 @@ def test_cm_offset_and_dipole_in_a_vertical_field_are_one_torque_form():
     # inertia about the pivot: far below a per cent of a torque
     assert c.correlation > math.sqrt(1 - NEAR_SINE**2)
     assert "field" in c.experiment and "slider" in c.experiment
+    # an inertia scale error makes a CM offset's torque only along the nominal offset
+    # (J w' + w x J w = m r x g is homogeneous): this offset is not one
+    assert not any("inertia_error" in c.effects for c in found), found
     # the dipole that makes the CM offset's torque: m_res b = mass dr g (same direction
     # convention up to sign): |m_res| = mass g |dr| / |b|
     m = PLATFORM.body.mass

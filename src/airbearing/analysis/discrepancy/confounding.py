@@ -5,13 +5,15 @@ other's over every logged state: no fit can tell them apart, whatever its solver
 The test is structural. At the fitted parameters each candidate's torque regressor
 (the exact CasADi Jacobian of the Model's acceleration in the candidate's parameters,
 times the inertia: :func:`.candidates.residual_torque`) is evaluated at the usable rows
-of every log; the columns of two candidates span two subspaces of the stacked torque
-series, and their principal angles (``scipy.linalg.subspace_angles``) say how much of
-the smaller span the larger one holds. The cosine of the largest angle is the smallest
-canonical correlation of the two regressors: 1 when every torque of one is a torque of
-the other (a CM offset and a residual dipole under a vertical field:
-``m dr x g_body`` and ``m_res x b_body`` with ``b || g``), near 1 when they differ only
-over a range of states the logs hardly visit.
+of every log. A named effect is confounded with another candidate when its fitted torque
+series (its regressor times its value) lies in the span of the other's regressor columns:
+the sine of the angle between them is 0 when the other makes exactly that torque (a CM
+offset and a residual dipole under a vertical field: ``m dr x g_body`` and
+``m_res x b_body`` with ``b || g``), near 0 when they differ only over states the logs
+hardly visit. The test is on the named value, not on the whole form: an inertia scale
+error makes, in free motion, the torque of a CM offset along the nominal offset (``J w'
++ w x J w = m r x g`` is homogeneous), so a named inertia error is confounded with a CM
+offset, but a CM offset in another direction is not an inertia error.
 
 The same test finds what a **constant torque** on a body axis would take: an axis whose
 rate barely changes over a log (a platform spinning about its vertical axis at a nearly
@@ -72,8 +74,9 @@ class Confounding:
     kind : str
         ``"exact"`` (one torque form on these logs) or ``"near"``.
     correlation : float
-        Smallest canonical correlation of the two torque regressors over the logs (1:
-        one form).
+        Cosine of the angle between the named effect's fitted torque over the logs and the
+        span of the other's regressors (1: the other makes exactly that torque); for a
+        constant torque, between the named effect's regressor on the axis and a constant.
     experiment : str
         What would separate them.
     equivalent : dict
@@ -159,7 +162,7 @@ def structural_confounding(model, datas, p, named, others, S_of, experiment_for)
             B = col(b)
             if not np.any(B):
                 continue
-            sine = _largest_sine(A, B)
+            sine, eq_theta = _sine_in_span(A @ np.atleast_1d(np.asarray(th_a, float)), B)
             if sine >= NEAR_SINE:
                 continue
             kind = "exact" if sine < EXACT_SINE else "near"
@@ -167,21 +170,19 @@ def structural_confounding(model, datas, p, named, others, S_of, experiment_for)
             key = (a.name, b.name)
             if key in found and found[key].correlation >= corr:
                 continue
-            # b's value that makes a's torque: least squares of A th_a on B
-            eq = {b.name: b.value(lsq(B, A @ np.asarray(th_a, float)))}
+            eq = {b.name: b.value(eq_theta)}
             found[key] = Confounding(key, kind, corr, experiment_for(*key), eq)
     return list(found.values())
 
 
-def _largest_sine(A: np.ndarray, B: np.ndarray) -> float:
-    """Sine of the largest principal angle between the spans of ``A`` and ``B`` (columns
-    scaled; a zero column dropped): 0 when the smaller span lies in the larger."""
-    A = _scaled(A)
-    B = _scaled(B)
-    if A.shape[1] == 0 or B.shape[1] == 0:
-        return 1.0
-    angles = subspace_angles(A, B)
-    return float(np.sin(np.max(angles)))
+def _sine_in_span(tau: np.ndarray, B: np.ndarray) -> tuple[float, np.ndarray]:
+    """Sine of the angle between the torque series ``tau`` and the span of ``B``, and the
+    least-squares ``theta`` of ``B`` that makes it (0 when ``tau`` lies in the span)."""
+    norm = float(np.linalg.norm(tau))
+    if norm == 0:
+        return 1.0, np.zeros(B.shape[1])
+    th = lsq(B, tau)
+    return float(np.linalg.norm(tau - B @ th)) / norm, th
 
 
 def _scaled(X: np.ndarray) -> np.ndarray:

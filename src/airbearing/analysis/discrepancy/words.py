@@ -32,6 +32,12 @@ EXPERIMENTS: dict[frozenset, str] = {
         "turns with the field), or move a slider by a known amount (the CM moves, the dipole "
         "does not)"
     ),
+    frozenset({"cm_offset_error", "inertia_error"}): (
+        "free motion fixes the inertia and the CM offset only up to a common scale (J w' + "
+        "w x J w = m r x g is homogeneous in J and r); move a slider by a known amount "
+        "between runs, or apply a known torque (a commanded dipole in the cage field, a "
+        "reaction wheel), and fit the logs together"
+    ),
     frozenset({"viscous_friction", "aero_drag"}): (
         "coast down from several initial rates: a viscous torque is proportional to w, "
         "aerodynamic drag to w^2, so their ratio changes with the speed (fit the logs together: "
