@@ -63,9 +63,9 @@ def test_hold_refuses_what_cannot_be(spin):
         identify_platform(SPIN_RIG, [spin.log], hold="mass")
     with pytest.raises(InputError, match="either"):
         identify_platform(SPIN_RIG, [spin.log], hold="cm", known_offset_xy=(0.0, 0.0))
-    # without anything held free motion cannot be identified; the message names the parameter
-    with pytest.raises(InputError, match="hold='inertia'"):
-        identify_platform(SPIN_RIG, [spin.log])
+    # without anything held free motion fixes no values: none given, and the fixes named
+    res = identify_platform(SPIN_RIG, [spin.log], method="equation-error")
+    assert not res.identifiable and any("--hold inertia" in f for f in res.scale_free["fixes"])
 
 
 def test_cli_hold_inertia(spin, tmp_path, capsys):

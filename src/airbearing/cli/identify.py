@@ -115,6 +115,13 @@ def identify(
             raise InputError(msg) from None
     _echo_estimates(tb, result)
     js = result.to_json()
+    if not js.get("identifiable", True):  # said above; the rest has no values to show
+        out.json(p_json, js)
+        if p_tb is not None:
+            result.to_testbed(tb)  # no values to write: an InputError that says why
+        for p in out.commit():
+            typer.echo(f"wrote {p}")
+        return
     typer.echo(f"active constraints: {', '.join(result.active_constraints) or 'none'}")
     typer.echo(f"residual rms: {result.residual_rms:.4g} {js['residual_unit']}")
     if "segments" in js:
@@ -154,6 +161,8 @@ def _echo_estimates(tb, result) -> None:
     elif tb.body.dof == 1:
         unit = "" if result.inertia != result.inertia else " kg m^2"
         typer.echo(f"J_z = {_fmt(result.inertia, result.std_inertia)}{unit} ({result.method})")
+    elif not getattr(result, "identifiable", True):
+        _echo_scale_free(result)
     else:
         typer.echo(f"method: {result.method}")
         from airbearing.cli.tables import matrix_table, table
@@ -174,3 +183,19 @@ def _echo_estimates(tb, result) -> None:
         for name, why in result.std_status.items():
             if why != "estimated":
                 typer.echo(f"{name}: {why}")
+
+
+def _echo_scale_free(result) -> None:
+    """No values when the logs fix the inertia and CM offset only up to a common scale:
+    what they do fix (ratios) and what would fix the rest."""
+    sf = result.scale_free
+    typer.echo(f"not identifiable: {sf['reason']}")
+    typer.echo(f"what these logs fix: {sf['combination']}")
+    slider = ", ".join(f"{v * 1e3:.4g}" for v in sf["slider_position"])
+    typer.echo(f"  (sliders at [{slider}] mm, from the equation-error stage)")
+    for name, value in sf["ratios"].items():
+        unit = sf["ratio_units"][name]
+        typer.echo(f"  {name} = {value:.5g}" + ("" if unit == "1" else f" {unit}"))
+    typer.echo("to fix the scale, any one of:")
+    for fix in sf["fixes"]:
+        typer.echo(f"  - {fix}")

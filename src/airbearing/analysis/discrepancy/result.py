@@ -93,6 +93,11 @@ class Discrepancy:
         Pairs of effect names that explain the data equally well.
     experiments : dict
         ``"a + b" -> the experiment that separates them``.
+    confounding : tuple of confounding.Confounding
+        The pairs found from the form of the torques at the final fit (one form on the
+        logs, or nearly; a named effect and a constant torque about a steady axis under a
+        significant unexplained torque), with the experiment and the partner's equivalent
+        value.
     validation : tuple of Validation
         Logs not fitted, replayed with the nominal and the augmented Model.
     verdict : str
@@ -137,6 +142,7 @@ class Discrepancy:
     effect_std_within_model: dict = field(default_factory=dict, repr=False)
     revisions: tuple = field(default=(), repr=False)
     alternatives: tuple = field(default=(), repr=False)
+    confounding: tuple = field(default=(), repr=False)
 
     def __repr__(self) -> str:
         effects = ", ".join(f"{n}={_short(v)}" for n, v in self.effects.items())
@@ -298,6 +304,7 @@ class Discrepancy:
             ],
             "confounded": [list(p) for p in self.confounded],
             "experiments": dict(self.experiments),
+            "confounding": [c.to_json() for c in self.confounding],
             "no_missing_effect": self.no_missing_effect,
             "verdict": self.verdict,
             "stop_reason": self.stop_reason,

@@ -49,6 +49,12 @@ from airbearing.analysis.discrepancy.candidates import (
     universal_effects,
     unphysical_candidates,
 )
+from airbearing.analysis.discrepancy.confounding import (
+    constant_torque_confounding,
+    constant_torque_inflation,
+    steady_axes,
+    structural_confounding,
+)
 from airbearing.analysis.discrepancy.consistency import consistency, per_log_fits
 from airbearing.analysis.discrepancy.honest import Errors, effect_errors, honest
 from airbearing.analysis.discrepancy.localise import localise
@@ -357,9 +363,9 @@ def _try(search, cand, chosen, theta_chosen, current, current_lag, ln_n, starts,
         problem, judge(cand, fit, k_sel, current, ln_n, k_added, heldout, before, start, note)
     )
     if retried:
+        # the retry ended badly too: judged against the round's best gap in _round (a fit
+        # that ends at the best gap is a candidate whatever IPOPT's status)
         res = replace(res, retried=True, retry_reason=retried, retry_failed=bool(left))
-        if left:  # the retry ended badly too: not an answer
-            res = replace(res, nameable=False, reason=res.reason or retried)
     return res
 
 
@@ -499,6 +505,7 @@ def discrepancy(
     base_problem, nominal = _nominal_replay(search, prog)
     sel = _select(search, nominal, max_effects, screen, workers, prog)
     named = _named(search, sel, prog, screen, workers)
+    _confounding(search, sel, named)
     judged = _judge(search, sel, named, logs, validate, window_s, jit, prog)
     judged = (*judged[:4], judged[4] + _unwrapped_words(logs))
     loc = localise(datas, base_problem, nominal, floor)
@@ -544,6 +551,7 @@ def _result(search, refused, base_problem, sel, named, judged, loc) -> Discrepan
         rounds=tuple(sel.rounds),
         confounded=tuple(sel.confounded),
         experiments=sel.experiments,
+        confounding=tuple(sel.confounding),
         augmented_testbed=augmented,
         augmented_model=build_model(augmented),
         verdict=text,
@@ -605,6 +613,7 @@ class _Selection:
     max_effects: int = 0
     revisions: list = field(default_factory=list)  # .revise.Move, on the horizon
     neighbours: list = field(default_factory=list)  # .revise.Neighbour of the final model
+    confounding: list = field(default_factory=list)  # .confounding.Confounding, structural
 
 
 @dataclass
@@ -760,8 +769,25 @@ def _round(search, sel: _Selection, remaining, screen, workers, prog) -> list:
         for i in again:
             results[i] = run(results[i].candidate, lin=None)
             prog(f"{results[i].label}: fitted by IPOPT, {results[i].status}")
+    results = _at_best_gap(results)
     results.sort(key=lambda c: (not np.isfinite(c.delta_bic), c.delta_bic))
     return results
+
+
+def _at_best_gap(results: list) -> list:
+    """A candidate whose fit and retry both ended badly (IPOPT's status) stays nameable only
+    when it ends at the round's best gap: within ``CONFOUND_BIC`` of the best BIC of the
+    round's fits. A fit that ends where the best does explains the logs as well as the best;
+    its solver status says how the iterations ended, not that the answer is wrong. Further
+    away it is not an answer (its reason says why)."""
+    fitted = [r.delta_bic for r in results if r.nameable and np.isfinite(r.delta_bic)]
+    best = min(fitted, default=math.inf)
+    out = []
+    for r in results:
+        if r.retry_failed and r.nameable and not r.delta_bic - best < CONFOUND_BIC:
+            r = replace(r, nameable=False, reason=r.retry_reason)
+        out.append(r)
+    return out
 
 
 def _add_best(sel: _Selection, results, prog) -> bool:
@@ -837,6 +863,92 @@ def _named(search: _Search, sel: _Selection, prog: _Progress, screen=True, worke
     if sel.rounds:
         sel.rounds[0] = tuple(_with_honest(search, r) for r in sel.rounds[0])
     return _Named(current, problem, errs, effects, effect_std, white, crlb, eff, within)
+
+
+def _confounding(search: _Search, sel: _Selection, named: _Named) -> None:
+    """What the final fit cannot tell apart, from the form of the torques (:mod:`.confounding`).
+
+    Every named effect against every candidate not named: pairs of one torque form (or
+    nearly) on the logs join ``sel.confounded`` with their experiment, whatever the
+    candidates' fits said. When the unexplained torque is significant, the named effects
+    whose torque about a steady axis is nearly constant are confounded with a constant
+    torque there, and their errors widen by what a free constant torque on that axis takes
+    from them (``sel.confounding[].std_factor``)."""
+    if not sel.chosen:
+        return
+    lag = sel.lag
+    model = search.models[lag]
+    theta = np.asarray(named.fit.theta, float)
+    p = model.p0 + search.S(lag, sel.chosen) @ theta
+    named_th, i = [], 0
+    for c in sel.chosen:
+        named_th.append((c, theta[i : i + c.k]))
+        i += c.k
+
+    def S_of(c):
+        return search.S(lag, [c])
+
+    taken = {c.name for c in sel.chosen}
+    others = [c for c in search.cands if c.name not in taken]
+    found = structural_confounding(
+        model, search.datas, p, named_th, others, S_of, experiment_for
+    )  # fmt: skip
+    for c in found:
+        pair = c.effects
+        if pair not in sel.confounded and pair[::-1] not in sel.confounded:
+            sel.confounded.append(pair)
+        sel.experiments[f"{pair[0]} + {pair[1]}"] = c.experiment
+    pn = named.fit.extra.get("process_noise") or {}
+    axes, rates = steady_axes(search.datas)
+    const = []
+    if axes:  # said whenever it holds: a fact of the logs' motion
+        const = constant_torque_confounding(
+            model, search.datas, p, named_th, S_of, axes, rates
+        )  # fmt: skip
+    if const and pn.get("significant"):  # widened when the logs show an unexplained torque
+        f = constant_torque_inflation(model, search.datas, p, named_th, S_of, axes)
+        i = 0
+        for c in sel.chosen:
+            fc = f[i : i + c.k]
+            if np.any(fc > 1.0):
+                sd = np.atleast_1d(np.asarray(named.std[c.name], float))
+                named.std_within.setdefault(c.name, named.std[c.name])
+                named.std[c.name] = _as_value(c, sd * fc)
+                if named.efficiency.get(c.name) is not None:
+                    with np.errstate(invalid="ignore", divide="ignore"):
+                        e = np.atleast_1d(np.asarray(named.efficiency[c.name], float)) * fc
+                    named.efficiency[c.name] = _as_value(c, e)
+            i += c.k
+        factors = {c.name: f for c, f in _split(sel.chosen, f)}
+        const = [
+                replace(
+                    c,
+                    std_factor=_as_value(_cand(sel, c), factors[c.effects[0]]),
+                    experiment=c.experiment + (
+                        "; an unexplained torque is significant, so the error includes a "
+                        "free constant torque there"
+                    ),
+                )
+                for c in const
+            ]  # fmt: skip
+    for c in const:
+        pair = c.effects
+        if pair not in sel.confounded:
+            sel.confounded.append(pair)
+        sel.experiments[f"{pair[0]} + {pair[1]}"] = c.experiment
+    sel.confounding = found + const
+
+
+def _split(chosen, x):
+    """``(candidate, x[its slice])`` per chosen candidate, in ``theta`` order."""
+    i = 0
+    for c in chosen:
+        yield c, x[i : i + c.k]
+        i += c.k
+
+
+def _cand(sel, conf):
+    return next(c for c in sel.chosen if c.name == conf.effects[0])
 
 
 def _as_value(cand, x: np.ndarray):
@@ -1018,7 +1130,7 @@ def _verdict_text(sel: _Selection, named: _Named, adq, agree, validation) -> str
             if r.status in ("did not converge", "at its physical bound"):
                 _log.debug("candidate %s: %s: %s", r.label, r.status, r.reason)
                 unfit.setdefault(r.label, failure_words(r.status, r.reason))
-            elif getattr(r, "retry_failed", False):
+            elif getattr(r, "retry_failed", False) and not r.nameable:
                 _log.debug("candidate %s: retry failed: %s", r.label, r.retry_reason)
                 unfit.setdefault(r.label, "a retry from another start did not converge either")
     text = verdict(
@@ -1030,6 +1142,7 @@ def _verdict_text(sel: _Selection, named: _Named, adq, agree, validation) -> str
         unfit=tuple(unfit.items()),
         disagreements=[w for w in (c.words() for c in agree) if w],
         nominal={c.name: c.nominal_value for c in sel.chosen if c.correction},
+        confounding=sel.confounding,
     )
     hidden = [
         r.label
@@ -1040,7 +1153,10 @@ def _verdict_text(sel: _Selection, named: _Named, adq, agree, validation) -> str
         text += "; these logs cannot show " + ", ".join(hidden)
     if sel.revisions:
         text += "; revised over whole segments: " + ", ".join(m.words() for m in sel.revisions)
+    constant = {c.effects for c in sel.confounding if not c.equivalent}
     for a, b in sel.confounded:
+        if (a, b) in constant:  # said by the verdict with its experiment
+            continue
         if a in named.effects or b in named.effects:
             text += (
                 f"; {a} and {b} explain these logs about equally well (the errors include "

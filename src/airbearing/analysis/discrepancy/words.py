@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import replace
 from typing import TYPE_CHECKING
 
@@ -26,8 +27,16 @@ __all__ = [
 EXPERIMENTS: dict[frozenset, str] = {
     frozenset({"cm_offset_error", "residual_dipole"}): (
         "under a vertical cage field a CM offset and a residual dipole give the same torque "
-        "(m dr x g and m_res x b with b parallel to g); repeat the run with the cage field off "
-        "or tilted: a CM-offset torque stays, a dipole torque vanishes or turns with the field"
+        "(m dr x g and m_res x b with b parallel to g); repeat the run with the cage field off, "
+        "reversed or tilted (a CM-offset torque stays, a dipole torque vanishes, reverses or "
+        "turns with the field), or move a slider by a known amount (the CM moves, the dipole "
+        "does not)"
+    ),
+    frozenset({"cm_offset_error", "inertia_error"}): (
+        "free motion fixes the inertia and the CM offset only up to a common scale (J w' + "
+        "w x J w = m r x g is homogeneous in J and r); move a slider by a known amount "
+        "between runs, or apply a known torque (a commanded dipole in the cage field, a "
+        "reaction wheel), and fit the logs together"
     ),
     frozenset({"viscous_friction", "aero_drag"}): (
         "coast down from several initial rates: a viscous torque is proportional to w, "
@@ -143,6 +152,7 @@ def verdict(
     unfit=(),
     disagreements=(),
     nominal: dict | None = None,
+    confounding=(),
 ) -> str:
     """The verdict: named effects with errors and efficiency, or what the model leaves.
 
@@ -164,18 +174,31 @@ def verdict(
     nominal : dict, optional
         ``name -> nominal value`` of the named effects that correct the testbed's own
         (their ``effects`` value is the total).
+    confounding : sequence of Confounding
+        What the logs cannot tell apart (:mod:`.confounding`): a named effect and another
+        effect of one torque form (named together, neither preferred), or a named effect
+        and a constant torque about a steady axis; each with the experiment that separates
+        them.
     """
     efficiency, nominal = efficiency or {}, nominal or {}
+    twins: dict = {}
+    for c in confounding:
+        if c.equivalent and c.effects[0] in effects:
+            twins.setdefault(c.effects[0], []).append(c)
     remains = adequacy is not None and adequacy.structure_remains
     if effects:
         parts = [
             f"{n} = {format_value(v, effect_std[n])}"
             + (f" (nominal {format_value(nominal[n])})" if n in nominal else "")
             + _efficiency_words(efficiency.get(n))
+            + "".join(_twin_words(c) for c in twins.get(n, ()))
             for n, v in effects.items()
         ]
         what = "corrected effect" if set(effects) <= set(nominal) else "missing effect"
         text = what + ("s" if len(effects) > 1 else "") + ": " + "; ".join(parts)
+        for c in confounding:
+            if c.effects[0] in effects:
+                text += "; " + _separate_words(c)
         if remains:
             text += "; " + adequacy.words(named=True)
     elif not remains:
@@ -203,6 +226,27 @@ def verdict(
     for d in disagreements:
         text += "; " + d
     return text
+
+
+def _twin_words(c) -> str:
+    """`` or, equally, b = value (...)`` after a named effect ``a`` the logs cannot tell
+    from ``b``."""
+    b = c.effects[1]
+    sine = math.sqrt(max(1.0 - c.correlation**2, 0.0))
+    how = (
+        "one torque form on these logs"
+        if c.kind == "exact"
+        else (f"one torque form on these logs to {sine:.1g} of a torque")
+    )
+    return f" OR, equally, {b} = {format_value(c.equivalent[b])} ({how}: neither is preferred)"
+
+
+def _separate_words(c) -> str:
+    """What separates a confounded pair, in words."""
+    a, b = c.effects
+    if not c.equivalent:  # a constant torque about a steady axis
+        return f"{a} cannot be told from a {b} on these logs: {c.experiment}"
+    return f"to tell {a} from {b}: {c.experiment}"
 
 
 #: Why a gyro bias cannot be seen on a dof-1 testbed with a gyro (FORMATS.md: its ``yaw`` is

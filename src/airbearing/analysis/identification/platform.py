@@ -39,6 +39,7 @@ from airbearing.analysis.identification.convex import (
 from airbearing.analysis.identification.data import prepare_platform_logs
 from airbearing.analysis.identification.regression import (
     PARAM_NAMES,
+    _slider_terms,
     regression_statistics,
     theta_to_body,
 )
@@ -232,15 +233,22 @@ def identify_platform(
     )
     report("reading the logs", 0, 3)
     data = prepare_platform_logs(testbed, logs)
-    _check_scale(testbed, data, fixed, prior, prior_weight)
     js = float(np.trace(testbed.body.inertia_matrix) / 3)
     margin = MARGIN_FRACTION * js if margin is None else float(margin)
-    free = np.array([i not in fixed for i in range(9)])
-    fit = _Fit(testbed, data, mass, fixed, prior, prior_weight, js, margin,
-               all(d.gyro for d in data), hold, free)  # fmt: skip
     if point_o is None:
         point_o = 0.5 * testbed.body.cm_offset_vec  # seed 004: rho^o half the unbalance vector
     window = max(1, int(round(testbed.sensors.rate))) if window is None else window
+    reason = scale_reason(testbed, data, fixed, prior, prior_weight)
+    if reason:  # no values: the combination the logs fix, and what would fix the rest
+        report("equation error, the scale set aside", 1, 2)
+        result = _scale_free(
+            testbed, data, mass, fixed, reason, (form, window, point_o, margin, js, hold)
+        )
+        report("done", 2, 2)
+        return result
+    free = np.array([i not in fixed for i in range(9)])
+    fit = _Fit(testbed, data, mass, fixed, prior, prior_weight, js, margin,
+               all(d.gyro for d in data), hold, free)  # fmt: skip
     report(f"equation error (seed 004 eq. {47 if form == 'integrated' else 45})", 1, 3)
     stats = regression_statistics(
         testbed, data, mass=mass, point_o=point_o, form=form, window=window
@@ -482,27 +490,107 @@ def _output_error(fit: _Fit, ee, active, null, weak, segment):
     )
 
 
-def _check_scale(testbed, data, fixed, prior, prior_weight) -> None:
-    """Refuse logs that fix the inertia and offset only up to a common scale.
+#: What fixes the common scale of the inertia and the CM offset (``scale_free["fixes"]``).
+SCALE_FIXES = (
+    "hold the testbed file's inertia as known and fit the CM offset (--hold inertia)",
+    "hold the testbed file's CM offset as known and fit the inertia (--hold cm)",
+    "give the in-plane CM offset from balancing (--known-offset-xy X Y)",
+    "add logs with the sliders at other known positions (their known inertia and CM shift "
+    "set the scale)",
+    "log a known torque: a commanded dipole in the cage field, or reaction wheels "
+    "exchanging momentum (their measured speeds ws)",
+)
+
+
+def scale_reason(testbed, data, fixed, prior, prior_weight) -> str:
+    """Why the logs fix the inertia and offset only up to a common scale ("" when they don't).
 
     ``J w' + w x J w = m r x g`` (seed 004 eq. 11) is homogeneous in ``(J, r)``: free
-    motion alone says nothing about their scale. Something known must break it: sliders
-    at known non-zero positions (their inertia and CM shift, seed 004 eqs. 4-7), a known
-    offset component, a commanded dipole in a field, or a prior in the cost.
+    motion alone says nothing about their scale. Sliders held at one position do not break
+    it either: their known inertia and CM shift only add constants to the unknowns (seed
+    004 eqs. 4-7), so ``J + dJ`` and ``r + dr`` scale together as before. Something known
+    must break it: sliders at two or more known positions over the logs, a known offset
+    component or a held value, a commanded dipole in a field, reaction wheels exchanging
+    their known momentum with the body, or a prior in the cost.
     """
-    sliders = testbed.masses is not None and any(np.any(d.s != 0) for d in data)
+    positions = set()
+    if testbed.masses is not None:
+        for d in data:
+            rows = np.asarray(d.s, float)[np.asarray(d.usable, bool)]
+            positions |= {tuple(np.round(r, 9)) for r in rows}
+    sliders = len(positions) >= 2
     dipole = any(np.any(d.dipole != 0) and np.any(d.b_body != 0) for d in data)
     # reaction wheels: their known momentum exchanged with the body fixes the scale
     wheels = any(d.h_wheels is not None and np.ptp(d.h_wheels) > 0 for d in data)
     if fixed or sliders or dipole or wheels or (prior is not None and prior_weight > 0):
-        return
-    raise InputError(
-        "identify: inertia and CM offset are not identifiable from these logs: free motion "
-        "fixes them only up to a common scale (J w' + w x J w = m r x g is homogeneous in J "
-        "and r) and nothing known breaks it; hold the testbed's inertia or CM offset as known "
-        "(hold='inertia', hold='cm'), give the in-plane offset (known_offset_xy), log with "
-        "the sliders at known non-zero positions, command a known dipole, or drive reaction "
-        "wheels (their known momentum fixes the scale)"
+        return ""
+    where = "at one slider position" if positions and any(map(any, positions)) else ""
+    return (
+        "the inertia and the CM offset are not identifiable from these logs: free motion "
+        f"{where + ' ' if where else ''}fixes them only up to a common scale (J w' + w x J w "
+        "= m r x g is homogeneous in J and r) and nothing known breaks it"
+    )
+
+
+def _scale_free(testbed, data, mass, fixed, reason, opts) -> PlatformIdentification:
+    """The answer when the logs do not fix the scale: no values, the ratios they do fix.
+
+    The equation-error stage is solved with ``J_zz`` held at the testbed's value (any
+    nonzero value would do: it only sets the scale), and the ratios of the inertia and
+    offset at the logged slider position are reported: ``J_ab / (m r_z)`` (m, the length
+    of the equivalent pendulum about each axis pair) and ``r_x / r_z``, ``r_y / r_z``.
+    """
+    form, window, point_o, margin, js, hold = opts
+    anchor = {**fixed, 2: float(testbed.body.inertia_matrix[2, 2])}
+    free = np.array([i not in anchor for i in range(9)])
+    gyro = all(d.gyro for d in data)
+    fit = _Fit(testbed, data, mass, anchor, None, 0.0, js, margin, gyro, hold, free)
+    stats = regression_statistics(
+        testbed, data, mass=mass, point_o=point_o, form=form, window=window
+    )
+    ee = _equation_error(fit, stats, form, window)[0]
+    d0 = data[0]
+    s0 = np.asarray(d0.s, float)[np.flatnonzero(np.asarray(d0.usable, bool))[0]]
+    dJ, dr = _slider_terms(testbed, s0[None], mass)
+    J, r = ee.inertia + dJ[0], ee.cm_offset + dr[0]
+    names = ("J_xx", "J_yy", "J_zz", "J_xy", "J_xz", "J_yz")
+    pairs = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
+    ratios = {
+        f"{n} / (m r_z)": float(J[a, b] / (mass * r[2]))
+        for n, (a, b) in zip(names, pairs, strict=True)
+    }
+    ratios["r_x / r_z"] = float(r[0] / r[2])
+    ratios["r_y / r_z"] = float(r[1] / r[2])
+    nan = np.full(9, np.nan)
+    why = "not identifiable from this log: only up to a common scale of J and r"
+    scale = {
+        "reason": reason,
+        "combination": (
+            "the inertia and the CM offset at the logged slider position up to one common "
+            "factor: their ratios to m r_z (m r_z in kg m)"
+        ),
+        "slider_position": [float(v) for v in s0],
+        "ratios": ratios,
+        "ratio_units": {k: ("m" if k.startswith("J") else "1") for k in ratios},
+        "fixes": list(SCALE_FIXES),
+    }
+    return make_result(
+        nan,
+        nan,
+        condition_number=float("inf"),
+        active_constraints=(),
+        residual_rms=ee.residual_rms,
+        residual_unit=ee.residual_unit,
+        warnings=[reason + "; to fix the scale: " + "; ".join(SCALE_FIXES)],
+        method="equation-error",
+        mass=mass,
+        std_status={n: why for i, n in enumerate(PARAM_NAMES) if i not in fixed},
+        segments=ee.segments,
+        logs=ee.logs,
+        held=hold,
+        details=dict(ee.details),
+        identifiable=False,
+        scale_free=scale,
     )
 
 

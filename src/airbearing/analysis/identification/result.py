@@ -301,6 +301,15 @@ class PlatformIdentification(IdentificationResult):
     held : str or None
         ``"inertia"`` or ``"cm"``: the testbed file's value taken as known (``hold=``),
         which breaks the common scale of J and r in free motion; None when neither.
+    identifiable : bool
+        False when the logs fix the inertia and the CM offset only up to a common scale
+        (free motion at one slider position, nothing known): then every value is NaN
+        (JSON ``null``) and ``scale_free`` says what the logs do fix.
+    scale_free : dict or None
+        ``reason``, ``combination`` (in words), ``slider_position`` (m), ``ratios`` (the
+        inertia and offset at that position over ``m r_z``, and ``r_x / r_z``,
+        ``r_y / r_z``), ``ratio_units`` and ``fixes`` (what would fix the scale); None when
+        identifiable.
     """
 
     param_names = PARAM_NAMES
@@ -327,6 +336,8 @@ class PlatformIdentification(IdentificationResult):
     details: dict = field(default_factory=dict, repr=False)
     held: str | None = None
     std_white: np.ndarray | None = field(default=None, repr=False)
+    identifiable: bool = True
+    scale_free: dict | None = field(default=None, repr=False)
 
     @property
     def theta(self) -> np.ndarray:
@@ -381,6 +392,8 @@ class PlatformIdentification(IdentificationResult):
             "warnings": list(self.warnings),
             "weak_directions": [dict(w) for w in self.weak_directions],
             "held": self.held,
+            "identifiable": bool(self.identifiable),
+            "scale_free": None if self.scale_free is None else dict(self.scale_free),
         }
         if self.std_white is not None:
             sw = np.asarray(self.std_white, dtype=float)
@@ -405,7 +418,17 @@ class PlatformIdentification(IdentificationResult):
 
         An effect ``cm_offset_error`` of ``testbed`` is dropped: identification fits the whole
         CM offset, that effect included (:func:`.platform.fold_cm_offset`).
+
+        Raises
+        ------
+        InputError
+            The logs did not fix the scale (``identifiable`` is False): no values to write.
         """
+        if not self.identifiable:
+            raise InputError(
+                "write-testbed: no values to write: " + self.scale_free["reason"]
+                + "; to fix the scale: " + "; ".join(self.scale_free["fixes"])
+            )  # fmt: skip
         body = testbed.body
         effects = {k: v for k, v in testbed.effects.items() if k != "cm_offset_error"}
         return testbed.replace(

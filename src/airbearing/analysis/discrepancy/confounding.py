@@ -1,0 +1,310 @@
+"""Confounding found from the form of the torques, not from a refit.
+
+Two effects are confounded on a set of logs when one's torque can be written as the
+other's over every logged state: no fit can tell them apart, whatever its solver says.
+The test is structural. At the fitted parameters each candidate's torque regressor
+(the exact CasADi Jacobian of the Model's acceleration in the candidate's parameters,
+times the inertia: :func:`.candidates.residual_torque`) is evaluated at the usable rows
+of every log. A named effect is confounded with another candidate when its fitted torque
+series (its regressor times its value) lies in the span of the other's regressor columns:
+the sine of the angle between them is 0 when the other makes exactly that torque (a CM
+offset and a residual dipole under a vertical field: ``m dr x g_body`` and
+``m_res x b_body`` with ``b || g``), near 0 when they differ only over states the logs
+hardly visit. The test is on the named value, not on the whole form: an inertia scale
+error makes, in free motion, the torque of a CM offset along the nominal offset (``J w'
++ w x J w = m r x g`` is homogeneous), so a named inertia error is confounded with a CM
+offset, but a CM offset in another direction is not an inertia error.
+
+The same test finds what a **constant torque** on a body axis would take: an axis whose
+rate barely changes over a log (a platform spinning about its vertical axis at a nearly
+constant rate) makes a viscous friction, a drag or a Coulomb friction about it a nearly
+constant torque there, and a slowly varying torque the Model does not explain is nearly
+constant over a log as well. When the estimator finds such a torque significant, the
+effects whose regressor on that axis is nearly constant cannot be told from it;
+:func:`constant_torque_confounding` names them, and :func:`constant_torque_inflation`
+gives the factor by which their errors grow when a constant torque on that axis is left
+free (the information a constant would take out of the Fisher information of the
+torque regression).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.linalg import subspace_angles
+
+from airbearing.analysis.discrepancy.candidates import lsq, residual_torque, smoothed
+
+__all__ = [
+    "EXACT_SINE",
+    "NEAR_SINE",
+    "STEADY_AXIS",
+    "Confounding",
+    "constant_torque_confounding",
+    "constant_torque_inflation",
+    "steady_axes",
+    "structural_confounding",
+]
+
+#: The sine of the largest principal angle below which two torque forms are one and the
+#: same on the logs ("exactly" confounded; rounding of the regressors is about 1e-12).
+EXACT_SINE = 1e-6
+#: ... and below which they differ by less than 2 % of a torque anywhere on the logs
+#: (nearly confounded: what tells them apart is a few per cent of the signal).
+NEAR_SINE = 0.02
+#: An axis is steady when the spread (standard deviation) of its rate over a log is below
+#: this fraction of its mean rate: a rate-dependent torque about it is then constant to
+#: that fraction, and a constant torque takes all but that fraction of its information
+#: (seed 004's platform nutates about its spin at 12 % of the mean rate).
+STEADY_AXIS = 0.25
+
+AXES = "xyz"
+
+
+@dataclass(frozen=True)
+class Confounding:
+    """Two effects (or an effect and a constant torque) the logs cannot tell apart.
+
+    Attributes
+    ----------
+    effects : tuple of str
+        The two effect names; ``"constant torque about z"`` (for instance) for the
+        unexplained torque of a steady axis.
+    kind : str
+        ``"exact"`` (one torque form on these logs) or ``"near"``.
+    correlation : float
+        Cosine of the angle between the named effect's fitted torque over the logs and the
+        span of the other's regressors (1: the other makes exactly that torque); for a
+        constant torque, between the named effect's regressor on the axis and a constant.
+    experiment : str
+        What would separate them.
+    equivalent : dict
+        Effect name -> the value of the other effect's form that makes the same torque as
+        the named one (least squares over the logs; only for pairs of effects).
+    std_factor : float, tuple or None
+        For a constant torque: the factor the named effect's error was widened by (a free
+        constant torque about the axis left in the fit); None otherwise.
+    """
+
+    effects: tuple
+    kind: str
+    correlation: float
+    experiment: str
+    equivalent: dict
+    std_factor: object = None
+
+    def to_json(self) -> dict:
+        return {
+            "effects": list(self.effects),
+            "kind": self.kind,
+            "correlation": float(self.correlation),
+            "experiment": self.experiment,
+            "equivalent": {k: _plain(v) for k, v in self.equivalent.items()},
+            "std_factor": None if self.std_factor is None else _plain(self.std_factor),
+        }
+
+
+def _plain(v):
+    a = np.asarray(v, dtype=float)
+    return float(a) if a.ndim == 0 else [float(x) for x in a]
+
+
+def _columns(model, datas, p, S) -> np.ndarray:
+    """The torque regressor stacked over rows and axes, ``(M * n_axes, k)``, N m per unit."""
+    _, phi = residual_torque(model, datas, p, S)
+    return phi.reshape(-1, phi.shape[2])
+
+
+def structural_confounding(model, datas, p, named, others, S_of, experiment_for) -> list:
+    """Pairs (named effect, other candidate) with one torque form, or nearly, on the logs.
+
+    Parameters
+    ----------
+    model : Model
+        The Model every candidate's parameters live in.
+    datas : sequence of ReplayData
+        The logs.
+    p : ndarray
+        Parameters at which the regressors are taken (the final fit).
+    named : sequence of (Candidate, ndarray)
+        The named effects and their fitted ``theta``.
+    others : sequence of Candidate
+        Candidates not named (measurement effects, whose torque regressor is zero, are
+        skipped).
+    S_of : callable
+        ``S_of(candidate) -> (n_p, k)`` tie of a candidate's ``theta`` to ``p``.
+    experiment_for : callable
+        ``experiment_for(a, b) -> str``.
+
+    Returns
+    -------
+    list of Confounding
+        Best (largest correlation) per pair of names, named effect first.
+    """
+    cols = {}
+
+    def col(c):
+        if c.label not in cols:
+            cols[c.label] = _columns(model, datas, p, S_of(c))
+        return cols[c.label]
+
+    found: dict = {}
+    for a, th_a in named:
+        if not a.smooth or a.lag:
+            continue
+        A = col(a)
+        if not np.any(A):
+            continue
+        for b in others:
+            if b.name == a.name or not b.smooth or b.lag:
+                continue
+            B = col(b)
+            if not np.any(B):
+                continue
+            sine, eq_theta = _sine_in_span(A @ np.atleast_1d(np.asarray(th_a, float)), B)
+            if sine >= NEAR_SINE:
+                continue
+            kind = "exact" if sine < EXACT_SINE else "near"
+            corr = float(np.sqrt(max(1.0 - sine**2, 0.0)))
+            key = (a.name, b.name)
+            if key in found and found[key].correlation >= corr:
+                continue
+            eq = {b.name: b.value(eq_theta)}
+            found[key] = Confounding(key, kind, corr, experiment_for(*key), eq)
+    return list(found.values())
+
+
+def _sine_in_span(tau: np.ndarray, B: np.ndarray) -> tuple[float, np.ndarray]:
+    """Sine of the angle between the torque series ``tau`` and the span of ``B``, and the
+    least-squares ``theta`` of ``B`` that makes it (0 when ``tau`` lies in the span)."""
+    norm = float(np.linalg.norm(tau))
+    if norm == 0:
+        return 1.0, np.zeros(B.shape[1])
+    th = lsq(B, tau)
+    return float(np.linalg.norm(tau - B @ th)) / norm, th
+
+
+def _scaled(X: np.ndarray) -> np.ndarray:
+    n = np.linalg.norm(X, axis=0)
+    keep = n > 0
+    return X[:, keep] / n[keep]
+
+
+def steady_axes(datas) -> tuple[list[int], list[float]]:
+    """Body axes whose rate barely changes over every log (module doc), and their mean rates.
+
+    An axis is steady when, in every segment of every log, the standard deviation of its
+    rate (the gyro's, or the attitude's smoothed derivative: :func:`.candidates.smoothed`)
+    is below :data:`STEADY_AXIS` times the magnitude of its mean, and the mean is not zero.
+    """
+    n_axes = datas[0].n_axes
+    stats = [[] for _ in range(n_axes)]
+    for d in datas:
+        w_s, _, ok = smoothed(d)
+        for a, b in d.segments:
+            rows = np.arange(a, b)[ok[a:b]]
+            if rows.size < 3:
+                continue
+            for i in range(n_axes):
+                wi = w_s[rows, i]
+                stats[i].append((float(np.mean(wi)), float(np.std(wi)), rows.size))
+    axes, rates = [], []
+    for i, st in enumerate(stats):
+        if st and all(abs(m) > 0 and s < STEADY_AXIS * abs(m) for m, s, _ in st):
+            axes.append(i)
+            rates.append(sum(m * n for m, _, n in st) / sum(n for *_, n in st))
+    return axes, rates
+
+
+def constant_torque_confounding(model, datas, p, named, S_of, axes, rates) -> list:
+    """Named effects whose torque on a steady axis is nearly constant over the logs.
+
+    Parameters
+    ----------
+    model, datas, p, named, S_of
+        As :func:`structural_confounding`.
+    axes : sequence of int
+        Steady axes (:func:`steady_axes`).
+    rates : ndarray
+        Mean rate of each steady axis (rad/s), for the words.
+
+    Returns
+    -------
+    list of Confounding
+        One per (named effect, axis) whose regressor on that axis makes a torque within
+        :data:`STEADY_AXIS` (sine of the angle) of a constant.
+    """
+    out = []
+    for a, _ in named:
+        if not a.smooth or a.lag:
+            continue
+        _, phi = residual_torque(model, datas, p, S_of(a))
+        for i, w in zip(axes, rates, strict=True):
+            col = phi[:, i, :]
+            if not np.any(col):
+                continue
+            ones = np.ones((col.shape[0], 1))
+            sine = _largest_sine_one(col, ones)
+            if sine >= STEADY_AXIS:
+                continue
+            kind = "exact" if sine < EXACT_SINE else "near"
+            what = f"constant torque about {AXES[i]}"
+            text = (
+                f"the rate about {AXES[i]} stays near {w:.3g} rad/s over the logs (within "
+                f"{100 * sine:.0f} %), so {a.name} about {AXES[i]} makes a nearly constant "
+                "torque there, as would a torque the model does not hold (the bearing's "
+                "own air-flow torque, a slow drift); repeat the run at another "
+                f"rate about {AXES[i]} (or let it coast down, or slew it) and fit the logs "
+                "together: a friction or drag scales with the rate, the unexplained torque "
+                "does not"
+            )
+            corr = float(np.sqrt(max(1.0 - sine**2, 0.0)))
+            out.append(Confounding((a.name, what), kind, corr, text, {}))
+    return out
+
+
+def _largest_sine_one(col: np.ndarray, ones: np.ndarray) -> float:
+    """Sine of the angle between the constant and the closest torque the effect's
+    regressor on one axis makes (the smallest principal angle: one of its columns may be
+    nearly constant while another is not)."""
+    C = _scaled(col)
+    if C.shape[1] == 0:
+        return 1.0
+    return float(np.sin(np.min(subspace_angles(C, ones))))
+
+
+def constant_torque_inflation(model, datas, p, named, S_of, axes) -> np.ndarray:
+    """Per parameter of the named effects (in ``theta`` order), the factor by which its
+    standard error grows when a constant torque on each steady axis is left free.
+
+    The torque regression's Fisher information ``F = Phi' Phi`` (every named parameter's
+    regressor stacked over rows and axes) loses what constant columns ``N`` (one per
+    steady axis) take: ``F_c = F - Phi' N (N' N)^-1 N' Phi``; the factor is
+    ``sqrt(inv(F_c)_jj / inv(F)_jj)`` (1 for a parameter the constant does not touch,
+    about 1e6 when a constant makes its whole torque: information at the rounding level).
+    """
+    blocks = []
+    for a, _ in named:
+        _, phi = residual_torque(model, datas, p, S_of(a))
+        blocks.append(phi)
+    if not blocks:
+        return np.ones(0)
+    phi = np.concatenate(blocks, axis=2)  # (M, n_axes, k)
+    M, n_axes, k = phi.shape
+    Phi = phi.reshape(-1, k)
+    scale = np.linalg.norm(Phi, axis=0)
+    scale = np.where(scale > 0, scale, 1.0)
+    Phi = Phi / scale
+    N = np.zeros((M * n_axes, len(axes)))
+    for j, i in enumerate(axes):
+        N[i::n_axes, j] = 1.0
+    F = Phi.T @ Phi
+    proj = Phi.T @ N @ np.linalg.solve(N.T @ N, N.T @ Phi)
+    Fc = F - proj
+    Fi = np.linalg.pinv(F)
+    # a direction a constant takes entirely: its information at the rounding level
+    w, V = np.linalg.eigh(Fc)
+    w = np.maximum(w, 1e-12 * max(float(np.max(np.abs(w))), 1e-300))
+    diag_c = (V**2) @ (1.0 / w)
+    return np.maximum(np.sqrt(diag_c / np.diag(Fi)), 1.0)
