@@ -249,3 +249,19 @@ def test_cli_simulate_slew_logs_wheel_columns(tmp_path):
     assert {"ws1", "wc1", "yaw", "wz"} <= set(log.data.columns)
     assert np.abs(log.data["wc1"]).max() <= ab.load_testbed("rw-yaw").wheels.max_torque
     assert run(["simulate", "rw-yaw", "--steering", "sr", "--duration", "1"]) == 2
+
+
+def test_only_the_stored_momentum_poles_are_left_out_of_the_verdict():
+    # rw-3axis: 4 wheels on 3 free axes store momentum in 3 directions, each a pole at
+    # z = 1 whose mode moves only the wheel speeds; without attitude feedback (K_p = 0)
+    # the attitude itself is neutral too, and that pole must still fail the verdict
+    tb = ab.load_testbed("rw-3axis")
+    opts = {"attitude": "measured", "lowpass": 1.0}
+    g = default_wheel_gains(tb)
+    lp = attitude_loop(tb, gains=g, wheel_options=opts)
+    every = lp.stability_system().poles()
+    judged = lp.stability_poles()
+    assert np.sum(np.abs(every - 1) < 1e-8) == 3 and len(every) - len(judged) == 3
+    assert np.abs(judged).max() < 1  # analyse_loop's verdict is on these poles
+    neutral = attitude_loop(tb, gains={**g, "K_p": 0.0, "K_i": 0.0}, wheel_options=opts)
+    assert np.abs(neutral.stability_poles()).max() >= 1 - 1e-12

@@ -368,7 +368,10 @@ def wheel_note(loop: Loop) -> str:
     speeds = ", ".join(f"{v:.4g}" for v in loop.trim.x[idx])
     return (
         f"{act}. The trim holds the {wh.n} wheel(s) at {speeds} rad/s (the testbed's "
-        "speeds with the null-space part at the bias)."
+        "speeds with the null-space part at the bias). A constant wheel speed is an "
+        "equilibrium at any value: the wheels' stored momentum is a pole at z = 1 that the "
+        "attitude loop does not move (dumping does), left out of the stability verdict; "
+        "every other pole must lie inside the unit circle."
     )
 
 
