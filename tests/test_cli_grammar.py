@@ -79,8 +79,19 @@ CASES = [
     (["balance", "{tb.toml}", "--log", "{tb.toml}"], "tb.toml"),  # the old spelling too
     (["gains", "{tb.toml}", "--json", "{tb.toml}"], "tb.toml"),
     (
-        ["export", "cmg-yaw", "--loop", "attitude", "--gains", "{gains.json}", "--name", "gains",
-         "-o", "{.}", "--force"],
+        [
+            "export",
+            "cmg-yaw",
+            "--loop",
+            "attitude",
+            "--gains",
+            "{gains.json}",
+            "--name",
+            "gains",
+            "-o",
+            "{.}",
+            "--force",
+        ],
         "gains.json",
     ),  # fmt: skip
     (["simulate", "cmg-yaw", "--gains", "{gains.json}", "--json", "{gains.json}"], "gains.json"),

@@ -62,6 +62,7 @@ class LogCheck:
     def usable(self) -> bool:
         """Whether some tool can use the log (``log check`` exits 2 when none can)."""
         return any(ok for ok, _ in self.tools.values())
+
     checked: object = field(default=None, repr=False, compare=False)
 
     @property

@@ -296,6 +296,8 @@ def _wheels_text(log, quality) -> str:
     if log.has(*wc):
         return text + f", {wheels.command} commands {wc[0]}..{wc[-1]} ({unit})"
     return text + ", no commands (wc) logged"
+
+
 def _refuse(log_file, tools: dict) -> None:
     """``log check``'s exit status 2: no tool can use the log; one line with each reason."""
     from airbearing.errors import InputError
