@@ -165,13 +165,13 @@ def test_notebook_script_raw_log_to_effect_inertia_gains_report(tmp_path):
     tuned gains and a stability report; each result prints in a few lines."""
     from pathlib import Path
 
-    ex = Path(__file__).resolve().parents[1] / "examples" / "mocap-spin"
+    ex = Path(__file__).resolve().parents[2] / "examples" / "mocap-spin"
     rig = ab.read_testbed(ex / "rig.toml")
     log = ab.import_log(ex / "raw.csv", ex / "map.toml", rig)
     check = ab.check_log(log)
     assert check.outlier_rows == (400, 1700)
     # ab.discrepancy(rig, [log]) naming both effects: the README's Python block asserts it
-    # (tests/test_readme_commands.py), on this very log; not run a fourth time here
+    # (tests/docs/test_readme_commands.py), on this very log; not run a fourth time here
 
     platform = ab.load_testbed("seed004-platform")
     runs = [

@@ -22,7 +22,7 @@ from pathlib import Path
 
 import pytest
 
-SRC = Path(__file__).resolve().parents[1] / "src"
+SRC = Path(__file__).resolve().parents[2] / "src"
 PKG = SRC / "airbearing"
 #: Layer ranks: a module may import modules of the same or a lower rank.
 RANK = {"io": 0, "models": 1, "design": 2, "analysis": 3, "reporting": 4, "api": 5, "cli": 6}

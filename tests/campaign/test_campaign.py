@@ -1,6 +1,6 @@
 """Campaigns (issue 16): campaign file, seeded draws, structure reuse, rows, resume, report.
 
-Fast tests run in-process (no Dask); tests/test_campaign_dask.py runs the clusters.
+Fast tests run in-process (no Dask); tests/campaign/test_campaign_dask.py runs the clusters.
 """
 
 from __future__ import annotations

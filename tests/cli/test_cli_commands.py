@@ -126,7 +126,7 @@ def test_console_script_has_no_traceback(tmp_path):
     assert len(proc.stderr.strip().splitlines()) == 1
 
 
-# The demo report: tests/test_demo.py (one demo run per session, the demo_run fixture).
+# The demo report: tests/reporting/test_demo.py (one demo run per session, the demo_run fixture).
 
 
 # ------------------------------------------------------------------ built-in testbeds
@@ -194,7 +194,7 @@ def test_formats_copy_is_the_shared_one():
     """docs/FORMATS.md is the project's copy of ../shared/FORMATS.md, byte for byte."""
     from pathlib import Path
 
-    root = Path(__file__).resolve().parents[1]
+    root = Path(__file__).resolve().parents[2]
     ours = root / "docs" / "FORMATS.md"
     assert ours.is_file() and "## Testbed file (TOML)" in ours.read_text()
     shared = root.parent / "shared" / "FORMATS.md"

@@ -35,7 +35,7 @@ def test_plain_lines_say_what_and_how_far(monkeypatch):
     lines = buf.getvalue().splitlines()
     assert lines[0] == "demo: section 1 of 2: CMG slews [0/2]"
     # steps that took no time predict nothing: no "about 0 s left" (time-left tests:
-    # tests/test_cli_output.py, tests/test_cli_grammar_round3.py)
+    # tests/cli/test_cli_output.py, tests/cli/test_cli_help_and_defaults.py)
     assert lines[1].startswith("demo: section 2 of 2: balancing [1/2")
     assert len(lines) == 2
 
@@ -89,7 +89,7 @@ def test_long_commands_show_progress_unless_quiet(args, label, tmp_path, capfd, 
     assert not any(line.startswith(label) for line in err.splitlines()), err
 
 
-# The demo's progress lines: tests/test_demo.py (the suite's one demo run).
+# The demo's progress lines: tests/reporting/test_demo.py (the suite's one demo run).
 
 
 @pytest.mark.slow

@@ -119,7 +119,7 @@ def test_simulate_cli_takes_every_steering_law(tmp_path):
         assert js.exists()
 
 
-# The CMG demo section: tests/test_demo.py (the suite's one demo run).
+# The CMG demo section: tests/reporting/test_demo.py (the suite's one demo run).
 
 
 def test_null_motion_escapes_hyperbolic_not_elliptic():

@@ -19,7 +19,7 @@ def _study():
     import importlib.util
     from pathlib import Path
 
-    path = Path(__file__).resolve().parents[1] / "benchmarks" / "coverage_study.py"
+    path = Path(__file__).resolve().parents[2] / "benchmarks" / "coverage_study.py"
     spec = importlib.util.spec_from_file_location("coverage_study", path)
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)

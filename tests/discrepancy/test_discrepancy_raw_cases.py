@@ -3,7 +3,7 @@
 Issue 13 "How we will know it works": the raw cases import with their maps, and
 discrepancy reports the outlier rows and segment count of ``answer.json`` and names the
 hidden effects within 20 %. The suite never depends on these files; the same behaviours
-are tested on simulated logs in tests/test_discrepancy_real.py.
+are tested on simulated logs in tests/discrepancy/test_discrepancy_lab_logs.py.
 """
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ import pytest
 
 import airbearing.cli as cli
 
-RAW = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "raw"
+RAW = Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "raw"
 CASES = (
     sorted(p.name for p in RAW.iterdir() if (p / "answer.json").is_file()) if RAW.is_dir() else []
 )

@@ -101,4 +101,4 @@ def test_cli_log_of_the_wrong_kind(story, tmp_path, capsys):
     assert "missing column" in capsys.readouterr().err
 
 
-# The discrepancy demo section: tests/test_demo.py (the suite's one demo run).
+# The discrepancy demo section: tests/reporting/test_demo.py (the suite's one demo run).

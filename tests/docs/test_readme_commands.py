@@ -6,8 +6,8 @@ Commands are the lines of the README's ```sh (or ```console) fenced blocks that 
 of ``examples/`` (so a command may use a file an earlier one wrote, as in a fresh clone),
 as new processes, with short durations where an option allows: ``--duration`` at most
 :data:`MAX_DURATION` s. Two blocks are run elsewhere, each exactly once per session:
-the demo (``tests/test_demo.py``, from the ``demo_run`` fixture, which runs the README's
-demo command with ``--quick``) and the worked example (``tests/test_worked_example.py``,
+the demo (``tests/reporting/test_demo.py``, from the ``demo_run`` fixture, which runs the README's
+demo command with ``--quick``) and the worked example (``tests/docs/test_worked_example.py``,
 which also checks its answer). The README's ```python blocks run in a new interpreter
 from the repository's folder.
 """
@@ -24,11 +24,11 @@ from pathlib import Path
 import pytest
 from conftest import DEMO_ARGS
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 README = ROOT / "README.md"
 #: s, longest run a README command gets here (the README's own numbers stay as written).
 MAX_DURATION = 20.0
-#: The heading of the README's worked example (tests/test_worked_example.py runs its block).
+#: The heading of the README's worked example (tests/docs/test_worked_example.py runs its block).
 WORKED_EXAMPLE = "## From a lab's raw log to a named effect"
 
 SH_BLOCK = r"```(?:sh|bash|console|shell)[^\n]*\n(.*?)```"

@@ -23,7 +23,7 @@ import pandas as pd
 import pytest
 from test_readme_commands import TEXT, worked_example_commands
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 EXAMPLE = ROOT / "examples" / "mocap-spin"
 
 

@@ -213,7 +213,7 @@ def test_the_spin_test_tutorial_runs(tmp_path, monkeypatch):
 
     import airbearing.cli as cli
 
-    page = Path(__file__).parents[1] / "docs" / "tutorials" / "spin-test.md"
+    page = Path(__file__).parents[2] / "docs" / "tutorials" / "spin-test.md"
     text = page.read_text()
     monkeypatch.chdir(tmp_path)
     for block in re.findall(r"```toml\n(.*?)```", text, re.S):

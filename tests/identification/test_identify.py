@@ -39,7 +39,7 @@ RUNS = [
     ((0.3676, 0.1265, -1.4835), (-0.020, 0.006, 0.024)),  # seed 004's experiment
     ((0.15, 0.45, 1.4), (0.004, 0.022, -0.016)),
 ]
-EXAMPLE = Path(__file__).resolve().parents[2] / "shared" / "data" / "examples" / "identify_platform"
+EXAMPLE = Path(__file__).resolve().parents[3] / "shared" / "data" / "examples" / "identify_platform"
 if not EXAMPLE.exists():
     EXAMPLE = Path("/work/shared/data/examples/identify_platform")
 

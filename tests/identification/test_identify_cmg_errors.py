@@ -155,8 +155,8 @@ def test_spin_down_output_error_keeps_both_errors():
     HAC's sampling error on white noise (measured 1.00-1.09 over 40 seeds), wider under
     AR(1) gyro noise, where the Fisher value left 4 of 10 seeds beyond 3 sigmas. There the
     exact ratio (the linearised fit's variance under the simulated noise covariance,
-    tests/test_honest_errors.py) is 3.50 and 3.57 on seeds 0 and 1: the sandwich said 1.76
-    and 1.54 while its bandwidth ended at the residual's 1/e lag, and its old upper limit
+    tests/shooting/test_shooting_errors.py) is 3.50 and 3.57 on seeds 0 and 1: the sandwich
+    said 1.76 and 1.54 while its bandwidth ended at the residual's 1/e lag, and its old upper limit
     of 3.0 stood below the exact value; now 4.10 and 3.28 (2.4-4.8 over 40 seeds)."""
     from airbearing.analysis.identification.yaw_inertia import identify_yaw_inertia
 

@@ -1,9 +1,10 @@
 """``identify`` breaks the common scale of J and r in free motion with what is known: the
 testbed's inertia (``hold="inertia"``: fit the CM offset) or its CM offset (``hold="cm"``).
 
-Oracle: the simulated spin test of an unbalanced rig (tests/test_far_from_nominal.py: J diag
-[0.0249, 0.0112, 0.0272] kg m^2, 2.686 kg, 3.2 rad/s about body z with a 5 deg tilt, motion
-capture only at 10 Hz for 60 s, 1 mrad noise), CM 19 mm low in the truth.
+Oracle: the simulated spin test of an unbalanced rig
+(tests/identification/test_far_from_nominal.py: J diag [0.0249, 0.0112, 0.0272] kg m^2,
+2.686 kg, 3.2 rad/s about body z with a 5 deg tilt, motion capture only at 10 Hz for 60 s,
+1 mrad noise), CM 19 mm low in the truth.
 """
 
 from __future__ import annotations

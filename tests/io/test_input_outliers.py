@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from test_quality_fast import assert_same, reference_quality
+from test_log_quality_fast import assert_same, reference_quality
 
 from airbearing.analysis.balancing.runs import run_balancing
 from airbearing.analysis.simulation.scenarios import slew

@@ -1,7 +1,7 @@
 """Messy lab logs, round 3: a log at another rate than its testbed's, two runs joined with
 continuous time, a logger that halves its rate mid-log, Excel's byte-order mark, tabs.
 
-The logs are exact motions in closed form (tests/test_log_quality.py) with white noise of
+The logs are exact motions in closed form (tests/io/test_log_quality.py) with white noise of
 the testbed's size; the defects are made as a lab makes them (time divided by 1000, a
 second run appended with ``t += duration``, every other sample dropped after a time).
 """

@@ -41,13 +41,13 @@ PAIR = (2e-4, -1e-4)  # N m: [A_s, A_c]
 
 
 def test_registry_names_exactly_the_formats_table():
-    # docs/FORMATS.md is the shared contract (a byte-equal copy, tests/test_docs.py)
+    # docs/FORMATS.md is the shared contract (a byte-equal copy, tests/docs/test_docs.py)
     from pathlib import Path
 
     from airbearing.io.vocabulary import EFFECTS
     from airbearing.models.effects import REGISTRY
 
-    text = (Path(__file__).parents[1] / "docs" / "FORMATS.md").read_text()
+    text = (Path(__file__).parents[2] / "docs" / "FORMATS.md").read_text()
     table = text.split("## Effects: names and parameters")[1].split("## Log")[0]
     names = [ln.split("`")[1] for ln in table.splitlines() if ln.startswith("| `")]
     assert list(EFFECTS) == list(REGISTRY) == names
