@@ -86,7 +86,7 @@ def test_multiloop_disk_margin_of_decoupled_loops_is_the_worst_siso():
 
 def test_json_uses_null_for_infinity():
     Lc, _ = _pd_loops(0.05)
-    d = loop_margins(Lc, name="pd").to_dict()
+    d = loop_margins(Lc, name="pd").to_json()
     assert d["gain_margin_db"] is None
     assert isinstance(d["phase_margin_deg"], float)
     assert all(len(p) == 2 for p in d["closed_loop_poles"])

@@ -52,7 +52,7 @@ def test_tuned_attitude_gains_meet_the_spec(tuned_attitude, cmg_tb):
     assert all(c.met for c in checks)
     assert worst["phase_margin_deg"] >= 45 and worst["gain_margin_db"] >= 6
     assert len(per) == 3  # J x 0.85, 1, 1.15
-    d = r.to_dict()
+    d = r.to_json()
     assert set(d["gains"]) == {"K_p", "K_i", "K_w"} and d["met"] is True
     # keys added by the step-response check and the search (none renamed)
     assert {"overshoot_pct", "settling_time_s", "crossover_rad_s"} <= set(d["worst_case"])

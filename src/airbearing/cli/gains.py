@@ -154,7 +154,7 @@ def gains(
     with progress_display("gains") as progress:
         progress(f"tuning the {loop} loop of {tb.name}")
         res = _call(tune, tb, loop, spec, split=split, progress=progress)
-    data = res.to_dict()
+    data = res.to_json()
     out.json(json_path, data)
     out.commit()
     units = GAIN_UNITS.get(loop, {})

@@ -293,13 +293,13 @@ def report_for_loop(
         "loop": loop.kind,
         "name": loop.name,
         "gains": dict(loop.gains),
-        "spec": spec.to_dict(),
+        "spec": spec.to_json(),
         "met": met,
-        "checks": [ch.to_dict() for ch in checks],
-        **d.to_dict(),
-        "continuous": c.to_dict(),
+        "checks": [ch.to_json() for ch in checks],
+        **d.to_json(),
+        "continuous": c.to_json(),
         "delay_samples": loop.delay_samples,
-        "without_delay": undelayed.to_dict(),
+        "without_delay": undelayed.to_json(),
         "worst_case": {
             k: (json_number(v) if isinstance(v, float) else v) for k, v in worst.items()
         },
@@ -396,7 +396,7 @@ def _margin_tables(rep: Report, d, c, checks, per, spec: Spec, worst: dict) -> N
     rep.table(_margin_rows(c, None), legend=_margin_legend(c))
     rep.heading("Specification, worst case over the uncertainty box", 3)
     rep.table(
-        [_check_row(ch.to_dict()) for ch in checks],
+        [_check_row(ch.to_json()) for ch in checks],
         ["check", "value", "required", "verdict", "by"],
         legend="not evaluated, or unlimited (no crossing)",
     )
