@@ -69,3 +69,20 @@ def test_library_errors_name_parameters():
         run_balancing(tb, duration=-1)
     with pytest.raises(InputError, match=r"^sweep='x': expected NAME=START:STOP:N"):
         parse_sweep("x")
+
+
+def test_the_default_split_is_the_one_the_testbed_can_run():
+    """One default for the library and the command line (design.balancing.default_split):
+    mixed where magnetorquers have a field to push against, mechanical otherwise."""
+    from airbearing.design.balancing import default_split
+    from airbearing.design.loops import balancing_loop, default_loop
+    from airbearing.io.testbed import load_testbed
+
+    seed000, seed004 = load_testbed("seed000-tabletop"), load_testbed("seed004-platform")
+    assert default_split(seed000) == "mixed"
+    assert seed004.field is None and default_split(seed004) == "mechanical"
+    assert default_loop(seed004) == "balancing" and default_loop(load_testbed("cmg-yaw")) == (
+        "attitude"
+    )
+    # no split given: the loop of the split the platform can run, as the CLI's --split
+    assert balancing_loop(seed004).name == balancing_loop(seed004, split="mechanical").name

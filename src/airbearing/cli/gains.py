@@ -34,22 +34,11 @@ LOOPS, SPLITS = get_args(Loop), get_args(Split)
 LOOP_HELP = "The loop to {}; default: attitude on a CMG testbed, balancing on a platform."
 
 
-def default_loop(testbed) -> str:
-    """The loop a testbed has: the CMG attitude loop, or a platform's balancing loop."""
-    return "attitude" if testbed.kind == "cmg" else "balancing"
-
-
 #: --split's help: the default depends on the testbed.
 SPLIT_HELP = (
     "Balancing PID split (seed 000); default: mixed on a testbed with magnetorquers and a "
     "cage field, mechanical otherwise."
 )
-
-
-def default_split(testbed) -> str:
-    """The seed-000 split a platform can run: mixed needs magnetorquers and a field."""
-    magnetic = testbed.magnetorquers is not None and testbed.field is not None
-    return "mixed" if magnetic else "mechanical"
 
 
 def _call(fn, *args, progress=None, **kw):
@@ -121,9 +110,10 @@ def gains(
     testbed_input(out, testbed)
     json_path = out.plan(json_out, "--json", (".json",))
     tb = testbed_arg(testbed)
+    from airbearing.design.loops import default_loop  # the library chooses
+
     loop = loop or default_loop(tb)
     _refuse_balancing_options(loop, ("split", "offset_range_mm"))
-    split = split or default_split(tb)
     number("--phase-margin-deg", phase_margin_deg, lo=0, hi=90, lo_open=True, hi_open=True,
            unit="deg")  # fmt: skip
     number("--gain-margin-db", gain_margin_db, lo=0, lo_open=True, unit="dB")
@@ -238,9 +228,10 @@ def report(
     html_path = out.plan(output, "-o", (".html",))
     json_path = out.plan(json_out, "--json", (".json",))
     tb = testbed_arg(testbed)
+    from airbearing.design.loops import default_loop  # the library chooses
+
     loop = loop or default_loop(tb)
     _refuse_balancing_options(loop, ("split",))
-    split = split or default_split(tb)
     spec_dict = None
     g = None
     if gains_file is not None:

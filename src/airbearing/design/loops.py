@@ -49,6 +49,7 @@ from airbearing.design.balancing import (
     MIXED,
     SEED000_GAINS,
     BalancingGains,
+    default_split,
     pid_balancing_controller,
 )
 from airbearing.design.controller import Controller
@@ -75,6 +76,7 @@ __all__ = [
     "balancing_loop",
     "attitude_loop",
     "make_loop",
+    "default_loop",
     "with_delay",
 ]
 
@@ -528,7 +530,7 @@ def controller_ref0(model, controller) -> np.ndarray:
 def balancing_loop(
     testbed_or_model,
     *,
-    split: str = "mixed",
+    split: str | None = None,
     gains=None,
     p=None,
     delay_samples: int = 1,
@@ -539,8 +541,9 @@ def balancing_loop(
     ----------
     testbed_or_model : Testbed or Model
         A ``kind = "platform"``, dof 3 testbed.
-    split : {"mixed", "mechanical"}
-        Which actuator carries which PID term (seed 000 eqs. 5, 7 / eq. 8).
+    split : {"mixed", "mechanical"}, optional
+        Which actuator carries which PID term (seed 000 eqs. 5, 7 / eq. 8); default the
+        split the testbed can run (:func:`~airbearing.design.balancing.default_split`).
     gains : mapping or sequence, optional
         ``K_p`` (N m), ``K_d`` (N m s), ``K_dK_i`` (N m/s); default seed 000 Tables 1-2.
     p : ndarray, optional
@@ -555,6 +558,7 @@ def balancing_loop(
             f"{tb.source}: the balancing loop needs a kind = 'platform', dof = 3 testbed; "
             f"'{tb.name}' is kind = '{model.kind}', dof = {model.dof}"
         )
+    split = default_split(tb) if split is None else split
     if split not in SPLITS:
         raise InputError(f"split '{split}': expected one of {', '.join(SPLITS)}")
     g = _gain_dict(tuple(BALANCING_GAINS), BALANCING_GAINS if gains is None else gains)
@@ -681,6 +685,28 @@ def _lin_ctrl_cached(model, ctl, tp, channels, kind) -> _LinearController:
         _LC_CACHE.clear()
     _LC_CACHE[key] = (model, lc)
     return lc
+
+
+def default_loop(testbed) -> str:
+    """The loop a testbed has: a CMG testbed's attitude loop, a platform's balancing loop.
+
+    Parameters
+    ----------
+    testbed : Testbed or Model
+
+    Returns
+    -------
+    str
+        ``"attitude"`` or ``"balancing"`` (:data:`LOOPS`).
+
+    Examples
+    --------
+    >>> import airbearing as ab
+    >>> default_loop(ab.load_testbed("cmg-yaw"))
+    'attitude'
+    """
+    tb = getattr(testbed, "testbed", testbed)
+    return "attitude" if tb.kind == "cmg" else "balancing"
 
 
 def make_loop(testbed_or_model, loop: str, **options) -> Loop:

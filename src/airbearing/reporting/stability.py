@@ -530,7 +530,7 @@ def stability_report(
     loop: str,
     *,
     gains=None,
-    split: str = "mixed",
+    split: str | None = None,
     spec: Spec | None = None,
     progress=None,
 ):
@@ -546,8 +546,10 @@ def stability_report(
         The loop's gains in SI (balancing: K_p N m, K_d N m s, K_d K_i N m/s; attitude:
         K_p, K_i, K_w as :func:`~airbearing.design.attitude.cmg_attitude_controller` takes
         them); default the seed papers' gains.
-    split : {"mixed", "mechanical"}
-        How the balancing PID is shared between sliders and magnetorquers (balancing only).
+    split : {"mixed", "mechanical"}, optional
+        How the balancing PID is shared between sliders and magnetorquers (balancing only);
+        default the split the testbed can run
+        (:func:`~airbearing.design.balancing.default_split`).
     spec : Spec, optional
         The specification the checks are made against (margins in dB and deg, bandwidth
         in rad/s); default :class:`~airbearing.design.tuning.Spec`'s.
