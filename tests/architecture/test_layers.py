@@ -10,6 +10,13 @@ runs and is tested without the upper one; a module-level import, or one in any o
 function, is still forbidden.
 matplotlib is imported only by reporting code: no other module may load it when it is
 imported (checked in a fresh interpreter, import by import).
+
+Imports stand at the top of a module. Allowed inside a function: the CLI's command modules
+(``cli/``: ``airbearing --help`` must not load the numerical libraries), a result's ``plot``
+method, and the counts of :data:`FUNCTION_IMPORTS` (each module's imports inside functions
+as they stand; a module may lower its count, never raise it, and a module not listed has
+none). No private name (``_x``) is imported from another package, except
+:data:`PRIVATE_IMPORTS`.
 """
 
 from __future__ import annotations
@@ -81,6 +88,152 @@ def _plot_method_lines(path: Path) -> set[int]:
 
 ALL_FILES = sorted(PKG.rglob("*.py"))
 LAYERED = [p for p in ALL_FILES if _layer(_module(p)) is not None]
+
+
+#: Imports inside functions outside cli/ and plot methods, per module (module docstring):
+#: lazy imports of pandas, cvxpy, scipy.stats, statsmodels or dask that keep a light import
+#: light (``import airbearing`` and the CLI's start-up), and imports that break a cycle.
+#: The list can only shrink: move an import to the top and lower (or drop) its count.
+FUNCTION_IMPORTS = {
+    "analysis.balancing.comparison": 2,
+    "analysis.balancing.drift": 1,
+    "analysis.balancing.runs": 2,
+    "analysis.balancing.transient": 1,
+    "analysis.balancing.two_step": 5,
+    "analysis.campaign.adapters": 10,
+    "analysis.campaign.child": 2,
+    "analysis.campaign.dispersions": 1,
+    "analysis.campaign.results": 5,
+    "analysis.campaign.runner": 6,
+    "analysis.campaign.spec": 6,
+    "analysis.campaign.studies": 7,
+    "analysis.cmg.steering_study": 2,
+    "analysis.discrepancy.adequacy": 7,
+    "analysis.discrepancy.consistency": 1,
+    "analysis.discrepancy.honest": 1,
+    "analysis.discrepancy.replay": 5,
+    "analysis.discrepancy.result": 1,
+    "analysis.discrepancy.screen": 3,
+    "analysis.discrepancy.starts": 1,
+    "analysis.discrepancy.trial": 2,
+    "analysis.identification.cmg_inertia": 5,
+    "analysis.identification.convex": 1,
+    "analysis.identification.data": 2,
+    "analysis.identification.output_error": 7,
+    "analysis.identification.platform": 4,
+    "analysis.identification.yaw_inertia": 6,
+    "analysis.identify": 4,
+    "analysis.logs.import_map": 2,
+    "analysis.shooting.constrained": 2,
+    "analysis.shooting.errors": 10,
+    "analysis.shooting.fit": 1,
+    "analysis.shooting.functions": 2,
+    "analysis.shooting.measurement_noise": 8,
+    "analysis.shooting.problem": 2,
+    "analysis.shooting.process_noise": 4,
+    "analysis.simulation.scenarios": 3,
+    "analysis.simulation.simulate": 1,
+    "api.logs": 8,
+    "api.plot": 12,
+    "design._control": 1,
+    "design.balancing": 1,
+    "design.linearise": 1,
+    "design.loops": 1,
+    "design.margins": 1,
+    "design.tuning.family": 1,
+    "design.tuning.responses": 2,
+    "design.tuning.spec": 2,
+    "design.tuning.tuner": 1,
+    "design.tuning.verdict": 1,
+    "io.coerce": 4,
+    "io.discontinuity": 4,
+    "io.import_map": 5,
+    "io.log": 9,
+    "io.output": 1,
+    "io.quality": 11,
+    "io.testbed": 1,
+    "models.compiled": 14,
+    "models.loop": 1,
+    "models.model": 1,
+    "models.quaternion": 1,
+    "models.structure_cache": 3,
+    "progress": 1,
+    "reporting.balancing": 1,
+    "reporting.campaign": 7,
+    "reporting.discrepancy": 3,
+    "reporting.identification": 3,
+    "reporting.stability": 5,
+}
+
+#: Private names imported from another package (module, name): to become public or move.
+PRIVATE_IMPORTS = {
+    ("analysis.discrepancy.revise", "_loglik"),
+    ("design.tuning.screening", "_PEAK_FRACTION"),
+    ("design.tuning.screening", "_disk_margin"),
+    ("design.tuning.screening", "_mu_upper"),
+    ("design.tuning.screening", "_perron_bounds"),
+    ("reporting.stability", "_response"),
+}
+
+
+def _function_level_imports(path: Path) -> list[int]:
+    """Lines of the imports inside functions, other than inside a class's ``plot``."""
+    tree = ast.parse(path.read_text(), filename=str(path))
+    top = {id(n) for n in tree.body}
+    for n in tree.body:  # under a module-level `if`/`try`: run at import too
+        if isinstance(n, ast.If | ast.Try):
+            top |= {id(c) for c in ast.walk(n)}
+    in_plot = _plot_method_lines(path)
+    return [
+        n.lineno
+        for n in ast.walk(tree)
+        if isinstance(n, ast.Import | ast.ImportFrom)
+        and id(n) not in top
+        and n.lineno not in in_plot
+    ]
+
+
+def test_imports_stand_at_the_top_of_modules():
+    over = []
+    for path in ALL_FILES:
+        mod = _module(path).removeprefix("airbearing.")
+        if mod == "cli" or mod.startswith("cli."):
+            continue  # the command functions import the numerical libraries when run
+        lines = _function_level_imports(path)
+        if len(lines) > FUNCTION_IMPORTS.get(mod, 0):
+            allowed = FUNCTION_IMPORTS.get(mod, 0)
+            over.append(f"{mod}: {len(lines)} imports inside functions (allowed {allowed}): "
+                        f"lines {lines}")  # fmt: skip
+    assert not over, "\n".join(over)
+
+
+def test_the_function_import_allowances_name_modules_that_exist():
+    modules = {_module(p).removeprefix("airbearing.") for p in ALL_FILES}
+    assert set(FUNCTION_IMPORTS) <= modules, set(FUNCTION_IMPORTS) - modules
+
+
+def _package(module: str, path: Path) -> str:
+    return module if path.name == "__init__.py" else module.rsplit(".", 1)[0]
+
+
+def test_no_private_name_is_imported_from_another_package():
+    found = set()
+    for path in ALL_FILES:
+        mod = _module(path)
+        tree = ast.parse(path.read_text(), filename=str(path))
+        for n in ast.walk(tree):
+            if not (isinstance(n, ast.ImportFrom) and n.level == 0 and n.module):
+                continue
+            if not n.module.startswith("airbearing."):
+                continue
+            is_pkg = (SRC / n.module.replace(".", "/")).is_dir()
+            theirs = n.module if is_pkg else n.module.rsplit(".", 1)[0]
+            if theirs == _package(mod, path):
+                continue
+            for a in n.names:
+                if a.name.startswith("_") and not a.name.startswith("__"):
+                    found.add((mod.removeprefix("airbearing."), a.name))
+    assert found <= PRIVATE_IMPORTS, sorted(found - PRIVATE_IMPORTS)
 
 
 def test_the_source_tree_is_found():
