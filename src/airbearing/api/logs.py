@@ -39,6 +39,8 @@ class LogCheck:
         Segments, jitter and outliers (:func:`airbearing.io.quality.assess`).
     tools : dict of str to (bool, str)
         Whether each tool can use the log, and why.
+    yaw_unwrapped_rows : tuple of int
+        Rows where a yaw written wrapped was unwrapped on read (the file unchanged).
     """
 
     log: str
@@ -48,6 +50,12 @@ class LogCheck:
     rate: float
     quality: object = field(repr=False)
     tools: dict = field(repr=False)
+    yaw_unwrapped_rows: tuple[int, ...] = ()
+
+    @property
+    def usable(self) -> bool:
+        """Whether some tool can use the log (``log check`` exits 2 when none can)."""
+        return any(ok for ok, _ in self.tools.values())
 
     @property
     def outlier_rows(self) -> tuple[int, ...]:
@@ -68,11 +76,13 @@ class LogCheck:
             "duration": self.duration,
             "rate": self.rate,
             **self.quality.to_json(),
+            "yaw_unwrapped_rows": list(self.yaw_unwrapped_rows),
+            "usable": self.usable,
             "tools": {name: {"usable": ok, "why": why} for name, (ok, why) in self.tools.items()},
         }
 
     def __str__(self) -> str:
-        from airbearing.io.log import time_text
+        from airbearing.io.log import time_text, yaw_unwrapped_words
 
         q = self.quality
         lines = [
@@ -81,6 +91,11 @@ class LogCheck:
         ]
         for o in q.outliers:
             lines.append(f"  row {o.row} (t = {time_text(o.t, q.period)} s): {o.reason}")
+        if self.yaw_unwrapped_rows:
+            lines.append(f"  {yaw_unwrapped_words(self.yaw_unwrapped_rows)}")
+        for words in (*q.still_channels, q.no_motion):
+            if words:
+                lines.append(f"  {words}")
         for name, (ok, why) in self.tools.items():
             lines.append(f"  {name}: {'yes' if ok else 'no'} ({why})")
         return "\n".join(lines)
@@ -137,7 +152,7 @@ def check_log(log, testbed=None) -> LogCheck:
     (1, ())
     """
     from airbearing.io.coerce import as_log, as_testbed
-    from airbearing.io.log import Log
+    from airbearing.io.log import YAW_UNWRAPPED, Log
     from airbearing.io.tool_use import tool_use
 
     tb = as_testbed(testbed, optional=True)
@@ -158,6 +173,7 @@ def check_log(log, testbed=None) -> LogCheck:
         rate=log.testbed.sensors.rate,
         quality=quality,
         tools=tool_use(log, quality),
+        yaw_unwrapped_rows=tuple(log.data.attrs.get(YAW_UNWRAPPED, ())),
     )
 
 

@@ -108,12 +108,32 @@ def import_(
     from airbearing.io.quality import assess
 
     result = import_log_with_notes(raw, map_path, tb)
-    log = result.log
-    quality = assess(log, tb)
-    out.file(log_path, lambda tmp: write_log(log, tmp))
+    paths = [log_path]
+    if len(result.logs) > 1:  # restart = "split": one log per run, LOG-run1, LOG-run2, ...
+        paths = [
+            out.plan(log_path.with_name(f"{log_path.stem}-run{k + 1}{log_path.suffix}"), "-o",
+                     _LOG_SUFFIXES)
+            for k in range(len(result.logs))
+        ]  # fmt: skip
+    qualities = [assess(log, tb) for log in result.logs]
+    for path, log in zip(paths, result.logs, strict=True):
+        out.file(path, lambda tmp, log=log: write_log(log, tmp))
     out.commit()
     for note in result.notes:
         typer.echo(f"note: {note}")
+    for k, (path, log, quality) in enumerate(zip(paths, result.logs, qualities, strict=True)):
+        if len(paths) > 1:
+            a, b = result.runs[k]
+            typer.echo(f"run {k + 1}: raw rows {a}-{b - 1} -> {path} (rows 0-{log.n - 1})")
+        _import_summary(log, quality)
+    if tb is None:
+        typer.echo("note: no testbed: gaps judged by the median interval, no sensor noise floor")
+    for path in paths:
+        typer.echo(f"wrote {path}")
+
+
+def _import_summary(log, quality) -> None:
+    """``log import``'s lines on one imported log: rows, segments, steps, outliers."""
     typer.echo(f"rows: {log.n} (t = {log.t[0]:g} .. {log.t[-1]:g} s)")
     typer.echo(f"segments: {quality.n_segments} (rows {_segments_text(quality)})")
     for d in quality.discontinuities:
@@ -121,9 +141,8 @@ def import_(
     for change in quality.rate_changes:
         typer.echo(f"rate change: {change['reason']}")
     typer.echo(f"outlier rows: {_rows(quality.outlier_rows)}")
-    if tb is None:
-        typer.echo("note: no testbed: gaps judged by the median interval, no sensor noise floor")
-    typer.echo(f"wrote {log_path}")
+    for warning in quality.still_channels:
+        typer.echo(f"still: {warning}")
 
 
 #: Segments printed by ``log check`` and ``log import`` (the first ones and the last);
@@ -161,9 +180,10 @@ def check(
 ) -> None:
     """Rows, rate, segments, jitter, outlier rows and what each tool can use.
 
-    A log with rows no tool can use (a cell that is not a number, not finite or of
-    magnitude above 1e100, time that does not increase, a non-unit quaternion) is
-    reported with exactly those rows, why, and "no" for every tool.
+    Exit status 0 when some tool can use the log, 2 when none can (nothing written):
+    rows no tool can use (a cell that is not a number, not finite or of magnitude above
+    1e100, time that does not increase or restarts, a non-unit quaternion, a yaw that
+    wraps) are reported with exactly those rows and why; otherwise each tool's reason.
     """
     from airbearing.cli.outputs import Outputs
 
@@ -173,23 +193,24 @@ def check(
     json_path = out.plan(json_out, "--json", (".json",))
     tb = _testbed(testbed)
     from airbearing.api.logs import check_log
-    from airbearing.io.log import BadCellsError, read_log, time_text
+    from airbearing.io.log import BadCellsError, read_log, time_text, yaw_unwrapped_words
     from airbearing.io.tool_use import TOOLS
 
     try:
         log = read_log(log_file, tb)
     except BadCellsError as e:
-        _report_bad_cells(out, json_path, log_file, tb, e)
-        return
+        _report_bad_cells(log_file, tb, e)
     result = check_log(log)
     quality, tools, t = result.quality, result.tools, log.t
+    usable = result.usable
 
     def _t(value: float) -> str:
         return time_text(value, quality.period)
 
-    summary = {**result.to_json(), "log": str(log_file)}
-    out.json(json_path, summary)
-    out.commit()
+    if usable:  # exit 2 (no tool can use the log) writes nothing
+        summary = {**result.to_json(), "log": str(log_file)}
+        out.json(json_path, summary)
+        out.commit()
     lines = [
         ("log", f"{log_file} (testbed {tb.name!r})"),
         ("rows", f"{log.n}"),
@@ -211,6 +232,8 @@ def check(
         labels.append("unexplained")  # its own label, in the same column
     if quality.noise_warnings:
         labels.append("noise")
+    if quality.still_channels or quality.no_motion:
+        labels.append("motion")
     width = max(len(k) for k in labels)
     for key, value in lines:
         typer.echo(f"{key:<{width}}  {value}")
@@ -234,6 +257,8 @@ def check(
             f"{ratio:.3g} x 1 / sensors.rate: is sensors.rate = {tb.sensors.rate:g} Hz this "
             "log's rate? (gaps and the noise per sample are judged by it)"
         )
+    if result.yaw_unwrapped_rows:
+        typer.echo(f"{'yaw':<{width}}  {yaw_unwrapped_words(result.yaw_unwrapped_rows)}")
     typer.echo(f"{'outliers':<{width}}  {len(quality.outliers)} row(s)")
     for o in quality.outliers:
         typer.echo(f"{'':<{width}}  row {o.row:<6} t = {_t(o.t):<9} s  {o.reason}")
@@ -244,9 +269,28 @@ def check(
         )
     for warning in quality.noise_warnings:
         typer.echo(f"{'noise':<{width}}  {warning}")
+    for warning in quality.still_channels:
+        typer.echo(f"{'noise':<{width}}  {warning}")
+    if quality.no_motion:
+        typer.echo(f"{'motion':<{width}}  {quality.no_motion}")
     _echo_tools({name: tools[name] for name in TOOLS})
+    if not usable:
+        _refuse(log_file, {name: tools[name] for name in TOOLS})
     if json_path is not None:
         typer.echo(f"wrote {json_path}")
+
+
+def _refuse(log_file, tools: dict) -> None:
+    """``log check``'s exit status 2: no tool can use the log; one line with each reason."""
+    from airbearing.errors import InputError
+
+    reasons: dict[str, list[str]] = {}
+    for name, (_ok, why) in tools.items():
+        reasons.setdefault(why, []).append(name)
+    raise InputError(
+        f"{log_file}: no tool can use this log: "
+        + "; ".join(f"{', '.join(names)}: {why}" for why, names in reasons.items())
+    )
 
 
 def _echo_tools(tools: dict) -> None:
@@ -262,33 +306,21 @@ def _echo_tools(tools: dict) -> None:
     )
 
 
-def _report_bad_cells(out, json_path, log_file, tb, error) -> None:
-    """``log check`` of a log with unusable cells: those rows, why, and "no" everywhere."""
+def _report_bad_cells(log_file, tb, error) -> None:
+    """``log check`` of a log with unusable cells: those rows, why, "no" for every tool,
+    and exit status 2 (nothing written): no tool can use it."""
     from airbearing.cli import one_line
+    from airbearing.errors import InputError
     from airbearing.io.log import row_ranges
     from airbearing.io.tool_use import TOOLS
 
-    where = "; ".join(f"column '{c}' rows {row_ranges(r)}" for c, r in error.bad.items())
-    why = f"{len(error.rows)} unusable row(s) ({where}): fix or remove them"
-    summary = {
-        "log": str(log_file),
-        "testbed": tb.name,
-        "usable": False,
-        "bad_rows": error.rows,
-        "bad_cells": error.bad,
-        "error": one_line(error),
-        "tools": {name: {"usable": False, "why": why} for name in TOOLS},
-    }
-    out.json(json_path, summary)
-    out.commit()
     typer.echo(f"log       {log_file} (testbed {tb.name!r})")
     typer.echo(f"bad rows  {row_ranges(error.rows)}")
     for c, r in error.bad.items():
         typer.echo(f"          column '{c}': rows {row_ranges(r)} ({len(r)} cells)")
     typer.echo(f"why       {one_line(error)}")
     _echo_tools({name: (False, f"bad cells in rows {row_ranges(error.rows)}") for name in TOOLS})
-    if json_path is not None:
-        typer.echo(f"wrote {json_path}")
+    raise InputError(f"no tool can use this log: {one_line(error)}")
 
 
 @log_app.command("plot")

@@ -27,6 +27,7 @@ from airbearing.errors import InputError
 
 __all__ = [
     "COLUMN_QUANTITY",
+    "FILE_KEYS",
     "LAB_UP",
     "MAPS",
     "UNITS",
@@ -34,6 +35,7 @@ __all__ = [
     "import_map_from_dict",
     "raw_columns",
     "read_import_map",
+    "missing_cells",
     "read_raw",
     "unwrap",
 ]
@@ -76,6 +78,16 @@ _TABLES: dict[str, tuple[str, ...] | None] = {
     "frames": ("lab_up", "body"),
 }
 _IDENTITY = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))
+#: Top-level keys of a map that say how the raw file is written (airbearing's additions to
+#: FORMATS.md's map): key -> its valid values (the first is the default).
+FILE_KEYS: dict[str, tuple[str | None, ...]] = {
+    "missing": ("error", "gap"),  # blank or non-finite cells: an error, or rows left out
+    "decimal": (".", ","),  # the decimal mark of the raw cells
+    "separator": (None, ",", ";", "\t"),  # None: comma, or tab / ';' when the header has none
+    "restart": ("error", "split"),  # time that restarts (two runs): an error, or one log per run
+}
+#: Cells that a lab's exporter writes for "no value" (besides a blank and a non-finite number).
+MISSING_WORDS = frozenset(("na", "n/a", "null", "none", "-nan", "missing"))
 
 
 @dataclass(frozen=True)
@@ -101,6 +113,17 @@ class ImportMap:
     given_units : tuple of str
         The columns whose unit the map names in ``[units]`` (the others took the SI
         unit by default).
+    missing : {"error", "gap"}
+        A blank or non-finite cell in a mapped column: an error (default), or its row
+        is left out of the log (a gap, reported by rows; nothing filled).
+    decimal : {".", ","}
+        The raw cells' decimal mark.
+    separator : {None, ",", ";", "\\t"}
+        The raw CSV's separator; None: a comma, or a tab or ``;`` when the header has no
+        comma.
+    restart : {"error", "split"}
+        Time that restarts (two runs in one file): an error naming the row, or one log
+        per run.
     """
 
     columns: dict[str, str]
@@ -110,6 +133,10 @@ class ImportMap:
     body: tuple[tuple[float, ...], ...] = _IDENTITY
     source: str = _MEMORY
     given_units: tuple[str, ...] = ()
+    missing: str = "error"
+    decimal: str = "."
+    separator: str | None = None
+    restart: str = "error"
 
     def factor(self, column: str) -> float:
         """Factor from the raw unit of a log column to its SI unit."""
@@ -159,10 +186,14 @@ def import_map_from_dict(data: Mapping[str, Any], source: str = _MEMORY) -> Impo
     if not isinstance(data, Mapping):
         raise InputError(f"{src}: expected tables of keys, got {data!r}")
     for key, value in data.items():
+        if key in FILE_KEYS:
+            continue  # checked by _file_keys
         if key not in _TABLES:
             raise InputError(
                 f"{src}: unknown key '{key}'; an import map has the tables "
                 + ", ".join(f"[{t}]" for t in _TABLES)
+                + " and the top-level keys "
+                + ", ".join(FILE_KEYS)
             )
         if not isinstance(value, Mapping):
             raise _fail(src, key, "a table", value)
@@ -174,6 +205,7 @@ def import_map_from_dict(data: Mapping[str, Any], source: str = _MEMORY) -> Impo
                     + ", ".join(valid)
                 )
             if valid is None and sub not in LOG_COLUMNS:
+                _misplaced_file_key(src, key, sub)
                 raise InputError(
                     f"{src}: unknown key '{key}.{sub}': not a log column; log columns are: "
                     + ", ".join(LOG_COLUMNS)
@@ -224,7 +256,36 @@ def import_map_from_dict(data: Mapping[str, Any], source: str = _MEMORY) -> Impo
     if lab_up not in LAB_UP:
         raise _fail(src, "frames.lab_up", "one of " + ", ".join(repr(a) for a in LAB_UP), lab_up)
     body = _rotation(frames.get("body", [list(r) for r in _IDENTITY]), src)
-    return ImportMap(columns, units, maps, lab_up, body, src, given)
+    return ImportMap(columns, units, maps, lab_up, body, src, given, **_file_keys(data, src))
+
+
+def _misplaced_file_key(src: str, table: str, key: str) -> None:
+    """A top-level key written after a table header lands in that table (TOML): say so."""
+    if key in FILE_KEYS:
+        raise InputError(
+            f"{src}: key '{table}.{key}': {key!r} is a top-level key of the map; TOML puts a "
+            f"key written after [{table}] into that table: move '{key} = ...' above the "
+            "first [table]"
+        )
+
+
+def _file_keys(data: Mapping[str, Any], src: str) -> dict[str, str | None]:
+    """The top-level keys of :data:`FILE_KEYS` (how the raw file is written), checked."""
+    out: dict[str, str | None] = {}
+    for key, valid in FILE_KEYS.items():
+        value = data.get(key, valid[0])
+        if value == "tab" and key == "separator":
+            value = "\t"
+        if value not in valid or (value is None and key in data):
+            shown = ", ".join(repr(v) for v in valid if v is not None)
+            raise _fail(src, key, f"one of {shown}", value)
+        out[key] = value
+    if out["decimal"] == "," and out["separator"] == ",":
+        raise InputError(
+            f"{src}: keys 'decimal' and 'separator': a decimal comma needs another separator; "
+            'expected separator = ";" (or "\\t")'
+        )
+    return out
 
 
 def _rotation(value: object, src: str) -> tuple[tuple[float, ...], ...]:
@@ -284,12 +345,17 @@ def read_import_map(path: str | os.PathLike[str]) -> ImportMap:
     return import_map_from_dict(data, src)
 
 
-def read_raw(path: str | os.PathLike[str]):
+def read_raw(path: str | os.PathLike[str], separator: str | None = None, decimal: str = "."):
     """Read a lab's raw log (CSV, or Parquet by suffix) with every cell kept as it is.
 
     Parameters
     ----------
     path : str or path-like
+    separator : str or None
+        The CSV separator (an import map's ``separator``); None: a comma, or a tab or
+        semicolon when the header has no comma.
+    decimal : {".", ","}
+        The cells' decimal mark: with ``","`` the separator must be another one.
 
     Returns
     -------
@@ -317,9 +383,15 @@ def read_raw(path: str | os.PathLike[str]):
             return pq.read_table(p).to_pandas()
         with p.open(encoding="utf-8-sig") as fh:
             header = fh.readline()
-        sep = ","
-        if "," not in header:  # a lab's export may use tabs or semicolons
+        sep = separator or ","
+        if separator is None and "," not in header:  # a lab's export: tabs or semicolons
             sep = "\t" if "\t" in header else (";" if ";" in header else ",")
+        if decimal == "," and sep == ",":
+            raise InputError(
+                f'{src}: the header is comma separated, but the map says decimal = ",": '
+                'expected cells separated by ";" or tabs (set separator = ";" if the header '
+                "holds commas in its names)"
+            )
         return pd.read_csv(
             p,
             sep=sep,
@@ -328,6 +400,8 @@ def read_raw(path: str | os.PathLike[str]):
             skip_blank_lines=True,
             encoding="utf-8-sig",  # a byte-order mark is not part of the first header
         )
+    except InputError:
+        raise
     except pd.errors.EmptyDataError as e:
         raise InputError(f"{src}: the raw log is empty; expected a header row") from e
     except Exception as e:  # noqa: BLE001 (any reader failure is a bad file)
@@ -386,8 +460,14 @@ def raw_columns(raw, import_map: ImportMap, src: str, skip: tuple[str, ...] = ()
             values = cells.to_numpy(dtype=float, na_value=np.nan)
         else:
             text = cells.astype(str).str.strip()
+            if import_map.decimal == ",":
+                text = text.str.replace(",", ".", regex=False)
             values = pd.to_numeric(text, errors="coerce").to_numpy(dtype=float, na_value=np.nan)
         bad = bad_mask(values)
+        blank = missing_cells(cells, values) if bad.any() else bad
+        if import_map.missing == "gap":
+            bad &= ~blank  # left out as a gap by the import (reported by rows)
+            values = np.where(blank, np.nan, values)
         if bad.any():
             i = int(np.argmax(bad))
             rows = np.flatnonzero(bad)
@@ -395,6 +475,7 @@ def raw_columns(raw, import_map: ImportMap, src: str, skip: tuple[str, ...] = ()
             raise InputError(
                 f"{src}: row {i}, column {actual!r} (log column {name!r}): expected a finite "
                 f"number of magnitude at most 1e+100, got {cells.iloc[i]!r}{more}"
+                + _cell_hint(cells.iloc[i], bool(np.all(blank[bad])), import_map)
             )
         if name == "t" and "t" not in import_map.given_units and len(values) > 1:
             _check_seconds(values, src, actual, import_map.source)
@@ -407,6 +488,41 @@ def raw_columns(raw, import_map: ImportMap, src: str, skip: tuple[str, ...] = ()
         else:
             out[name] = values * factor
     return out
+
+
+def missing_cells(cells, values: np.ndarray) -> np.ndarray:
+    """Cells with no value: blank, a non-finite number (``NaN``, ``inf``) or a word an
+    exporter writes for none (:data:`MISSING_WORDS`), shape (n,), bool."""
+    import pandas as pd
+
+    out = ~np.isfinite(values) & ~np.isnan(values)  # inf, -inf
+    if pd.api.types.is_numeric_dtype(cells.dtype) and not pd.api.types.is_bool_dtype(cells.dtype):
+        return out | np.isnan(values)
+    text = cells.astype(str).str.strip().str.lower()
+    nan_text = text.isin(("nan", "+nan", "-nan", "")) | text.isin(MISSING_WORDS)
+    return out | nan_text.to_numpy(dtype=bool) | cells.isna().to_numpy(dtype=bool)
+
+
+def _cell_hint(cell: object, all_missing: bool, import_map: ImportMap) -> str:
+    """The map setting that would read a refused cell, in words ("" when none would)."""
+    import re
+
+    where = f" in {import_map.source}" if import_map.source != _MEMORY else ""
+    if all_missing:
+        return (
+            f'; if these are dropouts (blank or NaN cells), set missing = "gap"{where} to '
+            "leave those rows out as a gap (reported by rows, never filled)"
+        )
+    if (
+        import_map.decimal == "."
+        and isinstance(cell, str)
+        and re.fullmatch(r"[+-]?\d*,\d+([eE][+-]?\d+)?", cell.strip())
+    ):
+        return (
+            f'; a decimal comma? set decimal = ","{where} (with separator = ";" when the file '
+            "is separated by semicolons)"
+        )
+    return ""
 
 
 #: s: a time column read in s (no ``[units] t``) whose median interval is this or more is

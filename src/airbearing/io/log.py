@@ -11,6 +11,10 @@ does not increase, a log that is all gaps or a non-unit quaternion raises
 Rows are 0-based data-row indices (the header is not counted), the same in a raw
 file, its imported log and every report; CSV messages add the line of the file.
 
+A ``yaw`` written wrapped (within one turn, jumping by about 2 pi between samples) is
+unwrapped on read and said (:func:`_unwrap_yaw`, ``data.attrs[YAW_UNWRAPPED]``): the
+built-in CMG simulation and many loggers write it so, and no fit can use it wrapped.
+
 Sampling (FORMATS.md, "Real logs are not perfect"), with ``T = 1 / sensors.rate``:
 
 - an interval within ``[0.5 T, 1.5 T]`` is normal jitter: used with its logged times;
@@ -57,10 +61,12 @@ __all__ = [
     "QUATERNION_NORM_TOL",
     "RATE_COLUMNS",
     "REQUIRED_COLUMNS",
+    "YAW_UNWRAPPED",
     "Log",
     "read_log",
     "time_text",
     "segments_of",
+    "yaw_unwrapped_words",
     "validate_log",
     "write_log",
 ]
@@ -393,9 +399,11 @@ def _validate(
         raise BadCellsError(
             f"{src}: {_at(i, lines)}, column 't': time must be strictly increasing, "
             f"but t = {float(t[i])!r} s follows t = {float(t[i - 1])!r} s of row {i - 1}"
-            + (f"; {len(rows)} such rows: {row_ranges(rows)}" if len(rows) > 1 else ""),
+            + (f"; {len(rows)} such rows: {row_ranges(rows)}" if len(rows) > 1 else "")
+            + _restart_hint(t, rows),
             {"t": rows},
         )
+    _unwrap_yaw(out, testbed)
     if testbed is not None:
         period = testbed.sensors.dt
         segments = segments_of(t, period)
@@ -423,6 +431,86 @@ def _validate(
                 {"qw, qx, qy, qz": rows},
             )
     return out
+
+
+def _restart_hint(t: np.ndarray, rows: Sequence[int]) -> str:
+    """When time goes back to or before the start of its run (two runs joined), say where
+    to split; ``""`` for a repeated or out-of-order time."""
+    starts = [0]
+    for i in rows:
+        if not (t[i] <= t[starts[-1]] and i - starts[-1] >= 2):
+            return ""
+        starts.append(i)
+    if len(t) - starts[-1] < 2:
+        return ""
+    at = ", ".join(str(i) for i in starts[1:])
+    n = len(starts)
+    return (
+        f": time restarts, {'two' if n == 2 else n} runs in one file: split at "
+        f'row{"s" if n > 2 else ""} {at} (or import the raw file with restart = "split" in '
+        "its import map: one log per run)"
+    )
+
+
+#: rad: a step of the logged yaw between two samples larger than this, which is within
+#: :data:`_WRAP_SLACK` of a whole turn, in a yaw that stays within one turn, is the angle
+#: written wrapped (to [-pi, pi) or [0, 2 pi)), not motion: no air bearing turns by pi within
+#: one sample.
+_WRAP_STEP = math.pi
+_WRAP_SLACK = math.pi / 2
+#: rad: a yaw is judged only if its median step between samples is below this (a rig
+#: turning 0.4 rad per sample, 4 rad/s at 10 Hz, is; white noise of 1 rad is not).
+_SMOOTH_STEP = math.pi / 4
+#: Key of ``Log.data.attrs``: the rows where a yaw written wrapped was unwrapped on read.
+YAW_UNWRAPPED = "yaw_unwrapped_rows"
+
+
+def _unwrap_yaw(out: pd.DataFrame, testbed: Testbed | None) -> None:
+    """A logged ``yaw`` written wrapped is unwrapped on read, and said.
+
+    The signature of a wrapped yaw: it stays within one turn (its range is at most 2 pi),
+    moves smoothly (median step below :data:`_SMOOTH_STEP`) and jumps by about a whole turn
+    (more than pi, within pi/2 of 2 pi k) between two samples of a segment. Such a yaw is
+    unwrapped as the import map does (:func:`airbearing.io.import_map.unwrap`: each segment
+    on its own, an isolated jump keeping the branch), and the rows where its branch changes
+    are kept in ``out.attrs[YAW_UNWRAPPED]`` for ``log check`` and the tools to say. A
+    glitch (a frame exported as 0) on a spinning yaw is not one: the yaw spans more than a
+    turn.
+    """
+    if "yaw" not in out.columns or len(out) < 3:
+        return
+    yaw = out["yaw"].to_numpy()
+    if not float(np.ptp(yaw)) <= 2 * math.pi + 1e-9:
+        return
+    t = out["t"].to_numpy()
+    period = testbed.sensors.dt if testbed is not None else float(np.median(np.diff(t)))
+    step = np.diff(yaw)
+    wrapped = np.abs(np.mod(step + math.pi, 2 * math.pi) - math.pi)
+    inside = np.diff(t) <= GAP_FACTORS[1] * period
+    jump = (np.abs(step) > _WRAP_STEP) & (wrapped < _WRAP_SLACK) & inside
+    if not jump.any() or not np.median(wrapped[inside]) < _SMOOTH_STEP:
+        return
+    from airbearing.io.import_map import unwrap
+
+    new = unwrap(yaw, t)
+    turns = np.round((new - yaw) / (2 * math.pi))
+    rows = [int(r) for r in np.flatnonzero(np.diff(turns) != 0) + 1]
+    if not rows:
+        return
+    out["yaw"] = new
+    out.attrs[YAW_UNWRAPPED] = rows
+
+
+def yaw_unwrapped_words(rows: Sequence[int]) -> str:
+    """The sentence that says a yaw was unwrapped on read (``""`` for no rows)."""
+    if not rows:
+        return ""
+    shown = row_ranges(list(rows)[:10]) + (" ..." if len(rows) > 10 else "")
+    return (
+        f"yaw written wrapped (to one turn): unwrapped on read, {len(rows)} jump(s) of 2 pi "
+        f"removed at row(s) {shown}; the file is unchanged (import raw files with 'airbearing "
+        "log import', which writes the yaw unwrapped)"
+    )
 
 
 #: The median sample interval of a log must lie within this factor of ``1 / sensors.rate``

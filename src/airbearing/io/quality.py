@@ -284,6 +284,11 @@ class LogQuality:
     rate_changes : tuple of dict
         Stretches sampled at another rate than ``sensors.rate``
         (:func:`airbearing.io.discontinuity.rate_changes`).
+    still_channels : tuple of str
+        Channels far quieter than the testbed's declared noise: frozen or noise-free
+        (:func:`airbearing.io.motion.still_channels`).
+    no_motion : str
+        Why the log shows no motion (:func:`airbearing.io.motion.no_motion`), or ``""``.
     """
 
     n_rows: int
@@ -303,6 +308,8 @@ class LogQuality:
     noise_warnings: tuple[str, ...] = ()
     discontinuities: tuple = ()
     rate_changes: tuple[dict, ...] = ()
+    still_channels: tuple[str, ...] = ()
+    no_motion: str = ""
 
     @property
     def n_segments(self) -> int:
@@ -373,6 +380,8 @@ class LogQuality:
             "discontinuity_rows": [d.row for d in self.discontinuities],
             "discontinuities": [d.to_json() for d in self.discontinuities],
             "rate_changes": [dict(r) for r in self.rate_changes],
+            "still_channels": list(self.still_channels),
+            "no_motion": self.no_motion,
         }
 
 
@@ -1047,7 +1056,18 @@ def assess(log: Log, testbed: Testbed | None) -> LogQuality:
         noise_warnings=_noise_warnings(noise, testbed),
         discontinuities=steps,
         rate_changes=() if testbed is None else rate_changes(t, period, testbed.sensors.rate),
+        **_motion(log, testbed, segments),
     )
+
+
+def _motion(log: Log, testbed, segments) -> dict:
+    """``still_channels`` and ``no_motion`` (:mod:`airbearing.io.motion`)."""
+    from airbearing.io.motion import no_motion, still_channels
+
+    return {
+        "still_channels": still_channels(log, testbed, segments),
+        "no_motion": no_motion(log, testbed),
+    }
 
 
 def _steps(log: Log, testbed, segments, t, period):

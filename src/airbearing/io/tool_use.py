@@ -2,7 +2,8 @@
 
 From the log's segments and outlier rows (:mod:`airbearing.io.quality`) and its
 testbed: replays need a segment of 2 samples, fits a segment of
-:data:`MIN_FIT_SAMPLES` usable samples, balancing the slider columns.
+:data:`MIN_FIT_SAMPLES` usable samples and some motion (:mod:`airbearing.io.motion`),
+balancing the slider columns.
 """
 
 from __future__ import annotations
@@ -66,6 +67,9 @@ def tool_use(log: Log, quality: LogQuality) -> dict[str, tuple[bool, str]]:
         if tb is not None and tb.kind == "cmg" and tb.body.dof == 1:
             out["identify"] = _cmg_identify_minimum(quality, usable)
     out["replay"] = (replay_ok, why_replay)
+    if quality.no_motion:  # nothing to fit: the model is not excited
+        for tool in ("identify", "discrepancy"):
+            out[tool] = (False, quality.no_motion)
     if quality.gyro_disagreement:  # a fit on it would be confidently wrong
         why = quality.gyro_disagreement[0]
         for tool in ("simulate replay", "identify", "discrepancy", "replay"):

@@ -107,9 +107,10 @@ from airbearing.analysis.shooting.process_noise import (
     estimate_process_noise,
     set_intensity,
 )
-from airbearing.errors import SolverError
+from airbearing.errors import InputError, SolverError
 from airbearing.io.coerce import as_int, as_logs, as_names
-from airbearing.io.log import Log
+from airbearing.io.log import YAW_UNWRAPPED, Log, yaw_unwrapped_words
+from airbearing.io.motion import no_motion
 from airbearing.io.testbed import Testbed
 from airbearing.io.vocabulary import EFFECTS
 from airbearing.models.effects import REGISTRY
@@ -488,6 +489,7 @@ def discrepancy(
     max_effects = as_int(max_effects, "max_effects", minimum=0)
     workers, seed = as_int(workers, "workers", minimum=1), as_int(seed, "seed")
     only = as_names(only, "only", optional=True, choices=EFFECTS, kind="effect")
+    _refuse_still(testbed, logs)
     datas, windows, floor = prepare(testbed, logs, window_s=window_s)
     cands = candidates_for(testbed, datas, only)
     # listed with their reason, never fitted (a spring on a yaw that turns many times)
@@ -498,9 +500,29 @@ def discrepancy(
     sel = _select(search, nominal, max_effects, screen, workers, prog)
     named = _named(search, sel, prog, screen, workers)
     judged = _judge(search, sel, named, logs, validate, window_s, jit, prog)
+    judged = (*judged[:4], judged[4] + _unwrapped_words(logs))
     loc = localise(datas, base_problem, nominal, floor)
     prog("done", prog.total)
     return _result(search, refused, base_problem, sel, named, judged, loc)
+
+
+def _refuse_still(testbed: Testbed, logs) -> None:
+    """Before any fitting: logs that show no motion (:func:`airbearing.io.motion.no_motion`)
+    have nothing for a model to explain; a fit would only say it "explains the data"."""
+    still = [no_motion(log, testbed) for log in logs]
+    if all(still):
+        names = ", ".join(log.source for log in logs)
+        raise InputError(f"{names}: discrepancy: {still[0]}")
+
+
+def _unwrapped_words(logs) -> str:
+    """ "; LOG: yaw written wrapped ... unwrapped on read" for each such log (or "")."""
+    words = [
+        f"; {log.source}: {yaw_unwrapped_words(log.data.attrs[YAW_UNWRAPPED])}"
+        for log in logs
+        if log.data.attrs.get(YAW_UNWRAPPED)
+    ]
+    return "".join(words)
 
 
 def _result(search, refused, base_problem, sel, named, judged, loc) -> Discrepancy:

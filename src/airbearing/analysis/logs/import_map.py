@@ -32,7 +32,15 @@ from airbearing.io.log import LOG_COLUMNS, QUATERNION_NORM_TOL, RATE_COLUMNS, Lo
 from airbearing.io.testbed import Testbed
 from airbearing.models import quaternion as quat
 
-__all__ = ["ImportResult", "import_log", "import_log_with_notes", "lab_up_quaternion", "unwrap"]
+__all__ = [
+    "ImportResult",
+    "import_log",
+    "import_log_with_notes",
+    "lab_up_quaternion",
+    "leave_out_missing",
+    "time_runs",
+    "unwrap",
+]
 
 _QUATERNION = ("qw", "qx", "qy", "qz")
 _BODY_VECTORS = (("wx", "wy", "wz"), ("mx", "my", "mz"), ("bx", "by", "bz"))
@@ -51,11 +59,26 @@ class ImportResult:
         Sentences for the user (ignored rate columns, renormalised quaternions).
     ignored : tuple of str
         Log columns of the map that were not imported.
+    logs : tuple of Log
+        One log per run: a file whose time restarts holds several runs, imported one
+        log each with the map's ``restart = "split"`` (else just :attr:`log`).
+    runs : tuple of (int, int)
+        Raw rows ``(first, last + 1)`` of each log of :attr:`logs`.
+    left_out : tuple of int
+        Raw rows with a blank or non-finite cell, left out as a gap (the map's
+        ``missing = "gap"``); the log has no row for them.
     """
 
     log: Log
     notes: tuple[str, ...] = ()
     ignored: tuple[str, ...] = ()
+    logs: tuple[Log, ...] = ()
+    runs: tuple[tuple[int, int], ...] = ()
+    left_out: tuple[int, ...] = ()
+
+    def __post_init__(self) -> None:
+        if not self.logs:
+            object.__setattr__(self, "logs", (self.log,))
 
 
 def lab_up_quaternion(lab_up: str) -> np.ndarray:
@@ -164,7 +187,7 @@ def import_log_with_notes(
         )
     else:
         src = source or str(raw)
-        table = read_raw(Path(raw))  # type: ignore[arg-type]
+        table = read_raw(Path(raw), import_map.separator, import_map.decimal)  # type: ignore[arg-type]
     notes: list[str] = []
     skip: tuple[str, ...] = ()
     if testbed is not None and not testbed.sensors.gyro:
@@ -176,6 +199,9 @@ def import_log_with_notes(
                 "ignored (attitude-only log)"
             )
     values = raw_columns(table, import_map, src, skip)
+    values, raw_rows, gap_notes = leave_out_missing(values, import_map)
+    notes += gap_notes
+    runs = time_runs(values["t"], raw_rows, import_map, src)
     c = import_map.body_matrix
 
     if all(name in values for name in _QUATERNION):
@@ -183,7 +209,8 @@ def import_log_with_notes(
         norm = np.linalg.norm(q, axis=1)
         off = np.abs(norm - 1.0) > QUATERNION_NORM_TOL
         if off.any():
-            i = int(np.argmax(off))
+            i = int(raw_rows[int(np.argmax(off))])
+            norm = dict(zip(raw_rows.tolist(), norm.tolist(), strict=True))
             cols = ", ".join(repr(import_map.columns[n]) for n in _QUATERNION)
             raise InputError(
                 f"{src}: row {i}, columns {cols}: expected a unit quaternion (norm within "
@@ -201,11 +228,163 @@ def import_log_with_notes(
         if renormalised:
             notes.append(f"{renormalised} quaternion(s) renormalised (norm within 1e-3 of 1)")
     _body_vectors(values, c, import_map.source)
-    if "yaw" in values:
-        values["yaw"] = unwrap(values["yaw"], values["t"])
-    columns = {name: values[name] for name in LOG_COLUMNS if name in values}
-    log = Log(pd.DataFrame(columns), source=src, testbed=testbed)
-    return ImportResult(log, tuple(notes), skip)
+    logs = []
+    for k, (a, b) in enumerate(runs):
+        run = {name: v[a:b] for name, v in values.items()}
+        if "yaw" in run:
+            yaw = unwrap(run["yaw"], run["t"])
+            notes += _unwrap_note(yaw - run["yaw"], raw_rows[a:b], import_map)
+            run["yaw"] = yaw
+        columns = {name: run[name] for name in LOG_COLUMNS if name in run}
+        name = src if len(runs) == 1 else f"{src} (run {k + 1}: raw rows {raw_rows[a]}-"
+        name += "" if len(runs) == 1 else f"{raw_rows[b - 1]})"
+        logs.append(Log(pd.DataFrame(columns), source=name, testbed=testbed))
+    spans = tuple((int(raw_rows[a]), int(raw_rows[b - 1]) + 1) for a, b in runs)
+    left = np.setdiff1d(np.arange(len(table)), raw_rows)
+    return ImportResult(
+        logs[0], tuple(notes), skip, tuple(logs), spans, tuple(int(r) for r in left)
+    )
+
+
+def leave_out_missing(
+    values: dict[str, np.ndarray], import_map: ImportMap
+) -> tuple[dict[str, np.ndarray], np.ndarray, list[str]]:
+    """Rows with a missing cell left out (the map's ``missing = "gap"``), and said.
+
+    Parameters
+    ----------
+    values : dict of str to numpy.ndarray
+        Log column -> raw values in SI units, NaN where a cell had no value
+        (:func:`airbearing.io.import_map.raw_columns`).
+    import_map : ImportMap
+
+    Returns
+    -------
+    values : dict of str to numpy.ndarray
+        Without those rows (nothing filled: the log has no row for them, and the
+        interval across them is a gap).
+    raw_rows : numpy.ndarray
+        The raw row of each row kept, shape (n_kept,).
+    notes : list of str
+        The rows left out, by run of rows, and which raw columns had no value.
+    """
+    n = len(values["t"])
+    missing = np.zeros(n, dtype=bool)
+    for v in values.values():
+        missing |= np.isnan(v)
+    raw_rows = np.flatnonzero(~missing)
+    if not missing.any():
+        return values, raw_rows, []
+    from airbearing.io.log import row_ranges
+
+    rows = np.flatnonzero(missing)
+    if raw_rows.size < 2:
+        raise InputError(
+            f'{import_map.source}: missing = "gap" leaves {raw_rows.size} row(s) of '
+            f"{n}: every other row has a blank or non-finite cell; expected a log"
+        )
+    cols = [import_map.columns[c] for c, v in values.items() if np.isnan(v).any()]
+    blocks = np.split(rows, np.flatnonzero(np.diff(rows) > 1) + 1)
+    where = []
+    for block in blocks:
+        after = int(np.searchsorted(raw_rows, block[-1]))  # the log row that follows
+        if after == 0:
+            where.append("the log starts after them")
+        elif after == raw_rows.size:
+            where.append("the log ends before them")
+        else:
+            where.append(f"a gap before log row {after} (raw row {raw_rows[after]})")
+    notes = [
+        f'missing = "gap": raw rows {row_ranges(rows)} ({rows.size} row(s) with a blank or '
+        f"non-finite cell in {', '.join(repr(c) for c in cols)}) left out, nothing filled: "
+        + "; ".join(where)
+        + "; the log's rows are the raw rows kept, renumbered from 0"
+    ]
+    return {k: v[~missing] for k, v in values.items()}, raw_rows, notes
+
+
+def time_runs(
+    t: np.ndarray, raw_rows: np.ndarray, import_map: ImportMap, src: str
+) -> list[tuple[int, int]]:
+    """The runs of a raw file: split where time restarts (the map's ``restart``).
+
+    Parameters
+    ----------
+    t : numpy.ndarray
+        s, the time of the rows kept, shape (n,).
+    raw_rows : numpy.ndarray
+        The raw row of each, shape (n,).
+    import_map : ImportMap
+    src : str
+        The raw file's name, for messages.
+
+    Returns
+    -------
+    list of (int, int)
+        ``(start, stop)`` rows of ``t`` of each run (one run when time increases).
+
+    Raises
+    ------
+    InputError
+        Time that does not increase where it does not restart (a repeated or
+        out-of-order time; the row named); time that restarts (goes back to or before
+        the start of its run, each run increasing and of at least 2 rows) while the
+        map says ``restart = "error"``: the rows where it restarts and the fix.
+    """
+    from airbearing.io.log import row_ranges
+
+    header = import_map.columns["t"]
+    back = np.flatnonzero(~(np.diff(t) > 0)) + 1
+    starts, start = [0], 0
+    for i in back.tolist():
+        if t[i] <= t[start] and i - start >= 2:
+            starts.append(i)
+            start = i
+            continue
+        rows = raw_rows[back]
+        more = f"; {rows.size} such rows: {row_ranges(rows)}" if rows.size > 1 else ""
+        raise InputError(
+            f"{src}: row {raw_rows[i]}, column {header!r}: time must be strictly increasing, "
+            f"but t = {t[i]:.6g} s follows t = {t[i - 1]:.6g} s of row {raw_rows[i - 1]}{more}"
+        )
+    if len(starts) > 1 and t.size - starts[-1] < 2:
+        i = starts[-1]
+        raise InputError(
+            f"{src}: row {raw_rows[i]}, column {header!r}: time must be strictly increasing, "
+            f"but t = {t[i]:.6g} s follows t = {t[i - 1]:.6g} s of row {raw_rows[i - 1]} "
+            "(the last row)"
+        )
+    stops = [*starts[1:], int(t.size)]
+    if len(starts) > 1 and import_map.restart != "split":
+        at = ", ".join(str(raw_rows[i]) for i in starts[1:])
+        first = starts[1]
+        where = f" in {import_map.source}" if import_map.source else ""
+        raise InputError(
+            f"{src}: column {header!r}: time restarts at row {raw_rows[first]} (t = "
+            f"{t[first]:.6g} s after {t[first - 1]:.6g} s): {_count(len(starts))} runs in one "
+            f"file, split at row{'s' if len(starts) > 2 else ''} {at}; set restart = "
+            f'"split"{where} to import one log per run (-o LOG writes LOG-run1, LOG-run2, ...), '
+            "or cut the file there"
+        )
+    return list(zip(starts, stops, strict=True))
+
+
+def _count(n: int) -> str:
+    return {2: "two", 3: "three", 4: "four"}.get(n, str(n))
+
+
+def _unwrap_note(shift: np.ndarray, raw_rows: np.ndarray, import_map: ImportMap) -> list[str]:
+    """A note when the import unwrapped the yaw (FORMATS.md: it always does): where."""
+    from airbearing.io.log import row_ranges
+
+    jumps = np.flatnonzero(np.diff(shift) != 0) + 1
+    if not jumps.size:
+        return []
+    shown = row_ranges(raw_rows[jumps][:10]) + (" ..." if jumps.size > 10 else "")
+    return [
+        f"yaw ({import_map.columns['yaw']!r}) unwrapped: {jumps.size} jump(s) of 2 pi "
+        f"removed (at raw row(s) {shown}); a log's yaw is continuous"
+    ]
 
 
 def _as_import_map(import_map) -> ImportMap:
@@ -267,4 +446,11 @@ def import_log(
     >>> log.t.tolist(), [round(float(y), 4) for y in log.data["yaw"]]  # s; rad, unwrapped
     ([0.0, 0.1, 0.2], [3.1241, 3.159, 3.194])
     """
-    return import_log_with_notes(raw, import_map, testbed).log
+    result = import_log_with_notes(raw, import_map, testbed)
+    if len(result.logs) > 1:
+        runs = ", ".join(f"{a}-{b - 1}" for a, b in result.runs)
+        raise InputError(
+            f"{result.log.source.split(' (run')[0]}: {len(result.logs)} runs (raw rows {runs}): "
+            "import_log returns one log; use import_log_with_notes(...).logs"
+        )
+    return result.log
