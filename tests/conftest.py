@@ -21,11 +21,11 @@ def _cmg_case(folder: Path, effects: dict, seed: int) -> None:
     """The public CMG examples' run: a 180 deg slew, then back to 90 deg at 20 s (40 s)."""
     import numpy as np
 
+    from airbearing import quaternion as quat
     from airbearing.analysis.simulation.simulate import simulate
     from airbearing.design.attitude import cmg_attitude_controller
     from airbearing.io.log import write_log
     from airbearing.io.testbed import load_testbed, write_testbed
-    from airbearing.models import quaternion as quat
     from airbearing.models.model import build_model
 
     tb = load_testbed("cmg-yaw")

@@ -156,7 +156,6 @@ FUNCTION_IMPORTS = {
     "models.compiled": 14,
     "models.loop": 1,
     "models.model": 1,
-    "models.quaternion": 1,
     "models.structure_cache": 3,
     "progress": 1,
     "reporting.balancing": 1,

@@ -9,6 +9,7 @@ import casadi as ca
 import numpy as np
 import pytest
 
+from airbearing import quaternion as quat
 from airbearing.analysis.balancing.comparison import compare_methods
 from airbearing.analysis.balancing.runs import run_balancing
 from airbearing.analysis.simulation.simulate import simulate
@@ -24,7 +25,6 @@ from airbearing.design.balancing import (
 )
 from airbearing.errors import InputError
 from airbearing.io.testbed import Field, load_testbed
-from airbearing.models import quaternion as quat
 from airbearing.models.model import build_model
 
 RNG = np.random.default_rng(20240501)

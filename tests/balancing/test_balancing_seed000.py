@@ -145,8 +145,8 @@ def test_mixed_slider_1_is_a_backlash_limit_cycle():
 def test_residual_torque_is_the_gravity_torque_of_the_free_swing():
     """The free float's estimate (seed 000: eq. 1's left-hand side from the measured rates)
     is the gravity torque of the swing it sees: ``m |g| |r x g_hat|``, truth from the run."""
+    from airbearing import quaternion as quat
     from airbearing.analysis.balancing.runs import run_balancing
-    from airbearing.models import quaternion as quat
 
     tb = load_testbed("seed000-tabletop")
     # 60 s: the 33 s damping leaves a swing of about 1e-2 rad from the 5 deg rest tilt

@@ -3,6 +3,7 @@
 import numpy as np
 import pytest
 
+from airbearing import quaternion as quat
 from airbearing.design.linearise import (
     delay_system,
     discretise,
@@ -13,7 +14,6 @@ from airbearing.design.linearise import (
     trim,
 )
 from airbearing.io.testbed import load_testbed
-from airbearing.models import quaternion as quat
 from airbearing.models.model import build_model
 
 

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 from cli_run import run
 
+from airbearing import quaternion as quat
 from airbearing.analysis.simulation.scenarios import slew
 from airbearing.cli.gains import _echo_checks
 from airbearing.design.loops import make_loop
@@ -17,7 +18,6 @@ from airbearing.design.tuning.responses import _scenario_run
 from airbearing.design.tuning.screening import _Fast
 from airbearing.errors import InputError
 from airbearing.io.testbed import load_testbed
-from airbearing.models import quaternion as quat
 
 #: seed 001 Table 6: K_p, K_i, K_w of the yaw CMG loop (eq. 19)
 SEED001_TABLE6 = {"K_p": 6.0, "K_i": 0.001, "K_w": 6.0}

@@ -21,10 +21,10 @@ def _platform(attitude_noise=0.0):
 
 
 def test_a_noise_free_attitude_is_integrated_to_the_resolution():
+    from airbearing import quaternion as quat
     from airbearing.analysis.discrepancy.data import ATTITUDE_SIGMA_MIN
     from airbearing.analysis.discrepancy.replay import model_for, prepare, substeps_for
     from airbearing.analysis.simulation.on_times import rollout_dt
-    from airbearing.models import quaternion as quat
 
     tb, logs = _platform()
     _, windows, floor = prepare(tb, logs)

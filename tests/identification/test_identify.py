@@ -16,6 +16,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from airbearing import quaternion as quat
 from airbearing.analysis.identification import regression as ir
 from airbearing.analysis.identification.platform import (
     SEED004_TRUTH,
@@ -29,7 +30,6 @@ from airbearing.analysis.simulation.scenarios import free_oscillation, slew
 from airbearing.errors import InputError
 from airbearing.io.log import Log, read_log
 from airbearing.io.testbed import Body, Sensors, load_testbed
-from airbearing.models import quaternion as quat
 from airbearing.models.model import build_model
 
 TRUTH = np.array(SEED004_TRUTH)

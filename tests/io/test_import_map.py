@@ -16,6 +16,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from airbearing import quaternion as quat
 from airbearing.analysis.logs.import_map import (
     import_log,
     import_log_with_notes,
@@ -25,7 +26,6 @@ from airbearing.analysis.logs.import_map import (
 from airbearing.errors import InputError
 from airbearing.io.import_map import import_map_from_dict, read_import_map
 from airbearing.io.testbed import testbed_from_dict as make_testbed
-from airbearing.models import quaternion as quat
 
 RAW = Path("/work/shared/data/raw")
 QUAT = ["qw", "qx", "qy", "qz"]

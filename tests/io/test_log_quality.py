@@ -16,12 +16,12 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from airbearing import quaternion as quat
 from airbearing.errors import InputError
 from airbearing.io import Log
 from airbearing.io.quality import CHI2_3_THRESHOLD, Z_THRESHOLD, assess
 from airbearing.io.testbed import testbed_from_dict as make_testbed
 from airbearing.io.tool_use import tool_use
-from airbearing.models import quaternion as quat
 
 QUAT = ["qw", "qx", "qy", "qz"]
 RATES = ["wx", "wy", "wz"]

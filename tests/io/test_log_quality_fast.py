@@ -19,11 +19,11 @@ import pandas as pd
 import pytest
 from test_log_quality import QUAT, RATES, mocap_yaw_log, tumble_log
 
+from airbearing import quaternion as S
+from airbearing import quaternion as quat
 from airbearing.io import Log
 from airbearing.io import local_fits as F
 from airbearing.io import quality as Q
-from airbearing.io import quaternion_signs as S
-from airbearing.models import quaternion as quat
 
 # ----------------------------------------------------------------------------
 # the slow reference (the oracle)

@@ -5,10 +5,10 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
+from airbearing import quaternion as quat
 from airbearing.errors import InputError
 from airbearing.io.testbed import Body, load_testbed
 from airbearing.io.vocabulary import EFFECTS
-from airbearing.models import quaternion as quat
 from airbearing.models.cmg import cmg_functions, jacobian_eq15
 from airbearing.models.effects import REGISTRY, applicable_effects
 from airbearing.models.model import build_model

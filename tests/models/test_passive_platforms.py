@@ -13,12 +13,12 @@ import pytest
 from numpy.testing import assert_allclose
 from scipy import stats
 
+from airbearing import quaternion as quat
 from airbearing.analysis.simulation.artefacts import sample_times, with_gap, with_jitter
 from airbearing.analysis.simulation.on_times import simulate_on_times
 from airbearing.analysis.simulation.scenarios import free_oscillation, free_summary, spindown
 from airbearing.errors import InputError
 from airbearing.io.testbed import testbed_from_dict as make_testbed
-from airbearing.models import quaternion as quat
 from airbearing.models.effects import REGISTRY, applicable_effects
 from airbearing.models.model import build_model
 

@@ -6,7 +6,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from numpy.testing import assert_allclose
 
-from airbearing.models import quaternion as quat
+from airbearing import quaternion as quat
 
 finite = st.floats(-1.0, 1.0, allow_nan=False)
 vec3 = st.tuples(finite, finite, finite).map(np.array)
@@ -118,7 +118,7 @@ def test_continuous_branch_removes_sign_jumps():
 def test_one_sign_continuity_routine_one_and_three_lags():
     """continuous_branch is continuous_signs with one lag; three lags keep the segment's
     branch across one glitched sample that one lag follows (q and -q are one attitude)."""
-    from airbearing.io.quaternion_signs import continuous_signs
+    from airbearing.quaternion import continuous_signs
 
     rng = np.random.default_rng(3)
     q = quat.normalize(np.cumsum(rng.normal(scale=0.02, size=(50, 4)), axis=0) + [1, 0, 0, 0])

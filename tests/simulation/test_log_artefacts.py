@@ -9,6 +9,7 @@ import pytest
 from numpy.testing import assert_allclose
 from scipy.integrate import solve_ivp
 
+from airbearing import quaternion as quat
 from airbearing.analysis.simulation.artefacts import (
     GLITCH_KINDS,
     sample_times,
@@ -24,7 +25,6 @@ from airbearing.analysis.simulation.on_times import integrate_on_times, simulate
 from airbearing.analysis.simulation.scenarios import free_oscillation
 from airbearing.errors import InputError
 from airbearing.io.testbed import testbed_from_dict as make_testbed
-from airbearing.models import quaternion as quat
 from airbearing.models.model import build_model
 
 # seed 004: the 6.3 kg platform, J_CR and offset r^o; seed 000: 0.041 kg sliders, 6e-4 T cage

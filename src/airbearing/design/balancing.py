@@ -372,7 +372,7 @@ def field_in_body(field_lab, g_hat, q):
     b = np.asarray(field_lab, dtype=float)
     if np.hypot(b[0], b[1]) <= 1e-12 * abs(b[2]):
         return -b[2] * g_hat
-    from airbearing.models import quaternion as quat
+    from airbearing import quaternion as quat
 
     return quat.rotate_inverse(q, ca.DM(b))
 

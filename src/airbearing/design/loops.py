@@ -41,6 +41,7 @@ from functools import lru_cache
 import casadi as ca
 import numpy as np
 
+from airbearing import quaternion as quat
 from airbearing.design import _control as ct
 from airbearing.design.actuators import MagnetorquerActuator, SliderActuator
 from airbearing.design.attitude import SEED001_GAINS, cmg_attitude_controller
@@ -64,7 +65,6 @@ from airbearing.design.linearise import (
 )
 from airbearing.errors import InputError
 from airbearing.io.testbed import Testbed
-from airbearing.models import quaternion as quat
 from airbearing.models.model import Model, build_model
 
 __all__ = [

@@ -144,7 +144,7 @@ from airbearing.io.local_fits import loo as _loo
 from airbearing.io.local_fits import noise_gain as _noise_gain
 from airbearing.io.local_fits import regular_weights as _regular_weights
 from airbearing.io.local_fits import window_median as _window_median
-from airbearing.io.quaternion_signs import continuous_signs
+from airbearing.quaternion import continuous_signs
 
 if TYPE_CHECKING:
     from airbearing.io.log import Log

@@ -16,12 +16,12 @@ from dataclasses import replace
 import matplotlib.pyplot as plt
 import numpy as np
 
+from airbearing import quaternion as quat
 from airbearing.analysis.simulation.simulate import closed_loop_rollout
 from airbearing.design.loops import Loop, make_loop, with_delay
 from airbearing.design.margins import _response, analyse_loop, frequency_grid, json_number
 from airbearing.design.tuning import Spec, evaluate, scenario_response, tune
 from airbearing.design.tuning.verdict import SIMULTANEOUS_GAIN, SIMULTANEOUS_PHASE
-from airbearing.models import quaternion as quat
 from airbearing.reporting.html import Report, pretty_key, table_html
 
 __all__ = [

@@ -33,6 +33,7 @@ from functools import lru_cache
 
 import numpy as np
 
+from airbearing import quaternion as quat
 from airbearing.analysis.balancing.metrics import BalancingMetrics, balancing_metrics, true_offset
 from airbearing.analysis.balancing.transient import integral_time_constant, settling_time
 from airbearing.analysis.simulation.simulate import SimResult, simulate
@@ -46,7 +47,6 @@ from airbearing.design.balancing import (
 from airbearing.design.controller import constant_input
 from airbearing.errors import InputError
 from airbearing.io.testbed import Testbed
-from airbearing.models import quaternion as quat
 from airbearing.models.model import Model, build_model
 
 __all__ = [

@@ -6,11 +6,11 @@ from dataclasses import dataclass, field, fields
 
 import numpy as np
 
+from airbearing import quaternion as quat
 from airbearing.analysis.discrepancy.data import NoiseFloor
 from airbearing.analysis.discrepancy.filters import welch
 from airbearing.analysis.discrepancy.replay import primary_series
 from airbearing.analysis.shooting import Fit, ShootingProblem
-from airbearing.models import quaternion as quat
 
 __all__ = ["Localisation", "localise"]
 

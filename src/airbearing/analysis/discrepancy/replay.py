@@ -25,6 +25,7 @@ from functools import lru_cache
 
 import numpy as np
 
+from airbearing import quaternion as quat
 from airbearing.analysis.discrepancy.data import (
     ATTITUDE_SIGMA_MIN,
     DEFAULT_WINDOW_S,
@@ -56,7 +57,6 @@ from airbearing.errors import InputError
 from airbearing.io.coerce import as_effects, as_float, as_int, as_logs, as_testbed
 from airbearing.io.log import Log
 from airbearing.io.testbed import Testbed
-from airbearing.models import quaternion as quat
 from airbearing.models.model import Model, build_model
 
 __all__ = [

@@ -2,7 +2,7 @@
 
 The map and the raw cells are read and checked by :mod:`airbearing.io.import_map`;
 this module converts (units, lab axis up, quaternion direction, body axes, yaw
-unwrapping) with the one quaternion module, :mod:`airbearing.models.quaternion`
+unwrapping) with the one quaternion module, :mod:`airbearing.quaternion`
 (which is why it lives outside ``io``: ``io`` imports nothing from ``models``).
 
 The import never drops, reorders, fills, smooths or resamples a row: row ``i`` of
@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
+from airbearing import quaternion as quat
 from airbearing.errors import InputError
 from airbearing.io.coerce import as_testbed
 from airbearing.io.import_map import (
@@ -30,7 +31,6 @@ from airbearing.io.import_map import (
 )
 from airbearing.io.log import LOG_COLUMNS, QUATERNION_NORM_TOL, RATE_COLUMNS, Log
 from airbearing.io.testbed import Testbed
-from airbearing.models import quaternion as quat
 
 __all__ = [
     "ImportResult",
