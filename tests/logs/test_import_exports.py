@@ -220,7 +220,8 @@ def test_an_imported_wrapped_yaw_is_said(tmp_path, rig, capsys):
     _export(raw, t, yaw)
     out = tmp_path / "log.csv"
     assert _import(rig, raw, _map(tmp_path), out) == 0
-    assert "unwrapped" in capsys.readouterr().out
+    jumps = np.flatnonzero(np.abs(np.diff(yaw)) > 180.0) + 1
+    assert f"unwrapped: {jumps.size} jump(s) of 2 pi removed" in capsys.readouterr().out
     np.testing.assert_allclose(pd.read_csv(out)["yaw"], 2.0 * t / 1e3, rtol=0, atol=1e-9)
 
 
@@ -238,7 +239,7 @@ def test_a_quaternion_of_norm_two_exits_2(tmp_path, capsys):
     )
     js = tmp_path / "c.json"
     code = run(["log", "check", str(tb), str(path), "--json", str(js)])
-    _refused(capsys, code, "no tool can use this log", "unit quaternion", "norm 2")
+    _refused(capsys, code, "no tool can use this log", "unit quaternion", "every row has norm 2")
     assert not js.exists()
 
 

@@ -7,6 +7,10 @@ quaternion algebra of :mod:`airbearing.quaternion`, is
 :func:`airbearing.analysis.logs.import_map.import_log` (``io`` imports nothing from
 ``models``, DESIGN.md).
 
+Besides the tables of FORMATS.md, a map may have the top-level keys of
+:data:`FILE_KEYS` (airbearing's additions, for real exports): ``missing`` (dropouts
+left out as a gap), ``decimal``, ``separator`` and ``restart`` (two runs in one file).
+
 Every mistake is one :class:`~airbearing.errors.InputError` line naming the file and
 the key, row (0-based data row) or column.
 """
@@ -425,7 +429,9 @@ def raw_columns(raw, import_map: ImportMap, src: str, skip: tuple[str, ...] = ()
     -------
     dict of str to numpy.ndarray
         Log column -> values times the unit's factor (``t = raw time x unit``,
-        never shifted).
+        never shifted); with the map's ``missing = "gap"``, NaN where a cell has no value
+        (:func:`missing_cells`: the import leaves those rows out as a gap). Cells are read
+        with the map's ``decimal`` mark.
 
     Raises
     ------
@@ -449,9 +455,11 @@ def raw_columns(raw, import_map: ImportMap, src: str, skip: tuple[str, ...] = ()
             continue
         actual = header if header in headers else stripped.get(header.strip())
         if actual is None:
+            glued = len(headers) == 1 and any(c in headers[0] for c in ",;\t")
             raise InputError(
                 f"{src}: no column {header!r} (map {import_map.source}, key 'columns.{name}'); "
                 f"the file has: {', '.join(repr(h) for h in headers)}"
+                + ("; is the map's separator the file's?" if glued else "")
             )
         cells = raw[actual]
         if pd.api.types.is_bool_dtype(cells.dtype):

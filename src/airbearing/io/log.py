@@ -65,6 +65,7 @@ __all__ = [
     "Log",
     "read_log",
     "time_text",
+    "quaternion_norm_hint",
     "segments_of",
     "yaw_unwrapped_words",
     "validate_log",
@@ -303,9 +304,16 @@ def _bad_cell(
         more = f"; {n} such cells: " + "; ".join(
             f"column '{c}' rows {row_ranges(r)}" for c, r in bad.items()
         )
+    dropout = not big and (got == "an empty cell" or got.startswith("NaN") or got == "'nan'")
     return BadCellsError(
         f"{src}: {_at(i, lines)}, column '{name}': expected a finite number{limit}, "
-        f"got {got}{more}",
+        f"got {got}{more}"
+        + (
+            "; if these are dropouts, remove those rows (the time across them is a gap) or "
+            'import the raw file with missing = "gap" in its import map'
+            if dropout
+            else ""
+        ),
         bad,
     )
 
@@ -427,10 +435,25 @@ def _validate(
             raise BadCellsError(
                 f"{src}: {_at(i, lines)}, columns qw, qx, qy, qz: expected a unit "
                 f"quaternion (norm within {QUATERNION_NORM_TOL:g} of 1), got norm {norm[i]:.9g}"
-                + (f"; {len(rows)} such rows: {row_ranges(rows)}" if len(rows) > 1 else ""),
+                + (f"; {len(rows)} such rows: {row_ranges(rows)}" if len(rows) > 1 else "")
+                + quaternion_norm_hint(norm),
                 {"qw, qx, qy, qz": rows},
             )
     return out
+
+
+def quaternion_norm_hint(norm: np.ndarray) -> str:
+    """The fix of a quaternion whose norm is off 1, in words: a whole log at one norm is a
+    scaled export; a few rows are cells that are not a quaternion."""
+    good = norm[np.isfinite(norm)]
+    if good.size and float(np.ptp(good)) <= QUATERNION_NORM_TOL * float(np.mean(good)):
+        x = float(np.mean(good))
+        return (
+            f"; every row has norm {x:.6g}: a quaternion exported scaled, or another quantity "
+            f"(divide qw, qx, qy, qz by {x:.6g} if they are a scaled attitude; the tools "
+            f"renormalise only within {QUATERNION_NORM_TOL:g} of 1)"
+        )
+    return "; fix those rows (a unit quaternion qw, qx, qy, qz, scalar first) or remove them"
 
 
 def _restart_hint(t: np.ndarray, rows: Sequence[int]) -> str:
@@ -856,7 +879,7 @@ def _check_separator(header: str, src: str, line: int) -> None:
                 f"{src}: line {line}: not comma separated: {name} found in the header "
                 f"({header.strip()[:60]!r}); a log is comma separated (FORMATS.md): save it "
                 "with commas, or convert it with 'airbearing log import' (which reads tab "
-                "and semicolon separated files)"
+                'and semicolon separated files, with decimal = "," for decimal commas)'
             )
 
 

@@ -29,7 +29,14 @@ from airbearing.io.import_map import (
     read_raw,
     unwrap,
 )
-from airbearing.io.log import LOG_COLUMNS, QUATERNION_NORM_TOL, RATE_COLUMNS, Log
+from airbearing.io.log import (
+    LOG_COLUMNS,
+    QUATERNION_NORM_TOL,
+    RATE_COLUMNS,
+    Log,
+    quaternion_norm_hint,
+    row_ranges,
+)
 from airbearing.io.testbed import Testbed
 
 __all__ = [
@@ -209,12 +216,14 @@ def import_log_with_notes(
         norm = np.linalg.norm(q, axis=1)
         off = np.abs(norm - 1.0) > QUATERNION_NORM_TOL
         if off.any():
-            i = int(raw_rows[int(np.argmax(off))])
-            norm = dict(zip(raw_rows.tolist(), norm.tolist(), strict=True))
+            k = int(np.argmax(off))
             cols = ", ".join(repr(import_map.columns[n]) for n in _QUATERNION)
+            rows = raw_rows[off]
+            more = f"; {rows.size} such rows: {row_ranges(rows)}" if rows.size > 1 else ""
             raise InputError(
-                f"{src}: row {i}, columns {cols}: expected a unit quaternion (norm within "
-                f"{QUATERNION_NORM_TOL:g} of 1 is renormalised), got norm {norm[i]:.9g}"
+                f"{src}: row {raw_rows[k]}, columns {cols}: expected a unit quaternion (norm "
+                f"within {QUATERNION_NORM_TOL:g} of 1 is renormalised), got norm "
+                f"{norm[k]:.9g}{more}" + quaternion_norm_hint(norm)
             )
         renormalised = int(np.count_nonzero(np.abs(norm - 1.0) > 1e-12))
         q = q / norm[:, None]
@@ -275,7 +284,6 @@ def leave_out_missing(
     raw_rows = np.flatnonzero(~missing)
     if not missing.any():
         return values, raw_rows, []
-    from airbearing.io.log import row_ranges
 
     rows = np.flatnonzero(missing)
     if raw_rows.size < 2:
@@ -331,7 +339,6 @@ def time_runs(
         the start of its run, each run increasing and of at least 2 rows) while the
         map says ``restart = "error"``: the rows where it restarts and the fix.
     """
-    from airbearing.io.log import row_ranges
 
     header = import_map.columns["t"]
     back = np.flatnonzero(~(np.diff(t) > 0)) + 1
@@ -375,9 +382,8 @@ def _count(n: int) -> str:
 
 def _unwrap_note(shift: np.ndarray, raw_rows: np.ndarray, import_map: ImportMap) -> list[str]:
     """A note when the import unwrapped the yaw (FORMATS.md: it always does): where."""
-    from airbearing.io.log import row_ranges
 
-    jumps = np.flatnonzero(np.diff(shift) != 0) + 1
+    jumps = np.flatnonzero(np.diff(np.round(shift / (2.0 * np.pi))) != 0) + 1
     if not jumps.size:
         return []
     shown = row_ranges(raw_rows[jumps][:10]) + (" ..." if jumps.size > 10 else "")
