@@ -123,7 +123,7 @@ FUNCTION_IMPORTS = {
     "analysis.identification.platform": 4,
     "analysis.identification.yaw_inertia": 6,
     "analysis.identify": 4,
-    "analysis.logs.import_map": 5,
+    "io.log_import": 5,
     "analysis.shooting.constrained": 2,
     "analysis.shooting.errors": 10,
     "analysis.shooting.fit": 1,

@@ -35,7 +35,7 @@ def test_millisecond_time_column_read_as_seconds_says_so(tmp_path, capsys):
 
 
 def test_seconds_given_explicitly_are_believed(tmp_path):
-    from airbearing.analysis.logs.import_map import import_log
+    from airbearing.io.log_import import import_log
 
     raw = tmp_path / "raw.csv"
     pd.DataFrame({"T": np.arange(5) * 2.0, "yaw": np.zeros(5)}).to_csv(raw, index=False)

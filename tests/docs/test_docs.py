@@ -38,7 +38,7 @@ DOCTEST_MODULES = [
     "airbearing.io.builtins",
     "airbearing.io.gains",
     "airbearing.analysis.identify",
-    "airbearing.analysis.logs.import_map",
+    "airbearing.io.log_import",
     "airbearing.models.model",
     "airbearing.design.linearise",
     "airbearing.analysis.cmg.singularity",

@@ -1,4 +1,4 @@
-"""Tests of the import map (FORMATS.md, "Import map"): io.import_map and analysis.logs.import_map.
+"""Tests of the import map (FORMATS.md, "Import map"): io.import_map and io.log_import.
 
 Reference values are the FORMATS.md rules themselves: a known body -> lab attitude is
 written the way a lab would log it (another lab axis up, the body axes turned, the
@@ -17,14 +17,14 @@ import pandas as pd
 import pytest
 
 from airbearing import quaternion as quat
-from airbearing.analysis.logs.import_map import (
+from airbearing.errors import InputError
+from airbearing.io.import_map import import_map_from_dict, read_import_map
+from airbearing.io.log_import import (
     import_log,
     import_log_with_notes,
     lab_up_quaternion,
     unwrap,
 )
-from airbearing.errors import InputError
-from airbearing.io.import_map import import_map_from_dict, read_import_map
 from airbearing.io.testbed import testbed_from_dict as make_testbed
 
 RAW = Path("/work/shared/data/raw")

@@ -103,8 +103,8 @@ def import_(
     _declare_inputs(out, testbed, [(raw, "the raw log"), (map_path, "the import map")])
     log_path = out.plan(output, "-o", _LOG_SUFFIXES)
     tb = _testbed(testbed)
-    from airbearing.analysis.logs.import_map import import_log_with_notes
     from airbearing.io.log import write_log
+    from airbearing.io.log_import import import_log_with_notes
     from airbearing.io.quality import assess
 
     result = import_log_with_notes(raw, map_path, tb)

@@ -2,8 +2,8 @@
 
 The map and the raw cells are read and checked by :mod:`airbearing.io.import_map`;
 this module converts (units, lab axis up, quaternion direction, body axes, yaw
-unwrapping) with the one quaternion module, :mod:`airbearing.quaternion`
-(which is why it lives outside ``io``: ``io`` imports nothing from ``models``).
+unwrapping) with the one quaternion module, :mod:`airbearing.quaternion` (below every
+layer, so the whole import map lives in ``io``).
 
 The import never drops, reorders, fills, smooths or resamples a row: row ``i`` of
 the raw file is row ``i`` of the log.
