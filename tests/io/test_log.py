@@ -407,16 +407,11 @@ def test_write_log_validates_and_leaves_no_file(tmp_path):
     assert read_log(path, CMG_YAW).n == 20
 
 
-def test_72000_rows_written_and_read_fast(tmp_path):
-    # issue 15: a 72,000-row log (1 h at 20 Hz) written "in well under a second" with
-    # pyarrow; the bound here is loose (a loaded 2-core machine), the README has timings
-    import time
-
+def test_72000_rows_written_and_read_back_exactly(tmp_path):
+    # a 72,000-row log (1 h at 20 Hz) round-trips exactly through CSV and Parquet; how fast
+    # is a benchmark's question (docs/benchmarks.md), not a test's: no timing assertion
     log = Log(platform_frame(n=72_000).drop(columns="comment"), testbed=PLATFORM)
     for suffix in (".csv", ".parquet"):
-        start = time.perf_counter()
         path = write_log(log, tmp_path / f"run{suffix}")
-        elapsed = time.perf_counter() - start
         back = read_log(path, PLATFORM)
         pd.testing.assert_frame_equal(back.data, log.data, check_exact=True)
-        assert elapsed < 3.0, (suffix, elapsed)
