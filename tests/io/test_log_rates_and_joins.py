@@ -172,7 +172,8 @@ def test_cli_check_names_the_step_and_import_says_it(tmp_path, capsys):
     assert summary["discontinuity_rows"] == [1200]
     page = tmp_path / "plot.html"
     assert run(["log", "plot", str(tb_path), str(path), "-o", str(page)]) == 0
-    assert "Row 1200: step between rows 1199 and 1200" in page.read_text()
+    # the page says it in the words of `log import` (LogQuality.findings)
+    assert "Discontinuity: row 1200: step between rows 1199 and 1200" in page.read_text()
 
 
 # ----------------------------------------------------------------------------
