@@ -15,11 +15,11 @@ import time
 import numpy as np
 from scipy.integrate import solve_ivp
 
+from airbearing import quaternion as quat
 from airbearing.analysis.simulation.scenarios import free_oscillation, slew
 from airbearing.analysis.simulation.simulate import simulate
 from airbearing.design.attitude import cmg_attitude_controller
 from airbearing.io.testbed import load_testbed
-from airbearing.models import quaternion as quat
 from airbearing.models.model import build_model
 
 

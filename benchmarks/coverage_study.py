@@ -188,7 +188,7 @@ def platform_logs(seed: int, case: str, attitude_noise: float = 0.0):
     for axis in ("wx", "wy", "wz"):
         df[axis] = df[f"true_{axis}"] + _noise(rng, case, t.size, tb.sensors.gyro_noise)
     if attitude_noise > 0:
-        from airbearing.models import quaternion as quat
+        from airbearing import quaternion as quat
 
         half = 0.5 * attitude_noise * rng.standard_normal((t.size, 3))
         dq = np.column_stack([np.sqrt(1.0 - np.sum(half**2, axis=1)), half])

@@ -16,18 +16,16 @@ from pathlib import Path
 
 import pytest
 
-sys.path.insert(0, str(Path(__file__).parent))  # tests/cli_run.py for every test module
-
 
 def _cmg_case(folder: Path, effects: dict, seed: int) -> None:
     """The public CMG examples' run: a 180 deg slew, then back to 90 deg at 20 s (40 s)."""
     import numpy as np
 
+    from airbearing import quaternion as quat
     from airbearing.analysis.simulation.simulate import simulate
     from airbearing.design.attitude import cmg_attitude_controller
     from airbearing.io.log import write_log
     from airbearing.io.testbed import load_testbed, write_testbed
-    from airbearing.models import quaternion as quat
     from airbearing.models.model import build_model
 
     tb = load_testbed("cmg-yaw")
@@ -146,7 +144,7 @@ def demo_run(tmp_path_factory):
     Returns ``(out_dir, completed_process)``. Every test about the demo (the report, its
     rendering, the progress lines, the README's demo command) reads this one run instead of
     running the demo again (it is the longest run in the suite). They are all in
-    ``tests/test_demo.py``, which pytest-xdist (``--dist loadfile``) sends to one worker.
+    ``tests/reporting/test_demo.py``, which pytest-xdist (``--dist loadfile``) sends to one worker.
     """
     import subprocess
 

@@ -30,7 +30,7 @@ _WHERE: dict[str, str] = {
     **dict.fromkeys(["builtin_names", "builtin_toml"], "airbearing.io.builtins"),
     # logs
     **dict.fromkeys(["Log", "read_log", "write_log"], "airbearing.io.log"),
-    **dict.fromkeys(["import_log", "import_log_with_notes"], "airbearing.analysis.logs.import_map"),
+    **dict.fromkeys(["import_log", "import_log_with_notes"], "airbearing.io.log_import"),
     "read_import_map": "airbearing.io.import_map",
     **dict.fromkeys(["LogQuality"], "airbearing.io.quality"),
     **dict.fromkeys(["LogCheck", "check_log", "plot_log"], "airbearing.api.logs"),

@@ -17,6 +17,7 @@ import pytest
 from cli_run import run
 
 import airbearing as ab
+from airbearing import quaternion as quat
 from airbearing.analysis.simulation.scenarios import slew, slew_summary
 from airbearing.design.loops import attitude_loop
 from airbearing.design.margins import analyse_loop
@@ -27,7 +28,6 @@ from airbearing.design.wheels import (
     wheel_bias,
 )
 from airbearing.errors import InputError
-from airbearing.models import quaternion as quat
 
 
 def _wheel_speeds(result):

@@ -6,10 +6,10 @@ import math
 import numpy as np
 import pandas as pd
 import pytest
+from airbearing.analysis.logs.import_map import import_log_with_notes
 from numpy.testing import assert_allclose
 
 import airbearing as ab
-from airbearing.analysis.logs.import_map import import_log_with_notes
 from airbearing.api.logs import check_log
 from airbearing.errors import InputError
 from airbearing.io.log import Log, wheel_saturation

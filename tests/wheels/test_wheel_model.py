@@ -18,9 +18,9 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
+from airbearing import quaternion as quat
 from airbearing.errors import InputError
 from airbearing.io.testbed import Body, Wheels, load_testbed
-from airbearing.models import quaternion as quat
 from airbearing.models.effects import REGISTRY, applicable_effects
 from airbearing.models.model import build_model
 from airbearing.models.wheels import SPEED_LIMIT_BAND

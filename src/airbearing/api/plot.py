@@ -1,9 +1,9 @@
 """``ab.plot(result)``: the picture of a result, drawn by :mod:`airbearing.reporting`.
 
 Results are defined in the lower layers (``analysis/``, ``design/``, ``io/``), which may not
-import ``reporting/`` (the layer rule of ``tests/test_layers.py``); this one function sits
-above both and chooses the figure by the result's type. matplotlib is imported only when a
-figure is drawn.
+import ``reporting/`` (the layer rule of ``tests/architecture/test_layers.py``); this one
+function sits above both and chooses the figure by the result's type. matplotlib is
+imported only when a figure is drawn.
 """
 
 from __future__ import annotations

@@ -194,7 +194,7 @@ def chatter_to_debug_log(verbose: bool, *, fds: bool = False) -> Iterator[Path |
 
 def _register() -> None:
     # each command module adds its commands to `app` on import; modules import only
-    # light things at module level (tests/test_cli_edges.py checks the start-up)
+    # light things at module level (tests/cli/test_cli_edges.py checks the start-up)
     from airbearing.cli import (  # noqa: F401
         balance,
         cmg,

@@ -175,10 +175,10 @@ def balance(
         two_step_,
     )  # fmt: skip
     tb = testbed_arg(testbed)
-    if method is None:  # the law the testbed can run (as gains --split)
-        from airbearing.cli.gains import default_split
+    if method is None and not two_step_:  # the library's default: the split tb can run
+        from airbearing.design.balancing import default_split
 
-        method = Method.lyapunov if two_step_ else Method(default_split(tb))
+        method = Method(default_split(tb))
     if not two_step_:  # each run keeps its whole log in memory
         longest = duration
         if sweep_spec is not None and sweep_spec[0] == "duration":
@@ -192,7 +192,8 @@ def balance(
         from airbearing.analysis.balancing.two_step import two_step
 
         with progress_display("balance") as progress:
-            result = two_step(tb, method=method.value, seed=seed, progress=progress)
+            law = {} if method is None else {"method": method.value}
+            result = two_step(tb, **law, seed=seed, progress=progress)
         summary = result.to_json()
     elif methods is not None:
         with flags:

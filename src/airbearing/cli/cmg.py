@@ -97,7 +97,7 @@ def size(
         outer_radius=outer_radius,
         density=density,
     )
-    out.json(json_path, r.to_dict())
+    out.json(json_path, r.to_json())
     out.commit()
     echo_table(
         [

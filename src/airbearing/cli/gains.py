@@ -36,24 +36,11 @@ LOOP_HELP = (
 )
 
 
-def default_loop(testbed) -> str:
-    """The loop a testbed has: the attitude loop of a CMG or reaction-wheel testbed, or a
-    platform's balancing loop."""
-    wheels = getattr(testbed, "wheels", None) is not None
-    return "attitude" if testbed.kind == "cmg" or wheels else "balancing"
-
-
 #: --split's help: the default depends on the testbed.
 SPLIT_HELP = (
     "Balancing PID split (seed 000); default: mixed on a testbed with magnetorquers and a "
     "cage field, mechanical otherwise."
 )
-
-
-def default_split(testbed) -> str:
-    """The seed-000 split a platform can run: mixed needs magnetorquers and a field."""
-    magnetic = testbed.magnetorquers is not None and testbed.field is not None
-    return "mixed" if magnetic else "mechanical"
 
 
 def _call(fn, *args, progress=None, **kw):
@@ -136,9 +123,10 @@ def gains(
     testbed_input(out, testbed)
     json_path = out.plan(json_out, "--json", (".json",))
     tb = testbed_arg(testbed)
+    from airbearing.design.loops import default_loop  # the library chooses
+
     loop = loop or default_loop(tb)
     _refuse_balancing_options(loop, ("split", "offset_range_mm"))
-    split = split or default_split(tb)
     number("--phase-margin-deg", phase_margin_deg, lo=0, hi=90, lo_open=True, hi_open=True,
            unit="deg")  # fmt: skip
     number("--gain-margin-db", gain_margin_db, lo=0, lo_open=True, unit="dB")
@@ -169,7 +157,7 @@ def gains(
     with progress_display("gains") as progress:
         progress(f"tuning the {loop} loop of {tb.name}")
         res = _call(tune, tb, loop, spec, split=split, progress=progress)
-    data = res.to_dict()
+    data = res.to_json()
     out.json(json_path, data)
     out.commit()
     units = gain_units(tb, loop)
@@ -253,9 +241,10 @@ def report(
     html_path = out.plan(output, "-o", (".html",))
     json_path = out.plan(json_out, "--json", (".json",))
     tb = testbed_arg(testbed)
+    from airbearing.design.loops import default_loop  # the library chooses
+
     loop = loop or default_loop(tb)
     _refuse_balancing_options(loop, ("split",))
-    split = split or default_split(tb)
     spec_dict = None
     g = None
     if gains_file is not None:

@@ -103,8 +103,8 @@ def import_(
     _declare_inputs(out, testbed, [(raw, "the raw log"), (map_path, "the import map")])
     log_path = out.plan(output, "-o", _LOG_SUFFIXES)
     tb = _testbed(testbed)
-    from airbearing.analysis.logs.import_map import import_log_with_notes
     from airbearing.io.log import write_log
+    from airbearing.io.log_import import import_log_with_notes
     from airbearing.io.quality import assess
 
     result = import_log_with_notes(raw, map_path, tb)
@@ -136,13 +136,8 @@ def _import_summary(log, quality) -> None:
     """``log import``'s lines on one imported log: rows, segments, steps, outliers."""
     typer.echo(f"rows: {log.n} (t = {log.t[0]:g} .. {log.t[-1]:g} s)")
     typer.echo(f"segments: {quality.n_segments} (rows {_segments_text(quality)})")
-    for d in quality.discontinuities:
-        typer.echo(f"discontinuity: row {d.row}: {d.reason}")
-    for change in quality.rate_changes:
-        typer.echo(f"rate change: {change['reason']}")
-    typer.echo(f"outlier rows: {_rows(quality.outlier_rows)}")
-    for warning in quality.still_channels:
-        typer.echo(f"still: {warning}")
+    for what, text in quality.findings():
+        typer.echo(f"{what}: {text}")
 
 
 #: Segments printed by ``log check`` and ``log import`` (the first ones and the last);

@@ -12,6 +12,8 @@ from collections.abc import Iterable, Mapping, Sequence
 
 import typer
 
+from airbearing.io.units import split_unit
+
 __all__ = [
     "cell",
     "table",
@@ -24,25 +26,6 @@ __all__ = [
     "matrix_table",
     "tidy_numbers",
 ]
-
-#: Units taken from a key's suffix (the JSON contract's naming): ``peak_rate_deg_s`` -> deg/s.
-_SUFFIX_UNITS = (
-    ("_deg_s", "deg/s"),
-    ("_rad_s", "rad/s"),
-    ("_deg", "deg"),
-    ("_rad", "rad"),
-    ("_mm", "mm"),
-    ("_um", "um"),
-    ("_m", "m"),
-    ("_s", "s"),
-    ("_hz", "Hz"),
-    ("_db", "dB"),
-    ("_kg", "kg"),
-    ("_nm", "N m"),
-    ("_nms", "N m s"),
-    ("_j", "J"),
-)
-
 
 #: Units of JSON keys named without a unit suffix.
 _KEY_UNITS = {"dipole_rms": "A m^2"}  # magnetorquer dipole (seed 000)
@@ -89,11 +72,8 @@ def unit_of(key: str) -> tuple[str, str]:
 def _unit_of(key: str) -> tuple[str, str]:
     if key in _KEY_UNITS:
         return key.replace("_", " "), _KEY_UNITS[key]
-    low = key.lower()
-    for suffix, unit in _SUFFIX_UNITS:
-        if low.endswith(suffix) and len(low) > len(suffix):
-            return key[: -len(suffix)].replace("_", " "), unit
-    return key.replace("_", " "), ""
+    stem, unit = split_unit(key)
+    return stem.replace("_", " "), unit
 
 
 #: A number written with more digits than a person reads (``-3.690476190476191e-05``).

@@ -5,11 +5,11 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
+from airbearing import quaternion as quat
 from airbearing.design.controller import Controller
 from airbearing.design.steering import saturate_rates, steering_function
 from airbearing.errors import InputError
 from airbearing.io.coerce import as_gains
-from airbearing.models import quaternion as quat
 from airbearing.models.cmg import jacobian_normalised, momentum_normalised
 
 __all__ = ["cmg_attitude_controller", "SEED001_GAINS", "quaternion_pid", "pid_c0", "PID_STATES"]

@@ -55,6 +55,7 @@ __all__ = [
     "TILT_INTEGRAL_RATE",
     "adaptive_balancing_controller",
     "balancing_controller",
+    "default_split",
     "dipole_for_torque",
     "field_in_body",
     "in_plane_pid",
@@ -371,7 +372,7 @@ def field_in_body(field_lab, g_hat, q):
     b = np.asarray(field_lab, dtype=float)
     if np.hypot(b[0], b[1]) <= 1e-12 * abs(b[2]):
         return -b[2] * g_hat
-    from airbearing.models import quaternion as quat
+    from airbearing import quaternion as quat
 
     return quat.rotate_inverse(q, ca.DM(b))
 
@@ -650,6 +651,33 @@ def adaptive_balancing_controller(
         uses_mag=False, sliders=sliders, magnetorquers=None, slider_start=slider_start,
         slider_zero=slider_zero, extra_law_names=("r_hat_x", "r_hat_y", "r_hat_z"),
     )  # fmt: skip
+
+
+def default_split(testbed) -> str:
+    """The seed-000 PID split a platform can run: the default of every balancing function.
+
+    Parameters
+    ----------
+    testbed : Testbed or Model
+        The platform.
+
+    Returns
+    -------
+    str
+        ``"mixed"`` (sliders P and I, magnetorquers D; seed 000 eqs. 5, 7, the law of its
+        Tables 1-2) on a testbed with magnetorquers and a field to push against;
+        ``"mechanical"`` (the sliders carry all three terms, seed 000 eq. 8), the only split
+        a platform without magnetorquers or field can run, otherwise.
+
+    Examples
+    --------
+    >>> import airbearing as ab
+    >>> default_split(ab.load_testbed("seed000-tabletop"))
+    'mixed'
+    """
+    tb = getattr(testbed, "testbed", testbed)
+    magnetic = tb.magnetorquers is not None and tb.field is not None
+    return "mixed" if magnetic else "mechanical"
 
 
 #: Method name -> how to build it (``balancing_controller``).

@@ -29,6 +29,7 @@ from dataclasses import dataclass, field
 import casadi as ca
 import numpy as np
 
+from airbearing import quaternion as quat
 from airbearing.design.actuators import SliderActuator
 from airbearing.design.attitude import GAIN_NAMES as ATTITUDE_GAIN_NAMES
 from airbearing.design.attitude import SEED001_GAINS, cmg_attitude_controller
@@ -46,7 +47,6 @@ from airbearing.design.wheels import (
 )
 from airbearing.errors import InputError
 from airbearing.io.coerce import as_testbed
-from airbearing.models import quaternion as quat
 from airbearing.models.model import Model, build_model
 
 __all__ = [

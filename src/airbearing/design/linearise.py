@@ -27,9 +27,9 @@ from functools import lru_cache
 import casadi as ca
 import numpy as np
 
+from airbearing import quaternion as quat
 from airbearing.design import _control as ct
 from airbearing.errors import InputError, SolverError
-from airbearing.models import quaternion as quat
 from airbearing.models.model import INERTIA_NAMES, Model
 
 __all__ = [

@@ -43,6 +43,7 @@ from dataclasses import dataclass, field, replace
 import casadi as ca
 import numpy as np
 
+from airbearing import quaternion as quat
 from airbearing.design import _control as ct
 from airbearing.design.actuators import MagnetorquerActuator, SliderActuator
 from airbearing.design.attitude import SEED001_GAINS, cmg_attitude_controller
@@ -51,6 +52,7 @@ from airbearing.design.balancing import (
     MIXED,
     SEED000_GAINS,
     BalancingGains,
+    default_split,
     pid_balancing_controller,
 )
 from airbearing.design.controller import Controller
@@ -72,7 +74,6 @@ from airbearing.design.wheels import (
 )
 from airbearing.errors import InputError
 from airbearing.io.testbed import Testbed
-from airbearing.models import quaternion as quat
 from airbearing.models.model import Model
 from airbearing.models.structure_cache import built_model
 
@@ -85,6 +86,7 @@ __all__ = [
     "balancing_loop",
     "attitude_loop",
     "make_loop",
+    "default_loop",
     "with_delay",
     "without_momentum_poles",
 ]
@@ -624,7 +626,7 @@ def controller_ref0(model, controller) -> np.ndarray:
 def balancing_loop(
     testbed_or_model,
     *,
-    split: str = "mixed",
+    split: str | None = None,
     gains=None,
     p=None,
     delay_samples: int = 1,
@@ -635,8 +637,9 @@ def balancing_loop(
     ----------
     testbed_or_model : Testbed or Model
         A ``kind = "platform"``, dof 3 testbed.
-    split : {"mixed", "mechanical"}
-        Which actuator carries which PID term (seed 000 eqs. 5, 7 / eq. 8).
+    split : {"mixed", "mechanical"}, optional
+        Which actuator carries which PID term (seed 000 eqs. 5, 7 / eq. 8); default the
+        split the testbed can run (:func:`~airbearing.design.balancing.default_split`).
     gains : mapping or sequence, optional
         ``K_p`` (N m), ``K_d`` (N m s), ``K_dK_i`` (N m/s); default seed 000 Tables 1-2.
     p : ndarray, optional
@@ -651,6 +654,7 @@ def balancing_loop(
             f"{tb.source}: the balancing loop needs a kind = 'platform', dof = 3 testbed; "
             f"'{tb.name}' is kind = '{model.kind}', dof = {model.dof}"
         )
+    split = default_split(tb) if split is None else split
     if split not in SPLITS:
         raise InputError(f"split '{split}': expected one of {', '.join(SPLITS)}")
     g = _gain_dict(tuple(BALANCING_GAINS), BALANCING_GAINS if gains is None else gains)
@@ -803,6 +807,29 @@ def _lin_ctrl_cached(model, ctl, tp, channels, kind) -> _LinearController:
         _LC_CACHE.clear()
     _LC_CACHE[key] = (model, lc)
     return lc
+
+
+def default_loop(testbed) -> str:
+    """The loop a testbed has: the attitude loop of a CMG or reaction-wheel testbed, a
+    platform's balancing loop.
+
+    Parameters
+    ----------
+    testbed : Testbed or Model
+
+    Returns
+    -------
+    str
+        ``"attitude"`` or ``"balancing"`` (:data:`LOOPS`).
+
+    Examples
+    --------
+    >>> import airbearing as ab
+    >>> default_loop(ab.load_testbed("cmg-yaw")), default_loop(ab.load_testbed("rw-yaw"))
+    ('attitude', 'attitude')
+    """
+    tb = getattr(testbed, "testbed", testbed)
+    return "attitude" if tb.kind == "cmg" or tb.wheels is not None else "balancing"
 
 
 def make_loop(testbed_or_model, loop: str, **options) -> Loop:

@@ -24,7 +24,7 @@ For a MIMO loop, :func:`multiloop_disk_margin` gives the disk margin for simulta
 independent perturbations of every channel: ``1 / max_w mu(S - I/2)`` with ``mu``
 bounded above by the D-scaled largest singular value (exact for two channels, an upper
 bound, so a conservative margin, beyond). An infinite margin is ``math.inf`` here and
-``None`` in JSON (:meth:`LoopMargins.to_dict`).
+``None`` in JSON (:meth:`LoopMargins.to_json`).
 """
 
 from __future__ import annotations
@@ -118,8 +118,6 @@ class LoopMargins:
         out["sensitivity_peak_db"] = json_number(self.sensitivity_peak_db)
         out["bandwidth_hz"] = json_number(self.bandwidth_hz)
         return out
-
-    to_dict = to_json  # the earlier name
 
 
 def frequency_grid(sys: ct.StateSpace, n: int = _N_GRID) -> np.ndarray:
@@ -569,14 +567,12 @@ class LoopAnalysis:
 
     def to_json(self) -> dict:
         """``{"loops": {channel: {...}}, "multiloop": {...}, "stable": bool}`` (None = inf)."""
-        out = {"loops": {k: m.to_dict() for k, m in self.channels.items()}, "stable": self.stable}
+        out = {"loops": {k: m.to_json() for k, m in self.channels.items()}, "stable": self.stable}
         if self.multiloop is not None:
             out["multiloop"] = {
                 k: json_number(v) if isinstance(v, float) else v for k, v in self.multiloop.items()
             }
         return out
-
-    to_dict = to_json  # the earlier name
 
 
 def analyse_loop(

@@ -174,8 +174,6 @@ class SizingResult:
             "warnings": list(self.warnings),
         }
 
-    to_dict = to_json  # the earlier name
-
 
 def _positive(name: str, value) -> float:
     try:

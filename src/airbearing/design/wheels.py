@@ -44,11 +44,11 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
+from airbearing import quaternion as quat
 from airbearing.design.attitude import PID_STATES, pid_c0, quaternion_pid
 from airbearing.design.controller import Controller
 from airbearing.errors import InputError
 from airbearing.io.coerce import as_gains
-from airbearing.models import quaternion as quat
 
 __all__ = [
     "WHEEL_GAIN_NAMES",

@@ -3,9 +3,8 @@
 An import map says how a lab's own log file (its column names, units, lab axis up,
 quaternion direction and body axes) becomes a log of FORMATS.md. This module reads
 and checks the map and the raw file's cells; the conversion itself, which needs the
-quaternion algebra of :mod:`airbearing.models.quaternion`, is
-:func:`airbearing.analysis.logs.import_map.import_log` (``io`` imports nothing from
-``models``, DESIGN.md).
+quaternion algebra of :mod:`airbearing.quaternion`, is
+:func:`airbearing.io.log_import.import_log`.
 
 Besides the tables of FORMATS.md, a map may have the top-level keys of
 :data:`FILE_KEYS` (airbearing's additions, for real exports): ``missing`` (dropouts

@@ -5,7 +5,7 @@ explanation wins, the reasons); this module holds the arithmetic it runs on ever
 row of a log, each in two forms where speed matters: a per-row reference (one
 least-squares solve per row, the definition) and a fast path for regular windows
 (one set of weights per window shape) that gives the same numbers
-(``tests/test_quality_fast.py`` checks it against the reference).
+(``tests/io/test_log_quality_fast.py`` checks it against the reference).
 """
 
 from __future__ import annotations

@@ -31,7 +31,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from airbearing.io.quaternion_signs import continuous_signs
+from airbearing.quaternion import continuous_signs
 
 if TYPE_CHECKING:
     from airbearing.io.log import Log

@@ -146,7 +146,7 @@ from airbearing.io.local_fits import loo as _loo
 from airbearing.io.local_fits import noise_gain as _noise_gain
 from airbearing.io.local_fits import regular_weights as _regular_weights
 from airbearing.io.local_fits import window_median as _window_median
-from airbearing.io.quaternion_signs import continuous_signs
+from airbearing.quaternion import continuous_signs
 
 if TYPE_CHECKING:
     from airbearing.io.log import Log
@@ -317,6 +317,35 @@ class LogQuality:
     def n_segments(self) -> int:
         """Number of segments."""
         return len(self.segments)
+
+    def findings(self, shown_rows: int = 20) -> tuple[tuple[str, str], ...]:
+        """What the check found besides the segments, in words: ``(what, text)`` pairs.
+
+        The one text of ``log import``'s summary and the log plot's page: each step, each
+        change of sampling rate, the outlier rows (the first ``shown_rows`` and how many in
+        all) and each channel that is quieter than the testbed says.
+
+        Parameters
+        ----------
+        shown_rows : int
+            Outlier rows listed before ``... (N in all)``.
+
+        Returns
+        -------
+        tuple of (str, str)
+            ``("discontinuity", "row 532: ...")``, ``("rate change", ...)``,
+            ``("outlier rows", "400, 1700")`` (``"none"`` when there are none),
+            ``("still", ...)``, in that order.
+        """
+        out = [("discontinuity", f"row {d.row}: {d.reason}") for d in self.discontinuities]
+        out += [("rate change", str(change["reason"])) for change in self.rate_changes]
+        rows = list(self.outlier_rows)
+        text = ", ".join(str(r) for r in rows[:shown_rows]) or "none"
+        if len(rows) > shown_rows:
+            text += f", ... ({len(rows)} in all)"
+        out.append(("outlier rows", text))
+        out += [("still", warning) for warning in self.still_channels]
+        return tuple(out)
 
     @property
     def input_rows(self) -> tuple[int, ...]:

@@ -45,9 +45,9 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
+from airbearing import quaternion as quat
 from airbearing.errors import InputError
 from airbearing.io.testbed import Testbed
-from airbearing.models import quaternion as quat
 from airbearing.models.cmg import momentum_normalised
 from airbearing.models.effects import (
     WHEEL_EFFECTS,

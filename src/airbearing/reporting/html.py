@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 import matplotlib
 
 from airbearing.io.output import write_atomic, write_json  # noqa: F401  (re-exported)
+from airbearing.io.units import split_unit
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
@@ -35,22 +36,6 @@ __all__ = [
 NONE_TEXT = "—"
 #: Texts other code uses for "no value"; a table shows :data:`NONE_TEXT` for each.
 _MISSING_TEXTS = frozenset({"", "-", "–", "—", "nan", "NaN", "None", "none", "n/a", "N/A"})
-#: Unit suffixes of code-style column names (the JSON's naming) and their unit.
-_UNIT_SUFFIXES = (
-    ("_deg_s", "deg/s"),
-    ("_rad_s", "rad/s"),
-    ("_deg", "deg"),
-    ("_rad", "rad"),
-    ("_mm", "mm"),
-    ("_um", "um"),
-    ("_m", "m"),
-    ("_s", "s"),
-    ("_hz", "Hz"),
-    ("_db", "dB"),
-    ("_kg", "kg"),
-    ("_nm", "N m"),
-    ("_j", "J"),
-)
 #: Columns whose True/False is a verdict (pass/FAIL); other booleans print yes/no.
 _VERDICT_WORDS = ("ok", "met", "pass", "stable", "verdict")
 
@@ -107,15 +92,11 @@ def column_label(name: str) -> str:
     ``t peak (s)``; a name with a space (already for people) is kept."""
     if " " in name or "_" not in name:
         return name
-    unit = ""
-    low = name.lower()
-    for suffix, u in _UNIT_SUFFIXES:
-        if low.endswith(suffix) and len(name) > len(suffix):
-            stem = name[: -len(suffix)]
-            if suffix == "_m" and "_" not in stem:
-                break  # min_m: the manipulability m, not metres
-            name, unit = stem, u
-            break
+    stem, unit = split_unit(name)
+    if unit == "m" and "_" not in stem:
+        unit = ""  # min_m: the manipulability m, not metres
+    else:
+        name = stem
     parts = name.split("_")
     if len(parts) > 2 and re.fullmatch(r"[a-z]\w*0", parts[-1]):  # normalised by h0, J0, ...
         text = " ".join(parts[:-1]) + " / " + parts[-1]
@@ -124,22 +105,15 @@ def column_label(name: str) -> str:
     return f"{text} ({unit})" if unit else text
 
 
-_KEY_UNITS = (
-    ("_rad_s", "rad/s"), ("_deg_s", "deg/s"), ("_db", "dB"), ("_deg", "deg"), ("_nm", "N m"),
-    ("_m", "m"), ("_s", "s"), ("_pct", "%"),
-)  # fmt: skip
-
-
 def pretty_key(key: str) -> str:
     """A JSON key or result column as a header: ``gain_margin_db`` -> ``gain margin (dB)``,
     ``gimbal_min_deg[0]`` -> ``gimbal min [0] (deg)``."""
     index = ""
     if key.endswith("]") and "[" in key:
         key, index = key[: key.index("[")], " " + key[key.index("[") :]
-    for suffix, unit in _KEY_UNITS:
-        if key.endswith(suffix):
-            return f"{key[: -len(suffix)].replace('_', ' ')}{index} ({unit})"
-    return key.replace("_", " ") + index
+    stem, unit = split_unit(key)
+    text = stem.replace("_", " ") + index
+    return f"{text} ({unit})" if unit else text
 
 
 def sentence(text: str) -> str:

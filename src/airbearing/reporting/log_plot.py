@@ -276,15 +276,11 @@ def log_report_html(log: Log, quality: LogQuality | None = None) -> str:
     report = Report(f"Log {log.source}")
     report.raw(figure_html(log_figure(log, quality), "Logged channels against time."))
     if quality is not None:
-        outliers = ", ".join(map(str, quality.outlier_rows)) or "none"
         report.paragraph(
-            f"{log.n} rows in {quality.n_segments} segment(s). Jitter {quality.jitter:.3f}. "
-            f"Outlier rows: {outliers}."
+            f"{log.n} rows in {quality.n_segments} segment(s). Jitter {quality.jitter:.3f}."
         )
-        for d in quality.discontinuities:
-            report.paragraph(f"Row {d.row}: {d.reason}.")
-        for change in quality.rate_changes:
-            report.paragraph(f"Rate change: {change['reason']}")
+        for what, text in quality.findings():  # the words of ``log import``
+            report.paragraph(f"{what.capitalize()}: {text}")
         if quality.outliers:
             report.table(
                 [

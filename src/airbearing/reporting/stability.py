@@ -16,12 +16,12 @@ from dataclasses import replace
 import matplotlib.pyplot as plt
 import numpy as np
 
+from airbearing import quaternion as quat
 from airbearing.analysis.simulation.simulate import closed_loop_rollout
 from airbearing.design.loops import Loop, make_loop, with_delay
 from airbearing.design.margins import _response, analyse_loop, frequency_grid, json_number
 from airbearing.design.tuning import Spec, evaluate, scenario_response, tune
 from airbearing.design.tuning.verdict import SIMULTANEOUS_GAIN, SIMULTANEOUS_PHASE
-from airbearing.models import quaternion as quat
 from airbearing.reporting.html import Report, pretty_key, table_html
 
 __all__ = [
@@ -296,13 +296,13 @@ def report_for_loop(
         "loop": loop.kind,
         "name": loop.name,
         "gains": dict(loop.gains),
-        "spec": spec.to_dict(),
+        "spec": spec.to_json(),
         "met": met,
-        "checks": [ch.to_dict() for ch in checks],
-        **d.to_dict(),
-        "continuous": c.to_dict(),
+        "checks": [ch.to_json() for ch in checks],
+        **d.to_json(),
+        "continuous": c.to_json(),
         "delay_samples": loop.delay_samples,
-        "without_delay": undelayed.to_dict(),
+        "without_delay": undelayed.to_json(),
         "worst_case": {
             k: (json_number(v) if isinstance(v, float) else v) for k, v in worst.items()
         },
@@ -430,7 +430,7 @@ def _margin_tables(rep: Report, d, c, checks, per, spec: Spec, worst: dict) -> N
     rep.table(_margin_rows(c, None), legend=_margin_legend(c))
     rep.heading("Specification, worst case over the uncertainty box", 3)
     rep.table(
-        [_check_row(ch.to_dict()) for ch in checks],
+        [_check_row(ch.to_json()) for ch in checks],
         ["check", "value", "required", "verdict", "by"],
         legend="not evaluated, or unlimited (no crossing)",
     )
@@ -564,7 +564,7 @@ def stability_report(
     loop: str,
     *,
     gains=None,
-    split: str = "mixed",
+    split: str | None = None,
     spec: Spec | None = None,
     progress=None,
 ):
@@ -580,8 +580,10 @@ def stability_report(
         The loop's gains in SI (balancing: K_p N m, K_d N m s, K_d K_i N m/s; attitude:
         K_p, K_i, K_w as :func:`~airbearing.design.attitude.cmg_attitude_controller` takes
         them); default the seed papers' gains.
-    split : {"mixed", "mechanical"}
-        How the balancing PID is shared between sliders and magnetorquers (balancing only).
+    split : {"mixed", "mechanical"}, optional
+        How the balancing PID is shared between sliders and magnetorquers (balancing only);
+        default the split the testbed can run
+        (:func:`~airbearing.design.balancing.default_split`).
     spec : Spec, optional
         The specification the checks are made against (margins in dB and deg, bandwidth
         in rad/s); default :class:`~airbearing.design.tuning.Spec`'s.

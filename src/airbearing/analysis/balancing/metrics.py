@@ -21,12 +21,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from airbearing import quaternion as quat
 from airbearing.analysis.balancing.drift import window_drift
 from airbearing.analysis.shooting.filters import savgol
 from airbearing.analysis.simulation.simulate import SimResult
 from airbearing.errors import InputError
 from airbearing.io.testbed import Testbed
-from airbearing.models import quaternion as quat
 
 __all__ = [
     "SEED000_TABLES",

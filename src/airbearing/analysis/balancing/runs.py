@@ -33,15 +33,20 @@ from functools import lru_cache
 
 import numpy as np
 
+from airbearing import quaternion as quat
 from airbearing.analysis.balancing.metrics import BalancingMetrics, balancing_metrics, true_offset
 from airbearing.analysis.balancing.transient import integral_time_constant, settling_time
 from airbearing.analysis.simulation.simulate import SimResult, simulate
 from airbearing.design.actuators import SliderActuator
-from airbearing.design.balancing import METHODS, SEED000_GAINS, balancing_controller
+from airbearing.design.balancing import (
+    METHODS,
+    SEED000_GAINS,
+    balancing_controller,
+    default_split,
+)
 from airbearing.design.controller import constant_input
 from airbearing.errors import InputError
 from airbearing.io.testbed import Testbed
-from airbearing.models import quaternion as quat
 from airbearing.models.model import Model
 from airbearing.models.structure_cache import built_model
 
@@ -201,7 +206,7 @@ def check_inputs(testbed: Testbed, method: str, duration: float) -> None:
 
 def run_balancing(
     testbed: Testbed,
-    method: str = "mixed",
+    method: str | None = None,
     *,
     duration: float = 300.0,
     initial_offset: float = -0.5e-3,
@@ -225,7 +230,9 @@ def run_balancing(
     testbed : Testbed
         A platform testbed; its ``[masses]``, ``[sensors]``, ``[body] torque_noise`` and
         ``[magnetorquers]`` give the actuator and sensor imperfections.
-    method : {"mechanical", "mixed", "lyapunov", "adaptive"}
+    method : {"mechanical", "mixed", "lyapunov", "adaptive"}, optional
+        The balancing law; default the PID split the testbed can run
+        (:func:`~airbearing.design.balancing.default_split`).
     duration : float
         s, seed 000: 300 s.
     initial_offset : float
@@ -268,6 +275,7 @@ def run_balancing(
     from airbearing.io.coerce import as_testbed
 
     testbed = as_testbed(testbed)
+    method = default_split(testbed) if method is None else method
     gains = _checked_gains(gains)
     _check_run(testbed, method, duration, initial_offset, start)
     if vertical_offset is None:

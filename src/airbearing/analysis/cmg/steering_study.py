@@ -26,6 +26,7 @@ from dataclasses import dataclass, field
 import casadi as ca
 import numpy as np
 
+from airbearing import quaternion as quat
 from airbearing.analysis.cmg.singularity import (
     measure,
     singular_states,
@@ -40,7 +41,6 @@ from airbearing.design.steering import (
 )
 from airbearing.errors import InputError
 from airbearing.io.testbed import Body, Testbed, load_testbed
-from airbearing.models import quaternion as quat
 from airbearing.models.cmg import jacobian_normalised, momentum_normalised
 
 __all__ = [

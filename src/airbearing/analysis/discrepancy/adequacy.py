@@ -421,8 +421,8 @@ class Adequacy:
 
 def _states(problem, fit, datas):
     """Residual (gap unit), yaw, rate, time and segment label at every usable window sample."""
+    from airbearing import quaternion as quat
     from airbearing.analysis.discrepancy.replay import primary_series
-    from airbearing.models import quaternion as quat
 
     s = primary_series(problem, fit.delta, fit.p)
     w = problem.windows
@@ -480,7 +480,7 @@ def _defects(problem, fit, datas):
     """The unexplained torque at each hand-over of linked pieces: the whitened rate defects
     (process-noise rows of the residual), with yaw, rate, time and segment there; None
     without process-noise rows."""
-    from airbearing.models import quaternion as quat
+    from airbearing import quaternion as quat
 
     r = np.asarray(fit.extra.get("r", ()))
     n_meas = int(getattr(problem, "n_meas", r.size))

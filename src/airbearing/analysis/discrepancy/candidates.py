@@ -54,12 +54,12 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
+from airbearing import quaternion as quat
 from airbearing.analysis.shooting.filters import _savgol_weights, savgol
 from airbearing.analysis.shooting.logs import ReplayData
 from airbearing.errors import InputError
 from airbearing.io.testbed import Testbed
 from airbearing.io.vocabulary import EFFECTS as VOCABULARY
-from airbearing.models import quaternion as quat
 from airbearing.models.effects import REGISTRY, applicable_effects, effect_param_names
 from airbearing.models.model import Model
 

@@ -6,11 +6,11 @@ from dataclasses import dataclass, field, fields
 
 import numpy as np
 
+from airbearing import quaternion as quat
 from airbearing.analysis.discrepancy.replay import primary_series
 from airbearing.analysis.shooting import Fit, ShootingProblem
 from airbearing.analysis.shooting.filters import welch
 from airbearing.analysis.shooting.logs import NoiseFloor
-from airbearing.models import quaternion as quat
 
 __all__ = ["Localisation", "localise"]
 

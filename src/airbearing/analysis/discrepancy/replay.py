@@ -22,6 +22,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from airbearing import quaternion as quat
 from airbearing.analysis.shooting import (
     THETA_SLOTS,
     Fit,
@@ -57,7 +58,6 @@ from airbearing.errors import InputError
 from airbearing.io.coerce import as_effects, as_float, as_int, as_logs, as_testbed
 from airbearing.io.log import Log
 from airbearing.io.testbed import Testbed
-from airbearing.models import quaternion as quat
 from airbearing.models.model import Model
 from airbearing.models.structure_cache import built_model
 

@@ -4,7 +4,7 @@ What :func:`airbearing.analysis.discrepancy.search.discrepancy` returns: the nam
 effects with their honest errors, the adequacy verdict, the agreement across runs, the
 candidates of every round and the fits behind them; ``str`` is the verdict a person
 reads, ``to_json()`` the contract of ``airbearing discrepancy --json``
-(docs/reference/discrepancy-json.md), ``plot()`` the report's figures.
+(docs/reference/json/discrepancy.md), ``plot()`` the report's figures.
 """
 
 from __future__ import annotations

@@ -22,10 +22,10 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from airbearing import quaternion as quat
 from airbearing.errors import InputError
 from airbearing.io.log import LOG_COLUMNS, Log
 from airbearing.io.testbed import Testbed
-from airbearing.models import quaternion as quat
 
 __all__ = [
     "COLUMNS_USED",

@@ -30,6 +30,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from airbearing import quaternion as quat
 from airbearing.analysis.identification.data import RATE_DEGREE, RATE_HALF_WIDTH, _local_poly
 from airbearing.analysis.identification.data import log_quality as _quality
 from airbearing.analysis.identification.result import IdentificationResult
@@ -37,7 +38,6 @@ from airbearing.errors import InputError
 from airbearing.io.log import Log
 from airbearing.io.output import to_jsonable
 from airbearing.io.testbed import Body, Testbed
-from airbearing.models import quaternion as quat
 
 __all__ = ["YawIdentification", "identify_yaw_inertia"]
 

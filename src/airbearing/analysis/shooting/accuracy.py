@@ -14,6 +14,7 @@ import weakref
 
 import numpy as np
 
+from airbearing import quaternion as quat
 from airbearing.analysis.shooting.functions import DEFAULT_SUBSTEPS
 from airbearing.analysis.shooting.logs import (
     ATTITUDE_SIGMA_MIN,
@@ -23,7 +24,6 @@ from airbearing.analysis.shooting.logs import (
     _attitude_diff,
 )
 from airbearing.analysis.shooting.windows import WindowSet
-from airbearing.models import quaternion as quat
 from airbearing.models.model import Model
 
 __all__ = [

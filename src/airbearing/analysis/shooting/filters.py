@@ -3,7 +3,7 @@ Welch power spectral density (the discrepancy search, the balancing metrics).
 
 They give the numbers of ``scipy.signal.savgol_filter(..., mode="interp")`` and
 ``scipy.signal.welch`` (defaults: periodic Hann window, half overlap, constant detrend,
-one-sided density), checked against scipy in ``tests/test_discrepancy_speed.py``.
+one-sided density), checked against scipy in ``tests/discrepancy/test_discrepancy_search.py``.
 Importing ``scipy.signal`` costs about 1 s of CPU (it pulls ``scipy.stats`` in), a
 sixth of a whole ``airbearing discrepancy`` run once the search is screened.
 """

@@ -19,7 +19,7 @@ import casadi as ca
 import numpy as np
 import scipy.sparse as sp
 
-from airbearing.models import quaternion as quat
+from airbearing import quaternion as quat
 from airbearing.models.model import Model
 
 #: RK4 sub-steps per sample of a replay: on the seed-004 free oscillation (rates to 1.5 rad/s,

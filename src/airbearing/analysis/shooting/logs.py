@@ -51,12 +51,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from airbearing import quaternion as quat
 from airbearing.analysis.shooting.windows import WindowSet
 from airbearing.errors import InputError
 from airbearing.io.coerce import check_gyro_agrees
 from airbearing.io.log import Log
 from airbearing.io.testbed import Testbed
-from airbearing.models import quaternion as quat
 from airbearing.models.model import build_model
 
 __all__ = [

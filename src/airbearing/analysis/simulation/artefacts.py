@@ -22,10 +22,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from airbearing import quaternion as quat
 from airbearing.errors import InputError
 from airbearing.io.log import Log
 from airbearing.io.testbed import Testbed
-from airbearing.models import quaternion as quat
 
 __all__ = [
     "GLITCH_KINDS",

@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from airbearing import quaternion as quat
 from airbearing.analysis.simulation.artefacts import (
     GLITCH_KINDS,
     sample_times,
@@ -28,7 +29,6 @@ from airbearing.analysis.simulation.scenarios import tilt_note
 from airbearing.errors import InputError
 from airbearing.io.log import Log
 from airbearing.io.testbed import Testbed
-from airbearing.models import quaternion as quat
 
 __all__ = ["Rehearsal", "rehearsal_log", "rehearsal_summary", "parse_glitch", "parse_gap"]
 

@@ -7,6 +7,7 @@ from functools import lru_cache
 
 import numpy as np
 
+from airbearing import quaternion as quat
 from airbearing.analysis.simulation.simulate import SimResult, simulate
 from airbearing.design.attitude import cmg_attitude_controller
 from airbearing.design.controller import constant_input
@@ -14,7 +15,6 @@ from airbearing.design.wheels import has_wheels, wheel_attitude_controller
 from airbearing.errors import InputError
 from airbearing.io.coerce import as_effects, as_float, as_int, as_testbed, as_vector
 from airbearing.io.testbed import Testbed
-from airbearing.models import quaternion as quat
 from airbearing.models.model import Model, build_model
 
 __all__ = [

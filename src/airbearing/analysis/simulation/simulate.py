@@ -16,10 +16,10 @@ import casadi as ca
 import numpy as np
 import pandas as pd
 
+from airbearing import quaternion as quat
 from airbearing.design.controller import Controller
 from airbearing.errors import InputError
 from airbearing.io.log import Log
-from airbearing.models import quaternion as quat
 from airbearing.models.compiled import LOOP_MIN_STEPS
 from airbearing.models.loop import ChunkedLoop
 from airbearing.models.model import Model

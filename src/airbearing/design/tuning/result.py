@@ -76,15 +76,13 @@ class TuningResult:
             "split": self.split,
             "testbed": self.testbed,
             "gains": dict(self.gains),
-            "spec": self.spec.to_dict(),
+            "spec": self.spec.to_json(),
             "met": self.met,
-            "checks": [c.to_dict() for c in self.checks],
+            "checks": [c.to_json() for c in self.checks],
             "worst_case": {k: num(v) for k, v in self.worst_case.items()},
             "message": self.message,
             "design": {k: num(v) for k, v in self.design.items()},
         }
-
-    to_dict = to_json  # the earlier name
 
 
 def _verdict(checks: list) -> str:

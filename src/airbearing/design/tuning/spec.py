@@ -87,8 +87,6 @@ class Spec:
         """The specification, SI (the ``spec`` key of ``airbearing gains --json``)."""
         return asdict(self)
 
-    to_dict = to_json  # the earlier name
-
 
 @dataclass(frozen=True)
 class Check:
@@ -131,8 +129,6 @@ class Check:
             "by": num(self.by),
             "note": self.note,
         }
-
-    to_dict = to_json  # the earlier name
 
 
 def _check(name, value, limit, sense) -> Check:

@@ -9,6 +9,7 @@ import threading
 from collections import OrderedDict
 from dataclasses import replace
 
+from airbearing.design.balancing import default_split
 from airbearing.design.loops import make_loop
 from airbearing.design.tuning.box import _corner_grid
 from airbearing.design.tuning.family import _family, _stiffness
@@ -34,7 +35,7 @@ def tune(
     loop: str,
     spec: Spec | None = None,
     *,
-    split: str = "mixed",
+    split: str | None = None,
     progress=None,
 ) -> TuningResult:
     """Gains of the ``loop`` (``"balancing"`` or ``"attitude"``) of ``testbed`` for ``spec``.
@@ -52,8 +53,9 @@ def tune(
         Default :class:`Spec` (45 deg, 6 dB, |S| <= 2, overshoot <= 5 %, fastest); a dict
         gives some of its fields (``{"phase_margin_deg": 50}``), the others at their
         defaults.
-    split : {"mixed", "mechanical"}
-        Balancing PID split.
+    split : {"mixed", "mechanical"}, optional
+        Balancing PID split; default the split the testbed can run
+        (:func:`~airbearing.design.balancing.default_split`).
     progress : callable, optional
         ``progress(what, done, total)`` (:mod:`airbearing.progress`).
 
@@ -91,6 +93,8 @@ def tune(
     opts = {"split": split} if loop == "balancing" else {}
     base = make_loop(testbed, loop, **opts)
     testbed = base.model.testbed  # a name or a file: the testbed it named
+    if loop == "balancing" and split is None:
+        split = default_split(testbed)
     key = (testbed, loop, split if loop == "balancing" else None, spec)
     with _DONE_LOCK:
         done = _DONE.get(key)

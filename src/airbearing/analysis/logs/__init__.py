@@ -1,1 +1,0 @@
-"""airbearing.analysis.logs: a lab's own log files turned into logs (the import map)."""
