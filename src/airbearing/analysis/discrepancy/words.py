@@ -70,6 +70,27 @@ EXPERIMENTS: dict[frozenset, str] = {
         "spin through several turns at two or more rates: the imbalance follows the yaw angle "
         "(once per turn), drag the square of the rate"
     ),
+    # reaction wheels: the body feels a wheel effect only through the reaction torque
+    frozenset({"wheel_viscous_friction", "wheel_coulomb_friction"}): (
+        "vary the wheel speed: a bias-speed change or a spin-down of the wheel (motor torque "
+        "zero); viscous bearing friction follows the wheel speed, Coulomb friction stays the "
+        "same at every speed of one sign"
+    ),
+    frozenset({"inertia_error", "wheel_torque_error"}): (
+        "both scale the body's response to a wheel torque; log the wheel speeds with the wheel's "
+        "inertia known (a torque error changes the wheel's own acceleration, a body inertia "
+        "error does not), or apply a known external torque (a calibrated mass offset, a spring)"
+    ),
+    frozenset({"inertia_error", "wheel_inertia_error"}): (
+        "the body sees the wheel's inertia only through J - Iw (a part in a thousand of J); "
+        "spin the wheel with the body held or with a known motor torque: the wheel speed's "
+        "slope gives the wheel's inertia"
+    ),
+    frozenset({"wheel_torque_error", "wheel_inertia_error"}): (
+        "momentum exchange fixes only the motor torque over the wheel's inertia; measure one "
+        "of them on its own (the wheel's inertia on a torsion pendulum or from its data sheet, "
+        "the motor torque from its current and torque constant)"
+    ),
 }
 GENERIC_EXPERIMENT = (
     "excite the testbed over a wider range of the states the two torques depend on "
