@@ -77,9 +77,10 @@ EXPERIMENTS: dict[frozenset, str] = {
         "same at every speed of one sign"
     ),
     frozenset({"inertia_error", "wheel_torque_error"}): (
-        "both scale the body's response to a wheel torque; log the wheel speeds with the wheel's "
-        "inertia known (a torque error changes the wheel's own acceleration, a body inertia "
-        "error does not), or apply a known external torque (a calibrated mass offset, a spring)"
+        "the body's rate sees the motor torque over J - Iw, so a larger body and a weaker motor "
+        "give the same rate; apply a known external torque (a calibrated mass offset, a "
+        "spring), or compare the wheel speeds' own slope with the command, the wheel's inertia "
+        "known (a torque error changes it, a body inertia error does not)"
     ),
     frozenset({"inertia_error", "wheel_inertia_error"}): (
         "the body sees the wheel's inertia only through J - Iw (a part in a thousand of J); "
