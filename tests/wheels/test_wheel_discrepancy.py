@@ -21,6 +21,7 @@ import pandas as pd
 import pytest
 
 import airbearing as ab
+from airbearing.analysis.discrepancy.words import WHEEL_INERTIA_UNSEEN
 from airbearing.errors import InputError
 from airbearing.io.log import Log
 from airbearing.io.testbed import load_testbed
@@ -132,6 +133,16 @@ def test_the_friction_pair_at_a_nearly_constant_wheel_speed_is_confounded():
         _judge(found, "wheel_viscous_friction", VISCOUS)
     else:
         _judge(found, "wheel_coulomb_friction", VISCOUS * 300.0)
+    # the fit pushes a wheel inertia error to a bound on this log (the body sees it only
+    # through J - Iw): said to be unseen by the body, not to be that large
+    pinned = [
+        c for c in found.candidates
+        if c.name == "wheel_inertia_error" and c.status == "at its physical bound"
+    ]  # fmt: skip
+    assert pinned, str(found)
+    for c in pinned:
+        assert WHEEL_INERTIA_UNSEEN in c.reason
+        assert WHEEL_INERTIA_UNSEEN in found.verdict
 
 
 def test_body_inertia_error_on_a_wheel_yaw_rig_is_named_and_confounded_with_the_motor():
