@@ -11,6 +11,8 @@ right effect within 10 % and 3 std, the gap after it at most 1.5 x the noise flo
   wheel torque over ``J - Iw``: a larger body and a weaker motor give the same rate);
 - a torque-constant error on ONE wheel of ``rw-3axis`` (3 + 1 wheels) during a slew: named
   per wheel, with its value on that wheel and the others near zero;
+- Coulomb friction of different sizes in each wheel of ``rw-3axis`` (one wheel without):
+  named per wheel;
 - the confounded friction pair: the wheel held at a nearly constant speed (the command
   balances the friction), where viscous and Coulomb bearing friction are one constant
   torque: both listed in ``confounded`` with the experiment that separates them.
@@ -170,3 +172,18 @@ def test_a_torque_error_on_one_of_four_wheels_is_named_on_that_wheel():
     assert values.size == 4  # per wheel
     others = [0, 2, 3]
     assert np.all(np.abs(values[others]) < np.maximum(3 * stds[others], 0.1 * TORQUE))
+
+
+def test_coulomb_friction_of_each_of_four_wheels_is_named_per_wheel():
+    tb = load_testbed("rw-3axis")
+    truth = [2e-5, 4e-5, 0.0, 1e-5]  # N m; wheel 3 without friction
+    run = ab.slew(
+        tb, effects={"wheel_coulomb_friction": truth}, duration=40.0, axis=(0.3, 1.0, 0.2),
+        angle_deg=90.0, seed=3,
+    )  # fmt: skip
+    found = ab.discrepancy(tb, [run.log])
+    for i in (0, 1, 3):
+        _judge(found, "wheel_coulomb_friction", truth[i], index=i)
+    value = float(np.ravel(found.effects["wheel_coulomb_friction"])[2])
+    std = float(np.ravel(found.effect_std["wheel_coulomb_friction"])[2])
+    assert value < 3 * std  # >= 0 by its physical range
