@@ -228,12 +228,6 @@ def verdict(
     return text
 
 
-#: Why a wheel's inertia error sits at a bound rather than at its value: the discrepancy
-#: search compares the body's outputs, and the body sees the wheel's inertia only through
-#: ``J - Iw`` (the wheel's own acceleration is in the wheel speeds, which start each window).
-WHEEL_INERTIA_UNSEEN = (
-    "the body sees a wheel's inertia only through J - Iw, and the wheel speeds are not fitted"
-)
 #: Why a gyro bias cannot be seen on a dof-1 testbed with a gyro (FORMATS.md: its ``yaw`` is
 #: the testbed's own integral of the gyro, not an independent sensor; seed 001 Sec. 2.1.2).
 GYRO_BIAS_DOF1 = (
@@ -257,3 +251,11 @@ def why(problem: ShootingProblem, res: CandidateResult) -> CandidateResult:
         head, colon, rest = (res.reason or "").partition(":")
         return replace(res, reason=f"{head} ({WHEEL_INERTIA_UNSEEN})" + colon + rest)
     return res
+
+
+#: Why a wheel's inertia error sits at a bound rather than at its value: the discrepancy
+#: search compares the body's outputs, and the body sees the wheel's inertia only through
+#: ``J - Iw`` (the wheel's own acceleration is in the wheel speeds, which start each window).
+WHEEL_INERTIA_UNSEEN = (
+    "the body sees a wheel's inertia only through J - Iw, and the wheel speeds are not fitted"
+)
