@@ -1,9 +1,21 @@
 """The discrepancy workflow on reaction-wheel logs: the wheel_* effects are candidates.
 
-A yaw rig turned by one torque-commanded wheel with Coulomb friction in its bearing
-(simulated with the package's own model, as every discrepancy test): the search names
-``wheel_coulomb_friction`` near its value and within 3 std, with the gap after it at the
-noise floor (1.5 x: the reaction-wheel issue's bound for hidden cases).
+Each case is one log simulated with the package's own model (as every discrepancy test)
+and one discrepancy run, judged by the reaction-wheel issue's bounds for hidden cases: the
+right effect within 10 % and 3 std, the gap after it at most 1.5 x the noise floor.
+
+- wheel Coulomb and viscous bearing friction on ``rw-yaw`` (one torque-commanded wheel,
+  open-loop torque steps: the wheel speed changes by tens of rad/s, so the two forms differ);
+- the body's ``inertia_error`` on ``rw-yaw`` under the wheel attitude loop (a slew): named,
+  and said to be confounded with ``wheel_torque_error`` (the body outputs see only the
+  wheel torque over ``J - Iw``: a larger body and a weaker motor give the same rate);
+- a torque-constant error on ONE wheel of ``rw-3axis`` (3 + 1 wheels) during a slew: named
+  per wheel, with its value on that wheel and the others near zero;
+- Coulomb friction of different sizes in each wheel of ``rw-3axis`` (one wheel without):
+  named per wheel;
+- the confounded friction pair: the wheel held at a nearly constant speed (the command
+  balances the friction), where viscous and Coulomb bearing friction are one constant
+  torque: both listed in ``confounded`` with the experiment that separates them.
 """
 
 import numpy as np
@@ -11,29 +23,32 @@ import pandas as pd
 import pytest
 
 import airbearing as ab
+from airbearing.analysis.discrepancy.words import WHEEL_INERTIA_UNSEEN
 from airbearing.errors import InputError
 from airbearing.io.log import Log
 from airbearing.io.testbed import load_testbed
 from airbearing.models.model import build_model
 
-DT = 0.05  # s, rw-yaw's 20 Hz
+DT = 0.05  # s, the built-ins' 20 Hz
 N = 800  # 40 s
-FRICTION = 5e-5  # N m: a twentieth of the wheel's largest torque
+COULOMB = 5e-5  # N m: a twentieth of the wheel's largest torque
+VISCOUS = 2e-7  # N m s: 6e-5 N m at 300 rad/s
+INERTIA = 0.1  # body inertia error, rw-yaw
+TORQUE = 0.15  # torque-constant error of wheel 2, rw-3axis
 
 
-@pytest.fixture(scope="module")
-def friction_log():
-    tb = load_testbed("rw-yaw")
-    model = build_model(tb, {"wheel_coulomb_friction": FRICTION})
+def _open_loop(name, effects, command, speeds, seed=11):
+    """A log of open-loop wheel commands ``command(t)`` (N m) from wheel speeds ``speeds``."""
+    tb = load_testbed(name)
+    model = build_model(tb, effects)
     p = model.params()
     t = np.arange(N) * DT
     U = np.zeros((model.nu, N))
     i = model.index("wc1", "u")[0]
-    # torque steps about a bias: the wheel stays between about 150 and 250 rad/s
-    U[i] = 4e-4 * np.sign(np.sin(2 * np.pi * t / 10.0))
-    x0 = model.x0(wheels=[200.0])
+    U[i] = command(t)
+    x0 = model.x0(wheels=speeds)
     X = np.vstack([x0, np.asarray(model.rollout(N - 1, DT)(x0, U[:, :-1], p)).T])
-    rng = np.random.default_rng(11)
+    rng = np.random.default_rng(seed)
     s = tb.sensors
     cols = {
         "t": t,
@@ -42,23 +57,133 @@ def friction_log():
         "ws1": X[:, 2] + tb.wheels.speed_noise * rng.standard_normal(N),
         "wc1": U[i],
     }
-    assert np.all(X[:, 2] > 50)  # away from zero speed, where the friction changes sign
-    return tb, Log(pd.DataFrame(cols), source="<rw friction>", testbed=tb)
+    return tb, Log(pd.DataFrame(cols), source=f"<{name} open loop>", testbed=tb), X[:, 2]
 
 
-def test_wheel_coulomb_friction_is_named(friction_log):
-    tb, log = friction_log
-    found = ab.discrepancy(tb, [log])
-    named = found.effects
-    assert "wheel_coulomb_friction" in named, str(found)
-    value = float(np.ravel(named["wheel_coulomb_friction"])[0])
-    std = float(np.ravel(found.effect_std["wheel_coulomb_friction"])[0])
-    assert abs(value / FRICTION - 1) < 0.10  # the issue's 10 %
-    assert abs(value - FRICTION) < 3 * std
-    assert found.gap_after < 1.5 * found.noise_floor
+def _judge(found, name, truth, index=0):
+    """The issue's bounds: named, within 10 % and 3 std, the gap after <= 1.5 x the floor."""
+    assert name in found.effects, str(found)
+    value = float(np.ravel(found.effects[name])[index])
+    std = float(np.ravel(found.effect_std[name])[index])
+    assert abs(value / truth - 1) < 0.10, str(found)
+    assert abs(value - truth) < 3 * std, str(found)
+    assert found.gap_after < 1.5 * found.noise_floor, str(found)
+    return value, std
 
 
-def test_a_wheel_log_without_wheel_speeds_is_refused(friction_log):
-    tb, log = friction_log
+@pytest.fixture(scope="module")
+def coulomb_run():
+    # torque steps about a bias: the wheel stays between about 150 and 250 rad/s
+    tb, log, W = _open_loop(
+        "rw-yaw",
+        {"wheel_coulomb_friction": COULOMB},
+        lambda t: 4e-4 * np.sign(np.sin(2 * np.pi * t / 10.0)),
+        [200.0],
+    )
+    assert np.all(W > 50)  # away from zero speed, where the friction changes sign
+    return tb, log, ab.discrepancy(tb, [log])
+
+
+def test_wheel_coulomb_friction_is_named(coulomb_run):
+    _, _, found = coulomb_run
+    _judge(found, "wheel_coulomb_friction", COULOMB)
+
+
+def test_a_wheel_log_without_wheel_speeds_is_refused(coulomb_run):
+    tb, log, _ = coulomb_run
     with pytest.raises(InputError, match=r"nows\.csv: missing column 'ws1'"):
         ab.discrepancy(tb, [Log(log.data.drop(columns=["ws1"]), source="nows.csv", testbed=tb)])
+
+
+def test_wheel_viscous_friction_is_named_when_the_wheel_speed_changes():
+    # small torque steps: the friction spins the wheel down from 300 to about 220 rad/s,
+    # a friction torque that falls by a quarter (Coulomb friction's would not)
+    tb, log, W = _open_loop(
+        "rw-yaw",
+        {"wheel_viscous_friction": VISCOUS},
+        lambda t: 4e-5 * np.sign(np.sin(2 * np.pi * t / 4.0)),
+        [300.0],
+    )
+    assert np.ptp(W) > 50
+    found = ab.discrepancy(tb, [log])
+    _judge(found, "wheel_viscous_friction", VISCOUS)
+    assert "wheel_coulomb_friction" not in found.effects
+    assert not any("wheel_coulomb_friction" in pair for pair in found.confounded)
+
+
+def test_the_friction_pair_at_a_nearly_constant_wheel_speed_is_confounded():
+    # the command balances the viscous friction at 300 rad/s (6e-5 N m) with steps about
+    # it: the wheel speed stays within about 1 % and both forms are one constant torque
+    tb, log, W = _open_loop(
+        "rw-yaw",
+        {"wheel_viscous_friction": VISCOUS},
+        lambda t: VISCOUS * 300.0 + 4e-5 * np.sign(np.sin(2 * np.pi * t / 4.0)),
+        [300.0],
+    )
+    assert np.ptp(W) < 0.02 * 300
+    found = ab.discrepancy(tb, [log])
+    pair = {"wheel_viscous_friction", "wheel_coulomb_friction"}
+    assert any(set(p) == pair for p in found.confounded), str(found)
+    (key,) = [k for k in found.experiments if set(k.split(" + ")) == pair]
+    assert "vary the wheel speed" in found.experiments[key]
+    # one of the two is named, never both, and its error holds the choice: the truth (or
+    # the other form's equivalent constant torque) within 3 std
+    named = pair & set(found.effects)
+    assert len(named) == 1, str(found)
+    assert found.gap_after < 1.5 * found.noise_floor
+    if "wheel_viscous_friction" in named:
+        _judge(found, "wheel_viscous_friction", VISCOUS)
+    else:
+        _judge(found, "wheel_coulomb_friction", VISCOUS * 300.0)
+    # the fit pushes a wheel inertia error to a bound on this log (the body sees it only
+    # through J - Iw): said to be unseen by the body, not to be that large
+    pinned = [
+        c for c in found.candidates
+        if c.name == "wheel_inertia_error" and c.status == "at its physical bound"
+    ]  # fmt: skip
+    assert pinned, str(found)
+    for c in pinned:
+        assert WHEEL_INERTIA_UNSEEN in c.reason
+        assert WHEEL_INERTIA_UNSEEN in found.verdict
+
+
+def test_body_inertia_error_on_a_wheel_yaw_rig_is_named_and_confounded_with_the_motor():
+    tb = load_testbed("rw-yaw")
+    log = ab.slew(tb, effects={"inertia_error": INERTIA}, duration=40.0, seed=3).log
+    found = ab.discrepancy(tb, [log])
+    _judge(found, "inertia_error", INERTIA)
+    # the body's rate sees the wheel torque over J - Iw: a torque-constant error of
+    # 1 / (1 + e) - 1 gives the same rate (to the wheel's part in a thousand of J)
+    assert ("inertia_error", "wheel_torque_error") in found.confounded, str(found)
+    assert "known external torque" in found.experiments["inertia_error + wheel_torque_error"]
+
+
+def test_a_torque_error_on_one_of_four_wheels_is_named_on_that_wheel():
+    tb = load_testbed("rw-3axis")
+    truth = [0.0, TORQUE, 0.0, 0.0]
+    run = ab.slew(
+        tb, effects={"wheel_torque_error": truth}, duration=30.0, axis=(0.3, 1.0, 0.2),
+        angle_deg=90.0, seed=3,
+    )  # fmt: skip
+    found = ab.discrepancy(tb, [run.log])
+    value, std = _judge(found, "wheel_torque_error", TORQUE, index=1)
+    values = np.ravel(found.effects["wheel_torque_error"])
+    stds = np.ravel(found.effect_std["wheel_torque_error"])
+    assert values.size == 4  # per wheel
+    others = [0, 2, 3]
+    assert np.all(np.abs(values[others]) < np.maximum(3 * stds[others], 0.1 * TORQUE))
+
+
+def test_coulomb_friction_of_each_of_four_wheels_is_named_per_wheel():
+    tb = load_testbed("rw-3axis")
+    truth = [2e-5, 4e-5, 0.0, 1e-5]  # N m; wheel 3 without friction
+    run = ab.slew(
+        tb, effects={"wheel_coulomb_friction": truth}, duration=40.0, axis=(0.3, 1.0, 0.2),
+        angle_deg=90.0, seed=3,
+    )  # fmt: skip
+    found = ab.discrepancy(tb, [run.log])
+    for i in (0, 1, 3):
+        _judge(found, "wheel_coulomb_friction", truth[i], index=i)
+    value = float(np.ravel(found.effects["wheel_coulomb_friction"])[2])
+    std = float(np.ravel(found.effect_std["wheel_coulomb_friction"])[2])
+    assert value < 3 * std  # >= 0 by its physical range

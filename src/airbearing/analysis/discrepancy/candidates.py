@@ -60,7 +60,12 @@ from airbearing.analysis.shooting.logs import ReplayData
 from airbearing.errors import InputError
 from airbearing.io.testbed import Testbed
 from airbearing.io.vocabulary import EFFECTS as VOCABULARY
-from airbearing.models.effects import REGISTRY, applicable_effects, effect_param_names
+from airbearing.models.effects import (
+    REGISTRY,
+    WHEEL_EFFECTS,
+    applicable_effects,
+    effect_param_names,
+)
 from airbearing.models.model import Model
 
 __all__ = [
@@ -166,8 +171,13 @@ class Candidate:
 
     @property
     def label(self) -> str:
-        """The effect name, with ``(per axis)`` for the three-value form."""
-        return f"{self.name} (per axis)" if self.per_axis else self.name
+        """The effect name, with ``(per axis)`` for the three-value form, ``(per wheel)`` for
+        a ``wheel_*`` effect with one value per wheel."""
+        if not self.per_axis:
+            return self.name
+        return (
+            f"{self.name} (per wheel)" if self.name in WHEEL_EFFECTS else f"{self.name} (per axis)"
+        )
 
     @property
     def correction(self) -> bool:
@@ -198,13 +208,18 @@ class Candidate:
 
 
 def universal_effects(testbed: Testbed, names: Iterable[str]) -> dict:
-    """Every candidate at zero (per-axis parameters for dof 3) plus the testbed's own effects."""
+    """Every candidate at zero (per-axis parameters for dof 3, per-wheel ones on a rig of
+    several wheels) plus the testbed's own effects."""
     dof = testbed.body.dof
+    n_wheels = testbed.wheels.n if testbed.wheels is not None else 0
     out = {}
     for name in names:
         shape = VOCABULARY[name].shape
         if shape == "vector3" or (shape == "scalar_or_axes" and dof == 3):
             out[name] = (0.0, 0.0, 0.0)
+        elif shape == "scalar_or_wheels" and n_wheels > 1:
+            # per-wheel parameters: the shared form ties them (Candidate.tie)
+            out[name] = (0.0,) * n_wheels
         elif shape == "pair":
             out[name] = (0.0, 0.0)
         else:
@@ -212,6 +227,8 @@ def universal_effects(testbed: Testbed, names: Iterable[str]) -> dict:
     for name, value in testbed.effects.items():
         if VOCABULARY[name].shape == "scalar_or_axes" and dof == 3 and np.ndim(value) == 0:
             value = (float(value),) * 3
+        elif VOCABULARY[name].shape == "scalar_or_wheels" and n_wheels > 1 and np.ndim(value) == 0:
+            value = (float(value),) * n_wheels
         out[name] = value
     return out
 

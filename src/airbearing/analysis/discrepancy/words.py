@@ -16,6 +16,7 @@ __all__ = [
     "EXPERIMENTS",
     "GENERIC_EXPERIMENT",
     "GYRO_BIAS_DOF1",
+    "WHEEL_INERTIA_UNSEEN",
     "experiment_for",
     "failure_words",
     "format_value",
@@ -78,6 +79,28 @@ EXPERIMENTS: dict[frozenset, str] = {
     frozenset({"yaw_imbalance", "aero_drag"}): (
         "spin through several turns at two or more rates: the imbalance follows the yaw angle "
         "(once per turn), drag the square of the rate"
+    ),
+    # reaction wheels: the body feels a wheel effect only through the reaction torque
+    frozenset({"wheel_viscous_friction", "wheel_coulomb_friction"}): (
+        "vary the wheel speed: a bias-speed change or a spin-down of the wheel (motor torque "
+        "zero); viscous bearing friction follows the wheel speed, Coulomb friction stays the "
+        "same at every speed of one sign"
+    ),
+    frozenset({"inertia_error", "wheel_torque_error"}): (
+        "the body's rate sees the motor torque over J - Iw, so a larger body and a weaker motor "
+        "give the same rate; apply a known external torque (a calibrated mass offset, a "
+        "spring), or compare the wheel speeds' own slope with the command, the wheel's inertia "
+        "known (a torque error changes it, a body inertia error does not)"
+    ),
+    frozenset({"inertia_error", "wheel_inertia_error"}): (
+        "the body sees the wheel's inertia only through J - Iw (a part in a thousand of J); "
+        "spin the wheel with the body held or with a known motor torque: the wheel speed's "
+        "slope gives the wheel's inertia"
+    ),
+    frozenset({"wheel_torque_error", "wheel_inertia_error"}): (
+        "momentum exchange fixes only the motor torque over the wheel's inertia; measure one "
+        "of them on its own (the wheel's inertia on a torsion pendulum or from its data sheet, "
+        "the motor torque from its current and torque constant)"
     ),
 }
 GENERIC_EXPERIMENT = (
@@ -268,4 +291,15 @@ def why(problem: ShootingProblem, res: CandidateResult) -> CandidateResult:
         and "yaw" not in problem.outputs
     ):
         return replace(res, reason=GYRO_BIAS_DOF1)
+    if res.name == "wheel_inertia_error" and res.status == "at its physical bound":
+        head, colon, rest = (res.reason or "").partition(":")
+        return replace(res, reason=f"{head} ({WHEEL_INERTIA_UNSEEN})" + colon + rest)
     return res
+
+
+#: Why a wheel's inertia error sits at a bound rather than at its value: the discrepancy
+#: search compares the body's outputs, and the body sees the wheel's inertia only through
+#: ``J - Iw`` (the wheel's own acceleration is in the wheel speeds, which start each window).
+WHEEL_INERTIA_UNSEEN = (
+    "the body sees a wheel's inertia only through J - Iw, and the wheel speeds are not fitted"
+)
