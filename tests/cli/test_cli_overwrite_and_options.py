@@ -310,7 +310,11 @@ def test_identify_says_what_it_wrote(tmp_path, example_case, capsys):
         "--quiet",
         "identify",
         str(case / "testbed.toml"),
+        # three slider positions fix the scale (one alone gives a scale-free answer, which
+        # has no values to write)
         str(case / "log1.csv"),
+        str(case / "log2.csv"),
+        str(case / "log3.csv"),
         "--method",
         "equation-error",
         "--json",

@@ -23,7 +23,8 @@ HIDDEN = 0.15  # inertia error hidden in the log: large enough to be named in on
 DISCREPANCY_KEYS = {
     "testbed", "log", "effects", "gap_before", "gap_after", "noise_floor", "gap_unit",
     "noise_floor_source", "segments", "segment_rows", "outlier_rows", "candidates",
-    "confounded", "experiments", "no_missing_effect", "verdict", "stop_reason", "rounds",
+    "confounded", "experiments", "confounding", "no_missing_effect", "verdict", "stop_reason",
+    "rounds",
     "windows", "attitude_noise", "rate_noise", "logs", "validation", "localisation",
     "adequacy", "per_log", "consistency", "revisions", "alternatives", "testbed_attitude_noise",
 }  # fmt: skip

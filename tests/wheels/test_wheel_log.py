@@ -6,13 +6,13 @@ import math
 import numpy as np
 import pandas as pd
 import pytest
-from airbearing.analysis.logs.import_map import import_log_with_notes
 from numpy.testing import assert_allclose
 
 import airbearing as ab
 from airbearing.api.logs import check_log
 from airbearing.errors import InputError
 from airbearing.io.log import Log, wheel_saturation
+from airbearing.io.log_import import import_log_with_notes
 from airbearing.io.quality import assess
 from airbearing.io.testbed import load_testbed
 from airbearing.models.model import build_model

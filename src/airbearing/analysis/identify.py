@@ -18,6 +18,11 @@ from __future__ import annotations
 
 from collections.abc import Iterable
 
+from airbearing.analysis.identification.data import COLUMNS_USED
+from airbearing.analysis.identification.wheel_inertia import (
+    identify_wheel_inertia,
+    wheel_columns,
+)
 from airbearing.errors import InputError
 from airbearing.io.coerce import as_float, as_logs, as_testbed, as_vector
 
@@ -120,12 +125,8 @@ def identify(
                           expected="a positive mass in kg, or None")  # fmt: skip
     if progress is not None and not callable(progress):
         raise InputError(f"progress={progress!r:.60}: expected a callable or None")
-    from airbearing.analysis.identification.data import COLUMNS_USED
-    from airbearing.analysis.identification.wheel_inertia import wheel_columns
-
     tb = as_testbed(testbed)
-    columns = (*COLUMNS_USED, *wheel_columns(tb))
-    loaded = as_logs(logs, tb, columns=columns, what="the testbed to identify")
+    loaded = as_logs(logs, tb, columns=columns_used(tb), what="the testbed to identify")
     fr = None if friction in (None, "none") else friction
     if hold is not None and tb.body.dof == 1:
         raise InputError("hold applies to platform testbeds (dof 3), not to dof 1")
@@ -156,9 +157,6 @@ def columns_used(testbed) -> tuple[str, ...]:
     >>> columns_used(ab.load_testbed("rw-yaw"))[-2:]
     ('ws1', 'wc1')
     """
-    from airbearing.analysis.identification.data import COLUMNS_USED
-    from airbearing.analysis.identification.wheel_inertia import wheel_columns
-
     return (*COLUMNS_USED, *wheel_columns(as_testbed(testbed)))
 
 
@@ -181,8 +179,6 @@ def _identify_dof1(tb, loaded, known_offset_xy, method, friction, progress):
 
         return identify_cmg_inertia(tb, loaded, friction=friction)
     if tb.wheels is not None:
-        from airbearing.analysis.identification.wheel_inertia import identify_wheel_inertia
-
         return identify_wheel_inertia(tb, loaded, friction=friction)
     if friction is not None:
         raise InputError("friction applies to dof-1 CMG and reaction-wheel testbeds")

@@ -106,7 +106,7 @@ def export(
         if loop == "balancing" and method is None and data.get("split"):
             method = data["split"]
     if loop == "balancing" and method is None:
-        from airbearing.cli.gains import default_split
+        from airbearing.design.balancing import default_split
 
         method = default_split(tb)
     if name is None and loop == "attitude":

@@ -55,7 +55,7 @@ import casadi as ca
 import numpy as np
 
 from airbearing import quaternion as quat
-from airbearing.analysis.shooting.filters import _savgol_weights, savgol
+from airbearing.analysis.shooting.filters import savgol, savgol_weights
 from airbearing.analysis.shooting.logs import ReplayData
 from airbearing.errors import InputError
 from airbearing.io.testbed import Testbed
@@ -504,8 +504,8 @@ def _smoothed_attitude(data: ReplayData, w_s, w_dot, ok):
         q = data.q[a:b]
         m = b - a
         h = float(np.median(np.diff(data.t[a:b])))
-        c1 = _savgol_weights(SG_WINDOW, SG_ORDER_ATT, 1, h, 0.0)
-        c2 = _savgol_weights(SG_WINDOW, SG_ORDER_ATT, 2, h, 0.0)
+        c1 = savgol_weights(SG_WINDOW, SG_ORDER_ATT, 1, h, 0.0)
+        c2 = savgol_weights(SG_WINDOW, SG_ORDER_ATT, 2, h, 0.0)
         centre = np.arange(half, m - half)
         qc = quat.qconj(q[centre])
         w1 = np.zeros((centre.size, 3))

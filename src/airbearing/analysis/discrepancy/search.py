@@ -777,14 +777,20 @@ def _round(search, sel: _Selection, remaining, screen, workers, prog) -> list:
 def _at_best_gap(results: list) -> list:
     """A candidate whose fit and retry both ended badly (IPOPT's status) stays nameable only
     when it ends at the round's best gap: within ``CONFOUND_BIC`` of the best BIC of the
-    round's fits. A fit that ends where the best does explains the logs as well as the best;
-    its solver status says how the iterations ended, not that the answer is wrong. Further
-    away it is not an answer (its reason says why)."""
-    fitted = [r.delta_bic for r in results if r.nameable and np.isfinite(r.delta_bic)]
+    round's converged fits. A fit that ends where the best converged one does explains the
+    logs as well as it; its solver status says how the iterations ended, not that the
+    answer is wrong. Further away, or with no converged fit to compare with, it is not an
+    answer (its reason says why)."""
+    fitted = [
+        r.delta_bic
+        for r in results
+        if r.nameable and not r.retry_failed and np.isfinite(r.delta_bic)
+    ]
     best = min(fitted, default=math.inf)
     out = []
     for r in results:
-        if r.retry_failed and r.nameable and not r.delta_bic - best < CONFOUND_BIC:
+        at_best = np.isfinite(best) and r.delta_bic - best < CONFOUND_BIC
+        if r.retry_failed and r.nameable and not at_best:
             r = replace(r, nameable=False, reason=r.retry_reason)
         out.append(r)
     return out

@@ -14,10 +14,10 @@ import math
 
 import numpy as np
 
-__all__ = ["savgol", "welch"]
+__all__ = ["savgol", "savgol_weights", "welch"]
 
 
-def _savgol_weights(window: int, order: int, deriv: int, delta: float, z: float) -> np.ndarray:
+def savgol_weights(window: int, order: int, deriv: int, delta: float, z: float) -> np.ndarray:
     """Weights giving the ``deriv``-th derivative at offset ``z`` (samples from the window's
     centre) of the least-squares polynomial of ``order`` through ``window`` samples."""
     half = window // 2
@@ -51,7 +51,7 @@ def savgol(x: np.ndarray, window: int, order: int, deriv: int = 0, delta: float 
     x = np.asarray(x, dtype=float)
     n, half = x.shape[0], window // 2
     out = np.empty_like(x)
-    w = _savgol_weights(window, order, deriv, delta, 0.0)
+    w = savgol_weights(window, order, deriv, delta, 0.0)
     # interior: a correlation with the centre weights
     acc = np.zeros((n - 2 * half, *x.shape[1:]))
     for k in range(window):
@@ -59,8 +59,8 @@ def savgol(x: np.ndarray, window: int, order: int, deriv: int = 0, delta: float 
     out[half : n - half] = acc
     # edges: the polynomial of the first (last) window evaluated off-centre
     for i in range(half):
-        out[i] = _savgol_weights(window, order, deriv, delta, i - half) @ x[:window]
-        out[n - half + i] = _savgol_weights(window, order, deriv, delta, i + 1) @ x[n - window :]
+        out[i] = savgol_weights(window, order, deriv, delta, i - half) @ x[:window]
+        out[n - half + i] = savgol_weights(window, order, deriv, delta, i + 1) @ x[n - window :]
     return out
 
 
