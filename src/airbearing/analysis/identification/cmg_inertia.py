@@ -48,7 +48,7 @@ from airbearing.io.testbed import Body, Testbed
 from airbearing.models.cmg import cmg_functions
 from airbearing.models.effects import COULOMB_SMOOTHING
 
-__all__ = ["CMGIdentification", "fit_momentum_exchange", "identify_cmg_inertia"]
+__all__ = ["CMGIdentification", "fit_momentum_exchange", "identify_cmg_inertia", "log_pieces"]
 
 #: Friction models and the effect each identifies (FORMATS.md names).
 FRICTION = {None: (), "viscous": ("viscous_friction",), "coulomb": ("coulomb_friction",)}
@@ -328,14 +328,43 @@ def fit_momentum_exchange(
 
 
 def _momentum_pieces(testbed: Testbed, logs):
-    """Per usable piece ``(t, w_z, h_z)`` and per log its JSON entry: segments (never
-    integrated across a gap: each its own constant) and outlier rows (left out of the rows
-    and of the friction integrals), io.quality's rule."""
+    """Per usable piece ``(t, w_z, h_z)`` and per log its JSON entry (:func:`log_pieces`),
+    ``h_z`` the cluster's momentum."""
     h0, beta = testbed.cmg.h0, testbed.cmg.skew
     H = cmg_functions()["H"]
+
+    def arrays(log):
+        t, w, d = _log_arrays(testbed, log)
+        hz = h0 * np.asarray(H.map(len(t))(d.T, beta))[2]  # seed 001 eq. 12, z, N m s
+        if np.ptp(hz) <= 0:
+            raise InputError(f"{log.source}: the gimbals do not move: no momentum exchange to use")
+        return t, w, hz
+
+    return log_pieces(testbed, logs, arrays)
+
+
+def log_pieces(testbed: Testbed, logs, arrays):
+    """Per usable piece ``(t, w_z, h_z)`` and per log its JSON entry.
+
+    Parameters
+    ----------
+    testbed : Testbed
+    logs : list of Log
+    arrays : callable
+        ``arrays(log) -> (t, w_z, h_z)`` (s, rad/s, N m s) of one log, checked.
+
+    Returns
+    -------
+    pieces : list of (ndarray, ndarray, ndarray)
+        Segments (never integrated across a gap: each its own constant) without their
+        outlier rows (left out of the rows and of the friction integrals), io.quality's
+        rule.
+    entries : list of dict
+        Per log its ``source``, ``segments``, ``segment_rows`` and ``outlier_rows``.
+    """
     pieces, entries = [], []
     for log in logs:
-        t, w, d = _log_arrays(testbed, log)
+        t, w, hz = arrays(log)
         segments, outliers = log_quality(log, testbed)
         usable = np.ones(len(t), bool)
         usable[list(outliers)] = False
@@ -347,10 +376,6 @@ def _momentum_pieces(testbed: Testbed, logs):
                 "outlier_rows": [int(r) for r in outliers],
             }
         )
-        # seed 001 eq. 12, z component, in N m s
-        hz = h0 * np.asarray(H.map(len(t))(d.T, beta))[2]
-        if np.ptp(hz) <= 0:
-            raise InputError(f"{log.source}: the gimbals do not move: no momentum exchange to use")
         for a, b in segments:
             k = np.arange(a, b)[usable[a:b]]
             if len(k) >= 3:

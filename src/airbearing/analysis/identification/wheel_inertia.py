@@ -27,8 +27,8 @@ from airbearing.analysis.identification.cmg_inertia import (
     FRICTION,
     CMGIdentification,
     fit_momentum_exchange,
+    log_pieces,
 )
-from airbearing.analysis.identification.data import log_quality
 from airbearing.errors import InputError
 from airbearing.io.coerce import check_gyro_agrees, check_log_testbed
 from airbearing.io.log import Log
@@ -76,8 +76,8 @@ def _wheel_momentum(testbed: Testbed, log: Log) -> np.ndarray:
 
 def _pieces(testbed: Testbed, logs):
     """Per usable piece ``(t, w_z, h_z)`` and per log its JSON entry (segments, outliers)."""
-    pieces, entries = [], []
-    for log in logs:
+
+    def arrays(log):
         if not isinstance(log, Log):
             raise InputError(f"identify: expected Log objects, got {type(log).__name__}")
         check_log_testbed(testbed, log, "the testbed to identify")
@@ -86,29 +86,15 @@ def _pieces(testbed: Testbed, logs):
             raise InputError(
                 f"{log.source}: missing wz: the momentum exchange needs the yaw rate (rad/s)"
             )
-        t, w = log.t, log.column("wz")
         hz = _wheel_momentum(testbed, log)
-        segments, outliers = log_quality(log, testbed)
-        usable = np.ones(len(t), bool)
-        usable[list(outliers)] = False
-        entries.append(
-            {
-                "source": log.source,
-                "segments": len(segments),
-                "segment_rows": [list(sg) for sg in segments],
-                "outlier_rows": [int(r) for r in outliers],
-            }
-        )
-        if np.ptp(hz[usable]) <= 0:
+        if np.ptp(hz) <= 0:
             raise InputError(
                 f"{log.source}: the wheel speeds do not change: no momentum exchange to use "
                 "(drive the wheels, e.g. a slew, to identify the inertia)"
             )
-        for a, b in segments:
-            k = np.arange(a, b)[usable[a:b]]
-            if len(k) >= 3:
-                pieces.append((t[k], w[k], hz[k]))
-    return pieces, entries
+        return log.t, log.column("wz"), hz
+
+    return log_pieces(testbed, logs, arrays)
 
 
 def identify_wheel_inertia(
