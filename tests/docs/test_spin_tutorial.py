@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import re
 import subprocess
 import sys
@@ -15,7 +16,8 @@ PAGE = Path(__file__).resolve().parents[2] / "docs" / "tutorials" / "spin-test.m
 def _named(line: str) -> list[str]:
     """The effects a "missing effects:" line names (before "not converged ...")."""
     head = line.split("missing effects:", 1)[1].split("not converged", 1)[0]
-    return sorted(set(re.findall(r"(\w+) = ", head)))
+    # the first name of each "; " item: a partner ("A OR, equally, B = ...") is not named
+    return sorted(set(re.findall(r"(?:^|; )(\w+) = ", head.strip())))
 
 
 def _airbearing(args: list[str], cwd: Path) -> str:
@@ -39,12 +41,13 @@ def test_spin_tutorial_names_what_it_says(tmp_path, noise):
     if noise:
         sim += ["--attitude-noise", noise]
     _airbearing(sim, tmp_path)
-    out = _airbearing(["discrepancy", "spin-rig.toml", "spin.csv"], tmp_path)
-    ran = next(line for line in out.splitlines() if line.startswith("missing effects:"))
+    out = _airbearing(["discrepancy", "spin-rig.toml", "spin.csv", "--json", "d.json"], tmp_path)
+    # the names from the JSON: the printed line also names partners ("A OR, equally, B")
+    named = sorted(e["name"] for e in json.loads((tmp_path / "d.json").read_text())["effects"])
     blocks = [b for b in re.findall(r"```text\n(.*?)```", text, re.S) if "missing effects:" in b]
     page = blocks[0 if noise is None else 1]
     said = next(line for line in page.splitlines() if line.startswith("missing effects:"))
-    assert _named(ran) == _named(said), (ran, said)
+    assert named == _named(said), (named, said)
     confounded = [line for line in out.splitlines() if line.startswith("confounded:")]
     promised = re.search(r"noisier.*?```text\n.*?```\n\n(.*?)\n\n", text, re.S).group(1)
     # the page promises a confounded line only when the two laws come within 2 BIC units

@@ -525,7 +525,9 @@ def _refuse_still(testbed: Testbed, logs) -> None:
 def _unwrapped_words(logs) -> str:
     """ "; LOG: yaw written wrapped ... unwrapped on read" for each such log (or "")."""
     words = [
-        f"; {log.source}: {yaw_unwrapped_words(log.data.attrs[YAW_UNWRAPPED])}"
+        # a log made in memory (source "<simulation>") is named in words
+        f"; {'the simulated log' if log.source.startswith('<') else log.source}: "
+        f"{yaw_unwrapped_words(log.data.attrs[YAW_UNWRAPPED])}"
         for log in logs
         if log.data.attrs.get(YAW_UNWRAPPED)
     ]
