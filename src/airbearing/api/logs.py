@@ -46,6 +46,23 @@ class LogCheck:
         Rows where a yaw written wrapped was unwrapped on read (the file unchanged).
     checked : Log or None
         The log that was checked, for :meth:`plot` (not part of :meth:`to_json`).
+
+    Examples
+    --------
+    >>> import airbearing as ab
+    >>> run = ab.spindown(ab.load_testbed("cmg-yaw"), initial_rate=1.0, duration=5.0)
+    >>> check = ab.check_log(run.log)
+    >>> print(check)
+    <simulation>: 100 rows, 4.95 s at 20 Hz, 1 segment(s), outlier rows: none
+      simulate replay: yes (1 segment(s), 0 outlier row(s) left out; ...)
+      identify: yes (...)
+      discrepancy: yes (...)
+      replay: yes (...)
+      balance: no (kind = 'cmg': no sliding masses to balance with)
+    >>> check.usable, check.to_json()["rows"], check.to_pandas().shape
+    (True, 100, (0, 5))
+    >>> type(check.plot()).__name__
+    'Figure'
     """
 
     log: str
@@ -78,8 +95,15 @@ class LogCheck:
     _wheels: bool = field(default=False, repr=False)
 
     def to_json(self) -> dict:
-        """The ``airbearing log check --json`` contract (``wheel_saturation``: a list, on a
-        testbed with reaction wheels only)."""
+        """The ``airbearing log check --json`` contract.
+
+        Returns
+        -------
+        dict
+            ``log``, ``testbed``, ``rows``, ``duration`` (s), ``rate`` (Hz), the keys of
+            :meth:`LogQuality.to_json`, ``wheel_saturation`` (a list, on a testbed with
+            reaction wheels only), ``yaw_unwrapped_rows``, ``usable`` and ``tools``.
+        """
         return {
             "log": self.log,
             "testbed": self.testbed,
@@ -121,6 +145,15 @@ class LogCheck:
         ----------
         log : Log, optional
             The log that was checked; by default the one :func:`check_log` was given.
+
+        Returns
+        -------
+        matplotlib.figure.Figure
+
+        Raises
+        ------
+        InputError
+            If no log is given and none was kept (a LogCheck built by hand).
         """
         log = self.checked if log is None else log
         if log is None:
@@ -130,7 +163,13 @@ class LogCheck:
         return log_figure(log, self.quality)
 
     def to_pandas(self):
-        """The outliers as a table: ``row``, ``t`` (s), ``columns``, ``reason``, ``score``."""
+        """The outliers as a table.
+
+        Returns
+        -------
+        pandas.DataFrame
+            One row per outlier: ``row``, ``t`` (s), ``columns``, ``reason``, ``score``.
+        """
         import pandas as pd
 
         return pd.DataFrame(
@@ -207,6 +246,19 @@ def plot_log(log, testbed=None):
     Returns
     -------
     matplotlib.figure.Figure
+
+    Raises
+    ------
+    InputError
+        If the log cannot be read or does not fit the testbed.
+
+    Examples
+    --------
+    >>> import airbearing as ab
+    >>> run = ab.spindown(ab.load_testbed("cmg-yaw"), initial_rate=1.0, duration=5.0)
+    >>> figure = ab.plot_log(run.log)
+    >>> len(figure.axes)  # one panel per channel group
+    4
     """
     from airbearing.io.coerce import as_log, as_testbed
     from airbearing.reporting.log_plot import log_figure

@@ -86,6 +86,21 @@ def report(result, path=None, *, title: str | None = None):
     -------
     Report
         ``.html()`` is the page; ``.write(path)`` writes it.
+
+    Raises
+    ------
+    InputError
+        If ``result`` is neither a Discrepancy nor a Replay.
+
+    Examples
+    --------
+    >>> from pathlib import Path
+    >>> import airbearing as ab
+    >>> tb = ab.load_testbed("cmg-yaw")
+    >>> run = ab.slew(tb, angle_deg=30.0, duration=3.0)
+    >>> page = ab.report(ab.replay(tb, run.log), "replay.html", title="Nominal replay")
+    >>> page.html().startswith("<!DOCTYPE html>"), Path("replay.html").is_file()
+    (True, True)
     """
     from airbearing.analysis.discrepancy.replay import Replay
     from airbearing.analysis.discrepancy.search import Discrepancy

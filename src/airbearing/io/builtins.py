@@ -144,7 +144,29 @@ def find(name: str) -> Builtin | None:
 
 
 def builtin_toml(name: str) -> bytes:
-    """The TOML text of a built-in (an alias: its target's, with the alias's name)."""
+    """The TOML text of a built-in (an alias: its target's, with the alias's name).
+
+    Parameters
+    ----------
+    name : str
+        A name of :func:`builtin_names`.
+
+    Returns
+    -------
+    bytes
+        The UTF-8 text of the testbed file (FORMATS.md), ready to write or to parse.
+
+    Raises
+    ------
+    KeyError
+        If ``name`` is not a built-in (:func:`load_testbed` names them in an InputError).
+
+    Examples
+    --------
+    >>> import airbearing as ab
+    >>> print(ab.builtin_toml("cmg-yaw").decode().splitlines()[0])
+    # Built-in testbed "cmg-yaw": a yaw-only (dof = 1) air-bearing platform actuated
+    """
     entry = find(name)
     if entry is None:
         raise KeyError(name)

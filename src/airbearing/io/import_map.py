@@ -345,6 +345,16 @@ def read_import_map(path: str | os.PathLike[str]) -> ImportMap:
     ------
     InputError
         If the file is missing, not TOML, or not a valid map (:func:`import_map_from_dict`).
+
+    Examples
+    --------
+    >>> from pathlib import Path
+    >>> import airbearing as ab
+    >>> _ = Path("lab.toml").write_text(
+    ...     '[columns]\\nt = "Time (ms)"\\nyaw = "Yaw (deg)"\\n[units]\\nt = "ms"\\nyaw = "deg"\\n')
+    >>> found = ab.read_import_map("lab.toml")
+    >>> found.columns, found.units
+    ({'t': 'Time (ms)', 'yaw': 'Yaw (deg)'}, {'t': 'ms', 'yaw': 'deg'})
     """
     src = str(path)
     try:

@@ -758,6 +758,19 @@ class Log:
     -----
     The array accessors (:meth:`rates`, :meth:`quaternions`, ...) return
     copies in SI units, or None when the log lacks those columns.
+
+    Examples
+    --------
+    A simulated 2 s slew of the yaw CMG testbed, sampled at 20 Hz:
+
+    >>> import airbearing as ab
+    >>> log = ab.slew(ab.load_testbed("cmg-yaw"), angle_deg=30.0, duration=2.0).log
+    >>> log.n, round(log.period, 3), log.segments  # samples, s, row ranges
+    (40, 0.05, ((0, 40),))
+    >>> log.rates().shape, log.gimbals().shape, log.has("wz", "d1")  # rad/s, rad
+    ((40, 1), (40, 4), True)
+    >>> log.quaternions() is None  # a yaw-only log has no quaternion columns
+    True
     """
 
     def __init__(
@@ -810,7 +823,13 @@ class Log:
         return cached
 
     def usable_mask(self) -> np.ndarray:
-        """Rows every fit may use: False at :attr:`quality` outlier rows, shape (n,), bool."""
+        """Rows every fit may use: False at :attr:`quality` outlier rows.
+
+        Returns
+        -------
+        numpy.ndarray
+            Shape (n,), bool.
+        """
         mask = np.ones(self.n, dtype=bool)
         mask[list(self.quality.outlier_rows)] = False
         return mask
@@ -842,11 +861,31 @@ class Log:
         return float(np.median(np.diff(self.data["t"].to_numpy(dtype=float))))
 
     def has(self, *names: str) -> bool:
-        """True if every named column is present."""
+        """Whether every named column is present.
+
+        Parameters
+        ----------
+        *names : str
+            Column names (FORMATS.md).
+
+        Returns
+        -------
+        bool
+        """
         return all(name in self.data.columns for name in names)
 
     def column(self, name: str) -> np.ndarray:
-        """One column as a float array, shape (n,).
+        """One column as a float array.
+
+        Parameters
+        ----------
+        name : str
+            The column (FORMATS.md or an extra column); its unit is the file's.
+
+        Returns
+        -------
+        numpy.ndarray
+            Shape (n,), a copy.
 
         Raises
         ------
@@ -860,7 +899,23 @@ class Log:
         return _numeric(self.data[name], name, self.source, None).copy()
 
     def columns(self, names: Sequence[str]) -> np.ndarray:
-        """Several columns as a float array, shape (n, len(names))."""
+        """Several columns as a float array.
+
+        Parameters
+        ----------
+        names : sequence of str
+            The columns, in the order wanted.
+
+        Returns
+        -------
+        numpy.ndarray
+            Shape (n, len(names)), a copy.
+
+        Raises
+        ------
+        InputError
+            If a column is absent or not numeric.
+        """
         out = np.empty((self.n, len(names)))
         for i, name in enumerate(names):
             if name in LOG_COLUMNS and name in self.data.columns and self.data[name].dtype == float:
@@ -894,35 +949,83 @@ class Log:
         return None
 
     def quaternions(self) -> np.ndarray | None:
-        """Attitude quaternion body -> lab, scalar first, shape (n, 4), or None."""
+        """Attitude quaternion body -> lab, scalar first.
+
+        Returns
+        -------
+        numpy.ndarray or None
+            Shape (n, 4) ``qw, qx, qy, qz``; None if absent.
+        """
         return self._optional(_QUATERNION)
 
     def yaw(self) -> np.ndarray | None:
-        """Logged yaw, rad, shape (n,), or None (not derived from the quaternion)."""
+        """Logged yaw (not derived from the quaternion).
+
+        Returns
+        -------
+        numpy.ndarray or None
+            rad, shape (n,); None if absent.
+        """
         return self.column("yaw") if self.has("yaw") else None
 
     def yaw_ref(self) -> np.ndarray | None:
-        """Commanded yaw, rad, shape (n,), or None."""
+        """Commanded yaw.
+
+        Returns
+        -------
+        numpy.ndarray or None
+            rad, shape (n,); None if absent.
+        """
         return self.column("yaw_ref") if self.has("yaw_ref") else None
 
     def sliders(self) -> np.ndarray | None:
-        """Slider positions along their rails, m, shape (n, 3), or None."""
+        """Slider positions along their rails.
+
+        Returns
+        -------
+        numpy.ndarray or None
+            m, shape (n, 3); None if absent.
+        """
         return self._optional(_SLIDERS)
 
     def dipoles(self) -> np.ndarray | None:
-        """Commanded magnetorquer dipole, A m^2, body axes, shape (n, 3), or None."""
+        """Commanded magnetorquer dipole, body axes.
+
+        Returns
+        -------
+        numpy.ndarray or None
+            A m^2, shape (n, 3); None if absent.
+        """
         return self._optional(_DIPOLES)
 
     def fields(self) -> np.ndarray | None:
-        """Logged magnetic field, T, body axes, shape (n, 3), or None."""
+        """Logged magnetic field, body axes.
+
+        Returns
+        -------
+        numpy.ndarray or None
+            T, shape (n, 3); None if absent.
+        """
         return self._optional(_FIELDS)
 
     def gimbals(self) -> np.ndarray | None:
-        """Measured gimbal angles, rad, shape (n, 4), or None."""
+        """Measured gimbal angles.
+
+        Returns
+        -------
+        numpy.ndarray or None
+            rad, shape (n, 4); None if absent.
+        """
         return self._optional(_GIMBALS)
 
     def gimbal_rates(self) -> np.ndarray | None:
-        """Commanded gimbal rates, rad/s, shape (n, 4), or None."""
+        """Commanded gimbal rates.
+
+        Returns
+        -------
+        numpy.ndarray or None
+            rad/s, shape (n, 4); None if absent.
+        """
         return self._optional(_GIMBAL_RATES)
 
     def _wheel_family(self, family: tuple[str, ...]) -> np.ndarray | None:
@@ -933,13 +1036,24 @@ class Log:
         return self._optional(family[:n]) if n else None
 
     def wheel_speeds(self) -> np.ndarray | None:
-        """Measured wheel speeds ``ws1 .. wsn``, rad/s (relative to the body), shape (n, k),
-        or None."""
+        """Measured wheel speeds ``ws1 .. wsn`` (relative to the body).
+
+        Returns
+        -------
+        numpy.ndarray or None
+            rad/s, shape (n, k) for k wheels; None if absent.
+        """
         return self._wheel_family(WHEEL_SPEED_COLUMNS)
 
     def wheel_commands(self) -> np.ndarray | None:
-        """Wheel commands ``wc1 .. wcn`` (N m, or rad/s for ``wheels.command = "speed"``),
-        shape (n, k), or None."""
+        """Wheel commands ``wc1 .. wcn``.
+
+        Returns
+        -------
+        numpy.ndarray or None
+            N m (rad/s for ``wheels.command = "speed"``), shape (n, k) for k wheels; None
+            if absent.
+        """
         return self._wheel_family(WHEEL_COMMAND_COLUMNS)
 
 
@@ -1103,6 +1217,19 @@ def read_log(
     CSV is read by ``pyarrow.csv``; a file it refuses (or whose content is not
     valid) is read again cell by cell as text, so that the message names the
     row, the line and the column of the first bad cell.
+
+    Examples
+    --------
+    >>> import airbearing as ab
+    >>> tb = ab.load_testbed("cmg-yaw")
+    >>> path = ab.write_log(ab.slew(tb, angle_deg=30.0, duration=2.0).log, "slew.csv")
+    >>> log = ab.read_log(path, tb, columns=["yaw", "wz"])
+    >>> log.n, log.has("yaw", "wz", "d1")  # the testbed requires the gimbal angles d1..d4
+    (40, True)
+    >>> ab.read_log("slew.txt")
+    Traceback (most recent call last):
+    ...
+    airbearing.errors.InputError: slew.txt: ...
     """
     from airbearing.io.coerce import as_testbed
 
@@ -1184,6 +1311,17 @@ def write_log(log: Log | pd.DataFrame, path: str | os.PathLike[str]) -> Path:
     InputError
         If the suffix is unknown, the data is not a valid log, or the
         directory cannot be written. No partial file is left behind.
+
+    Examples
+    --------
+    >>> import pandas as pd
+    >>> import airbearing as ab
+    >>> samples = pd.DataFrame({"t": [0.0, 0.05, 0.1], "yaw": [0.0, 0.01, 0.02],
+    ...                         "wz": [0.2, 0.2, 0.2]})  # s, rad, rad/s
+    >>> ab.write_log(samples, "run.parquet").name
+    'run.parquet'
+    >>> ab.read_log("run.parquet").column("wz").tolist()
+    [0.2, 0.2, 0.2]
     """
     p = Path(path)
     kind = _format(p)

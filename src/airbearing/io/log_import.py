@@ -178,6 +178,21 @@ def import_log_with_notes(
         non-finite cell, a quaternion whose norm is off 1 by more than 1e-3, or a
         result that is not a valid log (time not increasing, all gaps, ...): one
         line naming the key, row (0-based data row) or column.
+
+    Examples
+    --------
+    A raw file with a millisecond clock and the yaw in degrees, wrapped at 180 deg:
+
+    >>> from pathlib import Path
+    >>> import airbearing as ab
+    >>> _ = Path("raw.csv").write_text("Time (ms),Yaw (deg)\\n0,179\\n100,-179\\n200,-177\\n")
+    >>> mapping = {"columns": {"t": "Time (ms)", "yaw": "Yaw (deg)"},
+    ...            "units": {"t": "ms", "yaw": "deg"}}
+    >>> imported = ab.import_log_with_notes("raw.csv", mapping)
+    >>> imported.log.t.tolist()  # s
+    [0.0, 0.1, 0.2]
+    >>> print(imported.notes[0])
+    yaw ('Yaw (deg)') unwrapped: 1 jump(s) of 2 pi removed (at raw row(s) 1); ...
     """
     import pandas as pd
 

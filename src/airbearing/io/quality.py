@@ -291,6 +291,19 @@ class LogQuality:
         (:func:`airbearing.io.motion.still_channels`).
     no_motion : str
         Why the log shows no motion (:func:`airbearing.io.motion.no_motion`), or ``""``.
+
+    Examples
+    --------
+    A 3 s simulated log with five rows (0.25 s) taken out, read as a gap:
+
+    >>> import airbearing as ab
+    >>> tb = ab.load_testbed("cmg-yaw")
+    >>> log = ab.slew(tb, angle_deg=30.0, duration=3.0, seed=1).log
+    >>> quality = ab.Log(log.data.drop(index=range(20, 25)), testbed=tb).quality
+    >>> quality.n_rows, quality.segments, round(quality.period, 3)  # rows, row ranges, s
+    (55, ((0, 20), (20, 55)), 0.05)
+    >>> quality.findings()
+    (('outlier rows', 'none'),)
     """
 
     n_rows: int
@@ -359,6 +372,11 @@ class LogQuality:
         integrate a model through it (held over its interval, or as the difference that
         derives a gimbal rate). So a segment ends before the row and the next starts after
         it; nothing is filled.
+
+        Returns
+        -------
+        tuple of (int, int)
+            ``(start, stop)`` row ranges, 0-based.
         """
         bad = self.input_rows
         out = []
@@ -373,7 +391,13 @@ class LogQuality:
         return tuple(out)
 
     def usable_mask(self) -> np.ndarray:
-        """True for every row a fit may use (False at outlier rows), shape (n_rows,)."""
+        """True for every row a fit may use (False at outlier rows).
+
+        Returns
+        -------
+        numpy.ndarray
+            Shape (n_rows,), bool.
+        """
         mask = np.ones(self.n_rows, dtype=bool)
         mask[list(self.outlier_rows)] = False
         return mask

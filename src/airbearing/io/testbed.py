@@ -720,6 +720,17 @@ class Testbed:
     -----
     Instances are immutable and hashable; :meth:`replace` and
     :meth:`with_effects` return validated copies.
+
+    Examples
+    --------
+    >>> import airbearing as ab
+    >>> tb = ab.load_testbed("cmg-yaw")
+    >>> tb
+    Testbed(name='cmg-yaw', kind='cmg', dof=1, mass=0.7628, source='cmg-yaw (built-in)')
+    >>> tb.body.yaw_inertia, tb.sensors.rate  # kg m^2, Hz
+    (0.00283, 20.0)
+    >>> tb.with_effects({"viscous_friction": 1e-4}).effects  # N m s/rad
+    {'viscous_friction': 0.0001}
     """
 
     kind: str
@@ -1020,6 +1031,18 @@ def testbed_from_dict(data: Mapping[str, Any], source: str = _MEMORY) -> Testbed
         ``flywheel_speed`` for kind ``"cmg"``), a table not allowed for the
         kind, or a value of the wrong type, shape or range. The message names
         ``source`` and the dotted key.
+
+    Examples
+    --------
+    >>> import airbearing as ab
+    >>> body = {"dof": 1, "mass": 12.0, "inertia": 0.4}  # kg, kg m^2 (yaw only)
+    >>> tb = ab.testbed_from_dict({"kind": "platform", "name": "bench", "body": body})
+    >>> tb.dof, tb.body.yaw_inertia
+    (1, 0.4)
+    >>> ab.testbed_from_dict({"kind": "platform", "body": {**body, "mass": -1.0}})
+    Traceback (most recent call last):
+    ...
+    airbearing.errors.InputError: <memory>: key 'body.mass': expected a finite number > 0 (kg), got -1.0
     """
     src = str(source)
     if not isinstance(data, Mapping):
@@ -1110,6 +1133,21 @@ def testbed_to_dict(testbed: Testbed) -> dict[str, Any]:
         identical float (almost always), else in radians; an infinite
         ``max_gimbal_rate`` is omitted (it is the default). Reading the
         result with :func:`testbed_from_dict` gives an equal Testbed.
+
+    Raises
+    ------
+    InputError
+        If ``testbed`` is not a :class:`Testbed`.
+
+    Examples
+    --------
+    >>> import airbearing as ab
+    >>> tb = ab.load_testbed("cmg-yaw")
+    >>> data = ab.testbed_to_dict(tb)
+    >>> sorted(data), data["body"]["inertia"]  # kg m^2
+    (['body', 'cmg', 'gravity', 'kind', 'name', 'sensors'], 0.00283)
+    >>> ab.testbed_from_dict(data) == tb
+    True
     """
     if not isinstance(testbed, Testbed):
         raise InputError(f"testbed_to_dict: expected a Testbed, got {type(testbed).__name__}")
@@ -1217,6 +1255,17 @@ def read_testbed(path: str | os.PathLike[str]) -> Testbed:
     InputError
         If the file cannot be read, is not valid TOML or is not a valid
         testbed; the message names the file and the key.
+
+    Examples
+    --------
+    >>> import airbearing as ab
+    >>> path = ab.write_testbed(ab.load_testbed("cmg-yaw"), "bench.toml")
+    >>> ab.read_testbed(path).source
+    'bench.toml'
+    >>> ab.read_testbed("missing.toml")
+    Traceback (most recent call last):
+    ...
+    airbearing.errors.InputError: missing.toml: no such testbed file
     """
     p = Path(path)
     src = str(path)
@@ -1251,6 +1300,13 @@ def load_testbed(path_or_name: str | os.PathLike[str]) -> Testbed:
     InputError
         If the argument is neither a built-in name nor an existing file (the
         message lists the built-ins), or the file is invalid.
+
+    Examples
+    --------
+    >>> import airbearing as ab
+    >>> tb = ab.load_testbed("seed004-platform")
+    >>> tb.kind, tb.dof, tb.source
+    ('platform', 3, 'seed004-platform (built-in)')
     """
     if isinstance(path_or_name, str) and path_or_name in BUILTIN_TESTBEDS:
         src = f"{path_or_name} (built-in)"
@@ -1292,6 +1348,14 @@ def write_testbed(testbed: Testbed, path: str | os.PathLike[str]) -> Path:
     ------
     InputError
         If the directory does not exist or cannot be written.
+
+    Examples
+    --------
+    >>> import airbearing as ab
+    >>> tb = ab.load_testbed("cmg-yaw").with_effects({"viscous_friction": 1e-4})
+    >>> path = ab.write_testbed(tb, "cmg-with-friction.toml")
+    >>> path.name, ab.load_testbed(path) == tb
+    ('cmg-with-friction.toml', True)
     """
     text = _HEADER + _dumps(testbed_to_dict(testbed))
     return _atomic_write_bytes(Path(path), text.encode("utf-8"))

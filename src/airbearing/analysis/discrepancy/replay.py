@@ -215,6 +215,24 @@ class Replay:
         of one trajectory per segment. None on fixed windows.
 
     Printing one gives the verdict a person reads (``str``); its ``repr`` is one short line.
+
+    Examples
+    --------
+    A 3 s slew with a friction the nominal Model lacks, replayed by it:
+
+    >>> import airbearing as ab
+    >>> tb = ab.load_testbed("cmg-yaw")
+    >>> run = ab.slew(tb, angle_deg=30.0, duration=3.0, effects={"viscous_friction": 2e-4})
+    >>> replayed = ab.replay(tb, run.log)
+    >>> print(replayed)
+    The model misses the logs: gap 0.00233 rad/s, ... x the noise floor ... rad/s (1 log(s), 4 windows)
+    an unexplained torque is significant (...)
+    >>> [round(g, 5) for g in replayed.log_gaps()], replayed.gap_unit
+    ([0.00233], 'rad/s')
+    >>> replayed.to_pandas().columns.tolist()
+    ['log', 'row', 't', 'residual']
+    >>> replayed.to_json()["windows"]["count"], type(replayed.plot()).__name__
+    (4, 'Figure')
     """
 
     model: Model = field(repr=False)
@@ -278,14 +296,28 @@ class Replay:
 
     @property
     def gap_unit(self) -> str:
+        """Unit of the gap and the noise floor: ``"rad/s"`` (rates) or ``"rad"`` (attitude)."""
         return self.data.gap_unit
 
     def log_gaps(self) -> list[float]:
-        """The gap of each log alone (its windows), same unit."""
+        """The gap of each log alone (its windows).
+
+        Returns
+        -------
+        list of float
+            One gap per log, in :attr:`gap_unit`.
+        """
         return log_gaps(self.problem, self.fit)
 
     def residuals(self) -> dict:
-        """Primary output at every usable sample (:func:`primary_series`) plus ``t``."""
+        """Primary output at every usable sample (:func:`primary_series`) plus ``t``.
+
+        Returns
+        -------
+        dict
+            ``meas``, ``model``, ``residual`` (:attr:`gap_unit`), ``rows``, ``source`` (log
+            index), ``window`` and ``t`` (s), one entry per usable sample.
+        """
         s = primary_series(self.problem, self.fit.delta, self.fit.p)
         t = np.array([self.datas[i].t[r] for i, r in zip(s["source"], s["rows"], strict=True)])
         return {**s, "t": t}
@@ -311,7 +343,15 @@ class Replay:
         return df.sort_values(["log", "row"], kind="stable").reset_index(drop=True)
 
     def to_json(self) -> dict:
-        """``airbearing replay --json``: gap, noise floor, unit, segments, outliers per log."""
+        """The JSON document of ``airbearing replay --json``.
+
+        Returns
+        -------
+        dict
+            ``testbed``, ``effects``, ``gap``, the noise floor's keys, ``ratio``,
+            ``segments``, ``outlier_rows``, ``windows``, ``solver``, ``logs`` (gap,
+            segments, outliers per log) and ``process_noise``.
+        """
         per = []
         for d, g in zip(self.datas, self.log_gaps(), strict=True):
             per.append({"log": d.log.source, "gap": g, **d.segment_json()})
@@ -398,6 +438,8 @@ def replay(
         Multiple-shooting window, s (see :func:`make_windows`).
     substeps : int, optional
         RK4 sub-steps per sample, >= 1 (default :func:`substeps_for`).
+    jit : bool, optional
+        Compile the Model to C (default: when a compiler is available).
     progress : callable, optional
         ``progress(what, done, total)``.
 
@@ -414,6 +456,18 @@ def replay(
         finite or cannot act on the testbed.
     SolverError
         The fit of the windows' initial states failed.
+
+    Examples
+    --------
+    The nominal Model misses a friction; the Model with it replays the log to the noise:
+
+    >>> import airbearing as ab
+    >>> tb = ab.load_testbed("cmg-yaw")
+    >>> run = ab.slew(tb, angle_deg=30.0, duration=3.0, effects={"viscous_friction": 2e-4})
+    >>> round(ab.replay(tb, run.log).gap, 5)  # rad/s
+    0.00233
+    >>> ab.replay(tb, run.log, effects={"viscous_friction": 2e-4}).gap < 1e-6
+    True
     """
     testbed, logs, window_s = checked_arguments(
         testbed, logs, window_s, "the testbed replayed", progress

@@ -103,8 +103,51 @@ class Discrepancy:
     verdict : str
     localisation : Localisation
         Where the nominal residual lives (:func:`localise`), with ``words``.
+    testbed, augmented_testbed : Testbed
+        The nominal testbed, and the same with the named effects added.
+    augmented_model : Model
+        The Model of ``augmented_testbed``.
+    datas : tuple of ReplayData
+        The fitted logs, as the shooting problem reads them.
+    windows : WindowSet
+        The shooting windows (or linked pieces) over the logs.
+    floor : NoiseFloor
+        The measurement noise estimate (``noise_floor`` is its value).
+    nominal_fit, final_fit : Fit
+        The fits of the nominal and of the augmented Model.
+    nominal_problem, final_problem : ShootingProblem
+        Their shooting problems.
+    stop_reason : str
+        Why forward selection stopped.
+    log_gaps_before, log_gaps_after : tuple of float
+        The gap of each fitted log alone (``gap_unit``).
+    errors : Errors or None
+        The honest errors' details (:mod:`.honest`).
+    effect_std_within_model : dict
+        ``name -> 1-sigma`` within the named model, without the choice among
+        ``alternatives``.
 
     Printing one gives the verdict a person reads (``str``); its ``repr`` is one short line.
+
+    Examples
+    --------
+    A 3 s slew of the yaw CMG with a viscous friction its nominal Model lacks, searched
+    for that one effect (:func:`discrepancy` searches them all):
+
+    >>> import airbearing as ab
+    >>> tb = ab.load_testbed("cmg-yaw")
+    >>> run = ab.slew(tb, angle_deg=30.0, duration=3.0, effects={"viscous_friction": 2e-4})
+    >>> found = ab.discrepancy(tb, run.log, only="viscous_friction")
+    >>> print(found)
+    missing effect: viscous_friction = 0.0002 +- ... (std / bound 1)
+    gap before 0.00233 rad/s (... x the noise floor ... rad/s), after ... rad/s (0.00 x)
+    adequacy: ...
+    >>> round(found.effects["viscous_friction"], 6), found.gap_unit  # N m s/rad
+    (0.0002, 'rad/s')
+    >>> found.to_pandas()[["name", "named"]].values.tolist()
+    [['viscous_friction', True]]
+    >>> [(e["name"], round(e["value"], 6)) for e in found.to_json()["effects"]]
+    [('viscous_friction', 0.0002)]
     """
 
     testbed: Testbed = field(repr=False)
@@ -225,6 +268,7 @@ class Discrepancy:
 
     @property
     def gap_unit(self) -> str:
+        """Unit of the gaps and the noise floor: ``"rad/s"`` (rates) or ``"rad"`` (attitude)."""
         return self.data.gap_unit
 
     @property
@@ -233,7 +277,15 @@ class Discrepancy:
         return not self.effects
 
     def to_json(self) -> dict:
-        """The JSON document of ``airbearing discrepancy --json``."""
+        """The JSON document of ``airbearing discrepancy --json``.
+
+        Returns
+        -------
+        dict
+            The keys of the discrepancy JSON reference (``effects``: a list of
+            ``{name, value, std, ...}``; ``gap_before``, ``gap_after``, ``noise_floor``,
+            ``candidates``, ``logs`` ...).
+        """
         logs = []
         for d, gb, ga in zip(self.datas, self.log_gaps_before, self.log_gaps_after, strict=True):
             logs.append(

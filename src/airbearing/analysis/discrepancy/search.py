@@ -487,6 +487,17 @@ def discrepancy(
         inapplicable effect in ``only``, a negative ``max_effects``.
     SolverError
         The nominal replay cannot be fitted.
+
+    Examples
+    --------
+    >>> import airbearing as ab
+    >>> tb = ab.load_testbed("cmg-yaw")
+    >>> run = ab.slew(tb, angle_deg=30.0, duration=3.0, effects={"viscous_friction": 2e-4})
+    >>> found = ab.discrepancy(tb, run.log, only="viscous_friction")
+    >>> found.effects  # doctest: +ELLIPSIS
+    {'viscous_friction': 0.000200...}
+    >>> found.gap_after < 0.01 * found.gap_before  # rad/s
+    True
     """
     testbed, logs, window_s = checked_arguments(
         testbed, logs, window_s, "the testbed searched", progress
