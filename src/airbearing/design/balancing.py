@@ -685,7 +685,40 @@ METHODS = ("mechanical", "mixed", "lyapunov", "adaptive")
 
 
 def balancing_controller(model, method: str, **options) -> Controller:
-    """The balancing controller of ``method`` (:data:`METHODS`); options go to its builder."""
+    """The balancing controller of ``method`` (:data:`METHODS`); options go to its builder.
+
+    Parameters
+    ----------
+    model : Model
+        A ``kind = "platform"``, dof 3 Model.
+    method : {"mechanical", "mixed", "lyapunov", "adaptive"}
+        Seed 000's PID with the sliders alone (eq. 8) or with the magnetorquers (eqs. 5
+        and 7), the Lyapunov law, or the adaptive law.
+    **options
+        Keywords of the method's builder (:func:`pid_balancing_controller`,
+        :func:`lyapunov_balancing_controller`, :func:`adaptive_balancing_controller`):
+        gains, actuator blocks, slider positions (m).
+
+    Returns
+    -------
+    Controller
+
+    Raises
+    ------
+    InputError
+        An unknown method.
+
+    Examples
+    --------
+    >>> import airbearing as ab
+    >>> controller = ab.balancing_controller(ab.build_model("seed000-tabletop"), "mixed")
+    >>> controller.name, controller.gain_names  # N m, N m s, N m/s
+    ('balance_mixed', ('K_p', 'K_d', 'K_dK_i'))
+    >>> ab.balancing_controller(ab.build_model("seed000-tabletop"), "magic")
+    Traceback (most recent call last):
+    ...
+    airbearing.errors.InputError: method='magic': expected one of mechanical|mixed|lyapunov|adaptive
+    """
     if method == "mechanical":
         return pid_balancing_controller(model, split=MECHANICAL, **options)
     if method == "mixed":

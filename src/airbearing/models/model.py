@@ -97,6 +97,25 @@ class Model:
     lag_init : casadi.Function
         ``(x_plant, u, p) -> lag states`` of a lag that has been following the rate
         (ramp steady state ``src - tau d(src)/dt``); the start of a lag state in a window.
+
+    Examples
+    --------
+    The yaw CMG testbed with a viscous friction, coasting at 0.5 rad/s for 1 s: the rate
+    decays as ``exp(-c t / J_zz)`` (``c`` = 1e-4 N m s/rad, ``J_zz`` = 0.00283 kg m^2):
+
+    >>> import math
+    >>> import numpy as np
+    >>> import airbearing as ab
+    >>> model = ab.build_model("cmg-yaw", {"viscous_friction": 1e-4})
+    >>> model.x_names, model.nu, model.kind, model.dof
+    (('yaw', 'wz', 'd1', 'd2', 'd3', 'd4'), 7, 'cmg', 1)
+    >>> x0 = model.x0(w=0.5)  # rad/s
+    >>> X = model.rollout(20, 0.05)(x0, np.zeros((model.nu, 20)), model.p0)  # 20 x 0.05 s
+    >>> wz = float(X[model.index("wz")[0], -1])
+    >>> round(wz, 5), round(0.5 * math.exp(-1e-4 * 1.0 / 0.00283), 5)  # rad/s
+    (0.48264, 0.48264)
+    >>> model.params(viscous_friction=2e-4)[model.index("viscous_friction", "p")].tolist()
+    [0.0002]
     """
 
     testbed: Testbed
@@ -121,30 +140,53 @@ class Model:
 
     @property
     def nx(self) -> int:
+        """Number of states."""
         return len(self.x_names)
 
     @property
     def nu(self) -> int:
+        """Number of inputs."""
         return len(self.u_names)
 
     @property
     def n_p(self) -> int:
+        """Number of parameters."""
         return len(self.p_names)
 
     @property
     def ny(self) -> int:
+        """Number of measurements."""
         return len(self.y_names)
 
     @property
     def kind(self) -> str:
+        """The testbed's kind, ``"platform"`` or ``"cmg"``."""
         return self.testbed.kind
 
     @property
     def dof(self) -> int:
+        """Rotational degrees of freedom of the bearing (1 or 3)."""
         return self.testbed.body.dof
 
     def index(self, names, which: str = "x") -> list[int]:
-        """Positions of ``names`` in the ``x``, ``u``, ``p`` or ``y`` vector."""
+        """Positions of ``names`` in the ``x``, ``u``, ``p`` or ``y`` vector.
+
+        Parameters
+        ----------
+        names : str or sequence of str
+            Entry names (:attr:`x_names`, :attr:`u_names`, ...).
+        which : {"x", "u", "p", "y"}
+            The vector.
+
+        Returns
+        -------
+        list of int
+
+        Raises
+        ------
+        InputError
+            If a name is not an entry of that vector.
+        """
         table = {"x": self.x_names, "u": self.u_names, "p": self.p_names, "y": self.y_names}[which]
         names = [names] if isinstance(names, str) else list(names)
         missing = [n for n in names if n not in table]
@@ -153,16 +195,51 @@ class Model:
         return [table.index(n) for n in names]
 
     def params(self, **values) -> np.ndarray:
-        """Nominal parameters with some entries replaced by name (SI units)."""
+        """Nominal parameters with some entries replaced by name.
+
+        Parameters
+        ----------
+        **values : float
+            Parameter name -> value (SI units, those of :attr:`p_names`).
+
+        Returns
+        -------
+        numpy.ndarray
+            Shape (n_p,), a copy of :attr:`p0` with those entries replaced.
+
+        Raises
+        ------
+        InputError
+            If a name is not a parameter.
+        """
         p = self.p0.copy()
         for k, v in values.items():
             p[self.index(k, "p")[0]] = v
         return p
 
     def x0(self, *, q=None, yaw=0.0, w=None, gimbals=None, wheels=None) -> np.ndarray:
-        """A state vector: attitude, rate (body, rad/s), gimbal angles and wheel speeds
-        (rad/s, relative to the body; default: the testbed's ``cmg.gimbal_angles`` and
-        ``wheels.speeds``)."""
+        """A state vector: attitude, rate, gimbal angles and wheel speeds.
+
+        Parameters
+        ----------
+        q : sequence of 4 float, optional
+            Attitude quaternion body -> lab, scalar first (dof 3; normalised). Default:
+            identity.
+        yaw : float
+            rad, the attitude of a dof-1 bearing.
+        w : float or sequence of 3 float, optional
+            Body rate, rad/s (dof 1: the yaw rate). Default: at rest.
+        gimbals : sequence of 4 float, optional
+            Gimbal angles, rad (default: the testbed's ``cmg.gimbal_angles``).
+        wheels : sequence of float, optional
+            Wheel speeds, rad/s relative to the body (default: the testbed's
+            ``wheels.speeds``).
+
+        Returns
+        -------
+        numpy.ndarray
+            Shape (nx,); ``sensor_lag`` states start at the true rate.
+        """
         x = np.zeros(self.nx)
         if self.dof == 3:
             x[0:4] = [1, 0, 0, 0] if q is None else quat.normalize(np.asarray(q, float))
@@ -191,6 +268,18 @@ class Model:
         attitude quaternion renormalised at the end; ``sensor_lag`` states are
         advanced with the exact exponential of a first-order lag driven by the
         sub-interval mean rate, so any time constant >= 0 is stable.
+
+        Parameters
+        ----------
+        dt : float
+            Sample interval, s.
+        substeps : int
+            RK4 sub-intervals per sample.
+
+        Returns
+        -------
+        casadi.Function
+            ``step(x, u, p) -> x_next``.
         """
         x = ca.SX.sym("x", self.nx)
         u = ca.SX.sym("u", self.nu)
@@ -204,6 +293,16 @@ class Model:
         The same arithmetic as :meth:`step` (RK4 with ``substeps`` sub-intervals, the
         quaternion renormalised, exact lag update), with the interval length a symbol, so
         one Function integrates a log on its own (jittered) sample times.
+
+        Parameters
+        ----------
+        substeps : int
+            RK4 sub-intervals per interval.
+
+        Returns
+        -------
+        casadi.Function
+            ``step_dt(x, u, p, dt) -> x_next``.
         """
         x = ca.SX.sym("x", self.nx)
         u = ca.SX.sym("u", self.nu)
@@ -239,6 +338,20 @@ class Model:
 
         Column ``k`` of ``X`` is the state at the end of sample ``k`` (time ``(k+1) dt``).
         One compiled ``mapaccum``: no Python loop per step.
+
+        Parameters
+        ----------
+        n : int
+            Number of samples.
+        dt : float
+            Sample interval, s.
+        substeps : int
+            RK4 sub-intervals per sample.
+
+        Returns
+        -------
+        casadi.Function
+            ``rollout(x0, U, p) -> X``, ``U`` of shape (nu, n), ``X`` of shape (nx, n).
         """
         step = self.step(dt, substeps)
         return step.mapaccum("rollout", n, [0], [0])

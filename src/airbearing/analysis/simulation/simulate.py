@@ -58,6 +58,25 @@ class SimResult:
         The controller's logged quantities (``controller.extra_names``).
     reference : ndarray (N, n_ref)
         The reference at each sample.
+    model : Model
+        The plant that was simulated.
+    controller : Controller
+        The controller that closed the loop.
+
+    Examples
+    --------
+    >>> import airbearing as ab
+    >>> run = ab.slew(ab.load_testbed("cmg-yaw"), angle_deg=30.0, duration=5.0)
+    >>> run
+    SimResult(testbed='cmg-yaw', samples=100, duration_s=5)
+    >>> print(run)
+    cmg-yaw: 100 samples over 5 s, peak rate ... deg/s, final rate ... deg/s
+    >>> run.x.shape, run.state("wz").shape, run.to_pandas().shape[0]  # rad/s
+    ((101, 6), (100,), 100)
+    >>> sorted(run.to_json())
+    ['duration_s', 'final_rate_deg_s', 'peak_rate_deg_s', 'samples', 'testbed']
+    >>> len(run.plot().axes)
+    5
     """
 
     log: Log = field(repr=False)
@@ -100,22 +119,43 @@ class SimResult:
         return float(self.t[-1] - self.t[0] + self.model.testbed.sensors.dt) if len(self.t) else 0.0
 
     def to_json(self) -> dict:
-        """``testbed`` and the run's motion: ``peak_rate_deg_s``, ``final_rate_deg_s``,
-        ``duration_s``, ``samples`` (``max_tilt_deg`` on dof 3), true states.
-
-        ``airbearing simulate --json`` adds the scenario's own numbers (a slew's
+        """``testbed`` and the run's motion (``airbearing simulate --json`` without the
+        scenario's own numbers, a slew's
         :func:`~airbearing.analysis.simulation.scenarios.slew_summary`).
+
+        Returns
+        -------
+        dict
+            ``testbed``, ``peak_rate_deg_s``, ``final_rate_deg_s`` (deg/s),
+            ``duration_s`` (s), ``samples`` (``max_tilt_deg``, deg, on dof 3).
         """
         from airbearing.analysis.simulation.scenarios import free_summary
 
         return {"testbed": self.model.testbed.name, **free_summary(self)}
 
     def to_pandas(self):
-        """The run as a log table (pandas DataFrame: FORMATS.md columns, ``true_*``, ...)."""
+        """The run as a log table.
+
+        Returns
+        -------
+        pandas.DataFrame
+            FORMATS.md columns, the ``true_*`` states and the controller's columns.
+        """
         return self.log.data.copy()
 
     def state(self, name: str) -> np.ndarray:
-        """True state ``name`` at the sample instants ``t`` (N,)."""
+        """True state ``name`` at the sample instants ``t``.
+
+        Parameters
+        ----------
+        name : str
+            A state of ``model.x_names`` (``"yaw"``, ``"wz"``, ``"d1"`` ...).
+
+        Returns
+        -------
+        numpy.ndarray
+            Shape (N,), SI units (rad, rad/s, m).
+        """
         return self.x[:-1, self.model.index(name)[0]]
 
 
@@ -322,6 +362,8 @@ def simulate(
         Physical parameters (default ``model.p0``).
     reference : ndarray, optional
         ``(len(ref_names),)`` held for the whole run, or ``(N, len(ref_names))``.
+        Default zeros: give an attitude controller its commanded quaternion (a zero
+        quaternion makes the run NaN).
     seed : int
         Seed of the noise generator; the same seed gives the same run.
     noise : bool
@@ -332,8 +374,29 @@ def simulate(
         ``sensors.attitude_noise``.
     torque_noise : float, optional
         1-sigma disturbance torque per sample and axis, N m (default ``body.torque_noise``).
+    c0 : ndarray, optional
+        Initial controller state (default ``controller.c0``).
     substeps : int
         RK4 sub-steps per sample.
+
+    Returns
+    -------
+    SimResult
+
+    Raises
+    ------
+    InputError
+        A duration, state, parameter or reference of the wrong shape or value.
+
+    Examples
+    --------
+    >>> import airbearing as ab
+    >>> model = ab.build_model("cmg-yaw")
+    >>> controller = ab.cmg_attitude_controller(model)
+    >>> run = ab.simulate(model, controller, duration=2.0, x0=model.x0(w=0.1),
+    ...                   reference=(1.0, 0.0, 0.0, 0.0), seed=3)  # hold yaw 0
+    >>> run.log.n, run.u.shape  # 20 Hz; inputs dd1..dd4 (rad/s), tau_x..tau_z (N m)
+    (40, (40, 7))
     """
     dt = model.testbed.sensors.dt
     n, x0, p, ref = _checked_inputs(model, controller, duration, seed, x0, p, reference)
