@@ -106,6 +106,21 @@ class CMGIdentification(IdentificationResult):
         ``"momentum-exchange"``.
     residual_unit : str
         ``"rad/s"``.
+    cm_offset, std_cm_offset, held : None
+        Always None (dof 1, nothing held): the fields every identification result has.
+
+    Examples
+    --------
+    >>> import airbearing as ab
+    >>> tb = ab.load_testbed("cmg-yaw")
+    >>> run = ab.slew(tb, angle_deg=30.0, duration=3.0, seed=1)
+    >>> found = ab.identify(tb, run.log)
+    >>> print(found)
+    CMGIdentification (momentum-exchange, 1 segment(s))
+    J_z = 0.00283 +- ... kg m^2
+    residual rms ... rad/s
+    >>> found.to_json()["friction"], found.to_testbed(tb).body.yaw_inertia == found.inertia
+    ({}, True)
     """
 
     inertia: float
@@ -134,9 +149,15 @@ class CMGIdentification(IdentificationResult):
         return rows[0] if len(rows) == 1 else rows
 
     def to_json(self) -> dict:
-        """``inertia`` (J_z), ``std``, ``std_white``, ``condition_number``,
-        ``active_constraints``, ``residual_rms`` and the friction terms (NaN: null, as in
-        ``--json``)."""
+        """The JSON contract of ``airbearing identify --json`` (NaN: null).
+
+        Returns
+        -------
+        dict
+            ``inertia`` (J_z, kg m^2), ``std``, ``std_white``, ``condition_number``,
+            ``active_constraints``, ``residual_rms``, ``friction``, ``std_friction``,
+            ``method``, ``segments``, ``outlier_rows``, ``warnings``, ``details``.
+        """
         return to_jsonable(
             {
                 **self._yaw_json(self.condition_number, self.active_constraints),
@@ -155,6 +176,15 @@ class CMGIdentification(IdentificationResult):
 
         An ``inertia_error`` effect of the testbed is dropped: the identified J_z is
         the effective inertia it stood for.
+
+        Parameters
+        ----------
+        testbed : Testbed
+            The testbed the logs came from.
+
+        Returns
+        -------
+        Testbed
         """
         b = testbed.body
         effects = {k: v for k, v in testbed.effects.items() if k != "inertia_error"}

@@ -58,6 +58,15 @@ class Prior:
         Hard bound: each inertia entry within this many kg m^2 of the prior.
     cm_offset_bound : float, optional
         Hard bound: each offset component within this many m of the prior.
+
+    Examples
+    --------
+    >>> import airbearing as ab
+    >>> prior = ab.Prior.from_testbed(ab.load_testbed("seed004-platform"), std_cm_offset=5e-4)
+    >>> prior.theta().round(4).tolist()  # J_xx J_yy J_zz J_xy J_xz J_yz (kg m^2), r (m)
+    [0.0241, 0.0332, 0.0363, -0.001, 0.0, -0.004, 0.0004, 0.0007, -0.0026]
+    >>> prior.std().round(5).tolist()  # 10 % of the mean principal inertia; 0.5 mm
+    [0.00312, 0.00312, 0.00312, 0.00312, 0.00312, 0.00312, 0.0005, 0.0005, 0.0005]
     """
 
     inertia: object
@@ -69,11 +78,34 @@ class Prior:
 
     @classmethod
     def from_testbed(cls, testbed: Testbed, **kwargs) -> Prior:
-        """The testbed file's inertia and offset as a prior."""
+        """The testbed file's inertia and offset as a prior.
+
+        Parameters
+        ----------
+        testbed : Testbed
+            Its ``body.inertia`` (kg m^2) and ``body.cm_offset`` (m) are the prior.
+        **kwargs
+            ``std_inertia``, ``std_cm_offset``, ``inertia_bound``, ``cm_offset_bound``.
+
+        Returns
+        -------
+        Prior
+        """
         return cls(testbed.body.inertia_matrix, testbed.body.cm_offset_vec, **kwargs)
 
     def theta(self) -> np.ndarray:
-        """``[J_xx J_yy J_zz J_xy J_xz J_yz r_x r_y r_z]`` of the prior (kg m^2, m)."""
+        """The prior as a parameter vector.
+
+        Returns
+        -------
+        numpy.ndarray
+            ``[J_xx J_yy J_zz J_xy J_xz J_yz r_x r_y r_z]`` (kg m^2, m).
+
+        Raises
+        ------
+        InputError
+            An inertia that is not a symmetric 3x3, an offset that is not 3 numbers.
+        """
         J = np.asarray(self.inertia, float)
         if J.shape != (3, 3) or not np.allclose(J, J.T):
             raise InputError(f"prior inertia: expected a symmetric 3x3 in kg m^2, got {J.tolist()}")
@@ -83,7 +115,13 @@ class Prior:
         return np.r_[J[0, 0], J[1, 1], J[2, 2], J[0, 1], J[0, 2], J[1, 2], r]
 
     def std(self) -> np.ndarray:
-        """1-sigma of each entry of :meth:`theta` (kg m^2, m)."""
+        """1-sigma of each entry of :meth:`theta`.
+
+        Returns
+        -------
+        numpy.ndarray
+            Shape (9,), kg m^2 and m.
+        """
         J = np.asarray(self.inertia, float)
         sj = (
             self.std_inertia
@@ -310,6 +348,31 @@ class PlatformIdentification(IdentificationResult):
         inertia and offset at that position over ``m r_z``, and ``r_x / r_z``,
         ``r_y / r_z``), ``ratio_units`` and ``fixes`` (what would fix the scale); None when
         identifiable.
+
+    Examples
+    --------
+    Two simulated 10 s free oscillations of seed 004's platform, the sliders moved between,
+    the offset's x and y known from balancing:
+
+    >>> import airbearing as ab
+    >>> tb = ab.load_testbed("seed004-platform")
+    >>> runs = [
+    ...     ab.free_oscillation(tb, initial_rate=(0.3, -0.2, 0.5), duration=10.0, seed=1),
+    ...     ab.free_oscillation(tb, initial_rate=(-0.4, 0.3, -1.2), duration=10.0, seed=2,
+    ...                         sliders=(0.01, -0.01, 0.005)),
+    ... ]
+    >>> found = ab.identify(tb, [r.log for r in runs], known_offset_xy=(0.0004, 0.0007),
+    ...                     method="equation-error")
+    >>> found.inertia.diagonal().round(3).tolist()  # kg m^2 (the testbed's: 0.0241 ...)
+    [0.024, 0.033, 0.036]
+    >>> round(float(found.cm_offset[2]), 4), found.active_constraints  # m
+    (-0.0026, ('known_offset_x', 'known_offset_y'))
+    >>> found.param_names[:3], found.std.shape, found.outlier_rows
+    (('J_xx', 'J_yy', 'J_zz'), (9,), [[], []])
+    >>> updated = found.to_testbed(tb)  # the testbed file with the identified values
+    >>> to_json = found.to_json()
+    >>> to_json["method"], to_json["identifiable"]
+    ('equation-error', True)
     """
 
     param_names = PARAM_NAMES
@@ -371,8 +434,18 @@ class PlatformIdentification(IdentificationResult):
         return rows[0] if len(rows) == 1 else rows
 
     def to_json(self) -> dict:
-        """The JSON contract: inertia, cm_offset, std, condition_number, active_constraints,
-        residual_rms (+ residual_unit), segments, outlier_rows, std_status, ..."""
+        """The JSON contract of ``airbearing identify --json`` (NaN: null).
+
+        Returns
+        -------
+        dict
+            ``inertia`` (kg m^2), ``cm_offset`` (m), ``std``, ``std_status``,
+            ``not_identifiable``, ``condition_number``, ``active_constraints``,
+            ``residual_rms`` (+ ``residual_unit``), ``method``, ``mass`` (kg), ``segments``,
+            ``outlier_rows``, ``logs``, ``warnings``, ``weak_directions``, ``held``,
+            ``identifiable``, ``scale_free``, ``details`` (and ``std_white``,
+            ``cramer_rao``, ``prior_z``, ``equation_error`` when present).
+        """
         out = {
             "inertia": self.inertia.tolist(),
             "cm_offset": self.cm_offset.tolist(),
@@ -418,6 +491,15 @@ class PlatformIdentification(IdentificationResult):
 
         An effect ``cm_offset_error`` of ``testbed`` is dropped: identification fits the whole
         CM offset, that effect included (:func:`.platform.fold_cm_offset`).
+
+        Parameters
+        ----------
+        testbed : Testbed
+            The testbed the logs came from.
+
+        Returns
+        -------
+        Testbed
 
         Raises
         ------

@@ -77,6 +77,24 @@ class YawIdentification(IdentificationResult):
         ``std_inertia``, the engine's HAC sandwich never below it
         (:func:`airbearing.analysis.shooting.errors.honest_errors`); None for equation
         error (its ``std_inertia`` is the least-squares one).
+    cm_offset, std_cm_offset, held : None
+        Always None (dof 1): the fields every identification result has.
+
+    Examples
+    --------
+    A 5 s spin-down of a yaw-only bench (``J_z`` = 0.4 kg m^2) whose friction is known:
+
+    >>> import airbearing as ab
+    >>> bench = ab.testbed_from_dict({
+    ...     "kind": "platform", "name": "bench",
+    ...     "body": {"dof": 1, "mass": 12.0, "inertia": 0.4},  # kg, kg m^2
+    ...     "effects": {"viscous_friction": 0.002}})  # N m s/rad
+    >>> run = ab.spindown(bench, initial_rate=1.0, duration=5.0)  # rad/s, s
+    >>> found = ab.identify(bench, run.log, method="equation-error")
+    >>> type(found).__name__, round(found.inertia, 4), found.std_status  # kg m^2
+    ('YawIdentification', 0.4, {'J_zz': 'estimated'})
+    >>> found.to_json()["residual_unit"], found.to_testbed(bench).body.yaw_inertia == found.inertia
+    ('rad/s', True)
     """
 
     inertia: float
@@ -106,9 +124,15 @@ class YawIdentification(IdentificationResult):
         return rows[0] if len(rows) == 1 else rows
 
     def to_json(self) -> dict:
-        """``inertia``, ``std``, ``std_white``, ``std_status``, ``residual_rms``,
-        ``residual_unit``, ``segments``, ``outlier_rows``, ``logs``, ``warnings``, ``method``
-        (NaN: null, as in ``--json``)."""
+        """The JSON contract of ``airbearing identify --json`` (NaN: null).
+
+        Returns
+        -------
+        dict
+            ``inertia`` (kg m^2), ``std``, ``std_white``, ``std_status``, ``residual_rms``,
+            ``residual_unit``, ``segments``, ``outlier_rows``, ``logs``, ``warnings``,
+            ``method``, ``details``.
+        """
         return to_jsonable(
             {
                 **self._yaw_json(1.0, ()),
@@ -122,7 +146,22 @@ class YawIdentification(IdentificationResult):
         )
 
     def to_testbed(self, testbed: Testbed) -> Testbed:
-        """``testbed`` with J_z; an error when J_z was not identifiable."""
+        """``testbed`` with J_z as its yaw inertia.
+
+        Parameters
+        ----------
+        testbed : Testbed
+            The testbed the logs came from.
+
+        Returns
+        -------
+        Testbed
+
+        Raises
+        ------
+        InputError
+            J_z was not identifiable (no value to write).
+        """
         if not np.isfinite(self.inertia):
             raise InputError(
                 f"to_testbed: {self.std_status['J_zz']}; no testbed with an inertia to write"

@@ -49,6 +49,17 @@ class Rehearsal:
         Rows where the rate was set to 0 (a finite-difference export's segment starts).
     jitter : float
         The jitter fraction the clock was given.
+
+    Examples
+    --------
+    >>> import airbearing as ab
+    >>> rehearsal = ab.rehearsal_log(ab.load_testbed("seed004-platform"), duration=4.0,
+    ...                              initial_rate=(0.0, 0.0, 0.5), gaps=[(1.5, 0.5)],
+    ...                              glitches=[("rate_spike", (30,), "wz")], seed=2)
+    >>> print(rehearsal)
+    70 rows, 2 segment(s) (rows 0-29, 30-69), outlier rows 30, jitter 0
+    >>> rehearsal.to_json()["glitches"]
+    [{'kind': 'rate_spike', 'rows': [30]}]
     """
 
     log: Log = field(repr=False)
@@ -72,7 +83,14 @@ class Rehearsal:
         return tuple(sorted(rows))
 
     def to_json(self) -> dict:
-        """``segments`` (count), ``segment_rows``, ``outlier_rows``, ``glitches``, ``jitter``."""
+        """The answer key as JSON.
+
+        Returns
+        -------
+        dict
+            ``segments`` (count), ``segment_rows``, ``outlier_rows``, ``glitches``
+            (``{kind, rows}``), ``first_sample_rows``, ``jitter``.
+        """
         return {
             "segments": len(self.segment_rows),
             "segment_rows": [list(s) for s in self.segment_rows],
@@ -158,6 +176,28 @@ def rehearsal_log(
         the rate column of a ``rate_spike``.
     first_sample : bool
         Rate 0 at each segment's first row (needs rate columns).
+
+    Returns
+    -------
+    Rehearsal
+        The log and its answer key (segments, glitch rows).
+
+    Raises
+    ------
+    InputError
+        Both or neither of ``duration`` and ``times``, a gap that is not ``(t_start,
+        length)`` in s, an unknown glitch kind or a row outside the log.
+
+    Examples
+    --------
+    A 4 s free spin of seed 004's platform with a 0.5 s recording gap, checked as a lab's
+    log would be:
+
+    >>> import airbearing as ab
+    >>> rehearsal = ab.rehearsal_log(ab.load_testbed("seed004-platform"), duration=4.0,
+    ...                              initial_rate=(0.0, 0.0, 0.5), gaps=[(1.5, 0.5)])
+    >>> rehearsal.segment_rows, ab.check_log(rehearsal.log).quality.segments
+    (((0, 30), (30, 70)), ((0, 30), (30, 70)))
     """
     if (times is None) == (duration is None):
         raise InputError("give either a duration (s) or the sample times, not both or neither")

@@ -106,7 +106,9 @@ def slew(
         No sensor noise, disturbance torque or gyro low-pass (the "theoretical" runs of
         seed 001 Tables 7-8).
     steering : {"mp", "sr", "gsr", "sda"}
-        Steering law (:mod:`airbearing.design.steering`); ``steering_options`` its options.
+        Steering law (:mod:`airbearing.design.steering`).
+    steering_options : dict, optional
+        Options of the steering law (its builder's keywords).
     rate_limit_mode : {"scale", "clip"}
         Gimbal-rate limiting: seed 001 eq. 4 scales the whole command, or clip each rate.
         On wheels: the same choice for the motor torques against ``max_torque``.
@@ -241,6 +243,16 @@ def slew_summary(result: SimResult) -> dict:
         envelope while the loop asked for more), ``gimbal_rate_chatter`` (episodes
         ``{"start_s", "end_s", "samples", "reversal_samples"}`` when the gimbal-rate
         command reversed sign sample after sample) and ``warnings`` (both in words).
+
+    Examples
+    --------
+    >>> import airbearing as ab
+    >>> run = ab.slew(ab.load_testbed("cmg-yaw"), angle_deg=30.0, duration=5.0, ideal=True)
+    >>> summary = ab.slew_summary(run)
+    >>> round(summary["peak_rate_deg_s"], 1), round(summary["final_yaw_deg"], 1)  # deg/s, deg
+    (11.1, 29.1)
+    >>> summary["warnings"]
+    []
     """
     m = result.model
     if has_wheels(m.testbed):
@@ -597,6 +609,15 @@ def free_summary(result: SimResult) -> dict:
         ``peak_rate_deg_s``, ``final_rate_deg_s`` (deg/s), ``duration_s`` (s), ``samples``
         and, on dof 3, ``max_tilt_deg`` (deg, body z from lab z) with ``tilt_note`` when it
         passes what a spherical air bearing allows (:func:`tilt_note`).
+
+    Examples
+    --------
+    >>> import airbearing as ab
+    >>> run = ab.free_oscillation(ab.load_testbed("seed004-platform"),
+    ...                           initial_rate=(0.0, 0.0, 0.5), duration=5.0)  # rad/s, s
+    >>> summary = ab.free_summary(run)
+    >>> summary["samples"], summary["duration_s"], round(summary["max_tilt_deg"])  # -, s, deg
+    (100, 5.0, 34)
     """
     m = result.model
     w = result.x[:, m.index(["wx", "wy", "wz"] if m.dof == 3 else ["wz"])]
