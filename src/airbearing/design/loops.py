@@ -144,6 +144,27 @@ class Loop:
         Physical parameters of the plant (the controller keeps its nominal knowledge).
     delay_samples : int
         Computation delay of the discrete loop, samples.
+    notes : tuple of str
+        What the reader of a report should know about this loop (said in words).
+
+    Examples
+    --------
+    Seed 001's attitude loop of the yaw CMG testbed, broken at the four gimbal-rate
+    commands:
+
+    >>> import airbearing as ab
+    >>> loop = ab.make_loop(ab.load_testbed("cmg-yaw"), "attitude")
+    >>> loop
+    Loop(kind='attitude', name='attitude', gains={'K_p': 6.0, 'K_i': 0.001, 'K_w': 6.0}, channels=('dd1', 'dd2', 'dd3', 'dd4'), delay_samples=1)
+    >>> loop.dt, loop.channel_quantity, round(loop.channel_limit, 3)  # s; rad/s
+    (0.05, 'gimbal rate (rad/s)', 1.126)
+    >>> loop.used_measurements(), loop.default_outputs()
+    (('wz',), ['true_yaw', 'true_wz'])
+    >>> closed = loop.closed_loop()  # python-control StateSpace, discrete
+    >>> closed.input_labels, bool(abs(loop.stability_poles()).max() < 1)
+    (['yaw_ref', 'tau_z'], True)
+    >>> loop.with_gains({"K_p": 3.0, "K_i": 0.001, "K_w": 6.0}).gain_vector.tolist()
+    [3.0, 0.001, 6.0]
     """
 
     kind: str
@@ -162,6 +183,7 @@ class Loop:
 
     @property
     def dt(self) -> float:
+        """Sample interval of the discrete loop, s (``1 / sensors.rate``)."""
         return self.model.testbed.sensors.dt
 
     @property
@@ -190,16 +212,47 @@ class Loop:
 
     @property
     def gain_vector(self) -> np.ndarray:
+        """The gains in the controller's order (``controller.gain_names``), SI."""
         return np.array([self.gains[k] for k in self.controller.gain_names], dtype=float)
 
     # ---------------------------------------------------------------- variants
 
     def with_gains(self, gains) -> Loop:
-        """The same loop with other gains (a mapping by name or a sequence in order)."""
+        """The same loop with other gains.
+
+        Parameters
+        ----------
+        gains : mapping or sequence of float
+            Every gain by name, or all of them in ``controller.gain_names`` order (SI).
+
+        Returns
+        -------
+        Loop
+
+        Raises
+        ------
+        InputError
+            A gain missing, unknown or not finite.
+        """
         return replace(self, gains=_gain_dict(self.controller.gain_names, gains))
 
     def with_params(self, p) -> Loop:
-        """The same loop on a plant with parameters ``p`` (the controller is unchanged)."""
+        """The same loop on a plant with parameters ``p`` (the controller is unchanged).
+
+        Parameters
+        ----------
+        p : array_like
+            Shape (n_p,), the Model's parameters (``model.p_names``, SI).
+
+        Returns
+        -------
+        Loop
+
+        Raises
+        ------
+        InputError
+            ``p`` of the wrong shape.
+        """
         p = np.asarray(p, dtype=float)
         if p.shape != (self.model.n_p,):
             raise InputError(f"parameters have shape {p.shape}, expected ({self.model.n_p},)")
@@ -211,6 +264,13 @@ class Loop:
         return linearisation(self.model).state_space(self.trim, self.p, name="plant")
 
     def used_measurements(self) -> tuple:
+        """The measurements the controller reads (not its references).
+
+        Returns
+        -------
+        tuple of str
+            Names of ``model.y_names``.
+        """
         return tuple(n for n in self._lin_ctrl.inputs if n not in self.references)
 
     def plant(self, *, discrete: bool = True, outputs=None) -> ct.StateSpace:
@@ -220,6 +280,17 @@ class Loop:
         (e.g. the gimbal angles, or the yaw of a balancing platform: neutral modes the
         loop does not act on). Discrete: zero-order hold and ``delay_samples`` of delay on
         the channels, whose inputs are then named ``<channel>_cmd``.
+
+        Parameters
+        ----------
+        discrete : bool
+            Sampled at the loop's rate (zero-order hold), else continuous.
+        outputs : sequence of str, optional
+            Further outputs to keep (``true_*`` states).
+
+        Returns
+        -------
+        control.StateSpace
         """
         full = self._plant_full()
         keep_out = list(self.used_measurements()) + [
@@ -246,18 +317,40 @@ class Loop:
         return sysd
 
     def delay(self) -> ct.StateSpace:
-        """``delay_samples`` of computation delay on each channel (``<ch>_cmd`` -> ``<ch>``)."""
+        """``delay_samples`` of computation delay on each channel.
+
+        Returns
+        -------
+        control.StateSpace
+            Discrete, ``<ch>_cmd`` -> ``<ch>``.
+        """
         return delay_system(self.channels, self.dt, self.delay_samples, suffix="_cmd")
 
     # ---------------------------------------------------------------- controller
 
     def controller_trim(self) -> np.ndarray:
-        """Controller state at the trim (e.g. the integral holding the sliders), solved."""
+        """Controller state at the trim (e.g. the integral holding the sliders), solved.
+
+        Returns
+        -------
+        numpy.ndarray
+            Shape of ``controller.c0``.
+        """
         return _controller_trim(self._lin_ctrl, self.gain_vector)
 
     def controller_ss(self, *, discrete: bool = True) -> ct.StateSpace:
         """The linearised controller: inputs the used measurements and references,
-        outputs ``<channel>_cmd``."""
+        outputs ``<channel>_cmd``.
+
+        Parameters
+        ----------
+        discrete : bool
+            The sampled controller, else its bilinear (Tustin) continuous equivalent.
+
+        Returns
+        -------
+        control.StateSpace
+        """
         lc = self._lin_ctrl
         A, B, C, D = (np.asarray(m) for m in lc.fn(self.gain_vector, self.controller_trim()))
         ins = list(lc.inputs)
@@ -309,6 +402,22 @@ class Loop:
 
         ``channel`` given: the SISO loop-at-a-time ``L_j`` (the other channels closed);
         ``None``: the MIMO ``L`` with every channel open.
+
+        Parameters
+        ----------
+        channel : str, optional
+            One of :attr:`channels`.
+        discrete : bool
+            The sampled loop (with its delay), else the continuous design model.
+
+        Returns
+        -------
+        control.StateSpace
+
+        Raises
+        ------
+        InputError
+            An unknown channel.
         """
         chans = list(self.channels) if channel is None else [channel]
         if channel is not None and channel not in self.channels:
@@ -335,6 +444,15 @@ class Loop:
         one and its only non-zero eigenvalue, ``trace L``, is the loop seen by a
         perturbation common to all gimbals (the loop broken at the torque command before
         the steering law). None for other loops.
+
+        Parameters
+        ----------
+        discrete : bool
+            The sampled loop, else the continuous design model.
+
+        Returns
+        -------
+        control.StateSpace or None
         """
         if self.kind != "attitude" or self.model.dof != 1:
             return None
@@ -348,8 +466,20 @@ class Loop:
         )
 
     def closed_loop(self, *, discrete: bool = True, outputs=None) -> ct.StateSpace:
-        """The closed loop: inputs references and disturbances; outputs ``outputs``
-        (default the true attitude error and rate states) and the actuator channels."""
+        """The closed loop: inputs references and disturbances.
+
+        Parameters
+        ----------
+        discrete : bool
+            The sampled loop, else the continuous design model.
+        outputs : sequence of str, optional
+            Its outputs besides the actuator channels (default
+            :meth:`default_outputs`: the true attitude error and rate states).
+
+        Returns
+        -------
+        control.StateSpace
+        """
         default = self.default_outputs()
         outs = list(outputs or default)
         plant, ctrl, dly = self._parts(discrete, outputs=outs)
@@ -364,6 +494,14 @@ class Loop:
         )
 
     def default_outputs(self) -> list[str]:
+        """The closed loop's default outputs: the true attitude (error) and rate states.
+
+        Returns
+        -------
+        list of str
+            ``true_yaw, true_wz`` (dof 1) or ``true_th_x ..`` (dof 3), and the wheel
+            speeds of speed-commanded wheels.
+        """
         if self.kind == "attitude":
             out = (
                 ["true_yaw", "true_wz"]
@@ -384,6 +522,16 @@ class Loop:
         does not regulate is a pole at z = 1 (s = 0) whose mode moves the wheel speeds
         (and a speed command with them) and nothing else; it is neutral, not unstable
         (momentum dumping, not the attitude loop, takes it away).
+
+        Parameters
+        ----------
+        discrete : bool
+            z-plane poles of the sampled loop, else s-plane poles of the design model.
+
+        Returns
+        -------
+        numpy.ndarray
+            Complex poles.
         """
         sys = self.stability_system(discrete=discrete)
         if not self.wheels:
@@ -391,7 +539,18 @@ class Loop:
         return without_momentum_poles(sys.A, _body_state_mask(sys.state_labels), discrete)
 
     def stability_system(self, *, discrete: bool = True) -> ct.StateSpace:
-        """The closed loop restricted to the states the loop acts on (for its poles)."""
+        """The closed loop restricted to the states the loop acts on (for its poles).
+
+        Parameters
+        ----------
+        discrete : bool
+            The sampled loop, else the continuous design model.
+
+        Returns
+        -------
+        control.StateSpace
+            Inputs the disturbances, outputs the channels.
+        """
         plant, ctrl, dly = self._parts(discrete)
         return ct.interconnect(
             [plant, ctrl, dly],

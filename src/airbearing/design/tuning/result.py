@@ -41,6 +41,24 @@ class TuningResult:
     design : dict
         Where the search ended: ``speed_rad_s`` (w), ``damping`` (zeta),
         ``integral_ratio`` (r), ``objective`` and ``candidates`` (designs evaluated).
+
+    Examples
+    --------
+    Tuning searches a few hundred designs, each checked at every corner (several
+    seconds); printing the result gives the verdict:
+
+    >>> import airbearing as ab
+    >>> spec = ab.Spec(inertia_uncertainty=0.0)  # the nominal plant only
+    >>> print(ab.tune(ab.load_testbed("rw-yaw"), "attitude", spec=spec))  # doctest: +SKIP
+    attitude loop of rw-yaw: K_p = 0.003816, K_i = 1.176e-06, K_w = 0.0111
+    specification met
+      stable at every corner: pass
+      phase margin (deg) 70.88 >= 45: pass
+      gain margin (dB) 31.12 >= 6: pass
+      sensitivity peak 1.041 <= 2: pass
+      overshoot (%) 0.3148 <= 5: pass
+      wheel torque (N m) 0.0009992 <= 0.001: pass
+      also: settling time, 2 % (s) 14.9; 180 deg slew, overshoot (%) 0.3798; ...
     """
 
     loop: str
@@ -68,6 +86,15 @@ class TuningResult:
         return "\n".join(lines)
 
     def to_json(self) -> dict:
+        """The JSON document of ``airbearing gains --json`` (an infinite value: null).
+
+        Returns
+        -------
+        dict
+            ``loop``, ``split``, ``testbed``, ``gains``, ``spec``, ``met``, ``checks``,
+            ``worst_case``, ``message``, ``design``.
+        """
+
         def num(v):
             return None if isinstance(v, float) and not math.isfinite(v) else v
 

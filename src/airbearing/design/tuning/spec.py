@@ -44,6 +44,17 @@ class Spec:
     max_settling_time : float or None
         Longest 2 % settling time of the linear step response, s; None: reported, not
         required.
+
+    Examples
+    --------
+    >>> import airbearing as ab
+    >>> spec = ab.Spec(phase_margin_deg=50.0, inertia_uncertainty=0.1)
+    >>> spec.to_json()["phase_margin_deg"], spec.to_json()["gain_margin_db"]  # deg, dB
+    (50.0, 6.0)
+    >>> ab.Spec(phase_margin_deg=95.0)
+    Traceback (most recent call last):
+    ...
+    airbearing.errors.InputError: phase_margin_deg=95.0: expected a margin in (0, 90) deg
     """
 
     phase_margin_deg: float = 45.0
@@ -84,7 +95,13 @@ class Spec:
             )
 
     def to_json(self) -> dict:
-        """The specification, SI (the ``spec`` key of ``airbearing gains --json``)."""
+        """The specification, SI (the ``spec`` key of ``airbearing gains --json``).
+
+        Returns
+        -------
+        dict
+            Every field by name.
+        """
         return asdict(self)
 
 
