@@ -70,6 +70,18 @@ class TrimPoint:
         Actuator limits the trim input exceeds (e.g. a slider past its travel); empty
         when the equilibrium is reachable. A linearisation about such a point is still
         the right small-signal model, but the testbed cannot get there.
+
+    Examples
+    --------
+    Seed 004's platform levels with its sliders: they cancel the gravity torque of the
+    in-plane CM offset (0.4 mm, 0.7 mm):
+
+    >>> import airbearing as ab
+    >>> point = ab.trim(ab.build_model("seed004-platform"))
+    >>> print(point)
+    trim of seed004-platform: solved s1 = -0.005419, s2 = -0.009484, s3 = 0 (residual 0)
+    >>> round(point.value("s1"), 6), point.limit_violations  # m
+    (-0.005419, ())
     """
 
     model: Model = field(repr=False)
@@ -91,7 +103,20 @@ class TrimPoint:
         return f"trim of {name}: solved {solved} (residual {self.residual:.2g}){where}"
 
     def value(self, name: str, which: str = "u") -> float:
-        """One entry of ``x``, ``u`` or ``p`` by name."""
+        """One entry of ``x``, ``u`` or ``p`` by name.
+
+        Parameters
+        ----------
+        name : str
+            A name of the Model's ``x_names``, ``u_names`` or ``p_names``.
+        which : {"u", "x", "p"}
+            The vector.
+
+        Returns
+        -------
+        float
+            SI units.
+        """
         vec = {"x": self.x, "u": self.u, "p": self.p}[which]
         return float(vec[self.model.index(name, which)[0]])
 
@@ -148,6 +173,10 @@ def trim(model: Model, p=None, *, yaw: float = 0.0, gimbals=None, wheel_speeds=N
     wheel_speeds : sequence of n floats, optional
         Reaction-wheel speeds relative to the body, rad/s (default the testbed's
         ``wheels.speeds``); with ``command = "speed"`` the trim commands hold them.
+
+    Returns
+    -------
+    TrimPoint
 
     Raises
     ------

@@ -62,7 +62,55 @@ _PEAK_XTOL = 1e-7  # the refined peak's frequency, in ln w
 
 @dataclass(frozen=True)
 class LoopMargins:
-    """Margins of one SISO loop (SI units; angles in degrees, as the names say)."""
+    """Margins of one SISO loop (SI units; angles in degrees, as the names say).
+
+    Attributes
+    ----------
+    name : str
+        The loop (a channel: ``yaw``, ``dd1``, ``s1`` ...).
+    discrete : bool
+        Margins of the sampled loop (z-plane) or of the continuous design model.
+    dt : float or None
+        Sample interval, s (None when continuous).
+    gain_margin_db : float
+        Upward gain margin, dB (inf: none).
+    gain_reduction_margin_db : float
+        Downward gain margin, dB, <= 0 (-inf: none).
+    phase_margin_deg : float
+        Smallest over every gain crossover, deg (inf: no crossover).
+    delay_margin_s : float
+        Smallest extra delay that destabilises, s (inf: no crossover).
+    crossover_rad_s, phase_crossover_rad_s : list of float
+        Every gain and phase crossover frequency, rad/s.
+    disk_margin : float
+        ``alpha`` of the balanced disk margin.
+    disk_gain_margin_db, disk_phase_margin_deg : float
+        The gain (dB) and phase (deg) variations the disk margin allows.
+    sensitivity_peak, complementary_peak : float
+        ``max |S|`` and ``max |T|``.
+    bandwidth_rad_s : float or None
+        ``w_B``, where ``|S|`` reaches 1/sqrt(2) from below, rad/s (None: never).
+    closed_loop_poles : list of [float, float]
+        ``[re, im]`` of each closed-loop pole (z-plane when discrete).
+    min_damping : float
+        Smallest damping ratio of those poles.
+    stable : bool
+
+    Examples
+    --------
+    ``L = 1 / (s (s + 1))``: one gain crossover at 0.786 rad/s, phase margin
+    ``90 - atan(0.786)`` = 51.8 deg, delay margin 0.904 rad / 0.786 rad/s = 1.15 s:
+
+    >>> import control as ct
+    >>> import airbearing as ab
+    >>> margins = ab.loop_margins(ct.ss(ct.tf([1.0], [1.0, 1.0, 0.0])), name="double")
+    >>> print(margins)
+    double: gain margin none, phase margin 51.8 deg, delay margin 1.15 s, disk margin 0.894, stable
+    >>> round(margins.sensitivity_peak_db, 2), round(margins.bandwidth_hz, 4)  # dB, Hz
+    (3.33, 0.0876)
+    >>> margins.to_json()["gain_margin_db"] is None  # inf: none, null in JSON
+    True
+    """
 
     name: str
     discrete: bool
@@ -86,10 +134,12 @@ class LoopMargins:
 
     @property
     def sensitivity_peak_db(self) -> float:
+        """``max |S|`` in dB."""
         return 20 * math.log10(self.sensitivity_peak)
 
     @property
     def bandwidth_hz(self) -> float | None:
+        """``w_B / 2 pi``, Hz (None: no bandwidth)."""
         return None if self.bandwidth_rad_s is None else self.bandwidth_rad_s / (2 * math.pi)
 
     def __str__(self) -> str:
@@ -103,7 +153,13 @@ class LoopMargins:
         )
 
     def to_json(self) -> dict:
-        """JSON-ready: infinities and NaN become None."""
+        """JSON-ready: infinities and NaN become None.
+
+        Returns
+        -------
+        dict
+            Every field by name, with ``sensitivity_peak_db`` and ``bandwidth_hz``.
+        """
         out = {}
         for k, v in asdict(self).items():
             if isinstance(v, float):
@@ -259,6 +315,24 @@ def loop_margins(
         Poles of the closed loop (default: those of ``feedback(L, 1)``).
     omega : array, optional
         Frequency grid, rad/s (default :func:`frequency_grid`).
+
+    Returns
+    -------
+    LoopMargins
+
+    Raises
+    ------
+    InputError
+        ``L`` is not SISO.
+
+    Examples
+    --------
+    >>> import control as ct
+    >>> import airbearing as ab
+    >>> L = ct.ss(ct.tf([1.0], [1.0, 1.0, 0.0]))  # 1 / (s (s + 1))
+    >>> margins = ab.loop_margins(L, name="double")
+    >>> round(margins.phase_margin_deg, 1), round(margins.crossover_rad_s[0], 3)  # deg, rad/s
+    (51.8, 0.786)
     """
     if not L.issiso():
         raise InputError(f"loop '{name}': loop_margins needs a SISO loop, got {L.ninputs} inputs")
@@ -501,7 +575,44 @@ def multiloop_worst_corner(loop, corner_set, *, n_freq: int = 400) -> dict | Non
 
 @dataclass(frozen=True)
 class LoopAnalysis:
-    """Margins of every channel of a loop, its multi-loop disk margin and its poles."""
+    """Margins of every channel of a loop, its multi-loop disk margin and its poles.
+
+    Attributes
+    ----------
+    name : str
+        The loop's name.
+    discrete : bool
+        Of the sampled loop, or of the continuous design model.
+    channels : dict of str to LoopMargins
+        Loop-at-a-time margins per actuator channel (and ``yaw``, the axis loop of a
+        yaw-only CMG testbed).
+    multiloop : dict or None
+        The balanced multi-loop disk margin (``disk_margin``, ``disk_gain_margin_db``,
+        ``disk_phase_margin_deg``, ``frequency_rad_s``, ``channels``); None for one channel
+        or when not asked for.
+    closed_loop_poles : numpy.ndarray
+        Complex poles (z-plane when discrete).
+    stable : bool
+
+    Examples
+    --------
+    >>> import airbearing as ab
+    >>> loop = ab.make_loop(ab.load_testbed("cmg-yaw"), "attitude")
+    >>> analysis = ab.analyse_loop(loop, multiloop=False)
+    >>> print(analysis)
+    attitude (discrete): stable
+      dd1: gain margin 31.4 dB, phase margin none, delay margin none, disk margin 1.71, stable
+      dd2: ...
+      dd3: ...
+      dd4: ...
+      yaw: gain margin 20 dB, phase margin 51.6 deg, delay margin 0.501 s, disk margin 0.953, stable
+    >>> round(analysis.worst()["phase_margin_deg"], 1), analysis.to_pandas().shape  # deg
+    (51.6, (5, 20))
+    >>> sorted(analysis.to_json())
+    ['loops', 'stable']
+    >>> len(analysis.plot(loop, which="nyquist").axes)
+    1
+    """
 
     name: str
     discrete: bool
@@ -525,12 +636,23 @@ class LoopAnalysis:
         return "\n".join(lines)
 
     def plot(self, loop, *, which: str = "bode"):
-        """Figure: the Bode (``which="bode"``) or Nyquist (``"nyquist"``) plot of every
-        channel of ``loop`` (the Loop this analysis was made of).
+        """Figure: the Bode or Nyquist plot of every channel of ``loop``.
+
+        Parameters
+        ----------
+        loop : Loop
+            The Loop this analysis was made of.
+        which : {"bode", "nyquist"}
+            The plot.
 
         Returns
         -------
         matplotlib.figure.Figure
+
+        Raises
+        ------
+        InputError
+            ``which`` is neither.
         """
         from airbearing.reporting.stability import bode_nyquist
 
@@ -543,14 +665,28 @@ class LoopAnalysis:
         return bode if which == "bode" else nyquist
 
     def to_pandas(self):
-        """One row per channel: the margins of :meth:`LoopMargins.to_json` (None for inf)."""
+        """The margins as a table.
+
+        Returns
+        -------
+        pandas.DataFrame
+            One row per channel: the margins of :meth:`LoopMargins.to_json` (None for inf).
+        """
         import pandas as pd
 
         rows = {k: m.to_json() for k, m in self.channels.items()}
         return pd.DataFrame.from_dict(rows, orient="index")
 
     def worst(self) -> dict:
-        """The worst value of each margin over the channels."""
+        """The worst value of each margin over the channels.
+
+        Returns
+        -------
+        dict
+            ``gain_margin_db``, ``phase_margin_deg``, ``delay_margin_s``, ``disk_margin``
+            (smallest), ``sensitivity_peak``, ``complementary_peak`` (largest),
+            ``bandwidth_rad_s`` (slowest), ``stable``.
+        """
         ms = list(self.channels.values())
         return {
             "gain_margin_db": min(m.gain_margin_db for m in ms),
@@ -566,7 +702,13 @@ class LoopAnalysis:
         }
 
     def to_json(self) -> dict:
-        """``{"loops": {channel: {...}}, "multiloop": {...}, "stable": bool}`` (None = inf)."""
+        """The JSON document of the margins (None: inf).
+
+        Returns
+        -------
+        dict
+            ``{"loops": {channel: {...}}, "multiloop": {...}, "stable": bool}``.
+        """
         out = {"loops": {k: m.to_json() for k, m in self.channels.items()}, "stable": self.stable}
         if self.multiloop is not None:
             out["multiloop"] = {
