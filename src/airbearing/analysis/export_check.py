@@ -95,6 +95,23 @@ class ReplayCheck:
     bound : float
         The bound of the precision (:data:`DOUBLE_BOUND` or :data:`FLOAT_BOUND`).
     real : str
+        The C type the step was compiled with, ``"double"`` or ``"float"``.
+    commands : numpy.ndarray or None
+        The compiled step's commands, one row per log row.
+
+    Examples
+    --------
+    A 2 s simulated slew replayed through the exported C (compiled with the system's C
+    compiler): the C commands are the simulation's to the bound of ``double``:
+
+    >>> import airbearing as ab
+    >>> tb = ab.load_testbed("cmg-yaw")
+    >>> run = ab.slew(tb, angle_deg=30.0, duration=2.0, ideal=True)
+    >>> check = ab.replay_check(ab.export_spec(tb, "attitude", lowpass=False), run.log)
+    >>> check.ok, check.rows, check.bound
+    (True, 40, 1e-09)
+    >>> sorted(check.to_json())
+    ['bound', 'max_diff', 'ok', 'per_command', 'real', 'rows']
     """
 
     max_diff: float
@@ -106,9 +123,17 @@ class ReplayCheck:
 
     @property
     def ok(self) -> bool:
+        """Whether every command is within :attr:`bound`."""
         return bool(self.max_diff <= self.bound)
 
     def to_json(self) -> dict:
+        """The ``check`` of ``airbearing export --json``.
+
+        Returns
+        -------
+        dict
+            ``max_diff``, ``bound``, ``ok``, ``rows``, ``real``, ``per_command``.
+        """
         return {"max_diff": self.max_diff, "bound": self.bound, "ok": self.ok,
                 "rows": self.rows, "real": self.real, "per_command": self.per_command}  # fmt: skip
 
@@ -222,6 +247,19 @@ def replay_check(spec: ExportSpec, log, *, real: str = "double", name: str = "ct
     ------
     InputError
         No C compiler, a log without the columns the controller reads or writes.
+
+    Examples
+    --------
+    The check compiles the step (see :class:`ReplayCheck`); a log of another loop is
+    refused before any compiling:
+
+    >>> import airbearing as ab
+    >>> spec = ab.export_spec("cmg-yaw", "attitude")
+    >>> log = ab.spindown(ab.load_testbed("seed004-platform"), duration=1.0).log
+    >>> ab.replay_check(spec, log)
+    Traceback (most recent call last):
+    ...
+    airbearing.errors.InputError: <log>: ...
     """
     source = "<log>"
     if not isinstance(log, Log):

@@ -141,6 +141,17 @@ class ExportSpec:
         s, the sample time.
     meta : dict
         Testbed, loop and options, written to ``NAME.json``.
+
+    Examples
+    --------
+    Seed 001's attitude controller of the yaw CMG testbed, ready for C:
+
+    >>> import airbearing as ab
+    >>> spec = ab.export_spec(ab.load_testbed("cmg-yaw"), "attitude")
+    >>> [s.name for s in spec.y], [s.name for s in spec.r], [s.name for s in spec.u]
+    (['wz', 'd1', 'd2', 'd3', 'd4'], ['yaw_ref'], ['dd1', 'dd2', 'dd3', 'dd4'])
+    >>> spec.dt, spec.gains, len(spec.x)  # s; the controller's state entries
+    (0.05, {'K_p': 6.0, 'K_i': 0.001, 'K_w': 6.0}, 10)
     """
 
     function: ca.Function = field(repr=False)
@@ -401,10 +412,22 @@ def export_spec(
         gyro driver smooths the rate itself (FORMATS.md: ``lowpass`` is a sensor setting);
         filtering twice would add lag the margins did not see.
 
+    Returns
+    -------
+    ExportSpec
+
     Raises
     ------
     InputError
         A loop the testbed cannot run, gains that do not fit the loop, an unknown law.
+
+    Examples
+    --------
+    >>> import airbearing as ab
+    >>> spec = ab.export_spec("cmg-yaw", "attitude", gains={"K_p": 4.0, "K_i": 0.0,
+    ...                                                     "K_w": 5.0}, steering="sr")
+    >>> spec.gains
+    {'K_p': 4.0, 'K_i': 0.0, 'K_w': 5.0}
     """
     tb = as_testbed(testbed)
     if loop == "attitude" and has_wheels(tb):
@@ -509,6 +532,20 @@ def c_sources(spec: ExportSpec, name: str, real: str = "double", *, harness: boo
     -------
     dict
         File name -> text.
+
+    Raises
+    ------
+    InputError
+        ``name`` is not a C identifier, ``real`` not a known type.
+
+    Examples
+    --------
+    >>> import airbearing as ab
+    >>> files = ab.c_sources(ab.export_spec("cmg-yaw", "attitude"), "ctl")
+    >>> sorted(files)
+    ['ctl.c', 'ctl.h', 'ctl.json']
+    >>> print([line for line in files["ctl.h"].splitlines() if "int ctl_step" in line][0])
+    int ctl_step(const ctl_real y[CTL_NY], const ctl_real r[CTL_NR], ctl_real x[CTL_NX], ctl_real u[CTL_NU]);   /* 0 on success */
     """
     check_c_name(name)
     if real not in REALS:

@@ -250,7 +250,36 @@ def report_for_loop(
 ):
     """Add the stability analysis of ``loop`` to ``report`` and return its numbers (JSON-ready).
 
-    ``progress``: see :mod:`airbearing.progress` (margins, then the responses).
+    Parameters
+    ----------
+    loop : Loop
+        From :func:`~airbearing.design.loops.make_loop`, with the gains to report on.
+    spec : Spec, optional
+        The specification the checks are made against (default :class:`Spec`'s).
+    report : Report, optional
+        The report to add to (default a new one titled after the loop).
+    heading : str, optional
+        The section's heading (default the loop and the testbed).
+    nonlinear : bool
+        Also the nonlinear step response (a simulation) beside the linear one.
+    progress : callable, optional
+        ``progress(what, done, total)`` (:mod:`airbearing.progress`): margins, then the
+        responses.
+
+    Returns
+    -------
+    (Report, dict)
+        The report and the JSON document of :func:`stability_report`.
+
+    Examples
+    --------
+    The report evaluates every corner of the uncertainty box and simulates the responses
+    (many seconds: not run in the docstring test):
+
+    >>> import airbearing as ab
+    >>> loop = ab.make_loop(ab.load_testbed("cmg-yaw"), "attitude")
+    >>> ab.report_for_loop(loop, nonlinear=False)[1]["met"]  # doctest: +SKIP
+    True
     """
     from airbearing.progress import call
 
@@ -605,6 +634,23 @@ def stability_report(
     ------
     InputError
         An unknown loop, a loop the testbed does not have, or bad gains.
+
+    Examples
+    --------
+    The report evaluates every corner of the uncertainty box and simulates the responses
+    (many seconds: not run in the docstring test):
+
+    >>> import airbearing as ab
+    >>> tb = ab.load_testbed("cmg-yaw")
+    >>> ab.stability_report(tb, "attitude")[1]["loops"]["yaw"]["phase_margin_deg"]  # doctest: +SKIP
+    51.649...
+
+    Bad options are refused at once:
+
+    >>> ab.stability_report(tb, "steering")
+    Traceback (most recent call last):
+    ...
+    airbearing.errors.InputError: ...
     """
     from airbearing.progress import call
 
