@@ -40,6 +40,8 @@ SKIPPED: dict[str, str] = {
     "TuningResult": "made only by tune (10-40 s)",
     "stability_report": "every corner, the responses and the figures (15-30 s)",
     "report_for_loop": "the same report as stability_report (15-30 s)",
+    "two_step": "three balancing steps, up to six identifications (8-12 s on short runs)",
+    "TwoStepResult": "made only by two_step (8-12 s)",
 }
 #: Names whose example compiles C (skipped without a compiler, failed on CI without one).
 NEEDS_COMPILER = {"ReplayCheck"}

@@ -67,6 +67,20 @@ class Comparison:
         ``steady`` is true only when both say so.
     verdict : str or None
         One sentence: does the second method beat the first as seed 000's mixed split did?
+
+    Examples
+    --------
+    One offset, one seed, 10 s runs (seed 000: two offsets, four seeds, 300 s):
+
+    >>> import airbearing as ab
+    >>> cmp = ab.compare_methods(ab.load_testbed("seed000-tabletop"), offsets=(-0.5e-3,),
+    ...                          seeds=(0,), duration=10.0, free_duration=None)
+    >>> cmp
+    Comparison(methods=('mechanical', 'mixed'), duration_s=10, offsets=1, ratios=(g_perp_rms=1.02, slider_p2p=0.301))
+    >>> cmp.to_pandas()[["offset_m", "method"]].values.tolist()  # m
+    [[-0.0005, 'mechanical'], [-0.0005, 'mixed']]
+    >>> sorted(cmp.to_json())
+    ['ratios', 'steady', 'tables', 'verdict']
     """
 
     methods: tuple[str, ...]
@@ -77,15 +91,27 @@ class Comparison:
     verdict: str | None = None
 
     def to_json(self) -> dict:
-        """The ``balance --compare`` JSON: ``tables``, ``ratios``, ``steady``, ``verdict``."""
+        """The ``balance --compare`` JSON.
+
+        Returns
+        -------
+        dict
+            ``tables``, ``ratios``, ``steady`` and (two methods) ``verdict``.
+        """
         out = {"tables": self.tables, "ratios": self.ratios, "steady": self.steady}
         if self.verdict is not None:
             out["verdict"] = self.verdict
         return out
 
     def to_pandas(self):
-        """One row per offset and method: the averaged metrics (scalars; per-slider lists
-        as ``<key>_1..3``)."""
+        """The averaged metrics as a table.
+
+        Returns
+        -------
+        pandas.DataFrame
+            One row per offset and method: ``offset_m`` (m), ``method`` and the averaged
+            metrics (scalars; per-slider lists as ``<key>_1..3``).
+        """
         import pandas as pd
 
         rows = []
@@ -210,6 +236,21 @@ class Sweep:
         within :data:`RATIO_MATCH_FACTOR`, both methods balanced.
     seed_ratios_within : list of float
         The values where both do.
+
+    Examples
+    --------
+    The slider lag swept over two values, one offset and one seed, 10 s runs:
+
+    >>> import airbearing as ab
+    >>> sweep = ab.sweep_comparison(ab.load_testbed("seed000-tabletop"), "lag", [0.0, 0.5],
+    ...                             offsets=(-0.5e-3,), seeds=(0,), duration=10.0)
+    >>> print(sweep)
+    sweep of lag (slider lag time constant) over 0, 0.5 s
+    seed 000's ratios both within 1.5x at: none
+    >>> sweep.to_pandas().columns.tolist()
+    ['lag', 'balanced', 'ratio_g_perp_rms', 'ratio_slider_p2p']
+    >>> sweep.to_json()["values"]
+    [0.0, 0.5]
     """
 
     name: str
@@ -222,14 +263,26 @@ class Sweep:
     seed_ratios_within: list
 
     def to_json(self) -> dict:
-        """The ``balance --sweep`` JSON (keys as the attributes)."""
+        """The ``balance --sweep`` JSON.
+
+        Returns
+        -------
+        dict
+            One key per attribute; ``points`` as :meth:`SweepPoint.to_json`.
+        """
         return {"name": self.name, "unit": self.unit, "where": self.where,
                 "values": list(self.values), "points": [p.to_json() for p in self.points],
                 "seed_ratios": self.seed_ratios, "seed_ratio_within": self.seed_ratio_within,
                 "seed_ratios_within": self.seed_ratios_within}  # fmt: skip
 
     def to_pandas(self):
-        """One row per swept value: the ratios and whether every method balanced."""
+        """The sweep as a table.
+
+        Returns
+        -------
+        pandas.DataFrame
+            One row per swept value: the value, ``balanced`` and ``ratio_<metric>``.
+        """
         import pandas as pd
 
         rows = []
@@ -341,6 +394,20 @@ def compare_methods(
         The ratios (second method over first, in-plane sliders 1 and 2 averaged) are what
         seed 000 reports as "about 45 % lower g_perp_rms, about 90 % lower peak-to-peak";
         ``steady`` says whether the last third is past the integral transient.
+
+    Raises
+    ------
+    InputError
+        A testbed that cannot balance, an unknown method, an empty list of offsets or seeds,
+        a non-positive duration.
+
+    Examples
+    --------
+    >>> import airbearing as ab
+    >>> cmp = ab.compare_methods("seed000-tabletop", offsets=(-0.5e-3,), seeds=(0,),
+    ...                          duration=10.0, free_duration=None)
+    >>> cmp.ratios["of"], round(cmp.ratios["slider_p2p"], 2)  # seed 000: about 0.1
+    ('mixed/mechanical', 0.3)
     """
     testbed, methods, offsets, seeds, duration = _checked(
         testbed, methods, offsets, seeds, duration
@@ -526,6 +593,24 @@ def sweep_comparison(
         Per value the ratios and both methods' averaged metrics; per ratio the values where
         it matches seed 000's (g_perp about 0.54, peak-to-peak about 0.09;
         :data:`SEED000_RATIOS`) within :data:`RATIO_MATCH_FACTOR`, and where both do.
+
+    Raises
+    ------
+    InputError
+        An unknown imperfection, values that are not finite (or negative where they must
+        not be), or the errors of :func:`compare_methods`.
+
+    Examples
+    --------
+    >>> import airbearing as ab
+    >>> sweep = ab.sweep_comparison("seed000-tabletop", "lag", [0.0, 0.5], offsets=(-0.5e-3,),
+    ...                             seeds=(0,), duration=10.0)  # s
+    >>> [point.value for point in sweep.points], sweep.unit
+    ([0.0, 0.5], 's')
+    >>> ab.sweep_comparison("seed000-tabletop", "wind", [1.0])
+    Traceback (most recent call last):
+    ...
+    airbearing.errors.InputError: name='wind': expected one of backlash, speed, ...
     """
     if name not in SWEEPS:
         raise InputError(f"name={name!r}: expected one of {', '.join(SWEEPS)}")

@@ -154,6 +154,23 @@ class BalancingRun:
         The free float after it (sliders held, magnetorquers off).
     metrics : BalancingMetrics
         Seed 000's numbers and the run's context (:mod:`.metrics`).
+
+    Examples
+    --------
+    Seed 000's mixed balancing of its tabletop platform for 10 s (seed 000 ran 300 s):
+
+    >>> import airbearing as ab
+    >>> run = ab.run_balancing(ab.load_testbed("seed000-tabletop"), "mixed", duration=10.0,
+    ...                        free_duration=None)
+    >>> run
+    BalancingRun(method='mixed', duration_s=10.0, g_perp_rms=0.0667, dipole_rms=0.0336, steady=None)
+    >>> print(run)
+    balancing run, mixed, 10 s
+    g_perp_rms 0.0667 (x 0.0496, y 0.0447)
+    slider p2p 52.0, 42.0, 4.0 um, dipole rms 0.0336 A m^2
+    steady: not judged: ...
+    >>> run.to_json()["duration_s"], run.to_pandas().shape[0], len(run.plot().axes)
+    (10.0, 200, 3)
     """
 
     method: str
@@ -162,11 +179,24 @@ class BalancingRun:
     metrics: BalancingMetrics = field(repr=False)
 
     def to_json(self) -> dict:
-        """The ``balance --json`` metrics of the run (:meth:`BalancingMetrics.to_json`)."""
+        """The ``balance --json`` metrics of the run.
+
+        Returns
+        -------
+        dict
+            :meth:`BalancingMetrics.to_json`: ``g_perp_rms``, ``dipole_rms`` (A m^2),
+            ``slider_p2p_m`` (m), ``residual_torque_nm`` (N m) ...
+        """
         return self.metrics.to_json()
 
     def to_pandas(self):
-        """The closed-loop time series (:meth:`SimResult.to_pandas` when it has one)."""
+        """The closed-loop time series.
+
+        Returns
+        -------
+        pandas.DataFrame
+            :meth:`SimResult.to_pandas` of the closed-loop run.
+        """
         return self.result.to_pandas()
 
     def __repr__(self) -> str:
@@ -271,6 +301,28 @@ def run_balancing(
     model : Model, optional
         The Model to run, default the one of ``testbed`` and ``effects``; a campaign passes
         one Model per structure with this run's values in ``p0``.
+
+    Returns
+    -------
+    BalancingRun
+
+    Raises
+    ------
+    InputError
+        Not a dof-3 platform with sliders, an unknown method, a non-positive duration, a
+        start the testbed has no rest position for.
+
+    Examples
+    --------
+    >>> import airbearing as ab
+    >>> tb = ab.load_testbed("seed000-tabletop")
+    >>> run = ab.run_balancing(tb, "mechanical", duration=10.0, free_duration=None)
+    >>> run.method, run.metrics.duration_s  # s
+    ('mechanical', 10.0)
+    >>> ab.run_balancing(ab.load_testbed("cmg-yaw"), "mixed")
+    Traceback (most recent call last):
+    ...
+    airbearing.errors.InputError: cmg-yaw (built-in): balancing needs a kind = 'platform', dof = 3 testbed with [masses]; ...
     """
     from airbearing.io.coerce import as_testbed
 

@@ -115,6 +115,19 @@ class TwoStepResult:
         What makes the result doubtful, in words: a step 1 shorter than its integral needs
         to settle, an estimate still moving after the last round, a measured spread of
         ``E`` that hardly fell (empty when none).
+
+    Examples
+    --------
+    Made by :func:`two_step` (seconds even on short runs: not run in the docstring test);
+    printing one gives what a person reads:
+
+    >>> import airbearing as ab
+    >>> print(ab.two_step("platform-3dof", balance_duration=20.0, noise=False))  # doctest: +SKIP
+    two-step balancing of platform-3dof (lyapunov, 6 round(s))
+    spread of E = w^T J w (seed 004 eq. 53, twice the kinetic energy) ... -> ... J (... % less, true rates)
+    vertical offset identified ... um
+    residual offset [...] um
+    warning: step 1 ran 20 s, shorter than the 675 s the tilt loop's integral needs to settle: ...
     """
 
     testbed: str
@@ -150,7 +163,13 @@ class TwoStepResult:
     warnings: list = field(default_factory=list)
 
     def to_json(self) -> dict:
-        """The ``balance --two-step`` JSON: one key per attribute, in this order."""
+        """The ``balance --two-step`` JSON.
+
+        Returns
+        -------
+        dict
+            One key per attribute, in their order (NaN: null).
+        """
         from airbearing.io.output import to_jsonable
 
         return to_jsonable({f.name: getattr(self, f.name) for f in fields(self)})
@@ -282,9 +301,51 @@ def two_step(
 
     ``progress(what, done, total)`` (:mod:`airbearing.progress`) is told each step.
 
+    Parameters
+    ----------
+    testbed : Testbed, str or path-like
+        A dof-3 platform with sliders (:func:`~.runs.run_balancing`).
+    method : {"lyapunov", "mixed", "mechanical", "adaptive"}
+        The in-plane balancing law of step 1.
+    balance_duration : float, optional
+        s, step 1 (default :func:`step1_duration`).
+    identification_duration : float
+        s, each free oscillation of step 2 (seed 004: 200 s).
+    ke_duration : float
+        s, each free oscillation of step 3.
+    known_displacement : sequence of 3 float
+        m, the known slider displacement of step 2, per rail.
+    seed : int
+        Noise seed.
+    noise : bool
+        False: ideal sensors and no disturbance torque.
+    identify_method : {"equation-error", "output-error"}
+        The identification of step 2.
+    initial_rate : sequence of 3 float
+        rad/s, body rates at the start of step 1.
+    in_plane_known : bool
+        Step 2 takes step 1's in-plane offset as known (seed 004) and the sliders cancel
+        only the vertical offset; False: all of it is identified and cancelled.
+    progress : callable, optional
+        ``progress(what, done, total)``.
+
     Returns
     -------
     TwoStepResult
+
+    Raises
+    ------
+    InputError
+        A testbed that cannot balance, an unknown method, a non-positive duration.
+
+    Examples
+    --------
+    The three steps simulate several minutes of motion and identify it up to six times
+    (seconds even on short runs: not run in the docstring test):
+
+    >>> import airbearing as ab
+    >>> ab.two_step("platform-3dof", balance_duration=20.0).iterations  # doctest: +SKIP
+    6
     """
     from airbearing.io.coerce import as_testbed
 
