@@ -95,6 +95,18 @@ class SizingResult:
         N m s, the ``h0`` that holds ``momentum_needed`` at ``t_a / 2`` at ``gimbal_rate``.
     warnings : list of str
         The shortfall in words (empty when the cluster holds what is needed).
+
+    Examples
+    --------
+    Seed 001 Table 5: a 30 deg yaw manoeuvre in 2 s of a 0.0033 kg m^2 platform:
+
+    >>> import math
+    >>> import airbearing as ab
+    >>> sizing = ab.size_cluster(math.radians(30.0), 2.0, 0.0033)
+    >>> sizing
+    SizingResult(torque=0.001728, momentum=0.0008661, flywheel_inertia=2.068e-06, flywheel_mass=0.01411)
+    >>> round(sizing.to_json()["torque_nm"] * 1e3, 3)  # mN m
+    1.728
     """
 
     angle: float
@@ -140,7 +152,15 @@ class SizingResult:
         ])  # fmt: skip
 
     def to_json(self) -> dict:
-        """JSON-ready: SI values under unit-suffixed keys (and the inputs)."""
+        """JSON-ready: SI values under unit-suffixed keys (and the inputs).
+
+        Returns
+        -------
+        dict
+            ``torque_nm``, ``momentum_nms``, ``flywheel_inertia_kgm2``, ``flywheel_mass_kg``,
+            ``flywheel_thickness_m``, ``inputs`` (deg, s, kg m^2, deg/s, rpm, m, kg/m^3),
+            the momentum check's keys and ``warnings``.
+        """
         d = asdict(self)
 
         def echo(x):  # a value in deg or rpm without the round trip's round-off

@@ -183,7 +183,35 @@ def _sphere(n_el: int, n_az: int) -> np.ndarray:
 
 
 def singular_surface(beta: float, signs=(1, 1, 1, 1), *, n_el=61, n_az=121) -> SingularSurface:
-    """The singular surface of sign pattern ``signs`` on an ``n_el x n_az`` grid of ``u``."""
+    """The singular surface of sign pattern ``signs`` on an ``n_el x n_az`` grid of ``u``.
+
+    Parameters
+    ----------
+    beta : float
+        Pyramid skew angle, rad, strictly between 0 and pi/2.
+    signs : sequence of 4 int
+        ``eps_i`` = +-1 per CMG; ``(1, 1, 1, 1)`` is the momentum envelope.
+    n_el, n_az : int
+        Grid of singular directions (elevation, azimuth).
+
+    Returns
+    -------
+    SingularSurface
+        ``H`` in units of ``h0``, ``delta`` in rad.
+
+    Raises
+    ------
+    InputError
+        A skew outside (0, pi/2).
+
+    Examples
+    --------
+    >>> import math
+    >>> import airbearing as ab
+    >>> surface = ab.singular_surface(math.radians(54.73), (1, 1, 1, -1), n_el=11, n_az=21)
+    >>> surface.signs, surface.H.shape, surface.delta.shape
+    ((1, 1, 1, -1), (11, 21, 3), (11, 21, 4))
+    """
     u = _sphere(n_el, n_az)
     delta, H = singular_states(u, beta, signs)
     return SingularSurface(check_skew(beta), tuple(int(s) for s in signs), u, H, delta)
@@ -220,7 +248,27 @@ def momentum_envelope(beta: float, *, n_el=61, n_az=121) -> SingularSurface:
 
 
 def internal_surfaces(beta: float, *, n_el=61, n_az=121) -> list[SingularSurface]:
-    """The 7 internal singular surfaces (one or two CMGs reversed)."""
+    """The 7 internal singular surfaces (one or two CMGs reversed).
+
+    Parameters
+    ----------
+    beta : float
+        Pyramid skew angle, rad, strictly between 0 and pi/2.
+    n_el, n_az : int
+        Grid of singular directions (elevation, azimuth).
+
+    Returns
+    -------
+    list of SingularSurface
+
+    Examples
+    --------
+    >>> import math
+    >>> import airbearing as ab
+    >>> surfaces = ab.internal_surfaces(math.radians(54.73), n_el=11, n_az=21)
+    >>> len(surfaces), surfaces[0].signs
+    (7, (1, 1, 1, -1))
+    """
     return [singular_surface(beta, s, n_el=n_el, n_az=n_az) for s in SURFACE_SIGNS if min(s) < 0]
 
 
@@ -258,8 +306,38 @@ def measure(delta, beta: float) -> np.ndarray:
 def classify_singularity(delta, beta: float, *, tol: float = 1e-6) -> str:
     """Type of the gimbal state ``delta`` (rad) of the pyramid with skew ``beta`` (rad).
 
-    Returns ``"nonsingular"``, ``"elliptic"``, ``"hyperbolic"`` or ``"degenerate"``
-    (``sigma_3 <= tol``; ``P = N^T diag(u . h_i) N`` definite, indefinite or singular).
+    Parameters
+    ----------
+    delta : sequence of 4 float
+        Gimbal angles, rad.
+    beta : float
+        Pyramid skew angle, rad.
+    tol : float
+        Smallest singular value of the Jacobian below which the state is singular.
+
+    Returns
+    -------
+    str
+        ``"nonsingular"``, ``"elliptic"``, ``"hyperbolic"`` or ``"degenerate"``
+        (``sigma_3 <= tol``; ``P = N^T diag(u . h_i) N`` definite, indefinite or singular).
+
+    Raises
+    ------
+    InputError
+        ``delta`` is not 4 angles.
+
+    Examples
+    --------
+    The zero gimbal set is not singular; all four momenta lined up along the pyramid's
+    axis (the momentum envelope) is an elliptic singularity:
+
+    >>> import math
+    >>> import airbearing as ab
+    >>> beta = math.radians(54.73)
+    >>> ab.classify_singularity([0.0, 0.0, 0.0, 0.0], beta)
+    'nonsingular'
+    >>> ab.classify_singularity([math.pi / 2] * 4, beta)
+    'elliptic'
     """
     geo = pyramid_geometry(beta)
     d = np.asarray(delta, dtype=float)
