@@ -102,6 +102,21 @@ class SteeringRun:
         Gimbal rates after the rate limit, rad/s.
     m : ndarray (N + 1,)
         Singularity measure.
+    tolerance : float
+        Momentum error (h0) within which the manoeuvre counts as completed.
+    info : dict
+        The run's settings (skew, direction, ramp, limit ...), for the record.
+
+    Examples
+    --------
+    The singularity-robust law tracking a 1 h0 ramp along body x for 8 s:
+
+    >>> import airbearing as ab
+    >>> run = ab.momentum_tracking("sr", h_final=1.0, duration=8.0)
+    >>> print(run)
+    sr: completed in 5 s, peak gimbal rate 17 deg/s
+    >>> run.summary()["completed"], run.to_json()["law"], run.to_pandas().shape
+    (True, 'sr', (160, 12))
     """
 
     law: str
@@ -131,14 +146,25 @@ class SteeringRun:
         return f"{self.law}: {done}, peak gimbal rate {s['peak_gimbal_rate_deg_s']:.3g} deg/s"
 
     def to_json(self) -> dict:
-        """:meth:`summary` with infinite values as None (JSON null)."""
+        """:meth:`summary` with infinite values as None (JSON null).
+
+        Returns
+        -------
+        dict
+        """
         from airbearing.io.output import to_jsonable
 
         return to_jsonable(self.summary())
 
     def to_pandas(self):
-        """The run as a table: ``t`` (s), gimbal angles ``delta1..4`` (rad), momentum
-        ``Hx Hy Hz`` and reference ``Hx_ref ..`` (h0), singularity measure ``m``."""
+        """The run as a table.
+
+        Returns
+        -------
+        pandas.DataFrame
+            ``t`` (s), gimbal angles ``delta1..4`` (rad), momentum ``Hx Hy Hz`` and
+            reference ``Hx_ref ..`` (h0), singularity measure ``m``.
+        """
         import pandas as pd
 
         n = len(self.t)
@@ -150,7 +176,17 @@ class SteeringRun:
         return pd.DataFrame(cols)
 
     def summary(self) -> dict:
-        """Tracking error, peak gimbal rate, time near singularity, time to escape."""
+        """Tracking error, peak gimbal rate, time near singularity, time to escape.
+
+        Returns
+        -------
+        dict
+            ``law``, ``final_momentum_error_h0``, ``max_torque_error_h0_s``,
+            ``final_torque_error_h0_s``, ``peak_gimbal_rate_deg_s``, ``completed``,
+            ``completion_time_s`` (inf when not completed), ``final_Hx_h0``,
+            ``reference_moving`` and the singularity keys (``min_m``, ``time_near_s``,
+            ``time_to_escape_s``, ``escaped``).
+        """
         err = np.linalg.norm(self.H - self.H_ref, axis=1)
         terr = np.linalg.norm(self.h_out - self.h_cmd, axis=1)
         tt = np.append(self.t, self.t[-1] + (self.t[1] - self.t[0]))
@@ -230,6 +266,24 @@ def momentum_tracking(
         Options of the law.
     tolerance : float
         Momentum error (h0) within which the manoeuvre counts as completed.
+
+    Returns
+    -------
+    SteeringRun
+
+    Raises
+    ------
+    InputError
+        A skew outside (0, 90) deg, a non-positive final momentum, ramp or sample time, a
+        duration shorter than one sample, a negative gain or rate limit, a zero direction,
+        an unknown law.
+
+    Examples
+    --------
+    >>> import airbearing as ab
+    >>> run = ab.momentum_tracking("mp", direction=(0.0, 0.0, 1.0), h_final=1.0, duration=8.0)
+    >>> run.law, run.H.shape  # momentum in h0
+    ('mp', (161, 3))
     """
     beta = check_skew(np.deg2rad(skew_deg), "skew_deg")
     for name, v, lo in (("h_final", h_final, 0), ("ramp_rate", ramp_rate, 0), ("dt", dt, 0)):
@@ -445,7 +499,38 @@ def compare_slews(
 ) -> tuple[list[dict], dict]:
     """The same slew with each law; returns the metric rows and the runs by law.
 
-    ``steering_options`` maps a law name to its options.
+    Parameters
+    ----------
+    testbed : Testbed
+        A ``kind = "cmg"`` testbed.
+    laws : sequence of str
+        Steering laws (:data:`airbearing.design.steering.STEERING_LAWS`).
+    angle_deg : float
+        Slew angle, deg.
+    axis : sequence of 3 float
+        Slew axis, body frame.
+    duration : float
+        Run length, s.
+    ideal : bool
+        No sensor noise, disturbance torque or gyro low-pass.
+    rate_limit_mode : {"scale", "clip"}
+        Seed 001 eq. 4 or per-gimbal clipping.
+    steering_options : dict, optional
+        Law name -> that law's options.
+
+    Returns
+    -------
+    (list of dict, dict)
+        One row of :func:`slew_metrics` per law (with ``law``: final error in deg, peak
+        rates in deg/s, torque error in mN m ...), and the SimResult of each law.
+
+    Examples
+    --------
+    >>> import airbearing as ab
+    >>> rows, runs = ab.compare_slews(ab.load_testbed("cmg-yaw"), laws=("mp", "sr"),
+    ...                               angle_deg=30.0, duration=5.0)
+    >>> [(row["law"], round(row["final_error_deg"], 1)) for row in rows], sorted(runs)
+    ([('mp', 0.9), ('sr', 0.9)], ['mp', 'sr'])
     """
     rows, runs = [], {}
     for law in laws:
@@ -480,6 +565,38 @@ def rate_limit_comparison(
     Besides :func:`slew_metrics`, each row gives the largest angle (deg) between the
     delivered and the wanted momentum rate while the limit acts: zero for scaling
     (the direction is kept), not for clipping.
+
+    Parameters
+    ----------
+    testbed : Testbed
+        A ``kind = "cmg"`` testbed.
+    law : str
+        Steering law.
+    angle_deg : float
+        Slew angle, deg.
+    axis : sequence of 3 float
+        Slew axis, body frame (a dof-1 testbed turns about z only).
+    duration : float
+        Run length, s.
+    max_gimbal_rate_deg : float or None
+        Gimbal-rate limit of both runs, deg/s; None: the testbed's.
+
+    Returns
+    -------
+    (list of dict, dict)
+        One row per mode (``mode``, ``limit_active_s`` in s,
+        ``max_torque_direction_error_deg`` in deg, and :func:`slew_metrics`), and the
+        SimResult of each mode.
+
+    Examples
+    --------
+    On the 3-axis CMG testbed, a 30 deg slew about (1, 1, 1) at 20 deg/s:
+
+    >>> import airbearing as ab
+    >>> rows, runs = ab.rate_limit_comparison(ab.load_testbed("cmg-3dof"), angle_deg=30.0,
+    ...                                       duration=5.0)
+    >>> [(row["mode"], round(row["max_torque_direction_error_deg"])) for row in rows]  # deg
+    [('scale', 0), ('clip', 38)]
     """
     tb = testbed
     if max_gimbal_rate_deg is not None:
