@@ -42,6 +42,8 @@ SKIPPED: dict[str, str] = {
     "report_for_loop": "the same report as stability_report (15-30 s)",
     "two_step": "three balancing steps, up to six identifications (8-12 s on short runs)",
     "TwoStepResult": "made only by two_step (8-12 s)",
+    "open_client": "a local Dask cluster starts worker processes (seconds, and CPU the suite's"
+    " other workers use)",
 }
 #: Names whose example compiles C (skipped without a compiler, failed on CI without one).
 NEEDS_COMPILER = {"ReplayCheck"}

@@ -108,10 +108,39 @@ def run_part(campaign, runs: list[int], run_timeout: float | None = None) -> tup
 def open_client(workers: int | None = None, scheduler: str | None = None) -> Iterator:
     """A ``dask.distributed.Client``: a local cluster of ``workers`` processes, or ``scheduler``.
 
+    A context manager: the cluster it started is closed on leaving the ``with`` block.
+
+    Parameters
+    ----------
+    workers : int, optional
+        Worker processes of a local cluster, >= 1 (default one per CPU).
+    scheduler : str, optional
+        The address of a running Dask scheduler (``"tcp://host:8786"``) instead; not with
+        ``workers``.
+
+    Yields
+    ------
+    dask.distributed.Client
+
     Raises
     ------
     InputError
         ``workers`` < 1, or no scheduler answers at ``scheduler`` within a few seconds.
+
+    Examples
+    --------
+    A local cluster starts worker processes (seconds: not run in the docstring test):
+
+    >>> import airbearing as ab
+    >>> campaign = ab.parse_campaign({"testbed": "cmg-yaw", "command": "simulate", "runs": 2,
+    ...                               "args": {"scenario": "slew", "duration": 2}})
+    >>> with ab.open_client(workers=2) as client:  # doctest: +SKIP
+    ...     table = ab.run_campaign(campaign, "slews.parquet", client=client)
+    >>> with ab.open_client(workers=0):
+    ...     pass
+    Traceback (most recent call last):
+    ...
+    airbearing.errors.InputError: workers=0: expected at least 1
     """
     import logging
 
@@ -197,6 +226,34 @@ def run_campaign(
         s, longest time one run may take; a run still going then is stopped and is a row
         whose ``error`` starts with ``TimeoutError`` (each run then goes through a child
         process of its worker, see :mod:`.child`). None: no limit.
+
+    Returns
+    -------
+    pandas.DataFrame
+        One row per run: ``run``, ``seed``, the drawn values (one column per dispersed
+        key), the command's results (SI, unit-suffixed names) and ``error`` (``""`` when
+        the run succeeded).
+
+    Raises
+    ------
+    InputError
+        A non-positive ``run_timeout``; parts of another campaign at ``output``.
+
+    Examples
+    --------
+    Two 2 s slews, the gyro noise drawn for each, run in this process:
+
+    >>> import airbearing as ab
+    >>> campaign = ab.parse_campaign({
+    ...     "testbed": "cmg-yaw", "command": "simulate", "runs": 2, "seed": 7,
+    ...     "args": {"scenario": "slew", "yaw-deg": 30, "duration": 2},  # deg, s
+    ...     "dispersions": {"sensors.gyro_noise": {"uniform": [0.0, 1e-3]}},  # rad/s
+    ... })
+    >>> table = ab.run_campaign(campaign, "slews.parquet")
+    >>> table[["run", "error"]].values.tolist()
+    [[0, ''], [1, '']]
+    >>> "sensors.gyro_noise" in table.columns, "final_yaw_deg" in table.columns
+    (True, True)
     """
     if run_timeout is not None and not (math.isfinite(run_timeout) and run_timeout > 0):
         raise InputError(f"run_timeout={run_timeout}: expected a time > 0 in s")

@@ -118,6 +118,21 @@ class Campaign:
     spec : tuple of SpecEntry
     gains : tuple of float or None
         Attitude gains ``K_p, K_i, K_w`` from ``[args] gains``.
+    study : str or None
+        The study the campaign runs as (:func:`with_study`), or None.
+
+    Examples
+    --------
+    >>> import airbearing as ab
+    >>> campaign = ab.parse_campaign({
+    ...     "testbed": "cmg-yaw", "command": "simulate", "runs": 2, "seed": 7,
+    ...     "args": {"scenario": "slew", "yaw-deg": 30, "duration": 2},  # deg, s
+    ...     "dispersions": {"sensors.gyro_noise": {"uniform": [0.0, 1e-3]}},  # rad/s
+    ... })
+    >>> campaign.runs, campaign.testbed.name, [d.key for d in campaign.dispersions]
+    (2, 'cmg-yaw', ['sensors.gyro_noise'])
+    >>> len(campaign.fingerprint()), campaign.effect_keys
+    (16, [])
     """
 
     source: str
@@ -138,7 +153,13 @@ class Campaign:
         return [d.key for d in self.dispersions if d.key.startswith("effects.")]
 
     def fingerprint(self) -> str:
-        """A hash of everything that decides the runs' results (resume checks it)."""
+        """A hash of everything that decides the runs' results (resume checks it).
+
+        Returns
+        -------
+        str
+            16 hexadecimal digits.
+        """
         import hashlib
         import json
 
@@ -225,7 +246,26 @@ def _read_gains(src: str, base: Path, value: Any) -> tuple[float, float, float]:
 def parse_campaign(data: dict, source: str = "<memory>", base: Path | None = None) -> Campaign:
     """Validate a parsed campaign document (see :func:`read_campaign`).
 
-    ``base`` is the folder that relative testbed and gains paths start from.
+    Parameters
+    ----------
+    data : dict
+        The document in the layout of a campaign file (FORMATS.md "Campaign file"):
+        ``testbed``, ``command``, ``runs``, ``seed``, ``[args]``, ``[dispersions]``,
+        ``[spec]``.
+    source : str
+        Its name in messages.
+    base : pathlib.Path, optional
+        The folder that relative testbed and gains paths start from (default ``.``).
+
+    Returns
+    -------
+    Campaign
+
+    Raises
+    ------
+    InputError
+        An unknown or missing key, command or distribution, wrong distribution parameters,
+        an unknown testbed key, or a command option that does not exist.
 
     Examples
     --------
@@ -237,9 +277,10 @@ def parse_campaign(data: dict, source: str = "<memory>", base: Path | None = Non
     ... })
     >>> campaign.runs, campaign.command
     (4, 'simulate')
-    >>> table = ab.run_campaign(campaign, __import__("tempfile").mkdtemp() + "/r.parquet")
-    >>> len(table), "sensors.gyro_noise" in table.columns
-    (4, True)
+    >>> ab.parse_campaign({"testbed": "cmg-yaw", "command": "fly", "runs": 1})
+    Traceback (most recent call last):
+    ...
+    airbearing.errors.InputError: <memory>: ...
     """
     from airbearing.analysis.campaign.adapters import check_args
     from airbearing.analysis.campaign.dispersions import check_dispersions
@@ -305,12 +346,33 @@ def parse_campaign(data: dict, source: str = "<memory>", base: Path | None = Non
 def read_campaign(path: str | Path) -> Campaign:
     """Read and validate a campaign file (TOML, FORMATS.md "Campaign file").
 
+    Parameters
+    ----------
+    path : str or pathlib.Path
+        The ``.toml`` file; relative testbed and gains paths in it start from its folder.
+
+    Returns
+    -------
+    Campaign
+
     Raises
     ------
     InputError
         A missing or unreadable file, bad TOML, an unknown key, command or
         distribution, wrong distribution parameters, an unknown testbed key, or a
         command option that does not exist; the message names the file and the key.
+
+    Examples
+    --------
+    >>> from pathlib import Path
+    >>> import airbearing as ab
+    >>> _ = Path("slews.toml").write_text(
+    ...     'testbed = "cmg-yaw"\\ncommand = "simulate"\\nruns = 2\\nseed = 7\\n'
+    ...     '[args]\\nscenario = "slew"\\nyaw-deg = 30\\nduration = 2\\n'
+    ...     '[dispersions]\\n"sensors.gyro_noise" = { uniform = [0.0, 1e-3] }\\n')
+    >>> campaign = ab.read_campaign("slews.toml")
+    >>> campaign.source, campaign.runs, campaign.args
+    ('slews.toml', 2, {'scenario': 'slew', 'yaw-deg': 30, 'duration': 2})
     """
     path = Path(path)
     try:
