@@ -36,7 +36,8 @@ class InputError(AirbearingError, ValueError):
     >>> ab.load_testbed("no-such-testbed")
     Traceback (most recent call last):
     ...
-    airbearing.errors.InputError: no-such-testbed: neither an existing testbed file nor a built-in testbed; ...
+    airbearing.errors.InputError: no-such-testbed: neither an existing testbed file nor a
+    built-in testbed; ...
     """
 
 

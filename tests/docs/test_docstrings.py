@@ -42,6 +42,7 @@ SKIPPED: dict[str, str] = {
     "report_for_loop": "the same report as stability_report (15-30 s)",
     "two_step": "three balancing steps, up to six identifications (8-12 s on short runs)",
     "TwoStepResult": "made only by two_step (8-12 s)",
+    "run_demo": "every section of the demo report (a minute even quick)",
     "open_client": "a local Dask cluster starts worker processes (seconds, and CPU the suite's"
     " other workers use)",
 }

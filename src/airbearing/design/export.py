@@ -545,7 +545,8 @@ def c_sources(spec: ExportSpec, name: str, real: str = "double", *, harness: boo
     >>> sorted(files)
     ['ctl.c', 'ctl.h', 'ctl.json']
     >>> print([line for line in files["ctl.h"].splitlines() if "int ctl_step" in line][0])
-    int ctl_step(const ctl_real y[CTL_NY], const ctl_real r[CTL_NR], ctl_real x[CTL_NX], ctl_real u[CTL_NU]);   /* 0 on success */
+    int ctl_step(const ctl_real y[CTL_NY], const ctl_real r[CTL_NR], ctl_real x[CTL_NX],
+                 ctl_real u[CTL_NU]);   /* 0 on success */
     """
     check_c_name(name)
     if real not in REALS:

@@ -155,7 +155,8 @@ class Loop:
     >>> import airbearing as ab
     >>> loop = ab.make_loop(ab.load_testbed("cmg-yaw"), "attitude")
     >>> loop
-    Loop(kind='attitude', name='attitude', gains={'K_p': 6.0, 'K_i': 0.001, 'K_w': 6.0}, channels=('dd1', 'dd2', 'dd3', 'dd4'), delay_samples=1)
+    Loop(kind='attitude', name='attitude', gains={'K_p': 6.0, 'K_i': 0.001, 'K_w': 6.0},
+         channels=('dd1', 'dd2', 'dd3', 'dd4'), delay_samples=1)
     >>> loop.dt, loop.channel_quantity, round(loop.channel_limit, 3)  # s; rad/s
     (0.05, 'gimbal rate (rad/s)', 1.126)
     >>> loop.used_measurements(), loop.default_outputs()

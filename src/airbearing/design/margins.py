@@ -608,10 +608,8 @@ class LoopAnalysis:
       yaw: gain margin 20 dB, phase margin 51.6 deg, delay margin 0.501 s, disk margin 0.953, stable
     >>> round(analysis.worst()["phase_margin_deg"], 1), analysis.to_pandas().shape  # deg
     (51.6, (5, 20))
-    >>> sorted(analysis.to_json())
+    >>> sorted(analysis.to_json())  # analysis.plot(loop): the Bode plot of every channel
     ['loops', 'stable']
-    >>> len(analysis.plot(loop, which="nyquist").axes)
-    1
     """
 
     name: str

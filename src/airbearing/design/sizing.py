@@ -104,7 +104,8 @@ class SizingResult:
     >>> import airbearing as ab
     >>> sizing = ab.size_cluster(math.radians(30.0), 2.0, 0.0033)
     >>> sizing
-    SizingResult(torque=0.001728, momentum=0.0008661, flywheel_inertia=2.068e-06, flywheel_mass=0.01411)
+    SizingResult(torque=0.001728, momentum=0.0008661, flywheel_inertia=2.068e-06,
+                 flywheel_mass=0.01411)
     >>> round(sizing.to_json()["torque_nm"] * 1e3, 3)  # mN m
     1.728
     """

@@ -1042,7 +1042,8 @@ def testbed_from_dict(data: Mapping[str, Any], source: str = _MEMORY) -> Testbed
     >>> ab.testbed_from_dict({"kind": "platform", "body": {**body, "mass": -1.0}})
     Traceback (most recent call last):
     ...
-    airbearing.errors.InputError: <memory>: key 'body.mass': expected a finite number > 0 (kg), got -1.0
+    airbearing.errors.InputError: <memory>: key 'body.mass': expected a finite number > 0 (kg),
+    got -1.0
     """
     src = str(source)
     if not isinstance(data, Mapping):

@@ -232,6 +232,15 @@ def run_demo(out_dir: str | Path, *, quick: bool = False, progress=None) -> Path
     -------
     Path
         ``out_dir/report.html``.
+
+    Examples
+    --------
+    Every section simulates, identifies and searches (a minute even with ``quick``: not
+    run in the docstring test):
+
+    >>> import airbearing as ab
+    >>> ab.run_demo("demo", quick=True).name  # doctest: +SKIP
+    'report.html'
     """
     report_progress = _progress(progress)
     out_dir = Path(out_dir)

@@ -76,7 +76,8 @@ class Comparison:
     >>> cmp = ab.compare_methods(ab.load_testbed("seed000-tabletop"), offsets=(-0.5e-3,),
     ...                          seeds=(0,), duration=10.0, free_duration=None)
     >>> cmp
-    Comparison(methods=('mechanical', 'mixed'), duration_s=10, offsets=1, ratios=(g_perp_rms=1.02, slider_p2p=0.301))
+    Comparison(methods=('mechanical', 'mixed'), duration_s=10, offsets=1,
+               ratios=(g_perp_rms=1.02, slider_p2p=0.301))
     >>> cmp.to_pandas()[["offset_m", "method"]].values.tolist()  # m
     [[-0.0005, 'mechanical'], [-0.0005, 'mixed']]
     >>> sorted(cmp.to_json())

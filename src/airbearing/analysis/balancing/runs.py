@@ -322,7 +322,8 @@ def run_balancing(
     >>> ab.run_balancing(ab.load_testbed("cmg-yaw"), "mixed")
     Traceback (most recent call last):
     ...
-    airbearing.errors.InputError: cmg-yaw (built-in): balancing needs a kind = 'platform', dof = 3 testbed with [masses]; ...
+    airbearing.errors.InputError: cmg-yaw (built-in): balancing needs a kind = 'platform',
+    dof = 3 testbed with [masses]; ...
     """
     from airbearing.io.coerce import as_testbed
 

@@ -124,7 +124,8 @@ class TwoStepResult:
     >>> import airbearing as ab
     >>> print(ab.two_step("platform-3dof", balance_duration=20.0, noise=False))  # doctest: +SKIP
     two-step balancing of platform-3dof (lyapunov, 6 round(s))
-    spread of E = w^T J w (seed 004 eq. 53, twice the kinetic energy) ... -> ... J (... % less, true rates)
+    spread of E = w^T J w (seed 004 eq. 53, twice the kinetic energy) ... -> ... J
+    (... % less, true rates)
     vertical offset identified ... um
     residual offset [...] um
     warning: step 1 ran 20 s, shorter than the 675 s the tilt loop's integral needs to settle: ...
