@@ -24,9 +24,11 @@ name gains a skipped line, so the list cannot grow silently.
 
 from __future__ import annotations
 
+import ast
 import doctest
 import inspect
 import re
+import textwrap
 import warnings
 
 import pytest
@@ -89,8 +91,26 @@ def _raises_input_error(func) -> bool:
 
 
 def _returns_something(func) -> bool:
+    """Annotated with a return type, or (no annotation) a ``return <value>`` of its own."""
     annotation = inspect.signature(func).return_annotation
-    return annotation not in (None, "None", inspect.Signature.empty)
+    if annotation is not inspect.Signature.empty:
+        return annotation not in (None, "None")
+    try:
+        tree = ast.parse(textwrap.dedent(inspect.getsource(func)))
+    except (OSError, TypeError, SyntaxError):
+        return False
+    own = [tree.body[0]]
+    found = False
+    while own:  # its own statements, not those of the functions it defines
+        node = own.pop()
+        if isinstance(node, ast.Return) and node.value is not None:
+            found = True
+        own += [
+            child
+            for child in ast.iter_child_nodes(node)
+            if not isinstance(child, ast.FunctionDef | ast.AsyncFunctionDef | ast.Lambda)
+        ]
+    return found
 
 
 def _check_function(func, where: str, doc: NumpyDocString, skip_first: bool) -> list[str]:
