@@ -234,6 +234,8 @@ def replay_check(spec: ExportSpec, log, *, real: str = "double", name: str = "ct
         A closed-loop run of the same controller (same testbed, loop, law, gains), from its
         first sample (``NAME_init``'s state is the simulation's initial controller state).
     real : {"double", "float"}
+        The C type the step is compiled with; it sets the bound (:data:`DOUBLE_BOUND`,
+        :data:`FLOAT_BOUND`).
     name : str
         The C name used for the temporary build.
     compiler : str, optional

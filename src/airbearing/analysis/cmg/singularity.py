@@ -313,7 +313,8 @@ def classify_singularity(delta, beta: float, *, tol: float = 1e-6) -> str:
     beta : float
         Pyramid skew angle, rad.
     tol : float
-        Smallest singular value of the Jacobian below which the state is singular.
+        Smallest singular value of the normalised Jacobian (per unit h0, dimensionless)
+        below which the state is singular.
 
     Returns
     -------
