@@ -139,8 +139,8 @@ class Discrepancy:
     >>> run = ab.slew(tb, angle_deg=30.0, duration=3.0, effects={"viscous_friction": 2e-4})
     >>> found = ab.discrepancy(tb, run.log, only="viscous_friction")
     >>> print(found)
-    missing effect: viscous_friction = 0.0002 +- ... (std / bound 1)
-    gap before 0.00233 rad/s (... x the noise floor ... rad/s), after ... rad/s (0.00 x)
+    missing effect: viscous_friction = 0.0002 +- ...
+    gap before ... rad/s (... x the noise floor ... rad/s), after ... rad/s (0.00 x)
     adequacy: ...
     >>> round(found.effects["viscous_friction"], 6), found.gap_unit  # N m s/rad
     (0.0002, 'rad/s')
