@@ -52,13 +52,11 @@ class LogCheck:
     >>> import airbearing as ab
     >>> run = ab.spindown(ab.load_testbed("cmg-yaw"), initial_rate=1.0, duration=5.0)
     >>> check = ab.check_log(run.log)
-    >>> print(check)
+    >>> print(str(check).splitlines()[0])  # then one line per tool, with the reason
     <simulation>: 100 rows, 4.95 s at 20 Hz, 1 segment(s), outlier rows: none
-      simulate replay: yes (1 segment(s), 0 outlier row(s) left out; ...)
-      identify: yes (...)
-      discrepancy: yes (...)
-      replay: yes (...)
-      balance: no (kind = 'cmg': no sliding masses to balance with)
+    >>> {tool: usable for tool, (usable, why) in check.tools.items()}
+    {'simulate replay': True, 'identify': True, 'discrepancy': True, 'replay': True,
+     'balance': False}
     >>> check.usable, check.to_json()["rows"], check.to_pandas().shape
     (True, 100, (0, 5))
     >>> type(check.plot()).__name__
