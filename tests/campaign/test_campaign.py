@@ -185,6 +185,9 @@ def test_resume_runs_only_the_missing_runs(tmp_path):
     other = parse_campaign(dict(SLEW, seed=2))
     with pytest.raises(InputError, match="different campaign"):
         run_campaign(other, out, resume=True)
+    with pytest.raises(InputError, match="does not exist; create it first"):
+        run_campaign(c, tmp_path / "missing" / "r.parquet")
+    assert not (tmp_path / "missing").exists()
 
 
 BAD = {

@@ -105,3 +105,19 @@ def test_library_refuses_bad_numbers_at_the_api_boundary(kwargs):
     tb = load_testbed("cmg-yaw")
     with pytest.raises(InputError):
         slew(tb, **{"duration": 5.0, **kwargs})
+
+
+def test_an_attitude_controller_without_a_unit_reference_is_refused(cmg):
+    from airbearing.analysis.simulation.simulate import simulate
+    from airbearing.design.attitude import cmg_attitude_controller
+    from airbearing.models.model import build_model
+
+    model = build_model(cmg)
+    ctl = cmg_attitude_controller(model)
+    # the default reference is zeros: not a quaternion (the run would be NaN)
+    with pytest.raises(InputError, match=r"reference row 0: no reference.*unit quaternion"):
+        simulate(model, ctl, duration=1.0, x0=model.x0())
+    with pytest.raises(InputError, match=r"reference row 0: norm 2"):
+        simulate(model, ctl, duration=1.0, x0=model.x0(), reference=(2.0, 0.0, 0.0, 0.0))
+    run = simulate(model, ctl, duration=0.5, x0=model.x0(), reference=(1.0, 0.0, 0.0, 0.0))
+    assert np.all(np.isfinite(run.log.data["wz"]))

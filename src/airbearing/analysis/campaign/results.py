@@ -63,7 +63,8 @@ def open_parts(output: str | Path, campaign, *, resume: bool) -> Path:
     ------
     InputError
         Parts of an earlier run exist without ``resume``, or they belong to a
-        different campaign (another file, seed or number of runs).
+        different campaign (another file, seed or number of runs); the folder of
+        ``output`` does not exist.
     """
     folder = parts_dir(output)
     manifest = {"source": campaign.source, "fingerprint": campaign.fingerprint()}
@@ -83,6 +84,8 @@ def open_parts(output: str | Path, campaign, *, resume: bool) -> Path:
                 f"campaign file) than {campaign.source}; delete it to start again"
             )
         return folder
+    if not folder.parent.is_dir():
+        raise InputError(f"{output}: the folder {folder.parent} does not exist; create it first")
     folder.mkdir()
     _atomic(folder / _MANIFEST, lambda tmp: Path(tmp).write_text(json.dumps(manifest)))
     return folder

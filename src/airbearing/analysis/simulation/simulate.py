@@ -362,8 +362,8 @@ def simulate(
         Physical parameters (default ``model.p0``).
     reference : ndarray, optional
         ``(len(ref_names),)`` held for the whole run, or ``(N, len(ref_names))``.
-        Default zeros: give an attitude controller its commanded quaternion (a zero
-        quaternion makes the run NaN).
+        Default zeros. An attitude controller's commanded quaternion must be a unit
+        quaternion on every row (an ``InputError`` otherwise: the default zeros is none).
     seed : int
         Seed of the noise generator; the same seed gives the same run.
     noise : bool
@@ -447,6 +447,17 @@ def _checked_inputs(model, controller, duration, seed, x0, p, reference):
         ref = np.tile(ref, (n, 1))
     if ref.shape != (n, nref):
         raise InputError(f"reference has shape {ref.shape}, expected ({n}, {nref})")
+    quat_cols = [i for i, name in enumerate(controller.ref_names) if name.startswith("qc_")]
+    if len(quat_cols) == 4:
+        norm = np.linalg.norm(ref[:, quat_cols], axis=1)
+        bad = np.flatnonzero(~(np.abs(norm - 1.0) <= 1e-6))
+        if bad.size:
+            given = "no reference (zeros)" if reference is None else f"norm {norm[bad[0]]:.6g}"
+            raise InputError(
+                f"reference row {bad[0]}: {given}; the controller commands a unit quaternion "
+                f"{tuple(controller.ref_names[i] for i in quat_cols)} (e.g. reference=(1, 0, 0, 0) "
+                "holds yaw 0)"
+            )
     return n, x0, p, ref
 
 
