@@ -24,6 +24,7 @@ from airbearing.analysis.identification.wheel_inertia import (
     wheel_columns,
 )
 from airbearing.errors import InputError
+from airbearing.interrupt import stoppable
 from airbearing.io.coerce import as_float, as_logs, as_testbed, as_vector
 from airbearing.io.motion import no_motion
 
@@ -37,6 +38,7 @@ FORMS = ("integrated", "acceleration")
 FRICTIONS = (None, "none", "viscous", "coulomb")
 
 
+@stoppable
 def identify(
     testbed,
     logs: Iterable,

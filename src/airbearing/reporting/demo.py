@@ -24,6 +24,7 @@ from airbearing.analysis.simulation.scenarios import (
     slew,
     slew_summary,
 )
+from airbearing.interrupt import stoppable
 from airbearing.io.testbed import load_testbed
 from airbearing.progress import call as _progress
 from airbearing.progress import expect
@@ -215,6 +216,7 @@ SECTIONS = [
 ]
 
 
+@stoppable
 def run_demo(out_dir: str | Path, *, quick: bool = False, progress=None) -> Path:
     """Run every section and write ``out_dir/report.html``.
 

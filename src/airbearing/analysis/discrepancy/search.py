@@ -114,6 +114,7 @@ from airbearing.analysis.shooting.process_noise import (
     set_intensity,
 )
 from airbearing.errors import InputError, SolverError
+from airbearing.interrupt import stoppable
 from airbearing.io.coerce import as_int, as_logs, as_names
 from airbearing.io.log import YAW_UNWRAPPED, Log, yaw_unwrapped_words
 from airbearing.io.motion import no_motion
@@ -433,6 +434,7 @@ def _validate(testbed, effects, logs, window_s, jit) -> tuple:
     return tuple(out)
 
 
+@stoppable
 def discrepancy(
     testbed: Testbed,
     logs,
