@@ -158,9 +158,12 @@ def _slews(report, laws, quick: bool):
     trapped = 2.0 * np.cos(np.deg2rad(BENCHMARK_SKEW_DEG))
     slew_checks = []
     for r in rows3:
+        slow = "stops at the singularity, then slews slowly (settles after 12-14 s)"
         slew_checks.append(
             check(f"{r['law']}: final pointing error (deg)", 0.0, r["final_error_deg"],
-                  "< 0.5", r["final_error_deg"] < 0.5)
+                  "< 0.5", r["final_error_deg"] < 0.5,
+                  expected=f"{slow}: the --quick run (15 s) may end first"
+                  if quick and r["law"] in ("mp", "sr") else "")
         )  # fmt: skip
         passes = r["law"] not in ("mp", "sr")
         slew_checks.append(
@@ -258,7 +261,9 @@ def _rate_limiting(report, tb3, quick: bool) -> None:
                   turn["clip"] > 1.0),
         ]
         + [check(f"{m}: final pointing error (deg)", 0.0, by[m]["final_error_deg"], "< 0.5",
-                 by[m]["final_error_deg"] < 0.5) for m in ("scale", "clip")],
+                 by[m]["final_error_deg"] < 0.5,
+                 expected="the --quick run (10 s) ends before the limited slew settles "
+                 "(about 11 s)" if quick else "") for m in ("scale", "clip")],
     )  # fmt: skip
 
 
