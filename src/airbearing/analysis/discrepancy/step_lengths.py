@@ -14,17 +14,25 @@ __all__ = ["LATER_COMPILES", "STEP_FITS", "step_lengths"]
 
 
 #: Expected lengths of the search's steps, in nominal fits (the first step's fit, timed):
-#: a screened candidate (score test on the shared Jacobian), an IPOPT fit of a candidate,
-#: the per-axis form of one (fitted only when its one-value form is significant), the
-#: round's own work (cross-validation, regression starts, the shared Jacobian), the
-#: horizon (the process-noise grid and the named effects' errors, with the per-log fits).
-#: Measured on a 120 s seed004-platform free oscillation (docs/benchmarks.md, "Time
-#: estimates").
-STEP_FITS = {"screened": 0.05, "fit": 1.5, "per axis": 0.75, "round": 1.0, "horizon": 6.0}
+#: a screened candidate (score test on the shared Jacobian), an IPOPT fit of a candidate
+#: (one that reaches IPOPT's iteration limit takes several), the per-axis form of one
+#: (fitted only when its one-value form is significant), the round's own work
+#: (cross-validation, regression starts, the shared Jacobian), the horizon (the
+#: process-noise grid on linked pieces, shorter pieces, the named effects' errors: two
+#: thirds of a search). Later rounds start next to the answer: ``"later round"`` scales
+#: their candidates. From a first and a second run of a 120 s seed004-platform free
+#: oscillation (docs/benchmarks.md, "Time estimates").
+STEP_FITS = {
+    "screened": 0.05,
+    "fit": 2.0,
+    "per axis": 1.0,
+    "round": 0.3,
+    "later round": 0.25,
+    "horizon": 30.0,
+}
 #: Compiling after the first step, in units of the first step's own compiling (a first run
-#: on this structure): the first round builds the lag model and the screen's structures,
-#: the horizon its linked windows.
-LATER_COMPILES = {"round": 2.0, "horizon": 1.5}
+#: on this structure): the first round builds the lag model's and the screen's structures.
+LATER_COMPILES = {"round": 3.0, "horizon": 0.0}
 
 
 def step_lengths(cands, rounds, screen, n_validate, step_s, compile_s) -> list[float]:
@@ -66,7 +74,8 @@ def step_lengths(cands, rounds, screen, n_validate, step_s, compile_s) -> list[f
             slots.append(STEP_FITS["fit"])
     out = [step_s]
     for r in range(rounds):
-        one = [w * fit for w in slots]
+        scale = 1.0 if r == 0 else STEP_FITS["later round"]
+        one = [w * fit * scale for w in slots]
         if one:
             one[0] += STEP_FITS["round"] * fit + (
                 LATER_COMPILES["round"] * compiling if r == 0 else 0.0
