@@ -129,6 +129,7 @@ def test_identify_chooses_the_method_as_the_cli_did(testbed, chosen, monkeypatch
                     mod, fn, lambda *a, _fn=fn, **k: calls.append((_fn, a, k)) or _fn
                 )
     log = object.__new__(ab.Log)  # any Log: the stand-ins do not read it
+    monkeypatch.setattr("airbearing.analysis.identify.no_motion", lambda log, tb: "")  # moves
     assert ab.identify(tb, [log]) == chosen
     ((name, args, kw),) = calls
     assert args[1] == [log]

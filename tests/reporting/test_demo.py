@@ -44,3 +44,18 @@ def test_demo_report_renders_in_headless_chromium(demo_run, tmp_path, width):
     out, proc = demo_run
     assert proc.returncode == 0, proc.stderr[-2000:]
     check_layout(render(out / "report.html", tmp_path, width), f"demo at {width} px")
+
+
+def test_every_section_checks_itself_against_its_truth(demo_run):
+    """Each section's checks are pass/FAIL cells the summary counts: none has none."""
+    import re
+
+    out, proc = demo_run
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    html = (out / "report.html").read_text()
+    summary = html[html.index("<h2>Summary</h2>") : html.index("<h2>Contents</h2>")]
+    rows = re.findall(r"<tr>(.*?)</tr>", summary, re.S)[1:]
+    cells = [re.findall(r"<td[^>]*>(.*?)</td>", r, re.S) for r in rows]
+    assert len(cells) >= 9
+    unchecked = [re.sub("<[^>]+>", "", c[0]) for c in cells if int(c[2]) + int(c[3]) == 0]
+    assert unchecked == [], f"sections without a check: {unchecked}"

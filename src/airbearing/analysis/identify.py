@@ -24,7 +24,9 @@ from airbearing.analysis.identification.wheel_inertia import (
     wheel_columns,
 )
 from airbearing.errors import InputError
+from airbearing.interrupt import stoppable
 from airbearing.io.coerce import as_float, as_logs, as_testbed, as_vector
+from airbearing.io.motion import no_motion
 
 __all__ = ["identify", "columns_used", "METHODS", "FORMS", "FRICTIONS"]
 # as_testbed and as_logs lived here first; they are airbearing.io.coerce's now
@@ -36,6 +38,7 @@ FORMS = ("integrated", "acceleration")
 FRICTIONS = (None, "none", "viscous", "coulomb")
 
 
+@stoppable
 def identify(
     testbed,
     logs: Iterable,
@@ -88,7 +91,7 @@ def identify(
     ------
     InputError
         An option that does not apply to this testbed, a value outside its choices, a log
-        that does not fit the testbed.
+        that does not fit the testbed or shows no motion (a frozen or resting signal).
     SolverError
         The underlying solver failed.
 
@@ -127,6 +130,7 @@ def identify(
         raise InputError(f"progress={progress!r:.60}: expected a callable or None")
     tb = as_testbed(testbed)
     loaded = as_logs(logs, tb, columns=columns_used(tb), what="the testbed to identify")
+    _refuse_still(tb, loaded)
     fr = None if friction in (None, "none") else friction
     if hold is not None and tb.body.dof == 1:
         raise InputError("hold applies to platform testbeds (dof 3), not to dof 1")
@@ -158,6 +162,15 @@ def columns_used(testbed) -> tuple[str, ...]:
     ('ws1', 'wc1')
     """
     return (*COLUMNS_USED, *wheel_columns(as_testbed(testbed)))
+
+
+def _refuse_still(tb, loaded) -> None:
+    """Before any fitting: a log that shows no motion (:func:`airbearing.io.motion.no_motion`)
+    excites nothing a fit could identify; its numbers would be the prior's or noise's."""
+    for log in loaded:
+        why = no_motion(log, tb)
+        if why:
+            raise InputError(f"{log.source}: identify: {why}")
 
 
 def _check_choices(method, form, friction) -> None:

@@ -68,6 +68,7 @@ __all__ = [
     "read_log",
     "time_text",
     "quaternion_norm_hint",
+    "restarts_at",
     "segments_of",
     "yaw_unwrapped_words",
     "validate_log",
@@ -566,12 +567,38 @@ def quaternion_norm_hint(norm: np.ndarray) -> str:
     return "; fix those rows (a unit quaternion qw, qx, qy, qz, scalar first) or remove them"
 
 
+def restarts_at(t: np.ndarray, i: int, start: int) -> bool:
+    """Whether the step back of time at row ``i`` starts a new run (two runs joined).
+
+    A second run's clock may restart at 0 or at any earlier value (a recorder that
+    restarts its clock at an arbitrary time): the step back counts as a restart when the
+    run before it has at least 2 rows and time goes back past at least two of its samples
+    (``t[i] <= t[i - 2]``) and stays back at the next row (``t[i + 1] <= t[i - 1]``). A
+    repeated time, two swapped rows or one misplaced row is not a restart: it is undone
+    within a row.
+
+    Parameters
+    ----------
+    t : numpy.ndarray
+        s, shape (n,).
+    i : int
+        A row where time does not increase (``t[i] <= t[i - 1]``).
+    start : int
+        First row of the run ``i`` would end.
+    """
+    if i - start < 2 or not t[i] < t[i - 1]:
+        return False
+    if not t[i] <= t[i - 2]:
+        return False
+    return i + 1 >= len(t) or bool(t[i + 1] <= t[i - 1])
+
+
 def _restart_hint(t: np.ndarray, rows: Sequence[int]) -> str:
-    """When time goes back to or before the start of its run (two runs joined), say where
-    to split; ``""`` for a repeated or out-of-order time."""
+    """When time steps back to an earlier value and runs on from there (two runs joined,
+    :func:`restarts_at`), say where to split; ``""`` for a repeated or out-of-order time."""
     starts = [0]
     for i in rows:
-        if not (t[i] <= t[starts[-1]] and i - starts[-1] >= 2):
+        if not restarts_at(t, i, starts[-1]):
             return ""
         starts.append(i)
     if len(t) - starts[-1] < 2:

@@ -36,6 +36,7 @@ from airbearing.io.log import (
     RATE_COLUMNS,
     Log,
     quaternion_norm_hint,
+    restarts_at,
     row_ranges,
 )
 from airbearing.io.testbed import Testbed
@@ -352,16 +353,17 @@ def time_runs(
     ------
     InputError
         Time that does not increase where it does not restart (a repeated or
-        out-of-order time; the row named); time that restarts (goes back to or before
-        the start of its run, each run increasing and of at least 2 rows) while the
-        map says ``restart = "error"``: the rows where it restarts and the fix.
+        out-of-order time; the row named); time that restarts (steps back to an earlier
+        value, 0 or not, and runs on from there: :func:`airbearing.io.log.restarts_at`;
+        each run increasing and of at least 2 rows) while the map says
+        ``restart = "error"``: the rows where it restarts and the fix.
     """
 
     header = import_map.columns["t"]
     back = np.flatnonzero(~(np.diff(t) > 0)) + 1
     starts, start = [0], 0
     for i in back.tolist():
-        if t[i] <= t[start] and i - start >= 2:
+        if restarts_at(t, i, start):
             starts.append(i)
             start = i
             continue

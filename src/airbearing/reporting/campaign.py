@@ -17,6 +17,7 @@ import numpy as np
 
 from airbearing.analysis.campaign import studies
 from airbearing.analysis.campaign.dispersions import dispersed_columns
+from airbearing.reporting.checks import check, checks_table
 from airbearing.reporting.html import Report, pretty_key
 from airbearing.reporting.style import axis_label, plain
 
@@ -339,6 +340,15 @@ def robust_verification_section(report: Report, *, quick: bool = False) -> None:
         f"interval {rate['ci_low']:.0%}-{rate['ci_high']:.0%}). The README gives the full "
         "campaign (airbearing campaign robust.toml)."
     )
+    fraction = rate["fraction"]
+    checks_table(
+        report,
+        [
+            check(f"runs meeting {e.describe()} (fraction)", ">= 0.95 (gains tuned over the "
+                  "box)", fraction, "95 % interval reaches 0.95",
+                  fraction is not None and rate["ci_high"] >= 0.95),
+        ],
+    )  # fmt: skip
     campaign_report(campaign, df, report=report, level=3, max_plotted=2)
 
 
@@ -355,4 +365,17 @@ def detection_section(report: Report, *, quick: bool = False) -> None:
         "in turn); the README gives the full study over every effect that acts on cmg-yaw "
         "(airbearing campaign detection.toml --study detection)."
     )
-    _detection(report, campaign, df)
+    det = _detection(report, campaign, df)
+    rows = []
+    for r in det["effects"]:
+        rows.append(
+            check(f"{r['effect']} hidden: runs naming it (fraction)", 1.0, r["rate"], ">= 0.5",
+                  r["rate"] is not None and r["rate"] >= 0.5)
+        )  # fmt: skip
+    fa = det["false_alarm"]
+    if fa:
+        rows.append(
+            check("nothing hidden: runs naming an effect (count)", 0, fa["alarms"], "= 0",
+                  fa["alarms"] == 0)
+        )  # fmt: skip
+    checks_table(report, rows, title="Against what each run hid:")

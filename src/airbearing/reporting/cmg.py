@@ -30,6 +30,7 @@ from airbearing.analysis.cmg.steering_study import (
 )
 from airbearing.design.steering import STEERING_LAWS, check_skew
 from airbearing.io.testbed import load_testbed
+from airbearing.reporting.checks import check, checks_table, within
 from airbearing.reporting.style import legend_outside, plain, trace
 
 __all__ = ["demo_section", "envelope_figure"]
@@ -103,6 +104,19 @@ def _internal_singularity(report, laws, quick: bool) -> None:
         "error and complete the manoeuvre."
     )
     report.table([{k: r[k] for k in cols} for r in rows], cols)
+    trapped = 2.0 * np.cos(np.deg2rad(BENCHMARK_SKEW_DEG))  # h0: the elliptic state's |H|
+    ends = {r["law"]: r["final_Hx_h0"] for r in rows}
+    checks_table(
+        report,
+        [
+            check(f"{law}: final Hx (h0)", trapped if law in ("mp", "sr") else 2.0, ends[law],
+                  "within 0.05 h0", within(ends[law], trapped if law in ("mp", "sr") else 2.0,
+                                           abs_=0.05))
+            for law in ends
+        ],
+        title="Against the theory: mp and sr stay at the elliptic singularity (2 cos(beta) "
+        "h0 = 1.2 h0), the dithered laws reach the 2.0 h0 demanded (Wie 2005):",
+    )  # fmt: skip
     fig, ax = plt.subplots(1, 2, figsize=(11, 3.6))
     for k, (law, r) in enumerate(runs.items()):
         tt = np.append(r.t, r.t[-1] + r.info["dt"])
@@ -141,6 +155,25 @@ def _slews(report, laws, quick: bool):
         "peak_gimbal_rate_deg_s", "max_torque_error_mNm", "time_near_s", "time_to_escape_s",
     ]  # fmt: skip
     report.table([{k: r[k] for k in cols3} for r in rows3], cols3)
+    trapped = 2.0 * np.cos(np.deg2rad(BENCHMARK_SKEW_DEG))
+    slew_checks = []
+    for r in rows3:
+        slow = "stops at the singularity, then slews slowly (settles after 12-14 s)"
+        slew_checks.append(
+            check(f"{r['law']}: final pointing error (deg)", 0.0, r["final_error_deg"],
+                  "< 0.5", r["final_error_deg"] < 0.5,
+                  expected=f"{slow}: the --quick run (15 s) may end first"
+                  if quick and r["law"] in ("mp", "sr") else "")
+        )  # fmt: skip
+        passes = r["law"] not in ("mp", "sr")
+        slew_checks.append(
+            check(f"{r['law']}: peak momentum (h0)",
+                  "past 1.2 (dithered)" if passes else "1.2 (stops at the singularity)",
+                  r["peak_momentum_h0"], "> 1.25" if passes else "within 0.05 of 1.2",
+                  r["peak_momentum_h0"] > trapped + 0.05 if passes
+                  else within(r["peak_momentum_h0"], trapped, abs_=0.05))
+        )  # fmt: skip
+    checks_table(report, slew_checks)
     fig, ax = plt.subplots(1, 2, figsize=(11, 3.6))
     for k, (law, r) in enumerate(runs3.items()):
         tt = np.append(r.t, r.t[-1] + tb3.sensors.dt)
@@ -186,6 +219,21 @@ def _null_motion(report, quick: bool) -> None:
         "theory says (Margulies & Aubrun 1978; Wie 2004)."
     )
     report.table(nrows)
+    hyp, ell = nrows[0], nrows[1]
+    checks_table(
+        report,
+        [
+            check("near hyperbolic: m at end (-)", f"> {NEAR_SINGULAR:g} (escapes)",
+                  hyp["m at end"], f"> {NEAR_SINGULAR:g}", hyp["m at end"] > NEAR_SINGULAR),
+            check("near elliptic: m at end (-)", f"< {NEAR_SINGULAR:g} (no null motion "
+                  "leaves it)", ell["m at end"], f"< {NEAR_SINGULAR:g}",
+                  ell["m at end"] < NEAR_SINGULAR),
+            check("largest momentum drift, both (h0)", 0.0,
+                  max(hyp["largest momentum drift (h0)"], ell["largest momentum drift (h0)"]),
+                  "< 0.01 (null motion makes no torque)",
+                  max(r["largest momentum drift (h0)"] for r in nrows) < 0.01),
+        ],
+    )  # fmt: skip
 
 
 def _rate_limiting(report, tb3, quick: bool) -> None:
@@ -202,6 +250,21 @@ def _rate_limiting(report, tb3, quick: bool) -> None:
         "settle_time_s", "peak_gimbal_rate_deg_s",
     ]  # fmt: skip
     report.table([{k: r[k] for k in colsr} for r in rrows], colsr)
+    by = {r["mode"]: r for r in rrows}
+    turn = {m: by[m]["max_torque_direction_error_deg"] for m in ("scale", "clip")}
+    checks_table(
+        report,
+        [
+            check("scale: torque direction error (deg)", 0.0, turn["scale"], "< 1e-6",
+                  turn["scale"] < 1e-6),
+            check("clip: torque direction error (deg)", "turned", turn["clip"], "> 1",
+                  turn["clip"] > 1.0),
+        ]
+        + [check(f"{m}: final pointing error (deg)", 0.0, by[m]["final_error_deg"], "< 0.5",
+                 by[m]["final_error_deg"] < 0.5,
+                 expected="the --quick run (10 s) ends before the limited slew settles "
+                 "(about 11 s)" if quick else "") for m in ("scale", "clip")],
+    )  # fmt: skip
 
 
 def _envelopes(report, quick: bool) -> None:

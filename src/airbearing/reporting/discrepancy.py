@@ -12,6 +12,7 @@ import numpy as np
 from airbearing.analysis.discrepancy.replay import Replay, primary_series
 from airbearing.analysis.discrepancy.search import Discrepancy, discrepancy
 from airbearing.analysis.discrepancy.words import format_value
+from airbearing.reporting.checks import check, checks_table, within
 from airbearing.reporting.html import Report
 from airbearing.reporting.html import sentence as as_sentence
 from airbearing.reporting.style import plain
@@ -468,11 +469,15 @@ def _story_inputs(quick: bool):
     # workflow below gets only the nominal testbed and the log
     res = slew(
         tb,
-        effects={"inertia_error": 0.00323 / 0.00283 - 1},
+        effects={"inertia_error": STORY_INERTIA_ERROR},
         seed=5001,
         duration=20.0 if quick else 40.0,
     )
     return tb, res.log, "simulated seed-001 slew (inertia hidden in the truth, seed 5001)"
+
+
+#: The effect the story hides in the simulated truth: seed 001's inertia over the CAD one.
+STORY_INERTIA_ERROR = 0.00323 / 0.00283 - 1
 
 
 def demo_section(report: Report, *, quick: bool = False) -> None:
@@ -487,6 +492,8 @@ def demo_section(report: Report, *, quick: bool = False) -> None:
         f"testbed ({what}), tries every registered effect, and names the missing one."
     )
     add_discrepancy(report, result, level=3)
+    checks_table(report, _story_checks(result), title="Against the truth the log was simulated "
+                 "with (inertia_error = 0.00323 / 0.00283 - 1, nothing else):")  # fmt: skip
     if "inertia_error" in result.effects:
         j0 = tb.body.yaw_inertia
         e = result.effects["inertia_error"]
@@ -496,6 +503,28 @@ def demo_section(report: Report, *, quick: bool = False) -> None:
             f"+- {j0 * sd:.1g} kg m^2 (seed 001: 0.00323 kg m^2).",
             note=True,
         )
+
+
+def _story_checks(result: Discrepancy) -> list[dict]:
+    """The search's answer against the hidden truth: it names inertia_error, at a value
+    within 3 standard errors, names nothing else, and the named model replays the log to
+    within 1.5 noise floors."""
+    names = list(result.effects)
+    value = result.effects.get("inertia_error")
+    value = None if value is None else float(np.ravel(value)[0])
+    std = result.effect_std.get("inertia_error")
+    std = None if std is None else float(np.ravel(std)[0])
+    others = [n for n in names if n != "inertia_error"]
+    ratio = result.gap_after / result.noise_floor
+    return [
+        check("effect named", "inertia_error", ", ".join(names) or "none", "inertia_error "
+              "named", "inertia_error" in names),
+        check("inertia_error (relative, -)", STORY_INERTIA_ERROR, value, "within 3 std",
+              value is not None and std is not None
+              and within(value, STORY_INERTIA_ERROR, abs_=3 * std), std=std),
+        check("effects named besides it (count)", 0, len(others), "= 0", not others),
+        check("gap of the named model (x noise floor)", 1.0, ratio, "<= 1.5", ratio <= 1.5),
+    ]  # fmt: skip
 
 
 def _dbic_words(dbic: float) -> str:

@@ -22,6 +22,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
 __all__ = [
+    "EXPECTED_KEY",
     "Report",
     "figure_html",
     "table_html",
@@ -56,6 +57,7 @@ td.l { white-space: nowrap; }
 td.l, th.l { text-align: left; }
 .pass { color: #11772d; font-weight: 600; }
 .fail { color: #b00020; font-weight: 600; }
+.fail-expected { color: #8a5a00; font-weight: 600; }
 figure { margin: 1em 0; page-break-inside: avoid; }
 figure img { max-width: 100%; height: auto; }
 figcaption { font-size: 0.9em; color: #555; }
@@ -141,6 +143,10 @@ def _fmt(v) -> str:
     return html.escape(str(v))
 
 
+#: Column of a table row saying why a FAIL in that row is expected ("" or absent: not).
+EXPECTED_KEY = "failure expected because"
+
+
 def _is_verdict(column: str) -> bool:
     words = column.lower().replace("(", " ").replace(")", " ").split()
     return any(w in _VERDICT_WORDS for w in words)
@@ -154,7 +160,9 @@ def table_html(
     First column left-aligned. A value that does not exist (None, NaN) prints as
     :data:`NONE_TEXT` and the table gets a legend saying what that means (``legend``,
     default "not defined"). True/False print as pass/FAIL in verdict columns (names with
-    "ok", "met", "pass", "stable") and as yes/no elsewhere.
+    "ok", "met", "pass", "stable") and as yes/no elsewhere; a FAIL whose row says why it is
+    expected (a non-empty :data:`EXPECTED_KEY`) prints as "FAIL, expected" (class
+    ``fail-expected``, which a summary counts apart from an unexpected ``fail``).
     """
     if not rows:
         return "<p><em>(empty)</em></p>"
@@ -171,7 +179,9 @@ def table_html(
             v = r.get(c, "")
             cls = "l" if i == 0 else ""
             if isinstance(v, bool) or type(v).__name__ == "bool_":
-                if _is_verdict(c):
+                if _is_verdict(c) and not v and r.get(EXPECTED_KEY):
+                    cls, v = "fail-expected", "FAIL, expected"
+                elif _is_verdict(c):
                     cls, v = ("pass", "pass") if v else ("fail", "FAIL")
                 else:
                     v = "yes" if v else "no"

@@ -55,6 +55,7 @@ from airbearing.analysis.shooting.process_noise import (
     set_intensity,
 )
 from airbearing.errors import InputError
+from airbearing.interrupt import stoppable
 from airbearing.io.coerce import as_effects, as_float, as_int, as_logs, as_testbed
 from airbearing.io.log import Log
 from airbearing.io.testbed import Testbed
@@ -414,6 +415,7 @@ def checked_arguments(testbed, logs, window_s, what: str, progress=None) -> tupl
     return testbed, logs, window_s
 
 
+@stoppable
 def replay(
     testbed: Testbed,
     logs,

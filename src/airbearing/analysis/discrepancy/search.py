@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import logging
 import math
+import time
 from collections.abc import Iterable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
@@ -85,6 +86,7 @@ from airbearing.analysis.discrepancy.starts import (
     needs_retry,
     start_json,
 )
+from airbearing.analysis.discrepancy.step_lengths import step_lengths
 from airbearing.analysis.discrepancy.trial import (
     CV_FOLDS,
     MIN_SIGMAS,
@@ -114,13 +116,16 @@ from airbearing.analysis.shooting.process_noise import (
     set_intensity,
 )
 from airbearing.errors import InputError, SolverError
+from airbearing.interrupt import stoppable
 from airbearing.io.coerce import as_int, as_logs, as_names
 from airbearing.io.log import YAW_UNWRAPPED, Log, yaw_unwrapped_words
 from airbearing.io.motion import no_motion
 from airbearing.io.testbed import Testbed
 from airbearing.io.vocabulary import EFFECTS
+from airbearing.models.compiled import compile_seconds
 from airbearing.models.effects import REGISTRY
 from airbearing.models.model import build_model
+from airbearing.progress import expect
 
 __all__ = [
     "CONFOUND_BIC",
@@ -433,6 +438,7 @@ def _validate(testbed, effects, logs, window_s, jit) -> tuple:
     return tuple(out)
 
 
+@stoppable
 def discrepancy(
     testbed: Testbed,
     logs,
@@ -512,10 +518,17 @@ def discrepancy(
     # listed with their reason, never fitted (a spring on a yaw that turns many times)
     refused = [failed(c, "not offered", r) for c, r in unphysical_candidates(testbed, datas, only)]
     search = _Search(testbed, datas, windows, floor, cands, seed, jit)
-    prog = _Progress(progress, 1 + len(cands) * max(max_effects, 1) + len(validate))
+    # steps: the nominal replay, every candidate of every round, the horizon, each validation
+    rounds = len(cands) * max(max_effects, 1)
+    prog = _Progress(progress, 1 + rounds + 1 + len(validate))
+    prog.lengths = lambda step_s, compile_s: step_lengths(
+        search.cands, max(max_effects, 1), screen, len(validate), step_s, compile_s
+    )
     base_problem, nominal = _nominal_replay(search, prog)
     sel = _select(search, nominal, max_effects, screen, workers, prog)
+    prog.done, prog.cap = 1 + rounds, 1 + rounds  # rounds not run: their steps are skipped
     named = _named(search, sel, prog, screen, workers)
+    prog.done, prog.cap = 2 + rounds, None
     _confounding(search, sel, named)
     judged = _judge(search, sel, named, logs, validate, window_s, jit, prog)
     judged = (*judged[:4], judged[4] + _unwrapped_words(logs))
@@ -591,18 +604,34 @@ def _result(search, refused, base_problem, sel, named, judged, loc) -> Discrepan
 
 
 class _Progress:
-    """``progress(what, done, total)`` with the count of fits done so far."""
+    """``progress(what, done, total)`` with the count of fits done so far.
+
+    ``lengths(step_s, compile_s)``: the expected length of every step, s, once the first
+    (the nominal replay: ``step_s`` long, ``compile_s`` of it compiling) is done; the
+    display is told them (:func:`airbearing.progress.expect`). ``cap``: the count shown
+    stays at it while a stage refits more than its one step (the horizon's retries).
+    """
 
     def __init__(self, progress, total: int):
+        self.raw = progress
         self.say = progress or (lambda *a, **k: None)
         self.total = total
         self.done = 0
+        self.cap: int | None = None
+        self.lengths = None
 
     def __call__(self, what: str, done: int | None = None) -> None:
         done = self.done if done is None else done
+        if self.cap is not None:
+            done = min(done, self.cap)
         # retries and refits are not known in advance: the count never passes its total
         self.total = max(self.total, done)
         self.say(what, done, self.total)
+
+    def expect(self, step_s: float, compile_s: float) -> None:
+        """Tell the display the steps' expected lengths (after the first step)."""
+        if self.lengths is not None:
+            expect(self.raw, self.lengths(step_s, compile_s))
 
 
 @dataclass
@@ -648,6 +677,7 @@ def _nominal_replay(search: _Search, prog: _Progress) -> tuple[ShootingProblem, 
     """Stage 1: the nominal Model's replay of every log (the baseline of every candidate)."""
     unit, floor = search.datas[0].gap_unit, search.floor
     prog("nominal replay (compiling the window function once per model structure)")
+    t0, c0 = time.monotonic(), compile_seconds()
     base_problem = search.problem(False)
     # far from the data the nominal replay may not converge: its last iterate is the baseline
     nominal = base_problem.fit(
@@ -655,6 +685,7 @@ def _nominal_replay(search: _Search, prog: _Progress) -> tuple[ShootingProblem, 
         name="replay of the logs (nominal model)",
         accept_max_iter=True,
     )
+    prog.expect(time.monotonic() - t0, compile_seconds() - c0)
     prog.done += 1
     prog(f"nominal gap {nominal.gap:.3g} {unit}, noise floor {floor.value:.3g} {unit}")
     return base_problem, nominal
@@ -742,14 +773,20 @@ def _round(search, sel: _Selection, remaining, screen, workers, prog) -> list:
         return _try(search, c, chosen, theta, current, lag, sel.ln_n, sel.starts, before, lin)
 
     def fit_all(group):
-        if workers > 1 and len(group) > 1:
-            with ThreadPoolExecutor(max_workers=workers) as pool:
-                out = list(pool.map(run, group))
-        else:
-            out = [run(c) for c in group]
-        for res in out:
+        out = []
+
+        def told(res):  # each candidate counted as it finishes (the estimate follows them)
+            out.append(res)
             prog.done += 1
             prog(f"{res.label}: gap {res.gap:.3g} {unit}, {res.status}")
+
+        if workers > 1 and len(group) > 1:
+            with ThreadPoolExecutor(max_workers=workers) as pool:
+                for res in pool.map(run, group):
+                    told(res)
+        else:
+            for c in group:
+                told(run(c))
         return out
 
     # the per-axis form of an effect only when its one-value form is significant: an
