@@ -3,7 +3,7 @@ torque outside the vocabulary acts, runs that disagree said in words.
 
 Oracle: recovery on simulated coast-downs of the coverage study's rig
 (``benchmarks/coverage_study.py``), with the truth known; the tolerances are stated at
-each check.
+each check. Coloured (AR(1)) measurement noise: test_discrepancy_coloured_noise.py.
 """
 
 from __future__ import annotations
@@ -124,9 +124,11 @@ def test_runs_that_disagree_are_said_in_words():
 
 @pytest.mark.slow
 def test_coverage_study_small():
-    # a few seeds of benchmarks/coverage_study.py (its docs table has 20 per case)
+    # a few seeds of benchmarks/coverage_study.py (its docs table has 20 per case); the OU
+    # coast-downs (about 3 times a white one's cost) on 2 seeds
     cs = _study()
-    res = [_run_one(cs, "coast", c, s, 150.0) for c in ("a", "c") for s in range(3)]
+    res = [_run_one(cs, "coast", "a", s, 150.0) for s in range(3)]
+    res += [_run_one(cs, "coast", "c", s, 150.0) for s in range(2)]
     res += [_run_one(cs, "cmg", c, s) for c in ("a", "c") for s in range(3)]
     rows = {(r["set-up"], r["case"]): r for r in cs.summarise(res)}
     for kind in ("coast", "cmg"):
@@ -139,8 +141,9 @@ def test_coverage_study_small():
         assert a["structure_remains"] == 0.0, a
         # an OU torque outside the vocabulary: said in every run
         assert c["structure_remains"] == 1.0, c
-    # ... and on the coast-downs the truth still within 3 std in at least 2 of 3 runs per
-    # effect (the goal is 90 % over 20 seeds); the CMG slew: test_cmg_slew_ou_coverage
+    # ... and on the coast-downs the truth still within 3 std in at least 4 of the 6 (effect,
+    # run) pairs (the goal is 90 % over 20 seeds; scipy.stats.binom: at 90 % coverage 4 of 6
+    # pass with probability 0.98, 6 of 9 did with 0.99); the CMG slew: test_cmg_slew_ou_coverage
     assert rows[("coast", "c")]["truth within 3 std"] >= 0.66, rows[("coast", "c")]
 
 
@@ -154,20 +157,6 @@ def test_cmg_slew_ou_coverage():
     (row,) = cs.summarise(res)
     assert row["truth within 3 std"] >= 0.75, row
     assert row["structure_remains"] == 1.0, row
-
-
-@pytest.mark.slow
-def test_ar1_measurement_noise_coverage():
-    # AR(1) measurement noise of coefficient 0.95: estimated with the fit and whitened, so
-    # the true effects are named and covered (1 miss in the 9 coast-down pairs and 1 in 4
-    # slews allowed: the goal is 90 % over 20 seeds), and the verdict says the noise is
-    # coloured
-    cs = _study()
-    res = [_run_one(cs, "coast", "b", s, 150.0) for s in range(3)]
-    res += [_run_one(cs, "cmg", "b", s) for s in range(4)]
-    rows = {(r["set-up"], r["case"]): r for r in cs.summarise(res)}
-    assert rows[("coast", "b")]["truth within 3 std"] >= 8 / 9, rows
-    assert rows[("cmg", "b")]["truth within 3 std"] >= 0.75, rows
 
 
 @pytest.mark.slow
@@ -203,20 +192,3 @@ def test_a_weak_candidate_is_named_at_the_horizon():
     assert set(d.effects) == set(cs.CMG_TRUTH), d.verdict
     for name, value in cs.CMG_TRUTH.items():
         assert abs(d.effects[name] - value) < 3 * d.effect_std[name], d.verdict
-
-
-@pytest.mark.slow
-def test_noise_free_attitude_per_axis_friction_is_covered():
-    # seed 004's platform, AR(1) gyro noise, a noise-free attitude: the run whose per-axis
-    # viscous friction lay 3.2 std off when the replay's two RK4 sub-steps drifted 3.9e-6
-    # rad (four times the resolution the attitude is weighted at); integrated to the
-    # resolution, every axis lies within 2.5 std (measured 1.6, 2.0, 1.9)
-    from airbearing.analysis.discrepancy.search import discrepancy
-
-    cs = _study()
-    tb, logs = cs.platform_logs(14, "b")
-    d = discrepancy(tb, logs, only=["viscous_friction"], max_effects=1)
-    value = np.atleast_1d(d.effects["viscous_friction"])
-    std = np.atleast_1d(d.effect_std["viscous_friction"])
-    z = (value - cs.PLATFORM_TRUTH["viscous_friction"]) / std
-    assert np.all(np.abs(z) <= 2.5), z

@@ -85,16 +85,19 @@ def test_joint_spindowns_separate_coulomb_viscous_and_drag():
 
 @pytest.mark.slow
 def test_nothing_hidden_in_attitude_only_logs_names_nothing():
-    # issue 13: no effect named in at least 9 of 10 seeds, attitude-only logs included
+    # issue 13: no effect named in at least 9 of 10 seeds, attitude-only logs included, i.e.
+    # a false-alarm rate of at most about 10 %. Six seeds with none allowed test that as
+    # well (scipy.stats.binom): a rate of 30 % passes 9-of-10 with probability 0.15 and
+    # 6-of-6 with 0.12; a rate of 5 % passes them with 0.91 and 0.74
     named = []
-    for seed in range(300, 310):
+    for seed in range(300, 306):
         log = spindown(ROTOR, initial_rate=2.0, duration=60.0, seed=seed).log
         d = discrepancy(ROTOR, log, max_effects=1)
         named.append(d.no_missing_effect)
         for c in d.candidates:  # never a number with a zero or non-finite error
             if c.value is not None and c.std is not None:
                 assert np.all(np.asarray(c.std) > 0) and np.all(np.isfinite(c.std))
-    assert sum(named) >= 9, named
+    assert all(named), named
 
 
 def test_what_a_log_cannot_identify_is_said_so():
@@ -131,7 +134,10 @@ def test_artefacts_leave_the_answer_within_its_errors():
     clean = jittered_platform(PLATFORM, 7, gap=(15.0, 4.0), duration=36.0, effects=truth)
     dirty, rows = with_glitches(clean, [100, 333], "rate_spike", size=0.05)
     dirty, more = with_glitches(dirty, [500], "quat_wrong_frame")
-    a = discrepancy(PLATFORM, clean, max_effects=1)
+    # the clean log's IPOPT fit of the effect alone (that a search names viscous friction
+    # on a clean platform log: test_discrepancy_hidden_effects.py); the dirty log's full
+    # search must name it and nothing else despite the glitches
+    a = discrepancy(PLATFORM, clean, only=["viscous_friction"], max_effects=1)
     b = discrepancy(PLATFORM, dirty, max_effects=1)
     assert set(a.effects) == set(b.effects) == {"viscous_friction"}, (a.verdict, b.verdict)
     va, vb = a.effects["viscous_friction"], b.effects["viscous_friction"]

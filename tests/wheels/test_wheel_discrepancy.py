@@ -165,7 +165,10 @@ def test_a_torque_error_on_one_of_four_wheels_is_named_on_that_wheel():
         tb, effects={"wheel_torque_error": truth}, duration=30.0, axis=(0.3, 1.0, 0.2),
         angle_deg=90.0, seed=3,
     )  # fmt: skip
-    found = ab.discrepancy(tb, [run.log])
+    # one effect hidden and judged: the search stops after naming it (max_effects=1; a
+    # second round of the ~20 rw-3axis candidates would double the cost and is asserted
+    # nowhere here: a search naming nothing more is test_wheel_viscous_friction_is_named...)
+    found = ab.discrepancy(tb, [run.log], max_effects=1)
     value, std = _judge(found, "wheel_torque_error", TORQUE, index=1)
     values = np.ravel(found.effects["wheel_torque_error"])
     stds = np.ravel(found.effect_std["wheel_torque_error"])
@@ -181,7 +184,7 @@ def test_coulomb_friction_of_each_of_four_wheels_is_named_per_wheel():
         tb, effects={"wheel_coulomb_friction": truth}, duration=40.0, axis=(0.3, 1.0, 0.2),
         angle_deg=90.0, seed=3,
     )  # fmt: skip
-    found = ab.discrepancy(tb, [run.log])
+    found = ab.discrepancy(tb, [run.log], max_effects=1)  # one effect: as above
     for i in (0, 1, 3):
         _judge(found, "wheel_coulomb_friction", truth[i], index=i)
     value = float(np.ravel(found.effects["wheel_coulomb_friction"])[2])
