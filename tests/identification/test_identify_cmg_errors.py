@@ -10,6 +10,7 @@ docs/explanation/honest-answers.md.
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -30,12 +31,17 @@ SEEDS = range(10)
 COVER_SIGMAS, MIN_COVERED = 3.0, 9
 
 
+@functools.cache
 def _testbed():
+    # one object: the logs carry it, so identification reuses each log's cached quality
+    # (io.quality's rule, most of a fit's time) instead of assessing the log twice
     sensors = Sensors(rate=20.0, gyro_noise=SIGMA, lowpass=1.0)
     return load_testbed("cmg-yaw").replace(sensors=sensors)
 
 
+@functools.cache
 def _log(case: str, seed: int) -> Log:
+    # cached: the two viscous tests fit the same logs (with and without the friction term)
     tb = _testbed()
     effects = {"inertia_error": 0.14}
     if case.startswith("viscous"):
@@ -49,7 +55,7 @@ def _log(case: str, seed: int) -> Log:
         phi = 0.95
         u = rng.normal(0.0, SIGMA * math.sqrt(1 - phi**2), len(d))
         d["wz"] = d["wz"] + lfilter([1.0], [1.0, -phi], u, zi=[phi * rng.normal(0.0, SIGMA)])[0]
-    return Log(d, source=f"{case}-{seed}.csv")
+    return Log(d, source=f"{case}-{seed}.csv", testbed=tb)
 
 
 def _runs(case: str, friction=None):
@@ -147,7 +153,7 @@ def _spin_down(seed: int, coloured: bool) -> tuple:
         sg, phi = tb.sensors.gyro_noise, 0.95
         u = rng.normal(0.0, sg * math.sqrt(1 - phi**2), len(d))
         d["wz"] = d["wz"] + lfilter([1.0], [1.0, -phi], u, zi=[phi * rng.normal(0.0, sg)])[0]
-    return tb, Log(d, source=f"spin-{seed}.csv")
+    return tb, Log(d, source=f"spin-{seed}.csv", testbed=tb)
 
 
 def test_spin_down_output_error_keeps_both_errors():

@@ -11,6 +11,7 @@ import pandas as pd
 import pytest
 from rigs import ROTOR
 from scipy.integrate import solve_ivp
+from scipy.linalg import expm
 
 from airbearing.analysis.discrepancy.replay import model_for, problem_for
 from airbearing.analysis.shooting.errors import honest_errors, normalised_residuals
@@ -28,17 +29,37 @@ SIGMA = 1.5e-3  # rad, attitude noise of the logs
 RATE_HZ = 10.0
 
 
-def _coast(w0, c, seconds, seed, torque=None):
+#: s, the step of the piecewise-constant torque of the random-walk case
+TORQUE_DT = 0.05
+
+
+def _coast(w0, c, seconds, seed, kicks=None):
     """A passive yaw coast-down with viscous friction ``c`` (N m s) and an optional extra
-    torque ``torque(t)`` (N m), yaw logged at 10 Hz with white noise ``SIGMA``."""
+    torque held at ``kicks[k]`` (N m) over ``[k, k + 1) TORQUE_DT``, yaw logged at 10 Hz
+    with white noise ``SIGMA``."""
     t = np.arange(0.0, seconds, 1.0 / RATE_HZ)
+    if kicks is None:
 
-    def f(tt, x):
-        tau = -c * x[1] + (0.0 if torque is None else torque(tt))
-        return [x[1], tau / J_ZZ]
+        def f(tt, x):
+            return [x[1], -c * x[1] / J_ZZ]
 
-    sol = solve_ivp(f, (0, t[-1]), [0.0, w0], t_eval=t, rtol=1e-11, atol=1e-12, max_step=0.05)
-    yaw = sol.y[0] + np.random.default_rng(seed).normal(0.0, SIGMA, t.size)
+        sol = solve_ivp(f, (0, t[-1]), [0.0, w0], t_eval=t, rtol=1e-11, atol=1e-12, max_step=0.05)
+        yaw = sol.y[0]
+    else:
+        # linear between the torque's steps: the exact step x+ = Ad x + Bd tau, from the
+        # matrix exponential of [[A, B], [0, 0]] (an adaptive integrator has to stop at each
+        # of the thousands of steps: 12 s for this log)
+        E = expm(
+            np.array([[0.0, 1.0, 0.0], [0.0, -c / J_ZZ, 1 / J_ZZ], [0.0, 0.0, 0.0]]) * TORQUE_DT
+        )
+        x = np.empty((len(kicks) + 1, 2))
+        x[0] = (0.0, w0)
+        for k, tau in enumerate(kicks):
+            x[k + 1] = E[:2, :2] @ x[k] + E[:2, 2] * tau
+        per_sample = round(1.0 / (RATE_HZ * TORQUE_DT))
+        yaw = x[::per_sample, 0][: t.size]
+        assert yaw.size == t.size
+    yaw = yaw + np.random.default_rng(seed).normal(0.0, SIGMA, t.size)
     return Log(pd.DataFrame({"t": t, "yaw": yaw}), source=f"coast{seed}.csv", testbed=ROTOR)
 
 
@@ -105,16 +126,12 @@ def test_in_model_intensity_falls_to_the_bottom_and_std_meets_the_closed_form_bo
 
 def test_a_random_walk_torque_makes_the_intensity_significant_and_the_errors_honest():
     rng = np.random.default_rng(3)
-    tt = np.arange(0.0, 200.0, 0.05)
+    tt = np.arange(0.0, 200.0, TORQUE_DT)
     # an unmodelled torque that walks the rate: white at 0.05 s, 2e-6 N m per sqrt(Hz)
     # (the rate wanders by 4e-5 rad/s per sqrt(s), 3e-4 rad/s over the run)
-    kick = rng.normal(0.0, 2e-6 / np.sqrt(0.05), tt.size)
-
-    def torque(t):
-        return float(kick[min(int(t / 0.05), kick.size - 1)])
-
+    kick = rng.normal(0.0, 2e-6 / np.sqrt(TORQUE_DT), tt.size)
     c = 2e-4
-    prob, model, S = _problem([_coast(1.2, c, 200.0, 11, torque)])
+    prob, model, S = _problem([_coast(1.2, c, 200.0, 11, kick)])
     top = prob.fit(model.p0, S, np.zeros(1), name="top")
     fit = estimate_process_noise(prob, model.p0, S, top.theta, delta0=top.delta, start=top)
     pn = fit.extra["process_noise"]
