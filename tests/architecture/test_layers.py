@@ -22,6 +22,7 @@ none). No private name (``_x``) is imported from another package, except
 from __future__ import annotations
 
 import ast
+import functools
 import re
 import subprocess
 import sys
@@ -47,16 +48,30 @@ def _layer(module: str) -> str | None:
     return parts[1] if parts[1] in RANK else None
 
 
-def _imports(path: Path) -> list[tuple[int, str, bool]]:
-    """``(line, imported module, at module level)`` for every absolute import in a file."""
+@functools.cache
+def _nodes(path: Path) -> tuple[list[ast.AST], list[ast.ClassDef], set[int]]:
+    """``(import statements, classes, ids of the nodes that run at import)`` of a file,
+    parsed and walked once per session (every check below reads the same files)."""
     tree = ast.parse(path.read_text(), filename=str(path))
     top = {id(n) for n in tree.body}
     # imports under a module-level `if`/`try` run at import too
     for n in tree.body:
         if isinstance(n, ast.If | ast.Try):
             top |= {id(c) for c in ast.walk(n)}
-    out = []
+    imports, classes = [], []
     for node in ast.walk(tree):
+        if isinstance(node, ast.Import | ast.ImportFrom):
+            imports.append(node)
+        elif isinstance(node, ast.ClassDef):
+            classes.append(node)
+    return imports, classes, top
+
+
+def _imports(path: Path) -> list[tuple[int, str, bool]]:
+    """``(line, imported module, at module level)`` for every absolute import in a file."""
+    nodes, _, top = _nodes(path)
+    out = []
+    for node in nodes:
         if isinstance(node, ast.Import):
             out += [(node.lineno, a.name, id(node) in top) for a in node.names]
         elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
@@ -71,13 +86,11 @@ def _imports(path: Path) -> list[tuple[int, str, bool]]:
 PLOT_MAY_IMPORT = ("reporting", "api")
 
 
+@functools.cache
 def _plot_method_lines(path: Path) -> set[int]:
     """Lines of the imports inside a method named ``plot`` (a def directly in a class)."""
-    tree = ast.parse(path.read_text(), filename=str(path))
     lines = set()
-    for cls in ast.walk(tree):
-        if not isinstance(cls, ast.ClassDef):
-            continue
+    for cls in _nodes(path)[1]:
         for fn in cls.body:
             if isinstance(fn, ast.FunctionDef) and fn.name == "plot":
                 lines |= {
@@ -181,19 +194,9 @@ PRIVATE_IMPORTS = {
 
 def _function_level_imports(path: Path) -> list[int]:
     """Lines of the imports inside functions, other than inside a class's ``plot``."""
-    tree = ast.parse(path.read_text(), filename=str(path))
-    top = {id(n) for n in tree.body}
-    for n in tree.body:  # under a module-level `if`/`try`: run at import too
-        if isinstance(n, ast.If | ast.Try):
-            top |= {id(c) for c in ast.walk(n)}
+    nodes, _, top = _nodes(path)  # under a module-level `if`/`try`: run at import too
     in_plot = _plot_method_lines(path)
-    return [
-        n.lineno
-        for n in ast.walk(tree)
-        if isinstance(n, ast.Import | ast.ImportFrom)
-        and id(n) not in top
-        and n.lineno not in in_plot
-    ]
+    return [n.lineno for n in nodes if id(n) not in top and n.lineno not in in_plot]
 
 
 def test_imports_stand_at_the_top_of_modules():
@@ -223,8 +226,7 @@ def test_no_private_name_is_imported_from_another_package():
     found = set()
     for path in ALL_FILES:
         mod = _module(path)
-        tree = ast.parse(path.read_text(), filename=str(path))
-        for n in ast.walk(tree):
+        for n in _nodes(path)[0]:
             if not (isinstance(n, ast.ImportFrom) and n.level == 0 and n.module):
                 continue
             if not n.module.startswith("airbearing."):
