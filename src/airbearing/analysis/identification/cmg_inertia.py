@@ -425,10 +425,10 @@ def _honest_cov(pieces, beta_hat, friction, nfr: int):
     constant projected off (demeaned), are filtered backwards in time by ``1/Phi``, and the
     nearly white scores ``z_i u_i`` get a short Bartlett HAC. Segments are independent.
     """
-    from scipy.signal import lfilter
     from statsmodels.stats.sandwich_covariance import S_hac_simple
 
-    from airbearing.analysis.shooting.errors import andrews_bandwidth, ar_coefficients
+    from airbearing.analysis.shooting.autoregressive import AR
+    from airbearing.analysis.shooting.errors import andrews_bandwidth
 
     k = 1 + nfr
     cols, res = [], []
@@ -439,16 +439,14 @@ def _honest_cov(pieces, beta_hat, friction, nfr: int):
     n_all = sum(r.size for r in res)
     # the longest AR order tried: Schwert's rule 12 (n/100)^(1/4)
     maxlag = int(min(12 * (n_all / 100.0) ** 0.25, max(r.size for r in res) // 2))
-    phi = ar_coefficients(res, maxlag)
-    ar = np.r_[1.0, -phi]
+    model = AR.yule_walker(res, maxlag)
+    phi = model.phi
     bread = np.zeros((k, k))
     meat = np.zeros((k, k))
     lags = 0
     for Xd, r in zip(cols, res, strict=True):
         bread += Xd.T @ Xd
-        u = lfilter(ar, [1.0], r)
-        Z = lfilter([1.0], ar, Xd[::-1], axis=0)[::-1]
-        sc = Z * u[:, None]
+        sc = model.recolour_t(Xd) * model.whiten(r)[:, None]
         nl = andrews_bandwidth(sc)
         lags = max(lags, nl)
         meat += S_hac_simple(sc, nlags=nl)

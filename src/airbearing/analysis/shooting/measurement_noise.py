@@ -1,5 +1,7 @@
 """Coloured measurement noise: an AR(1) model of each output group, estimated with the fit.
 
+The model is the one AR model of the engine (:class:`.autoregressive.AR`, order 1 here).
+
 A motion-capture or gyro channel is often not white: its errors are correlated over
 several samples (marker jitter filtered by the capture software, a gyro's internal
 low-pass). Treated as white, such noise makes every standard error too small: an AR(1)
@@ -49,6 +51,8 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
+
+from airbearing.analysis.shooting.autoregressive import AR
 
 __all__ = [
     "MeasurementNoise",
@@ -177,21 +181,15 @@ def whitening(problem, ar: dict, dt: float):
     rows_o, cols_o, vals_o = [], [], []
     series = _series(problem)
     for group, (phi, s) in ar.items():
-        phi, s = float(phi), float(s)
+        model = AR(phi=np.array([float(phi)]), s=float(s))
         for rows, t in series.get(group, []):
             if rows.size == 0:
                 continue
-            steps = np.maximum(np.diff(t) / dt, 1.0)
-            a = np.sign(phi) * np.abs(phi) ** steps if phi != 0.0 else np.zeros(steps.size)
-            # innovation std over d steps: s sqrt((1 - phi^2d) / (1 - phi^2))
-            ratio = (1.0 - a**2) / (1.0 - phi**2) if phi != 0.0 else np.ones(steps.size)
-            d = np.empty(rows.size)
-            d[0] = math.sqrt(1.0 - phi**2) / s
-            d[1:] = 1.0 / (s * np.sqrt(ratio))
+            d, sub = model.whitening_rows(t, dt)
             diag[rows] = d
             rows_o.append(rows[1:])
             cols_o.append(rows[:-1])
-            vals_o.append(-a * d[1:])
+            vals_o.append(sub)
     off = (
         sp.csc_matrix(
             (np.concatenate(vals_o), (np.concatenate(rows_o), np.concatenate(cols_o))),
