@@ -31,9 +31,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from airbearing import quaternion as quat
-from airbearing.analysis.identification.data import RATE_DEGREE, RATE_HALF_WIDTH, _local_poly
+from airbearing.analysis.identification.data import RATE_DEGREE, RATE_HALF_WIDTH
 from airbearing.analysis.identification.data import log_quality as _quality
 from airbearing.analysis.identification.result import IdentificationResult
+from airbearing.analysis.shooting.filters import local_poly
 from airbearing.errors import InputError
 from airbearing.io.log import Log
 from airbearing.io.output import to_jsonable
@@ -162,7 +163,7 @@ def _arrays(testbed: Testbed, log: Log):
         for a, b in segments:
             wt = usable[a:b].astype(float)
             if b - a >= 3 and wt.sum() >= 3:
-                _, slope = _local_poly(t[a:b], yaw[a:b, None], wt, RATE_HALF_WIDTH, RATE_DEGREE)
+                _, slope = local_poly(t[a:b], yaw[a:b, None], wt, RATE_HALF_WIDTH, RATE_DEGREE)
                 wz[a:b] = slope[:, 0]
     dipole = log.columns(["mx", "my", "mz"]) if log.has("mx", "my", "mz") else None
     return t, yaw, wz, dipole, segments, usable
