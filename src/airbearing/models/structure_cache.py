@@ -12,6 +12,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import json
+import weakref
 from collections.abc import Callable
 
 import numpy as np
@@ -40,6 +41,7 @@ _RUN_VALUES = {
 _STRUCTURES: dict = {}
 _MAX_STRUCTURES = 16
 _STATS = {"built": 0, "reused": 0}
+_MODEL_KEYS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
 
 def structure_stats() -> dict:
@@ -47,15 +49,41 @@ def structure_stats() -> dict:
     return dict(_STATS)
 
 
-def structure_key(tb: Testbed, extra=()) -> str:
-    """The key of ``tb``'s structure (and ``extra``, JSON-able): its values left out,
-    effects by name and shape."""
+def structure_key(of, extra=()) -> str:
+    """The one structure key of the package: equal for two testbeds (or Models) whose
+    Models have the same expressions, whatever their values.
+
+    Parameters
+    ----------
+    of : Testbed or Model
+        A testbed (its ``[effects]``), or a Model: its testbed with the Model's effects
+        (memoised per Model; the shooting engine's compiled functions are cached by it).
+    extra : JSON-able, optional
+        More that decides the structure (a caller's own tag).
+
+    Returns
+    -------
+    str
+        The testbed's document without its values (:data:`_RUN_VALUES`), effects by name
+        and shape, and ``extra``, as JSON.
+    """
+    if not isinstance(of, Testbed):  # a Model
+        if extra == () and of in _MODEL_KEYS:
+            return _MODEL_KEYS[of]
+        key = _key(of.testbed, of.effects, extra)
+        if extra == ():
+            _MODEL_KEYS[of] = key
+        return key
+    return _key(of, of.effects, extra)
+
+
+def _key(tb: Testbed, effects, extra) -> str:
     doc = testbed_to_dict(tb)
     for table, keys in _RUN_VALUES.items():
         holder = doc if not table else doc.get(table, {})
         for k in keys:
             holder.pop(k, None)
-    doc["effects"] = {k: np.shape(v) for k, v in tb.effects.items()}  # names and shapes only
+    doc["effects"] = {k: np.shape(v) for k, v in effects.items()}  # names and shapes only
     return json.dumps([doc, extra], sort_keys=True, default=str)
 
 

@@ -31,8 +31,8 @@ from airbearing.analysis.shooting.functions import (
     evaluate,
     ipopt_options,
     scale_columns,
-    structure_key,
 )
+from airbearing.models.structure_cache import structure_key
 
 __all__ = ["Inequality", "null_space_basis"]
 
