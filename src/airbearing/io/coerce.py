@@ -19,6 +19,9 @@ from collections.abc import Iterable, Mapping
 import numpy as np
 
 from airbearing.errors import InputError
+from airbearing.io.log import Log, read_log
+from airbearing.io.testbed import BUILTIN_TESTBEDS, Testbed, load_testbed
+from airbearing.io.vocabulary import validate_effect_value
 
 __all__ = [
     "as_effects",
@@ -60,8 +63,6 @@ def as_testbed(testbed, name: str = "testbed", *, optional: bool = False):
     InputError
         Anything else, a name that is neither built in nor a file, an invalid file.
     """
-    from airbearing.io.testbed import BUILTIN_TESTBEDS, Testbed, load_testbed
-
     if isinstance(testbed, Testbed) or (optional and testbed is None):
         return testbed
     builtins = ", ".join(BUILTIN_TESTBEDS)
@@ -115,8 +116,6 @@ def check_gyro_agrees(log) -> None:
 
 def as_log(log, testbed=None, *, columns=None, name: str = "log", what: str = "the testbed"):
     """A :class:`~airbearing.io.log.Log` from itself or a file, checked against ``testbed``."""
-    from airbearing.io.log import Log, read_log
-
     if isinstance(log, Log):
         check_log_testbed(testbed, log, what)
         return log
@@ -145,8 +144,6 @@ def as_logs(
         None or another type, an element that is not a log or a path, no log at all
         (unless ``allow_empty``), a log of another kind of testbed.
     """
-    from airbearing.io.log import Log
-
     if isinstance(logs, Log) or _is_path(logs):
         logs = [logs]
     if isinstance(logs, Mapping) or not isinstance(logs, Iterable):
@@ -292,7 +289,6 @@ def as_effects(effects, name: str = "effects") -> dict | None:
             f"{name}={_short(effects)}: expected a dict of effect names to values "
             "(e.g. {'viscous_friction': 1e-4})"
         )
-    from airbearing.io.vocabulary import validate_effect_value
 
     for k, v in effects.items():
         if isinstance(v, np.ndarray | np.generic):  # numpy values as the vocabulary's types
