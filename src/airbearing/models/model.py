@@ -282,6 +282,7 @@ def build_model(testbed: Testbed, effects: Mapping | None = None) -> Model:
     >>> model.x_names[:2], "viscous_friction" in model.p_names
     (('yaw', 'wz'), True)
     """
+    # io.coerce loads pandas (through io.log): 0.5 s CPU that a model without logs never needs
     from airbearing.io.coerce import as_effects, as_testbed
 
     testbed, effects = as_testbed(testbed), as_effects(effects)

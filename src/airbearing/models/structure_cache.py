@@ -18,6 +18,7 @@ from collections.abc import Callable
 import numpy as np
 
 from airbearing.io.testbed import Testbed, testbed_to_dict
+from airbearing.models.model import Model, build_model, parameter_values
 
 __all__ = [
     "built_model",
@@ -114,8 +115,6 @@ def model_for(tb: Testbed, extra=()):
     -------
     Model
     """
-    from airbearing.models.model import build_model
-
     return with_values(cached(tb, ["model", extra], lambda: build_model(tb)), tb)
 
 
@@ -125,8 +124,6 @@ def params_of(model, tb: Testbed) -> np.ndarray:
     The values :func:`airbearing.models.model.build_model` puts in ``p0``
     (:func:`~airbearing.models.model.parameter_values`), without building a model.
     """
-    from airbearing.models.model import parameter_values
-
     names, values, _ = parameter_values(tb, dict(tb.effects))
     vals = dict(zip(names, values, strict=True))
     missing = [n for n in model.p_names if n not in vals]
@@ -137,8 +134,6 @@ def params_of(model, tb: Testbed) -> np.ndarray:
 
 @functools.cache
 def _run_model_class():
-    from airbearing.models.model import Model
-
     class _RunModel(Model):
         # the compiled loop (closed_loop_rollout, lru-cached by model) depends on the
         # structure only: a run's model compares and hashes as its structure
@@ -171,8 +166,6 @@ def effects_key(effects) -> tuple:
 
 @functools.lru_cache(maxsize=32)
 def _built(testbed: Testbed, key: tuple):
-    from airbearing.models.model import build_model
-
     effects = {k: (v[0] if len(v) == 1 else tuple(v)) for k, v in key}
     return build_model(testbed, effects or None)
 
@@ -199,7 +192,5 @@ def built_model(testbed: Testbed, effects=None):
         key = effects_key(effects)
         hash(testbed)
     except (TypeError, ValueError):  # something unhashable or not numeric: build afresh
-        from airbearing.models.model import build_model
-
         return build_model(testbed, effects)
     return _built(testbed, key)
