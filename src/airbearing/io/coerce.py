@@ -19,7 +19,6 @@ from collections.abc import Iterable, Mapping
 import numpy as np
 
 from airbearing.errors import InputError
-from airbearing.io.log import Log, read_log
 from airbearing.io.testbed import BUILTIN_TESTBEDS, Testbed, load_testbed
 from airbearing.io.vocabulary import validate_effect_value
 
@@ -116,6 +115,10 @@ def check_gyro_agrees(log) -> None:
 
 def as_log(log, testbed=None, *, columns=None, name: str = "log", what: str = "the testbed"):
     """A :class:`~airbearing.io.log.Log` from itself or a file, checked against ``testbed``."""
+    # io.log loads pandas (0.5 s CPU): the testbed and number coercions of models/ and
+    # design/ never need it
+    from airbearing.io.log import Log, read_log
+
     if isinstance(log, Log):
         check_log_testbed(testbed, log, what)
         return log
@@ -144,6 +147,8 @@ def as_logs(
         None or another type, an element that is not a log or a path, no log at all
         (unless ``allow_empty``), a log of another kind of testbed.
     """
+    from airbearing.io.log import Log  # pandas: see as_log
+
     if isinstance(logs, Log) or _is_path(logs):
         logs = [logs]
     if isinstance(logs, Mapping) or not isinstance(logs, Iterable):

@@ -7,6 +7,7 @@ import math
 from dataclasses import replace
 
 from airbearing.design.loops import Loop
+from airbearing.design.margins import analyse_loop, multiloop_worst_corner
 from airbearing.design.tuning.box import corners
 from airbearing.design.tuning.responses import (
     _HORIZON_MAX,
@@ -68,8 +69,6 @@ def evaluate(
         at a corner, margins and responses mean nothing: those checks have no value, are
         not met and say why.
     """
-    from airbearing.design.margins import analyse_loop, multiloop_worst_corner
-
     per, peaks = [], {}
     todo = corners(loop, spec) if corner_set is None else corner_set
     slew = slew_limit(loop) is not None
