@@ -17,6 +17,7 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
+import pandas as pd
 
 from airbearing.analysis.balancing.metrics import SEED000_TABLES
 from airbearing.analysis.balancing.runs import FREE_FLOAT_DURATION, run_balancing
@@ -86,8 +87,6 @@ class Comparison:
     def to_pandas(self):
         """One row per offset and method: the averaged metrics (scalars; per-slider lists
         as ``<key>_1..3``)."""
-        import pandas as pd
-
         rows = []
         for off, table in self.tables.items():
             for method, m in table.items():
@@ -230,8 +229,6 @@ class Sweep:
 
     def to_pandas(self):
         """One row per swept value: the ratios and whether every method balanced."""
-        import pandas as pd
-
         rows = []
         for p in self.points:
             row = {self.name: p.value, "balanced": p.balanced}

@@ -40,8 +40,11 @@ import numpy as np
 
 from airbearing.analysis.identification.data import log_quality
 from airbearing.analysis.identification.result import IdentificationResult
+from airbearing.analysis.shooting.autoregressive import AR
+from airbearing.analysis.shooting.errors import andrews_bandwidth
 from airbearing.analysis.shooting.fit import information_inverse
 from airbearing.errors import InputError, SolverError
+from airbearing.io.coerce import check_gyro_agrees, check_log_testbed
 from airbearing.io.log import Log
 from airbearing.io.output import to_jsonable
 from airbearing.io.testbed import Body, Testbed
@@ -175,7 +178,6 @@ def _log_arrays(testbed: Testbed, log: Log):
     src = log.source
     if not isinstance(log, Log):
         raise InputError(f"identify: expected Log objects, got {type(log).__name__}")
-    from airbearing.io.coerce import check_gyro_agrees, check_log_testbed
 
     check_log_testbed(testbed, log, "the testbed to identify")
     check_gyro_agrees(log)  # a fit on a dead or reversed gyro axis is confidently wrong
@@ -425,10 +427,8 @@ def _honest_cov(pieces, beta_hat, friction, nfr: int):
     constant projected off (demeaned), are filtered backwards in time by ``1/Phi``, and the
     nearly white scores ``z_i u_i`` get a short Bartlett HAC. Segments are independent.
     """
+    # statsmodels: 0.7-2.1 s CPU to import, loaded only when this runs
     from statsmodels.stats.sandwich_covariance import S_hac_simple
-
-    from airbearing.analysis.shooting.autoregressive import AR
-    from airbearing.analysis.shooting.errors import andrews_bandwidth
 
     k = 1 + nfr
     cols, res = [], []

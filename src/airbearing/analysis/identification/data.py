@@ -25,7 +25,9 @@ import numpy as np
 from airbearing import quaternion as quat
 from airbearing.analysis.shooting.filters import local_poly
 from airbearing.errors import InputError
+from airbearing.io.coerce import check_gyro_agrees, check_log_testbed
 from airbearing.io.log import LOG_COLUMNS, Log
+from airbearing.io.quality import assess
 from airbearing.io.testbed import Testbed
 
 __all__ = [
@@ -170,8 +172,6 @@ def log_quality(log: Log, testbed: Testbed) -> tuple[tuple, tuple]:
     if log.testbed is testbed:
         qual = log.quality
     else:
-        from airbearing.io.quality import assess
-
         qual = assess(log, testbed)
     # a bad input (slider, dipole, gimbal angle) breaks its segment: nothing integrates it
     segs = tuple((int(a), int(b)) for a, b in qual.input_segments())
@@ -204,7 +204,6 @@ def rates_from_attitude(t, q, usable, segments, *, half_width: int = RATE_HALF_W
 def _check_log(testbed: Testbed, log) -> None:
     if not isinstance(log, Log):
         raise InputError(f"identify: expected Log objects, got {type(log).__name__}")
-    from airbearing.io.coerce import check_gyro_agrees, check_log_testbed
 
     check_log_testbed(testbed, log, "the testbed to identify")
     check_gyro_agrees(log)  # a fit on a dead or reversed gyro axis is confidently wrong

@@ -23,9 +23,6 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy import stats
-from scipy.signal import lfilter
-from statsmodels.tsa.stattools import acovf, levinson_durbin
 
 __all__ = ["AR", "MAX_CORRECTION_STEPS", "WHITE_SIGNIFICANCE"]
 
@@ -69,11 +66,15 @@ class AR:
 
     def whiten(self, x: np.ndarray, axis: int = 0) -> np.ndarray:
         """The innovations ``Phi(L) x`` of consecutive samples (times ``s``: not rescaled)."""
+        from scipy.signal import lfilter  # 1.4 s CPU to import (scipy.stats): only when used
+
         return lfilter(self.filter, [1.0], x, axis=axis)
 
     def recolour_t(self, X: np.ndarray) -> np.ndarray:
         """``Phi(L)^-T X``: regressors filtered backwards in time by the inverse filter, so
         that ``X' x = (Phi^-T X)' (Phi x)`` exactly (the prewhitened scores)."""
+        from scipy.signal import lfilter  # 1.4 s CPU to import (scipy.stats): only when used
+
         return lfilter([1.0], self.filter, X[::-1], axis=0)[::-1]
 
     def whitening_rows(self, t: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
@@ -154,6 +155,8 @@ class AR:
         >>> round(float(model.phi[0]), 1)
         0.8
         """
+        from statsmodels.tsa.stattools import acovf  # 2.1 s CPU to import: only when fitted
+
         series = list(series)
         used = [x for x in series if x.size > 2 * maxlag and np.any(x != x[0])]
         if maxlag < 1 or not used:
@@ -183,6 +186,9 @@ def _yule_walker_aic(g: np.ndarray, n: int):
     alone found orders of 11 and 23, coefficients summing to 0.05 and -0.01, in the nearly
     white residuals of the identify-platform tutorial (2400 samples per output), and moved
     its errors by 3 %."""
+    from scipy import stats  # 1.2 s CPU to import: only when a model is fitted
+    from statsmodels.tsa.stattools import levinson_durbin  # 2.1 s CPU, as above
+
     _, _, pacf, _, phi = levinson_durbin(g, nlags=g.size - 1, isacov=True)
     innov = g[0] * np.cumprod(np.r_[1.0, 1.0 - pacf[1:] ** 2])  # innovation variance per order
     loglik = -0.5 * n * np.log(np.maximum(innov, 1e-300))

@@ -22,6 +22,7 @@ import hashlib
 import casadi as ca
 import numpy as np
 import scipy.sparse as sp
+from scipy.sparse.linalg import splu
 
 from airbearing.analysis.shooting.functions import (
     _cached,
@@ -276,7 +277,6 @@ def null_space_basis(Jc, k: int, nd: int | None = None) -> np.ndarray:
     later = _continued_columns(Cd, nd)
     if later is not None:
         free = np.setdiff1d(np.arange(Cd.shape[1]), later)
-        from scipy.sparse.linalg import splu
 
         try:
             with np.errstate(all="ignore"):

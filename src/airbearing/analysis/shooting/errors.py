@@ -59,12 +59,13 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
+from scipy.sparse.linalg import splu
 
 from airbearing.analysis.shooting.autoregressive import AR
 from airbearing.analysis.shooting.fit import information_inverse
 from airbearing.analysis.shooting.functions import _problem_functions
 from airbearing.analysis.shooting.problem import solve_gram
-from airbearing.analysis.shooting.process_noise import KAPPA_GRID
+from airbearing.analysis.shooting.process_noise import KAPPA_GRID, piece_durations
 
 __all__ = [
     "RESOLUTION",
@@ -183,6 +184,7 @@ def normalised_residuals(problem, fit) -> list[Residuals]:
 def _decorrelation_lag(series, max_lag: int) -> int:
     """The first lag at which the mean autocorrelation of ``series`` (1-D arrays, each
     weighted by its length; ``statsmodels.tsa.stattools.acf``) falls below 1/e."""
+    # statsmodels: 0.7-2.1 s CPU to import, loaded only when this runs
     from statsmodels.tsa.stattools import acf
 
     acc, wsum = None, 0.0
@@ -215,8 +217,6 @@ def correlation_time(residuals: list[Residuals], dt: float | None = None) -> flo
 def _defect_correlation_time(problem, d: np.ndarray) -> float:
     """s, the lag (in pieces, times their mean length) at which the whitened defects' mean
     autocorrelation within segments first falls below 1/e; 0 when they are independent."""
-    from airbearing.analysis.shooting.process_noise import piece_durations
-
     w = problem.windows
     nd = problem.n_delta
     D = d.reshape(-1, nd)
@@ -325,6 +325,7 @@ def honest_errors(problem, fit, k: int) -> HonestErrors:
         ``std``, ``std_white``, ``crlb`` (k,) in the parameters' SI units, their
         covariances, the residuals' correlation time (s) and the HAC bandwidth (samples).
     """
+    # statsmodels: 0.7-2.1 s CPU to import, loaded only when this runs
     from statsmodels.stats.sandwich_covariance import S_hac_simple
 
     fit_std = np.asarray(fit.theta_std[:k], dtype=float)
@@ -528,6 +529,7 @@ def _piece_meat(problem, scores: np.ndarray):
     ``1 / (1 - rho)^2`` (Andrews & Monahan 1992): a torque correlated over several pieces
     makes the sums persistent, and a kernel alone, over a few pieces, misses most of it.
     """
+    # statsmodels: 0.7-2.1 s CPU to import, loaded only when this runs
     from statsmodels.stats.sandwich_covariance import S_hac_simple
 
     w = problem.windows
@@ -597,8 +599,6 @@ def _kkt(Jm, C, k: int, level: np.ndarray | None = None):
     Column-scaled, sparse (a null-space basis would need a dense SVD). None when the data
     cannot fix some direction.
     """
-    from scipy.sparse.linalg import splu
-
     if level is not None:
         Jm = sp.csc_matrix(sp.diags(1.0 / np.sqrt(level)) @ Jm)
     F = sp.csc_matrix(Jm.T @ Jm)
