@@ -127,12 +127,8 @@ FUNCTION_IMPORTS = {
     "io.quality": 3,
     "models.compiled": 1,
     "progress": 1,
-    "reporting.balancing": 1,
-    "reporting.campaign": 7,
-    "reporting.demo": 4,
-    "reporting.discrepancy": 3,
-    "reporting.identification": 3,
-    "reporting.stability": 5,
+    "reporting.campaign": 1,
+    "reporting.stability": 1,
 }
 
 #: Private names imported from another package (module, name): to become public or move.
