@@ -128,6 +128,7 @@ FUNCTION_IMPORTS = {
     "models.compiled": 1,
     "progress": 1,
     "reporting.campaign": 1,
+    "reporting.demo": 4,
     "reporting.stability": 1,
 }
 

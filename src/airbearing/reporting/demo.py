@@ -10,9 +10,7 @@ module, e.g. for ``airbearing --help``, loads no section's dependencies).
 
 from __future__ import annotations
 
-import html as _html
 import importlib
-import re
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -27,7 +25,6 @@ from airbearing.analysis.simulation.scenarios import (
     slew_summary,
 )
 from airbearing.io.testbed import load_testbed
-from airbearing.models.compiled import cache_dir
 from airbearing.progress import call as _progress
 from airbearing.progress import expect
 from airbearing.reporting.html import Report
@@ -138,6 +135,8 @@ def _anchor(text: str) -> str:
 def _summary_html(results: list[dict]) -> str:
     """The report's opening: a table of what each section shows and what passed, and the
     contents (every heading of level 2 and 3, linked)."""
+    import html as _html
+
     rows = []
     for r in results:
         fails = r["fail"]
@@ -182,10 +181,14 @@ def _summary_html(results: list[dict]) -> str:
 
 def _section_facts(parts: list[str]) -> tuple[list[str], list[tuple[str, str, int]], int, int]:
     """``(parts with anchored headings, (heading, anchor, level), passes, fails)``."""
+    import re
+
     out, heads = [], []
     for part in parts:
         m = re.fullmatch(r"<h([23])>(.*)</h\1>", part, re.S)
         if m:
+            import html as _html
+
             text = _html.unescape(m.group(2))
             a = _anchor(text)
             heads.append((text, a, int(m.group(1))))
@@ -291,6 +294,8 @@ def section_weights(quick: bool = False) -> list[float]:
     """Expected length of each section, relative (:func:`airbearing.progress.expect`):
     with the compiling of a first run when the compile cache holds fewer libraries than
     the demo builds."""
+    from airbearing.models.compiled import cache_dir
+
     try:
         libs = sum(1 for p in cache_dir().glob("*") if p.suffix in (".so", ".dylib", ".dll"))
     except OSError:
