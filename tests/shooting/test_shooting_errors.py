@@ -98,7 +98,7 @@ def test_ar_model_of_a_residual_is_corrected_for_the_windows_initial_states():
     # 90 % of a long-run variance, the correction takes a whole one: ~10 % high)
     from scipy.signal import lfilter
 
-    from airbearing.analysis.shooting.errors import ar_coefficients
+    from airbearing.analysis.shooting.autoregressive import AR
 
     phi, length, windows = 0.95, 200, 200
     e = _white_plus_ar1(np.random.default_rng(0), length * windows, phi).reshape(windows, -1)
@@ -110,13 +110,13 @@ def test_ar_model_of_a_residual_is_corrected_for_the_windows_initial_states():
 
     maxlag = int(12 * (x.size / 100) ** 0.25)
     truth = 1 + (1 + phi) / (1 - phi)
-    assert long_run(ar_coefficients([x], maxlag)) < 0.7 * truth
-    assert 0.8 * truth <= long_run(ar_coefficients([x], maxlag, n_free=windows)) <= 1.35 * truth
+    assert long_run(AR.yule_walker([x], maxlag).phi) < 0.7 * truth
+    assert 0.8 * truth <= long_run(AR.yule_walker([x], maxlag, n_free=windows).phi) <= 1.35 * truth
     # white noise stays white: no AR model beats it in the likelihood-ratio test (p < 1e-3;
     # AIC alone picked orders 11 and 23 in the identify-platform tutorial's residuals; here
     # order 0 on seeds 0-9)
     w = np.random.default_rng(1).standard_normal((windows, length))
-    coef = ar_coefficients([(w - w.mean(axis=1, keepdims=True)).ravel()], maxlag, windows)
+    coef = AR.yule_walker([(w - w.mean(axis=1, keepdims=True)).ravel()], maxlag, windows).phi
     assert coef.size == 0, coef
 
 
@@ -125,18 +125,18 @@ def _spin_down_fit(monkeypatch, seed, case):
     engine's problem, fit and errors caught on the way."""
     from bench_scripts import load
 
-    import airbearing.analysis.shooting.errors as errors
+    import airbearing.analysis.identification.yaw_inertia as yaw_inertia
     from airbearing.analysis.identification.yaw_inertia import identify_yaw_inertia
 
     ic = load("identify_coverage")
     seen = {}
-    honest = errors.honest_errors
+    honest = yaw_inertia.honest_errors
 
     def catch(problem, fit, k):
         seen.update(problem=problem, fit=fit, he=honest(problem, fit, k))
         return seen["he"]
 
-    monkeypatch.setattr(errors, "honest_errors", catch)
+    monkeypatch.setattr(yaw_inertia, "honest_errors", catch)  # where the identification calls it
     tb, log = ic.spin_down(seed, case)
     identify_yaw_inertia(tb, [log])
     return ic, tb, seen["problem"], seen["fit"], seen["he"]

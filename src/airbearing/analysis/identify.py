@@ -18,11 +18,14 @@ from __future__ import annotations
 
 from collections.abc import Iterable
 
+from airbearing.analysis.identification.cmg_inertia import identify_cmg_inertia
 from airbearing.analysis.identification.data import COLUMNS_USED
+from airbearing.analysis.identification.platform import identify_platform
 from airbearing.analysis.identification.wheel_inertia import (
     identify_wheel_inertia,
     wheel_columns,
 )
+from airbearing.analysis.identification.yaw_inertia import identify_yaw_inertia
 from airbearing.errors import InputError
 from airbearing.interrupt import stoppable
 from airbearing.io.coerce import as_float, as_logs, as_testbed, as_vector
@@ -138,7 +141,6 @@ def identify(
         return _identify_dof1(tb, loaded, known_offset_xy, method, fr, progress)
     if fr is not None:
         raise InputError("friction applies to dof-1 CMG testbeds")
-    from airbearing.analysis.identification.platform import identify_platform
 
     return identify_platform(
         tb, loaded, known_offset_xy=known_offset_xy, known_mass=known_mass, method=method,
@@ -188,13 +190,10 @@ def _identify_dof1(tb, loaded, known_offset_xy, method, friction, progress):
     if known_offset_xy is not None:
         raise InputError("known_offset_xy applies to platform testbeds (dof 3), not to dof 1")
     if tb.kind == "cmg":
-        from airbearing.analysis.identification.cmg_inertia import identify_cmg_inertia
-
         return identify_cmg_inertia(tb, loaded, friction=friction)
     if tb.wheels is not None:
         return identify_wheel_inertia(tb, loaded, friction=friction)
     if friction is not None:
         raise InputError("friction applies to dof-1 CMG and reaction-wheel testbeds")
-    from airbearing.analysis.identification.yaw_inertia import identify_yaw_inertia
 
     return identify_yaw_inertia(tb, loaded, method=method, progress=progress)

@@ -10,7 +10,13 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass, field
 
+import pandas as pd
+
 from airbearing.errors import InputError
+from airbearing.io.coerce import as_log, as_testbed
+from airbearing.io.log import YAW_UNWRAPPED, Log, time_text, wheel_saturation, yaw_unwrapped_words
+from airbearing.io.quality import assess
+from airbearing.io.tool_use import tool_use
 
 __all__ = ["LogCheck", "check_log", "plot_log"]
 
@@ -116,8 +122,6 @@ class LogCheck:
         }
 
     def __str__(self) -> str:
-        from airbearing.io.log import time_text, yaw_unwrapped_words
-
         q = self.quality
         lines = [
             f"{self.log}: {self.rows} rows, {self.duration:.6g} s at {self.rate:g} Hz, "
@@ -168,8 +172,6 @@ class LogCheck:
         pandas.DataFrame
             One row per outlier: ``row``, ``t`` (s), ``columns``, ``reason``, ``score``.
         """
-        import pandas as pd
-
         return pd.DataFrame(
             [o.to_json() for o in self.quality.outliers],
             columns=["row", "t", "columns", "reason", "score"],
@@ -203,10 +205,6 @@ def check_log(log, testbed=None) -> LogCheck:
     >>> check.segments, check.outlier_rows
     (1, ())
     """
-    from airbearing.io.coerce import as_log, as_testbed
-    from airbearing.io.log import YAW_UNWRAPPED, Log, wheel_saturation
-    from airbearing.io.tool_use import tool_use
-
     tb = as_testbed(testbed, optional=True)
     if not isinstance(log, Log) and tb is None and isinstance(log, str | os.PathLike):
         raise InputError("testbed: expected a testbed to read the log file with")
@@ -258,14 +256,11 @@ def plot_log(log, testbed=None):
     >>> len(figure.axes)  # one panel per channel group
     4
     """
-    from airbearing.io.coerce import as_log, as_testbed
-    from airbearing.reporting.log_plot import log_figure
+    from airbearing.reporting.log_plot import log_figure  # matplotlib: 1 s CPU, for a figure only
 
     tb = as_testbed(testbed, optional=True)
     log = as_log(log, tb, what="the testbed to plot it with")
     tb = tb if tb is not None else log.testbed
     if tb is None:
         return log_figure(log, None)
-    from airbearing.io.quality import assess
-
     return log_figure(log, assess(log, tb))

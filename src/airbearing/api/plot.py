@@ -8,6 +8,7 @@ imported only when a figure is drawn.
 
 from __future__ import annotations
 
+from airbearing.api.logs import LogCheck, plot_log
 from airbearing.errors import InputError
 
 __all__ = ["plot", "report"]
@@ -45,17 +46,16 @@ def plot(result, **options):
     >>> type(fig).__name__, len(fig.axes) >= 2
     ('Figure', True)
     """
+    # the results' modules load pandas (0.5 s CPU), their figures matplotlib (1 s): only the
+    # one asked for is imported
     from airbearing.analysis.cmg.singularity import SingularSurface
     from airbearing.analysis.simulation.rehearsal import Rehearsal
     from airbearing.analysis.simulation.simulate import SimResult
-    from airbearing.api.logs import LogCheck
     from airbearing.io.log import Log
 
     if isinstance(result, SimResult | Rehearsal):
         result = result.log
     if isinstance(result, Log):
-        from airbearing.api.logs import plot_log
-
         return plot_log(result, result.testbed)
     if isinstance(result, LogCheck):
         raise InputError("LogCheck: plot it with its log, check.plot(log)")
@@ -102,6 +102,7 @@ def report(result, path=None, *, title: str | None = None):
     >>> page.html().startswith("<!DOCTYPE html>"), Path("replay.html").is_file()
     (True, True)
     """
+    # as in plot: pandas and matplotlib only for the result asked for
     from airbearing.analysis.discrepancy.replay import Replay
     from airbearing.analysis.discrepancy.search import Discrepancy
 

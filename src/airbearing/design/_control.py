@@ -10,6 +10,6 @@ from __future__ import annotations
 
 
 def __getattr__(name: str):
-    import control
+    import control  # control: 2.2 s CPU to import, loaded only when this runs
 
     return getattr(control, name)

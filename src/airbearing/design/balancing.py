@@ -38,6 +38,7 @@ from typing import ClassVar
 import casadi as ca
 import numpy as np
 
+from airbearing import quaternion as quat
 from airbearing.design.actuators import MagnetorquerActuator, SliderActuator
 from airbearing.design.controller import Controller
 from airbearing.errors import InputError
@@ -372,7 +373,6 @@ def field_in_body(field_lab, g_hat, q):
     b = np.asarray(field_lab, dtype=float)
     if np.hypot(b[0], b[1]) <= 1e-12 * abs(b[2]):
         return -b[2] * g_hat
-    from airbearing import quaternion as quat
 
     return quat.rotate_inverse(q, ca.DM(b))
 

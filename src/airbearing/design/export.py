@@ -39,6 +39,7 @@ from airbearing.design.balancing import (
     lyapunov_gains_from_pid,
 )
 from airbearing.design.controller import Controller
+from airbearing.design.steering import STEERING_LAWS
 from airbearing.design.wheels import (
     WHEEL_GAIN_NAMES,
     default_wheel_gains,
@@ -443,7 +444,6 @@ def export_spec(
                 f"{tb.source}: the attitude loop needs a CMG testbed or reaction wheels; "
                 f"'{tb.name}' is kind = '{tb.kind}' without [wheels]"
             )
-        from airbearing.design.steering import STEERING_LAWS
 
         if steering not in STEERING_LAWS:
             raise InputError(f"steering '{steering}': expected one of {'|'.join(STEERING_LAWS)}")

@@ -30,6 +30,7 @@ import numpy as np
 from airbearing import quaternion as quat
 from airbearing.design import _control as ct
 from airbearing.errors import InputError, SolverError
+from airbearing.io.coerce import as_float, as_vector
 from airbearing.models.model import INERTIA_NAMES, Model
 
 __all__ = [
@@ -192,8 +193,6 @@ def trim(model: Model, p=None, *, yaw: float = 0.0, gimbals=None, wheel_speeds=N
     >>> type(point).__name__
     'TrimPoint'
     """
-    from airbearing.io.coerce import as_float, as_vector
-
     if not isinstance(model, Model):
         raise InputError(f"model={model!r:.60}: expected a Model (airbearing.build_model(testbed))")
     yaw = as_float(yaw, "yaw", "rad")
@@ -239,8 +238,6 @@ def trim(model: Model, p=None, *, yaw: float = 0.0, gimbals=None, wheel_speeds=N
 def _trim_wheels(model: Model, x, u, wheel_speeds) -> None:
     """Set the wheel speeds of the trim state ``x`` and, for speed-commanded wheels, the
     commands ``u`` that hold them (in place)."""
-    from airbearing.io.coerce import as_vector
-
     wh = model.testbed.wheels
     idx = model.index([f"W{i}" for i in range(1, wh.n + 1)])
     if wheel_speeds is not None:

@@ -46,7 +46,7 @@ import numpy as np
 from airbearing import quaternion as quat
 from airbearing.design import _control as ct
 from airbearing.design.actuators import MagnetorquerActuator, SliderActuator
-from airbearing.design.attitude import SEED001_GAINS, cmg_attitude_controller
+from airbearing.design.attitude import PID_STATES, SEED001_GAINS, cmg_attitude_controller
 from airbearing.design.balancing import (
     MECHANICAL,
     MIXED,
@@ -73,6 +73,7 @@ from airbearing.design.wheels import (
     wheel_attitude_controller,
 )
 from airbearing.errors import InputError
+from airbearing.io.coerce import as_testbed
 from airbearing.io.testbed import Testbed
 from airbearing.models.model import Model
 from airbearing.models.structure_cache import built_model
@@ -575,8 +576,6 @@ def _body_state_mask(labels) -> np.ndarray:
     leaves at rest: the body's (not ``W<i>``) and the PID's (controller states ``c0..c9``,
     :data:`~airbearing.design.attitude.PID_STATES`); the delay's and the speed targets'
     states may move with the wheels."""
-    from airbearing.design.attitude import PID_STATES
-
     out = []
     for lbl in labels:
         name = lbl.split("_", 1)[1] if "_" in lbl else lbl
@@ -747,8 +746,6 @@ def _as_model(testbed_or_model) -> Model:
     if isinstance(testbed_or_model, Testbed):
         return _model_of(testbed_or_model)
     if isinstance(testbed_or_model, str | os.PathLike):  # a built-in name or a testbed file
-        from airbearing.io.coerce import as_testbed
-
         return _model_of(as_testbed(testbed_or_model))
     raise InputError(
         f"testbed={testbed_or_model!r}: expected a Testbed, a Model, a built-in testbed name "

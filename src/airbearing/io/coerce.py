@@ -19,6 +19,8 @@ from collections.abc import Iterable, Mapping
 import numpy as np
 
 from airbearing.errors import InputError
+from airbearing.io.testbed import BUILTIN_TESTBEDS, Testbed, load_testbed
+from airbearing.io.vocabulary import validate_effect_value
 
 __all__ = [
     "as_effects",
@@ -60,8 +62,6 @@ def as_testbed(testbed, name: str = "testbed", *, optional: bool = False):
     InputError
         Anything else, a name that is neither built in nor a file, an invalid file.
     """
-    from airbearing.io.testbed import BUILTIN_TESTBEDS, Testbed, load_testbed
-
     if isinstance(testbed, Testbed) or (optional and testbed is None):
         return testbed
     builtins = ", ".join(BUILTIN_TESTBEDS)
@@ -115,6 +115,8 @@ def check_gyro_agrees(log) -> None:
 
 def as_log(log, testbed=None, *, columns=None, name: str = "log", what: str = "the testbed"):
     """A :class:`~airbearing.io.log.Log` from itself or a file, checked against ``testbed``."""
+    # io.log loads pandas (0.5 s CPU): the testbed and number coercions of models/ and
+    # design/ never need it
     from airbearing.io.log import Log, read_log
 
     if isinstance(log, Log):
@@ -145,7 +147,7 @@ def as_logs(
         None or another type, an element that is not a log or a path, no log at all
         (unless ``allow_empty``), a log of another kind of testbed.
     """
-    from airbearing.io.log import Log
+    from airbearing.io.log import Log  # pandas: see as_log
 
     if isinstance(logs, Log) or _is_path(logs):
         logs = [logs]
@@ -292,7 +294,6 @@ def as_effects(effects, name: str = "effects") -> dict | None:
             f"{name}={_short(effects)}: expected a dict of effect names to values "
             "(e.g. {'viscous_friction': 1e-4})"
         )
-    from airbearing.io.vocabulary import validate_effect_value
 
     for k, v in effects.items():
         if isinstance(v, np.ndarray | np.generic):  # numpy values as the vocabulary's types

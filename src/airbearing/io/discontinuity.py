@@ -46,8 +46,16 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.lib.stride_tricks import sliding_window_view
 
-from airbearing.io.quality import RowFinding
+from airbearing.io.log import RATE_MISMATCH_FACTOR
+from airbearing.io.quality import (
+    _CHI2_3_MEDIAN,
+    _MAD_TO_SIGMA,
+    CHI2_3_THRESHOLD,
+    Z_THRESHOLD,
+    RowFinding,
+)
 
 __all__ = ["Discontinuity", "STEP_THRESHOLD", "find_steps", "rate_changes", "split_at"]
 
@@ -164,8 +172,6 @@ def _calibrate(g, t, segments, count, p, period):
     """Robust scale of the one-step residuals of a side fit, per channel (or one for a
     vector group), over up to 2000 boundaries spread over the log: noise plus the
     fit's own misfit of the motion, measured on the log. None if too few."""
-    from airbearing.io.quality import _CHI2_3_MEDIAN, _MAD_TO_SIGMA
-
     rows = []
     for a, b in segments:
         if b - a > 2 * count + 2:
@@ -202,8 +208,6 @@ def find_steps(
         rates are not tested and the attitude only for a jump in value (its two fits
         may meet anywhere in the interval).
     """
-    from airbearing.io.quality import CHI2_3_THRESHOLD, Z_THRESHOLD
-
     g = scorer.group
     k, p = scorer.fit
     n = t.size
@@ -328,13 +332,10 @@ def rate_changes(t: np.ndarray, period: float, rate: float) -> tuple[dict, ...]:
         stretch (the first is the first row after an interval at the other rate), its
         logged times (s), its median interval (s) and one sentence.
     """
-    from airbearing.io.log import RATE_MISMATCH_FACTOR
-
     dt = np.diff(t)
     width = 2 * _RATE_HALF + 1
     if dt.size < width:
         return ()
-    from numpy.lib.stride_tricks import sliding_window_view
 
     running = np.median(sliding_window_view(dt, width), axis=1)
     running = np.r_[np.full(_RATE_HALF, running[0]), running, np.full(_RATE_HALF, running[-1])]

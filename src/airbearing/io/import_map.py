@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import math
 import os
+import re
 import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -25,8 +26,11 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import pandas as pd
+import pyarrow.parquet as pq
 
 from airbearing.errors import InputError
+from airbearing.io.log import LOG_COLUMNS, bad_mask, row_ranges
 
 __all__ = [
     "COLUMN_QUANTITY",
@@ -195,8 +199,6 @@ def import_map_from_dict(data: Mapping[str, Any], source: str = _MEMORY) -> Impo
         message lists the valid units), an incomplete quaternion, an unknown
         ``maps`` or ``lab_up``, or a ``body`` that is not a rotation matrix.
     """
-    from airbearing.io.log import LOG_COLUMNS
-
     src = str(source)
     if not isinstance(data, Mapping):
         raise InputError(f"{src}: expected tables of keys, got {data!r}")
@@ -395,16 +397,12 @@ def read_raw(path: str | os.PathLike[str], separator: str | None = None, decimal
     InputError
         If the file is missing, empty or not readable.
     """
-    import pandas as pd
-
     p = Path(path)
     src = str(path)
     if not p.is_file():
         raise InputError(f"{src}: no such raw log file")
     try:
         if p.suffix.lower() in (".parquet", ".pq"):
-            import pyarrow.parquet as pq
-
             return pq.read_table(p).to_pandas()
         with p.open(encoding="utf-8-sig") as fh:
             header = fh.readline()
@@ -464,10 +462,6 @@ def raw_columns(raw, import_map: ImportMap, src: str, skip: tuple[str, ...] = ()
         more (the message asks whether it is in ms), or one in ms, us or ns whose
         median interval is shorter than ``1 / FASTEST_RATE`` s (asks whether it is in s).
     """
-    import pandas as pd
-
-    from airbearing.io.log import bad_mask, row_ranges
-
     headers = [str(c) for c in raw.columns]
     stripped = {h.strip(): h for h in headers}
     out: dict[str, np.ndarray] = {}
@@ -522,8 +516,6 @@ def raw_columns(raw, import_map: ImportMap, src: str, skip: tuple[str, ...] = ()
 def missing_cells(cells, values: np.ndarray) -> np.ndarray:
     """Cells with no value: blank, a non-finite number (``NaN``, ``inf``) or a word an
     exporter writes for none (:data:`MISSING_WORDS`), shape (n,), bool."""
-    import pandas as pd
-
     out = ~np.isfinite(values) & ~np.isnan(values)  # inf, -inf
     if pd.api.types.is_numeric_dtype(cells.dtype) and not pd.api.types.is_bool_dtype(cells.dtype):
         return out | np.isnan(values)
@@ -534,8 +526,6 @@ def missing_cells(cells, values: np.ndarray) -> np.ndarray:
 
 def _cell_hint(cell: object, all_missing: bool, import_map: ImportMap) -> str:
     """The map setting that would read a refused cell, in words ("" when none would)."""
-    import re
-
     where = f" in {import_map.source}" if import_map.source != _MEMORY else ""
     if all_missing:
         return (

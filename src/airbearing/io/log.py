@@ -43,6 +43,9 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 import pandas as pd
+import pyarrow as pa
+import pyarrow.csv as pacsv
+import pyarrow.parquet as pq
 
 from airbearing.errors import InputError
 from airbearing.io.testbed import Testbed, _atomic_write_bytes
@@ -1162,9 +1165,6 @@ def _to_pandas(table) -> pd.DataFrame:
 
 def _read_csv_fast(path: Path, wanted: set[str] | None) -> pd.DataFrame:
     """pyarrow's CSV reader: known columns as float64, others inferred (raises on any doubt)."""
-    import pyarrow as pa
-    import pyarrow.csv as pacsv
-
     with path.open("rb") as fh:
         first = fh.readline()
     if first.startswith(b"\xef\xbb\xbf"):
@@ -1286,8 +1286,6 @@ def read_log(
             if wanted is not None:
                 df = df[[c for c in df.columns if c in wanted]]
         else:
-            import pyarrow.parquet as pq
-
             names = pq.read_schema(p).names
             keep = None if wanted is None else [c for c in names if c in wanted]
             df, lines = _to_pandas(pq.read_table(p, columns=keep)), None
@@ -1301,9 +1299,6 @@ def read_log(
 
 def _csv_bytes(data: pd.DataFrame) -> bytes:
     """CSV text by pyarrow (shortest round-trip floats); pandas for what arrow cannot type."""
-    import pyarrow as pa
-    import pyarrow.csv as pacsv
-
     try:
         table = pa.Table.from_pandas(data, preserve_index=False)
     except (pa.ArrowInvalid, pa.ArrowTypeError, TypeError, ValueError):
@@ -1361,9 +1356,6 @@ def write_log(log: Log | pd.DataFrame, path: str | os.PathLike[str]) -> Path:
     if kind == "csv":
         content = _csv_bytes(data)
     else:
-        import pyarrow as pa
-        import pyarrow.parquet as pq
-
         buffer = io.BytesIO()
         pq.write_table(pa.Table.from_pandas(data, preserve_index=False), buffer)
         content = buffer.getvalue()

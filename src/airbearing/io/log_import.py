@@ -17,6 +17,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
+from scipy.spatial.transform import Rotation
 
 from airbearing import quaternion as quat
 from airbearing.errors import InputError
@@ -105,8 +107,6 @@ def lab_up_quaternion(lab_up: str) -> np.ndarray:
 
 def _quaternion_of_matrix(c: np.ndarray) -> np.ndarray:
     """Unit quaternion whose ``rotation_matrix`` is ``c`` (scalar first)."""
-    from scipy.spatial.transform import Rotation
-
     x, y, z, w = Rotation.from_matrix(c).as_quat()
     q = np.array([w, x, y, z])
     if not np.allclose(quat.rotation_matrix(q), c, atol=1e-9):  # same convention as models
@@ -195,8 +195,6 @@ def import_log_with_notes(
     >>> [round(float(y), 4) for y in imported.log.yaw()]  # rad, unwrapped (said in .notes)
     [3.1241, 3.159, 3.194]
     """
-    import pandas as pd
-
     import_map = _as_import_map(import_map)
     testbed = as_testbed(testbed, optional=True)
     if source is not None and not isinstance(source, str):

@@ -31,6 +31,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from airbearing.io.log import segments_of
 from airbearing.quaternion import continuous_signs
 
 if TYPE_CHECKING:
@@ -180,8 +181,6 @@ def no_motion(log: Log, testbed: Testbed | None) -> str:
         scales or a logged input changes; else one sentence: each channel's span
         against its noise.
     """
-    from airbearing.io.log import segments_of
-
     period = testbed.sensors.dt if testbed is not None else log.dt
     segments = segments_of(log.data["t"].to_numpy(dtype=float), period)
     channels = _channels(log, testbed, segments)

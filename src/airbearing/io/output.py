@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import errno as _errno
 import json
 import math
 import os
@@ -32,8 +33,6 @@ __all__ = [
 def reason(error: OSError) -> str:
     """errno's reason for an OS error in words (``permission denied``, ``read-only file
     system``, ``no space left on device``), lower case, without the path."""
-    import errno as _errno
-
     text = error.strerror or (os.strerror(error.errno) if error.errno else str(error))
     if error.errno == _errno.EROFS:
         text = "read-only file system"

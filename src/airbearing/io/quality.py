@@ -140,12 +140,25 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from airbearing.errors import InputError
+from airbearing.io.gyro_check import gyro_disagreement
+from airbearing.io.import_map import unwrap
 from airbearing.io.local_fits import LOCAL as _LOCAL
 from airbearing.io.local_fits import REGULAR_ULPS as _REGULAR_ULPS
 from airbearing.io.local_fits import loo as _loo
 from airbearing.io.local_fits import noise_gain as _noise_gain
 from airbearing.io.local_fits import regular_weights as _regular_weights
 from airbearing.io.local_fits import window_median as _window_median
+from airbearing.io.log import (
+    _DIPOLES,
+    _GIMBAL_RATES,
+    _GIMBALS,
+    _SLIDERS,
+    WHEEL_COMMAND_COLUMNS,
+    segments_of,
+    time_text,
+)
+from airbearing.io.motion import no_motion, still_channels
+from airbearing.io.testbed import Sensors, Testbed
 from airbearing.quaternion import continuous_signs
 
 if TYPE_CHECKING:
@@ -887,8 +900,6 @@ def find_outliers(
 
 
 def _groups(log: Log, testbed: Testbed | None, segments) -> list[_Group]:
-    from airbearing.io.testbed import Sensors
-
     t = log.data["t"].to_numpy(dtype=float)
     groups = []
     sensors = testbed.sensors if testbed is not None else Sensors(gyro_noise=0.0)
@@ -909,8 +920,6 @@ def _groups(log: Log, testbed: Testbed | None, segments) -> list[_Group]:
     dof = testbed.body.dof if testbed is not None else (3 if log.has("qw") else 1)
     use_yaw = dof == 1 and log.has("yaw")
     if use_yaw:
-        from airbearing.io.import_map import unwrap
-
         yaw = log.column("yaw")
         for start, stop in segments:  # a logged yaw should be unwrapped; if not, this does
             yaw[start:stop] = unwrap(yaw[start:stop], t[start:stop])
@@ -942,11 +951,8 @@ def _switch_rows(log: Log, segments, k: int) -> np.ndarray | None:
     there (its rate) or a change of curvature (its attitude), which a centred smooth fit
     cannot follow.
     """
-    from airbearing.io.log import _DIPOLES, _GIMBAL_RATES, _SLIDERS
-
     n = len(log.data)
     out = np.zeros(n, dtype=bool)
-    from airbearing.io.log import WHEEL_COMMAND_COLUMNS
 
     wc = tuple(c for c in WHEEL_COMMAND_COLUMNS if c in log.data.columns)
     for cols, order in ((_GIMBAL_RATES, 1), (_DIPOLES, 1), (_SLIDERS, 2), (wc, 1)):
@@ -977,8 +983,6 @@ def _changing(values: np.ndarray, segments) -> np.ndarray:
 
 def _input_groups(log: Log, testbed: Testbed | None, segments, t: np.ndarray) -> list[_Group]:
     """Gimbal angles (minus the integral of their commanded rates), sliders and dipoles."""
-    from airbearing.io.log import _DIPOLES, _GIMBAL_RATES, _GIMBALS, _SLIDERS
-
     groups = []
     step = 0.0
     if testbed is not None and getattr(testbed, "masses", None) is not None:
@@ -1046,8 +1050,6 @@ def assess(log: Log, testbed: Testbed | None) -> LogQuality:
         If ``testbed`` is not a Testbed.
     """
     from airbearing.io.discontinuity import rate_changes
-    from airbearing.io.log import segments_of
-    from airbearing.io.testbed import Testbed
 
     if testbed is not None and not isinstance(testbed, Testbed):
         raise InputError(f"{log.source}: assess needs a Testbed, got {type(testbed).__name__}")
@@ -1101,8 +1103,6 @@ def assess(log: Log, testbed: Testbed | None) -> LogQuality:
     usable[[o.row for o in outliers]] = False
     disagree = ()
     if log.rates() is not None and (noise.get("yaw") or noise.get("quaternion")):
-        from airbearing.io.gyro_check import gyro_disagreement
-
         att_noise = noise.get("yaw") or noise["quaternion"]
         disagree = gyro_disagreement(log, segments, usable, att_noise)
     return LogQuality(
@@ -1131,8 +1131,6 @@ def assess(log: Log, testbed: Testbed | None) -> LogQuality:
 
 def _motion(log: Log, testbed, segments) -> dict:
     """``still_channels`` and ``no_motion`` (:mod:`airbearing.io.motion`)."""
-    from airbearing.io.motion import no_motion, still_channels
-
     return {
         "still_channels": still_channels(log, testbed, segments),
         "no_motion": no_motion(log, testbed),
@@ -1143,7 +1141,6 @@ def _steps(log: Log, testbed, segments, t, period):
     """The channel groups, the scorers of the rates and attitude, and the steps found
     on them (:mod:`airbearing.io.discontinuity`), merged by row."""
     from airbearing.io.discontinuity import Discontinuity, find_steps
-    from airbearing.io.log import time_text
 
     groups = _groups(log, testbed, segments)
     scorers: dict[str, _Scorer] = {}

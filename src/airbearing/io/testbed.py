@@ -27,6 +27,7 @@ import tomli_w
 
 from airbearing.errors import InputError
 from airbearing.io.builtins import builtin_names, builtin_toml
+from airbearing.io.output import write_temp
 from airbearing.io.vocabulary import EFFECTS, EffectValue, validate_effect_value
 
 __all__ = [
@@ -1390,8 +1391,6 @@ def _dumps(document: Mapping[str, Any]) -> str:
 
 
 def _atomic_write_bytes(path: Path, content: bytes) -> Path:
-    from airbearing.io.output import write_temp
-
     directory = path.parent if str(path.parent) else Path(".")
     if not directory.is_dir():
         raise InputError(f"{path}: directory {str(directory)!r} does not exist")

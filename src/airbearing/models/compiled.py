@@ -39,8 +39,14 @@ record of the ``airbearing.compiled`` logger.
 from __future__ import annotations
 
 import contextlib
+import hashlib
+import logging
 import os
+import platform
+import shutil
+import subprocess
 import sys
+import tempfile
 import threading
 import time
 import weakref
@@ -48,6 +54,10 @@ from collections import OrderedDict
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
+
+import casadi as ca
+
+from airbearing.io.output import write_atomic, write_temp
 
 __all__ = [
     "CACHE_ENV",
@@ -81,8 +91,6 @@ MEMORY_SIZE = 64
 
 
 def _log():
-    import logging
-
     return logging.getLogger("airbearing.compiled")
 
 
@@ -208,8 +216,6 @@ def clear_cache() -> int:
 
 def compiler() -> str | None:
     """Path of the C compiler (``$CC``, else ``gcc``, else ``cc``), or None when there is none."""
-    import shutil
-
     for cc in (os.environ.get("CC"), "gcc", "cc"):
         if cc:
             path = shutil.which(cc)
@@ -280,8 +286,6 @@ def _suffix() -> str:
 
 
 def _digest_file(path: Path) -> str:
-    import hashlib
-
     h = hashlib.sha256()
     with open(path, "rb") as f:
         for chunk in iter(lambda: f.read(1 << 20), b""):
@@ -324,8 +328,6 @@ def _matches(f, fn) -> bool:
 
 
 def _load(name: str, lib: Path, fn):
-    import casadi as ca
-
     f = ca.external(name, str(lib))
     if not _matches(f, fn):
         raise RuntimeError(f"{lib} does not hold {name} with the expected inputs and outputs")
@@ -334,10 +336,6 @@ def _load(name: str, lib: Path, fn):
 
 def _build(cc: str, name: str, source: str, lib: Path, side: Path) -> None:
     """Compile ``source`` and install it at ``lib`` (atomically, sidecar first)."""
-    import shutil
-    import subprocess
-    import tempfile
-
     with tempfile.TemporaryDirectory(prefix="airbearing-cc-") as tmp:
         # a fixed source name keeps the library's bytes independent of the folder
         src = Path(tmp) / f"{lib.stem}.c"
@@ -350,7 +348,6 @@ def _build(cc: str, name: str, source: str, lib: Path, side: Path) -> None:
         digest = _digest_file(out)
         # copy into the cache folder under a unique name, then rename into place (the
         # sidecar first: a library is never in place without its digest)
-        from airbearing.io.output import write_atomic, write_temp
 
         part = write_temp(lib, write=lambda p: shutil.copyfile(out, p))
         try:
@@ -361,8 +358,6 @@ def _build(cc: str, name: str, source: str, lib: Path, side: Path) -> None:
 
 
 def _source(fn) -> str:
-    import casadi as ca
-
     cg = ca.CodeGenerator(fn.name())
     cg.add(fn)
     return cg.dump()
@@ -390,11 +385,6 @@ def compiled(fn, *, key: str = "", progress: Callable | None = None):
     When the compiler fails, ``fn`` is returned (a warning is logged and
     :func:`cache_info` counts it as uncompiled).
     """
-    import hashlib
-    import platform
-
-    import casadi as ca
-
     cc = compiler()
     if cc is None or os.environ.get(COMPILE_ENV, "1") == "0":
         _count("uncompiled")
@@ -488,8 +478,6 @@ def _via_ref(ref: Path, name: str, fn):
 
 
 def _write_ref(ref: Path, target: str) -> None:
-    from airbearing.io.output import write_atomic
-
     try:
         write_atomic(ref, target + "\n")
     except OSError as e:  # only a shortcut: the next process generates the C source again

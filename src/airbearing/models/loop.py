@@ -11,6 +11,7 @@ of ``n`` nodes, no conversion.
 
 from __future__ import annotations
 
+import casadi as ca
 import numpy as np
 
 from airbearing.models.compiled import compiled
@@ -45,8 +46,6 @@ class ChunkedLoop:
     """
 
     def __init__(self, step, n: int, chunk: int = CHUNK, mapped: tuple = (1,)) -> None:
-        import casadi as ca
-
         if n < 1:
             raise ValueError(f"n = {n}: expected at least one step")
         for i in range(step.n_out()):

@@ -47,6 +47,7 @@ import numpy as np
 
 from airbearing import quaternion as quat
 from airbearing.errors import InputError
+from airbearing.io.coerce import as_effects, as_testbed
 from airbearing.io.testbed import Testbed
 from airbearing.models.cmg import momentum_normalised
 from airbearing.models.effects import (
@@ -395,8 +396,6 @@ def build_model(testbed: Testbed, effects: Mapping | None = None) -> Model:
     >>> model.x_names[:2], "viscous_friction" in model.p_names
     (('yaw', 'wz'), True)
     """
-    from airbearing.io.coerce import as_effects, as_testbed
-
     testbed, effects = as_testbed(testbed), as_effects(effects)
     kind, dof = testbed.kind, testbed.body.dof
     has_field = testbed.field is not None or kind == "platform"  # platform: field is an input

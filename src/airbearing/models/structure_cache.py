@@ -12,11 +12,13 @@ from __future__ import annotations
 import dataclasses
 import functools
 import json
+import weakref
 from collections.abc import Callable
 
 import numpy as np
 
 from airbearing.io.testbed import Testbed, testbed_to_dict
+from airbearing.models.model import Model, build_model, parameter_values
 
 __all__ = [
     "built_model",
@@ -40,6 +42,7 @@ _RUN_VALUES = {
 _STRUCTURES: dict = {}
 _MAX_STRUCTURES = 16
 _STATS = {"built": 0, "reused": 0}
+_MODEL_KEYS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
 
 def structure_stats() -> dict:
@@ -47,15 +50,41 @@ def structure_stats() -> dict:
     return dict(_STATS)
 
 
-def structure_key(tb: Testbed, extra=()) -> str:
-    """The key of ``tb``'s structure (and ``extra``, JSON-able): its values left out,
-    effects by name and shape."""
+def structure_key(of, extra=()) -> str:
+    """The one structure key of the package: equal for two testbeds (or Models) whose
+    Models have the same expressions, whatever their values.
+
+    Parameters
+    ----------
+    of : Testbed or Model
+        A testbed (its ``[effects]``), or a Model: its testbed with the Model's effects
+        (memoised per Model; the shooting engine's compiled functions are cached by it).
+    extra : JSON-able, optional
+        More that decides the structure (a caller's own tag).
+
+    Returns
+    -------
+    str
+        The testbed's document without its values (:data:`_RUN_VALUES`), effects by name
+        and shape, and ``extra``, as JSON.
+    """
+    if not isinstance(of, Testbed):  # a Model
+        if extra == () and of in _MODEL_KEYS:
+            return _MODEL_KEYS[of]
+        key = _key(of.testbed, of.effects, extra)
+        if extra == ():
+            _MODEL_KEYS[of] = key
+        return key
+    return _key(of, of.effects, extra)
+
+
+def _key(tb: Testbed, effects, extra) -> str:
     doc = testbed_to_dict(tb)
     for table, keys in _RUN_VALUES.items():
         holder = doc if not table else doc.get(table, {})
         for k in keys:
             holder.pop(k, None)
-    doc["effects"] = {k: np.shape(v) for k, v in tb.effects.items()}  # names and shapes only
+    doc["effects"] = {k: np.shape(v) for k, v in effects.items()}  # names and shapes only
     return json.dumps([doc, extra], sort_keys=True, default=str)
 
 
@@ -86,8 +115,6 @@ def model_for(tb: Testbed, extra=()):
     -------
     Model
     """
-    from airbearing.models.model import build_model
-
     return with_values(cached(tb, ["model", extra], lambda: build_model(tb)), tb)
 
 
@@ -97,8 +124,6 @@ def params_of(model, tb: Testbed) -> np.ndarray:
     The values :func:`airbearing.models.model.build_model` puts in ``p0``
     (:func:`~airbearing.models.model.parameter_values`), without building a model.
     """
-    from airbearing.models.model import parameter_values
-
     names, values, _ = parameter_values(tb, dict(tb.effects))
     vals = dict(zip(names, values, strict=True))
     missing = [n for n in model.p_names if n not in vals]
@@ -109,8 +134,6 @@ def params_of(model, tb: Testbed) -> np.ndarray:
 
 @functools.cache
 def _run_model_class():
-    from airbearing.models.model import Model
-
     class _RunModel(Model):
         # the compiled loop (closed_loop_rollout, lru-cached by model) depends on the
         # structure only: a run's model compares and hashes as its structure
@@ -143,8 +166,6 @@ def effects_key(effects) -> tuple:
 
 @functools.lru_cache(maxsize=32)
 def _built(testbed: Testbed, key: tuple):
-    from airbearing.models.model import build_model
-
     effects = {k: (v[0] if len(v) == 1 else tuple(v)) for k, v in key}
     return build_model(testbed, effects or None)
 
@@ -171,7 +192,5 @@ def built_model(testbed: Testbed, effects=None):
         key = effects_key(effects)
         hash(testbed)
     except (TypeError, ValueError):  # something unhashable or not numeric: build afresh
-        from airbearing.models.model import build_model
-
         return build_model(testbed, effects)
     return _built(testbed, key)

@@ -28,6 +28,7 @@ from airbearing.analysis.balancing.transient import (
     steady_state,
 )
 from airbearing.design.balancing import SEED000_GAINS
+from airbearing.io.testbed import load_testbed
 from airbearing.reporting.checks import check, checks_table
 
 __all__ = [
@@ -190,8 +191,6 @@ def comparison_rows(cmp: Comparison) -> list[dict]:
 
 def demo_section(report, *, quick: bool = False) -> None:
     """Seed-000 balancing comparison and the imperfection sweeps on ``seed000-tabletop``."""
-    from airbearing.io.testbed import load_testbed
-
     tb = load_testbed("seed000-tabletop")
     report.heading("Automatic balancing: mechanical vs mixed (seed 000)")
     # fewer runs than the tests and the README (4 seeds per offset, 6-point grids, 2 seeds

@@ -14,9 +14,12 @@ from pathlib import Path
 
 import matplotlib.pyplot as plt
 import numpy as np
+from scipy.special import expit
 
-from airbearing.analysis.campaign import studies
+from airbearing.analysis.campaign import parse_campaign, run_campaign, studies
 from airbearing.analysis.campaign.dispersions import dispersed_columns
+from airbearing.analysis.campaign.spec import with_study
+from airbearing.io.testbed import load_testbed
 from airbearing.reporting.checks import check, checks_table
 from airbearing.reporting.html import Report, pretty_key
 from airbearing.reporting.style import axis_label, plain
@@ -95,8 +98,6 @@ def _scatter(df, metrics: list[str], cols: list[str], log_cols: set[str]):
 
 
 def _detection(report: Report, campaign, df) -> dict:
-    from scipy.special import expit
-
     det = studies.detection(df, [c for c in df.columns if c.startswith("effects.")])
     report.heading("Detection rate of the discrepancy workflow")
     report.paragraph(
@@ -313,17 +314,14 @@ DETECTION_DEMO = {
 
 
 def _run_in_process(campaign):
-    from airbearing.analysis.campaign import run_campaign
-
     with tempfile.TemporaryDirectory() as tmp:
         return run_campaign(campaign, Path(tmp) / "results.parquet")
 
 
 def robust_verification_section(report: Report, *, quick: bool = False) -> None:
     """Seed-001 slew with tuned gains over dispersed inertia, gyro noise and gimbal angles."""
-    from airbearing.analysis.campaign import parse_campaign
+    # design.tuning loads scipy.optimize: 0.45 s CPU, loaded only when this runs
     from airbearing.design.tuning import Spec, tune
-    from airbearing.io.testbed import load_testbed
 
     tuned = tune(load_testbed("cmg-yaw"), "attitude", Spec())
     gains = tuple(tuned.gains[k] for k in ("K_p", "K_i", "K_w"))
@@ -354,9 +352,6 @@ def robust_verification_section(report: Report, *, quick: bool = False) -> None:
 
 def detection_section(report: Report, *, quick: bool = False) -> None:
     """The detection-rate study of the discrepancy workflow, tiny in the demo."""
-    from airbearing.analysis.campaign import parse_campaign
-    from airbearing.analysis.campaign.spec import with_study
-
     doc = dict(DETECTION_DEMO, runs=2 if quick else 6)
     campaign = with_study(parse_campaign(doc, "detection"), "detection")
     df = _run_in_process(campaign)

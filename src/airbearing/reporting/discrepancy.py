@@ -12,6 +12,9 @@ import numpy as np
 from airbearing.analysis.discrepancy.replay import Replay, primary_series
 from airbearing.analysis.discrepancy.search import Discrepancy, discrepancy
 from airbearing.analysis.discrepancy.words import format_value
+from airbearing.analysis.simulation.scenarios import slew
+from airbearing.io.testbed import Sensors, load_testbed
+from airbearing.io.vocabulary import EFFECTS
 from airbearing.reporting.checks import check, checks_table, within
 from airbearing.reporting.html import Report
 from airbearing.reporting.html import sentence as as_sentence
@@ -446,8 +449,6 @@ def _adequacy_section(report: Report, result: Discrepancy, level: int) -> None:
 
 
 def _unit(name: str) -> str:
-    from airbearing.io.vocabulary import EFFECTS
-
     return EFFECTS[name].unit
 
 
@@ -460,9 +461,6 @@ def discrepancy_report(result: Discrepancy, *, title: str | None = None) -> Repo
 
 def _story_inputs(quick: bool):
     """The seed-001 inertia story, simulated with the package's simulator and a fixed seed."""
-    from airbearing.analysis.simulation.scenarios import slew
-    from airbearing.io.testbed import Sensors, load_testbed
-
     tb = load_testbed("cmg-yaw")
     tb = tb.replace(sensors=Sensors(rate=tb.sensors.rate, gyro_noise=5e-4, lowpass=1.0))
     # the truth has the larger inertia of seed 001 Sec. 5 (0.00323 / 0.00283 - 1); the

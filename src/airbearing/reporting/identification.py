@@ -8,6 +8,8 @@ seeds.
 
 from __future__ import annotations
 
+import time
+
 import matplotlib.pyplot as plt
 import numpy as np
 
@@ -19,8 +21,9 @@ from airbearing.analysis.identification.platform import (
 )
 from airbearing.analysis.identification.regression import PARAM_NAMES
 from airbearing.analysis.identification.result import PRIOR_COVER_SIGMAS, Prior
+from airbearing.analysis.simulation.scenarios import free_oscillation, slew
 from airbearing.errors import InputError
-from airbearing.io.testbed import Body, Testbed
+from airbearing.io.testbed import Body, Testbed, load_testbed
 from airbearing.reporting.checks import check, checks_table, within
 
 __all__ = ["demo_section", "identification_figure"]
@@ -195,11 +198,6 @@ def demo_section(report, *, quick: bool) -> None:
     quick : bool
         Shorter logs (a few seconds of work instead of about twenty).
     """
-    import time
-
-    from airbearing.analysis.simulation.scenarios import free_oscillation, slew
-    from airbearing.io.testbed import load_testbed
-
     report.heading("Identification of mass properties (seed 004 eqs. 39-50; seed 001)")
     truth = seed004_testbed()
     runs = [

@@ -19,9 +19,17 @@ import numpy as np
 from airbearing import quaternion as quat
 from airbearing.analysis.simulation.simulate import closed_loop_rollout
 from airbearing.design.loops import Loop, make_loop, with_delay
-from airbearing.design.margins import _response, analyse_loop, frequency_grid, json_number
+from airbearing.design.margins import (
+    _response,
+    analyse_loop,
+    frequency_grid,
+    json_number,
+    pole_damping,
+)
 from airbearing.design.tuning import Spec, evaluate, scenario_response, tune
 from airbearing.design.tuning.verdict import SIMULTANEOUS_GAIN, SIMULTANEOUS_PHASE
+from airbearing.io.testbed import load_testbed
+from airbearing.progress import call
 from airbearing.reporting.html import Report, pretty_key, table_html
 
 __all__ = [
@@ -281,8 +289,6 @@ def report_for_loop(
     >>> ab.report_for_loop(loop, nonlinear=False)[1]["met"]  # doctest: +SKIP
     True
     """
-    from airbearing.progress import call
-
     progress = call(progress)
     spec = Spec() if spec is None else spec
     rep = (
@@ -524,7 +530,7 @@ def _responses(rep: Report, loop: Loop, nonlinear: bool) -> float:
 
 def _disturbance_response(rep: Report, loop: Loop, t_end: float) -> None:
     """The attitude loop's linear response to a disturbance torque step."""
-    import control as ct
+    import control as ct  # control: 2.2 s CPU to import, loaded only when this runs
 
     cl = loop.closed_loop()
     t = np.arange(0, min(t_end, 60.0), loop.dt)
@@ -569,7 +575,6 @@ def _pole_map(rep: Report, poles, dt: float) -> None:
         fig,
         "Closed-loop poles of the discrete loop in the z-plane (inside the unit circle: stable).",
     )
-    from airbearing.design.margins import pole_damping
 
     wn, zeta = pole_damping(poles, dt)
     rows = []
@@ -652,8 +657,6 @@ def stability_report(
     ...
     airbearing.errors.InputError: ...
     """
-    from airbearing.progress import call
-
     progress = call(progress)
     opts = {"split": split} if loop == "balancing" else {}
     progress("linearising the loop", 0, 3)
@@ -671,8 +674,6 @@ def stability_report(
 
 def demo_section(report: Report, *, quick: bool = False) -> None:
     """Seed gains against tuned gains, for the balancing and the CMG attitude loops."""
-    from airbearing.io.testbed import load_testbed
-
     report.heading("Linear stability: seed gains and tuned gains")
     spec = Spec()
     report.paragraph(

@@ -17,6 +17,7 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
+import pandas as pd
 
 from airbearing.analysis.balancing.metrics import SEED000_TABLES
 from airbearing.analysis.balancing.runs import FREE_FLOAT_DURATION, run_balancing
@@ -113,8 +114,6 @@ class Comparison:
             One row per offset and method: ``offset_m`` (m), ``method`` and the averaged
             metrics (scalars; per-slider lists as ``<key>_1..3``).
         """
-        import pandas as pd
-
         rows = []
         for off, table in self.tables.items():
             for method, m in table.items():
@@ -284,8 +283,6 @@ class Sweep:
         pandas.DataFrame
             One row per swept value: the value, ``balanced`` and ``ratio_<metric>``.
         """
-        import pandas as pd
-
         rows = []
         for p in self.points:
             row = {self.name: p.value, "balanced": p.balanced}

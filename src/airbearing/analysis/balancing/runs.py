@@ -37,7 +37,7 @@ from airbearing import quaternion as quat
 from airbearing.analysis.balancing.metrics import BalancingMetrics, balancing_metrics, true_offset
 from airbearing.analysis.balancing.transient import integral_time_constant, settling_time
 from airbearing.analysis.simulation.simulate import SimResult, simulate
-from airbearing.design.actuators import SliderActuator
+from airbearing.design.actuators import MagnetorquerActuator, SliderActuator
 from airbearing.design.balancing import (
     METHODS,
     SEED000_GAINS,
@@ -46,6 +46,7 @@ from airbearing.design.balancing import (
 )
 from airbearing.design.controller import constant_input
 from airbearing.errors import InputError
+from airbearing.io.coerce import as_testbed
 from airbearing.io.testbed import Testbed
 from airbearing.models.model import Model
 from airbearing.models.structure_cache import built_model
@@ -135,8 +136,6 @@ def _law(model: Model, method: str, initial_offset: float, offset_stays: bool, g
     if gains is not None:
         options["gains"] = gains
     if ideal_actuators and method == "mixed":
-        from airbearing.design.actuators import MagnetorquerActuator
-
         options["magnetorquers"] = MagnetorquerActuator.from_testbed(testbed, ideal=True)
     return balancing_controller(model, method, **options)
 
@@ -325,8 +324,6 @@ def run_balancing(
     airbearing.errors.InputError: cmg-yaw (built-in): balancing needs a kind = 'platform',
     dof = 3 testbed with [masses]; ...
     """
-    from airbearing.io.coerce import as_testbed
-
     testbed = as_testbed(testbed)
     method = default_split(testbed) if method is None else method
     gains = _checked_gains(gains)

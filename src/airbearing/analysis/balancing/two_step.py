@@ -21,6 +21,8 @@ from airbearing.analysis.balancing.metrics import (
     true_offset,
 )
 from airbearing.analysis.balancing.runs import FREE_FLOAT_DURATION, check_inputs
+from airbearing.analysis.identification.data import rates_from_attitude
+from airbearing.analysis.identification.platform import identify_platform
 from airbearing.analysis.simulation.simulate import simulate
 from airbearing.design.balancing import (
     TILT_INTEGRAL_RATE,
@@ -30,6 +32,8 @@ from airbearing.design.balancing import (
 )
 from airbearing.design.controller import constant_input
 from airbearing.errors import InputError
+from airbearing.io.coerce import as_testbed
+from airbearing.io.output import to_jsonable
 from airbearing.io.testbed import Testbed
 from airbearing.models.model import build_model
 from airbearing.progress import call as _progress
@@ -171,8 +175,6 @@ class TwoStepResult:
         dict
             One key per attribute, in their order (NaN: null).
         """
-        from airbearing.io.output import to_jsonable
-
         return to_jsonable({f.name: getattr(self, f.name) for f in fields(self)})
 
     def __repr__(self) -> str:
@@ -348,8 +350,6 @@ def two_step(
     >>> ab.two_step("platform-3dof", balance_duration=20.0).iterations  # doctest: +SKIP
     6
     """
-    from airbearing.io.coerce import as_testbed
-
     testbed = as_testbed(testbed)
     if balance_duration is None:
         balance_duration = step1_duration(testbed)
@@ -421,8 +421,6 @@ def _step2(model, s1, d, b_lab, in_plane_known: bool, duration: float, identify_
            seed: int, noise: bool):  # fmt: skip
     """Identification rounds until the vertical offset stops moving: the result's fields of
     step 2, the final slider positions (in whole steps) and the identified inertia."""
-    from airbearing.analysis.identification.platform import identify_platform
-
     testbed = model.testbed
     mass, m_i, A = testbed.body.mass, testbed.masses.mass_vec, testbed.masses.axes_matrix
     travel, step = testbed.masses.travel, testbed.masses.step
@@ -501,8 +499,6 @@ def _z_from_known_xy(testbed, logs, known_xy, z, identify_method: str) -> float:
     repeated with the known in-plane offset moved by its 1-sigma (:func:`step1_offset_sigma`)
     along x, then y; the equation-error fit is linear in that constraint, so each change
     is the derivative times the sigma."""
-    from airbearing.analysis.identification.platform import identify_platform
-
     sigma = step1_offset_sigma(testbed)
     out = 0.0
     for axis in (0, 1):
@@ -584,8 +580,6 @@ def _measured_rates(log) -> np.ndarray:
     short for a slope)."""
     w = log.rates()
     if w is None:
-        from airbearing.analysis.identification.data import rates_from_attitude
-
         w = rates_from_attitude(log.t, log.quaternions(), None, log.quality.segments)
     return w
 

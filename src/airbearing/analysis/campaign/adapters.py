@@ -25,8 +25,12 @@ from collections.abc import Callable
 
 import numpy as np
 
+from airbearing.design.balancing import METHODS
+from airbearing.design.steering import STEERING_LAWS
 from airbearing.errors import InputError
+from airbearing.io.output import to_jsonable
 from airbearing.io.testbed import Testbed, testbed_to_dict
+from airbearing.io.vocabulary import EFFECTS, validate_effect_value
 from airbearing.models.structure_cache import cached as _structure
 from airbearing.models.structure_cache import model_for as _reused_model
 from airbearing.models.structure_cache import params_of, structure_stats
@@ -140,8 +144,6 @@ def _convert(src: str, command: str, args: dict, prefix: str = "") -> dict:
 
 
 def _effects(src: str, items: list[str]) -> dict:
-    from airbearing.io.vocabulary import EFFECTS, validate_effect_value
-
     out = {}
     for item in items:
         name, sep, value = item.partition("=")
@@ -159,8 +161,6 @@ def _effects(src: str, items: list[str]) -> dict:
 
 def check_args(src: str, command: str, args: dict, truth: dict) -> None:
     """Refuse an option the command does not take, or a value of the wrong type."""
-    from airbearing.design.steering import STEERING_LAWS
-
     conv = _convert(src, command, args)
     sim = {}
     if command == "simulate":
@@ -184,8 +184,6 @@ def check_args(src: str, command: str, args: dict, truth: dict) -> None:
         if conv.get("form", "integrated") not in ("integrated", "acceleration"):
             raise InputError(f"{src}: [args] form: expected integrated or acceleration")
     if command == "balance":
-        from airbearing.design.balancing import METHODS
-
         if conv.get("method", "mixed") not in METHODS:
             raise InputError(f"{src}: [args] method: expected one of {'|'.join(METHODS)}")
 
@@ -210,6 +208,7 @@ def _dotted(doc: dict, key: str):
 
 def _slew(tb: Testbed, *, yaw_deg, axis, duration, seed, ideal, steering, rate_limit, gains):
     """``scenarios.slew`` with the structure reused (tests check the runs are identical)."""
+    # analysis.simulation.scenarios loads pandas: 0.5 s CPU, loaded only when this runs
     from airbearing.analysis.simulation.scenarios import slew, slew_loop
 
     kw = dict(steering=steering, rate_limit_mode=rate_limit, ideal=ideal, gains=gains)
@@ -226,6 +225,7 @@ def _slew(tb: Testbed, *, yaw_deg, axis, duration, seed, ideal, steering, rate_l
 
 def _simulate(tb: Testbed, a: dict, seed: int, gains=None, src: str = ""):
     """The run and summary of ``airbearing simulate`` (scenario slew or free)."""
+    # analysis.simulation.scenarios loads pandas: 0.5 s CPU, loaded only when this runs
     from airbearing.analysis.simulation.scenarios import (
         LEVEL,
         SCENARIO_DURATIONS,
@@ -261,7 +261,7 @@ def _simulate(tb: Testbed, a: dict, seed: int, gains=None, src: str = ""):
 
 def _truth_log(campaign, tb: Testbed, seed: int):
     """The run's log, simulated with the dispersed testbed, as the nominal testbed's log."""
-    from airbearing.io.log import Log
+    from airbearing.io.log import Log  # io.log loads pandas: 0.5 s CPU, loaded only when this runs
 
     a = _convert(campaign.source, "simulate", campaign.truth_args, "simulate.")
     result, _ = _simulate(tb, a, seed, src=campaign.source)
@@ -271,14 +271,13 @@ def _truth_log(campaign, tb: Testbed, seed: int):
 
 def run_command(campaign, testbed: Testbed, seed: int) -> dict:
     """One run of ``campaign.command`` on ``testbed`` (the run's draw): its JSON summary."""
-    from airbearing.io.output import to_jsonable
-
     cmd = campaign.command
     a = _convert(campaign.source, cmd, campaign.args)
     if cmd == "simulate":
         _, summary = _simulate(testbed, a, seed, campaign.gains, campaign.source)
         return to_jsonable(summary)
     if cmd == "balance":
+        # analysis.balancing.runs loads pandas: 0.5 s CPU, loaded only when this runs
         from airbearing.analysis.balancing.runs import run_balancing
 
         method = a.get("method", "mixed")
@@ -296,6 +295,7 @@ def run_command(campaign, testbed: Testbed, seed: int) -> dict:
     log = _truth_log(campaign, testbed, seed)
     nominal = campaign.testbed
     if cmd == "identify":
+        # analysis.identify loads pandas: 0.5 s CPU, loaded only when this runs
         from airbearing.analysis.identify import identify
 
         # the choice of method is the library's (as airbearing identify); no CAD prior
@@ -306,6 +306,7 @@ def run_command(campaign, testbed: Testbed, seed: int) -> dict:
             form=a.get("form", "integrated"), friction=a.get("friction"), prior=False,
         )  # fmt: skip
         return to_jsonable(res.to_json())
+    # analysis.discrepancy.search loads pandas: 0.5 s CPU, loaded only when this runs
     from airbearing.analysis.discrepancy.search import discrepancy
 
     res = discrepancy(

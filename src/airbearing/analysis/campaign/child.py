@@ -27,6 +27,8 @@ import subprocess
 import sys
 import time
 
+from airbearing.analysis.campaign.dispersions import draw_run
+
 __all__ = ["Child", "timeout_row", "main"]
 
 _HEADER = struct.Struct(">Q")
@@ -69,8 +71,6 @@ def _wait_readable(fd: int, timeout: float | None) -> bool:
 
 def timeout_row(campaign, run: int, error: str) -> dict:
     """The row of a run that did not finish: its draw (run, seed, values) and ``error``."""
-    from airbearing.analysis.campaign.dispersions import draw_run
-
     draw = draw_run(campaign, run)
     return {"run": run, "seed": draw.seed, **draw.values, "error": error}
 

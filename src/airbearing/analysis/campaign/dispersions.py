@@ -27,6 +27,7 @@ import numpy as np
 
 from airbearing.errors import InputError
 from airbearing.io.testbed import Testbed, testbed_from_dict, testbed_to_dict
+from airbearing.io.vocabulary import EFFECTS
 
 __all__ = ["RunDraw", "run_seed_sequence", "draw_run", "check_dispersions", "dispersed_columns"]
 
@@ -87,8 +88,6 @@ def _drawn_nominal(doc: dict, key: str):
     nominal = _nominal(doc, key)
     table, entry = _split(key)
     if nominal is None and table == "effects":
-        from airbearing.io.vocabulary import EFFECTS
-
         size = {"vector3": 3, "pair": 2}.get(getattr(EFFECTS.get(entry), "shape", ""), 0)
         if size:
             return [0.0] * size

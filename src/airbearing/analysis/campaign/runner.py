@@ -16,6 +16,7 @@ and without its ``MALLOC_TRIM_THRESHOLD_`` (see :func:`open_client`).
 from __future__ import annotations
 
 import contextlib
+import logging
 import math
 import os
 import statistics
@@ -24,12 +25,14 @@ import traceback
 from collections.abc import Iterator
 
 from airbearing.analysis.campaign.adapters import run_command
+from airbearing.analysis.campaign.child import run_with_timeout
 from airbearing.analysis.campaign.dispersions import dispersed_columns, draw_run
 from airbearing.analysis.campaign.results import (
     flatten,
     merge_parts,
     open_parts,
     part_bytes,
+    read_parts,
     write_part_bytes,
 )
 from airbearing.errors import InputError
@@ -87,8 +90,6 @@ def run_chunk(
     if run_timeout is None:
         rows = [_run(campaign, i) for i in runs]
     else:
-        from airbearing.analysis.campaign.child import run_with_timeout
-
         rows = [run_with_timeout(campaign, i, run_timeout, _run) for i in runs]
     return rows, time.perf_counter() - t0
 
@@ -142,8 +143,6 @@ def open_client(workers: int | None = None, scheduler: str | None = None) -> Ite
     ...
     airbearing.errors.InputError: workers=0: expected at least 1
     """
-    import logging
-
     import dask
     from dask.distributed import Client, LocalCluster
 
@@ -291,8 +290,6 @@ def run_campaign(
 
 def _done_before(folder) -> tuple[set, int]:
     """Runs an interrupted campaign already finished (its parts), and how many failed."""
-    from airbearing.analysis.campaign.results import read_parts
-
     old = read_parts(folder)
     failed = int((old["error"].fillna("") != "").sum()) if "error" in old.columns else 0
     return set(int(r) for r in old["run"]), failed

@@ -14,13 +14,19 @@ give the specification the report checks.
 
 from __future__ import annotations
 
+import dataclasses
+import hashlib
+import json
 import math
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from airbearing.analysis.campaign.adapters import check_args
+from airbearing.analysis.campaign.dispersions import check_dispersions
 from airbearing.errors import InputError
+from airbearing.io.gains import read_gains
 from airbearing.io.testbed import BUILTIN_TESTBEDS, Testbed, load_testbed, testbed_to_dict
 
 __all__ = [
@@ -160,9 +166,6 @@ class Campaign:
         str
             16 hexadecimal digits.
         """
-        import hashlib
-        import json
-
         doc = {
             "testbed": testbed_to_dict(self.testbed),  # values, not where it was read
             "command": self.command,
@@ -227,8 +230,6 @@ def _spec(src: str, key: Any, entry: Any) -> SpecEntry:
 def _read_gains(src: str, base: Path, value: Any) -> tuple[float, float, float]:
     """``K_p, K_i, K_w`` of an ``airbearing gains --loop attitude --json`` file (the one
     reader, :func:`airbearing.io.gains.read_gains`), the path relative to ``base``."""
-    from airbearing.io.gains import read_gains
-
     where = f"{src}: [args] gains"
     if not isinstance(value, str):
         raise InputError(f"{where}: expected the path of an 'airbearing gains --json' file")
@@ -282,9 +283,6 @@ def parse_campaign(data: dict, source: str = "<memory>", base: Path | None = Non
     ...
     airbearing.errors.InputError: <memory>: ...
     """
-    from airbearing.analysis.campaign.adapters import check_args
-    from airbearing.analysis.campaign.dispersions import check_dispersions
-
     src = str(source)
     base = Path(".") if base is None else Path(base)
     unknown = [k for k in data if k not in _TOP_KEYS]
@@ -397,8 +395,6 @@ def with_study(campaign: Campaign, study: str | None) -> Campaign:
     ``k = K`` (the false-alarm runs); the other effects are not in its truth (their
     columns are 0). Other dispersions (noise, inertia) apply to every run.
     """
-    import dataclasses
-
     if study is None:
         return campaign
     src = campaign.source

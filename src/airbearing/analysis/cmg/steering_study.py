@@ -25,6 +25,7 @@ from dataclasses import dataclass, field
 
 import casadi as ca
 import numpy as np
+import pandas as pd
 
 from airbearing import quaternion as quat
 from airbearing.analysis.cmg.singularity import (
@@ -40,6 +41,7 @@ from airbearing.design.steering import (
     steering_function,
 )
 from airbearing.errors import InputError
+from airbearing.io.output import to_jsonable
 from airbearing.io.testbed import Body, Testbed, load_testbed
 from airbearing.models.cmg import jacobian_normalised, momentum_normalised
 
@@ -152,8 +154,6 @@ class SteeringRun:
         -------
         dict
         """
-        from airbearing.io.output import to_jsonable
-
         return to_jsonable(self.summary())
 
     def to_pandas(self):
@@ -165,8 +165,6 @@ class SteeringRun:
             ``t`` (s), gimbal angles ``delta1..4`` (rad), momentum ``Hx Hy Hz`` and
             reference ``Hx_ref ..`` (h0), singularity measure ``m``.
         """
-        import pandas as pd
-
         n = len(self.t)
         cols = {"t": self.t}
         cols |= {f"delta{i + 1}": self.delta[:n, i] for i in range(4)}

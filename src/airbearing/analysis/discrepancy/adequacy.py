@@ -42,9 +42,13 @@ Every discrepancy fit is judged on its residual:
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
+from numpy.polynomial import legendre
+
+from airbearing import quaternion as quat
+from airbearing.analysis.shooting import errors
 
 __all__ = [
     "GAP_ABOVE",
@@ -119,6 +123,7 @@ def whiteness(segments) -> tuple[float, int]:
         long enough).
     tests : int
     """
+    # statsmodels: 0.7-2.1 s CPU to import, loaded only when this runs
     from statsmodels.stats.diagnostic import acorr_ljungbox
 
     ps = []
@@ -177,8 +182,6 @@ def correlation_time(acf: np.ndarray, dt: float) -> float:
 
 
 def _legendre(x: np.ndarray, deg: int) -> np.ndarray:
-    from numpy.polynomial import legendre
-
     return np.column_stack([legendre.legval(x, np.eye(deg + 1)[d]) for d in range(1, deg + 1)])
 
 
@@ -421,7 +424,7 @@ class Adequacy:
 
 def _states(problem, fit, datas):
     """Residual (gap unit), yaw, rate, time and segment label at every usable window sample."""
-    from airbearing import quaternion as quat
+    # analysis.discrepancy.replay loads pandas: 0.5 s CPU, loaded only when this runs
     from airbearing.analysis.discrepancy.replay import primary_series
 
     s = primary_series(problem, fit.delta, fit.p)
@@ -480,8 +483,6 @@ def _defects(problem, fit, datas):
     """The unexplained torque at each hand-over of linked pieces: the whitened rate defects
     (process-noise rows of the residual), with yaw, rate, time and segment there; None
     without process-noise rows."""
-    from airbearing import quaternion as quat
-
     r = np.asarray(fit.extra.get("r", ()))
     n_meas = int(getattr(problem, "n_meas", r.size))
     w = problem.windows
@@ -530,8 +531,6 @@ def adequacy(problem, fit, floor, datas, *, gap_before: float | None = None) -> 
     -------
     Adequacy
     """
-    from airbearing.analysis.shooting import errors
-
     pn = fit.extra.get("process_noise") if isinstance(fit.extra, dict) else None
     # on linked pieces the fit's own gap is the short horizon's; the most continuous fit
     # the estimator reached (one trajectory per segment) says what the model leaves
@@ -601,6 +600,4 @@ def adequacy(problem, fit, floor, datas, *, gap_before: float | None = None) -> 
 
 
 def _with_note(a: Adequacy, note: str) -> Adequacy:
-    from dataclasses import replace
-
     return replace(a, note=note)

@@ -21,8 +21,10 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+import pandas as pd
 
 from airbearing import quaternion as quat
+from airbearing.analysis.discrepancy.adequacy import torque_words
 from airbearing.analysis.shooting import (
     THETA_SLOTS,
     Fit,
@@ -49,6 +51,7 @@ from airbearing.analysis.shooting.logs import (
     noise_floor,
     replay_data,
 )
+from airbearing.analysis.shooting.measurement_noise import set_measurement_noise
 from airbearing.analysis.shooting.process_noise import (
     KAPPA_GRID,
     estimate_process_noise,
@@ -126,8 +129,6 @@ def problem_for(
     if windows.linked:  # linked pieces start nearly free (the top of the intensity grid)
         set_intensity(problem, KAPPA_GRID[0] if kappa is None else kappa)
         if noise is not None:
-            from airbearing.analysis.shooting.measurement_noise import set_measurement_noise
-
             set_measurement_noise(problem, noise)
     return problem
 
@@ -265,8 +266,6 @@ class Replay:
         ]
         pn = self.process_noise
         if pn and pn.get("significant"):
-            from airbearing.analysis.discrepancy.adequacy import torque_words
-
             lines.append(torque_words(pn))
         elif pn is not None:
             lines.append("no significant unexplained torque between the pieces")
@@ -333,8 +332,6 @@ class Replay:
         -------
         pandas.DataFrame
         """
-        import pandas as pd
-
         s = self.residuals()
         res = np.asarray(s["residual"]).reshape(len(s["rows"]), -1)
         cols = ["residual"] if res.shape[1] == 1 else [f"residual_{a}" for a in "xyz"]

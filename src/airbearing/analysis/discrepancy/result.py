@@ -12,6 +12,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+import pandas as pd
 
 from airbearing.analysis.discrepancy.adequacy import Adequacy
 from airbearing.analysis.discrepancy.honest import Errors
@@ -239,8 +240,6 @@ class Discrepancy:
         -------
         pandas.DataFrame
         """
-        import pandas as pd
-
         table = pd.DataFrame(self.to_json()["candidates"])
         if table.empty:
             return table

@@ -28,7 +28,15 @@ from dataclasses import dataclass, replace
 import numpy as np
 import scipy.sparse as sp
 
-from airbearing.analysis.discrepancy.trial import chi2_threshold, cross_validate, judge
+from airbearing.analysis.discrepancy.candidates import smoothed
+from airbearing.analysis.discrepancy.trial import (
+    CandidateResult,
+    chi2_threshold,
+    cross_validate,
+    judge,
+    profile_std,
+    scan_grid,
+)
 from airbearing.analysis.discrepancy.words import why
 from airbearing.analysis.shooting import THETA_SLOTS, Fit, ShootingProblem, theta_errors
 
@@ -268,9 +276,6 @@ def screened_lag(problem, current, cand, datas, ln_n, k_added, before):
     ``SCREEN_FRACTION`` of what naming a lag needs (it counts the free starts too), the lag
     Model (more states, another compiled structure) is neither built nor fitted.
     """
-    from airbearing.analysis.discrepancy.candidates import smoothed
-    from airbearing.analysis.discrepancy.trial import CandidateResult
-
     if problem.outputs[0] != "rate" or problem.n_lag or problem.penalty is not None:
         return None  # (linked pieces: the lag is fitted by IPOPT)
     w, nd, nw, n = problem.windows, problem.n_delta, problem.windows.n, problem.n_win_res
@@ -353,8 +358,6 @@ def screened_scan(problem, cand, current, S_sel, col, ln_n, before, folds):
     what naming needs, the candidate is judged on that profile (its 1-sigma from where the
     profile rises by 1) and IPOPT's scan is not run.
     """
-    from airbearing.analysis.discrepancy.trial import profile_std, scan_grid
-
     _, grid = scan_grid(problem, cand)
     J = current.extra["J"].tocsc()
     Q, Rq = np.linalg.qr(J.toarray())

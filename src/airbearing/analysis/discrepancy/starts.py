@@ -38,6 +38,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from airbearing.analysis.discrepancy.replay import problem_for
 from airbearing.analysis.discrepancy.trial import jsonable
 from airbearing.analysis.shooting.logs import make_windows
 from airbearing.errors import InputError, SolverError
@@ -116,8 +117,6 @@ def needs_retry(fit, current, floor: float, explained: float) -> str:
 
 def _short_problem(search, lag: bool):
     """The shooting problem of the search's logs on ``CONTINUATION_WINDOW_S`` windows."""
-    from airbearing.analysis.discrepancy.replay import problem_for
-
     cache = search.__dict__.setdefault("_short_problems", {})
     if lag not in cache:
         try:

@@ -39,6 +39,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from airbearing.analysis.discrepancy.candidates import Candidate, smoothed
+from airbearing.analysis.discrepancy.replay import primary_series
 from airbearing.analysis.shooting import Fit, ShootingProblem
 from airbearing.errors import SolverError
 
@@ -469,8 +470,6 @@ def judge(cand, fit, k_sel, current, ln_n, k_added, held: HeldOut, before: HeldO
 
 def lag_start(problem: ShootingProblem, current: Fit, datas) -> float:
     """Sensor-lag start: the current rate residual regressed on -w' (w_lag ~ w - tau w')."""
-    from airbearing.analysis.discrepancy.replay import primary_series
-
     s = primary_series(problem, current.delta, current.p)
     xs, ys = [], []
     for i, d in enumerate(datas):

@@ -40,8 +40,11 @@ import numpy as np
 
 from airbearing.analysis.identification.data import log_quality
 from airbearing.analysis.identification.result import IdentificationResult
+from airbearing.analysis.shooting.autoregressive import AR
+from airbearing.analysis.shooting.errors import andrews_bandwidth
 from airbearing.analysis.shooting.fit import information_inverse
 from airbearing.errors import InputError, SolverError
+from airbearing.io.coerce import check_gyro_agrees, check_log_testbed
 from airbearing.io.log import Log
 from airbearing.io.output import to_jsonable
 from airbearing.io.testbed import Body, Testbed
@@ -205,7 +208,6 @@ def _log_arrays(testbed: Testbed, log: Log):
     src = log.source
     if not isinstance(log, Log):
         raise InputError(f"identify: expected Log objects, got {type(log).__name__}")
-    from airbearing.io.coerce import check_gyro_agrees, check_log_testbed
 
     check_log_testbed(testbed, log, "the testbed to identify")
     check_gyro_agrees(log)  # a fit on a dead or reversed gyro axis is confidently wrong
@@ -455,10 +457,8 @@ def _honest_cov(pieces, beta_hat, friction, nfr: int):
     constant projected off (demeaned), are filtered backwards in time by ``1/Phi``, and the
     nearly white scores ``z_i u_i`` get a short Bartlett HAC. Segments are independent.
     """
-    from scipy.signal import lfilter
+    # statsmodels: 0.7-2.1 s CPU to import, loaded only when this runs
     from statsmodels.stats.sandwich_covariance import S_hac_simple
-
-    from airbearing.analysis.shooting.errors import andrews_bandwidth, ar_coefficients
 
     k = 1 + nfr
     cols, res = [], []
@@ -469,16 +469,14 @@ def _honest_cov(pieces, beta_hat, friction, nfr: int):
     n_all = sum(r.size for r in res)
     # the longest AR order tried: Schwert's rule 12 (n/100)^(1/4)
     maxlag = int(min(12 * (n_all / 100.0) ** 0.25, max(r.size for r in res) // 2))
-    phi = ar_coefficients(res, maxlag)
-    ar = np.r_[1.0, -phi]
+    model = AR.yule_walker(res, maxlag)
+    phi = model.phi
     bread = np.zeros((k, k))
     meat = np.zeros((k, k))
     lags = 0
     for Xd, r in zip(cols, res, strict=True):
         bread += Xd.T @ Xd
-        u = lfilter(ar, [1.0], r)
-        Z = lfilter([1.0], ar, Xd[::-1], axis=0)[::-1]
-        sc = Z * u[:, None]
+        sc = model.recolour_t(Xd) * model.whiten(r)[:, None]
         nl = andrews_bandwidth(sc)
         lags = max(lags, nl)
         meat += S_hac_simple(sc, nlags=nl)

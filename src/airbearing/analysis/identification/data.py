@@ -23,8 +23,11 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from airbearing import quaternion as quat
+from airbearing.analysis.shooting.filters import local_poly
 from airbearing.errors import InputError
+from airbearing.io.coerce import check_gyro_agrees, check_log_testbed
 from airbearing.io.log import LOG_COLUMNS, Log
+from airbearing.io.quality import assess
 from airbearing.io.testbed import Testbed
 
 __all__ = [
@@ -169,35 +172,10 @@ def log_quality(log: Log, testbed: Testbed) -> tuple[tuple, tuple]:
     if log.testbed is testbed:
         qual = log.quality
     else:
-        from airbearing.io.quality import assess
-
         qual = assess(log, testbed)
     # a bad input (slider, dipole, gimbal angle) breaks its segment: nothing integrates it
     segs = tuple((int(a), int(b)) for a, b in qual.input_segments())
     return segs, tuple(int(r) for r in qual.outlier_rows)
-
-
-def _local_poly(t, y, weight, half, degree):
-    """Value and slope of a weighted local polynomial at each sample of one piece.
-
-    ``y`` (N, k). Window ``2 half + 1`` samples, shifted inwards at the ends; times in
-    units of the median interval for conditioning.
-    """
-    n = len(t)
-    width = min(2 * half + 1, n)
-    deg = min(degree, width - 1)
-    h = float(np.median(np.diff(t))) if n > 1 else 1.0
-    centre = np.arange(n)
-    start = np.clip(centre - half, 0, n - width)
-    idx = start[:, None] + np.arange(width)[None, :]
-    tau = (t[idx] - t[:, None]) / h  # (N, W)
-    V = tau[..., None] ** np.arange(deg + 1)  # (N, W, d+1)
-    Wt = weight[idx][..., None]
-    A = np.einsum("nwi,nwj->nij", V * Wt, V)
-    rhs = np.einsum("nwi,nwk->nik", V * Wt, y[idx])
-    c = np.linalg.solve(A, rhs)  # (N, d+1, k)
-    slope = c[:, 1, :] / h if deg >= 1 else np.zeros_like(c[:, 0, :])
-    return c[:, 0, :], slope
 
 
 def rates_from_attitude(t, q, usable, segments, *, half_width: int = RATE_HALF_WIDTH):
@@ -217,7 +195,7 @@ def rates_from_attitude(t, q, usable, segments, *, half_width: int = RATE_HALF_W
         weight = usable[a:b].astype(float)
         if weight.sum() < 3:
             continue
-        val, slope = _local_poly(t[a:b], q[a:b], weight, half_width, RATE_DEGREE)
+        val, slope = local_poly(t[a:b], q[a:b], weight, half_width, RATE_DEGREE)
         qn = quat.normalize(val)
         w[a:b] = 2 * quat.qmul(quat.qconj(qn), slope)[:, 1:4]
     return w
@@ -226,7 +204,6 @@ def rates_from_attitude(t, q, usable, segments, *, half_width: int = RATE_HALF_W
 def _check_log(testbed: Testbed, log) -> None:
     if not isinstance(log, Log):
         raise InputError(f"identify: expected Log objects, got {type(log).__name__}")
-    from airbearing.io.coerce import check_gyro_agrees, check_log_testbed
 
     check_log_testbed(testbed, log, "the testbed to identify")
     check_gyro_agrees(log)  # a fit on a dead or reversed gyro axis is confidently wrong

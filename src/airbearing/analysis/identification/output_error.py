@@ -31,8 +31,14 @@ import numpy as np
 
 from airbearing.analysis.identification.data import PlatformData
 from airbearing.analysis.identification.oe_problem import physical_constraint, platform_windows
+from airbearing.analysis.identification.regression import PARAM_NAMES, theta_to_body
+from airbearing.analysis.shooting import ShootingProblem
+from airbearing.analysis.shooting.accuracy import substeps_for
+from airbearing.analysis.shooting.errors import honest_errors
 from airbearing.analysis.shooting.fit import information_inverse
-from airbearing.io.testbed import Testbed
+from airbearing.analysis.shooting.logs import NoiseFloor
+from airbearing.io.testbed import Body, Testbed
+from airbearing.models.model import build_model
 
 __all__ = ["OutputErrorResult", "refine_output_error"]
 
@@ -168,8 +174,6 @@ def refine_output_error(
     SolverError
         When IPOPT fails (infeasible, iteration limit, numerical trouble).
     """
-    from airbearing.analysis.shooting import ShootingProblem
-
     free = np.ones(9, bool) if free is None else np.asarray(free, bool)
     theta0 = np.asarray(theta0, float)
     model, J0 = _model_at(testbed, theta0, mass)
@@ -177,9 +181,6 @@ def refine_output_error(
     gyro = all(d.gyro for d in data)
     spec_w, spec_q = testbed.sensors.gyro_noise, testbed.sensors.attitude_noise
     if substeps is None:
-        from airbearing.analysis.shooting.accuracy import substeps_for
-        from airbearing.analysis.shooting.logs import NoiseFloor
-
         # integrated to the noise the testbed states (the replay's step-doubling check): two
         # sub-steps per sample on three 10 Hz free oscillations spinning at 3 rad/s left
         # every inertia 1.1-1.3e-5 high together, a common scale (2-5e-7 at 20 Hz and 1.5
@@ -244,10 +245,6 @@ _FIT_NAME = (
 
 def _model_at(testbed: Testbed, theta0: np.ndarray, mass: float):
     """The Model of ``testbed`` with the start's inertia and offset, and that inertia."""
-    from airbearing.analysis.identification.regression import theta_to_body
-    from airbearing.io.testbed import Body
-    from airbearing.models.model import build_model
-
     J0, r0 = theta_to_body(theta0)
     tb = testbed.replace(
         body=Body(dof=3, mass=mass, inertia=tuple(map(tuple, J0)), cm_offset=tuple(r0),
@@ -267,8 +264,6 @@ def _spec_warnings(gyro: bool, spec_w: float, spec_q: float) -> list[str]:
 
 def _free_parameters(model, free):
     """``p = p_base + S theta``: theta are the free entries themselves (kg m^2, m)."""
-    from airbearing.analysis.identification.regression import PARAM_NAMES
-
     idx = np.asarray(model.index(list(PARAM_NAMES), "p"))
     fidx = np.flatnonzero(free)
     p_base = model.p0.copy()
@@ -308,8 +303,6 @@ def _fit_with_noise(prob, p_base, S, theta, phys, noise, gyro, max_iter, max_ref
 def _covariances(prob, fit, free, *, fit_weights, spec_weights):
     """The honest (HAC sandwich, never below white), white-noise and specification
     covariances, (9, 9) with zero rows and columns for fixed parameters."""
-    from airbearing.analysis.shooting.errors import honest_errors
-
     k = int(np.count_nonzero(free))
     c_fit = _inverse(prob.fisher(fit, k, rate=fit_weights[0], att=fit_weights[1]))
     c_spec = _inverse(prob.fisher(fit, k, rate=spec_weights[0], att=spec_weights[1]))

@@ -26,6 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from airbearing.analysis.identification import cmg_inertia
 from airbearing.analysis.identification.convex import (
     active_constraints,
     diagnostics,
@@ -37,6 +38,7 @@ from airbearing.analysis.identification.convex import (
     std_status,
 )
 from airbearing.analysis.identification.data import prepare_platform_logs
+from airbearing.analysis.identification.output_error import refine_output_error
 from airbearing.analysis.identification.regression import (
     PARAM_NAMES,
     _slider_terms,
@@ -51,7 +53,8 @@ from airbearing.analysis.identification.result import (
     sym_from6,
 )
 from airbearing.errors import InputError
-from airbearing.io.testbed import Body, Testbed
+from airbearing.io.testbed import Body, Testbed, load_testbed
+from airbearing.progress import call
 
 __all__ = [
     "SEED004_TRUTH",
@@ -65,8 +68,6 @@ __all__ = [
 def __getattr__(name):
     # the CMG yaw-inertia fit, re-exported lazily (it loads the CMG model, CasADi)
     if name in ("identify_cmg_inertia", "CMGIdentification"):
-        from airbearing.analysis.identification import cmg_inertia
-
         return getattr(cmg_inertia, name)
     raise AttributeError(name)
 
@@ -224,8 +225,6 @@ def identify_platform(
     SolverError
         When Clarabel or IPOPT fails.
     """
-    from airbearing.progress import call
-
     report = call(progress)
     testbed = fold_cm_offset(testbed)
     mass, fixed, prior = _check_options(
@@ -431,8 +430,6 @@ def _output_error(fit: _Fit, ee, active, null, weak, segment):
 
     Parameters in an exact null direction of stage 1 stay at their stage-1 value (fitting
     them would only move along it)."""
-    from airbearing.analysis.identification.output_error import refine_output_error
-
     gyro, data = fit.gyro, fit.data
     free_oe = fit.free & np.array([n not in null for n in PARAM_NAMES])
     oe = refine_output_error(
@@ -626,8 +623,6 @@ SEED004_TRUTH = (0.0241, 0.0333, 0.0364, -0.0011, 0.0009, -0.0040, 0.0004, 0.000
 
 def seed004_testbed() -> Testbed:
     """platform-3dof with the seed-004 truth as its body."""
-    from airbearing.io.testbed import load_testbed
-
     J, r = theta_to_body(SEED004_TRUTH)
     tb = load_testbed("platform-3dof")
     return tb.replace(

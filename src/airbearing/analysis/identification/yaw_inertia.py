@@ -31,13 +31,19 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from airbearing import quaternion as quat
-from airbearing.analysis.identification.data import RATE_DEGREE, RATE_HALF_WIDTH, _local_poly
+from airbearing.analysis.identification.data import RATE_DEGREE, RATE_HALF_WIDTH
 from airbearing.analysis.identification.data import log_quality as _quality
 from airbearing.analysis.identification.result import IdentificationResult
+from airbearing.analysis.shooting import ShootingProblem
+from airbearing.analysis.shooting.errors import honest_errors
+from airbearing.analysis.shooting.filters import local_poly
+from airbearing.analysis.shooting.logs import make_windows, replay_data
 from airbearing.errors import InputError
+from airbearing.io.coerce import check_gyro_agrees
 from airbearing.io.log import Log
 from airbearing.io.output import to_jsonable
 from airbearing.io.testbed import Body, Testbed
+from airbearing.models.model import build_model
 
 __all__ = ["YawIdentification", "identify_yaw_inertia"]
 
@@ -201,7 +207,7 @@ def _arrays(testbed: Testbed, log: Log):
         for a, b in segments:
             wt = usable[a:b].astype(float)
             if b - a >= 3 and wt.sum() >= 3:
-                _, slope = _local_poly(t[a:b], yaw[a:b, None], wt, RATE_HALF_WIDTH, RATE_DEGREE)
+                _, slope = local_poly(t[a:b], yaw[a:b, None], wt, RATE_HALF_WIDTH, RATE_DEGREE)
                 wz[a:b] = slope[:, 0]
     dipole = log.columns(["mx", "my", "mz"]) if log.has("mx", "my", "mz") else None
     return t, yaw, wz, dipole, segments, usable
@@ -243,7 +249,6 @@ def identify_yaw_inertia(
     logs = list(logs)
     if not logs:
         raise InputError("identify: expected at least one log, got none")
-    from airbearing.io.coerce import check_gyro_agrees
 
     for log in logs:  # a fit on a dead or reversed gyro is confidently wrong
         check_gyro_agrees(log)
@@ -291,8 +296,6 @@ def _window_equations(testbed: Testbed, logs, window: int):
     """The window equations ``w_z(t_b) - w_z(t_a) = a int tau_z dt`` of every stretch between
     gaps and outliers: the torque integrals, the rate changes, the logs' JSON entries, the
     segment count and whether a dipole acts."""
-    from airbearing.models.model import build_model
-
     model = build_model(testbed)
     J0 = testbed.body.yaw_inertia
     iw = model.index("wz")[0]
@@ -383,10 +386,6 @@ def _output_error(testbed: Testbed, logs, J_start: float) -> dict:
     outlier rows weighted 0, logged intervals), the Model's yaw and rate (or the yaw
     alone, attitude-only) compared with the log, J_z the one free parameter.
     """
-    from airbearing.analysis.shooting import ShootingProblem
-    from airbearing.analysis.shooting.logs import make_windows, replay_data
-    from airbearing.models.model import build_model
-
     b = testbed.body
     start = testbed.replace(
         body=Body(dof=1, mass=b.mass, inertia=J_start, cm_offset=b.cm_offset,
@@ -407,8 +406,6 @@ def _output_error(testbed: Testbed, logs, J_start: float) -> dict:
     std_white = float(fit.theta_std[0])
     std = std_white
     if not reason and np.isfinite(std_white):
-        from airbearing.analysis.shooting.errors import honest_errors
-
         # coloured gyro noise (or a slow torque the windows do not absorb) leaves a correlated
         # residual the Fisher (white-noise) error ignores: the engine's HAC sandwich, never below
         he = honest_errors(prob, fit, 1)

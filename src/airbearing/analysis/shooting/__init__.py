@@ -74,7 +74,6 @@ from airbearing.analysis.shooting.functions import (
     jit_available,
     start_function,
     step_function,
-    structure_key,
 )
 from airbearing.analysis.shooting.problem import ShootingProblem
 from airbearing.analysis.shooting.windows import WindowSet
@@ -93,6 +92,5 @@ __all__ = [
     "null_space_basis",
     "start_function",
     "step_function",
-    "structure_key",
     "theta_errors",
 ]

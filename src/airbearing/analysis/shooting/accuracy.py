@@ -24,6 +24,7 @@ from airbearing.analysis.shooting.logs import (
     _attitude_diff,
 )
 from airbearing.analysis.shooting.windows import WindowSet
+from airbearing.analysis.simulation.on_times import rollout_dt
 from airbearing.models.model import Model
 
 __all__ = [
@@ -202,8 +203,6 @@ def integration_error(model: Model, windows: WindowSet, substeps: int):
         ``(rad, rad/s)``: the attitude error (the small rotation) and the largest rate
         error of any axis, the largest over segments.
     """
-    from airbearing.analysis.simulation.on_times import rollout_dt
-
     L, n = windows.length, windows.n
     # every window in one call of each rollout (map: the windows side by side)
     args = (

@@ -22,6 +22,7 @@ import hashlib
 import casadi as ca
 import numpy as np
 import scipy.sparse as sp
+from scipy.sparse.linalg import splu
 
 from airbearing.analysis.shooting.functions import (
     _cached,
@@ -31,8 +32,8 @@ from airbearing.analysis.shooting.functions import (
     evaluate,
     ipopt_options,
     scale_columns,
-    structure_key,
 )
+from airbearing.models.structure_cache import structure_key
 
 __all__ = ["Inequality", "null_space_basis"]
 
@@ -276,7 +277,6 @@ def null_space_basis(Jc, k: int, nd: int | None = None) -> np.ndarray:
     later = _continued_columns(Cd, nd)
     if later is not None:
         free = np.setdiff1d(np.arange(Cd.shape[1]), later)
-        from scipy.sparse.linalg import splu
 
         try:
             with np.errstate(all="ignore"):

@@ -19,7 +19,7 @@ Three numbers per fitted parameter:
     (Andrews & Monahan 1992; :func:`prewhitened_scores`): per output group an AR(p) model
     of the residual (Yule-Walker, order by AIC, kept when it beats white noise in a
     likelihood-ratio test; ``statsmodels.tsa.stattools``, its autocovariances corrected for
-    the fitted initial states, :func:`ar_coefficients`) whitens each series, the scores'
+    the fitted initial states, :meth:`.AR.yule_walker`) whitens each series, the scores'
     regressors pass through the inverse of the same filter (the recolouring is exact), and
     the whitened scores get a Bartlett-kernel HAC
     (``statsmodels.stats.sandwich_covariance.S_hac_simple``) whose bandwidth is the longest
@@ -59,18 +59,19 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
+from scipy.sparse.linalg import splu
 
+from airbearing.analysis.shooting.autoregressive import AR
 from airbearing.analysis.shooting.fit import information_inverse
 from airbearing.analysis.shooting.functions import _problem_functions
 from airbearing.analysis.shooting.problem import solve_gram
-from airbearing.analysis.shooting.process_noise import KAPPA_GRID
+from airbearing.analysis.shooting.process_noise import KAPPA_GRID, piece_durations
 
 __all__ = [
     "RESOLUTION",
     "HonestErrors",
     "Residuals",
     "andrews_bandwidth",
-    "ar_coefficients",
     "correlation_time",
     "crlb",
     "group_variances",
@@ -85,13 +86,6 @@ DECORRELATED = math.exp(-1.0)
 MIN_PIECES = 8
 #: Largest AR(1) coefficient of the prewhitening (Andrews & Monahan's bound).
 MAX_RHO = 0.97
-#: p-value of the likelihood-ratio test against white noise below which a residual's AR
-#: model prewhitens the sandwich (as the coloured-noise model's test,
-#: :data:`.measurement_noise.SIGNIFICANCE`).
-WHITE_SIGNIFICANCE = 1e-3
-#: Most steps of the fixed point that corrects residual autocovariances for the free
-#: variables (:func:`ar_coefficients`).
-MAX_CORRECTION_STEPS = 100
 #: rad/s, rad: the replay's resolution per output group, the smallest noise level a bound
 #: is computed at (a noise-free log's residual is the integration's own error; the
 #: discrepancy's weights never go below it either).
@@ -190,6 +184,7 @@ def normalised_residuals(problem, fit) -> list[Residuals]:
 def _decorrelation_lag(series, max_lag: int) -> int:
     """The first lag at which the mean autocorrelation of ``series`` (1-D arrays, each
     weighted by its length; ``statsmodels.tsa.stattools.acf``) falls below 1/e."""
+    # statsmodels: 0.7-2.1 s CPU to import, loaded only when this runs
     from statsmodels.tsa.stattools import acf
 
     acc, wsum = None, 0.0
@@ -222,8 +217,6 @@ def correlation_time(residuals: list[Residuals], dt: float | None = None) -> flo
 def _defect_correlation_time(problem, d: np.ndarray) -> float:
     """s, the lag (in pieces, times their mean length) at which the whitened defects' mean
     autocorrelation within segments first falls below 1/e; 0 when they are independent."""
-    from airbearing.analysis.shooting.process_noise import piece_durations
-
     w = problem.windows
     nd = problem.n_delta
     D = d.reshape(-1, nd)
@@ -332,6 +325,7 @@ def honest_errors(problem, fit, k: int) -> HonestErrors:
         ``std``, ``std_white``, ``crlb`` (k,) in the parameters' SI units, their
         covariances, the residuals' correlation time (s) and the HAC bandwidth (samples).
     """
+    # statsmodels: 0.7-2.1 s CPU to import, loaded only when this runs
     from statsmodels.stats.sandwich_covariance import S_hac_simple
 
     fit_std = np.asarray(fit.theta_std[:k], dtype=float)
@@ -420,81 +414,6 @@ def _bread_inverse(A: np.ndarray) -> np.ndarray:
     return information_inverse(A.T @ A)[0]
 
 
-def ar_coefficients(series, maxlag: int, n_free: float = 0.0) -> np.ndarray:
-    """AR(p) coefficients ``phi`` (p,) of pooled residual series: Yule-Walker
-    (Levinson-Durbin on the length-weighted autocovariances, ``statsmodels.tsa.stattools``),
-    the order by AIC up to ``maxlag``, 0 (white) unless a likelihood-ratio test says the
-    model beats white noise. Yule-Walker keeps the filter stable.
-
-    A residual's autocovariances are biased low: each of the ``n_free`` free variables
-    fitted to it (a window's initial state, smooth over the window) takes about one
-    long-run variance ``lambda`` (the spectral density at frequency 0) out of the sum of
-    its squares, so that every lag's sample autocovariance is short by about
-    ``n_free lambda / n`` (the demeaning bias of a sample autocovariance, ``-lambda / n``
-    for one mean). The autocovariances are corrected by that amount at the long-run
-    variance ``s^2 / (1 - sum phi)^2`` of the model fitted to the corrected ones (a fixed
-    point, reached from no correction); the correction never exceeds the variance itself
-    (a noise correlated over a window's length is not told from its initial state). On
-    10 s windows of a spin-down under white plus AR(1) gyro noise (correlated over 20
-    samples) the uncorrected model's long-run variance was about half the noise's.
-
-    Parameters
-    ----------
-    series : iterable of ndarray
-        1-D series (noise units); those no longer than ``2 maxlag`` or constant are left out.
-    maxlag : int
-        The longest order tried.
-    n_free : float
-        The number of free variables fitted to these series (0: raw series).
-
-    Returns
-    -------
-    ndarray (p,)
-        ``x_t = sum_l phi_l x_(t-l) + u_t``.
-    """
-    from statsmodels.tsa.stattools import acovf
-
-    series = list(series)
-    used = [x for x in series if x.size > 2 * maxlag and np.any(x != x[0])]
-    if maxlag < 1 or not used:
-        return np.zeros(0)
-    n = sum(x.size for x in used)
-    g = sum(x.size * acovf(x, demean=False, fft=True, nlag=maxlag) for x in used) / n
-    if g[0] <= 0:
-        return np.zeros(0)
-    share = n_free / sum(x.size for x in series)  # free variables per sample
-    phi, lrv = _yule_walker_aic(g, n)
-    for _ in range(MAX_CORRECTION_STEPS):
-        if share <= 0:
-            break
-        step = min(share * lrv, g[0])
-        phi, new = _yule_walker_aic(g + step, n)
-        if step >= g[0] or abs(new - lrv) <= 1e-3 * new:
-            break
-        lrv = new
-    return phi
-
-
-def _yule_walker_aic(g: np.ndarray, n: int):
-    """``(phi, long-run variance)`` of the AR model of autocovariances ``g`` (lags 0..p_max)
-    whose order minimises AIC (``statsmodels.tsa.stattools.levinson_durbin``), taken only
-    when it beats white noise in a likelihood-ratio test (``scipy.stats.chi2``, p below
-    :data:`WHITE_SIGNIFICANCE`): AIC alone found orders of 11 and 23, coefficients summing
-    to 0.05 and -0.01, in the nearly white residuals of the identify-platform tutorial
-    (2400 samples per output), and moved its errors by 3 %."""
-    from scipy import stats
-    from statsmodels.tsa.stattools import levinson_durbin
-
-    _, _, pacf, _, phi = levinson_durbin(g, nlags=g.size - 1, isacov=True)
-    innov = g[0] * np.cumprod(np.r_[1.0, 1.0 - pacf[1:] ** 2])  # innovation variance per order
-    loglik = -0.5 * n * np.log(np.maximum(innov, 1e-300))
-    p = int(np.argmax(loglik - np.arange(innov.size)))  # AIC
-    if p > 0 and stats.chi2.sf(2.0 * (loglik[p] - loglik[0]), p) >= WHITE_SIGNIFICANCE:
-        p = 0
-    coef = np.asarray(phi[1 : p + 1, p], dtype=float) if p > 0 else np.zeros(0)
-    return coef, float(innov[p]) / (1.0 - float(coef.sum())) ** 2
-
-
 def andrews_bandwidth(scores: np.ndarray) -> int:
     """Bartlett-kernel bandwidth (lags) of Andrews (1991) with his AR(1) plug-in, the score
     columns weighted equally; at most ``n - 1``.
@@ -530,7 +449,7 @@ def prewhitened_scores(problem, G: np.ndarray, r: np.ndarray, free=None):
     """The measurement rows' scores ``G_i r_i`` prewhitened (module doc): ``(scores, phi)``.
 
     Per output group, an AR(p) model of the residual pooled over segments and axes
-    (:func:`ar_coefficients`, the longest order tried Schwert's ``12 (n / 100)^(1/4)``);
+    (:meth:`.AR.yule_walker`, the longest order tried Schwert's ``12 (n / 100)^(1/4)``);
     each series (one segment, one axis, usable rows in time order; a hole left by an
     outlier is closed) is filtered by it, ``u = Phi(L) r``, and its regressors backwards by
     the inverse, ``Z = Phi(L)^-T G``, so that ``sum_i G_i r_i = sum_i Z_i u_i`` exactly.
@@ -544,7 +463,7 @@ def prewhitened_scores(problem, G: np.ndarray, r: np.ndarray, free=None):
     r : ndarray (n_meas,)
         The measurement residual (noise units).
     free : sequence of float, optional
-        Per output group, the free variables fitted to its rows (:func:`ar_coefficients`
+        Per output group, the free variables fitted to its rows (:meth:`.AR.yule_walker`
         corrects its autocovariances for them; default none).
 
     Returns
@@ -554,8 +473,6 @@ def prewhitened_scores(problem, G: np.ndarray, r: np.ndarray, free=None):
     phi : dict
         ``group -> AR coefficients`` (empty: white).
     """
-    from scipy.signal import lfilter
-
     from airbearing.analysis.shooting.measurement_noise import _series
 
     scores = G * r[:, None]
@@ -566,17 +483,14 @@ def prewhitened_scores(problem, G: np.ndarray, r: np.ndarray, free=None):
             continue
         n_all = sum(rows.size for rows in series)
         maxlag = int(min(12 * (n_all / 100.0) ** 0.25, max(rows.size for rows in series) // 2))
-        phi = ar_coefficients(
+        model = AR.yule_walker(
             [r[rows] for rows in series], maxlag, 0.0 if free is None else float(free[g])
         )
-        phis[group] = phi
-        if phi.size == 0:
+        phis[group] = model.phi
+        if model.order == 0:
             continue
-        ar = np.r_[1.0, -phi]
         for rows in series:
-            u = lfilter(ar, [1.0], r[rows])
-            Z = lfilter([1.0], ar, G[rows][::-1], axis=0)[::-1]
-            scores[rows] = Z * u[:, None]
+            scores[rows] = model.recolour_t(G[rows]) * model.whiten(r[rows])[:, None]
     return scores, phis
 
 
@@ -615,6 +529,7 @@ def _piece_meat(problem, scores: np.ndarray):
     ``1 / (1 - rho)^2`` (Andrews & Monahan 1992): a torque correlated over several pieces
     makes the sums persistent, and a kernel alone, over a few pieces, misses most of it.
     """
+    # statsmodels: 0.7-2.1 s CPU to import, loaded only when this runs
     from statsmodels.stats.sandwich_covariance import S_hac_simple
 
     w = problem.windows
@@ -684,8 +599,6 @@ def _kkt(Jm, C, k: int, level: np.ndarray | None = None):
     Column-scaled, sparse (a null-space basis would need a dense SVD). None when the data
     cannot fix some direction.
     """
-    from scipy.sparse.linalg import splu
-
     if level is not None:
         Jm = sp.csc_matrix(sp.diags(1.0 / np.sqrt(level)) @ Jm)
     F = sp.csc_matrix(Jm.T @ Jm)

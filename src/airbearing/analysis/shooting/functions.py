@@ -1,19 +1,17 @@
 """Compiled functions of the shooting engine: one window, all windows, the IPOPT solver.
 
-One bounded cache (``CACHE_SIZE`` entries) keyed by the Model's STRUCTURE (a hash of
-its serialized expressions, :func:`structure_key`), the window length, the number of
-parameter slots, the output groups and whether windows are linked; compiled functions go
-through the on-disk cache of :mod:`airbearing.models.compiled` (a new process loads them):
-a large step (dof 3) and its Jacobian once per structure, the window chained over them;
-a small one (dof 1) as whole windows (``CHAIN_MIN_INSTRUCTIONS``). The constrained solver
+One bounded cache (``CACHE_SIZE`` entries) keyed by the Model's STRUCTURE (the package's
+one key, :func:`airbearing.models.structure_cache.structure_key`), the window length, the
+number of parameter slots, the output groups and whether windows are linked; compiled
+functions go through the on-disk cache of :mod:`airbearing.models.compiled` (a new process
+loads them): a large step (dof 3) and its Jacobian once per structure, the window chained
+over them; a small one (dof 1) as whole windows (``CHAIN_MIN_INSTRUCTIONS``). The constrained solver
 (linked windows, inequalities) is in :mod:`.constrained`, in the same cache.
 """
 
 from __future__ import annotations
 
-import hashlib
 import threading
-import weakref
 from collections import OrderedDict
 
 import casadi as ca
@@ -22,6 +20,7 @@ import scipy.sparse as sp
 
 from airbearing import quaternion as quat
 from airbearing.models.model import Model
+from airbearing.models.structure_cache import structure_key
 
 #: RK4 sub-steps per sample of a replay: on the seed-004 free oscillation (rates to 1.5 rad/s,
 #: 20 Hz) 2 sub-steps differ from 4 by 7e-7 rad/s RMS over 10 s, 1e-3 of a gyro's noise.
@@ -72,21 +71,6 @@ def _cached(key, build):
     while len(_CACHE) > CACHE_SIZE:
         _CACHE.popitem(last=False)
     return value
-
-
-_KEYS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
-
-
-def structure_key(model: Model) -> str:
-    """A hash of the Model's expressions (dynamics, measurement, lag): equal for equal structure."""
-    if model in _KEYS:
-        return _KEYS[model]
-    h = hashlib.sha1()
-    for fn in (model.f, model.h, model._lag):
-        h.update(fn.serialize().encode())
-    h.update(repr((model.x_names, model.u_names, model.p_names, model.y_names)).encode())
-    _KEYS[model] = key = h.hexdigest()
-    return key
 
 
 def step_function(model: Model, substeps: int = DEFAULT_SUBSTEPS) -> ca.Function:

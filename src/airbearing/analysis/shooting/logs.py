@@ -52,6 +52,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from airbearing import quaternion as quat
+from airbearing.analysis.shooting.filters import local_poly
 from airbearing.analysis.shooting.windows import WindowSet
 from airbearing.errors import InputError
 from airbearing.io.coerce import check_gyro_agrees
@@ -211,9 +212,8 @@ class ReplayData:
             y = self.att[use, :1] - self.att[row, 0]
         else:
             y = quat.qlog(quat.qmul(quat.qconj(self.q[row])[None, :], self.q[use]))
-        A = np.column_stack([np.ones_like(tau), tau, 0.5 * tau**2])
-        coef, *_ = np.linalg.lstsq(A, y, rcond=None)
-        return coef[1]
+        _, slope = local_poly(tau, y, np.ones(use.size), use.size, 2)
+        return slope[0]
 
 
 def _quality(log: Log):

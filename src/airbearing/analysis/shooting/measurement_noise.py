@@ -1,5 +1,7 @@
 """Coloured measurement noise: an AR(1) model of each output group, estimated with the fit.
 
+The model is the one AR model of the engine (:class:`.autoregressive.AR`, order 1 here).
+
 A motion-capture or gyro channel is often not white: its errors are correlated over
 several samples (marker jitter filtered by the capture software, a gyro's internal
 low-pass). Treated as white, such noise makes every standard error too small: an AR(1)
@@ -49,6 +51,12 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
+from scipy.sparse.linalg import splu
+
+from airbearing.analysis.shooting.autoregressive import AR
+from airbearing.analysis.shooting.errors import _segment_order
+from airbearing.analysis.shooting.problem import solve_gram
+from airbearing.analysis.shooting.process_noise import piece_durations
 
 __all__ = [
     "MeasurementNoise",
@@ -131,8 +139,6 @@ class MeasurementNoise:
 
 def _series(problem):
     """Per output group, per segment and axis: residual rows in time order and their times."""
-    from airbearing.analysis.shooting.errors import _segment_order
-
     cached = getattr(problem, "_noise_series", None)
     if cached is not None:
         return cached
@@ -177,21 +183,15 @@ def whitening(problem, ar: dict, dt: float):
     rows_o, cols_o, vals_o = [], [], []
     series = _series(problem)
     for group, (phi, s) in ar.items():
-        phi, s = float(phi), float(s)
+        model = AR(phi=np.array([float(phi)]), s=float(s))
         for rows, t in series.get(group, []):
             if rows.size == 0:
                 continue
-            steps = np.maximum(np.diff(t) / dt, 1.0)
-            a = np.sign(phi) * np.abs(phi) ** steps if phi != 0.0 else np.zeros(steps.size)
-            # innovation std over d steps: s sqrt((1 - phi^2d) / (1 - phi^2))
-            ratio = (1.0 - a**2) / (1.0 - phi**2) if phi != 0.0 else np.ones(steps.size)
-            d = np.empty(rows.size)
-            d[0] = math.sqrt(1.0 - phi**2) / s
-            d[1:] = 1.0 / (s * np.sqrt(ratio))
+            d, sub = model.whitening_rows(t, dt)
             diag[rows] = d
             rows_o.append(rows[1:])
             cols_o.append(rows[:-1])
-            vals_o.append(-a * d[1:])
+            vals_o.append(sub)
     off = (
         sp.csc_matrix(
             (np.concatenate(vals_o), (np.concatenate(rows_o), np.concatenate(cols_o))),
@@ -227,8 +227,6 @@ class _Linearised:
         n = problem.n_meas
         P0 = problem.meas_whitening
         if P0 is not None:  # back to the raw residual
-            from scipy.sparse.linalg import splu
-
             lu = splu(sp.csc_matrix(P0))
             self.rm = lu.solve(r[:n])
             self.Jm = sp.csc_matrix(lu.solve(J[:n].toarray()))
@@ -239,10 +237,6 @@ class _Linearised:
         self.problem = problem
 
     def loglik(self, ar: dict, dt: float) -> float:
-        from scipy.sparse.linalg import splu
-
-        from airbearing.analysis.shooting.problem import solve_gram
-
         P, logdet = whitening(self.problem, ar, dt)
         A = sp.vstack([P @ self.Jm, self.Jp]).tocsc()
         b = np.r_[P @ self.rm, self.rp]
@@ -263,8 +257,6 @@ class _Linearised:
 
 
 def _max_phi(problem, dt: float) -> float:
-    from airbearing.analysis.shooting.process_noise import piece_durations
-
     piece = float(np.mean(piece_durations(problem)[:-1])) if problem.windows.n > 1 else 0.0
     if not piece > 0:
         piece = float(problem.windows.length * dt)
@@ -275,7 +267,7 @@ def _still_rising(ll, phi: float, phi_max: float, dt: float, at_best: float) -> 
     """True when the estimate sits at the correlation bound and the likelihood still rises
     towards it: by more than :data:`RISING` over the coefficient of half that correlation
     time (the data want a longer correlation than a sensor's: a misfit)."""
-    from scipy import optimize
+    from scipy import optimize  # scipy.optimize: 0.45 s CPU to import, loaded only when this runs
 
     if phi_max - phi > 0.1 * (1.0 - phi_max):
         return False
@@ -296,7 +288,7 @@ def _homoscedastic(problem, innovations: np.ndarray, group: str) -> bool:
     friction acts where the rate is high, a mis-scaled inertia during the slew), and the
     pieces where it acts stand out.
     """
-    from scipy import stats
+    from scipy import stats  # scipy.stats: 1.2 s CPU to import, loaded only when this runs
 
     g = problem.outputs.index(group)
     rows = np.flatnonzero((problem.group == g) & problem.usable)
@@ -324,6 +316,7 @@ def estimate_measurement_noise(problem, fit, k: int) -> MeasurementNoise | None:
     MeasurementNoise or None
         None when no group's noise is significantly coloured.
     """
+    # scipy.optimize, scipy.stats: 0.45+1.2 s CPU to import, loaded only when this runs
     from scipy import optimize, stats
 
     w = problem.windows

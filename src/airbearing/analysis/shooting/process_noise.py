@@ -50,9 +50,9 @@ from airbearing.analysis.shooting.functions import (
     evaluate,
     ipopt_options,
     scale_columns,
-    structure_key,
     vstack_csc,
 )
+from airbearing.models.structure_cache import structure_key
 
 __all__ = [
     "KAPPA_GRID",

@@ -8,6 +8,9 @@ from functools import lru_cache
 import numpy as np
 
 from airbearing import quaternion as quat
+from airbearing.analysis.balancing.runs import MAX_TILT
+from airbearing.analysis.cmg.singularity import measure, pyramid_geometry
+from airbearing.analysis.simulation import slew_checks as sc
 from airbearing.analysis.simulation.simulate import SimResult, simulate
 from airbearing.design.attitude import cmg_attitude_controller
 from airbearing.design.controller import constant_input
@@ -358,9 +361,6 @@ def wheel_slew_summary(result: SimResult) -> dict:
 def _saturation_and_chatter(result: SimResult, d: np.ndarray) -> dict:
     """The envelope and chatter keys of :func:`slew_summary` (``d``: true gimbal angles,
     rad, at ``t_0 .. t_N``)."""
-    from airbearing.analysis.cmg.singularity import measure, pyramid_geometry
-    from airbearing.analysis.simulation import slew_checks as sc
-
     m = result.model
     cmg = m.testbed.cmg
     u = np.array([0.0, 0.0, 1.0])
@@ -650,8 +650,6 @@ def tilt_note(max_tilt_deg: float) -> dict:
     -------
     dict
     """
-    from airbearing.analysis.balancing.runs import MAX_TILT
-
     limit = float(np.rad2deg(MAX_TILT))
     if not max_tilt_deg > limit:
         return {}

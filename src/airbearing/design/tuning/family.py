@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from airbearing.design.linearise import linearisation
 from airbearing.design.loops import Loop
 
 __all__: list[str] = []
@@ -20,8 +21,6 @@ __all__: list[str] = []
 def _stiffness(loop: Loop) -> tuple[float, float]:
     """Balancing design model: the larger in-plane inertia J (kg m^2) and the smallest
     pendulum stiffness k (N m/rad, dw/dt = -(k/J) theta, torque m g r_z per radian)."""
-    from airbearing.design.linearise import linearisation
-
     m, p = loop.model, loop.p
     A, _, _, _ = linearisation(m).matrices(loop.trim, p)
     Jd = np.array([p[m.index(n, "p")[0]] for n in ("J_xx", "J_yy")])

@@ -3,7 +3,8 @@
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass
+from collections.abc import Mapping
+from dataclasses import asdict, dataclass, fields
 
 from airbearing.errors import InputError
 
@@ -161,9 +162,6 @@ def _check(name, value, limit, sense) -> Check:
 
 def _as_spec(spec) -> Spec:
     """``spec`` as a :class:`Spec`: itself, None (the default) or a dict of its fields."""
-    from collections.abc import Mapping
-    from dataclasses import fields
-
     if spec is None:
         return Spec()
     if isinstance(spec, Spec):

@@ -19,6 +19,7 @@ from airbearing.design.tuning.search import _search
 from airbearing.design.tuning.spec import Spec, _as_spec
 from airbearing.design.tuning.verdict import evaluate
 from airbearing.errors import InputError
+from airbearing.progress import call
 
 __all__ = ["tune"]
 
@@ -94,8 +95,6 @@ def tune(
     ...
     airbearing.errors.InputError: ...
     """
-    from airbearing.progress import call
-
     progress = call(progress)
     spec = _as_spec(spec)
     opts = {"split": split} if loop == "balancing" else {}

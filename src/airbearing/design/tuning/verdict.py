@@ -7,6 +7,7 @@ import math
 from dataclasses import replace
 
 from airbearing.design.loops import Loop
+from airbearing.design.margins import analyse_loop, multiloop_worst_corner
 from airbearing.design.tuning.box import corners
 from airbearing.design.tuning.responses import (
     _HORIZON_MAX,
@@ -81,8 +82,6 @@ def evaluate(
     >>> all(c.met for c in checks), round(worst["gain_margin_db"], 1), len(per_corner)  # dB
     (True, 20.0, 1)
     """
-    from airbearing.design.margins import analyse_loop, multiloop_worst_corner
-
     per, peaks = [], {}
     todo = corners(loop, spec) if corner_set is None else corner_set
     slew = slew_limit(loop) is not None
