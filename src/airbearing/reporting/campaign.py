@@ -344,7 +344,10 @@ def robust_verification_section(report: Report, *, quick: bool = False) -> None:
         [
             check(f"runs meeting {e.describe()} (fraction)", ">= 0.95 (gains tuned over the "
                   "box)", fraction, "95 % interval reaches 0.95",
-                  fraction is not None and rate["ci_high"] >= 0.95),
+                  fraction is not None and rate["ci_high"] >= 0.95,
+                  expected="the campaign disperses what the tuner's box does not hold (gyro "
+                  "noise up to 2e-3 rad/s on a testbed whose file has none, initial gimbal-"
+                  "angle errors): the noisiest runs may miss it"),
         ],
     )  # fmt: skip
     campaign_report(campaign, df, report=report, level=3, max_plotted=2)
