@@ -11,6 +11,7 @@ import signal
 import subprocess
 import sys
 import time
+from contextlib import nullcontext
 from pathlib import Path
 
 import pandas as pd
@@ -54,10 +55,21 @@ def in_process(tmp_path_factory):
     return run_campaign(parse_campaign(SLEW), tmp_path_factory.mktemp("ref") / "r.parquet")
 
 
+@pytest.fixture(scope="module")
+def two_workers():
+    """A local cluster of two workers, started once for the tests that run on two (each
+    start imports the package in every worker process)."""
+    with open_client(2) as client:
+        yield client
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("workers", [1, 2])
-def test_local_cluster_gives_the_in_process_results(tmp_path, in_process, workers):
-    with open_client(workers) as client:
+def test_local_cluster_gives_the_in_process_results(tmp_path, in_process, workers, request):
+    cluster = (
+        nullcontext(request.getfixturevalue("two_workers")) if workers == 2 else open_client(1)
+    )
+    with cluster as client:
         assert len(client.scheduler_info()["workers"]) == workers
         # no glibc trim threshold from Dask's nanny (it made every run ~1.5x slower in CPU)
         env = client.run(lambda: os.environ.get("MALLOC_TRIM_THRESHOLD_"))
@@ -67,11 +79,10 @@ def test_local_cluster_gives_the_in_process_results(tmp_path, in_process, worker
 
 
 @pytest.mark.slow
-def test_run_timeout_on_workers_gives_the_in_process_results(tmp_path, in_process):
+def test_run_timeout_on_workers_gives_the_in_process_results(tmp_path, in_process, two_workers):
     # each worker runs its runs in a child process it can stop (analysis/campaign/child.py)
-    with open_client(2) as client:
-        c = parse_campaign(SLEW)
-        df = run_campaign(c, tmp_path / "r.parquet", client=client, run_timeout=120.0)
+    c = parse_campaign(SLEW)
+    df = run_campaign(c, tmp_path / "r.parquet", client=two_workers, run_timeout=120.0)
     pd.testing.assert_frame_equal(df, in_process)
 
 
@@ -134,7 +145,9 @@ def test_scheduler_that_does_not_answer(tmp_path, capsys):
 
 @pytest.mark.slow
 def test_killed_halfway_then_resume_has_every_run_once(tmp_path):
-    runs = 40
+    # 12 runs: on one worker the chunks are at most half of what remains (1, 6, 3 runs at
+    # most), so three parts leave at least two runs for the resume
+    runs = 12
     camp = tmp_path / "c.toml"
     camp.write_text(TOML.format(runs=runs, duration=100))
     out = tmp_path / "r.parquet"

@@ -347,7 +347,8 @@ def test_report_help_says_the_output_is_required(capsys):
 
 
 def test_gains_table_has_units(capsys):
-    assert run(["--quiet", "gains", "cmg-yaw"]) == 0
+    # the nominal inertia only (one corner, not three): the table is the same
+    assert run(["--quiet", "gains", "cmg-yaw", "--inertia-uncertainty", "0"]) == 0
     lines = [line.split() for line in capsys.readouterr().out.splitlines()[:5] if line.strip()]
     rows = {line[0]: line[1:] for line in lines}
     assert rows["gain"] == ["value", "unit"]
@@ -425,6 +426,8 @@ def test_defaults_that_depend_on_the_testbed_are_ones_it_accepts(tmp_path):
                 str(tmp_path / "s.json")]) == 0  # fmt: skip
     assert json.loads((tmp_path / "s.json").read_text())["scenario"] == "free"
     # --loop and --split: a platform without a cage field tunes the mechanical balancing PID
-    assert run(["gains", "seed004-platform", "--json", str(tmp_path / "g.json")]) == 0
+    # (the nominal inertia: three corners of the box, not nine, the same defaults)
+    assert run(["gains", "seed004-platform", "--inertia-uncertainty", "0",
+                "--json", str(tmp_path / "g.json")]) == 0  # fmt: skip
     doc = json.loads((tmp_path / "g.json").read_text())
     assert doc["loop"] == "balancing" and doc["split"] == "mechanical"

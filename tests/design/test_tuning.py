@@ -221,7 +221,8 @@ def test_an_offset_range_no_design_meets_is_reported_not_relaxed():
 
 
 def test_impossible_spec_is_reported_not_relaxed(cmg_tb):
-    spec = Spec(phase_margin_deg=85, gain_margin_db=20, bandwidth_hz=2.0)
+    # the nominal inertia only (one corner, not three): no design meets it there either
+    spec = Spec(phase_margin_deg=85, gain_margin_db=20, bandwidth_hz=2.0, inertia_uncertainty=0)
     r = tune(cmg_tb, "attitude", spec)
     assert not r.met
     assert r.spec == spec  # the specification is never relaxed
@@ -264,27 +265,33 @@ def test_the_default_offset_box_runs_from_before_to_after_step_two():
 
 @pytest.mark.slow
 def test_balancing_tuning_reports_the_unreachable_trim():
-    """platform-3dof needs sliders at -61/-108 mm to balance: past the 37 mm travel. Every
-    other check is met, the margin of its four channels at once included (the previous
-    tuner's gains missed it by 15.6 deg), and the report on the tuned gains agrees."""
+    """platform-3dof needs sliders at -61/-108 mm to balance: past the 37 mm travel. The
+    search still finds the fastest design that meets the rest (the travel does not drive
+    it): every other check is met, the margin of its four channels at once included (the
+    previous tuner's gains missed it by 15.6 deg), and the report on the tuned gains
+    agrees. The nominal inertia only (the three vertical offsets of the default box, not
+    nine corners: a third of the work); the default box's gains are AT_THE_EDGE's."""
     from airbearing.reporting.stability import stability_report
 
     tb = load_testbed("platform-3dof")
-    r = tune(tb, "balancing", Spec(), split="mixed")
+    r = tune(tb, "balancing", Spec(inertia_uncertainty=0.0), split="mixed")
     by = {c.name: c for c in r.checks}
     assert by["phase margin (deg)"].met and by["gain margin (dB)"].met
     assert by["phase margin, all channels at once (deg)"].met
     assert not by["slider travel (m)"].met and not r.met
     # every other check is met: no gains move the trim
     assert [c.name for c in r.checks if not c.met] == ["slider travel (m)"]
+    # a design of the search, not the candidate that misses least (what it returns when
+    # nothing is admissible)
+    assert r.design["speed_rad_s"] is not None
     _, report = stability_report(tb, "balancing", gains=r.gains, split="mixed", spec=r.spec)
     assert report["met"] is r.met
     assert [(c["name"], c["met"]) for c in report["checks"]] == [(c.name, c.met) for c in r.checks]
-    assert r.gains == pytest.approx(AT_THE_EDGE["seed000-tabletop"][2], rel=2e-3)
     # seed 004 eqs. 4-5: travel needed = mass |r_y| / m_2
     want = tb.body.mass * abs(tb.body.cm_offset_vec[1]) / tb.masses.mass_vec[1]
     assert by["slider travel (m)"].value == pytest.approx(want, rel=0.02)  # + transient
-    assert len(r.corners) == 9  # 3 inertias x 3 vertical offsets
+    assert [label for label, _ in r.corners] == [
+        "J x 1, r_z = -3.9 mm", "J x 1, r_z = -2.6 mm", "J x 1, r_z = -0.052 mm"]  # fmt: skip
 
 
 @pytest.mark.slow
