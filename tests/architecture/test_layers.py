@@ -123,7 +123,7 @@ FUNCTION_IMPORTS = {
     "design.margins": 1,
     "design.tuning.responses": 1,
     "io.coerce": 2,
-    "io.log": 3,
+    "io.log": 2,
     "io.quality": 3,
     "models.compiled": 1,
     "progress": 1,

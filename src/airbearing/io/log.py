@@ -48,6 +48,7 @@ import pyarrow.csv as pacsv
 import pyarrow.parquet as pq
 
 from airbearing.errors import InputError
+from airbearing.io.coerce import as_testbed
 from airbearing.io.testbed import Testbed, _atomic_write_bytes
 
 if TYPE_CHECKING:
@@ -626,7 +627,7 @@ def _unwrap_yaw(out: pd.DataFrame, testbed: Testbed | None) -> None:
     jump = (np.abs(step) > _WRAP_STEP) & (wrapped < _WRAP_SLACK) & inside
     if not jump.any() or not np.median(wrapped[inside]) < _SMOOTH_STEP:
         return
-    from airbearing.io.import_map import unwrap
+    from airbearing.io.import_map import unwrap  # cycle: io.import_map imports io.log
 
     new = unwrap(yaw, t)
     turns = np.round((new - yaw) / (2 * math.pi))
@@ -806,7 +807,7 @@ class Log:
         """
         cached = self.__dict__.get("_quality")
         if cached is None:
-            from airbearing.io.quality import assess
+            from airbearing.io.quality import assess  # cycle: io.quality imports io.log
 
             cached = assess(self, self.testbed)
             self.__dict__["_quality"] = cached
@@ -1104,8 +1105,6 @@ def read_log(
     valid) is read again cell by cell as text, so that the message names the
     row, the line and the column of the first bad cell.
     """
-    from airbearing.io.coerce import as_testbed
-
     testbed = as_testbed(testbed, optional=True)
     if not isinstance(path, str | os.PathLike):
         raise InputError(f"path={path!r}: expected a log file path (str or path-like)")

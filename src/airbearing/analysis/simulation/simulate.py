@@ -106,6 +106,7 @@ class SimResult:
         ``airbearing simulate --json`` adds the scenario's own numbers (a slew's
         :func:`~airbearing.analysis.simulation.scenarios.slew_summary`).
         """
+        # cycle: scenarios imports simulate
         from airbearing.analysis.simulation.scenarios import free_summary
 
         return {"testbed": self.model.testbed.name, **free_summary(self)}
