@@ -123,7 +123,7 @@ FUNCTION_IMPORTS = {
     "analysis.identification.convex": 1,
     "analysis.shooting.autoregressive": 5,
     "analysis.shooting.constrained": 1,
-    "analysis.shooting.errors": 4,
+    "analysis.shooting.errors": 3,
     "analysis.shooting.fit": 1,
     "analysis.shooting.functions": 2,
     "analysis.shooting.measurement_noise": 3,
@@ -136,7 +136,7 @@ FUNCTION_IMPORTS = {
     "design.margins": 1,
     "design.tuning.responses": 1,
     "io.coerce": 2,
-    "io.log": 3,
+    "io.log": 2,
     "io.quality": 3,
     "models.compiled": 1,
     "progress": 1,
@@ -148,11 +148,6 @@ FUNCTION_IMPORTS = {
 #: Private names imported from another package (module, name): to become public or move.
 PRIVATE_IMPORTS = {
     ("analysis.discrepancy.revise", "_loglik"),
-    ("design.tuning.screening", "_PEAK_FRACTION"),
-    ("design.tuning.screening", "_disk_margin"),
-    ("design.tuning.screening", "_mu_upper"),
-    ("design.tuning.screening", "_perron_bounds"),
-    ("reporting.stability", "_response"),
 }
 
 

@@ -137,19 +137,19 @@ def test_a_lightly_damped_sensitivity_peak_is_not_read_low():
     points over the two decades around it, a step of 1.2e-4 in ln w: 1.24771), and so
     does the disk margin's |S - 1/2|."""
     from airbearing.design.linearise import scaled_params
-    from airbearing.design.margins import _response, frequency_grid
+    from airbearing.design.margins import frequency_grid, frequency_response
 
     loop = balancing_loop(load_testbed("seed000-tabletop"), split="mixed")
     loop = loop.with_params(scaled_params(loop.model, loop.p, inertia_scale=1.15, r_z=-1.3e-3))
     L = loop.loop_transfer("s1")
     grid = frequency_grid(L, 1000)
-    S_grid = np.abs(1 / (1 + _response(L, grid)))
+    S_grid = np.abs(1 / (1 + frequency_response(L, grid)))
     at = grid[np.argmax(S_grid)]
     window = (grid > at / 10) & (grid < at * 10)
     # outside the two decades both peaks are far lower
     assert S_grid[~window].max() < 1.1
-    assert np.abs(1 / (1 + _response(L, grid[~window])) - 0.5).max() < 0.8
-    dense = _response(L, np.geomspace(at / 10, at * 10, 40001))
+    assert np.abs(1 / (1 + frequency_response(L, grid[~window])) - 0.5).max() < 0.8
+    dense = frequency_response(L, np.geomspace(at / 10, at * 10, 40001))
     m = analyse_loop(loop, multiloop=False, n_freq=1000).channels["s1"]
     assert S_grid.max() == pytest.approx(1.2200, abs=1e-4)  # the grid alone: 2.2 % low
     # a grid reads a peak low, never high; this one by 1.5e-6 relative (the peak's

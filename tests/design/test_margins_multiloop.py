@@ -17,9 +17,9 @@ import pytest
 from airbearing.design.loops import make_loop
 from airbearing.design.margins import (
     _grid_mu,
-    _mu_upper,
-    _response,
     frequency_grid,
+    frequency_response,
+    mu_upper_bound,
     multiloop_disk_margin,
     multiloop_worst_corner,
 )
@@ -63,7 +63,7 @@ def tabletop_mixed():
 
 
 def _sensitivity_minus_half(loop, w):
-    Lw = np.moveaxis(_response(loop.loop_transfer(None), w), -1, 0)
+    Lw = np.moveaxis(frequency_response(loop.loop_transfer(None), w), -1, 0)
     eye = np.eye(Lw.shape[1])
     return np.linalg.inv(eye[None] + Lw) - 0.5 * eye
 
@@ -76,7 +76,7 @@ def test_pruned_search_finds_the_bound_of_every_frequency(tabletop_mixed):
     exhaustive check runs on a grid of 100 points, the pruning is the same on any grid.)"""
     L = tabletop_mixed.loop_transfer(None)
     coarse = _sensitivity_minus_half(tabletop_mixed, frequency_grid(L, 100))
-    exhaustive = max(_mu_upper(Mk) for Mk in coarse)
+    exhaustive = max(mu_upper_bound(Mk) for Mk in coarse)
     assert _grid_mu(coarse)[0] == pytest.approx(exhaustive, rel=1e-12)
     ml = multiloop_disk_margin(L)
     assert 1 / ml["disk_margin"] >= exhaustive * (1 - 1e-12)
@@ -84,7 +84,7 @@ def test_pruned_search_finds_the_bound_of_every_frequency(tabletop_mixed):
     assert 1 / ml["disk_margin"] >= _grid_mu(M)[0] * (1 - 1e-12)
     # 101 points over +-0.25 %: the same step as 201 over +-0.5 %, around the refined peak
     near = np.geomspace(ml["frequency_rad_s"] / 1.0025, ml["frequency_rad_s"] * 1.0025, 101)
-    dense = max(_mu_upper(Mk) for Mk in _sensitivity_minus_half(tabletop_mixed, near))
+    dense = max(mu_upper_bound(Mk) for Mk in _sensitivity_minus_half(tabletop_mixed, near))
     assert 1 / ml["disk_margin"] == pytest.approx(dense, rel=1e-6)  # grid step 5e-5 in w
     # nominal plant: alpha 0.717, +-6.52 dB or +-39.4 deg (the reviewer's finding)
     assert ml["disk_margin"] == pytest.approx(0.7171, abs=1e-4)

@@ -14,7 +14,7 @@ python-control evaluation. (``control.stability_margins`` converts to polynomial
 loses all accuracy for these loops whose integral poles sit within 1e-6 of ``z = 1``;
 the test suite checks the two agree where both are accurate.) The peaks (of ``|S|``,
 ``|T|``, ``|S - 1/2|`` and of ``mu``) are refined the same way: every local maximum of the
-grid within :data:`_PEAK_FRACTION` of the largest is maximised between its two
+grid within :data:`PEAK_FRACTION` of the largest is maximised between its two
 neighbours by a bounded scalar search in ``ln w`` (scipy ``minimize_scalar``), so a
 lightly damped peak that falls between grid points is not read low (seed000-tabletop's
 mixed loop with tuned gains: |S| 1.220 on a 1000-point grid, 1.248 refined and on a
@@ -49,6 +49,11 @@ __all__ = [
     "pole_damping",
     "analyse_loop",
     "json_number",
+    "PEAK_FRACTION",
+    "disk_margin_of_peak",
+    "frequency_response",
+    "mu_upper_bound",
+    "perron_mu_bounds",
 ]
 
 _N_GRID = 3000  # points of the logarithmic frequency grid
@@ -56,7 +61,7 @@ _SQRT_HALF = 1 / math.sqrt(2)
 #: A local maximum of a peak's grid values at least this fraction of the largest is
 #: refined between its neighbours: a lightly damped peak can rise that much between two
 #: points of the grid.
-_PEAK_FRACTION = 0.8
+PEAK_FRACTION = 0.8
 _PEAK_XTOL = 1e-7  # the refined peak's frequency, in ln w
 
 
@@ -196,11 +201,23 @@ def frequency_grid(sys: ct.StateSpace, n: int = _N_GRID) -> np.ndarray:
     return np.logspace(math.log10(lo), math.log10(hi), n)
 
 
-def _response(sys: ct.StateSpace, omega) -> np.ndarray:
+def frequency_response(sys: ct.StateSpace, omega) -> np.ndarray:
     """Frequency response ``C (xI - A)^-1 B + D`` at ``x = jw`` or ``exp(jwT)``.
 
     Batched linear solves over the frequencies (python-control's ``horner`` without
-    slycot loops in Python); SISO gives shape ``(n,)``, MIMO ``(p, m, n)``.
+    slycot loops in Python).
+
+    Parameters
+    ----------
+    sys : control.StateSpace
+        Continuous or discrete (sample time ``T``, s).
+    omega : array_like (n,)
+        rad/s.
+
+    Returns
+    -------
+    ndarray
+        Complex; SISO shape ``(n,)``, MIMO ``(p, m, n)``.
     """
     w = np.atleast_1d(np.asarray(omega, dtype=float))
     A, B, C, D = (np.asarray(m, dtype=float) for m in (sys.A, sys.B, sys.C, sys.D))
@@ -251,12 +268,12 @@ def _crossovers(Lof, w, Lw, mag) -> tuple[list, list]:
 def _peak(f, w, values) -> tuple[float, float]:
     """The largest value of ``f`` (a function of the frequency, rad/s), refined from its
     ``values`` on the grid ``w``: each interior local maximum of the grid within
-    :data:`_PEAK_FRACTION` of the largest is maximised between its two neighbours
+    :data:`PEAK_FRACTION` of the largest is maximised between its two neighbours
     (bounded Brent search in ``ln w``). Returns ``(peak, frequency rad/s)``."""
     values = np.asarray(values, dtype=float)
     k = int(np.argmax(values))
     best, at = float(values[k]), float(w[k])
-    return _maximise_between(f, w, _local_maxima(values, _PEAK_FRACTION * best), best, at)
+    return _maximise_between(f, w, _local_maxima(values, PEAK_FRACTION * best), best, at)
 
 
 def _local_maxima(values: np.ndarray, at_least: float) -> set[int]:
@@ -283,9 +300,10 @@ def _maximise_between(f, w, indices, best: float, at: float) -> tuple[float, flo
     return best, at
 
 
-def _disk_margin(peak: float) -> tuple[float, float, float]:
+def disk_margin_of_peak(peak: float) -> tuple[float, float, float]:
     """Balanced disk margin (skew 0) from the peak of ``|S - 1/2|``, as
-    control.disk_margins: ``alpha = 1 / max |S - 1/2|``, its gain (dB) and phase (deg)."""
+    control.disk_margins: ``(alpha, gain margin dB, phase margin deg)`` with
+    ``alpha = 1 / max |S - 1/2|`` (dimensionless)."""
     alpha = 1 / peak
     if alpha >= 2:
         return alpha, math.inf, 90.0
@@ -339,11 +357,11 @@ def loop_margins(
     discrete = L.isdtime(strict=True)
     dt = L.dt if discrete else None
     w = frequency_grid(L) if omega is None else np.asarray(omega, float)
-    Lw = _response(L, w)
+    Lw = frequency_response(L, w)
     mag = np.abs(Lw)
 
     def Lof(x):
-        return complex(_response(L, [x])[0])
+        return complex(frequency_response(L, [x])[0])
 
     gc, pc = _crossovers(Lof, w, Lw, mag)
     gms = [-1 / Lof(x).real for x in pc]
@@ -388,7 +406,7 @@ def loop_margins(
         if gms:  # as control.stability_margins: the (negative) margin to the crossing
             gm_db = 20 * math.log10(min(gms))
     off_half = _peak(lambda x: abs(1 / (1 + Lof(x)) - 0.5), w, np.abs(S - 0.5))[0]
-    alpha, dgm, dpm = _disk_margin(off_half)
+    alpha, dgm, dpm = disk_margin_of_peak(off_half)
     return LoopMargins(
         name=name,
         discrete=discrete,
@@ -411,7 +429,7 @@ def loop_margins(
     )
 
 
-def _mu_upper(M: np.ndarray) -> float:
+def mu_upper_bound(M: np.ndarray) -> float:
     """Upper bound of mu for a diagonal complex perturbation: min_D sigma(D M D^-1)."""
     n = M.shape[0]
     if n == 1:
@@ -432,9 +450,9 @@ def _mu_upper(M: np.ndarray) -> float:
     return float(min(res.fun, f(x0), np.linalg.norm(M, 2)))
 
 
-def _perron_bounds(M: np.ndarray) -> np.ndarray:
+def perron_mu_bounds(M: np.ndarray) -> np.ndarray:
     """Upper bounds of mu at every frequency at once: ``sigma(D M D^-1)`` with the
-    Perron scaling of ``|M|`` that :func:`_mu_upper` starts from (``M``: ``(n, m, m)``)."""
+    Perron scaling of ``|M|`` that :func:`mu_upper_bound` starts from (``M``: ``(n, m, m)``)."""
     A = np.abs(M) + 1e-300
 
     def perron(X):
@@ -453,13 +471,13 @@ def _grid_mu(M: np.ndarray) -> tuple[float, int | None, np.ndarray]:
     ``sigma_max``, or the Perron-scaled one), stopping when the bound falls below the
     largest ``mu`` found. Returns ``(mu, its index or None, the cheap bounds)``."""
     sig = np.linalg.norm(M, 2, axis=(1, 2))  # unstructured bound, >= mu
-    if M.shape[1] > 1:  # the Perron-scaled bound, tighter, is where _mu_upper starts
-        sig = np.minimum(sig, _perron_bounds(M))
+    if M.shape[1] > 1:  # the Perron-scaled bound, tighter, is where mu_upper_bound starts
+        sig = np.minimum(sig, perron_mu_bounds(M))
     worst, k_worst = 0.0, None
     for k in np.argsort(-sig):  # branch and bound: mu <= the bound
         if sig[k] <= worst:
             break
-        mu = _mu_upper(M[k])
+        mu = mu_upper_bound(M[k])
         if mu > worst:
             worst, k_worst = mu, int(k)
     return worst, k_worst, sig
@@ -468,15 +486,15 @@ def _grid_mu(M: np.ndarray) -> tuple[float, int | None, np.ndarray]:
 def _refine_mu(L, w, bound, worst: float, w_worst: float, k_worst: int) -> tuple[float, float]:
     """The peak of ``mu(S - I/2)`` between grid points: around the worst grid frequency
     and every local maximum of the grid's upper ``bound`` that comes within
-    :data:`_PEAK_FRACTION` of ``worst``, a bounded scalar search in ``ln w`` between the
+    :data:`PEAK_FRACTION` of ``worst``, a bounded scalar search in ``ln w`` between the
     neighbours (as :func:`_peak`). Returns ``(mu, frequency rad/s)``."""
     eye = np.eye(L.ninputs)
 
     def mu_at(x):
-        Lx = _response(L, [x])[..., 0]
-        return _mu_upper(np.linalg.inv(eye + Lx) - 0.5 * eye)
+        Lx = frequency_response(L, [x])[..., 0]
+        return mu_upper_bound(np.linalg.inv(eye + Lx) - 0.5 * eye)
 
-    todo = _local_maxima(bound, _PEAK_FRACTION * worst)
+    todo = _local_maxima(bound, PEAK_FRACTION * worst)
     if 0 < k_worst < len(w) - 1:
         todo.add(k_worst)
     return _maximise_between(mu_at, w, todo, worst, w_worst)
@@ -510,7 +528,7 @@ def multiloop_disk_margin(L: ct.StateSpace, omega=None, *, n_freq: int = 400) ->
     if L.noutputs != m:
         raise InputError("multiloop_disk_margin needs a square loop transfer")
     w = frequency_grid(L, n_freq) if omega is None else np.asarray(omega, float)
-    Lw = np.moveaxis(_response(L, w), -1, 0)  # (n, m, m)
+    Lw = np.moveaxis(frequency_response(L, w), -1, 0)  # (n, m, m)
     eye = np.eye(m)
     M = np.linalg.solve(eye[None] + Lw, np.broadcast_to(eye, Lw.shape)) - 0.5 * eye
     worst, k_worst, sig = _grid_mu(M)

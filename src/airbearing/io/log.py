@@ -48,6 +48,7 @@ import pyarrow.csv as pacsv
 import pyarrow.parquet as pq
 
 from airbearing.errors import InputError
+from airbearing.io.coerce import as_testbed
 from airbearing.io.testbed import Testbed, _atomic_write_bytes
 
 if TYPE_CHECKING:
@@ -653,7 +654,7 @@ def _unwrap_yaw(out: pd.DataFrame, testbed: Testbed | None) -> None:
     jump = (np.abs(step) > _WRAP_STEP) & (wrapped < _WRAP_SLACK) & inside
     if not jump.any() or not np.median(wrapped[inside]) < _SMOOTH_STEP:
         return
-    from airbearing.io.import_map import unwrap
+    from airbearing.io.import_map import unwrap  # cycle: io.import_map imports io.log
 
     new = unwrap(yaw, t)
     turns = np.round((new - yaw) / (2 * math.pi))
@@ -846,7 +847,7 @@ class Log:
         """
         cached = self.__dict__.get("_quality")
         if cached is None:
-            from airbearing.io.quality import assess
+            from airbearing.io.quality import assess  # cycle: io.quality imports io.log
 
             cached = assess(self, self.testbed)
             self.__dict__["_quality"] = cached
@@ -1258,8 +1259,6 @@ def read_log(
     ...
     airbearing.errors.InputError: slew.txt: ...
     """
-    from airbearing.io.coerce import as_testbed
-
     testbed = as_testbed(testbed, optional=True)
     if not isinstance(path, str | os.PathLike):
         raise InputError(f"path={path!r}: expected a log file path (str or path-like)")

@@ -1049,6 +1049,7 @@ def assess(log: Log, testbed: Testbed | None) -> LogQuality:
     InputError
         If ``testbed`` is not a Testbed.
     """
+    # cycle: io.discontinuity imports io.quality
     from airbearing.io.discontinuity import rate_changes
 
     if testbed is not None and not isinstance(testbed, Testbed):
@@ -1059,7 +1060,7 @@ def assess(log: Log, testbed: Testbed | None) -> LogQuality:
     segments = segments_of(t, period)
     groups, scorers, steps = _steps(log, testbed, segments, t, period)
     if steps:  # a step breaks the segment there as a gap does (nothing filled)
-        from airbearing.io.discontinuity import split_at
+        from airbearing.io.discontinuity import split_at  # cycle, as above
 
         segments = split_at(segments, [s.row for s in steps])
         groups, scorers = _groups(log, testbed, segments), {}
@@ -1140,7 +1141,7 @@ def _motion(log: Log, testbed, segments) -> dict:
 def _steps(log: Log, testbed, segments, t, period):
     """The channel groups, the scorers of the rates and attitude, and the steps found
     on them (:mod:`airbearing.io.discontinuity`), merged by row."""
-    from airbearing.io.discontinuity import Discontinuity, find_steps
+    from airbearing.io.discontinuity import Discontinuity, find_steps  # cycle, as above
 
     groups = _groups(log, testbed, segments)
     scorers: dict[str, _Scorer] = {}

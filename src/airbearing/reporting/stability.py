@@ -20,9 +20,9 @@ from airbearing import quaternion as quat
 from airbearing.analysis.simulation.simulate import closed_loop_rollout
 from airbearing.design.loops import Loop, make_loop, with_delay
 from airbearing.design.margins import (
-    _response,
     analyse_loop,
     frequency_grid,
+    frequency_response,
     json_number,
     pole_damping,
 )
@@ -152,7 +152,7 @@ def _bode_nyquist(analysis, loop: Loop, discrete: bool):
         w = frequency_grid(L, 1500)
         if discrete:
             w = w[w <= _BODE_TOP * math.pi / loop.dt]
-        Lw = _response(L, w)
+        Lw = frequency_response(L, w)
         with np.errstate(divide="ignore"):
             mag = 20 * np.log10(np.abs(Lw))
         (line,) = a1.semilogx(w, mag, label=words(name))
@@ -162,14 +162,14 @@ def _bode_nyquist(analysis, loop: Loop, discrete: bool):
         for wp in mg.phase_crossover_rad_s:
             a2.plot(
                 wp,
-                np.degrees(np.angle(complex(_response(L, [wp])[0]))) % 360 - 360,
+                np.degrees(np.angle(complex(frequency_response(L, [wp])[0]))) % 360 - 360,
                 "s",
                 color=line.get_color(),
             )
         ax.plot(Lw.real, Lw.imag, color=line.get_color(), label=words(name))
         ax.plot(Lw.real, -Lw.imag, color=line.get_color(), ls=":", lw=0.8)
         for wc in mg.crossover_rad_s:
-            z = complex(_response(L, [wc])[0])
+            z = complex(frequency_response(L, [wc])[0])
             ax.plot([0, z.real], [0, z.imag], color=line.get_color(), lw=0.6)
     a1.axhline(0, color="k", lw=0.6)
     a2.axhline(-180, color="k", lw=0.6)

@@ -151,6 +151,29 @@ def _segment_order(problem):
     return out
 
 
+def _series(problem):
+    """Per output group, per segment and axis: residual rows in time order and their times."""
+    cached = getattr(problem, "_noise_series", None)
+    if cached is not None:
+        return cached
+    w = problem.windows
+    L = w.length
+    sizes = {"rate": problem.n_rate, "quat": 3, "yaw": 1}
+    offsets, off = [], 0
+    for o in problem.outputs:
+        offsets.append(off)
+        off += sizes[o] * L
+    out: dict = {o: [] for o in problem.outputs}
+    for _, _, idx, t in _segment_order(problem):
+        j, s = idx // L, idx % L
+        for g, o in enumerate(problem.outputs):
+            for a in range(sizes[o]):
+                rows = j * problem.n_win_res + offsets[g] + s * sizes[o] + a
+                out[o].append((rows, np.asarray(t, dtype=float)))
+    problem._noise_series = out
+    return out
+
+
 def normalised_residuals(problem, fit) -> list[Residuals]:
     """The primary output's residual (noise units) per log segment, in time order.
 
@@ -473,8 +496,6 @@ def prewhitened_scores(problem, G: np.ndarray, r: np.ndarray, free=None):
     phi : dict
         ``group -> AR coefficients`` (empty: white).
     """
-    from airbearing.analysis.shooting.measurement_noise import _series
-
     scores = G * r[:, None]
     phis = {}
     for g, (group, series) in enumerate(_series(problem).items()):

@@ -54,7 +54,7 @@ import scipy.sparse as sp
 from scipy.sparse.linalg import splu
 
 from airbearing.analysis.shooting.autoregressive import AR
-from airbearing.analysis.shooting.errors import _segment_order
+from airbearing.analysis.shooting.errors import _series
 from airbearing.analysis.shooting.problem import solve_gram
 from airbearing.analysis.shooting.process_noise import piece_durations
 
@@ -135,29 +135,6 @@ class MeasurementNoise:
 
 # ----------------------------------------------------------------------------
 # the whitening
-
-
-def _series(problem):
-    """Per output group, per segment and axis: residual rows in time order and their times."""
-    cached = getattr(problem, "_noise_series", None)
-    if cached is not None:
-        return cached
-    w = problem.windows
-    L = w.length
-    sizes = {"rate": problem.n_rate, "quat": 3, "yaw": 1}
-    offsets, off = [], 0
-    for o in problem.outputs:
-        offsets.append(off)
-        off += sizes[o] * L
-    out: dict = {o: [] for o in problem.outputs}
-    for _, _, idx, t in _segment_order(problem):
-        j, s = idx // L, idx % L
-        for g, o in enumerate(problem.outputs):
-            for a in range(sizes[o]):
-                rows = j * problem.n_win_res + offsets[g] + s * sizes[o] + a
-                out[o].append((rows, np.asarray(t, dtype=float)))
-    problem._noise_series = out
-    return out
 
 
 def whitening(problem, ar: dict, dt: float):

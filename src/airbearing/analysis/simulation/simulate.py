@@ -129,6 +129,7 @@ class SimResult:
             ``testbed``, ``peak_rate_deg_s``, ``final_rate_deg_s`` (deg/s),
             ``duration_s`` (s), ``samples`` (``max_tilt_deg``, deg, on dof 3).
         """
+        # cycle: scenarios imports simulate
         from airbearing.analysis.simulation.scenarios import free_summary
 
         return {"testbed": self.model.testbed.name, **free_summary(self)}

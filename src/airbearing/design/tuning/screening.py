@@ -9,7 +9,12 @@ import numpy as np
 
 from airbearing.design.linearise import prune_states
 from airbearing.design.loops import Loop, without_momentum_poles
-from airbearing.design.margins import _PEAK_FRACTION, _disk_margin, _mu_upper, _perron_bounds
+from airbearing.design.margins import (
+    PEAK_FRACTION,
+    disk_margin_of_peak,
+    mu_upper_bound,
+    perron_mu_bounds,
+)
 from airbearing.design.tuning.fast_loop import _assemble, _freq, _mats, _step_response
 from airbearing.design.tuning.fast_margins import _SUBGRID, _siso_margins
 from airbearing.design.tuning.responses import (
@@ -139,17 +144,17 @@ class _Fast:
         Perron-scaled largest singular value, where
         :func:`~airbearing.design.margins.multiloop_disk_margin` starts its D-scaling (on
         these loops it ends there to 1e-5 at the peak). Where that cheap bound says the
-        check fails, the D-scaling of the report (:func:`_mu_upper`) decides, frequency by
+        check fails, the D-scaling of the report (:func:`mu_upper_bound`) decides, frequency by
         frequency from the largest, so a loose bound rejects nothing: near the Nyquist
         frequency, where the sampled plant's zeros make ``|M|`` nearly reducible, the
         Perron scaling of seed000-tabletop's mixed loop reads 70 where ``mu`` is 0.5."""
         M = S - 0.5 * np.eye(S.shape[1])
-        bound = np.minimum(np.linalg.norm(M, 2, axis=(1, 2)), _perron_bounds(M))
+        bound = np.minimum(np.linalg.norm(M, 2, axis=(1, 2)), perron_mu_bounds(M))
         for _ in range(bound.size):
             k = int(np.argmax(bound))
             if bound[k] < self.mu_limit:
                 break
-            exact = _mu_upper(M[k])
+            exact = mu_upper_bound(M[k])
             if exact >= self.mu_limit:
                 bound[k] = exact
                 break
@@ -162,7 +167,7 @@ class _Fast:
         finer exact grids between their neighbours (two levels, as the channels' |S|).
 
         Only a peak that can decide the check is refined: none when the grid's peak
-        already fails it, and otherwise those that come within :data:`_PEAK_FRACTION` of
+        already fails it, and otherwise those that come within :data:`PEAK_FRACTION` of
         the largest peak the check allows (:attr:`mu_limit`); the others are reported as
         the grid reads them."""
         bound = self._mu_bound(S)
@@ -173,7 +178,7 @@ class _Fast:
         inner = bound[1:-1]
         local = np.nonzero((inner >= bound[:-2]) & (inner >= bound[2:]))[0] + 1
         eye = np.eye(S.shape[1])
-        for i in local[bound[local] >= _PEAK_FRACTION * self.mu_limit]:
+        for i in local[bound[local] >= PEAK_FRACTION * self.mu_limit]:
             x0, x1 = lw[i - 1], lw[i + 1]
             for _ in range(2):
                 xs = np.linspace(x0, x1, _SUBGRID)
@@ -240,7 +245,7 @@ class _Fast:
         phase, to the :meth:`margins` ``m`` of corner ``c`` (a stable loop with several
         channels; nothing otherwise)."""
         if m["stable"] and m["_S"] is not None and "ml_pm" not in m:
-            _, m["ml_gm"], m["ml_pm"] = _disk_margin(self._simultaneous(c, K, m["_S"]))
+            _, m["ml_gm"], m["ml_pm"] = disk_margin_of_peak(self._simultaneous(c, K, m["_S"]))
 
     def step(self, c, K, wb, settle: bool) -> dict:
         """Overshoot, settling and actuator peaks of the scenario at corner ``c``.
