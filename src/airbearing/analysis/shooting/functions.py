@@ -32,6 +32,17 @@ THETA_SLOTS = 6
 IPOPT_MAX_ITER = 80
 #: IPOPT tolerance (scaled variables: a step of 1 moves the residual by ~1 sigma).
 IPOPT_TOL = 1e-6
+#: IPOPT's acceptable-level test with the objective's change in it: for 2 iterations in a row
+#: the scaled optimality error below 1e-4 AND the objective (half the chi-square) changed by
+#: less than 1e-10 of itself (4e-7 of a chi-square of 4,300: far below one unit). At such
+#: points of a warm-started fit the round-off of a long rollout's gradient kept the dual
+#: infeasibility above ``IPOPT_TOL`` and IPOPT backtracked 15-27 times per iteration
+#: (docs/benchmarks.md, "Where a dof-3 search spends its time").
+OBJECTIVE_STOP = {
+    "ipopt.acceptable_tol": 1e-4,
+    "ipopt.acceptable_obj_change_tol": 1e-10,
+    "ipopt.acceptable_iter": 2,
+}
 #: Relative eigenvalue of the reduced Fisher matrix below which a parameter is not identifiable.
 FISHER_RCOND = 1e-10
 #: Largest number of compiled function sets kept per process.
@@ -849,8 +860,13 @@ class _Call(ca.Callback):
         return self.jac(name)
 
 
-def ipopt_options(max_iter: int) -> dict:
-    """The IPOPT options every fit of the engine shares (quiet, scaled tolerances)."""
+def ipopt_options(max_iter: int, objective_stop: bool = False) -> dict:
+    """The IPOPT options every fit of the engine shares (quiet, scaled tolerances).
+
+    ``objective_stop``: also stop when the objective has converged (``OBJECTIVE_STOP``),
+    for warm-started fits near their optimum only (the process-noise descent): far from it
+    a creeping IPOPT meets the same test.
+    """
     return {
         # a trial point whose replay is not finite is IPOPT's to reject; CasADi's "NaN
         # detected" lines would only reach a notebook's output
@@ -863,6 +879,7 @@ def ipopt_options(max_iter: int) -> dict:
         "ipopt.acceptable_tol": 1e-5,
         "ipopt.acceptable_iter": 3,
         "ipopt.mu_strategy": "adaptive",
+        **(OBJECTIVE_STOP if objective_stop else {}),
     }
 
 

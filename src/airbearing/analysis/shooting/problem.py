@@ -31,6 +31,8 @@ from airbearing.analysis.shooting.windows import WindowSet  # noqa: F401
 from airbearing.errors import SolverError
 from airbearing.models.model import Model
 
+_ACCEPTABLE = "Solved_To_Acceptable_Level"
+
 
 def unscale_columns(J: sp.csc_matrix, scale: np.ndarray) -> sp.csc_matrix:
     """``J @ diag(1 / scale)`` in place: the Jacobian in the unscaled variables."""
@@ -91,6 +93,8 @@ class ShootingProblem:
         self.n_meas = self.group.size  # measurement residuals; process-noise rows follow them
         # process noise (:mod:`.process_noise`): whitening of the continuity defects, or None
         self.penalty = None
+        #: penalised fits also stop where the objective converged (set by the descent)
+        self.objective_stop = False
         self.penalty_logdet = 0.0
         self.process_noise = None
         # coloured measurement noise (:mod:`.measurement_noise`): the whitening of the
@@ -309,6 +313,8 @@ class ShootingProblem:
         z, stats, r, J, Jc = self._solve(v0, Sp, lb, ub, scale, p_base, ineq, mi)
         status = str(stats.get("return_status", "?"))
         level = classify_status(status)
+        if self.objective_stop and self.penalty is not None and status == _ACCEPTABLE:
+            level = "converged"  # the objective converged (functions.OBJECTIVE_STOP)
         if accept_max_iter and status == "Maximum_Iterations_Exceeded":
             level = "warning"  # the last iterate, taken as it is (a baseline far from the data)
         if level == "error":
@@ -352,7 +358,7 @@ class ShootingProblem:
                 raise ValueError("process noise and inequality constraints together")
             from airbearing.analysis.shooting.process_noise import penalised_solver
 
-            solver, _keep = penalised_solver(*self._key(K), mi)
+            solver, _keep = penalised_solver(*self._key(K), mi, self.objective_stop)
             oracle = _keep[-1]
             oracle.set(p_base, Sp, scale, self._data, self.penalty, self.meas_whitening)
             z = solver(x0=x0, lbx=lbx, ubx=ubx)["x"].full().ravel()

@@ -266,7 +266,7 @@ def hessian_pattern(fj, nd: int, nw: int) -> sp.csc_matrix:
     return H
 
 
-def _build_penalised(model, L, nw, K, outputs, substeps, jit, max_iter):
+def _build_penalised(model, L, nw, K, outputs, substeps, jit, max_iter, objective_stop=False):
     fr, fj, _ = _problem_functions(model, L, nw, K, outputs, substeps, jit, True)
     nd = sum(delta_layout(model, outputs))
     n_v = K + nd * nw
@@ -304,16 +304,18 @@ def _build_penalised(model, L, nw, K, outputs, substeps, jit, max_iter):
         {
             "grad_f": GF,
             "hess_lag": H,
-            **ipopt_options(max_iter),
+            **ipopt_options(max_iter, objective_stop),
         },
     )
     return solver, (F, GF, H, f_jac, o)
 
 
-def penalised_solver(model, L, nw, K, outputs, substeps, jit, max_iter):
-    """``(solver, keep)``: IPOPT on the stacked residual ``[r; W c]`` (module doc)."""
-    key = ("penalised", structure_key(model), L, nw, K, outputs, substeps, jit, max_iter)
-    return _cached(key, lambda: _build_penalised(model, L, nw, K, outputs, substeps, jit, max_iter))
+def penalised_solver(model, L, nw, K, outputs, substeps, jit, max_iter, objective_stop=False):
+    """``(solver, keep)``: IPOPT on the stacked residual ``[r; W c]`` (module doc);
+    ``objective_stop`` as :func:`.functions.ipopt_options`."""
+    args = (model, L, nw, K, outputs, substeps, jit, max_iter, objective_stop)
+    key = ("penalised", structure_key(model), *args[1:])
+    return _cached(key, lambda: _build_penalised(*args))
 
 
 # ----------------------------------------------------------------------------
@@ -394,9 +396,14 @@ def estimate_process_noise(
 
     def fit_at(kappa, th, d):
         set_intensity(problem, kappa)
-        return problem.fit(
-            p_base, S, th, lower=lower, upper=upper, delta0=d, name=f"{name} ({kappa:g})"
-        )
+        # warm-started near the optimum: a converged objective ends the fit (OBJECTIVE_STOP)
+        problem.objective_stop = True
+        try:
+            return problem.fit(
+                p_base, S, th, lower=lower, upper=upper, delta0=d, name=f"{name} ({kappa:g})"
+            )
+        finally:
+            problem.objective_stop = False
 
     if measurement and problem.measurement_noise is None:
         # coloured measurement noise first, on nearly free pieces (they absorb the slow part
