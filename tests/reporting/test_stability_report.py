@@ -9,6 +9,7 @@ README writes them (the README test leaves them to this file), and ``gains`` the
 import json
 import os
 
+import numpy as np
 import pytest
 from conftest import README_GAINS_ARGS, README_REPORT_ARGS
 from html_check import bad_text, check_layout, page_text, render, require_chromium
@@ -81,9 +82,23 @@ def test_json_has_every_loop_and_the_required_keys(attitude_report):
 def test_report_tables_have_no_nan_or_inf_text(attitude_report, balancing_report):
     for d in (attitude_report[0], balancing_report):
         assert bad_text((d / "report.html").read_text()) == [], d
-    # the one-sample computation delay puts closed-loop poles at z = 0, where log(z)/dt
-    # (w_n, damping) does not exist: named, not printed as inf/nan
-    assert "delay (z = 0)" in page_text((balancing_report / "report.html").read_text())
+
+
+def test_poles_at_the_origin_and_at_one_are_named_not_nan(tmp_path):
+    """The one-sample computation delay can put closed-loop poles at z = 0 (seed000's mixed
+    balancing loop with the seed gains has them), where log(z)/dt (w_n, damping) does not
+    exist, and an integral action leaves one at z = 1: named in the pole table, not
+    printed as inf/nan (the table a report writes, on those poles)."""
+    from airbearing.reporting.html import Report
+    from airbearing.reporting.stability import _pole_map
+
+    rep = Report("poles")
+    _pole_map(rep, np.array([0j, 0j, 1 + 0j, 0.9 + 0.1j, 0.9 - 0.1j]), 0.05)
+    rep.write(tmp_path / "poles.html")
+    html = (tmp_path / "poles.html").read_text()
+    assert bad_text(html) == []
+    text = page_text(html)
+    assert text.count("delay (z = 0)") == 2 and "integrator" in text
 
 
 @pytest.mark.parametrize("width", [1200, 700], ids=["wide-window", "narrow-window"])
