@@ -135,6 +135,12 @@ def example_case(tmp_path_factory):
 
 #: The demo as the README's first command runs it (``--quick`` in the suite).
 DEMO_ARGS = ["demo", "--out", "demo-out", "--quick"]
+#: The README's (and the slew-tune-report tutorial's) tuning and report commands, as
+#: written: ``tests/reporting/test_stability_report.py`` runs them once and checks their
+#: outputs; the README test checks that they are still the README's.
+README_GAINS_ARGS = ["gains", "cmg-yaw", "--loop", "attitude", "--json", "gains.json"]
+README_REPORT_ARGS = ["report", "cmg-yaw", "--loop", "attitude", "--gains", "gains.json",
+                      "-o", "report.html", "--json", "margins.json"]  # fmt: skip
 
 
 @pytest.fixture(scope="session")

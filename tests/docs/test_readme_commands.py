@@ -4,12 +4,15 @@ Commands are the lines of the README's ```sh (or ```console) fenced blocks that 
 ``airbearing`` (also inside ``a && b`` chains, ``.venv/bin/airbearing``, a ``$`` prompt,
 ``\\`` continuations). They run one after the other in one temporary folder holding a copy
 of ``examples/`` (so a command may use a file an earlier one wrote, as in a fresh clone),
-as new processes, with short durations where an option allows: ``--duration`` at most
-:data:`MAX_DURATION` s. Two blocks are run elsewhere, each exactly once per session:
-the demo (``tests/reporting/test_demo.py``, from the ``demo_run`` fixture, which runs the README's
-demo command with ``--quick``) and the worked example (``tests/docs/test_worked_example.py``,
-which also checks its answer). The README's ```python blocks run in a new interpreter
-from the repository's folder.
+in-process (``airbearing``'s ``main``, as ``tests/cli_run.py`` calls it; the demo below
+runs as a new process), with short durations where an option
+allows: ``--duration`` at most :data:`MAX_DURATION` s. Some blocks are run elsewhere, each
+exactly once per session: the demo (``tests/reporting/test_demo.py``, from the ``demo_run``
+fixture, which runs the README's demo command with ``--quick``), the worked example
+(``tests/docs/test_worked_example.py``, which also checks its answer) and the ``gains`` and
+``report`` commands on ``cmg-yaw`` (``tests/reporting/test_stability_report.py``, as
+written, which checks their outputs). The README's ```python blocks run in a new
+interpreter from the repository's folder.
 """
 
 from __future__ import annotations
@@ -22,7 +25,8 @@ import sys
 from pathlib import Path
 
 import pytest
-from conftest import DEMO_ARGS
+from cli_run import run
+from conftest import DEMO_ARGS, README_GAINS_ARGS, README_REPORT_ARGS
 
 ROOT = Path(__file__).resolve().parents[2]
 README = ROOT / "README.md"
@@ -111,24 +115,27 @@ def test_readme_demo_is_the_suites_demo_run():
     assert demos == [DEMO_ARGS], demos
 
 
+def test_readme_tuning_is_the_stability_report_tests_run():
+    """The README's gains-then-report pair is the one test_stability_report.py runs."""
+    i = COMMANDS.index(README_GAINS_ARGS)
+    assert COMMANDS[i + 1] == README_REPORT_ARGS, COMMANDS[i : i + 2]
+
+
 @pytest.mark.slow
-def test_readme_commands_run(tmp_path):
+def test_readme_commands_run(tmp_path, monkeypatch, capsys):
     assert COMMANDS, "the README shows no airbearing command in a ```sh block"
     shutil.copytree(ROOT / "examples", tmp_path / "examples")
+    monkeypatch.chdir(tmp_path)
     skip = [c for c in COMMANDS if c[0] == "demo"] + worked_example_commands(TEXT)
+    skip += [README_GAINS_ARGS, README_REPORT_ARGS]
     for args in COMMANDS:
         if args in skip:
             continue
         args = shortened(args)
-        out = subprocess.run(
-            [sys.executable, "-m", "airbearing", "--quiet", *args],
-            cwd=tmp_path,
-            capture_output=True,
-            text=True,
-            timeout=900,
-        )
-        assert out.returncode == 0, f"airbearing {' '.join(args)}: {out.stderr[-1500:]}"
-        assert "deprecated" not in out.stderr, f"old spelling in the README: {out.stderr}"
+        code = run(["--quiet", *args])
+        err = capsys.readouterr().err
+        assert code == 0, f"airbearing {' '.join(args)}: {err[-1500:]}"
+        assert "deprecated" not in err, f"old spelling in the README: {err}"
 
 
 @pytest.mark.slow

@@ -19,6 +19,7 @@ from scipy.special import expit
 from airbearing.analysis.campaign import parse_campaign, run_campaign, studies
 from airbearing.analysis.campaign.dispersions import dispersed_columns
 from airbearing.analysis.campaign.spec import with_study
+from airbearing.design.attitude import SEED001_GAINS
 from airbearing.io.testbed import load_testbed
 from airbearing.reporting.checks import check, checks_table
 from airbearing.reporting.html import Report, pretty_key
@@ -323,15 +324,22 @@ def robust_verification_section(report: Report, *, quick: bool = False) -> None:
     # design.tuning loads scipy.optimize: 0.45 s CPU, loaded only when this runs
     from airbearing.design.tuning import Spec, tune
 
-    tuned = tune(load_testbed("cmg-yaw"), "attitude", Spec())
-    gains = tuple(tuned.gains[k] for k in ("K_p", "K_i", "K_w"))
     doc = dict(ROBUST_CAMPAIGN, runs=40 if quick else 120)
-    campaign = dataclasses.replace(parse_campaign(doc, "robust-verification"), gains=gains)
+    campaign = parse_campaign(doc, "robust-verification")
+    if quick:
+        # the quick linear stability section's gains: tuning was a fifth of a quick demo
+        gains = SEED001_GAINS
+        source = "Quick run: seed 001's gains (Table 6; the full demo tunes them first)"
+    else:
+        tuned = tune(load_testbed("cmg-yaw"), "attitude", Spec())
+        gains = tuple(tuned.gains[k] for k in ("K_p", "K_i", "K_w"))
+        source = "Gains from 'airbearing gains cmg-yaw --loop attitude'"
+    campaign = dataclasses.replace(campaign, gains=tuple(float(g) for g in gains))
     df = _run_in_process(campaign)
     e = campaign.spec[0]
     rate = studies.spec_rate(df, e)
     report.paragraph(
-        f"Gains from 'airbearing gains cmg-yaw --loop attitude' (K_p {gains[0]:.3g}, K_i "
+        f"{source} (K_p {gains[0]:.3g}, K_i "
         f"{gains[1]:.3g}, K_w {gains[2]:.3g}), a 180 deg slew, {len(df)} runs with inertia "
         "+-15 %, gyro noise 0-2e-3 rad/s and initial gimbal-angle errors (sigma 0.05 rad): "
         f"{rate['met']} of {rate['runs']} meet {e.describe()} ({rate['fraction']:.0%}, 95 % "
@@ -342,8 +350,9 @@ def robust_verification_section(report: Report, *, quick: bool = False) -> None:
     checks_table(
         report,
         [
-            check(f"runs meeting {e.describe()} (fraction)", ">= 0.95 (gains tuned over the "
-                  "box)", fraction, "95 % interval reaches 0.95",
+            check(f"runs meeting {e.describe()} (fraction)",
+                  ">= 0.95" if quick else ">= 0.95 (gains tuned over the box)", fraction,
+                  "95 % interval reaches 0.95",
                   fraction is not None and rate["ci_high"] >= 0.95,
                   expected="the campaign disperses what the tuner's box does not hold (gyro "
                   "noise up to 2e-3 rad/s on a testbed whose file has none, initial gimbal-"

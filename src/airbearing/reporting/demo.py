@@ -138,8 +138,8 @@ SHOWS = {
     "and the yaw inertia of the CMG testbed (seed 001)",
     "Model discrepancy": "the seed-001 story: a log whose inertia differs from the file, and "
     "the effect the search names",
-    "Campaign: robust verification": "a Monte Carlo campaign of the tuned loop over the "
-    "uncertainty box",
+    "Campaign: robust verification": "a Monte Carlo campaign of the tuned loop (with "
+    "--quick, seed 001's) over the uncertainty box",
     "Campaign: detection rate": "how often the discrepancy search finds an effect of a given "
     "size in noise",
 }
