@@ -146,9 +146,7 @@ FUNCTION_IMPORTS = {
 }
 
 #: Private names imported from another package (module, name): to become public or move.
-PRIVATE_IMPORTS = {
-    ("analysis.discrepancy.revise", "_loglik"),
-}
+PRIVATE_IMPORTS: set = set()
 
 
 def _function_level_imports(path: Path) -> list[int]:

@@ -41,7 +41,7 @@ import numpy as np
 
 from airbearing.analysis.discrepancy.candidates import regression_start, residual_torque
 from airbearing.analysis.discrepancy.words import format_value
-from airbearing.analysis.shooting.process_noise import KAPPA_GRID, _loglik, set_intensity
+from airbearing.analysis.shooting.process_noise import KAPPA_GRID, loglik, set_intensity
 from airbearing.errors import SolverError
 
 __all__ = [
@@ -143,7 +143,7 @@ def _refit(search, problem, lag, chosen, theta, kappa: float, delta0, up: bool =
         set_intensity(problem, q)
         f = problem.fit(p0, free["S"], th, lower=free["lower"], upper=free["upper"],
                         delta0=d, name="revising the named effects on the horizon")  # fmt: skip
-        return f, _loglik(problem, f, k)
+        return f, loglik(problem, f, k)
 
     grid = sorted(set(KAPPA_GRID) | {kappa}, reverse=True)
     i = grid.index(kappa)

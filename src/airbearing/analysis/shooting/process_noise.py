@@ -59,6 +59,7 @@ __all__ = [
     "ProcessNoise",
     "defect_whitening",
     "estimate_process_noise",
+    "loglik",
     "penalised_solver",
 ]
 
@@ -322,8 +323,23 @@ def penalised_solver(model, L, nw, K, outputs, substeps, jit, max_iter, objectiv
 # the intensity
 
 
-def _loglik(problem, fit, k: int) -> float:
-    """Laplace log marginal likelihood (module doc) of a fit at the problem's intensity."""
+def loglik(problem, fit, k: int) -> float:
+    """Laplace log marginal likelihood (module doc) of a fit at the problem's intensity.
+
+    Parameters
+    ----------
+    problem : ShootingProblem
+        The linked-window problem at the intensity the fit was made at.
+    fit : Fit
+        Its fit (``fit.extra["J"]``: the penalised residual's Jacobian).
+    k : int
+        Number of fitted effect parameters (the Jacobian's first ``k`` columns).
+
+    Returns
+    -------
+    float
+        The log marginal likelihood (nats; larger is better).
+    """
     from scipy.sparse.linalg import splu
 
     J = sp.csc_matrix(fit.extra["J"])
@@ -461,7 +477,7 @@ def _descend(problem, fit_at, grid, theta0, delta0, start, k: int) -> dict:
                 if not out:
                     raise
                 break  # a lower intensity the fit cannot reach
-        out[kappa] = (fit, _loglik(problem, fit, k))
+        out[kappa] = (fit, loglik(problem, fit, k))
         _keep_best_jacobian(out, start)
         th, d = fit.theta, fit.delta
     best = max(out, key=lambda a: out[a][1])
@@ -473,7 +489,7 @@ def _descend(problem, fit_at, grid, theta0, delta0, start, k: int) -> dict:
             fit = fit_at(kappa, near.theta, near.delta)
         except SolverError:
             continue
-        out[kappa] = (fit, _loglik(problem, fit, k))
+        out[kappa] = (fit, loglik(problem, fit, k))
         _keep_best_jacobian(out, start)
     return out
 
