@@ -167,9 +167,9 @@ def log_quality(log: Log, testbed: Testbed) -> tuple[tuple, tuple]:
 
     From :func:`airbearing.io.quality.assess`, the package's one rule for gaps and
     outliers; the log's cached :attr:`~airbearing.io.log.Log.quality` when it was read
-    with this testbed.
+    with this testbed or an equal one (a Testbed is a frozen value).
     """
-    if log.testbed is testbed:
+    if log.testbed is testbed or log.testbed == testbed:
         qual = log.quality
     else:
         qual = assess(log, testbed)
