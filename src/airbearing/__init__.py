@@ -43,9 +43,10 @@ _WHERE: dict[str, str] = {
     # simulation and scenarios
     **dict.fromkeys(["SimResult", "simulate"], "airbearing.analysis.simulation.simulate"),
     **dict.fromkeys(
-        ["slew", "slew_summary", "free_oscillation", "free_summary", "spindown"],
+        ["slew", "slew_summary", "free_oscillation", "spindown"],
         "airbearing.analysis.simulation.scenarios",
     ),
+    "free_summary": "airbearing.analysis.simulation.summary",
     **dict.fromkeys(["Rehearsal", "rehearsal_log"], "airbearing.analysis.simulation.rehearsal"),
     # identification
     "identify": "airbearing.analysis.identify",

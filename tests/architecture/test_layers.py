@@ -129,7 +129,6 @@ FUNCTION_IMPORTS = {
     "analysis.shooting.measurement_noise": 3,
     "analysis.shooting.problem": 2,
     "analysis.shooting.process_noise": 4,
-    "analysis.simulation.simulate": 1,
     "api.logs": 1,
     "api.plot": 10,
     "design._control": 1,

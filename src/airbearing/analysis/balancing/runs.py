@@ -37,6 +37,7 @@ from airbearing import quaternion as quat
 from airbearing.analysis.balancing.metrics import BalancingMetrics, balancing_metrics, true_offset
 from airbearing.analysis.balancing.transient import integral_time_constant, settling_time
 from airbearing.analysis.simulation.simulate import SimResult, simulate
+from airbearing.analysis.simulation.summary import MAX_TILT
 from airbearing.design.actuators import MagnetorquerActuator, SliderActuator
 from airbearing.design.balancing import (
     METHODS,
@@ -65,9 +66,6 @@ __all__ = [
 #: Fraction of the vertical offset that seed 004's two-step procedure leaves in the worst
 #: case: "the estimation error limit was found to be of 2% in the worst case" (seed 004).
 STEP2_ERROR = 0.02
-#: rad, largest tilt of a tabletop spherical air bearing: seed 001 Sec. 2 cites +-45 deg
-#: and +-50 deg; the smaller one.
-MAX_TILT = math.radians(45.0)
 #: s, free-floating run for the residual torque: seed 004's 40 s kinetic-energy experiments.
 FREE_FLOAT_DURATION = 40.0
 

@@ -17,6 +17,7 @@ import numpy as np
 import pandas as pd
 
 from airbearing import quaternion as quat
+from airbearing.analysis.simulation.summary import free_summary
 from airbearing.design.controller import Controller
 from airbearing.errors import InputError
 from airbearing.io.log import Log
@@ -129,9 +130,6 @@ class SimResult:
             ``testbed``, ``peak_rate_deg_s``, ``final_rate_deg_s`` (deg/s),
             ``duration_s`` (s), ``samples`` (``max_tilt_deg``, deg, on dof 3).
         """
-        # cycle: scenarios imports simulate
-        from airbearing.analysis.simulation.scenarios import free_summary
-
         return {"testbed": self.model.testbed.name, **free_summary(self)}
 
     def to_pandas(self):
