@@ -36,17 +36,20 @@ def call(progress: Callable | None) -> Progress:
     return silent if progress is None else progress
 
 
-def expect(progress: Callable | None, weights) -> None:
+def expect(progress: Callable | None, weights, *, min_share: float = 0.0) -> None:
     """Tell ``progress`` how long each step is expected to take, relative to the others.
 
     ``weights[k]`` is the expected length of step ``k`` (any unit; a display uses only
     their ratios), so an estimate of the time left counts the work left rather than the
-    steps left (the demo's sections differ 100-fold). A ``progress`` without an
-    ``expect`` method (a plain function) is not told.
+    steps left (the demo's sections differ 100-fold). ``min_share`` (0-1): no estimate
+    before this share of the expected work is done, when the first steps are too short
+    to set the pace of the rest. A ``progress`` without an ``expect`` method (a plain
+    function) is not told.
     """
     tell = getattr(progress, "expect", None)
     if callable(tell):
-        tell([float(w) for w in weights])
+        w = [float(x) for x in weights]
+        tell(w, min_share=float(min_share)) if min_share > 0 else tell(w)
 
 
 class TimeLeft:
@@ -71,8 +74,11 @@ class TimeLeft:
 
     Steps of unequal length: with :meth:`expect` weights the share of the work done
     replaces ``done / total`` (the steps' expected lengths, e.g. a first run's compiling
-    included). Without them, the time spent compiling (``excluded``) is left out of the
-    pace: it happens once, and the steps after it run at the pace of a warm cache.
+    included), and no estimate is shown before the share of the work given to
+    :meth:`expect` is done (the demo's first sections are a second of imports and a
+    table: extrapolated, a second's jitter there is a twofold error on the whole).
+    Without weights, the time spent compiling (``excluded``) is left out of the pace: it
+    happens once, and the steps after it run at the pace of a warm cache.
 
     Parameters
     ----------
@@ -93,6 +99,7 @@ class TimeLeft:
         self.excluded = excluded
         self.excluded0 = excluded() if excluded is not None else 0.0
         self.weights: list[float] | None = None
+        self.min_share = 0.0
         self.shown: float | None = None
         self.uncertainty = 0.0
         self.at = start
@@ -110,7 +117,8 @@ class TimeLeft:
             work, whole = self._share(done, total)
             if self.weights is None and self.excluded is not None:
                 elapsed = max(elapsed - (self.excluded() - self.excluded0), 0.0)
-            if work <= 0:
+            weighted = self.weights is not None and len(self.weights) == int(total)
+            if work <= 0 or (weighted and work < self.min_share * whole):
                 return None
             raw = elapsed * (whole - work) / work
             unc = raw / done**0.5
@@ -124,10 +132,12 @@ class TimeLeft:
             return None
         return left, self.uncertainty
 
-    def expect(self, weights) -> None:
-        """The steps' expected lengths (relative): see :func:`airbearing.progress.expect`."""
+    def expect(self, weights, min_share: float = 0.0) -> None:
+        """The steps' expected lengths (relative) and the share of them done before an
+        estimate: see :func:`airbearing.progress.expect`."""
         weights = [max(float(w), 0.0) for w in weights]
         self.weights = weights if sum(weights) > 0 else None
+        self.min_share = float(min_share)
 
     def _share(self, done: float, total: float) -> tuple[float, float]:
         """``(work done, whole work)``: weighted when the weights match the steps."""

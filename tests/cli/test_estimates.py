@@ -88,3 +88,42 @@ def test_the_search_tells_the_display_before_its_first_estimate():
     assert len(weights) == seen[-1][1]
     assert all(done == 0 for done, _ in seen[:at]) and seen[at][0] == 1
     assert all(w > 0 for w in weights)
+
+
+def test_no_estimate_before_the_share_of_work_asked_for():
+    # the demo's first sections: one second of a run whose sections weigh 1:4:36:330 s;
+    # extrapolating that second would carry its jitter a hundredfold into the whole
+    left = TimeLeft(0.0)
+    left.expect([1.0, 4.0, 36.0, 330.0], min_share=0.05)
+    assert left.update(1, 4, 1.0) is None
+    assert left.update(2, 4, 5.0) is None  # 5 of 371: 1.3 %
+    est, _ = left.update(3, 4, 41.0)  # 41 of 371: the pace of the work done
+    assert est == pytest.approx(330.0)
+    # without a share asked for, the first step sets the pace
+    left = TimeLeft(0.0)
+    left.expect([1.0, 4.0, 36.0, 330.0])
+    assert left.update(1, 4, 1.0)[0] == pytest.approx(370.0)
+
+
+def test_the_demo_asks_for_a_share_before_its_first_estimate(monkeypatch):
+    import airbearing as ab
+    from airbearing.reporting import demo
+
+    told = []
+
+    class Display:
+        def __call__(self, what, done=None, total=None):
+            raise KeyboardInterrupt  # stop at the first section: only the telling matters
+
+        def expect(self, weights, min_share=0.0):
+            told.append(min_share)
+
+    with pytest.raises(KeyboardInterrupt):
+        ab.run_demo("unused", quick=True, progress=Display())
+    assert told == [demo.FIRST_ESTIMATE_SHARE]
+    # in a full demo (warm or first run) the first two sections weigh less than that
+    # share: their pace, a second or two of imports and tables, does not set the estimate
+    # (in --quick, 8 % of a shorter run, the second does)
+    for col in (0, 1):
+        w = [demo.SECTION_COST[t][col] for t, _ in demo.SECTIONS]
+        assert sum(w[:2]) < demo.FIRST_ESTIMATE_SHARE * sum(w) <= sum(w[:3])

@@ -97,9 +97,9 @@ class _Plain:
         self.timer: threading.Timer | None = None
         self.lock = threading.Lock()
 
-    def expect(self, weights) -> None:
+    def expect(self, weights, min_share: float = 0.0) -> None:
         """The steps' expected lengths (:func:`airbearing.progress.expect`)."""
-        self.left.expect(weights)
+        self.left.expect(weights, min_share)
 
     def _flush(self) -> None:
         with self.lock:
@@ -144,9 +144,9 @@ class _Rich:
         self.label = label
         self.left = _time_left(time.monotonic())
 
-    def expect(self, weights) -> None:
+    def expect(self, weights, min_share: float = 0.0) -> None:
         """The steps' expected lengths (:func:`airbearing.progress.expect`)."""
-        self.left.expect(weights)
+        self.left.expect(weights, min_share)
 
     def __call__(self, what: str, done=None, total=None) -> None:
         check_interrupt()
