@@ -12,15 +12,16 @@ state-space loop, evaluated on ``z = exp(j w T)`` for a discrete loop); crossove
 bracketed on a dense logarithmic grid and refined with Brent's method on the same
 python-control evaluation. (``control.stability_margins`` converts to polynomials, which
 loses all accuracy for these loops whose integral poles sit within 1e-6 of ``z = 1``;
-the test suite checks the two agree where both are accurate.) The peaks (of ``|S|``,
-``|T|``, ``|S - 1/2|`` and of ``mu``) are refined the same way: every local maximum of the
+the test suite checks the two agree where both are accurate.) The peaks of ``|S|``,
+``|T|`` and ``|S - 1/2|`` are refined between grid points: every local maximum of the
 grid within :data:`PEAK_FRACTION` of the largest is maximised between its two
 neighbours by a golden-section search in ``ln w``, every candidate at once (one
-batched evaluation of the frequency response a step; to 2e-7 in ``ln w``, so a peak of
-damping above 1e-3 is read to better than 1e-7 relative), so a
-lightly damped peak that falls between grid points is not read low (seed000-tabletop's
-mixed loop with tuned gains: |S| 1.220 on a 1000-point grid, 1.248 refined and on a
-dense grid).
+batched evaluation of the frequency response a step, to 2e-7 in ``ln w``: a peak of
+damping above 1e-3 is read to better than 1e-7 relative), so a lightly damped peak that
+falls between grid points is not read low (seed000-tabletop's mixed loop with tuned
+gains: |S| 1.220 on a 1000-point grid, 1.248 refined and on a dense grid). The peak of
+``mu`` is refined on the same candidates, through its cheap upper bound first
+(:func:`_refine_mu`).
 
 For a MIMO loop, :func:`multiloop_disk_margin` gives the disk margin for simultaneous
 independent perturbations of every channel: ``1 / max_w mu(S - I/2)`` with ``mu``
@@ -35,7 +36,7 @@ import math
 from dataclasses import asdict, dataclass, field
 
 import numpy as np
-from scipy.optimize import brentq, minimize
+from scipy.optimize import brentq, minimize, minimize_scalar
 
 from airbearing.design import _control as ct
 from airbearing.errors import InputError
@@ -66,6 +67,9 @@ _SQRT_HALF = 1 / math.sqrt(2)
 PEAK_FRACTION = 0.8
 _PEAK_XTOL = 1e-7  # the refined peak's frequency, in ln w
 _GOLDEN = (math.sqrt(5) - 1) / 2
+# where the D-scaled mu at the peak of the cheap bound comes this close (relative) to it,
+# the peak of mu between those grid points is that mu to this tolerance
+_MU_TIGHT = 1e-9
 
 
 @dataclass(frozen=True)
@@ -304,22 +308,6 @@ def _golden_max(f, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarr
     return top, x_top
 
 
-def _maximise_between(f, w, indices, best: float, at: float) -> tuple[float, float]:
-    """``f`` maximised between the grid neighbours of each of ``indices`` (golden-section
-    search in ``ln w`` on all of them at once, :func:`_golden_max`; ``f`` takes and
-    returns arrays), starting from the value ``best`` at frequency ``at`` (rad/s).
-    Returns ``(largest value, its frequency rad/s)``."""
-    idx = np.array(sorted(indices), dtype=int)
-    if not idx.size:
-        return best, at
-    lw = np.log(w)
-    top, x_top = _golden_max(f, lw[idx - 1], lw[idx + 1])
-    k = int(np.argmax(top))
-    if top[k] > best:
-        best, at = float(top[k]), math.exp(float(x_top[k]))
-    return best, at
-
-
 def _sensitivity_peaks(Lof, w, Lw) -> tuple[float, float, float]:
     """The peaks of ``|S|``, ``|T|`` and ``|S - 1/2|`` of a SISO loop whose response on the
     grid ``w`` (rad/s) is ``Lw``: each interior local maximum of the grid within
@@ -534,18 +522,55 @@ def _grid_mu(M: np.ndarray) -> tuple[float, int | None, np.ndarray]:
 def _refine_mu(L, w, bound, worst: float, w_worst: float, k_worst: int) -> tuple[float, float]:
     """The peak of ``mu(S - I/2)`` between grid points: around the worst grid frequency
     and every local maximum of the grid's upper ``bound`` that comes within
-    :data:`PEAK_FRACTION` of ``worst``, a golden-section search in ``ln w`` between the
-    neighbours (:func:`_maximise_between`). Returns ``(mu, frequency rad/s)``."""
+    :data:`PEAK_FRACTION` of ``worst``, between the neighbours.
+
+    The cheap bound (``sigma_max`` or the Perron-scaled one, >= ``mu``, vectorised) is
+    maximised first in every bracket at once (:func:`_golden_max`); a bracket whose bound
+    peaks below the largest ``mu`` found cannot hold a larger one and is left. Where the
+    D-scaled ``mu`` at the bound's peak comes within :data:`_MU_TIGHT` of it, ``mu``'s
+    peak in the bracket lies between the two (``mu <= bound`` everywhere), and that ``mu``
+    is taken; elsewhere (a loose bound) ``mu`` itself is maximised in the bracket
+    (bounded scalar search in ``ln w``, scipy ``minimize_scalar``). Returns ``(mu, frequency
+    rad/s)``."""
     eye = np.eye(L.ninputs)
 
-    def mu_at(x):
+    def sensitivity(x):
         Lx = np.moveaxis(frequency_response(L, x), -1, 0)
-        return np.array([mu_upper_bound(np.linalg.inv(eye + Lk) - 0.5 * eye) for Lk in Lx])
+        return np.linalg.solve(eye[None] + Lx, np.broadcast_to(eye, Lx.shape)) - 0.5 * eye
+
+    def bound_at(x):
+        M = sensitivity(x)
+        return np.minimum(np.linalg.norm(M, 2, axis=(1, 2)), perron_mu_bounds(M))
+
+    def mu_at(x):
+        return np.array([mu_upper_bound(Mk) for Mk in sensitivity(x)])
 
     todo = _local_maxima(bound, PEAK_FRACTION * worst)
     if 0 < k_worst < len(w) - 1:
         todo.add(k_worst)
-    return _maximise_between(mu_at, w, todo, worst, w_worst)
+    if not todo:
+        return worst, w_worst
+    idx = np.array(sorted(todo), dtype=int)
+    lw = np.log(w)
+    top, x_top = _golden_max(bound_at, lw[idx - 1], lw[idx + 1])
+    for k in np.argsort(-top):
+        if top[k] <= worst:
+            break  # the bound of this bracket and of every one after it is below mu found
+        mu = float(mu_at(np.exp(x_top[k : k + 1]))[0])
+        if mu >= top[k] * (1 - _MU_TIGHT):
+            if mu > worst:
+                worst, w_worst = mu, math.exp(float(x_top[k]))
+        else:  # one bracket: Brent's bounded search needs fewer (costly) mu than golden
+            i = idx[k]
+            r = minimize_scalar(
+                lambda x: -mu_at(np.exp([x]))[0],
+                bounds=(lw[i - 1], lw[i + 1]),
+                method="bounded",
+                options={"xatol": _PEAK_XTOL},
+            )
+            if -r.fun > worst:
+                worst, w_worst = float(-r.fun), math.exp(float(r.x))
+    return worst, w_worst
 
 
 def multiloop_disk_margin(L: ct.StateSpace, omega=None, *, n_freq: int = 400) -> dict:
