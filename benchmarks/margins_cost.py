@@ -9,7 +9,8 @@ For each loop of each built-in testbed (``airbearing testbed list``; the alias
 discrete loop, of ``multiloop_disk_margin`` (loops with several channels) and of the whole
 ``stability_report`` (margins of three loop variants, every corner of the uncertainty box,
 the multi-loop margin at every corner, the responses and the figures), with the number of
-calls of ``frequency_response`` and of frequencies it evaluated; then one ``tune`` (the
+calls of ``frequency_response`` and of frequencies it evaluated, and the CPU time (this
+process's, every thread); then one ``tune`` (the
 CMG attitude loop of ``cmg-yaw``). The machine is shared: say the load beside the times.
 """
 
@@ -60,10 +61,10 @@ class _Counter:
 
 def _timed(fn):
     with _Counter() as c:
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         out = fn()
-        dt = time.perf_counter() - t0
-    return out, dt, c.calls, c.points
+        dt, cpu = time.perf_counter() - t0, time.process_time() - c0
+    return out, (dt, cpu), c.calls, c.points
 
 
 def _cases():
@@ -77,13 +78,17 @@ def _cases():
             yield name, tb, loop, lp
 
 
-def _row(label, dt, calls, points):
-    print(f"  {label:<24} {dt:8.3f} s {calls:7d} calls {points:9d} freqs", flush=True)
+def _row(label, times, calls, points):
+    wall, cpu = times
+    print(
+        f"  {label:<22} {wall:8.3f} s wall {cpu:8.3f} s CPU {calls:7d} calls {points:8d} freqs",
+        flush=True,
+    )
 
 
 def run(do_tune: bool) -> dict:
     results = {}
-    totals = {"loop_margins": 0.0, "multiloop": 0.0, "report": 0.0}
+    totals = {"loop_margins": 0.0, "multiloop": 0.0, "report": 0.0}  # CPU, s
     for name, tb, loop, lp in _cases():
         print(f"{name} / {loop} ({len(lp.channels)} channels)")
 
@@ -94,9 +99,9 @@ def run(do_tune: bool) -> dict:
                 out[ch] = loop_margins(L, name=ch, omega=frequency_grid(L))
             return out
 
-        siso, dt, calls, pts = _timed(margins_all)
-        totals["loop_margins"] += dt
-        _row("loop_margins", dt, calls, pts)
+        siso, times, calls, pts = _timed(margins_all)
+        totals["loop_margins"] += times[1]
+        _row("loop_margins", times, calls, pts)
         entry = {
             ch: {
                 "sensitivity_peak": m.sensitivity_peak,
@@ -108,24 +113,24 @@ def run(do_tune: bool) -> dict:
             for ch, m in siso.items()
         }
         if len(lp.channels) > 1:
-            ml, dt, calls, pts = _timed(
+            ml, times, calls, pts = _timed(
                 lambda lp=lp: multiloop_disk_margin(lp.loop_transfer(None, discrete=True))
             )
-            totals["multiloop"] += dt
-            _row("multiloop_disk_margin", dt, calls, pts)
+            totals["multiloop"] += times[1]
+            _row("multiloop_disk_margin", times, calls, pts)
             entry["multiloop"] = {"disk_margin": ml["disk_margin"]}
-        (_, data), dt, calls, pts = _timed(lambda tb=tb, loop=loop: stability_report(tb, loop))
-        totals["report"] += dt
-        _row("stability_report", dt, calls, pts)
+        (_, data), times, calls, pts = _timed(lambda tb=tb, loop=loop: stability_report(tb, loop))
+        totals["report"] += times[1]
+        _row("stability_report", times, calls, pts)
         entry["report_worst"] = {
             k: v for k, v in data.get("worst", {}).items() if isinstance(v, float | int)
         }
         results[f"{name}/{loop}"] = entry
-    print("totals: " + ", ".join(f"{k} {v:.2f} s" for k, v in totals.items()))
+    print("CPU totals: " + ", ".join(f"{k} {v:.2f} s" for k, v in totals.items()))
     if do_tune:
-        res, dt, calls, pts = _timed(lambda: tune(load_testbed("cmg-yaw"), "attitude"))
+        res, times, calls, pts = _timed(lambda: tune(load_testbed("cmg-yaw"), "attitude"))
         print("tune cmg-yaw / attitude")
-        _row("tune", dt, calls, pts)
+        _row("tune", times, calls, pts)
         results["tune"] = {k: float(v) for k, v in res.gains.items()}
     return results
 
