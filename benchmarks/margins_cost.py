@@ -122,8 +122,10 @@ def run(do_tune: bool) -> dict:
         (_, data), times, calls, pts = _timed(lambda tb=tb, loop=loop: stability_report(tb, loop))
         totals["report"] += times[1]
         _row("stability_report", times, calls, pts)
-        entry["report_worst"] = {
-            k: v for k, v in data.get("worst", {}).items() if isinstance(v, float | int)
+        entry["report"] = {  # the report's JSON document: margins, checks, worst case
+            k: data[k]
+            for k in ("loops", "multiloop", "continuous", "without_delay", "worst_case", "checks")
+            if k in data
         }
         results[f"{name}/{loop}"] = entry
     print("CPU totals: " + ", ".join(f"{k} {v:.2f} s" for k, v in totals.items()))
@@ -135,6 +137,10 @@ def run(do_tune: bool) -> dict:
     return results
 
 
+def _number(x) -> bool:
+    return isinstance(x, int | float) and not isinstance(x, bool)
+
+
 def compare(old: str, new: str) -> None:
     """The largest relative difference of every number of two ``--json`` files."""
     with open(old) as f:
@@ -144,16 +150,21 @@ def compare(old: str, new: str) -> None:
     worst = []
 
     def walk(x, y, path):
-        if isinstance(x, dict):
+        if isinstance(x, dict) and isinstance(y, dict):
             for k in x:
                 walk(x[k], y.get(k), f"{path}/{k}")
-        elif isinstance(x, int | float) and isinstance(y, int | float) and x is not True:
+        elif isinstance(x, list) and isinstance(y, list) and len(x) == len(y):
+            for k, (u, v) in enumerate(zip(x, y, strict=True)):
+                walk(u, v, f"{path}/{k}")
+        elif _number(x) and _number(y):
             if math.isfinite(x) and math.isfinite(y) and x != y:
                 worst.append((abs(x - y) / max(abs(x), 1e-300), path, x, y))
+        elif x != y:  # a flag, a text, a null or a list's length differs
+            worst.append((math.inf, path, x, y))
 
     walk(a, b, "")
     worst.sort(reverse=True)
-    print(f"{len(worst)} numbers differ")
+    print(f"{len(worst)} values differ")
     for rel, path, x, y in worst[:15]:
         print(f"  {rel:.2e}  {path}: {x!r} -> {y!r}")
 
