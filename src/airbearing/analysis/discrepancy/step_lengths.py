@@ -19,16 +19,17 @@ __all__ = ["LATER_COMPILES", "STEP_FITS", "step_lengths"]
 #: (fitted only when its one-value form is significant), the round's own work
 #: (cross-validation, regression starts, the shared Jacobian), the horizon (the
 #: process-noise grid on linked pieces, shorter pieces, the named effects' errors: two
-#: thirds of a search). Later rounds start next to the answer: ``"later round"`` scales
-#: their candidates. From a first and a second run of a 120 s seed004-platform free
-#: oscillation (docs/benchmarks.md, "Time estimates").
+#: thirds to five sixths of a search). Later rounds start next to the answer:
+#: ``"later round"`` scales their candidates. From first runs of a 120 s seed004-platform
+#: free oscillation at 20 Hz and at 50 Hz (docs/benchmarks.md, "Time estimates"): the
+#: horizon took 46 nominal fits of the 50 Hz log.
 STEP_FITS = {
     "screened": 0.05,
     "fit": 2.0,
     "per axis": 1.0,
     "round": 0.3,
     "later round": 0.25,
-    "horizon": 30.0,
+    "horizon": 45.0,
 }
 #: Compiling after the first step, in units of the first step's own compiling (a first run
 #: on this structure): the first round builds the lag model's and the screen's structures.
