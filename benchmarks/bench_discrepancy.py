@@ -127,7 +127,7 @@ def cli(repeat: int = 3) -> None:
     def one(log: Path) -> tuple[float, float]:
         before = resource.getrusage(resource.RUSAGE_CHILDREN)
         t0 = time.perf_counter()
-        subprocess.run([*exe, str(log), "--json", str(work / "d.json")], check=True)
+        subprocess.run([*exe, str(log), "--json", str(work / "d.json"), "--force"], check=True)
         wall = time.perf_counter() - t0
         after = resource.getrusage(resource.RUSAGE_CHILDREN)
         cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
