@@ -140,6 +140,18 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from airbearing.errors import InputError
+from airbearing.io.discontinuity import (
+    _CHI2_3_MEDIAN,
+    _MAD_TO_SIGMA,
+    CHI2_3_THRESHOLD,
+    Z_THRESHOLD,
+    Discontinuity,
+    RowFinding,
+    find_steps,
+    poly_weights,
+    rate_changes,
+    split_at,
+)
 from airbearing.io.gyro_check import gyro_disagreement
 from airbearing.io.import_map import unwrap
 from airbearing.io.local_fits import LOCAL as _LOCAL
@@ -175,15 +187,8 @@ __all__ = [
     "find_outliers",
 ]
 
-#: Normalised residual (robust noise scales) above which one channel's sample is
-#: suspect: two-sided Gaussian tail probability 2e-9 (scipy.stats.norm.isf(1e-9) = 5.998).
-Z_THRESHOLD = 6.0
-#: Squared normalised quaternion residual above which a sample is suspect:
-#: chi-square with 3 degrees of freedom at tail probability 2e-9
-#: (scipy.stats.chi2.isf(2e-9, 3) = 43.42).
-CHI2_3_THRESHOLD = 43.42
-_CHI2_3_MEDIAN = 2.3660  # scipy.stats.chi2.median(3)
-_MAD_TO_SIGMA = 1.4826  # 1 / Phi^-1(3/4): MAD of a Gaussian -> its standard deviation
+# Z_THRESHOLD, CHI2_3_THRESHOLD and RowFinding are defined in io.discontinuity (which
+# the step detector shares with this rule) and exported from here too.
 #: The local fits tried, ``(k, p)``: k samples each side, polynomial degree p.
 FITS: tuple[tuple[int, int], ...] = ((3, 2), (4, 4), (5, 6))
 _MAX_RUN = 2  # longest run of consecutive suspects that is an isolated glitch
@@ -204,28 +209,6 @@ _SCALE_ROWS = 2000  # rows spread over the log on which the noise scales are mea
 _MIN_SCALE_SAMPLES = 8  # fewer residuals than this give no scale (the floor is used)
 _RECOMPUTE = 3  # rows within this many k of a newly excluded sample are refitted
 _ROUGH = 0.2  # noise-free channels: scale floor per unit median |second difference|
-
-
-@dataclass(frozen=True)
-class RowFinding:
-    """Something found at one row of a log (an outlier, a step): where, in which columns,
-    why and how strongly (see the subclasses)."""
-
-    row: int
-    t: float
-    columns: tuple[str, ...]
-    reason: str
-    score: float
-
-    def to_json(self) -> dict:
-        """``{"row", "t", "columns", "reason", "score"}``."""
-        return {
-            "row": self.row,
-            "t": self.t,
-            "columns": list(self.columns),
-            "reason": self.reason,
-            "score": self.score,
-        }
 
 
 @dataclass(frozen=True)
@@ -537,7 +520,9 @@ def _shape_residuals(
     ``out[a]`` is ``_normalised(group, t, segments, good, k, p, scale, rows, shape=a)[0]``
     for ``a = 0 .. 2k``, with the fast path of `local_fits.loo` (regular windows: the
     weights of their shape) taken for all shapes at once; the rows whose window is
-    not regular go through :func:`_normalised` itself.
+    not regular have the least-squares weights of their own window, all rows of a
+    shape at once (:func:`airbearing.io.discontinuity.poly_weights`: the same numbers as
+    `local_fits.loo_reference` to its rounding).
     """
     n_shapes = 2 * k + 1
     out = np.full((n_shapes, rows.size, group.values.shape[1]), np.nan)
@@ -556,7 +541,6 @@ def _shape_residuals(
     tol = _REGULAR_ULPS * np.spacing(big)
     regular = fits & (np.max(dt, axis=-1) - np.min(dt, axis=-1) <= tol)
     x = group.values
-    good = None
     for a in range(n_shapes):
         at = rows[regular[a]]
         if at.size:
@@ -569,11 +553,16 @@ def _shape_residuals(
             if group.wrap:
                 r = np.mod(r + np.pi, 2 * np.pi) - np.pi
             out[a, regular[a]] = r / np.sqrt(1.0 + float(w @ w))
-        other = fits[a] & ~regular[a]
-        if other.any():
-            good = np.ones(t.size, dtype=bool) if good is None else good
-            d, _ = _normalised(group, t, segments, good, k, p, scale, rows[other], shape=a)
-            out[a, other] = d
+        other = np.flatnonzero(fits[a] & ~regular[a])
+        if other.size:  # jittered windows: the least-squares weights of each, all at once
+            at = rows[other]
+            offsets = np.r_[-np.arange(a, 0, -1), np.arange(1, 2 * k - a + 1)]
+            nb = at[:, None] + offsets
+            w = poly_weights(t[nb] - t[at][:, None], p, np.zeros((at.size, 1)))[:, 0]
+            r = x[at] - np.einsum("mj,mjc->mc", w, x[nb])
+            if group.wrap:
+                r = np.mod(r + np.pi, 2 * np.pi) - np.pi
+            out[a, other] = r / np.sqrt(1.0 + np.sum(w * w, axis=1))[:, None]
     return out
 
 
@@ -1049,9 +1038,6 @@ def assess(log: Log, testbed: Testbed | None) -> LogQuality:
     InputError
         If ``testbed`` is not a Testbed.
     """
-    # cycle: io.discontinuity imports io.quality
-    from airbearing.io.discontinuity import rate_changes
-
     if testbed is not None and not isinstance(testbed, Testbed):
         raise InputError(f"{log.source}: assess needs a Testbed, got {type(testbed).__name__}")
     t = log.data["t"].to_numpy(dtype=float)
@@ -1060,8 +1046,6 @@ def assess(log: Log, testbed: Testbed | None) -> LogQuality:
     segments = segments_of(t, period)
     groups, scorers, steps = _steps(log, testbed, segments, t, period)
     if steps:  # a step breaks the segment there as a gap does (nothing filled)
-        from airbearing.io.discontinuity import split_at  # cycle, as above
-
         segments = split_at(segments, [s.row for s in steps])
         groups, scorers = _groups(log, testbed, segments), {}
     dt = np.diff(t)
@@ -1141,8 +1125,6 @@ def _motion(log: Log, testbed, segments) -> dict:
 def _steps(log: Log, testbed, segments, t, period):
     """The channel groups, the scorers of the rates and attitude, and the steps found
     on them (:mod:`airbearing.io.discontinuity`), merged by row."""
-    from airbearing.io.discontinuity import Discontinuity, find_steps  # cycle, as above
-
     groups = _groups(log, testbed, segments)
     scorers: dict[str, _Scorer] = {}
     found: dict[int, tuple[list[str], float]] = {}
