@@ -156,10 +156,12 @@ from airbearing.io.gyro_check import gyro_disagreement
 from airbearing.io.import_map import unwrap
 from airbearing.io.local_fits import LOCAL as _LOCAL
 from airbearing.io.local_fits import REGULAR_ULPS as _REGULAR_ULPS
-from airbearing.io.local_fits import loo as _loo
+from airbearing.io.local_fits import loo as _loo_regular
 from airbearing.io.local_fits import noise_gain as _noise_gain
+from airbearing.io.local_fits import regular_span as _regular_span
 from airbearing.io.local_fits import regular_weights as _regular_weights
 from airbearing.io.local_fits import window_median as _window_median
+from airbearing.io.local_fits import window_shape as _window_shape
 from airbearing.io.log import (
     _DIPOLES,
     _GIMBAL_RATES,
@@ -447,6 +449,36 @@ class _Group:
     sided: bool = False  # inputs: the best of the centred and one-sided fits (module doc)
     # rows next to a command's switch: the best of the three fits there too (module doc)
     switch_rows: np.ndarray | None = None
+
+
+def _loo(t, x, good, k, p, scale, rows, shape=None):
+    """`local_fits.loo` (the parameters and returns are its own), with the windows that
+    are complete (``2k`` neighbours, all good) but not regular (a jittered clock) fitted
+    all at once (:func:`airbearing.io.discontinuity.poly_weights`) instead of one Gram
+    solve per row: the same least-squares prediction, equal to its rounding."""
+    a, b = _window_shape(t.size, k, rows, shape)
+    full = (a + b) == 2 * k
+    if rows.size == 0 or not full.any():
+        return _loo_regular(t, x, good, k, p, scale, rows, shape)
+    j = np.arange(2 * k)[None, :]
+    nb = np.where(
+        j < a[:, None], rows[:, None] - a[:, None] + j, rows[:, None] + 1 + j - a[:, None]
+    )
+    nb = np.clip(nb, 0, t.size - 1)
+    batch = full & np.all(good[nb], axis=1)
+    batch &= ~_regular_span(t, good, rows, a, b, k)
+    if not batch.any():
+        return _loo_regular(t, x, good, k, p, scale, rows, shape)
+    r = np.full((rows.size, x.shape[1]), np.nan)
+    h = np.full(rows.size, np.nan)
+    rest = ~batch
+    if rest.any():
+        r[rest], h[rest], _ = _loo_regular(t, x, good, k, p, scale, rows[rest], shape)
+    at, nb = rows[batch], nb[batch]
+    w = poly_weights(t[nb] - t[at][:, None], p, np.zeros((at.size, 1)))[:, 0]
+    r[batch] = x[at] - np.einsum("mj,mjc->mc", w, x[nb])
+    h[batch] = np.sum(w * w, axis=1)
+    return r, h, a
 
 
 def _normalised(
@@ -888,7 +920,8 @@ def find_outliers(
 # channel groups of a log
 
 
-def _groups(log: Log, testbed: Testbed | None, segments) -> list[_Group]:
+def _groups(log: Log, testbed: Testbed | None, segments, switch: np.ndarray | None) -> list[_Group]:
+    """The channel groups of a log; ``switch``: :func:`_switch_rows` on the same segments."""
     t = log.data["t"].to_numpy(dtype=float)
     groups = []
     sensors = testbed.sensors if testbed is not None else Sensors(gyro_noise=0.0)
@@ -919,7 +952,6 @@ def _groups(log: Log, testbed: Testbed | None, segments) -> list[_Group]:
         q = continuous_signs(log.quaternions(), segments)
         floor = np.array([0.5 * max(sensors.attitude_noise, ABSOLUTE_FLOOR)])
         groups.append(_Group("attitude", ("qw", "qx", "qy", "qz"), q, True, floor))
-    switch = _switch_rows(log, segments, max(k for k, _ in FITS))
     if switch is not None:
         for g in groups:  # (a quaternion's chi-square test takes no per-channel side)
             g.switch_rows = None if g.vector else switch
@@ -1047,7 +1079,8 @@ def assess(log: Log, testbed: Testbed | None) -> LogQuality:
     groups, scorers, steps = _steps(log, testbed, segments, t, period)
     if steps:  # a step breaks the segment there as a gap does (nothing filled)
         segments = split_at(segments, [s.row for s in steps])
-        groups, scorers = _groups(log, testbed, segments), {}
+        switch = _switch_rows(log, segments, max(k for k, _ in FITS))
+        groups, scorers = _groups(log, testbed, segments, switch), {}
     dt = np.diff(t)
     inside = dt <= 1.5 * period
     jitter = float(np.max(np.abs(dt[inside] / period - 1.0))) if inside.any() else 0.0
@@ -1125,10 +1158,10 @@ def _motion(log: Log, testbed, segments) -> dict:
 def _steps(log: Log, testbed, segments, t, period):
     """The channel groups, the scorers of the rates and attitude, and the steps found
     on them (:mod:`airbearing.io.discontinuity`), merged by row."""
-    groups = _groups(log, testbed, segments)
+    switch = _switch_rows(log, segments, max(k for k, _ in FITS))
+    groups = _groups(log, testbed, segments, switch)
     scorers: dict[str, _Scorer] = {}
     found: dict[int, tuple[list[str], float]] = {}
-    switch = _switch_rows(log, segments, max(k for k, _ in FITS))
     for g in groups:
         if g.name not in ("rates", "attitude"):
             continue
