@@ -13,8 +13,9 @@ through ``Log.quality``). This measures, for each log, two calls:
   ``read_log(path, tb, columns=COLUMNS_USED).quality``.
 
 Each (rows, case, call) runs in a NEW process (imports excluded from the time, the reading
-of the file included): its wall time, CPU time and peak resident memory above the
-interpreter's after the imports (``ru_maxrss``, kB on Linux). The growth exponent of a
+of the file included): its wall time, CPU time and the process's peak resident memory
+(``ru_maxrss``; the interpreter with the package imported holds ~190 MB of it, printed as
+``base``). The growth exponent of a
 case is the least-squares slope of log CPU time against log rows over the sizes measured
 from 10^4 rows on (below that the fixed costs flatten it).
 
@@ -123,7 +124,7 @@ def one(tb_path: str, path: str, call: str, profile: bool = False) -> dict:
     from airbearing.io.testbed import load_testbed
 
     tb = load_testbed(tb_path)
-    base = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    base = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     prof = None
     if profile:
         import cProfile
@@ -142,11 +143,12 @@ def one(tb_path: str, path: str, call: str, profile: bool = False) -> dict:
 
         prof.disable()
         pstats.Stats(prof).sort_stats("cumulative").print_stats(25)
-    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024  # kB on Linux
     return {
         "wall": wall,
         "cpu": cpu,
-        "mb": (peak - base) / 1024,
+        "mb": peak,
+        "base_mb": base,
         "outliers": list(quality.outlier_rows),
         "segments": len(quality.segments),
         "steps": [d.row for d in quality.discontinuities],
@@ -185,7 +187,8 @@ def main() -> None:
     cases = args.cases.split(",")
     calls = args.calls.split(",")
     out = []
-    print(f"{'case':<14} {'call':<6} {'rows':>8} {'wall s':>8} {'cpu s':>8} {'MB':>7}  load")
+    print(f"{'case':<14} {'call':<6} {'rows':>8} {'wall s':>8} {'cpu s':>8} {'peak MB':>8} "
+          f"{'base':>5}  load")  # fmt: skip
     for case in cases:
         for call in calls:
             cpu = []
@@ -194,8 +197,9 @@ def main() -> None:
                 cmd = [sys.executable, __file__, "--one", str(tb_path), str(path), call]
                 res = json.loads(subprocess.run(cmd, check=True, capture_output=True).stdout)
                 load = os.getloadavg()[0]
+                mem = f"{res['mb']:8.0f} {res['base_mb']:5.0f}"
                 print(f"{case:<14} {call:<6} {rows:>8} {res['wall']:8.3f} {res['cpu']:8.3f} "
-                      f"{res['mb']:7.1f}  {load:.1f}", flush=True)  # fmt: skip
+                      f"{mem}  {load:.1f}", flush=True)  # fmt: skip
                 out.append({"case": case, "call": call, "rows": rows, "load": load, **res})
                 cpu.append(res["cpu"])
             print(f"{case:<14} {call:<6} exponent {exponent(args.rows, cpu):.2f}", flush=True)

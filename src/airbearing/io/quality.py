@@ -458,26 +458,26 @@ def _loo(t, x, good, k, p, scale, rows, shape=None):
     solve per row: the same least-squares prediction, equal to its rounding."""
     a, b = _window_shape(t.size, k, rows, shape)
     full = (a + b) == 2 * k
-    if rows.size == 0 or not full.any():
+    cand = np.flatnonzero(full & ~_regular_span(t, good, rows, a, b, k)) if full.any() else ()
+    if len(cand) == 0:
         return _loo_regular(t, x, good, k, p, scale, rows, shape)
     j = np.arange(2 * k)[None, :]
-    nb = np.where(
-        j < a[:, None], rows[:, None] - a[:, None] + j, rows[:, None] + 1 + j - a[:, None]
-    )
-    nb = np.clip(nb, 0, t.size - 1)
-    batch = full & np.all(good[nb], axis=1)
-    batch &= ~_regular_span(t, good, rows, a, b, k)
-    if not batch.any():
+    ac = a[cand, None]
+    nb = np.where(j < ac, rows[cand, None] - ac + j, rows[cand, None] + 1 + j - ac)
+    complete = np.all(good[nb], axis=1)  # else: some neighbour excluded, the per-row solve
+    cand, nb = cand[complete], nb[complete]
+    if cand.size == 0:
         return _loo_regular(t, x, good, k, p, scale, rows, shape)
     r = np.full((rows.size, x.shape[1]), np.nan)
     h = np.full(rows.size, np.nan)
-    rest = ~batch
+    rest = np.ones(rows.size, dtype=bool)
+    rest[cand] = False
     if rest.any():
         r[rest], h[rest], _ = _loo_regular(t, x, good, k, p, scale, rows[rest], shape)
-    at, nb = rows[batch], nb[batch]
+    at = rows[cand]
     w = poly_weights(t[nb] - t[at][:, None], p, np.zeros((at.size, 1)))[:, 0]
-    r[batch] = x[at] - np.einsum("mj,mjc->mc", w, x[nb])
-    h[batch] = np.sum(w * w, axis=1)
+    r[cand] = x[at] - np.einsum("mj,mjc->mc", w, x[nb])
+    h[cand] = np.sum(w * w, axis=1)
     return r, h, a
 
 
@@ -982,12 +982,13 @@ def _switch_rows(log: Log, segments, k: int) -> np.ndarray | None:
         if not log.has(*cols):
             continue
         u = np.stack([log.column(c) for c in cols], axis=1).astype(float)
+        tiny = 1e-12 * np.max(np.abs(u), axis=0)  # once per log, not per segment
         for start, stop in segments:
             if stop - start <= order + 1:
                 continue
             du = np.abs(np.diff(u[start:stop], order, axis=0))
             typical = np.median(du, axis=0)
-            big = du > SWITCH_RATIO * np.maximum(typical, 1e-12 * np.max(np.abs(u), axis=0))
+            big = du > SWITCH_RATIO * np.maximum(typical, tiny)
             for j in np.flatnonzero(big.any(axis=1)) + start + order:
                 out[max(j - k, start) : min(j + k + 1, stop)] = True
     return out if out.any() else None
