@@ -14,10 +14,10 @@ through ``Log.quality``). This measures, for each log, two calls:
 
 Each (rows, case, call) runs in a NEW process (imports excluded from the time, the reading
 of the file included): its wall time, CPU time and the process's peak resident memory
-(``ru_maxrss``; the interpreter with the package imported holds ~190 MB of it, printed as
-``base``). The growth exponent of a
-case is the least-squares slope of log CPU time against log rows over the sizes measured
-from 10^4 rows on (below that the fixed costs flatten it).
+(``ru_maxrss``; the interpreter with the package imported holds ~150 MB of it, printed as
+``base``). The logs are written by child processes too, so that no process starts large.
+The growth exponent of a case is the least-squares slope of log CPU time against log rows
+over the sizes measured from 10^4 rows on (below that the fixed costs flatten it).
 
 The logs are synthetic and written with the public io API (:func:`airbearing.io.log.write_log`,
 Parquet): ``seed004-platform`` at 20 Hz turning about a fixed tilted axis at
@@ -174,9 +174,14 @@ def main() -> None:
     ap.add_argument("--json", type=Path, help="write the rows here")
     ap.add_argument("--profile", nargs=2, metavar=("ROWS", "CASE"))
     ap.add_argument("--one", nargs=3, help=argparse.SUPPRESS)  # tb, log, call: child
+    ap.add_argument("--make", nargs=3, help=argparse.SUPPRESS)  # folder, rows, case: child
     args = ap.parse_args()
     if args.one:
         print(json.dumps(one(*args.one)))
+        return
+    if args.make:
+        print(json.dumps([str(p) for p in make_log(Path(args.make[0]), int(args.make[1]),
+                                                   args.make[2])]))  # fmt: skip
         return
     folder = args.keep or Path(tempfile.mkdtemp(prefix="log-check-cost-"))
     folder.mkdir(parents=True, exist_ok=True)
@@ -193,7 +198,11 @@ def main() -> None:
         for call in calls:
             cpu = []
             for rows in args.rows:
-                tb_path, path = make_log(folder, rows, case)
+                # a child writes the log: a parent grown by a 10^6-row log would pass its
+                # resident size on to every child it forks as their ru_maxrss
+                make = [sys.executable, __file__, "--make", str(folder), str(rows), case]
+                done = subprocess.run(make, check=True, capture_output=True).stdout
+                tb_path, path = json.loads(done)
                 cmd = [sys.executable, __file__, "--one", str(tb_path), str(path), call]
                 res = json.loads(subprocess.run(cmd, check=True, capture_output=True).stdout)
                 load = os.getloadavg()[0]
