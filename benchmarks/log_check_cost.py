@@ -17,7 +17,8 @@ of the file included): its wall time, CPU time and the process's peak resident m
 (``ru_maxrss``; the interpreter with the package imported holds ~150 MB of it, printed as
 ``base``). The logs are written by child processes too, so that no process starts large.
 The growth exponent of a case is the least-squares slope of log CPU time against log rows
-over the sizes measured from 10^4 rows on (below that the fixed costs flatten it).
+over the sizes measured from 10^4 rows on (below that the fixed costs flatten it), and
+the slope between the two largest sizes (where a super-linear part shows first).
 
 The logs are synthetic and written with the public io API (:func:`airbearing.io.log.write_log`,
 Parquet): ``seed004-platform`` at 20 Hz turning about a fixed tilted axis at
@@ -211,7 +212,9 @@ def main() -> None:
                       f"{mem}  {load:.1f}", flush=True)  # fmt: skip
                 out.append({"case": case, "call": call, "rows": rows, "load": load, **res})
                 cpu.append(res["cpu"])
-            print(f"{case:<14} {call:<6} exponent {exponent(args.rows, cpu):.2f}", flush=True)
+            last = math.log(cpu[-1] / cpu[-2]) / math.log(args.rows[-1] / args.rows[-2])
+            print(f"{case:<14} {call:<6} exponent {exponent(args.rows, cpu):.2f} (fit), "
+                  f"{last:.2f} (two largest)", flush=True)  # fmt: skip
     if args.json:
         args.json.write_text(json.dumps(out, indent=1))
 

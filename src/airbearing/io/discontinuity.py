@@ -201,20 +201,43 @@ class _Basis:
         return np.einsum("mij,mic->mjc", psi, self.phi)
 
 
+#: Relative sample times equal to within 1 / this (periods) share their fit weights.
+_PATTERN_GRID = 1e9
+
+
 class _Fit:
     """The least-squares polynomials (degree ``p``) of the ``count`` samples starting at
     rows ``first`` (m,), times in ``period`` from ``origin`` (m,): :meth:`weights` at any
-    targets, the windows' rows ``rows`` (m, count)."""
+    targets, the windows' rows ``rows`` (m, count).
+
+    The weights depend only on the sample and target times relative to the origin: on a
+    regular grid every window has the same ones (times equal to 1e-9 of a period, far
+    below any time a log resolves), so they are computed once and shared there."""
 
     def __init__(self, t, first, count, p, origin, period):
         self.rows = first[:, None] + np.arange(count)
-        self.origin, self.period, self.p = origin, period, p
-        self.basis = _Basis((t[self.rows] - origin[:, None]) / period, p)
+        self.origin, self.period = origin, period
+        u = (t[self.rows] - origin[:, None]) / period
+        self._same = _one_pattern(u)
+        self._u, self._p = u, p
+        self.basis = _Basis(u[:1] if self._same else u, p)
 
     def weights(self, at, slope=False):
         """Weights (m, j, count) of the value (``slope``: the slope, per period) at the
         times ``at`` (m, j), s."""
-        return self.basis.weights((at - self.origin[:, None]) / self.period, slope)
+        at = (at - self.origin[:, None]) / self.period
+        if self._same and _one_pattern(at):
+            w = self.basis.weights(at[:1], slope)
+            return np.broadcast_to(w, (at.shape[0], *w.shape[1:]))
+        if self._same:  # one window pattern, targets that differ: every window's own
+            self.basis, self._same = _Basis(self._u, self._p), False
+        return self.basis.weights(at, slope)
+
+
+def _one_pattern(u: np.ndarray) -> bool:
+    """Are all rows of ``u`` equal to 1 / :data:`_PATTERN_GRID`?"""
+    key = np.round(u * _PATTERN_GRID)
+    return bool(np.all(key == key[:1]))
 
 
 def _weights(t, first, count, p, at, origin, period, slope=False):
