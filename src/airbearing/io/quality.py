@@ -688,6 +688,7 @@ class _Scorer:
         rows = np.arange(n)
         d, shapes = _normalised(g, self.t, self.segments, np.ones(n, bool), k, p, self.scale, rows)
         self._all_rows = (d, shapes)  # the first pass (nothing excluded yet) scores these
+        self._first_pass = None  # its (score, over) with exact=False: steps, then outliers
         if g.vector:
             self._rough_sq = np.sum(d**2, axis=1, keepdims=True) / _CHI2_3_MEDIAN
         else:
@@ -800,7 +801,10 @@ class _Scorer:
         """
         g, t, segs, sc = self.group, self.t, self.segments, self.scale
         k, p = self.fit
-        if self._all_rows is not None and rows.size == t.size and good.all():
+        first_pass = self._all_rows is not None and rows.size == t.size and good.all()
+        if first_pass and not exact and self._first_pass is not None:
+            return self._first_pass[0].copy(), self._first_pass[1].copy()
+        if first_pass:
             d, shapes = self._all_rows
         else:
             d, shapes = _normalised(g, t, segs, good, k, p, sc, rows)
@@ -835,6 +839,8 @@ class _Scorer:
             score[maybe], over[maybe] = _score(
                 g, d[maybe], scale[maybe] * self.local_at(rows[maybe])
             )
+        if first_pass:
+            self._first_pass = (score.copy(), over.copy())
         return score, over
 
 
