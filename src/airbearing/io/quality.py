@@ -459,7 +459,9 @@ def _loo(t, x, good, k, p, scale, rows, shape=None):
     a, b = _window_shape(t.size, k, rows, shape)
     full = (a + b) == 2 * k
     cand = np.flatnonzero(full & ~_regular_span(t, good, rows, a, b, k)) if full.any() else ()
-    if len(cand) == 0:
+    del b, full
+    if len(cand) == 0:  # (without this call's arrays: a long log's peak memory)
+        del a
         return _loo_regular(t, x, good, k, p, scale, rows, shape)
     j = np.arange(2 * k)[None, :]
     ac = a[cand, None]
@@ -688,7 +690,9 @@ class _Scorer:
         rows = np.arange(n)
         d, shapes = _normalised(g, self.t, self.segments, np.ones(n, bool), k, p, self.scale, rows)
         self._all_rows = (d, shapes)  # the first pass (nothing excluded yet) scores these
-        self._first_pass = None  # its (score, over) with exact=False: steps, then outliers
+        # its (score, over) with exact=False, kept for the second ask (the step detector
+        # asks first, the outlier search second)
+        self._first_pass = None
         if g.vector:
             self._rough_sq = np.sum(d**2, axis=1, keepdims=True) / _CHI2_3_MEDIAN
         else:
@@ -801,10 +805,11 @@ class _Scorer:
         """
         g, t, segs, sc = self.group, self.t, self.segments, self.scale
         k, p = self.fit
-        first_pass = self._all_rows is not None and rows.size == t.size and good.all()
+        first_pass = rows.size == t.size and good.all()  # rows sorted: all of them
         if first_pass and not exact and self._first_pass is not None:
-            return self._first_pass[0].copy(), self._first_pass[1].copy()
-        if first_pass:
+            kept, self._first_pass = self._first_pass, None  # asked for twice, not more
+            return kept
+        if first_pass and self._all_rows is not None:
             d, shapes = self._all_rows
         else:
             d, shapes = _normalised(g, t, segs, good, k, p, sc, rows)
@@ -839,8 +844,9 @@ class _Scorer:
             score[maybe], over[maybe] = _score(
                 g, d[maybe], scale[maybe] * self.local_at(rows[maybe])
             )
-        if first_pass:
+        if first_pass and self._all_rows is not None:
             self._first_pass = (score.copy(), over.copy())
+            self._all_rows = None  # its residuals are not needed again
         return score, over
 
 
