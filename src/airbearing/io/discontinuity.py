@@ -49,15 +49,53 @@ import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 
 from airbearing.io.log import RATE_MISMATCH_FACTOR
-from airbearing.io.quality import (
-    _CHI2_3_MEDIAN,
-    _MAD_TO_SIGMA,
-    CHI2_3_THRESHOLD,
-    Z_THRESHOLD,
-    RowFinding,
-)
 
-__all__ = ["Discontinuity", "STEP_THRESHOLD", "find_steps", "rate_changes", "split_at"]
+__all__ = [
+    "CHI2_3_THRESHOLD",
+    "Discontinuity",
+    "RowFinding",
+    "STEP_THRESHOLD",
+    "Z_THRESHOLD",
+    "find_steps",
+    "poly_weights",
+    "rate_changes",
+    "split_at",
+]
+
+# The thresholds of the outlier rule (airbearing.io.quality, which imports this module and
+# exports them too) that the step detector shares.
+#: Normalised residual (robust noise scales) above which one channel's sample is
+#: suspect: two-sided Gaussian tail probability 2e-9 (scipy.stats.norm.isf(1e-9) = 5.998).
+Z_THRESHOLD = 6.0
+#: Squared normalised quaternion residual above which a sample is suspect:
+#: chi-square with 3 degrees of freedom at tail probability 2e-9
+#: (scipy.stats.chi2.isf(2e-9, 3) = 43.42).
+CHI2_3_THRESHOLD = 43.42
+_CHI2_3_MEDIAN = 2.3660  # scipy.stats.chi2.median(3)
+_MAD_TO_SIGMA = 1.4826  # 1 / Phi^-1(3/4): MAD of a Gaussian -> its standard deviation
+
+
+@dataclass(frozen=True)
+class RowFinding:
+    """Something found at one row of a log (an outlier, a step): where, in which columns,
+    why and how strongly (see the subclasses)."""
+
+    row: int
+    t: float
+    columns: tuple[str, ...]
+    reason: str
+    score: float
+
+    def to_json(self) -> dict:
+        """``{"row", "t", "columns", "reason", "score"}``."""
+        return {
+            "row": self.row,
+            "t": self.t,
+            "columns": list(self.columns),
+            "reason": self.reason,
+            "score": self.score,
+        }
+
 
 #: Smallest normalised disagreement (noise scales) between the left and right fits over
 #: an interval above which the interval holds a step (module doc, step 5).
@@ -86,8 +124,120 @@ class Discontinuity(RowFinding):
     """
 
 
+def poly_weights(u: np.ndarray, p: int, at: np.ndarray, slope: bool = False) -> np.ndarray:
+    """Least-squares polynomial weights on many small windows at once.
+
+    For each window ``i`` (sample times ``u[i]``, strictly increasing, at least ``p + 1``
+    of them), the weights ``w[i, j, :]`` with ``sum_c w[i, j, c] x[i, c]`` the value
+    (``slope``: the derivative, per unit of ``u``) at ``at[i, j]`` of the degree-``p``
+    polynomial fitted to ``x[i]`` by least squares: ``V(at) pinv(V(u))`` with ``V`` the
+    Vandermonde matrix, as ``numpy.linalg.pinv`` gives it, without a decomposition per
+    window. The polynomials orthonormal on each window's own times (Gram-Schmidt of
+    ``s * phi_i`` against ``phi_0 .. phi_i``, done twice, on ``s`` the times centred and
+    scaled to [-1, 1]) make the fit's projection ``sum_i phi_i(at) phi_i(u_c)``; the same
+    recurrence evaluates them (and their derivatives) at ``at``. ``O(p^2)`` array
+    operations over all windows instead of one SVD each; agrees with the pseudo-inverse
+    to its rounding (``tests/io/test_poly_weights.py``).
+
+    Parameters
+    ----------
+    u : numpy.ndarray
+        (m, count) sample times of each window, any unit, increasing along a row.
+    p : int
+        Polynomial degree, ``p + 1 <= count``.
+    at : numpy.ndarray
+        (m, j) times (same unit) where the fit is evaluated.
+    slope : bool
+        Weights of the fit's derivative (per unit of ``u``) instead of its value.
+
+    Returns
+    -------
+    numpy.ndarray
+        (m, j, count) weights.
+    """
+    return _Basis(u, p).weights(at, slope)
+
+
+class _Basis:
+    """The polynomials of degree <= ``p`` orthonormal on each window's times ``u`` (m, count)
+    (:func:`poly_weights`), built once and evaluated at any targets."""
+
+    def __init__(self, u: np.ndarray, p: int) -> None:
+        m, count = u.shape
+        self.centre = 0.5 * (u[:, :1] + u[:, -1:])
+        self.half = 0.5 * (u[:, -1:] - u[:, :1])
+        s = (u - self.centre) / self.half
+        phi = np.empty((m, p + 1, count))
+        phi[:, 0] = 1.0 / np.sqrt(count)
+        self.coef, self.norm = [], []  # phi_{i+1} = (s phi_i - sum_l c_l phi_l) / norm_i
+        for i in range(p):
+            v = s * phi[:, i]
+            c = np.zeros((m, i + 1))
+            for _ in range(2):  # twice is enough (Kahan): orthogonal to rounding
+                d = np.einsum("mlc,mc->ml", phi[:, : i + 1], v)
+                v = v - np.einsum("ml,mlc->mc", d, phi[:, : i + 1])
+                c += d
+            norm = np.sqrt(np.einsum("mc,mc->m", v, v))[:, None]
+            phi[:, i + 1] = v / norm
+            self.coef.append(c)
+            self.norm.append(norm)
+        self.phi, self.count = phi, count
+
+    def weights(self, at: np.ndarray, slope: bool = False) -> np.ndarray:
+        """(m, j, count) weights of the fit's value (``slope``: derivative) at ``at`` (m, j)."""
+        m, p1 = self.phi.shape[:2]
+        sa = (at - self.centre) / self.half
+        psi = np.empty((m, p1, at.shape[1]))  # the orthonormal polynomials at `at`
+        dpsi = np.zeros_like(psi)  # their derivatives in the scaled time
+        psi[:, 0] = 1.0 / np.sqrt(self.count)
+        for i, (c, norm) in enumerate(zip(self.coef, self.norm, strict=True)):
+            psi[:, i + 1] = (sa * psi[:, i] - np.einsum("ml,mlj->mj", c, psi[:, : i + 1])) / norm
+            if slope:
+                dpsi[:, i + 1] = (
+                    psi[:, i] + sa * dpsi[:, i] - np.einsum("ml,mlj->mj", c, dpsi[:, : i + 1])
+                ) / norm
+        if slope:
+            return np.einsum("mij,mic->mjc", dpsi, self.phi) / self.half[:, :, None]
+        return np.einsum("mij,mic->mjc", psi, self.phi)
+
+
 #: Relative sample times equal to within 1 / this (periods) share their fit weights.
 _PATTERN_GRID = 1e9
+
+
+class _Fit:
+    """The least-squares polynomials (degree ``p``) of the ``count`` samples starting at
+    rows ``first`` (m,), times in ``period`` from ``origin`` (m,): :meth:`weights` at any
+    targets, the windows' rows ``rows`` (m, count).
+
+    The weights depend only on the sample and target times relative to the origin: on a
+    regular grid every window has the same ones (times equal to 1e-9 of a period, far
+    below any time a log resolves), so they are computed once and shared there."""
+
+    def __init__(self, t, first, count, p, origin, period):
+        self.rows = first[:, None] + np.arange(count)
+        self.origin, self.period = origin, period
+        u = (t[self.rows] - origin[:, None]) / period
+        self._same = _one_pattern(u)
+        self._u, self._p = u, p
+        self.basis = _Basis(u[:1] if self._same else u, p)
+
+    def weights(self, at, slope=False):
+        """Weights (m, j, count) of the value (``slope``: the slope, per period) at the
+        times ``at`` (m, j), s."""
+        at = (at - self.origin[:, None]) / self.period
+        if self._same and _one_pattern(at):
+            w = self.basis.weights(at[:1], slope)
+            return np.broadcast_to(w, (at.shape[0], *w.shape[1:]))
+        if self._same:  # one window pattern, targets that differ: every window's own
+            self.basis, self._same = _Basis(self._u, self._p), False
+        return self.basis.weights(at, slope)
+
+
+def _one_pattern(u: np.ndarray) -> bool:
+    """Are all rows of ``u`` equal to 1 / :data:`_PATTERN_GRID`?"""
+    key = np.round(u * _PATTERN_GRID)
+    return bool(np.all(key == key[:1]))
 
 
 def _weights(t, first, count, p, at, origin, period, slope=False):
@@ -96,26 +246,8 @@ def _weights(t, first, count, p, at, origin, period, slope=False):
     at rows ``first`` (m,).
 
     Returns the weights (m, j, count) and the rows (m, count)."""
-    rows = first[:, None] + np.arange(count)
-    u = (t[rows] - origin[:, None]) / period
-    at = (at - origin[:, None]) / period
-    # The weights depend only on the sample and target times relative to the origin: on a
-    # regular grid every boundary has the same ones. One pseudo-inverse per distinct
-    # pattern (times equal to 1e-9 of a period, far below any time a log resolves)
-    # instead of one per boundary (a batched SVD per row was most of a log check).
-    key = np.round(np.concatenate([u, at], axis=1) * _PATTERN_GRID)
-    if np.all(key == key[:1]):
-        first_of, inverse = np.zeros(1, dtype=int), np.zeros(len(key), dtype=int)
-    else:
-        _, first_of, inverse = np.unique(key, axis=0, return_index=True, return_inverse=True)
-    u, at = u[first_of], at[first_of]
-    powers = np.arange(p + 1)
-    pinv = np.linalg.pinv(u[..., None] ** powers)  # (distinct, p + 1, count)
-    if slope:
-        v = powers * at[..., None] ** np.maximum(powers - 1, 0)
-    else:
-        v = at[..., None] ** powers  # (distinct, j, p + 1)
-    return (v @ pinv)[inverse.reshape(-1)], rows
+    fit = _Fit(t, first, count, p, origin, period)
+    return fit.weights(at, slope), fit.rows
 
 
 def _predict(w, rows, x):
@@ -128,20 +260,23 @@ def _predict(w, rows, x):
 SIDE_FITS: tuple[tuple[int, int], ...] = ((12, 2), (24, 3))
 
 
-def _side(t, x, b, count, p, period, wrap):
+def _side(t, x, b, count, p, period, wrap, in_window=False):
     """Left and right fits of ``count`` samples at boundaries ``b``: their disagreement in
     value at :data:`_TAU` across the interval (m, tau, c) and in slope at its middle
     (m, c), with their noise gains, and each side's own one-step residual (normalised by
-    ``sqrt(1 + h)``) of its last sample."""
+    ``sqrt(1 + h)``) of its last sample; ``in_window``: also the residuals of the two
+    fits on their own samples (m, 2 count, c), a side that one polynomial does not
+    explain (a block of glitches in it) being no side of a step. Each window's fit is
+    built once and evaluated at all its targets."""
     t0, t1 = t[b - 1], t[b]
     at = t0[:, None] + (t1 - t0)[:, None] * _TAU
     mid = 0.5 * (t0 + t1)[:, None]
-    w_l, r_l = _weights(t, b - count, count, p, at, t0, period)
-    w_r, r_r = _weights(t, b, count, p, at, t0, period)
-    v_l, _ = _weights(t, b - count, count, p, mid, t0, period, slope=True)
-    v_r, _ = _weights(t, b, count, p, mid, t0, period, slope=True)
-    d = _predict(w_l, r_l, x) - _predict(w_r, r_r, x)
-    dv = _predict(v_l, r_l, x)[:, 0] - _predict(v_r, r_r, x)[:, 0]
+    left = _Fit(t, b - count, count, p, t0, period)
+    right = _Fit(t, b, count, p, t0, period)
+    w_l, w_r = left.weights(at), right.weights(at)
+    v_l, v_r = left.weights(mid, slope=True), right.weights(mid, slope=True)
+    d = _predict(w_l, left.rows, x) - _predict(w_r, right.rows, x)
+    dv = _predict(v_l, left.rows, x)[:, 0] - _predict(v_r, right.rows, x)[:, 0]
     h = np.sum(w_l**2, axis=-1) + np.sum(w_r**2, axis=-1)
     hv = np.sum(v_l[:, 0] ** 2, axis=-1) + np.sum(v_r[:, 0] ** 2, axis=-1)
     s_l, q_l = _weights(t, b - count - 1, count, p, t0[:, None], t0, period)
@@ -152,20 +287,13 @@ def _side(t, x, b, count, p, period, wrap):
         d, e_l, e_r = (np.mod(v + np.pi, 2 * np.pi) - np.pi for v in (d, e_l, e_r))
     e_l = e_l / np.sqrt(1.0 + np.sum(s_l[:, 0] ** 2, axis=-1))[:, None]
     e_r = e_r / np.sqrt(1.0 + np.sum(s_r[:, 0] ** 2, axis=-1))[:, None]
-    return d, dv, h, hv, e_l, e_r
-
-
-def _in_window(t, x, b, count, p, period, wrap):
-    """Residuals of the left and right fits on their own samples, (m, 2 count, c): a side
-    that one polynomial does not explain (a block of glitches in it) is no side of a step."""
-    t0 = t[b - 1]
+    if not in_window:
+        return d, dv, h, hv, e_l, e_r
     out = []
-    for first in (b - count, b):
-        rows = first[:, None] + np.arange(count)
-        w, r = _weights(t, first, count, p, t[rows], t0, period)
-        e = x[r] - _predict(w, r, x)
+    for fit in (left, right):
+        e = x[fit.rows] - _predict(fit.weights(t[fit.rows]), fit.rows, x)
         out.append(np.mod(e + np.pi, 2 * np.pi) - np.pi if wrap else e)
-    return np.concatenate(out, axis=1)
+    return d, dv, h, hv, e_l, e_r, np.concatenate(out, axis=1)
 
 
 def _calibrate(g, t, segments, count, p, period):
@@ -197,6 +325,7 @@ def find_steps(
     Parameters
     ----------
     scorer : airbearing.io.quality._Scorer
+        (passed in: this module is below io.quality, which calls it)
         The outlier rule's scorer of the group on the log's gap segments.
     t : numpy.ndarray
         s, sample times, shape (n,).
@@ -235,7 +364,7 @@ def find_steps(
     if b.size == 0:
         return []
     x = g.values
-    d, dv, h, hv, e_l, e_r = _side(t, x, b, count, deg, period, g.wrap)
+    d, dv, h, hv, e_l, e_r, e_in = _side(t, x, b, count, deg, period, g.wrap, in_window=True)
     # the local roughness a window's away on each side: a glitch (or the step itself)
     # right at the boundary must not inflate the scale that is to judge it
     local = np.maximum(scorer.local_at(b - count), scorer.local_at(b + count - 1))  # (m, c)
@@ -244,7 +373,6 @@ def find_steps(
     # multiplied by this fit's misfit
     quiet = scorer._quiet[None, :]
     scale = np.where(quiet, np.maximum(base, scorer.noise * local), base[None, :] * local)
-    e_in = _in_window(t, x, b, count, deg, period, g.wrap)
     at_switch = np.zeros(b.size, dtype=bool) if switch is None else switch[b - 1] | switch[b]
     if g.vector:
         explained = (np.sum(e_l**2, axis=1) / scale[:, 0] ** 2 <= CHI2_3_THRESHOLD) & (

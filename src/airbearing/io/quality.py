@@ -140,14 +140,28 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from airbearing.errors import InputError
+from airbearing.io.discontinuity import (
+    _CHI2_3_MEDIAN,
+    _MAD_TO_SIGMA,
+    CHI2_3_THRESHOLD,
+    Z_THRESHOLD,
+    Discontinuity,
+    RowFinding,
+    find_steps,
+    poly_weights,
+    rate_changes,
+    split_at,
+)
 from airbearing.io.gyro_check import gyro_disagreement
 from airbearing.io.import_map import unwrap
 from airbearing.io.local_fits import LOCAL as _LOCAL
 from airbearing.io.local_fits import REGULAR_ULPS as _REGULAR_ULPS
-from airbearing.io.local_fits import loo as _loo
+from airbearing.io.local_fits import loo as _loo_regular
 from airbearing.io.local_fits import noise_gain as _noise_gain
+from airbearing.io.local_fits import regular_span as _regular_span
 from airbearing.io.local_fits import regular_weights as _regular_weights
 from airbearing.io.local_fits import window_median as _window_median
+from airbearing.io.local_fits import window_shape as _window_shape
 from airbearing.io.log import (
     _DIPOLES,
     _GIMBAL_RATES,
@@ -175,15 +189,8 @@ __all__ = [
     "find_outliers",
 ]
 
-#: Normalised residual (robust noise scales) above which one channel's sample is
-#: suspect: two-sided Gaussian tail probability 2e-9 (scipy.stats.norm.isf(1e-9) = 5.998).
-Z_THRESHOLD = 6.0
-#: Squared normalised quaternion residual above which a sample is suspect:
-#: chi-square with 3 degrees of freedom at tail probability 2e-9
-#: (scipy.stats.chi2.isf(2e-9, 3) = 43.42).
-CHI2_3_THRESHOLD = 43.42
-_CHI2_3_MEDIAN = 2.3660  # scipy.stats.chi2.median(3)
-_MAD_TO_SIGMA = 1.4826  # 1 / Phi^-1(3/4): MAD of a Gaussian -> its standard deviation
+# Z_THRESHOLD, CHI2_3_THRESHOLD and RowFinding are defined in io.discontinuity (which
+# the step detector shares with this rule) and exported from here too.
 #: The local fits tried, ``(k, p)``: k samples each side, polynomial degree p.
 FITS: tuple[tuple[int, int], ...] = ((3, 2), (4, 4), (5, 6))
 _MAX_RUN = 2  # longest run of consecutive suspects that is an isolated glitch
@@ -204,28 +211,6 @@ _SCALE_ROWS = 2000  # rows spread over the log on which the noise scales are mea
 _MIN_SCALE_SAMPLES = 8  # fewer residuals than this give no scale (the floor is used)
 _RECOMPUTE = 3  # rows within this many k of a newly excluded sample are refitted
 _ROUGH = 0.2  # noise-free channels: scale floor per unit median |second difference|
-
-
-@dataclass(frozen=True)
-class RowFinding:
-    """Something found at one row of a log (an outlier, a step): where, in which columns,
-    why and how strongly (see the subclasses)."""
-
-    row: int
-    t: float
-    columns: tuple[str, ...]
-    reason: str
-    score: float
-
-    def to_json(self) -> dict:
-        """``{"row", "t", "columns", "reason", "score"}``."""
-        return {
-            "row": self.row,
-            "t": self.t,
-            "columns": list(self.columns),
-            "reason": self.reason,
-            "score": self.score,
-        }
 
 
 @dataclass(frozen=True)
@@ -466,6 +451,38 @@ class _Group:
     switch_rows: np.ndarray | None = None
 
 
+def _loo(t, x, good, k, p, scale, rows, shape=None):
+    """`local_fits.loo` (the parameters and returns are its own), with the windows that
+    are complete (``2k`` neighbours, all good) but not regular (a jittered clock) fitted
+    all at once (:func:`airbearing.io.discontinuity.poly_weights`) instead of one Gram
+    solve per row: the same least-squares prediction, equal to its rounding."""
+    a, b = _window_shape(t.size, k, rows, shape)
+    full = (a + b) == 2 * k
+    cand = np.flatnonzero(full & ~_regular_span(t, good, rows, a, b, k)) if full.any() else ()
+    del b, full
+    if len(cand) == 0:  # (without this call's arrays: a long log's peak memory)
+        del a
+        return _loo_regular(t, x, good, k, p, scale, rows, shape)
+    j = np.arange(2 * k)[None, :]
+    ac = a[cand, None]
+    nb = np.where(j < ac, rows[cand, None] - ac + j, rows[cand, None] + 1 + j - ac)
+    complete = np.all(good[nb], axis=1)  # else: some neighbour excluded, the per-row solve
+    cand, nb = cand[complete], nb[complete]
+    if cand.size == 0:
+        return _loo_regular(t, x, good, k, p, scale, rows, shape)
+    r = np.full((rows.size, x.shape[1]), np.nan)
+    h = np.full(rows.size, np.nan)
+    rest = np.ones(rows.size, dtype=bool)
+    rest[cand] = False
+    if rest.any():
+        r[rest], h[rest], _ = _loo_regular(t, x, good, k, p, scale, rows[rest], shape)
+    at = rows[cand]
+    w = poly_weights(t[nb] - t[at][:, None], p, np.zeros((at.size, 1)))[:, 0]
+    r[cand] = x[at] - np.einsum("mj,mjc->mc", w, x[nb])
+    h[cand] = np.sum(w * w, axis=1)
+    return r, h, a
+
+
 def _normalised(
     group: _Group,
     t: np.ndarray,
@@ -537,7 +554,9 @@ def _shape_residuals(
     ``out[a]`` is ``_normalised(group, t, segments, good, k, p, scale, rows, shape=a)[0]``
     for ``a = 0 .. 2k``, with the fast path of `local_fits.loo` (regular windows: the
     weights of their shape) taken for all shapes at once; the rows whose window is
-    not regular go through :func:`_normalised` itself.
+    not regular have the least-squares weights of their own window, all rows of a
+    shape at once (:func:`airbearing.io.discontinuity.poly_weights`: the same numbers as
+    `local_fits.loo_reference` to its rounding).
     """
     n_shapes = 2 * k + 1
     out = np.full((n_shapes, rows.size, group.values.shape[1]), np.nan)
@@ -556,7 +575,6 @@ def _shape_residuals(
     tol = _REGULAR_ULPS * np.spacing(big)
     regular = fits & (np.max(dt, axis=-1) - np.min(dt, axis=-1) <= tol)
     x = group.values
-    good = None
     for a in range(n_shapes):
         at = rows[regular[a]]
         if at.size:
@@ -569,11 +587,16 @@ def _shape_residuals(
             if group.wrap:
                 r = np.mod(r + np.pi, 2 * np.pi) - np.pi
             out[a, regular[a]] = r / np.sqrt(1.0 + float(w @ w))
-        other = fits[a] & ~regular[a]
-        if other.any():
-            good = np.ones(t.size, dtype=bool) if good is None else good
-            d, _ = _normalised(group, t, segments, good, k, p, scale, rows[other], shape=a)
-            out[a, other] = d
+        other = np.flatnonzero(fits[a] & ~regular[a])
+        if other.size:  # jittered windows: the least-squares weights of each, all at once
+            at = rows[other]
+            offsets = np.r_[-np.arange(a, 0, -1), np.arange(1, 2 * k - a + 1)]
+            nb = at[:, None] + offsets
+            w = poly_weights(t[nb] - t[at][:, None], p, np.zeros((at.size, 1)))[:, 0]
+            r = x[at] - np.einsum("mj,mjc->mc", w, x[nb])
+            if group.wrap:
+                r = np.mod(r + np.pi, 2 * np.pi) - np.pi
+            out[a, other] = r / np.sqrt(1.0 + np.sum(w * w, axis=1))[:, None]
     return out
 
 
@@ -667,6 +690,9 @@ class _Scorer:
         rows = np.arange(n)
         d, shapes = _normalised(g, self.t, self.segments, np.ones(n, bool), k, p, self.scale, rows)
         self._all_rows = (d, shapes)  # the first pass (nothing excluded yet) scores these
+        # its (score, over) with exact=False, kept for the second ask (the step detector
+        # asks first, the outlier search second)
+        self._first_pass = None
         if g.vector:
             self._rough_sq = np.sum(d**2, axis=1, keepdims=True) / _CHI2_3_MEDIAN
         else:
@@ -779,7 +805,11 @@ class _Scorer:
         """
         g, t, segs, sc = self.group, self.t, self.segments, self.scale
         k, p = self.fit
-        if self._all_rows is not None and rows.size == t.size and good.all():
+        first_pass = rows.size == t.size and good.all()  # rows sorted: all of them
+        if first_pass and not exact and self._first_pass is not None:
+            kept, self._first_pass = self._first_pass, None  # asked for twice, not more
+            return kept
+        if first_pass and self._all_rows is not None:
             d, shapes = self._all_rows
         else:
             d, shapes = _normalised(g, t, segs, good, k, p, sc, rows)
@@ -814,6 +844,9 @@ class _Scorer:
             score[maybe], over[maybe] = _score(
                 g, d[maybe], scale[maybe] * self.local_at(rows[maybe])
             )
+        if first_pass and self._all_rows is not None:
+            self._first_pass = (score.copy(), over.copy())
+            self._all_rows = None  # its residuals are not needed again
         return score, over
 
 
@@ -899,7 +932,8 @@ def find_outliers(
 # channel groups of a log
 
 
-def _groups(log: Log, testbed: Testbed | None, segments) -> list[_Group]:
+def _groups(log: Log, testbed: Testbed | None, segments, switch: np.ndarray | None) -> list[_Group]:
+    """The channel groups of a log; ``switch``: :func:`_switch_rows` on the same segments."""
     t = log.data["t"].to_numpy(dtype=float)
     groups = []
     sensors = testbed.sensors if testbed is not None else Sensors(gyro_noise=0.0)
@@ -930,7 +964,6 @@ def _groups(log: Log, testbed: Testbed | None, segments) -> list[_Group]:
         q = continuous_signs(log.quaternions(), segments)
         floor = np.array([0.5 * max(sensors.attitude_noise, ABSOLUTE_FLOOR)])
         groups.append(_Group("attitude", ("qw", "qx", "qy", "qz"), q, True, floor))
-    switch = _switch_rows(log, segments, max(k for k, _ in FITS))
     if switch is not None:
         for g in groups:  # (a quaternion's chi-square test takes no per-channel side)
             g.switch_rows = None if g.vector else switch
@@ -961,12 +994,13 @@ def _switch_rows(log: Log, segments, k: int) -> np.ndarray | None:
         if not log.has(*cols):
             continue
         u = np.stack([log.column(c) for c in cols], axis=1).astype(float)
+        tiny = 1e-12 * np.max(np.abs(u), axis=0)  # once per log, not per segment
         for start, stop in segments:
             if stop - start <= order + 1:
                 continue
             du = np.abs(np.diff(u[start:stop], order, axis=0))
             typical = np.median(du, axis=0)
-            big = du > SWITCH_RATIO * np.maximum(typical, 1e-12 * np.max(np.abs(u), axis=0))
+            big = du > SWITCH_RATIO * np.maximum(typical, tiny)
             for j in np.flatnonzero(big.any(axis=1)) + start + order:
                 out[max(j - k, start) : min(j + k + 1, stop)] = True
     return out if out.any() else None
@@ -1049,9 +1083,6 @@ def assess(log: Log, testbed: Testbed | None) -> LogQuality:
     InputError
         If ``testbed`` is not a Testbed.
     """
-    # cycle: io.discontinuity imports io.quality
-    from airbearing.io.discontinuity import rate_changes
-
     if testbed is not None and not isinstance(testbed, Testbed):
         raise InputError(f"{log.source}: assess needs a Testbed, got {type(testbed).__name__}")
     t = log.data["t"].to_numpy(dtype=float)
@@ -1060,10 +1091,9 @@ def assess(log: Log, testbed: Testbed | None) -> LogQuality:
     segments = segments_of(t, period)
     groups, scorers, steps = _steps(log, testbed, segments, t, period)
     if steps:  # a step breaks the segment there as a gap does (nothing filled)
-        from airbearing.io.discontinuity import split_at  # cycle, as above
-
         segments = split_at(segments, [s.row for s in steps])
-        groups, scorers = _groups(log, testbed, segments), {}
+        switch = _switch_rows(log, segments, max(k for k, _ in FITS))
+        groups, scorers = _groups(log, testbed, segments, switch), {}
     dt = np.diff(t)
     inside = dt <= 1.5 * period
     jitter = float(np.max(np.abs(dt[inside] / period - 1.0))) if inside.any() else 0.0
@@ -1141,12 +1171,10 @@ def _motion(log: Log, testbed, segments) -> dict:
 def _steps(log: Log, testbed, segments, t, period):
     """The channel groups, the scorers of the rates and attitude, and the steps found
     on them (:mod:`airbearing.io.discontinuity`), merged by row."""
-    from airbearing.io.discontinuity import Discontinuity, find_steps  # cycle, as above
-
-    groups = _groups(log, testbed, segments)
+    switch = _switch_rows(log, segments, max(k for k, _ in FITS))
+    groups = _groups(log, testbed, segments, switch)
     scorers: dict[str, _Scorer] = {}
     found: dict[int, tuple[list[str], float]] = {}
-    switch = _switch_rows(log, segments, max(k for k, _ in FITS))
     for g in groups:
         if g.name not in ("rates", "attitude"):
             continue
