@@ -136,7 +136,6 @@ FUNCTION_IMPORTS = {
     "design.tuning.responses": 1,
     "io.coerce": 2,
     "io.log": 2,
-    "io.quality": 3,
     "models.compiled": 1,
     "progress": 1,
     "reporting.campaign": 1,
