@@ -135,7 +135,6 @@ FUNCTION_IMPORTS = {
     "design.margins": 1,
     "design.tuning.responses": 1,
     "io.coerce": 2,
-    "io.log": 2,
     "models.compiled": 1,
     "progress": 1,
     "reporting.campaign": 1,

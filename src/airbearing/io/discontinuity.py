@@ -48,7 +48,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 
-from airbearing.io.log import RATE_MISMATCH_FACTOR
+from airbearing.io.columns import RATE_MISMATCH_FACTOR
 
 __all__ = [
     "CHI2_3_THRESHOLD",

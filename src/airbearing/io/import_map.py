@@ -30,7 +30,7 @@ import pandas as pd
 import pyarrow.parquet as pq
 
 from airbearing.errors import InputError
-from airbearing.io.log import LOG_COLUMNS, bad_mask, row_ranges
+from airbearing.io.columns import LOG_COLUMNS, bad_mask, row_ranges
 
 __all__ = [
     "COLUMN_QUANTITY",

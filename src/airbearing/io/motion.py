@@ -31,7 +31,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from airbearing.io.log import segments_of
+from airbearing.io.columns import segments_of
 from airbearing.quaternion import continuous_signs
 
 if TYPE_CHECKING:

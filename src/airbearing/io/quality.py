@@ -140,6 +140,15 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from airbearing.errors import InputError
+from airbearing.io.columns import (
+    _DIPOLES,
+    _GIMBAL_RATES,
+    _GIMBALS,
+    _SLIDERS,
+    WHEEL_COMMAND_COLUMNS,
+    segments_of,
+    time_text,
+)
 from airbearing.io.discontinuity import (
     _CHI2_3_MEDIAN,
     _MAD_TO_SIGMA,
@@ -162,15 +171,6 @@ from airbearing.io.local_fits import regular_span as _regular_span
 from airbearing.io.local_fits import regular_weights as _regular_weights
 from airbearing.io.local_fits import window_median as _window_median
 from airbearing.io.local_fits import window_shape as _window_shape
-from airbearing.io.log import (
-    _DIPOLES,
-    _GIMBAL_RATES,
-    _GIMBALS,
-    _SLIDERS,
-    WHEEL_COMMAND_COLUMNS,
-    segments_of,
-    time_text,
-)
 from airbearing.io.motion import no_motion, still_channels
 from airbearing.io.testbed import Sensors, Testbed
 from airbearing.quaternion import continuous_signs
