@@ -457,7 +457,7 @@ def raw_columns(raw, import_map: ImportMap, src: str, skip: tuple[str, ...] = ()
     InputError
         A mapped column missing from the file (the message lists the file's
         columns), a cell that is not a finite number or is overflow-sized (the log's
-        rule, :func:`airbearing.io.log.bad_mask`; rows and column named), or a time
+        rule, :func:`airbearing.io.columns.bad_mask`; rows and column named), or a time
         column in s by default whose median interval is :data:`SLOWEST_INTERVAL` or
         more (the message asks whether it is in ms), or one in ms, us or ns whose
         median interval is shorter than ``1 / FASTEST_RATE`` s (asks whether it is in s).
