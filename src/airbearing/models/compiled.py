@@ -357,6 +357,14 @@ def _build(cc: str, name: str, source: str, lib: Path, side: Path) -> None:
             part.unlink(missing_ok=True)
 
 
+def _instructions(fn) -> int:
+    """Instructions of ``fn`` (SX and MX Functions; -1 for others)."""
+    try:
+        return int(fn.n_instructions())
+    except RuntimeError:
+        return -1
+
+
 def _source(fn) -> str:
     cg = ca.CodeGenerator(fn.name())
     cg.add(fn)
@@ -413,7 +421,9 @@ def compiled(fn, *, key: str = "", progress: Callable | None = None):
         f, what, lib = _via_ref(ref, name, fn), "disk", None
         if f is None:
             # ... and the generated C source is the library's own key
+            t_gen = time.monotonic()
             source = _source(fn)
+            t_gen = time.monotonic() - t_gen
             digest = hashlib.sha256((source + "\0" + env).encode()).hexdigest()[:24]
             lib = folder / f"{name}-{digest}{_suffix()}"
             side = lib.with_name(lib.name + ".sha256")
@@ -443,6 +453,15 @@ def compiled(fn, *, key: str = "", progress: Callable | None = None):
                                 None,
                             )
                             _compile_time["done"] += time.monotonic() - t0
+                        _log().info(
+                            "compiled %s: %d instructions, %.0f kB of C generated in %.2f s, "
+                            "compiled in %.2f s",
+                            name,
+                            _instructions(fn),
+                            len(source) / 1e3,
+                            t_gen,
+                            time.monotonic() - t0,
+                        )
                         f = _load(name, lib, fn)
                     except (RuntimeError, OSError) as e:
                         # the virtual machine computes the same values, only slower
