@@ -5,8 +5,8 @@
 Each run is a new process on the same fresh cache folder (``AIRBEARING_CACHE_DIR``): the
 first one compiles every CasADi Function it needs to C (cold), the second loads them
 (warm). A process simulates a free oscillation of the dof-3 ``seed004-platform``, then runs
-``ab.replay`` and ``ab.discrepancy`` on it, and prints the wall time of each phase and
-every compilation (the ``airbearing.compiled`` logger: the function, its instructions, the
+``ab.replay`` and ``ab.discrepancy`` on it, and prints the wall time of each phase, the
+process's CPU time (user + system, the compilers it ran included) and every compilation (the ``airbearing.compiled`` logger: the function, its instructions, the
 size of its C source, the time to generate and to compile it).
 """
 
@@ -17,6 +17,7 @@ import json
 import logging
 import os
 import re
+import resource
 import subprocess
 import sys
 import tempfile
@@ -72,6 +73,7 @@ def child(duration: float, only: str) -> dict:
 
 def run(cache: str, duration: float, only: str) -> dict:
     env = {**os.environ, "AIRBEARING_CACHE_DIR": cache}
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
     res = subprocess.run(
         [sys.executable, __file__, "--child", "--duration", str(duration), "--only", only],
@@ -82,6 +84,9 @@ def run(cache: str, duration: float, only: str) -> dict:
     )
     out = json.loads(res.stdout.strip().splitlines()[-1])
     out["wall"] = time.perf_counter() - t0
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    # user + system of the process and the compilers it ran
+    out["cpu"] = after.ru_utime + after.ru_stime - before.ru_utime - before.ru_stime
     return out
 
 
@@ -98,7 +103,10 @@ def main() -> None:
         for label in ("cold", "warm"):
             r = run(cache, a.duration, a.only)
             phases = ", ".join(f"{k} {v:.1f} s" for k, v in r["times"].items())
-            print(f"{label}: process {r['wall']:.1f} s ({phases}); gap {r['gap']:.6g}")
+            print(
+                f"{label}: process {r['wall']:.1f} s, CPU {r['cpu']:.1f} s ({phases}); "
+                f"gap {r['gap']:.6g}"
+            )
             if "effects" in r:
                 print(f"  effects: {r['effects']}")
             total = sum(c["generate_s"] + c["compile_s"] for c in r["compiles"])
