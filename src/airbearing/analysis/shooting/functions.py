@@ -196,44 +196,48 @@ def _step_functions(model: Model, substeps: int, jit) -> tuple:
 
     def build():
         step = step_function(model, substeps)
-        if model.lag_index:
-            x, u = ca.SX.sym("x", model.nx), ca.SX.sym("u", model.nu)
-            p, dt = ca.SX.sym("p", model.n_p), ca.SX.sym("dt")
-            xn = step(x, u, p, dt)
-            jac = ca.Function(
-                "step_jac", [x, u, p, dt], [xn, ca.jacobian(xn, ca.vertcat(x, p))],
-                ["x", "u", "p", "dt"], ["x_next", "jac"],
-            )  # fmt: skip
-        else:
-            jac = _chained_step_jac(model, substeps)
-        return compiled(step, jit=jit), compiled(jac, jit=jit)
+        return compiled(step, jit=jit), compiled(_chained_step_jac(model, substeps), jit=jit)
 
     return _cached(key, build)
 
 
 def _chained_step_jac(model: Model, substeps: int) -> ca.Function:
-    """``(x, u, p, dt) -> (x_next, d x_next / d[x; p])`` of a Model without lag states, the
-    Jacobian chained over the RK4 sub-steps of :meth:`Model.step_dt`.
+    """``(x, u, p, dt) -> (x_next, d x_next / d[x; p])``, the Jacobian chained over the RK4
+    sub-steps of :meth:`Model.step_dt`.
 
-    The sub-step's state and sensitivity ``(x, S, u, p, h) -> (x', d x'/d[x; p] [S; 0 I])``
-    is one SX Function, called ``substeps`` times, then the quaternion's renormalisation
-    (dof 3). ``x_next`` is the same arithmetic as :meth:`Model.step_dt` (the same RK4
-    expressions of ``Model.f``, which is the plant's dynamics when there are no lag
-    states); the Jacobian equals the derivative of the whole step to round-off. The whole
-    step's Jacobian as one SX expression (21 directions through every sub-step: 85,000
-    instructions for the dof-3 platform at 8 sub-steps) took the C compiler 3-6 min; the
+    One SX Function holds a sub-step's state and sensitivity, ``(x, S, u, p, h) -> (x',
+    d x'/d[x; p] [S; 0 I])``; it is called ``substeps`` times, then the quaternion's
+    renormalisation (dof 3). ``x_next`` is the arithmetic of :meth:`Model.step_dt` (the same
+    RK4 expressions of the plant's rows of ``Model.f``, the same exact update of the lag
+    states), so it equals the step's to the last bit; the Jacobian equals the derivative
+    of the whole step to round-off (1e-15 relative). The whole step's Jacobian as one SX
+    expression (21 directions through every sub-step: 85,000 instructions for the dof-3
+    platform at 8 sub-steps) took the C compiler 3-7 min, superlinear in its size; a
     sub-step's is 1/``substeps`` of it.
     """
     nx, n_p = model.nx, model.n_p
+    n_lag = len(model.lag_index)
+    n_pl = nx - n_lag
+    if tuple(model.lag_index) != tuple(range(n_pl, nx)):  # pragma: no cover - Model's layout
+        raise ValueError("the lag states are expected after the plant's states")
     x, u = ca.SX.sym("x", nx), ca.SX.sym("u", model.nu)
     p, h = ca.SX.sym("p", n_p), ca.SX.sym("h")
     S = ca.SX.sym("S", nx, nx + n_p)
-    f = model.f
-    k1 = f(x, u, p)
-    k2 = f(x + h / 2 * k1, u, p)
-    k3 = f(x + h / 2 * k2, u, p)
-    k4 = f(x + h * k3, u, p)
-    xn = x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+    xp, lag = x[:n_pl], x[n_pl:]
+
+    def f(z):  # the plant's rows of f do not read the lag states
+        return model.f(ca.vertcat(z, lag), u, p)[:n_pl]
+
+    k1 = f(xp)
+    k2 = f(xp + h / 2 * k1)
+    k3 = f(xp + h / 2 * k2)
+    k4 = f(xp + h * k3)
+    xp_next = xp + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+    if n_lag:
+        # the exact lag update over the sub-step (Model.step_dt's own Function)
+        xn = ca.vertcat(xp_next, model._lag(xp, xp_next, lag, p, h))
+    else:
+        xn = xp_next
     seed = ca.vertcat(S, ca.horzcat(ca.SX(n_p, nx), ca.SX.eye(n_p)))
     sub = ca.Function("rk4_sens", [x, S, u, p, h], [xn, ca.jtimes(xn, ca.vertcat(x, p), seed)])
     if model.dof == 3:
@@ -245,8 +249,7 @@ def _chained_step_jac(model: Model, substeps: int) -> ca.Function:
     X, U = ca.MX.sym("x", nx), ca.MX.sym("u", model.nu)
     P, DT = ca.MX.sym("p", n_p), ca.MX.sym("dt")
     hs = DT / substeps
-    Xk = X
-    Sk = ca.MX(ca.DM.eye(nx + n_p)[:nx, :])
+    Xk, Sk = X, ca.MX(ca.DM.eye(nx + n_p)[:nx, :])
     for _ in range(substeps):
         Xk, Sk = sub(Xk, Sk, U, P, hs)
     xn_out, Jn = fin(Xk)
