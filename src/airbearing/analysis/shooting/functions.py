@@ -206,20 +206,20 @@ def _chained_step_jac(model: Model, substeps: int, jit=None) -> ca.Function:
     """``(x, u, p, dt) -> (x_next, d x_next / d[x; p])``, the Jacobian chained over the RK4
     sub-steps of :meth:`Model.step_dt`.
 
-    One SX Function holds a sub-step's state and sensitivity, ``(x, S, u, p, h) -> (x',
-    d x'/d[x; p] [S; 0 I])``, compiled to C once per structure (``jit``, :func:`compiled`)
-    whatever the number of sub-steps; the returned Function (CasADi's virtual machine)
-    calls it ``substeps`` times, then the quaternion's renormalisation (dof 3).
+    One SX Function holds a sub-step and its own Jacobian, ``(x, u, p, h) -> (x', A = d x' /
+    d[x; p])``, compiled to C once per structure (``jit``, :func:`compiled`) whatever the
+    number of sub-steps; the returned Function (CasADi's virtual machine) calls it
+    ``substeps`` times, chaining ``S' = A [S; 0 I]``, then the quaternion's renormalisation
+    (dof 3).
 
     ``x_next`` is the arithmetic of :meth:`Model.step_dt` (the same RK4 expressions of the
     plant's rows of ``Model.f``, the same exact update of the lag states), so it equals the
     step's to the last bit; the Jacobian equals the derivative of the whole step to
-    round-off (1e-15 relative). The whole step's Jacobian as one SX
-    expression (21 directions through every sub-step: 85,000 instructions for the dof-3
-    platform at 8 sub-steps) took the C compiler 3-7 min, superlinear in its size; a
-    sub-step's is 1/``substeps`` of it. The chain in the virtual machine costs 3 % more than
-    the same chain compiled (a 200-step sensitivity rollout, 8 sub-steps: 17.0 ms against
-    16.5 ms) and saves compiling the sub-step again for every number of sub-steps.
+    round-off (1e-15 relative). The whole step's Jacobian as one SX expression (85,000
+    instructions for the dof-3 platform at 8 sub-steps) took the C compiler 3-7 min,
+    superlinear in its size; one sub-step's Jacobian is 8,900 and compiles in about 3 s. A
+    200-step sensitivity rollout (8 sub-steps) takes 10.6 ms with this chain, 16.5 ms with
+    the sub-step's forward derivative in 21 directions compiled with the chain.
     """
     nx, n_p = model.nx, model.n_p
     n_lag = len(model.lag_index)
@@ -228,7 +228,6 @@ def _chained_step_jac(model: Model, substeps: int, jit=None) -> ca.Function:
         raise ValueError("the lag states are expected after the plant's states")
     x, u = ca.SX.sym("x", nx), ca.SX.sym("u", model.nu)
     p, h = ca.SX.sym("p", n_p), ca.SX.sym("h")
-    S = ca.SX.sym("S", nx, nx + n_p)
     xp, lag = x[:n_pl], x[n_pl:]
 
     def f(z):  # the plant's rows of f do not read the lag states
@@ -244,8 +243,7 @@ def _chained_step_jac(model: Model, substeps: int, jit=None) -> ca.Function:
         xn = ca.vertcat(xp_next, model._lag(xp, xp_next, lag, p, h))
     else:
         xn = xp_next
-    seed = ca.vertcat(S, ca.horzcat(ca.SX(n_p, nx), ca.SX.eye(n_p)))
-    sub = ca.Function("rk4_sens", [x, S, u, p, h], [xn, ca.jtimes(xn, ca.vertcat(x, p), seed)])
+    sub = ca.Function("rk4_jac", [x, u, p, h], [xn, ca.jacobian(xn, ca.vertcat(x, p))])
     sub = compiled(sub, jit=jit)
     if model.dof == 3:
         out = ca.vertcat(x[0:4] / ca.norm_2(x[0:4]), x[4:])
@@ -256,9 +254,11 @@ def _chained_step_jac(model: Model, substeps: int, jit=None) -> ca.Function:
     X, U = ca.MX.sym("x", nx), ca.MX.sym("u", model.nu)
     P, DT = ca.MX.sym("p", n_p), ca.MX.sym("dt")
     hs = DT / substeps
-    Xk, Sk = X, ca.MX(ca.DM.eye(nx + n_p)[:nx, :])
-    for _ in range(substeps):
-        Xk, Sk = sub(Xk, Sk, U, P, hs)
+    Xk, Sk = sub(X, U, P, hs)
+    grow = ca.DM.eye(nx + n_p)[nx:, :]  # d p / d[x; p]
+    for _ in range(substeps - 1):
+        Xk, A = sub(Xk, U, P, hs)
+        Sk = ca.mtimes(A, ca.vertcat(Sk, grow))
     xn_out, Jn = fin(Xk)
     # the whole step's structural zeros (exact zeros of the chain, not stored)
     step = step_function(model, substeps)
