@@ -33,7 +33,8 @@ Compilation (not a cache hit) is announced through the ``progress`` argument and
 through every sink registered with :func:`compile_notices` (the CLI's progress
 display), each sink hearing it once per process (the first compilation: a run that
 builds 20 structures says so once, not 20 times), and every time as an ``INFO``
-record of the ``airbearing.compiled`` logger.
+record of the ``airbearing.compiled`` logger, followed by one naming the Function's
+instructions, its C source's size and the seconds spent generating and compiling it.
 """
 
 from __future__ import annotations
