@@ -81,6 +81,14 @@ COMPILE_ENV = "AIRBEARING_COMPILE"
 #: and Jacobian, 200 samples): ``-O1`` runs as fast as ``-O2`` (0.23 ms) and compiles
 #: in 1.3 s against 1.6 s; ``-O0`` compiles in 0.5 s but runs 2.6x slower.
 FLAGS = ("-O1", "-fPIC", "-shared")
+#: Instructions from which a Function is compiled with ``BIG_FLAGS`` instead. gcc's time at
+#: ``-O1`` grows faster than the size of one generated function (register allocation, 70 %
+#: of it): the dof-3 platform's step Jacobian, 20,000 instructions 11 s of CPU, 42,000 36 s,
+#: 85,000 3-6 min; at ``-O0`` 1.2 s, 2.7 s and 6 s, running 2.1 times slower (66 against 31
+#: us at 42,000). The values are the same to the bit (the same C, no fast-math).
+BIG_INSTRUCTIONS = 30_000
+#: Flags for Functions of ``BIG_INSTRUCTIONS`` or more.
+BIG_FLAGS = ("-O0", "-fPIC", "-shared")
 #: Shortest loop (steps) worth compiling: below it building and running a
 #: ``mapaccum`` in the virtual machine costs less than loading a cached library
 #: (measured on the CMG closed loop, CPU time: VM 12-25 us a step for building the
@@ -335,14 +343,14 @@ def _load(name: str, lib: Path, fn):
     return f
 
 
-def _build(cc: str, name: str, source: str, lib: Path, side: Path) -> None:
+def _build(cc: str, name: str, source: str, lib: Path, side: Path, flags=FLAGS) -> None:
     """Compile ``source`` and install it at ``lib`` (atomically, sidecar first)."""
     with tempfile.TemporaryDirectory(prefix="airbearing-cc-") as tmp:
         # a fixed source name keeps the library's bytes independent of the folder
         src = Path(tmp) / f"{lib.stem}.c"
         src.write_text(source)
         out = Path(tmp) / f"{lib.stem}{_suffix()}"
-        cmd = [cc, *FLAGS, src.name, "-o", out.name, "-lm"]
+        cmd = [cc, *flags, src.name, "-o", out.name, "-lm"]
         res = subprocess.run(cmd, cwd=tmp, capture_output=True, text=True)
         if res.returncode != 0 or not out.exists():
             raise RuntimeError(f"C compiler failed on {name}: {res.stderr.strip()[:500]}")
@@ -398,7 +406,8 @@ def compiled(fn, *, key: str = "", progress: Callable | None = None):
     if cc is None or os.environ.get(COMPILE_ENV, "1") == "0":
         _count("uncompiled")
         return fn
-    env = "\0".join((ca.__version__, cc, " ".join(FLAGS), platform.machine(), sys.platform, key))
+    flags = BIG_FLAGS if _instructions(fn) >= BIG_INSTRUCTIONS else FLAGS
+    env = "\0".join((ca.__version__, cc, " ".join(flags), platform.machine(), sys.platform, key))
     mem_key = hashlib.sha256((env + "\0" + fn.serialize()).encode()).hexdigest()
     with _lock:
         hit = _memory.get(mem_key)
@@ -447,7 +456,7 @@ def compiled(fn, *, key: str = "", progress: Callable | None = None):
                     try:
                         _compile_time["running_since"] = time.monotonic()
                         try:
-                            _build(cc, name, source, lib, side)
+                            _build(cc, name, source, lib, side, flags)
                         finally:
                             t0, _compile_time["running_since"] = (
                                 _compile_time["running_since"],

@@ -189,84 +189,23 @@ def _link_function(model: Model, K: int, outputs: tuple) -> ca.Function:
 
 
 def _step_functions(model: Model, substeps: int, jit) -> tuple:
-    """``(step, step_jac)`` for any window length, slot count and output groups: ``(x, u, p,
-    dt) -> x_next`` compiled once per structure and sub-steps, and ``-> (x_next, d x_next /
-    d[x; p])`` chained over a sub-step compiled once per structure
-    (:func:`_chained_step_jac`)."""
+    """``(step, step_jac)`` compiled once per structure and sub-steps (any window length,
+    slot count, output groups): ``(x, u, p, dt) -> x_next`` and ``-> (x_next, d x_next /
+    d[x; p])``."""
     key = ("step", structure_key(model), substeps, jit)
 
     def build():
         step = step_function(model, substeps)
-        return compiled(step, jit=jit), _chained_step_jac(model, substeps, jit)
+        x, u = ca.SX.sym("x", model.nx), ca.SX.sym("u", model.nu)
+        p, dt = ca.SX.sym("p", model.n_p), ca.SX.sym("dt")
+        xn = step(x, u, p, dt)
+        jac = ca.Function(
+            "step_jac", [x, u, p, dt], [xn, ca.jacobian(xn, ca.vertcat(x, p))],
+            ["x", "u", "p", "dt"], ["x_next", "jac"],
+        )  # fmt: skip
+        return compiled(step, jit=jit), compiled(jac, jit=jit)
 
     return _cached(key, build)
-
-
-def _chained_step_jac(model: Model, substeps: int, jit=None) -> ca.Function:
-    """``(x, u, p, dt) -> (x_next, d x_next / d[x; p])``, the Jacobian chained over the RK4
-    sub-steps of :meth:`Model.step_dt`.
-
-    One SX Function holds a sub-step and its own Jacobian, ``(x, u, p, h) -> (x', A = d x' /
-    d[x; p])``, compiled to C once per structure (``jit``, :func:`compiled`) whatever the
-    number of sub-steps; the returned Function (CasADi's virtual machine) calls it
-    ``substeps`` times, chaining ``S' = A [S; 0 I]``, then the quaternion's renormalisation
-    (dof 3).
-
-    ``x_next`` is the arithmetic of :meth:`Model.step_dt` (the same RK4 expressions of the
-    plant's rows of ``Model.f``, the same exact update of the lag states), so it equals the
-    step's to the last bit; the Jacobian equals the derivative of the whole step to
-    round-off (1e-15 relative). The whole step's Jacobian as one SX expression (85,000
-    instructions for the dof-3 platform at 8 sub-steps) took the C compiler 3-7 min,
-    superlinear in its size; one sub-step's Jacobian is 8,900 and compiles in about 3 s. A
-    200-step sensitivity rollout (8 sub-steps) takes 10.6 ms with this chain, 16.5 ms with
-    the sub-step's forward derivative in 21 directions compiled with the chain.
-    """
-    nx, n_p = model.nx, model.n_p
-    n_lag = len(model.lag_index)
-    n_pl = nx - n_lag
-    if tuple(model.lag_index) != tuple(range(n_pl, nx)):  # pragma: no cover - Model's layout
-        raise ValueError("the lag states are expected after the plant's states")
-    x, u = ca.SX.sym("x", nx), ca.SX.sym("u", model.nu)
-    p, h = ca.SX.sym("p", n_p), ca.SX.sym("h")
-    xp, lag = x[:n_pl], x[n_pl:]
-
-    def f(z):  # the plant's rows of f do not read the lag states
-        return model.f(ca.vertcat(z, lag), u, p)[:n_pl]
-
-    k1 = f(xp)
-    k2 = f(xp + h / 2 * k1)
-    k3 = f(xp + h / 2 * k2)
-    k4 = f(xp + h * k3)
-    xp_next = xp + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
-    if n_lag:
-        # the exact lag update over the sub-step (Model.step_dt's own Function)
-        xn = ca.vertcat(xp_next, model._lag(xp, xp_next, lag, p, h))
-    else:
-        xn = xp_next
-    sub = ca.Function("rk4_jac", [x, u, p, h], [xn, ca.jacobian(xn, ca.vertcat(x, p))])
-    sub = compiled(sub, jit=jit)
-    if model.dof == 3:
-        out = ca.vertcat(x[0:4] / ca.norm_2(x[0:4]), x[4:])
-    else:
-        out = x
-    fin = ca.Function("renorm", [x], [out, ca.jacobian(out, x)])
-
-    X, U = ca.MX.sym("x", nx), ca.MX.sym("u", model.nu)
-    P, DT = ca.MX.sym("p", n_p), ca.MX.sym("dt")
-    hs = DT / substeps
-    Xk, Sk = sub(X, U, P, hs)
-    grow = ca.DM.eye(nx + n_p)[nx:, :]  # d p / d[x; p]
-    for _ in range(substeps - 1):
-        Xk, A = sub(Xk, U, P, hs)
-        Sk = ca.mtimes(A, ca.vertcat(Sk, grow))
-    xn_out, Jn = fin(Xk)
-    # the whole step's structural zeros (exact zeros of the chain, not stored)
-    step = step_function(model, substeps)
-    pattern = ca.horzcat(step.jac_sparsity(0, 0), step.jac_sparsity(0, 2))
-    return ca.Function(
-        "step_jac", [X, U, P, DT], [xn_out, ca.project(ca.mtimes(Jn, Sk), pattern)],
-        ["x", "u", "p", "dt"], ["x_next", "jac"],
-    )  # fmt: skip
 
 
 def _sample_functions(model: Model, outputs: tuple, jit) -> tuple:
