@@ -81,14 +81,13 @@ COMPILE_ENV = "AIRBEARING_COMPILE"
 #: and Jacobian, 200 samples): ``-O1`` runs as fast as ``-O2`` (0.23 ms) and compiles
 #: in 1.3 s against 1.6 s; ``-O0`` compiles in 0.5 s but runs 2.6x slower.
 FLAGS = ("-O1", "-fPIC", "-shared")
-#: Instructions from which a Function is compiled with ``BIG_FLAGS`` instead. gcc's time at
-#: ``-O1`` grows faster than the size of one generated function (register allocation, 70 %
-#: of it): the dof-3 platform's step Jacobian, 20,000 instructions 11 s of CPU, 42,000 36 s,
-#: 85,000 3-6 min; at ``-O0`` 1.2 s, 2.7 s and 6 s, running 2.1 times slower (66 against 31
-#: us at 42,000). The values are the same to the bit (the same C, no fast-math).
+#: Instructions from which a Function's C keeps its intermediate values in the work vector
+#: (CasADi's ``avoid_stack``) instead of thousands of local variables. gcc's time at ``-O1``
+#: grows faster than the size of one generated function, most of it in register
+#: allocation: the dof-3 platform's step Jacobian of 42,000 instructions took 36 s of CPU,
+#: with ``avoid_stack`` 19 s, and runs as fast (29 against 31 us), to the same bits.
+#: (``-O0`` takes 2.7 s but runs 2.1 times slower: a warm search took twice as long.)
 BIG_INSTRUCTIONS = 30_000
-#: Flags for Functions of ``BIG_INSTRUCTIONS`` or more.
-BIG_FLAGS = ("-O0", "-fPIC", "-shared")
 #: Shortest loop (steps) worth compiling: below it building and running a
 #: ``mapaccum`` in the virtual machine costs less than loading a cached library
 #: (measured on the CMG closed loop, CPU time: VM 12-25 us a step for building the
@@ -343,14 +342,14 @@ def _load(name: str, lib: Path, fn):
     return f
 
 
-def _build(cc: str, name: str, source: str, lib: Path, side: Path, flags=FLAGS) -> None:
+def _build(cc: str, name: str, source: str, lib: Path, side: Path) -> None:
     """Compile ``source`` and install it at ``lib`` (atomically, sidecar first)."""
     with tempfile.TemporaryDirectory(prefix="airbearing-cc-") as tmp:
         # a fixed source name keeps the library's bytes independent of the folder
         src = Path(tmp) / f"{lib.stem}.c"
         src.write_text(source)
         out = Path(tmp) / f"{lib.stem}{_suffix()}"
-        cmd = [cc, *flags, src.name, "-o", out.name, "-lm"]
+        cmd = [cc, *FLAGS, src.name, "-o", out.name, "-lm"]
         res = subprocess.run(cmd, cwd=tmp, capture_output=True, text=True)
         if res.returncode != 0 or not out.exists():
             raise RuntimeError(f"C compiler failed on {name}: {res.stderr.strip()[:500]}")
@@ -374,8 +373,8 @@ def _instructions(fn) -> int:
         return -1
 
 
-def _source(fn) -> str:
-    cg = ca.CodeGenerator(fn.name())
+def _source(fn, options=None) -> str:
+    cg = ca.CodeGenerator(fn.name(), dict(options or {}))
     cg.add(fn)
     return cg.dump()
 
@@ -406,8 +405,10 @@ def compiled(fn, *, key: str = "", progress: Callable | None = None):
     if cc is None or os.environ.get(COMPILE_ENV, "1") == "0":
         _count("uncompiled")
         return fn
-    flags = BIG_FLAGS if _instructions(fn) >= BIG_INSTRUCTIONS else FLAGS
-    env = "\0".join((ca.__version__, cc, " ".join(flags), platform.machine(), sys.platform, key))
+    options = {"avoid_stack": True} if _instructions(fn) >= BIG_INSTRUCTIONS else {}
+    env = "\0".join((ca.__version__, cc, " ".join(FLAGS), platform.machine(), sys.platform, key))
+    if options:  # (small Functions keep the keys of the libraries already cached)
+        env += "\0avoid_stack"
     mem_key = hashlib.sha256((env + "\0" + fn.serialize()).encode()).hexdigest()
     with _lock:
         hit = _memory.get(mem_key)
@@ -432,7 +433,7 @@ def compiled(fn, *, key: str = "", progress: Callable | None = None):
         if f is None:
             # ... and the generated C source is the library's own key
             t_gen = time.monotonic()
-            source = _source(fn)
+            source = _source(fn, options)
             t_gen = time.monotonic() - t_gen
             digest = hashlib.sha256((source + "\0" + env).encode()).hexdigest()[:24]
             lib = folder / f"{name}-{digest}{_suffix()}"
@@ -456,7 +457,7 @@ def compiled(fn, *, key: str = "", progress: Callable | None = None):
                     try:
                         _compile_time["running_since"] = time.monotonic()
                         try:
-                            _build(cc, name, source, lib, side, flags)
+                            _build(cc, name, source, lib, side)
                         finally:
                             t0, _compile_time["running_since"] = (
                                 _compile_time["running_since"],
