@@ -6,8 +6,9 @@ Each run is a new process on the same fresh cache folder (``AIRBEARING_CACHE_DIR
 first one compiles every CasADi Function it needs to C (cold), the second loads them
 (warm). A process simulates a free oscillation of the dof-3 ``seed004-platform``, then runs
 ``ab.replay`` and ``ab.discrepancy`` on it, and prints the wall time of each phase, the
-process's CPU time (user + system, the compilers it ran included) and every compilation (the ``airbearing.compiled`` logger: the function, its instructions, the
-size of its C source, the time to generate and to compile it).
+process's CPU time (user + system, the compilers it ran included) and every compilation
+(the ``airbearing.compiled`` logger: the function, its instructions, the size of its C
+source, the time to generate and to compile it).
 """
 
 from __future__ import annotations
