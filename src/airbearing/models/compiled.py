@@ -33,7 +33,8 @@ Compilation (not a cache hit) is announced through the ``progress`` argument and
 through every sink registered with :func:`compile_notices` (the CLI's progress
 display), each sink hearing it once per process (the first compilation: a run that
 builds 20 structures says so once, not 20 times), and every time as an ``INFO``
-record of the ``airbearing.compiled`` logger.
+record of the ``airbearing.compiled`` logger, followed by one naming the Function's
+instructions, its C source's size and the seconds spent generating and compiling it.
 """
 
 from __future__ import annotations
@@ -80,6 +81,13 @@ COMPILE_ENV = "AIRBEARING_COMPILE"
 #: and Jacobian, 200 samples): ``-O1`` runs as fast as ``-O2`` (0.23 ms) and compiles
 #: in 1.3 s against 1.6 s; ``-O0`` compiles in 0.5 s but runs 2.6x slower.
 FLAGS = ("-O1", "-fPIC", "-shared")
+#: Instructions from which a Function's C keeps its intermediate values in the work vector
+#: (CasADi's ``avoid_stack``) instead of thousands of local variables. gcc's time at ``-O1``
+#: grows faster than the size of one generated function, most of it in register
+#: allocation: the dof-3 platform's step Jacobian of 42,000 instructions took 36 s of CPU,
+#: with ``avoid_stack`` 19 s, and runs as fast (29 against 31 us), to the same bits.
+#: (``-O0`` takes 2.7 s but runs 2.1 times slower: a warm search took twice as long.)
+BIG_INSTRUCTIONS = 30_000
 #: Shortest loop (steps) worth compiling: below it building and running a
 #: ``mapaccum`` in the virtual machine costs less than loading a cached library
 #: (measured on the CMG closed loop, CPU time: VM 12-25 us a step for building the
@@ -357,8 +365,16 @@ def _build(cc: str, name: str, source: str, lib: Path, side: Path) -> None:
             part.unlink(missing_ok=True)
 
 
-def _source(fn) -> str:
-    cg = ca.CodeGenerator(fn.name())
+def _instructions(fn) -> int:
+    """Instructions of ``fn`` (SX and MX Functions; -1 for others)."""
+    try:
+        return int(fn.n_instructions())
+    except RuntimeError:
+        return -1
+
+
+def _source(fn, options=None) -> str:
+    cg = ca.CodeGenerator(fn.name(), dict(options or {}))
     cg.add(fn)
     return cg.dump()
 
@@ -389,7 +405,10 @@ def compiled(fn, *, key: str = "", progress: Callable | None = None):
     if cc is None or os.environ.get(COMPILE_ENV, "1") == "0":
         _count("uncompiled")
         return fn
+    options = {"avoid_stack": True} if _instructions(fn) >= BIG_INSTRUCTIONS else {}
     env = "\0".join((ca.__version__, cc, " ".join(FLAGS), platform.machine(), sys.platform, key))
+    if options:  # (small Functions keep the keys of the libraries already cached)
+        env += "\0avoid_stack"
     mem_key = hashlib.sha256((env + "\0" + fn.serialize()).encode()).hexdigest()
     with _lock:
         hit = _memory.get(mem_key)
@@ -413,7 +432,9 @@ def compiled(fn, *, key: str = "", progress: Callable | None = None):
         f, what, lib = _via_ref(ref, name, fn), "disk", None
         if f is None:
             # ... and the generated C source is the library's own key
-            source = _source(fn)
+            t_gen = time.monotonic()
+            source = _source(fn, options)
+            t_gen = time.monotonic() - t_gen
             digest = hashlib.sha256((source + "\0" + env).encode()).hexdigest()[:24]
             lib = folder / f"{name}-{digest}{_suffix()}"
             side = lib.with_name(lib.name + ".sha256")
@@ -443,6 +464,15 @@ def compiled(fn, *, key: str = "", progress: Callable | None = None):
                                 None,
                             )
                             _compile_time["done"] += time.monotonic() - t0
+                        _log().info(
+                            "compiled %s: %d instructions, %.0f kB of C generated in %.2f s, "
+                            "compiled in %.2f s",
+                            name,
+                            _instructions(fn),
+                            len(source) / 1e3,
+                            t_gen,
+                            time.monotonic() - t0,
+                        )
                         f = _load(name, lib, fn)
                     except (RuntimeError, OSError) as e:
                         # the virtual machine computes the same values, only slower
