@@ -513,8 +513,8 @@ def scale_reason(testbed, data, fixed, prior, prior_weight) -> str:
     positions = set()
     if testbed.masses is not None:
         for d in data:
-            rows = np.asarray(d.s, float)[np.asarray(d.usable, bool)]
-            positions |= {tuple(np.round(r, 9)) for r in rows}
+            rows = np.round(np.asarray(d.s, float)[np.asarray(d.usable, bool)], 9)
+            positions |= set(map(tuple, np.unique(rows, axis=0).tolist()))
     sliders = len(positions) >= 2
     dipole = any(np.any(d.dipole != 0) and np.any(d.b_body != 0) for d in data)
     # reaction wheels: their known momentum exchanged with the body fixes the scale
