@@ -49,7 +49,10 @@ def expect(progress: Callable | None, weights, *, min_share: float = 0.0) -> Non
     tell = getattr(progress, "expect", None)
     if callable(tell):
         w = [float(x) for x in weights]
-        tell(w, min_share=float(min_share)) if min_share > 0 else tell(w)
+        if min_share > 0:
+            tell(w, min_share=float(min_share))
+        else:  # a display that takes only the weights
+            tell(w)
 
 
 class TimeLeft:
@@ -114,10 +117,9 @@ class TimeLeft:
             return None
         if done != self.done:  # a step finished: a new estimate
             elapsed = max(now - self.start, 0.0)
-            work, whole = self._share(done, total)
+            work, whole, weighted = self._share(done, total)
             if self.weights is None and self.excluded is not None:
                 elapsed = max(elapsed - (self.excluded() - self.excluded0), 0.0)
-            weighted = self.weights is not None and len(self.weights) == int(total)
             if work <= 0 or (weighted and work < self.min_share * whole):
                 return None
             raw = elapsed * (whole - work) / work
@@ -139,11 +141,11 @@ class TimeLeft:
         self.weights = weights if sum(weights) > 0 else None
         self.min_share = float(min_share)
 
-    def _share(self, done: float, total: float) -> tuple[float, float]:
-        """``(work done, whole work)``: weighted when the weights match the steps."""
+    def _share(self, done: float, total: float) -> tuple[float, float, bool]:
+        """``(work done, whole work, weighted)``: weighted when the weights match the steps."""
         w = self.weights
         if w is None or len(w) != int(total):
-            return float(done), float(total)
+            return float(done), float(total), False
         k = int(done)
         part = sum(w[:k]) + (done - k) * (w[k] if k < len(w) else 0.0)
-        return part, sum(w)
+        return part, sum(w), True
