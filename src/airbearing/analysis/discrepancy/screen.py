@@ -34,6 +34,8 @@ from airbearing.analysis.discrepancy.trial import (
     chi2_threshold,
     cross_validate,
     judge,
+    lr_of,
+    noise_count,
     profile_std,
     scan_grid,
 )
@@ -182,7 +184,7 @@ class Linearisation:
         e = r.copy()
         for R, Dj, P in self.blocks:
             e[R] -= Dj @ (P @ (Dj.T @ r[R]))
-        return lr_of(self.current.n_res, self.current.rss, float(e @ e))
+        return lr_of(self.current, float(e @ e))
 
     def S_all(self, E: np.ndarray) -> np.ndarray:
         """``S`` of the chosen and the candidate's parameters (n_p, k)."""
@@ -229,8 +231,7 @@ def screened(lin, cand, k_sel, lower, upper, current, ln_n, before, folds, th_re
     E = lin.columns(cand.params, cand.tie)
     st = lin.step(E, lower[:k_sel], upper[:k_sel], cand.lower, cand.upper)
     need = max(chi2_threshold(cand.k), cand.k * ln_n)
-    n = current.n_res
-    lr_model, lr_step = lr_of(n, current.rss, st.rss_model), lr_of(n, current.rss, st.rss)
+    lr_model, lr_step = lr_of(current, st.rss_model), lr_of(current, st.rss)
     agree = abs(lr_step - lr_model) < AGREE_FRACTION * need
     if not (st.feasible and agree):
         return None
@@ -303,7 +304,7 @@ def screened_lag(problem, current, cand, datas, ln_n, k_added, before):
     reach = max(1, math.ceil(3 * tau / float(np.median(w.dt[w.dt > 0]))))
     starts = sum(float(np.sum(e[j * n : j * n + reach * na] ** 2)) for j in range(nw))
     rss = max(float(e @ e) - starts, 1e-300)
-    lr = lr_of(current.n_res, current.rss, rss)
+    lr = lr_of(current, rss)
     need = max(chi2_threshold(k_added), k_added * ln_n)
     if lr >= SCREEN_FRACTION * need:
         return None
@@ -374,7 +375,7 @@ def screened_scan(problem, cand, current, S_sel, col, ln_n, before, folds):
     i = int(np.argmin(prof[:, 1]))
     th_best = float(prof[i, 0])
     need = max(chi2_threshold(1), ln_n)
-    lr_model = lr_of(n, current.rss, prof[i, 1])
+    lr_model = lr_of(current, prof[i, 1])
     # the step at the best threshold, checked by the residual there
     r = problem.residual(current.delta, p_sel + col * th_best)
     z = np.zeros(J.shape[1])
@@ -384,12 +385,13 @@ def screened_scan(problem, cand, current, S_sel, col, ln_n, before, folds):
     p = p_sel + col * th_best + (S_sel @ z[:k_sel] if k_sel else 0.0)
     r_step = problem.residual(delta, p)
     rss = float(r_step @ r_step)
-    lr_step = lr_of(n, current.rss, rss)
+    lr_step = lr_of(current, rss)
     if abs(lr_step - lr_model) >= AGREE_FRACTION * need:
         return None
     if max(lr_model, lr_step) >= SCREEN_FRACTION * need:
         return None
-    std = profile_std(prof, n)  # 0 on a flat profile: "not identifiable", as IPOPT's scan says
+    # 0 on a flat profile: "not identifiable", as IPOPT's scan says
+    std = profile_std(prof, noise_count(current))
     k = k_sel + 1
     Jx = sp.hstack([J[:, :k_sel], sp.csc_matrix((J.shape[0], 1)), J[:, k_sel:]]).tocsc()
     cov = np.zeros((k, k))
@@ -466,8 +468,3 @@ def _box_min(G: np.ndarray, g: np.ndarray, lo: np.ndarray, hi: np.ndarray):
         if q < best_q:
             best, best_q = d, q
     return best / c, best_q
-
-
-def lr_of(n: int, rss0: float, rss: float) -> float:
-    """Likelihood ratio ``n ln(RSS_0 / RSS)`` (inf for a perfect fit)."""
-    return n * math.log(rss0 / rss) if rss > 0 else math.inf

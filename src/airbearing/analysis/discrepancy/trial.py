@@ -6,7 +6,9 @@ residual-torque regression start. It is scored by
 
 - the likelihood ratio ``LR = n ln(RSS_0 / RSS_1)`` and the BIC change
   ``dBIC = -LR + k ln(n)`` (``k`` added parameters; a first ``sensor_lag`` also
-  counts the lag filter's free start in every window);
+  counts the lag filter's free start in every window). ``n`` counts the residuals that
+  carry noise (:func:`noise_count`): where the current fit's residuals lie below the noise
+  the weights assume, the weights are taken as the noise;
 - its standard errors (Gauss-Newton covariance with the initial states
   eliminated, :func:`airbearing.analysis.shooting.theta_errors`) and the Wald
   distance ``sigmas = sqrt(theta^T C^-1 theta)`` (``|value| / std`` for one number);
@@ -187,6 +189,30 @@ def _g(v) -> str:
     return f"{float(v):g}"
 
 
+def noise_count(current: Fit) -> float:
+    """Residuals of ``current`` that carry noise: ``n min(1, s2)``, ``s2 = RSS / (n - n_free)``.
+
+    ``n ln(RSS_0 / RSS_1)`` is the likelihood ratio when every residual carries noise of one
+    unknown scale. An output group weighted by a floor rather than by its noise (noise-free
+    attitude beside a gyro: its residuals are nearly zero) adds rows without noise; counted,
+    they scale the ratio up by ``1 / s2`` (on a 120 s dof-3 oscillation with a noise-free
+    attitude, s2 = 0.48 doubled it and named a gyro bias that was not there). With ``s2``
+    below 1 the ratio becomes the known-noise one, ``RSS_0 - RSS_1`` to first order: the
+    noise is never taken as smaller than the weights say. Taken from the current fit (the
+    null), so the ratio grows as a candidate's RSS falls. One scale for all groups: a group
+    noisier than its weights beside a quiet one is not corrected (the rate weights come from
+    the logged rates' own noise floor, so the gyro's group is at its weights).
+    """
+    n = current.n_res
+    return n * min(1.0, current.rss / max(n - current.n_free, 1))
+
+
+def lr_of(current: Fit, rss: float) -> float:
+    """Likelihood ratio of a fit of residual sum ``rss`` against ``current`` (module doc;
+    inf for a perfect fit)."""
+    return noise_count(current) * math.log(current.rss / rss) if rss > 0 else math.inf
+
+
 def chi2_threshold(k: int) -> float:
     """The chi-square quantile ``1 - SIGNIFICANCE`` with ``k`` degrees of freedom."""
     from scipy.special import chdtri  # chi2.ppf(1 - a, k) without importing scipy.stats (0.6 s)
@@ -348,8 +374,7 @@ def failed(cand: Candidate, status: str, reason: str, start=None, before=math.na
 def judge(cand, fit, k_sel, current, ln_n, k_added, held: HeldOut, before: HeldOut, start, note):
     """Scores and the honest-naming tests of one fitted candidate (module doc)."""
     k = k_sel + cand.k
-    n = fit.n_res
-    lr = n * math.log(current.rss / fit.rss) if fit.rss > 0 else math.inf
+    lr = lr_of(current, fit.rss)
     dbic = -lr + k_added * ln_n
     significant = bool(dbic < 0 and lr > chi2_threshold(k_added))
     th = fit.theta[k_sel:k]
@@ -406,7 +431,8 @@ def judge(cand, fit, k_sel, current, ln_n, k_added, held: HeldOut, before: HeldO
     at_high = np.isfinite(hi) & (hi - th <= near)
     # the words speak of the total: a correction's bounds are shifted by its nominal
     nom = np.zeros(lo.size) if cand.nominal is None else np.asarray(cand.nominal, dtype=float)
-    cov = fit.cov[k_sel:k, k_sel:k]
+    # the noise not below the weights' (noise_count): errors not narrowed by s2 < 1
+    cov = fit.cov[k_sel:k, k_sel:k] / min(1.0, s2)
     try:
         sig = float(math.sqrt(max(float(th @ np.linalg.solve(cov, th)), 0.0)))
     except np.linalg.LinAlgError:
@@ -499,11 +525,11 @@ def scan_grid(problem: ShootingProblem, cand: Candidate):
     return dd, np.unique(np.quantile(dd, np.linspace(0.02, 0.9, SCAN_POINTS)))
 
 
-def profile_std(prof: np.ndarray, n_res: int) -> float:
-    """1-sigma of a profile ``[(threshold, rss), ...]``: where ``n ln(RSS / RSS_min)``
-    rises by 1."""
+def profile_std(prof: np.ndarray, count: float) -> float:
+    """1-sigma of a profile ``[(threshold, rss), ...]``: where ``count ln(RSS / RSS_min)``
+    rises by 1 (``count``: :func:`noise_count`)."""
     i = int(np.argmin(prof[:, 1]))
-    inside = prof[n_res * np.log(prof[:, 1] / prof[i, 1]) <= 1.0, 0]
+    inside = prof[count * np.log(prof[:, 1] / prof[i, 1]) <= 1.0, 0]
     th = prof[i, 0]
     return float(max(inside.max() - th, th - inside.min(), 0.0)) if inside.size else 0.0
 
@@ -557,7 +583,7 @@ def scan(problem, cand, p_base, S_sel, theta_sel, S_c, lo_sel, hi_sel, delta0, b
     prof = np.array(sorted((th, f.rss) for th, f in fits.items()))
     th_best = float(prof[int(np.argmin(prof[:, 1])), 0])
     fbest = fits[th_best]
-    inside = prof[fbest.n_res * np.log(prof[:, 1] / fbest.rss) <= 1.0, 0]
+    inside = prof[noise_count(fbest) * np.log(prof[:, 1] / fbest.rss) <= 1.0, 0]
     std = float(max(inside.max() - th_best, th_best - inside.min(), 0.0)) if inside.size else 0.0
     if mids.size > 1:
         m = np.sort(mids)
