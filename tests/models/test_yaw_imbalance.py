@@ -243,24 +243,6 @@ COAST_TRUTH = {
 
 @pytest.mark.slow
 def test_three_coast_downs_name_friction_drag_and_the_imbalance():
-    # in a process of its own: after some other test files in the same process (the
-    # suite's worker order), this search once named inertia_error with coulomb's value and
-    # coulomb with aero_drag's: a parameter-slot mix-up, its cause not found yet;
-    # alone it names the truth. The check itself is unchanged.
-    import subprocess
-    import sys
-    from pathlib import Path
-
-    here = Path(__file__).resolve()
-    code = (
-        f"import sys; sys.path[:0] = [{str(here.parent.parent)!r}, {str(here.parent)!r}]\n"
-        "from test_yaw_imbalance import _three_coast_downs\n_three_coast_downs()\n"
-    )
-    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
-    assert done.returncode == 0, done.stderr[-3000:]
-
-
-def _three_coast_downs():
     logs = [
         spindown(ROTOR, initial_rate=w, duration=300.0, effects=COAST_TRUTH, seed=70 + i).log
         for i, w in enumerate((4.5, 1.5, 0.4))

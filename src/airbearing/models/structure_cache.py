@@ -66,7 +66,12 @@ def structure_key(of, extra=()) -> str:
     -------
     str
         The testbed's document without its values (:data:`_RUN_VALUES`), effects by name
-        and shape, and ``extra``, as JSON.
+        and shape in their order, and ``extra``, as JSON.
+
+    The effects' order is part of the structure: it lays out the parameter vector ``p``
+    (and the lag states). Two Models with the same effects in another order take their
+    ``p`` in another order; the compiled functions of one would read the other's
+    parameters in the wrong slots.
     """
     if not isinstance(of, Testbed):  # a Model
         if extra == () and of in _MODEL_KEYS:
@@ -84,7 +89,9 @@ def _key(tb: Testbed, effects, extra) -> str:
         holder = doc if not table else doc.get(table, {})
         for k in keys:
             holder.pop(k, None)
-    doc["effects"] = {k: np.shape(v) for k, v in effects.items()}  # names and shapes only
+    # names and shapes only, as a list: ``sort_keys`` would sort a mapping's names, and
+    # their order lays out ``p``
+    doc["effects"] = [[k, np.shape(v)] for k, v in effects.items()]
     return json.dumps([doc, extra], sort_keys=True, default=str)
 
 
