@@ -1,4 +1,4 @@
-"""The likelihood ratio that decides whether a candidate may be named (analysis/discrepancy/trial.py).
+"""The likelihood ratio that decides whether a candidate may be named (discrepancy/trial.py).
 
 Oracle: Wilks' theorem. For a candidate that is not in the data (a regressor of pure noise)
 and acts on the noisy rows (a gyro bias on the gyro's), the ratio of two nested least-squares
