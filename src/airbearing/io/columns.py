@@ -3,7 +3,9 @@
 gaps split it into segments (:func:`segments_of`), which cells are unusable
 (:func:`bad_mask`), rows and time stamps as text.
 
-Below :mod:`airbearing.io.log` (which reads, validates and writes logs) and the checks
+Below :mod:`airbearing.io.log` (the :class:`~airbearing.io.log.Log`; its files are read,
+validated and written by :mod:`~airbearing.io.log_read`, :mod:`~airbearing.io.log_validate`
+and :mod:`~airbearing.io.log_write`) and the checks
 that read a log (:mod:`airbearing.io.quality`, :mod:`airbearing.io.motion`,
 :mod:`airbearing.io.discontinuity`, :mod:`airbearing.io.import_map`), so that these import
 each other one way only.

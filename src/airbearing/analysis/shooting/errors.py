@@ -62,10 +62,9 @@ import scipy.sparse as sp
 from scipy.sparse.linalg import splu
 
 from airbearing.analysis.shooting.autoregressive import AR
-from airbearing.analysis.shooting.fit import information_inverse
+from airbearing.analysis.shooting.fit import information_inverse, solve_gram
 from airbearing.analysis.shooting.functions import _problem_functions
-from airbearing.analysis.shooting.problem import solve_gram
-from airbearing.analysis.shooting.process_noise import KAPPA_GRID, piece_durations
+from airbearing.analysis.shooting.penalty import KAPPA_GRID, piece_durations
 
 __all__ = [
     "RESOLUTION",

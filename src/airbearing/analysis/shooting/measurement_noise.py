@@ -55,8 +55,8 @@ from scipy.sparse.linalg import splu
 
 from airbearing.analysis.shooting.autoregressive import AR
 from airbearing.analysis.shooting.errors import _series
-from airbearing.analysis.shooting.problem import solve_gram
-from airbearing.analysis.shooting.process_noise import piece_durations
+from airbearing.analysis.shooting.fit import solve_gram
+from airbearing.analysis.shooting.penalty import piece_durations
 
 __all__ = [
     "MeasurementNoise",

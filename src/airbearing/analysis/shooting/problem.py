@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import scipy.sparse as sp
+from scipy.sparse.linalg import splu
 
 from airbearing.analysis.shooting.constrained import Inequality, linked_solver, null_space_basis
 from airbearing.analysis.shooting.fit import (  # noqa: F401 - the problem's public names
@@ -27,6 +28,7 @@ from airbearing.analysis.shooting.functions import (
     vstack_csc,
     window_jacobian,
 )
+from airbearing.analysis.shooting.penalty import penalised_solver
 from airbearing.analysis.shooting.windows import WindowSet  # noqa: F401
 from airbearing.errors import SolverError
 from airbearing.models.model import Model
@@ -220,8 +222,6 @@ class ShootingProblem:
         if P is None:
             return r
         if self._meas_lu is None or self._meas_lu[0] is not P:
-            from scipy.sparse.linalg import splu
-
             self._meas_lu = (P, splu(sp.csc_matrix(P)))
         return self._meas_lu[1].solve(r)
 
@@ -356,8 +356,6 @@ class ShootingProblem:
         if self.penalty is not None and self.link:
             if ineq is not None:  # pragma: no cover - programming error
                 raise ValueError("process noise and inequality constraints together")
-            from airbearing.analysis.shooting.process_noise import penalised_solver
-
             solver, _keep = penalised_solver(*self._key(K), mi, self.objective_stop)
             oracle = _keep[-1]
             oracle.set(p_base, Sp, scale, self._data, self.penalty, self.meas_whitening)

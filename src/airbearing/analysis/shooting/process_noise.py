@@ -38,21 +38,23 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-import casadi as ca
 import numpy as np
 import scipy.sparse as sp
+from scipy.sparse.linalg import splu
 
-from airbearing.analysis.shooting.functions import (
-    _cached,
-    _Call,
-    _problem_functions,
-    delta_layout,
-    evaluate,
-    ipopt_options,
-    scale_columns,
-    vstack_csc,
+from airbearing.analysis.shooting.measurement_noise import (
+    estimate_measurement_noise,
+    set_measurement_noise,
 )
-from airbearing.models.structure_cache import structure_key
+from airbearing.analysis.shooting.penalty import (  # noqa: F401 - also this module's names
+    KAPPA_GRID,
+    defect_whitening,
+    hessian_pattern,
+    penalised_solver,
+    piece_durations,
+    set_intensity,
+)
+from airbearing.errors import SolverError
 
 __all__ = [
     "KAPPA_GRID",
@@ -61,13 +63,9 @@ __all__ = [
     "estimate_process_noise",
     "loglik",
     "penalised_solver",
+    "set_intensity",
 ]
 
-#: Grid of the dimensionless intensity ``kappa`` (defect variance over a typical piece, in
-#: units of the measurement noise variance), searched from the top down. 1e4: the windows
-#: are practically free (the old fixed-window fit); 1e-8: one trajectory per segment (a
-#: defect of 1e-4 noise sigma; lower intensities only make the solve ill-conditioned).
-KAPPA_GRID = (1e4, 1e2, 1.0, 1e-2, 1e-4, 1e-6, 1e-8)
 #: Likelihood-ratio p-value below which the unexplained torque is significant.
 SIGNIFICANCE = 1e-3
 
@@ -122,204 +120,6 @@ class ProcessNoise:
 
 
 # ----------------------------------------------------------------------------
-# the whitening of the defects
-
-
-def piece_durations(problem) -> np.ndarray:
-    """s, time from each window's first row to its hand-over row."""
-    w = problem.windows
-    cum = np.concatenate([np.zeros((w.n, 1)), np.cumsum(w.dt, axis=1)], axis=1)
-    end = np.asarray(w.end, dtype=int)
-    return cum[np.arange(w.n), end]
-
-
-def _sigma_of_kappa(problem, kappa: float) -> float:
-    """``sigma_w`` of a dimensionless intensity (module doc)."""
-    T = float(np.mean(piece_durations(problem)[:-1])) if problem.windows.n > 1 else 1.0
-    if problem.n_att:
-        return math.sqrt(kappa * problem.sigma_att**2 * 3.0 / T**3)
-    return math.sqrt(kappa * problem.sigma_rate**2 / T)
-
-
-def defect_whitening(problem, sigma_w: float):
-    """``(W, logdet_W)``: the whitening of every consecutive pair's defects (module doc).
-
-    Parameters
-    ----------
-    problem : ShootingProblem
-        On linked windows.
-    sigma_w : float
-        Random-walk intensity of the rate, rad/s per sqrt(s) (> 0).
-
-    Returns
-    -------
-    W : scipy.sparse.csr_matrix (n_delta (n - 1), n_delta (n - 1))
-        Maps the defects (noise units, :func:`.functions._link_function`) to independent
-        unit-variance residuals; zero rows where two windows are not linked.
-    logdet : float
-        ``log det`` of the linked blocks of ``W``.
-    """
-    w = problem.windows
-    nd, n_att, n_rate = problem.n_delta, problem.n_att, problem.n_rate
-    T = piece_durations(problem)
-    link = np.asarray(w.link, dtype=bool)
-    sa, sr = problem.sigma_att, problem.sigma_rate
-    rows, cols, vals = [], [], []
-    logdet = 0.0
-    eps = 1e-12  # keeps a block positive definite at any intensity
-    for j in np.flatnonzero(link):
-        base = j * nd
-        t = max(float(T[j]), 1e-9)
-        q = sigma_w**2
-        for a in range(n_rate):
-            ir = base + n_att + a
-            vr = q * t / sr**2 + eps
-            if n_att:
-                ia = base + a
-                va = q * t**3 / 3.0 / sa**2 + eps
-                cv = q * t**2 / 2.0 / (sa * sr)
-                # inverse of the lower Cholesky factor of [[va, cv], [cv, vr]]
-                l11 = math.sqrt(va)
-                l21 = cv / l11
-                l22 = math.sqrt(max(vr - l21**2, eps))
-                rows += [ia, ir, ir]
-                cols += [ia, ia, ir]
-                vals += [1.0 / l11, -l21 / (l11 * l22), 1.0 / l22]
-                logdet -= math.log(l11 * l22)
-            else:
-                rows.append(ir)
-                cols.append(ir)
-                vals.append(1.0 / math.sqrt(vr))
-                logdet -= 0.5 * math.log(vr)
-        for i in range(n_att + n_rate, nd):  # lagged gyro states: like the rate
-            vr = q * t / sr**2 + eps
-            rows.append(base + i)
-            cols.append(base + i)
-            vals.append(1.0 / math.sqrt(vr))
-            logdet -= 0.5 * math.log(vr)
-    m = nd * max(w.n - 1, 0)
-    W = sp.csr_matrix((vals, (rows, cols)), shape=(m, m))
-    return W, logdet
-
-
-# ----------------------------------------------------------------------------
-# the solver: linked windows, defects penalised
-
-
-class _PenalisedOracle:
-    """Stacked residual ``[r; W c]`` and its Jacobian at the last iterate."""
-
-    def __init__(self, fr, fj, n_v: int) -> None:
-        self.fr, self.fj, self.n_v = fr, fj, n_v
-        self.z = self.r = self.J = None
-
-    def set(self, p_base, S, scale, data, W, P=None) -> None:
-        self.pb, self.S, self.scale, self.data, self.W = p_base, S, scale, data, W
-        self.P = P  # whitening of the measurement rows (coloured noise), or None
-        self.z = None
-
-    def release(self) -> None:
-        """Forget the last iterate (its Jacobian is large on long logs; the cached solver
-        keeps this oracle)."""
-        self.z = self.r = self.J = None
-        if hasattr(self, "Jc"):
-            self.c = self.Jc = None
-
-    def r_at(self, z):
-        if self.z is None or not np.array_equal(z, self.z):
-            rm, c = evaluate(self.fr, z * self.scale, self.pb, self.S, self.data)
-            self.z, self.J = z.copy(), None
-            self.r = np.r_[rm if self.P is None else self.P @ rm, self.W @ c]
-        return self.r
-
-    def rj_at(self, z):
-        if self.z is None or self.J is None or not np.array_equal(z, self.z):
-            rm, Jm, c, Jc = self.fj(z * self.scale, self.pb, self.S, self.data)
-            self.z = z.copy()
-            if self.P is not None:
-                rm, Jm = self.P @ rm, self.P @ Jm
-            self.r = np.r_[rm, self.W @ c]
-            self.J = scale_columns(vstack_csc(Jm, self.W @ Jc), self.scale)
-        return self.r, self.J
-
-
-def _pattern(spy: ca.Sparsity) -> sp.csc_matrix:
-    """A CasADi sparsity as a scipy CSC matrix of ones."""
-    return sp.csc_matrix(
-        (np.ones(spy.nnz()), np.asarray(spy.row()), np.asarray(spy.colind())),
-        shape=(spy.size1(), spy.size2()),
-    )
-
-
-def hessian_pattern(fj, nd: int, nw: int) -> sp.csc_matrix:
-    """Upper triangle of the structure of ``J^T J + Jc^T W^T W Jc`` (``fj`` the problem's
-    :class:`~.functions.WindowJacobian`; ``W`` dense within each pair's ``nd x nd`` block):
-    fixed for a problem structure, so IPOPT gets a sparse Hessian (the window states couple
-    only their neighbours)."""
-    J = fj.pattern()
-    Jc = _pattern(fj.defect_sparsity())
-    m = nd * max(nw - 1, 0)
-    Wp = sp.block_diag([np.ones((nd, nd))] * max(nw - 1, 0), format="csc") if m else None
-    H = (J.T @ J) + ((Wp @ Jc).T @ (Wp @ Jc) if m else 0 * (J.T @ J))
-    H = sp.triu(H, format="csc")
-    H.data[:] = 1.0
-    H.sort_indices()
-    return H
-
-
-def _build_penalised(model, L, nw, K, outputs, substeps, jit, max_iter, objective_stop=False):
-    fr, fj, _ = _problem_functions(model, L, nw, K, outputs, substeps, jit, True)
-    nd = sum(delta_layout(model, outputs))
-    n_v = K + nd * nw
-    o = _PenalisedOracle(fr, fj, n_v)
-    Hp = hessian_pattern(fj, nd, nw)
-    h_spy = ca.Sparsity(n_v, n_v, Hp.indptr.tolist(), Hp.indices.tolist())
-    h_rows = Hp.indices
-    h_cols = np.repeat(np.arange(n_v), np.diff(Hp.indptr))
-
-    def f(z):
-        r = o.r_at(z)
-        return [0.5 * float(r @ r)]
-
-    def grad(z, _par):
-        r, J = o.rj_at(z)
-        return [0.5 * float(r @ r), np.asarray(J.T @ r).ravel()]
-
-    def hess(z, _par, lam_f, _lam_g):
-        _, J = o.rj_at(z)
-        H = (J.T @ J).tocsr()
-        vals = float(lam_f[0]) * np.asarray(H[h_rows, h_cols]).ravel()
-        return [ca.DM(h_spy, vals)]
-
-    f_jac = _Call(
-        "pn_jac_f", [n_v, 1], [ca.Sparsity.dense(1, n_v)], lambda z, _f: [grad(z, 0)[1][None, :]]
-    )
-    F = _Call("pn_f", [n_v], [ca.Sparsity.dense(1, 1)], f, lambda name: f_jac)
-    GF = _Call("pn_grad_f", [n_v, 0], [ca.Sparsity.dense(1, 1), ca.Sparsity.dense(n_v, 1)], grad)
-    H = _Call("pn_hess_l", [n_v, 0, 1, 0], [h_spy], hess)
-    z = ca.MX.sym("z", n_v)
-    solver = ca.nlpsol(
-        "output_error_process_noise",
-        "ipopt",
-        {"x": z, "f": F(z)},
-        {
-            "grad_f": GF,
-            "hess_lag": H,
-            **ipopt_options(max_iter, objective_stop),
-        },
-    )
-    return solver, (F, GF, H, f_jac, o)
-
-
-def penalised_solver(model, L, nw, K, outputs, substeps, jit, max_iter, objective_stop=False):
-    """``(solver, keep)``: IPOPT on the stacked residual ``[r; W c]`` (module doc);
-    ``objective_stop`` as :func:`.functions.ipopt_options`."""
-    args = (model, L, nw, K, outputs, substeps, jit, max_iter, objective_stop)
-    key = ("penalised", structure_key(model), *args[1:])
-    return _cached(key, lambda: _build_penalised(*args))
-
-
-# ----------------------------------------------------------------------------
 # the intensity
 
 
@@ -340,8 +140,6 @@ def loglik(problem, fit, k: int) -> float:
     float
         The log marginal likelihood (nats; larger is better).
     """
-    from scipy.sparse.linalg import splu
-
     J = sp.csc_matrix(fit.extra["J"])
     Jd = J[:, k:]
     G = sp.csc_matrix(Jd.T @ Jd)
@@ -360,16 +158,6 @@ def loglik(problem, fit, k: int) -> float:
         + problem.meas_logdet
         - 0.5 * (logdet + 2 * np.log(c).sum())
     )
-
-
-def set_intensity(problem, kappa: float | None) -> None:
-    """Penalise ``problem``'s defects at dimensionless intensity ``kappa`` (None: unpenalised)."""
-    if kappa is None:
-        problem.penalty, problem.penalty_logdet, problem.process_noise = None, 0.0, None
-        return
-    sigma_w = _sigma_of_kappa(problem, kappa)
-    problem.penalty, problem.penalty_logdet = defect_whitening(problem, sigma_w)
-    problem.process_noise = (float(kappa), float(sigma_w))
 
 
 def estimate_process_noise(
@@ -425,11 +213,6 @@ def estimate_process_noise(
         # coloured measurement noise first, on nearly free pieces (they absorb the slow part
         # of a trajectory error; measurement_noise's tests catch the rest), then the
         # intensity with the noise whitened
-        from airbearing.analysis.shooting.measurement_noise import (
-            estimate_measurement_noise,
-            set_measurement_noise,
-        )
-
         if start is None:
             start = fit_at(grid[0], theta0, delta0)
         else:
@@ -462,8 +245,6 @@ def estimate_process_noise(
 def _descend(problem, fit_at, grid, theta0, delta0, start, k: int) -> dict:
     """``kappa -> (fit, log-likelihood)`` down the grid (warm-started), then one decade
     either side of the best; a solve that fails ends the descent (keeps what was found)."""
-    from airbearing.errors import SolverError
-
     out: dict = {}
     th, d = theta0, delta0
     for i, kappa in enumerate(grid):
