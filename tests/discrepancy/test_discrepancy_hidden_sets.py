@@ -43,6 +43,18 @@ def test_per_axis_friction_is_named_per_axis():
     assert best.label == "viscous_friction (per axis)" and best.row()["per_axis"]
 
 
+@pytest.mark.slow
+def test_a_gyro_bias_of_either_sign_per_axis_is_named_per_axis():
+    # a signed effect's one-value form is the axes' average, here zero: not significant,
+    # so the per-axis form is tried whatever the one-value form's test says (a friction's
+    # one value cannot cancel)
+    value = (2e-3, -2e-3, 0.0)
+    d = discrepancy(PLATFORM, hidden_log(PLATFORM, {"gyro_bias": value}, seed=15))
+    assert set(d.effects) == {"gyro_bias"}, d.verdict
+    assert len(d.effects["gyro_bias"]) == 3
+    assert rel_error(d.effects["gyro_bias"], value) < 0.2
+
+
 # nothing hidden: the issue asks for "no missing effect" in at least 9 of 10 seeds, i.e. a
 # false-alarm rate of at most about 10 %. Six seeds with none allowed test that as well
 # (scipy.stats.binom): a workflow naming a false effect in 30 % of logs passes 9-of-10 with

@@ -152,6 +152,9 @@ class Candidate:
         value in ``theta`` space (the Model holds it in its parameters, so ``theta`` is
         the correction added to it; ``lower``, ``upper`` are shifted by it). None for an
         effect the testbed does not have.
+    signed : bool
+        The effect takes values of either sign (its physical range includes negatives): the
+        one-value form of a per-axis effect can cancel where the axes' values differ in sign.
     """
 
     name: str
@@ -163,6 +166,7 @@ class Candidate:
     lag: bool = False
     per_axis: bool = False
     nominal: tuple | None = None
+    signed: bool = False
 
     @property
     def k(self) -> int:
@@ -411,6 +415,7 @@ def _candidates(testbed: Testbed, datas, only) -> tuple[list, list]:
                     lag=name == "sensor_lag",
                     per_axis=per_axis,
                     nominal=nominal,
+                    signed=lo < 0,
                 )
             )
     return out, [(c, refused[c.name]) for c in unphysical]

@@ -789,10 +789,13 @@ def _round(search, sel: _Selection, remaining, screen, workers, prog) -> list:
                 told(run(c))
         return out
 
-    # the per-axis form of an effect only when its one-value form is significant: an
-    # effect the logs do not see with one value is not seen with three either
+    # the per-axis form of an effect only when its one-value form is significant: a friction
+    # the logs do not see with one value is not seen with three either. A signed effect's
+    # one value can cancel (a gyro bias of [2e-4, -1e-4, 5e-5] rad/s is 5e-5 on average: its
+    # one-value form was not significant on a 60 s dof-3 oscillation): always per axis too
     results = fit_all([c for c in remaining if not c.per_axis])
     seen = {r.name for r in results if r.significant}
+    seen |= {c.name for c in remaining if c.per_axis and c.signed}
     # ... or when it has none (a correction of axes whose nominals differ)
     one = {c.name for c in search.cands if not c.per_axis}
     seen |= {c.name for c in search.cands if c.per_axis} - one
