@@ -9,7 +9,9 @@ rule computed the slow way: one least-squares solve per row (``_loo_reference``)
 pandas' rolling median over whole segments, every score exact, and plain pointer
 doubling. On logs with glitches, gaps, irregular rows and both regular and jittered
 sampling the two must give the same segments, the same outlier and unexplained rows,
-the same columns and reasons, and scores and noise scales equal to rounding.
+the same columns and reasons, and scores and noise scales equal to rounding. The fast
+paths live in airbearing.io.quality_outliers (the rule on one channel group): the oracle
+patches them there, where ``assess``'s scorers look them up.
 """
 
 from __future__ import annotations
@@ -24,6 +26,7 @@ from airbearing import quaternion as quat
 from airbearing.io import Log
 from airbearing.io import local_fits as F
 from airbearing.io import quality as Q
+from airbearing.io import quality_outliers as QO
 
 # ----------------------------------------------------------------------------
 # the slow reference (the oracle)
@@ -51,7 +54,7 @@ def _shape_residuals_one_by_one(group, t, segments, k, p, scale, rows):
     good = np.ones(t.size, dtype=bool)
     return np.stack(
         [
-            Q._normalised(group, t, segments, good, k, p, scale, rows, shape=a)[0]
+            QO._normalised(group, t, segments, good, k, p, scale, rows, shape=a)[0]
             for a in range(2 * k + 1)
         ]
     )
@@ -65,9 +68,9 @@ def reference_quality(monkeypatch, log: Log) -> Q.LogQuality:
         return exact_call(self, rows, good, exact=True)
 
     with monkeypatch.context() as m:
-        m.setattr(Q, "_loo", F.loo_reference)
-        m.setattr(Q, "_shape_residuals", _shape_residuals_one_by_one)
-        m.setattr(Q, "_window_median", _median_by_pandas)
+        m.setattr(QO, "_loo", F.loo_reference)
+        m.setattr(QO, "_shape_residuals", _shape_residuals_one_by_one)
+        m.setattr(QO, "_window_median", _median_by_pandas)
         m.setattr(S, "_signs_along_parents", _signs_by_pointer_doubling)
         m.setattr(Q._Scorer, "__call__", always_exact)
         return Q.assess(log, log.testbed)

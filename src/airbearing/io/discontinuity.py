@@ -324,7 +324,7 @@ def find_steps(
 
     Parameters
     ----------
-    scorer : airbearing.io.quality._Scorer
+    scorer : airbearing.io.quality_outliers._Scorer
         (passed in: this module is below io.quality, which calls it)
         The outlier rule's scorer of the group on the log's gap segments.
     t : numpy.ndarray
@@ -332,7 +332,7 @@ def find_steps(
     period : float
         s, nominal sample interval (only scales the time axis of the fits).
     switch : numpy.ndarray or None
-        (n,) bool: rows near a switch of a logged command (``quality._switch_rows``).
+        (n,) bool: rows near a switch of a logged command (``quality_channels._switch_rows``).
         There a moving mass or a gimbal's momentum exchange may make the rate jump: the
         rates are not tested and the attitude only for a jump in value (its two fits
         may meet anywhere in the interval).

@@ -81,7 +81,8 @@ from airbearing.io.log_validate import (  # noqa: F401 (re-exported: the log mod
 from airbearing.io.log_write import log_bytes
 from airbearing.io.log_yaw import YAW_UNWRAPPED, yaw_unwrapped_words
 from airbearing.io.quality import LogQuality, assess
-from airbearing.io.testbed import Testbed, _atomic_write_bytes
+from airbearing.io.testbed import Testbed
+from airbearing.io.testbed_write import _atomic_write_bytes
 
 __all__ = [
     "BadCellsError",

@@ -1,10 +1,28 @@
-"""Testbed files (FORMATS.md, "Testbed file (TOML)"): read, validate, write.
+"""Testbed files (FORMATS.md, "Testbed file (TOML)"): the :class:`Testbed` and its front doors.
 
 A :class:`Testbed` is the nominal model of one air-bearing simulator plus the
 named effects already known to act on it. It is a frozen dataclass whose
 vectors and matrices are tuples of floats, so two testbeds compare equal when
 their values are equal; numpy views are available as properties. Every
 constructor validates its values, so an invalid Testbed cannot exist.
+
+This module holds the dataclasses (one per table of the file: :class:`Body`,
+:class:`Masses`, :class:`Magnetorquers`, :class:`Wheels`, :class:`Field`, :class:`CMG`,
+:class:`Sensors`) and the front doors: :func:`load_testbed` (a built-in by name,
+:mod:`airbearing.io.builtins`, or a file), :func:`read_testbed`, :func:`write_testbed`,
+:func:`testbed_from_dict` and :func:`testbed_to_dict`. The work is below it:
+
+- :mod:`airbearing.io.testbed_values`: the value checks (a number within bounds, a
+  vector, a symmetric positive definite inertia), each raising the one-line error that
+  names the file and the key;
+- :mod:`airbearing.io.testbed_tables`: each table's keys, required keys and normaliser,
+  and the checks of the file layout (unknown keys, the kind and its tables, radians or
+  degrees);
+- :mod:`airbearing.io.testbed_read`: a file's bytes to the TOML document;
+- :mod:`airbearing.io.testbed_write`: a Testbed to its document, the document to TOML
+  text, written atomically.
+
+Every name a user imports from here still is importable from here.
 
 Units are SI throughout (s, m, kg, rad, rad/s, N m, A m^2, T). Angles are
 radians inside; a ``_deg`` key of a file gives the same quantity in degrees.
@@ -13,21 +31,48 @@ radians inside; a ``_deg`` key of a file gives the same quantity in degrees.
 from __future__ import annotations
 
 import dataclasses
-import difflib
 import math
 import os
-import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-import tomli_w
 
 from airbearing.errors import InputError
 from airbearing.io.builtins import builtin_names, builtin_toml
-from airbearing.io.output import write_temp
+from airbearing.io.testbed_read import _parse_toml, read_testbed_bytes
+from airbearing.io.testbed_tables import (
+    _CMG_ONLY,
+    _DEFAULT_DOF,
+    _NORMALISERS,
+    _PLATFORM_ONLY,
+    _REQUIRED,
+    _TABLE_KEYS,
+    _UNIT_NORM_TOL,
+    DEFAULT_GRAVITY,
+    DEFAULT_SKEW_DEG,
+    KINDS,
+    WHEEL_COMMANDS,
+    _angle_key,
+    _check_keys,
+    _check_top_level,
+    _norm_body,
+    _norm_cmg,
+    _norm_field,
+    _norm_magnetorquers,
+    _norm_masses,
+    _norm_sensors,
+    _norm_wheels,
+)
+from airbearing.io.testbed_values import _MEMORY, _fail, _number
+from airbearing.io.testbed_write import (  # noqa: F401 (_atomic_write_bytes: re-exported)
+    _HEADER,
+    _atomic_write_bytes,
+    _dumps,
+    _testbed_document,
+)
 from airbearing.io.vocabulary import EFFECTS, EffectValue, validate_effect_value
 
 __all__ = [
@@ -53,328 +98,7 @@ __all__ = [
 
 #: Names accepted by :func:`load_testbed` in place of a path (catalogue: io/builtins.py).
 BUILTIN_TESTBEDS: tuple[str, ...] = builtin_names()
-#: Values of the top-level ``kind`` key.
-KINDS: tuple[str, ...] = ("platform", "cmg")
-#: m/s^2, default of the top-level ``gravity`` key (FORMATS.md).
-DEFAULT_GRAVITY = 9.81
-#: deg, default CMG pyramid skew angle (seed 001 Table 6: beta = 54.73 deg).
-DEFAULT_SKEW_DEG = 54.73
-
-_MEMORY = "<memory>"
-_DOFS = (1, 3)
-_SYMMETRY_RTOL = 1e-9  # relative tolerance of the inertia symmetry check
-_UNIT_NORM_TOL = 1e-6  # |norm - 1| allowed for a rail axis
-_N_GIMBALS = 4
 _IDENTITY3 = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))
-_MAX_WHEELS = 6
-#: Values of ``wheels.command``: the logged command is a motor torque or a wheel speed.
-WHEEL_COMMANDS: tuple[str, ...] = ("torque", "speed")
-_DEG_SEARCH_ULPS = 8  # neighbours tried to find a degree value that reads back exactly
-
-
-# ----------------------------------------------------------------------------
-# value checks: each takes the value, the source (file) and the dotted key
-
-
-def _is_number(value: object) -> bool:
-    """True for int and float (numpy scalars included); booleans are not numbers."""
-    return isinstance(value, int | float | np.integer | np.floating) and not isinstance(
-        value, bool | np.bool_
-    )
-
-
-def _fail(src: str, key: str, expected: str, got: object) -> InputError:
-    shown = str(got).lower() if isinstance(got, bool) else repr(got)  # TOML's true/false
-    return InputError(f"{src}: key '{key}': expected {expected}, got {shown}")
-
-
-def _number(
-    value: object,
-    src: str,
-    key: str,
-    unit: str,
-    *,
-    gt: float | None = None,
-    ge: float | None = None,
-    lt: float | None = None,
-    le: float | None = None,
-    allow_inf: bool = False,
-) -> float:
-    """A float from an int or float (not a bool), finite unless allowed, within bounds."""
-    bounds = []
-    if gt is not None:
-        bounds.append(f"> {gt:g}")
-    if ge is not None:
-        bounds.append(f">= {ge:g}")
-    if lt is not None:
-        bounds.append(f"< {lt:g}")
-    if le is not None:
-        bounds.append(f"<= {le:g}")
-    what = "a " + ("" if allow_inf else "finite ") + "number"
-    if bounds:
-        what += " " + " and ".join(bounds)
-    if unit:
-        what += f" ({unit})"
-    if not _is_number(value):
-        raise _fail(src, key, what, value)
-    x = float(value)  # type: ignore[arg-type]
-    if math.isnan(x) or (math.isinf(x) and not allow_inf):
-        raise _fail(src, key, what, value)
-    if (
-        (gt is not None and not x > gt)
-        or (ge is not None and not x >= ge)
-        or (lt is not None and not x < lt)
-        or (le is not None and not x <= le)
-    ):
-        raise _fail(src, key, what, value)
-    return x
-
-
-def _vector(value: object, n: int, src: str, key: str, unit: str) -> tuple[float, ...]:
-    """A tuple of n finite floats."""
-    what = f"a list of {n} finite numbers ({unit})"
-    if not isinstance(value, list | tuple | np.ndarray) or len(value) != n:
-        raise _fail(src, key, what, value)
-    out = []
-    for v in value:
-        if not _is_number(v) or not math.isfinite(float(v)):
-            raise _fail(src, key, what, value)
-        out.append(float(v))
-    return tuple(out)
-
-
-def _vector3(value: object, src: str, key: str, unit: str) -> tuple[float, float, float]:
-    x, y, z = _vector(value, 3, src, key, unit)
-    return (x, y, z)
-
-
-def _matrix3(value: object, src: str, key: str, what: str) -> tuple[tuple[float, ...], ...]:
-    if isinstance(value, np.ndarray):
-        value = value.tolist()
-    if not isinstance(value, list | tuple) or len(value) != 3:
-        raise _fail(src, key, what, value)
-    rows = []
-    for row in value:
-        if isinstance(row, np.ndarray):
-            row = row.tolist()
-        if not isinstance(row, list | tuple) or len(row) != 3:
-            raise _fail(src, key, what, value)
-        if not all(_is_number(v) and math.isfinite(float(v)) for v in row):
-            raise _fail(src, key, what, value)
-        rows.append(tuple(float(v) for v in row))
-    return tuple(rows)
-
-
-def _inertia(value: object, dof: int, src: str, key: str) -> float | tuple[tuple[float, ...], ...]:
-    """Scalar yaw inertia (dof 1 only) or a symmetric positive definite 3x3 matrix."""
-    if _is_number(value):
-        if dof != 1:
-            raise _fail(
-                src,
-                key,
-                "a symmetric 3x3 matrix (kg m^2) for dof = 3 (a single number is "
-                "accepted only for dof = 1)",
-                value,
-            )
-        return _number(value, src, key, "kg m^2", gt=0.0)
-    what = "a symmetric positive definite 3x3 matrix (kg m^2)"
-    if dof == 1:
-        what = "a positive number or " + what
-    matrix = _matrix3(value, src, key, what)
-    m = np.array(matrix)
-    scale = float(np.max(np.abs(m)))
-    if float(np.max(np.abs(m - m.T))) > _SYMMETRY_RTOL * scale:
-        raise _fail(src, key, "a symmetric 3x3 matrix (kg m^2)", value)
-    eigenvalues = np.linalg.eigvalsh(0.5 * (m + m.T))
-    if not np.all(eigenvalues > 0.0):
-        raise InputError(
-            f"{src}: key '{key}': expected a positive definite 3x3 matrix (kg m^2), "
-            f"got {value!r} with eigenvalues {eigenvalues.tolist()!r}"
-        )
-    return matrix
-
-
-def _integer_choice(value: object, choices: tuple[int, ...], src: str, key: str) -> int:
-    what = "one of " + ", ".join(str(c) for c in choices)
-    if isinstance(value, np.integer):
-        value = int(value)
-    if not isinstance(value, int) or isinstance(value, bool) or value not in choices:
-        raise _fail(src, key, what, value)
-    return value
-
-
-# ----------------------------------------------------------------------------
-# normalisers: raw field values -> validated field values (same keys)
-
-
-def _norm_body(raw: Mapping[str, Any], src: str) -> dict[str, Any]:
-    dof = _integer_choice(raw["dof"], _DOFS, src, "body.dof")
-    return {
-        "dof": dof,
-        "mass": _number(raw["mass"], src, "body.mass", "kg", gt=0.0),
-        "inertia": _inertia(raw["inertia"], dof, src, "body.inertia"),
-        "cm_offset": _vector3(raw["cm_offset"], src, "body.cm_offset", "m"),
-        "torque_noise": _number(raw["torque_noise"], src, "body.torque_noise", "N m", ge=0.0),
-    }
-
-
-def _norm_masses(raw: Mapping[str, Any], src: str) -> dict[str, Any]:
-    axes_value = raw["axes"]
-    what = "3 rail unit vectors (a 3x3 list, one row per rail, body axes)"
-    axes = _matrix3(axes_value, src, "masses.axes", what)
-    for i, axis in enumerate(axes):
-        norm = math.sqrt(sum(a * a for a in axis))
-        if abs(norm - 1.0) > _UNIT_NORM_TOL:
-            raise InputError(
-                f"{src}: key 'masses.axes': expected unit vectors (norm within "
-                f"{_UNIT_NORM_TOL:g} of 1), got rail {i + 1} = {list(axis)!r} with norm "
-                f"{norm:.9g}; normalise it in the file"
-            )
-    masses = raw["mass"]
-    if isinstance(masses, list | tuple) and len(masses) != len(axes):
-        raise _fail(
-            src, "masses.mass", f"one mass per rail ({len(axes)} positive numbers, kg)", masses
-        )
-    mass = _vector3(masses, src, "masses.mass", "kg")
-    if not all(m > 0.0 for m in mass):
-        raise _fail(src, "masses.mass", "3 positive numbers (kg)", masses)
-    return {
-        "mass": mass,
-        "axes": axes,
-        "travel": _number(raw["travel"], src, "masses.travel", "m", gt=0.0),
-        "step": _number(raw["step"], src, "masses.step", "m", ge=0.0),
-        "speed": _number(raw["speed"], src, "masses.speed", "m/s", gt=0.0),
-        "backlash": _number(raw["backlash"], src, "masses.backlash", "m", ge=0.0),
-        "gyro_vibration": _number(
-            raw["gyro_vibration"], src, "masses.gyro_vibration", "rad/s", ge=0.0
-        ),
-        "accel_vibration": _number(
-            raw["accel_vibration"], src, "masses.accel_vibration", "-", ge=0.0
-        ),
-        "drive_torque_noise": _number(
-            raw["drive_torque_noise"], src, "masses.drive_torque_noise", "N m", ge=0.0
-        ),
-    }
-
-
-def _norm_magnetorquers(raw: Mapping[str, Any], src: str) -> dict[str, Any]:
-    return {
-        "max_dipole": _number(raw["max_dipole"], src, "magnetorquers.max_dipole", "A m^2", gt=0.0)
-    }
-
-
-def _per_wheel(value: object, n: int, src: str, key: str, unit: str, **bounds: float) -> tuple:
-    """A number broadcast to ``n`` wheels, or a list of one number per wheel."""
-    if isinstance(value, list | tuple | np.ndarray):
-        if len(value) != n:
-            raise _fail(
-                src,
-                key,
-                f"a number or one per wheel ({n} numbers, {unit}; wheels.axes has {n})",
-                value if not isinstance(value, np.ndarray) else value.tolist(),
-            )
-        return tuple(_number(v, src, key, unit, **bounds) for v in value)
-    return (_number(value, src, key, unit, **bounds),) * n
-
-
-def _norm_wheels(raw: Mapping[str, Any], src: str) -> dict[str, Any]:
-    value = raw["axes"]
-    if isinstance(value, np.ndarray):
-        value = value.tolist()
-    what = (
-        f"1 to {_MAX_WHEELS} spin-axis unit vectors (a list of [x, y, z] rows, one per "
-        "wheel, body axes)"
-    )
-    if not isinstance(value, list | tuple) or not 1 <= len(value) <= _MAX_WHEELS:
-        raise _fail(src, "wheels.axes", what, value)
-    axes = []
-    for i, row in enumerate(value):
-        if isinstance(row, np.ndarray):
-            row = row.tolist()
-        if not isinstance(row, list | tuple) or len(row) != 3:
-            raise _fail(src, "wheels.axes", what, value)
-        if not all(_is_number(v) and math.isfinite(float(v)) for v in row):
-            raise _fail(src, "wheels.axes", what, value)
-        axis = tuple(float(v) for v in row)
-        norm = math.sqrt(sum(a * a for a in axis))
-        if abs(norm - 1.0) > _UNIT_NORM_TOL:
-            raise InputError(
-                f"{src}: key 'wheels.axes': expected unit vectors (norm within "
-                f"{_UNIT_NORM_TOL:g} of 1), got wheel {i + 1} = {list(row)!r} with norm "
-                f"{norm:.9g}; normalise it in the file"
-            )
-        axes.append(axis)
-    n = len(axes)
-    command = raw["command"]
-    if not isinstance(command, str) or command not in WHEEL_COMMANDS:
-        raise _fail(
-            src, "wheels.command", "one of " + ", ".join(repr(c) for c in WHEEL_COMMANDS), command
-        )
-    tau = raw["speed_loop_tau"]
-    if command == "speed":
-        if tau is None:
-            raise InputError(
-                f"{src}: key 'wheels.speed_loop_tau' is required with wheels.command = "
-                "'speed' (s, time constant of the wheel driver's speed loop)"
-            )
-        tau = _number(tau, src, "wheels.speed_loop_tau", "s", gt=0.0)
-    elif tau is not None:
-        raise InputError(
-            f"{src}: key 'wheels.speed_loop_tau' is only for wheels.command = 'speed', but "
-            "command = 'torque'; remove it or set command = 'speed'"
-        )
-    speeds = raw["speeds"]
-    return {
-        "axes": tuple(axes),
-        "inertia": _per_wheel(raw["inertia"], n, src, "wheels.inertia", "kg m^2", gt=0.0),
-        "max_torque": _number(raw["max_torque"], src, "wheels.max_torque", "N m", gt=0.0),
-        "max_speed": _number(raw["max_speed"], src, "wheels.max_speed", "rad/s", gt=0.0),
-        "command": command,
-        "speed_loop_tau": tau,
-        "speed_noise": _number(raw["speed_noise"], src, "wheels.speed_noise", "rad/s", ge=0.0),
-        "speeds": (0.0,) * n
-        if speeds is None or (isinstance(speeds, tuple) and len(speeds) == 0)
-        else _per_wheel(speeds, n, src, "wheels.speeds", "rad/s"),
-    }
-
-
-def _norm_field(raw: Mapping[str, Any], src: str) -> dict[str, Any]:
-    return {"lab": _vector3(raw["lab"], src, "field.lab", "T, lab frame")}
-
-
-def _norm_cmg(raw: Mapping[str, Any], src: str) -> dict[str, Any]:
-    return {
-        "skew": _number(raw["skew"], src, "cmg.skew", "rad", gt=0.0, lt=math.pi / 2),
-        "flywheel_inertia": _number(
-            raw["flywheel_inertia"], src, "cmg.flywheel_inertia", "kg m^2", gt=0.0
-        ),
-        "flywheel_speed": _number(
-            raw["flywheel_speed"], src, "cmg.flywheel_speed", "rad/s", gt=0.0
-        ),
-        "max_gimbal_rate": _number(
-            raw["max_gimbal_rate"], src, "cmg.max_gimbal_rate", "rad/s", gt=0.0, allow_inf=True
-        ),
-        "gimbal_angles": _vector(raw["gimbal_angles"], _N_GIMBALS, src, "cmg.gimbal_angles", "rad"),
-    }
-
-
-def _norm_sensors(raw: Mapping[str, Any], src: str) -> dict[str, Any]:
-    return {
-        "rate": _number(raw["rate"], src, "sensors.rate", "Hz", gt=0.0),
-        "gyro_noise": _number(raw["gyro_noise"], src, "sensors.gyro_noise", "rad/s", ge=0.0),
-        "accel_noise": _number(raw["accel_noise"], src, "sensors.accel_noise", "-", ge=0.0),
-        "lowpass": _number(raw["lowpass"], src, "sensors.lowpass", "-", gt=0.0, le=1.0),
-        "gyro": _boolean(raw["gyro"], src, "sensors.gyro"),
-        "attitude_noise": _number(
-            raw["attitude_noise"], src, "sensors.attitude_noise", "rad", ge=0.0
-        ),
-    }
-
-
-def _boolean(value: Any, src: str, key: str) -> bool:
-    if not isinstance(value, bool):
-        raise _fail(src, key, "true or false", value)
-    return value
 
 
 def _apply(obj: object, normalised: Mapping[str, Any]) -> None:
@@ -681,8 +405,6 @@ _TABLE_TYPES: dict[str, type] = {
     "wheels": Wheels,
     "sensors": Sensors,
 }
-_PLATFORM_ONLY = ("masses", "magnetorquers", "wheels")
-_CMG_ONLY = ("cmg",)
 
 
 @dataclass(frozen=True)
@@ -863,77 +585,7 @@ class Testbed:
 
 
 # ----------------------------------------------------------------------------
-# dict <-> Testbed (the TOML layout of FORMATS.md)
-
-_TOP_KEYS = ("kind", "name", "gravity", *_TABLE_TYPES, "effects")
-_TABLE_KEYS: dict[str, tuple[str, ...]] = {
-    "body": ("dof", "mass", "inertia", "cm_offset", "torque_noise"),
-    "masses": (
-        "mass",
-        "axes",
-        "travel",
-        "step",
-        "speed",
-        "backlash",
-        "gyro_vibration",
-        "accel_vibration",
-        "drive_torque_noise",
-    ),
-    "magnetorquers": ("max_dipole",),
-    "field": ("lab",),
-    "cmg": (
-        "skew",
-        "skew_deg",
-        "flywheel_inertia",
-        "flywheel_speed",
-        "max_gimbal_rate",
-        "max_gimbal_rate_deg",
-        "gimbal_angles",
-    ),
-    "wheels": (
-        "axes",
-        "inertia",
-        "max_torque",
-        "max_speed",
-        "command",
-        "speed_loop_tau",
-        "speed_noise",
-        "speeds",
-    ),
-    "sensors": ("rate", "gyro_noise", "accel_noise", "lowpass", "gyro", "attitude_noise"),
-}
-#: Optional [masses] keys written by :func:`testbed_to_dict` only when non-zero.
-_VIBRATION_KEYS = ("gyro_vibration", "accel_vibration", "drive_torque_noise")
-_REQUIRED: dict[str, tuple[str, ...]] = {
-    "body": ("mass", "inertia"),
-    "masses": ("mass",),
-    "field": ("lab",),
-    "cmg": ("flywheel_inertia", "flywheel_speed"),
-    "wheels": ("axes", "inertia", "max_torque", "max_speed"),
-}
-_DEFAULT_DOF = 3
-_NORMALISERS = {
-    "body": _norm_body,
-    "masses": _norm_masses,
-    "magnetorquers": _norm_magnetorquers,
-    "field": _norm_field,
-    "cmg": _norm_cmg,
-    "wheels": _norm_wheels,
-    "sensors": _norm_sensors,
-}
-
-
-def _check_keys(table: Mapping[str, Any], valid: tuple[str, ...], src: str, prefix: str) -> None:
-    for key in table:
-        if key not in valid:
-            dotted = f"{prefix}.{key}" if prefix else str(key)
-            hint = difflib.get_close_matches(str(key), valid, n=1)
-            where = f"[{prefix}]" if prefix else "the top level"
-            message = f"{src}: unknown key '{dotted}'"
-            if hint:
-                message += f" (did you mean '{hint[0]}'?)"
-            message += f"; valid keys at {where} are: {', '.join(valid)}"
-            raise InputError(message)
+# dict <-> Testbed (the TOML layout of FORMATS.md; the tables in io/testbed_tables.py)
 
 
 def _defaults(cls: type) -> dict[str, Any]:
@@ -944,42 +596,6 @@ def _defaults(cls: type) -> dict[str, Any]:
         elif f.default_factory is not dataclasses.MISSING:
             out[f.name] = f.default_factory()
     return out
-
-
-def _angle_key(
-    table: dict[str, Any],
-    name: str,
-    src: str,
-    unit: str,
-    default: float | None,
-    *,
-    lt_deg: float | None = None,
-    allow_inf: bool = False,
-) -> float | None:
-    """Read ``name`` (rad) or ``name_deg`` (deg), not both; return radians or the default."""
-    deg_name = f"{name}_deg"
-    if name in table and deg_name in table:
-        raise InputError(
-            f"{src}: keys 'cmg.{name}' and 'cmg.{deg_name}' both given; "
-            f"give only one (radians or degrees)"
-        )
-    if deg_name in table:
-        value = _number(
-            table[deg_name],
-            src,
-            f"cmg.{deg_name}",
-            f"deg{unit}",
-            gt=0.0,
-            lt=lt_deg,
-            allow_inf=allow_inf,
-        )
-        return math.radians(value)
-    if name in table:
-        lt_rad = None if lt_deg is None else math.radians(lt_deg)
-        return _number(
-            table[name], src, f"cmg.{name}", f"rad{unit}", gt=0.0, lt=lt_rad, allow_inf=allow_inf
-        )
-    return default
 
 
 def _build_table(table_name: str, raw: object, src: str) -> object:
@@ -1047,36 +663,7 @@ def testbed_from_dict(data: Mapping[str, Any], source: str = _MEMORY) -> Testbed
     got -1.0
     """
     src = str(source)
-    if not isinstance(data, Mapping):
-        raise InputError(f"{src}: expected a table of keys at the top level, got {data!r}")
-    _check_keys(data, _TOP_KEYS, src, "")
-    for table, value in data.items():  # misspelt keys first: they explain missing ones
-        if table in _TABLE_KEYS and isinstance(value, Mapping):
-            _check_keys(value, _TABLE_KEYS[table], src, table)
-    if "kind" not in data:
-        raise InputError(
-            f"{src}: key 'kind' is required: one of " + ", ".join(repr(k) for k in KINDS)
-        )
-    kind = data["kind"]
-    if not isinstance(kind, str) or kind not in KINDS:
-        raise _fail(src, "kind", "one of " + ", ".join(repr(k) for k in KINDS), kind)
-    if "body" not in data:
-        raise InputError(f"{src}: table [body] is required (with keys 'mass' and 'inertia')")
-    other = "cmg" if kind == "platform" else "platform"
-    for table in _CMG_ONLY if kind == "platform" else _PLATFORM_ONLY:
-        if table in data:
-            raise InputError(
-                f"{src}: table [{table}] is only allowed for kind = {other!r}, but kind = {kind!r}"
-            )
-    if kind == "cmg" and "cmg" not in data:
-        raise InputError(
-            f"{src}: table [cmg] is required for kind = 'cmg' (with keys "
-            "'flywheel_inertia' and 'flywheel_speed')"
-        )
-    name = data.get("name", "")
-    if not isinstance(name, str):
-        raise _fail(src, "name", "a string", name)
-    gravity = _number(data.get("gravity", DEFAULT_GRAVITY), src, "gravity", "m/s^2", gt=0.0)
+    kind, name, gravity = _check_top_level(data, src)
     tables: dict[str, Any] = {}
     for table in _TABLE_TYPES:
         if table in data:
@@ -1092,29 +679,6 @@ def testbed_from_dict(data: Mapping[str, Any], source: str = _MEMORY) -> Testbed
         source=src,
         **tables,
     )
-
-
-def _exact_degrees(radians: float) -> float | None:
-    """A degree value ``d`` with ``math.radians(d) == radians``, shortest repr; None if none."""
-    first = math.degrees(radians)
-    candidates = [first]
-    up = down = first
-    for _ in range(_DEG_SEARCH_ULPS):
-        up = math.nextafter(up, math.inf)
-        down = math.nextafter(down, -math.inf)
-        candidates += [down, up]
-    exact = [d for d in candidates if math.radians(d) == radians]
-    if not exact:
-        return None
-    return min(exact, key=lambda d: (len(repr(d)), abs(d - first)))
-
-
-def _angle_out(out: dict[str, Any], name: str, radians: float) -> None:
-    degrees = _exact_degrees(radians)
-    if degrees is None:  # no decimal degree value reads back to the same float
-        out[name] = radians
-    else:
-        out[f"{name}_deg"] = degrees
 
 
 def testbed_to_dict(testbed: Testbed) -> dict[str, Any]:
@@ -1153,90 +717,11 @@ def testbed_to_dict(testbed: Testbed) -> dict[str, Any]:
     """
     if not isinstance(testbed, Testbed):
         raise InputError(f"testbed_to_dict: expected a Testbed, got {type(testbed).__name__}")
-    body = testbed.body
-    out: dict[str, Any] = {
-        "kind": testbed.kind,
-        "name": testbed.name,
-        "gravity": testbed.gravity,
-        "body": {
-            "dof": body.dof,
-            "mass": body.mass,
-            "inertia": (
-                body.inertia
-                if isinstance(body.inertia, float)
-                else [list(row) for row in body.inertia]
-            ),
-            "cm_offset": list(body.cm_offset),
-            "torque_noise": body.torque_noise,
-        },
-    }
-    if testbed.masses is not None:
-        m = testbed.masses
-        out["masses"] = {
-            "mass": list(m.mass),
-            "axes": [list(a) for a in m.axes],
-            "travel": m.travel,
-            "step": m.step,
-            "speed": m.speed,
-            "backlash": m.backlash,
-        }
-        for key in _VIBRATION_KEYS:  # optional: written only when set
-            if getattr(m, key):
-                out["masses"][key] = getattr(m, key)
-    if testbed.magnetorquers is not None:
-        out["magnetorquers"] = {"max_dipole": testbed.magnetorquers.max_dipole}
-    if testbed.field is not None:
-        out["field"] = {"lab": list(testbed.field.lab)}
-    if testbed.cmg is not None:
-        c = testbed.cmg
-        cmg: dict[str, Any] = {}
-        _angle_out(cmg, "skew", c.skew)
-        cmg["flywheel_inertia"] = c.flywheel_inertia
-        cmg["flywheel_speed"] = c.flywheel_speed
-        if math.isfinite(c.max_gimbal_rate):
-            _angle_out(cmg, "max_gimbal_rate", c.max_gimbal_rate)
-        cmg["gimbal_angles"] = list(c.gimbal_angles)
-        out["cmg"] = cmg
-    if testbed.wheels is not None:
-        wh = testbed.wheels
-        out["wheels"] = {
-            "axes": [list(a) for a in wh.axes],
-            "inertia": list(wh.inertia),
-            "max_torque": wh.max_torque,
-            "max_speed": wh.max_speed,
-            "command": wh.command,
-        }
-        if wh.speed_loop_tau is not None:
-            out["wheels"]["speed_loop_tau"] = wh.speed_loop_tau
-        out["wheels"]["speed_noise"] = wh.speed_noise
-        out["wheels"]["speeds"] = list(wh.speeds)
-    s = testbed.sensors
-    out["sensors"] = {
-        "rate": s.rate,
-        "gyro_noise": s.gyro_noise,
-        "accel_noise": s.accel_noise,
-        "lowpass": s.lowpass,
-        "gyro": s.gyro,
-        "attitude_noise": s.attitude_noise,
-    }
-    if testbed.effects:
-        out["effects"] = {
-            k: (list(v) if isinstance(v, tuple) else v) for k, v in testbed.effects.items()
-        }
-    return out
+    return _testbed_document(testbed)
 
 
 # ----------------------------------------------------------------------------
-# files
-
-
-def _parse_toml(content: bytes, src: str) -> dict[str, Any]:
-    try:
-        return tomllib.loads(content.decode("utf-8"))
-    except UnicodeDecodeError as e:
-        raise InputError(f"{src}: not a UTF-8 text file ({e})") from e
-    except tomllib.TOMLDecodeError as e:
-        raise InputError(f"{src}: not valid TOML: {e}") from e
+# files (io/testbed_read.py, io/testbed_write.py)
 
 
 def read_testbed(path: str | os.PathLike[str]) -> Testbed:
@@ -1269,17 +754,8 @@ def read_testbed(path: str | os.PathLike[str]) -> Testbed:
     ...
     airbearing.errors.InputError: missing.toml: no such testbed file
     """
-    p = Path(path)
     src = str(path)
-    try:
-        content = p.read_bytes()
-    except FileNotFoundError as e:
-        raise InputError(f"{src}: no such testbed file") from e
-    except IsADirectoryError as e:
-        raise InputError(f"{src}: is a directory, expected a testbed file (.toml)") from e
-    except OSError as e:
-        raise InputError(f"{src}: cannot read the testbed file: {e.strerror}") from e
-    return testbed_from_dict(_parse_toml(content, src), source=src)
+    return testbed_from_dict(_parse_toml(read_testbed_bytes(path), src), source=src)
 
 
 def load_testbed(path_or_name: str | os.PathLike[str]) -> Testbed:
@@ -1326,9 +802,6 @@ def load_testbed(path_or_name: str | os.PathLike[str]) -> Testbed:
     return read_testbed(path_or_name)
 
 
-_HEADER = "# Testbed file (FORMATS.md), written by airbearing. SI units; _deg keys in degrees.\n"
-
-
 def write_testbed(testbed: Testbed, path: str | os.PathLike[str]) -> Path:
     """Write a testbed file (TOML, FORMATS.md) atomically.
 
@@ -1361,47 +834,3 @@ def write_testbed(testbed: Testbed, path: str | os.PathLike[str]) -> Path:
     """
     text = _HEADER + _dumps(testbed_to_dict(testbed))
     return _atomic_write_bytes(Path(path), text.encode("utf-8"))
-
-
-def _toml_value(value: object) -> str:
-    """One TOML value on one line (tomli_w puts every array element on its own line)."""
-    if isinstance(value, str):
-        return tomli_w.dumps({"x": value})[len("x = ") :].strip()
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, int):
-        return str(value)
-    if isinstance(value, float):
-        if math.isinf(value):
-            return "inf" if value > 0 else "-inf"
-        return repr(value)  # shortest text that reads back to the same float
-    if isinstance(value, list | tuple):
-        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
-    raise TypeError(f"cannot write {value!r} to a testbed file")
-
-
-def _dumps(document: Mapping[str, Any]) -> str:
-    """TOML text of a testbed document: top-level values, then one table per section."""
-    lines = [f"{k} = {_toml_value(v)}" for k, v in document.items() if not isinstance(v, Mapping)]
-    for name, table in document.items():
-        if isinstance(table, Mapping):
-            lines += ["", f"[{name}]"]
-            lines += [f"{k} = {_toml_value(v)}" for k, v in table.items()]
-    return "\n".join(lines) + "\n"
-
-
-def _atomic_write_bytes(path: Path, content: bytes) -> Path:
-    directory = path.parent if str(path.parent) else Path(".")
-    if not directory.is_dir():
-        raise InputError(f"{path}: directory {str(directory)!r} does not exist")
-    try:
-        # the mode of the file it replaces, or the usual mode of a new data file
-        tmp = write_temp(path, content, keep_mode=True)
-    except OSError as e:
-        raise InputError(f"{path}: cannot write to {str(directory)!r}: {e.strerror}") from e
-    try:
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
-    return path
