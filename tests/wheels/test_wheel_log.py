@@ -186,3 +186,20 @@ def test_log_check_and_plot_show_the_wheels(tmp_path, capsys):
     # plotted in rpm and mN m
     assert_allclose(speeds.lines[0].get_ydata(), df["ws1"] * 60 / (2 * math.pi), rtol=1e-12)
     assert_allclose(commands.lines[1].get_ydata(), df["wc2"] * 1e3, rtol=1e-12)
+
+
+def test_simulate_takes_an_effect_value_per_wheel(tmp_path, capsys):
+    # FORMATS.md: a wheel_* effect is a number or one value per wheel (four on rw-3axis)
+    from cli_run import run
+
+    out = tmp_path / "w.csv"
+    value = "wheel_torque_error=0.05,-0.05,0,0"
+    assert run(["simulate", RW3, "--duration", "2", "--effect", value, "--out", str(out)]) == 0
+    assert out.exists()
+    capsys.readouterr()
+    bad = tmp_path / "bad.csv"
+    args = ["simulate", RW3, "--duration", "2", "--effect", "wheel_torque_error=0.05,-0.05,0"]
+    assert run([*args, "--out", str(bad)]) == 2
+    err = capsys.readouterr().err
+    assert "wheel_torque_error" in err and "4 numbers (one per wheel)" in err
+    assert not bad.exists()

@@ -77,9 +77,14 @@ def parse_effects(items: list[str] | None, *, option: str = "--effect") -> dict:
             nums = [float(v) for v in value.split(",")]
         except ValueError:
             raise InputError(f"{option} '{item}': '{value}' is not a number or 3 numbers") from None
-        pair = EFFECTS[name].shape == "pair"  # yaw_imbalance=A_S,A_C
-        if len(nums) not in ((2,) if pair else (1, 3)):
-            want = "2 numbers A_S,A_C" if pair else "1 or 3 numbers"
+        shape = EFFECTS[name].shape
+        if shape == "scalar_or_wheels":  # one value, or one per wheel (the testbed checks n)
+            counts, want = None, "1 number or one per wheel"
+        elif shape == "pair":  # yaw_imbalance=A_S,A_C
+            counts, want = (2,), "2 numbers A_S,A_C"
+        else:
+            counts, want = (1, 3), "1 or 3 numbers"
+        if counts is not None and len(nums) not in counts:
             raise InputError(f"{option} '{item}': expected {want}, got {len(nums)}")
         if not all(math.isfinite(v) for v in nums):
             raise InputError(f"{option} '{item}': expected finite numbers")
