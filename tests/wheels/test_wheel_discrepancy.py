@@ -190,3 +190,22 @@ def test_coulomb_friction_of_each_of_four_wheels_is_named_per_wheel():
     value = float(np.ravel(found.effects["wheel_coulomb_friction"])[2])
     std = float(np.ravel(found.effect_std["wheel_coulomb_friction"])[2])
     assert value < 3 * std  # >= 0 by its physical range
+
+
+def test_air_bearing_and_wheel_bearing_friction_in_a_slew_from_rest_are_confounded():
+    # a slew from rest: the wheel turns against the body (J w + Iw (W + w) = 0), so the air
+    # bearing's Coulomb friction -f sign(w) and the wheel bearing's reaction f sign(W) are
+    # one torque form on the body: both listed, the experiment that separates them named
+    tb = load_testbed("rw-yaw")
+    friction = 1e-4  # N m
+    log = ab.slew(tb, effects={"coulomb_friction": friction}, duration=40.0, seed=5).log
+    found = ab.discrepancy(tb, [log])
+    pair = {"coulomb_friction", "wheel_coulomb_friction"}
+    assert any(set(p) == pair for p in found.confounded), str(found)
+    (key,) = [k for k in found.experiments if set(k.split(" + ")) == pair]
+    assert "bias speed" in found.experiments[key] and "spin down" in found.experiments[key]
+    (named,) = pair & set(found.effects)
+    # either form's value is the same torque here (the wheel's reaction to the body's rate)
+    value = float(np.ravel(found.effects[named])[0])
+    assert abs(value / friction - 1) < 0.10, str(found)
+    assert found.gap_after < 1.5 * found.noise_floor

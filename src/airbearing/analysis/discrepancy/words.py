@@ -86,6 +86,20 @@ EXPERIMENTS: dict[frozenset, str] = {
         "zero); viscous bearing friction follows the wheel speed, Coulomb friction stays the "
         "same at every speed of one sign"
     ),
+    frozenset({"coulomb_friction", "wheel_coulomb_friction"}): (
+        "a wheel that starts at rest turns against the body (momentum exchange), so the air "
+        "bearing's friction and the wheel bearing's give one torque form on the body; run "
+        "with the wheels at a bias speed (a wheel then turns with the body for part of the "
+        "log), or hold the body and let a wheel spin down with its motor off: the wheel "
+        "bearing's friction slows the wheel, the air bearing's does not"
+    ),
+    frozenset({"viscous_friction", "wheel_viscous_friction"}): (
+        "a wheel that starts at rest turns against the body at a rate proportional to the "
+        "body's (momentum exchange), so the air bearing's viscous friction and the wheel "
+        "bearing's give one torque form on the body; run with the wheels at a bias speed, or "
+        "hold the body and let a wheel spin down with its motor off: the wheel bearing's "
+        "friction slows the wheel, the air bearing's does not"
+    ),
     frozenset({"inertia_error", "wheel_torque_error"}): (
         "the body's rate sees the motor torque over J - Iw, so a larger body and a weaker motor "
         "give the same rate; apply a known external torque (a calibrated mass offset, a "
