@@ -1,0 +1,734 @@
+"""The extended-Kalman-filter likelihood of a whole log: effects, process-noise intensity and
+measurement noise as the parameters of one optimisation, cost linear in the samples.
+
+The Model is the engine's (:meth:`Model.step_dt`, its RK4 step on the logged intervals, and
+its measurement ``h``), and so is the front end (:func:`.logs.replay_data`: inputs, the
+measured outputs, segments and outlier rows). The filter runs sample by sample:
+
+Predict (from row ``k-1`` to row ``k``, the input held over the logged interval ``dt``)
+    ``x- = step(x+, u, p, dt)``, ``P- = F P+ F^T + Q`` with ``F = d step / d x`` (CasADi's
+    exact Jacobian of the RK4 step, no finite differences). The unexplained torque is white
+    and held over each interval (zero-order hold, as the engine holds every input), so its
+    covariance is exact for the discrete model: ``Q = sigma_w^2 g g^T / dt`` with ``g = (d
+    step / d tau) / (d wdot / d tau)`` the state's response to the torque, per unit rate
+    change it would cause (``tau`` the Model's disturbance torque input ``tau_z``). On the
+    rate ``Q = sigma_w^2 dt``: ``sigma_w`` (rad/s per sqrt(s)) is the random-walk intensity
+    of the rate, the :class:`.process_noise.ProcessNoise` ``intensity``.
+Update (row ``k``)
+    ``e = y - h(x-)``, ``S = H P- H^T + R``, ``K = P- H^T S^-1``, ``x+ = x- + K e``, ``P+`` by
+    Joseph's form (symmetric, positive for any gain). ``R = diag(sigma_y^2)``, one sigma per
+    measured output (yaw, rate), estimated or given. An entry that is missing (NaN in
+    :class:`KalmanData`, every entry of an outlier row) is skipped: its row of ``H`` and its
+    innovation are zero and its variance one, so it adds nothing to the likelihood or the
+    state.
+Likelihood
+    ``NLL = sum_k 0.5 (log det S_k + e_k^T S_k^-1 e_k + n_k log 2 pi)`` (the prediction-error
+    decomposition; exact for a linear Gaussian model, first order in the EKF).
+Segments
+    A segment (FORMATS.md gaps, input glitches) starts afresh: the state is reset to the
+    front end's start estimate with a broad covariance ``P0`` (:data:`P0_ATTITUDE`,
+    :data:`P0_RATE`; measured extra states such as gimbal angles exactly), nothing is
+    integrated across a gap.
+
+Cost
+    One sample is one CasADi Function of a few hundred instructions; the log is its
+    ``mapaccum`` (a graph of constant size) and the NLL's gradient is CasADi's reverse mode
+    through it, its Hessian forward-over-reverse: time and memory linear in the samples.
+    The NLL with its gradient, and its Hessian, are compiled to C through the engine's
+    on-disk cache (:func:`.functions.compiled`) for a padded length (:func:`padded_length`,
+    at most 1/8 more rows of no effect), so logs of similar length share one library.
+
+Optimiser
+    scipy's L-BFGS-B on the compiled NLL and its exact gradient, in variables scaled by the
+    NLL's exact Hessian at the start (one unit is one standard error), the log intensity
+    bounded below (:data:`LOG_INTENSITY_MIN`: no process noise is a boundary, not a
+    minimum at minus infinity). Chosen over IPOPT with the exact Hessian: a Hessian costs
+    several gradients and L-BFGS-B on a scaled problem of at most a few tens of
+    parameters converges in a few tens of gradients with no Hessian at all; the exact
+    Hessian is evaluated twice, at the start (scaling) and at the optimum (the observed
+    information, whose inverse gives the standard errors).
+
+Assumptions and limits
+    dof 1 (a yaw rig, a yaw CMG), without reaction wheels. The noises are white and
+    Gaussian; the filter linearises the Model about its estimate at each sample (an EKF:
+    first order, good while the state's uncertainty is small against the scale of the
+    Model's nonlinearity, which for friction and drag on a gyro or attitude log of usual
+    noise it is). The standard errors are those of the observed information (asymptotic,
+    the parameters away from their bounds); an intensity at its lower bound has none.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import casadi as ca
+import numpy as np
+import scipy.optimize as so
+
+from airbearing.analysis.shooting.functions import (
+    DEFAULT_SUBSTEPS,
+    _cached,
+    compiled,
+    evaluate,
+    step_function,
+)
+from airbearing.analysis.shooting.logs import ReplayData, noise_floor
+from airbearing.errors import InputError, SolverError
+from airbearing.models.model import Model
+from airbearing.models.structure_cache import structure_key
+
+__all__ = [
+    "KalmanData",
+    "KalmanFit",
+    "LOG_INTENSITY_MIN",
+    "P0_ATTITUDE",
+    "P0_RATE",
+    "fit_kalman",
+    "kalman_data",
+    "kalman_nll",
+    "padded_length",
+]
+
+#: rad, 1-sigma of the attitude at a segment's start (its front-end estimate is a
+#: measurement: a broad prior, the first update pins it).
+P0_ATTITUDE = 0.1
+#: rad/s, 1-sigma of the rate at a segment's start.
+P0_RATE = 0.1
+#: Lower bound of ``log(sigma_w)`` (sigma_w in rad/s per sqrt(s)): 1e-12 rad/s per sqrt(s)
+#: moves a rate by 1e-10 rad/s in 3 hours, no process noise for any log.
+LOG_INTENSITY_MIN = math.log(1e-12)
+#: Bounds of ``log(sigma_y)`` (rad or rad/s) of an estimated measurement noise.
+LOG_NOISE_BOUNDS = (math.log(1e-9), math.log(10.0))
+#: L-BFGS-B: iteration limit and the projected-gradient tolerance (scaled variables: one
+#: unit is about one standard error, so 1e-5 is far below any statistical precision).
+MAX_ITER = 300
+GTOL = 1e-5
+#: Mantissa steps of the padded lengths: 8 per doubling (:func:`padded_length`).
+PAD_STEPS = 8
+#: Names of the torque input and of the rate state on a dof-1 bearing.
+_TAU, _RATE = "tau_z", "wz"
+
+
+@dataclass(frozen=True, eq=False)
+class KalmanData:
+    """A log as the filter reads it: one row per sample.
+
+    Attributes
+    ----------
+    t : ndarray (N,)
+        Sample times, s, increasing.
+    u : ndarray (N, nu)
+        Inputs held from ``t[k]`` to ``t[k+1]`` (the Model's ``u_names``, SI).
+    y : ndarray (N, ny)
+        Measured outputs, the Model's outputs ``y_names`` (rad, rad/s); NaN where missing.
+    y_names : tuple of str
+        Which Model outputs the columns of ``y`` are.
+    reset : ndarray (N,) of bool
+        True at the first row of each segment (row 0 included): the filter restarts there.
+    start : ndarray (N, nx)
+        The state the filter restarts from at a reset row (ignored elsewhere).
+    source : str
+        Where the log came from, for messages.
+    """
+
+    t: np.ndarray
+    u: np.ndarray
+    y: np.ndarray
+    y_names: tuple
+    reset: np.ndarray
+    start: np.ndarray
+    source: str = "<arrays>"
+
+    @property
+    def n(self) -> int:
+        """Number of rows."""
+        return len(self.t)
+
+    def without(self, rows) -> KalmanData:
+        """The same log with the measurements of ``rows`` missing (NaN)."""
+        y = self.y.copy()
+        y[np.asarray(rows, dtype=int)] = np.nan
+        return KalmanData(self.t, self.u, y, self.y_names, self.reset, self.start, self.source)
+
+
+def kalman_data(data: ReplayData, model: Model) -> KalmanData:
+    """The filter's rows of a log turned into arrays by the engine's front end.
+
+    Parameters
+    ----------
+    data : ReplayData
+        :func:`airbearing.analysis.shooting.logs.replay_data` of the log.
+    model : Model
+        The Model fitted (the testbed of ``data`` with the effects to estimate).
+
+    Returns
+    -------
+    KalmanData
+        The measured yaw (when the log has an attitude) and rate (with a gyro); outlier
+        rows missing; a reset at the first row of every segment, from the front end's
+        start estimate (``ReplayData.start_state``), lag states at the start rate.
+
+    Raises
+    ------
+    InputError
+        If the Model is not dof 1, has reaction wheels, or its states are not the log's.
+    """
+    _check_model(model)
+    if tuple(data.x_names) != tuple(model.x_names[: len(data.x_names)]):
+        raise InputError(
+            f"{data.log.source}: the log's states {list(data.x_names)} are not the Model's "
+            f"{list(model.x_names)}: build the Model from the log's testbed"
+        )
+    cols, names = [], []
+    if data.yaw is not None:
+        cols.append(data.yaw)
+        names.append("yaw")
+    if data.w is not None:
+        cols.append(data.w[:, -1])
+        names.append("wz")
+    y = np.column_stack(cols)
+    y[~data.mask] = np.nan
+    reset = np.zeros(data.n, dtype=bool)
+    start = np.zeros((data.n, model.nx))
+    n_plant = model.nx - len(model.lag_index)
+    for a, b in data.segments:
+        use = np.flatnonzero(data.mask[a:b]) + a
+        if use.size == 0:
+            y[a:b] = np.nan
+            continue
+        reset[a] = True
+        xs = data.start_state(int(use[0]), b)
+        start[a, :n_plant] = xs
+        for i in model.lag_index:  # a lagged gyro starts at the rate
+            start[a, i] = xs[model.index(model.x_names[i].replace("lag_", ""))[0]]
+    return KalmanData(
+        t=np.asarray(data.t, float),
+        u=np.asarray(data.u, float),
+        y=y,
+        y_names=tuple(names),
+        reset=reset,
+        start=start,
+        source=data.log.source,
+    )
+
+
+def _check_model(model: Model) -> None:
+    if not isinstance(model, Model):
+        raise InputError(f"kalman: expected a Model, got {type(model).__name__}")
+    if model.dof != 1:
+        raise InputError(
+            f"kalman: testbed '{model.testbed.name}' has dof = {model.dof}; the Kalman "
+            "likelihood takes dof = 1 bearings only (yaw rigs); use discrepancy for dof 3"
+        )
+    if model.testbed.wheels is not None:
+        raise InputError(
+            f"kalman: testbed '{model.testbed.name}' has reaction wheels; the Kalman "
+            "likelihood takes passive yaw rigs and yaw CMGs only"
+        )
+
+
+def padded_length(n: int) -> int:
+    """The length a log of ``n`` rows is compiled for: the next ``m 2^e`` with ``m`` in
+    ``PAD_STEPS .. 2 PAD_STEPS - 1`` (padding rows do nothing: no interval, no
+    measurement), so logs of similar length share one compiled library."""
+    if n <= 2 * PAD_STEPS:
+        return max(int(n), 1)
+    e = int(math.floor(math.log2(n / PAD_STEPS)))
+    m = math.ceil(n / 2**e)
+    return int(m * 2**e)
+
+
+# ----------------------------------------------------------------------------
+# the filter as CasADi Functions
+
+
+def _sample_function(model: Model, y_rows: tuple, substeps: int) -> ca.Function:
+    """One sample of the filter: predict over ``dt`` (or restart), update with ``y``.
+
+    ``(c, u, dt, y, m, r, xs, p, lsw, lsy, p0) -> c_next`` with the carry ``c = [x; vec(P);
+    nll]``, ``m`` the 0/1 availability of each output, ``r`` 1 at a restart from ``xs``
+    with covariance ``diag(p0)``, ``lsw = log sigma_w``, ``lsy = log sigma_y``.
+    """
+    nx, ny, nu, n_p = model.nx, len(y_rows), model.nu, model.n_p
+    c = ca.SX.sym("c", nx + nx * nx + 1)
+    x, P, nll = c[:nx], ca.reshape(c[nx : nx + nx * nx], nx, nx), c[-1]
+    u, dt = ca.SX.sym("u", nu), ca.SX.sym("dt")
+    y, m, r = ca.SX.sym("y", ny), ca.SX.sym("m", ny), ca.SX.sym("r")
+    xs, p = ca.SX.sym("xs", nx), ca.SX.sym("p", n_p)
+    lsw, lsy, p0 = ca.SX.sym("lsw"), ca.SX.sym("lsy", ny), ca.SX.sym("p0", nx)
+    # predict: the step, its exact Jacobian and the held torque's response
+    xsym = ca.SX.sym("x", nx)
+    xn = step_function(model, substeps)(xsym, u, p, dt)
+    it = model.index(_TAU, "u")[0]
+    F = ca.jacobian(xn, xsym)
+    g = ca.jacobian(xn, u[it]) / ca.jacobian(model.f(xsym, u, p)[model.index(_RATE)[0]], u[it])
+    Q = ca.exp(2 * lsw) * ca.mtimes(g, g.T) / ca.fmax(dt, 1e-12)
+    pred = ca.Function("pred", [xsym, u, p, dt, lsw], [xn, F, Q])
+    xp, Fk, Qk = pred(x, u, p, dt, lsw)
+    x_pr = r * xs + (1 - r) * xp
+    P_pr = r * ca.diag(p0) + (1 - r) * (ca.mtimes([Fk, P, Fk.T]) + Qk)
+    # update: the available outputs only (a missing one: zero row, unit variance)
+    yh = model.h(xsym, u, p)[list(y_rows)]
+    upd_h = ca.Function("meas", [xsym, u, p], [yh, ca.jacobian(yh, xsym)])
+    yk, Hk = upd_h(x_pr, u, p)
+    M = ca.diag(m)
+    Hm = ca.mtimes(M, Hk)
+    e = m * (y - yk)
+    Rm = ca.diag(m * ca.exp(2 * lsy))
+    S = ca.mtimes([Hm, P_pr, Hm.T]) + Rm + ca.diag(1 - m)
+    Si_e = ca.solve(S, e)
+    K = ca.mtimes(P_pr, ca.solve(S, Hm).T)
+    IKH = ca.DM.eye(nx) - ca.mtimes(K, Hm)
+    x_up = x_pr + ca.mtimes(K, e)
+    P_up = ca.mtimes([IKH, P_pr, IKH.T]) + ca.mtimes([K, Rm, K.T])
+    nll_k = 0.5 * (ca.log(ca.det(S)) + ca.dot(e, Si_e) + ca.sum1(m) * math.log(2 * math.pi))
+    c_next = ca.vertcat(x_up, ca.vec(P_up), nll + nll_k)
+    return ca.Function(
+        "kf_sample",
+        [c, u, dt, y, m, r, xs, p, lsw, lsy, p0],
+        [c_next],
+        ["c", "u", "dt", "y", "m", "r", "xs", "p", "lsw", "lsy", "p0"],
+        ["c_next"],
+    )
+
+
+def _log_functions(model: Model, n: int, y_rows: tuple, K: int, substeps: int):
+    """``(nll_g, nll_h, states)`` over ``n`` rows: ``(z, p_base, S, U, DT, Y, M, R, XS, P0)
+    ->`` (NLL, gradient in ``z``), the Hessian in ``z``, and the filtered states; ``z =
+    [theta (K); log sigma_w; log sigma_y]``, ``p = p_base + S theta``."""
+    ny, nx = len(y_rows), model.nx
+    one = _sample_function(model, y_rows, substeps)
+    run = one.mapaccum("kf_log", n)
+    z = ca.MX.sym("z", K + 1 + ny)
+    pb, Sm = ca.MX.sym("p_base", model.n_p), ca.MX.sym("S", model.n_p, K)
+    U, DT = ca.MX.sym("U", model.nu, n), ca.MX.sym("DT", 1, n)
+    Y, M = ca.MX.sym("Y", ny, n), ca.MX.sym("M", ny, n)
+    R, XS, P0 = ca.MX.sym("R", 1, n), ca.MX.sym("XS", nx, n), ca.MX.sym("P0", nx)
+    p = pb + ca.mtimes(Sm, z[:K]) if K else pb
+    C = run(ca.DM.zeros(one.size1_in(0)), U, DT, Y, M, R, XS, p, z[K], z[K + 1 :], P0)
+    nll = C[-1, -1]
+    ins = [z, pb, Sm, U, DT, Y, M, R, XS, P0]
+    names = ["z", "p_base", "S", "U", "DT", "Y", "M", "R", "XS", "P0"]
+    f_g = ca.Function("kf_nll", ins, [nll, ca.gradient(nll, z)], names, ["nll", "grad"])
+    f_h = ca.Function("kf_hess", ins, [ca.hessian(nll, z)[0]], names, ["hess"])
+    f_x = ca.Function("kf_states", ins, [C[:nx, :]], names, ["X"])
+    return f_g, f_h, f_x
+
+
+def _compiled_functions(model, n, y_rows, K, substeps, jit):
+    key = ("kalman", structure_key(model), n, y_rows, K, substeps, jit)
+
+    def build():
+        f_g, f_h, f_x = _log_functions(model, n, y_rows, K, substeps)
+        return compiled(f_g, jit=jit), compiled(f_h, jit=jit), f_x
+
+    return _cached(key, build)
+
+
+# ----------------------------------------------------------------------------
+# arrays of a log
+
+
+@dataclass(frozen=True, eq=False)
+class _Problem:
+    """The compiled functions and the padded data arrays of one fit."""
+
+    f_g: ca.Function
+    f_h: ca.Function
+    f_x: ca.Function
+    args: list  # p_base, S, U, DT, Y, M, R, XS, P0
+    n: int
+
+    def nll_grad(self, z):
+        v, g = evaluate(self.f_g, z, *self.args)
+        return float(v[0]), g
+
+    def hess(self, z):
+        H = evaluate(self.f_h, z, *self.args)[0]
+        k = len(z)
+        return H.reshape(k, k, order="F")
+
+
+def _arrays(model: Model, kd: KalmanData, n_pad: int):
+    """Padded ``U, DT, Y, M, R, XS`` (columns are rows of the log) and ``P0``."""
+    n = kd.n
+    ny = len(kd.y_names)
+    U = np.zeros((model.nu, n_pad))
+    U[:, :n] = kd.u.T
+    U[:, n:] = kd.u[-1][:, None]
+    DT = np.zeros((1, n_pad))
+    DT[0, 1:n] = np.diff(kd.t)
+    DT[0, np.flatnonzero(kd.reset)] = 0.0  # a restart integrates nothing (a gap's interval)
+    # the input of row k-1 is held over the interval that ends at row k
+    U_prev = np.zeros_like(U)
+    U_prev[:, 1:] = U[:, :-1]
+    U_prev[:, 0] = U[:, 0]
+    Y = np.zeros((ny, n_pad))
+    M = np.zeros((ny, n_pad))
+    ok = np.isfinite(kd.y)
+    Y[:, :n] = np.where(ok, kd.y, 0.0).T
+    M[:, :n] = ok.T
+    R = np.zeros((1, n_pad))
+    R[0, :n] = kd.reset
+    XS = np.zeros((model.nx, n_pad))
+    XS[:, :n] = kd.start.T
+    p0 = np.zeros(model.nx)
+    p0[model.index("yaw")[0]] = P0_ATTITUDE**2
+    p0[model.index(_RATE)[0]] = P0_RATE**2
+    for i in model.lag_index:
+        p0[i] = P0_RATE**2
+    return [U_prev, DT, Y, M, R, XS, p0]
+
+
+def _check_data(model: Model, kd: KalmanData) -> None:
+    if not isinstance(kd, KalmanData):
+        raise InputError(f"kalman: expected KalmanData or ReplayData, got {type(kd).__name__}")
+    n = kd.n
+    src = kd.source
+    shapes = {
+        "u": (kd.u, (n, model.nu)),
+        "y": (kd.y, (n, len(kd.y_names))),
+        "start": (kd.start, (n, model.nx)),
+        "reset": (kd.reset, (n,)),
+    }
+    for name, (a, want) in shapes.items():
+        if np.shape(a) != want:
+            raise InputError(f"{src}: {name} has shape {np.shape(a)}, expected {want}")
+    if n < 2:
+        raise InputError(f"{src}: {n} row(s); the Kalman likelihood needs at least 2")
+    unknown = [c for c in kd.y_names if c not in model.y_names]
+    if unknown or not kd.y_names:
+        raise InputError(
+            f"{src}: outputs {list(kd.y_names)}: expected some of the Model's {list(model.y_names)}"
+        )
+    if not np.all(np.isfinite(kd.t)) or np.any(np.diff(kd.t) <= 0):
+        raise InputError(f"{src}: t must be finite and strictly increasing (s)")
+    if not np.all(np.isfinite(kd.u)):
+        row = int(np.flatnonzero(~np.isfinite(kd.u).all(axis=1))[0])
+        raise InputError(f"{src}: row {row}: input is not finite (inputs cannot be missing)")
+    if not kd.reset[0]:
+        raise InputError(f"{src}: reset[0] must be true (the filter starts at row 0)")
+    if not np.all(np.isfinite(kd.start[kd.reset])):
+        raise InputError(f"{src}: the start state of a reset row is not finite")
+
+
+# ----------------------------------------------------------------------------
+# the fit
+
+
+@dataclass(frozen=True)
+class KalmanFit:
+    """The maximum-likelihood fit of the Kalman likelihood.
+
+    Attributes
+    ----------
+    names : tuple of str
+        The free parameters (``Model.p_names``).
+    estimates, std : ndarray
+        Their estimates and standard errors (SI units of ``p_names``); NaN std when the
+        observed information is not positive definite.
+    intensity : float
+        ``sigma_w``, rad/s per sqrt(s): the random-walk intensity of the rate (a white
+        torque of spectral density ``(J sigma_w)^2`` N^2 m^2 s); 0 when fixed at 0.
+    intensity_std : float
+        Its standard error (delta method from ``log sigma_w``); NaN when fixed or at the
+        lower bound :data:`LOG_INTENSITY_MIN`.
+    noise : dict
+        Output name -> measurement noise sigma (rad or rad/s), estimated or given.
+    noise_std : dict
+        Output name -> its standard error (NaN when given).
+    nll : float
+        The negative log-likelihood at the optimum (nats).
+    iterations : int
+        L-BFGS-B iterations.
+    evaluations : int
+        NLL-and-gradient evaluations.
+    seconds : float
+        Wall time of the fit, s (compilation included when it happened).
+    rows : int
+        Rows of the log; ``observations`` the measured entries used.
+    observations : int
+    covariance : ndarray
+        Covariance of ``z = [theta; log sigma_w; log sigma_y]`` (inverse observed
+        information in the estimated entries; zero rows and columns for fixed ones).
+    message : str
+        The optimiser's message.
+    """
+
+    names: tuple
+    estimates: np.ndarray
+    std: np.ndarray
+    intensity: float
+    intensity_std: float
+    noise: dict
+    noise_std: dict
+    nll: float
+    iterations: int
+    evaluations: int
+    seconds: float
+    rows: int
+    observations: int
+    covariance: np.ndarray = field(repr=False)
+    message: str = ""
+
+    def estimate(self, name: str) -> tuple[float, float]:
+        """``(estimate, std)`` of one free parameter by name."""
+        if name not in self.names:
+            raise InputError(f"kalman fit: no free parameter {name!r}; it has {list(self.names)}")
+        i = self.names.index(name)
+        return float(self.estimates[i]), float(self.std[i])
+
+
+def _free_selection(model: Model, free) -> tuple[tuple, np.ndarray]:
+    free = (free,) if isinstance(free, str) else tuple(free or ())
+    unknown = [n for n in free if n not in model.p_names]
+    if unknown:
+        raise InputError(
+            f"kalman: free {unknown}: not parameters of the Model; expected names from "
+            f"{list(model.p_names)}"
+        )
+    if len(set(free)) != len(free):
+        raise InputError(f"kalman: free {list(free)}: a parameter is named twice")
+    S = np.zeros((model.n_p, len(free)))
+    for j, n in enumerate(free):
+        S[model.p_names.index(n), j] = 1.0
+    return free, S
+
+
+def _prepare(model, data, free, substeps, jit):
+    _check_model(model)
+    kd = kalman_data(data, model) if isinstance(data, ReplayData) else data
+    _check_data(model, kd)
+    free, S = _free_selection(model, free)
+    y_rows = tuple(model.index(list(kd.y_names), "y"))
+    n_pad = padded_length(kd.n)
+    f_g, f_h, f_x = _compiled_functions(model, n_pad, y_rows, len(free), substeps, jit)
+    arrays = _arrays(model, kd, n_pad)
+    return kd, free, S, _Problem(f_g, f_h, f_x, [None, S, *arrays], kd.n)
+
+
+def _noise_start(data, kd: KalmanData) -> dict:
+    """A first guess of each output's noise sigma: the engine's noise floor of the log, or
+    the scatter of the first differences of the arrays."""
+    out = {}
+    floor = noise_floor(data) if isinstance(data, ReplayData) else None
+    for j, name in enumerate(kd.y_names):
+        v = None
+        if floor is not None:
+            v = floor.rate if name == "wz" else floor.attitude
+        if v is None or not v > 0:
+            d = np.diff(kd.y[:, j])
+            d = d[np.isfinite(d)]
+            v = float(np.median(np.abs(d - np.median(d)))) * 1.4826 / math.sqrt(2) if d.size else 0
+        out[name] = max(float(v), 1e-8)
+    return out
+
+
+def kalman_nll(
+    model: Model,
+    data,
+    *,
+    p=None,
+    intensity: float = 0.0,
+    noise: dict,
+    substeps: int = DEFAULT_SUBSTEPS,
+    jit: bool | None = None,
+    gradient: bool = False,
+):
+    """The negative log-likelihood of a log under the Model (and its gradient).
+
+    Parameters
+    ----------
+    model : Model
+        dof-1 Model (module doc).
+    data : ReplayData or KalmanData
+        The log.
+    p : array_like (n_p,), optional
+        Parameters (default ``model.p0``).
+    intensity : float
+        ``sigma_w``, rad/s per sqrt(s), of the unexplained torque (module doc).
+    noise : dict
+        Output name (``yaw``, ``wz``) -> measurement noise sigma, rad or rad/s.
+    substeps : int
+        RK4 sub-steps per sample.
+    jit : bool, optional
+        False: CasADi's virtual machine; default: compiled when a C compiler exists.
+    gradient : bool
+        Also return the gradient in ``[p; log sigma_w; log sigma_y]`` (all parameters).
+
+    Returns
+    -------
+    float or (float, ndarray)
+        The NLL (nats) and, with ``gradient``, its gradient.
+    """
+    _check_model(model)
+    names = model.p_names if gradient else ()
+    kd, _, S, prob = _prepare(model, data, names, substeps, jit)
+    p = model.p0 if p is None else np.asarray(p, float)
+    missing = [k for k in kd.y_names if k not in noise]
+    if missing:
+        raise InputError(f"kalman_nll: noise has no sigma for outputs {missing}")
+    lsw = math.log(intensity) if intensity > 0 else -700.0
+    lsy = [math.log(noise[k]) for k in kd.y_names]
+    if gradient:
+        z = np.r_[p, lsw, lsy]
+        prob.args[0] = np.zeros(model.n_p)
+        return prob.nll_grad(z)
+    prob.args[0] = p
+    return prob.nll_grad(np.r_[lsw, lsy])[0]
+
+
+def fit_kalman(
+    model: Model,
+    data,
+    free=(),
+    *,
+    intensity: float | None = None,
+    noise: dict | None = None,
+    substeps: int = DEFAULT_SUBSTEPS,
+    jit: bool | None = None,
+    max_iter: int = MAX_ITER,
+) -> KalmanFit:
+    """Maximise the Kalman likelihood of a log over effects, intensity and noise.
+
+    Parameters
+    ----------
+    model : Model
+        dof-1 Model holding the effects to estimate (their values are the start).
+    data : ReplayData or KalmanData
+        The log (:func:`airbearing.analysis.shooting.logs.replay_data`, or
+        :func:`kalman_data` arrays with missing entries as NaN).
+    free : sequence of str
+        Parameters to estimate (``model.p_names``, e.g. ``viscous_friction``), SI units.
+    intensity : float, optional
+        ``sigma_w``, rad/s per sqrt(s): fixed at this value (0: no process noise, the
+        output-error likelihood); default estimated.
+    noise : dict, optional
+        Output name (``yaw``, ``wz``) -> measurement noise sigma (rad, rad/s), fixed;
+        outputs not named are estimated (default: all).
+    substeps : int
+        RK4 sub-steps per sample (the engine's :data:`.functions.DEFAULT_SUBSTEPS`).
+    jit : bool, optional
+        False: CasADi's virtual machine (same values, slower); default compiled when a C
+        compiler is available.
+    max_iter : int
+        L-BFGS-B iteration limit.
+
+    Returns
+    -------
+    KalmanFit
+
+    Raises
+    ------
+    InputError
+        A free name that is not a parameter, a noise for an output the log lacks, a
+        non-positive fixed intensity or noise, a log the filter cannot read.
+    SolverError
+        When L-BFGS-B stops without converging or the likelihood is not finite at the start.
+    """
+    t0 = time.perf_counter()
+    kd, free, S, prob = _prepare(model, data, free, substeps, jit)
+    K, ny = len(free), len(kd.y_names)
+    noise = dict(noise or {})
+    bad = [k for k in noise if k not in kd.y_names]
+    if bad:
+        raise InputError(
+            f"kalman: noise for {bad}: the log measures only {list(kd.y_names)}"
+        )
+    for k, v in noise.items():
+        if not (isinstance(v, (int, float)) and v > 0 and math.isfinite(v)):
+            raise InputError(f"kalman: noise[{k!r}] = {v!r}: expected a positive sigma")
+    if intensity is not None and not (intensity >= 0 and math.isfinite(intensity)):
+        raise InputError(f"kalman: intensity {intensity!r}: expected sigma_w >= 0 rad/s/sqrt(s)")
+    guess = _noise_start(data, kd)
+    theta0 = model.p0[[model.p_names.index(n) for n in free]]
+    prob.args[0] = model.p0 - S @ theta0
+    lsy0 = np.array([math.log(noise.get(k, guess[k])) for k in kd.y_names])
+    if intensity is None:
+        # a start well inside: the rate's noise over a tenth of the log per sqrt(s)
+        sw0 = 0.1 * guess.get("wz", guess[kd.y_names[0]]) / math.sqrt(max(kd.t[-1] - kd.t[0], 1e-9))
+        lsw0 = math.log(max(sw0, 1e-10))
+    else:
+        lsw0 = math.log(intensity) if intensity > 0 else LOG_INTENSITY_MIN - 600.0
+    z0 = np.r_[theta0, lsw0, lsy0]
+    est = np.r_[np.ones(K, bool), intensity is None, [k not in noise for k in kd.y_names]]
+    f0, _ = prob.nll_grad(z0)
+    if not math.isfinite(f0):
+        raise SolverError(f"{kd.source}: the Kalman likelihood is not finite at the start")
+    # scale: one unit of each estimated variable is about one standard error at the start
+    H0 = prob.hess(z0)
+    d = np.abs(np.diag(H0))[est]
+    scale = np.ones(len(z0))
+    scale[est] = 1.0 / np.sqrt(np.where(d > 0, d, 1.0))
+    scale[K:][est[K:]] = np.minimum(scale[K:][est[K:]], 1.0)
+    idx = np.flatnonzero(est)
+    lo = np.full(idx.size, -np.inf)
+    hi = np.full(idx.size, np.inf)
+    for j, i in enumerate(idx):
+        if i == K:
+            lo[j] = (LOG_INTENSITY_MIN - z0[i]) / scale[i]
+        elif i > K:
+            lo[j] = (LOG_NOISE_BOUNDS[0] - z0[i]) / scale[i]
+            hi[j] = (LOG_NOISE_BOUNDS[1] - z0[i]) / scale[i]
+    count = {"n": 0}
+
+    def fun(s):
+        z = z0.copy()
+        z[idx] += s * scale[idx]
+        count["n"] += 1
+        v, g = prob.nll_grad(z)
+        if not math.isfinite(v):
+            return 1e300, np.zeros(idx.size)
+        return v - f0, g[idx] * scale[idx]
+
+    res = so.minimize(
+        fun,
+        np.zeros(idx.size),
+        jac=True,
+        method="L-BFGS-B",
+        bounds=list(zip(lo, hi, strict=True)),
+        options={"maxiter": int(max_iter), "gtol": GTOL, "ftol": 1e-15, "maxcor": 20},
+    )
+    z = z0.copy()
+    z[idx] += res.x * scale[idx]
+    nll, g = prob.nll_grad(z)
+    if not res.success and np.max(np.abs(g[idx] * scale[idx])) > 1e-2:
+        raise SolverError(f"{kd.source}: the Kalman fit did not converge: {res.message}")
+    H = prob.hess(z)
+    cov = np.zeros((len(z), len(z)))
+    inner = est.copy()
+    if intensity is None and z[K] <= LOG_INTENSITY_MIN + 1e-6:
+        inner[K] = False  # at the bound: no curvature to invert
+    ii = np.flatnonzero(inner)
+    Hs = H[np.ix_(ii, ii)]
+    try:
+        np.linalg.cholesky(Hs)
+        cov[np.ix_(ii, ii)] = np.linalg.inv(Hs)
+    except np.linalg.LinAlgError:
+        cov[np.ix_(ii, ii)] = np.nan
+    sd = np.sqrt(np.abs(np.diag(cov)))
+    sd[~inner] = np.nan
+    sw = math.exp(z[K]) if (intensity is None or intensity > 0) else 0.0
+    if intensity is None and not inner[K]:
+        sw = 0.0
+    noise_out = {k: math.exp(z[K + 1 + j]) for j, k in enumerate(kd.y_names)}
+    noise_sd = {k: noise_out[k] * sd[K + 1 + j] for j, k in enumerate(kd.y_names)}
+    return KalmanFit(
+        names=free,
+        estimates=z[:K].copy(),
+        std=sd[:K].copy(),
+        intensity=sw,
+        intensity_std=sw * sd[K] if inner[K] else math.nan,
+        noise=noise_out,
+        noise_std=noise_sd,
+        nll=float(nll),
+        iterations=int(res.nit),
+        evaluations=count["n"],
+        seconds=time.perf_counter() - t0,
+        rows=kd.n,
+        observations=int(np.isfinite(kd.y).sum()),
+        covariance=cov,
+        message=str(res.message),
+    )
