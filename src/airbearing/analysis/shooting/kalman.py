@@ -31,12 +31,19 @@ Segments
     integrated across a gap.
 
 Cost
-    One sample is one CasADi Function of a few hundred instructions; the log is its
-    ``mapaccum`` (a graph of constant size) and the NLL's gradient is CasADi's reverse mode
-    through it, its Hessian forward-over-reverse: time and memory linear in the samples.
-    The NLL with its gradient, and its Hessian, are compiled to C through the engine's
-    on-disk cache (:func:`.functions.compiled`) for a padded length (:func:`padded_length`,
-    at most 1/8 more rows of no effect), so logs of similar length share one library.
+    One sample is one CasADi Function of a few hundred instructions. Its derivatives are
+    carried FORWARD with the filter: with the few variables ``z`` (effects, ``log
+    sigma_w``, ``log sigma_y``) as directions, the carry's sensitivity ``dc/dz`` (and for
+    the Hessian its second derivative) is propagated by CasADi's exact derivatives of the
+    sample, so the NLL's gradient and exact Hessian come out of one pass, and nothing of
+    the pass is stored: time linear in the samples, memory that of the log. A block of
+    :data:`BLOCK` samples (a ``mapaccum``, a graph of constant size) is compiled to C once
+    per Model structure and number of variables through the engine's on-disk cache
+    (:func:`.functions.compiled`), whatever the log's length; a Python loop runs the
+    blocks (a log is padded with rows of no effect to whole blocks). Reverse mode through
+    a ``mapaccum`` of the whole log was tried first: its graph and C code depend on the
+    log's length (one compilation per length, 20 s for the Hessian) and it stores every
+    sample's carry.
 
 Optimiser
     scipy's L-BFGS-B on the compiled NLL and its exact gradient, in variables scaled by the
@@ -88,7 +95,7 @@ __all__ = [
     "fit_kalman",
     "kalman_data",
     "kalman_nll",
-    "padded_length",
+    "BLOCK",
 ]
 
 #: rad, 1-sigma of the attitude at a segment's start (its front-end estimate is a
@@ -105,8 +112,10 @@ LOG_NOISE_BOUNDS = (math.log(1e-9), math.log(10.0))
 #: unit is about one standard error, so 1e-5 is far below any statistical precision).
 MAX_ITER = 300
 GTOL = 1e-5
-#: Mantissa steps of the padded lengths: 8 per doubling (:func:`padded_length`).
-PAD_STEPS = 8
+#: Rows per compiled block: the log is padded to a whole number of blocks with rows of no
+#: effect (no interval, no measurement); a Python loop runs the blocks (at 10^6 rows 3,900
+#: calls, a few per cent of the time).
+BLOCK = 256
 #: Names of the torque input and of the rate state on a dof-1 bearing.
 _TAU, _RATE = "tau_z", "wz"
 
@@ -229,100 +238,104 @@ def _check_model(model: Model) -> None:
         )
 
 
-def padded_length(n: int) -> int:
-    """The length a log of ``n`` rows is compiled for: the next ``m 2^e`` with ``m`` in
-    ``PAD_STEPS .. 2 PAD_STEPS - 1`` (padding rows do nothing: no interval, no
-    measurement), so logs of similar length share one compiled library."""
-    if n <= 2 * PAD_STEPS:
-        return max(int(n), 1)
-    e = int(math.floor(math.log2(n / PAD_STEPS)))
-    m = math.ceil(n / 2**e)
-    return int(m * 2**e)
-
-
 # ----------------------------------------------------------------------------
 # the filter as CasADi Functions
 
 
-def _sample_function(model: Model, y_rows: tuple, substeps: int) -> ca.Function:
-    """One sample of the filter: predict over ``dt`` (or restart), update with ``y``.
+def _sample_expr(model: Model, y_rows: tuple, substeps: int, K: int):
+    """One sample of the filter as SX: predict over ``dt`` (or restart), update with ``y``.
 
-    ``(c, u, dt, y, m, r, xs, p, lsw, lsy, p0) -> c_next`` with the carry ``c = [x; vec(P);
-    nll]``, ``m`` the 0/1 availability of each output, ``r`` 1 at a restart from ``xs``
-    with covariance ``diag(p0)``, ``lsw = log sigma_w``, ``lsy = log sigma_y``.
+    Returns the carry ``c = [x; vec(P); nll]``, the row's data ``d = [u; dt; y; m; r; xs]``
+    (``m`` the 0/1 availability of each output, ``r`` 1 at a restart from ``xs``), the
+    variables ``z = [theta; log sigma_w; log sigma_y]``, the constants ``k = [p_base;
+    vec(S); p0]`` (``p = p_base + S theta``, ``P0 = diag(p0)``) and ``c_next``.
     """
     nx, ny, nu, n_p = model.nx, len(y_rows), model.nu, model.n_p
     c = ca.SX.sym("c", nx + nx * nx + 1)
     x, P, nll = c[:nx], ca.reshape(c[nx : nx + nx * nx], nx, nx), c[-1]
-    u, dt = ca.SX.sym("u", nu), ca.SX.sym("dt")
-    y, m, r = ca.SX.sym("y", ny), ca.SX.sym("m", ny), ca.SX.sym("r")
-    xs, p = ca.SX.sym("xs", nx), ca.SX.sym("p", n_p)
-    lsw, lsy, p0 = ca.SX.sym("lsw"), ca.SX.sym("lsy", ny), ca.SX.sym("p0", nx)
+    d = ca.SX.sym("d", nu + 1 + 2 * ny + 1 + nx)
+    u, dt = d[:nu], d[nu]
+    y, m = d[nu + 1 : nu + 1 + ny], d[nu + 1 + ny : nu + 1 + 2 * ny]
+    r, xs = d[nu + 1 + 2 * ny], d[nu + 2 + 2 * ny :]
+    z = ca.SX.sym("z", K + 1 + ny)
+    k = ca.SX.sym("k", n_p + n_p * K + nx)
+    pb, Sm, p0 = k[:n_p], ca.reshape(k[n_p : n_p + n_p * K], n_p, K), k[n_p + n_p * K :]
+    p = pb + ca.mtimes(Sm, z[:K]) if K else pb
+    lsw, lsy = z[K], z[K + 1 :]
     # predict: the step, its exact Jacobian and the held torque's response
-    xsym = ca.SX.sym("x", nx)
-    xn = step_function(model, substeps)(xsym, u, p, dt)
+    xs_, us_, ps_ = ca.SX.sym("x", nx), ca.SX.sym("u", nu), ca.SX.sym("p", n_p)
+    dts_, lsw_ = ca.SX.sym("dt"), ca.SX.sym("lsw")
+    xn = step_function(model, substeps)(xs_, us_, ps_, dts_)
     it = model.index(_TAU, "u")[0]
-    F = ca.jacobian(xn, xsym)
-    g = ca.jacobian(xn, u[it]) / ca.jacobian(model.f(xsym, u, p)[model.index(_RATE)[0]], u[it])
-    Q = ca.exp(2 * lsw) * ca.mtimes(g, g.T) / ca.fmax(dt, 1e-12)
-    pred = ca.Function("pred", [xsym, u, p, dt, lsw], [xn, F, Q])
+    F = ca.jacobian(xn, xs_)
+    b = ca.jacobian(model.f(xs_, us_, ps_)[model.index(_RATE)[0]], us_[it])
+    g = ca.jacobian(xn, us_[it]) / b
+    Q = ca.exp(2 * lsw_) * ca.mtimes(g, g.T) / ca.fmax(dts_, 1e-12)
+    pred = ca.Function("pred", [xs_, us_, ps_, dts_, lsw_], [xn, F, Q])
     xp, Fk, Qk = pred(x, u, p, dt, lsw)
     x_pr = r * xs + (1 - r) * xp
     P_pr = r * ca.diag(p0) + (1 - r) * (ca.mtimes([Fk, P, Fk.T]) + Qk)
     # update: the available outputs only (a missing one: zero row, unit variance)
-    yh = model.h(xsym, u, p)[list(y_rows)]
-    upd_h = ca.Function("meas", [xsym, u, p], [yh, ca.jacobian(yh, xsym)])
-    yk, Hk = upd_h(x_pr, u, p)
-    M = ca.diag(m)
-    Hm = ca.mtimes(M, Hk)
+    yh = model.h(xs_, us_, ps_)[list(y_rows)]
+    meas = ca.Function("meas", [xs_, us_, ps_], [yh, ca.jacobian(yh, xs_)])
+    yk, Hk = meas(x_pr, u, p)
+    Hm = ca.mtimes(ca.diag(m), Hk)
     e = m * (y - yk)
     Rm = ca.diag(m * ca.exp(2 * lsy))
     S = ca.mtimes([Hm, P_pr, Hm.T]) + Rm + ca.diag(1 - m)
-    Si_e = ca.solve(S, e)
-    K = ca.mtimes(P_pr, ca.solve(S, Hm).T)
-    IKH = ca.DM.eye(nx) - ca.mtimes(K, Hm)
-    x_up = x_pr + ca.mtimes(K, e)
-    P_up = ca.mtimes([IKH, P_pr, IKH.T]) + ca.mtimes([K, Rm, K.T])
-    nll_k = 0.5 * (ca.log(ca.det(S)) + ca.dot(e, Si_e) + ca.sum1(m) * math.log(2 * math.pi))
-    c_next = ca.vertcat(x_up, ca.vec(P_up), nll + nll_k)
+    Kg = ca.mtimes(P_pr, ca.solve(S, Hm).T)
+    IKH = ca.DM.eye(nx) - ca.mtimes(Kg, Hm)
+    x_up = x_pr + ca.mtimes(Kg, e)
+    P_up = ca.mtimes([IKH, P_pr, IKH.T]) + ca.mtimes([Kg, Rm, Kg.T])
+    nll_k = ca.log(ca.det(S)) + ca.dot(e, ca.solve(S, e)) + ca.sum1(m) * math.log(2 * math.pi)
+    c_next = ca.vertcat(x_up, ca.vec(P_up), nll + 0.5 * nll_k)
+    return c, d, z, k, c_next
+
+
+def _block_function(model: Model, y_rows: tuple, substeps: int, K: int, order: int):
+    """``BLOCK`` samples of the filter with the forward sensitivities of its carry to
+    ``order``: ``(carry, D, z, k) -> carry`` with ``D`` the rows' data (one column per
+    row) and ``carry = [c; vec(dc/dz)]`` (order 1) ``; vec(d vec(dc/dz) / dz)]`` (order 2).
+
+    Forward mode with the few variables ``z`` as directions: the sensitivity of the next
+    carry is ``dc'/dc S + dc'/dz`` (CasADi's exact derivatives of the sample), the second
+    order the same rule applied to that; the NLL's gradient and Hessian are the last rows.
+    """
+    c, d, z, k, cn = _sample_expr(model, y_rows, substeps, K)
+    nc, nz = c.shape[0], z.shape[0]
+    carry, out = [c], [cn]
+    if order >= 1:
+        S = ca.SX.sym("S", nc, nz)
+        Sn = ca.jtimes(cn, c, S) + ca.jacobian(cn, z)
+        carry.append(ca.vec(S))
+        out.append(ca.vec(Sn))
+    if order >= 2:
+        T = ca.SX.sym("T", nc * nz, nz)
+        vS = ca.vec(Sn)
+        Tn = ca.jtimes(vS, c, S) + ca.jtimes(vS, ca.vec(S), T) + ca.jacobian(vS, z)
+        carry.append(ca.vec(T))
+        out.append(ca.vec(Tn))
+    one = ca.Function(
+        f"kf_sample{order}", [ca.vertcat(*carry), d, z, k], [ca.vertcat(*out)],
+        ["carry", "d", "z", "k"], ["carry_next"],
+    )  # fmt: skip
+    run = one.mapaccum(f"kf_rows{order}", BLOCK)
+    C0, D = ca.MX.sym("carry", one.size1_in(0)), ca.MX.sym("D", d.shape[0], BLOCK)
+    Z, Kc = ca.MX.sym("z", nz), ca.MX.sym("k", k.shape[0])
+    C = run(C0, D, Z, Kc)  # z and k repeated over the block
     return ca.Function(
-        "kf_sample",
-        [c, u, dt, y, m, r, xs, p, lsw, lsy, p0],
-        [c_next],
-        ["c", "u", "dt", "y", "m", "r", "xs", "p", "lsw", "lsy", "p0"],
-        ["c_next"],
+        f"kf_block{order}", [C0, D, Z, Kc], [C[:, -1]], ["carry", "D", "z", "k"], ["carry_end"]
     )
 
 
-def _log_functions(model: Model, n: int, y_rows: tuple, K: int, substeps: int):
-    """``(nll_g, nll_h, states)`` over ``n`` rows: ``(z, p_base, S, U, DT, Y, M, R, XS, P0)
-    ->`` (NLL, gradient in ``z``), the Hessian in ``z``, and the filtered states; ``z =
-    [theta (K); log sigma_w; log sigma_y]``, ``p = p_base + S theta``."""
-    ny, nx = len(y_rows), model.nx
-    one = _sample_function(model, y_rows, substeps)
-    run = one.mapaccum("kf_log", n)
-    z = ca.MX.sym("z", K + 1 + ny)
-    pb, Sm = ca.MX.sym("p_base", model.n_p), ca.MX.sym("S", model.n_p, K)
-    U, DT = ca.MX.sym("U", model.nu, n), ca.MX.sym("DT", 1, n)
-    Y, M = ca.MX.sym("Y", ny, n), ca.MX.sym("M", ny, n)
-    R, XS, P0 = ca.MX.sym("R", 1, n), ca.MX.sym("XS", nx, n), ca.MX.sym("P0", nx)
-    p = pb + ca.mtimes(Sm, z[:K]) if K else pb
-    C = run(ca.DM.zeros(one.size1_in(0)), U, DT, Y, M, R, XS, p, z[K], z[K + 1 :], P0)
-    nll = C[-1, -1]
-    ins = [z, pb, Sm, U, DT, Y, M, R, XS, P0]
-    names = ["z", "p_base", "S", "U", "DT", "Y", "M", "R", "XS", "P0"]
-    f_g = ca.Function("kf_nll", ins, [nll, ca.gradient(nll, z)], names, ["nll", "grad"])
-    f_h = ca.Function("kf_hess", ins, [ca.hessian(nll, z)[0]], names, ["hess"])
-    f_x = ca.Function("kf_states", ins, [C[:nx, :]], names, ["X"])
-    return f_g, f_h, f_x
-
-
-def _compiled_functions(model, n, y_rows, K, substeps, jit):
-    key = ("kalman", structure_key(model), n, y_rows, K, substeps, jit)
+def _block_functions(model, y_rows, K, substeps, jit):
+    """The compiled blocks of order 0, 1 and 2, once per structure (any log length)."""
+    key = ("kalman", structure_key(model), y_rows, K, substeps, jit)
 
     def build():
-        f_g, f_h, f_x = _log_functions(model, n, y_rows, K, substeps)
-        return compiled(f_g, jit=jit), compiled(f_h, jit=jit), f_x
+        return tuple(
+            compiled(_block_function(model, y_rows, substeps, K, o), jit=jit) for o in (0, 1, 2)
+        )
 
     return _cached(key, build)
 
@@ -333,53 +346,67 @@ def _compiled_functions(model, n, y_rows, K, substeps, jit):
 
 @dataclass(frozen=True, eq=False)
 class _Problem:
-    """The compiled functions and the padded data arrays of one fit."""
+    """The compiled blocks and the padded rows of one log."""
 
-    f_g: ca.Function
-    f_h: ca.Function
-    f_x: ca.Function
-    args: list  # p_base, S, U, DT, Y, M, R, XS, P0
+    blocks: tuple
+    D: np.ndarray  # (n_blocks, BLOCK, nd): the rows' data, block after block
+    k: np.ndarray  # constants [p_base; vec(S); p0]
+    nc: int
     n: int
 
+    def run(self, z, order: int):
+        """The carry after the last row: ``c`` and its sensitivities up to ``order``."""
+        fn = self.blocks[order]
+        nz = len(z)
+        size = self.nc * (1 + (nz if order >= 1 else 0) + (nz * nz if order >= 2 else 0))
+        carry = np.zeros(size)
+        for Db in self.D:
+            carry = evaluate(fn, carry, Db.T, z, self.k)[0]
+        return carry
+
+    def nll(self, z) -> float:
+        return float(self.run(z, 0)[self.nc - 1])
+
     def nll_grad(self, z):
-        v, g = evaluate(self.f_g, z, *self.args)
-        return float(v[0]), g
+        carry = self.run(z, 1)
+        nc = self.nc
+        S = carry[nc:].reshape(nc, len(z), order="F")
+        return float(carry[nc - 1]), S[nc - 1].copy()
 
     def hess(self, z):
-        H = evaluate(self.f_h, z, *self.args)[0]
-        k = len(z)
-        return H.reshape(k, k, order="F")
+        carry = self.run(z, 2)
+        nc, nz = self.nc, len(z)
+        T = carry[nc + nc * nz :].reshape(nc * nz, nz, order="F")
+        H = T[nc - 1 :: nc, :]
+        return 0.5 * (H + H.T)
 
 
-def _arrays(model: Model, kd: KalmanData, n_pad: int):
-    """Padded ``U, DT, Y, M, R, XS`` (columns are rows of the log) and ``P0``."""
-    n = kd.n
-    ny = len(kd.y_names)
-    U = np.zeros((model.nu, n_pad))
-    U[:, :n] = kd.u.T
-    U[:, n:] = kd.u[-1][:, None]
-    DT = np.zeros((1, n_pad))
-    DT[0, 1:n] = np.diff(kd.t)
-    DT[0, np.flatnonzero(kd.reset)] = 0.0  # a restart integrates nothing (a gap's interval)
-    # the input of row k-1 is held over the interval that ends at row k
-    U_prev = np.zeros_like(U)
-    U_prev[:, 1:] = U[:, :-1]
-    U_prev[:, 0] = U[:, 0]
-    Y = np.zeros((ny, n_pad))
-    M = np.zeros((ny, n_pad))
+def _rows(model: Model, kd: KalmanData, n_pad: int) -> np.ndarray:
+    """The rows' data ``[u_prev; dt; y; m; r; xs]`` (n_pad, nd): ``u_prev`` the input held
+    over the interval that ends at the row, padding rows with no interval and no
+    measurement."""
+    n, ny, nu, nx = kd.n, len(kd.y_names), model.nu, model.nx
+    D = np.zeros((n_pad, nu + 1 + 2 * ny + 1 + nx))
+    D[1:n, :nu] = kd.u[:-1]
+    D[0, :nu] = kd.u[0]
+    D[n:, :nu] = kd.u[-1]
+    D[1:n, nu] = np.diff(kd.t)
+    D[np.flatnonzero(kd.reset), nu] = 0.0  # a restart integrates nothing (a gap's interval)
     ok = np.isfinite(kd.y)
-    Y[:, :n] = np.where(ok, kd.y, 0.0).T
-    M[:, :n] = ok.T
-    R = np.zeros((1, n_pad))
-    R[0, :n] = kd.reset
-    XS = np.zeros((model.nx, n_pad))
-    XS[:, :n] = kd.start.T
+    D[:n, nu + 1 : nu + 1 + ny] = np.where(ok, kd.y, 0.0)
+    D[:n, nu + 1 + ny : nu + 1 + 2 * ny] = ok
+    D[:n, nu + 1 + 2 * ny] = kd.reset
+    D[:n, nu + 2 + 2 * ny :] = kd.start
+    return D
+
+
+def _p0(model: Model) -> np.ndarray:
     p0 = np.zeros(model.nx)
     p0[model.index("yaw")[0]] = P0_ATTITUDE**2
     p0[model.index(_RATE)[0]] = P0_RATE**2
     for i in model.lag_index:
         p0[i] = P0_RATE**2
-    return [U_prev, DT, Y, M, R, XS, p0]
+    return p0
 
 
 def _check_data(model: Model, kd: KalmanData) -> None:
@@ -497,16 +524,19 @@ def _free_selection(model: Model, free) -> tuple[tuple, np.ndarray]:
     return free, S
 
 
-def _prepare(model, data, free, substeps, jit):
+def _prepare(model, data, free, substeps, jit, p_base=None):
     _check_model(model)
     kd = kalman_data(data, model) if isinstance(data, ReplayData) else data
     _check_data(model, kd)
     free, S = _free_selection(model, free)
     y_rows = tuple(model.index(list(kd.y_names), "y"))
-    n_pad = padded_length(kd.n)
-    f_g, f_h, f_x = _compiled_functions(model, n_pad, y_rows, len(free), substeps, jit)
-    arrays = _arrays(model, kd, n_pad)
-    return kd, free, S, _Problem(f_g, f_h, f_x, [None, S, *arrays], kd.n)
+    blocks = _block_functions(model, y_rows, len(free), substeps, jit)
+    n_pad = BLOCK * math.ceil(kd.n / BLOCK)
+    D = _rows(model, kd, n_pad).reshape(n_pad // BLOCK, BLOCK, -1)
+    pb = model.p0 - S @ model.p0[[model.p_names.index(n) for n in free]] if p_base is None else p_base
+    k = np.r_[pb, S.ravel(order="F"), _p0(model)]
+    nc = model.nx + model.nx**2 + 1
+    return kd, free, S, _Problem(blocks, D, k, nc, kd.n)
 
 
 def _noise_start(data, kd: KalmanData) -> dict:
@@ -564,20 +594,18 @@ def kalman_nll(
         The NLL (nats) and, with ``gradient``, its gradient.
     """
     _check_model(model)
-    names = model.p_names if gradient else ()
-    kd, _, S, prob = _prepare(model, data, names, substeps, jit)
     p = model.p0 if p is None else np.asarray(p, float)
+    names = model.p_names if gradient else ()
+    pb = np.zeros(model.n_p) if gradient else p
+    kd, _, _, prob = _prepare(model, data, names, substeps, jit, p_base=pb)
     missing = [k for k in kd.y_names if k not in noise]
     if missing:
         raise InputError(f"kalman_nll: noise has no sigma for outputs {missing}")
     lsw = math.log(intensity) if intensity > 0 else -700.0
     lsy = [math.log(noise[k]) for k in kd.y_names]
     if gradient:
-        z = np.r_[p, lsw, lsy]
-        prob.args[0] = np.zeros(model.n_p)
-        return prob.nll_grad(z)
-    prob.args[0] = p
-    return prob.nll_grad(np.r_[lsw, lsy])[0]
+        return prob.nll_grad(np.r_[p, lsw, lsy])
+    return prob.nll(np.r_[lsw, lsy])
 
 
 def fit_kalman(
@@ -644,7 +672,6 @@ def fit_kalman(
         raise InputError(f"kalman: intensity {intensity!r}: expected sigma_w >= 0 rad/s/sqrt(s)")
     guess = _noise_start(data, kd)
     theta0 = model.p0[[model.p_names.index(n) for n in free]]
-    prob.args[0] = model.p0 - S @ theta0
     lsy0 = np.array([math.log(noise.get(k, guess[k])) for k in kd.y_names])
     if intensity is None:
         # a start well inside: the rate's noise over a tenth of the log per sqrt(s)
