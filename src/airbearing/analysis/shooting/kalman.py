@@ -116,6 +116,10 @@ GTOL = 1e-5
 #: effect (no interval, no measurement); a Python loop runs the blocks (at 10^6 rows 3,900
 #: calls, a few per cent of the time).
 BLOCK = 256
+#: Rows from which the Hessian's block is compiled: below, CasADi's virtual machine
+#: evaluates it (measured, dof-1 rotor, 5 variables: 840 us a row in the virtual machine,
+#: 28 us compiled, 24 s to compile once per structure; the Hessian is evaluated twice).
+HESSIAN_COMPILE_ROWS = 15_000
 #: Names of the torque input and of the rate state on a dof-1 bearing.
 _TAU, _RATE = "tau_z", "wz"
 
@@ -175,7 +179,8 @@ def kalman_data(data: ReplayData, model: Model) -> KalmanData:
     Returns
     -------
     KalmanData
-        The measured yaw (when the log has an attitude) and rate (with a gyro); outlier
+        The outputs the engine compares (:attr:`ReplayData.outputs`): the rate with a
+        gyro, else the yaw (a gyro log's yaw state is then carried, unmeasured); outlier
         rows missing; a reset at the first row of every segment, from the front end's
         start estimate (``ReplayData.start_state``), lag states at the start rate.
 
@@ -191,10 +196,10 @@ def kalman_data(data: ReplayData, model: Model) -> KalmanData:
             f"{list(model.x_names)}: build the Model from the log's testbed"
         )
     cols, names = [], []
-    if data.yaw is not None:
+    if "yaw" in data.outputs:
         cols.append(data.yaw)
         names.append("yaw")
-    if data.w is not None:
+    if "rate" in data.outputs:
         cols.append(data.w[:, -1])
         names.append("wz")
     y = np.column_stack(cols)
@@ -328,16 +333,23 @@ def _block_function(model: Model, y_rows: tuple, substeps: int, K: int, order: i
     )
 
 
-def _block_functions(model, y_rows, K, substeps, jit):
-    """The compiled blocks of order 0, 1 and 2, once per structure (any log length)."""
+def _block_functions(model, y_rows, K, substeps, jit, n_rows: int):
+    """The blocks of order 0, 1 and 2, once per structure (any log length): orders 0 and 1
+    compiled; order 2 (the Hessian, evaluated twice per fit) compiled from
+    :data:`HESSIAN_COMPILE_ROWS` rows on, below that in CasADi's virtual machine."""
     key = ("kalman", structure_key(model), y_rows, K, substeps, jit)
-
-    def build():
-        return tuple(
-            compiled(_block_function(model, y_rows, substeps, K, o), jit=jit) for o in (0, 1, 2)
-        )
-
-    return _cached(key, build)
+    low = _cached(
+        key,
+        lambda: tuple(
+            compiled(_block_function(model, y_rows, substeps, K, o), jit=jit) for o in (0, 1)
+        ),
+    )
+    hess_jit = False if n_rows < HESSIAN_COMPILE_ROWS else jit
+    hess = _cached(
+        (*key, "hessian", hess_jit),
+        lambda: compiled(_block_function(model, y_rows, substeps, K, 2), jit=hess_jit),
+    )
+    return (*low, hess)
 
 
 # ----------------------------------------------------------------------------
@@ -530,10 +542,14 @@ def _prepare(model, data, free, substeps, jit, p_base=None):
     _check_data(model, kd)
     free, S = _free_selection(model, free)
     y_rows = tuple(model.index(list(kd.y_names), "y"))
-    blocks = _block_functions(model, y_rows, len(free), substeps, jit)
+    blocks = _block_functions(model, y_rows, len(free), substeps, jit, kd.n)
     n_pad = BLOCK * math.ceil(kd.n / BLOCK)
     D = _rows(model, kd, n_pad).reshape(n_pad // BLOCK, BLOCK, -1)
-    pb = model.p0 - S @ model.p0[[model.p_names.index(n) for n in free]] if p_base is None else p_base
+    pb = (
+        model.p0 - S @ model.p0[[model.p_names.index(n) for n in free]]
+        if p_base is None
+        else p_base
+    )
     k = np.r_[pb, S.ravel(order="F"), _p0(model)]
     nc = model.nx + model.nx**2 + 1
     return kd, free, S, _Problem(blocks, D, k, nc, kd.n)
@@ -563,11 +579,11 @@ def kalman_nll(
     p=None,
     intensity: float = 0.0,
     noise: dict,
+    order: int = 0,
     substeps: int = DEFAULT_SUBSTEPS,
     jit: bool | None = None,
-    gradient: bool = False,
 ):
-    """The negative log-likelihood of a log under the Model (and its gradient).
+    """The negative log-likelihood of a log under the Model, and its exact derivatives.
 
     Parameters
     ----------
@@ -576,36 +592,44 @@ def kalman_nll(
     data : ReplayData or KalmanData
         The log.
     p : array_like (n_p,), optional
-        Parameters (default ``model.p0``).
+        Parameters, SI (default ``model.p0``).
     intensity : float
-        ``sigma_w``, rad/s per sqrt(s), of the unexplained torque (module doc).
+        ``sigma_w``, rad/s per sqrt(s), of the unexplained torque (module doc); 0: none.
     noise : dict
         Output name (``yaw``, ``wz``) -> measurement noise sigma, rad or rad/s.
+    order : {0, 1, 2}
+        0: the NLL; 1: also its gradient; 2: also its Hessian, both in ``z = [p; log
+        sigma_w; log sigma_y]`` (all parameters; ``log sigma_w`` has zero derivatives when
+        ``intensity`` is 0).
     substeps : int
         RK4 sub-steps per sample.
     jit : bool, optional
         False: CasADi's virtual machine; default: compiled when a C compiler exists.
-    gradient : bool
-        Also return the gradient in ``[p; log sigma_w; log sigma_y]`` (all parameters).
 
     Returns
     -------
-    float or (float, ndarray)
-        The NLL (nats) and, with ``gradient``, its gradient.
+    float, or tuple
+        The NLL (nats), then the gradient (n_p + 1 + ny,) and the Hessian.
     """
     _check_model(model)
     p = model.p0 if p is None else np.asarray(p, float)
-    names = model.p_names if gradient else ()
-    pb = np.zeros(model.n_p) if gradient else p
+    if p.shape != (model.n_p,):
+        raise InputError(f"kalman_nll: p has shape {p.shape}, expected ({model.n_p},)")
+    if order not in (0, 1, 2):
+        raise InputError(f"kalman_nll: order {order!r}: expected 0, 1 or 2")
+    names = model.p_names if order else ()
+    pb = np.zeros(model.n_p) if order else p
     kd, _, _, prob = _prepare(model, data, names, substeps, jit, p_base=pb)
     missing = [k for k in kd.y_names if k not in noise]
     if missing:
         raise InputError(f"kalman_nll: noise has no sigma for outputs {missing}")
     lsw = math.log(intensity) if intensity > 0 else -700.0
     lsy = [math.log(noise[k]) for k in kd.y_names]
-    if gradient:
-        return prob.nll_grad(np.r_[p, lsw, lsy])
-    return prob.nll(np.r_[lsw, lsy])
+    z = np.r_[p, lsw, lsy] if order else np.r_[lsw, lsy]
+    if order == 0:
+        return prob.nll(z)
+    f, g = prob.nll_grad(z)
+    return (f, g) if order == 1 else (f, g, prob.hess(z))
 
 
 def fit_kalman(
@@ -658,13 +682,11 @@ def fit_kalman(
     """
     t0 = time.perf_counter()
     kd, free, S, prob = _prepare(model, data, free, substeps, jit)
-    K, ny = len(free), len(kd.y_names)
+    K = len(free)
     noise = dict(noise or {})
     bad = [k for k in noise if k not in kd.y_names]
     if bad:
-        raise InputError(
-            f"kalman: noise for {bad}: the log measures only {list(kd.y_names)}"
-        )
+        raise InputError(f"kalman: noise for {bad}: the log measures only {list(kd.y_names)}")
     for k, v in noise.items():
         if not (isinstance(v, (int, float)) and v > 0 and math.isfinite(v)):
             raise InputError(f"kalman: noise[{k!r}] = {v!r}: expected a positive sigma")
@@ -740,7 +762,7 @@ def fit_kalman(
     sw = math.exp(z[K]) if (intensity is None or intensity > 0) else 0.0
     if intensity is None and not inner[K]:
         sw = 0.0
-    noise_out = {k: math.exp(z[K + 1 + j]) for j, k in enumerate(kd.y_names)}
+    noise_out = {k: noise.get(k, math.exp(z[K + 1 + j])) for j, k in enumerate(kd.y_names)}
     noise_sd = {k: noise_out[k] * sd[K + 1 + j] for j, k in enumerate(kd.y_names)}
     return KalmanFit(
         names=free,
