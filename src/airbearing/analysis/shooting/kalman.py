@@ -119,7 +119,7 @@ BLOCK = 256
 #: Rows from which the Hessian's block is compiled: below, CasADi's virtual machine
 #: evaluates it (measured, dof-1 rotor, 5 variables: 840 us a row in the virtual machine,
 #: 28 us compiled, 24 s to compile once per structure; the Hessian is evaluated twice).
-HESSIAN_COMPILE_ROWS = 15_000
+HESSIAN_COMPILE_ROWS = 5_000
 #: Names of the torque input and of the rate state on a dof-1 bearing.
 _TAU, _RATE = "tau_z", "wz"
 
