@@ -119,10 +119,9 @@ def one_discrepancy(rows: int) -> dict:
     res = discrepancy(tb, log, only=FREE, max_effects=2, workers=1)
     wall = time.perf_counter() - t0
     out = {"rows": log.n, "wall_s": wall, "rss_before_mb": rss0, "rss_peak_mb": _rss_mb()}
-    try:
-        out["named"] = {k: v for k, v in res.to_json().get("effects", {}).items()}
-    except Exception as exc:  # noqa: BLE001 - a report's shape must not lose the timing
-        out["named"] = f"(not reported: {exc})"
+    doc = res.to_json()
+    out["named"] = {e["name"]: [e["value"], e["std"]] for e in doc.get("effects", [])}
+    out["process_noise"] = (doc.get("adequacy") or {}).get("process_noise")
     return out
 
 

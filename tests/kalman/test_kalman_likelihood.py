@@ -75,7 +75,8 @@ def _within(est, sd, truth, k=3.0):
 
 def test_recovers_hidden_friction_and_noise_on_a_mocap_coast_down():
     data = _log(ROTOR, duration=120.0, seed=3)
-    fit = fit_kalman(build_model(ROTOR, START), data, FREE)
+    # a Log is read through the engine's front end (the same rows as ReplayData)
+    fit = fit_kalman(build_model(ROTOR, START), data.log, FREE)
     for name in FREE:
         est, sd = fit.estimate(name)
         assert sd > 0 and _within(est, sd, TRUTH[name]), (name, est, sd)

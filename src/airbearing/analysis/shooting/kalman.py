@@ -52,8 +52,9 @@ Optimiser
     minimum at minus infinity). Chosen over IPOPT with the exact Hessian: a Hessian costs
     several gradients and L-BFGS-B on a scaled problem of at most a few tens of
     parameters converges in a few tens of gradients with no Hessian at all; the exact
-    Hessian is evaluated twice, at the start (scaling) and at the optimum (the observed
-    information, whose inverse gives the standard errors).
+    Hessian is evaluated twice: at the start on the first :data:`SCALE_BLOCKS` blocks
+    (scaling) and at the optimum on the whole log (the observed information, whose
+    inverse gives the standard errors).
 
 Assumptions and limits
     dof 1 (a yaw rig, a yaw CMG), without reaction wheels. The noises are white and
@@ -81,8 +82,9 @@ from airbearing.analysis.shooting.functions import (
     evaluate,
     step_function,
 )
-from airbearing.analysis.shooting.logs import ReplayData, noise_floor
+from airbearing.analysis.shooting.logs import ReplayData, noise_floor, replay_data
 from airbearing.errors import InputError, SolverError
+from airbearing.io.log import Log
 from airbearing.models.model import Model
 from airbearing.models.structure_cache import structure_key
 
@@ -120,6 +122,8 @@ BLOCK = 256
 #: evaluates it (measured, dof-1 rotor, 5 variables: 840 us a row in the virtual machine,
 #: 28 us compiled, 24 s to compile once per structure; the Hessian is evaluated twice).
 HESSIAN_COMPILE_ROWS = 5_000
+#: Blocks whose Hessian scales the variables at the start (:func:`fit_kalman`).
+SCALE_BLOCKS = 16
 #: Names of the torque input and of the rate state on a dof-1 bearing.
 _TAU, _RATE = "tau_z", "wz"
 
@@ -212,11 +216,14 @@ def kalman_data(data: ReplayData, model: Model) -> KalmanData:
         if use.size == 0:
             y[a:b] = np.nan
             continue
-        reset[a] = True
-        xs = data.start_state(int(use[0]), b)
-        start[a, :n_plant] = xs
+        # from the first usable row (a restart there too: nothing measured before it)
+        first = int(use[0])
+        xs = np.zeros(model.nx)
+        xs[:n_plant] = data.start_state(first, b)
         for i in model.lag_index:  # a lagged gyro starts at the rate
-            start[a, i] = xs[model.index(model.x_names[i].replace("lag_", ""))[0]]
+            xs[i] = xs[model.index(model.x_names[i].split("_", 1)[1])[0]]
+        reset[[a, first]] = True
+        start[[a, first]] = xs
     return KalmanData(
         t=np.asarray(data.t, float),
         u=np.asarray(data.u, float),
@@ -366,13 +373,14 @@ class _Problem:
     nc: int
     n: int
 
-    def run(self, z, order: int):
-        """The carry after the last row: ``c`` and its sensitivities up to ``order``."""
+    def run(self, z, order: int, blocks: int | None = None):
+        """The carry after the last row (of the first ``blocks`` blocks): ``c`` and its
+        sensitivities up to ``order``."""
         fn = self.blocks[order]
         nz = len(z)
         size = self.nc * (1 + (nz if order >= 1 else 0) + (nz * nz if order >= 2 else 0))
         carry = np.zeros(size)
-        for Db in self.D:
+        for Db in self.D[:blocks]:
             carry = evaluate(fn, carry, Db.T, z, self.k)[0]
         return carry
 
@@ -385,8 +393,9 @@ class _Problem:
         S = carry[nc:].reshape(nc, len(z), order="F")
         return float(carry[nc - 1]), S[nc - 1].copy()
 
-    def hess(self, z):
-        carry = self.run(z, 2)
+    def hess(self, z, blocks: int | None = None):
+        """The NLL's Hessian in ``z`` (over the first ``blocks`` blocks)."""
+        carry = self.run(z, 2, blocks)
         nc, nz = self.nc, len(z)
         T = carry[nc + nc * nz :].reshape(nc * nz, nz, order="F")
         H = T[nc - 1 :: nc, :]
@@ -423,7 +432,9 @@ def _p0(model: Model) -> np.ndarray:
 
 def _check_data(model: Model, kd: KalmanData) -> None:
     if not isinstance(kd, KalmanData):
-        raise InputError(f"kalman: expected KalmanData or ReplayData, got {type(kd).__name__}")
+        raise InputError(
+            f"kalman: expected a Log, ReplayData or KalmanData, got {type(kd).__name__}"
+        )
     n = kd.n
     src = kd.source
     shapes = {
@@ -538,6 +549,8 @@ def _free_selection(model: Model, free) -> tuple[tuple, np.ndarray]:
 
 def _prepare(model, data, free, substeps, jit, p_base=None):
     _check_model(model)
+    if isinstance(data, Log):
+        data = replay_data(model.testbed, data)
     kd = kalman_data(data, model) if isinstance(data, ReplayData) else data
     _check_data(model, kd)
     free, S = _free_selection(model, free)
@@ -589,8 +602,8 @@ def kalman_nll(
     ----------
     model : Model
         dof-1 Model (module doc).
-    data : ReplayData or KalmanData
-        The log.
+    data : Log, ReplayData or KalmanData
+        The log (as in :func:`fit_kalman`).
     p : array_like (n_p,), optional
         Parameters, SI (default ``model.p0``).
     intensity : float
@@ -649,9 +662,10 @@ def fit_kalman(
     ----------
     model : Model
         dof-1 Model holding the effects to estimate (their values are the start).
-    data : ReplayData or KalmanData
-        The log (:func:`airbearing.analysis.shooting.logs.replay_data`, or
-        :func:`kalman_data` arrays with missing entries as NaN).
+    data : Log, ReplayData or KalmanData
+        The log (a Log of the Model's testbed is read by
+        :func:`airbearing.analysis.shooting.logs.replay_data`), or :func:`kalman_data`
+        arrays with missing entries as NaN.
     free : sequence of str
         Parameters to estimate (``model.p_names``, e.g. ``viscous_friction``), SI units.
     intensity : float, optional
@@ -681,6 +695,9 @@ def fit_kalman(
         When L-BFGS-B stops without converging or the likelihood is not finite at the start.
     """
     t0 = time.perf_counter()
+    _check_model(model)
+    if isinstance(data, Log):
+        data = replay_data(model.testbed, data)
     kd, free, S, prob = _prepare(model, data, free, substeps, jit)
     K = len(free)
     noise = dict(noise or {})
@@ -707,7 +724,10 @@ def fit_kalman(
     if not math.isfinite(f0):
         raise SolverError(f"{kd.source}: the Kalman likelihood is not finite at the start")
     # scale: one unit of each estimated variable is about one standard error at the start
-    H0 = prob.hess(z0)
+    # (from the first SCALE_BLOCKS blocks, times the log's length over theirs: a scale
+    # needs no more; the Hessian is the dearest pass, 10 gradients' worth)
+    m = min(len(prob.D), SCALE_BLOCKS)
+    H0 = prob.hess(z0, m) * (len(prob.D) / m)
     d = np.abs(np.diag(H0))[est]
     scale = np.ones(len(z0))
     scale[est] = 1.0 / np.sqrt(np.where(d > 0, d, 1.0))
