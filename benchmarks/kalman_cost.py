@@ -159,11 +159,16 @@ def main(argv=None) -> int:
         print(f"| {r['rows']:,} | {r['wall_s']:.2f} | {r['evaluations']} | "
               f"{r['grad_pass_s']:.4f} | {r['hess_pass_s']:.3f} | "
               f"{r['rss_before_mb']:.0f} / {r['rss_peak_mb']:.0f} |")  # fmt: skip
-    if len(res) > 1:
-        x = np.log([r["rows"] for r in res])
+    # the slope over every length, and from 10^4 rows on (below, fixed costs dominate and
+    # the Hessian runs in the virtual machine: HESSIAN_COMPILE_ROWS)
+    for lo in (0, 10_000):
+        use = [r for r in res if r["rows"] >= lo]
+        if len(use) < 2:
+            continue
+        x = np.log([r["rows"] for r in use])
         for key in ("wall_s", "grad_pass_s", "hess_pass_s"):
-            slope = np.polyfit(x, np.log([r[key] for r in res]), 1)[0]
-            print(f"log-log slope of {key} against rows: {slope:.2f}")
+            slope = np.polyfit(x, np.log([r[key] for r in use]), 1)[0]
+            print(f"log-log slope of {key} against rows >= {lo}: {slope:.2f}")
     out = {"kalman": res}
     if args.discrepancy:
         d = _child("--one-discrepancy", 30000)

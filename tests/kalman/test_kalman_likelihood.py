@@ -111,6 +111,9 @@ def test_fixed_intensity_and_noise_are_not_estimated():
     fit = fit_kalman(build_model(ROTOR, START), data, FREE, intensity=0.0, noise={"yaw": 1e-3})
     assert fit.intensity == 0.0 and math.isnan(fit.intensity_std)
     assert fit.noise == {"yaw": 1e-3} and math.isnan(fit.noise_std["yaw"])
+    doc = fit.to_json()
+    assert doc["intensity_std"] is None and doc["noise_std"] == {"yaw": None}
+    assert [e["name"] for e in doc["effects"]] == FREE
     for name in FREE:
         est, sd = fit.estimate(name)
         assert _within(est, sd, TRUTH[name])

@@ -523,6 +523,32 @@ class KalmanFit:
     covariance: np.ndarray = field(repr=False)
     message: str = ""
 
+    def to_json(self) -> dict:
+        """The JSON form: plain numbers, ``null`` for a missing standard error."""
+
+        def num(v):
+            v = float(v)
+            return v if math.isfinite(v) else None
+
+        return {
+            "effects": [
+                {"name": n, "value": num(v), "std": num(e)}
+                for n, v, e in zip(self.names, self.estimates, self.std, strict=True)
+            ],
+            "intensity": num(self.intensity),
+            "intensity_std": num(self.intensity_std),
+            "intensity_unit": "rad/s/sqrt(s)",
+            "noise": {k: num(v) for k, v in self.noise.items()},
+            "noise_std": {k: num(v) for k, v in self.noise_std.items()},
+            "nll": num(self.nll),
+            "iterations": self.iterations,
+            "evaluations": self.evaluations,
+            "seconds": num(self.seconds),
+            "rows": self.rows,
+            "observations": self.observations,
+            "message": self.message,
+        }
+
     def estimate(self, name: str) -> tuple[float, float]:
         """``(estimate, std)`` of one free parameter by name."""
         if name not in self.names:
