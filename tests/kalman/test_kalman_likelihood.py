@@ -33,6 +33,8 @@ from airbearing.analysis.shooting.kalman import (
     kalman_nll,
 )
 from airbearing.analysis.shooting.logs import replay_data
+from airbearing.analysis.simulation.artefacts import sample_times, with_gap, with_glitches
+from airbearing.analysis.simulation.on_times import simulate_on_times
 from airbearing.analysis.simulation.scenarios import spindown
 from airbearing.errors import InputError
 from airbearing.io.testbed import testbed_from_dict as make_testbed
@@ -117,6 +119,26 @@ def test_fixed_intensity_and_noise_are_not_estimated():
     for name in FREE:
         est, sd = fit.estimate(name)
         assert _within(est, sd, TRUTH[name])
+
+
+def test_a_gap_restarts_the_filter_and_outliers_are_skipped():
+    # 60 s at 20 Hz with a 5 s gap and two gyro spikes of 100 noise sigmas: the front end
+    # makes two segments and marks the spikes; the filter restarts at the second segment
+    # and reads nothing of the spikes, so the truth is still recovered
+    t, _ = with_gap(sample_times(GYRO_ROTOR, 60.0), 30.0, 5.0)
+    log = simulate_on_times(GYRO_ROTOR, t, initial_rate=2.0, effects=TRUTH, seed=11)
+    log, spikes = with_glitches(log, [200, 700], "rate_spike", size=100 * 1.5e-4)
+    data = replay_data(GYRO_ROTOR, log)
+    assert len(data.segments) == 2 and set(spikes) <= set(data.outlier_rows)
+    model = build_model(GYRO_ROTOR, START)
+    kd = kalman_data(data, model)
+    assert np.flatnonzero(kd.reset).tolist() == [a for a, _ in data.segments]
+    assert np.isnan(kd.y[list(spikes)]).all()
+    fit = fit_kalman(model, data, FREE)
+    assert fit.observations == data.n - len(data.outlier_rows)
+    for name in FREE:
+        est, sd = fit.estimate(name)
+        assert _within(est, sd, TRUTH[name]), (name, est, sd)
 
 
 @pytest.mark.slow
