@@ -91,7 +91,8 @@ def test_recovers_hidden_friction_and_noise_on_a_mocap_coast_down():
 def test_recovers_a_hidden_process_torque_intensity_on_a_gyro_coast_down():
     sigma_w = 1e-4  # rad/s per sqrt(s): 0.7 noise sigma of rate wander per second
     data = _log(GYRO_ROTOR, duration=60.0, seed=5, sigma_w=sigma_w)
-    fit = fit_kalman(build_model(GYRO_ROTOR, START), data, FREE)
+    fit = fit_kalman(build_model(GYRO_ROTOR, START), data, FREE, test_intensity=True)
+    assert fit.significant and fit.lr > 100  # a torque of 0.7 noise sigma per second
     assert fit.intensity_std > 0
     assert _within(fit.intensity, fit.intensity_std, sigma_w), (fit.intensity, fit.intensity_std)
     assert _within(fit.noise["wz"], fit.noise_std["wz"], GYRO_ROTOR.sensors.gyro_noise)
@@ -100,12 +101,15 @@ def test_recovers_a_hidden_process_torque_intensity_on_a_gyro_coast_down():
         assert _within(est, sd, TRUTH[name]), (name, est, sd)
 
 
-def test_no_process_torque_gives_an_intensity_far_below_the_one_it_could_see():
+def test_no_process_torque_gives_an_intensity_far_below_and_not_significant():
     # on the same log without a torque the intensity collapses: below a tenth of the one
     # the previous test finds (10 of its standard errors away from it)
     data = _log(GYRO_ROTOR, duration=60.0, seed=5)
-    fit = fit_kalman(build_model(GYRO_ROTOR, START), data, FREE)
+    fit = fit_kalman(build_model(GYRO_ROTOR, START), data, FREE, test_intensity=True)
     assert fit.intensity < 1e-5
+    # and the likelihood-ratio test does not call it significant (p >= 1e-3: a correct
+    # test errs so on one log in a thousand)
+    assert fit.significant is False and fit.p >= 1e-3
 
 
 def test_fixed_intensity_and_noise_are_not_estimated():
@@ -114,6 +118,7 @@ def test_fixed_intensity_and_noise_are_not_estimated():
     assert fit.intensity == 0.0 and math.isnan(fit.intensity_std)
     assert fit.noise == {"yaw": 1e-3} and math.isnan(fit.noise_std["yaw"])
     doc = fit.to_json()
+    assert fit.significant is None and doc["p"] is None  # not tested: fixed intensity
     assert doc["intensity_std"] is None and doc["noise_std"] == {"yaw": None}
     assert [e["name"] for e in doc["effects"]] == FREE
     for name in FREE:

@@ -74,6 +74,7 @@ from dataclasses import dataclass, field
 import casadi as ca
 import numpy as np
 import scipy.optimize as so
+from scipy.stats import chi2
 
 from airbearing.analysis.shooting.functions import (
     DEFAULT_SUBSTEPS,
@@ -122,6 +123,8 @@ BLOCK = 256
 #: evaluates it (measured, dof-1 rotor, 5 variables: 840 us a row in the virtual machine,
 #: 28 us compiled, 24 s to compile once per structure; the Hessian is evaluated twice).
 HESSIAN_COMPILE_ROWS = 5_000
+#: p-value below which the unexplained torque is significant (as the linked pieces').
+SIGNIFICANCE = 1e-3
 #: Blocks whose Hessian scales the variables at the start (:func:`fit_kalman`).
 SCALE_BLOCKS = 16
 #: Names of the torque input and of the rate state on a dof-1 bearing.
@@ -494,7 +497,7 @@ class KalmanFit:
     iterations : int
         L-BFGS-B iterations.
     evaluations : int
-        NLL-and-gradient evaluations.
+        NLL-and-gradient evaluations (of both fits with ``test_intensity``).
     seconds : float
         Wall time of the fit, s (compilation included when it happened).
     rows : int
@@ -505,6 +508,12 @@ class KalmanFit:
         information in the estimated entries; zero rows and columns for fixed ones).
     message : str
         The optimiser's message.
+    lr : float
+        With ``test_intensity``: the likelihood-ratio statistic ``2 (NLL_0 - NLL)``
+        against the same fit without process noise (NaN when not tested).
+    p : float
+        Its p-value, a 50:50 mixture of chi2(0) and chi2(1) (zero intensity is on the
+        boundary; Self & Liang 1987), NaN when not tested.
     """
 
     names: tuple
@@ -522,6 +531,13 @@ class KalmanFit:
     observations: int
     covariance: np.ndarray = field(repr=False)
     message: str = ""
+    lr: float = math.nan
+    p: float = math.nan
+
+    @property
+    def significant(self) -> bool | None:
+        """``p < SIGNIFICANCE``: the unexplained torque is real (None when not tested)."""
+        return None if math.isnan(self.p) else bool(self.p < SIGNIFICANCE)
 
     def to_json(self) -> dict:
         """The JSON form: plain numbers, ``null`` for a missing standard error."""
@@ -547,6 +563,9 @@ class KalmanFit:
             "rows": self.rows,
             "observations": self.observations,
             "message": self.message,
+            "lr": num(self.lr),
+            "p": num(self.p),
+            "significant": self.significant,
         }
 
     def estimate(self, name: str) -> tuple[float, float]:
@@ -681,6 +700,7 @@ def fit_kalman(
     substeps: int = DEFAULT_SUBSTEPS,
     jit: bool | None = None,
     max_iter: int = MAX_ITER,
+    test_intensity: bool = False,
 ) -> KalmanFit:
     """Maximise the Kalman likelihood of a log over effects, intensity and noise.
 
@@ -707,6 +727,10 @@ def fit_kalman(
         compiler is available.
     max_iter : int
         L-BFGS-B iteration limit.
+    test_intensity : bool
+        With an estimated intensity: also fit without process noise (warm-started, no
+        Hessian) for the likelihood-ratio test :attr:`KalmanFit.p` (about half as many
+        gradient passes again).
 
     Returns
     -------
@@ -758,39 +782,57 @@ def fit_kalman(
     scale = np.ones(len(z0))
     scale[est] = 1.0 / np.sqrt(np.where(d > 0, d, 1.0))
     scale[K:][est[K:]] = np.minimum(scale[K:][est[K:]], 1.0)
-    idx = np.flatnonzero(est)
-    lo = np.full(idx.size, -np.inf)
-    hi = np.full(idx.size, np.inf)
-    for j, i in enumerate(idx):
-        if i == K:
-            lo[j] = (LOG_INTENSITY_MIN - z0[i]) / scale[i]
-        elif i > K:
-            lo[j] = (LOG_NOISE_BOUNDS[0] - z0[i]) / scale[i]
-            hi[j] = (LOG_NOISE_BOUNDS[1] - z0[i]) / scale[i]
     count = {"n": 0}
 
-    def fun(s):
-        z = z0.copy()
-        z[idx] += s * scale[idx]
-        count["n"] += 1
-        v, g = prob.nll_grad(z)
-        if not math.isfinite(v):
-            return 1e300, np.zeros(idx.size)
-        return v - f0, g[idx] * scale[idx]
+    def minimise(z_start, mask):
+        """L-BFGS-B over the entries ``mask`` of ``z`` from ``z_start``, scaled by ``scale``."""
+        idx = np.flatnonzero(mask)
+        lo = np.full(idx.size, -np.inf)
+        hi = np.full(idx.size, np.inf)
+        for j, i in enumerate(idx):
+            if i == K:
+                lo[j] = (LOG_INTENSITY_MIN - z_start[i]) / scale[i]
+            elif i > K:
+                lo[j] = (LOG_NOISE_BOUNDS[0] - z_start[i]) / scale[i]
+                hi[j] = (LOG_NOISE_BOUNDS[1] - z_start[i]) / scale[i]
+        f_start, _ = prob.nll_grad(z_start)
 
-    res = so.minimize(
-        fun,
-        np.zeros(idx.size),
-        jac=True,
-        method="L-BFGS-B",
-        bounds=list(zip(lo, hi, strict=True)),
-        options={"maxiter": int(max_iter), "gtol": GTOL, "ftol": 1e-15, "maxcor": 20},
-    )
-    z = z0.copy()
-    z[idx] += res.x * scale[idx]
-    nll, g = prob.nll_grad(z)
-    if not res.success and np.max(np.abs(g[idx] * scale[idx])) > 1e-2:
-        raise SolverError(f"{kd.source}: the Kalman fit did not converge: {res.message}")
+        def fun(s):
+            z = z_start.copy()
+            z[idx] += s * scale[idx]
+            count["n"] += 1
+            v, g = prob.nll_grad(z)
+            if not math.isfinite(v):
+                return 1e300, np.zeros(idx.size)
+            return v - f_start, g[idx] * scale[idx]
+
+        res = so.minimize(
+            fun,
+            np.zeros(idx.size),
+            jac=True,
+            method="L-BFGS-B",
+            bounds=list(zip(lo, hi, strict=True)),
+            options={"maxiter": int(max_iter), "gtol": GTOL, "ftol": 1e-15, "maxcor": 20},
+        )
+        z = z_start.copy()
+        z[idx] += res.x * scale[idx]
+        nll, g = prob.nll_grad(z)
+        if not res.success and np.max(np.abs(g[idx] * scale[idx])) > 1e-2:
+            raise SolverError(f"{kd.source}: the Kalman fit did not converge: {res.message}")
+        return z, nll, res
+
+    z, nll, res = minimise(z0, est)
+    lr = p_value = math.nan
+    if test_intensity and intensity is None:
+        # the same likelihood without process noise, from the estimates: the boundary
+        # test of the intensity (chi2 mixture, as the linked pieces' ProcessNoise)
+        z_null = z.copy()
+        z_null[K] = LOG_INTENSITY_MIN - 600.0
+        mask = est.copy()
+        mask[K] = False
+        _, nll_null, _ = minimise(z_null, mask)
+        lr = max(2.0 * (nll_null - nll), 0.0)
+        p_value = 0.5 * float(chi2.sf(lr, 1)) if lr > 0 else 1.0
     H = prob.hess(z)
     cov = np.zeros((len(z), len(z)))
     inner = est.copy()
@@ -826,4 +868,6 @@ def fit_kalman(
         observations=int(np.isfinite(kd.y).sum()),
         covariance=cov,
         message=str(res.message),
+        lr=lr,
+        p=p_value,
     )
