@@ -146,6 +146,19 @@ def test_a_gap_restarts_the_filter_and_outliers_are_skipped():
         assert _within(est, sd, TRUTH[name]), (name, est, sd)
 
 
+def test_a_lagged_gyro_is_a_state_of_the_filter():
+    # sensor_lag adds a lagged-rate state whose exact update divides by the interval: the
+    # restarts and the padding (no interval) must not make the likelihood NaN
+    truth = {**TRUTH, "sensor_lag": 0.2}  # s
+    run = spindown(GYRO_ROTOR, initial_rate=2.0, duration=30.0, effects=truth, seed=2)
+    model = build_model(GYRO_ROTOR, {**START, "sensor_lag": 0.1})
+    assert model.x_names == ("yaw", "wz", "lag_wz")
+    fit = fit_kalman(model, run.log, [*FREE, "sensor_lag"], intensity=0.0)
+    for name in [*FREE, "sensor_lag"]:
+        est, sd = fit.estimate(name)
+        assert _within(est, sd, truth[name]), (name, est, sd)
+
+
 @pytest.mark.slow
 def test_three_sigma_intervals_cover_the_truth():
     # 20 seeds of a 40 s mocap coast-down: each interval covers with probability 0.997

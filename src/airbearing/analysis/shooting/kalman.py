@@ -65,7 +65,7 @@ Assumptions and limits
     the parameters away from their bounds); an intensity at its lower bound has none;
     ``test_intensity`` tests it against zero (likelihood ratio). Not built: dof 3 (it
     needs an error-state filter, a three-component attitude error about the estimated
-    quaternion; with this forward scheme its second-order block would be some 10^6
+    quaternion; with this forward scheme its second-order block would be, by estimate, 10^6
     instructions), reaction wheels, coloured measurement noise.
 """
 
@@ -292,8 +292,10 @@ def _sample_expr(model: Model, y_rows: tuple, substeps: int, K: int):
     Q = ca.exp(2 * lsw_) * ca.mtimes(g, g.T) / ca.fmax(dts_, 1e-12)
     pred = ca.Function("pred", [xs_, us_, ps_, dts_, lsw_], [xn, F, Q])
     xp, Fk, Qk = pred(x, u, p, dt, lsw)
-    x_pr = r * xs + (1 - r) * xp
-    P_pr = r * ca.diag(p0) + (1 - r) * (ca.mtimes([Fk, P, Fk.T]) + Qk)
+    # a restart takes the start and drops the prediction (which integrates no interval
+    # there and may not be finite: a sensor lag divides by the interval)
+    x_pr = ca.if_else(r > 0.5, xs, xp)
+    P_pr = ca.if_else(r > 0.5, ca.diag(p0), ca.mtimes([Fk, P, Fk.T]) + Qk)
     # update: the available outputs only (a missing one: zero row, unit variance)
     yh = model.h(xs_, us_, ps_)[list(y_rows)]
     meas = ca.Function("meas", [xs_, us_, ps_], [yh, ca.jacobian(yh, xs_)])
@@ -411,8 +413,8 @@ class _Problem:
 
 def _rows(model: Model, kd: KalmanData, n_pad: int) -> np.ndarray:
     """The rows' data ``[u_prev; dt; y; m; r; xs]`` (n_pad, nd): ``u_prev`` the input held
-    over the interval that ends at the row, padding rows with no interval and no
-    measurement."""
+    over the interval that ends at the row; padding rows restart at zero and measure
+    nothing (no term of the likelihood)."""
     n, ny, nu, nx = kd.n, len(kd.y_names), model.nu, model.nx
     D = np.zeros((n_pad, nu + 1 + 2 * ny + 1 + nx))
     D[1:n, :nu] = kd.u[:-1]
@@ -424,6 +426,7 @@ def _rows(model: Model, kd: KalmanData, n_pad: int) -> np.ndarray:
     D[:n, nu + 1 : nu + 1 + ny] = np.where(ok, kd.y, 0.0)
     D[:n, nu + 1 + ny : nu + 1 + 2 * ny] = ok
     D[:n, nu + 1 + 2 * ny] = kd.reset
+    D[n:, nu + 1 + 2 * ny] = 1.0  # padding: restarts that measure nothing
     D[:n, nu + 2 + 2 * ny :] = kd.start
     return D
 
