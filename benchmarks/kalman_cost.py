@@ -15,9 +15,9 @@ errors, and the process's peak resident memory before and after the fit
 
 The compiled blocks come from the disk cache after a first run (the first one on a
 machine compiles them: a few seconds, and 24 s for the Hessian's block once the log has
-``HESSIAN_COMPILE_ROWS`` rows); a warm-up fit runs first. ``--discrepancy`` also runs
-``discrepancy`` once on the 10 min log (30 000 rows), restricted to the two frictions, in
-the same way (a new process), for comparison.
+``HESSIAN_COMPILE_ROWS`` rows); warm-up fits of 1,000 and 5,000 rows run first.
+``--discrepancy`` also runs ``discrepancy`` once on the 10 min log (30 000 rows),
+restricted to the two frictions, in the same way (a new process), for comparison.
 """
 
 from __future__ import annotations
@@ -146,7 +146,9 @@ def main(argv=None) -> int:
         print(json.dumps(one_discrepancy(args.one_discrepancy)))
         return 0
     print(f"load average {os.getloadavg()[0]:.1f}", file=sys.stderr)
-    _child("--one", 1000)  # warm-up: the compiled blocks on disk
+    # warm-up: the compiled blocks on disk, the Hessian's too (HESSIAN_COMPILE_ROWS)
+    _child("--one", 1000)
+    _child("--one", 5000)
     res = []
     for n in args.rows:
         r = _child("--one", n)
