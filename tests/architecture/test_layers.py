@@ -125,7 +125,6 @@ FUNCTION_IMPORTS = {
     "analysis.shooting.constrained": 1,
     "analysis.shooting.errors": 3,
     "analysis.shooting.fit": 1,
-    "analysis.shooting.functions": 2,
     "analysis.shooting.measurement_noise": 3,
     "analysis.shooting.process_noise": 1,
     "api.logs": 1,

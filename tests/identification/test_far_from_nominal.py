@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 
 from airbearing.analysis.discrepancy import search as search_mod
+from airbearing.analysis.discrepancy import selection as selection_mod
 from airbearing.analysis.discrepancy.candidates import (
     candidates_for,
     regression_start,
@@ -168,9 +169,10 @@ def test_continuation_from_the_regression_start(low19):
 def test_a_fit_that_ends_badly_is_retried_and_not_named(low19, monkeypatch):
     # the old start (every effect at zero): IPOPT ends at "acceptable level" with 1 % of
     # the offset; the retry (continuation from that start) fails too, and the candidate is
-    # then not an answer: not named, and its reason says so
+    # then not an answer: not named, and its reason says so. Patched where the rounds
+    # look it up (.selection); search no longer holds it, so a patch there would fail
     monkeypatch.setattr(
-        search_mod,
+        selection_mod,
         "regression_start",
         lambda tau, phi: (np.zeros(phi.shape[2]), np.ones(phi.shape[2])),
     )

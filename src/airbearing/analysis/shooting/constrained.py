@@ -5,7 +5,7 @@ solver of :mod:`.functions`, with constraints ``g = [c; h(theta)]``:
 
 - ``c = 0``: the continuity defects of the linked pairs of consecutive windows (the end
   state of window ``j`` equals the start state of window ``j + 1``, in noise units,
-  :func:`.functions._link_function`), so the windows of one segment form one trajectory;
+  :func:`.problem_functions._link_function`), so the windows of one segment form one trajectory;
 - ``h(theta) >= 0``: any CasADi Function of the free parameters (e.g. the principal
   minors of a pseudo-inertia), with its exact Jacobian and Hessian.
 

@@ -76,7 +76,7 @@ def defect_whitening(problem, sigma_w: float):
     Returns
     -------
     W : scipy.sparse.csr_matrix (n_delta (n - 1), n_delta (n - 1))
-        Maps the defects (noise units, :func:`.functions._link_function`) to independent
+        Maps the defects (noise units, :func:`.problem_functions._link_function`) to independent
         unit-variance residuals; zero rows where two windows are not linked.
     logdet : float
         ``log det`` of the linked blocks of ``W``.
@@ -175,7 +175,7 @@ def _pattern(spy: ca.Sparsity) -> sp.csc_matrix:
 
 def hessian_pattern(fj, nd: int, nw: int) -> sp.csc_matrix:
     """Upper triangle of the structure of ``J^T J + Jc^T W^T W Jc`` (``fj`` the problem's
-    :class:`~.functions.WindowJacobian`; ``W`` dense within each pair's ``nd x nd`` block):
+    :class:`~.problem_functions.WindowJacobian`; ``W`` dense within each pair's ``nd x nd`` block):
     fixed for a problem structure, so IPOPT gets a sparse Hessian (the window states couple
     only their neighbours)."""
     J = fj.pattern()
@@ -235,7 +235,7 @@ def _build_penalised(model, L, nw, K, outputs, substeps, jit, max_iter, objectiv
 
 def penalised_solver(model, L, nw, K, outputs, substeps, jit, max_iter, objective_stop=False):
     """``(solver, keep)``: IPOPT on the stacked residual ``[r; W c]`` (:mod:`.process_noise`);
-    ``objective_stop`` as :func:`.functions.ipopt_options`."""
+    ``objective_stop`` as :func:`.solver.ipopt_options`."""
     args = (model, L, nw, K, outputs, substeps, jit, max_iter, objective_stop)
     key = ("penalised", structure_key(model), *args[1:])
     return _cached(key, lambda: _build_penalised(*args))

@@ -314,7 +314,7 @@ class ShootingProblem:
         status = str(stats.get("return_status", "?"))
         level = classify_status(status)
         if self.objective_stop and self.penalty is not None and status == _ACCEPTABLE:
-            level = "converged"  # the objective converged (functions.OBJECTIVE_STOP)
+            level = "converged"  # the objective converged (solver.OBJECTIVE_STOP)
         if accept_max_iter and status == "Maximum_Iterations_Exceeded":
             level = "warning"  # the last iterate, taken as it is (a baseline far from the data)
         if level == "error":

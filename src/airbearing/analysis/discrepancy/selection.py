@@ -1,0 +1,243 @@
+"""Forward selection (stages 1 and 3 of :func:`.search.discrepancy`): the nominal replay,
+then one round per effect added, up to ``max_effects``.
+
+Each round (:func:`_round`) judges every remaining candidate at the current fit
+(:mod:`.candidate_fit`): first on the round's shared Jacobian, the per-axis forms after the
+one-value ones, then refits by IPOPT every screened candidate that could be named near the
+round's best. :func:`_add_best` adds the nameable candidate with the lowest BIC; candidates
+within ``CONFOUND_BIC`` of it are reported as confounded.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import replace
+
+import numpy as np
+
+from airbearing.analysis.discrepancy.candidate_fit import _try
+from airbearing.analysis.discrepancy.candidates import regression_start, residual_torque
+from airbearing.analysis.discrepancy.screen import MATTER_BIC, linearise
+from airbearing.analysis.discrepancy.search_state import _Progress, _Search, _Selection
+from airbearing.analysis.discrepancy.starts import explained_fraction
+from airbearing.analysis.discrepancy.trial import cross_validate
+from airbearing.analysis.discrepancy.words import experiment_for, format_value
+from airbearing.analysis.shooting import Fit, ShootingProblem
+from airbearing.models.compiled import compile_seconds
+from airbearing.models.effects import REGISTRY
+
+#: Candidates whose BIC lies within this of the best explain the data equally well
+#: (a BIC difference below 2 is "not worth more than a bare mention", Kass & Raftery 1995).
+CONFOUND_BIC = 2.0
+
+
+def _nominal_replay(search: _Search, prog: _Progress) -> tuple[ShootingProblem, Fit]:
+    """Stage 1: the nominal Model's replay of every log (the baseline of every candidate)."""
+    unit, floor = search.datas[0].gap_unit, search.floor
+    prog("nominal replay (compiling the window function once per model structure)")
+    t0, c0 = time.monotonic(), compile_seconds()
+    base_problem = search.problem(False)
+    # far from the data the nominal replay may not converge: its last iterate is the baseline
+    nominal = base_problem.fit(
+        search.models[False].p0.copy(),
+        name="replay of the logs (nominal model)",
+        accept_max_iter=True,
+    )
+    prog.expect(time.monotonic() - t0, compile_seconds() - c0)
+    prog.done += 1
+    prog(f"nominal gap {nominal.gap:.3g} {unit}, noise floor {floor.value:.3g} {unit}")
+    return base_problem, nominal
+
+
+def _select(search, nominal, max_effects, screen, workers, prog) -> _Selection:
+    """Stage 3: forward selection, one round per effect added, up to ``max_effects``."""
+    unit = search.datas[0].gap_unit
+    sel = _Selection(nominal=nominal, current=nominal, ln_n=math.log(nominal.n_res))
+    sel.max_effects = max_effects
+    sel.stop_reason = "max_effects = 0" if max_effects == 0 else ""
+    # a noise-free log: below the smallest noise level the replay weighs with, what is left is
+    # the integration's own error, not an effect; the likelihood ratio is scale-free and
+    # would name it
+    resolution = search.floor.resolution
+    while len(sel.chosen) < max_effects:
+        if sel.current.gap < resolution:
+            what = "the named effects replay" if sel.chosen else "the nominal model replays"
+            more = "more " if sel.chosen else ""
+            sel.stop_reason = (
+                f"{what} the logs to {sel.current.gap:.3g} {unit}, below the "
+                f"{resolution:g} {unit} the replay resolves (a noise-free log): nothing "
+                f"{more}to name"
+            )
+            break
+        taken = {c.name for c in sel.chosen}
+        remaining = [c for c in search.cands if c.name not in taken and c.label not in sel.dropped]
+        if not remaining:
+            sel.stop_reason = "every candidate is in the model"
+            break
+        results = _round(search, sel, remaining, screen, workers, prog)
+        sel.rounds.append(tuple(results))
+        # what the logs cannot identify (nothing excites it) or what the fit pins at its
+        # physical bound is not refitted in later rounds
+        sel.dropped |= {
+            r.label
+            for r in results
+            if r.status in ("not identifiable from this log", "at its physical bound")
+        }
+        sel.at_bound |= {r.label for r in results if r.status == "at its physical bound"}
+        # what short pieces found too weak (not significant, too few standard errors from
+        # zero, no better on held-out pieces) may not be on the horizon: tried again there
+        sel.weak = {
+            r.label
+            for r in results
+            if not r.nameable and r.status in ("converged", "warning", "screened") and str(r.reason)
+        }
+        if not _add_best(sel, results, prog):
+            break
+    else:
+        sel.stop_reason = (
+            sel.stop_reason
+            or f"it named the most effects asked for ({max_effects}; max_effects, --max-effects)"
+        )
+    return sel
+
+
+def _round(search, sel: _Selection, remaining, screen, workers, prog) -> list:
+    """One round: every remaining candidate judged at the current fit, best first."""
+    unit = search.datas[0].gap_unit
+    chosen, theta, current, lag = sel.chosen, sel.theta, sel.current, sel.lag
+    before = cross_validate(search.problem(lag), current, len(theta), search.folds)
+    # regression starts of this round (one residual-torque evaluation per candidate)
+    model = search.models[lag]
+    p_cur = model.p0 + (search.S(lag, chosen) @ theta if chosen else 0.0)
+    for c in remaining:
+        if c.smooth and not c.lag:
+            tau, phi = residual_torque(model, search.datas, p_cur, search.S(lag, [c]))
+            th, sd = regression_start(tau, phi)
+            sel.starts[(c.label, len(chosen))] = (th, sd, explained_fraction(tau, phi, th))
+    # the lag problem (more states) is built before the threads share it
+    for c in remaining:
+        search.problem(lag or c.lag)
+    # one Jacobian at the current fit in every candidate's parameters: the score test
+    lin = None
+    if screen:
+        lin = linearise(
+            search.problem(lag),
+            current,
+            search.S(lag, chosen),
+            [c for c in remaining if c.smooth and not c.lag],
+        )
+
+    def run(c, lin=lin):
+        return _try(search, c, chosen, theta, current, lag, sel.ln_n, sel.starts, before, lin)
+
+    def fit_all(group):
+        out = []
+
+        def told(res):  # each candidate counted as it finishes (the estimate follows them)
+            out.append(res)
+            prog.done += 1
+            prog(f"{res.label}: gap {res.gap:.3g} {unit}, {res.status}")
+
+        if workers > 1 and len(group) > 1:
+            with ThreadPoolExecutor(max_workers=workers) as pool:
+                for res in pool.map(run, group):
+                    told(res)
+        else:
+            for c in group:
+                told(run(c))
+        return out
+
+    # the per-axis form of an effect only when its one-value form is significant: a friction
+    # the logs do not see with one value is not seen with three either. A signed effect's
+    # one value can cancel (a gyro bias of [2e-4, -1e-4, 5e-5] rad/s is 5e-5 on average: its
+    # one-value form was not significant on a 60 s dof-3 oscillation): always per axis too
+    results = fit_all([c for c in remaining if not c.per_axis])
+    seen = {r.name for r in results if r.significant}
+    seen |= {c.name for c in remaining if c.per_axis and c.signed}
+    # ... or when it has none (a correction of axes whose nominals differ)
+    one = {c.name for c in search.cands if not c.per_axis}
+    seen |= {c.name for c in search.cands if c.per_axis} - one
+    per_axis = [c for c in remaining if c.per_axis and c.name in seen]
+    prog.done += sum(1 for c in remaining if c.per_axis and c.name not in seen)
+    results += fit_all(per_axis)
+    # IPOPT where it can matter: a candidate judged on its Gauss-Newton step that could be
+    # named and whose BIC comes within MATTER_BIC of the best is fitted by IPOPT
+    while True:  # each pass refits at least one step, which is then an IPOPT fit
+        # near the best significant candidate, or near the best nameable one (the pick)
+        bests = [
+            min((r.delta_bic for r in results if test(r)), default=-math.inf)
+            for test in (lambda r: r.significant, lambda r: r.nameable)
+        ]
+        again = [
+            i
+            for i, r in enumerate(results)
+            if r.status == "screened"
+            and r.significant
+            and any(r.delta_bic <= b + MATTER_BIC for b in bests)
+        ]
+        if not again:
+            break
+        for i in again:
+            results[i] = run(results[i].candidate, lin=None)
+            prog(f"{results[i].label}: fitted by IPOPT, {results[i].status}")
+    results = _at_best_gap(results)
+    results.sort(key=lambda c: (not np.isfinite(c.delta_bic), c.delta_bic))
+    return results
+
+
+def _at_best_gap(results: list) -> list:
+    """A candidate whose fit and retry both ended badly (IPOPT's status) stays nameable only
+    when it ends at the round's best gap: within ``CONFOUND_BIC`` of the best BIC of the
+    round's converged fits. A fit that ends where the best converged one does explains the
+    logs as well as it; its solver status says how the iterations ended, not that the
+    answer is wrong. Further away, or with no converged fit to compare with, it is not an
+    answer (its reason says why)."""
+    fitted = [
+        r.delta_bic
+        for r in results
+        if r.nameable and not r.retry_failed and np.isfinite(r.delta_bic)
+    ]
+    best = min(fitted, default=math.inf)
+    out = []
+    for r in results:
+        at_best = np.isfinite(best) and r.delta_bic - best < CONFOUND_BIC
+        if r.retry_failed and r.nameable and not at_best:
+            r = replace(r, nameable=False, reason=r.retry_reason)
+        out.append(r)
+    return out
+
+
+def _add_best(sel: _Selection, results, prog) -> bool:
+    """Add the round's pick to the model (False, with the stop reason, when none may be named).
+
+    Candidates within ``CONFOUND_BIC`` of the best are confounded; the registry's first of
+    them (fewest parameters first) is added.
+    """
+    good = [c for c in results if c.nameable]
+    if not good:
+        sel.stop_reason = (
+            "no further candidate may be named" if sel.chosen else "no candidate may be named"
+        )
+        return False
+    best_bic = min(c.delta_bic for c in good)
+    group = [c for c in good if c.delta_bic - best_bic < CONFOUND_BIC]
+    order = {name: i for i, name in enumerate(REGISTRY)}
+    group.sort(key=lambda c: (c.k, order[c.name]))
+    pick = group[0]
+    # a pick is always an IPOPT fit: within MATTER_BIC (> CONFOUND_BIC) of the best
+    # nameable candidate, every step was refitted above
+    if pick.status == "screened":  # pragma: no cover - an invariant of the refit loop
+        raise RuntimeError(f"{pick.label}: a named effect must be an IPOPT fit")
+    for other in (c for c in group[1:] if c.name != pick.name):
+        pair = (pick.name, other.name)
+        if pair not in sel.confounded:
+            sel.confounded.append(pair)
+            sel.experiments[f"{pick.name} + {other.name}"] = experiment_for(*pair)
+    sel.chosen.append(pick.candidate)
+    sel.theta = pick.fit.theta.copy()
+    sel.current = pick.fit
+    sel.lag = sel.lag or pick.candidate.lag
+    prog(f"added {pick.candidate.label} = {format_value(pick.value)}")
+    return True

@@ -1,0 +1,299 @@
+"""The compiled functions of ALL windows of a problem: the residual (with the continuity
+defects of linked windows), its Jacobian (:class:`WindowJacobian`) and the outputs.
+
+The window functions of :mod:`.window_functions` mapped over the windows, ``THREADS`` at a
+time (:func:`map_windows`); the Jacobian's blocks written straight into NumPy and placed in
+a scipy CSC matrix. Cached in the one bounded cache (:mod:`.function_cache`).
+"""
+
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+import scipy.sparse as sp
+
+from airbearing import quaternion as quat
+from airbearing.analysis.shooting.buffers import evaluate, function_buffer
+from airbearing.analysis.shooting.function_cache import _cached
+from airbearing.analysis.shooting.sparse import csc_of
+from airbearing.analysis.shooting.window_functions import (
+    _window_functions,
+    delta_layout,
+    start_function,
+)
+from airbearing.models.model import Model
+from airbearing.models.structure_cache import structure_key
+
+
+def _link_function(model: Model, K: int, outputs: tuple) -> ca.Function:
+    """Continuity defect between a window's end and the next window's start.
+
+    ``(x_end, dx_end, delta_next, x_meas_next, sigma) -> (c, dc/d[theta; delta], dc/d delta_next)``
+    with ``dx_end`` the end state's Jacobian in ``[theta; delta]`` of its own window. One
+    entry per entry of ``delta`` (the states a window's ``delta`` sets): the small rotation
+    ``2 vec(conj(q_end) (x) q_next)`` (dof 3) or the yaw difference, over ``sigma_att``; the
+    rate and lagged-rate differences over ``sigma_rate`` (defects in noise units).
+    """
+    n_att, n_rate, n_lag = delta_layout(model, outputs)
+    nd = n_att + n_rate + n_lag
+    nx = model.nx
+    xe = ca.SX.sym("x_end", nx)
+    dxe = ca.SX.sym("dx_end", nx, K + nd)
+    dn = ca.SX.sym("delta_next", nd)
+    xm = ca.SX.sym("x_meas_next", nx - n_lag)
+    sig = ca.SX.sym("sigma", 2)
+    xn = start_function(model, outputs)(dn, xm)
+    rate = list(range(4, 7)) if model.dof == 3 else [1]
+    parts = []
+    if model.dof == 3:
+        e = quat.qmul(quat.qconj(xe[0:4]), xn[0:4])
+        parts.append(2 * ca.sign(e[0] + 1e-300) * e[1:4] / sig[1])
+    elif n_att:
+        parts.append((xn[0] - xe[0]) / sig[1])
+    parts.append((xn[rate] - xe[rate]) / sig[0])
+    if n_lag:
+        lag = list(model.lag_index)
+        parts.append((xn[lag] - xe[lag]) / sig[0])
+    c = ca.vertcat(*parts)
+    return ca.Function(
+        "link",
+        [xe, dxe, dn, xm, sig],
+        [c, ca.mtimes(ca.jacobian(c, xe), dxe), ca.jacobian(c, dn)],
+    )
+
+
+def _data_shapes(model: Model, L: int, nw: int, na: int, link: bool = False) -> list:
+    """Pieces of the data vector; ``sigma`` (2) is always the last one."""
+    nx_plant = model.nx - len(model.lag_index)
+    return [
+        (nx_plant, nw),
+        (model.nu, L * nw),
+        (1, (L - 1) * nw),
+        (1, L * nw),
+        (na, L * nw),
+        (4, L * nw),
+        (1, L * nw),
+        *([(1, L * nw)] if link else []),  # end-row selector of each window
+        (2, 1),
+    ]
+
+
+def _problem_functions(model, L, nw, K, outputs, substeps, jit, link=False):
+    """``(fr, fj, fy)`` of :func:`_build_problem`, from the one bounded cache."""
+    key = ("problem", structure_key(model), L, nw, K, outputs, substeps, jit, link)
+    return _cached(key, lambda: _build_problem(model, L, nw, K, outputs, substeps, jit, link))
+
+
+def window_jacobian(model, L, nw, K, outputs, substeps, jit, link=False) -> WindowJacobian:
+    """The :class:`WindowJacobian` ``fj`` of :func:`_problem_functions`."""
+    return _problem_functions(model, L, nw, K, outputs, substeps, jit, link)[1]
+
+
+class WindowJacobian:
+    """The residual and its Jacobian in ``v = [theta; vec(delta)]`` from the windows' own
+    blocks: the compiled window function runs on ``THREADS`` windows at a time, each call
+    writing straight into its windows' slices of the result (:meth:`casadi.Function.buffer`),
+    and NumPy places the blocks in the sparse matrix. On an hour of 50 Hz pieces the same
+    in one CasADi map cost 0.6 GB for the map's output pattern and work vectors, and its
+    assembly in CasADi's virtual machine 1 GB more.
+
+    Attributes
+    ----------
+    shape : tuple of int
+        ``(m nw, K + nd nw)``, the Jacobian's shape.
+    """
+
+    def __init__(self, win_rj: ca.Function, nw: int, K: int, shapes: list, defects=None):
+        self.win_rj, self.nw, self.K, self.defects = win_rj, nw, K, defects
+        self.pair = win_rj.map(THREADS, "thread", THREADS) if nw >= THREADS else None
+        block = win_rj.sparsity_out(1)
+        m = block.size1()
+        row = np.asarray(block.row(), dtype=np.int64)
+        self._colind = col = np.asarray(block.colind(), dtype=np.int64)
+        counts = np.diff(col)
+        self.shape = (m * nw, K + (block.size2() - K) * nw)
+        big = max(m * nw, int(col[-1]) * nw) >= np.iinfo(np.int32).max
+        itype = np.int64 if big else np.int32
+        off = (np.arange(nw, dtype=np.int64) * m)[:, None]
+        # theta columns: every window's rows in turn; then each window's own columns
+        parts = [(row[col[c] : col[c + 1]][None, :] + off).ravel() for c in range(K)]
+        parts.append((row[col[K] :][None, :] + off).ravel())
+        self._indices = np.concatenate(parts).astype(itype)
+        sizes = np.r_[counts[:K] * nw, np.tile(counts[K:], nw)]
+        self._indptr = np.r_[0, np.cumsum(sizes)].astype(itype)
+        # where each input of the window function lives: (source, offset, entries per
+        # window or None when shared); sources 0 v, 1 p_base, 2 S, 3 data
+        nd = win_rj.size1_in(0)
+        pieces, off = [], 0
+        for a, b in shapes:
+            pieces.append((off, a * b // nw if b % nw == 0 and b >= nw else None))
+            off += a * b
+        x0, U, dt, wt, W, Q, YW, *rest = pieces
+        sigma = rest[-1]
+        self._where = [
+            (0, K, nd),
+            (3, *x0),
+            (3, *U),
+            (3, *dt),
+            (3, *wt),
+            (3, *W),
+            (3, *Q),
+            (3, *YW),
+            (1, 0, None),
+            (2, 0, None),
+            (0, 0, None),
+            (3, sigma[0], None),
+        ]
+        if len(rest) == 2:  # the hand-over row selector of linked windows
+            self._where.append((3, *rest[0]))  # fmt: skip
+
+    def pattern(self) -> sp.csc_matrix:
+        """The Jacobian's structure: a CSC matrix of ones."""
+        ones = np.ones(self._indices.size)
+        return sp.csc_matrix((ones, self._indices, self._indptr), shape=self.shape)
+
+    def defect_sparsity(self) -> ca.Sparsity:
+        """The structure of the defects' Jacobian (linked windows)."""
+        return self.defects.sparsity_out(1)
+
+    def matrix(self, blocks: np.ndarray) -> sp.csc_matrix:
+        """The Jacobian (CSC) from the nonzeros of the window blocks, window after window."""
+        B = np.asarray(blocks).reshape(self.nw, -1)
+        col = self._colind
+        parts = [B[:, col[c] : col[c + 1]].ravel() for c in range(self.K)]
+        parts.append(B[:, col[self.K] :].ravel())
+        return sp.csc_matrix(
+            (np.concatenate(parts), self._indices, self._indptr), shape=self.shape, copy=False
+        )
+
+    def _windows(self, src: list) -> list:
+        """Every output of the window function for all windows, window after window."""
+        f = self.win_rj
+        out = [np.empty(f.nnz_out(i) * self.nw) for i in range(f.n_out())]
+        buffers: dict = {}
+        # shared inputs (parameters, noise levels) once per mapped window
+        shared = {
+            i: src[s][off : off + f.nnz_in(i)]
+            for i, (s, off, per) in enumerate(self._where)
+            if per is None
+        }
+        for fn, j0, count in self._calls():
+            if count not in buffers:
+                tiled = {i: np.tile(a, count) for i, a in shared.items()}
+                buffers[count] = (*function_buffer(fn), tiled)
+            buf, run, tiled = buffers[count]
+            for i, (s, off, per) in enumerate(self._where):
+                if per is None:
+                    piece = tiled[i]
+                else:
+                    piece = src[s][off + j0 * per : off + (j0 + count) * per]
+                buf.set_arg(i, memoryview(piece))
+            for i, o in enumerate(out):
+                n = f.nnz_out(i)
+                buf.set_res(i, memoryview(o[j0 * n : (j0 + count) * n]))
+            run()
+            if buf.ret() != 0:
+                raise RuntimeError(f"{f.name()}: evaluation failed (return code {buf.ret()})")
+        return out
+
+    def _calls(self):
+        """``(function, first window, windows)`` of each evaluation."""
+        m = (self.nw // THREADS) * THREADS if self.pair is not None else 0
+        for j0 in range(0, m, THREADS):
+            yield self.pair, j0, THREADS
+        for j0 in range(m, self.nw):
+            yield self.win_rj, j0, 1
+
+    def __call__(self, v, p_base, S, data) -> tuple:
+        """``(r, J)``, and on linked windows ``(r, J, c, Jc)`` (``J``, ``Jc`` scipy CSC)."""
+        src = [np.ascontiguousarray(np.asarray(a, dtype=float).reshape(-1, order="F"))
+               for a in (v, p_base, S, data)]  # fmt: skip
+        out = self._windows(src)
+        J = self.matrix(out[1])
+        if self.defects is None:
+            return out[0], J
+        c, Jc = evaluate(self.defects, out[2], out[3], *src)
+        return out[0], J, c, csc_of(Jc, self.defects.sparsity_out(1))
+
+
+#: Threads evaluating the windows side by side.
+THREADS = 2
+
+
+def map_windows(fn: ca.Function, nw: int, args: list) -> list:
+    """``fn`` over ``nw`` windows (``args`` as :meth:`casadi.Function.map` takes them: a
+    window's inputs side by side, or one for all), ``THREADS`` windows at a time.
+
+    CasADi's threaded map keeps a work vector per window it maps, not per thread: for the
+    Jacobian of an hour of 50 Hz pieces, 570 MB. A serial map of threaded maps of
+    ``THREADS`` windows keeps ``THREADS`` (the remaining windows are one more call)."""
+    if nw < 2 * THREADS:
+        return fn.map(nw, "thread", THREADS).call(args)
+    per = [fn.size2_in(i) for i in range(fn.n_in())]
+    m = (nw // THREADS) * THREADS
+    mapped = fn.map(THREADS, "thread", THREADS).map(m // THREADS, "serial")
+
+    def part(a, w, lo, hi):
+        whole = (lo, hi) == (0, nw)
+        return a[:, lo * w : hi * w] if a.shape[1] == w * nw != w and not whole else a
+
+    out = mapped.call([part(a, w, 0, m) for a, w in zip(args, per, strict=True)])
+    if m == nw:
+        return out
+    rest = fn.map(nw - m, "thread", THREADS).call(
+        [part(a, w, m, nw) for a, w in zip(args, per, strict=True)]
+    )
+    return [ca.horzcat(a, b) for a, b in zip(out, rest, strict=True)]
+
+
+def _build_problem(model, L, nw, K, outputs, substeps, jit, link=False):
+    """``fr, fj, fy`` of all windows: ``fr`` and ``fy`` CasADi Functions ``(v, p_base, S,
+    data) -> `` the residual (and with ``link`` the continuity defects of every consecutive
+    pair of windows), the outputs; ``fj`` the :class:`WindowJacobian` (the same and their
+    Jacobians in ``v = [theta; vec(delta)]``, NumPy and scipy CSC)."""
+    win_r, win_rj, win_y = _window_functions(model, L, K, outputs, substeps, jit, link)
+    n_att, n_rate, n_lag = delta_layout(model, outputs)
+    nd = n_att + n_rate + n_lag
+    v = ca.MX.sym("v", K + nd * nw)
+    pb = ca.MX.sym("p_base", model.n_p)
+    S = ca.MX.sym("S", model.n_p, K)
+    shapes = _data_shapes(model, L, nw, n_rate, link)
+    data = ca.MX.sym("data", sum(a * b for a, b in shapes))
+    pieces, i = [], 0
+    for a, b in shapes:
+        pieces.append(ca.reshape(data[i : i + a * b], a, b))
+        i += a * b
+    th, D = v[:K], ca.reshape(v[K:], nd, nw)
+    args = [D, *pieces[:7], pb, S, th, pieces[-1], *(pieces[7:8] if link else [])]
+    out_r = map_windows(win_r, nw, args)
+    R = out_r[0]
+    Y = map_windows(win_y, nw, [D, pieces[0], pieces[1], pieces[2], pb, S, th])[0]
+    defects = None
+    if link:
+        # the defects and their Jacobian from every window's end state and its Jacobian
+        XE = ca.MX.sym("x_end", model.nx, nw)
+        DX = ca.MX.sym("dx_end", ca.repmat(win_rj.sparsity_out(3), 1, nw))
+        if nw > 1:
+            lf = _link_function(model, K, outputs).map(nw - 1)
+            sig = ca.repmat(pieces[-1], 1, nw - 1)
+            C = ca.vec(lf(out_r[1][:, :-1], ca.DM.zeros(model.nx, (K + nd) * (nw - 1)),
+                          D[:, 1:], pieces[0][:, 1:], sig)[0])  # fmt: skip
+            Cj, A, B = lf(XE[:, :-1], DX[:, : (K + nd) * (nw - 1)], D[:, 1:],
+                          pieces[0][:, 1:], sig)  # fmt: skip
+            m = nd * (nw - 1)
+            a_blocks = [A[:, j * (K + nd) : (j + 1) * (K + nd)] for j in range(nw - 1)]
+            b_blocks = [B[:, j * nd : (j + 1) * nd] for j in range(nw - 1)]
+            JC_th = ca.vertcat(*[blk[:, :K] for blk in a_blocks]) if K else ca.MX(m, 0)
+            JC_d = ca.horzcat(ca.diagcat(*[blk[:, K:] for blk in a_blocks]), ca.MX(m, nd))
+            JC_d = JC_d + ca.horzcat(ca.MX(m, nd), ca.diagcat(*b_blocks))
+            JC = ca.horzcat(JC_th, JC_d)
+            fr = ca.Function("r", [v, pb, S, data], [ca.vec(R), C])
+            outs = [ca.vec(Cj), JC]
+        else:  # one window: nothing to join
+            fr = ca.Function("r", [v, pb, S, data], [ca.vec(R), ca.MX(0, 1)])
+            outs = [ca.MX(0, 1), ca.MX(0, v.shape[0])]
+        defects = ca.Function("defects", [XE, DX, v, pb, S, data], outs)
+    else:
+        fr = ca.Function("r", [v, pb, S, data], [ca.vec(R)])
+    fy = ca.Function("y", [v, pb, S, data], [Y])
+    return fr, WindowJacobian(win_rj, nw, K, shapes, defects), fy

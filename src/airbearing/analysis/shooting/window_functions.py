@@ -1,0 +1,316 @@
+"""The compiled functions of ONE window: the step, a window's start state, its residual,
+Jacobian and outputs.
+
+A large step (dof 3, ``CHAIN_MIN_INSTRUCTIONS``) and its Jacobian are compiled once per
+structure and the window chained over them (:func:`_build_chained_window`); a small one
+(dof 1) is compiled as whole windows (:func:`_build_whole_window`). Every function goes
+through the one bounded cache (:mod:`.function_cache`); all windows of a problem are built
+over these in :mod:`.problem_functions`.
+"""
+
+from __future__ import annotations
+
+import casadi as ca
+
+from airbearing import quaternion as quat
+from airbearing.analysis.shooting.function_cache import _cached, compiled
+from airbearing.models.model import Model
+from airbearing.models.structure_cache import structure_key
+
+#: RK4 sub-steps per sample of a replay: on the seed-004 free oscillation (rates to 1.5 rad/s,
+#: 20 Hz) 2 sub-steps differ from 4 by 7e-7 rad/s RMS over 10 s, 1e-3 of a gyro's noise.
+DEFAULT_SUBSTEPS = 2
+
+
+#: Instructions of a step (``step_function``) from which a window is chained over the step
+#: and its Jacobian compiled once per structure rather than compiled whole for every window
+#: length. Measured (CPU, 2-core machine under load): the dof-3 platform's step (2,110
+#: instructions) compiled whole took 1-3 min per window length and evaluates its window
+#: Jacobian in 7.6 ms at 201 rows, chained 8.6 s once and 3.6 ms; a dof-1 step (63
+#: instructions) compiles whole in about a second and runs 2x (Jacobian) to 15x (residual)
+#: faster whole than chained through CasADi's virtual machine.
+CHAIN_MIN_INSTRUCTIONS = 500
+
+
+def step_function(model: Model, substeps: int = DEFAULT_SUBSTEPS) -> ca.Function:
+    """One sample with its own interval: ``(x, u, p, dt) -> x_next`` (:meth:`Model.step_dt`).
+
+    The same scheme as :meth:`Model.step` with ``dt`` an input, so a jittered log is
+    integrated on its logged times.
+    """
+    return model.step_dt(substeps)
+
+
+def delta_layout(model: Model, outputs: tuple) -> tuple[int, int, int]:
+    """Entries of ``delta``: (attitude, rate, lag)."""
+    n_att = 3 if model.dof == 3 else (1 if "yaw" in outputs else 0)
+    n_rate = 3 if model.dof == 3 else 1
+    return n_att, n_rate, len(model.lag_index)
+
+
+def _window_functions(
+    model: Model, L: int, K: int, outputs: tuple, substeps: int, jit, link: bool = False
+):
+    key = ("window", structure_key(model), L, K, outputs, substeps, jit, link)
+    return _cached(key, lambda: _build_window(model, L, K, outputs, substeps, jit, link))
+
+
+def start_function(model: Model, outputs: tuple) -> ca.Function:
+    """``(delta, x_meas) -> x0``: a window's initial state from its estimate (module doc)."""
+    key = ("start", structure_key(model), tuple(outputs))
+    return _cached(key, lambda: _build_start(model, tuple(outputs)))
+
+
+def _build_start(model: Model, outputs: tuple) -> ca.Function:
+    n_att, n_rate, n_lag = delta_layout(model, outputs)
+    nd = n_att + n_rate + n_lag
+    d = ca.SX.sym("delta", nd)
+    xm = ca.SX.sym("x_meas", model.nx - n_lag)
+    if model.dof == 3:
+        rate0 = xm[4:7] + d[3:6]
+        parts = [quat.qmul(xm[0:4], quat.qexp(d[0:3])), rate0, xm[7:]]
+    else:
+        yaw0 = xm[0] + d[0] if n_att else xm[0]
+        rate0 = xm[1] + d[n_att]
+        parts = [yaw0, rate0, xm[2:]]
+    if n_lag:
+        # the lagged gyro starts near the start rate, free per window
+        parts.append(rate0 + d[n_att + n_rate :])
+    return ca.Function("x0", [d, xm], [ca.vertcat(*parts)])
+
+
+def _step_functions(model: Model, substeps: int, jit) -> tuple:
+    """``(step, step_jac)`` compiled once per structure and sub-steps (any window length,
+    slot count, output groups): ``(x, u, p, dt) -> x_next`` and ``-> (x_next, d x_next /
+    d[x; p])``."""
+    key = ("step", structure_key(model), substeps, jit)
+
+    def build():
+        step = step_function(model, substeps)
+        x, u = ca.SX.sym("x", model.nx), ca.SX.sym("u", model.nu)
+        p, dt = ca.SX.sym("p", model.n_p), ca.SX.sym("dt")
+        xn = step(x, u, p, dt)
+        jac = ca.Function(
+            "step_jac", [x, u, p, dt], [xn, ca.jacobian(xn, ca.vertcat(x, p))],
+            ["x", "u", "p", "dt"], ["x_next", "jac"],
+        )  # fmt: skip
+        return compiled(step, jit=jit), compiled(jac, jit=jit)
+
+    return _cached(key, build)
+
+
+def _sample_functions(model: Model, outputs: tuple, jit) -> tuple:
+    """``(res, res_jac)`` of one sample, compiled once per structure and output groups:
+    ``(x, u, p, weight, w, q, yaw, sigma) -> r_g`` per group ``g`` of ``outputs`` (the
+    window's residual, module doc), and the same followed by each ``d r_g / d[x; p]``."""
+    key = ("sample", structure_key(model), outputs, jit)
+
+    def build():
+        dof, na = model.dof, delta_layout(model, outputs)[1]
+        x, u, p = ca.SX.sym("x", model.nx), ca.SX.sym("u", model.nu), ca.SX.sym("p", model.n_p)
+        m, w, q = ca.SX.sym("weight"), ca.SX.sym("w", na), ca.SX.sym("q", 4)
+        yw, sig = ca.SX.sym("yaw"), ca.SX.sym("sigma", 2)
+        y = model.h(x, u, p)
+        res = []
+        if "rate" in outputs:
+            rows = model.index(["wx", "wy", "wz"] if dof == 3 else ["wz"], "y")
+            res.append(m * (w - y[rows]) / sig[0])
+        if "quat" in outputs:
+            e = quat.qmul(quat.qconj(y[model.index(["qw", "qx", "qy", "qz"], "y")]), q)
+            res.append(m * 2 * ca.sign(e[0] + 1e-300) * e[1:4] / sig[1])
+        if "yaw" in outputs:
+            res.append(m * (yw - y[model.index(["yaw"], "y")[0]]) / sig[1])
+        ins = [x, u, p, m, w, q, yw, sig]
+        xp = ca.vertcat(x, p)
+        fr = ca.Function("sample_r", ins, res)
+        frj = ca.Function("sample_rj", ins, [*res, *[ca.jacobian(g, xp) for g in res]])
+        return compiled(fr, jit=jit), compiled(frj, jit=jit)
+
+    return _cached(key, build)
+
+
+def _build_window(
+    model: Model, L: int, K: int, outputs: tuple, substeps: int, jit, link: bool = False
+):
+    """``(window_r, window_rj, window_y)`` of one window of ``L`` rows: chained over the
+    step compiled once per structure (:func:`_build_chained_window`) when the step is large,
+    else whole windows compiled to C (:func:`_build_whole_window`)."""
+    if step_function(model, substeps).n_instructions() >= CHAIN_MIN_INSTRUCTIONS:
+        return _build_chained_window(model, L, K, outputs, substeps, jit, link)
+    return _build_whole_window(model, L, K, outputs, substeps, jit, link)
+
+
+def _build_whole_window(
+    model: Model, L: int, K: int, outputs: tuple, substeps: int, jit, link: bool = False
+):
+    """The window functions compiled to C as whole windows (the derivatives inside), for a
+    small step (:data:`CHAIN_MIN_INSTRUCTIONS`)."""
+    dof = model.dof
+    n_att, n_rate, n_lag = delta_layout(model, outputs)
+    nd = n_att + n_rate + n_lag
+    nx_plant = model.nx - n_lag
+    na = n_rate
+    x0_fn = start_function(model, outputs)
+    qa, qb = ca.SX.sym("qa", 4), ca.SX.sym("qb", 4)
+    e = quat.qmul(quat.qconj(qa), qb)
+    att_fn = ca.Function("att_err", [qa, qb], [2 * ca.sign(e[0] + 1e-300) * e[1:4]])
+
+    D = ca.MX.sym("delta", nd)
+    XM = ca.MX.sym("x_meas0", nx_plant)
+    U = ca.MX.sym("U", model.nu, L)
+    DT = ca.MX.sym("dt", 1, L - 1)
+    M = ca.MX.sym("weight", 1, L)
+    W = ca.MX.sym("W_meas", na, L)
+    Q = ca.MX.sym("Q_meas", 4, L)
+    YW = ca.MX.sym("yaw_meas", 1, L)
+    PB = ca.MX.sym("p_base", model.n_p)
+    S = ca.MX.sym("S", model.n_p, K)
+    TH = ca.MX.sym("theta", K)
+    SIG = ca.MX.sym("sigma", 2)
+    P = PB + ca.mtimes(S, TH) if K else PB
+    X0 = x0_fn(D, XM)
+    step = step_function(model, substeps)
+    X = step.mapaccum("rollout", L - 1, [0], [0])(X0, U[:, : L - 1], P, DT)
+    X_all = ca.horzcat(X0, X)
+    Y = model.h.map(L)(X_all, U, P)
+    res = []
+    if "rate" in outputs:
+        rows = model.index(["wx", "wy", "wz"] if dof == 3 else ["wz"], "y")
+        res.append(ca.vec(ca.repmat(M, na, 1) * (W - Y[rows, :]) / SIG[0]))
+    if "quat" in outputs:
+        rows = model.index(["qw", "qx", "qy", "qz"], "y")
+        res.append(ca.vec(ca.repmat(M, 3, 1) * att_fn.map(L)(Y[rows, :], Q) / SIG[1]))
+    if "yaw" in outputs:
+        row = model.index(["yaw"], "y")[0]
+        res.append(ca.vec(M * (YW - Y[row, :]) / SIG[1]))
+    r = ca.vertcat(*res)
+    ins = [D, XM, U, DT, M, W, Q, YW, PB, S, TH, SIG]
+    names = [
+        "delta",
+        "x_meas0",
+        "U",
+        "dt",
+        "weight",
+        "W",
+        "Q",
+        "YAW",
+        "p_base",
+        "S",
+        "theta",
+        "sigma",
+    ]
+    if link:
+        # the state at the row the selector E picks (the next window's first row)
+        E = ca.MX.sym("end", 1, L)
+        xe = ca.mtimes(X_all, E.T)
+        ins, names = [*ins, E], [*names, "end"]
+        Jall = ca.jacobian(ca.vertcat(r, xe), ca.vertcat(TH, D))
+        n_r = r.shape[0]
+        win_r = ca.Function("window_r", ins, [r, xe], names, ["r", "x_end"])
+        win_rj = ca.Function(
+            "window_rj",
+            ins,
+            [r, Jall[:n_r, :], xe, Jall[n_r:, :]],
+            names,
+            ["r", "J", "x_end", "dx_end"],
+        )
+    else:
+        win_r = ca.Function("window_r", ins, [r], names, ["r"])
+        win_rj = ca.Function(
+            "window_rj", ins, [r, ca.jacobian(r, ca.vertcat(TH, D))], names, ["r", "J"]
+        )
+    win_y = ca.Function("window_y", [D, XM, U, DT, PB, S, TH], [Y])
+    # the residual, its Jacobian and the outputs compiled to C as whole windows (the
+    # derivatives are inside), cached on disk: a new process loads them. Linked windows
+    # (the output-error fit) never replay outputs in bulk: their outputs stay in the
+    # virtual machine (same values, one compilation less per structure)
+    win_y = compiled(win_y, jit=False if link else jit)
+    return compiled(win_r, jit=jit), compiled(win_rj, jit=jit), win_y
+
+
+def _build_chained_window(
+    model: Model, L: int, K: int, outputs: tuple, substeps: int, jit, link: bool = False
+):
+    """The window functions of :func:`_window_functions` (CasADi's virtual machine) over
+    the compiled step and sample functions.
+
+    The Jacobian in ``v = [theta; delta]`` follows the rollout by the chain rule, ``S_{k+1}
+    = d x_next / d[x; p] [S_k; d p / d v]`` from ``S_0 = d x_0 / d v``, and each sample's
+    residual rows are ``d r / d[x; p] [S_k; d p / d v]``: the same numbers as CasADi's
+    forward derivative of the whole window (to round-off), with only the step's and the
+    sample's Jacobians compiled, once per structure. Compiling whole windows (the step's
+    forward derivative in 12 directions: 117,000 lines of C for dof 3) took minutes for
+    every new window length.
+    """
+    n_att, n_rate, n_lag = delta_layout(model, outputs)
+    nd = n_att + n_rate + n_lag
+    nx, n_p, na = model.nx, model.n_p, n_rate
+    nv = K + nd
+    step, step_jac = _step_functions(model, substeps, jit)
+    sample_r, sample_rj = _sample_functions(model, outputs, jit)
+    ng = len(outputs)
+
+    # one step of the state and its sensitivity, one sample's residual rows
+    x, Sx = ca.MX.sym("x", nx), ca.MX.sym("Sx", nx, nv)
+    u, p, dt = ca.MX.sym("u", model.nu), ca.MX.sym("p", n_p), ca.MX.sym("dt")
+    Sp = ca.MX.sym("Sp", n_p, nv)
+    xn, A = step_jac(x, u, p, dt)
+    sens = ca.Function("step_sens", [x, Sx, u, p, Sp, dt], [xn, ca.mtimes(A, ca.vertcat(Sx, Sp))])
+    sm, sw, sq = ca.MX.sym("weight"), ca.MX.sym("w", na), ca.MX.sym("q", 4)
+    syw, ssig = ca.MX.sym("yaw"), ca.MX.sym("sigma", 2)
+    sins = [x, u, p, sm, sw, sq, syw, ssig]
+    out = sample_rj(*sins)
+    # each group's rows transposed: a map puts the samples side by side
+    rows_t = [ca.transpose(ca.mtimes(g, ca.vertcat(Sx, Sp))) for g in out[ng:]]
+    sample_j = ca.Function("sample_j", [*sins, Sx, Sp], [*out[:ng], *rows_t])
+
+    x0_fn = start_function(model, outputs)
+    D = ca.MX.sym("delta", nd)
+    XM = ca.MX.sym("x_meas0", nx - n_lag)
+    U = ca.MX.sym("U", model.nu, L)
+    DT = ca.MX.sym("dt", 1, L - 1)
+    M = ca.MX.sym("weight", 1, L)
+    W = ca.MX.sym("W_meas", na, L)
+    Q = ca.MX.sym("Q_meas", 4, L)
+    YW = ca.MX.sym("yaw_meas", 1, L)
+    PB = ca.MX.sym("p_base", n_p)
+    S = ca.MX.sym("S", n_p, K)
+    TH = ca.MX.sym("theta", K)
+    SIG = ca.MX.sym("sigma", 2)
+    P = PB + ca.mtimes(S, TH) if K else PB
+    X0 = x0_fn(D, XM)
+    data = [M, W, Q, YW, SIG]
+    ins = [D, XM, U, DT, M, W, Q, YW, PB, S, TH, SIG]
+    names = ["delta", "x_meas0", "U", "dt", "weight", "W", "Q", "YAW", "p_base", "S",
+             "theta", "sigma"]  # fmt: skip
+
+    X = step.mapaccum("rollout", L - 1, [0], [0])(X0, U[:, : L - 1], P, DT)
+    X_all = ca.horzcat(X0, X)
+    res = sample_r.map(L)(X_all, U, P, *data)
+    res = [res] if isinstance(res, ca.MX) else res
+    r = ca.vertcat(*[ca.vec(g) for g in res])
+
+    SP = ca.horzcat(S, ca.MX(n_p, nd))  # d p / d v
+    S0 = ca.densify(ca.horzcat(ca.MX(nx, K), ca.jacobian(X0, D)))  # d x_0 / d v
+    Xs, Ss = sens.mapaccum("rollout_sens", L - 1, [0, 1], [0, 1])(X0, S0, U[:, : L - 1], P, SP, DT)
+    Xj, Sj = ca.horzcat(X0, Xs), ca.horzcat(S0, Ss)
+    outj = sample_j.map(L)(Xj, U, P, *data, Sj, SP)
+    rj = ca.vertcat(*[ca.vec(g) for g in outj[:ng]])
+    J = ca.vertcat(*[ca.transpose(g) for g in outj[ng:]])
+    if link:
+        # the state at the row the selector E picks (the next window's first row)
+        E = ca.MX.sym("end", 1, L)
+        ins, names = [*ins, E], [*names, "end"]
+        win_r = ca.Function("window_r", ins, [r, ca.mtimes(X_all, E.T)], names, ["r", "x_end"])
+        win_rj = ca.Function(
+            "window_rj",
+            ins,
+            [rj, J, ca.mtimes(Xj, E.T), ca.mtimes(Sj, ca.kron(E.T, ca.DM.eye(nv)))],
+            names,
+            ["r", "J", "x_end", "dx_end"],
+        )
+    else:
+        win_r = ca.Function("window_r", ins, [r], names, ["r"])
+        win_rj = ca.Function("window_rj", ins, [rj, J], names, ["r", "J"])
+    win_y = ca.Function("window_y", [D, XM, U, DT, PB, S, TH], [model.h.map(L)(X_all, U, P)])
+    return win_r, win_rj, win_y
