@@ -129,7 +129,7 @@ def params_of(model, tb: Testbed) -> np.ndarray:
     """The parameter vector ``p`` of ``tb`` for a Model of the same structure.
 
     The values :func:`airbearing.models.model.build_model` puts in ``p0``
-    (:func:`~airbearing.models.model.parameter_values`), without building a model.
+    (:func:`~airbearing.models.parameters.parameter_values`), without building a model.
     """
     names, values, _ = parameter_values(tb, dict(tb.effects))
     vals = dict(zip(names, values, strict=True))
