@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from collections import OrderedDict
 from dataclasses import dataclass
 
 import numpy as np
@@ -38,6 +39,7 @@ _W_MIN = 1e-4  # rad/s, slowest speed tried
 # (python-control, its own frequency grid) agrees on the design the search returns
 _INSIDE = {"pm": 0.05, "gm": 0.02, "ms": 0.002, "overshoot": 0.02, "bandwidth": 0.003}
 _UNSTABLE_MISS = 100.0  # how far an unstable corner misses (a relative shortfall)
+_REFINED_KEPT = 256  # plant responses on refinement grids kept per corner (16-32 kB each)
 
 
 @dataclass
@@ -92,6 +94,7 @@ class _Fast:
                     "Pm": (A, B, C, D),
                     "body": body,
                     "P_fr": _freq(A, B[:, :nch], C, D[:, :nch], self.z),
+                    "P_refined": OrderedDict(),  # _mimo's plant responses off the grid
                 }
             )
         self.delay = _mats(base.delay())
@@ -234,12 +237,23 @@ class _Fast:
         if isinstance(K_fr_or_x, np.ndarray) and K_fr_or_x.ndim == 3:
             K_fr, P_fr, z = K_fr_or_x, c["P_fr"], self.z
         else:
-            z = np.exp(1j * np.atleast_1d(K_fr_or_x) * self.dt)
+            x = np.atleast_1d(K_fr_or_x)
+            z = np.exp(1j * x * self.dt)
             nm, nch = len(self.meas), len(self.ch)
             A, B, C, D = K
             K_fr = _freq(A, B[:, :nm], C, D[:, :nm], z)
-            A, B, C, D = c["Pm"]
-            P_fr = _freq(A, B[:, :nch], C, D[:, :nch], z)
+            # the plant's response on a refinement grid: the grids come from the fixed
+            # search grid, so other candidates ask for the same ones at this corner
+            key = x.tobytes()
+            P_fr = c["P_refined"].get(key)
+            if P_fr is None:
+                A, B, C, D = c["Pm"]
+                P_fr = _freq(A, B[:, :nch], C, D[:, :nch], z)
+                c["P_refined"][key] = P_fr
+                if len(c["P_refined"]) > _REFINED_KEPT:
+                    c["P_refined"].popitem(last=False)
+            else:
+                c["P_refined"].move_to_end(key)
         G = np.einsum("ijw,jkw->wik", K_fr, P_fr) * (z ** (-self.base.delay_samples))[:, None, None]
         return -G
 
@@ -261,10 +275,15 @@ class _Fast:
         S = np.linalg.inv(np.eye(n)[None] + Lw) if n > 1 else None
         loops = self._loops(Lw, S)
         res = {}
+        seen: dict = {}  # the channels' refinements often ask for the same frequencies
+
         for name, L in loops.items():
 
             def exact(x, name=name):
-                return self._loops(self._mimo(c, K, x))[name]
+                key = x.tobytes()
+                if key not in seen:
+                    seen[key] = self._loops(self._mimo(c, K, x))
+                return seen[key][name]
 
             res[name] = _siso_margins(self.omega, L, stable, exact)
         wbs = [m["wb"] for m in res.values() if m["wb"] is not None]
@@ -298,6 +317,10 @@ class _Fast:
         names = c["po_out"]
         final = _final_values(lc, A, B, C, D, self.u, names)
         b, d = B @ self.u, D @ self.u
+        # only the outputs judged: the tracked ones and the actuators (wheel speeds for
+        # the torques of speed-commanded wheels)
+        keep = [i for i, x in enumerate(names) if x in final or x in self.ch or x[:6] == "true_W"]
+        names, C, d = [names[i] for i in keep], C[keep], d[keep]
         duration = _horizon(wb)
         while True:
             n = int(round(duration / self.dt))
