@@ -72,6 +72,7 @@ class _Fast:
         # the margin with every channel perturbed at once (evaluate's SIMULTANEOUS_* checks)
         self.simultaneous = len(self.ch) > 1
         self.count = 0
+        self._k_refined: tuple = (None, {})  # the controller's responses off the grid
         self.least = None  # (miss, gains) of the candidate that misses least
         outs = [o for o in base.default_outputs() if o not in self.meas]
         ins = self.ch + list(base.disturbances)
@@ -240,11 +241,16 @@ class _Fast:
             x = np.atleast_1d(K_fr_or_x)
             z = np.exp(1j * x * self.dt)
             nm, nch = len(self.meas), len(self.ch)
-            A, B, C, D = K
-            K_fr = _freq(A, B[:, :nm], C, D[:, :nm], z)
+            if self._k_refined[0] is not K:  # a new candidate
+                self._k_refined = (K, {})
+            key = x.tobytes()
+            K_fr = self._k_refined[1].get(key)
+            if K_fr is None:  # the corners' refinement grids often coincide
+                A, B, C, D = K
+                K_fr = _freq(A, B[:, :nm], C, D[:, :nm], z)
+                self._k_refined[1][key] = K_fr
             # the plant's response on a refinement grid: the grids come from the fixed
             # search grid, so other candidates ask for the same ones at this corner
-            key = x.tobytes()
             P_fr = c["P_refined"].get(key)
             if P_fr is None:
                 A, B, C, D = c["Pm"]
