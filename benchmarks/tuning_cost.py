@@ -38,6 +38,7 @@ CASES = {
         },
     ),  # fmt: skip
     "balancing seed004-platform": ("seed004-platform", "balancing", "mechanical", {}),
+    "balancing seed000-tabletop": ("seed000-tabletop", "balancing", "mixed", {}),
     "balancing platform-3dof": ("platform-3dof", "balancing", "mixed", {"inertia_uncertainty": 0}),
     "evaluate seed004-platform, unstable": (
         "seed004-platform",

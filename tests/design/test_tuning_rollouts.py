@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from airbearing.design.loops import make_loop
-from airbearing.design.margins import PEAK_FRACTION, perron_mu_bounds
+from airbearing.design.margins import PEAK_FRACTION, mu_upper_bound, perron_mu_bounds
 from airbearing.design.tuning import Spec, scenario_response
 from airbearing.design.tuning.box import _corner_grid
 from airbearing.design.tuning.responses import _scenario_inputs
@@ -59,10 +59,11 @@ def test_the_chunked_rollout_is_one_mapaccum(n):
 )
 def test_the_searchs_mu_bound_is_the_bound_where_it_matters(name, loop, split):
     """The branch and bound of the search's multi-loop bound: at every frequency where the
-    bound computed everywhere (min of sigma_max and the Perron-scaled one) reaches the
-    floor, the same value, and the same largest value and frequency; elsewhere an upper
-    bound below the floor. The testbed's own gains and ten times them (a loop whose
-    bound comes near the limit)."""
+    bound computed everywhere reaches the floor, the same value, and the same largest
+    value and frequency; elsewhere an upper bound of it below the floor. The bound itself
+    lies between mu (the D-scaled bound of the report at its peak) and the Perron-scaled
+    one. The testbed's own gains and ten times them (a loop whose bound comes near the
+    limit)."""
     base = make_loop(load_testbed(name), loop, **({} if split is None else {"split": split}))
     spec = Spec()
     grid = _corner_grid(base, spec)
@@ -77,13 +78,17 @@ def test_the_searchs_mu_bound_is_the_bound_where_it_matters(name, loop, split):
                 continue
             S = m["_S"]
             M = S - 0.5 * np.eye(S.shape[1])
-            full = np.minimum(np.linalg.svd(M, compute_uv=False)[:, 0], perron_mu_bounds(M))
+            full = fast._mu_bound(S, -np.inf)  # every frequency reaches the floor
             if full.max() >= fast.mu_limit:
                 continue  # D-scaled where it fails: mu_upper_bound's, not compared here
+            perron = np.minimum(np.linalg.svd(M, compute_uv=False)[:, 0], perron_mu_bounds(M))
+            assert np.all(full <= perron)
+            k = int(np.argmax(full))
+            assert full[k] >= mu_upper_bound(M[k]) * (1 - 1e-9)  # Nelder-Mead's tolerance
             got = fast._mu_bound(S, floor)
             high = full >= floor
             assert np.array_equal(got[high], full[high])
             assert np.all(got[~high] >= full[~high]) and np.all(got[~high] < floor)
-            assert got.max() == full.max() and np.argmax(got) == np.argmax(full)
+            assert got.max() == full.max() and np.argmax(got) == k
             checked += 1
     assert checked >= 2

@@ -145,53 +145,68 @@ class _Fast:
 
     def _mu_bound(self, S, floor: float = math.inf) -> np.ndarray:
         """An upper bound of ``mu(S - I/2)`` at each frequency (``S`` frequency first): the
-        Perron-scaled largest singular value, where
+        largest singular value of ``D M D^-1`` with the Perron scaling of ``|M|``, where
         :func:`~airbearing.design.margins.multiloop_disk_margin` starts its D-scaling (on
-        these loops it ends there to 1e-5 at the peak). Where that cheap bound says the
-        check fails, the D-scaling of the report (:func:`mu_upper_bound`) decides, frequency by
-        frequency from the largest, so a loose bound rejects nothing: near the Nyquist
-        frequency, where the sampled plant's zeros make ``|M|`` nearly reducible, the
-        Perron scaling of seed000-tabletop's mixed loop reads 70 where ``mu`` is 0.5.
+        these loops it ends there to 1e-5 at the peak), or with the ``D`` that balances the
+        row and column 2-norms of ``|M|`` once, or none, whichever is least. Where that
+        cheap bound says the check fails, the D-scaling of the report
+        (:func:`mu_upper_bound`) decides, frequency by frequency from the largest, so a
+        loose bound rejects nothing: near the Nyquist frequency, where the sampled plant's
+        zeros make ``|M|`` nearly reducible, the Perron scaling of seed000-tabletop's mixed
+        loop reads 70 where ``mu`` is 0.5.
 
         The bound is computed only where it can matter (branch and bound), from cruder
-        upper bounds: ``min(||M||_F, sqrt(||M||_1 ||M||_inf)) >= sigma_max(M)`` (sums),
-        then ``sigma_max`` (one SVD), then the Perron scaling (two eigenproblems), each
-        only where the one before reaches ``floor`` or the largest bound found. Elsewhere
-        a cruder bound is returned: it lies below both, so the largest value and its
-        frequency, and every value from ``floor`` up, are those of the bound computed at
-        every frequency. (cmg-yaw's loop has one measurement: there ``sigma_max`` is the
-        bound wherever it matters; on a platform's mixed loop, the Perron scaling.)"""
+        upper bounds of it: ``min(||M||_F, sqrt(||M||_1 ||M||_inf)) >= sigma_max(M)``
+        (sums), then ``sigma_max`` (one SVD), then the balanced scaling (one SVD), then the
+        Perron scaling (two eigenproblems), each only where the one before reaches
+        ``floor`` or the largest bound found. Elsewhere a cruder bound is returned: it lies
+        below both, so the largest value and its frequency, and every value from ``floor``
+        up, are those of the bound computed at every frequency. (cmg-yaw's loop has one
+        measurement: there ``sigma_max`` is the bound wherever it matters; on a platform's
+        mixed loop, the balanced scaling leaves the Perron scaling a tenth of the
+        frequencies, where it is tighter.)"""
         M = S - 0.5 * np.eye(S.shape[1])
         absM = np.abs(M)
         bound = (1 + 1e-12) * np.minimum(
             np.sqrt(np.einsum("wij,wij->w", absM, absM)),
             np.sqrt(absM.sum(axis=1).max(axis=1) * absM.sum(axis=2).max(axis=1)),
         )
-        level = np.zeros(bound.size, dtype=int)  # 0: the sums, 1: sigma_max, 2: the bound
+        level = np.zeros(bound.size, dtype=int)
+        final = 3  # 0: the sums, 1: sigma_max, 2: balanced, 3: Perron-scaled
+
+        def balanced(Mi):
+            """sigma_max(D M D^-1), D balancing the row and column 2-norms of |M| once."""
+            A = np.abs(Mi)
+            cols, rows = np.sqrt((A * A).sum(axis=1)), np.sqrt((A * A).sum(axis=2))
+            d = np.clip(np.sqrt(cols / np.maximum(rows, 1e-300)), 1e-6, 1e6)  # any D > 0 holds
+            return np.linalg.svd((d[:, :, None] * Mi) / d[:, None, :], compute_uv=False)[:, 0]
 
         def refine(idx):
-            first, second = idx[level[idx] == 0], idx[level[idx] == 1]
-            if first.size:
-                bound[first] = np.linalg.svd(M[first], compute_uv=False)[:, 0]
-            if second.size:
-                bound[second] = np.minimum(bound[second], perron_mu_bounds(M[second]))
+            for lv, fn in ((0, None), (1, balanced), (2, perron_mu_bounds)):
+                at = idx[level[idx] == lv]
+                if not at.size:
+                    continue
+                if fn is None:
+                    bound[at] = np.linalg.svd(M[at], compute_uv=False)[:, 0]
+                else:
+                    bound[at] = np.fmin(bound[at], fn(M[at]))
             level[idx] += 1
 
         def reaching(threshold):
-            return np.nonzero((level < 2) & (bound >= threshold))[0]
+            return np.nonzero((level < final) & (bound >= threshold))[0]
 
         def largest_exact():
             """Refine, the largest first, until no cruder bound reaches the largest bound."""
             chunk = 16
             while True:
-                top = bound[level == 2].max() if (level == 2).any() else -math.inf
+                top = bound[level == final].max() if (level == final).any() else -math.inf
                 todo = reaching(top)
                 if not todo.size:
                     return
                 refine(todo[np.argsort(-bound[todo], kind="stable")[:chunk]])
                 chunk *= 2
 
-        for _ in range(2):
+        for _ in range(final):
             refine(reaching(floor))
         for _ in range(bound.size):
             largest_exact()
