@@ -3,7 +3,10 @@
 Run by hand: ``PYTHONPATH=src .venv/bin/python benchmarks/tuning_cost.py`` (``--case NAME``
 runs one; ``--json FILE`` writes the gains, checks and worst-case values; ``--compare OLD
 NEW`` says how two such files differ). To time another version of the code, point
-``PYTHONPATH`` at its ``src`` (e.g. a ``git archive`` of the parent commit).
+``PYTHONPATH`` at its ``src`` (e.g. a ``git archive`` of the parent commit), or give it as
+``--against OLD_SRC``: each case then runs in the old and the new code in turn,
+``--repeat`` times, and the least CPU time of each is printed (on a shared machine the
+load changes between two whole runs far more than between two processes in a row).
 
 Each case runs in a process of its own (the tuner keeps its recent results, and the
 rollouts their CasADi graphs, per process), after the imports and the testbed load: the
@@ -123,12 +126,47 @@ def compare(old: list, new: list) -> None:
             print("   ", line)
 
 
+def _one(name: str, src: str | None) -> dict:
+    env = dict(os.environ)
+    if src is not None:
+        env["PYTHONPATH"] = src
+    p = subprocess.run([sys.executable, __file__, "--case", name], capture_output=True,
+                       text=True, check=True, env=env)  # fmt: skip
+    return json.loads(p.stdout.strip().splitlines()[-1])
+
+
+def against(old_src: str, repeat: int, path: str | None) -> None:
+    """Each case in the old code (``old_src``) and in this one, in turn: least CPU times."""
+    print(f"load average before: {os.getloadavg()}")
+    olds, news = [], []
+    for name in CASES:
+        runs = {"old": [], "new": []}
+        for _ in range(repeat):
+            runs["old"].append(_one(name, old_src))
+            runs["new"].append(_one(name, None))
+        o, n = (min(runs[k], key=lambda r: r["cpu_s"]) for k in ("old", "new"))
+        olds.append(o)
+        news.append(n)
+        print(f"{name:40s} {o['cpu_s']:6.1f} -> {n['cpu_s']:6.1f} s CPU "
+              f"({100 * (1 - n['cpu_s'] / o['cpu_s']):.0f} % less)", flush=True)  # fmt: skip
+    print(f"load average after: {os.getloadavg()}")
+    compare(olds, news)
+    if path:
+        with open(path, "w") as f:
+            json.dump({"old": olds, "new": news}, f, indent=1)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--case", choices=sorted(CASES), help="run this case only, in this process")
     ap.add_argument("--json", help="write the results to this file")
     ap.add_argument("--compare", nargs=2, metavar=("OLD", "NEW"), help="compare two --json files")
+    ap.add_argument("--against", metavar="OLD_SRC", help="time each case in this src too")
+    ap.add_argument("--repeat", type=int, default=2, help="runs of each case with --against")
     args = ap.parse_args()
+    if args.against:
+        against(args.against, args.repeat, args.json)
+        return
     if args.compare:
         old, new = (json.load(open(f)) for f in args.compare)
         compare(old, new)
