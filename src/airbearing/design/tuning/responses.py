@@ -63,13 +63,19 @@ def scenario_response(loop: Loop, *, discrete: bool = True, duration: float | No
     Returns ``(t, outputs dict)`` with the actuator channels and the true states
     (deviations from the trim; s, rad, m, rad/s as the names say).
     """
-    import control as ct  # control: 2.2 s CPU to import, loaded only when this runs
-
     cl = loop.closed_loop(discrete=discrete)
-    dt = loop.dt
     if duration is None:
         wb = _nominal_bandwidth(loop)
         duration = float(np.clip(12 / wb if wb else 600.0, 20.0, 600.0))
+    return _response_of(loop, cl, discrete, duration)
+
+
+def _response_of(loop: Loop, cl, discrete: bool, duration: float):
+    """:func:`scenario_response` on ``loop``'s closed loop ``cl`` (python-control), built
+    once by the caller for every horizon it runs."""
+    import control as ct  # control: 2.2 s CPU to import, loaded only when this runs
+
+    dt = loop.dt
     t = np.arange(0, duration, dt) if discrete else np.linspace(0, duration, int(duration / dt) + 1)
     u = _scenario_inputs(loop, cl.input_labels)
     if discrete:
@@ -204,7 +210,7 @@ def _scenario_run(loop: Loop, bandwidth_rad_s) -> tuple:
     final = _final_values(loop, A, B, C, D, u, cl.output_labels)
     duration = _horizon(bandwidth_rad_s)
     while True:
-        t, y = scenario_response(loop, duration=duration)
+        t, y = _response_of(loop, cl, True, duration)
         overshoot, settling = _step_metrics(t, y, final)
         if math.isfinite(settling) or duration >= _HORIZON_MAX:
             return t, y, overshoot, settling
