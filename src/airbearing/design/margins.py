@@ -473,17 +473,19 @@ def mu_upper_bound(M: np.ndarray) -> float:
 
     def f(logd):
         d = np.exp(np.concatenate([[0.0], logd]))
-        return np.linalg.norm((d[:, None] * M) / d[None, :], 2)
+        # the largest singular value (np.linalg.norm(., 2) without its axis handling)
+        return float(np.linalg.svd((d[:, None] * M) / d[None, :], compute_uv=False)[0])
 
     # Perron scaling of |M| as the start (Safonov's bound)
     A = np.abs(M) + 1e-300
     vals, vecs = np.linalg.eig(A)
     v = np.abs(vecs[:, np.argmax(vals.real)]) + 1e-300
-    vl = np.abs(np.linalg.eig(A.T)[1][:, np.argmax(np.linalg.eig(A.T)[0].real)]) + 1e-300
+    vals_l, vecs_l = np.linalg.eig(A.T)
+    vl = np.abs(vecs_l[:, np.argmax(vals_l.real)]) + 1e-300
     d0 = np.sqrt(vl / v)
     x0 = np.log(d0[1:] / d0[0])
     res = minimize(f, x0, method="Nelder-Mead", options={"xatol": 1e-6, "fatol": 1e-10})
-    return float(min(res.fun, f(x0), np.linalg.norm(M, 2)))
+    return float(min(res.fun, f(x0), np.linalg.svd(M, compute_uv=False)[0]))
 
 
 def perron_mu_bounds(M: np.ndarray) -> np.ndarray:
@@ -498,7 +500,7 @@ def perron_mu_bounds(M: np.ndarray) -> np.ndarray:
 
     d = np.sqrt(perron(np.swapaxes(A, 1, 2)) / perron(A))
     scaled = (d[:, :, None] * M) / d[:, None, :]
-    return np.linalg.norm(scaled, 2, axis=(1, 2))
+    return np.linalg.svd(scaled, compute_uv=False)[:, 0]  # the largest singular values
 
 
 def _grid_mu(M: np.ndarray) -> tuple[float, int | None, np.ndarray]:

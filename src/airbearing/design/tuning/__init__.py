@@ -77,11 +77,13 @@ least. The specification is never relaxed.
 The search evaluates hundreds of candidates on NumPy copies of the python-control pieces
 of :class:`~airbearing.design.loops.Loop` (its discrete plant, delay and controller); the
 returned design is always judged by :func:`evaluate`, on python-control's
-:func:`~airbearing.design.margins.analyse_loop` and the closed loop's forced response. The
-margin with every channel at once is screened cheaply, with the Perron-scaled bound of
-``mu`` on the search's grid (exact D-scaling only where that bound would reject, peaks
-refined only near the limit), and only where the loop-at-a-time margins pass; near the
-limit it agrees with the verdict's to 0.05 deg (the tests check it).
+:func:`~airbearing.design.margins.analyse_loop` and the response of python-control's
+closed loop (rolled out by CasADi). The margin with every channel at once is screened
+cheaply, with the Perron-scaled (or row/column-balanced) bound of ``mu`` on the search's
+grid, computed only at the frequencies where it can decide (exact D-scaling only where
+that bound would reject, peaks refined only near the limit), and only where the
+loop-at-a-time margins pass; near the limit it agrees with the verdict's to 0.05 deg (the
+tests check it).
 
 Modules
 -------

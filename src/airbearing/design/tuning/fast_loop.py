@@ -83,7 +83,8 @@ def _step_response(A, b, C, d, n: int) -> np.ndarray:
     while m < n:  # x holds x_m, Am holds A^m
         Am[np.abs(Am) < 1e-150] = 0.0  # no subnormal numbers: they are 100 times slower
         e = min(2 * m, n)
-        X[m:e] = np.einsum("kj,ij->ki", X[: e - m], Am) + x
+        np.einsum("kj,ij->ki", X[: e - m], Am, out=X[m:e])
+        X[m:e] += x
         x = Am @ x + x
         Am = Am @ Am
         m = e

@@ -9,10 +9,13 @@ the integral pole, ``K_i / K_p`` rad/s.
 from __future__ import annotations
 
 import math
+from functools import lru_cache
 
+import casadi as ca
 import numpy as np
 
 from airbearing.design.loops import Loop
+from airbearing.models.loop import ExpandedLoop
 
 __all__: list[str] = []
 
@@ -44,28 +47,49 @@ def _slew_response(P, K, Dl, nmeas: int, nch: int, iy: int, limit: float, dt: fl
     step = math.radians(_SLEW_DEG)
     r = np.zeros(Bc.shape[1] - nmeas)
     r[0] = step
-    Bpu, Dpu = Bp[:, :nch], Dp[:, :nch]
+    npl, nc, nd = Ap.shape[0], Ac.shape[0], Ad.shape[0]
+    ip, ic, idl = slice(0, npl), slice(npl, npl + nc), slice(npl + nc, npl + nc + nd)
+    # the loop in the state x = [plant, controller, delay]: the channels u = Cd x_d (one
+    # sample of delay or more: no direct path), the measurements y = Cy x, the commands
+    # v = Cv x + dcr before the limit, x+ = F x + G v + g
+    Cy = np.zeros((Cp.shape[0], npl + nc + nd))
+    Cy[:, ip], Cy[:, idl] = Cp, Dp[:, :nch] @ Cd
     Bcy, Dcy = Bc[:, :nmeas], Dc[:, :nmeas]
-    bcr, dcr = Bc[:, nmeas:] @ r, Dc[:, nmeas:] @ r
-    xp, xc, xd = np.zeros(Ap.shape[0]), np.zeros(Ac.shape[0]), np.zeros(Ad.shape[0])
+    Cv = Dcy @ Cy[:nmeas]
+    Cv[:, ic] += Cc
+    F = np.zeros((npl + nc + nd,) * 2)
+    F[ip, ip], F[ip, idl] = Ap, Bp[:, :nch] @ Cd
+    F[ic] = Bcy @ Cy[:nmeas]
+    F[ic, ic] += Ac
+    F[idl, idl] = Ad
+    G = np.zeros((npl + nc + nd, Bd.shape[1]))
+    G[idl] = Bd
+    g = np.zeros(npl + nc + nd)
+    g[ic] = Bc[:, nmeas:] @ r
     n = int(round(_SLEW_HORIZON / dt))
-    err = np.empty(n)
-    for k in range(n):
-        u = Cd @ xd  # one sample of delay or more: no direct path
-        y = Cp @ xp + Dpu @ u
-        err[k] = y[iy] - step
-        v = Cc @ xc + Dcy @ y[:nmeas] + dcr
-        peak = float(np.max(np.abs(v)))
-        if peak > limit:
-            v = v * (limit / peak)  # seed 001 eq. 4
-        xp = Ap @ xp + Bpu @ u
-        xc = Ac @ xc + Bcy @ y[:nmeas] + bcr
-        xd = Ad @ xd + Bd @ v
+    rollout = _rollout(F.shape[0], Cv.shape[0])
+    _, y = rollout(np.zeros(F.shape[0]), n, F, G, g, Cv, Dc[:, nmeas:] @ r, Cy[iy : iy + 1], limit)
+    err = y[0] - step
     overshoot = max(0.0, 100.0 * float(err.max()) / step)
     out = np.nonzero(np.abs(err) > math.radians(_A_ERR_DEG))[0]
     if out.size and out[-1] >= n - int(round(_T_SS / dt)):
         return overshoot, math.inf
     return overshoot, float((out[-1] + 1) * dt) if out.size else 0.0
+
+
+@lru_cache(maxsize=16)
+def _rollout(nx: int, nv: int) -> ExpandedLoop:
+    """The rate-limited loop as a CasADi rollout (built once per size, the matrices as
+    inputs): ``(x0, n, F, G, g, Cv, dcr, cy, limit) -> (X, y)``, the states after each
+    sample and the attitude ``cy x`` at each sample (before its step)."""
+    x = ca.SX.sym("x", nx)
+    F, G, g = ca.SX.sym("F", nx, nx), ca.SX.sym("G", nx, nv), ca.SX.sym("g", nx)
+    Cv, dcr, cy = ca.SX.sym("Cv", nv, nx), ca.SX.sym("dcr", nv), ca.SX.sym("cy", 1, nx)
+    limit = ca.SX.sym("limit")
+    v = Cv @ x + dcr
+    v = v * ca.fmin(1, limit / ca.mmax(ca.fabs(v)))  # seed 001 eq. 4: all scaled together
+    one = ca.Function("slew_step", [x, F, G, g, Cv, dcr, cy, limit], [F @ x + G @ v + g, cy @ x])
+    return ExpandedLoop(one)
 
 
 def slew_limit(loop: Loop) -> float | None:

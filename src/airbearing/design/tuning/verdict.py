@@ -1,5 +1,5 @@
 """The verdict: every check of a specification at every corner of the uncertainty box,
-on python-control's margins and the closed loop's forced response."""
+on python-control's margins and the response of its closed loop."""
 
 from __future__ import annotations
 
