@@ -137,7 +137,6 @@ FUNCTION_IMPORTS = {
     "progress": 1,
     "reporting.campaign": 1,
     "reporting.demo": 4,
-    "reporting.stability_responses": 1,
 }
 
 #: Private names imported from another package (module, name): to become public or move.

@@ -19,7 +19,7 @@ from airbearing.design.margins import analyse_loop
 from airbearing.design.tuning.spec import Check, _check
 from airbearing.models.loop import ExpandedLoop
 
-__all__ = ["scenario_response", "actuator_checks"]
+__all__ = ["scenario_response", "actuator_checks", "held_input_response"]
 
 _OFFSET_STEP = 0.5e-3  # m, seed 000 Tables 1-2: initial slider offset +-0.5 mm
 _YAW_STEP_DEG = 30.0  # deg, seed 001 Table 5: the 30 deg sizing manoeuvre
@@ -79,15 +79,45 @@ def _response_of(loop: Loop, cl, discrete: bool, duration: float):
     t = np.arange(0, duration, dt) if discrete else np.linspace(0, duration, int(duration / dt) + 1)
     u = _scenario_inputs(loop, cl.input_labels)
     if discrete:
-        # the held input makes the sampled loop x+ = A x + B u, y = C x + D u from rest:
-        # a CasADi rollout (python-control's forced_response steps it in a Python loop,
-        # 20 us a sample, up to 48,000 samples a run)
-        A, B, C, D = (np.asarray(m, float) for m in (cl.A, cl.B, cl.C, cl.D))
-        _, y = _rollout(A.shape[0], C.shape[0])(np.zeros(A.shape[0]), t.size, A, B @ u, C, D @ u)
+        y = held_input_response(cl, u, t.size)
     else:
         U = np.repeat(u[:, None], t.size, axis=1)
         y = np.atleast_2d(ct.forced_response(cl, t, U).outputs)
     return t, dict(zip(cl.output_labels, y, strict=True))
+
+
+def held_input_response(cl, u: np.ndarray, n: int) -> np.ndarray:
+    """Outputs (ny, n) of a sampled closed loop from rest under the held input ``u``.
+
+    The held input makes the loop ``x+ = A x + B u``, ``y = C x + D u``: a CasADi rollout
+    (python-control's ``forced_response`` steps it in a Python loop, 20 us a sample, up to
+    48,000 samples a run).
+
+    Parameters
+    ----------
+    cl : control.StateSpace
+        A discrete closed loop.
+    u : ndarray (ninputs,)
+        Its inputs, held from the first sample on.
+    n : int
+        Samples.
+
+    Returns
+    -------
+    ndarray (noutputs, n)
+        The outputs at each sample, before its step.
+
+    Examples
+    --------
+    >>> import control as ct
+    >>> cl = ct.ss([[0.5]], [[1.0]], [[1.0]], [[0.0]], 0.1)
+    >>> held_input_response(cl, np.array([1.0]), 4).round(3)
+    array([[0.  , 1.  , 1.5 , 1.75]])
+    """
+    A, B, C, D = (np.asarray(m, float) for m in (cl.A, cl.B, cl.C, cl.D))
+    u = np.asarray(u, dtype=float)
+    _, y = _rollout(A.shape[0], C.shape[0])(np.zeros(A.shape[0]), n, A, B @ u, C, D @ u)
+    return np.atleast_2d(np.asarray(y))
 
 
 @lru_cache(maxsize=16)
