@@ -325,24 +325,25 @@ def run_demo(out_dir: str | Path, *, quick: bool = False, progress=None) -> Path
 #: Relative length of each section: (warm compile cache, first run compiling its C code,
 #: ``--quick`` with a warm cache).
 #: Seconds per section on the 2-core machine of docs/benchmarks.md ("Time estimates of the
-#: demo"): the first-run column is the mean share of two first runs in an empty cache (load
-#: 1-3 and 4-6, 384 s and 447 s), scaled to 400 s; the warm and quick columns one run each
-#: at load 4-6. Only the ratios matter (the display scales them by the pace it sees).
+#: demo"): the first-run column the mean of two runs in an empty cache (load 2-3, 122 s and
+#: 150 s), the warm column of two runs (load 2-5, 105 s and 172 s), all after the tuner's
+#: CasADi rollouts cut the linear stability section two- to threefold; the quick column
+#: one run at load 5-6. Only the ratios matter (the display scales them by the pace it sees).
 SECTION_COST = {
     "Foundation": (2.0, 3.0, 2.0),
-    "CMG cluster": (12.0, 8.0, 6.0),
-    "Balancing": (16.0, 51.0, 11.0),
-    "Linear stability": (184.0, 236.0, 20.0),
-    "Reaction wheels": (55.0, 28.0, 27.0),
-    "Identification": (11.0, 25.0, 4.0),
-    "Model discrepancy": (20.0, 16.0, 10.0),
-    "Campaign: robust verification": (21.0, 11.0, 5.0),
-    "Campaign: detection rate": (39.0, 23.0, 9.0),
+    "CMG cluster": (4.0, 4.0, 6.0),
+    "Balancing": (14.0, 24.0, 11.0),
+    "Linear stability": (75.0, 57.0, 20.0),
+    "Reaction wheels": (10.0, 11.0, 27.0),
+    "Identification": (4.0, 14.0, 4.0),
+    "Model discrepancy": (9.0, 10.0, 10.0),
+    "Campaign: robust verification": (6.0, 5.0, 5.0),
+    "Campaign: detection rate": (16.0, 11.0, 9.0),
 }
 #: No estimate before this share of the demo's expected work is done: its first two
-#: sections (imports, tables, a few simulations: 1-4 % of the run) vary threefold with the
+#: sections (imports, tables, a few simulations: 5-6 % of the run) vary threefold with the
 #: machine's load, the third (a compile and closed-loop simulations) sets the pace.
-FIRST_ESTIMATE_SHARE = 0.05
+FIRST_ESTIMATE_SHARE = 0.1
 #: Compiled libraries a first run of the demo leaves in the cache (fewer: a first run).
 FIRST_RUN_LIBRARIES = 20
 
