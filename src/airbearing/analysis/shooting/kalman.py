@@ -75,23 +75,26 @@ import math
 import time
 from dataclasses import dataclass, field
 
-import casadi as ca
 import numpy as np
 import scipy.optimize as so
 from scipy.stats import chi2
 
-from airbearing.analysis.shooting.functions import (
-    DEFAULT_SUBSTEPS,
-    _cached,
-    compiled,
-    evaluate,
-    step_function,
+from airbearing.analysis.shooting.functions import DEFAULT_SUBSTEPS
+from airbearing.analysis.shooting.kalman_data import (
+    P0_ATTITUDE,
+    P0_RATE,
+    KalmanData,
+    _check_data,
+    _check_model,
+    _p0,
+    _rows,
+    kalman_data,
 )
+from airbearing.analysis.shooting.kalman_filter import BLOCK, _block_functions, _Problem
 from airbearing.analysis.shooting.logs import ReplayData, noise_floor, replay_data
 from airbearing.errors import InputError, SolverError
 from airbearing.io.log import Log
 from airbearing.models.model import Model
-from airbearing.models.structure_cache import structure_key
 
 __all__ = [
     "KalmanData",
@@ -105,11 +108,6 @@ __all__ = [
     "BLOCK",
 ]
 
-#: rad, 1-sigma of the attitude at a segment's start (its front-end estimate is a
-#: measurement: a broad prior, the first update pins it).
-P0_ATTITUDE = 0.1
-#: rad/s, 1-sigma of the rate at a segment's start.
-P0_RATE = 0.1
 #: Lower bound of ``log(sigma_w)`` (sigma_w in rad/s per sqrt(s)): 1e-12 rad/s per sqrt(s)
 #: moves a rate by 1e-10 rad/s in 3 hours, no process noise for any log.
 LOG_INTENSITY_MIN = math.log(1e-12)
@@ -119,359 +117,10 @@ LOG_NOISE_BOUNDS = (math.log(1e-9), math.log(10.0))
 #: unit is about one standard error, so 1e-5 is far below any statistical precision).
 MAX_ITER = 300
 GTOL = 1e-5
-#: Rows per compiled block: the log is padded to a whole number of blocks with rows of no
-#: effect (no interval, no measurement); a Python loop runs the blocks (3,900 calls at
-#: 10^6 rows).
-BLOCK = 256
-#: Rows from which the Hessian's block is compiled: below, CasADi's virtual machine
-#: evaluates it (measured, dof-1 rotor, 5 variables: 840 us a row in the virtual machine,
-#: 28 us compiled, 24 s to compile once per structure; the Hessian is evaluated twice).
-HESSIAN_COMPILE_ROWS = 5_000
 #: p-value below which the unexplained torque is significant (as the linked pieces').
 SIGNIFICANCE = 1e-3
 #: Blocks whose Hessian scales the variables at the start (:func:`fit_kalman`).
 SCALE_BLOCKS = 16
-#: Names of the torque input and of the rate state on a dof-1 bearing.
-_TAU, _RATE = "tau_z", "wz"
-
-
-@dataclass(frozen=True, eq=False)
-class KalmanData:
-    """A log as the filter reads it: one row per sample.
-
-    Attributes
-    ----------
-    t : ndarray (N,)
-        Sample times, s, increasing.
-    u : ndarray (N, nu)
-        Inputs held from ``t[k]`` to ``t[k+1]`` (the Model's ``u_names``, SI).
-    y : ndarray (N, ny)
-        Measured outputs, the Model's outputs ``y_names`` (rad, rad/s); NaN where missing.
-    y_names : tuple of str
-        Which Model outputs the columns of ``y`` are.
-    reset : ndarray (N,) of bool
-        True at the first row of each segment (row 0 included): the filter restarts there.
-    start : ndarray (N, nx)
-        The state the filter restarts from at a reset row (ignored elsewhere).
-    source : str
-        Where the log came from, for messages.
-    """
-
-    t: np.ndarray
-    u: np.ndarray
-    y: np.ndarray
-    y_names: tuple
-    reset: np.ndarray
-    start: np.ndarray
-    source: str = "<arrays>"
-
-    @property
-    def n(self) -> int:
-        """Number of rows."""
-        return len(self.t)
-
-    def without(self, rows) -> KalmanData:
-        """The same log with the measurements of ``rows`` missing (NaN)."""
-        y = self.y.copy()
-        y[np.asarray(rows, dtype=int)] = np.nan
-        return KalmanData(self.t, self.u, y, self.y_names, self.reset, self.start, self.source)
-
-
-def kalman_data(data: ReplayData, model: Model) -> KalmanData:
-    """The filter's rows of a log turned into arrays by the engine's front end.
-
-    Parameters
-    ----------
-    data : ReplayData
-        :func:`airbearing.analysis.shooting.logs.replay_data` of the log.
-    model : Model
-        The Model fitted (the testbed of ``data`` with the effects to estimate).
-
-    Returns
-    -------
-    KalmanData
-        The outputs the engine compares (:attr:`ReplayData.outputs`): the rate with a
-        gyro, else the yaw (a gyro log's yaw state is then carried, unmeasured); outlier
-        rows missing; a reset at the first row of every segment, from the front end's
-        start estimate (``ReplayData.start_state``), lag states at the start rate.
-
-    Raises
-    ------
-    InputError
-        If the Model is not dof 1, has reaction wheels, or its states are not the log's.
-    """
-    _check_model(model)
-    if tuple(data.x_names) != tuple(model.x_names[: len(data.x_names)]):
-        raise InputError(
-            f"{data.log.source}: the log's states {list(data.x_names)} are not the Model's "
-            f"{list(model.x_names)}: build the Model from the log's testbed"
-        )
-    cols, names = [], []
-    if "yaw" in data.outputs:
-        cols.append(data.yaw)
-        names.append("yaw")
-    if "rate" in data.outputs:
-        cols.append(data.w[:, -1])
-        names.append("wz")
-    y = np.column_stack(cols)
-    y[~data.mask] = np.nan
-    reset = np.zeros(data.n, dtype=bool)
-    start = np.zeros((data.n, model.nx))
-    n_plant = model.nx - len(model.lag_index)
-    for a, b in data.segments:
-        use = np.flatnonzero(data.mask[a:b]) + a
-        if use.size == 0:
-            y[a:b] = np.nan
-            continue
-        # from the first usable row (a restart there too: nothing measured before it)
-        first = int(use[0])
-        xs = np.zeros(model.nx)
-        xs[:n_plant] = data.start_state(first, b)
-        for i in model.lag_index:  # a lagged gyro starts at the rate
-            xs[i] = xs[model.index(model.x_names[i].split("_", 1)[1])[0]]
-        reset[[a, first]] = True
-        start[[a, first]] = xs
-    return KalmanData(
-        t=np.asarray(data.t, float),
-        u=np.asarray(data.u, float),
-        y=y,
-        y_names=tuple(names),
-        reset=reset,
-        start=start,
-        source=data.log.source,
-    )
-
-
-def _check_model(model: Model) -> None:
-    if not isinstance(model, Model):
-        raise InputError(f"kalman: expected a Model, got {type(model).__name__}")
-    if model.dof != 1:
-        raise InputError(
-            f"kalman: testbed '{model.testbed.name}' has dof = {model.dof}; the Kalman "
-            "likelihood takes dof = 1 bearings only (yaw rigs); use discrepancy for dof 3"
-        )
-    if model.testbed.wheels is not None:
-        raise InputError(
-            f"kalman: testbed '{model.testbed.name}' has reaction wheels; the Kalman "
-            "likelihood takes passive yaw rigs and yaw CMGs only"
-        )
-
-
-# ----------------------------------------------------------------------------
-# the filter as CasADi Functions
-
-
-def _sample_expr(model: Model, y_rows: tuple, substeps: int, K: int):
-    """One sample of the filter as SX: predict over ``dt`` (or restart), update with ``y``.
-
-    Returns the carry ``c = [x; vec(P); nll]``, the row's data ``d = [u; dt; y; m; r; xs]``
-    (``m`` the 0/1 availability of each output, ``r`` 1 at a restart from ``xs``), the
-    variables ``z = [theta; log sigma_w; log sigma_y]``, the constants ``k = [p_base;
-    vec(S); p0]`` (``p = p_base + S theta``, ``P0 = diag(p0)``) and ``c_next``.
-    """
-    nx, ny, nu, n_p = model.nx, len(y_rows), model.nu, model.n_p
-    c = ca.SX.sym("c", nx + nx * nx + 1)
-    x, P, nll = c[:nx], ca.reshape(c[nx : nx + nx * nx], nx, nx), c[-1]
-    d = ca.SX.sym("d", nu + 1 + 2 * ny + 1 + nx)
-    u, dt = d[:nu], d[nu]
-    y, m = d[nu + 1 : nu + 1 + ny], d[nu + 1 + ny : nu + 1 + 2 * ny]
-    r, xs = d[nu + 1 + 2 * ny], d[nu + 2 + 2 * ny :]
-    z = ca.SX.sym("z", K + 1 + ny)
-    k = ca.SX.sym("k", n_p + n_p * K + nx)
-    pb, Sm, p0 = k[:n_p], ca.reshape(k[n_p : n_p + n_p * K], n_p, K), k[n_p + n_p * K :]
-    p = pb + ca.mtimes(Sm, z[:K]) if K else pb
-    lsw, lsy = z[K], z[K + 1 :]
-    # predict: the step, its exact Jacobian and the held torque's response
-    xs_, us_, ps_ = ca.SX.sym("x", nx), ca.SX.sym("u", nu), ca.SX.sym("p", n_p)
-    dts_, lsw_ = ca.SX.sym("dt"), ca.SX.sym("lsw")
-    xn = step_function(model, substeps)(xs_, us_, ps_, dts_)
-    it = model.index(_TAU, "u")[0]
-    F = ca.jacobian(xn, xs_)
-    b = ca.jacobian(model.f(xs_, us_, ps_)[model.index(_RATE)[0]], us_[it])
-    g = ca.jacobian(xn, us_[it]) / b
-    Q = ca.exp(2 * lsw_) * ca.mtimes(g, g.T) / ca.fmax(dts_, 1e-12)
-    pred = ca.Function("pred", [xs_, us_, ps_, dts_, lsw_], [xn, F, Q])
-    xp, Fk, Qk = pred(x, u, p, dt, lsw)
-    # a restart takes the start and drops the prediction (which integrates no interval
-    # there and may not be finite: a sensor lag divides by the interval)
-    x_pr = ca.if_else(r > 0.5, xs, xp)
-    P_pr = ca.if_else(r > 0.5, ca.diag(p0), ca.mtimes([Fk, P, Fk.T]) + Qk)
-    # update: the available outputs only (a missing one: zero row, unit variance)
-    yh = model.h(xs_, us_, ps_)[list(y_rows)]
-    meas = ca.Function("meas", [xs_, us_, ps_], [yh, ca.jacobian(yh, xs_)])
-    yk, Hk = meas(x_pr, u, p)
-    Hm = ca.mtimes(ca.diag(m), Hk)
-    e = m * (y - yk)
-    Rm = ca.diag(m * ca.exp(2 * lsy))
-    S = ca.mtimes([Hm, P_pr, Hm.T]) + Rm + ca.diag(1 - m)
-    Kg = ca.mtimes(P_pr, ca.solve(S, Hm).T)
-    IKH = ca.DM.eye(nx) - ca.mtimes(Kg, Hm)
-    x_up = x_pr + ca.mtimes(Kg, e)
-    P_up = ca.mtimes([IKH, P_pr, IKH.T]) + ca.mtimes([Kg, Rm, Kg.T])
-    nll_k = ca.log(ca.det(S)) + ca.dot(e, ca.solve(S, e)) + ca.sum1(m) * math.log(2 * math.pi)
-    c_next = ca.vertcat(x_up, ca.vec(P_up), nll + 0.5 * nll_k)
-    return c, d, z, k, c_next
-
-
-def _block_function(model: Model, y_rows: tuple, substeps: int, K: int, order: int):
-    """``BLOCK`` samples of the filter with the forward sensitivities of its carry to
-    ``order``: ``(carry, D, z, k) -> carry`` with ``D`` the rows' data (one column per
-    row) and ``carry = [c; vec(dc/dz)]`` (order 1) ``; vec(d vec(dc/dz) / dz)]`` (order 2).
-
-    Forward mode with the few variables ``z`` as directions: the sensitivity of the next
-    carry is ``dc'/dc S + dc'/dz`` (CasADi's exact derivatives of the sample), the second
-    order the same rule applied to that; the NLL's gradient and Hessian are the last rows.
-    """
-    c, d, z, k, cn = _sample_expr(model, y_rows, substeps, K)
-    nc, nz = c.shape[0], z.shape[0]
-    carry, out = [c], [cn]
-    if order >= 1:
-        S = ca.SX.sym("S", nc, nz)
-        Sn = ca.jtimes(cn, c, S) + ca.jacobian(cn, z)
-        carry.append(ca.vec(S))
-        out.append(ca.vec(Sn))
-    if order >= 2:
-        T = ca.SX.sym("T", nc * nz, nz)
-        vS = ca.vec(Sn)
-        Tn = ca.jtimes(vS, c, S) + ca.jtimes(vS, ca.vec(S), T) + ca.jacobian(vS, z)
-        carry.append(ca.vec(T))
-        out.append(ca.vec(Tn))
-    one = ca.Function(
-        f"kf_sample{order}", [ca.vertcat(*carry), d, z, k], [ca.vertcat(*out)],
-        ["carry", "d", "z", "k"], ["carry_next"],
-    )  # fmt: skip
-    run = one.mapaccum(f"kf_rows{order}", BLOCK)
-    C0, D = ca.MX.sym("carry", one.size1_in(0)), ca.MX.sym("D", d.shape[0], BLOCK)
-    Z, Kc = ca.MX.sym("z", nz), ca.MX.sym("k", k.shape[0])
-    C = run(C0, D, Z, Kc)  # z and k repeated over the block
-    return ca.Function(
-        f"kf_block{order}", [C0, D, Z, Kc], [C[:, -1]], ["carry", "D", "z", "k"], ["carry_end"]
-    )
-
-
-def _block_functions(model, y_rows, K, substeps, jit, n_rows: int):
-    """The blocks of order 0, 1 and 2, once per structure (any log length): orders 0 and 1
-    compiled; order 2 (the Hessian, evaluated twice per fit) compiled from
-    :data:`HESSIAN_COMPILE_ROWS` rows on, below that in CasADi's virtual machine."""
-    key = ("kalman", structure_key(model), y_rows, K, substeps, jit)
-    low = _cached(
-        key,
-        lambda: tuple(
-            compiled(_block_function(model, y_rows, substeps, K, o), jit=jit) for o in (0, 1)
-        ),
-    )
-    hess_jit = False if n_rows < HESSIAN_COMPILE_ROWS else jit
-    hess = _cached(
-        (*key, "hessian", hess_jit),
-        lambda: compiled(_block_function(model, y_rows, substeps, K, 2), jit=hess_jit),
-    )
-    return (*low, hess)
-
-
-# ----------------------------------------------------------------------------
-# arrays of a log
-
-
-@dataclass(frozen=True, eq=False)
-class _Problem:
-    """The compiled blocks and the padded rows of one log."""
-
-    blocks: tuple
-    D: np.ndarray  # (n_blocks, BLOCK, nd): the rows' data, block after block
-    k: np.ndarray  # constants [p_base; vec(S); p0]
-    nc: int
-    n: int
-
-    def run(self, z, order: int, blocks: int | None = None):
-        """The carry after the last row (of the first ``blocks`` blocks): ``c`` and its
-        sensitivities up to ``order``."""
-        fn = self.blocks[order]
-        nz = len(z)
-        size = self.nc * (1 + (nz if order >= 1 else 0) + (nz * nz if order >= 2 else 0))
-        carry = np.zeros(size)
-        for Db in self.D[:blocks]:
-            carry = evaluate(fn, carry, Db.T, z, self.k)[0]
-        return carry
-
-    def nll(self, z) -> float:
-        return float(self.run(z, 0)[self.nc - 1])
-
-    def nll_grad(self, z):
-        carry = self.run(z, 1)
-        nc = self.nc
-        S = carry[nc:].reshape(nc, len(z), order="F")
-        return float(carry[nc - 1]), S[nc - 1].copy()
-
-    def hess(self, z, blocks: int | None = None):
-        """The NLL's Hessian in ``z`` (over the first ``blocks`` blocks)."""
-        carry = self.run(z, 2, blocks)
-        nc, nz = self.nc, len(z)
-        T = carry[nc + nc * nz :].reshape(nc * nz, nz, order="F")
-        H = T[nc - 1 :: nc, :]
-        return 0.5 * (H + H.T)
-
-
-def _rows(model: Model, kd: KalmanData, n_pad: int) -> np.ndarray:
-    """The rows' data ``[u_prev; dt; y; m; r; xs]`` (n_pad, nd): ``u_prev`` the input held
-    over the interval that ends at the row; padding rows restart at zero and measure
-    nothing (no term of the likelihood)."""
-    n, ny, nu, nx = kd.n, len(kd.y_names), model.nu, model.nx
-    D = np.zeros((n_pad, nu + 1 + 2 * ny + 1 + nx))
-    D[1:n, :nu] = kd.u[:-1]
-    D[0, :nu] = kd.u[0]
-    D[n:, :nu] = kd.u[-1]
-    D[1:n, nu] = np.diff(kd.t)
-    D[np.flatnonzero(kd.reset), nu] = 0.0  # a restart integrates nothing (a gap's interval)
-    ok = np.isfinite(kd.y)
-    D[:n, nu + 1 : nu + 1 + ny] = np.where(ok, kd.y, 0.0)
-    D[:n, nu + 1 + ny : nu + 1 + 2 * ny] = ok
-    D[:n, nu + 1 + 2 * ny] = kd.reset
-    D[n:, nu + 1 + 2 * ny] = 1.0  # padding: restarts that measure nothing
-    D[:n, nu + 2 + 2 * ny :] = kd.start
-    return D
-
-
-def _p0(model: Model) -> np.ndarray:
-    p0 = np.zeros(model.nx)
-    p0[model.index("yaw")[0]] = P0_ATTITUDE**2
-    p0[model.index(_RATE)[0]] = P0_RATE**2
-    for i in model.lag_index:
-        p0[i] = P0_RATE**2
-    return p0
-
-
-def _check_data(model: Model, kd: KalmanData) -> None:
-    if not isinstance(kd, KalmanData):
-        raise InputError(
-            f"kalman: expected a Log, ReplayData or KalmanData, got {type(kd).__name__}"
-        )
-    n = kd.n
-    src = kd.source
-    shapes = {
-        "u": (kd.u, (n, model.nu)),
-        "y": (kd.y, (n, len(kd.y_names))),
-        "start": (kd.start, (n, model.nx)),
-        "reset": (kd.reset, (n,)),
-    }
-    for name, (a, want) in shapes.items():
-        if np.shape(a) != want:
-            raise InputError(f"{src}: {name} has shape {np.shape(a)}, expected {want}")
-    if n < 2:
-        raise InputError(f"{src}: {n} row(s); the Kalman likelihood needs at least 2")
-    unknown = [c for c in kd.y_names if c not in model.y_names]
-    if unknown or not kd.y_names:
-        raise InputError(
-            f"{src}: outputs {list(kd.y_names)}: expected some of the Model's {list(model.y_names)}"
-        )
-    if not np.all(np.isfinite(kd.t)) or np.any(np.diff(kd.t) <= 0):
-        raise InputError(f"{src}: t must be finite and strictly increasing (s)")
-    if not np.all(np.isfinite(kd.u)):
-        row = int(np.flatnonzero(~np.isfinite(kd.u).all(axis=1))[0])
-        raise InputError(f"{src}: row {row}: input is not finite (inputs cannot be missing)")
-    if not kd.reset[0]:
-        raise InputError(f"{src}: reset[0] must be true (the filter starts at row 0)")
-    if not np.all(np.isfinite(kd.start[kd.reset])):
-        raise InputError(f"{src}: the start state of a reset row is not finite")
 
 
 # ----------------------------------------------------------------------------
