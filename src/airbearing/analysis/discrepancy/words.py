@@ -24,6 +24,12 @@ __all__ = [
     "why",
 ]
 
+#: What tells the air bearing's friction from a wheel bearing's.
+_BEARINGS_APART = (
+    "run with the wheels at a bias speed (a wheel then turns with the body for part of the "
+    "log), or hold the body and let a wheel spin down with its motor off: the wheel "
+    "bearing's friction slows the wheel, the air bearing's does not"
+)
 #: What separates two effects that fit the same data (name pair -> experiment).
 EXPERIMENTS: dict[frozenset, str] = {
     frozenset({"cm_offset_error", "residual_dipole"}): (
@@ -88,17 +94,13 @@ EXPERIMENTS: dict[frozenset, str] = {
     ),
     frozenset({"coulomb_friction", "wheel_coulomb_friction"}): (
         "a wheel that starts at rest turns against the body (momentum exchange), so the air "
-        "bearing's friction and the wheel bearing's give one torque form on the body; run "
-        "with the wheels at a bias speed (a wheel then turns with the body for part of the "
-        "log), or hold the body and let a wheel spin down with its motor off: the wheel "
-        "bearing's friction slows the wheel, the air bearing's does not"
+        "bearing's friction and the wheel bearing's give one torque form on the body; "
+        + _BEARINGS_APART
     ),
     frozenset({"viscous_friction", "wheel_viscous_friction"}): (
         "a wheel that starts at rest turns against the body at a rate proportional to the "
         "body's (momentum exchange), so the air bearing's viscous friction and the wheel "
-        "bearing's give one torque form on the body; run with the wheels at a bias speed, or "
-        "hold the body and let a wheel spin down with its motor off: the wheel bearing's "
-        "friction slows the wheel, the air bearing's does not"
+        "bearing's give one torque form on the body; " + _BEARINGS_APART
     ),
     frozenset({"inertia_error", "wheel_torque_error"}): (
         "the body's rate sees the motor torque over J - Iw, so a larger body and a weaker motor "
