@@ -56,7 +56,7 @@ from scipy.sparse.linalg import splu
 from airbearing.analysis.shooting.autoregressive import AR
 from airbearing.analysis.shooting.errors import _series
 from airbearing.analysis.shooting.fit import solve_gram
-from airbearing.analysis.shooting.penalty import piece_durations
+from airbearing.analysis.shooting.penalty import piece_durations, start_yaw_profiled
 
 __all__ = [
     "MeasurementNoise",
@@ -223,13 +223,16 @@ class _Linearised:
         step = solve_gram(Dc @ G @ Dc, (A.T @ b) / c) / c
         e = b - A @ step
         self.innovations = e[: self.rm.size]  # the whitened measurement rows after the step
-        Gd = sp.csc_matrix((Dc @ G @ Dc)[self.k :, self.k :])
+        Gd = start_yaw_profiled(self.problem, sp.csc_matrix((Dc @ G @ Dc)[self.k :, self.k :]))
         try:
-            u = splu(Gd).U.diagonal()
+            u = splu(sp.csc_matrix(Gd)).U.diagonal()
             ld = float(np.sum(np.log(np.abs(u)))) if np.all(u != 0) else np.inf
         except RuntimeError:
             ld = np.inf
-        ld += 2.0 * float(np.log(c[self.k :]).sum())
+        cd = c[self.k :]
+        if Gd.shape[0] < cd.size:  # the start yaws profiled out: their scales with them
+            cd = np.delete(cd, np.arange(self.problem.windows.n) * self.problem.n_delta)
+        ld += 2.0 * float(np.log(cd).sum())
         return float(-0.5 * (e @ e) + logdet - 0.5 * ld)
 
 

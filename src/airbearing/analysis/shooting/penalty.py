@@ -16,6 +16,7 @@ import casadi as ca
 import numpy as np
 import scipy.sparse as sp
 
+from airbearing.analysis.shooting.fit import PINV_RCOND
 from airbearing.analysis.shooting.functions import (
     _cached,
     _Call,
@@ -35,6 +36,7 @@ __all__ = [
     "penalised_solver",
     "piece_durations",
     "set_intensity",
+    "start_yaw_profiled",
 ]
 
 #: Grid of the dimensionless intensity ``kappa`` (defect variance over a typical piece, in
@@ -58,7 +60,7 @@ def piece_durations(problem) -> np.ndarray:
 def _sigma_of_kappa(problem, kappa: float) -> float:
     """``sigma_w`` of a dimensionless intensity (:mod:`.process_noise`)."""
     T = float(np.mean(piece_durations(problem)[:-1])) if problem.windows.n > 1 else 1.0
-    if problem.n_att:
+    if problem.attitude_measured:
         return math.sqrt(kappa * problem.sigma_att**2 * 3.0 / T**3)
     return math.sqrt(kappa * problem.sigma_rate**2 / T)
 
@@ -93,10 +95,19 @@ def defect_whitening(problem, sigma_w: float):
         base = j * nd
         t = max(float(T[j]), 1e-9)
         q = sigma_w**2
+        joint = n_att and problem.attitude_measured
+        if n_att and not joint:
+            # a dof-1 gyro log's yaw, fitted at the starts but not measured
+            # (:func:`.delta_layout`): one yaw trajectory per segment, its defect weighed as
+            # a measurement at the replay's attitude resolution (``sigma_att``) whatever the
+            # intensity, so the rate's likelihood stays what it was without it
+            rows.append(base)
+            cols.append(base)
+            vals.append(1.0)
         for a in range(n_rate):
             ir = base + n_att + a
             vr = q * t / sr**2 + eps
-            if n_att:
+            if joint:
                 ia = base + a
                 va = q * t**3 / 3.0 / sa**2 + eps
                 cv = q * t**2 / 2.0 / (sa * sr)
@@ -122,6 +133,35 @@ def defect_whitening(problem, sigma_w: float):
     m = nd * max(w.n - 1, 0)
     W = sp.csr_matrix((vals, (rows, cols)), shape=(m, m))
     return W, logdet
+
+
+def start_yaw_profiled(problem, G):
+    """The window states' information ``G`` (``n_delta n_windows`` square, window-major) with
+    a dof-1 gyro log's start yaws profiled out; ``G`` itself on any other problem.
+
+    The start yaws are fitted but not measured (:func:`.delta_layout`) and held to one
+    trajectory per segment by their defects (:func:`defect_whitening`); when no torque
+    depends on the yaw at the fitted parameters their common offset is in nothing and
+    ``G`` is singular. The Schur complement (a pseudo-inverse) leaves the information of
+    the other window states, which is then what it is without the start yaws.
+
+    Returns
+    -------
+    scipy.sparse.csc_matrix
+        ``G``, or the other states' block less what the yaws explain (``n_delta - 1``
+        entries per window).
+    """
+    if not (problem.n_att and not problem.attitude_measured):
+        return G
+    nd, nw = problem.n_delta, problem.windows.n
+    yaw = np.arange(nw) * nd
+    rest = np.setdiff1d(np.arange(nd * nw), yaw)
+    G = sp.csc_matrix(G)
+    Gyy = G[yaw][:, yaw].toarray()
+    Gyr = G[yaw][:, rest].toarray()
+    explained = Gyr.T @ np.linalg.pinv(Gyy, rcond=PINV_RCOND, hermitian=True) @ Gyr
+    schur = G[rest][:, rest].toarray() - explained
+    return sp.csc_matrix(0.5 * (schur + schur.T))
 
 
 # ----------------------------------------------------------------------------

@@ -85,6 +85,9 @@ class ShootingProblem:
         self.substeps, self.jit, self.theta_slots = int(substeps), jit, int(theta_slots)
         self.sigma_rate, self.sigma_att = float(sigma_rate), float(sigma_att)
         self.n_att, self.n_rate, self.n_lag = delta_layout(model, self.outputs)
+        #: the attitude is compared (not only fitted at the window starts: a dof-1 gyro
+        #: log's yaw, :func:`.delta_layout`); the process noise is scaled by it then
+        self.attitude_measured = "quat" in self.outputs or "yaw" in self.outputs
         self.n_delta = self.n_att + self.n_rate + self.n_lag
         nw, L = windows.n, windows.length
         sizes = {"rate": self.n_rate, "quat": 3, "yaw": 1}

@@ -53,6 +53,7 @@ from airbearing.analysis.shooting.penalty import (  # noqa: F401 - also this mod
     penalised_solver,
     piece_durations,
     set_intensity,
+    start_yaw_profiled,
 )
 from airbearing.errors import SolverError
 
@@ -143,6 +144,7 @@ def loglik(problem, fit, k: int) -> float:
     J = sp.csc_matrix(fit.extra["J"])
     Jd = J[:, k:]
     G = sp.csc_matrix(Jd.T @ Jd)
+    G = start_yaw_profiled(problem, G)
     # column scaling keeps the determinant well conditioned (its log is added back)
     c = np.sqrt(np.maximum(G.diagonal(), 1e-300))
     Dc = sp.diags(1.0 / c)
@@ -296,7 +298,7 @@ def _verdict(problem, ll: dict, best: float, bottom: float) -> ProcessNoise:
     sigma_w = problem.process_noise[1]
     piece = float(np.mean(piece_durations(problem)[:-1])) if problem.windows.n > 1 else 0.0
     if significant and sigma_w > 0:
-        if problem.n_att:
+        if problem.attitude_measured:
             horizon = (3.0 * problem.sigma_att**2 / sigma_w**2) ** (1.0 / 3.0)
         else:
             horizon = problem.sigma_rate**2 / sigma_w**2

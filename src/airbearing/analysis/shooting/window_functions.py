@@ -42,10 +42,42 @@ def step_function(model: Model, substeps: int = DEFAULT_SUBSTEPS) -> ca.Function
 
 
 def delta_layout(model: Model, outputs: tuple) -> tuple[int, int, int]:
-    """Entries of ``delta``: (attitude, rate, lag)."""
-    n_att = 3 if model.dof == 3 else (1 if "yaw" in outputs else 0)
+    """Entries of ``delta``: (attitude, rate, lag).
+
+    A dof-1 window fits its start yaw when the yaw is compared (attitude-only logs) or when
+    the Model's dynamics depend on it (:func:`yaw_acts`): a gyro log's ``yaw`` is the yaw
+    "as the testbed knows it" (FORMATS.md; often the integral of a filtered gyro, seed 001
+    eq. 21), not the plant's, and a yaw-dependent torque (``spring_torque``,
+    ``yaw_imbalance``, a field) taken at it would be wrong by its error.
+    """
+    if model.dof == 3:
+        n_att = 3
+    else:
+        n_att = 1 if "yaw" in outputs or yaw_acts(model) else 0
     n_rate = 3 if model.dof == 3 else 1
     return n_att, n_rate, len(model.lag_index)
+
+
+def yaw_acts(model: Model) -> bool:
+    """Whether the dynamics of a dof-1 Model depend on its yaw (a yaw-dependent torque, at
+    any parameter value: the structure, not the numbers, decides)."""
+    key = structure_key(model)
+    if key not in _YAW_ACTS:
+        _YAW_ACTS[key] = _yaw_acts(model)
+    return _YAW_ACTS[key]
+
+
+#: :func:`yaw_acts` by structure key (a few booleans per process).
+_YAW_ACTS: dict[str, bool] = {}
+
+
+def _yaw_acts(model: Model) -> bool:
+    if model.dof != 1:
+        return False
+    x = ca.SX.sym("x", model.nx)
+    u, p = ca.SX.sym("u", model.nu), ca.SX.sym("p", model.n_p)
+    xdot = model.f(x, u, p)
+    return bool(ca.depends_on(xdot, x[model.index("yaw")[0]]))
 
 
 def _window_functions(
