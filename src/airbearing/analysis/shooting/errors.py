@@ -244,11 +244,13 @@ def _defect_correlation_time(problem, d: np.ndarray) -> float:
     D = d.reshape(-1, nd)
     link = np.asarray(w.link, dtype=bool)
     seg = w.segments()[:-1]
+    # a dof-1 gyro log's start yaw is held continuous, not a random walk (penalty.py)
+    first = problem.n_att if problem.n_att and not problem.attitude_measured else 0
     series = []
     for sgm in np.unique(seg[link]):
         x = D[np.flatnonzero(link & (seg == sgm))]
         if x.shape[0] >= 4:
-            series += [x[:, a] for a in range(nd)]
+            series += [x[:, a] for a in range(first, nd)]
     lag = _decorrelation_lag(series, 20)
     return float(lag * np.mean(piece_durations(problem)[:-1])) if lag > 1 else 0.0
 
