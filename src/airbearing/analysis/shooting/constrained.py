@@ -31,9 +31,9 @@ from airbearing.analysis.shooting.functions import (
     delta_layout,
     evaluate,
     ipopt_options,
+    layout_key,
     scale_columns,
 )
-from airbearing.models.structure_cache import structure_key
 
 __all__ = ["Inequality", "null_space_basis"]
 
@@ -233,7 +233,7 @@ def linked_solver(model, L, nw, K, outputs, substeps, jit, link, rows, n_ineq, m
     (``rows``: the continuity rows, part of the key since they set the constraints'
     sparsity)."""
     rows = np.asarray(rows, dtype=int)
-    key = ("linked", structure_key(model), L, nw, K, outputs, substeps, jit, link,
+    key = ("linked", layout_key(model, outputs), L, nw, K, outputs, substeps, jit, link,
            hashlib.sha1(rows.tobytes()).hexdigest(), rows.size, n_ineq, max_iter)  # fmt: skip
     return _cached(
         key,

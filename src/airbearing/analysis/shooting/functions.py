@@ -75,6 +75,7 @@ from airbearing.analysis.shooting.window_functions import (  # noqa: F401 (re-ex
     _step_functions,
     _window_functions,
     delta_layout,
+    layout_key,
     start_function,
     step_function,
 )

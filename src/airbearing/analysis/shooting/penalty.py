@@ -24,10 +24,10 @@ from airbearing.analysis.shooting.functions import (
     delta_layout,
     evaluate,
     ipopt_options,
+    layout_key,
     scale_columns,
     vstack_csc,
 )
-from airbearing.models.structure_cache import structure_key
 
 __all__ = [
     "KAPPA_GRID",
@@ -277,7 +277,7 @@ def penalised_solver(model, L, nw, K, outputs, substeps, jit, max_iter, objectiv
     """``(solver, keep)``: IPOPT on the stacked residual ``[r; W c]`` (:mod:`.process_noise`);
     ``objective_stop`` as :func:`.solver.ipopt_options`."""
     args = (model, L, nw, K, outputs, substeps, jit, max_iter, objective_stop)
-    key = ("penalised", structure_key(model), *args[1:])
+    key = ("penalised", layout_key(model, outputs), *args[1:])
     return _cached(key, lambda: _build_penalised(*args))
 
 

@@ -19,10 +19,10 @@ from airbearing.analysis.shooting.sparse import csc_of
 from airbearing.analysis.shooting.window_functions import (
     _window_functions,
     delta_layout,
+    layout_key,
     start_function,
 )
 from airbearing.models.model import Model
-from airbearing.models.structure_cache import structure_key
 
 
 def _link_function(model: Model, K: int, outputs: tuple) -> ca.Function:
@@ -80,7 +80,7 @@ def _data_shapes(model: Model, L: int, nw: int, na: int, link: bool = False) -> 
 
 def _problem_functions(model, L, nw, K, outputs, substeps, jit, link=False):
     """``(fr, fj, fy)`` of :func:`_build_problem`, from the one bounded cache."""
-    key = ("problem", structure_key(model), L, nw, K, outputs, substeps, jit, link)
+    key = ("problem", layout_key(model, outputs), L, nw, K, outputs, substeps, jit, link)
     return _cached(key, lambda: _build_problem(model, L, nw, K, outputs, substeps, jit, link))
 
 

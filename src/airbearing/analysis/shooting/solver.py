@@ -15,8 +15,7 @@ from airbearing.analysis.shooting.buffers import evaluate
 from airbearing.analysis.shooting.function_cache import _cached
 from airbearing.analysis.shooting.problem_functions import _problem_functions
 from airbearing.analysis.shooting.sparse import scale_columns
-from airbearing.analysis.shooting.window_functions import delta_layout
-from airbearing.models.structure_cache import structure_key
+from airbearing.analysis.shooting.window_functions import delta_layout, layout_key
 
 #: IPOPT iteration limit (Gauss-Newton on scaled variables converges in a few).
 IPOPT_MAX_ITER = 80
@@ -41,7 +40,7 @@ OBJECTIVE_STOP = {
 
 def _problem_solver(model, L, nw, K, outputs, substeps, jit, max_iter=IPOPT_MAX_ITER):
     """``(solver, keep)``: the IPOPT solver and the Python objects it calls (kept alive)."""
-    key = ("solver", structure_key(model), L, nw, K, outputs, substeps, jit, max_iter)
+    key = ("solver", layout_key(model, outputs), L, nw, K, outputs, substeps, jit, max_iter)
     return _cached(key, lambda: _build_solver(model, L, nw, K, outputs, substeps, jit, max_iter))
 
 

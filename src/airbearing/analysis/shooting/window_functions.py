@@ -10,7 +10,10 @@ over these in :mod:`.problem_functions`.
 
 from __future__ import annotations
 
+import weakref
+
 import casadi as ca
+import numpy as np
 
 from airbearing import quaternion as quat
 from airbearing.analysis.shooting.function_cache import _cached, compiled
@@ -45,9 +48,9 @@ def delta_layout(model: Model, outputs: tuple) -> tuple[int, int, int]:
     """Entries of ``delta``: (attitude, rate, lag).
 
     A dof-1 window fits its start yaw when the yaw is compared (attitude-only logs) or when
-    the Model's dynamics depend on it (:func:`yaw_acts`): a gyro log's ``yaw`` is the yaw
-    "as the testbed knows it" (FORMATS.md; often the integral of a filtered gyro, seed 001
-    eq. 21), not the plant's, and a yaw-dependent torque (``spring_torque``,
+    a torque of the Model depends on it (:func:`yaw_acts`): a gyro log's ``yaw`` is the
+    yaw "as the testbed knows it" (FORMATS.md; often the integral of a filtered gyro, seed
+    001 eqs. 3 and 21), not the plant's, and a yaw-dependent torque (``spring_torque``,
     ``yaw_imbalance``, a field) taken at it would be wrong by its error.
     """
     if model.dof == 3:
@@ -58,38 +61,49 @@ def delta_layout(model: Model, outputs: tuple) -> tuple[int, int, int]:
     return n_att, n_rate, len(model.lag_index)
 
 
+def layout_key(model: Model, outputs: tuple) -> tuple:
+    """The part of a compiled function's cache key that the Model decides: its structure
+    and its windows' :func:`delta_layout` (which :func:`yaw_acts` makes depend on values)."""
+    return (structure_key(model), delta_layout(model, tuple(outputs)))
+
+
+#: Points (yaw, rate, gimbals, inputs: unit normal draws) at which :func:`yaw_acts` looks.
+_YAW_PROBES = 3
+_YAW_ACTS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
 def yaw_acts(model: Model) -> bool:
-    """Whether the dynamics of a dof-1 Model depend on its yaw (a yaw-dependent torque, at
-    any parameter value: the structure, not the numbers, decides)."""
-    key = structure_key(model)
-    if key not in _YAW_ACTS:
-        _YAW_ACTS[key] = _yaw_acts(model)
-    return _YAW_ACTS[key]
+    """Whether a torque of a dof-1 Model depends on its yaw at its nominal parameters
+    ``p0`` (``spring_torque`` or ``yaw_imbalance`` with a non-zero value, a field's torque).
 
-
-#: :func:`yaw_acts` by structure key (a few booleans per process).
-_YAW_ACTS: dict[str, bool] = {}
-
-
-def _yaw_acts(model: Model) -> bool:
+    Not the structure alone: a discrepancy search holds every candidate at zero in one
+    Model, and a start yaw that nothing depends on would be a direction no fit can fix.
+    """
     if model.dof != 1:
         return False
-    x = ca.SX.sym("x", model.nx)
-    u, p = ca.SX.sym("u", model.nu), ca.SX.sym("p", model.n_p)
-    xdot = model.f(x, u, p)
-    return bool(ca.depends_on(xdot, x[model.index("yaw")[0]]))
+    if model not in _YAW_ACTS:
+        x = ca.SX.sym("x", model.nx)
+        u, p = ca.SX.sym("u", model.nu), ca.SX.sym("p", model.n_p)
+        dxdy = ca.jacobian(model.f(x, u, p), x[model.index("yaw")[0]])
+        fn = ca.Function("dxdot_dyaw", [x, u, p], [dxdy])
+        rng = np.random.default_rng(0)
+        X = rng.standard_normal((model.nx, _YAW_PROBES))
+        U = rng.standard_normal((model.nu, _YAW_PROBES))
+        D = np.asarray(fn.map(_YAW_PROBES)(X, U, np.tile(model.p0[:, None], _YAW_PROBES)))
+        _YAW_ACTS[model] = bool(np.any(D != 0))
+    return _YAW_ACTS[model]
 
 
 def _window_functions(
     model: Model, L: int, K: int, outputs: tuple, substeps: int, jit, link: bool = False
 ):
-    key = ("window", structure_key(model), L, K, outputs, substeps, jit, link)
+    key = ("window", layout_key(model, outputs), L, K, outputs, substeps, jit, link)
     return _cached(key, lambda: _build_window(model, L, K, outputs, substeps, jit, link))
 
 
 def start_function(model: Model, outputs: tuple) -> ca.Function:
     """``(delta, x_meas) -> x0``: a window's initial state from its estimate (module doc)."""
-    key = ("start", structure_key(model), tuple(outputs))
+    key = ("start", layout_key(model, outputs), tuple(outputs))
     return _cached(key, lambda: _build_start(model, tuple(outputs)))
 
 
