@@ -5,7 +5,10 @@ The Model of a testbed is driven by the inputs each log recorded (see
 the logged one on multiple-shooting windows (:mod:`airbearing.analysis.shooting`):
 each window restarts from the measured state corrected by a fitted perturbation,
 so the comparison is not swamped by one noisy initial sample nor by the
-divergence of a sensitive motion over a long horizon.
+divergence of a sensitive motion over a long horizon. A dof-1 gyro log's ``yaw`` is the
+testbed's own estimate (FORMATS.md), not a measurement: when a torque of the Model depends
+on the yaw (``spring_torque``, ``yaw_imbalance`` at a non-zero value), the windows' start
+yaw is fitted as well, one yaw trajectory per segment.
 
 The gap
     ``gap = sqrt( sum_{usable samples, axes} e^2 / count )``, the RMS over every

@@ -29,7 +29,10 @@ Windows
     at most ``L = window_s / dt`` rows, padded to ``L`` rows of weight zero. A
     window starts at a usable row: from its measured attitude and rate (with a gyro),
     or from the rate of a local quadratic fit of the attitude over the first
-    ``RATE_FIT_ROWS`` usable rows (attitude only).
+    ``RATE_FIT_ROWS`` usable rows (attitude only). A dof-1 gyro log's ``yaw`` is the
+    yaw as the testbed knows it (FORMATS.md: often the integral of a filtered gyro),
+    so when a torque of the Model depends on the yaw the windows' start yaw is fitted
+    too (:func:`~airbearing.analysis.shooting.window_functions.delta_layout`).
 
 Noise floor (from the data alone, per segment, outlier rows left out)
     The fourth DIVIDED difference on the logged times, with unit-norm weights
