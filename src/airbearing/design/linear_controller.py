@@ -9,6 +9,7 @@ keeps them in a small cache.
 
 from __future__ import annotations
 
+import hashlib
 from dataclasses import dataclass
 
 import casadi as ca
@@ -19,8 +20,9 @@ from airbearing.design.controller import Controller
 from airbearing.design.linearise import TrimPoint
 from airbearing.errors import InputError
 from airbearing.models.model import Model
+from airbearing.models.structure_cache import structure_key
 
-__all__ = ["LinearController", "linear_controller", "trim_state"]
+__all__ = ["LinearController", "controller_key", "linear_controller", "trim_state"]
 
 _TRIM_TOL = 1e-9  # relative residual accepted for the controller's trim state
 
@@ -103,7 +105,32 @@ def trim_state(lc: LinearController, gains: np.ndarray, c0=None) -> np.ndarray:
     return c
 
 
+#: The linear controllers built, by :func:`linear_controller`'s key (bounded).
 _LC_CACHE: dict = {}
+_LC_CACHE_SIZE = 32
+
+
+def controller_key(ctl: Controller) -> tuple:
+    """What decides a controller's linear model, as a hashable key.
+
+    Parameters
+    ----------
+    ctl : Controller
+
+    Returns
+    -------
+    tuple
+        The SHA-256 of its serialised CasADi Function (the expressions and every number
+        built into them: gains, slider matrix, field, options), its initial state, the
+        number of its gains and its reference names.
+    """
+    text = ctl.function.serialize()
+    return (
+        hashlib.sha256(text.encode()).hexdigest(),
+        np.asarray(ctl.c0, dtype=float).tobytes(),
+        int(np.size(ctl.gains)),
+        tuple(ctl.ref_names),
+    )
 
 
 def linear_controller(model, ctl, tp, channels, kind) -> LinearController:
@@ -126,18 +153,25 @@ def linear_controller(model, ctl, tp, channels, kind) -> LinearController:
     Returns
     -------
     LinearController
+
+    Notes
+    -----
+    Cached by what decides the result: the model's structure
+    (:func:`~airbearing.models.structure_cache.structure_key`; the trim's ``p`` gives its
+    values), the controller (:func:`controller_key`), the channels and the trim's state,
+    input and parameters. Not by names: two controllers of one name with other gains
+    baked in, or another structure, have other linear models.
     """
     key = (
-        id(model),
+        structure_key(model),
         kind,
-        ctl.name,
+        controller_key(ctl),
         tuple(channels),
-        tuple(np.round(tp.x, 12)),
-        tuple(np.round(tp.u, 12)),
+        *(np.asarray(v, dtype=float).tobytes() for v in (tp.x, tp.u, tp.p)),
     )
     hit = _LC_CACHE.get(key)
-    if hit is not None and hit[0] is model:
-        return hit[1]
+    if hit is not None:
+        return hit
     if kind == "attitude" and model.dof == 1:
         names = ("yaw_ref",)
         yaw0 = float(tp.x[0])
@@ -157,7 +191,7 @@ def linear_controller(model, ctl, tp, channels, kind) -> LinearController:
             return ca.SX(0, 1)
 
     lc = _build_linear_controller(model, ctl, tp, channels, ref_expr, names)
-    if len(_LC_CACHE) > 32:
+    if len(_LC_CACHE) > _LC_CACHE_SIZE:
         _LC_CACHE.clear()
-    _LC_CACHE[key] = (model, lc)
+    _LC_CACHE[key] = lc
     return lc

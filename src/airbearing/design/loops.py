@@ -33,7 +33,6 @@ from __future__ import annotations
 
 import math
 import os
-from dataclasses import replace
 
 import casadi as ca
 import numpy as np
@@ -245,8 +244,6 @@ def attitude_loop(
         wheel_kw = {k: opts[k] for k in ("bias_fraction", "bias") if k in opts}
         tp = trim(model, p, wheel_speeds=trim_wheel_speeds(tb, **wheel_kw))
         ctl = wheel_attitude_controller(model, gains=tuple(g.values()), **opts)
-        if opts:  # the Jacobian cache is keyed by the controller's name
-            ctl = replace(ctl, name=f"{ctl.name}{sorted(opts.items())!r}")
         cands = tuple(f"wc{i}" for i in range(1, tb.wheels.n + 1))
         channels = _active_channels(model, tp, ctl, cands)
     else:
