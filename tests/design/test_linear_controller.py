@@ -52,12 +52,12 @@ def test_a_wheel_option_gives_its_own_linear_model():
     filtered = attitude_loop("rw-yaw", wheel_options={"lowpass": 0.5})
     assert filtered.controller.name == default.controller.name
     f_g = default.model.testbed.sensors.lowpass
+    assert f_g != 0.5  # the two loops differ
     # seed 001 eq. 3: the gyro low-pass w_f(k+1) = f_g w(k) + (1 - f_g) w_f(k) is a pole of
     # the controller at z = 1 - f_g (eigenvalues of a 3x3 matrix: rounding only)
     for loop, fg in ((default, f_g), (filtered, 0.5)):
         poles = np.linalg.eigvals(loop.controller_ss().A)
         assert np.min(np.abs(poles - (1 - fg))) < 1e-12, (fg, poles)
-    assert f_g != 0.5  # the two loops differ
 
 
 def test_a_wheel_loop_with_options_runs_with_a_delay():
