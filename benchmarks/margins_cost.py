@@ -26,7 +26,8 @@ import time
 
 import numpy as np
 
-import airbearing.design.margins as margins_mod
+import airbearing.design.margins_multiloop as multiloop_mod
+import airbearing.design.margins_siso as siso_mod
 from airbearing.design.loops import make_loop
 from airbearing.design.margins import frequency_grid, loop_margins, multiloop_disk_margin
 from airbearing.design.tuning import tune
@@ -39,12 +40,16 @@ LOOPS = ["balancing", "attitude"]
 
 
 class _Counter:
-    """Counts the calls of ``margins.frequency_response`` and the frequencies evaluated."""
+    """Counts the calls of ``frequency_response`` by the SISO and the multi-loop margins
+    (``margins_siso``, ``margins_multiloop``) and the frequencies evaluated."""
+
+    #: The modules whose ``frequency_response`` is counted.
+    MODULES = (siso_mod, multiloop_mod)
 
     def __init__(self):
         self.calls = 0
         self.points = 0
-        self._orig = margins_mod.frequency_response
+        self._orig = siso_mod.frequency_response
 
     def __enter__(self):
         def counted(sys, omega):
@@ -52,11 +57,13 @@ class _Counter:
             self.points += int(np.size(omega))
             return self._orig(sys, omega)
 
-        margins_mod.frequency_response = counted
+        for mod in self.MODULES:
+            mod.frequency_response = counted
         return self
 
     def __exit__(self, *exc):
-        margins_mod.frequency_response = self._orig
+        for mod in self.MODULES:
+            mod.frequency_response = self._orig
 
 
 def _timed(fn):

@@ -16,13 +16,13 @@ import pytest
 
 from airbearing.design.loops import make_loop
 from airbearing.design.margins import (
-    _grid_mu,
     frequency_grid,
     frequency_response,
     mu_upper_bound,
     multiloop_disk_margin,
     multiloop_worst_corner,
 )
+from airbearing.design.margins_multiloop import _grid_mu
 from airbearing.design.tuning import Spec, corners
 from airbearing.io.testbed import load_testbed
 from airbearing.reporting.stability import (
