@@ -169,6 +169,7 @@ def test_cli_says_what_E_is(capsys, monkeypatch):
     assert "(1/2) w^T J w" in note and "ratios" in note
 
 
+@pytest.mark.slow
 def test_a_short_two_step_says_it_is_doubtful():
     """Step 1 too short to settle: the in-plane offset step 2 takes as known is wrong, the
     estimate keeps moving and the spread hardly falls; the result says all three."""

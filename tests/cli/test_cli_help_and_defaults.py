@@ -247,6 +247,7 @@ def test_report_with_gains_of_another_loop_says_to_pass_loop(tmp_path, capsys):
 # --- output shape ------------------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_report_prints_its_margins_then_what_it_wrote(tmp_path, capsys, monkeypatch):
     from airbearing.cli import show_progress
 
@@ -265,6 +266,7 @@ def test_report_prints_its_margins_then_what_it_wrote(tmp_path, capsys, monkeypa
     assert lines[-2:] == [f"wrote {html}", f"wrote {js}"]
 
 
+@pytest.mark.slow
 def test_an_unmet_specification_is_one_line(capsys):
     # the nominal inertia only: one corner of the box, not three, for the same verdict
     assert run(["-q", "gains", "cmg-yaw", "--max-sensitivity", "1.01", "--bandwidth-hz", "5",

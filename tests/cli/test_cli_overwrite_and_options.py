@@ -418,6 +418,7 @@ def test_balance_note_names_the_flag(capsys):
     assert note and "--vertical-offset" in note[0] and "vertical_offset" not in note[0]
 
 
+@pytest.mark.slow
 def test_defaults_that_depend_on_the_testbed_are_ones_it_accepts(tmp_path):
     import json
 

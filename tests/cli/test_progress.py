@@ -81,6 +81,7 @@ def test_library_progress_default_is_silent():
     ],
     ids=["gains", "report"],
 )
+@pytest.mark.slow
 def test_long_commands_show_progress_unless_quiet(
     args, label, quiet_too, tmp_path, capfd, monkeypatch
 ):

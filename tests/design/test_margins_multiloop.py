@@ -150,6 +150,7 @@ def tabletop_report():
     )
 
 
+@pytest.mark.slow
 def test_report_checks_the_simultaneous_margins(tabletop_report):
     _, data = tabletop_report
     checks = {c["name"]: c for c in data["checks"]}
@@ -226,6 +227,7 @@ def _hand_built_yaw_loop(dt, J, h0, fg, gains, delay):
     return L
 
 
+@pytest.mark.slow
 def test_report_says_what_the_delay_costs_cmg_yaw(tmp_path):
     """cmg-yaw with tuned gains: yaw phase margin 48.93 deg with the one-sample delay the
     design loop assumes, 52.07 deg without (simulate's loop)."""

@@ -43,6 +43,7 @@ def seed_verdict(cmg_tb):
     return evaluate(make_loop(cmg_tb, "attitude", gains=SEED001_TABLE6), Spec())
 
 
+@pytest.mark.slow
 def test_tuned_attitude_gains_meet_the_spec(tuned_attitude, cmg_tb):
     r = tuned_attitude
     assert r.met, r.message
@@ -148,6 +149,7 @@ def test_step_response_matches_an_independent_oracle(cmg_tb):
     [("cmg-yaw", "attitude", None), ("seed000-tabletop", "balancing", "mixed")],
     ids=["cmg-yaw", "seed000-mixed"],
 )
+@pytest.mark.slow
 def test_the_searchs_margins_agree_with_analyse_loop(name, loop, split):
     """Agreement between methods: the search's NumPy loop against python-control's
     analyse_loop, every corner, seed gains (seed000's mixed loop has the lightly damped
@@ -175,6 +177,7 @@ def test_the_searchs_margins_agree_with_analyse_loop(name, loop, split):
         assert s["settling"] == pytest.approx(settling, abs=1e-9)
 
 
+@pytest.mark.slow
 def test_bandwidth_0_15_hz_is_met_on_cmg_yaw(tmp_path, capsys):
     """Seed 001's Table 6 gains have a worst-case bandwidth of 0.153 Hz and meet every check,
     so a design at 0.15 Hz exists: the tuner must find one."""
@@ -220,6 +223,7 @@ def test_an_offset_range_no_design_meets_is_reported_not_relaxed():
         assert all(c.value is None and not c.met for c in r.checks[1:])
 
 
+@pytest.mark.slow
 def test_impossible_spec_is_reported_not_relaxed(cmg_tb):
     # the nominal inertia only (one corner, not three): no design meets it there either
     spec = Spec(phase_margin_deg=85, gain_margin_db=20, bandwidth_hz=2.0, inertia_uncertainty=0)
@@ -230,6 +234,7 @@ def test_impossible_spec_is_reported_not_relaxed(cmg_tb):
     assert failed and "NOT met" in r.message
 
 
+@pytest.mark.slow
 def test_balancing_loop_of_seed004_meets_its_spec():
     """seed 004's platform (mechanical split: no cage field) tunes to the default spec over
     the default box, the offset before and after step two, and gives AT_THE_EDGE's gains."""

@@ -63,6 +63,7 @@ def _coast(cs, seed, case, rates=(4.5, 1.5), duration=100.0, truth=TWO):
     return tb, logs
 
 
+@pytest.mark.slow
 def test_in_model_fit_is_at_the_noise_with_honest_errors_near_the_bound():
     from airbearing.analysis.discrepancy.search import discrepancy
     from airbearing.reporting.discrepancy import discrepancy_report

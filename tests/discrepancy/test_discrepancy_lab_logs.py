@@ -116,6 +116,7 @@ def test_what_a_log_cannot_identify_is_said_so():
     assert all(r["std"] is None or np.all(np.asarray(r["std"]) > 0) for r in row)  # pairs too
 
 
+@pytest.mark.slow
 def test_a_first_sample_artefact_names_nothing_false():
     # the real-log failure of issue 13: rate 0 at each segment's first sample (a finite-
     # difference export) made the old code name sensor_lag = 0.0004 +- 4e4 s
@@ -158,6 +159,7 @@ def two_spindowns(tmp_path_factory):
     return folder
 
 
+@pytest.mark.slow
 def test_validation_log_and_replay_command(two_spindowns, tmp_path):
     f = two_spindowns
     out, rep, aug = tmp_path / "d.json", tmp_path / "d.html", tmp_path / "aug.toml"

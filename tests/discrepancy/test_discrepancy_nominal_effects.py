@@ -55,6 +55,7 @@ def found(logs):
     return ab.discrepancy(_rig({"viscous_friction": OLD}), logs)
 
 
+@pytest.mark.slow
 def test_a_wrong_nominal_is_corrected_and_nothing_else_is_named(found):
     assert set(found.effects) == {"viscous_friction"}, found.verdict
     value, std = found.effects["viscous_friction"], found.effect_std["viscous_friction"]

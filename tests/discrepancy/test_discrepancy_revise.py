@@ -43,6 +43,7 @@ def _z(found, name, truth):
 
 
 @pytest.mark.parametrize("seed", [1, 2])
+@pytest.mark.slow
 def test_two_frictions_on_a_narrow_speed_range_are_both_named_or_honestly_confounded(seed):
     # 2.0 -> 1.9 rad/s: viscous 1e-5 + drag 5e-6 (2e-5 N m each at 2 rad/s). Before: viscous
     # alone, 1.98e-05 +- 9.7e-08 (101 of its errors off the truth); now both, within 3 std
@@ -60,6 +61,7 @@ def test_two_frictions_on_a_narrow_speed_range_are_both_named_or_honestly_confou
     assert j["revisions"] and j["alternatives"] and j["effects"][0]["std_within_model"] > 0
 
 
+@pytest.mark.slow
 def test_a_wrong_first_friction_is_swapped_on_the_horizon():
     # a gyro rig coasting from 3 rad/s with viscous friction: short pieces named Coulomb
     # friction first (seed 2, 5.8e-05 +- 3.4e-07, not in the truth); the horizon swaps it

@@ -32,6 +32,7 @@ def _airbearing(args: list[str], capsys) -> str:
 # the camera variant's commands run in tests/identification/test_far_from_nominal.py
 # (test_the_spin_test_tutorial_runs), which checks what they name; 26 s saved here
 @pytest.mark.parametrize("noise", ["0.01"], ids=["noisy camera"])
+@pytest.mark.slow
 def test_spin_tutorial_names_what_it_says(tmp_path, monkeypatch, capsys, noise):
     monkeypatch.chdir(tmp_path)
     text = PAGE.read_text()

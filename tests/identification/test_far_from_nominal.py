@@ -191,6 +191,7 @@ def test_a_fit_that_ends_badly_is_retried_and_not_named(low19, monkeypatch):
         assert [s["window_s"] for s in row["start"]["stages"]][0] == 2.0
 
 
+@pytest.mark.slow
 def test_a_nominal_replay_that_does_not_converge_is_still_a_baseline():
     # 0.4 mm below but 1.7 mm to the side: the rig wobbles ~10 deg at the spin rate and the
     # nominal replay stops at IPOPT's iteration limit on 10 s windows; its last iterate is the

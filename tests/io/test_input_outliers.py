@@ -76,6 +76,7 @@ def test_gimbal_angles_without_commanded_rates_are_not_tested():
     assert "gimbals" not in Log(df, "x.csv", log.testbed).quality.fits
 
 
+@pytest.mark.slow
 def test_long_clean_logs_with_inputs_have_no_outlier():
     logs = [_slew(n, seed=s, ideal=i) for n in ("cmg-yaw", "cmg-3dof") for s, i in ((1, True),
             (2, False), (3, False))]  # fmt: skip
@@ -92,6 +93,7 @@ def test_long_clean_logs_with_inputs_have_no_outlier():
         assert flagged == [], (log.source, flagged)
 
 
+@pytest.mark.slow
 def test_an_input_glitch_breaks_the_replay_segment_and_is_not_integrated():
     """A slider sample 5 mm off in a free oscillation of seed004-platform: masking the row
     would still hold the bad position over its interval (a gravity torque of about 5e-3

@@ -195,6 +195,7 @@ def test_experiment_separates_it_from_confounded_effects():
 # --------------------------------------------------------------------------- campaigns
 
 
+@pytest.mark.slow
 def test_detection_campaign_hides_the_pair(tmp_path):
     from airbearing.analysis.campaign import parse_campaign, run_campaign, studies
     from airbearing.analysis.campaign.dispersions import dispersed_columns, draw_run

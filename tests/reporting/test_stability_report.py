@@ -56,6 +56,7 @@ def balancing_report(tmp_path_factory):
     return d
 
 
+@pytest.mark.slow
 def test_json_has_every_loop_and_the_required_keys(attitude_report):
     d, codes = attitude_report
     assert codes == [0, 0]
@@ -79,6 +80,7 @@ def test_json_has_every_loop_and_the_required_keys(attitude_report):
     assert data["loops"]["yaw"]["phase_margin_deg"] > 45
 
 
+@pytest.mark.slow
 def test_report_tables_have_no_nan_or_inf_text(attitude_report, balancing_report):
     for d in (attitude_report[0], balancing_report):
         assert bad_text((d / "report.html").read_text()) == [], d

@@ -114,6 +114,7 @@ def test_gap_and_noise_rms_are_of_the_raw_residual():
     assert prob.noise_rms(fit2.extra["r"])["yaw"] == pytest.approx(fit2.gap, rel=1e-9)
 
 
+@pytest.mark.slow
 def test_errors_under_ar1_noise_match_the_spread_over_repeated_runs():
     """The issue's case (b) in small: AR(1) 0.95 noise, one 120 s coast-down per run.
 

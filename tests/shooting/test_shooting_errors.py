@@ -23,6 +23,7 @@ def _effect(doc, name):
     return e
 
 
+@pytest.mark.slow
 def test_noise_free_attitude_beside_a_noisy_gyro_keeps_std_at_or_above_the_bound():
     # seed 004's platform: gyro 7.73e-4 rad/s, attitude ideal. The attitude residual is the
     # integration's own error (~0.02 of its weight's floor), the gyro's at its noise: one

@@ -84,6 +84,7 @@ def coulomb_run():
     return tb, log, ab.discrepancy(tb, [log])
 
 
+@pytest.mark.slow
 def test_wheel_coulomb_friction_is_named(coulomb_run):
     _, _, found = coulomb_run
     _judge(found, "wheel_coulomb_friction", COULOMB)
@@ -111,6 +112,7 @@ def test_wheel_viscous_friction_is_named_when_the_wheel_speed_changes():
     assert not any("wheel_coulomb_friction" in pair for pair in found.confounded)
 
 
+@pytest.mark.slow
 def test_the_friction_pair_at_a_nearly_constant_wheel_speed_is_confounded():
     # the command balances the viscous friction at 300 rad/s (6e-5 N m) with steps about
     # it: the wheel speed stays within about 1 % and both forms are one constant torque
@@ -158,6 +160,7 @@ def test_body_inertia_error_on_a_wheel_yaw_rig_is_named_and_confounded_with_the_
     assert "known external torque" in found.experiments["inertia_error + wheel_torque_error"]
 
 
+@pytest.mark.slow
 def test_a_torque_error_on_one_of_four_wheels_is_named_on_that_wheel():
     tb = load_testbed("rw-3axis")
     truth = [0.0, TORQUE, 0.0, 0.0]
@@ -177,6 +180,7 @@ def test_a_torque_error_on_one_of_four_wheels_is_named_on_that_wheel():
     assert np.all(np.abs(values[others]) < np.maximum(3 * stds[others], 0.1 * TORQUE))
 
 
+@pytest.mark.slow
 def test_coulomb_friction_of_each_of_four_wheels_is_named_per_wheel():
     tb = load_testbed("rw-3axis")
     truth = [2e-5, 4e-5, 0.0, 1e-5]  # N m; wheel 3 without friction
@@ -192,6 +196,7 @@ def test_coulomb_friction_of_each_of_four_wheels_is_named_per_wheel():
     assert value < 3 * std  # >= 0 by its physical range
 
 
+@pytest.mark.slow
 def test_air_bearing_and_wheel_bearing_friction_in_a_slew_from_rest_are_confounded():
     # a slew from rest: the wheel turns against the body (J w + Iw (W + w) = 0), so the air
     # bearing's Coulomb friction -f sign(w) and the wheel bearing's reaction f sign(W) are

@@ -74,6 +74,7 @@ def test_yaw_inertia_within_one_percent_and_three_std(truth):
 
 
 @pytest.mark.parametrize("ar", [0.0, 0.9])
+@pytest.mark.slow
 def test_std_covers_the_truth_over_twenty_draws(truth, ar):
     tb, J_true, t, X, wc = truth
     z = []
