@@ -22,7 +22,7 @@ from airbearing.io.columns import (
     WHEEL_COMMAND_COLUMNS,
 )
 from airbearing.io.import_map import unwrap
-from airbearing.io.motion import signed_quaternions
+from airbearing.io.motion import column_spans, signed_quaternions
 from airbearing.io.quality_outliers import ABSOLUTE_FLOOR, _Group
 from airbearing.io.testbed import Sensors, Testbed
 
@@ -113,7 +113,7 @@ def _changing(values: np.ndarray, segments) -> np.ndarray:
     out = np.zeros(values.shape[1], dtype=bool)
     for start, stop in segments:
         if stop - start >= 4:
-            out |= np.ptp(values[start:stop], axis=0) > 0
+            out |= column_spans(values[start:stop]) > 0
     return out
 
 
