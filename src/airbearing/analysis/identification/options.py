@@ -62,7 +62,7 @@ def refuse_still(tb, loaded) -> None:
     every fit after; the same function on the same log and testbed): no second pass over
     its channels (0.3 s of a 10^6-row identify)."""
     for log in loaded:
-        why = log.quality.no_motion if log.testbed is tb else no_motion(log, tb)
+        why = log.quality.no_motion if getattr(log, "testbed", None) is tb else no_motion(log, tb)
         if why:
             raise InputError(f"{log.source}: identify: {why}")
 
