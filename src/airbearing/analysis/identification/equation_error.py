@@ -234,6 +234,24 @@ def identify_equation_error(
     platform (dof 3): the same options, checks, messages and answer, without loading the
     output-error stage (module doc; ``airbearing identify --method equation-error``).
 
+    Parameters
+    ----------
+    testbed : Testbed, str or path-like
+        A platform (dof 3): the testbed, a testbed file or a built-in name (its values
+        are the prior).
+    logs : Log, path-like, or a list of them
+        Free oscillations.
+    known_offset_xy : (float, float), optional
+        CR -> CM offset x, y with sliders at zero, m (from balancing).
+    known_mass : float, optional
+        Total mass, kg (default: the testbed's).
+    form, friction, prior, progress, hold
+        As :func:`~airbearing.analysis.identify.identify`.
+
+    Returns
+    -------
+    PlatformIdentification
+
     Raises
     ------
     InputError
