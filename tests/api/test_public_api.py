@@ -125,7 +125,9 @@ def test_identify_chooses_the_method_as_the_cli_did(testbed, chosen, monkeypatch
     for fn in ("identify_cmg_inertia", "identify_platform", "identify_yaw_inertia"):
         monkeypatch.setattr(chooser, fn, lambda *a, _fn=fn, **k: calls.append((_fn, a, k)) or _fn)
     log = object.__new__(ab.Log)  # any Log: the stand-ins do not read it
-    monkeypatch.setattr("airbearing.analysis.identify.no_motion", lambda log, tb: "")  # moves
+    monkeypatch.setattr(
+        "airbearing.analysis.identification.options.no_motion", lambda log, tb: ""
+    )  # moves
     assert ab.identify(tb, [log]) == chosen
     ((name, args, kw),) = calls
     assert args[1] == [log]

@@ -19,7 +19,7 @@ from airbearing.analysis.discrepancy.screen import AGREE_FRACTION, _box_min
 from airbearing.analysis.discrepancy.search import discrepancy
 from airbearing.analysis.discrepancy.trial import MIN_SIGMAS, HeldOut, chi2_threshold
 from airbearing.analysis.discrepancy.words import GYRO_BIAS_DOF1
-from airbearing.analysis.shooting.filters import savgol, welch
+from airbearing.analysis.filters import savgol, welch
 from airbearing.analysis.simulation.scenarios import free_oscillation, slew
 from airbearing.io.testbed import Sensors, load_testbed
 

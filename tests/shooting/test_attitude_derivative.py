@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from airbearing.analysis.shooting.filters import local_poly, savgol_weights
+from airbearing.analysis.filters import local_poly, savgol_weights
 
 
 def _jittered(n, rng):

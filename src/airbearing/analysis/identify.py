@@ -19,26 +19,23 @@ from __future__ import annotations
 from collections.abc import Iterable
 
 from airbearing.analysis.identification.cmg_inertia import identify_cmg_inertia
-from airbearing.analysis.identification.data import COLUMNS_USED
-from airbearing.analysis.identification.platform import identify_platform
-from airbearing.analysis.identification.wheel_inertia import (
-    identify_wheel_inertia,
-    wheel_columns,
+from airbearing.analysis.identification.options import (
+    FORMS,
+    FRICTIONS,
+    METHODS,
+    checked_request,
+    columns_used,
 )
+from airbearing.analysis.identification.platform import identify_platform
+from airbearing.analysis.identification.wheel_inertia import identify_wheel_inertia
 from airbearing.analysis.identification.yaw_inertia import identify_yaw_inertia
 from airbearing.errors import InputError
 from airbearing.interrupt import stoppable
-from airbearing.io.coerce import as_float, as_logs, as_testbed, as_vector
-from airbearing.io.motion import no_motion
+from airbearing.io.coerce import as_logs, as_testbed
 
 __all__ = ["identify", "columns_used", "METHODS", "FORMS", "FRICTIONS"]
 # as_testbed and as_logs lived here first; they are airbearing.io.coerce's now
 __all__ += ["as_logs", "as_testbed"]
-
-#: Accepted values of ``method``, ``form`` and ``friction`` (``None`` = no friction term).
-METHODS = ("output-error", "equation-error")
-FORMS = ("integrated", "acceleration")
-FRICTIONS = (None, "none", "viscous", "coulomb")
 
 
 @stoppable
@@ -123,20 +120,10 @@ def identify(
     ...
     airbearing.errors.InputError: method='fast': expected one of output-error, equation-error
     """
-    _check_choices(method, form, friction)
-    if known_offset_xy is not None:
-        xy = as_vector(known_offset_xy, "known_offset_xy", 2, "2 finite offsets x, y in m")
-        known_offset_xy = (float(xy[0]), float(xy[1]))
-    known_mass = as_float(known_mass, "known_mass", positive=True, optional=True,
-                          expected="a positive mass in kg, or None")  # fmt: skip
-    if progress is not None and not callable(progress):
-        raise InputError(f"progress={progress!r:.60}: expected a callable or None")
-    tb = as_testbed(testbed)
-    loaded = as_logs(logs, tb, columns=columns_used(tb), what="the testbed to identify")
-    _refuse_still(tb, loaded)
-    fr = None if friction in (None, "none") else friction
-    if hold is not None and tb.body.dof == 1:
-        raise InputError("hold applies to platform testbeds (dof 3), not to dof 1")
+    tb, loaded, known_offset_xy, known_mass, fr = checked_request(
+        testbed, logs, known_offset_xy=known_offset_xy, known_mass=known_mass, method=method,
+        form=form, friction=friction, progress=progress, hold=hold,
+    )  # fmt: skip
     if tb.body.dof == 1:
         return _identify_dof1(tb, loaded, known_offset_xy, method, fr, progress)
     if fr is not None:
@@ -147,42 +134,6 @@ def identify(
         form=form, prior=tb if prior is True else (prior or None), progress=progress,
         hold=hold,
     )  # fmt: skip
-
-
-def columns_used(testbed) -> tuple[str, ...]:
-    """The log columns identification reads for ``testbed``: those of FORMATS.md, the
-    accelerometer's ``gx, gy, gz`` and, with ``[wheels]``, ``ws1..wsn`` and ``wc1..wcn``.
-
-    ``read_log(path, testbed, columns=columns_used(testbed))`` leaves a log's other columns
-    (simulation truth, notes) unread.
-
-    Examples
-    --------
-    >>> import airbearing as ab
-    >>> from airbearing.analysis.identify import columns_used
-    >>> columns_used(ab.load_testbed("rw-yaw"))[-2:]
-    ('ws1', 'wc1')
-    """
-    return (*COLUMNS_USED, *wheel_columns(as_testbed(testbed)))
-
-
-def _refuse_still(tb, loaded) -> None:
-    """Before any fitting: a log that shows no motion (:func:`airbearing.io.motion.no_motion`)
-    excites nothing a fit could identify; its numbers would be the prior's or noise's."""
-    for log in loaded:
-        why = no_motion(log, tb)
-        if why:
-            raise InputError(f"{log.source}: identify: {why}")
-
-
-def _check_choices(method, form, friction) -> None:
-    """Options outside their choices, before any work."""
-    if method not in METHODS:
-        raise InputError(f"method={method!r}: expected one of {', '.join(METHODS)}")
-    if form not in FORMS:
-        raise InputError(f"form={form!r}: expected one of {', '.join(FORMS)}")
-    if friction not in FRICTIONS:
-        raise InputError(f"friction={friction!r}: expected none, viscous or coulomb")
 
 
 def _identify_dof1(tb, loaded, known_offset_xy, method, friction, progress):

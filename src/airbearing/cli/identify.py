@@ -79,7 +79,7 @@ def identify(
         raise InputError(f"--method {method}: expected output-error or equation-error")
     if form not in ("integrated", "acceleration"):
         raise InputError(f"--form {form}: expected integrated or acceleration")
-    from airbearing.analysis.identify import columns_used
+    from airbearing.analysis.identification.options import columns_used
     from airbearing.cli.process_settings import reuse_freed_memory
     from airbearing.io.log import read_log
     from airbearing.io.testbed import write_testbed
@@ -94,14 +94,21 @@ def identify(
             "the regression of seed 004 eqs. 45 and 47",
         )
     loaded = [read_log(p, tb, columns=columns_used(tb)) for p in logs]
-    from airbearing.analysis.identify import identify as identify_logs
+    options = dict(known_offset_xy=known_offset_xy, known_mass=known_mass, form=form,
+                   friction=friction, hold=hold)  # fmt: skip
+    if tb.body.dof == 3 and method == "equation-error":
+        # the same checks and answer without loading the output-error stage (shooting
+        # engine, scipy: ~0.3 s CPU of a new process)
+        from airbearing.analysis.identification.equation_error import (
+            identify_equation_error as identify_logs,
+        )
+    else:
+        from airbearing.analysis.identify import identify as identify_logs
 
+        options["method"] = method
     with progress_display("identify") as progress:
         try:
-            result = identify_logs(
-                tb, loaded, known_offset_xy=known_offset_xy, known_mass=known_mass,
-                method=method, form=form, friction=friction, progress=progress, hold=hold,
-            )  # fmt: skip
+            result = identify_logs(tb, loaded, progress=progress, **options)
         except InputError as e:  # the library names parameters; the CLI names its flags
             msg = str(e)
             for param in ("known_offset_xy", "known_mass", "friction", "method", "form", "hold"):

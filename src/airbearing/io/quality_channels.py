@@ -22,9 +22,9 @@ from airbearing.io.columns import (
     WHEEL_COMMAND_COLUMNS,
 )
 from airbearing.io.import_map import unwrap
+from airbearing.io.motion import column_spans, signed_quaternions
 from airbearing.io.quality_outliers import ABSOLUTE_FLOOR, _Group
 from airbearing.io.testbed import Sensors, Testbed
-from airbearing.quaternion import continuous_signs
 
 if TYPE_CHECKING:
     from airbearing.io.log import Log
@@ -63,7 +63,7 @@ def _groups(log: Log, testbed: Testbed | None, segments, switch: np.ndarray | No
         floor = np.array([max(sensors.attitude_noise, ABSOLUTE_FLOOR, _RELATIVE_FLOOR * mag)])
         groups.append(_Group("attitude", ("yaw",), yaw[:, None], False, floor, wrap=True))
     elif log.has("qw", "qx", "qy", "qz"):
-        q = continuous_signs(log.quaternions(), segments)
+        q = signed_quaternions(log, segments)
         floor = np.array([0.5 * max(sensors.attitude_noise, ABSOLUTE_FLOOR)])
         groups.append(_Group("attitude", ("qw", "qx", "qy", "qz"), q, True, floor))
     if switch is not None:
@@ -113,7 +113,7 @@ def _changing(values: np.ndarray, segments) -> np.ndarray:
     out = np.zeros(values.shape[1], dtype=bool)
     for start, stop in segments:
         if stop - start >= 4:
-            out |= np.ptp(values[start:stop], axis=0) > 0
+            out |= column_spans(values[start:stop]) > 0
     return out
 
 

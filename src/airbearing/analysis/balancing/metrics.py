@@ -23,7 +23,7 @@ import numpy as np
 
 from airbearing import quaternion as quat
 from airbearing.analysis.balancing.drift import window_drift
-from airbearing.analysis.shooting.filters import savgol
+from airbearing.analysis.filters import savgol
 from airbearing.analysis.simulation.simulate import SimResult
 from airbearing.errors import InputError
 from airbearing.io.testbed import Testbed

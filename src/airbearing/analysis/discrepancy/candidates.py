@@ -55,7 +55,7 @@ import casadi as ca
 import numpy as np
 
 from airbearing import quaternion as quat
-from airbearing.analysis.shooting.filters import savgol, savgol_weights
+from airbearing.analysis.filters import savgol, savgol_weights
 from airbearing.analysis.shooting.logs import ReplayData
 from airbearing.errors import InputError
 from airbearing.io.testbed import Testbed

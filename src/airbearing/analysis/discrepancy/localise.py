@@ -8,8 +8,8 @@ import numpy as np
 
 from airbearing import quaternion as quat
 from airbearing.analysis.discrepancy.replay import primary_series
+from airbearing.analysis.filters import welch
 from airbearing.analysis.shooting import Fit, ShootingProblem
-from airbearing.analysis.shooting.filters import welch
 from airbearing.analysis.shooting.logs import NoiseFloor
 
 __all__ = ["Localisation", "localise"]

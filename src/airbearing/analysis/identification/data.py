@@ -23,7 +23,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from airbearing import quaternion as quat
-from airbearing.analysis.shooting.filters import local_poly
+from airbearing.analysis.filters import local_poly
 from airbearing.errors import InputError
 from airbearing.io.coerce import check_gyro_agrees, check_log_testbed
 from airbearing.io.log import LOG_COLUMNS, Log

@@ -29,18 +29,13 @@ from airbearing.analysis.identification.cmg_inertia import (
     fit_momentum_exchange,
     log_pieces,
 )
+from airbearing.analysis.identification.options import wheel_columns
 from airbearing.errors import InputError
 from airbearing.io.coerce import check_gyro_agrees, check_log_testbed
 from airbearing.io.log import Log
 from airbearing.io.testbed import Testbed
 
 __all__ = ["WheelIdentification", "identify_wheel_inertia", "wheel_columns"]
-
-
-def wheel_columns(testbed: Testbed) -> tuple[str, ...]:
-    """The log columns of ``testbed``'s wheels: ``ws1..wsn`` and ``wc1..wcn``."""
-    n = testbed.wheels.n if testbed.wheels is not None else 0
-    return tuple(f"ws{i}" for i in range(1, n + 1)) + tuple(f"wc{i}" for i in range(1, n + 1))
 
 
 @dataclass(frozen=True, eq=False, repr=False)

@@ -31,12 +31,12 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from airbearing import quaternion as quat
+from airbearing.analysis.filters import local_poly
 from airbearing.analysis.identification.data import RATE_DEGREE, RATE_HALF_WIDTH
 from airbearing.analysis.identification.data import log_quality as _quality
 from airbearing.analysis.identification.result import IdentificationResult
 from airbearing.analysis.shooting import ShootingProblem
 from airbearing.analysis.shooting.errors import honest_errors
-from airbearing.analysis.shooting.filters import local_poly
 from airbearing.analysis.shooting.logs import make_windows, replay_data
 from airbearing.errors import InputError
 from airbearing.io.coerce import check_gyro_agrees

@@ -55,7 +55,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from airbearing import quaternion as quat
-from airbearing.analysis.shooting.filters import local_poly
+from airbearing.analysis.filters import local_poly
 from airbearing.analysis.shooting.windows import WindowSet
 from airbearing.errors import InputError
 from airbearing.io.coerce import check_gyro_agrees
