@@ -87,3 +87,18 @@ def test_a_spring_held_10_percent_low_is_corrected_and_nothing_else_named(cmg, s
     found = discrepancy(cmg.replace(effects={"spring_torque": 0.9 * SPRING}), spring_slew)
     assert list(found.effects) == ["spring_torque"], found.verdict
     assert found.effects["spring_torque"] == pytest.approx(SPRING, rel=1e-4)
+
+
+def test_the_search_names_a_hidden_spring_and_nothing_else(cmg, spring_slew):
+    # the testbed does not hold the spring: the search's Model has it at zero, where the
+    # start yaw is a direction no fit fixes; the spring is fitted from the logged yaw, then
+    # refitted with the start yaws free, and the search goes on on that layout. Started at
+    # the logged yaw only it named 1.82e-4 and a false yaw_imbalance here (2.023e-4, 1.2 %
+    # high, with a false friction on the 40 s slew). A noise-free log: the truth within 3 of
+    # the search's own standard errors (1.3e-10 N m/rad), and within 1e-6 relative (the
+    # replay's resolution, 1e-7 rad/s, over the spring's torque)
+    found = discrepancy(cmg, spring_slew)
+    assert list(found.effects) == ["spring_torque"], found.verdict
+    value, std = found.effects["spring_torque"], found.effect_std["spring_torque"]
+    assert abs(value - SPRING) <= 3 * std, found.verdict
+    assert value == pytest.approx(SPRING, rel=1e-6)
