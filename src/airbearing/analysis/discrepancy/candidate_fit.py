@@ -148,7 +148,8 @@ def _on_fitted_yaw(search, lag, cand, fit, args, k_sel):
     fitted from the logged yaw (the search's Model holds it at zero, where the start yaw is a
     direction no fit fixes); only when that fit is significant (``MIN_SIGMAS`` standard
     errors from zero) is it refitted from there with the start yaws free (the better of the
-    two fits is kept; the refit is marked ``extra["start_yaw"]``). Once the search has
+    two fits is kept, the refit only where it identifies every value; it is marked
+    ``extra["start_yaw"]``). Once the search has
     named such an effect every fit is on that layout already (:attr:`_Search.yaw_fitted`).
     """
     p_base, S_all, lower, upper = args
@@ -173,6 +174,10 @@ def _on_fitted_yaw(search, lag, cand, fit, args, k_sel):
     except SolverError:
         return fit
     if not (yawed.rss <= fit.rss and np.all(np.isfinite(yawed.theta))):
+        return fit
+    # a start yaw the effect itself can absorb (``yaw_imbalance``: a common yaw offset is a
+    # turn of its direction) leaves a direction no fit fixes; the logged yaw's fit is as good
+    if yawed.not_identifiable or not np.all(np.isfinite(yawed.theta_std)):
         return fit
     return replace(yawed, extra={**yawed.extra, START_YAW: True})
 
