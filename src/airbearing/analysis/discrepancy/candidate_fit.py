@@ -177,7 +177,7 @@ def _on_fitted_yaw(search, lag, cand, fit, args, k_sel):
         return fit
     # a start yaw the effect itself can absorb (``yaw_imbalance``: a common yaw offset is a
     # turn of its direction) leaves a direction no fit fixes; the logged yaw's fit is as good
-    if yawed.not_identifiable or not np.all(np.isfinite(yawed.theta_std)):
+    if any(yawed.not_identifiable) or not np.all(np.isfinite(yawed.theta_std)):
         return fit
     return replace(yawed, extra={**yawed.extra, START_YAW: True})
 
