@@ -15,9 +15,20 @@ import numpy as np
 
 from airbearing.analysis.discrepancy.screen import screened, screened_lag, screened_scan
 from airbearing.analysis.discrepancy.starts import continuation_fit, needs_retry, start_json
-from airbearing.analysis.discrepancy.trial import cross_validate, failed, judge, lag_start, scan
+from airbearing.analysis.discrepancy.trial import (
+    MIN_SIGMAS,
+    cross_validate,
+    failed,
+    judge,
+    lag_start,
+    scan,
+)
 from airbearing.analysis.discrepancy.words import why
+from airbearing.analysis.shooting import yaw_acts
 from airbearing.errors import SolverError
+
+#: ``Fit.extra`` key of a candidate's fit whose windows fitted their start yaw.
+START_YAW = "start_yaw"
 
 
 def _try(search, cand, chosen, theta_chosen, current, current_lag, ln_n, starts, before, lin=None):
@@ -105,11 +116,17 @@ def _try(search, cand, chosen, theta_chosen, current, current_lag, ln_n, starts,
                 start = start_json(
                     "continuation", cand.value(th0), start_from=source, stages=fit.extra["stages"]
                 )
+            fit = _on_fitted_yaw(search, lag, cand, fit, (p_base, S_all, lower, upper), k_sel)
+            if fit.extra.get(START_YAW):
+                problem = search.problem(lag, yaw=True)
+                note += "; refitted with the windows' start yaw fitted (the effect acts on the yaw)"
     except SolverError as e:
         return failed(cand, "did not converge", str(e), start, before.total()[1])
     k_added = cand.k
     if cand.lag and not current_lag:
         k_added += len(model.lag_index) * problem.windows.n
+    if fit.extra.get(START_YAW):
+        k_added += search.start_yaws()
     heldout = cross_validate(problem, fit, k, search.folds)
     res = why(
         problem, judge(cand, fit, k_sel, current, ln_n, k_added, heldout, before, start, note)
@@ -119,6 +136,50 @@ def _try(search, cand, chosen, theta_chosen, current, current_lag, ln_n, starts,
         # that ends at the best gap is a candidate whatever IPOPT's status)
         res = replace(res, retried=True, retry_reason=retried, retry_failed=bool(left))
     return res
+
+
+def _on_fitted_yaw(search, lag, cand, fit, args, k_sel):
+    """``fit`` refitted with its windows' start yaw fitted when the candidate makes a yaw
+    torque act (dof 1: ``spring_torque``, ``yaw_imbalance``, a field), ``fit`` otherwise.
+
+    A dof-1 gyro log's yaw is the testbed's estimate (FORMATS.md; seed 001 eqs. 3 and 21),
+    which trails the plant's during a slew: a yaw torque taken at it is wrong by its error,
+    and the fit moves the candidate (and others) to make up for it. The candidate is first
+    fitted from the logged yaw (the search's Model holds it at zero, where the start yaw is a
+    direction no fit fixes); only when that fit is significant (``MIN_SIGMAS`` standard
+    errors from zero) is it refitted from there with the start yaws free (the better of the
+    two fits is kept, the refit only where it identifies every value; it is marked
+    ``extra["start_yaw"]``). Once the search has
+    named such an effect every fit is on that layout already (:attr:`_Search.yaw_fitted`).
+    """
+    p_base, S_all, lower, upper = args
+    if search.yaw_fitted or cand.lag or not np.all(np.isfinite(fit.theta)):
+        return fit
+    if not yaw_acts(search.model(lag), p_base + S_all @ fit.theta):
+        return fit
+    th, sd = np.asarray(fit.theta[k_sel:], float), np.asarray(fit.theta_std[k_sel:], float)
+    with np.errstate(invalid="ignore"):
+        if not np.any(np.abs(th) > MIN_SIGMAS * sd):
+            return fit
+    try:
+        yawed = search.problem(lag, yaw=True).fit(
+            p_base,
+            S_all,
+            np.clip(fit.theta, lower, upper),
+            lower=lower,
+            upper=upper,
+            delta0=search.delta_for(lag, fit, yaw=True, from_yaw=False),
+            name=f"candidate {cand.label}, start yaws fitted",
+        )
+    except SolverError:
+        return fit
+    if not (yawed.rss <= fit.rss and np.all(np.isfinite(yawed.theta))):
+        return fit
+    # a start yaw the effect itself can absorb (``yaw_imbalance``: a common yaw offset is a
+    # turn of its direction) leaves a direction no fit fixes; the logged yaw's fit is as good
+    if any(yawed.not_identifiable) or not np.all(np.isfinite(yawed.theta_std)):
+        return fit
+    return replace(yawed, extra={**yawed.extra, START_YAW: True})
 
 
 def _fit_or_retry(search, lag, cand, args, current, source, expl):

@@ -14,10 +14,16 @@ from dataclasses import replace
 
 import numpy as np
 
+from airbearing.analysis.discrepancy.candidate_fit import START_YAW
 from airbearing.analysis.discrepancy.honest import effect_errors, honest
 from airbearing.analysis.discrepancy.revise import close_alternatives, model_averaged_std, revise
 from airbearing.analysis.discrepancy.search_state import _Named, _Progress, _Search, _Selection
-from airbearing.analysis.discrepancy.selection import CONFOUND_BIC, _add_best, _round
+from airbearing.analysis.discrepancy.selection import (
+    CONFOUND_BIC,
+    _add_best,
+    _follow_layout,
+    _round,
+)
 from airbearing.analysis.discrepancy.trial import MIN_SIGMAS, CandidateResult
 from airbearing.analysis.discrepancy.words import experiment_for
 from airbearing.analysis.shooting import Fit
@@ -188,7 +194,10 @@ def _retry_round(search, sel, current, retry, noise, run) -> bool:
         )
     results = _round(search, sel, retry, screen, workers, prog)
     sel.rounds.append(tuple(results))
-    return _add_best(sel, results, prog)
+    added = _add_best(sel, results, prog)
+    if added:
+        _follow_layout(search, sel)
+    return added
 
 
 def _with_honest(search: _Search, res: CandidateResult) -> CandidateResult:
@@ -196,5 +205,7 @@ def _with_honest(search: _Search, res: CandidateResult) -> CandidateResult:
     if res.fit is None or res.value is None or res.candidate is None:
         return res
     k = len(res.fit.theta)
-    ee = effect_errors(res.candidate, honest(search.problem(res.candidate.lag), res.fit, k), 0)
+    # on the layout it was fitted on: the start yaws fitted or not (.candidate_fit)
+    problem = search.problem(res.candidate.lag, yaw=bool(res.fit.extra.get(START_YAW)))
+    ee = effect_errors(res.candidate, honest(problem, res.fit, k), 0)
     return replace(res, std=ee.std, std_white=ee.std_white, crlb=ee.crlb, efficiency=ee.efficiency)

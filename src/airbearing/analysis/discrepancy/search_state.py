@@ -18,7 +18,7 @@ from airbearing.analysis.discrepancy.candidates import universal_effects
 from airbearing.analysis.discrepancy.honest import Errors
 from airbearing.analysis.discrepancy.replay import model_for, problem_for
 from airbearing.analysis.discrepancy.trial import CV_FOLDS
-from airbearing.analysis.shooting import Fit, ShootingProblem
+from airbearing.analysis.shooting import Fit, ShootingProblem, fitting_start_yaw
 from airbearing.analysis.shooting.logs import MIN_WINDOW_SAMPLES, make_windows
 from airbearing.analysis.shooting.measurement_noise import set_measurement_noise
 from airbearing.analysis.shooting.process_noise import (
@@ -37,9 +37,14 @@ class _Search:
         self.cands, self.jit = cands, jit
         names = list(dict.fromkeys(c.name for c in cands if not c.lag))
         self.base_effects = universal_effects(testbed, names)
-        self.models = {False: model_for(testbed, self.base_effects)}
+        # the Models with every candidate at zero; their windows start at the logged yaw
+        self.logged = {False: model_for(testbed, self.base_effects)}
         if any(c.lag for c in cands):
-            self.models[True] = model_for(testbed, {**self.base_effects, "sensor_lag": 0.0})
+            self.logged[True] = model_for(testbed, {**self.base_effects, "sensor_lag": 0.0})
+        self._yaw_models: dict = {}
+        # a named effect makes a yaw torque act (dof 1): from then on every window fits its
+        # start yaw (a gyro log's yaw is the testbed's estimate, FORMATS.md), see model()
+        self.yaw_fitted = False
         self.problems: dict = {}
         self.kappa = None  # process-noise intensity of linked pieces (None: the grid's top)
         self.noise = None  # the coloured measurement noise estimated with it (None: white)
@@ -50,13 +55,44 @@ class _Search:
         folds = np.arange(windows.n) % min(windows.n, CV_FOLDS)
         self.folds = folds[rng.permutation(windows.n)]
 
-    def problem(self, lag: bool) -> ShootingProblem:
-        if lag not in self.problems:
-            self.problems[lag] = problem_for(
-                self.models[lag], self.datas, self.windows, self.floor, jit=self.jit,
+    def model(self, lag: bool, yaw: bool | None = None):
+        """The search's Model (with lag states when ``lag``), its windows fitting their start
+        yaw when ``yaw`` (default: :attr:`yaw_fitted`).
+
+        The Model holds every candidate at zero, where no torque depends on the yaw and a
+        fitted start yaw would be a direction no fit fixes (:func:`yaw_acts`); a fit that
+        moves a yaw torque away from zero (a ``spring_torque``) takes the same Model with
+        its windows' start yaw fitted (:func:`fitting_start_yaw`), as the replay does when
+        the testbed holds the torque."""
+        yaw = self.yaw_fitted if yaw is None else yaw
+        if not yaw:
+            return self.logged[lag]
+        if lag not in self._yaw_models:
+            self._yaw_models[lag] = fitting_start_yaw(self.logged[lag])
+        return self._yaw_models[lag]
+
+    @property
+    def models(self) -> dict:
+        """``{lag: Model}`` of the search's current layout (:meth:`model`)."""
+        return {lag: self.model(lag) for lag in self.logged}
+
+    def problem(self, lag: bool, yaw: bool | None = None) -> ShootingProblem:
+        """The shooting problem of :meth:`model` ``(lag, yaw)`` on the search's windows."""
+        yaw = self.yaw_fitted if yaw is None else yaw
+        if (lag, yaw) not in self.problems:
+            self.problems[lag, yaw] = problem_for(
+                self.model(lag, yaw), self.datas, self.windows, self.floor, jit=self.jit,
                 kappa=self.kappa, noise=self.noise,
             )  # fmt: skip
-        return self.problems[lag]
+        return self.problems[lag, yaw]
+
+    def start_yaws(self) -> int:
+        """Start yaws a fit on the fitted-yaw layout frees (:meth:`model`): one per segment
+        on linked pieces (their jumps are held at the attitude's resolution), one per window
+        otherwise."""
+        if self.windows.linked:
+            return len(np.unique(self.windows.segments()))
+        return self.windows.n
 
     def horizon(self, fit: Fit, lag: bool, chosen, theta, *, fresh: bool = False) -> Fit:
         """``fit`` refitted at the most likely process-noise intensity at or below the current
@@ -142,14 +178,21 @@ class _Search:
             cols.append(block)
         return np.hstack(cols) if cols else np.zeros((m.n_p, 0))
 
-    def delta_for(self, lag: bool, fit: Fit | None):
-        """Start of the window perturbations: the current fit's, lag entries at zero."""
+    def delta_for(self, lag: bool, fit: Fit | None, yaw: bool | None = None, from_yaw=None):
+        """Start of the window perturbations of :meth:`problem` ``(lag, yaw)``: those of
+        ``fit`` (made on the layout ``from_yaw``, default :attr:`yaw_fitted`), lag entries
+        and a start yaw it did not fit at zero (the logged yaw)."""
         if fit is None:
             return None
-        nd = self.problem(lag).n_delta
-        d = np.zeros((nd, self.windows.n))
-        n0 = min(nd, fit.delta.shape[0])
-        d[:n0] = fit.delta[:n0]
+        pb = self.problem(lag, yaw)
+        from_yaw = self.yaw_fitted if from_yaw is None else from_yaw
+        a_to, a_from = pb.n_att, self.problem(False, from_yaw).n_att
+        d = np.zeros((pb.n_delta, self.windows.n))
+        a = min(a_to, a_from)
+        d[:a] = fit.delta[:a]
+        rest = fit.delta[a_from:]
+        n = min(pb.n_delta - a_to, rest.shape[0])
+        d[a_to : a_to + n] = rest[:n]
         return d
 
 

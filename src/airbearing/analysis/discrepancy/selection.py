@@ -17,7 +17,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from airbearing.analysis.discrepancy.candidate_fit import _try
+from airbearing.analysis.discrepancy.candidate_fit import START_YAW, _try
 from airbearing.analysis.discrepancy.candidates import regression_start, residual_torque
 from airbearing.analysis.discrepancy.screen import MATTER_BIC, linearise
 from airbearing.analysis.discrepancy.search_state import _Progress, _Search, _Selection
@@ -95,6 +95,7 @@ def _select(search, nominal, max_effects, screen, workers, prog) -> _Selection:
         }
         if not _add_best(sel, results, prog):
             break
+        _follow_layout(search, sel)
     else:
         sel.stop_reason = (
             sel.stop_reason
@@ -207,6 +208,13 @@ def _at_best_gap(results: list) -> list:
             r = replace(r, nameable=False, reason=r.retry_reason)
         out.append(r)
     return out
+
+
+def _follow_layout(search: _Search, sel: _Selection) -> None:
+    """Once the pick's fit fitted its windows' start yaw (it makes a yaw torque act,
+    :func:`.candidate_fit._on_fitted_yaw`), the search goes on on that layout."""
+    if sel.current.extra.get(START_YAW):
+        search.yaw_fitted = True
 
 
 def _add_best(sel: _Selection, results, prog) -> bool:

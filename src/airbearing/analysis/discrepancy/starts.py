@@ -118,19 +118,20 @@ def needs_retry(fit, current, floor: float, explained: float) -> str:
 def _short_problem(search, lag: bool):
     """The shooting problem of the search's logs on ``CONTINUATION_WINDOW_S`` windows."""
     cache = search.__dict__.setdefault("_short_problems", {})
-    if lag not in cache:
+    key = (lag, search.yaw_fitted)  # the windows' layout follows the search's (.search_state)
+    if key not in cache:
         try:
             windows = make_windows(search.datas, window_s=CONTINUATION_WINDOW_S)
         except InputError:
             windows = None
-        cache[lag] = (
+        cache[key] = (
             None
             if windows is None or windows.n <= search.windows.n
             else problem_for(
                 search.models[lag], search.datas, windows, search.floor, jit=search.jit
             )
         )
-    return cache[lag]
+    return cache[key]
 
 
 def continuation_fit(search, lag, p_base, S_all, theta_start, lower, upper, label):

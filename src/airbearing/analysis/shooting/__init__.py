@@ -71,9 +71,11 @@ from airbearing.analysis.shooting.functions import (
     THETA_SLOTS,
     compiled,
     delta_layout,
+    fitting_start_yaw,
     jit_available,
     start_function,
     step_function,
+    yaw_acts,
 )
 from airbearing.analysis.shooting.problem import ShootingProblem
 from airbearing.analysis.shooting.windows import WindowSet
@@ -88,9 +90,11 @@ __all__ = [
     "classify_status",
     "compiled",
     "delta_layout",
+    "fitting_start_yaw",
     "jit_available",
     "null_space_basis",
     "start_function",
     "step_function",
     "theta_errors",
+    "yaw_acts",
 ]

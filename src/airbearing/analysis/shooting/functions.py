@@ -75,9 +75,11 @@ from airbearing.analysis.shooting.window_functions import (  # noqa: F401 (re-ex
     _step_functions,
     _window_functions,
     delta_layout,
+    fitting_start_yaw,
     layout_key,
     start_function,
     step_function,
+    yaw_acts,
 )
 
 #: Free-parameter slots of a fit: unused slots are fixed at zero, so every fit with up to

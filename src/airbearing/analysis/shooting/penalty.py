@@ -239,13 +239,17 @@ def _build_penalised(model, L, nw, K, outputs, substeps, jit, max_iter, objectiv
     h_rows = Hp.indices
     h_cols = np.repeat(np.arange(n_v), np.diff(Hp.indptr))
 
+    # a trial step far out (a candidate's wild iterate) may overflow: IPOPT takes the
+    # infinite objective as a failed step and backtracks, nothing to warn about
     def f(z):
         r = o.r_at(z)
-        return [0.5 * float(r @ r)]
+        with np.errstate(over="ignore", invalid="ignore"):
+            return [0.5 * float(r @ r)]
 
     def grad(z, _par):
         r, J = o.rj_at(z)
-        return [0.5 * float(r @ r), np.asarray(J.T @ r).ravel()]
+        with np.errstate(over="ignore", invalid="ignore"):
+            return [0.5 * float(r @ r), np.asarray(J.T @ r).ravel()]
 
     def hess(z, _par, lam_f, _lam_g):
         _, J = o.rj_at(z)

@@ -10,6 +10,7 @@ over these in :mod:`.problem_functions`.
 
 from __future__ import annotations
 
+import copy
 import weakref
 
 import casadi as ca
@@ -56,7 +57,7 @@ def delta_layout(model: Model, outputs: tuple) -> tuple[int, int, int]:
     if model.dof == 3:
         n_att = 3
     else:
-        n_att = 1 if "yaw" in outputs or yaw_acts(model) else 0
+        n_att = 1 if "yaw" in outputs or yaw_acts(model) or model in _START_YAW else 0
     n_rate = 3 if model.dof == 3 else 1
     return n_att, n_rate, len(model.lag_index)
 
@@ -70,28 +71,53 @@ def layout_key(model: Model, outputs: tuple) -> tuple:
 #: Points (yaw, rate, gimbals, inputs: unit normal draws) at which :func:`yaw_acts` looks.
 _YAW_PROBES = 3
 _YAW_ACTS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+#: Models whose windows fit their start yaw whatever their values (:func:`fitting_start_yaw`).
+_START_YAW: weakref.WeakSet = weakref.WeakSet()
 
 
-def yaw_acts(model: Model) -> bool:
+def yaw_acts(model: Model, p: np.ndarray | None = None) -> bool:
     """Whether a torque of a dof-1 Model depends on its yaw at its nominal parameters
-    ``p0`` (``spring_torque`` or ``yaw_imbalance`` with a non-zero value, a field's torque).
+    ``p0`` (``spring_torque`` or ``yaw_imbalance`` with a non-zero value, a field's torque),
+    or at the parameters ``p`` when given.
 
     Not the structure alone: a discrepancy search holds every candidate at zero in one
     Model, and a start yaw that nothing depends on would be a direction no fit can fix.
     """
     if model.dof != 1:
         return False
-    if model not in _YAW_ACTS:
-        x = ca.SX.sym("x", model.nx)
-        u, p = ca.SX.sym("u", model.nu), ca.SX.sym("p", model.n_p)
-        dxdy = ca.jacobian(model.f(x, u, p), x[model.index("yaw")[0]])
-        fn = ca.Function("dxdot_dyaw", [x, u, p], [dxdy])
-        rng = np.random.default_rng(0)
-        X = rng.standard_normal((model.nx, _YAW_PROBES))
-        U = rng.standard_normal((model.nu, _YAW_PROBES))
-        D = np.asarray(fn.map(_YAW_PROBES)(X, U, np.tile(model.p0[:, None], _YAW_PROBES)))
-        _YAW_ACTS[model] = bool(np.any(D != 0))
-    return _YAW_ACTS[model]
+    if p is None:
+        if model not in _YAW_ACTS:
+            _YAW_ACTS[model] = _depends_on_yaw(model, model.p0)
+        return _YAW_ACTS[model]
+    return _depends_on_yaw(model, np.asarray(p, dtype=float))
+
+
+def _depends_on_yaw(model: Model, p: np.ndarray) -> bool:
+    x = ca.SX.sym("x", model.nx)
+    u, ps = ca.SX.sym("u", model.nu), ca.SX.sym("p", model.n_p)
+    dxdy = ca.jacobian(model.f(x, u, ps), x[model.index("yaw")[0]])
+    fn = ca.Function("dxdot_dyaw", [x, u, ps], [dxdy])
+    rng = np.random.default_rng(0)
+    X = rng.standard_normal((model.nx, _YAW_PROBES))
+    U = rng.standard_normal((model.nu, _YAW_PROBES))
+    D = np.asarray(fn.map(_YAW_PROBES)(X, U, np.tile(p[:, None], _YAW_PROBES)))
+    return bool(np.any(D != 0))
+
+
+def fitting_start_yaw(model: Model) -> Model:
+    """``model`` (a dof-1 Model), as a copy whose windows fit their start yaw whatever its
+    nominal values (:func:`delta_layout`).
+
+    For a fit that moves a yaw torque away from the Model's nominal values (a discrepancy
+    search's candidate ``spring_torque``, held at zero in the Model): the start yaw is then
+    a direction the fit fixes, as long as the torque's value stays away from zero. The
+    same Model (itself) for dof 3 and for a Model whose yaw torque acts already.
+    """
+    if model.dof != 1 or yaw_acts(model) or model in _START_YAW:
+        return model
+    other = copy.copy(model)
+    _START_YAW.add(other)
+    return other
 
 
 def _window_functions(
