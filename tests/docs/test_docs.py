@@ -29,7 +29,7 @@ DOCS = ROOT / "docs"
 #: ``airbearing.__all__`` run once, in ``test_docstrings.py``).
 DOCTEST_MODULES = [
     "airbearing.design.loops",
-    "airbearing.analysis.identify",
+    "airbearing.analysis.identification.options",  # columns_used
 ]
 #: Tutorials and how-to pages whose Python blocks run here (the campaign tutorial starts a
 #: Dask cluster on a file the reader writes: its commands are tested in test_campaign*).
