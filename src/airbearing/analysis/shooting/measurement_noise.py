@@ -209,21 +209,25 @@ class _Linearised:
             self.Jm = sp.csc_matrix(lu.solve(J[:n].toarray()))
         else:
             self.rm, self.Jm = r[:n], J[:n]
-        self.rp, self.Jp = r[n:], J[n:]
+        self.rp, self.Jp = r[n:], sp.csc_matrix(J[n:])
+        # the defect rows do not depend on the measurement noise: their part of the Gram
+        # matrix and of the gradient once
+        self.Gp, self.gp = sp.csc_matrix(self.Jp.T @ self.Jp), self.Jp.T @ self.rp
         self.k = k
         self.problem = problem
 
     def loglik(self, ar: dict, dt: float) -> float:
         P, logdet = whitening(self.problem, ar, dt)
-        A = sp.vstack([P @ self.Jm, self.Jp]).tocsc()
-        b = np.r_[P @ self.rm, self.rp]
-        G = sp.csc_matrix(A.T @ A)
+        A = sp.csc_matrix(P @ self.Jm)  # the whitened measurement rows
+        b = P @ self.rm
+        G = sp.csc_matrix(A.T @ A + self.Gp)
         c = np.sqrt(np.maximum(G.diagonal(), 1e-300))
         Dc = sp.diags(1.0 / c)
-        step = solve_gram(Dc @ G @ Dc, (A.T @ b) / c) / c
-        e = b - A @ step
-        self.innovations = e[: self.rm.size]  # the whitened measurement rows after the step
-        Gd = start_yaw_profiled(self.problem, sp.csc_matrix((Dc @ G @ Dc)[self.k :, self.k :]))
+        Gs = sp.csc_matrix(Dc @ G @ Dc)
+        step = solve_gram(Gs, (A.T @ b + self.gp) / c) / c
+        self.innovations = e = b - A @ step  # the whitened measurement rows after the step
+        ep = self.rp - self.Jp @ step
+        Gd = start_yaw_profiled(self.problem, Gs[self.k :, self.k :])
         try:
             u = splu(sp.csc_matrix(Gd)).U.diagonal()
             ld = float(np.sum(np.log(np.abs(u)))) if np.all(u != 0) else np.inf
@@ -233,7 +237,7 @@ class _Linearised:
         if Gd.shape[0] < cd.size:  # the start yaws profiled out: their scales with them
             cd = np.delete(cd, np.arange(self.problem.windows.n) * self.problem.n_delta)
         ld += 2.0 * float(np.log(cd).sum())
-        return float(-0.5 * (e @ e) + logdet - 0.5 * ld)
+        return float(-0.5 * (e @ e + ep @ ep) + logdet - 0.5 * ld)
 
 
 def _max_phi(problem, dt: float) -> float:
