@@ -157,7 +157,7 @@ def whitening(problem, ar: dict, dt: float):
     """
     n = problem.n_meas
     diag = np.ones(n)
-    rows_o, cols_o, vals_o = [], [], []
+    vals_o = []
     series = _series(problem)
     for group, (phi, s) in ar.items():
         model = AR(phi=np.array([float(phi)]), s=float(s))
@@ -166,19 +166,31 @@ def whitening(problem, ar: dict, dt: float):
                 continue
             d, sub = model.whitening_rows(t, dt)
             diag[rows] = d
-            rows_o.append(rows[1:])
-            cols_o.append(rows[:-1])
             vals_o.append(sub)
-    off = (
-        sp.csc_matrix(
-            (np.concatenate(vals_o), (np.concatenate(rows_o), np.concatenate(cols_o))),
-            shape=(n, n),
-        )
-        if rows_o
-        else sp.csc_matrix((n, n))
+    order, indices, indptr = _whitening_pattern(problem, tuple(ar))
+    P = sp.csc_matrix(
+        (np.concatenate([diag, *vals_o])[order], indices.copy(), indptr.copy()), shape=(n, n)
     )
-    P = (sp.diags(diag) + off).tocsc()
     return P, float(np.sum(np.log(diag)))
+
+
+def _whitening_pattern(problem, groups: tuple):
+    """``(order, indices, indptr)``: the CSC structure of :func:`whitening`'s ``P`` when
+    ``groups`` are coloured (the diagonal, then each series' subdiagonal in the order
+    :func:`whitening` makes their values; ``order`` sorts those values into it). Kept on the
+    problem: the noise estimate's likelihoods change the values only."""
+    cache = problem.__dict__.setdefault("_whitening_patterns", {})
+    if groups not in cache:
+        n = problem.n_meas
+        series = _series(problem)
+        rows_o = [rows[1:] for g in groups for rows, _ in series.get(g, []) if rows.size]
+        cols_o = [rows[:-1] for g in groups for rows, _ in series.get(g, []) if rows.size]
+        r = np.concatenate([np.arange(n), *rows_o]).astype(np.int64)
+        c = np.concatenate([np.arange(n), *cols_o]).astype(np.int64)
+        order = np.lexsort((r, c))
+        indptr = np.r_[0, np.cumsum(np.bincount(c, minlength=n))]
+        cache[groups] = (order, r[order], indptr)
+    return cache[groups]
 
 
 def set_measurement_noise(problem, noise: MeasurementNoise | None) -> None:
