@@ -164,3 +164,28 @@ def test_a_window_longer_than_every_segment_is_as_long_as_the_longest_segment():
     for linked in (False, True):
         ws = make_windows(datas, window_s=1e6, linked=linked)
         assert ws.u.shape[:2] == (2, 300), ws.u.shape
+
+
+def test_a_fit_from_the_last_answer_reuses_its_jacobian_and_finds_the_same_fit():
+    prob, model, S = _problem([_coast(1.2, 2e-4, 30.0, 5)])
+    set_intensity(prob, KAPPA_GRID[1])
+    prob.reuse_last = True
+    first = prob.fit(model.p0, S, np.zeros(1), name="first")
+    # kept at the answer: the next fit's start ([theta, unused slots, vec(delta)])
+    at = prob._last[0][0]
+    assert at[0] == first.theta[0] and np.array_equal(at[-first.delta.size :],
+                                                      first.delta.ravel(order="F"))  # fmt: skip
+    set_intensity(prob, KAPPA_GRID[3])  # the descent's next intensity, from that answer
+    kept = prob.fit(model.p0, S, first.theta, delta0=first.delta, name="kept")
+    prob.reuse_last = False
+    prob.forget_last()
+    fresh = prob.fit(model.p0, S, first.theta, delta0=first.delta, name="fresh")
+    # the start's Jacobian is the same numbers whether kept or evaluated again (the first
+    # iterate's at most an ulp of the start away): the same fit to round-off
+    assert kept.theta[0] == pytest.approx(fresh.theta[0], rel=1e-9)
+    assert np.allclose(kept.delta, fresh.delta, rtol=1e-9, atol=1e-12)
+    assert kept.rss == pytest.approx(fresh.rss, rel=1e-9)
+    # the descent keeps nothing once done (a Jacobian is 100s of MB on an hour of samples)
+    estimate_process_noise(prob, model.p0, S, first.theta, delta0=first.delta,
+                           measurement=False)  # fmt: skip
+    assert prob._last is None and not prob.reuse_last

@@ -157,7 +157,7 @@ def whitening(problem, ar: dict, dt: float):
     """
     n = problem.n_meas
     diag = np.ones(n)
-    rows_o, cols_o, vals_o = [], [], []
+    vals_o = []
     series = _series(problem)
     for group, (phi, s) in ar.items():
         model = AR(phi=np.array([float(phi)]), s=float(s))
@@ -166,19 +166,31 @@ def whitening(problem, ar: dict, dt: float):
                 continue
             d, sub = model.whitening_rows(t, dt)
             diag[rows] = d
-            rows_o.append(rows[1:])
-            cols_o.append(rows[:-1])
             vals_o.append(sub)
-    off = (
-        sp.csc_matrix(
-            (np.concatenate(vals_o), (np.concatenate(rows_o), np.concatenate(cols_o))),
-            shape=(n, n),
-        )
-        if rows_o
-        else sp.csc_matrix((n, n))
+    order, indices, indptr = _whitening_pattern(problem, tuple(ar))
+    P = sp.csc_matrix(
+        (np.concatenate([diag, *vals_o])[order], indices.copy(), indptr.copy()), shape=(n, n)
     )
-    P = (sp.diags(diag) + off).tocsc()
     return P, float(np.sum(np.log(diag)))
+
+
+def _whitening_pattern(problem, groups: tuple):
+    """``(order, indices, indptr)``: the CSC structure of :func:`whitening`'s ``P`` when
+    ``groups`` are coloured (the diagonal, then each series' subdiagonal in the order
+    :func:`whitening` makes their values; ``order`` sorts those values into it). Kept on the
+    problem: the noise estimate's likelihoods change the values only."""
+    cache = problem.__dict__.setdefault("_whitening_patterns", {})
+    if groups not in cache:
+        n = problem.n_meas
+        series = _series(problem)
+        rows_o = [rows[1:] for g in groups for rows, _ in series.get(g, []) if rows.size]
+        cols_o = [rows[:-1] for g in groups for rows, _ in series.get(g, []) if rows.size]
+        r = np.concatenate([np.arange(n), *rows_o]).astype(np.int64)
+        c = np.concatenate([np.arange(n), *cols_o]).astype(np.int64)
+        order = np.lexsort((r, c))
+        indptr = np.r_[0, np.cumsum(np.bincount(c, minlength=n))]
+        cache[groups] = (order, r[order], indptr)
+    return cache[groups]
 
 
 def set_measurement_noise(problem, noise: MeasurementNoise | None) -> None:
@@ -209,21 +221,25 @@ class _Linearised:
             self.Jm = sp.csc_matrix(lu.solve(J[:n].toarray()))
         else:
             self.rm, self.Jm = r[:n], J[:n]
-        self.rp, self.Jp = r[n:], J[n:]
+        self.rp, self.Jp = r[n:], sp.csc_matrix(J[n:])
+        # the defect rows do not depend on the measurement noise: their part of the Gram
+        # matrix and of the gradient once
+        self.Gp, self.gp = sp.csc_matrix(self.Jp.T @ self.Jp), self.Jp.T @ self.rp
         self.k = k
         self.problem = problem
 
     def loglik(self, ar: dict, dt: float) -> float:
         P, logdet = whitening(self.problem, ar, dt)
-        A = sp.vstack([P @ self.Jm, self.Jp]).tocsc()
-        b = np.r_[P @ self.rm, self.rp]
-        G = sp.csc_matrix(A.T @ A)
+        A = sp.csc_matrix(P @ self.Jm)  # the whitened measurement rows
+        b = P @ self.rm
+        G = sp.csc_matrix(A.T @ A + self.Gp)
         c = np.sqrt(np.maximum(G.diagonal(), 1e-300))
         Dc = sp.diags(1.0 / c)
-        step = solve_gram(Dc @ G @ Dc, (A.T @ b) / c) / c
-        e = b - A @ step
-        self.innovations = e[: self.rm.size]  # the whitened measurement rows after the step
-        Gd = start_yaw_profiled(self.problem, sp.csc_matrix((Dc @ G @ Dc)[self.k :, self.k :]))
+        Gs = sp.csc_matrix(Dc @ G @ Dc)
+        step = solve_gram(Gs, (A.T @ b + self.gp) / c) / c
+        self.innovations = e = b - A @ step  # the whitened measurement rows after the step
+        ep = self.rp - self.Jp @ step
+        Gd = start_yaw_profiled(self.problem, Gs[self.k :, self.k :])
         try:
             u = splu(sp.csc_matrix(Gd)).U.diagonal()
             ld = float(np.sum(np.log(np.abs(u)))) if np.all(u != 0) else np.inf
@@ -233,7 +249,7 @@ class _Linearised:
         if Gd.shape[0] < cd.size:  # the start yaws profiled out: their scales with them
             cd = np.delete(cd, np.arange(self.problem.windows.n) * self.problem.n_delta)
         ld += 2.0 * float(np.log(cd).sum())
-        return float(-0.5 * (e @ e) + logdet - 0.5 * ld)
+        return float(-0.5 * (e @ e + ep @ ep) + logdet - 0.5 * ld)
 
 
 def _max_phi(problem, dt: float) -> float:

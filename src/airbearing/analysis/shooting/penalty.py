@@ -169,39 +169,57 @@ def start_yaw_profiled(problem, G):
 
 
 class _PenalisedOracle:
-    """Stacked residual ``[r; W c]`` and its Jacobian at the last iterate."""
+    """Stacked residual ``[r; W c]`` and its Jacobian at the last iterate.
+
+    ``raw``: the window Jacobian's own output ``(rm, Jm, c, Jc)`` of the last iterate's
+    ``(r, J)`` (before the whitening and the column scaling), kept when ``keep_raw`` is set
+    (:meth:`.ShootingProblem.fit` hands it to the next fit from the same point)."""
 
     def __init__(self, fr, fj, n_v: int) -> None:
         self.fr, self.fj, self.n_v = fr, fj, n_v
-        self.z = self.r = self.J = None
+        self.z = self.r = self.J = self.raw = None
+        self.keep_raw = False
 
-    def set(self, p_base, S, scale, data, W, P=None) -> None:
+    def set(self, p_base, S, scale, data, W, P=None, keep_raw=False) -> None:
         self.pb, self.S, self.scale, self.data, self.W = p_base, S, scale, data, W
         self.P = P  # whitening of the measurement rows (coloured noise), or None
-        self.z = None
+        self.keep_raw = keep_raw
+        self.z = self.raw = None
+
+    def prime(self, z, raw) -> None:
+        """``(r, J)`` at ``z`` from the window Jacobian's output ``raw`` there (the fit's
+        start, evaluated already for its column scaling): IPOPT's first iterate then costs
+        no evaluation."""
+        self.z = np.array(z, dtype=float)
+        self._stack(raw)
 
     def release(self) -> None:
         """Forget the last iterate (its Jacobian is large on long logs; the cached solver
         keeps this oracle)."""
-        self.z = self.r = self.J = None
+        self.z = self.r = self.J = self.raw = None
         if hasattr(self, "Jc"):
             self.c = self.Jc = None
+
+    def _stack(self, raw) -> None:
+        rm, Jm, c, Jc = raw
+        self.raw = raw if self.keep_raw else None
+        if self.P is not None:
+            rm, Jm = self.P @ rm, self.P @ Jm
+        self.r = np.r_[rm, self.W @ c]
+        self.J = scale_columns(vstack_csc(Jm, self.W @ Jc), self.scale)
 
     def r_at(self, z):
         if self.z is None or not np.array_equal(z, self.z):
             rm, c = evaluate(self.fr, z * self.scale, self.pb, self.S, self.data)
-            self.z, self.J = z.copy(), None
+            self.z, self.J, self.raw = z.copy(), None, None
             self.r = np.r_[rm if self.P is None else self.P @ rm, self.W @ c]
         return self.r
 
     def rj_at(self, z):
         if self.z is None or self.J is None or not np.array_equal(z, self.z):
-            rm, Jm, c, Jc = self.fj(z * self.scale, self.pb, self.S, self.data)
+            raw = self.fj(z * self.scale, self.pb, self.S, self.data)
             self.z = z.copy()
-            if self.P is not None:
-                rm, Jm = self.P @ rm, self.P @ Jm
-            self.r = np.r_[rm, self.W @ c]
-            self.J = scale_columns(vstack_csc(Jm, self.W @ Jc), self.scale)
+            self._stack(raw)
         return self.r, self.J
 
 

@@ -108,6 +108,12 @@ class ShootingProblem:
         self.meas_logdet = 0.0
         self.measurement_noise = None
         self._meas_lu = None
+        #: keep the window Jacobian at a penalised fit's answer for the next fit that starts
+        #: there (set by the process-noise descent: each intensity starts where the last
+        #: ended, so its column scaling costs no evaluation)
+        self.reuse_last = False
+        self._last = None  # ((v, p_base, S, data), (rm, Jm, c, Jc)) of that answer
+        self._start_raw = None  # the same at a fit's start, for its solver's first iterate
         self.sample = np.tile(wrow, nw) + np.repeat(np.arange(nw) * L, group.size)
         self.usable = windows.weight.reshape(-1)[self.sample] > 0
         self.n_res = int(self.usable.sum())
@@ -168,16 +174,19 @@ class ShootingProblem:
         K = max(self.theta_slots, k)
         return np.hstack([S, np.zeros((S.shape[0], K - k))]), K
 
-    def _eval(self, which: int, v, p_base, S):
+    def _eval(self, which: int, v, p_base, S, raw=None):
         """``which`` 0: the residual (ndarray); 1: ``(r, J)`` (``J`` scipy CSC); 2: the
         outputs ``(ny, L n_windows)``. Linked windows: the measurement rows, and with
-        process noise the whitened defects after them."""
+        process noise the whitened defects after them. ``raw``: the window Jacobian's
+        output at ``v`` already evaluated (``which`` 1)."""
         key = self._key(S.shape[1])
         if which == 2:
             fy = _problem_functions(*key, self.link)[2]
             return evaluate(fy, v, p_base, S, self._data)[0].reshape(fy.size_out(0), order="F")
         if which == 0:
             out = evaluate(_problem_functions(*key, self.link)[0], v, p_base, S, self._data)
+        elif raw is not None:
+            out = raw
         else:
             out = window_jacobian(*key, self.link)(v, p_base, S, self._data)
         if not (self.link and self.penalty is not None):
@@ -191,6 +200,23 @@ class ShootingProblem:
         if P is not None:
             rm, Jm = P @ rm, P @ Jm
         return np.r_[rm, self.penalty @ c], vstack_csc(Jm, self.penalty @ Jc)
+
+    def _linked_raw(self, v, p_base, S):
+        """The window Jacobian's output ``(rm, Jm, c, Jc)`` on linked windows at ``v``: the
+        one kept at the last penalised fit's answer (:attr:`reuse_last`) when ``v`` is that
+        answer, with the same parameters and data; else evaluated."""
+        if self._last is not None:
+            at, raw = self._last
+            if all(
+                a.shape == b.shape and np.array_equal(a, b)
+                for a, b in zip(at, (v, p_base, S, self._data), strict=True)
+            ):
+                return raw
+        return window_jacobian(*self._key(S.shape[1]), True)(v, p_base, S, self._data)
+
+    def forget_last(self) -> None:
+        """Drop the window Jacobian kept at the last answer (:attr:`reuse_last`)."""
+        self._last = None
 
     def _v(self, delta, S, theta=None):
         Sp, K = self._pad(np.zeros((self.model.n_p, 0)) if S is None else S)
@@ -341,8 +367,14 @@ class ShootingProblem:
             ub[:k] = upper
         lb[k:K] = ub[k:K] = 0.0  # unused slots
         v0 = np.clip(v0, lb, ub)
-        r0, J0 = self._eval(1, v0, p_base, Sp)
+        raw = None
+        if self.link and self.penalty is not None:
+            # kept for the solver's first iterate (:meth:`_solve`): the same point
+            raw = self._start_raw = self._linked_raw(v0, p_base, Sp)
+        r0, J0 = self._eval(1, v0, p_base, Sp, raw)
+        del raw
         if not np.all(np.isfinite(r0)):
+            self._start_raw = None
             raise SolverError(f"{name}: the replay is not finite at the starting point")
         col = np.sqrt(np.asarray(J0.power(2).sum(axis=0)).ravel())
         del J0  # an hour of samples: the Jacobian is 100s of MB
@@ -361,9 +393,17 @@ class ShootingProblem:
                 raise ValueError("process noise and inequality constraints together")
             solver, _keep = penalised_solver(*self._key(K), mi, self.objective_stop)
             oracle = _keep[-1]
-            oracle.set(p_base, Sp, scale, self._data, self.penalty, self.meas_whitening)
+            oracle.set(p_base, Sp, scale, self._data, self.penalty, self.meas_whitening,
+                       keep_raw=self.reuse_last)  # fmt: skip
+            raw0, self._start_raw = self._start_raw, None
+            if raw0 is not None:
+                oracle.prime(x0, raw0)
+            del raw0
             z = solver(x0=x0, lbx=lbx, ubx=ubx)["x"].full().ravel()
             r, J = oracle.rj_at(z)
+            if self.reuse_last and oracle.raw is not None:
+                at = (z * scale, p_base.copy(), Sp.copy(), self._data.copy())
+                self._last = (at, oracle.raw)
             oracle.release()
             return z, solver.stats(), r, unscale_columns(J, scale), None
         if n_link or n_ineq:

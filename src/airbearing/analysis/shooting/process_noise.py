@@ -198,6 +198,18 @@ def estimate_process_noise(
         The fit at the most likely intensity; ``fit.extra["process_noise"]`` is the
         :class:`ProcessNoise`, and ``problem`` is left at that intensity.
     """
+    # each fit starts where the last ended: its start's Jacobian is the last one's answer's
+    problem.reuse_last = True
+    try:
+        return _estimate(problem, p_base, S, theta0, lower, upper, delta0, name, grid, start,
+                         measurement)  # fmt: skip
+    finally:
+        problem.reuse_last = False
+        problem.forget_last()
+
+
+def _estimate(problem, p_base, S, theta0, lower, upper, delta0, name, grid, start, measurement):
+    """:func:`estimate_process_noise` (its arguments in order)."""
     k = 0 if S is None else np.asarray(S).shape[1]
 
     def fit_at(kappa, th, d):
