@@ -499,7 +499,6 @@ def _accurate_run(model, controller, n, vibration, z0, V, p, sigmas):
             RuntimeWarning,
             stacklevel=3,
         )
-
     return x, R, np.asarray(TRUTH_LEVELS)[level]
 
 

@@ -208,7 +208,7 @@ def raise_levels(errors, tolerance, level, n_levels: int):
     )
     if share.sum() <= 1:
         return None
-    up = np.flatnonzero(level < n_levels - 1)
+    up = np.flatnonzero((level < n_levels - 1) & (share > 0))
     if not up.size:
         return None
     order = up[np.argsort(-share[up])]
