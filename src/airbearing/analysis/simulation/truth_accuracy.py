@@ -6,14 +6,16 @@ error over a segment is within the output noise, never below the 1e-6 rad resolu
 the square root of the segment's samples). The truth must be integrated well below that,
 or the replay fits the simulator's own integration error. A fixed four sub-steps per
 sample left seed 000's tabletop, spun at 2 rad/s with Coulomb friction and a noise-free
-attitude, 5e-6 rad off over 120 s against a tolerance of 2e-8 rad: the friction's sign,
-smoothed within 1e-3 rad/s, switches within a fraction of a sub-step whenever a body rate
-crosses zero, and RK4 converges slowly until the sub-step resolves it.
+attitude, 5e-6 rad off over 120 s (summed step-doubling errors) against a tolerance of
+2e-8 rad, and put both frictions a discrepancy search found on a 60 s log 6 of their std
+off: the friction's sign, smoothed within 1e-3 rad/s, switches within a fraction of a
+sub-step whenever a body rate crosses zero, and RK4 converges slowly until the sub-step
+resolves it.
 
 The sub-steps are chosen per sample, from levels of :data:`TRUTH_LEVELS`:
 :func:`sample_errors` measures each sample's error by step doubling (the sample integrated
-again from its true state with twice its sub-steps, 16/15 of the difference of the
-measured outputs); the run's error is their sum (an integration error grows along the
+again from its true state with twice its sub-steps, 16/15 of the difference of its
+attitude and body rates); the run's error is their sum (an integration error grows along the
 trajectory) and :func:`truth_tolerance` what it may be; :func:`raise_levels` refines the
 samples that carry the most of it (at a Coulomb friction's zero crossings) until it is met.
 """
@@ -47,8 +49,9 @@ __all__ = [
 TRUTH_ACCURACY = 0.1
 
 #: RK4 sub-steps per sample of each level (a run starts at the first). Each level divides
-#: a smooth motion's error by 256; seed 000's tabletop spun at 2 rad/s with Coulomb friction
-#: and noise-free sensors needs 256 at 20 Hz on the samples where a rate crosses zero.
+#: a smooth motion's error by 256; seed 000's tabletop spun at 2 rad/s for 120 s with
+#: Coulomb friction and a noise-free attitude takes 64 on most samples at 20 Hz, 256 on the
+#: few where a rate crosses zero.
 TRUTH_LEVELS = (4, 16, 64, 256)
 
 #: A refinement aims at this fraction of the tolerance (it assumes RK4's asymptotic rate,
