@@ -23,6 +23,7 @@ import pandas as pd
 from airbearing import quaternion as quat
 from airbearing.analysis.simulation.summary import free_summary
 from airbearing.analysis.simulation.truth_accuracy import (
+    MIN_GAIN,
     TRUTH_LEVELS,
     level_step,
     raise_levels,
@@ -479,6 +480,7 @@ def _accurate_run(model, controller, n, vibration, z0, V, p, sigmas):
     tol = truth_tolerance(model, n, sigmas[0], sigmas[model.y_names.index("wz")])
     inputs = slice(model.nx + model.ny, model.nx + model.ny + model.nu)
     level = np.zeros(n, dtype=int)
+    before = np.inf
     while True:
         used = TRUTH_LEVELS[: level.max() + 1]  # only the levels in use are built
         if level.any():
@@ -486,6 +488,10 @@ def _accurate_run(model, controller, n, vibration, z0, V, p, sigmas):
         else:  # the plain loop (its compiled code shared with a fixed number)
             x, R = _run(model, controller, n, used[0], vibration, z0, V, p)
         err = sample_errors(model, x, R[:, inputs], p, used, level)
+        share = sum(float(e.sum()) / t for e, t in zip(err, tol, strict=True) if np.isfinite(t))
+        if share > before / MIN_GAIN:  # not smooth on the sub-step's scale: more do not pay
+            break
+        before = share
         new = raise_levels(err, tol, level, len(TRUTH_LEVELS))
         if new is None:
             break
@@ -495,7 +501,8 @@ def _accurate_run(model, controller, n, vibration, z0, V, p, sigmas):
         warnings.warn(
             f"simulate: the truth's integration error over the run ({total[0]:.3g} rad, "
             f"{total[1]:.3g} rad/s) stays above its tolerance ({tol[0]:.3g} rad, "
-            f"{tol[1]:.3g} rad/s) at up to {TRUTH_LEVELS[-1]} RK4 sub-steps per sample",
+            f"{tol[1]:.3g} rad/s) at up to {int(TRUTH_LEVELS[level.max()])} RK4 sub-steps per "
+            "sample",
             RuntimeWarning,
             stacklevel=3,
         )

@@ -34,6 +34,7 @@ from airbearing.models.compiled import compiled
 from airbearing.models.model import Model
 
 __all__ = [
+    "MIN_GAIN",
     "TRUTH_ACCURACY",
     "TRUTH_LEVELS",
     "level_step",
@@ -53,6 +54,11 @@ TRUTH_ACCURACY = 0.1
 #: Coulomb friction and a noise-free attitude takes 64 on most samples at 20 Hz, 256 on the
 #: few where a rate crosses zero.
 TRUTH_LEVELS = (4, 16, 64, 256)
+
+#: A refinement that divides the run's error by less than this stops there (with a
+#: RuntimeWarning): the motion is not smooth on the sub-step's scale (a wheel's speed loop
+#: at its torque limit), and more sub-steps are not what makes it exact.
+MIN_GAIN = 4.0
 
 #: A refinement aims at this fraction of the tolerance (it assumes RK4's asymptotic rate,
 #: which a smoothed Coulomb sign only reaches at fine sub-steps).
