@@ -140,7 +140,7 @@ def level_step(model: Model, levels: tuple[int, ...]) -> ca.Function:
     return ca.Function("step_levels", [i, x, u, p], [out], ["level", "x", "u", "p"], ["x_next"])
 
 
-def sample_errors(model: Model, x, u, p, levels: tuple[int, ...], level=None):
+def sample_errors(model: Model, x, u, p, levels: tuple[int, ...], level=None, *, bound=False):
     """Each sample's integration error, by step doubling.
 
     Each sample is integrated again from its true state with twice its RK4 sub-steps (the
@@ -163,6 +163,10 @@ def sample_errors(model: Model, x, u, p, levels: tuple[int, ...], level=None):
         RK4 sub-steps per sample of each level.
     level : ndarray (N,) of int, optional
         Each sample's level (default all 0).
+    bound : bool
+        Instead, a cheaper bound: the difference from the sample integrated with half its
+        sub-steps (even numbers), which is at least the error at any order of convergence
+        >= 1 (four times cheaper to check; 15 times the error at RK4's rate).
 
     Returns
     -------
@@ -172,7 +176,8 @@ def sample_errors(model: Model, x, u, p, levels: tuple[int, ...], level=None):
     """
     n = u.shape[0]
     level = np.zeros(n) if level is None else np.asarray(level, dtype=float)
-    step = level_step(model, tuple(2 * k for k in levels)).map(n)
+    other = tuple(k // 2 if bound else 2 * k for k in levels)
+    step = level_step(model, other).map(n)
     fine = np.asarray(step(level[None, :], x[:-1].T, u.T, p)).T
     coarse = x[1:]
     if model.dof == 3:
@@ -184,7 +189,8 @@ def sample_errors(model: Model, x, u, p, levels: tuple[int, ...], level=None):
         att = np.abs(coarse[:, yaw] - fine[:, yaw])
         w = model.index(["wz"])
     rate = np.max(np.abs(coarse[:, w] - fine[:, w]), axis=1)
-    return 16 / 15 * att, 16 / 15 * rate
+    scale = 1.0 if bound else 16 / 15
+    return scale * att, scale * rate
 
 
 def raise_levels(errors, tolerance, level, n_levels: int):
