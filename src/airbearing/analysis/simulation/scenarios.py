@@ -402,6 +402,7 @@ def free_oscillation(
     noise: bool = True,
     attitude_noise: float | None = None,
     model: Model | None = None,
+    substeps: int | None = None,
 ) -> SimResult:
     """Free motion with inputs held: sliders at ``sliders`` (m), no dipole, the cage field on.
 
@@ -435,6 +436,8 @@ def free_oscillation(
     model : Model, optional
         The Model to run, default ``build_model(testbed, effects)``; a campaign passes one
         Model per structure with this run's values in ``p0``, and reuses its compiled loop.
+    substeps : int, optional
+        RK4 sub-steps per sample (default: as many as the truth needs, :func:`simulate`).
 
     Returns
     -------
@@ -477,6 +480,7 @@ def free_oscillation(
         seed=seed,
         noise=noise,
         attitude_noise=attitude_noise,
+        substeps=substeps,
     )
 
 

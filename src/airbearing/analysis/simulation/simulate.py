@@ -5,10 +5,14 @@ accelerometer and attitude noise with an explicit seed), the controller turns it
 into an input ``u_k``, a disturbance torque is added, and the plant is integrated
 over ``[t_k, t_k + dt)`` with ``u_k`` held (zero-order hold) by fixed-step RK4.
 The loop over all samples is one CasADi ``mapaccum`` Function, evaluated in C++.
+By default the number of RK4 sub-steps is chosen by the run's own integration error
+(:mod:`~airbearing.analysis.simulation.truth_accuracy`): the truth is integrated well below
+what a replay of its log resolves.
 """
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass, field
 from functools import lru_cache
 
@@ -18,6 +22,14 @@ import pandas as pd
 
 from airbearing import quaternion as quat
 from airbearing.analysis.simulation.summary import free_summary
+from airbearing.analysis.simulation.truth_accuracy import (
+    MIN_GAIN,
+    TRUTH_LEVELS,
+    level_step,
+    raise_levels,
+    sample_errors,
+    truth_tolerance,
+)
 from airbearing.design.controller import Controller
 from airbearing.errors import InputError
 from airbearing.io.log import Log
@@ -63,6 +75,8 @@ class SimResult:
         The plant that was simulated.
     controller : Controller
         The controller that closed the loop.
+    substeps : ndarray (N,) of int
+        RK4 sub-steps of each sample (:func:`simulate`'s choice, or the number given).
 
     Examples
     --------
@@ -89,6 +103,7 @@ class SimResult:
     model: Model = field(repr=False)
     controller: Controller = field(repr=False)
     reference: np.ndarray = field(repr=False)
+    substeps: np.ndarray | None = field(default=None, repr=False)
 
     def __repr__(self) -> str:
         return (
@@ -271,7 +286,11 @@ def vibration_draws(vib: dict, unit: np.ndarray) -> np.ndarray:
 
 @lru_cache(maxsize=32)
 def closed_loop_rollout(
-    model: Model, controller: Controller, n: int, substeps: int = 4, vibration: bool = False
+    model: Model,
+    controller: Controller,
+    n: int,
+    substeps: int | tuple[int, ...] = 4,
+    vibration: bool = False,
 ):
     """The compiled closed loop over ``n`` samples.
 
@@ -284,9 +303,13 @@ def closed_loop_rollout(
     ``z`` ends with the vibration's 5 states (zeros at the start) and each column of
     ``V`` with 9 scaled draws (gyro, accelerometer, torque; :func:`vibration_draws`): the
     compiled loop holds no vibration value, only whether there is vibration.
+    ``substeps``: RK4 sub-steps per sample, or a tuple of them, one per level: then each
+    column of ``V`` ends with the level of its sample (0, 1, ...; a CasADi switch evaluates
+    only that level's step; a ``mapaccum`` at any ``n``).
     """
     dt = model.testbed.sensors.dt
-    step = model.step(dt, substeps)
+    levels = substeps if isinstance(substeps, tuple) else None
+    step = model.step(dt, substeps) if levels is None else None
     fn = controller.function
     nx, nc = model.nx, controller.c0.size
     nref = len(controller.ref_names)
@@ -319,6 +342,11 @@ def closed_loop_rollout(
         z_vib = [s_now, speed, ca.DM.ones(1)]
     for j, i in enumerate(tau_idx):
         u_applied[i] = u_applied[i] + torque[j]
+    if levels is not None:
+        one = _levelled_step(model, levels, [z, v, p, g], x, u_applied, [c_next, *z_vib],
+                             ca.vertcat(x, y, u_applied, extra))  # fmt: skip
+        # (its finer levels call compiled steps: the loop stays a mapaccum at any length)
+        return one.mapaccum("closed_loop", n, [0], [0])
     x_next = step(x, u_applied, p)
     one = ca.Function(
         "closed_loop_step",
@@ -330,6 +358,19 @@ def closed_loop_rollout(
     if n >= LOOP_MIN_STEPS:  # long runs: compiled chunks, cached on disk (models/loop.py)
         return ChunkedLoop(one, n)
     return one.mapaccum("closed_loop", n, [0], [0])
+
+
+def _levelled_step(model, levels, args, x, u_applied, carried, row):
+    """The closed loop's one step with the plant advanced at a level per sample: the SX part
+    (measurement, controller) as one Function, the switch of :func:`level_step` after it."""
+    pre = ca.Function("closed_loop_pre", args, [x, u_applied, ca.vertcat(*carried), row])
+    z, v, p, g = (ca.MX.sym(k, a.sparsity()) for k, a in zip("zvpg", args, strict=True))
+    v_full = ca.MX.sym("v", v.shape[0] + 1)
+    xo, ua, rest, r = pre(z, v_full[:-1], p, g)
+    x_next = level_step(model, levels)(v_full[-1], xo, ua, p)
+    return ca.Function("closed_loop_step", [z, v_full, p, g],
+                       [ca.vertcat(x_next, rest), r], ["z", "v", "p", "gains"],
+                       ["z_next", "row"])  # fmt: skip
 
 
 def simulate(
@@ -345,7 +386,7 @@ def simulate(
     noise: bool = True,
     attitude_noise: float | None = None,
     torque_noise: float | None = None,
-    substeps: int = 4,
+    substeps: int | None = None,
 ) -> SimResult:
     """Run the closed loop for ``duration`` seconds at the testbed's sensor rate.
 
@@ -375,8 +416,12 @@ def simulate(
         1-sigma disturbance torque per sample and axis, N m (default ``body.torque_noise``).
     c0 : ndarray, optional
         Initial controller state (default ``controller.c0``).
-    substeps : int
-        RK4 sub-steps per sample.
+    substeps : int, optional
+        RK4 sub-steps per sample. Default: from 4 on, as many as the truth needs for its
+        integration error over the run (by step doubling) to stay within a tenth of the
+        log's noise, never below the replay's resolution (1e-6 rad, 1e-7 rad/s), over the
+        square root of its samples (:mod:`~airbearing.analysis.simulation.truth_accuracy`;
+        a RuntimeWarning if even the most it may take leave it above).
 
     Returns
     -------
@@ -403,14 +448,69 @@ def simulate(
     V, vibration, z0_vib = _draws(model, controller, n, t, ref, seed, noise, attitude_noise,
                                   torque_noise)  # fmt: skip
     c0 = controller.c0 if c0 is None else np.asarray(c0, float)
-    F = closed_loop_rollout(model, controller, n, substeps, vibration)
-    Z, R = F(np.concatenate([x0, c0, *z0_vib]), V, p, controller.gains)
-    Z, R = np.asarray(Z).T, np.asarray(R).T
+    z0 = np.concatenate([x0, c0, *z0_vib])
+    if substeps is None:  # the truth as accurate as its log needs (truth_accuracy.py)
+        sig = noise_sigmas(model, attitude_noise) if noise else np.zeros(model.ny)
+        x, R, used = _accurate_run(model, controller, n, vibration, z0, V, p, sig)
+    else:
+        if isinstance(substeps, bool) or not isinstance(substeps, int | np.integer) or substeps < 1:
+            raise InputError(f"substeps {substeps!r}: expected an integer >= 1, or None")
+        x, R = _run(model, controller, n, int(substeps), vibration, z0, V, p)
+        used = np.full(n, int(substeps))
     nx, ny, nu = model.nx, model.ny, model.nu
-    x = np.vstack([x0, Z[:, :nx]])
     y, u, extra = R[:, nx : nx + ny], R[:, nx + ny : nx + ny + nu], R[:, nx + ny + nu :]
     log = log_from_arrays(model, t, x[:-1], y, u, extra, controller, ref)
-    return SimResult(log, t, x, y, u, extra, model, controller, ref)
+    return SimResult(log, t, x, y, u, extra, model, controller, ref, used)
+
+
+def _run(model, controller, n, substeps, vibration, z0, V, p):
+    """The closed loop's true states ``(N + 1, nx)`` and rows ``(N, nr)`` at ``substeps``."""
+    F = closed_loop_rollout(model, controller, n, substeps, vibration)
+    Z, R = F(z0, V, p, controller.gains)
+    Z, R = np.asarray(Z).T, np.asarray(R).T
+    return np.vstack([z0[: model.nx], Z[:, : model.nx]]), R
+
+
+def _accurate_run(model, controller, n, vibration, z0, V, p, sigmas):
+    """:func:`_run` at the first of :data:`TRUTH_LEVELS`, then with the samples that carry
+    the most integration error (:func:`sample_errors`) at finer levels, until the run's
+    error is within its tolerance for a log of noise ``sigmas`` (per ``model.y_names``;
+    :func:`truth_tolerance`, :func:`raise_levels`). Returns the states, the rows and each
+    sample's sub-steps."""
+    tol = truth_tolerance(model, n, sigmas[0], sigmas[model.y_names.index("wz")])
+    inputs = slice(model.nx + model.ny, model.nx + model.ny + model.nu)
+    level = np.zeros(n, dtype=int)
+    before = np.inf
+    while True:
+        used = TRUTH_LEVELS[: level.max() + 1]  # only the levels in use are built
+        if level.any():
+            x, R = _run(model, controller, n, used, vibration, z0, np.vstack([V, level]), p)
+        else:  # the plain loop (its compiled code shared with a fixed number)
+            x, R = _run(model, controller, n, used[0], vibration, z0, V, p)
+        if not level.any():  # the cheap bound first: most runs are far within it at 4
+            err = sample_errors(model, x, R[:, inputs], p, used, level, bound=True)
+            if all(e.sum() <= t for e, t in zip(err, tol, strict=True)):
+                break
+        err = sample_errors(model, x, R[:, inputs], p, used, level)
+        share = sum(float(e.sum()) / t for e, t in zip(err, tol, strict=True) if np.isfinite(t))
+        if share > before / MIN_GAIN:  # not smooth on the sub-step's scale: more do not pay
+            break
+        before = share
+        new = raise_levels(err, tol, level, len(TRUTH_LEVELS))
+        if new is None:
+            break
+        level = new
+    total = (float(err[0].sum()), float(err[1].sum()))
+    if total[0] > tol[0] or total[1] > tol[1]:
+        warnings.warn(
+            f"simulate: the truth's integration error over the run ({total[0]:.3g} rad, "
+            f"{total[1]:.3g} rad/s) stays above its tolerance ({tol[0]:.3g} rad, "
+            f"{tol[1]:.3g} rad/s) at up to {int(TRUTH_LEVELS[level.max()])} RK4 sub-steps per "
+            "sample",
+            RuntimeWarning,
+            stacklevel=3,
+        )
+    return x, R, np.asarray(TRUTH_LEVELS)[level]
 
 
 def _checked_inputs(model, controller, duration, seed, x0, p, reference):
