@@ -256,7 +256,8 @@ class Model:
         Fixed-step RK4 with ``substeps`` sub-intervals on the plant states, the
         attitude quaternion renormalised at the end; ``sensor_lag`` states are
         advanced with the exact exponential of a first-order lag driven by the
-        sub-interval mean rate, so any time constant >= 0 is stable.
+        rate's cubic over each sub-interval (its end values and slopes: fourth order,
+        like RK4), so any time constant >= 0 is stable.
 
         Parameters
         ----------
