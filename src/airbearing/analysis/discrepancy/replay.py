@@ -129,11 +129,49 @@ def problem_for(
         jit=jit,
         theta_slots=theta_slots,
     )
+    if problem.n_att and not problem.attitude_measured:
+        # a gyro log's start yaws are fitted (the logged yaw is the testbed's estimate); one
+        # is held at the logged value, where the estimate is trusted (:func:`pinned_window`)
+        problem.pin([pinned_window(windows, problem.sigma_rate) * problem.n_delta])
     if windows.linked:  # linked pieces start nearly free (the top of the intensity grid)
         set_intensity(problem, KAPPA_GRID[0] if kappa is None else kappa)
         if noise is not None:
             set_measurement_noise(problem, noise)
     return problem
+
+
+#: A window whose first logged rate is within this many rate noise levels of zero starts at
+#: rest (a normal draw passes 3 sigma once in 370).
+REST_SIGMAS = 3.0
+
+
+def pinned_window(windows: WindowSet, sigma_rate: float) -> int:
+    """The window of a dof-1 gyro log whose start yaw a fit holds at the logged one.
+
+    The logged yaw is the testbed's estimate (FORMATS.md), propagated from the filtered
+    gyro (seed 001 eqs. 3 and 21): it trails the plant's yaw while the rig turns and is
+    right at rest, before any slew has added its lag's error. The windows' other start yaws
+    are fitted. With them all free a common offset is a direction no yaw torque of the
+    vocabulary but a spring fixes: a ``yaw_imbalance`` (or a residual dipole in the cage
+    field) turned by that angle gives the same torque. The one held fixes the yaw's frame
+    (and so the imbalance's direction) at that instant.
+
+    Returns
+    -------
+    int
+        The earliest window (by log, then row) whose first logged rate is within
+        :data:`REST_SIGMAS` times ``sigma_rate`` (rad/s) of zero; on logs that never rest,
+        the one that starts slowest.
+    """
+    w0 = np.abs(np.asarray(windows.rate)[:, 0, 0])
+    usable = np.asarray(windows.weight)[:, 0] > 0
+    if not usable.any():
+        usable = np.ones_like(usable)
+    order = np.lexsort((np.asarray(windows.rows)[:, 0], np.asarray(windows.source)))
+    rest = usable[order] & (w0[order] <= REST_SIGMAS * sigma_rate)
+    if rest.any():
+        return int(order[np.argmax(rest)])
+    return int(np.flatnonzero(usable)[np.argmin(w0[usable])])
 
 
 def primary_series(problem: ShootingProblem, fit_delta, p) -> dict:

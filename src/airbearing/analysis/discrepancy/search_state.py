@@ -89,10 +89,11 @@ class _Search:
     def start_yaws(self) -> int:
         """Start yaws a fit on the fitted-yaw layout frees (:meth:`model`): one per segment
         on linked pieces (their jumps are held at the attitude's resolution), one per window
-        otherwise."""
+        otherwise, less the one held at the logged yaw (:func:`.replay.pinned_window`)."""
+        held = self.problem(False, yaw=True).pinned.size
         if self.windows.linked:
-            return len(np.unique(self.windows.segments()))
-        return self.windows.n
+            return len(np.unique(self.windows.segments())) - held
+        return self.windows.n - held
 
     def horizon(self, fit: Fit, lag: bool, chosen, theta, *, fresh: bool = False) -> Fit:
         """``fit`` refitted at the most likely process-noise intensity at or below the current
