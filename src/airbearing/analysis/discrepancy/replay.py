@@ -8,7 +8,9 @@ so the comparison is not swamped by one noisy initial sample nor by the
 divergence of a sensitive motion over a long horizon. A dof-1 gyro log's ``yaw`` is the
 testbed's own estimate (FORMATS.md), not a measurement: when a torque of the Model depends
 on the yaw (``spring_torque``, ``yaw_imbalance`` at a non-zero value), the windows' start
-yaw is fitted as well, one yaw trajectory per segment.
+yaw is fitted as well, one yaw trajectory per segment, but for one start yaw held at the
+logged one where the rig rests (:func:`pinned_window`): it fixes the yaw's frame, and with
+it the direction of a ``yaw_imbalance`` (or of a residual dipole in a cage field).
 
 The gap
     ``gap = sqrt( sum_{usable samples, axes} e^2 / count )``, the RMS over every
@@ -85,6 +87,7 @@ __all__ = [
     "model_for",
     "noise_floor",
     "open_loop",
+    "pinned_window",
     "problem_for",
     "replay",
     "replay_data",

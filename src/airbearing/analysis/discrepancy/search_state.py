@@ -63,7 +63,8 @@ class _Search:
         fitted start yaw would be a direction no fit fixes (:func:`yaw_acts`); a fit that
         moves a yaw torque away from zero (a ``spring_torque``) takes the same Model with
         its windows' start yaw fitted (:func:`fitting_start_yaw`), as the replay does when
-        the testbed holds the torque."""
+        the testbed holds the torque; one of them is held at the logged yaw where the rig
+        rests (:func:`.replay.pinned_window`), which fixes a ``yaw_imbalance``'s direction."""
         yaw = self.yaw_fitted if yaw is None else yaw
         if not yaw:
             return self.logged[lag]
