@@ -20,6 +20,7 @@ import numpy as np
 import pytest
 
 from airbearing.analysis.discrepancy.replay import (
+    YawTurn,
     pinned_window,
     prepare,
     problem_for,
@@ -71,6 +72,28 @@ def test_one_start_yaw_is_held_where_the_rig_is_at_rest(cmg, imbalance_slew):
     assert list(problem.pinned) == [first * problem.n_delta]
 
 
+def test_a_start_yaw_is_held_only_where_a_turn_of_the_yaw_is_a_parameter_change(cmg):
+    # tau_z = A_s sin(yaw) + A_c cos(yaw) - k yaw: turning the yaw by c is the pair turned
+    # by -c, but a spring's -k c is a constant torque no free parameter gives (FORMATS.md)
+    model = build_model(cmg, {"yaw_imbalance": (0.0, 0.0), "spring_torque": 0.0})
+    imb = model.index(["yaw_imbalance_s", "yaw_imbalance_c"], "p")
+    spr = model.index(["spring_torque"], "p")
+    S_imb, S_spr = np.zeros((model.n_p, 2)), np.zeros((model.n_p, 1))
+    S_imb[imb, [0, 1]] = 1.0
+    S_spr[spr, 0] = 1.0
+    p_imb, p_spr = model.p0.copy(), model.p0.copy()
+    p_imb[imb] = PAIR
+    p_spr[spr] = 2e-4
+    turn = YawTurn(model)
+    assert turn(p_imb, S_imb)  # the imbalance fitted: its direction needs the held yaw
+    assert not turn(p_spr, S_spr)  # a spring fixes the offset: every start yaw fitted
+    p_both = p_imb.copy()
+    p_both[spr] = 2e-4
+    assert not turn(p_both, np.hstack([S_imb, S_spr]))
+    assert not turn(p_imb, None)  # the imbalance held (a replay): nothing absorbs the offset
+    assert turn(model.p0, None)  # nothing depends on the yaw
+
+
 def test_a_rig_that_never_rests_holds_its_slowest_start(cmg, imbalance_slew):
     datas, windows, floor = prepare(cmg, imbalance_slew)
     w0 = np.abs(windows.rate[:, 0, 0])
@@ -114,6 +137,7 @@ def test_the_imbalance_is_identified_with_the_start_yaws_fitted(cmg, imbalance_s
     assert not any(fit.not_identifiable), fit.not_identifiable
     assert np.all(np.isfinite(fit.theta_std))
     assert fit.theta == pytest.approx(PAIR, rel=1e-6)
+    assert list(fit.extra["held"]) == list(problem.pinned)
     held = problem.pinned[0]
     assert fit.delta.reshape(-1, order="F")[held] == 0.0  # the logged yaw, exactly
     # the other start yaws are fitted: in the slew they differ from the logged estimate

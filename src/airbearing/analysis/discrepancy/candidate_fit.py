@@ -126,7 +126,7 @@ def _try(search, cand, chosen, theta_chosen, current, current_lag, ln_n, starts,
     if cand.lag and not current_lag:
         k_added += len(model.lag_index) * problem.windows.n
     if fit.extra.get(START_YAW):
-        k_added += search.start_yaws()
+        k_added += search.start_yaws(fit)
     heldout = cross_validate(problem, fit, k, search.folds)
     res = why(
         problem, judge(cand, fit, k_sel, current, ln_n, k_added, heldout, before, start, note)

@@ -25,6 +25,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+import casadi as ca
 import numpy as np
 import pandas as pd
 
@@ -135,12 +136,69 @@ def problem_for(
     if problem.n_att and not problem.attitude_measured:
         # a gyro log's start yaws are fitted (the logged yaw is the testbed's estimate); one
         # is held at the logged value, where the estimate is trusted (:func:`pinned_window`)
-        problem.pin([pinned_window(windows, problem.sigma_rate) * problem.n_delta])
+        held = [pinned_window(windows, problem.sigma_rate) * problem.n_delta]
+        problem.pin(held, rule=YawTurn(model))
     if windows.linked:  # linked pieces start nearly free (the top of the intensity grid)
         set_intensity(problem, KAPPA_GRID[0] if kappa is None else kappa)
         if noise is not None:
             set_measurement_noise(problem, noise)
     return problem
+
+
+#: Random states, inputs and gimbal angles at which :class:`YawTurn` compares derivatives.
+YAW_TURN_PROBES = 8
+#: Relative residual below which the yaw's derivative is one of the free parameters'.
+YAW_TURN_RTOL = 1e-8
+
+
+class YawTurn:
+    """``rule(p, S) -> bool``: whether turning the yaw is, at the parameters ``p`` (n_p,),
+    a change of the free parameters ``p + S theta`` (the rule of :meth:`ShootingProblem.pin`).
+
+    With the start yaws fitted, a common offset ``c`` of them all changes the torque by
+    ``c d tau / d yaw``. When that is ``d tau / d theta`` times some ``dtheta`` at every
+    state (a ``yaw_imbalance``: its pair turned by ``-c``; a residual dipole in a cage
+    field; or no yaw torque at all), the offset is a direction no fit fixes and one start
+    yaw is held (:func:`pinned_window`). A spring (``-k yaw``: a constant change) fixes it:
+    the start yaws are then all fitted, as the estimate's error asks. Compared by CasADi
+    derivatives of the Model's dynamics at :data:`YAW_TURN_PROBES` random points.
+    """
+
+    def __init__(self, model: Model) -> None:
+        self.model = model
+        self._fn = None
+
+    def _derivatives(self):
+        if self._fn is None:
+            m = self.model
+            x, u, p = ca.SX.sym("x", m.nx), ca.SX.sym("u", m.nu), ca.SX.sym("p", m.n_p)
+            f = m.f(x, u, p)
+            dyaw = ca.jacobian(f, x[m.index("yaw")[0]])
+            fn = ca.Function("yaw_turn", [x, u, p], [dyaw, ca.jacobian(f, p)])
+            rng = np.random.default_rng(0)
+            X = rng.standard_normal((m.nx, YAW_TURN_PROBES))
+            X[m.index("yaw")[0]] = rng.uniform(-np.pi, np.pi, YAW_TURN_PROBES)
+            U = rng.standard_normal((m.nu, YAW_TURN_PROBES))
+            self._fn = (fn, X, U)
+        return self._fn
+
+    def __call__(self, p, S) -> bool:
+        fn, X, U = self._derivatives()
+        S = np.zeros((self.model.n_p, 0)) if S is None else np.asarray(S, dtype=float)
+        p = np.asarray(p, dtype=float)
+        a, B = [], []
+        for j in range(X.shape[1]):
+            dyaw, dp = fn(X[:, j], U[:, j], p)
+            a.append(np.asarray(dyaw).ravel())
+            B.append(np.asarray(dp) @ S)
+        a, B = np.concatenate(a), np.vstack(B)
+        scale = float(np.linalg.norm(a))
+        if scale == 0.0:  # nothing depends on the yaw: its offset is in nothing
+            return True
+        if not B.shape[1]:
+            return False
+        v = np.linalg.lstsq(B, a, rcond=None)[0]
+        return float(np.linalg.norm(B @ v - a)) <= YAW_TURN_RTOL * scale
 
 
 #: A window whose first logged rate is within this many rate noise levels of zero starts at

@@ -87,11 +87,11 @@ class _Search:
             )  # fmt: skip
         return self.problems[lag, yaw]
 
-    def start_yaws(self) -> int:
-        """Start yaws a fit on the fitted-yaw layout frees (:meth:`model`): one per segment
+    def start_yaws(self, fit: Fit) -> int:
+        """Start yaws ``fit`` on the fitted-yaw layout frees (:meth:`model`): one per segment
         on linked pieces (their jumps are held at the attitude's resolution), one per window
-        otherwise, less the one held at the logged yaw (:func:`.replay.pinned_window`)."""
-        held = self.problem(False, yaw=True).pinned.size
+        otherwise, less any it held at the logged yaw (:func:`.replay.pinned_window`)."""
+        held = len(fit.extra.get("held", ()))
         if self.windows.linked:
             return len(np.unique(self.windows.segments())) - held
         return self.windows.n - held
