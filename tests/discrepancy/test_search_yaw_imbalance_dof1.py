@@ -5,9 +5,10 @@ which trails the plant's yaw in a slew, so the replay and the search fit the win
 start yaws when a torque depends on the yaw. For ``yaw_imbalance``
 (``tau_z = A_s sin(yaw) + A_c cos(yaw)``) a common offset ``c`` of every start yaw is
 the same torque as the pair turned by ``-c``: with every start yaw free that direction is
-in nothing, and the refit could not be used. One start yaw is held at the logged one,
-at the earliest window that starts at rest (where the estimate has no slew's lag in it):
-the imbalance's direction is then fixed there.
+in nothing, and the refit could not be used. When the free values can absorb such an
+offset (``YawTurn``; a spring cannot), one start yaw is held at the logged one, at the
+earliest window that starts at rest (where the estimate has no slew's lag in it): the
+imbalance's direction is then fixed there.
 
 Oracle: the simulator, whose hidden values the fit must find within its errors (the
 truth within 3 standard errors: a normal draw passes that once in 370); noise-free logs

@@ -135,7 +135,8 @@ def problem_for(
     )
     if problem.n_att and not problem.attitude_measured:
         # a gyro log's start yaws are fitted (the logged yaw is the testbed's estimate); one
-        # is held at the logged value, where the estimate is trusted (:func:`pinned_window`)
+        # is held at the logged value, where the estimate is trusted (:func:`pinned_window`),
+        # in the fits whose free values would absorb a common offset of them all (YawTurn)
         held = [pinned_window(windows, problem.sigma_rate) * problem.n_delta]
         problem.pin(held, rule=YawTurn(model))
     if windows.linked:  # linked pieces start nearly free (the top of the intensity grid)
@@ -214,8 +215,8 @@ def pinned_window(windows: WindowSet, sigma_rate: float) -> int:
     right at rest, before any slew has added its lag's error. The windows' other start yaws
     are fitted. With them all free a common offset is a direction no yaw torque of the
     vocabulary but a spring fixes: a ``yaw_imbalance`` (or a residual dipole in the cage
-    field) turned by that angle gives the same torque. The one held fixes the yaw's frame
-    (and so the imbalance's direction) at that instant.
+    field) turned by that angle gives the same torque (:class:`YawTurn`). The one held fixes
+    the yaw's frame (and so the imbalance's direction) at that instant.
 
     Returns
     -------
