@@ -231,6 +231,15 @@ def _shape_scales(group: _Group, t, segments, k: int, p: int, scale: float) -> n
     return scales
 
 
+def _nanmedian(x: np.ndarray) -> np.ndarray:
+    """Median over axis 1 of the finite values (that axis dropped); NaN where none."""
+    x = np.sort(np.where(np.isfinite(x), x, np.inf), axis=1)
+    count = np.sum(np.isfinite(x), axis=1, keepdims=True)
+    lo = np.take_along_axis(x, np.maximum((count - 1) // 2, 0), axis=1)
+    hi = np.take_along_axis(x, np.minimum(count // 2, x.shape[1] - 1), axis=1)
+    return np.squeeze(np.where(count > 0, (lo + hi) / 2, np.nan), axis=1)
+
+
 def _score(group: _Group, d: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Per-row score (noise scales) and per-channel exceedance; NaN (unchecked) -> 0."""
     d = np.nan_to_num(d, nan=0.0)
@@ -402,6 +411,91 @@ class _Scorer:
             )
         return d, scale
 
+    def _edge_fits(self, rows, good, d, scale):
+        """The fit, scale and edge factor of the rows near a segment's ends (step 3).
+
+        Each row within the largest ``k`` of a segment's end takes the fit of
+        :data:`FITS` that flags the smallest glitch *there*: the smallest product over
+        channels of its window shape's scale, its edge factor (:meth:`_edge_factor`)
+        and ``sqrt(1 + h)``. Nothing of it depends on the row's own sample (the scales
+        are the log's, the edge factor comes from windows without the row), so a glitch
+        cannot choose the fit that hides it. Returns ``d, scale, edge`` of all ``rows``.
+        """
+        g, t, segs, sc = self.group, self.t, self.segments, self.scale
+        edge = np.ones(d.shape)
+        kmax = max(k for k, _ in FITS)
+        near = np.flatnonzero(np.minimum(self.from_start[rows], self.from_end[rows]) < kmax)
+        if near.size == 0:
+            return d, scale, edge
+        r = rows[near]
+        length = self.from_start[r] + self.from_end[r] + 1
+        best = np.full(near.size, np.inf)
+        d_near, s_near, e_near = d[near].copy(), scale[near].copy(), edge[near].copy()
+        for kf, pf in FITS:
+            fits = length >= 2 * kf + 1  # a full window of 2k neighbours
+            if not fits.any():
+                continue
+            d_f, sh_f = _normalised(g, t, segs, good, kf, pf, sc, r[fits])
+            s_f = self.scales[(kf, pf)][np.clip(sh_f, 0, 2 * kf)]
+            full = np.full(sh_f.size, kf)
+            e_f = self._edge_factor(r[fits], good, full, np.full(sh_f.size, pf), sh_f, d_f)
+            gain = np.array([_noise_gain(kf, pf, int(a)) for a in np.clip(sh_f, 0, 2 * kf)])
+            key = np.sum(np.log(s_f * e_f), axis=1) + d.shape[1] * 0.5 * np.log1p(gain)
+            key = np.where(np.all(np.isfinite(d_f), axis=1), key, np.inf)
+            at = np.flatnonzero(fits)
+            take = key < best[at]
+            at = at[take]
+            best[at] = key[take]
+            d_near[at], s_near[at], e_near[at] = d_f[take], s_f[take], e_f[take]
+        d[near], scale[near], edge[near] = d_near, s_near, e_near
+        return d, scale, edge
+
+    def _edge_factor(self, rows, good, fit_k, fit_p, shapes, d) -> np.ndarray:
+        """Per row and channel, how much rougher the motion is at an extrapolated edge
+        position than the log-wide scale of its window shape says (>= 1; io.quality doc,
+        step 4).
+
+        A row ``e`` samples from its segment's start has ``e < k`` left neighbours: its
+        fit extrapolates, and a motion that changes fast where the log begins (a filter's
+        start-up transient in a logged estimate, a slew starting with the log) leaves a
+        misfit there that the shape's scale, measured over the whole log, does not
+        contain. The same fit with the same shape predicts the next ``k`` rows inwards
+        from windows that do not contain the row itself (rows ``e + 1 + j`` with
+        ``e`` left neighbours start after it), so they measure that misfit where the
+        row is and a glitch in the row cannot raise its own scale. Their robust scale
+        (as step 4's, about zero: a misfit has a sign) over the shape's scale, never
+        below 1, is the factor; the end of a segment mirrors it. Under stationary
+        noise the factor is about 1 and only raises the scale, so the rule's false
+        flag rate stays at most its threshold's.
+        """
+        g, t, segs, sc = self.group, self.t, self.segments, self.scale
+        out = np.ones(d.shape)
+        left = (shapes >= 0) & (shapes < fit_k)
+        right = (shapes > fit_k) & (shapes <= 2 * fit_k)
+        at = np.flatnonzero(left | right)
+        if at.size == 0:
+            return out
+        for kf, pf, a in {(int(fit_k[i]), int(fit_p[i]), int(shapes[i])) for i in at}:
+            mine = at[(fit_k[at] == kf) & (fit_p[at] == pf) & (shapes[at] == a)]
+            r = rows[mine]
+            # the k rows inwards whose windows of this shape start (end) beyond the row
+            j = np.arange(kf)[None, :]
+            inward = r[:, None] + (a + 1 + j if a < kf else -(2 * kf - a + 1 + j))
+            inside = (inward >= self._seg_lo[r][:, None]) & (inward < self._seg_hi[r][:, None])
+            ask = np.unique(inward[inside])
+            if ask.size == 0:
+                continue
+            d_in, _ = _normalised(g, t, segs, good, kf, pf, sc, ask, shape=a)
+            z = np.full(inward.shape + (d.shape[1],), np.nan)
+            z[inside] = d_in[np.searchsorted(ask, inward[inside])] / self.scales[(kf, pf)][a]
+            if g.vector:
+                z2 = np.sum(z**2, axis=2)  # (rows, k), NaN where not predicted
+                s = np.sqrt(_nanmedian(z2) / _CHI2_3_MEDIAN)[:, None]
+            else:
+                s = _MAD_TO_SIGMA * _nanmedian(np.abs(z))
+            out[mine] = np.where(np.isfinite(s), np.maximum(s, 1.0), 1.0)
+        return out
+
     def __call__(
         self, rows: np.ndarray, good: np.ndarray, exact: bool = True
     ) -> tuple[np.ndarray, np.ndarray]:
@@ -425,18 +519,23 @@ class _Scorer:
         d = d.copy()
         scale = self.scales[self.fit][np.clip(shapes, 0, 2 * k)]
         # rows at a segment's first or last few positions may take another fit
-        edge_rows = np.flatnonzero(
-            np.minimum(self.from_start[rows], self.from_end[rows]) < self._edge_depth
-        )
-        from_start, from_end = self.from_start[rows[edge_rows]], self.from_end[rows[edge_rows]]
-        for (side, e), (kf, pf) in self.edge.items():
-            at = (from_start if side == 0 else from_end) == e
-            at &= (from_end if side == 0 else from_start) >= kf
-            if not at.any():
-                continue
-            at = edge_rows[at]
-            d_f, shapes_f = _normalised(g, t, segs, good, kf, pf, sc, rows[at])
-            d[at], scale[at] = d_f, self.scales[(kf, pf)][np.clip(shapes_f, 0, 2 * kf)]
+        if g.sided:  # inputs: the fit per position (the best of three fits decides below)
+            edge = np.ones(d.shape)
+            edge_rows = np.flatnonzero(
+                np.minimum(self.from_start[rows], self.from_end[rows]) < self._edge_depth
+            )
+            from_start = self.from_start[rows[edge_rows]]
+            from_end = self.from_end[rows[edge_rows]]
+            for (side, e), (kf, pf) in self.edge.items():
+                at = (from_start if side == 0 else from_end) == e
+                at &= (from_end if side == 0 else from_start) >= kf
+                if not at.any():
+                    continue
+                at = edge_rows[at]
+                d_f, shapes_f = _normalised(g, t, segs, good, kf, pf, sc, rows[at])
+                d[at], scale[at] = d_f, self.scales[(kf, pf)][np.clip(shapes_f, 0, 2 * kf)]
+        else:  # measurements: the fit per row, with the edge's own roughness
+            d, scale, edge = self._edge_fits(rows, good, d, scale)
         if g.sided:
             d, scale = self._sided(rows, good, d, scale)
         elif g.switch_rows is not None:
@@ -444,15 +543,17 @@ class _Scorer:
             if at.size:
                 # the motion changes its character at a switch (a rate limit reached
                 # or left): every fit's one-sided form, the higher degrees follow it
-                d[at], scale[at] = self._sided(rows[at], good, d[at], scale[at], FITS)
+                d_s, s_s = self._sided(rows[at], good, d[at], scale[at], FITS)
+                # a row rescored by another fit there: that fit's scale, no edge factor
+                edge[at] = np.where((d_s == d[at]) & (s_s == scale[at]), edge[at], 1.0)
+                d[at], scale[at] = d_s, s_s
         if exact:
-            return _score(g, d, scale * self.local_at(rows))
+            return _score(g, d, scale * np.maximum(self.local_at(rows), edge))
         score, over = _score(g, d, scale)  # local factor 1: an upper bound of each score
         maybe = over.any(axis=1)
         if maybe.any():
-            score[maybe], over[maybe] = _score(
-                g, d[maybe], scale[maybe] * self.local_at(rows[maybe])
-            )
+            factor = np.maximum(self.local_at(rows[maybe]), edge[maybe])
+            score[maybe], over[maybe] = _score(g, d[maybe], scale[maybe] * factor)
         if first_pass and self._all_rows is not None:
             self._first_pass = (score.copy(), over.copy())
             self._all_rows = None  # its residuals are not needed again
