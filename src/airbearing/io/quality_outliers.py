@@ -13,6 +13,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy import stats
 
 from airbearing.io.discontinuity import (
     _CHI2_3_MEDIAN,
@@ -27,6 +28,7 @@ from airbearing.io.local_fits import loo as _loo_regular
 from airbearing.io.local_fits import noise_gain as _noise_gain
 from airbearing.io.local_fits import regular_span as _regular_span
 from airbearing.io.local_fits import regular_weights as _regular_weights
+from airbearing.io.local_fits import residual_correlation as _residual_correlation
 from airbearing.io.local_fits import window_median as _window_median
 from airbearing.io.local_fits import window_shape as _window_shape
 
@@ -44,6 +46,9 @@ _MAX_PASSES = 200
 _SCALE_ROWS = 2000  # rows spread over the log on which the noise scales are measured
 _MIN_SCALE_SAMPLES = 8  # fewer residuals than this give no scale (the floor is used)
 _RECOMPUTE = 3  # rows within this many k of a newly excluded sample are refitted
+#: Level of the test that an edge's inward rows are rougher than the log-wide scale
+#: (:meth:`_Scorer._edge_factor`): a false alarm only lowers the sensitivity at that edge.
+EDGE_LEVEL = 1e-3
 _ROUGH = 0.2  # noise-free channels: scale floor per unit median |second difference|
 
 
@@ -229,15 +234,6 @@ def _shape_scales(group: _Group, t, segments, k: int, p: int, scale: float) -> n
         if a != k:
             scales[a] = np.maximum(scales[a], scales[k])
     return scales
-
-
-def _nanmedian(x: np.ndarray) -> np.ndarray:
-    """Median over axis 1 of the finite values (that axis dropped); NaN where none."""
-    x = np.sort(np.where(np.isfinite(x), x, np.inf), axis=1)
-    count = np.sum(np.isfinite(x), axis=1, keepdims=True)
-    lo = np.take_along_axis(x, np.maximum((count - 1) // 2, 0), axis=1)
-    hi = np.take_along_axis(x, np.minimum(count // 2, x.shape[1] - 1), axis=1)
-    return np.squeeze(np.where(count > 0, (lo + hi) / 2, np.nan), axis=1)
 
 
 def _score(group: _Group, d: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -457,16 +453,17 @@ class _Scorer:
 
         A row ``e`` samples from its segment's start has ``e < k`` left neighbours: its
         fit extrapolates, and a motion that changes fast where the log begins (a filter's
-        start-up transient in a logged estimate, a slew starting with the log) leaves a
-        misfit there that the shape's scale, measured over the whole log, does not
-        contain. The same fit with the same shape predicts the next ``k`` rows inwards
-        from windows that do not contain the row itself (rows ``e + 1 + j`` with
-        ``e`` left neighbours start after it), so they measure that misfit where the
-        row is and a glitch in the row cannot raise its own scale. Their robust scale
-        (as step 4's, about zero: a misfit has a sign) over the shape's scale, never
-        below 1, is the factor; the end of a segment mirrors it. Under stationary
-        noise the factor is about 1 and only raises the scale, so the rule's false
-        flag rate stays at most its threshold's.
+        start-up transient in a logged estimate) leaves a misfit there that the shape's
+        scale, measured over the whole log, does not contain. The same fit with the same
+        shape predicts the ``2k`` rows inwards from windows that do not contain the row
+        (rows ``e + 1 + j`` with ``e`` left neighbours start after it), so a glitch in
+        the row cannot raise its own scale. They are tested against white noise at
+        :data:`EDGE_LEVEL` (half for each statistic): their sum, which a misfit makes
+        of one sign (normal, with the variance ``1' C 1`` of the residuals' white-noise
+        correlation ``C``), and their sum of squares (the scaled chi-square with the
+        same two moments, Satterthwaite); where either fails, the factor is their root
+        mean square. The end of a segment mirrors it. The factor
+        only raises a scale, so the rule's false flag rate stays at most its threshold's.
         """
         g, t, segs, sc = self.group, self.t, self.segments, self.scale
         out = np.ones(d.shape)
@@ -475,25 +472,38 @@ class _Scorer:
         at = np.flatnonzero(left | right)
         if at.size == 0:
             return out
+        dof = 3 if g.vector else 1  # per row: the quaternion's tangent space, or one channel
         for kf, pf, a in {(int(fit_k[i]), int(fit_p[i]), int(shapes[i])) for i in at}:
             mine = at[(fit_k[at] == kf) & (fit_p[at] == pf) & (shapes[at] == a)]
             r = rows[mine]
-            # the k rows inwards whose windows of this shape start (end) beyond the row
-            j = np.arange(kf)[None, :]
+            j = np.arange(2 * kf)[None, :]
             inward = r[:, None] + (a + 1 + j if a < kf else -(2 * kf - a + 1 + j))
             inside = (inward >= self._seg_lo[r][:, None]) & (inward < self._seg_hi[r][:, None])
+            inside[inside] = good[inward[inside]]
             ask = np.unique(inward[inside])
             if ask.size == 0:
                 continue
             d_in, _ = _normalised(g, t, segs, good, kf, pf, sc, ask, shape=a)
-            z = np.full(inward.shape + (d.shape[1],), np.nan)
+            z = np.full(inward.shape + (d.shape[1],), np.nan)  # (rows, 2k, c)
             z[inside] = d_in[np.searchsorted(ask, inward[inside])] / self.scales[(kf, pf)][a]
-            if g.vector:
-                z2 = np.sum(z**2, axis=2)  # (rows, k), NaN where not predicted
-                s = np.sqrt(_nanmedian(z2) / _CHI2_3_MEDIAN)[:, None]
-            else:
-                s = _MAD_TO_SIGMA * _nanmedian(np.abs(z))
-            out[mine] = np.where(np.isfinite(s), np.maximum(s, 1.0), 1.0)
+            use = np.all(np.isfinite(z), axis=2)  # (rows, 2k)
+            corr = _residual_correlation(kf, pf, min(a, 2 * kf - a), 2 * kf)
+            for i in range(r.size):
+                if not use[i].any():
+                    continue
+                c = corr[np.ix_(use[i], use[i])]
+                zi = z[i, use[i]]  # (m, c)
+                # the spread: a scaled chi-square with the moments of sum z^2
+                tr, tr2 = dof * np.trace(c), dof * np.sum(c * c)  # (c symmetric)
+                ss = np.sum(zi**2, axis=0)
+                # the bias: a misfit of one sign over the next rows, sum z ~ N(0, 1'C1)
+                bias = np.sum(zi, axis=0) ** 2 / np.sum(c)
+                if g.vector:
+                    ss, bias = np.sum(ss, keepdims=True), np.sum(bias, keepdims=True)
+                failed = ss * tr / tr2 > stats.chi2.isf(EDGE_LEVEL / 2, tr * tr / tr2)
+                failed |= bias > stats.chi2.isf(EDGE_LEVEL / 2, dof)
+                rms = np.sqrt(ss / tr)
+                out[mine[i]] = np.where(failed, np.maximum(rms, 1.0), 1.0)
         return out
 
     def __call__(
