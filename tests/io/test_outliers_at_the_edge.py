@@ -15,7 +15,6 @@ Oracle: the simulator (a clean log has no glitch anywhere) and injected spikes.
 
 from __future__ import annotations
 
-import numpy as np
 import pytest
 from scipy import stats
 
