@@ -11,6 +11,7 @@ one at a time. The numerics of the fits are in :mod:`airbearing.io.local_fits`.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 from scipy import stats
@@ -236,6 +237,18 @@ def _shape_scales(group: _Group, t, segments, k: int, p: int, scale: float) -> n
     return scales
 
 
+@lru_cache(maxsize=8)
+def _gains(k: int, p: int) -> np.ndarray:
+    """`local_fits.noise_gain` of the fit ``(k, p)`` for every window shape ``0 .. 2k``."""
+    return np.array([_noise_gain(k, p, a) for a in range(2 * k + 1)])
+
+
+@lru_cache(maxsize=256)
+def _chi2_isf(level: float, dof: float) -> float:
+    """``scipy.stats.chi2.isf``, kept: the edge tests ask for few distinct ones."""
+    return float(stats.chi2.isf(level, dof))
+
+
 def _score(group: _Group, d: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Per-row score (noise scales) and per-channel exceedance; NaN (unchecked) -> 0."""
     d = np.nan_to_num(d, nan=0.0)
@@ -407,6 +420,45 @@ class _Scorer:
             )
         return d, scale
 
+    def _at_shape(self, kf, pf, a, rows, good, fixed: bool) -> np.ndarray:
+        """Normalised residuals of ``rows`` (sorted) by the fit ``(kf, pf)`` with ``a``
+        left neighbours, NaN where that window does not fit in the row's segment.
+
+        Windows that are regular with every neighbour good take the regular weights
+        (as `local_fits.loo`'s fast path, all segments at once); the others are those
+        of :func:`_normalised`, with the window of shape ``a`` (``fixed``: NaN where a
+        neighbour is excluded) or the row's own sliding window (excluded neighbours
+        left out)."""
+        g, t = self.group, self.t
+        out = np.full((rows.size, g.values.shape[1]), np.nan)
+        if rows.size == 0:
+            return out
+        lo, hi = self._seg_lo[rows], self._seg_hi[rows]
+        fits = (rows - a >= lo) & (rows + 2 * kf - a < hi)
+        span = np.clip(rows[:, None] - a + np.arange(2 * kf + 1), 0, t.size - 1)
+        dt = np.diff(t[span], axis=1)
+        big = np.maximum(np.abs(t[lo]), np.abs(t[hi - 1]))
+        fast = fits & (np.max(dt, axis=1) - np.min(dt, axis=1) <= _REGULAR_ULPS * np.spacing(big))
+        offsets = np.r_[-np.arange(a, 0, -1), np.arange(1, 2 * kf - a + 1)]
+        nb = np.clip(rows[:, None] + offsets, 0, t.size - 1)
+        fast &= np.all(good[nb], axis=1)
+        if fast.any():
+            w = _regular_weights(kf, pf, a)
+            x, at, nb_f = g.values, rows[fast], nb[fast]
+            pred = w[0] * x[nb_f[:, 0]]  # as _loo's fast path
+            for j in range(1, w.size):
+                pred += w[j] * x[nb_f[:, j]]
+            r = x[at] - pred
+            if g.wrap:
+                r = np.mod(r + np.pi, 2 * np.pi) - np.pi
+            out[fast] = r / np.sqrt(1.0 + float(w @ w))
+        slow = fits & ~fast
+        if slow.any():
+            out[slow], _ = _normalised(
+                g, t, self.segments, good, kf, pf, self.scale, rows[slow], a if fixed else None
+            )
+        return out
+
     def _edge_fits(self, rows, good, d, scale):
         """The fit, scale and edge factor of the rows near a segment's ends (step 3).
 
@@ -417,7 +469,6 @@ class _Scorer:
         are the log's, the edge factor comes from windows without the row), so a glitch
         cannot choose the fit that hides it. Returns ``d, scale, edge`` of all ``rows``.
         """
-        g, t, segs, sc = self.group, self.t, self.segments, self.scale
         edge = np.ones(d.shape)
         kmax = max(k for k, _ in FITS)
         near = np.flatnonzero(np.minimum(self.from_start[rows], self.from_end[rows]) < kmax)
@@ -431,11 +482,16 @@ class _Scorer:
             fits = length >= 2 * kf + 1  # a full window of 2k neighbours
             if not fits.any():
                 continue
-            d_f, sh_f = _normalised(g, t, segs, good, kf, pf, sc, r[fits])
+            rf = r[fits]
+            fs, fe = self.from_start[rf], self.from_end[rf]
+            sh_f = np.where(fs < kf, fs, np.where(fe < kf, 2 * kf - fe, kf))
+            d_f = np.empty((rf.size, d.shape[1]))
+            for a in np.unique(sh_f):
+                d_f[sh_f == a] = self._at_shape(kf, pf, int(a), rf[sh_f == a], good, False)
             s_f = self.scales[(kf, pf)][np.clip(sh_f, 0, 2 * kf)]
             full = np.full(sh_f.size, kf)
             e_f = self._edge_factor(r[fits], good, full, np.full(sh_f.size, pf), sh_f, d_f)
-            gain = np.array([_noise_gain(kf, pf, int(a)) for a in np.clip(sh_f, 0, 2 * kf)])
+            gain = _gains(kf, pf)[sh_f]
             key = np.sum(np.log(s_f * e_f), axis=1) + d.shape[1] * 0.5 * np.log1p(gain)
             key = np.where(np.all(np.isfinite(d_f), axis=1), key, np.inf)
             at = np.flatnonzero(fits)
@@ -465,7 +521,7 @@ class _Scorer:
         mean square. The end of a segment mirrors it. The factor
         only raises a scale, so the rule's false flag rate stays at most its threshold's.
         """
-        g, t, segs, sc = self.group, self.t, self.segments, self.scale
+        g = self.group
         out = np.ones(d.shape)
         left = (shapes >= 0) & (shapes < fit_k)
         right = (shapes > fit_k) & (shapes <= 2 * fit_k)
@@ -483,27 +539,31 @@ class _Scorer:
             ask = np.unique(inward[inside])
             if ask.size == 0:
                 continue
-            d_in, _ = _normalised(g, t, segs, good, kf, pf, sc, ask, shape=a)
+            d_in = self._at_shape(kf, pf, a, ask, good, True)
             z = np.full(inward.shape + (d.shape[1],), np.nan)  # (rows, 2k, c)
             z[inside] = d_in[np.searchsorted(ask, inward[inside])] / self.scales[(kf, pf)][a]
             use = np.all(np.isfinite(z), axis=2)  # (rows, 2k)
             corr = _residual_correlation(kf, pf, min(a, 2 * kf - a), 2 * kf)
-            for i in range(r.size):
-                if not use[i].any():
+            patterns, which = np.unique(use, axis=0, return_inverse=True)
+            for pat, these in zip(patterns, np.split(np.argsort(which, kind="stable"),
+                                                     np.cumsum(np.bincount(which.ravel()))[:-1]),
+                                  strict=True):  # fmt: skip
+                if not pat.any():
                     continue
-                c = corr[np.ix_(use[i], use[i])]
-                zi = z[i, use[i]]  # (m, c)
+                c = corr[np.ix_(pat, pat)]
+                zi = z[these][:, pat]  # (rows, m, c)
                 # the spread: a scaled chi-square with the moments of sum z^2
                 tr, tr2 = dof * np.trace(c), dof * np.sum(c * c)  # (c symmetric)
-                ss = np.sum(zi**2, axis=0)
+                ss = np.sum(zi**2, axis=1)
                 # the bias: a misfit of one sign over the next rows, sum z ~ N(0, 1'C1)
-                bias = np.sum(zi, axis=0) ** 2 / np.sum(c)
+                bias = np.sum(zi, axis=1) ** 2 / np.sum(c)
                 if g.vector:
-                    ss, bias = np.sum(ss, keepdims=True), np.sum(bias, keepdims=True)
-                failed = ss * tr / tr2 > stats.chi2.isf(EDGE_LEVEL / 2, tr * tr / tr2)
-                failed |= bias > stats.chi2.isf(EDGE_LEVEL / 2, dof)
+                    ss = np.sum(ss, axis=1, keepdims=True)
+                    bias = np.sum(bias, axis=1, keepdims=True)
+                failed = ss * tr / tr2 > _chi2_isf(EDGE_LEVEL / 2, tr * tr / tr2)
+                failed |= bias > _chi2_isf(EDGE_LEVEL / 2, dof)
                 rms = np.sqrt(ss / tr)
-                out[mine[i]] = np.where(failed, np.maximum(rms, 1.0), 1.0)
+                out[mine[these]] = np.where(failed, np.maximum(rms, 1.0), 1.0)
         return out
 
     def __call__(
