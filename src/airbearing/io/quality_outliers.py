@@ -33,7 +33,7 @@ from airbearing.io.local_fits import residual_correlation as _residual_correlati
 from airbearing.io.local_fits import window_median as _window_median
 from airbearing.io.local_fits import window_shape as _window_shape
 
-__all__ = ["ABSOLUTE_FLOOR", "FITS", "find_outliers"]
+__all__ = ["ABSOLUTE_FLOOR", "EDGE_LEVEL", "FITS", "find_outliers"]
 
 #: The local fits tried, ``(k, p)``: k samples each side, polynomial degree p.
 FITS: tuple[tuple[int, int], ...] = ((3, 2), (4, 4), (5, 6))
