@@ -65,7 +65,9 @@ def spin_log(cm, seed=1, effects=None, duration=60.0):
 
 @pytest.fixture(scope="module")
 def low19():
-    return spin_log((5e-4, 0.0, -0.019))
+    # 40 s of the spin, not 60 s: the search still names the offset within 0.01 % and 1.3
+    # std (60 s: 0.006 %, 1.0 std), and the badly started fit still fails its retry too
+    return spin_log((5e-4, 0.0, -0.019), duration=40.0)
 
 
 def _cm_candidate(datas):
