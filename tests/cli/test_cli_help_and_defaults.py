@@ -267,11 +267,18 @@ def test_report_prints_its_margins_then_what_it_wrote(tmp_path, capsys, monkeypa
 
 
 @pytest.mark.slow
-def test_an_unmet_specification_is_one_line(capsys):
+def test_an_unmet_specification_is_one_line(capsys, monkeypatch):
+    from airbearing.cli import show_progress
+
+    # -q silences the progress lines even with no delay (the loud gains run:
+    # tests/cli/test_progress.py)
+    monkeypatch.setattr(show_progress, "PLAIN_DELAY", 0.0)
     # the nominal inertia only: one corner of the box, not three, for the same verdict
     assert run(["-q", "gains", "cmg-yaw", "--max-sensitivity", "1.01", "--bandwidth-hz", "5",
                 "--inertia-uncertainty", "0"]) == 0  # fmt: skip
-    lines = capsys.readouterr().out.splitlines()
+    captured = capsys.readouterr()
+    assert not any(line.startswith("gains:") for line in captured.err.splitlines()), captured.err
+    lines = captured.out.splitlines()
     verdicts = [line for line in lines if line.startswith("specification")]
     assert len(verdicts) == 1 and verdicts[0].startswith("specification NOT met: "), verdicts
     assert "bandwidth (Hz)" in verdicts[0] and "short by" in verdicts[0]

@@ -427,8 +427,11 @@ def test_defaults_that_depend_on_the_testbed_are_ones_it_accepts(tmp_path):
                 str(tmp_path / "s.json")]) == 0  # fmt: skip
     assert json.loads((tmp_path / "s.json").read_text())["scenario"] == "free"
     # --loop and --split: a platform without a cage field tunes the mechanical balancing PID
-    # (the nominal inertia: three corners of the box, not nine, the same defaults)
+    # (one corner, the nominal inertia at the testbed's own vertical offset, not the nine of
+    # the default box: --loop and --split do not depend on the box; the default box's
+    # tuning is test_tuning.py's test_balancing_loop_of_seed004_meets_its_spec)
     assert run(["gains", "seed004-platform", "--inertia-uncertainty", "0",
+                "--offset-range-mm", "-2.6", "-2.6",
                 "--json", str(tmp_path / "g.json")]) == 0  # fmt: skip
     doc = json.loads((tmp_path / "g.json").read_text())
     assert doc["loop"] == "balancing" and doc["split"] == "mechanical"

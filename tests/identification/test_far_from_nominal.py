@@ -65,7 +65,9 @@ def spin_log(cm, seed=1, effects=None, duration=60.0):
 
 @pytest.fixture(scope="module")
 def low19():
-    return spin_log((5e-4, 0.0, -0.019))
+    # 40 s of the spin, not 60 s: the search still names the offset within 0.01 % and 1.3
+    # std (60 s: 0.006 %, 1.0 std), and the badly started fit still fails its retry too
+    return spin_log((5e-4, 0.0, -0.019), duration=40.0)
 
 
 def _cm_candidate(datas):
@@ -196,6 +198,7 @@ def test_a_nominal_replay_that_does_not_converge_is_still_a_baseline():
     # 0.4 mm below but 1.7 mm to the side: the rig wobbles ~10 deg at the spin rate and the
     # nominal replay stops at IPOPT's iteration limit on 10 s windows; its last iterate is the
     # baseline, and the CM offset is still named within 1 % with the gap at the noise
+    # (60 s: on 40 s it still stops there, but the search took longer, 98 s against 77 s)
     truth = np.array([-1.372e-3, -0.952e-3, -0.4e-3])
     d = discrepancy(SPIN_RIG, spin_log(tuple(truth), seed=100).log, max_effects=1)
     assert d.nominal_fit.status == "Maximum_Iterations_Exceeded"

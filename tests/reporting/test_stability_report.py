@@ -46,10 +46,14 @@ def attitude_report(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def balancing_report(tmp_path_factory):
-    """``gains`` then ``report --gains`` on seed 004's balancing loop (mechanical split)."""
+    """``gains`` then ``report --gains`` on seed 004's balancing loop (mechanical split), on
+    the nominal inertia (the default box's three vertical offsets, not nine corners: a third
+    of the work; the report takes the specification from the gains file, and the default
+    box's tuning is test_tuning.py's test_balancing_loop_of_seed004_meets_its_spec)."""
     d = tmp_path_factory.mktemp("report-balancing")
     name, split = "seed004-platform", "mechanical"
-    codes = _in(d, [["gains", name, "--loop", "balancing", "--split", split, "--json", "g.json"],
+    codes = _in(d, [["gains", name, "--loop", "balancing", "--split", split,
+                     "--inertia-uncertainty", "0", "--json", "g.json"],
                     ["report", name, "--loop", "balancing", "--gains", "g.json",
                      "-o", "report.html", "--json", "m.json"]])  # fmt: skip
     assert codes == [0, 0]
