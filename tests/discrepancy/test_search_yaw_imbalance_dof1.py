@@ -174,7 +174,8 @@ def test_the_search_names_a_hidden_imbalance_and_nothing_else(cmg, imbalance_sle
 @pytest.mark.slow  # a discrepancy search on two noise-free logs: about 8 s
 def test_two_slews_fit_one_held_start_yaw_and_the_other_logs_frame(cmg, imbalance_slew):
     # one start yaw is held over all the logs (the first log's start, at rest); the second
-    # log's start yaws are all fitted with the rest. With every start yaw free: (3.018e-4, 9.73e-5) +- (6.1e-5, 2.5e-5).
+    # log's start yaws are all fitted with the rest. With every start yaw free:
+    # (3.018e-4, 9.73e-5) +- (6.1e-5, 2.5e-5).
     # Noise-free logs: 1e-6 relative, as the module says
     other = slew(cmg, duration=3.0, angle_deg=-60.0, effects={"yaw_imbalance": PAIR}).log
     found = discrepancy(cmg, [imbalance_slew, other])

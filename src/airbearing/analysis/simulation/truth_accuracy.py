@@ -28,7 +28,6 @@ from functools import lru_cache
 
 import casadi as ca
 import numpy as np
-from scipy import signal
 
 from airbearing import quaternion as quat
 from airbearing.analysis.shooting.logs import ATTITUDE_SIGMA_MIN, RATE_SIGMA_MIN
@@ -216,7 +215,11 @@ def _lag_errors(model: Model, coarse, fine, p) -> np.ndarray:
         return local
     tau = float(np.asarray(p, dtype=float).ravel()[model.index(["sensor_lag"], "p")[0]])
     keep = math.exp(-model.testbed.sensors.dt / tau) if tau > 0 else 0.0
-    carried = signal.lfilter([1.0], [1.0, -keep], local)  # G_i = keep G_(i-1) + l_i
+    # here, not at the top: scipy.signal loads scipy.stats (1-3 s of CPU), which the
+    # discrepancy search, importing the simulator, does not need
+    from scipy.signal import lfilter
+
+    carried = lfilter([1.0], [1.0, -keep], local)  # G_i = keep G_(i-1) + l_i
     return local * (float(np.max(carried)) / total)
 
 
