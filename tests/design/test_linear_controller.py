@@ -11,11 +11,14 @@ from dataclasses import replace
 
 import casadi as ca
 import numpy as np
+import pytest
 
+import airbearing as ab
 from airbearing.design.balancing import SEED000_GAINS
 from airbearing.design.controller_delay import with_delay
 from airbearing.design.linear_controller import linear_controller
-from airbearing.design.loops import attitude_loop, balancing_loop
+from airbearing.design.loops import attitude_loop, balancing_loop, make_loop
+from airbearing.errors import InputError
 
 
 def _baked(controller, gains):
@@ -76,3 +79,13 @@ def test_a_wheel_loop_with_options_runs_with_a_delay():
     np.testing.assert_array_equal(u_d, loop.trim.u)
     np.testing.assert_array_equal(c_next_d[ctl.c0.size :], u)
     np.testing.assert_array_equal(c_next_d[: ctl.c0.size], c_next)
+
+
+def test_an_attitude_loop_without_a_trim_says_why_not_the_balancing_words():
+    # a gyro bias integrates into the CMG loop's yaw estimate for ever: no trim exists,
+    # and the error must not ask for the balancing loop's integral gain
+    tb = ab.load_testbed("cmg-yaw").with_effects({"gyro_bias": 1e-3})
+    with pytest.raises(InputError) as err:
+        make_loop(tb, "attitude").controller_trim()
+    msg = str(err.value)
+    assert "cannot hold the trim" in msg and "gyro bias" in msg and "K_dK_i" not in msg

@@ -264,7 +264,7 @@ class Loop:
         numpy.ndarray
             Shape of ``controller.c0``.
         """
-        return trim_state(self._lin_ctrl, self.gain_vector)
+        return trim_state(self._lin_ctrl, self.gain_vector, kind=self.kind)
 
     def controller_ss(self, *, discrete: bool = True) -> ct.StateSpace:
         """The linearised controller: inputs the used measurements and references,

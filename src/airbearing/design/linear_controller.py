@@ -85,8 +85,11 @@ def _build_linear_controller(
     )
 
 
-def trim_state(lc: LinearController, gains: np.ndarray, c0=None) -> np.ndarray:
-    """Controller state holding the trim: ``c_next = c`` and ``u = u_trim`` (Newton, exact)."""
+def trim_state(lc: LinearController, gains: np.ndarray, c0=None, *, kind="balancing") -> np.ndarray:
+    """Controller state holding the trim: ``c_next = c`` and ``u = u_trim`` (Newton, exact).
+
+    ``kind`` (the loop's, "balancing" or "attitude") only words the error when none exists.
+    """
     c = np.array(lc.c0 if c0 is None else c0, dtype=float)
     scale = 1.0
     for _ in range(4):  # the equations are linear in c for these laws; a few steps at most
@@ -98,9 +101,15 @@ def trim_state(lc: LinearController, gains: np.ndarray, c0=None) -> np.ndarray:
         c = c - np.linalg.lstsq(J, r, rcond=None)[0]
     r = np.asarray(lc.trim_fn(gains, c)[1]).ravel()
     if np.abs(r).max() > 1e-7 * max(scale, 1.0):
+        why = (
+            "the balancing loop needs integral action (K_dK_i > 0)"
+            if kind == "balancing"
+            else "a constant input at the trim (a gyro bias, a constant torque) moves the "
+            "attitude loop's state without end, so there is no trim to linearise about"
+        )
         raise InputError(
             "the controller cannot hold the trim with these gains (residual "
-            f"{np.abs(r).max():.3g}): the balancing loop needs integral action (K_dK_i > 0)"
+            f"{np.abs(r).max():.3g}): {why}"
         )
     return c
 

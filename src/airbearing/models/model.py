@@ -256,7 +256,8 @@ class Model:
         Fixed-step RK4 with ``substeps`` sub-intervals on the plant states, the
         attitude quaternion renormalised at the end; ``sensor_lag`` states are
         advanced with the exact exponential of a first-order lag driven by the
-        sub-interval mean rate, so any time constant >= 0 is stable.
+        rate's cubic over each sub-interval (its end values and slopes: fourth order,
+        like RK4), so any time constant >= 0 is stable.
 
         Parameters
         ----------
@@ -280,7 +281,7 @@ class Model:
         """One interval of any length: ``(x, u, p, dt) -> x_next``, ``dt`` (s) an input.
 
         The same arithmetic as :meth:`step` (RK4 with ``substeps`` sub-intervals, the
-        quaternion renormalised, exact lag update), with the interval length a symbol, so
+        quaternion renormalised, fourth-order lag update), with the interval length a symbol, so
         one Function integrates a log on its own (jittered) sample times.
 
         Parameters
@@ -305,14 +306,19 @@ class Model:
         xp = x[plant]
         lag = x[list(self.lag_index)] if self.lag_index else ca.SX(0, 1)
         hs = dt / substeps
-        for _ in range(substeps):
-            k1 = self._f_plant(xp, u, p)
+        k1 = self._f_plant(xp, u, p)
+        for i in range(substeps):
+            if i and not self.lag_index:
+                k1 = self._f_plant(xp, u, p)
             k2 = self._f_plant(xp + hs / 2 * k1, u, p)
             k3 = self._f_plant(xp + hs / 2 * k2, u, p)
             k4 = self._f_plant(xp + hs * k3, u, p)
             xp_next = xp + hs / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
             if self.lag_index:
-                lag = self._lag(xp, xp_next, lag, p, hs)
+                # the rate's slope at the sub-step's end, also the next sub-step's k1
+                k1_next = self._f_plant(xp_next, u, p)
+                lag = self._lag(xp, xp_next, k1, k1_next, lag, p, hs)
+                k1 = k1_next
             xp = xp_next
         if self.dof == 3:
             xp[0:4] = xp[0:4] / ca.norm_2(xp[0:4])

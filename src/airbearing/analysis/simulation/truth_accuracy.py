@@ -148,8 +148,7 @@ def sample_errors(model: Model, x, u, p, levels: tuple[int, ...], level=None, *,
     run's input held over it); 16/15 of the difference (RK4's error falls 16-fold when the
     sub-step halves) is its error. The attitude and the body rates are compared: what the
     integration carries from sample to sample. (A ``sensor_lag`` state forgets its error
-    within its time constant, and its update, exact for a source varying linearly over a
-    sub-step, is second order: more sub-steps are not what makes it exact.)
+    within its time constant.)
 
     Parameters
     ----------
