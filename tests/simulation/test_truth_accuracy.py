@@ -16,6 +16,7 @@ from airbearing import quaternion as quat
 from airbearing.analysis.simulation.truth_accuracy import (
     TRUTH_ACCURACY,
     raise_levels,
+    sample_errors,
     truth_tolerance,
 )
 from airbearing.errors import InputError
@@ -100,3 +101,46 @@ def test_levels_rise_where_the_error_is():
     # the rate's share counts too; a sample at the last level stays there
     err = (np.zeros(5), np.array([0.0, 0.0, 0.0, 0.0, 5.0]))
     assert raise_levels(err, tol, np.array([0, 0, 0, 0, 3]), 4) is None
+
+
+@pytest.fixture(scope="module")
+def lagged_slew():
+    # a noise-free 180-deg yaw slew of the 3-dof CMG rig whose gyro lags by 10 ms (a fifth
+    # of a sample: the lag's update sees its source change most within a sub-step)
+    tb = ab.load_testbed("cmg-3dof")
+    return ab.slew(tb, duration=6.0, effects={"sensor_lag": 0.01}, ideal=True, seed=1)
+
+
+def test_a_lagged_gyro_within_its_tolerance_keeps_four_sub_steps(lagged_slew):
+    # the lagged rates at 4 sub-steps are 3.8e-11 rad/s off CVODES (the body rates 3.3e-11)
+    # against a tolerance of 9.1e-10: the run keeps 4 sub-steps, to the bit. (Its lag's
+    # step-doubling errors summed as if they accumulated, 7.9e-10, refined 13 samples: a
+    # lag forgets its error within its time constant, so only what it carries counts)
+    run, model = lagged_slew, lagged_slew.model
+    rate_tol = truth_tolerance(model, len(run.t), 0.0, 0.0)[1]
+    ref = _cvodes_states(run)
+    lag = list(model.lag_index)
+    assert np.max(np.abs(run.x[1:, lag] - ref[:, lag])) < rate_tol
+    assert np.all(run.substeps == 4)
+    fixed = ab.simulate(model, run.controller, duration=6.0, x0=run.x[0], noise=False,
+                        reference=run.reference, seed=1, substeps=4)  # fmt: skip
+    assert np.array_equal(run.x, fixed.x)
+
+
+def test_a_lagged_rate_off_its_integration_is_refined(lagged_slew):
+    # one sample whose lagged rate is 10 tolerances off what its integration gives (the
+    # step doubling's own finer step does not reach it): the check counts it (16/15 of it,
+    # plus the next sample's share of the decay exp(-dt/tau) = 7e-3) and refines that sample
+    run, model = lagged_slew, lagged_slew.model
+    rate_tol = truth_tolerance(model, len(run.t), 0.0, 0.0)
+    x = run.x.copy()
+    k = 60
+    x[k + 1, list(model.lag_index)] += 10 * rate_tol[1]
+    level = np.zeros(len(run.t), dtype=int)
+    before = sample_errors(model, run.x, run.u, model.p0, (4,), level)
+    after = sample_errors(model, x, run.u, model.p0, (4,), level)
+    extra = after[1].sum() - before[1].sum()
+    assert extra == pytest.approx(16 / 15 * 10 * rate_tol[1], rel=0.05)
+    assert raise_levels(before, rate_tol, level, 4) is None
+    new = raise_levels(after, rate_tol, level, 4)
+    assert new is not None and new[k] == 1

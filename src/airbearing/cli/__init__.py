@@ -98,7 +98,8 @@ def _global(
     from airbearing.cli.show_progress import _repeated_compile_notice, set_quiet
 
     set_quiet(quiet)
-    from airbearing.models.compiled import announce_to  # stdlib only: start-up stays light
+    # imports CasADi; `CMD --help` never gets here (`fast_help` answers it first)
+    from airbearing.models.compiled import announce_to
 
     def notice(what: str, *_) -> None:
         if not _repeated_compile_notice(what):

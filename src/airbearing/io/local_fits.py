@@ -20,6 +20,7 @@ __all__ = [
     "loo",
     "loo_reference",
     "noise_gain",
+    "residual_correlation",
     "regular_span",
     "regular_weights",
     "window_median",
@@ -237,6 +238,28 @@ def noise_gain(k: int, p: int, a: int) -> float:
     tau = np.r_[-np.arange(a, 0, -1), np.arange(1, 2 * k - a + 1)].astype(float)
     w = np.linalg.pinv(np.vander(tau, p + 1, increasing=True))[0]
     return float(w @ w)
+
+
+@lru_cache(maxsize=64)
+def residual_correlation(k: int, p: int, a: int, m: int) -> np.ndarray:
+    """Correlation of the normalised residuals of ``m`` consecutive rows under white noise.
+
+    Each row ``i = 1 .. m`` (after a row 0) is predicted by the fit ``(k, p)`` with
+    ``a`` left neighbours on a regular grid (:func:`regular_weights`), its residual
+    divided by ``sqrt(1 + h)``: unit variance each, correlated where the windows
+    overlap. Returns the ``(m, m)`` matrix, read-only.
+    """
+    w = regular_weights(k, p, a)
+    offsets = np.r_[-np.arange(a, 0, -1), np.arange(1, 2 * k - a + 1)]
+    rows = np.zeros((m, m + 2 * k + 1))
+    for j in range(m):
+        i = j + a  # (the first predicted row's window starts at column 0)
+        rows[j, i] = 1.0
+        rows[j, i + offsets] -= w
+    rows /= np.sqrt(1.0 + float(w @ w))
+    out = rows @ rows.T
+    out.flags.writeable = False
+    return out
 
 
 #: Rows per block of :func:`window_median` (a block holds 51 values per row and channel).

@@ -55,8 +55,16 @@ segment (never across a gap) and each channel group:
    model's curvature. The first and last ``k`` samples
    of a segment are extrapolated, where a fit's misfit is larger: each window shape
    (how many neighbours on the left) has its own scale, measured on the log itself
-   by predicting every sample with that shape, and each position near a segment's
-   end uses the fit whose scale there is smallest.
+   by predicting every sample with that shape. A motion may also change fastest where
+   the log begins (a logged estimate's filter starting with the log), which the
+   log-wide scale does not see: the same fit and shape predict the ``2k`` rows
+   inwards from windows without the row, and where their residuals fail a test of
+   white noise at :data:`~airbearing.io.quality_outliers.EDGE_LEVEL` (their sum, which
+   a misfit makes of one sign, and their sum of squares, each against its
+   distribution under the residuals' correlation), their root mean square is the
+   edge's factor on the scale (never below 1). Each row near a segment's end uses
+   the fit whose scale times that factor times ``sqrt(1 + h)`` is smallest there;
+   none of it depends on the row's own sample.
 4. **Robust noise scale**, per channel over all segments: ``1.4826 * MAD`` of the
    normalised residuals (for the quaternion, ``sqrt(median(|r|^2) / 2.366)``, the
    median of chi-square with 3 degrees of freedom: attitude noise of ``sigma`` rad

@@ -11,8 +11,10 @@ one at a time. The numerics of the fits are in :mod:`airbearing.io.local_fits`.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
+from scipy import stats
 
 from airbearing.io.discontinuity import (
     _CHI2_3_MEDIAN,
@@ -27,10 +29,11 @@ from airbearing.io.local_fits import loo as _loo_regular
 from airbearing.io.local_fits import noise_gain as _noise_gain
 from airbearing.io.local_fits import regular_span as _regular_span
 from airbearing.io.local_fits import regular_weights as _regular_weights
+from airbearing.io.local_fits import residual_correlation as _residual_correlation
 from airbearing.io.local_fits import window_median as _window_median
 from airbearing.io.local_fits import window_shape as _window_shape
 
-__all__ = ["ABSOLUTE_FLOOR", "FITS", "find_outliers"]
+__all__ = ["ABSOLUTE_FLOOR", "EDGE_LEVEL", "FITS", "find_outliers"]
 
 #: The local fits tried, ``(k, p)``: k samples each side, polynomial degree p.
 FITS: tuple[tuple[int, int], ...] = ((3, 2), (4, 4), (5, 6))
@@ -44,6 +47,9 @@ _MAX_PASSES = 200
 _SCALE_ROWS = 2000  # rows spread over the log on which the noise scales are measured
 _MIN_SCALE_SAMPLES = 8  # fewer residuals than this give no scale (the floor is used)
 _RECOMPUTE = 3  # rows within this many k of a newly excluded sample are refitted
+#: Level of the test that an edge's inward rows are rougher than the log-wide scale
+#: (:meth:`_Scorer._edge_factor`): a false alarm only lowers the sensitivity at that edge.
+EDGE_LEVEL = 1e-3
 _ROUGH = 0.2  # noise-free channels: scale floor per unit median |second difference|
 
 
@@ -231,6 +237,18 @@ def _shape_scales(group: _Group, t, segments, k: int, p: int, scale: float) -> n
     return scales
 
 
+@lru_cache(maxsize=8)
+def _gains(k: int, p: int) -> np.ndarray:
+    """`local_fits.noise_gain` of the fit ``(k, p)`` for every window shape ``0 .. 2k``."""
+    return np.array([_noise_gain(k, p, a) for a in range(2 * k + 1)])
+
+
+@lru_cache(maxsize=256)
+def _chi2_isf(level: float, dof: float) -> float:
+    """``scipy.stats.chi2.isf``, kept: the edge tests ask for few distinct ones."""
+    return float(stats.chi2.isf(level, dof))
+
+
 def _score(group: _Group, d: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Per-row score (noise scales) and per-channel exceedance; NaN (unchecked) -> 0."""
     d = np.nan_to_num(d, nan=0.0)
@@ -402,6 +420,152 @@ class _Scorer:
             )
         return d, scale
 
+    def _at_shape(self, kf, pf, a, rows, good, fixed: bool) -> np.ndarray:
+        """Normalised residuals of ``rows`` (sorted) by the fit ``(kf, pf)`` with ``a``
+        left neighbours, NaN where that window does not fit in the row's segment.
+
+        Windows that are regular with every neighbour good take the regular weights
+        (as `local_fits.loo`'s fast path, all segments at once); the others are those
+        of :func:`_normalised`, with the window of shape ``a`` (``fixed``: NaN where a
+        neighbour is excluded) or the row's own sliding window (excluded neighbours
+        left out)."""
+        g, t = self.group, self.t
+        out = np.full((rows.size, g.values.shape[1]), np.nan)
+        if rows.size == 0:
+            return out
+        lo, hi = self._seg_lo[rows], self._seg_hi[rows]
+        fits = (rows - a >= lo) & (rows + 2 * kf - a < hi)
+        span = np.clip(rows[:, None] - a + np.arange(2 * kf + 1), 0, t.size - 1)
+        dt = np.diff(t[span], axis=1)
+        big = np.maximum(np.abs(t[lo]), np.abs(t[hi - 1]))
+        fast = fits & (np.max(dt, axis=1) - np.min(dt, axis=1) <= _REGULAR_ULPS * np.spacing(big))
+        offsets = np.r_[-np.arange(a, 0, -1), np.arange(1, 2 * kf - a + 1)]
+        nb = np.clip(rows[:, None] + offsets, 0, t.size - 1)
+        fast &= np.all(good[nb], axis=1)
+        if fast.any():
+            w = _regular_weights(kf, pf, a)
+            x, at, nb_f = g.values, rows[fast], nb[fast]
+            pred = w[0] * x[nb_f[:, 0]]  # as _loo's fast path
+            for j in range(1, w.size):
+                pred += w[j] * x[nb_f[:, j]]
+            r = x[at] - pred
+            if g.wrap:
+                r = np.mod(r + np.pi, 2 * np.pi) - np.pi
+            out[fast] = r / np.sqrt(1.0 + float(w @ w))
+        slow = fits & ~fast
+        if slow.any():
+            out[slow], _ = _normalised(
+                g, t, self.segments, good, kf, pf, self.scale, rows[slow], a if fixed else None
+            )
+        return out
+
+    def _edge_fits(self, rows, good, d, scale):
+        """The fit, scale and edge factor of the rows near a segment's ends (step 3).
+
+        Each row within the largest ``k`` of a segment's end takes the fit of
+        :data:`FITS` that flags the smallest glitch *there*: the smallest product over
+        channels of its window shape's scale, its edge factor (:meth:`_edge_factor`)
+        and ``sqrt(1 + h)``. Nothing of it depends on the row's own sample (the scales
+        are the log's, the edge factor comes from windows without the row), so a glitch
+        cannot choose the fit that hides it. Returns ``d, scale, edge`` of all ``rows``.
+        """
+        edge = np.ones(d.shape)
+        kmax = max(k for k, _ in FITS)
+        near = np.flatnonzero(np.minimum(self.from_start[rows], self.from_end[rows]) < kmax)
+        if near.size == 0:
+            return d, scale, edge
+        r = rows[near]
+        length = self.from_start[r] + self.from_end[r] + 1
+        best = np.full(near.size, np.inf)
+        d_near, s_near, e_near = d[near].copy(), scale[near].copy(), edge[near].copy()
+        for kf, pf in FITS:
+            fits = length >= 2 * kf + 1  # a full window of 2k neighbours
+            if not fits.any():
+                continue
+            rf = r[fits]
+            fs, fe = self.from_start[rf], self.from_end[rf]
+            sh_f = np.where(fs < kf, fs, np.where(fe < kf, 2 * kf - fe, kf))
+            d_f = np.empty((rf.size, d.shape[1]))
+            for a in np.unique(sh_f):
+                d_f[sh_f == a] = self._at_shape(kf, pf, int(a), rf[sh_f == a], good, False)
+            s_f = self.scales[(kf, pf)][np.clip(sh_f, 0, 2 * kf)]
+            full = np.full(sh_f.size, kf)
+            e_f = self._edge_factor(r[fits], good, full, np.full(sh_f.size, pf), sh_f, d_f)
+            gain = _gains(kf, pf)[sh_f]
+            key = np.sum(np.log(s_f * e_f), axis=1) + d.shape[1] * 0.5 * np.log1p(gain)
+            key = np.where(np.all(np.isfinite(d_f), axis=1), key, np.inf)
+            at = np.flatnonzero(fits)
+            take = key < best[at]
+            at = at[take]
+            best[at] = key[take]
+            d_near[at], s_near[at], e_near[at] = d_f[take], s_f[take], e_f[take]
+        d[near], scale[near], edge[near] = d_near, s_near, e_near
+        return d, scale, edge
+
+    def _edge_factor(self, rows, good, fit_k, fit_p, shapes, d) -> np.ndarray:
+        """Per row and channel, how much rougher the motion is at an extrapolated edge
+        position than the log-wide scale of its window shape says (>= 1; io.quality doc,
+        step 4).
+
+        A row ``e`` samples from its segment's start has ``e < k`` left neighbours: its
+        fit extrapolates, and a motion that changes fast where the log begins (a filter's
+        start-up transient in a logged estimate) leaves a misfit there that the shape's
+        scale, measured over the whole log, does not contain. The same fit with the same
+        shape predicts the ``2k`` rows inwards from windows that do not contain the row
+        (rows ``e + 1 + j`` with ``e`` left neighbours start after it), so a glitch in
+        the row cannot raise its own scale. They are tested against white noise at
+        :data:`EDGE_LEVEL` (half for each statistic): their sum, which a misfit makes
+        of one sign (normal, with the variance ``1' C 1`` of the residuals' white-noise
+        correlation ``C``), and their sum of squares (the scaled chi-square with the
+        same two moments, Satterthwaite); where either fails, the factor is their root
+        mean square. The end of a segment mirrors it. The factor
+        only raises a scale, so the rule's false flag rate stays at most its threshold's.
+        """
+        g = self.group
+        out = np.ones(d.shape)
+        left = (shapes >= 0) & (shapes < fit_k)
+        right = (shapes > fit_k) & (shapes <= 2 * fit_k)
+        at = np.flatnonzero(left | right)
+        if at.size == 0:
+            return out
+        dof = 3 if g.vector else 1  # per row: the quaternion's tangent space, or one channel
+        for kf, pf, a in {(int(fit_k[i]), int(fit_p[i]), int(shapes[i])) for i in at}:
+            mine = at[(fit_k[at] == kf) & (fit_p[at] == pf) & (shapes[at] == a)]
+            r = rows[mine]
+            j = np.arange(2 * kf)[None, :]
+            inward = r[:, None] + (a + 1 + j if a < kf else -(2 * kf - a + 1 + j))
+            inside = (inward >= self._seg_lo[r][:, None]) & (inward < self._seg_hi[r][:, None])
+            inside[inside] = good[inward[inside]]
+            ask = np.unique(inward[inside])
+            if ask.size == 0:
+                continue
+            d_in = self._at_shape(kf, pf, a, ask, good, True)
+            z = np.full(inward.shape + (d.shape[1],), np.nan)  # (rows, 2k, c)
+            z[inside] = d_in[np.searchsorted(ask, inward[inside])] / self.scales[(kf, pf)][a]
+            use = np.all(np.isfinite(z), axis=2)  # (rows, 2k)
+            corr = _residual_correlation(kf, pf, min(a, 2 * kf - a), 2 * kf)
+            patterns, which = np.unique(use, axis=0, return_inverse=True)
+            for pat, these in zip(patterns, np.split(np.argsort(which, kind="stable"),
+                                                     np.cumsum(np.bincount(which.ravel()))[:-1]),
+                                  strict=True):  # fmt: skip
+                if not pat.any():
+                    continue
+                c = corr[np.ix_(pat, pat)]
+                zi = z[these][:, pat]  # (rows, m, c)
+                # the spread: a scaled chi-square with the moments of sum z^2
+                tr, tr2 = dof * np.trace(c), dof * np.sum(c * c)  # (c symmetric)
+                ss = np.sum(zi**2, axis=1)
+                # the bias: a misfit of one sign over the next rows, sum z ~ N(0, 1'C1)
+                bias = np.sum(zi, axis=1) ** 2 / np.sum(c)
+                if g.vector:
+                    ss = np.sum(ss, axis=1, keepdims=True)
+                    bias = np.sum(bias, axis=1, keepdims=True)
+                failed = ss * tr / tr2 > _chi2_isf(EDGE_LEVEL / 2, tr * tr / tr2)
+                failed |= bias > _chi2_isf(EDGE_LEVEL / 2, dof)
+                rms = np.sqrt(ss / tr)
+                out[mine[these]] = np.where(failed, np.maximum(rms, 1.0), 1.0)
+        return out
+
     def __call__(
         self, rows: np.ndarray, good: np.ndarray, exact: bool = True
     ) -> tuple[np.ndarray, np.ndarray]:
@@ -425,18 +589,23 @@ class _Scorer:
         d = d.copy()
         scale = self.scales[self.fit][np.clip(shapes, 0, 2 * k)]
         # rows at a segment's first or last few positions may take another fit
-        edge_rows = np.flatnonzero(
-            np.minimum(self.from_start[rows], self.from_end[rows]) < self._edge_depth
-        )
-        from_start, from_end = self.from_start[rows[edge_rows]], self.from_end[rows[edge_rows]]
-        for (side, e), (kf, pf) in self.edge.items():
-            at = (from_start if side == 0 else from_end) == e
-            at &= (from_end if side == 0 else from_start) >= kf
-            if not at.any():
-                continue
-            at = edge_rows[at]
-            d_f, shapes_f = _normalised(g, t, segs, good, kf, pf, sc, rows[at])
-            d[at], scale[at] = d_f, self.scales[(kf, pf)][np.clip(shapes_f, 0, 2 * kf)]
+        if g.sided:  # inputs: the fit per position (the best of three fits decides below)
+            edge = np.ones(d.shape)
+            edge_rows = np.flatnonzero(
+                np.minimum(self.from_start[rows], self.from_end[rows]) < self._edge_depth
+            )
+            from_start = self.from_start[rows[edge_rows]]
+            from_end = self.from_end[rows[edge_rows]]
+            for (side, e), (kf, pf) in self.edge.items():
+                at = (from_start if side == 0 else from_end) == e
+                at &= (from_end if side == 0 else from_start) >= kf
+                if not at.any():
+                    continue
+                at = edge_rows[at]
+                d_f, shapes_f = _normalised(g, t, segs, good, kf, pf, sc, rows[at])
+                d[at], scale[at] = d_f, self.scales[(kf, pf)][np.clip(shapes_f, 0, 2 * kf)]
+        else:  # measurements: the fit per row, with the edge's own roughness
+            d, scale, edge = self._edge_fits(rows, good, d, scale)
         if g.sided:
             d, scale = self._sided(rows, good, d, scale)
         elif g.switch_rows is not None:
@@ -444,15 +613,17 @@ class _Scorer:
             if at.size:
                 # the motion changes its character at a switch (a rate limit reached
                 # or left): every fit's one-sided form, the higher degrees follow it
-                d[at], scale[at] = self._sided(rows[at], good, d[at], scale[at], FITS)
+                d_s, s_s = self._sided(rows[at], good, d[at], scale[at], FITS)
+                # a row rescored by another fit there: that fit's scale, no edge factor
+                edge[at] = np.where((d_s == d[at]) & (s_s == scale[at]), edge[at], 1.0)
+                d[at], scale[at] = d_s, s_s
         if exact:
-            return _score(g, d, scale * self.local_at(rows))
+            return _score(g, d, scale * np.maximum(self.local_at(rows), edge))
         score, over = _score(g, d, scale)  # local factor 1: an upper bound of each score
         maybe = over.any(axis=1)
         if maybe.any():
-            score[maybe], over[maybe] = _score(
-                g, d[maybe], scale[maybe] * self.local_at(rows[maybe])
-            )
+            factor = np.maximum(self.local_at(rows[maybe]), edge[maybe])
+            score[maybe], over[maybe] = _score(g, d[maybe], scale[maybe] * factor)
         if first_pass and self._all_rows is not None:
             self._first_pass = (score.copy(), over.copy())
             self._all_rows = None  # its residuals are not needed again

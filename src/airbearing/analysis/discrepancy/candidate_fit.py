@@ -126,7 +126,7 @@ def _try(search, cand, chosen, theta_chosen, current, current_lag, ln_n, starts,
     if cand.lag and not current_lag:
         k_added += len(model.lag_index) * problem.windows.n
     if fit.extra.get(START_YAW):
-        k_added += search.start_yaws()
+        k_added += search.start_yaws(fit)
     heldout = cross_validate(problem, fit, k, search.folds)
     res = why(
         problem, judge(cand, fit, k_sel, current, ln_n, k_added, heldout, before, start, note)
@@ -147,10 +147,12 @@ def _on_fitted_yaw(search, lag, cand, fit, args, k_sel):
     and the fit moves the candidate (and others) to make up for it. The candidate is first
     fitted from the logged yaw (the search's Model holds it at zero, where the start yaw is a
     direction no fit fixes); only when that fit is significant (``MIN_SIGMAS`` standard
-    errors from zero) is it refitted from there with the start yaws free (the better of the
-    two fits is kept, the refit only where it identifies every value; it is marked
-    ``extra["start_yaw"]``). Once the search has
-    named such an effect every fit is on that layout already (:attr:`_Search.yaw_fitted`).
+    errors from zero) is it refitted from there with the start yaws free but one, held at the
+    logged yaw where the rig rests (:func:`.replay.pinned_window`: a common offset of every
+    start yaw is a turn of a ``yaw_imbalance``'s direction, which that one fixes). The better
+    of the two fits is kept, the refit only where it identifies every value; it is marked
+    ``extra["start_yaw"]``. Once the search has named such an effect every fit is on that
+    layout already (:attr:`_Search.yaw_fitted`).
     """
     p_base, S_all, lower, upper = args
     if search.yaw_fitted or cand.lag or not np.all(np.isfinite(fit.theta)):
@@ -175,8 +177,8 @@ def _on_fitted_yaw(search, lag, cand, fit, args, k_sel):
         return fit
     if not (yawed.rss <= fit.rss and np.all(np.isfinite(yawed.theta))):
         return fit
-    # a start yaw the effect itself can absorb (``yaw_imbalance``: a common yaw offset is a
-    # turn of its direction) leaves a direction no fit fixes; the logged yaw's fit is as good
+    # a start yaw the effects can absorb leaves a direction no fit fixes (the held one
+    # removes the common offset a yaw_imbalance absorbs); the logged yaw's fit is then kept
     if any(yawed.not_identifiable) or not np.all(np.isfinite(yawed.theta_std)):
         return fit
     return replace(yawed, extra={**yawed.extra, START_YAW: True})

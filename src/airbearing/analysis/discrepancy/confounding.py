@@ -249,13 +249,14 @@ def constant_torque_confounding(model, datas, p, named, S_of, axes, rates) -> li
             if sine >= STEADY_AXIS:
                 continue
             kind = "exact" if sine < EXACT_SINE else "near"
-            what = f"constant torque about {AXES[i]}"
+            ax = AXES[i] if model.dof == 3 else "z"  # a dof-1 rate is the yaw rate
+            what = f"constant torque about {ax}"
             text = (
-                f"the rate about {AXES[i]} stays near {w:.3g} rad/s over the logs (within "
-                f"{100 * sine:.0f} %), so {a.name} about {AXES[i]} makes a nearly constant "
+                f"the rate about {ax} stays near {w:.3g} rad/s over the logs (within "
+                f"{100 * sine:.0f} %), so {a.name} about {ax} makes a nearly constant "
                 "torque there, as would a torque the model does not hold (the bearing's "
                 "own air-flow torque, a slow drift); repeat the run at another "
-                f"rate about {AXES[i]} (or let it coast down, or slew it) and fit the logs "
+                f"rate about {ax} (or let it coast down, or slew it) and fit the logs "
                 "together: a friction or drag scales with the rate, the unexplained torque "
                 "does not"
             )

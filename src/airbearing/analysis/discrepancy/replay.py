@@ -8,7 +8,9 @@ so the comparison is not swamped by one noisy initial sample nor by the
 divergence of a sensitive motion over a long horizon. A dof-1 gyro log's ``yaw`` is the
 testbed's own estimate (FORMATS.md), not a measurement: when a torque of the Model depends
 on the yaw (``spring_torque``, ``yaw_imbalance`` at a non-zero value), the windows' start
-yaw is fitted as well, one yaw trajectory per segment.
+yaw is fitted as well, one yaw trajectory per segment, but for one start yaw held at the
+logged one where the rig rests (:func:`pinned_window`): it fixes the yaw's frame, and with
+it the direction of a ``yaw_imbalance`` (or of a residual dipole in a cage field).
 
 The gap
     ``gap = sqrt( sum_{usable samples, axes} e^2 / count )``, the RMS over every
@@ -23,6 +25,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+import casadi as ca
 import numpy as np
 import pandas as pd
 
@@ -85,6 +88,7 @@ __all__ = [
     "model_for",
     "noise_floor",
     "open_loop",
+    "pinned_window",
     "problem_for",
     "replay",
     "replay_data",
@@ -129,11 +133,107 @@ def problem_for(
         jit=jit,
         theta_slots=theta_slots,
     )
+    if problem.n_att and not problem.attitude_measured:
+        # a gyro log's start yaws are fitted (the logged yaw is the testbed's estimate); one
+        # is held at the logged value, where the estimate is trusted (:func:`pinned_window`),
+        # in the fits whose free values would absorb a common offset of them all (YawTurn)
+        held = [pinned_window(windows, problem.sigma_rate) * problem.n_delta]
+        problem.pin(held, rule=YawTurn(model))
     if windows.linked:  # linked pieces start nearly free (the top of the intensity grid)
         set_intensity(problem, KAPPA_GRID[0] if kappa is None else kappa)
         if noise is not None:
             set_measurement_noise(problem, noise)
     return problem
+
+
+#: Random states, inputs and gimbal angles at which :class:`YawTurn` compares derivatives.
+YAW_TURN_PROBES = 8
+#: Relative residual below which the yaw's derivative is one of the free parameters'.
+YAW_TURN_RTOL = 1e-8
+
+
+class YawTurn:
+    """``rule(p, S) -> bool``: whether turning the yaw is, at the parameters ``p`` (n_p,),
+    a change of the free parameters ``p + S theta`` (the rule of :meth:`ShootingProblem.pin`).
+
+    With the start yaws fitted, a common offset ``c`` of them all changes the torque by
+    ``c d tau / d yaw``. When that is ``d tau / d theta`` times some ``dtheta`` at every
+    state (a ``yaw_imbalance``: its pair turned by ``-c``; a residual dipole in a cage
+    field; or no yaw torque at all), the offset is a direction no fit fixes and one start
+    yaw is held (:func:`pinned_window`). A spring (``-k yaw``: a constant change) fixes it:
+    the start yaws are then all fitted, as the estimate's error asks. Compared by CasADi
+    derivatives of the Model's dynamics at :data:`YAW_TURN_PROBES` random points.
+    """
+
+    def __init__(self, model: Model) -> None:
+        self.model = model
+        self._fn = None
+
+    def _derivatives(self):
+        if self._fn is None:
+            m = self.model
+            x, u, p = ca.SX.sym("x", m.nx), ca.SX.sym("u", m.nu), ca.SX.sym("p", m.n_p)
+            f = m.f(x, u, p)
+            dyaw = ca.jacobian(f, x[m.index("yaw")[0]])
+            fn = ca.Function("yaw_turn", [x, u, p], [dyaw, ca.jacobian(f, p)])
+            rng = np.random.default_rng(0)
+            X = rng.standard_normal((m.nx, YAW_TURN_PROBES))
+            X[m.index("yaw")[0]] = rng.uniform(-np.pi, np.pi, YAW_TURN_PROBES)
+            U = rng.standard_normal((m.nu, YAW_TURN_PROBES))
+            self._fn = (fn, X, U)
+        return self._fn
+
+    def __call__(self, p, S) -> bool:
+        fn, X, U = self._derivatives()
+        S = np.zeros((self.model.n_p, 0)) if S is None else np.asarray(S, dtype=float)
+        p = np.asarray(p, dtype=float)
+        a, B = [], []
+        for j in range(X.shape[1]):
+            dyaw, dp = fn(X[:, j], U[:, j], p)
+            a.append(np.asarray(dyaw).ravel())
+            B.append(np.asarray(dp) @ S)
+        a, B = np.concatenate(a), np.vstack(B)
+        scale = float(np.linalg.norm(a))
+        if scale == 0.0:  # nothing depends on the yaw: its offset is in nothing
+            return True
+        if not B.shape[1]:
+            return False
+        v = np.linalg.lstsq(B, a, rcond=None)[0]
+        return float(np.linalg.norm(B @ v - a)) <= YAW_TURN_RTOL * scale
+
+
+#: A window whose first logged rate is within this many rate noise levels of zero starts at
+#: rest (a normal draw passes 3 sigma once in 370).
+REST_SIGMAS = 3.0
+
+
+def pinned_window(windows: WindowSet, sigma_rate: float) -> int:
+    """The window of a dof-1 gyro log whose start yaw a fit holds at the logged one.
+
+    The logged yaw is the testbed's estimate (FORMATS.md), propagated from the filtered
+    gyro (seed 001 eqs. 3 and 21): it trails the plant's yaw while the rig turns and is
+    right at rest, before any slew has added its lag's error. The windows' other start yaws
+    are fitted. With them all free a common offset is a direction no yaw torque of the
+    vocabulary but a spring fixes: a ``yaw_imbalance`` (or a residual dipole in the cage
+    field) turned by that angle gives the same torque (:class:`YawTurn`). The one held fixes
+    the yaw's frame (and so the imbalance's direction) at that instant.
+
+    Returns
+    -------
+    int
+        The earliest window (by log, then row) whose first logged rate is within
+        :data:`REST_SIGMAS` times ``sigma_rate`` (rad/s) of zero; on logs that never rest,
+        the one that starts slowest.
+    """
+    w0 = np.abs(np.asarray(windows.rate)[:, 0, 0])
+    usable = np.asarray(windows.weight)[:, 0] > 0
+    if not usable.any():
+        usable = np.ones_like(usable)
+    order = np.lexsort((np.asarray(windows.rows)[:, 0], np.asarray(windows.source)))
+    rest = usable[order] & (w0[order] <= REST_SIGMAS * sigma_rate)
+    if rest.any():
+        return int(order[np.argmax(rest)])
+    return int(np.flatnonzero(usable)[np.argmin(w0[usable])])
 
 
 def primary_series(problem: ShootingProblem, fit_delta, p) -> dict:

@@ -63,7 +63,8 @@ class _Search:
         fitted start yaw would be a direction no fit fixes (:func:`yaw_acts`); a fit that
         moves a yaw torque away from zero (a ``spring_torque``) takes the same Model with
         its windows' start yaw fitted (:func:`fitting_start_yaw`), as the replay does when
-        the testbed holds the torque."""
+        the testbed holds the torque; one of them is held at the logged yaw where the rig
+        rests (:func:`.replay.pinned_window`), which fixes a ``yaw_imbalance``'s direction."""
         yaw = self.yaw_fitted if yaw is None else yaw
         if not yaw:
             return self.logged[lag]
@@ -86,13 +87,14 @@ class _Search:
             )  # fmt: skip
         return self.problems[lag, yaw]
 
-    def start_yaws(self) -> int:
-        """Start yaws a fit on the fitted-yaw layout frees (:meth:`model`): one per segment
+    def start_yaws(self, fit: Fit) -> int:
+        """Start yaws ``fit`` on the fitted-yaw layout frees (:meth:`model`): one per segment
         on linked pieces (their jumps are held at the attitude's resolution), one per window
-        otherwise."""
+        otherwise, less any it held at the logged yaw (:func:`.replay.pinned_window`)."""
+        held = len(fit.extra.get("held", ()))
         if self.windows.linked:
-            return len(np.unique(self.windows.segments()))
-        return self.windows.n
+            return len(np.unique(self.windows.segments())) - held
+        return self.windows.n - held
 
     def horizon(self, fit: Fit, lag: bool, chosen, theta, *, fresh: bool = False) -> Fit:
         """``fit`` refitted at the most likely process-noise intensity at or below the current

@@ -606,6 +606,12 @@ def _linearised(problem, fit, k: int):
     nd = problem.n_delta
     rows = (pairs[:, None] * nd + np.arange(nd)).ravel()
     C = out[3][rows][:, keep]
+    held = np.asarray(fit.extra.get("held", ()), dtype=int)
+    if held.size:  # entries the fit held (ShootingProblem.pin): fixed like the continuity
+        E = sp.csr_matrix(
+            (np.ones(held.size), (np.arange(held.size), k + held)), shape=(held.size, C.shape[1])
+        )
+        C = sp.vstack([C, E], format="csr")
     return Jm, C
 
 

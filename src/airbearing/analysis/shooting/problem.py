@@ -36,6 +36,20 @@ from airbearing.models.model import Model
 _ACCEPTABLE = "Solved_To_Acceptable_Level"
 
 
+def pinned_null_space(N: np.ndarray, rows: np.ndarray, k: int) -> np.ndarray:
+    """The directions of the basis ``N`` (:func:`null_space_basis`: its first ``k`` rows
+    ``[I 0]``) that keep the entries ``rows`` at zero, ``theta`` keeping its coordinates."""
+    if not len(rows):
+        return N
+    N = np.asarray(N)
+    At, Af = N[rows, :k], N[rows, k:]
+    _, sv, Vt = np.linalg.svd(Af)
+    rank = int(np.sum(sv > 1e-12 * max(float(sv.max(initial=0.0)), 1e-300)))
+    Z = Vt[rank:].T  # free directions that leave the pinned entries alone
+    T = np.block([[np.eye(k), np.zeros((k, Z.shape[1]))], [-np.linalg.pinv(Af) @ At, Z]])
+    return N @ T
+
+
 def unscale_columns(J: sp.csc_matrix, scale: np.ndarray) -> sp.csc_matrix:
     """``J @ diag(1 / scale)`` in place: the Jacobian in the unscaled variables."""
     return scale_columns(sp.csc_matrix(J), 1.0 / np.asarray(scale, dtype=float))
@@ -127,6 +141,36 @@ class ShootingProblem:
         else:
             self.link_rows = np.zeros(0, dtype=int)
         self._data = self._data_vector()
+        #: entries of ``vec(delta)`` a fit may hold at zero (:meth:`pin`)
+        self.pinned = np.zeros(0, dtype=int)
+        self.pin_rule = None
+        self._held = self.pinned  # those the current fit holds
+
+    def pin(self, entries, rule=None) -> None:
+        """Hold the entries ``entries`` of ``vec(delta)`` (window ``j``'s entry ``i`` is
+        ``j n_delta + i``) at zero in the fits ``rule(p, S)`` says (every fit when None;
+        ``p`` the parameters at the fit's start, ``S`` its free directions): a dof-1 gyro
+        log's start yaw held at the logged one
+        (:func:`airbearing.analysis.discrepancy.replay.problem_for`). Their columns of the
+        fit's Jacobian are zero, they are not counted as free, and the fit lists them in
+        ``extra["held"]``."""
+        self.pinned = np.unique(np.asarray(entries, dtype=int))
+        self.pin_rule = rule
+
+    def held(self, p, S) -> np.ndarray:
+        """The entries of ``vec(delta)`` a fit at ``p`` freeing ``S`` holds (:meth:`pin`)."""
+        if not self.pinned.size or self.pin_rule is None or self.pin_rule(p, S):
+            return self.pinned
+        return np.zeros(0, dtype=int)
+
+    @staticmethod
+    def _unpinned(J, k: int, held):
+        """``J`` (columns ``[theta (k); vec(delta)]``) with the ``held`` columns zeroed."""
+        if not len(held):
+            return J
+        keep = np.ones(J.shape[1])
+        keep[k + np.asarray(held)] = 0.0
+        return sp.csc_matrix(J) @ sp.diags(keep)
 
     # ------------------------------------------------------------------ plumbing
     def _data_vector(self) -> np.ndarray:
@@ -274,7 +318,8 @@ class ShootingProblem:
         p_base = fit.p - S @ fit.theta if k else fit.p
         r, J = self._eval(1, v, p_base, Sp)
         keep = np.r_[np.arange(k), np.arange(K, J.shape[1])]
-        return r, J[:, keep]
+        held = self.held(fit.p, S)
+        return r, self._unpinned(J[:, keep], k, held)
 
     def fit(
         self,
@@ -366,6 +411,8 @@ class ShootingProblem:
         if upper is not None:
             ub[:k] = upper
         lb[k:K] = ub[k:K] = 0.0  # unused slots
+        self._held = self.held(p_base + S @ v0[:k] if k else p_base, S)
+        lb[K + self._held] = ub[K + self._held] = 0.0
         v0 = np.clip(v0, lb, ub)
         raw = None
         if self.link and self.penalty is not None:
@@ -439,18 +486,20 @@ class ShootingProblem:
         penalised = self.penalty is not None and self.link
         keep = np.r_[np.arange(k), np.arange(K, v.size)]
         v = v[keep]
-        J = sp.csc_matrix(J)[:, keep]
-        extra = {"r": r, "J": J, "S": S, "p_base": p_base}
+        held = self._held
+        J = self._unpinned(sp.csc_matrix(J)[:, keep], k, held)
+        extra = {"r": r, "J": J, "S": S, "p_base": p_base, "held": held}
         rss = float(r @ r)
-        n_free = v.size
+        n_free = v.size - held.size
         theta = v[:k]
         if Jc is not None and not penalised:  # errors on continuous trajectories
             N = null_space_basis(Jc[:, keep], k, self.n_delta)
+            N = pinned_null_space(N, k + held, k)
             extra["N"] = N
             n_free = N.shape[1]
             Jr = J @ N
-        else:
-            Jr = J
+        else:  # a pinned entry is no nuisance direction (its column is zero)
+            Jr = J[:, np.setdiff1d(np.arange(J.shape[1]), k + held)] if held.size else J
         n_obs = self.n_res + (self.penalty.getnnz(axis=1) > 0).sum() if penalised else self.n_res
         std, cov, reasons = theta_errors(Jr, k, rss / max(n_obs - n_free, 1))
         return Fit(

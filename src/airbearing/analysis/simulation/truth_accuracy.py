@@ -15,9 +15,10 @@ resolves it.
 The sub-steps are chosen per sample, from levels of :data:`TRUTH_LEVELS`:
 :func:`sample_errors` measures each sample's error by step doubling (the sample integrated
 again from its true state with twice its sub-steps, 16/15 of the difference of its
-attitude and body rates); the run's error is their sum (an integration error grows along the
-trajectory) and :func:`truth_tolerance` what it may be; :func:`raise_levels` refines the
-samples that carry the most of it (at a Coulomb friction's zero crossings) until it is met.
+attitude, body rates and lagged rates); the run's error is their sum (an integration error
+grows along the trajectory) and :func:`truth_tolerance` what it may be; :func:`raise_levels`
+refines the samples that carry the most of it (at a Coulomb friction's zero crossings) until
+it is met.
 """
 
 from __future__ import annotations
@@ -27,6 +28,7 @@ from functools import lru_cache
 
 import casadi as ca
 import numpy as np
+from scipy import signal
 
 from airbearing import quaternion as quat
 from airbearing.analysis.shooting.logs import ATTITUDE_SIGMA_MIN, RATE_SIGMA_MIN
@@ -146,9 +148,12 @@ def sample_errors(model: Model, x, u, p, levels: tuple[int, ...], level=None, *,
 
     Each sample is integrated again from its true state with twice its RK4 sub-steps (the
     run's input held over it); 16/15 of the difference (RK4's error falls 16-fold when the
-    sub-step halves) is its error. The attitude and the body rates are compared: what the
-    integration carries from sample to sample. (A ``sensor_lag`` state forgets its error
-    within its time constant.)
+    sub-step halves) is its error. The attitude and the body rates are compared (what the
+    integration carries from sample to sample), and the ``sensor_lag`` states (the lagged
+    rates a gyro with a lag logs, rad/s; their update is fourth order like RK4,
+    :mod:`airbearing.models.measurement`, so 16/15 holds too), whose error a run carries
+    only within the lag's time constant: their share of the rate error is the largest
+    error they carry (:func:`_lag_errors`).
 
     Parameters
     ----------
@@ -171,8 +176,8 @@ def sample_errors(model: Model, x, u, p, levels: tuple[int, ...], level=None, *,
     Returns
     -------
     tuple of ndarray (N,)
-        rad, the attitude error (the small rotation, or yaw), and rad/s, the largest body
-        rate error of any axis.
+        rad, the attitude error (the small rotation, or yaw), and rad/s, the largest error
+        of any axis's body rate or lagged rate.
     """
     n = u.shape[0]
     level = np.zeros(n) if level is None else np.asarray(level, dtype=float)
@@ -189,8 +194,30 @@ def sample_errors(model: Model, x, u, p, levels: tuple[int, ...], level=None, *,
         att = np.abs(coarse[:, yaw] - fine[:, yaw])
         w = model.index(["wz"])
     rate = np.max(np.abs(coarse[:, w] - fine[:, w]), axis=1)
+    if model.lag_index:
+        rate = rate + _lag_errors(model, coarse, fine, p)
     scale = 1.0 if bound else 16 / 15
     return scale * att, scale * rate
+
+
+def _lag_errors(model: Model, coarse, fine, p) -> np.ndarray:
+    """rad/s per sample: the lagged rates' share of a run's rate error.
+
+    A lag state forgets an error with its time constant ``tau``: the error a run carries
+    at sample ``i`` is ``G_i = sum_j exp(-(i - j) dt / tau) l_j`` of the samples' local
+    errors ``l_j``, not their sum. Its largest ``G_i`` is shared among the samples in
+    proportion to ``l_j``, so the run's summed rate error counts it once and
+    :func:`raise_levels` refines the samples that make it.
+    """
+    lag = list(model.lag_index)
+    local = np.max(np.abs(coarse[:, lag] - fine[:, lag]), axis=1)
+    total = float(local.sum())
+    if total == 0.0:
+        return local
+    tau = float(np.asarray(p, dtype=float).ravel()[model.index(["sensor_lag"], "p")[0]])
+    keep = math.exp(-model.testbed.sensors.dt / tau) if tau > 0 else 0.0
+    carried = signal.lfilter([1.0], [1.0, -keep], local)  # G_i = keep G_(i-1) + l_i
+    return local * (float(np.max(carried)) / total)
 
 
 def raise_levels(errors, tolerance, level, n_levels: int):
