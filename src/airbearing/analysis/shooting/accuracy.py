@@ -53,7 +53,12 @@ MAX_SUBSTEPS = 32
 _ACCURATE = weakref.WeakKeyDictionary()
 
 
-def substeps_for(model: Model, windows: WindowSet, floor: NoiseFloor | None = None) -> int:
+def substeps_for(
+    model: Model,
+    windows: WindowSet,
+    floor: NoiseFloor | None = None,
+    p: np.ndarray | None = None,
+) -> int:
     """RK4 sub-steps per sample: ``DEFAULT_SUBSTEPS``, more for a fast three-axis spin.
 
     With the noise ``floor`` (three-axis rigs), also enough sub-steps for the replay to
@@ -70,12 +75,28 @@ def substeps_for(model: Model, windows: WindowSet, floor: NoiseFloor | None = No
     30 s and put per-axis viscous frictions up to 3.2 standard errors off; eight drift
     1.5e-8 rad. A motion-capture attitude (1e-3 rad) keeps two.
 
+    The check runs at the Model's nominal parameters unless ``p`` is given: a search's
+    Model holds every candidate at zero, and a fitted Coulomb friction (its smoothed sign
+    turning within a sub-step whenever a body rate crosses zero) can need many more. On
+    seed 000's tabletop spun down from 2 rad/s with a noise-free attitude (60 s), the
+    nominal model asks for 8 sub-steps, the fitted frictions leave 4.1e-6 rad over a
+    segment at 8 (140 times its tolerance) and 2.5e-7 at 32, the cap (8.8 times it). While
+    a sub-step (1.6 ms at 32 and 20 Hz) is longer than the smoothed sign takes to turn (its
+    1e-3 rad/s over a body rate's slope where it crosses zero, 1-2.6 rad/s^2 there: 0.4-0.9
+    ms), the error falls about 3-fold per doubling, not RK4's 16-fold; 64 sub-steps are
+    within the tolerance (1.3e-8 rad), but refitted there the frictions move by 0.02-0.03
+    of their standard error from 32's, so the cap stays. With ``p``, the check starts from the
+    nominal number and doubles from there.
+
     Parameters
     ----------
     model : Model
     windows : WindowSet
     floor : NoiseFloor, optional
         The noise floor the problem's weights come from (None: the rotation rule alone).
+    p : ndarray (n_p,), optional
+        Parameters to check the accuracy at (default the Model's nominal ``p0``), e.g. a
+        fit's.
 
     Returns
     -------
@@ -99,7 +120,14 @@ def substeps_for(model: Model, windows: WindowSet, floor: NoiseFloor | None = No
     cache = _ACCURATE.setdefault(windows, {})
     if key not in cache:
         cache[key] = _accurate_substeps(model, windows, n, _integration_tolerance(windows, floor))
-    return cache[key]
+    if p is None:
+        return cache[key]
+    p = np.asarray(p, dtype=float).ravel()
+    at = (*key, p.tobytes())  # the parameters checked are part of the answer
+    if at not in cache:
+        tol = _integration_tolerance(windows, floor)
+        cache[at] = _accurate_substeps(model, windows, cache[key], tol, p)
+    return cache[at]
 
 
 #: Orders of the attitude's differences whose smallest floor is its noise in
@@ -168,26 +196,27 @@ def attitude_noise(windows: WindowSet) -> float | None:
     return best
 
 
-def _accurate_substeps(model: Model, windows: WindowSet, n: int, tol) -> int:
+def _accurate_substeps(model: Model, windows: WindowSet, n: int, tol, p=None) -> int:
     """The fewest sub-steps from ``n`` on (doubling, at most :data:`MAX_SUBSTEPS`) whose
-    integration error over each segment (:func:`integration_error`) is within ``tol``."""
+    integration error over each segment (:func:`integration_error`, at ``p``) is within
+    ``tol``."""
     start = n
     while n < MAX_SUBSTEPS:
-        att, rate = integration_error(model, windows, n)
+        att, rate = integration_error(model, windows, n, p)
         if att <= tol[0] and rate <= tol[1]:
             break
         n *= 2
     return min(n, max(MAX_SUBSTEPS, start))
 
 
-def integration_error(model: Model, windows: WindowSet, substeps: int):
+def integration_error(model: Model, windows: WindowSet, substeps: int, p: np.ndarray | None = None):
     """The largest integration error over a segment of a three-axis replay, by step doubling.
 
-    Each window is integrated from its start (the Model's nominal parameters, the window's
-    inputs and logged intervals) with ``substeps`` and twice as many RK4 sub-steps; the
-    largest difference over its usable rows (16/15 of it: RK4's error falls 16-fold when
-    the sub-step halves) is the window's error, and a segment's error the sum over its
-    windows (an integration error grows along the trajectory).
+    Each window is integrated from its start (the parameters ``p``, default the Model's
+    nominal ones, the window's inputs and logged intervals) with ``substeps`` and twice as
+    many RK4 sub-steps; the largest difference over its usable rows (16/15 of it: RK4's
+    error falls 16-fold when the sub-step halves) is the window's error, and a segment's
+    error the sum over its windows (an integration error grows along the trajectory).
 
     Parameters
     ----------
@@ -196,6 +225,8 @@ def integration_error(model: Model, windows: WindowSet, substeps: int):
     windows : WindowSet
     substeps : int
         RK4 sub-steps per sample.
+    p : ndarray (n_p,), optional
+        Parameters (default the Model's nominal ``p0``).
 
     Returns
     -------
@@ -208,7 +239,7 @@ def integration_error(model: Model, windows: WindowSet, substeps: int):
     args = (
         windows.x0.T,
         windows.u[:, : L - 1].transpose(2, 0, 1).reshape(model.nu, -1),
-        model.p0,
+        model.p0 if p is None else np.asarray(p, dtype=float).ravel(),
         windows.dt.reshape(1, -1),
     )
 
