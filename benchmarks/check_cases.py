@@ -56,8 +56,8 @@ def _logs(folder: Path, work: Path, problems: list[str]) -> list[Path]:
         if "segments" in answer and log.quality.n_segments != answer["segments"]:
             problems.append(f"{log.quality.n_segments} segments, answer {answer['segments']}")
         out = work / "log.csv"
-        code = _run(["log", "import", str(folder / "raw.csv"), "--map", str(folder / "map.toml"),
-                     "--testbed", str(folder / "testbed.toml"), "-o", str(out)])  # fmt: skip
+        code = _run(["log", "import", str(folder / "testbed.toml"), str(folder / "raw.csv"),
+                     "--map", str(folder / "map.toml"), "-o", str(out)])  # fmt: skip
         if code:
             problems.append(f"log import exited {code}")
         return [out]
