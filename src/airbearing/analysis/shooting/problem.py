@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.linalg import splu
@@ -34,6 +36,7 @@ from airbearing.errors import SolverError
 from airbearing.models.model import Model
 
 _ACCEPTABLE = "Solved_To_Acceptable_Level"
+_SERIALS = itertools.count()
 
 
 def unscale_columns(J: sp.csc_matrix, scale: np.ndarray) -> sp.csc_matrix:
@@ -127,6 +130,7 @@ class ShootingProblem:
         else:
             self.link_rows = np.zeros(0, dtype=int)
         self._data = self._data_vector()
+        self._serial = next(_SERIALS)  # names this problem in its fits (Fit.extra)
 
     # ------------------------------------------------------------------ plumbing
     def _data_vector(self) -> np.ndarray:
@@ -401,11 +405,12 @@ class ShootingProblem:
             del raw0
             z = solver(x0=x0, lbx=lbx, ubx=ubx)["x"].full().ravel()
             r, J = oracle.rj_at(z)
+            C = oracle.C  # the defects' Jacobian at the answer (unscaled), for the errors
             if self.reuse_last and oracle.raw is not None:
                 at = (z * scale, p_base.copy(), Sp.copy(), self._data.copy())
                 self._last = (at, oracle.raw)
             oracle.release()
-            return z, solver.stats(), r, unscale_columns(J, scale), None
+            return z, solver.stats(), r, unscale_columns(J, scale), C
         if n_link or n_ineq:
             solver, _keep = linked_solver(*self._key(K), self.link, self.link_rows, n_ineq, mi)
             oracle = _keep[-1]
@@ -443,7 +448,6 @@ class ShootingProblem:
         extra = {"r": r, "J": J, "S": S, "p_base": p_base}
         rss = float(r @ r)
         n_free = v.size
-        theta = v[:k]
         if Jc is not None and not penalised:  # errors on continuous trajectories
             N = null_space_basis(Jc[:, keep], k, self.n_delta)
             extra["N"] = N
@@ -451,13 +455,24 @@ class ShootingProblem:
             Jr = J @ N
         else:
             Jr = J
+        theta = v[:k]
+        p = p_base + S @ theta if k else p_base.copy()
+        delta = v[k:].reshape(nd, nw, order="F")
+        if Jc is not None and penalised:
+            # the linearised problem of one trajectory per segment (.errors) takes the
+            # measurement rows of J and this: no window Jacobian evaluated again. Kept with
+            # what it was evaluated at and on (the point, the problem, its whitening and
+            # noise levels)
+            C = sp.csc_matrix(Jc)[:, keep]
+            at = (theta.copy(), delta.copy(), p.copy(), self.meas_whitening, self._data[-2:].copy())
+            extra["linearised"] = (self._serial, at, C)
         n_obs = self.n_res + (self.penalty.getnnz(axis=1) > 0).sum() if penalised else self.n_res
         std, cov, reasons = theta_errors(Jr, k, rss / max(n_obs - n_free, 1))
         return Fit(
             theta=theta,
             theta_std=std,
-            p=p_base + S @ theta if k else p_base.copy(),
-            delta=v[k:].reshape(nd, nw, order="F"),
+            p=p,
+            delta=delta,
             rss=rss,
             n_res=self.n_res,
             n_free=n_free,
