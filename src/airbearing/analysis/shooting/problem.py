@@ -117,6 +117,8 @@ class ShootingProblem:
         self.reuse_last = False
         self._last = None  # ((v, p_base, S, data), (rm, Jm, c, Jc)) of that answer
         self._start_raw = None  # the same at a fit's start, for its solver's first iterate
+        self._keep_start = False  # keep the next start's (a free fit's) for the bounded fit
+        self._start_kept = None
         self.sample = np.tile(wrow, nw) + np.repeat(np.arange(nw) * L, group.size)
         self.usable = windows.weight.reshape(-1)[self.sample] > 0
         self.n_res = int(self.usable.sum())
@@ -207,16 +209,20 @@ class ShootingProblem:
 
     def _linked_raw(self, v, p_base, S):
         """The window Jacobian's output ``(rm, Jm, c, Jc)`` on linked windows at ``v``: the
-        one kept at the last penalised fit's answer (:attr:`reuse_last`) when ``v`` is that
-        answer, with the same parameters and data; else evaluated."""
-        if self._last is not None:
-            at, raw = self._last
-            if all(
+        one kept at the last penalised fit's answer (:attr:`reuse_last`), or at a free fit's
+        start for the bounded fit after it, when ``v`` is that point, with the same
+        parameters and data; else evaluated."""
+        here = (v, p_base, S, self._data)
+        for kept in (self._last, self._start_kept):
+            if kept is not None and all(
                 a.shape == b.shape and np.array_equal(a, b)
-                for a, b in zip(at, (v, p_base, S, self._data), strict=True)
+                for a, b in zip(kept[0], here, strict=True)
             ):
-                return raw
-        return window_jacobian(*self._key(S.shape[1]), True)(v, p_base, S, self._data)
+                return kept[1]
+        raw = window_jacobian(*self._key(S.shape[1]), True)(v, p_base, S, self._data)
+        if self._keep_start:
+            self._start_kept = ((v.copy(), p_base.copy(), S.copy(), self._data.copy()), raw)
+        return raw
 
     def forget_last(self) -> None:
         """Drop the window Jacobian kept at the last answer (:attr:`reuse_last`)."""
@@ -336,11 +342,21 @@ class ShootingProblem:
             and self.penalty is not None
         ):
             # interior-point iterations multiply with bounds far from the answer (4-5x on
-            # linked pieces): a free fit that ends inside the bounds is the bounded fit too
-            free = self._free_fit(p_base, S, theta0, lower, upper, delta0, name, max_iter)
+            # linked pieces): a free fit that ends inside the bounds is the bounded fit too.
+            # Its start is the bounded fit's (a start inside the bounds): the window Jacobian
+            # there is kept for it (one evaluation less when the free fit leaves the bounds)
+            self._start_kept = None
+            self._keep_start = True
+            try:
+                free = self._free_fit(p_base, S, theta0, lower, upper, delta0, name, max_iter)
+            finally:
+                self._keep_start = False
             if free is not None:
+                self._start_kept = None
                 return free
         v0, Sp, lb, ub, scale = self._start(p_base, S, theta0, lower, upper, delta0, name)
+        if not self._keep_start:  # (the free fit keeps its start for the bounded fit)
+            self._start_kept = None
         ineq = None if constraint is None else Inequality(constraint)
         mi = IPOPT_MAX_ITER if max_iter is None else int(max_iter)
         z, stats, r, J, Jc = self._solve(v0, Sp, lb, ub, scale, p_base, ineq, mi)
