@@ -1,8 +1,8 @@
 """Score-test screening: which candidates of a round can matter, from ONE shared Jacobian.
 
 Before a round's IPOPT fits, the residual and its exact Jacobian at the current fit are
-evaluated once for every Model parameter a candidate moves (a few compiled evaluations for
-all candidates together, ``THETA_SLOTS`` parameters at a time). With each window's initial
+evaluated once for every Model parameter a candidate moves (one evaluation of the window
+function with a slot per parameter, for all candidates together). With each window's initial
 state eliminated in its own small normal equations (as in the held-out test), every
 candidate's Gauss-Newton step from the current fit is a small least-squares problem
 (within its physical bounds: the box-constrained minimum of the quadratic model, by its
@@ -103,7 +103,10 @@ class Linearisation:
         self.k_sel = k_sel = self.S_sel.shape[1]
         self.raw = list(raw)
         n_p = problem.model.n_p
-        room = THETA_SLOTS - k_sel
+        # every candidate parameter in ONE evaluation (a window function of that many slots,
+        # built once per problem): THETA_SLOTS at a time evaluated the same window states'
+        # columns once per chunk (3 evaluations on seed 004's platform)
+        room = max(THETA_SLOTS - k_sel, len(self.raw), 1)
         r, A_sel, Jd, cols = None, None, None, []
         for i in range(0, len(self.raw), room):
             chunk = self.raw[i : i + room]

@@ -592,6 +592,15 @@ def _linearised(problem, fit, k: int):
     S_fit = fit.extra.get("S")
     if k == 0 or not w.linked or S_fit is None:
         return None
+    pairs = np.flatnonzero(np.asarray(w.link, dtype=bool))
+    nd = problem.n_delta
+    rows = (pairs[:, None] * nd + np.arange(nd)).ravel()
+    if _made_here(problem, fit, k):
+        # a penalised fit of this problem under its measurement whitening and noise levels:
+        # its Jacobian's measurement rows and the defects' Jacobian it kept are the same
+        # numbers (to round-off) as the window Jacobian evaluated again at its answer
+        Jm = sp.csc_matrix(fit.extra["J"])[: problem.n_meas]
+        return Jm, _held_fixed(fit, k, fit.extra["linearised"][2][rows])
     Sp, K = problem._pad(np.asarray(S_fit, dtype=float))
     fn = _problem_functions(*problem._key(K), True)[1]
     delta = np.asarray(fit.delta).reshape(-1, order="F")
@@ -602,17 +611,42 @@ def _linearised(problem, fit, k: int):
     Jm = out[1][:, keep]
     if problem.meas_whitening is not None:  # coloured measurement noise: its innovations
         Jm = sp.csc_matrix(problem.meas_whitening @ Jm)
-    pairs = np.flatnonzero(np.asarray(w.link, dtype=bool))
-    nd = problem.n_delta
-    rows = (pairs[:, None] * nd + np.arange(nd)).ravel()
-    C = out[3][rows][:, keep]
+    return Jm, _held_fixed(fit, k, out[3][rows][:, keep])
+
+
+def _held_fixed(fit, k: int, C):
+    """The continuity Jacobian ``C`` with a row fixing each entry the fit held
+    (:meth:`ShootingProblem.pin`), as the continuity fixes the linked states."""
     held = np.asarray(fit.extra.get("held", ()), dtype=int)
-    if held.size:  # entries the fit held (ShootingProblem.pin): fixed like the continuity
-        E = sp.csr_matrix(
-            (np.ones(held.size), (np.arange(held.size), k + held)), shape=(held.size, C.shape[1])
-        )
-        C = sp.vstack([C, E], format="csr")
-    return Jm, C
+    if not held.size:
+        return C
+    E = sp.csr_matrix(
+        (np.ones(held.size), (np.arange(held.size), k + held)), shape=(held.size, C.shape[1])
+    )
+    return sp.vstack([C, E], format="csr")
+
+
+def _made_here(problem, fit, k: int) -> bool:
+    """Whether ``fit`` kept its linearisation (``Fit.extra["linearised"]``: the problem's
+    serial, the point, the measurement whitening and noise levels it was evaluated at, the
+    defects' Jacobian) on ``problem`` as it is now, at ``fit``'s point, with ``k``
+    parameters."""
+    kept, J = fit.extra.get("linearised"), fit.extra.get("J")
+    if kept is None or J is None or k != len(fit.theta):
+        return False
+    serial, (theta, delta, p, P, sigma), C = kept
+    same = (
+        np.array_equal(theta, fit.theta)
+        and np.array_equal(delta, fit.delta)
+        and np.array_equal(p, fit.p)
+    )
+    return (
+        serial == problem._serial
+        and same
+        and P is problem.meas_whitening
+        and np.array_equal(sigma, problem._data[-2:])
+        and C.shape[1] == J.shape[1]
+    )
 
 
 def _kkt(Jm, C, k: int, level: np.ndarray | None = None):

@@ -177,7 +177,7 @@ class _PenalisedOracle:
 
     def __init__(self, fr, fj, n_v: int) -> None:
         self.fr, self.fj, self.n_v = fr, fj, n_v
-        self.z = self.r = self.J = self.raw = None
+        self.z = self.r = self.J = self.raw = self.C = None
         self.keep_raw = False
 
     def set(self, p_base, S, scale, data, W, P=None, keep_raw=False) -> None:
@@ -196,13 +196,14 @@ class _PenalisedOracle:
     def release(self) -> None:
         """Forget the last iterate (its Jacobian is large on long logs; the cached solver
         keeps this oracle)."""
-        self.z = self.r = self.J = self.raw = None
+        self.z = self.r = self.J = self.raw = self.C = None
         if hasattr(self, "Jc"):
             self.c = self.Jc = None
 
     def _stack(self, raw) -> None:
         rm, Jm, c, Jc = raw
         self.raw = raw if self.keep_raw else None
+        self.C = Jc  # the defects' own Jacobian (small): the errors' linearised problem
         if self.P is not None:
             rm, Jm = self.P @ rm, self.P @ Jm
         self.r = np.r_[rm, self.W @ c]
@@ -211,7 +212,7 @@ class _PenalisedOracle:
     def r_at(self, z):
         if self.z is None or not np.array_equal(z, self.z):
             rm, c = evaluate(self.fr, z * self.scale, self.pb, self.S, self.data)
-            self.z, self.J, self.raw = z.copy(), None, None
+            self.z, self.J, self.raw, self.C = z.copy(), None, None, None
             self.r = np.r_[rm if self.P is None else self.P @ rm, self.W @ c]
         return self.r
 

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.linalg import splu
@@ -34,6 +36,7 @@ from airbearing.errors import SolverError
 from airbearing.models.model import Model
 
 _ACCEPTABLE = "Solved_To_Acceptable_Level"
+_SERIALS = itertools.count()
 
 
 def pinned_null_space(N: np.ndarray, rows: np.ndarray, k: int) -> np.ndarray:
@@ -128,6 +131,8 @@ class ShootingProblem:
         self.reuse_last = False
         self._last = None  # ((v, p_base, S, data), (rm, Jm, c, Jc)) of that answer
         self._start_raw = None  # the same at a fit's start, for its solver's first iterate
+        self._keep_start = False  # keep the next start's (a free fit's) for the bounded fit
+        self._start_kept = None
         self.sample = np.tile(wrow, nw) + np.repeat(np.arange(nw) * L, group.size)
         self.usable = windows.weight.reshape(-1)[self.sample] > 0
         self.n_res = int(self.usable.sum())
@@ -145,6 +150,7 @@ class ShootingProblem:
         self.pinned = np.zeros(0, dtype=int)
         self.pin_rule = None
         self._held = self.pinned  # those the current fit holds
+        self._serial = next(_SERIALS)  # names this problem in its fits (Fit.extra)
 
     def pin(self, entries, rule=None) -> None:
         """Hold the entries ``entries`` of ``vec(delta)`` (window ``j``'s entry ``i`` is
@@ -247,16 +253,20 @@ class ShootingProblem:
 
     def _linked_raw(self, v, p_base, S):
         """The window Jacobian's output ``(rm, Jm, c, Jc)`` on linked windows at ``v``: the
-        one kept at the last penalised fit's answer (:attr:`reuse_last`) when ``v`` is that
-        answer, with the same parameters and data; else evaluated."""
-        if self._last is not None:
-            at, raw = self._last
-            if all(
+        one kept at the last penalised fit's answer (:attr:`reuse_last`), or at a free fit's
+        start for the bounded fit after it, when ``v`` is that point, with the same
+        parameters and data; else evaluated."""
+        here = (v, p_base, S, self._data)
+        for kept in (self._last, self._start_kept):
+            if kept is not None and all(
                 a.shape == b.shape and np.array_equal(a, b)
-                for a, b in zip(at, (v, p_base, S, self._data), strict=True)
+                for a, b in zip(kept[0], here, strict=True)
             ):
-                return raw
-        return window_jacobian(*self._key(S.shape[1]), True)(v, p_base, S, self._data)
+                return kept[1]
+        raw = window_jacobian(*self._key(S.shape[1]), True)(v, p_base, S, self._data)
+        if self._keep_start:
+            self._start_kept = ((v.copy(), p_base.copy(), S.copy(), self._data.copy()), raw)
+        return raw
 
     def forget_last(self) -> None:
         """Drop the window Jacobian kept at the last answer (:attr:`reuse_last`)."""
@@ -377,11 +387,21 @@ class ShootingProblem:
             and self.penalty is not None
         ):
             # interior-point iterations multiply with bounds far from the answer (4-5x on
-            # linked pieces): a free fit that ends inside the bounds is the bounded fit too
-            free = self._free_fit(p_base, S, theta0, lower, upper, delta0, name, max_iter)
+            # linked pieces): a free fit that ends inside the bounds is the bounded fit too.
+            # Its start is the bounded fit's (a start inside the bounds): the window Jacobian
+            # there is kept for it (one evaluation less when the free fit leaves the bounds)
+            self._start_kept = None
+            self._keep_start = True
+            try:
+                free = self._free_fit(p_base, S, theta0, lower, upper, delta0, name, max_iter)
+            finally:
+                self._keep_start = False
             if free is not None:
+                self._start_kept = None
                 return free
         v0, Sp, lb, ub, scale = self._start(p_base, S, theta0, lower, upper, delta0, name)
+        if not self._keep_start:  # (the free fit keeps its start for the bounded fit)
+            self._start_kept = None
         ineq = None if constraint is None else Inequality(constraint)
         mi = IPOPT_MAX_ITER if max_iter is None else int(max_iter)
         z, stats, r, J, Jc = self._solve(v0, Sp, lb, ub, scale, p_base, ineq, mi)
@@ -448,11 +468,12 @@ class ShootingProblem:
             del raw0
             z = solver(x0=x0, lbx=lbx, ubx=ubx)["x"].full().ravel()
             r, J = oracle.rj_at(z)
+            C = oracle.C  # the defects' Jacobian at the answer (unscaled), for the errors
             if self.reuse_last and oracle.raw is not None:
                 at = (z * scale, p_base.copy(), Sp.copy(), self._data.copy())
                 self._last = (at, oracle.raw)
             oracle.release()
-            return z, solver.stats(), r, unscale_columns(J, scale), None
+            return z, solver.stats(), r, unscale_columns(J, scale), C
         if n_link or n_ineq:
             solver, _keep = linked_solver(*self._key(K), self.link, self.link_rows, n_ineq, mi)
             oracle = _keep[-1]
@@ -500,13 +521,23 @@ class ShootingProblem:
             Jr = J @ N
         else:  # a pinned entry is no nuisance direction (its column is zero)
             Jr = J[:, np.setdiff1d(np.arange(J.shape[1]), k + held)] if held.size else J
+        p = p_base + S @ theta if k else p_base.copy()
+        delta = v[k:].reshape(nd, nw, order="F")
+        if Jc is not None and penalised:
+            # the linearised problem of one trajectory per segment (.errors) takes the
+            # measurement rows of J and this: no window Jacobian evaluated again. Kept with
+            # what it was evaluated at and on (the point, the problem, its whitening and
+            # noise levels)
+            C = sp.csc_matrix(Jc)[:, keep]
+            at = (theta.copy(), delta.copy(), p.copy(), self.meas_whitening, self._data[-2:].copy())
+            extra["linearised"] = (self._serial, at, C)
         n_obs = self.n_res + (self.penalty.getnnz(axis=1) > 0).sum() if penalised else self.n_res
         std, cov, reasons = theta_errors(Jr, k, rss / max(n_obs - n_free, 1))
         return Fit(
             theta=theta,
             theta_std=std,
-            p=p_base + S @ theta if k else p_base.copy(),
-            delta=v[k:].reshape(nd, nw, order="F"),
+            p=p,
+            delta=delta,
             rss=rss,
             n_res=self.n_res,
             n_free=n_free,

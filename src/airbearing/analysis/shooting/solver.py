@@ -26,13 +26,17 @@ IPOPT_TOL = 1e-6
 
 
 #: IPOPT's acceptable-level test with the objective's change in it: for 2 iterations in a row
-#: the scaled optimality error below 1e-4 AND the objective (half the chi-square) changed by
+#: the scaled optimality error below 1e-2 AND the objective (half the chi-square) changed by
 #: less than 1e-10 of itself (4e-7 of a chi-square of 4,300: far below one unit). At such
 #: points of a warm-started fit the round-off of a long rollout's gradient kept the dual
 #: infeasibility above ``IPOPT_TOL`` and IPOPT backtracked 15-27 times per iteration
-#: (docs/benchmarks.md, "Where a dof-3 search spends its time").
+#: (docs/benchmarks.md, "Where a dof-3 search spends its time"). That floor grows with the
+#: rollout: at the bottom of the grid it was 4.6e-4 on a 2.5 min 50 Hz log (8 sub-steps),
+#: above the 1e-4 first chosen, and the fit crept to the iteration limit (80 iterations of 20
+#: backtracking steps, the objective flat to 8 digits). A scaled gradient of 1e-2 can lower
+#: the objective by about 1e-4 (a step of 1 moves the residual by ~1 sigma): nothing.
 OBJECTIVE_STOP = {
-    "ipopt.acceptable_tol": 1e-4,
+    "ipopt.acceptable_tol": 1e-2,
     "ipopt.acceptable_obj_change_tol": 1e-10,
     "ipopt.acceptable_iter": 2,
 }
