@@ -168,7 +168,8 @@ def _build_solver(model, L, nw, K, outputs, substeps, jit, max_iter=IPOPT_MAX_IT
 
     def f(z, _par):
         r = o.r_at(z, o.cur)
-        return [0.5 * float(r @ r)]
+        with np.errstate(over="ignore", invalid="ignore"):  # a trial step IPOPT rejects
+            return [0.5 * float(r @ r)]
 
     def grad(z, _par):
         r, J = o.rj_at(z, o.cur)
