@@ -190,7 +190,10 @@ def test_speed_loop_lag_costs_phase():
 
 def test_speed_commanded_wheel_slews_and_logs_speed_commands():
     tb = _with_wheels(ab.load_testbed("rw-yaw"), command="speed", speed_loop_tau=0.05)
-    r = slew(tb, angle_deg=90.0, duration=40.0, ideal=True)
+    # noise-free, so the truth's tolerance is the resolution's; the driver's torque clip is
+    # a kink RK4 converges slowly across: the simulator says so (expected here, not hidden)
+    with pytest.warns(RuntimeWarning, match="stays above its tolerance"):
+        r = slew(tb, angle_deg=90.0, duration=40.0, ideal=True)
     s = slew_summary(r)
     assert s["settling_time_s"] is not None and s["final_yaw_error_deg"] < 1.5
     log = r.log.data
