@@ -180,19 +180,19 @@ class YawTurn:
             X = rng.standard_normal((m.nx, YAW_TURN_PROBES))
             X[m.index("yaw")[0]] = rng.uniform(-np.pi, np.pi, YAW_TURN_PROBES)
             U = rng.standard_normal((m.nu, YAW_TURN_PROBES))
-            self._fn = (fn, X, U)
+            # every probe in one call; p is broadcast to them all
+            self._fn = (fn.map(YAW_TURN_PROBES), X, U)
         return self._fn
 
     def __call__(self, p, S) -> bool:
         fn, X, U = self._derivatives()
-        S = np.zeros((self.model.n_p, 0)) if S is None else np.asarray(S, dtype=float)
-        p = np.asarray(p, dtype=float)
-        a, B = [], []
-        for j in range(X.shape[1]):
-            dyaw, dp = fn(X[:, j], U[:, j], p)
-            a.append(np.asarray(dyaw).ravel())
-            B.append(np.asarray(dp) @ S)
-        a, B = np.concatenate(a), np.vstack(B)
+        n_p, nx = self.model.n_p, self.model.nx
+        S = np.zeros((n_p, 0)) if S is None else np.asarray(S, dtype=float)
+        dyaw, dp = fn(X, U, np.asarray(p, dtype=float))
+        # probe j: dyaw[:, j] (nx) and dp[:, j n_p:(j + 1) n_p] (nx, n_p), stacked by probe
+        a = np.asarray(dyaw).T.ravel()
+        dp = np.asarray(dp).reshape(nx, YAW_TURN_PROBES, n_p).transpose(1, 0, 2)
+        B = (dp @ S).reshape(YAW_TURN_PROBES * nx, S.shape[1])
         scale = float(np.linalg.norm(a))
         if scale == 0.0:  # nothing depends on the yaw: its offset is in nothing
             return True
