@@ -8,6 +8,9 @@
 - ``W0``, ``Q0``, ``SLIDERS``: seed 004's free oscillation (public example
   platform_viscous: initial state) and slider positions (m).
 - :func:`jittered_platform`: that oscillation simulated on jittered logged times.
+- ``SIM_SUBSTEPS``: the simulator's RK4 sub-steps per sample (``simulate``'s default).
+- :func:`noisy_gyro`: a testbed whose gyro has the public CMG examples' white noise,
+  its low-pass kept.
 """
 
 from __future__ import annotations
@@ -16,11 +19,22 @@ import tomllib
 
 from airbearing.analysis.simulation.artefacts import sample_times, with_gap, with_jitter
 from airbearing.analysis.simulation.on_times import simulate_on_times
-from airbearing.io.testbed import testbed_from_dict
+from airbearing.io.testbed import Sensors, testbed_from_dict
 
 W0 = (0.3676, 0.1265, -1.4835)  # rad/s
 Q0 = (0.99458, 0.024955, -0.014973, 0.099819)
 SLIDERS = (0.003, -0.002, 0.004)  # m
+SIM_SUBSTEPS = 4
+#: rad/s, white: the public CMG examples' gyro noise (as tests/hidden_cases.py)
+CMG_GYRO_NOISE = 5e-4
+
+
+def noisy_gyro(tb):
+    """``tb`` with a gyro of white noise ``CMG_GYRO_NOISE`` (rad/s), its rate and low-pass kept."""
+    return tb.replace(
+        sensors=Sensors(rate=tb.sensors.rate, gyro_noise=CMG_GYRO_NOISE, lowpass=tb.sensors.lowpass)
+    )
+
 
 MOCAP_RIG_TOML = """kind = "platform"
 name = "mocap-spin-rig"

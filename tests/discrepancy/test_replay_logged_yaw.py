@@ -16,18 +16,15 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from rigs import SIM_SUBSTEPS, noisy_gyro
 
 from airbearing.analysis.discrepancy.replay import replay
 from airbearing.analysis.discrepancy.search import discrepancy
 from airbearing.analysis.simulation.scenarios import slew
-from airbearing.io.testbed import Sensors, load_testbed
+from airbearing.io.testbed import load_testbed
 
 #: N m/rad, ten times the hidden-effect suite's spring: enough to show the yaw's error.
 SPRING = 2e-4
-#: RK4 sub-steps per sample of the simulator (``simulate``'s default).
-SIM_SUBSTEPS = 4
-#: rad/s, white: the public CMG examples' gyro noise (as tests/hidden_cases.py)
-GYRO_NOISE = 5e-4
 
 
 @pytest.fixture(scope="module")
@@ -112,9 +109,7 @@ def test_the_search_on_a_noisy_gyro_names_the_spring_it_hides_only(cmg, spring):
     # standard errors (measured 0.55), nothing else; from the logged yaw the search named
     # 1.946e-4 (4.4 std low) and a false yaw_imbalance. Without it: nothing named (the
     # start yaws are fitted only for a spring already significant from the logged yaw)
-    noisy = cmg.replace(
-        sensors=Sensors(rate=cmg.sensors.rate, gyro_noise=GYRO_NOISE, lowpass=cmg.sensors.lowpass)
-    )
+    noisy = noisy_gyro(cmg)
     effects = {"spring_torque": spring} if spring else None
     found = discrepancy(cmg, slew(noisy, duration=5.0, effects=effects, seed=3).log)
     if not spring:

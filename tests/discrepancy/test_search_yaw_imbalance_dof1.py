@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from rigs import SIM_SUBSTEPS, noisy_gyro
 
 from airbearing.analysis.discrepancy.replay import (
     YawTurn,
@@ -30,16 +31,12 @@ from airbearing.analysis.discrepancy.search import discrepancy
 from airbearing.analysis.shooting import fitting_start_yaw
 from airbearing.analysis.shooting.problem import pinned_null_space
 from airbearing.analysis.simulation.scenarios import slew
-from airbearing.io.testbed import Field, Sensors, load_testbed
+from airbearing.io.testbed import Field, load_testbed
 from airbearing.models.model import build_model
 
 #: N m, [A_s, A_c]: the case measured on the 3 s slew (named (2.65e-4, 1.63e-4) with a
 #: false inertia_error while every start yaw was free).
 PAIR = (3e-4, 1e-4)
-#: RK4 sub-steps per sample of the simulator (``simulate``'s default).
-SIM_SUBSTEPS = 4
-#: rad/s, white: the public CMG examples' gyro noise (as tests/hidden_cases.py).
-GYRO_NOISE = 5e-4
 
 
 @pytest.fixture(scope="module")
@@ -51,12 +48,6 @@ def cmg():
 def imbalance_slew(cmg):
     # a 3 s slew (60 rows), seed 001's gyro low-pass, a noise-free gyro; it starts at rest
     return slew(cmg, duration=3.0, effects={"yaw_imbalance": PAIR}).log
-
-
-def noisy(tb):
-    return tb.replace(
-        sensors=Sensors(rate=tb.sensors.rate, gyro_noise=GYRO_NOISE, lowpass=tb.sensors.lowpass)
-    )
 
 
 def test_one_start_yaw_is_held_where_the_rig_is_at_rest(cmg, imbalance_slew):
@@ -149,7 +140,7 @@ def test_the_imbalance_is_identified_with_the_start_yaws_fitted(cmg, imbalance_s
 def test_the_search_names_a_hidden_imbalance_on_a_noisy_gyro(cmg):
     # a 5 s slew with a noisy gyro (seed 3). With every start yaw free the search named
     # (2.76e-4, 1.22e-4) +- (2.5e-6, 3.6e-6), 9.6 and 6.1 std off; held at rest: 1.7 and 0.2
-    log = slew(noisy(cmg), duration=5.0, effects={"yaw_imbalance": PAIR}, seed=3).log
+    log = slew(noisy_gyro(cmg), duration=5.0, effects={"yaw_imbalance": PAIR}, seed=3).log
     found = discrepancy(cmg, log)
     assert list(found.effects) == ["yaw_imbalance"], found.verdict
     value = np.asarray(found.effects["yaw_imbalance"])
@@ -205,7 +196,7 @@ def test_a_residual_dipole_in_the_cage_field_is_named_by_its_torque(cmg):
     b = (2e-4, 0.0, -4e-4)  # T, lab frame: a cage field, horizontal part along lab x
     m = (1.0, -0.5, 0.0)  # A m^2, body axes
     caged = cmg.replace(field=Field(lab=b))
-    log = slew(noisy(caged), duration=5.0, effects={"residual_dipole": m}, seed=3).log
+    log = slew(noisy_gyro(caged), duration=5.0, effects={"residual_dipole": m}, seed=3).log
     found = discrepancy(caged, log)
     assert len(found.effects) == 1, found.verdict
     assert {frozenset(p) for p in found.confounded} == {
