@@ -74,6 +74,7 @@ def test_bad_gains_are_input_errors(gains, argument):
     _raises(lambda: ab.cmg_attitude_controller(model, gains=gains), argument)
 
 
+@pytest.mark.slow  # over 3 s of an idle core: CI runs it once (.ci/run)
 def test_dict_gains_run_as_the_same_sequence():
     """The docstring's ``gains : dict (K_p, K_i, K_w)``: the dict and the tuple in that order
     give the same run, and tune()'s gains are accepted as they come."""
@@ -274,6 +275,7 @@ def test_a_single_name_is_one_name_not_its_characters(logs):
 NOMINAL = {"inertia_uncertainty": 0.0}
 
 
+@pytest.mark.slow  # over 3 s of an idle core: CI runs it once (.ci/run)
 def test_tune_takes_a_dict_of_spec_fields():
     by_dict = ab.tune(CY, "attitude", {"phase_margin_deg": 50.0, **NOMINAL})
     by_spec = ab.tune(CY, "attitude", ab.Spec(phase_margin_deg=50.0, inertia_uncertainty=0.0))

@@ -140,6 +140,7 @@ def test_E_is_eq_53_as_written_twice_the_kinetic_energy():
     assert np.std(E[2:]) / np.std(E[:2]) == pytest.approx(np.std(T[2:]) / np.std(T[:2]))
 
 
+@pytest.mark.slow  # over 3 s of an idle core: CI runs it once (.ci/run)
 def test_cli_says_what_E_is(capsys, monkeypatch):
     """The terminal names the number: E = w^T J w (seed 004 eq. 53), twice the kinetic
     energy, in J; the JSON keys stay (contract).

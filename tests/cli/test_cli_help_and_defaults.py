@@ -367,6 +367,7 @@ def test_balance_table_of_a_loop_that_is_not_stable(tmp_path, capsys):
     assert re.search(r"\d\.\d{5,}", note) is None, note  # 4 significant digits
 
 
+@pytest.mark.slow  # over 3 s of an idle core: CI runs it once (.ci/run)
 def test_two_step_table_in_words(capsys):
     assert run(["-q", "balance", "seed004-platform", "--two-step"]) == 0
     out = capsys.readouterr().out

@@ -33,6 +33,7 @@ def lab_files(tmp_path: Path, n: int = 600, seed: int = 0) -> tuple[Path, Path, 
 
 
 @pytest.mark.parametrize("suffix", [".csv", ".parquet"])
+@pytest.mark.slow  # over 3 s of an idle core: CI runs it once (.ci/run)
 def test_import_then_check_and_plot(tmp_path, capsys, suffix):
     raw, mp, tb = lab_files(tmp_path)
     out = tmp_path / f"log{suffix}"

@@ -346,6 +346,7 @@ def test_report_help_says_the_output_is_required(capsys):
     assert "[required]" in " ".join(capsys.readouterr().out.split())
 
 
+@pytest.mark.slow  # over 3 s of an idle core: CI runs it once (.ci/run)
 def test_gains_table_has_units(capsys):
     # the nominal inertia only (one corner, not three): the table is the same
     assert run(["--quiet", "gains", "cmg-yaw", "--inertia-uncertainty", "0"]) == 0

@@ -174,6 +174,7 @@ def test_report_checks_the_simultaneous_margins(tabletop_report):
         make_loop(load_testbed("seed000-tabletop"), "balancing"), REVIEWER_BOX)}  # fmt: skip
 
 
+@pytest.mark.slow  # over 3 s of an idle core: CI runs it once (.ci/run)
 def test_report_cli_verdict_names_the_simultaneous_margin(
     tabletop_report, tmp_path, capsys, monkeypatch
 ):

@@ -78,6 +78,7 @@ def test_seed001_table6_gains_are_a_design_the_spec_admits(seed_verdict):
     assert worst["overshoot_pct"] < 0.05
 
 
+@pytest.mark.slow  # over 3 s of an idle core: CI runs it once (.ci/run)
 def test_tuned_cmg_yaw_is_at_least_as_fast_as_seed_001(tuned_attitude, seed_verdict):
     """The seed's gains meet the specification, so the fastest admissible design cannot be
     slower: by the objective (the worst-case settling of the linear step into 2 %, seed
@@ -191,6 +192,7 @@ def test_bandwidth_0_15_hz_is_met_on_cmg_yaw(tmp_path, capsys):
     assert "specification met: yes" in capsys.readouterr().out
 
 
+@pytest.mark.slow  # over 3 s of an idle core: CI runs it once (.ci/run)
 def test_an_unstable_loop_shows_no_met_margin(capsys):
     """Margins of an unstable closed loop mean nothing: not met, no value, the reason."""
     tb = load_testbed("seed004-platform")
@@ -513,6 +515,7 @@ def _balance(name, gains, offset_stays):
 
 
 @pytest.mark.parametrize("name", ["seed004-platform", "seed000-tabletop"])
+@pytest.mark.slow  # over 3 s of an idle core: CI runs it once (.ci/run)
 def test_tuned_balancing_gains_settle_in_the_default_balance_scenario(name):
     """The nonlinear closed loop (sliders with their steps, speed and backlash) of
     ``balance`` with its defaults, the gains the tuner now gives (AT_THE_EDGE), both as the

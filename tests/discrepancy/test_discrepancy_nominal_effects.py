@@ -72,6 +72,7 @@ def test_a_wrong_nominal_is_corrected_and_nothing_else_is_named(found):
     assert row["nominal"] == pytest.approx(OLD) and row["value"] > 50 * OLD
 
 
+@pytest.mark.slow  # over 3 s of an idle core: CI runs it once (.ci/run)
 def test_the_runs_alone_agree_on_the_total(found):
     assert len(found.per_log) == 2
     for f in found.per_log:

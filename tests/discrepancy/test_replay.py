@@ -183,6 +183,7 @@ def test_windows_never_span_a_gap_and_start_at_usable_rows(platform):
             np.testing.assert_allclose(w.dt[j, : m - 1], np.diff(data.t[w.rows[j, :m]]))
 
 
+@pytest.mark.slow  # over 3 s of an idle core: CI runs it once (.ci/run)
 def test_outliers_and_gaps_do_not_move_the_gap(platform):
     clean = _jittered_platform(platform, 7, gap=(12.0, 3.0))
     dirty, rows = with_glitches(clean, [50, 200, 420], "rate_spike", size=0.05)

@@ -104,6 +104,7 @@ def test_the_search_names_a_hidden_spring_and_nothing_else(cmg, spring_slew):
 
 
 @pytest.mark.parametrize("spring", [0.0, SPRING])
+@pytest.mark.slow  # over 3 s of an idle core: CI runs it once (.ci/run)
 def test_the_search_on_a_noisy_gyro_names_the_spring_it_hides_only(cmg, spring):
     # a 5 s slew with a noisy gyro (seed 3). With the spring: named within 3 of its
     # standard errors (measured 0.55), nothing else; from the logged yaw the search named

@@ -106,6 +106,7 @@ def test_regression_start_of_a_cm_offset_19_mm_low(low19):
     assert explained_fraction(tau, phi, th) > 0.9
 
 
+@pytest.mark.slow  # over 3 s of an idle core: CI runs it once (.ci/run)
 def test_discrepancy_names_a_cm_offset_19_mm_low(low19):
     # the case: named within 5 %, the gap left at most 1.5 x the noise floor (the
     # floor estimated from the data, and the true noise)
@@ -124,6 +125,7 @@ def test_discrepancy_names_a_cm_offset_19_mm_low(low19):
     assert row["retried"] is False
 
 
+@pytest.mark.slow  # over 3 s of an idle core: CI runs it once (.ci/run)
 def test_a_cm_offset_0p4_mm_low_keeps_its_precision():
     # the nominal is close here: found to ~1e-7 m (the white-noise std is ~1e-7 m)
     log = spin_log((0.0, 0.0, -4e-4), seed=2).log

@@ -67,6 +67,7 @@ def _z(res) -> float:
     return (res.inertia - J_TRUE) / res.std_inertia
 
 
+@pytest.mark.slow  # over 3 s of an idle core: CI runs it once (.ci/run)
 def test_white_noise_keeps_the_white_error():
     """Within the model the sandwich is the white-noise error (measured 1.00-1.10 times it
     on these seeds, 1.00-1.22 on 30 more, median 1.00: the HAC's own sampling error on 800
@@ -83,6 +84,7 @@ def test_white_noise_keeps_the_white_error():
     assert all(abs(r.details["covariance"]["ar_sum"]) < 0.2 for r in runs)
 
 
+@pytest.mark.slow  # over 3 s of an idle core: CI runs it once (.ci/run)
 def test_drifting_gyro_is_covered_and_warned():
     """Case (b): the drift's slow residual widens the error (measured 7.8-10.8 times the
     white one) so that the truth is covered, and the 2.2-sigma residual is warned about."""
@@ -92,6 +94,7 @@ def test_drifting_gyro_is_covered_and_warned():
     assert all(any("gyro sigmas" in w for w in r.warnings) for r in runs)
 
 
+@pytest.mark.slow  # over 3 s of an idle core: CI runs it once (.ci/run)
 def test_coloured_gyro_noise_is_covered():
     """AR(1) gyro noise (0.95): the errors widen 2.6-3.8 times and cover the truth; the
     correlated residual is named."""
@@ -100,6 +103,7 @@ def test_coloured_gyro_noise_is_covered():
     assert all(any("correlated" in w for w in r.warnings) for r in runs)
 
 
+@pytest.mark.slow  # over 3 s of an idle core: CI runs it once (.ci/run)
 def test_viscous_friction_fitted_is_covered():
     """Case (a) with friction='viscous': J_z and c covered, errors at the white value
     (measured 1.0-1.23 times it), no warning."""
@@ -156,6 +160,7 @@ def _spin_down(seed: int, coloured: bool) -> tuple:
     return tb, Log(d, source=f"spin-{seed}.csv", testbed=tb)
 
 
+@pytest.mark.slow  # over 3 s of an idle core: CI runs it once (.ci/run)
 def test_spin_down_output_error_keeps_both_errors():
     """Output error reports the engine's sandwich beside its Fisher value: equal within the
     HAC's sampling error on white noise (measured 1.00-1.09 over 40 seeds), wider under

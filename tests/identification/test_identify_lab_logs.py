@@ -99,6 +99,7 @@ def clean_and_artefacts(truth):
 # ---------------------------------------------------------------------------- artefacts
 
 
+@pytest.mark.slow  # over 3 s of an idle core: CI runs it once (.ci/run)
 def test_artefacts_equation_error(truth, clean_and_artefacts):
     """Gaps, jitter, glitches and first-sample artefacts: segments and outlier rows are
     reported exactly as injected, and the answer agrees with the clean log's within 4

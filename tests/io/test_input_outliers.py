@@ -35,6 +35,7 @@ def _with(log, changes):
 
 
 @pytest.mark.parametrize("name", ["cmg-yaw", "cmg-3dof"])
+@pytest.mark.slow  # over 3 s of an idle core: CI runs it once (.ci/run)
 def test_gimbal_angle_glitch_found_at_its_row(name, monkeypatch):
     log = _slew(name, seed=2)
     assert log.quality.outlier_rows == ()
@@ -53,6 +54,7 @@ def test_gimbal_angle_glitch_found_at_its_row(name, monkeypatch):
     assert_same(q, reference_quality(monkeypatch, bad))
 
 
+@pytest.mark.slow  # over 3 s of an idle core: CI runs it once (.ci/run)
 def test_slider_and_dipole_glitches_found(monkeypatch):
     log = run_balancing(load_testbed("seed000-tabletop"), "mixed", duration=120.0, seed=1)
     log = log.result.log

@@ -131,6 +131,7 @@ def glitched_tumble(seed: int, jitter: float, t0: float) -> tuple[pd.DataFrame, 
     [(0, 0.0, 0.0), (1, 0.0, 1.0e5), (2, 0.2, 0.0), (3, 0.0, 3.7e3)],
     ids=["regular", "regular-late-start", "jittered", "regular-odd-start"],
 )
+@pytest.mark.slow  # over 3 s of an idle core: CI runs it once (.ci/run)
 def test_fast_and_reference_flag_the_same_rows(monkeypatch, seed, jitter, t0):
     df, tb = glitched_tumble(seed, jitter, t0)
     log = Log(df, "run.csv", tb)

@@ -43,6 +43,7 @@ def slews(noisy_cmg):
     return {seed: slew(noisy_cmg, duration=DURATION, seed=seed).log for seed in SEEDS}
 
 
+@pytest.mark.slow  # over 3 s of an idle core: CI runs it once (.ci/run)
 def test_a_clean_slew_that_starts_at_once_has_no_outlier(noisy_cmg, slews):
     # every sample is the simulator's: any flag is false. The rule's own rate: a
     # two-sided Gaussian tail at Z_THRESHOLD per sample and channel (wz, yaw, d1..d4)

@@ -88,6 +88,7 @@ def test_recovers_hidden_friction_and_noise_on_a_mocap_coast_down():
     assert math.isfinite(fit.nll) and fit.iterations > 0
 
 
+@pytest.mark.slow  # over 3 s of an idle core: CI runs it once (.ci/run)
 def test_recovers_a_hidden_process_torque_intensity_on_a_gyro_coast_down():
     sigma_w = 1e-4  # rad/s per sqrt(s): 0.7 noise sigma of rate wander per second
     data = _log(GYRO_ROTOR, duration=60.0, seed=5, sigma_w=sigma_w)
@@ -146,6 +147,7 @@ def test_a_gap_restarts_the_filter_and_outliers_are_skipped():
         assert _within(est, sd, TRUTH[name]), (name, est, sd)
 
 
+@pytest.mark.slow  # over 3 s of an idle core: CI runs it once (.ci/run)
 def test_a_lagged_gyro_is_a_state_of_the_filter():
     # sensor_lag adds a lagged-rate state whose exact update divides by the interval: the
     # restarts and the padding (no interval) must not make the likelihood NaN

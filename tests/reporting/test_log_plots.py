@@ -122,6 +122,7 @@ def test_html_tables_one_missing_symbol_and_human_columns():
     assert column_label("min_m") == "min m" and column_label("cm_offset_m") == "cm offset (m)"
 
 
+@pytest.mark.slow  # over 3 s of an idle core: CI runs it once (.ci/run)
 def test_html_sentences_are_separated():
     report = Report("r")
     report.paragraph("yaw in rad")

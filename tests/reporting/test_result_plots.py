@@ -31,6 +31,7 @@ RESULT_MODULES = [
 ]
 
 
+@pytest.mark.slow  # over 3 s of an idle core: CI runs it once (.ci/run)
 def test_result_modules_load_no_matplotlib():
     code = (
         "import importlib, sys\n"

@@ -108,6 +108,7 @@ def test_poles_at_the_origin_and_at_one_are_named_not_nan(tmp_path):
 
 
 @pytest.mark.parametrize("width", [1200, 700], ids=["wide-window", "narrow-window"])
+@pytest.mark.slow  # over 3 s of an idle core: CI runs it once (.ci/run)
 def test_report_renders_in_headless_chromium(attitude_report, balancing_report, tmp_path, width):
     require_chromium()
     for d in (attitude_report[0], balancing_report):
@@ -122,6 +123,7 @@ def test_report_renders_in_headless_chromium(attitude_report, balancing_report, 
         assert png.stat().st_size > 10_000
 
 
+@pytest.mark.slow  # over 3 s of an idle core: CI runs it once (.ci/run)
 def test_cli_gains_then_report(attitude_report, tmp_path, capsys):
     d, codes = attitude_report
     assert codes == [0, 0]
@@ -150,6 +152,7 @@ def test_cli_gains_then_report(attitude_report, tmp_path, capsys):
     assert _main(["gains", "cmg-yaw", "--phase-margin-deg", "-5"]) == 2
 
 
+@pytest.mark.slow  # over 3 s of an idle core: CI runs it once (.ci/run)
 def test_gains_and_report_agree_on_a_balancing_loop(balancing_report):
     """``gains`` then ``report --gains`` on seed 004's platform: the same checks, values
     and verdict (seed000-tabletop's mixed loop: test_tuning's unreachable-trim test)."""

@@ -72,7 +72,7 @@ def _judge(found, name, truth, index=0):
 
 
 @pytest.fixture(scope="module")
-def coulomb_run():
+def coulomb_log():
     # torque steps about a bias: the wheel stays between about 150 and 250 rad/s
     tb, log, W = _open_loop(
         "rw-yaw",
@@ -81,6 +81,12 @@ def coulomb_run():
         [200.0],
     )
     assert np.all(W > 50)  # away from zero speed, where the friction changes sign
+    return tb, log
+
+
+@pytest.fixture(scope="module")
+def coulomb_run(coulomb_log):
+    tb, log = coulomb_log
     return tb, log, ab.discrepancy(tb, [log])
 
 
@@ -90,8 +96,8 @@ def test_wheel_coulomb_friction_is_named(coulomb_run):
     _judge(found, "wheel_coulomb_friction", COULOMB)
 
 
-def test_a_wheel_log_without_wheel_speeds_is_refused(coulomb_run):
-    tb, log, _ = coulomb_run
+def test_a_wheel_log_without_wheel_speeds_is_refused(coulomb_log):
+    tb, log = coulomb_log
     with pytest.raises(InputError, match=r"nows\.csv: missing column 'ws1'"):
         ab.discrepancy(tb, [Log(log.data.drop(columns=["ws1"]), source="nows.csv", testbed=tb)])
 
@@ -149,6 +155,7 @@ def test_the_friction_pair_at_a_nearly_constant_wheel_speed_is_confounded():
         assert WHEEL_INERTIA_UNSEEN in found.verdict
 
 
+@pytest.mark.slow  # over 3 s of an idle core: CI runs it once (.ci/run)
 def test_body_inertia_error_on_a_wheel_yaw_rig_is_named_and_confounded_with_the_motor():
     tb = load_testbed("rw-yaw")
     log = ab.slew(tb, effects={"inertia_error": INERTIA}, duration=40.0, seed=3).log
