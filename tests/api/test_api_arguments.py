@@ -302,6 +302,7 @@ def test_dir_lists_only_the_public_names():
 
 
 # ------------------------------------------------------------------ the rest of the API
+@pytest.mark.slow  # over 3 s of an idle core: CI runs it once (.ci/run)
 def test_loops_balancing_and_two_step_take_names_and_check_gains():
     assert ab.make_loop("cmg-yaw", "attitude").model.testbed.name == "cmg-yaw"
     assert set(ab.tune("cmg-yaw", "attitude", NOMINAL).gains) == {"K_p", "K_i", "K_w"}

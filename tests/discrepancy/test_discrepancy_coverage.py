@@ -94,6 +94,7 @@ def test_in_model_fit_is_at_the_noise_with_honest_errors_near_the_bound():
     assert "Is the fit adequate?" in html and "Agreement across runs" in html
 
 
+@pytest.mark.slow  # over 3 s of an idle core: CI runs it once (.ci/run)
 def test_an_unmodelled_correlated_torque_is_said():
     from airbearing.analysis.discrepancy.search import discrepancy
 

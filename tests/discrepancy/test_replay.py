@@ -197,6 +197,7 @@ def test_outliers_and_gaps_do_not_move_the_gap(platform):
     assert b.gap < 1.15 * b.floor.rate
 
 
+@pytest.mark.slow  # over 3 s of an idle core: CI runs it once (.ci/run)
 def test_several_logs_each_start_afresh(platform):
     logs = [_jittered_platform(platform, s, duration=15.0) for s in (11, 12)]
     rp = replay(platform, logs)

@@ -83,6 +83,7 @@ def _joined(jitter: float, n: int = 300):
 
 
 @pytest.mark.parametrize("jitter", [0.0, 0.2], ids=["regular", "jittered"])
+@pytest.mark.slow  # over 3 s of an idle core: CI runs it once (.ci/run)
 def test_steps_are_those_of_one_pseudo_inverse_per_window(monkeypatch, jitter):
     df, tb = _joined(jitter)
     fast = Log(df, "run.csv", tb).quality

@@ -75,6 +75,7 @@ def _within(est, sd, truth, k=3.0):
 # ------------------------------------------------------------------ recovery
 
 
+@pytest.mark.slow  # over 3 s of an idle core: CI runs it once (.ci/run)
 def test_recovers_hidden_friction_and_noise_on_a_mocap_coast_down():
     data = _log(ROTOR, duration=120.0, seed=3)
     # a Log is read through the engine's front end (the same rows as ReplayData)
@@ -102,6 +103,7 @@ def test_recovers_a_hidden_process_torque_intensity_on_a_gyro_coast_down():
         assert _within(est, sd, TRUTH[name]), (name, est, sd)
 
 
+@pytest.mark.slow  # over 3 s of an idle core: CI runs it once (.ci/run)
 def test_no_process_torque_gives_an_intensity_far_below_and_not_significant():
     # on the same log without a torque the intensity collapses: below a tenth of the one
     # the previous test finds (10 of its standard errors away from it)
