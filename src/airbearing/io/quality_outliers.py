@@ -11,7 +11,6 @@ one at a time. The numerics of the fits are in :mod:`airbearing.io.local_fits`.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import lru_cache
 
 import numpy as np
 
@@ -25,14 +24,13 @@ from airbearing.io.discontinuity import (
 from airbearing.io.local_fits import LOCAL as _LOCAL
 from airbearing.io.local_fits import REGULAR_ULPS as _REGULAR_ULPS
 from airbearing.io.local_fits import loo as _loo_regular
-from airbearing.io.local_fits import noise_gain as _noise_gain
 from airbearing.io.local_fits import regular_span as _regular_span
 from airbearing.io.local_fits import regular_weights as _regular_weights
-from airbearing.io.local_fits import residual_correlation as _residual_correlation
 from airbearing.io.local_fits import window_median as _window_median
 from airbearing.io.local_fits import window_shape as _window_shape
+from airbearing.io.quality_edges import edge_fits, gains
 
-__all__ = ["ABSOLUTE_FLOOR", "EDGE_LEVEL", "FITS", "find_outliers"]
+__all__ = ["ABSOLUTE_FLOOR", "FITS", "find_outliers"]
 
 #: The local fits tried, ``(k, p)``: k samples each side, polynomial degree p.
 FITS: tuple[tuple[int, int], ...] = ((3, 2), (4, 4), (5, 6))
@@ -46,9 +44,6 @@ _MAX_PASSES = 200
 _SCALE_ROWS = 2000  # rows spread over the log on which the noise scales are measured
 _MIN_SCALE_SAMPLES = 8  # fewer residuals than this give no scale (the floor is used)
 _RECOMPUTE = 3  # rows within this many k of a newly excluded sample are refitted
-#: Level of the test that an edge's inward rows are rougher than the log-wide scale
-#: (:meth:`_Scorer._edge_factor`): a false alarm only lowers the sensitivity at that edge.
-EDGE_LEVEL = 1e-3
 _ROUGH = 0.2  # noise-free channels: scale floor per unit median |second difference|
 
 
@@ -236,22 +231,6 @@ def _shape_scales(group: _Group, t, segments, k: int, p: int, scale: float) -> n
     return scales
 
 
-@lru_cache(maxsize=8)
-def _gains(k: int, p: int) -> np.ndarray:
-    """`local_fits.noise_gain` of the fit ``(k, p)`` for every window shape ``0 .. 2k``."""
-    return np.array([_noise_gain(k, p, a) for a in range(2 * k + 1)])
-
-
-@lru_cache(maxsize=256)
-def _chi2_isf(level: float, dof: float) -> float:
-    """The chi-square quantile ``scipy.stats.chi2.isf(level, dof)``, by the function it
-    calls (``scipy.special.chdtri``): importing scipy.stats costs 1-3 s of CPU, and
-    identify's equation-error path loads no scipy."""
-    from scipy.special import chdtri
-
-    return float(chdtri(dof, level))
-
-
 def _score(group: _Group, d: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Per-row score (noise scales) and per-channel exceedance; NaN (unchecked) -> 0."""
     d = np.nan_to_num(d, nan=0.0)
@@ -281,7 +260,7 @@ class _Scorer:
             # the smallest glitch this fit flags at this shape, in units of the noise:
             # scale x sqrt(1 + h) (the raw residual's spread), summed over channels
             s = self.scales[f][a]
-            return float(np.sum(np.log(s)) + s.size * 0.5 * np.log1p(_noise_gain(*f, a)))
+            return float(np.sum(np.log(s)) + s.size * 0.5 * np.log1p(gains(*f)[a]))
 
         self.fit = min(FITS, key=lambda f: key(f, f[0]))
         n = t.size
@@ -462,113 +441,6 @@ class _Scorer:
             )
         return out
 
-    def _edge_fits(self, rows, good, d, scale):
-        """The fit, scale and edge factor of the rows near a segment's ends (step 3).
-
-        Each row within the largest ``k`` of a segment's end takes the fit of
-        :data:`FITS` that flags the smallest glitch *there*: the smallest product over
-        channels of its window shape's scale, its edge factor (:meth:`_edge_factor`)
-        and ``sqrt(1 + h)``. Nothing of it depends on the row's own sample (the scales
-        are the log's, the edge factor comes from windows without the row), so a glitch
-        cannot choose the fit that hides it. Returns ``d, scale, edge`` of all ``rows``.
-        """
-        edge = np.ones(d.shape)
-        kmax = max(k for k, _ in FITS)
-        near = np.flatnonzero(np.minimum(self.from_start[rows], self.from_end[rows]) < kmax)
-        if near.size == 0:
-            return d, scale, edge
-        r = rows[near]
-        length = self.from_start[r] + self.from_end[r] + 1
-        best = np.full(near.size, np.inf)
-        d_near, s_near, e_near = d[near].copy(), scale[near].copy(), edge[near].copy()
-        for kf, pf in FITS:
-            fits = length >= 2 * kf + 1  # a full window of 2k neighbours
-            if not fits.any():
-                continue
-            rf = r[fits]
-            fs, fe = self.from_start[rf], self.from_end[rf]
-            sh_f = np.where(fs < kf, fs, np.where(fe < kf, 2 * kf - fe, kf))
-            d_f = np.empty((rf.size, d.shape[1]))
-            for a in np.unique(sh_f):
-                d_f[sh_f == a] = self._at_shape(kf, pf, int(a), rf[sh_f == a], good, False)
-            s_f = self.scales[(kf, pf)][np.clip(sh_f, 0, 2 * kf)]
-            full = np.full(sh_f.size, kf)
-            e_f = self._edge_factor(r[fits], good, full, np.full(sh_f.size, pf), sh_f, d_f)
-            gain = _gains(kf, pf)[sh_f]
-            key = np.sum(np.log(s_f * e_f), axis=1) + d.shape[1] * 0.5 * np.log1p(gain)
-            key = np.where(np.all(np.isfinite(d_f), axis=1), key, np.inf)
-            at = np.flatnonzero(fits)
-            take = key < best[at]
-            at = at[take]
-            best[at] = key[take]
-            d_near[at], s_near[at], e_near[at] = d_f[take], s_f[take], e_f[take]
-        d[near], scale[near], edge[near] = d_near, s_near, e_near
-        return d, scale, edge
-
-    def _edge_factor(self, rows, good, fit_k, fit_p, shapes, d) -> np.ndarray:
-        """Per row and channel, how much rougher the motion is at an extrapolated edge
-        position than the log-wide scale of its window shape says (>= 1; io.quality doc,
-        step 4).
-
-        A row ``e`` samples from its segment's start has ``e < k`` left neighbours: its
-        fit extrapolates, and a motion that changes fast where the log begins (a filter's
-        start-up transient in a logged estimate) leaves a misfit there that the shape's
-        scale, measured over the whole log, does not contain. The same fit with the same
-        shape predicts the ``2k`` rows inwards from windows that do not contain the row
-        (rows ``e + 1 + j`` with ``e`` left neighbours start after it), so a glitch in
-        the row cannot raise its own scale. They are tested against white noise at
-        :data:`EDGE_LEVEL` (half for each statistic): their sum, which a misfit makes
-        of one sign (normal, with the variance ``1' C 1`` of the residuals' white-noise
-        correlation ``C``), and their sum of squares (the scaled chi-square with the
-        same two moments, Satterthwaite); where either fails, the factor is their root
-        mean square. The end of a segment mirrors it. The factor
-        only raises a scale, so the rule's false flag rate stays at most its threshold's.
-        """
-        g = self.group
-        out = np.ones(d.shape)
-        left = (shapes >= 0) & (shapes < fit_k)
-        right = (shapes > fit_k) & (shapes <= 2 * fit_k)
-        at = np.flatnonzero(left | right)
-        if at.size == 0:
-            return out
-        dof = 3 if g.vector else 1  # per row: the quaternion's tangent space, or one channel
-        for kf, pf, a in {(int(fit_k[i]), int(fit_p[i]), int(shapes[i])) for i in at}:
-            mine = at[(fit_k[at] == kf) & (fit_p[at] == pf) & (shapes[at] == a)]
-            r = rows[mine]
-            j = np.arange(2 * kf)[None, :]
-            inward = r[:, None] + (a + 1 + j if a < kf else -(2 * kf - a + 1 + j))
-            inside = (inward >= self._seg_lo[r][:, None]) & (inward < self._seg_hi[r][:, None])
-            inside[inside] = good[inward[inside]]
-            ask = np.unique(inward[inside])
-            if ask.size == 0:
-                continue
-            d_in = self._at_shape(kf, pf, a, ask, good, True)
-            z = np.full(inward.shape + (d.shape[1],), np.nan)  # (rows, 2k, c)
-            z[inside] = d_in[np.searchsorted(ask, inward[inside])] / self.scales[(kf, pf)][a]
-            use = np.all(np.isfinite(z), axis=2)  # (rows, 2k)
-            corr = _residual_correlation(kf, pf, min(a, 2 * kf - a), 2 * kf)
-            patterns, which = np.unique(use, axis=0, return_inverse=True)
-            for pat, these in zip(patterns, np.split(np.argsort(which, kind="stable"),
-                                                     np.cumsum(np.bincount(which.ravel()))[:-1]),
-                                  strict=True):  # fmt: skip
-                if not pat.any():
-                    continue
-                c = corr[np.ix_(pat, pat)]
-                zi = z[these][:, pat]  # (rows, m, c)
-                # the spread: a scaled chi-square with the moments of sum z^2
-                tr, tr2 = dof * np.trace(c), dof * np.sum(c * c)  # (c symmetric)
-                ss = np.sum(zi**2, axis=1)
-                # the bias: a misfit of one sign over the next rows, sum z ~ N(0, 1'C1)
-                bias = np.sum(zi, axis=1) ** 2 / np.sum(c)
-                if g.vector:
-                    ss = np.sum(ss, axis=1, keepdims=True)
-                    bias = np.sum(bias, axis=1, keepdims=True)
-                failed = ss * tr / tr2 > _chi2_isf(EDGE_LEVEL / 2, tr * tr / tr2)
-                failed |= bias > _chi2_isf(EDGE_LEVEL / 2, dof)
-                rms = np.sqrt(ss / tr)
-                out[mine[these]] = np.where(failed, np.maximum(rms, 1.0), 1.0)
-        return out
-
     def __call__(
         self, rows: np.ndarray, good: np.ndarray, exact: bool = True
     ) -> tuple[np.ndarray, np.ndarray]:
@@ -608,7 +480,7 @@ class _Scorer:
                 d_f, shapes_f = _normalised(g, t, segs, good, kf, pf, sc, rows[at])
                 d[at], scale[at] = d_f, self.scales[(kf, pf)][np.clip(shapes_f, 0, 2 * kf)]
         else:  # measurements: the fit per row, with the edge's own roughness
-            d, scale, edge = self._edge_fits(rows, good, d, scale)
+            d, scale, edge = edge_fits(self, rows, good, d, scale, FITS)
         if g.sided:
             d, scale = self._sided(rows, good, d, scale)
         elif g.switch_rows is not None:

@@ -1,0 +1,218 @@
+"""The outlier rule at a segment's ends: each edge row's fit and its edge factor.
+
+A row within ``k`` samples of its segment's start or end is extrapolated by its local
+fit, and a motion may change fastest exactly there (a logged estimate's filter starting
+with the log), which the log-wide scale of the window shape does not see.
+:func:`edge_fits` gives each such row the fit of :data:`~airbearing.io.quality_outliers.FITS`
+that flags the smallest glitch there, with the scale times :func:`edge_factor`: the root
+mean square of the normalised residuals of the ``2k`` rows inwards (windows without the
+row), where they fail a test of white noise at :data:`EDGE_LEVEL`. The rule is told in
+:mod:`airbearing.io.quality`'s docstring (step 3); the scorer (``_Scorer`` of
+:mod:`airbearing.io.quality_outliers`) provides the residuals and the scales.
+
+The tests' chi-square quantile is :func:`chi2_isf` (the standard library's ``lgamma``):
+importing ``scipy.special`` costs 0.3-0.6 s of CPU in every process that checks a log.
+"""
+
+from __future__ import annotations
+
+import math
+from functools import lru_cache
+
+import numpy as np
+
+from airbearing.io.local_fits import noise_gain, residual_correlation
+
+__all__ = ["EDGE_LEVEL", "chi2_isf", "edge_factor", "edge_fits"]
+
+#: Level of the test that an edge's inward rows are rougher than the log-wide scale
+#: (:func:`edge_factor`): a false alarm only lowers the sensitivity at that edge.
+EDGE_LEVEL = 1e-3
+
+
+@lru_cache(maxsize=8)
+def gains(k: int, p: int) -> np.ndarray:
+    """`local_fits.noise_gain` of the fit ``(k, p)`` for every window shape ``0 .. 2k``."""
+    return np.array([noise_gain(k, p, a) for a in range(2 * k + 1)])
+
+
+def _upper_gamma(a: float, x: float) -> float:
+    """The regularised upper incomplete gamma function ``Q(a, x)``, ``a > 0, x >= 0``:
+    its series below ``x = a + 1``, its continued fraction (modified Lentz) above
+    (Abramowitz and Stegun 6.5.29 and 6.5.31)."""
+    if x <= 0.0:
+        return 1.0
+    log_front = a * math.log(x) - x - math.lgamma(a)
+    tiny = 1e-300
+    if x < a + 1.0:  # P(a, x) = x^a e^-x / Gamma(a + 1) sum x^n / ((a + 1) .. (a + n))
+        term = total = 1.0 / a
+        ap = a
+        for _ in range(10_000):
+            ap += 1.0
+            term *= x / ap
+            total += term
+            if abs(term) < abs(total) * 1e-17:
+                break
+        return 1.0 - total * math.exp(log_front)
+    b = x + 1.0 - a  # Q(a, x) = x^a e^-x / Gamma(a) / (x + 1 - a - 1 (1 - a) / (x + 3 - a - ..))
+    c = 1.0 / tiny
+    d = 1.0 / b
+    h = d
+    for i in range(1, 10_000):
+        an = -i * (i - a)
+        b += 2.0
+        d = an * d + b
+        d = tiny if abs(d) < tiny else d
+        c = b + an / c
+        c = tiny if abs(c) < tiny else c
+        d = 1.0 / d
+        delta = d * c
+        h *= delta
+        if abs(delta - 1.0) < 1e-17:
+            break
+    return math.exp(log_front) * h
+
+
+@lru_cache(maxsize=256)
+def chi2_isf(level: float, dof: float) -> float:
+    """The chi-square quantile exceeded with probability ``level`` (``0 < level <= 0.5``)
+    at ``dof`` degrees of freedom (fractional too): ``scipy.stats.chi2.isf(level, dof)``
+    to ~1e-14 (tests/io/test_outliers_at_the_edge.py compares them).
+
+    Newton's method on ``log Q(dof / 2, x / 2) = log(level)`` from the Wilson-Hilferty
+    approximation; ``Q`` is :func:`_upper_gamma`.
+    """
+    a = 0.5 * dof
+    z = _normal_isf_start(level)
+    v = 2.0 / (9.0 * dof)
+    x = dof * max(1.0 - v + z * math.sqrt(v), 0.05) ** 3  # Wilson-Hilferty
+    target = math.log(level)
+    for _ in range(100):
+        q = _upper_gamma(a, 0.5 * x)
+        # d log Q / dx = -(x/2)^(a-1) e^(-x/2) / (2 Gamma(a) Q)
+        slope = -math.exp((a - 1.0) * math.log(0.5 * x) - 0.5 * x - math.lgamma(a)) / (2.0 * q)
+        step = (math.log(q) - target) / slope
+        x_new = x - step if x - step > 0 else 0.5 * x
+        if abs(x_new - x) <= 4e-16 * x:
+            return x_new
+        x = x_new
+    return x
+
+
+def _normal_isf_start(level: float) -> float:
+    """A start for the normal quantile exceeded with probability ``level`` (to ~1e-3:
+    Abramowitz and Stegun 26.2.23), for :func:`chi2_isf`'s first guess."""
+    t = math.sqrt(-2.0 * math.log(level))
+    return t - (2.515517 + 0.802853 * t + 0.010328 * t * t) / (
+        1.0 + 1.432788 * t + 0.189269 * t * t + 0.001308 * t**3
+    )
+
+
+def edge_fits(scorer, rows, good, d, scale, candidates):
+    """The fit, scale and edge factor of the rows near a segment's ends (step 3).
+
+    Each row within the largest ``k`` of a segment's end takes the fit of ``candidates``
+    (:data:`~airbearing.io.quality_outliers.FITS`) that flags the smallest glitch
+    *there*: the smallest product over channels of its window shape's scale, its edge
+    factor (:func:`edge_factor`) and ``sqrt(1 + h)``. Nothing of it depends on the
+    row's own sample (the scales are the log's, the edge factor comes from windows
+    without the row), so a glitch cannot choose the fit that hides it. Returns ``d,
+    scale, edge`` of all ``rows``.
+    """
+    edge = np.ones(d.shape)
+    kmax = max(k for k, _ in candidates)
+    near = np.flatnonzero(np.minimum(scorer.from_start[rows], scorer.from_end[rows]) < kmax)
+    if near.size == 0:
+        return d, scale, edge
+    r = rows[near]
+    length = scorer.from_start[r] + scorer.from_end[r] + 1
+    best = np.full(near.size, np.inf)
+    d_near, s_near, e_near = d[near].copy(), scale[near].copy(), edge[near].copy()
+    for kf, pf in candidates:
+        fits = length >= 2 * kf + 1  # a full window of 2k neighbours
+        if not fits.any():
+            continue
+        rf = r[fits]
+        fs, fe = scorer.from_start[rf], scorer.from_end[rf]
+        sh_f = np.where(fs < kf, fs, np.where(fe < kf, 2 * kf - fe, kf))
+        d_f = np.empty((rf.size, d.shape[1]))
+        for a in np.unique(sh_f):
+            d_f[sh_f == a] = scorer._at_shape(kf, pf, int(a), rf[sh_f == a], good, False)
+        s_f = scorer.scales[(kf, pf)][np.clip(sh_f, 0, 2 * kf)]
+        full = np.full(sh_f.size, kf)
+        e_f = edge_factor(scorer, r[fits], good, full, np.full(sh_f.size, pf), sh_f, d_f)
+        gain = gains(kf, pf)[sh_f]
+        key = np.sum(np.log(s_f * e_f), axis=1) + d.shape[1] * 0.5 * np.log1p(gain)
+        key = np.where(np.all(np.isfinite(d_f), axis=1), key, np.inf)
+        at = np.flatnonzero(fits)
+        take = key < best[at]
+        at = at[take]
+        best[at] = key[take]
+        d_near[at], s_near[at], e_near[at] = d_f[take], s_f[take], e_f[take]
+    d[near], scale[near], edge[near] = d_near, s_near, e_near
+    return d, scale, edge
+
+
+def edge_factor(scorer, rows, good, fit_k, fit_p, shapes, d) -> np.ndarray:
+    """Per row and channel, how much rougher the motion is at an extrapolated edge
+    position than the log-wide scale of its window shape says (>= 1; io.quality doc,
+    step 4).
+
+    A row ``e`` samples from its segment's start has ``e < k`` left neighbours: its
+    fit extrapolates, and a motion that changes fast where the log begins (a filter's
+    start-up transient in a logged estimate) leaves a misfit there that the shape's
+    scale, measured over the whole log, does not contain. The same fit with the same
+    shape predicts the ``2k`` rows inwards from windows that do not contain the row
+    (rows ``e + 1 + j`` with ``e`` left neighbours start after it), so a glitch in
+    the row cannot raise its own scale. They are tested against white noise at
+    :data:`EDGE_LEVEL` (half for each statistic): their sum, which a misfit makes
+    of one sign (normal, with the variance ``1' C 1`` of the residuals' white-noise
+    correlation ``C``), and their sum of squares (the scaled chi-square with the
+    same two moments, Satterthwaite); where either fails, the factor is their root
+    mean square. The end of a segment mirrors it. The factor
+    only raises a scale, so the rule's false flag rate stays at most its threshold's.
+    """
+    g = scorer.group
+    out = np.ones(d.shape)
+    left = (shapes >= 0) & (shapes < fit_k)
+    right = (shapes > fit_k) & (shapes <= 2 * fit_k)
+    at = np.flatnonzero(left | right)
+    if at.size == 0:
+        return out
+    dof = 3 if g.vector else 1  # per row: the quaternion's tangent space, or one channel
+    for kf, pf, a in {(int(fit_k[i]), int(fit_p[i]), int(shapes[i])) for i in at}:
+        mine = at[(fit_k[at] == kf) & (fit_p[at] == pf) & (shapes[at] == a)]
+        r = rows[mine]
+        j = np.arange(2 * kf)[None, :]
+        inward = r[:, None] + (a + 1 + j if a < kf else -(2 * kf - a + 1 + j))
+        inside = (inward >= scorer._seg_lo[r][:, None]) & (inward < scorer._seg_hi[r][:, None])
+        inside[inside] = good[inward[inside]]
+        ask = np.unique(inward[inside])
+        if ask.size == 0:
+            continue
+        d_in = scorer._at_shape(kf, pf, a, ask, good, True)
+        z = np.full(inward.shape + (d.shape[1],), np.nan)  # (rows, 2k, c)
+        z[inside] = d_in[np.searchsorted(ask, inward[inside])] / scorer.scales[(kf, pf)][a]
+        use = np.all(np.isfinite(z), axis=2)  # (rows, 2k)
+        corr = residual_correlation(kf, pf, min(a, 2 * kf - a), 2 * kf)
+        patterns, which = np.unique(use, axis=0, return_inverse=True)
+        for pat, these in zip(patterns, np.split(np.argsort(which, kind="stable"),
+                                                 np.cumsum(np.bincount(which.ravel()))[:-1]),
+                              strict=True):  # fmt: skip
+            if not pat.any():
+                continue
+            c = corr[np.ix_(pat, pat)]
+            zi = z[these][:, pat]  # (rows, m, c)
+            # the spread: a scaled chi-square with the moments of sum z^2
+            tr, tr2 = dof * np.trace(c), dof * np.sum(c * c)  # (c symmetric)
+            ss = np.sum(zi**2, axis=1)
+            # the bias: a misfit of one sign over the next rows, sum z ~ N(0, 1'C1)
+            bias = np.sum(zi, axis=1) ** 2 / np.sum(c)
+            if g.vector:
+                ss = np.sum(ss, axis=1, keepdims=True)
+                bias = np.sum(bias, axis=1, keepdims=True)
+            failed = ss * tr / tr2 > chi2_isf(EDGE_LEVEL / 2, tr * tr / tr2)
+            failed |= bias > chi2_isf(EDGE_LEVEL / 2, dof)
+            rms = np.sqrt(ss / tr)
+            out[mine[these]] = np.where(failed, np.maximum(rms, 1.0), 1.0)
+    return out
