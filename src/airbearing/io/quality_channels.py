@@ -100,9 +100,16 @@ def _switch_rows(log: Log, segments, k: int) -> np.ndarray | None:
         for start, stop in segments:
             if stop - start <= order + 1:
                 continue
-            du = np.abs(np.diff(u[start:stop], order, axis=0))
+            seg = u[start:stop]
+            # a channel held within the segment (sliders parked) has no switch: its
+            # differences are all 0, below any threshold (no diff, no median: the per-row
+            # cost of a long log's parked sliders)
+            moving = ~np.all(seg == seg[:1], axis=0)
+            if not moving.any():
+                continue
+            du = np.abs(np.diff(seg[:, moving], order, axis=0))
             typical = np.median(du, axis=0)
-            big = du > SWITCH_RATIO * np.maximum(typical, tiny)
+            big = du > SWITCH_RATIO * np.maximum(typical, tiny[moving])
             for j in np.flatnonzero(big.any(axis=1)) + start + order:
                 out[max(j - k, start) : min(j + k + 1, stop)] = True
     return out if out.any() else None

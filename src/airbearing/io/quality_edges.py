@@ -195,10 +195,14 @@ def edge_factor(scorer, rows, good, fit_k, fit_p, shapes, d) -> np.ndarray:
         z[inside] = d_in[np.searchsorted(ask, inward[inside])] / scorer.scales[(kf, pf)][a]
         use = np.all(np.isfinite(z), axis=2)  # (rows, 2k)
         corr = residual_correlation(kf, pf, min(a, 2 * kf - a), 2 * kf)
-        patterns, which = np.unique(use, axis=0, return_inverse=True)
-        for pat, these in zip(patterns, np.split(np.argsort(which, kind="stable"),
-                                                 np.cumsum(np.bincount(which.ravel()))[:-1]),
-                              strict=True):  # fmt: skip
+        if use.all():  # the usual case (no gap or excluded row near): one pattern
+            groups = [(use[0], np.arange(use.shape[0]))]
+        else:
+            patterns, which = np.unique(use, axis=0, return_inverse=True)
+            order = np.argsort(which.ravel(), kind="stable")
+            groups = zip(patterns, np.split(order, np.cumsum(np.bincount(which.ravel()))[:-1]),
+                         strict=True)  # fmt: skip
+        for pat, these in groups:
             if not pat.any():
                 continue
             c = corr[np.ix_(pat, pat)]
