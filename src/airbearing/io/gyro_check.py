@@ -52,9 +52,16 @@ def _increments(q0: np.ndarray, q1: np.ndarray) -> np.ndarray:
     """``conj(q0) (x) q1`` (scalar first, Hamilton, FORMATS.md), the body-frame turn."""
     w0, v0 = q0[:, :1], -q0[:, 1:]
     w1, v1 = q1[:, :1], q1[:, 1:]
-    w = w0 * w1 - np.sum(v0 * v1, axis=1, keepdims=True)
-    v = w0 * v1 + w1 * v0 + np.cross(v0, v1)
-    return np.hstack([w, v])
+    out = np.empty((q0.shape[0], 4))
+    # the sum over 3 components and the cross product by columns: the operations of
+    # np.sum (in order) and np.cross, without their per-row overhead (~0.1 s per 10^6 rows)
+    p = v0 * v1
+    np.subtract(w0[:, 0] * w1[:, 0], p[:, 0] + p[:, 1] + p[:, 2], out=out[:, 0])
+    v = w0 * v1 + w1 * v0
+    for i, j, m in ((0, 1, 2), (1, 2, 0), (2, 0, 1)):  # (v0 x v1)_i = v0_j v1_m - v0_m v1_j
+        v[:, i] += v0[:, j] * v1[:, m] - v0[:, m] * v1[:, j]
+    out[:, 1:] = v
+    return out
 
 
 def _ends(k: np.ndarray, n: int):

@@ -83,6 +83,7 @@ def loo(
     scale: float,
     rows: np.ndarray,
     shape: int | None = None,
+    fast: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Leave-one-out residuals of some rows of one segment (fast where sampling is regular).
 
@@ -97,11 +98,12 @@ def loo(
     neighbour already excluded, a segment shorter than ``2k + 1``) goes through the
     per-row solve. The two agree to the rounding of the logged times: on a
     regular window the per-row solve's times differ from the regular grid by
-    nothing more.
+    nothing more. ``fast``: :func:`regular_span` of these rows, when the caller has it.
     """
     m = t.size
     a, b = window_shape(m, k, rows, shape)
-    fast = regular_span(t, good, rows, a, b, k)
+    if fast is None:
+        fast = regular_span(t, good, rows, a, b, k)
     if not fast.any():
         return loo_reference(t, x, good, k, p, scale, rows, shape)
     r = np.full((rows.size, x.shape[1]), np.nan)
