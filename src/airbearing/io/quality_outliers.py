@@ -11,6 +11,7 @@ one at a time. The numerics of the fits are in :mod:`airbearing.io.local_fits`.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 
@@ -58,6 +59,15 @@ class _Group:
     sided: bool = False  # inputs: the best of the centred and one-sided fits (io.quality doc)
     # rows next to a command's switch: the best of the three fits there too (io.quality doc)
     switch_rows: np.ndarray | None = None
+
+
+@lru_cache(maxsize=64)
+def _offsets(k: int, a: int) -> np.ndarray:
+    """Row offsets of the window with ``a`` left neighbours of ``2k``, in window order
+    (``-a .. -1``, then ``1 .. 2k - a``), read-only (made once: ``np.r_`` costs ~50 us)."""
+    out = np.r_[-np.arange(a, 0, -1), np.arange(1, 2 * k - a + 1)]
+    out.flags.writeable = False
+    return out
 
 
 def _loo(t, x, good, k, p, scale, rows, shape=None):
@@ -196,7 +206,7 @@ def _shape_residuals(
         mine = regular[a]
         if mine.any():
             w = _regular_weights(k, p, a)
-            offsets = np.r_[-np.arange(a, 0, -1), np.arange(1, 2 * k - a + 1)]
+            offsets = _offsets(k, a)
             # as _loo's fast path, on every row (the same operations per element); the
             # rows outside `mine` (clipped neighbours) are dropped after
             with np.errstate(invalid="ignore", over="ignore"):
@@ -210,7 +220,7 @@ def _shape_residuals(
         other = np.flatnonzero(fits[a] & ~regular[a])
         if other.size:  # jittered windows: the least-squares weights of each, all at once
             at = rows[other]
-            offsets = np.r_[-np.arange(a, 0, -1), np.arange(1, 2 * k - a + 1)]
+            offsets = _offsets(k, a)
             nb = at[:, None] + offsets
             w = poly_weights(t[nb] - t[at][:, None], p, np.zeros((at.size, 1)))[:, 0]
             r = x[at] - np.einsum("mj,mjc->mc", w, x[nb])
@@ -432,7 +442,7 @@ class _Scorer:
         dt = np.diff(t[span], axis=1)
         big = np.maximum(np.abs(t[lo]), np.abs(t[hi - 1]))
         fast = fits & (np.max(dt, axis=1) - np.min(dt, axis=1) <= _REGULAR_ULPS * np.spacing(big))
-        offsets = np.r_[-np.arange(a, 0, -1), np.arange(1, 2 * kf - a + 1)]
+        offsets = _offsets(kf, a)
         nb = np.clip(rows[:, None] + offsets, 0, t.size - 1)
         fast &= np.all(good[nb], axis=1)
         if fast.any():
