@@ -49,6 +49,7 @@ import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 
 from airbearing.io.columns import RATE_MISMATCH_FACTOR
+from airbearing.io.local_fits import row_any
 
 __all__ = [
     "CHI2_3_THRESHOLD",
@@ -351,7 +352,7 @@ def find_steps(
     k, p = scorer.fit
     n = t.size
     _, over = scorer(np.arange(n), np.ones(n, dtype=bool), exact=False)
-    suspect = over.any(axis=1)
+    suspect = row_any(over)
     cand = np.flatnonzero(suspect[:-1] | suspect[1:]) + 1
     cand = np.unique(np.clip(cand[:, None] + np.arange(-1, 2), 1, n - 1))
     if cand.size == 0:  # no suspect: no boundary to test (and no side fit to calibrate)

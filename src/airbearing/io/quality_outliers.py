@@ -27,6 +27,7 @@ from airbearing.io.local_fits import REGULAR_ULPS as _REGULAR_ULPS
 from airbearing.io.local_fits import loo as _loo_regular
 from airbearing.io.local_fits import regular_span as _regular_span
 from airbearing.io.local_fits import regular_weights as _regular_weights
+from airbearing.io.local_fits import row_any, row_max, row_sum
 from airbearing.io.local_fits import window_median as _window_median
 from airbearing.io.local_fits import window_shape as _window_shape
 from airbearing.io.quality_edges import edge_fits, gains
@@ -256,11 +257,11 @@ def _score(group: _Group, d: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, np.
     """Per-row score (noise scales) and per-channel exceedance; NaN (unchecked) -> 0."""
     d = np.nan_to_num(d, nan=0.0)
     if group.vector:
-        z2 = np.sum(d * d, axis=1) / s[:, 0] ** 2
+        z2 = row_sum(d * d) / s[:, 0] ** 2
         over = np.repeat((z2 > CHI2_3_THRESHOLD)[:, None], d.shape[1], axis=1)
         return np.sqrt(z2), over
     z = np.abs(d) / s
-    return np.max(z, axis=1), z > Z_THRESHOLD
+    return row_max(z), z > Z_THRESHOLD
 
 
 class _Scorer:
@@ -324,7 +325,7 @@ class _Scorer:
         # asks first, the outlier search second)
         self._first_pass = None
         if g.vector:
-            self._rough_sq = np.sum(d**2, axis=1, keepdims=True) / _CHI2_3_MEDIAN
+            self._rough_sq = row_sum(d**2)[:, None] / _CHI2_3_MEDIAN
         else:
             self._rough_sq = (_MAD_TO_SIGMA * d) ** 2
         # A channel without noise (its scale at the physical floor: a simulation)
@@ -516,7 +517,7 @@ class _Scorer:
         if exact:
             return _score(g, d, scale * np.maximum(self.local_at(rows), edge))
         score, over = _score(g, d, scale)  # local factor 1: an upper bound of each score
-        maybe = over.any(axis=1)
+        maybe = row_any(over)
         if maybe.any():
             factor = np.maximum(self.local_at(rows[maybe]), edge[maybe])
             score[maybe], over[maybe] = _score(g, d[maybe], scale[maybe] * factor)
@@ -576,7 +577,7 @@ def find_outliers(
     # compared, and _best_explanation scores its windows exactly): upper bounds suffice
     score, over = scorer(np.arange(n), ~excluded, exact=False)
     for _ in range(_MAX_PASSES):
-        suspect = over.any(axis=1) & ~excluded
+        suspect = row_any(over) & ~excluded
         if not suspect.any():
             break
         # only the largest suspect within k samples (same segment) is taken this pass
@@ -593,7 +594,7 @@ def find_outliers(
             near_mask[max(i - _RECOMPUTE * k, 0) : i + _RECOMPUTE * k + 1] = True
         again = np.flatnonzero(near_mask)
         score[again], over[again] = scorer(again, ~excluded, exact=False)
-    suspect = excluded & over.any(axis=1)
+    suspect = excluded & row_any(over)
     flagged = np.zeros(n, dtype=bool)
     unexplained = np.zeros(n, dtype=bool)
     bad = np.flatnonzero(suspect)
