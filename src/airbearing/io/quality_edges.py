@@ -10,13 +10,11 @@ row), where they fail a test of white noise at :data:`EDGE_LEVEL`. The rule is t
 :mod:`airbearing.io.quality`'s docstring (step 3); the scorer (``_Scorer`` of
 :mod:`airbearing.io.quality_outliers`) provides the residuals and the scales.
 
-The tests' chi-square quantile is :func:`chi2_isf` (the standard library's ``lgamma``):
-importing ``scipy.special`` costs 0.3-0.6 s of CPU in every process that checks a log.
+The tests' chi-square quantiles are scipy's (:func:`chi2_isf`).
 """
 
 from __future__ import annotations
 
-import math
 from functools import lru_cache
 
 import numpy as np
@@ -36,76 +34,14 @@ def gains(k: int, p: int) -> np.ndarray:
     return np.array([noise_gain(k, p, a) for a in range(2 * k + 1)])
 
 
-def _upper_gamma(a: float, x: float) -> float:
-    """The regularised upper incomplete gamma function ``Q(a, x)``, ``a > 0, x >= 0``:
-    its series below ``x = a + 1``, its continued fraction (modified Lentz) above
-    (Abramowitz and Stegun 6.5.29 and 6.5.31)."""
-    if x <= 0.0:
-        return 1.0
-    log_front = a * math.log(x) - x - math.lgamma(a)
-    tiny = 1e-300
-    if x < a + 1.0:  # P(a, x) = x^a e^-x / Gamma(a + 1) sum x^n / ((a + 1) .. (a + n))
-        term = total = 1.0 / a
-        ap = a
-        for _ in range(10_000):
-            ap += 1.0
-            term *= x / ap
-            total += term
-            if abs(term) < abs(total) * 1e-17:
-                break
-        return 1.0 - total * math.exp(log_front)
-    b = x + 1.0 - a  # Q(a, x) = x^a e^-x / Gamma(a) / (x + 1 - a - 1 (1 - a) / (x + 3 - a - ..))
-    c = 1.0 / tiny
-    d = 1.0 / b
-    h = d
-    for i in range(1, 10_000):
-        an = -i * (i - a)
-        b += 2.0
-        d = an * d + b
-        d = tiny if abs(d) < tiny else d
-        c = b + an / c
-        c = tiny if abs(c) < tiny else c
-        d = 1.0 / d
-        delta = d * c
-        h *= delta
-        if abs(delta - 1.0) < 1e-17:
-            break
-    return math.exp(log_front) * h
-
-
 @lru_cache(maxsize=256)
 def chi2_isf(level: float, dof: float) -> float:
-    """The chi-square quantile exceeded with probability ``level`` (``0 < level <= 0.5``)
-    at ``dof`` degrees of freedom (fractional too): ``scipy.stats.chi2.isf(level, dof)``
-    to ~1e-14 (tests/io/test_outliers_at_the_edge.py compares them).
+    """The chi-square quantile ``scipy.stats.chi2.isf(level, dof)``, by the function it
+    calls (``scipy.special.chdtri``): importing scipy.stats costs 1-3 s of CPU, and
+    identify's equation-error path loads no scipy.stats."""
+    from scipy.special import chdtri  # 0.3-0.6 s to import: only when a test needs it
 
-    Newton's method on ``log Q(dof / 2, x / 2) = log(level)`` from the Wilson-Hilferty
-    approximation; ``Q`` is :func:`_upper_gamma`.
-    """
-    a = 0.5 * dof
-    z = _normal_isf_start(level)
-    v = 2.0 / (9.0 * dof)
-    x = dof * max(1.0 - v + z * math.sqrt(v), 0.05) ** 3  # Wilson-Hilferty
-    target = math.log(level)
-    for _ in range(100):
-        q = _upper_gamma(a, 0.5 * x)
-        # d log Q / dx = -(x/2)^(a-1) e^(-x/2) / (2 Gamma(a) Q)
-        slope = -math.exp((a - 1.0) * math.log(0.5 * x) - 0.5 * x - math.lgamma(a)) / (2.0 * q)
-        step = (math.log(q) - target) / slope
-        x_new = x - step if x - step > 0 else 0.5 * x
-        if abs(x_new - x) <= 4e-16 * x:
-            return x_new
-        x = x_new
-    return x
-
-
-def _normal_isf_start(level: float) -> float:
-    """A start for the normal quantile exceeded with probability ``level`` (to ~1e-3:
-    Abramowitz and Stegun 26.2.23), for :func:`chi2_isf`'s first guess."""
-    t = math.sqrt(-2.0 * math.log(level))
-    return t - (2.515517 + 0.802853 * t + 0.010328 * t * t) / (
-        1.0 + 1.432788 * t + 0.189269 * t * t + 0.001308 * t**3
-    )
+    return float(chdtri(dof, level))
 
 
 def edge_fits(scorer, rows, good, d, scale, candidates):
