@@ -95,4 +95,3 @@ def test_the_edge_tests_quantile_is_scipy_stats_chi2():
 
     for level, dof in [(5e-4, 1.0), (5e-4, 3.0), (5e-4, 7.37), (1e-3, 22.5)]:
         assert chi2_isf(level, dof) == pytest.approx(stats.chi2.isf(level, dof), rel=1e-12)
-
