@@ -208,3 +208,20 @@ def test_window_median_is_pandas_rolling_median():
         got = F.window_median(v, lo, hi, rows, min_periods)
         want = _median_by_pandas(v, lo, hi, rows, min_periods)
         assert np.array_equal(got, want, equal_nan=True)
+
+
+def test_row_reductions_are_numpys_to_the_bit():
+    """The outlier rule reduces the few columns of each row column by column (numpy's
+    reduction along a short last axis is 10-30x slower): the same numbers as numpy's,
+    NaN and signed zeros included, for every width the rule uses (1 to 7 columns)."""
+    rng = np.random.default_rng(11)
+    for c in range(1, 8):
+        x = rng.standard_normal((500, c)) * 10.0 ** rng.integers(-8, 8, (500, c))
+        x[rng.uniform(size=x.shape) < 0.02] = np.nan
+        x[rng.uniform(size=x.shape) < 0.02] = -0.0
+        b = x > 0.3
+        assert np.array_equal(F.row_sum(x), np.sum(x, axis=1), equal_nan=True)
+        assert np.array_equal(np.signbit(F.row_sum(x)), np.signbit(np.sum(x, axis=1)))
+        assert np.array_equal(F.row_max(x), np.max(x, axis=1), equal_nan=True)
+        assert np.array_equal(F.row_any(b), b.any(axis=1))
+        assert np.array_equal(F.row_all(b), b.all(axis=1))

@@ -92,7 +92,7 @@ def test_a_yaw_spike_in_row_0_is_still_found(noisy_cmg, slews, seed):
 def test_the_edge_tests_quantile_is_scipy_stats_chi2():
     """The edge tests' thresholds come from scipy.special (scipy.stats is not loaded by
     the log check); the same numbers as ``scipy.stats.chi2.isf``, fractional dof too."""
-    from airbearing.io.quality_outliers import _chi2_isf
+    from airbearing.io.quality_edges import chi2_isf
 
     for level, dof in [(5e-4, 1.0), (5e-4, 3.0), (5e-4, 7.37), (1e-3, 22.5)]:
-        assert _chi2_isf(level, dof) == pytest.approx(stats.chi2.isf(level, dof), rel=1e-12)
+        assert chi2_isf(level, dof) == pytest.approx(stats.chi2.isf(level, dof), rel=1e-12)

@@ -49,6 +49,7 @@ import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 
 from airbearing.io.columns import RATE_MISMATCH_FACTOR
+from airbearing.io.local_fits import row_any
 
 __all__ = [
     "CHI2_3_THRESHOLD",
@@ -279,14 +280,9 @@ def _side(t, x, b, count, p, period, wrap, in_window=False):
     dv = _predict(v_l, left.rows, x)[:, 0] - _predict(v_r, right.rows, x)[:, 0]
     h = np.sum(w_l**2, axis=-1) + np.sum(w_r**2, axis=-1)
     hv = np.sum(v_l[:, 0] ** 2, axis=-1) + np.sum(v_r[:, 0] ** 2, axis=-1)
-    s_l, q_l = _weights(t, b - count - 1, count, p, t0[:, None], t0, period)
-    s_r, q_r = _weights(t, b + 1, count, p, t1[:, None], t0, period)
-    e_l = x[b - 1] - _predict(s_l, q_l, x)[:, 0]
-    e_r = x[b] - _predict(s_r, q_r, x)[:, 0]
+    e_l, e_r = _one_step(t, x, b, count, p, period, wrap)
     if wrap:
-        d, e_l, e_r = (np.mod(v + np.pi, 2 * np.pi) - np.pi for v in (d, e_l, e_r))
-    e_l = e_l / np.sqrt(1.0 + np.sum(s_l[:, 0] ** 2, axis=-1))[:, None]
-    e_r = e_r / np.sqrt(1.0 + np.sum(s_r[:, 0] ** 2, axis=-1))[:, None]
+        d = np.mod(d + np.pi, 2 * np.pi) - np.pi
     if not in_window:
         return d, dv, h, hv, e_l, e_r
     out = []
@@ -294,6 +290,22 @@ def _side(t, x, b, count, p, period, wrap, in_window=False):
         e = x[fit.rows] - _predict(fit.weights(t[fit.rows]), fit.rows, x)
         out.append(np.mod(e + np.pi, 2 * np.pi) - np.pi if wrap else e)
     return d, dv, h, hv, e_l, e_r, np.concatenate(out, axis=1)
+
+
+def _one_step(t, x, b, count, p, period, wrap):
+    """Each side's own one-step residual at boundaries ``b`` (m, c), normalised by
+    ``sqrt(1 + h)``: the last sample before ``b`` predicted by the ``count`` samples
+    before it, the first sample from ``b`` by the ``count`` samples after it."""
+    t0, t1 = t[b - 1], t[b]
+    s_l, q_l = _weights(t, b - count - 1, count, p, t0[:, None], t0, period)
+    s_r, q_r = _weights(t, b + 1, count, p, t1[:, None], t0, period)
+    e_l = x[b - 1] - _predict(s_l, q_l, x)[:, 0]
+    e_r = x[b] - _predict(s_r, q_r, x)[:, 0]
+    if wrap:
+        e_l, e_r = (np.mod(v + np.pi, 2 * np.pi) - np.pi for v in (e_l, e_r))
+    e_l = e_l / np.sqrt(1.0 + np.sum(s_l[:, 0] ** 2, axis=-1))[:, None]
+    e_r = e_r / np.sqrt(1.0 + np.sum(s_r[:, 0] ** 2, axis=-1))[:, None]
+    return e_l, e_r
 
 
 def _calibrate(g, t, segments, count, p, period):
@@ -310,8 +322,7 @@ def _calibrate(g, t, segments, count, p, period):
     rows = rows[np.unique(np.linspace(0, rows.size - 1, min(rows.size, 2000)).astype(int))]
     if rows.size < 8:
         return None
-    *_, e_l, e_r = _side(t, g.values, rows, count, p, period, g.wrap)
-    e = np.concatenate([e_l, e_r])
+    e = np.concatenate(_one_step(t, g.values, rows, count, p, period, g.wrap))
     if g.vector:
         return np.array([np.sqrt(np.median(np.sum(e**2, axis=1)) / _CHI2_3_MEDIAN)])
     return _MAD_TO_SIGMA * np.median(np.abs(e - np.median(e, axis=0)), axis=0)
@@ -341,9 +352,11 @@ def find_steps(
     k, p = scorer.fit
     n = t.size
     _, over = scorer(np.arange(n), np.ones(n, dtype=bool), exact=False)
-    suspect = over.any(axis=1)
+    suspect = row_any(over)
     cand = np.flatnonzero(suspect[:-1] | suspect[1:]) + 1
     cand = np.unique(np.clip(cand[:, None] + np.arange(-1, 2), 1, n - 1))
+    if cand.size == 0:  # no suspect: no boundary to test (and no side fit to calibrate)
+        return []
     best = None  # the most sensitive side fit: smallest step it detects (value)
     for count, deg in ((2 * k, p), *SIDE_FITS):
         scale = _calibrate(g, t, scorer.segments, count, deg, period)

@@ -52,24 +52,40 @@ def _increments(q0: np.ndarray, q1: np.ndarray) -> np.ndarray:
     """``conj(q0) (x) q1`` (scalar first, Hamilton, FORMATS.md), the body-frame turn."""
     w0, v0 = q0[:, :1], -q0[:, 1:]
     w1, v1 = q1[:, :1], q1[:, 1:]
-    w = w0 * w1 - np.sum(v0 * v1, axis=1, keepdims=True)
-    v = w0 * v1 + w1 * v0 + np.cross(v0, v1)
-    return np.hstack([w, v])
+    out = np.empty((q0.shape[0], 4))
+    # the sum over 3 components and the cross product by columns: the operations of
+    # np.sum (in order) and np.cross, without their per-row overhead (~0.1 s per 10^6 rows)
+    p = v0 * v1
+    np.subtract(w0[:, 0] * w1[:, 0], p[:, 0] + p[:, 1] + p[:, 2], out=out[:, 0])
+    v = w0 * v1 + w1 * v0
+    for i, j, m in ((0, 1, 2), (1, 2, 0), (2, 0, 1)):  # (v0 x v1)_i = v0_j v1_m - v0_m v1_j
+        v[:, i] += v0[:, j] * v1[:, m] - v0[:, m] * v1[:, j]
+    out[:, 1:] = v
+    return out
+
+
+def _ends(k: np.ndarray, n: int):
+    """The first and second rows of the intervals ``k`` as indices: slices (views, no
+    gathered copies of a long log's columns) when ``k`` is every interval ``0 .. n - 2``."""
+    if k.size == n - 1:
+        return slice(0, n - 1), slice(1, n)
+    return k, k + 1
 
 
 def _attitude_rates(log, k: np.ndarray) -> tuple[np.ndarray, tuple[str, ...]] | None:
     """Body rates the attitude shows over the intervals ``k`` (rad/s), and their axes."""
     t = log.data["t"].to_numpy(dtype=float)
-    h = t[k + 1] - t[k]
+    k0, k1 = _ends(k, t.size)
+    h = t[k1] - t[k0]
     q = log.quaternions()
     if q is not None:
-        inc = _increments(q[k], q[k + 1])
+        inc = _increments(q[k0], q[k1])
         inc = inc * np.sign(inc[:, :1] + (inc[:, :1] == 0))  # the short way round
         return 2.0 * inc[:, 1:] / h[:, None], _AXES
     yaw = log.yaw()
     if yaw is None:
         return None
-    d = np.angle(np.exp(1j * (yaw[k + 1] - yaw[k])))  # wrapped: a logged yaw may jump 2 pi
+    d = np.angle(np.exp(1j * (yaw[k1] - yaw[k0])))  # wrapped: a logged yaw may jump 2 pi
     return (d / h)[:, None], ("z",)
 
 
@@ -101,12 +117,13 @@ def gyro_disagreement(log, segments, usable, attitude_noise: float) -> tuple[str
         return ()
     w_att, axes = att
     cols = ("wx", "wy", "wz") if w.shape[1] == 3 else ("wz",)
-    w_gyro = 0.5 * (w[k] + w[k + 1])
+    k0, k1 = _ends(k, w.shape[0])
+    w_gyro = 0.5 * (w[k0] + w[k1])
     if w_gyro.shape[1] != w_att.shape[1]:
         w_gyro = w_gyro[:, -w_att.shape[1] :]
         cols = cols[-w_att.shape[1] :]
     t = log.data["t"].to_numpy(dtype=float)
-    h = float(np.median(t[k + 1] - t[k]))
+    h = float(np.median(t[k1] - t[k0]))
     noise = np.sqrt(2.0) * max(float(attitude_noise), 1e-12) / h  # of one interval's rate
     out = []
     for j, axis in enumerate(axes):

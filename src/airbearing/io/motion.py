@@ -32,6 +32,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from airbearing.io.columns import segments_of
+from airbearing.io.local_fits import row_all
 from airbearing.quaternion import continuous_signs
 
 if TYPE_CHECKING:
@@ -143,7 +144,7 @@ def still_channels(log: Log, testbed: Testbed | None, segments) -> tuple[str, ..
         unit = "rad/s" if key == "gyro_noise" else "rad"
         declared = 2 * noise if name == "quaternion" else noise
         scale = 2 * s if name == "quaternion" else s
-        same = float(np.mean(np.all(np.diff(x, axis=0) == 0, axis=1))) if x.shape[0] > 1 else 0
+        same = float(np.mean(row_all(np.diff(x, axis=0) == 0))) if x.shape[0] > 1 else 0
         what = (
             f"the same value on {same:.0%} of consecutive samples: frozen (a held or dead sensor?)"
             if same >= 0.5
@@ -159,7 +160,7 @@ def still_channels(log: Log, testbed: Testbed | None, segments) -> tuple[str, ..
 def _held_runs(name: str, x: np.ndarray, key: str) -> list[str]:
     """Stretches of a noisy channel that repeat one value for :data:`HELD_RUN` samples or
     more (an exporter holding the last sample through a dropout): one sentence."""
-    same = np.all(np.diff(x, axis=0) == 0, axis=1)  # same[i]: row i + 1 repeats row i
+    same = row_all(np.diff(x, axis=0) == 0)  # same[i]: row i + 1 repeats row i
     if same.sum() < HELD_RUN - 1:
         return []
     edges = np.flatnonzero(np.diff(np.concatenate([[0], same.astype(np.int8), [0]])))

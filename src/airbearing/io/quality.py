@@ -15,6 +15,8 @@ from here:
   floors, the inputs) and the rows near a command's switch;
 - :mod:`airbearing.io.quality_outliers`: the rule on one group (steps 2 to 7):
   ``_Scorer``, :func:`find_outliers`; its numerics in :mod:`airbearing.io.local_fits`;
+- :mod:`airbearing.io.quality_edges`: the rule at a segment's ends (step 3: each edge
+  row's fit and its edge factor, the white-noise tests at ``EDGE_LEVEL``);
 - :mod:`airbearing.io.discontinuity` (steps), :mod:`airbearing.io.gyro_check` (the gyro
   against the attitude), :mod:`airbearing.io.motion` (still channels, no motion).
 
@@ -59,7 +61,7 @@ segment (never across a gap) and each channel group:
    the log begins (a logged estimate's filter starting with the log), which the
    log-wide scale does not see: the same fit and shape predict the ``2k`` rows
    inwards from windows without the row, and where their residuals fail a test of
-   white noise at :data:`~airbearing.io.quality_outliers.EDGE_LEVEL` (their sum, which
+   white noise at :data:`~airbearing.io.quality_edges.EDGE_LEVEL` (their sum, which
    a misfit makes of one sign, and their sum of squares, each against its
    distribution under the residuals' correlation), their root mean square is the
    edge's factor on the scale (never below 1). Each row near a segment's end uses

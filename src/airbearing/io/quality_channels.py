@@ -95,14 +95,21 @@ def _switch_rows(log: Log, segments, k: int) -> np.ndarray | None:
             continue
         if not log.has(*cols):
             continue
-        u = np.stack([log.column(c) for c in cols], axis=1).astype(float)
+        u = log.columns(cols)  # (a new float array, as np.stack of the columns)
         tiny = 1e-12 * np.max(np.abs(u), axis=0)  # once per log, not per segment
         for start, stop in segments:
             if stop - start <= order + 1:
                 continue
-            du = np.abs(np.diff(u[start:stop], order, axis=0))
+            seg = u[start:stop]
+            # a channel held within the segment (sliders parked) has no switch: its
+            # differences are all 0, below any threshold (no diff, no median: the per-row
+            # cost of a long log's parked sliders)
+            moving = ~np.all(seg == seg[:1], axis=0)
+            if not moving.any():
+                continue
+            du = np.abs(np.diff(seg[:, moving], order, axis=0))
             typical = np.median(du, axis=0)
-            big = du > SWITCH_RATIO * np.maximum(typical, tiny)
+            big = du > SWITCH_RATIO * np.maximum(typical, tiny[moving])
             for j in np.flatnonzero(big.any(axis=1)) + start + order:
                 out[max(j - k, start) : min(j + k + 1, stop)] = True
     return out if out.any() else None
@@ -130,11 +137,11 @@ def _input_groups(log: Log, testbed: Testbed | None, segments, t: np.ndarray) ->
     ):
         if not log.has(*cols):
             continue
-        x = np.stack([log.column(c) for c in cols], axis=1).astype(float)
+        x = log.columns(cols)
         if name == "gimbals":
             if not log.has(*_GIMBAL_RATES):
                 continue  # io.quality doc: no commanded rates, no test
-            dd = np.stack([log.column(c) for c in _GIMBAL_RATES], axis=1).astype(float)
+            dd = log.columns(_GIMBAL_RATES)
             for start, stop in segments:  # zero-order hold: dd_j acts over [t_j, t_j+1)
                 steps = dd[start : stop - 1] * np.diff(t[start:stop])[:, None]
                 x[start + 1 : stop] -= np.cumsum(steps, axis=0)

@@ -25,14 +25,14 @@ from airbearing.io.discontinuity import (
 from airbearing.io.local_fits import LOCAL as _LOCAL
 from airbearing.io.local_fits import REGULAR_ULPS as _REGULAR_ULPS
 from airbearing.io.local_fits import loo as _loo_regular
-from airbearing.io.local_fits import noise_gain as _noise_gain
 from airbearing.io.local_fits import regular_span as _regular_span
 from airbearing.io.local_fits import regular_weights as _regular_weights
-from airbearing.io.local_fits import residual_correlation as _residual_correlation
+from airbearing.io.local_fits import row_any, row_max, row_sum
 from airbearing.io.local_fits import window_median as _window_median
 from airbearing.io.local_fits import window_shape as _window_shape
+from airbearing.io.quality_edges import edge_fits, gains
 
-__all__ = ["ABSOLUTE_FLOOR", "EDGE_LEVEL", "FITS", "find_outliers"]
+__all__ = ["ABSOLUTE_FLOOR", "FITS", "find_outliers"]
 
 #: The local fits tried, ``(k, p)``: k samples each side, polynomial degree p.
 FITS: tuple[tuple[int, int], ...] = ((3, 2), (4, 4), (5, 6))
@@ -46,9 +46,6 @@ _MAX_PASSES = 200
 _SCALE_ROWS = 2000  # rows spread over the log on which the noise scales are measured
 _MIN_SCALE_SAMPLES = 8  # fewer residuals than this give no scale (the floor is used)
 _RECOMPUTE = 3  # rows within this many k of a newly excluded sample are refitted
-#: Level of the test that an edge's inward rows are rougher than the log-wide scale
-#: (:meth:`_Scorer._edge_factor`): a false alarm only lowers the sensitivity at that edge.
-EDGE_LEVEL = 1e-3
 _ROUGH = 0.2  # noise-free channels: scale floor per unit median |second difference|
 
 
@@ -65,6 +62,15 @@ class _Group:
     switch_rows: np.ndarray | None = None
 
 
+@lru_cache(maxsize=64)
+def _offsets(k: int, a: int) -> np.ndarray:
+    """Row offsets of the window with ``a`` left neighbours of ``2k``, in window order
+    (``-a .. -1``, then ``1 .. 2k - a``), read-only (made once: ``np.r_`` costs ~50 us)."""
+    out = np.r_[-np.arange(a, 0, -1), np.arange(1, 2 * k - a + 1)]
+    out.flags.writeable = False
+    return out
+
+
 def _loo(t, x, good, k, p, scale, rows, shape=None):
     """`local_fits.loo` (the parameters and returns are its own), with the windows that
     are complete (``2k`` neighbours, all good) but not regular (a jittered clock) fitted
@@ -72,11 +78,14 @@ def _loo(t, x, good, k, p, scale, rows, shape=None):
     solve per row: the same least-squares prediction, equal to its rounding."""
     a, b = _window_shape(t.size, k, rows, shape)
     full = (a + b) == 2 * k
-    cand = np.flatnonzero(full & ~_regular_span(t, good, rows, a, b, k)) if full.any() else ()
+    fast = _regular_span(t, good, rows, a, b, k) if full.any() else full
+    cand = np.flatnonzero(full & ~fast)
     del b, full
     if len(cand) == 0:  # (without this call's arrays: a long log's peak memory)
         del a
-        return _loo_regular(t, x, good, k, p, scale, rows, shape)
+        # the regular windows just found: not looked for twice (0.05 s per 10^6 rows)
+        return _loo_regular(t, x, good, k, p, scale, rows, shape, fast=fast)
+    del fast
     j = np.arange(2 * k)[None, :]
     ac = a[cand, None]
     nb = np.where(j < ac, rows[cand, None] - ac + j, rows[cand, None] + 1 + j - ac)
@@ -182,29 +191,37 @@ def _shape_residuals(
     lo, hi = starts[seg], stops[seg]
     shapes = np.arange(n_shapes)[:, None]
     fits = (rows - lo >= shapes) & (hi - 1 - rows >= 2 * k - shapes) & (hi - lo >= 4)
-    first = np.where(fits, rows - shapes, rows)  # (shapes, rows): first row of each span
-    span = np.minimum(first[..., None] + np.arange(2 * k + 1), t.size - 1)
-    dt = np.diff(t[span], axis=-1)
+    # every shape's span [row - a, row - a + 2k] lies in [row - 2k, row + 2k]: the
+    # intervals there once per row, each shape's 2k of them a slice (the same numbers)
+    near = np.clip(rows[:, None] + np.arange(-2 * k, 2 * k + 1), 0, t.size - 1)
+    dt_all = np.diff(t[near], axis=-1)  # (rows, 4k)
     big = np.maximum(np.abs(t[lo]), np.abs(t[hi - 1]))
     tol = _REGULAR_ULPS * np.spacing(big)
-    regular = fits & (np.max(dt, axis=-1) - np.min(dt, axis=-1) <= tol)
-    x = group.values
+    regular = np.zeros(fits.shape, dtype=bool)
     for a in range(n_shapes):
-        at = rows[regular[a]]
-        if at.size:
+        dt = dt_all[:, 2 * k - a : 4 * k - a]
+        regular[a] = fits[a] & (np.max(dt, axis=-1) - np.min(dt, axis=-1) <= tol)
+    x = group.values
+    gathered = x[near.T]  # (4k + 1, rows, c): x at row + o, o = -2k .. 2k (clipped)
+    for a in range(n_shapes):
+        mine = regular[a]
+        if mine.any():
             w = _regular_weights(k, p, a)
-            offsets = np.r_[-np.arange(a, 0, -1), np.arange(1, 2 * k - a + 1)]
-            pred = w[0] * x[at + offsets[0]]  # as _loo's fast path
-            for off, wj in zip(offsets[1:], w[1:], strict=True):
-                pred += wj * x[at + off]
-            r = x[at] - pred
+            offsets = _offsets(k, a)
+            # as _loo's fast path, on every row (the same operations per element); the
+            # rows outside `mine` (clipped neighbours) are dropped after
+            with np.errstate(invalid="ignore", over="ignore"):
+                pred = w[0] * gathered[2 * k + offsets[0]]
+                for off, wj in zip(offsets[1:], w[1:], strict=True):
+                    pred += wj * gathered[2 * k + off]
+                r = (gathered[2 * k] - pred)[mine]
             if group.wrap:
                 r = np.mod(r + np.pi, 2 * np.pi) - np.pi
             out[a, regular[a]] = r / np.sqrt(1.0 + float(w @ w))
         other = np.flatnonzero(fits[a] & ~regular[a])
         if other.size:  # jittered windows: the least-squares weights of each, all at once
             at = rows[other]
-            offsets = np.r_[-np.arange(a, 0, -1), np.arange(1, 2 * k - a + 1)]
+            offsets = _offsets(k, a)
             nb = at[:, None] + offsets
             w = poly_weights(t[nb] - t[at][:, None], p, np.zeros((at.size, 1)))[:, 0]
             r = x[at] - np.einsum("mj,mjc->mc", w, x[nb])
@@ -236,31 +253,15 @@ def _shape_scales(group: _Group, t, segments, k: int, p: int, scale: float) -> n
     return scales
 
 
-@lru_cache(maxsize=8)
-def _gains(k: int, p: int) -> np.ndarray:
-    """`local_fits.noise_gain` of the fit ``(k, p)`` for every window shape ``0 .. 2k``."""
-    return np.array([_noise_gain(k, p, a) for a in range(2 * k + 1)])
-
-
-@lru_cache(maxsize=256)
-def _chi2_isf(level: float, dof: float) -> float:
-    """The chi-square quantile ``scipy.stats.chi2.isf(level, dof)``, by the function it
-    calls (``scipy.special.chdtri``): importing scipy.stats costs 1-3 s of CPU, and
-    identify's equation-error path loads no scipy."""
-    from scipy.special import chdtri
-
-    return float(chdtri(dof, level))
-
-
 def _score(group: _Group, d: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Per-row score (noise scales) and per-channel exceedance; NaN (unchecked) -> 0."""
     d = np.nan_to_num(d, nan=0.0)
     if group.vector:
-        z2 = np.sum(d * d, axis=1) / s[:, 0] ** 2
+        z2 = row_sum(d * d) / s[:, 0] ** 2
         over = np.repeat((z2 > CHI2_3_THRESHOLD)[:, None], d.shape[1], axis=1)
         return np.sqrt(z2), over
     z = np.abs(d) / s
-    return np.max(z, axis=1), z > Z_THRESHOLD
+    return row_max(z), z > Z_THRESHOLD
 
 
 class _Scorer:
@@ -281,7 +282,7 @@ class _Scorer:
             # the smallest glitch this fit flags at this shape, in units of the noise:
             # scale x sqrt(1 + h) (the raw residual's spread), summed over channels
             s = self.scales[f][a]
-            return float(np.sum(np.log(s)) + s.size * 0.5 * np.log1p(_noise_gain(*f, a)))
+            return float(np.sum(np.log(s)) + s.size * 0.5 * np.log1p(gains(*f)[a]))
 
         self.fit = min(FITS, key=lambda f: key(f, f[0]))
         n = t.size
@@ -324,7 +325,7 @@ class _Scorer:
         # asks first, the outlier search second)
         self._first_pass = None
         if g.vector:
-            self._rough_sq = np.sum(d**2, axis=1, keepdims=True) / _CHI2_3_MEDIAN
+            self._rough_sq = row_sum(d**2)[:, None] / _CHI2_3_MEDIAN
         else:
             self._rough_sq = (_MAD_TO_SIGMA * d) ** 2
         # A channel without noise (its scale at the physical floor: a simulation)
@@ -442,7 +443,7 @@ class _Scorer:
         dt = np.diff(t[span], axis=1)
         big = np.maximum(np.abs(t[lo]), np.abs(t[hi - 1]))
         fast = fits & (np.max(dt, axis=1) - np.min(dt, axis=1) <= _REGULAR_ULPS * np.spacing(big))
-        offsets = np.r_[-np.arange(a, 0, -1), np.arange(1, 2 * kf - a + 1)]
+        offsets = _offsets(kf, a)
         nb = np.clip(rows[:, None] + offsets, 0, t.size - 1)
         fast &= np.all(good[nb], axis=1)
         if fast.any():
@@ -460,113 +461,6 @@ class _Scorer:
             out[slow], _ = _normalised(
                 g, t, self.segments, good, kf, pf, self.scale, rows[slow], a if fixed else None
             )
-        return out
-
-    def _edge_fits(self, rows, good, d, scale):
-        """The fit, scale and edge factor of the rows near a segment's ends (step 3).
-
-        Each row within the largest ``k`` of a segment's end takes the fit of
-        :data:`FITS` that flags the smallest glitch *there*: the smallest product over
-        channels of its window shape's scale, its edge factor (:meth:`_edge_factor`)
-        and ``sqrt(1 + h)``. Nothing of it depends on the row's own sample (the scales
-        are the log's, the edge factor comes from windows without the row), so a glitch
-        cannot choose the fit that hides it. Returns ``d, scale, edge`` of all ``rows``.
-        """
-        edge = np.ones(d.shape)
-        kmax = max(k for k, _ in FITS)
-        near = np.flatnonzero(np.minimum(self.from_start[rows], self.from_end[rows]) < kmax)
-        if near.size == 0:
-            return d, scale, edge
-        r = rows[near]
-        length = self.from_start[r] + self.from_end[r] + 1
-        best = np.full(near.size, np.inf)
-        d_near, s_near, e_near = d[near].copy(), scale[near].copy(), edge[near].copy()
-        for kf, pf in FITS:
-            fits = length >= 2 * kf + 1  # a full window of 2k neighbours
-            if not fits.any():
-                continue
-            rf = r[fits]
-            fs, fe = self.from_start[rf], self.from_end[rf]
-            sh_f = np.where(fs < kf, fs, np.where(fe < kf, 2 * kf - fe, kf))
-            d_f = np.empty((rf.size, d.shape[1]))
-            for a in np.unique(sh_f):
-                d_f[sh_f == a] = self._at_shape(kf, pf, int(a), rf[sh_f == a], good, False)
-            s_f = self.scales[(kf, pf)][np.clip(sh_f, 0, 2 * kf)]
-            full = np.full(sh_f.size, kf)
-            e_f = self._edge_factor(r[fits], good, full, np.full(sh_f.size, pf), sh_f, d_f)
-            gain = _gains(kf, pf)[sh_f]
-            key = np.sum(np.log(s_f * e_f), axis=1) + d.shape[1] * 0.5 * np.log1p(gain)
-            key = np.where(np.all(np.isfinite(d_f), axis=1), key, np.inf)
-            at = np.flatnonzero(fits)
-            take = key < best[at]
-            at = at[take]
-            best[at] = key[take]
-            d_near[at], s_near[at], e_near[at] = d_f[take], s_f[take], e_f[take]
-        d[near], scale[near], edge[near] = d_near, s_near, e_near
-        return d, scale, edge
-
-    def _edge_factor(self, rows, good, fit_k, fit_p, shapes, d) -> np.ndarray:
-        """Per row and channel, how much rougher the motion is at an extrapolated edge
-        position than the log-wide scale of its window shape says (>= 1; io.quality doc,
-        step 4).
-
-        A row ``e`` samples from its segment's start has ``e < k`` left neighbours: its
-        fit extrapolates, and a motion that changes fast where the log begins (a filter's
-        start-up transient in a logged estimate) leaves a misfit there that the shape's
-        scale, measured over the whole log, does not contain. The same fit with the same
-        shape predicts the ``2k`` rows inwards from windows that do not contain the row
-        (rows ``e + 1 + j`` with ``e`` left neighbours start after it), so a glitch in
-        the row cannot raise its own scale. They are tested against white noise at
-        :data:`EDGE_LEVEL` (half for each statistic): their sum, which a misfit makes
-        of one sign (normal, with the variance ``1' C 1`` of the residuals' white-noise
-        correlation ``C``), and their sum of squares (the scaled chi-square with the
-        same two moments, Satterthwaite); where either fails, the factor is their root
-        mean square. The end of a segment mirrors it. The factor
-        only raises a scale, so the rule's false flag rate stays at most its threshold's.
-        """
-        g = self.group
-        out = np.ones(d.shape)
-        left = (shapes >= 0) & (shapes < fit_k)
-        right = (shapes > fit_k) & (shapes <= 2 * fit_k)
-        at = np.flatnonzero(left | right)
-        if at.size == 0:
-            return out
-        dof = 3 if g.vector else 1  # per row: the quaternion's tangent space, or one channel
-        for kf, pf, a in {(int(fit_k[i]), int(fit_p[i]), int(shapes[i])) for i in at}:
-            mine = at[(fit_k[at] == kf) & (fit_p[at] == pf) & (shapes[at] == a)]
-            r = rows[mine]
-            j = np.arange(2 * kf)[None, :]
-            inward = r[:, None] + (a + 1 + j if a < kf else -(2 * kf - a + 1 + j))
-            inside = (inward >= self._seg_lo[r][:, None]) & (inward < self._seg_hi[r][:, None])
-            inside[inside] = good[inward[inside]]
-            ask = np.unique(inward[inside])
-            if ask.size == 0:
-                continue
-            d_in = self._at_shape(kf, pf, a, ask, good, True)
-            z = np.full(inward.shape + (d.shape[1],), np.nan)  # (rows, 2k, c)
-            z[inside] = d_in[np.searchsorted(ask, inward[inside])] / self.scales[(kf, pf)][a]
-            use = np.all(np.isfinite(z), axis=2)  # (rows, 2k)
-            corr = _residual_correlation(kf, pf, min(a, 2 * kf - a), 2 * kf)
-            patterns, which = np.unique(use, axis=0, return_inverse=True)
-            for pat, these in zip(patterns, np.split(np.argsort(which, kind="stable"),
-                                                     np.cumsum(np.bincount(which.ravel()))[:-1]),
-                                  strict=True):  # fmt: skip
-                if not pat.any():
-                    continue
-                c = corr[np.ix_(pat, pat)]
-                zi = z[these][:, pat]  # (rows, m, c)
-                # the spread: a scaled chi-square with the moments of sum z^2
-                tr, tr2 = dof * np.trace(c), dof * np.sum(c * c)  # (c symmetric)
-                ss = np.sum(zi**2, axis=1)
-                # the bias: a misfit of one sign over the next rows, sum z ~ N(0, 1'C1)
-                bias = np.sum(zi, axis=1) ** 2 / np.sum(c)
-                if g.vector:
-                    ss = np.sum(ss, axis=1, keepdims=True)
-                    bias = np.sum(bias, axis=1, keepdims=True)
-                failed = ss * tr / tr2 > _chi2_isf(EDGE_LEVEL / 2, tr * tr / tr2)
-                failed |= bias > _chi2_isf(EDGE_LEVEL / 2, dof)
-                rms = np.sqrt(ss / tr)
-                out[mine[these]] = np.where(failed, np.maximum(rms, 1.0), 1.0)
         return out
 
     def __call__(
@@ -608,7 +502,7 @@ class _Scorer:
                 d_f, shapes_f = _normalised(g, t, segs, good, kf, pf, sc, rows[at])
                 d[at], scale[at] = d_f, self.scales[(kf, pf)][np.clip(shapes_f, 0, 2 * kf)]
         else:  # measurements: the fit per row, with the edge's own roughness
-            d, scale, edge = self._edge_fits(rows, good, d, scale)
+            d, scale, edge = edge_fits(self, rows, good, d, scale, FITS)
         if g.sided:
             d, scale = self._sided(rows, good, d, scale)
         elif g.switch_rows is not None:
@@ -623,7 +517,7 @@ class _Scorer:
         if exact:
             return _score(g, d, scale * np.maximum(self.local_at(rows), edge))
         score, over = _score(g, d, scale)  # local factor 1: an upper bound of each score
-        maybe = over.any(axis=1)
+        maybe = row_any(over)
         if maybe.any():
             factor = np.maximum(self.local_at(rows[maybe]), edge[maybe])
             score[maybe], over[maybe] = _score(g, d[maybe], scale[maybe] * factor)
@@ -683,7 +577,7 @@ def find_outliers(
     # compared, and _best_explanation scores its windows exactly): upper bounds suffice
     score, over = scorer(np.arange(n), ~excluded, exact=False)
     for _ in range(_MAX_PASSES):
-        suspect = over.any(axis=1) & ~excluded
+        suspect = row_any(over) & ~excluded
         if not suspect.any():
             break
         # only the largest suspect within k samples (same segment) is taken this pass
@@ -700,7 +594,7 @@ def find_outliers(
             near_mask[max(i - _RECOMPUTE * k, 0) : i + _RECOMPUTE * k + 1] = True
         again = np.flatnonzero(near_mask)
         score[again], over[again] = scorer(again, ~excluded, exact=False)
-    suspect = excluded & over.any(axis=1)
+    suspect = excluded & row_any(over)
     flagged = np.zeros(n, dtype=bool)
     unexplained = np.zeros(n, dtype=bool)
     bad = np.flatnonzero(suspect)

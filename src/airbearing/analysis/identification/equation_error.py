@@ -447,7 +447,11 @@ def _slider_positions(data) -> set:
     ``np.unique(rows, axis=0)`` of a 10^6-row log sorted its rows: ~1 s."""
     positions: set = set()
     for d in data:
-        rows = np.round(np.asarray(d.s, float)[np.asarray(d.usable, bool)], 9)
+        s, usable = np.asarray(d.s, float), np.asarray(d.usable, bool)
+        if usable.any() and np.all(s == s[0]):  # held throughout: no copy, no rounding per row
+            positions.add(tuple(np.round(s[0], 9).tolist()))
+            continue
+        rows = np.round(s[usable], 9)
         if rows.shape[0] == 0:
             continue
         if np.all(rows == rows[0]):

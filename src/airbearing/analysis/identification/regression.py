@@ -295,18 +295,20 @@ def _rows_integrated_fast(d: PlatformData, k0: int, k1: int, window: int, r_o, m
     starts = starts[starts + window <= len(idx) - 1]
     if len(starts) == 0:
         return np.zeros((0, 3, 9)), np.zeros((0, 3))
-    w, g, s = d.w[idx], d.g_body[idx], d.s[idx]
-    dt = np.diff(d.t[idx])
+    rows = slice(k0, end + 1)  # (views: the rows idx, not copies)
+    w, g, s = d.w[rows], d.g_body[rows], d.s[rows]
+    dt = np.diff(d.t[rows])
     Mo = _monomials(w, g)
     I_int = 0.5 * dt[:, None] * (Mo[:-1] + Mo[1:])  # trapezoid per interval (N-1, 9)
-    tau = np.cross(d.dipole[idx[:-1]], d.b_body[idx[:-1]]) + np.cross(
-        d.dipole[idx[:-1]], d.b_body[idx[1:]]
-    )
-    T_int = 0.5 * dt[:, None] * tau
     a, b = starts, starts + window
     # windows are contiguous (b_i = a_(i+1)): sums over [t_a, t_b] up to the last b
     Mw = np.add.reduceat(I_int[: b[-1]], a, axis=0)
-    Tw = np.add.reduceat(T_int[: b[-1]], a, axis=0)
+    Tw = None  # no dipole commanded: no torque d x b to add (its terms are all zero)
+    if np.any(d.dipole[k0:end]):
+        dip = d.dipole[k0:end]
+        tau = np.cross(dip, d.b_body[k0:end]) + np.cross(dip, d.b_body[k0 + 1 : end + 1])
+        T_int = 0.5 * dt[:, None] * tau
+        Tw = np.add.reduceat(T_int[: b[-1]], a, axis=0)
     C = _c_matrix(r_o, mass)
     cA = _monomial_coefficients(lambda ww, gg: _rate_terms(ww, gg, r_o, mass))  # (9, 3, 9)
     zJ = np.zeros((9, 3, 3))
@@ -329,15 +331,12 @@ def _rows_integrated_fast(d: PlatformData, k0: int, k1: int, window: int, r_o, m
         - _point_terms(w[a], r_o, mass)
         + np.einsum("nf,fij->nij", Mw, cA)
     )  # eq. 47, left
-    rhs = (
-        -dw @ C.T  # -C(r) (w - w0)
-        + Mw @ cy
-        + np.einsum("nf,nfi->ni", Mw, cs)
-        + Tw
-        - np.einsum("nij,nj->ni", dJ, dw)  # sliders: -dJ (w_b - w_a)
-    )  # eq. 47, right
+    rhs = -dw @ C.T + Mw @ cy + np.einsum("nf,nfi->ni", Mw, cs)  # -C(r) (w - w0) + ...
+    if Tw is not None:
+        rhs = rhs + Tw
+    rhs = rhs - np.einsum("nij,nj->ni", dJ, dw)  # sliders: -dJ (w_b - w_a); eq. 47, right
     if d.h_wheels is not None:
-        rhs = rhs - _wheel_integral(d.h_wheels[idx], w, dt, a, b)
+        rhs = rhs - _wheel_integral(d.h_wheels[rows], w, dt, a, b)
     return Phi, rhs
 
 
