@@ -10,6 +10,8 @@ CasADi's virtual machine: no compilation.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
@@ -132,3 +134,36 @@ def test_one_sixth_order_step_per_sample_integrates_a_50_hz_log_to_its_resolutio
     att, _ = integration_error(model, windows, n)
     samples = int((windows.weight > 0).sum())
     assert att <= ATTITUDE_SIGMA_MIN / np.sqrt(samples), att
+
+
+def test_a_fast_wheel_speed_loop_gets_the_steps_its_stability_needs():
+    # rw-3axis's wheels speed-commanded through a 30 ms driver loop, logged at 10 Hz: the
+    # loop's mode (33/s) times 0.1 s is beyond the sixth-order step's stability limit
+    # (2.86), so one step per sample would ring; the rule asks for dt |lambda| <= 1.4 per
+    # step (three here) and those steps agree with sixteen
+    from airbearing.analysis.discrepancy.replay import model_for, prepare
+    from airbearing.analysis.shooting.accuracy import MAX_SUBSTEP_STIFFNESS
+    from airbearing.analysis.simulation.scenarios import free_oscillation
+    from airbearing.io.testbed import testbed_from_dict, testbed_to_dict
+
+    d = testbed_to_dict(load_testbed("rw-3axis"))
+    d["wheels"].update(command="speed", speed_loop_tau=0.03)
+    d["sensors"]["rate"] = 10.0
+    tb = testbed_from_dict(d)
+    run = free_oscillation(tb, initial_rate=(0.1, -0.1, 0.5), duration=10.0, seed=0)
+    _, windows, _ = prepare(tb, [run.log])
+    model = model_for(tb)
+    n = substeps_for(model, windows)
+    assert n == math.ceil(0.1 / 0.03 / MAX_SUBSTEP_STIFFNESS) == 3
+
+    def speeds(k):  # wheel speeds after 5 s from 100 rad/s, commanded to rest
+        x = model.x0(w=[0.1, -0.1, 0.5], wheels=[100.0] * 4)
+        step = step_function(model, k)
+        for _ in range(50):
+            x = np.asarray(step(x, np.zeros(model.nu), model.p0, 0.1)).ravel()
+        return x[7:11]
+
+    fine = speeds(16)
+    # rad/s: 1e-7 is a hundred-thousandth of rw-3axis's wheel-speed noise (0.01 rad/s)
+    assert np.max(np.abs(speeds(n) - fine)) < 1e-7
+    assert np.max(np.abs(speeds(1) - fine)) > 1e-3  # what the rule avoids

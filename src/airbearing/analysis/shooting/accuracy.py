@@ -14,6 +14,7 @@ from __future__ import annotations
 import math
 import weakref
 
+import casadi as ca
 import numpy as np
 
 from airbearing import quaternion as quat
@@ -32,6 +33,7 @@ __all__ = [
     "ATTITUDE_NOISE_ORDERS",
     "MAX_SUBSTEPS",
     "MAX_SUBSTEP_ROTATION",
+    "MAX_SUBSTEP_STIFFNESS",
     "MIN_SUBSTEPS",
     "attitude_noise",
     "integration_error",
@@ -51,6 +53,14 @@ MAX_SUBSTEP_ROTATION = 0.16
 #: Fewest sub-steps per sample of a three-axis replay (one sixth-order step).
 MIN_SUBSTEPS = 1
 
+#: Largest ``dt |lambda|`` per sub-step of a three-axis replay for the fastest mode of the
+#: plant's dynamics at a window's start (a speed-commanded wheel's driver loop, ``1 /
+#: speed_loop_tau``): half the sixth-order step's stability limit on the negative real axis
+#: (2.86; RK4's is 2.79, and the two RK4 sub-steps per sample this step replaced held 5.6
+#: per sample). A free platform's fastest modes turn at its rates (0.03 per 50 Hz sample
+#: at 1.5 rad/s): the rotation rule decides there.
+MAX_SUBSTEP_STIFFNESS = 1.4
+
 
 #: Most sub-steps per sample the accuracy check of :func:`substeps_for` may ask for.
 MAX_SUBSTEPS = 32
@@ -69,7 +79,8 @@ def substeps_for(
 ) -> int:
     """Sub-steps per sample of the replay's step: ``DEFAULT_SUBSTEPS`` RK4 sub-steps for a
     yaw bearing; for dof 3, :data:`MIN_SUBSTEPS` sixth-order steps, more for a fast spin
-    (:data:`MAX_SUBSTEP_ROTATION`).
+    (:data:`MAX_SUBSTEP_ROTATION`) or a fast decaying mode such as a wheel's speed loop
+    (:data:`MAX_SUBSTEP_STIFFNESS`).
 
     With the noise ``floor`` (three-axis rigs), also enough sub-steps for the replay to
     integrate to the noise its errors assume: the number is doubled until the integration
@@ -125,6 +136,7 @@ def substeps_for(
     if not (np.isfinite(w) and dt > 0):
         return DEFAULT_SUBSTEPS
     n = max(MIN_SUBSTEPS, math.ceil(w * dt / MAX_SUBSTEP_ROTATION - 1e-9))
+    n = max(n, math.ceil(dt * _fastest_mode(model, windows) / MAX_SUBSTEP_STIFFNESS - 1e-9))
     if floor is None or windows.x0.shape[1] != model.nx:
         return n
     # the motion the logs record sets the error; the candidate effects (small torques) do
@@ -141,6 +153,25 @@ def substeps_for(
         tol = _integration_tolerance(windows, floor)
         cache[at] = _accurate_substeps(model, windows, cache[key], tol, p)
     return cache[at]
+
+
+def _fastest_mode(model: Model, windows: WindowSet) -> float:
+    """1/s, the largest ``|lambda|`` of the plant's dynamics ``d xdot / d x`` (the lag
+    states left out: their update is exact) at the windows' starts, their first inputs
+    and the Model's nominal parameters."""
+    plant = [i for i in range(model.nx) if i not in model.lag_index]
+    if windows.x0.shape[1] != len(plant):
+        return 0.0
+    x, u = ca.SX.sym("x", model.nx), ca.SX.sym("u", model.nu)
+    p = ca.SX.sym("p", model.n_p)
+    jac = ca.jacobian(model.f(x, u, p)[plant], x[plant])
+    n = windows.n
+    X = np.zeros((model.nx, n))
+    X[plant] = windows.x0.T
+    A = np.asarray(ca.Function("a", [x, u, p], [jac]).map(n)(X, windows.u[:, 0].T, model.p0))
+    blocks = A.reshape(len(plant), n, len(plant)).transpose(1, 0, 2)
+    lam = np.abs(np.linalg.eigvals(blocks))
+    return float(np.max(lam)) if np.all(np.isfinite(lam)) else 0.0
 
 
 #: Orders of the attitude's differences whose smallest floor is its noise in
