@@ -53,7 +53,7 @@ def test_a_noise_free_attitude_is_integrated_to_the_resolution():
 
 def test_without_the_floor_the_rotation_rule_alone():
     # identification's callers pass no floor: one sixth-order step per sample (0.075 rad
-    # at most here, under the rule's 0.16)
+    # at most here, under the rule's 0.2)
     from airbearing.analysis.discrepancy.replay import model_for, prepare, substeps_for
 
     tb, logs = _platform()

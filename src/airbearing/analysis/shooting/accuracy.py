@@ -45,10 +45,10 @@ __all__ = [
 #: step). The coupled Euler dynamics of a fast spin turn at the spin rate: at 3.2 rad/s and
 #: 10 Hz two RK4 sub-steps (0.16 rad each) left a 0.01-0.04 % bias on a 19 mm CM offset,
 #: 6-14 of its errors once whole segments are fitted; four (0.08 rad) left it within one.
-#: The sixth-order step at twice an RK4 sub-step's rotation is the more accurate one (seed
-#: 004's free oscillation, its samples stretched to 0.5 rad: 9.0e-4 rad over a segment in
-#: 0.25 rad steps against 3.0e-3 in 0.125 rad RK4 sub-steps), so it takes 0.16 rad.
-MAX_SUBSTEP_ROTATION = 0.16
+#: The sixth-order step at 2.5 times an RK4 sub-step's rotation is the more accurate one
+#: (seed 004's free oscillation, its samples stretched to 0.4 rad: 1.3e-4 rad over a
+#: segment in 0.2 rad steps against 2.7e-4 in 0.08 rad RK4 sub-steps), so it takes 0.2 rad.
+MAX_SUBSTEP_ROTATION = 0.2
 
 #: Fewest sub-steps per sample of a three-axis replay (one sixth-order step).
 MIN_SUBSTEPS = 1
