@@ -1,4 +1,5 @@
-"""The replay's RK4 accuracy rule checked at given parameters (a fit's), not only the nominal.
+"""The replay's integration accuracy rule checked at given parameters (a fit's), not only
+the nominal.
 
 A discrepancy search's Model holds every candidate at zero; a Coulomb friction's smoothed
 sign turns within a sub-step whenever a body rate crosses zero, so the fitted model can

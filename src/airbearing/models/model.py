@@ -59,6 +59,7 @@ from airbearing.models.effects import get_effect
 from airbearing.models.measurement import _lag_states, _measurement
 from airbearing.models.parameters import INERTIA_NAMES, inertia_from_params, parameter_values
 from airbearing.models.plant import _nominal_physics, _plant, _state_input_names
+from airbearing.models.runge_kutta import BUTCHER6, ORDERS
 
 __all__ = ["Model", "build_model", "parameter_values", "inertia_from_params", "INERTIA_NAMES"]
 
@@ -277,17 +278,23 @@ class Model:
         out = self._rk4(x, u, p, dt, substeps)
         return ca.Function("step", [x, u, p], [out], ["x", "u", "p"], ["x_next"])
 
-    def step_dt(self, substeps: int = 4) -> ca.Function:
+    def step_dt(self, substeps: int = 4, order: int = 4) -> ca.Function:
         """One interval of any length: ``(x, u, p, dt) -> x_next``, ``dt`` (s) an input.
 
         The same arithmetic as :meth:`step` (RK4 with ``substeps`` sub-intervals, the
         quaternion renormalised, fourth-order lag update), with the interval length a symbol, so
-        one Function integrates a log on its own (jittered) sample times.
+        one Function integrates a log on its own (jittered) sample times. ``order=6``:
+        Butcher's sixth-order scheme (:data:`airbearing.models.runge_kutta.BUTCHER6`,
+        seven stages) on the plant states instead of RK4, the lag states updated as with
+        RK4 from each sub-interval's end values and slopes (fourth order in the
+        sub-interval).
 
         Parameters
         ----------
         substeps : int
-            RK4 sub-intervals per interval.
+            Sub-intervals per interval.
+        order : int
+            4 (RK4) or 6 (Butcher's sixth-order scheme).
 
         Returns
         -------
@@ -298,8 +305,47 @@ class Model:
         u = ca.SX.sym("u", self.nu)
         p = ca.SX.sym("p", self.n_p)
         dt = ca.SX.sym("dt")
-        out = self._rk4(x, u, p, dt, substeps)
+        if order not in ORDERS:
+            raise InputError(f"step order must be one of {list(ORDERS)}, got {order!r}")
+        if order == 4:
+            out = self._rk4(x, u, p, dt, substeps)
+        else:
+            out = self._explicit_rk(x, u, p, dt, substeps, BUTCHER6)
         return ca.Function("step_dt", [x, u, p, dt], [out], ["x", "u", "p", "dt"], ["x_next"])
+
+    def _explicit_rk(self, x, u, p, dt, substeps: int, tableau):
+        """``substeps`` steps of the explicit scheme ``tableau`` (``(a, b)``) on the plant
+        states, the lag states advanced over each from its end values and slopes, the
+        quaternion renormalised at the end (as :meth:`_rk4`)."""
+        a, b = tableau
+        plant = [i for i in range(self.nx) if i not in self.lag_index]
+        xp = x[plant]
+        lag = x[list(self.lag_index)] if self.lag_index else ca.SX(0, 1)
+        hs = dt / substeps
+        k1 = self._f_plant(xp, u, p)
+        for i in range(substeps):
+            if i and not self.lag_index:
+                k1 = self._f_plant(xp, u, p)
+            ks = [k1]
+            for row in a[1:]:
+                xs = xp
+                for aj, kj in zip(row, ks, strict=False):
+                    if aj:
+                        xs = xs + hs * aj * kj
+                ks.append(self._f_plant(xs, u, p))
+            xp_next = xp + hs * sum(bj * kj for bj, kj in zip(b, ks, strict=True) if bj)
+            if self.lag_index:
+                k1_next = self._f_plant(xp_next, u, p)
+                lag = self._lag(xp, xp_next, k1, k1_next, lag, p, hs)
+                k1 = k1_next
+            xp = xp_next
+        if self.dof == 3:
+            xp[0:4] = xp[0:4] / ca.norm_2(xp[0:4])
+        out = ca.SX.zeros(self.nx)
+        out[plant] = xp
+        if self.lag_index:
+            out[list(self.lag_index)] = lag
+        return out
 
     def _rk4(self, x, u, p, dt, substeps: int):
         plant = [i for i in range(self.nx) if i not in self.lag_index]

@@ -1,7 +1,9 @@
-"""How many RK4 sub-steps a replay needs: the engine's integration accuracy rule.
+"""How many sub-steps a replay needs: the engine's integration accuracy rule.
 
-A fast three-axis spin needs more sub-steps than the default, and a noise-free attitude
-needs enough for the integration error over a segment to stay below its noise
+A three-axis replay integrates with a sixth-order Runge-Kutta step
+(:func:`~airbearing.analysis.shooting.window_functions.replay_order`): one sub-step per
+sample unless a fast spin turns it too far (:data:`MAX_SUBSTEP_ROTATION`) or a noise-free
+attitude needs more for the integration error over a segment to stay below its noise
 (:func:`substeps_for`). Used by the replay and the discrepancy search
 (:mod:`airbearing.analysis.discrepancy.replay`) and the platform output error
 (:mod:`airbearing.analysis.identification.output_error`).
@@ -12,10 +14,11 @@ from __future__ import annotations
 import math
 import weakref
 
+import casadi as ca
 import numpy as np
 
 from airbearing import quaternion as quat
-from airbearing.analysis.shooting.functions import DEFAULT_SUBSTEPS
+from airbearing.analysis.shooting.functions import DEFAULT_SUBSTEPS, replay_order, step_function
 from airbearing.analysis.shooting.logs import (
     ATTITUDE_SIGMA_MIN,
     MAD_TO_SIGMA,
@@ -24,27 +27,42 @@ from airbearing.analysis.shooting.logs import (
     _attitude_diff,
 )
 from airbearing.analysis.shooting.windows import WindowSet
-from airbearing.analysis.simulation.on_times import rollout_dt
 from airbearing.models.model import Model
 
 __all__ = [
     "ATTITUDE_NOISE_ORDERS",
     "MAX_SUBSTEPS",
     "MAX_SUBSTEP_ROTATION",
+    "MAX_SUBSTEP_STIFFNESS",
+    "MIN_SUBSTEPS",
     "attitude_noise",
     "integration_error",
     "substeps_for",
 ]
 
 
-#: rad, largest rotation of a three-axis rig per RK4 sub-step of a replay. The coupled Euler
-#: dynamics of a fast spin turn at the spin rate: at 3.2 rad/s and 10 Hz two sub-steps
-#: (0.16 rad each) left a 0.01-0.04 % bias on a 19 mm CM offset, 6-14 of its errors once
-#: whole segments are fitted; four (0.08 rad) leave it within one.
-MAX_SUBSTEP_ROTATION = 0.08
+#: rad, largest rotation of a three-axis rig per sub-step of a replay (its sixth-order
+#: step). The coupled Euler dynamics of a fast spin turn at the spin rate: at 3.2 rad/s and
+#: 10 Hz two RK4 sub-steps (0.16 rad each) left a 0.01-0.04 % bias on a 19 mm CM offset,
+#: 6-14 of its errors once whole segments are fitted; four (0.08 rad) left it within one.
+#: The sixth-order step at 2.5 times an RK4 sub-step's rotation is the more accurate one
+#: (seed 004's free oscillation, its samples stretched to 0.4 rad: 1.3e-4 rad over a
+#: segment in 0.2 rad steps against 2.7e-4 in 0.08 rad RK4 sub-steps), so it takes 0.2 rad.
+MAX_SUBSTEP_ROTATION = 0.2
+
+#: Fewest sub-steps per sample of a three-axis replay (one sixth-order step).
+MIN_SUBSTEPS = 1
+
+#: Largest ``dt |lambda|`` per sub-step of a three-axis replay for the fastest mode of the
+#: plant's dynamics at a window's start (a speed-commanded wheel's driver loop, ``1 /
+#: speed_loop_tau``): half the sixth-order step's stability limit on the negative real axis
+#: (2.86; RK4's is 2.79, and the two RK4 sub-steps per sample this step replaced held 5.6
+#: per sample). A free platform's fastest modes turn at its rates (0.03 per 50 Hz sample
+#: at 1.5 rad/s): the rotation rule decides there.
+MAX_SUBSTEP_STIFFNESS = 1.4
 
 
-#: Most RK4 sub-steps per sample the accuracy check of :func:`substeps_for` may ask for.
+#: Most sub-steps per sample the accuracy check of :func:`substeps_for` may ask for.
 MAX_SUBSTEPS = 32
 
 #: Per windows object: ``(states, inputs, rate floor, no attitude) -> sub-steps`` (the
@@ -59,7 +77,10 @@ def substeps_for(
     floor: NoiseFloor | None = None,
     p: np.ndarray | None = None,
 ) -> int:
-    """RK4 sub-steps per sample: ``DEFAULT_SUBSTEPS``, more for a fast three-axis spin.
+    """Sub-steps per sample of the replay's step: ``DEFAULT_SUBSTEPS`` RK4 sub-steps for a
+    yaw bearing; for dof 3, :data:`MIN_SUBSTEPS` sixth-order steps, more for a fast spin
+    (:data:`MAX_SUBSTEP_ROTATION`) or a fast decaying mode such as a wheel's speed loop
+    (:data:`MAX_SUBSTEP_STIFFNESS`).
 
     With the noise ``floor`` (three-axis rigs), also enough sub-steps for the replay to
     integrate to the noise its errors assume: the number is doubled until the integration
@@ -71,21 +92,24 @@ def substeps_for(
     within that tolerance its effect on any value is at most about one standard error. A
     noise-free attitude is weighted at the resolution
     (:data:`~airbearing.analysis.shooting.errors.RESOLUTION`, 1e-6 rad): on seed 004's
-    free oscillation (rates to 1.5 rad/s at 20 Hz) two sub-steps drifted 3.9e-6 rad over
-    30 s and put per-axis viscous frictions up to 3.2 standard errors off; eight drift
-    1.5e-8 rad. A motion-capture attitude (1e-3 rad) keeps two.
+    free oscillation (rates to 1.5 rad/s at 20 Hz) two RK4 sub-steps drifted 3.9e-6 rad
+    over 30 s and put per-axis viscous frictions up to 3.2 standard errors off; eight
+    drift 1.5e-8 rad. At 50 Hz one sixth-order step is within the tolerance up to 2.5 min
+    (1.3e-9 rad against 1.2e-8), two on 10 min (9.6e-11 against 5.8e-9; one leaves
+    6.1e-9). A motion-capture attitude (1e-3 rad) keeps the rotation rule's number.
 
     The check runs at the Model's nominal parameters unless ``p`` is given: a search's
     Model holds every candidate at zero, and a fitted Coulomb friction (its smoothed sign
     turning within a sub-step whenever a body rate crosses zero) can need many more. On
     seed 000's tabletop spun down from 2 rad/s with a noise-free attitude (60 s), the
-    nominal model asks for 8 sub-steps, the fitted frictions leave 4.1e-6 rad over a
+    nominal model asked for 8 RK4 sub-steps, the fitted frictions left 4.1e-6 rad over a
     segment at 8 (140 times its tolerance) and 2.5e-7 at 32, the cap (8.8 times it). While
     a sub-step (1.6 ms at 32 and 20 Hz) is longer than the smoothed sign takes to turn (its
     1e-3 rad/s over a body rate's slope where it crosses zero, 1-2.6 rad/s^2 there: 0.4-0.9
-    ms), the error falls about 3-fold per doubling, not RK4's 16-fold; 64 sub-steps are
-    within the tolerance (1.3e-8 rad), but refitted there the frictions move by 0.02-0.03
-    of their standard error from 32's, so the cap stays. With ``p``, the check starts from the
+    ms), the error falls about 3-fold per doubling, not a smooth motion's 16-fold (RK4) or
+    64-fold (sixth order); 64 RK4 sub-steps were within the tolerance (1.3e-8 rad), but
+    refitted there the frictions moved by 0.02-0.03 of their standard error from 32's, so
+    the cap stays. With ``p``, the check starts from the
     nominal number and doubles from there.
 
     Parameters
@@ -111,7 +135,8 @@ def substeps_for(
     dt = float(np.median(windows.dt[used])) if used.any() else 0.0
     if not (np.isfinite(w) and dt > 0):
         return DEFAULT_SUBSTEPS
-    n = max(DEFAULT_SUBSTEPS, math.ceil(w * dt / MAX_SUBSTEP_ROTATION - 1e-9))
+    n = max(MIN_SUBSTEPS, math.ceil(w * dt / MAX_SUBSTEP_ROTATION - 1e-9))
+    n = max(n, math.ceil(dt * _fastest_mode(model, windows) / MAX_SUBSTEP_STIFFNESS - 1e-9))
     if floor is None or windows.x0.shape[1] != model.nx:
         return n
     # the motion the logs record sets the error; the candidate effects (small torques) do
@@ -128,6 +153,25 @@ def substeps_for(
         tol = _integration_tolerance(windows, floor)
         cache[at] = _accurate_substeps(model, windows, cache[key], tol, p)
     return cache[at]
+
+
+def _fastest_mode(model: Model, windows: WindowSet) -> float:
+    """1/s, the largest ``|lambda|`` of the plant's dynamics ``d xdot / d x`` (the lag
+    states left out: their update is exact) at the windows' starts, their first inputs
+    and the Model's nominal parameters."""
+    plant = [i for i in range(model.nx) if i not in model.lag_index]
+    if windows.x0.shape[1] != len(plant):
+        return 0.0
+    x, u = ca.SX.sym("x", model.nx), ca.SX.sym("u", model.nu)
+    p = ca.SX.sym("p", model.n_p)
+    jac = ca.jacobian(model.f(x, u, p)[plant], x[plant])
+    n = windows.n
+    X = np.zeros((model.nx, n))
+    X[plant] = windows.x0.T
+    A = np.asarray(ca.Function("a", [x, u, p], [jac]).map(n)(X, windows.u[:, 0].T, model.p0))
+    blocks = A.reshape(len(plant), n, len(plant)).transpose(1, 0, 2)
+    lam = np.abs(np.linalg.eigvals(blocks))
+    return float(np.max(lam)) if np.all(np.isfinite(lam)) else 0.0
 
 
 #: Orders of the attitude's differences whose smallest floor is its noise in
@@ -213,10 +257,12 @@ def integration_error(model: Model, windows: WindowSet, substeps: int, p: np.nda
     """The largest integration error over a segment of a three-axis replay, by step doubling.
 
     Each window is integrated from its start (the parameters ``p``, default the Model's
-    nominal ones, the window's inputs and logged intervals) with ``substeps`` and twice as
-    many RK4 sub-steps; the largest difference over its usable rows (16/15 of it: RK4's
-    error falls 16-fold when the sub-step halves) is the window's error, and a segment's
-    error the sum over its windows (an integration error grows along the trajectory).
+    nominal ones, the window's inputs and logged intervals) with the replay's step
+    (:func:`~airbearing.analysis.shooting.window_functions.step_function`) at ``substeps``
+    and twice as many sub-steps; the largest difference over its usable rows (``2^q / (2^q
+    - 1)`` of it for a step of order ``q``: 16/15 for RK4, 64/63 for the sixth-order step)
+    is the window's error, and a segment's error the sum over its windows (an integration
+    error grows along the trajectory).
 
     Parameters
     ----------
@@ -224,7 +270,7 @@ def integration_error(model: Model, windows: WindowSet, substeps: int, p: np.nda
         A three-axis Model whose states are the windows' (no lag state).
     windows : WindowSet
     substeps : int
-        RK4 sub-steps per sample.
+        Sub-steps per sample.
     p : ndarray (n_p,), optional
         Parameters (default the Model's nominal ``p0``).
 
@@ -244,15 +290,17 @@ def integration_error(model: Model, windows: WindowSet, substeps: int, p: np.nda
     )
 
     def states(k):  # (windows, samples, states) at k sub-steps
-        X = np.asarray(rollout_dt(model, L - 1, k).map(n)(*args))
+        rollout = step_function(model, k).mapaccum("rollout", L - 1, [0], [0])
+        X = np.asarray(rollout.map(n)(*args))
         return X.reshape(model.nx, n, L - 1).transpose(1, 2, 0)
 
     a, b = states(substeps), states(2 * substeps)
     keep = windows.weight[:, 1:] > 0
     e = quat.qmul(quat.qconj(a[..., :4]), b[..., :4])
-    # the largest error over each window's usable rows, 16/15 of it (RK4)
-    att = 16 / 15 * np.max(np.where(keep, np.linalg.norm(2 * e[..., 1:], axis=-1), 0.0), axis=1)
-    rate = 16 / 15 * np.max(np.where(keep, np.max(np.abs(a[..., 4:7] - b[..., 4:7]), -1), 0.0), 1)
+    # the largest error over each window's usable rows, of the coarser step (Richardson)
+    gain = 2 ** replay_order(model) / (2 ** replay_order(model) - 1)
+    att = gain * np.max(np.where(keep, np.linalg.norm(2 * e[..., 1:], axis=-1), 0.0), axis=1)
+    rate = gain * np.max(np.where(keep, np.max(np.abs(a[..., 4:7] - b[..., 4:7]), -1), 0.0), 1)
     seg = windows.segments()
     per_seg = [(att[seg == s].sum(), rate[seg == s].sum()) for s in np.unique(seg)]
     return max(p[0] for p in per_seg), max(p[1] for p in per_seg)

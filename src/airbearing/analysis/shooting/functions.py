@@ -67,6 +67,7 @@ from airbearing.analysis.shooting.sparse import (  # noqa: F401 (re-exported)
 from airbearing.analysis.shooting.window_functions import (  # noqa: F401 (re-exported)
     CHAIN_MIN_INSTRUCTIONS,
     DEFAULT_SUBSTEPS,
+    REPLAY_ORDER,
     _build_chained_window,
     _build_start,
     _build_whole_window,
@@ -77,6 +78,7 @@ from airbearing.analysis.shooting.window_functions import (  # noqa: F401 (re-ex
     delta_layout,
     fitting_start_yaw,
     layout_key,
+    replay_order,
     start_function,
     step_function,
     yaw_acts,
