@@ -315,17 +315,10 @@ class Model:
 
     def _explicit_rk(self, x, u, p, dt, substeps: int, tableau):
         """``substeps`` steps of the explicit scheme ``tableau`` (``(a, b)``) on the plant
-        states, the lag states advanced over each from its end values and slopes, the
-        quaternion renormalised at the end (as :meth:`_rk4`)."""
+        states (the rest as :meth:`_substeps`)."""
         a, b = tableau
-        plant = [i for i in range(self.nx) if i not in self.lag_index]
-        xp = x[plant]
-        lag = x[list(self.lag_index)] if self.lag_index else ca.SX(0, 1)
-        hs = dt / substeps
-        k1 = self._f_plant(xp, u, p)
-        for i in range(substeps):
-            if i and not self.lag_index:
-                k1 = self._f_plant(xp, u, p)
+
+        def advance(xp, k1, hs):
             ks = [k1]
             for row in a[1:]:
                 xs = xp
@@ -333,21 +326,26 @@ class Model:
                     if aj:
                         xs = xs + hs * aj * kj
                 ks.append(self._f_plant(xs, u, p))
-            xp_next = xp + hs * sum(bj * kj for bj, kj in zip(b, ks, strict=True) if bj)
-            if self.lag_index:
-                k1_next = self._f_plant(xp_next, u, p)
-                lag = self._lag(xp, xp_next, k1, k1_next, lag, p, hs)
-                k1 = k1_next
-            xp = xp_next
-        if self.dof == 3:
-            xp[0:4] = xp[0:4] / ca.norm_2(xp[0:4])
-        out = ca.SX.zeros(self.nx)
-        out[plant] = xp
-        if self.lag_index:
-            out[list(self.lag_index)] = lag
-        return out
+            return xp + hs * sum(bj * kj for bj, kj in zip(b, ks, strict=True) if bj)
+
+        return self._substeps(x, u, p, dt, substeps, advance)
 
     def _rk4(self, x, u, p, dt, substeps: int):
+        """``substeps`` classical RK4 steps on the plant states (the rest as
+        :meth:`_substeps`)."""
+
+        def advance(xp, k1, hs):
+            k2 = self._f_plant(xp + hs / 2 * k1, u, p)
+            k3 = self._f_plant(xp + hs / 2 * k2, u, p)
+            k4 = self._f_plant(xp + hs * k3, u, p)
+            return xp + hs / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+
+        return self._substeps(x, u, p, dt, substeps, advance)
+
+    def _substeps(self, x, u, p, dt, substeps: int, advance):
+        """``x`` advanced over ``dt`` in ``substeps`` equal sub-intervals: the plant states by
+        ``advance(xp, k1, hs) -> xp_next`` (``k1`` the slope at ``xp``), the lag states over
+        each from its end values and slopes, the quaternion renormalised at the end."""
         plant = [i for i in range(self.nx) if i not in self.lag_index]
         xp = x[plant]
         lag = x[list(self.lag_index)] if self.lag_index else ca.SX(0, 1)
@@ -356,10 +354,7 @@ class Model:
         for i in range(substeps):
             if i and not self.lag_index:
                 k1 = self._f_plant(xp, u, p)
-            k2 = self._f_plant(xp + hs / 2 * k1, u, p)
-            k3 = self._f_plant(xp + hs / 2 * k2, u, p)
-            k4 = self._f_plant(xp + hs * k3, u, p)
-            xp_next = xp + hs / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+            xp_next = advance(xp, k1, hs)
             if self.lag_index:
                 # the rate's slope at the sub-step's end, also the next sub-step's k1
                 k1_next = self._f_plant(xp_next, u, p)
