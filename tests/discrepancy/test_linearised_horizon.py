@@ -1,7 +1,7 @@
 """The horizon's shortcuts: likelihoods from a fit's linearisation instead of new fits.
 
 The process-noise intensity's fits along the grid come from one IPOPT fit's Gauss-Newton
-linearisation when it holds there (:class:`process_noise._Linear`), and the coloured
+linearisation when it holds there (:class:`process_noise.Linearisation`), and the coloured
 measurement noise's trial likelihoods from sums over rows grouped by sample interval
 (:class:`measurement_noise._Linearised`). References: an IPOPT fit at the same intensity,
 and the likelihood whitened row by row (itself checked against the AR(1) covariance in
@@ -20,7 +20,7 @@ from airbearing.analysis.shooting.logs import make_windows, noise_floor, replay_
 from airbearing.analysis.shooting.measurement_noise import _Linearised
 from airbearing.analysis.shooting.process_noise import (
     KAPPA_GRID,
-    _Linear,
+    Linearisation,
     loglik,
     set_intensity,
 )
@@ -69,7 +69,7 @@ def test_linearised_intensity_fit_is_the_ipopt_fit():
     set_intensity(prob, KAPPA_GRID[0])
     top = prob.fit(model.p0, S, np.zeros(1), name="top")
     bounds = (model.p0.copy(), S, None, None)
-    lin = _Linear.of(prob, top, 1, bounds)
+    lin = Linearisation.of(prob, top, 1, bounds)
     for kappa in (1e-2, 1e-6):
         point, ll = lin.at(kappa)
         set_intensity(prob, kappa)
@@ -82,4 +82,4 @@ def test_linearised_intensity_fit_is_the_ipopt_fit():
         assert ll == pytest.approx(loglik(prob, fit, 1), abs=1e-3)
     # an effect the linearisation would take out of its bounds is IPOPT's
     below = (model.p0.copy(), S, np.array([0.0]), np.array([0.5 * top.theta[0]]))
-    assert _Linear.of(prob, top, 1, below).at(1e-2) is None
+    assert Linearisation.of(prob, top, 1, below).at(1e-2) is None

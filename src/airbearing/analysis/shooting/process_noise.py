@@ -60,6 +60,8 @@ from airbearing.errors import SolverError
 
 __all__ = [
     "KAPPA_GRID",
+    "Linearisation",
+    "LinearisedFit",
     "ProcessNoise",
     "defect_whitening",
     "estimate_process_noise",
@@ -266,9 +268,10 @@ def _descend(problem, fit_at, grid, theta0, delta0, start, k: int, bounds) -> di
     either side of the best; a solve that fails ends the descent (keeps what was found).
 
     An intensity's fit is the last IPOPT fit's Gauss-Newton linearisation solved at that
-    intensity (:class:`_Linear`, a :class:`_Point`) when that linearisation holds there;
-    else an IPOPT fit from the last intensity's answer (the continuation), linearised in its
-    turn. The most likely intensity's fit is always IPOPT's (refitted from its point)."""
+    intensity (:class:`Linearisation`, a :class:`LinearisedFit`) when that linearisation
+    holds there; else an IPOPT fit from the last intensity's answer (the continuation),
+    linearised in its turn. The most likely intensity's fit is always IPOPT's (refitted
+    from its point)."""
     out: dict = {}
     lin = None
     th, d = theta0, delta0
@@ -276,7 +279,7 @@ def _descend(problem, fit_at, grid, theta0, delta0, start, k: int, bounds) -> di
     def real(kappa, fit):
         nonlocal lin
         out[kappa] = (fit, loglik(problem, fit, k))
-        lin = _Linear.of(problem, fit, k, bounds)
+        lin = Linearisation.of(problem, fit, k, bounds)
         _keep_best_jacobian(out, start)
 
     for i, kappa in enumerate(grid):
@@ -308,7 +311,7 @@ def _descend(problem, fit_at, grid, theta0, delta0, start, k: int, bounds) -> di
             real(kappa, fit_at(kappa, near.theta, near.delta))
         except SolverError:
             continue
-    while isinstance(out[best := max(out, key=lambda a: out[a][1])][0], _Point):
+    while isinstance(out[best := max(out, key=lambda a: out[a][1])][0], LinearisedFit):
         point = out.pop(best)[0]
         try:
             real(best, fit_at(best, point.theta, point.delta))
@@ -321,7 +324,7 @@ def _keep_best_jacobian(out: dict, start) -> None:
     """Drop the Jacobian of every IPOPT fit of the descent but the most likely so far (only
     its fit is returned; the others give their gap and likelihood): on an hour of 50 Hz samples
     each is about 150 MB. ``start`` is the caller's and keeps its own."""
-    real = [a for a in out if not isinstance(out[a][0], _Point)]
+    real = [a for a in out if not isinstance(out[a][0], LinearisedFit)]
     best = max(real, key=lambda a: out[a][1])  # the answer is the most likely IPOPT fit
     for kappa in real:
         fit = out[kappa][0]
@@ -329,7 +332,7 @@ def _keep_best_jacobian(out: dict, start) -> None:
             fit.extra.pop("J", None)
 
 
-#: An intensity's fit is taken from another intensity's linearisation (:class:`_Linear`)
+#: An intensity's fit is taken from another intensity's linearisation (:class:`Linearisation`)
 #: when one more step of it would lower the objective (half the sum of squares, noise
 #: units) by less than this: about where the descent's IPOPT fits stop
 #: (``solver.OBJECTIVE_STOP``, a scaled gradient of 1e-2).
@@ -340,7 +343,7 @@ CHORD_STEPS = 4
 
 
 @dataclass(frozen=True)
-class _Point:
+class LinearisedFit:
     """The fit at one intensity from a linearisation: its answer and the gap it leaves."""
 
     theta: np.ndarray
@@ -349,7 +352,7 @@ class _Point:
     gap: float
 
 
-class _Linear:
+class Linearisation:
     """An IPOPT fit's Gauss-Newton linearisation, solved at other intensities.
 
     The measurement rows and the raw defects ``c`` (and their Jacobians) do not depend on
@@ -381,13 +384,25 @@ class _Linear:
 
     @classmethod
     def of(cls, problem, fit, k: int, bounds):
-        """The linearisation of ``fit`` (None when it keeps no Jacobian of its defects)."""
+        """The linearisation of ``fit`` (None when it keeps no Jacobian of its defects).
+
+        Parameters
+        ----------
+        problem : ShootingProblem
+            On linked windows, at the intensity ``fit`` was made at.
+        fit : Fit
+            An IPOPT fit of ``problem`` (its ``extra["J"]``, ``["r"]``, ``["linearised"]``).
+        k : int
+            Number of fitted effect parameters.
+        bounds : tuple
+            ``(p_base, S, lower, upper)`` as :meth:`ShootingProblem.fit` takes them.
+        """
         if "J" not in fit.extra or "linearised" not in fit.extra or problem.penalty is None:
             return None
         return cls(problem, fit, k, bounds)
 
     def at(self, kappa: float):
-        """``(_Point, log-likelihood)`` at ``kappa`` (``problem`` left at it), or None."""
+        """``(LinearisedFit, log-likelihood)`` at ``kappa`` (``problem`` left at it), or None."""
         problem, k = self.problem, self.k
         set_intensity(problem, kappa)
         W = problem.penalty
@@ -426,7 +441,7 @@ class _Linear:
             if not np.all(np.isfinite(r)):
                 return None
         rss = float(r @ r)
-        point = _Point(theta, delta, rss, problem.gap_of_residual(r))
+        point = LinearisedFit(theta, delta, rss, problem.gap_of_residual(r))
         return point, _laplace(problem, A, rss, k, problem.penalty_logdet)
 
 
