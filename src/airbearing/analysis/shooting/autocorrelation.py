@@ -47,7 +47,8 @@ def levinson_durbin(g: np.ndarray, nlags: int):
     sig[1] = g[0] - phi[1, 1] * g[1]
     for k in range(2, nlags + 1):
         phi[k, k] = (g[k] - np.dot(phi[1:k, k - 1], g[1:k][::-1])) / sig[k - 1]
-        phi[1:k, k] = phi[1:k, k - 1] - phi[k, k] * phi[k - 1 : 0 : -1, k - 1]
+        for j in range(1, k):
+            phi[j, k] = phi[j, k - 1] - phi[k, k] * phi[k - j, k - 1]
         sig[k] = sig[k - 1] * (1 - phi[k, k] ** 2)
     pacf = np.diag(phi).copy()
     pacf[0] = 1.0
