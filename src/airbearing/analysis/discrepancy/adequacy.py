@@ -8,10 +8,10 @@ Every discrepancy fit is judged on its residual:
 ``whiteness_p``
     A portmanteau test of the normalised primary residual
     (:func:`airbearing.analysis.shooting.errors.normalised_residuals`): the Ljung-Box
-    statistic (:func:`.autocorrelation.ljung_box_p`, statsmodels' ``acorr_ljungbox``) of
-    every log segment and every axis at ``min(LB_LAGS, n // 5)`` lags, combined by the
-    SMALLEST p-value times the number of tests (Bonferroni, capped at 1): the probability,
-    for white residuals, that at least one segment looks as correlated as the worst one.
+    statistic (``statsmodels.stats.diagnostic.acorr_ljungbox``) of every log segment and
+    every axis at ``min(LB_LAGS, n // 5)`` lags, combined by the SMALLEST p-value times
+    the number of tests (Bonferroni, capped at 1): the probability, for white residuals,
+    that at least one segment looks as correlated as the worst one.
 ``gap_over_noise``
     The gap over the measurement noise: the floor when the noise is white; when the
     estimator found it coloured (an AR(1) model of the primary output,
@@ -49,7 +49,6 @@ from numpy.polynomial import legendre
 
 from airbearing import quaternion as quat
 from airbearing.analysis.shooting import errors
-from airbearing.analysis.shooting.autocorrelation import ljung_box_p
 
 __all__ = [
     "GAP_ABOVE",
@@ -124,6 +123,9 @@ def whiteness(segments) -> tuple[float, int]:
         long enough).
     tests : int
     """
+    # statsmodels: 0.7-2.1 s CPU to import, loaded only when this runs
+    from statsmodels.stats.diagnostic import acorr_ljungbox
+
     ps = []
     for r in segments:
         n = r.shape[0]
@@ -134,7 +136,8 @@ def whiteness(segments) -> tuple[float, int]:
             x = r[:, a]
             if not np.all(np.isfinite(x)) or np.ptp(x) == 0:
                 continue
-            ps.append(ljung_box_p(x, h))
+            df = acorr_ljungbox(x, lags=[h], return_df=True)
+            ps.append(float(df["lb_pvalue"].iloc[-1]))
     if not ps:
         return math.nan, 0
     return float(min(1.0, min(ps) * len(ps))), len(ps)

@@ -13,9 +13,8 @@ Two uses, one model (:class:`AR`):
   coefficient ``phi^d``);
 - the prewhitening of a sandwich covariance (:mod:`.errors`, the CMG inertia's): an
   AR(p) fitted by Yule-Walker with the order by AIC (:meth:`AR.yule_walker`,
-  :mod:`.autocorrelation`: statsmodels' numbers in NumPy), applied on consecutive
-  samples (:meth:`AR.whiten`,
-  :meth:`AR.recolour_t`: ``scipy.signal.lfilter``'s numbers).
+  ``statsmodels.tsa.stattools``), applied on consecutive samples (:meth:`AR.whiten`,
+  :meth:`AR.recolour_t`, ``scipy.signal.lfilter``).
 """
 
 from __future__ import annotations
@@ -24,9 +23,6 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.linalg import solve_banded
-
-from airbearing.analysis.shooting.autocorrelation import acovf, chi2_sf, levinson_durbin
 
 __all__ = ["AR", "MAX_CORRECTION_STEPS", "WHITE_SIGNIFICANCE"]
 
@@ -69,32 +65,17 @@ class AR:
         return float(self.s**2 / (1.0 - float(np.sum(self.phi))) ** 2)
 
     def whiten(self, x: np.ndarray, axis: int = 0) -> np.ndarray:
-        """The innovations ``Phi(L) x`` of consecutive samples (times ``s``: not rescaled;
-        ``scipy.signal.lfilter(self.filter, [1], x, axis)``, zero initial conditions)."""
-        x = np.moveaxis(np.asarray(x, dtype=float), axis, 0)
-        y = x.copy()
-        for lag, c in enumerate(np.asarray(self.phi, dtype=float)[: x.shape[0] - 1], start=1):
-            y[lag:] -= c * x[:-lag]
-        return np.moveaxis(y, 0, axis)
+        """The innovations ``Phi(L) x`` of consecutive samples (times ``s``: not rescaled)."""
+        from scipy.signal import lfilter  # 1.4 s CPU to import (scipy.stats): only when used
+
+        return lfilter(self.filter, [1.0], x, axis=axis)
 
     def recolour_t(self, X: np.ndarray) -> np.ndarray:
         """``Phi(L)^-T X``: regressors filtered backwards in time by the inverse filter, so
-        that ``X' x = (Phi^-T X)' (Phi x)`` exactly (the prewhitened scores).
+        that ``X' x = (Phi^-T X)' (Phi x)`` exactly (the prewhitened scores)."""
+        from scipy.signal import lfilter  # 1.4 s CPU to import (scipy.stats): only when used
 
-        ``Phi(L)`` of consecutive samples is a lower triangular band matrix (ones on the
-        diagonal, ``-phi_l`` on the ``l``-th subdiagonal), so the transpose is solved as a
-        band system (``scipy.linalg.solve_banded``; ``scipy.signal.lfilter([1],
-        self.filter, X[::-1])[::-1]`` gives the same to round-off, and importing
-        ``scipy.signal`` costs 1.4 s of CPU)."""
-        X = np.asarray(X, dtype=float)
-        n, p = X.shape[0], min(self.order, X.shape[0] - 1)
-        if p == 0:
-            return X.copy()
-        ab = np.zeros((p + 1, n))  # upper band of Phi^T: row p - l holds the l-th superdiagonal
-        ab[p] = 1.0
-        for lag in range(1, p + 1):
-            ab[p - lag, lag:] = -float(self.phi[lag - 1])
-        return solve_banded((0, p), ab, X)
+        return lfilter([1.0], self.filter, X[::-1], axis=0)[::-1]
 
     def whitening_rows(self, t: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
         """The exact whitening of an AR(1) sampled at times ``t`` (s): a lower bidiagonal
@@ -132,7 +113,7 @@ class AR:
     @classmethod
     def yule_walker(cls, series, maxlag: int, n_free: float = 0.0) -> AR:
         """The AR(p) of pooled residual series: Yule-Walker (Levinson-Durbin on the
-        length-weighted autocovariances, :mod:`.autocorrelation`), the order by AIC up
+        length-weighted autocovariances, ``statsmodels.tsa.stattools``), the order by AIC up
         to ``maxlag``, 0 (white) unless a likelihood-ratio test says the model beats white
         noise. Yule-Walker keeps the filter stable.
 
@@ -174,6 +155,8 @@ class AR:
         >>> round(float(model.phi[0]), 1)
         0.8
         """
+        from statsmodels.tsa.stattools import acovf  # 2.1 s CPU to import: only when fitted
+
         series = list(series)
         used = [x for x in series if x.size > 2 * maxlag and np.any(x != x[0])]
         if maxlag < 1 or not used:
@@ -198,16 +181,19 @@ class AR:
 def _yule_walker_aic(g: np.ndarray, n: int):
     """``(phi, innovation variance, long-run variance)`` of the AR model of autocovariances
     ``g`` (lags 0..p_max) whose order minimises AIC
-    (:func:`.autocorrelation.levinson_durbin`), taken only when it beats white noise in
-    a likelihood-ratio test (chi-square, p below :data:`WHITE_SIGNIFICANCE`): AIC
+    (``statsmodels.tsa.stattools.levinson_durbin``), taken only when it beats white noise in
+    a likelihood-ratio test (``scipy.stats.chi2``, p below :data:`WHITE_SIGNIFICANCE`): AIC
     alone found orders of 11 and 23, coefficients summing to 0.05 and -0.01, in the nearly
     white residuals of the identify-platform tutorial (2400 samples per output), and moved
     its errors by 3 %."""
-    pacf, phi = levinson_durbin(g, g.size - 1)
+    from scipy import stats  # 1.2 s CPU to import: only when a model is fitted
+    from statsmodels.tsa.stattools import levinson_durbin  # 2.1 s CPU, as above
+
+    _, _, pacf, _, phi = levinson_durbin(g, nlags=g.size - 1, isacov=True)
     innov = g[0] * np.cumprod(np.r_[1.0, 1.0 - pacf[1:] ** 2])  # innovation variance per order
     loglik = -0.5 * n * np.log(np.maximum(innov, 1e-300))
     p = int(np.argmax(loglik - np.arange(innov.size)))  # AIC
-    if p > 0 and chi2_sf(2.0 * (loglik[p] - loglik[0]), p) >= WHITE_SIGNIFICANCE:
+    if p > 0 and stats.chi2.sf(2.0 * (loglik[p] - loglik[0]), p) >= WHITE_SIGNIFICANCE:
         p = 0
     coef = np.asarray(phi[1 : p + 1, p], dtype=float) if p > 0 else np.zeros(0)
     return coef, float(innov[p]), float(innov[p]) / (1.0 - float(coef.sum())) ** 2

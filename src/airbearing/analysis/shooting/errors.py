@@ -22,8 +22,8 @@ Three numbers per fitted parameter:
     the fitted initial states, :meth:`.AR.yule_walker`) whitens each series, the scores'
     regressors pass through the inverse of the same filter (the recolouring is exact), and
     the whitened scores get a Bartlett-kernel HAC
-    (:func:`.autocorrelation.hac_bartlett`, statsmodels' ``S_hac_simple``) whose bandwidth
-    is the longest of Andrews' (1991) AR(1) plug-in (:func:`andrews_bandwidth`, as the CMG
+    (``statsmodels.stats.sandwich_covariance.S_hac_simple``) whose bandwidth is the longest
+    of Andrews' (1991) AR(1) plug-in (:func:`andrews_bandwidth`, as the CMG
     identification's sandwich), the Newey-West rule ``4 (n / 100)^(2/9)`` and three
     correlation times (the lag where the autocorrelation of the residual, or of the
     process-noise defects, falls below 1/e). A white residual (AR order 0) keeps the
@@ -61,7 +61,6 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.linalg import splu
 
-from airbearing.analysis.shooting.autocorrelation import acf, hac_bartlett
 from airbearing.analysis.shooting.autoregressive import AR
 from airbearing.analysis.shooting.fit import information_inverse, solve_gram
 from airbearing.analysis.shooting.functions import _problem_functions
@@ -206,8 +205,10 @@ def normalised_residuals(problem, fit) -> list[Residuals]:
 
 def _decorrelation_lag(series, max_lag: int) -> int:
     """The first lag at which the mean autocorrelation of ``series`` (1-D arrays, each
-    weighted by its length; :func:`.autocorrelation.acf`, statsmodels' ``acf``) falls
-    below 1/e."""
+    weighted by its length; ``statsmodels.tsa.stattools.acf``) falls below 1/e."""
+    # statsmodels: 0.7-2.1 s CPU to import, loaded only when this runs
+    from statsmodels.tsa.stattools import acf
+
     acc, wsum = None, 0.0
     for x in series:
         n = x.size
@@ -348,6 +349,9 @@ def honest_errors(problem, fit, k: int) -> HonestErrors:
         ``std``, ``std_white``, ``crlb`` (k,) in the parameters' SI units, their
         covariances, the residuals' correlation time (s) and the HAC bandwidth (samples).
     """
+    # statsmodels: 0.7-2.1 s CPU to import, loaded only when this runs
+    from statsmodels.stats.sandwich_covariance import S_hac_simple
+
     fit_std = np.asarray(fit.theta_std[:k], dtype=float)
     residuals = normalised_residuals(problem, fit)
     tau = correlation_time(residuals)
@@ -425,7 +429,7 @@ def honest_errors(problem, fit, k: int) -> HonestErrors:
         nl = max(newey_west, andrews_bandwidth(x), int(math.ceil(3 * tau / dt)))
         nl = max(0, min(nl, shortest // 2, n - 1))
         lags.append(nl)
-        meat = meat + hac_bartlett(x, nlags=nl)
+        meat = meat + S_hac_simple(x, nlags=nl)
     return _sandwich(A, meat, std_w, cov_w, bound, tau, int(max(lags) if lags else 0))
 
 
@@ -547,6 +551,9 @@ def _piece_meat(problem, scores: np.ndarray):
     ``1 / (1 - rho)^2`` (Andrews & Monahan 1992): a torque correlated over several pieces
     makes the sums persistent, and a kernel alone, over a few pieces, misses most of it.
     """
+    # statsmodels: 0.7-2.1 s CPU to import, loaded only when this runs
+    from statsmodels.stats.sandwich_covariance import S_hac_simple
+
     w = problem.windows
     n_meas, nd = problem.n_meas, problem.n_delta
     if w.n < MIN_PIECES:
@@ -570,7 +577,7 @@ def _piece_meat(problem, scores: np.ndarray):
         n = e.shape[0]
         nl = max(0, min(int(math.floor(4 * (n / 100.0) ** (2.0 / 9.0))), n - 1))
         lags.append(nl)
-        meat = meat + hac_bartlett(e, nlags=nl)
+        meat = meat + S_hac_simple(e, nlags=nl)
     return meat / (1.0 - rho) ** 2, rho, max(lags) if lags else 0
 
 

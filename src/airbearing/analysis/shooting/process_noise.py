@@ -42,7 +42,6 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.linalg import splu
 
-from airbearing.analysis.shooting.autocorrelation import chi2_sf
 from airbearing.analysis.shooting.measurement_noise import (
     estimate_measurement_noise,
     set_measurement_noise,
@@ -447,8 +446,10 @@ class Linearisation:
 
 def _verdict(problem, ll: dict, best: float, bottom: float) -> ProcessNoise:
     """The :class:`ProcessNoise` of the most likely intensity (the problem is left at it)."""
+    from scipy import stats
+
     lr = max(0.0, 2.0 * (ll[best] - ll[bottom]))
-    p = 0.5 * float(chi2_sf(lr, 1)) if lr > 0 else 1.0
+    p = 0.5 * float(stats.chi2.sf(lr, 1)) if lr > 0 else 1.0
     significant = p < SIGNIFICANCE
     set_intensity(problem, best)
     sigma_w = problem.process_noise[1]
