@@ -41,7 +41,13 @@ import numpy as np
 
 from airbearing.analysis.discrepancy.candidates import regression_start, residual_torque
 from airbearing.analysis.discrepancy.words import format_value
-from airbearing.analysis.shooting.process_noise import KAPPA_GRID, loglik, set_intensity
+from airbearing.analysis.shooting.process_noise import (
+    KAPPA_GRID,
+    Linearisation,
+    LinearisedFit,
+    loglik,
+    set_intensity,
+)
 from airbearing.errors import SolverError
 
 __all__ = [
@@ -157,18 +163,29 @@ def _refit(search, problem, lag, chosen, theta, kappa: float, delta0, up: bool =
     grid = sorted(set(KAPPA_GRID) | {kappa}, reverse=True)
     i = grid.index(kappa)
     best = (*at(kappa, free["theta0"], delta0, False), kappa)
+    # the steps along the grid from the last IPOPT fit's linearisation where it holds
+    # (process_noise.Linearisation: only the defects' whitening depends on the intensity)
+    bounds = (p0, free["S"], free["lower"], free["upper"])
+    lin = Linearisation.of(problem, best[0], k, bounds)
     for step in (1, -1) if up else (1,):
         j, moved = i + step, False
         while 0 <= j < len(grid):
-            try:
-                f, ll = at(grid[j], best[0].theta, best[0].delta, True)
-            except SolverError:
-                break
+            got = None if lin is None else lin.at(grid[j])
+            if got is None:
+                try:
+                    f, ll = at(grid[j], best[0].theta, best[0].delta, True)
+                except SolverError:
+                    break
+                lin = Linearisation.of(problem, f, k, bounds)
+            else:
+                f, ll = got
             if ll <= best[1]:
                 break
             best, moved, j = (f, ll, grid[j]), True, j + step
         if moved:
             break
+    if isinstance(best[0], LinearisedFit):  # the answer and its errors are IPOPT's
+        best = (*at(best[2], best[0].theta, best[0].delta, True), best[2])
     return best
 
 

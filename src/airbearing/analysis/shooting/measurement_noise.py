@@ -77,6 +77,9 @@ MAX_CORRELATION_OF_PIECE = 0.5
 RISING = 2.0
 #: Smallest marginal level (noise-floor units) of an adopted noise model.
 MIN_LEVEL = 0.5
+#: Most distinct sample intervals of one output group whose rows the noise estimate groups
+#: (:class:`_Linearised`); a log with more is whitened row by row.
+MAX_INTERVALS = 8
 #: Search range of ``ln s`` (the innovation's level in noise-floor units: 0.007-150).
 LOG_S = (-5.0, 5.0)
 
@@ -208,7 +211,16 @@ def set_measurement_noise(problem, noise: MeasurementNoise | None) -> None:
 
 
 class _Linearised:
-    """The Laplace log-likelihood of a fit's Gauss-Newton linearisation under any ``P``."""
+    """The Laplace log-likelihood of a fit's Gauss-Newton linearisation under any ``P``.
+
+    ``P`` whitens each row with itself and the row before it in its series, with weights
+    that depend on ``(phi, s)`` and on how many sample intervals lie between the two
+    (:meth:`.AR.whitening_rows`). Rows are grouped by that interval (a regular log has
+    one); each group's parts of ``J^T P^T P J``, ``J^T P^T P r`` and ``|P r|^2`` are fixed
+    sums, so a trial ``(phi, s)`` weighs a few sparse matrices the size of the window
+    states instead of whitening every row (:meth:`loglik`; a log of more than
+    :data:`MAX_INTERVALS` distinct intervals takes the rows, :meth:`exact`).
+    """
 
     def __init__(self, problem, fit, k: int) -> None:
         J = sp.csc_matrix(fit.extra["J"])
@@ -227,8 +239,154 @@ class _Linearised:
         self.Gp, self.gp = sp.csc_matrix(self.Jp.T @ self.Jp), self.Jp.T @ self.rp
         self.k = k
         self.problem = problem
+        self._parts: dict = {}
+
+    # -- the rows grouped by interval
+    def _moments(self, rows, prev=None) -> tuple:
+        """``(S0, S1, S2, g0, g1, g2, q0, q1, q2)``: the sums a whitened row ``d x_t + e
+        x_(t-1)`` makes of its Gram matrix (``d^2 S0 + d e S1 + e^2 S2``), its gradient and
+        its sum of squares, over ``rows`` (``prev``: the rows before them)."""
+        Jm = self._csr
+        A, a = Jm[rows], self.rm[rows]
+        if prev is None:
+            return (A.T @ A, None, None, A.T @ a, None, None, float(a @ a), 0.0, 0.0)
+        B, b = Jm[prev], self.rm[prev]
+        AB = A.T @ B
+        return (A.T @ A, AB + AB.T, B.T @ B, A.T @ a, A.T @ b + B.T @ a, B.T @ b,
+                float(a @ a), 2.0 * float(a @ b), float(b @ b))  # fmt: skip
+
+    def _split(self, dt: float):
+        """The rows grouped by interval: ``(groups, M, Mg, mq, diag)``, or None when a
+        group has more than :data:`MAX_INTERVALS` intervals.
+
+        Every part of the Gram matrix is a column of ``M`` (its values on one common
+        sparsity pattern), of the gradient a column of ``Mg``, of the sum of squares an
+        entry of ``mq``: first the defect rows and the rows in no series (weight 1), then
+        per output group (``groups``: ``(white, first, n_first, classes)``) the column of its
+        rows unwhitened, of its series' first rows, and per interval ``(steps, n, column)``
+        the columns ``S0, S1, S2`` of :meth:`_moments` from ``column`` on. ``diag``: where
+        each diagonal entry lies in the pattern (-1: none)."""
+        if dt in self._parts:
+            return self._parts[dt]
+        self._csr = sp.csr_matrix(self.Jm)
+        series = _series(self.problem)
+        covered = np.zeros(self.rm.size, dtype=bool)
+        terms: list = [None]  # (G, g, q) per column; the first filled last
+
+        def add(G, g, q) -> int:
+            terms.append((G, g, q))
+            return len(terms) - 1
+
+        groups = {}
+        for name in self.problem.outputs:
+            parts = [(rows, t) for rows, t in series.get(name, []) if rows.size]
+            if not parts:
+                continue
+            first = np.concatenate([rows[:1] for rows, _ in parts])
+            cur = np.concatenate([rows[1:] for rows, _ in parts])
+            prev = np.concatenate([rows[:-1] for rows, _ in parts])
+            steps = np.concatenate([np.maximum(np.diff(t) / dt, 1.0) for _, t in parts])
+            # intervals equal to round-off (times summed from a log's steps) are one
+            key = np.round(steps, 9)
+            uniq = np.unique(key)
+            if uniq.size > MAX_INTERVALS:
+                self._parts[dt] = None
+                return None
+            covered[first] = covered[cur] = True
+            m = self._moments(np.concatenate([first, cur]))
+            white = add(m[0], m[3], m[6])
+            m = self._moments(first)
+            head = add(m[0], m[3], m[6])
+            classes = []
+            for u in uniq:
+                at = key == u
+                S0, S1, S2, g0, g1, g2, q0, q1, q2 = self._moments(cur[at], prev[at])
+                col = add(S0, g0, q0)
+                add(S1, g1, q1)
+                add(S2, g2, q2)
+                classes.append((float(np.mean(steps[at])), int(at.sum()), col))
+            groups[name] = (white, head, first.size, classes)
+        m = self._moments(np.flatnonzero(~covered))
+        terms[0] = (m[0] + self.Gp, m[3] + self.gp, m[6] + float(self.rp @ self.rp))
+        # the common pattern, and each part's values on it
+        mats = [sp.csc_matrix(G) for G, _, _ in terms]
+        U = sp.csc_matrix(sum(abs(G) for G in mats))
+        U.sum_duplicates()
+        U.sort_indices()
+        nr = U.shape[0]
+        ucol = np.repeat(np.arange(U.shape[1]), np.diff(U.indptr))
+        where = ucol * nr + U.indices  # increasing: column-major
+        M = np.zeros((where.size, len(mats)))
+        for i, G in enumerate(mats):
+            G = G.tocoo()
+            np.add.at(M[:, i], np.searchsorted(where, G.col * nr + G.row), G.data)
+        Mg = np.column_stack([np.asarray(g, dtype=float).ravel() for _, g, _ in terms])
+        mq = np.array([float(q) for _, _, q in terms])
+        diag = np.full(nr, -1)
+        on = ucol == U.indices
+        diag[U.indices[on]] = np.flatnonzero(on)
+        self._pattern = (U.indices.copy(), U.indptr.copy(), U.shape, ucol)
+        out = (groups, M, Mg, mq, diag)
+        self._parts[dt] = out
+        return out
+
+    @staticmethod
+    def _weights(groups: dict, n_terms: int, ar: dict):
+        """``(w, log det P)``: the weight of each column of :meth:`_split` under ``ar``
+        (the whitening of :meth:`.AR.whitening_rows`)."""
+        w = np.zeros(n_terms)
+        w[0] = 1.0
+        logdet = 0.0
+        for name, (white, head, n0, classes) in groups.items():
+            if name not in ar:
+                w[white] = 1.0
+                continue
+            phi, s = float(ar[name][0]), float(ar[name][1])
+            d0 = math.sqrt(1.0 - phi**2) / s
+            w[head] = d0**2
+            logdet += n0 * math.log(d0)
+            for steps, n, col in classes:
+                a = math.copysign(abs(phi) ** steps, phi) if phi != 0.0 else 0.0
+                ratio = (1.0 - a**2) / (1.0 - phi**2) if phi != 0.0 else 1.0
+                d = 1.0 / (s * math.sqrt(ratio))
+                e = -a * d
+                w[col : col + 3] = (d * d, d * e, e * e)
+                logdet += n * math.log(d)
+        return w, logdet
 
     def loglik(self, ar: dict, dt: float) -> float:
+        """The Laplace log-likelihood with the measurement rows whitened by ``ar``."""
+        split = self._split(dt)
+        if split is None:
+            return self.exact(ar, dt)
+        groups, M, Mg, mq, diag = split
+        w, logdet = self._weights(groups, M.shape[1], ar)
+        data = M @ w
+        grad = Mg @ w
+        d = np.where(diag >= 0, data[np.maximum(diag, 0)], 0.0)
+        c = np.sqrt(np.maximum(d, 1e-300))
+        rows, indptr, shape, cols = self._pattern
+        Gs = sp.csc_matrix((data / (c[rows] * c[cols]), rows, indptr), shape=shape)
+        step = solve_gram(Gs, grad / c) / c
+        rss = float(mq @ w) - float(step @ grad)  # at the step
+        return float(-0.5 * rss + logdet - 0.5 * self._logdet(Gs, c))
+
+    def _logdet(self, Gs, c) -> float:
+        """``log det`` of the window states' information (``Gs`` column-scaled by ``c``)."""
+        Gd = start_yaw_profiled(self.problem, Gs[self.k :, self.k :])
+        try:
+            u = splu(sp.csc_matrix(Gd)).U.diagonal()
+            ld = float(np.sum(np.log(np.abs(u)))) if np.all(u != 0) else np.inf
+        except RuntimeError:
+            ld = np.inf
+        cd = c[self.k :]
+        if Gd.shape[0] < cd.size:  # the start yaws profiled out: their scales with them
+            cd = np.delete(cd, np.arange(self.problem.windows.n) * self.problem.n_delta)
+        return ld + 2.0 * float(np.log(cd).sum())
+
+    def exact(self, ar: dict, dt: float) -> float:
+        """:meth:`loglik` row by row; keeps the whitened measurement rows after the step
+        (``innovations``)."""
         P, logdet = whitening(self.problem, ar, dt)
         A = sp.csc_matrix(P @ self.Jm)  # the whitened measurement rows
         b = P @ self.rm
@@ -239,17 +397,7 @@ class _Linearised:
         step = solve_gram(Gs, (A.T @ b + self.gp) / c) / c
         self.innovations = e = b - A @ step  # the whitened measurement rows after the step
         ep = self.rp - self.Jp @ step
-        Gd = start_yaw_profiled(self.problem, Gs[self.k :, self.k :])
-        try:
-            u = splu(sp.csc_matrix(Gd)).U.diagonal()
-            ld = float(np.sum(np.log(np.abs(u)))) if np.all(u != 0) else np.inf
-        except RuntimeError:
-            ld = np.inf
-        cd = c[self.k :]
-        if Gd.shape[0] < cd.size:  # the start yaws profiled out: their scales with them
-            cd = np.delete(cd, np.arange(self.problem.windows.n) * self.problem.n_delta)
-        ld += 2.0 * float(np.log(cd).sum())
-        return float(-0.5 * (e @ e + ep @ ep) + logdet - 0.5 * ld)
+        return float(-0.5 * (e @ e + ep @ ep) + logdet - 0.5 * self._logdet(Gs, c))
 
 
 def _max_phi(problem, dt: float) -> float:
@@ -346,7 +494,7 @@ def estimate_measurement_noise(problem, fit, k: int) -> MeasurementNoise | None:
         lrs[group], ps[group] = lr, p
         strong = s / math.sqrt(1.0 - phi**2) >= MIN_LEVEL
         if p < SIGNIFICANCE and strong and not _still_rising(ll, phi, phi_max, dt, float(best.fun)):
-            lin.loglik({**ar, group: (phi, s)}, dt)
+            lin.exact({**ar, group: (phi, s)}, dt)
             if _homoscedastic(problem, lin.innovations, group):
                 ar[group] = (phi, s)
                 if phi_max - phi <= 0.1 * (1.0 - phi_max):

@@ -59,6 +59,8 @@ from airbearing.errors import SolverError
 
 __all__ = [
     "KAPPA_GRID",
+    "Linearisation",
+    "LinearisedFit",
     "ProcessNoise",
     "defect_whitening",
     "estimate_process_noise",
@@ -141,7 +143,13 @@ def loglik(problem, fit, k: int) -> float:
     float
         The log marginal likelihood (nats; larger is better).
     """
-    J = sp.csc_matrix(fit.extra["J"])
+    return _laplace(problem, fit.extra["J"], fit.rss, k, problem.penalty_logdet)
+
+
+def _laplace(problem, J, rss: float, k: int, penalty_logdet: float) -> float:
+    """:func:`loglik` of a residual ``rss`` and its Jacobian ``J`` (the defect rows whitened
+    at the intensity whose ``log det W`` is ``penalty_logdet``)."""
+    J = sp.csc_matrix(J)
     Jd = J[:, k:]
     G = sp.csc_matrix(Jd.T @ Jd)
     G = start_yaw_profiled(problem, G)
@@ -155,10 +163,7 @@ def loglik(problem, fit, k: int) -> float:
     except RuntimeError:  # singular: a state the data cannot fix at any intensity
         logdet = np.inf
     return float(
-        -0.5 * fit.rss
-        + problem.penalty_logdet
-        + problem.meas_logdet
-        - 0.5 * (logdet + 2 * np.log(c).sum())
+        -0.5 * rss + penalty_logdet + problem.meas_logdet - 0.5 * (logdet + 2 * np.log(c).sum())
     )
 
 
@@ -235,7 +240,8 @@ def _estimate(problem, p_base, S, theta0, lower, upper, delta0, name, grid, star
         if noise is not None:
             set_measurement_noise(problem, noise)
             start = fit_at(grid[0], start.theta, start.delta)
-    fits = _descend(problem, fit_at, grid, theta0, delta0, start, k)
+    bounds = (np.asarray(p_base, dtype=float), S, lower, upper)
+    fits = _descend(problem, fit_at, grid, theta0, delta0, start, k, bounds)
     ll = {kappa: v[1] for kappa, v in fits.items()}
     fits = {kappa: v[0] for kappa, v in fits.items()}
     best = max(ll, key=ll.get)
@@ -256,47 +262,186 @@ def _estimate(problem, p_base, S, theta0, lower, upper, delta0, name, grid, star
     return fit
 
 
-def _descend(problem, fit_at, grid, theta0, delta0, start, k: int) -> dict:
+def _descend(problem, fit_at, grid, theta0, delta0, start, k: int, bounds) -> dict:
     """``kappa -> (fit, log-likelihood)`` down the grid (warm-started), then one decade
-    either side of the best; a solve that fails ends the descent (keeps what was found)."""
+    either side of the best; a solve that fails ends the descent (keeps what was found).
+
+    An intensity's fit is the last IPOPT fit's Gauss-Newton linearisation solved at that
+    intensity (:class:`Linearisation`, a :class:`LinearisedFit`) when that linearisation
+    holds there; else an IPOPT fit from the last intensity's answer (the continuation),
+    linearised in its turn. The most likely intensity's fit is always IPOPT's (refitted
+    from its point)."""
     out: dict = {}
+    lin = None
     th, d = theta0, delta0
+
+    def real(kappa, fit):
+        nonlocal lin
+        out[kappa] = (fit, loglik(problem, fit, k))
+        lin = Linearisation.of(problem, fit, k, bounds)
+        _keep_best_jacobian(out, start)
+
     for i, kappa in enumerate(grid):
         if i == 0 and start is not None:
             set_intensity(problem, kappa)
-            fit = start
+            real(kappa, start)
         else:
-            try:
-                fit = fit_at(kappa, th, d)
-            except SolverError:
-                if not out:
-                    raise
-                break  # a lower intensity the fit cannot reach
-        out[kappa] = (fit, loglik(problem, fit, k))
-        _keep_best_jacobian(out, start)
-        th, d = fit.theta, fit.delta
+            got = None if lin is None else lin.at(kappa)
+            if got is not None:
+                out[kappa] = got
+            else:
+                try:
+                    real(kappa, fit_at(kappa, th, d))
+                except SolverError:
+                    if not out:
+                        raise
+                    break  # a lower intensity the fit cannot reach
+        th, d = out[kappa][0].theta, out[kappa][0].delta
     best = max(out, key=lambda a: out[a][1])
     for kappa in (best * 10.0, best / 10.0):
         if not (min(grid) < kappa < max(grid)) or kappa in out or len(out) < 2:
             continue
+        got = None if lin is None else lin.at(kappa)
+        if got is not None:
+            out[kappa] = got
+            continue
         near = out[min(out, key=lambda a, kappa=kappa: abs(math.log(a / kappa)))][0]
         try:
-            fit = fit_at(kappa, near.theta, near.delta)
+            real(kappa, fit_at(kappa, near.theta, near.delta))
         except SolverError:
             continue
-        out[kappa] = (fit, loglik(problem, fit, k))
-        _keep_best_jacobian(out, start)
+    while isinstance(out[best := max(out, key=lambda a: out[a][1])][0], LinearisedFit):
+        point = out.pop(best)[0]
+        try:
+            real(best, fit_at(best, point.theta, point.delta))
+        except SolverError:  # (the start is IPOPT's: the loop ends)
+            continue
     return out
 
 
 def _keep_best_jacobian(out: dict, start) -> None:
-    """Drop the Jacobian of every fit of the descent but the most likely so far (only its
-    fit is returned; the others give their gap and likelihood): on an hour of 50 Hz samples
+    """Drop the Jacobian of every IPOPT fit of the descent but the most likely so far (only
+    its fit is returned; the others give their gap and likelihood): on an hour of 50 Hz samples
     each is about 150 MB. ``start`` is the caller's and keeps its own."""
-    best = max(out, key=lambda a: out[a][1])
-    for kappa, (fit, _) in out.items():
+    real = [a for a in out if not isinstance(out[a][0], LinearisedFit)]
+    best = max(real, key=lambda a: out[a][1])  # the answer is the most likely IPOPT fit
+    for kappa in real:
+        fit = out[kappa][0]
         if kappa != best and fit is not start:
             fit.extra.pop("J", None)
+
+
+#: An intensity's fit is taken from another intensity's linearisation (:class:`Linearisation`)
+#: when one more step of it would lower the objective (half the sum of squares, noise
+#: units) by less than this: about where the descent's IPOPT fits stop
+#: (``solver.OBJECTIVE_STOP``, a scaled gradient of 1e-2).
+LINEAR_TOL = 1e-4
+#: Steps with the linearisation's Jacobian (the first its Gauss-Newton step, the next ones
+#: corrections from the true residual) before IPOPT takes over.
+CHORD_STEPS = 4
+
+
+@dataclass(frozen=True)
+class LinearisedFit:
+    """The fit at one intensity from a linearisation: its answer and the gap it leaves."""
+
+    theta: np.ndarray
+    delta: np.ndarray
+    rss: float
+    gap: float
+
+
+class Linearisation:
+    """An IPOPT fit's Gauss-Newton linearisation, solved at other intensities.
+
+    The measurement rows and the raw defects ``c`` (and their Jacobians) do not depend on
+    the intensity; only the defects' whitening ``W`` does. At an intensity, the linearised
+    problem ``min |r_m + J_m dz|^2 + |W (c + J_c dz)|^2`` is one sparse factorisation; its
+    Gauss-Newton step is corrected with the residual evaluated at its answer (a chord
+    method: the same Jacobian, no window Jacobian evaluated) until a step would lower the
+    objective by less than :data:`LINEAR_TOL`. That point is the intensity's fit and its
+    likelihood the Laplace one of the linearisation. Else (a step the linearisation does not
+    hold over, an effect out of its bounds, a singular information) :meth:`at` gives None.
+    """
+
+    def __init__(self, problem, fit, k: int, bounds) -> None:
+        J = sp.csc_matrix(fit.extra["J"])
+        r = np.asarray(fit.extra["r"], dtype=float)
+        n = problem.n_meas
+        self.Jm, self.rm = J[:n], r[:n]
+        C = sp.csc_matrix(fit.extra["linearised"][2])
+        keep = np.asarray(np.abs(J).sum(axis=0)).ravel() > 0  # pinned states: zero columns
+        self.C = C @ sp.diags(keep.astype(float))
+        self.free = np.flatnonzero(keep)
+        W0 = sp.csr_matrix(problem.penalty)
+        unlinked = np.diff(W0.indptr) == 0
+        self.c = splu(sp.csc_matrix(W0 + sp.diags(unlinked.astype(float)))).solve(r[n:])
+        self.theta, self.delta = np.asarray(fit.theta, dtype=float), np.asarray(fit.delta)
+        self.p_base, self.S = bounds[0], bounds[1]
+        self.lower, self.upper = bounds[2], bounds[3]
+        self.problem, self.k = problem, k
+
+    @classmethod
+    def of(cls, problem, fit, k: int, bounds):
+        """The linearisation of ``fit`` (None when it keeps no Jacobian of its defects).
+
+        Parameters
+        ----------
+        problem : ShootingProblem
+            On linked windows, at the intensity ``fit`` was made at.
+        fit : Fit
+            An IPOPT fit of ``problem`` (its ``extra["J"]``, ``["r"]``, ``["linearised"]``).
+        k : int
+            Number of fitted effect parameters.
+        bounds : tuple
+            ``(p_base, S, lower, upper)`` as :meth:`ShootingProblem.fit` takes them.
+        """
+        if "J" not in fit.extra or "linearised" not in fit.extra or problem.penalty is None:
+            return None
+        return cls(problem, fit, k, bounds)
+
+    def at(self, kappa: float):
+        """``(LinearisedFit, log-likelihood)`` at ``kappa`` (``problem`` left at it), or None."""
+        problem, k = self.problem, self.k
+        set_intensity(problem, kappa)
+        W = problem.penalty
+        A = sp.csc_matrix(sp.vstack([self.Jm, W @ self.C], format="csc"))
+        Af = A[:, self.free]
+        G = sp.csc_matrix(Af.T @ Af)
+        sc = np.sqrt(np.maximum(G.diagonal(), 1e-300))
+        Ds = sp.diags(1.0 / sc)
+        try:
+            with np.errstate(all="ignore"):
+                lu = splu(sp.csc_matrix(Ds @ G @ Ds))
+        except RuntimeError:  # singular: IPOPT's to handle
+            return None
+        dz = np.zeros(A.shape[1])
+        r = np.r_[self.rm, W @ self.c]  # the residual at the linearisation's point
+        for i in range(CHORD_STEPS + 1):
+            with np.errstate(all="ignore"):
+                step = -lu.solve((Af.T @ r) / sc) / sc
+                drop = 0.5 * float(np.sum((Af @ step) ** 2))
+            if not np.isfinite(drop):
+                return None
+            if i and drop <= LINEAR_TOL:
+                break
+            if i == CHORD_STEPS:
+                return None
+            dz[self.free] += step
+            theta = self.theta + dz[:k]
+            if (self.lower is not None and np.any(theta < self.lower)) or (
+                self.upper is not None and np.any(theta > self.upper)
+            ):
+                return None
+            delta = self.delta + dz[k:].reshape(self.delta.shape, order="F")
+            p = self.p_base + self.S @ theta if k else self.p_base
+            with np.errstate(all="ignore"):
+                r = problem.residual(delta, p)
+            if not np.all(np.isfinite(r)):
+                return None
+        rss = float(r @ r)
+        point = LinearisedFit(theta, delta, rss, problem.gap_of_residual(r))
+        return point, _laplace(problem, A, rss, k, problem.penalty_logdet)
 
 
 def _verdict(problem, ll: dict, best: float, bottom: float) -> ProcessNoise:
