@@ -104,7 +104,7 @@ def _accurate_at_fit(search: _Search, sel: _Selection, problem: ShootingProblem,
         problem.model.p0.copy(),
         **search.free(sel.lag, sel.chosen, current.theta),
         delta0=current.delta,
-        name=f"the named effects at {need} RK4 sub-steps",
+        name=f"the named effects at {need} steps per sample",
     )
     return accurate, replace(refit, extra={**current.extra, **refit.extra})
 

@@ -540,7 +540,8 @@ def replay(
     window_s : float, optional
         Multiple-shooting window, s (see :func:`make_windows`).
     substeps : int, optional
-        RK4 sub-steps per sample, >= 1 (default :func:`substeps_for`).
+        Integration steps per sample, >= 1 (default :func:`substeps_for`): RK4 sub-steps on
+        a yaw bearing, sixth-order steps on a three-axis rig.
     jit : bool, optional
         Compile the Model to C (default: when a compiler is available).
     progress : callable, optional
