@@ -31,6 +31,7 @@ from airbearing.analysis.shooting.functions import (
     window_jacobian,
 )
 from airbearing.analysis.shooting.penalty import penalised_solver
+from airbearing.analysis.shooting.solver import start_meets_objective_stop
 from airbearing.analysis.shooting.windows import WindowSet  # noqa: F401
 from airbearing.errors import SolverError
 from airbearing.models.model import Model
@@ -486,14 +487,24 @@ class ShootingProblem:
             if raw0 is not None:
                 oracle.prime(x0, raw0)
             del raw0
-            z = solver(x0=x0, lbx=lbx, ubx=ubx)["x"].full().ravel()
+            if (
+                self.objective_stop
+                and oracle.z is not None
+                and start_meets_objective_stop(oracle.r, oracle.J, x0, lbx, ubx)
+            ):
+                # started at its optimum (the horizon's answer from its linearisation):
+                # IPOPT's acceptable stop, met here, without its two iterations
+                z, stats = x0, {"return_status": _ACCEPTABLE, "iter_count": 0}
+            else:
+                z = solver(x0=x0, lbx=lbx, ubx=ubx)["x"].full().ravel()
+                stats = solver.stats()
             r, J = oracle.rj_at(z)
             C = oracle.C  # the defects' Jacobian at the answer (unscaled), for the errors
             if self.reuse_last and oracle.raw is not None:
                 at = (z * scale, p_base.copy(), Sp.copy(), self._data.copy())
                 self._last = (at, oracle.raw)
             oracle.release()
-            return z, solver.stats(), r, unscale_columns(J, scale), C
+            return z, stats, r, unscale_columns(J, scale), C
         if n_link or n_ineq:
             solver, _keep = linked_solver(*self._key(K), self.link, self.link_rows, n_ineq, mi)
             oracle = _keep[-1]
