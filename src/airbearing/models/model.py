@@ -300,6 +300,11 @@ class Model:
         -------
         casadi.Function
             ``step_dt(x, u, p, dt) -> x_next``.
+
+        Raises
+        ------
+        InputError
+            ``order`` is neither 4 nor 6.
         """
         x = ca.SX.sym("x", self.nx)
         u = ca.SX.sym("u", self.nu)
