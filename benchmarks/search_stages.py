@@ -117,7 +117,7 @@ class Counts:
         rows = sorted(self.stats.items(), key=lambda kv: -kv[1][1])
         for (stage, kind, where), (n, s) in rows:
             if s >= 0.05:
-                print(f"{n:5d} {s:8.2f} s  {kind:20s} {stage[:32]:32s} {where}")
+                print(f"{n:5d} {s:8.2f} s  {kind:20s} {stage[:36]:36s} {where}")
             total[kind][0] += n
             total[kind][1] += s
         for kind, (n, s) in total.items():
@@ -134,14 +134,17 @@ def main() -> None:
     log = read_log(args.log, tb)
     counts = Counts()
     counts.install()
-    t0, last = time.monotonic(), [cpu()]
+    t0, last, rounds = time.monotonic(), [cpu()], [1]
 
     def progress(what, done, total):
         c = cpu()
         print(f"{time.monotonic() - t0:8.1f} s wall {c:8.1f} s CPU (+{c - last[0]:.1f})  {what}",
               flush=True)  # fmt: skip
         last[0] = c
-        counts.stage = what.split(":")[0][:30]
+        # the work counted next runs AFTER this line (the next candidate's fit, not this
+        # one's); the round number keeps a later round's same names apart
+        rounds[0] += what.startswith("added ")
+        counts.stage = f"r{rounds[0]} after {what.split(':')[0][:24]}"
 
     result = discrepancy(tb, [log], progress=progress)
     print("effects", result.effects, "std", result.effect_std)
