@@ -11,12 +11,18 @@
 - ``SIM_SUBSTEPS``: the simulator's RK4 sub-steps per sample (``simulate``'s default).
 - :func:`noisy_gyro`: a testbed whose gyro has the public CMG examples' white noise,
   its low-pass kept.
+- :func:`rotor_viscous_problem`: the shooting problem of ``ROTOR`` logs with a viscous
+  friction to fit, on linked pieces.
 """
 
 from __future__ import annotations
 
 import tomllib
 
+import numpy as np
+
+from airbearing.analysis.discrepancy.replay import model_for, problem_for
+from airbearing.analysis.shooting.logs import make_windows, noise_floor, replay_data
 from airbearing.analysis.simulation.artefacts import sample_times, with_gap, with_jitter
 from airbearing.analysis.simulation.on_times import simulate_on_times
 from airbearing.io.testbed import Sensors, testbed_from_dict
@@ -89,3 +95,15 @@ def jittered_platform(tb, seed, *, gap=None, duration=30.0, effects=None):
         attitude_noise=1e-3,
         effects=effects,
     )
+
+
+def rotor_viscous_problem(logs, window_s: float = 10.0):
+    """``(problem, model, S)``: ``logs`` of ``ROTOR`` on linked pieces of ``window_s`` s, the
+    Model with a viscous friction, ``S`` its one column (the friction) of the parameters."""
+    datas = [replay_data(ROTOR, lg) for lg in logs]
+    windows = make_windows(datas, window_s=window_s, linked=True)
+    model = model_for(ROTOR, {"viscous_friction": 0.0})
+    prob = problem_for(model, datas, windows, noise_floor(datas))
+    S = np.zeros((model.n_p, 1))
+    S[model.index(["viscous_friction"], "p")[0], 0] = 1.0
+    return prob, model, S

@@ -13,10 +13,8 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 import pytest
-from rigs import ROTOR
+from rigs import ROTOR, rotor_viscous_problem
 
-from airbearing.analysis.discrepancy.replay import model_for, problem_for
-from airbearing.analysis.shooting.logs import make_windows, noise_floor, replay_data
 from airbearing.analysis.shooting.measurement_noise import _Linearised
 from airbearing.analysis.shooting.process_noise import (
     KAPPA_GRID,
@@ -41,13 +39,7 @@ def _problem(seed: int, phi: float = 0.0, seconds: float = 60.0):
     for i in range(1, t.size):  # AR(1) of marginal level 1.5e-3 rad
         e[i] = phi * e[i - 1] + np.sqrt(1 - phi**2) * e[i]
     log = Log(pd.DataFrame({"t": t, "yaw": yaw + e}), source=f"c{seed}.csv", testbed=ROTOR)
-    datas = [replay_data(ROTOR, log)]
-    windows = make_windows(datas, window_s=10.0, linked=True)
-    model = model_for(ROTOR, {"viscous_friction": 0.0})
-    prob = problem_for(model, datas, windows, noise_floor(datas))
-    S = np.zeros((model.n_p, 1))
-    S[model.index(["viscous_friction"], "p")[0], 0] = 1.0
-    return prob, model, S
+    return rotor_viscous_problem([log])
 
 
 def test_grouped_noise_likelihood_is_the_row_by_row_one():

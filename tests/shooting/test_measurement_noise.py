@@ -10,11 +10,9 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 import pytest
-from rigs import ROTOR
+from rigs import ROTOR, rotor_viscous_problem
 
-from airbearing.analysis.discrepancy.replay import model_for, problem_for
 from airbearing.analysis.shooting.errors import honest_errors
-from airbearing.analysis.shooting.logs import make_windows, noise_floor, replay_data
 from airbearing.analysis.shooting.measurement_noise import (
     MeasurementNoise,
     estimate_measurement_noise,
@@ -50,18 +48,8 @@ def _coast(seed, phi, seconds=120.0, w0=1.2):
     return Log(df, source=f"coast{seed}.csv", testbed=ROTOR)
 
 
-def _problem(logs, piece_s=10.0):
-    datas = [replay_data(ROTOR, lg) for lg in logs]
-    windows = make_windows(datas, window_s=piece_s, linked=True)
-    model = model_for(ROTOR, {"viscous_friction": 0.0})
-    prob = problem_for(model, datas, windows, noise_floor(datas))
-    S = np.zeros((model.n_p, 1))
-    S[model.index(["viscous_friction"], "p")[0], 0] = 1.0
-    return prob, model, S
-
-
 def test_whitening_inverts_the_ar1_covariance_across_pieces_and_holes():
-    prob, _, _ = _problem([_coast(1, 0.0, seconds=30.0)])
+    prob, _, _ = rotor_viscous_problem([_coast(1, 0.0, seconds=30.0)])
     # a hole: one usable row taken out of the second piece (an outlier)
     prob.windows.weight[1, 7] = 0.0
     prob.usable[:] = prob.windows.weight.reshape(-1)[prob.sample] > 0
@@ -84,7 +72,7 @@ def test_whitening_inverts_the_ar1_covariance_across_pieces_and_holes():
 
 
 def test_ar1_noise_is_found_and_white_noise_is_left_white():
-    prob, model, S = _problem([_coast(2, 0.9)])
+    prob, model, S = rotor_viscous_problem([_coast(2, 0.9)])
     top = prob.fit(model.p0, S, np.zeros(1), name="top")
     noise = estimate_measurement_noise(prob, top, 1)
     assert noise is not None
@@ -98,13 +86,13 @@ def test_ar1_noise_is_found_and_white_noise_is_left_white():
     assert marginal == pytest.approx(SIGMA, rel=0.15)
     assert noise.p["yaw"] < 1e-6
 
-    prob_w, model_w, S_w = _problem([_coast(3, 0.0)])
+    prob_w, model_w, S_w = rotor_viscous_problem([_coast(3, 0.0)])
     top_w = prob_w.fit(model_w.p0, S_w, np.zeros(1), name="top")
     assert estimate_measurement_noise(prob_w, top_w, 1) is None
 
 
 def test_gap_and_noise_rms_are_of_the_raw_residual():
-    prob, model, S = _problem([_coast(4, 0.9, seconds=60.0)])
+    prob, model, S = rotor_viscous_problem([_coast(4, 0.9, seconds=60.0)])
     fit = prob.fit(model.p0, S, np.zeros(1), name="white")
     gap = fit.gap
     set_measurement_noise(prob, MeasurementNoise({"yaw": (0.9, 0.5)}, 0.1, {}, {}))
@@ -123,7 +111,7 @@ def test_errors_under_ar1_noise_match_the_spread_over_repeated_runs():
     issue's band: with 8 draws the sample std itself is uncertain by 25 %)."""
     values, stds = [], []
     for seed in range(8):
-        prob, model, S = _problem([_coast(100 + seed, 0.95)])
+        prob, model, S = rotor_viscous_problem([_coast(100 + seed, 0.95)])
         top = prob.fit(model.p0, S, np.zeros(1), name="top")
         fit = estimate_process_noise(prob, model.p0, S, top.theta, delta0=top.delta, start=top)
         assert fit.extra["measurement_noise"] is not None
