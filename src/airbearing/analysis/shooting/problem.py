@@ -55,12 +55,10 @@ def pinned_null_space(N: np.ndarray, rows: np.ndarray, k: int) -> np.ndarray:
 
 
 #: IPOPT iterations a fit held at a bound may take before the bounded fit is run instead:
-#: where it is the bounded optimum it converges in 2 (a 60 s three-axis log's sensor_lag,
-#: against the bounded fit's 12), but where holding the bound leaves directions no log fixes
-#: (a lag of 0 forgets its states' start) it wandered 12 iterations on a 10 min log, against
-#: the bounded fit's 6 (that search, viscous friction and the lag only: 52 s of CPU before
-#: the held fits, 73 s held without a cap, 72 s capped at 4, 64 s capped at 2).
-HELD_MAX_ITER = 2
+#: where it is the bounded optimum it converges in 2 (a 60 s three-axis log's sensor_lag),
+#: but where holding the bound leaves directions no log fixes (a lag of 0 forgets its
+#: states' start) it wandered 12 iterations on a 10 min log, against the bounded fit's 6.
+HELD_MAX_ITER = 4
 
 
 def _bounds(k: int, lower, upper) -> tuple[np.ndarray, np.ndarray]:
