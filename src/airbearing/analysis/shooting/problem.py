@@ -54,13 +54,6 @@ def pinned_null_space(N: np.ndarray, rows: np.ndarray, k: int) -> np.ndarray:
     return N @ T
 
 
-#: IPOPT iterations a fit held at a bound may take before the bounded fit is run instead:
-#: where it is the bounded optimum it converges in 2 (a 60 s three-axis log's sensor_lag),
-#: but where holding the bound leaves directions no log fixes (a lag of 0 forgets its
-#: states' start) it wandered 12 iterations on a 10 min log, against the bounded fit's 6.
-HELD_MAX_ITER = 4
-
-
 def _bounds(k: int, lower, upper) -> tuple[np.ndarray, np.ndarray]:
     """The bounds of ``theta`` (k,) with None as unbounded."""
     lo = np.full(k, -np.inf) if lower is None else np.asarray(lower, dtype=float)
@@ -627,8 +620,7 @@ class ShootingProblem:
             return None  # another entry starts outside its bounds
         try:
             v0, Sp, lb, ub, scale = self._start(p_base, S, th0, lo_h, hi_h, free.delta, name)
-            mi = HELD_MAX_ITER if max_iter is None else min(int(max_iter), HELD_MAX_ITER)
-            held = self._bounded(v0, Sp, lb, ub, scale, S, p_base, None, name, mi, False)
+            held = self._bounded(v0, Sp, lb, ub, scale, S, p_base, None, name, max_iter, False)
         except SolverError:
             return None
         if not np.all((held.theta >= lo) & (held.theta <= hi)):
