@@ -54,13 +54,6 @@ def pinned_null_space(N: np.ndarray, rows: np.ndarray, k: int) -> np.ndarray:
     return N @ T
 
 
-def _bounds(k: int, lower, upper) -> tuple[np.ndarray, np.ndarray]:
-    """The bounds of ``theta`` (k,) with None as unbounded."""
-    lo = np.full(k, -np.inf) if lower is None else np.asarray(lower, dtype=float)
-    hi = np.full(k, np.inf) if upper is None else np.asarray(upper, dtype=float)
-    return lo, hi
-
-
 def unscale_columns(J: sp.csc_matrix, scale: np.ndarray) -> sp.csc_matrix:
     """``J @ diag(1 / scale)`` in place: the Jacobian in the unscaled variables."""
     return scale_columns(sp.csc_matrix(J), 1.0 / np.asarray(scale, dtype=float))
@@ -404,26 +397,13 @@ class ShootingProblem:
                 free = self._free_fit(p_base, S, theta0, lower, upper, delta0, name, max_iter)
             finally:
                 self._keep_start = False
-            lo, hi = _bounds(S.shape[1], lower, upper)
-            if free is not None and np.all((free.theta >= lo) & (free.theta <= hi)):
+            if free is not None:
                 self._start_kept = None
                 return free
-            if free is not None:
-                kept = self._start_kept
-                held = self._held_at_bound(free, p_base, S, lo, hi, name, max_iter)
-                if held is not None:
-                    self._start_kept = None
-                    return held
-                self._start_kept = kept  # the bounded fit starts where the free one did
         v0, Sp, lb, ub, scale = self._start(p_base, S, theta0, lower, upper, delta0, name)
         if not self._keep_start:  # (the free fit keeps its start for the bounded fit)
             self._start_kept = None
         ineq = None if constraint is None else Inequality(constraint)
-        return self._bounded(v0, Sp, lb, ub, scale, S, p_base, ineq, name, max_iter,
-                             accept_max_iter)  # fmt: skip
-
-    def _bounded(self, v0, Sp, lb, ub, scale, S, p_base, ineq, name, max_iter, accept_max_iter):
-        """IPOPT from the start :meth:`_start` made: the :class:`Fit` or a SolverError."""
         mi = IPOPT_MAX_ITER if max_iter is None else int(max_iter)
         z, stats, r, J, Jc = self._solve(v0, Sp, lb, ub, scale, p_base, ineq, mi)
         status = str(stats.get("return_status", "?"))
@@ -582,52 +562,19 @@ class ShootingProblem:
         )
 
     def _free_fit(self, p_base, S, theta0, lower, upper, delta0, name, max_iter):
-        """The fit without bounds on ``theta`` from a start inside them, else None (the
-        caller uses it when it ends inside: level "warning" as a bounded fit's would be)."""
+        """The fit without bounds on ``theta`` when it converges inside them, else None."""
         k = S.shape[1]
-        lo, hi = _bounds(k, lower, upper)
+        lo = np.full(k, -np.inf) if lower is None else np.asarray(lower, dtype=float)
+        hi = np.full(k, np.inf) if upper is None else np.asarray(upper, dtype=float)
         th0 = np.zeros(k) if theta0 is None else np.asarray(theta0, dtype=float)
         if not np.all((th0 >= lo) & (th0 <= hi)):
             return None
         try:
-            return self.fit(p_base, S, th0, delta0=delta0, name=name, max_iter=max_iter)
+            fit = self.fit(p_base, S, th0, delta0=delta0, name=name, max_iter=max_iter)
         except SolverError:
             return None
-
-    def _held_at_bound(self, free, p_base, S, lo, hi, name, max_iter):
-        """The bounded fit when the ``free`` fit left the bounds in one entry of ``theta``:
-        that entry held at the bound it crossed, the rest free, warm-started from ``free``;
-        None when it is not the bounded optimum (another entry outside, or the objective
-        would fall moving off the bound into the bounds: a multiplier of the wrong sign).
-
-        With that entry's bound the only active one, the held fit meets the bounded fit's
-        KKT conditions (the gradient in the free variables zero, the bound's multiplier
-        ``dF/dtheta_i`` >= 0 at a lower bound, <= 0 at an upper one, F = 0.5 |r|^2): the
-        same answer as the interior-point fit to its tolerance, for a few iterations
-        instead of the barrier's walk to the bound (12 IPOPT iterations on a 60 s log).
-        """
-        below, above = free.theta < lo, free.theta > hi
-        out = np.flatnonzero(below | above)
-        if out.size != 1:
-            return None
-        i = int(out[0])
-        at = lo[i] if below[i] else hi[i]
-        th0 = free.theta.copy()
-        th0[i] = at
-        lo_h, hi_h = lo.copy(), hi.copy()
-        lo_h[i] = hi_h[i] = at
-        if not np.all((th0 >= lo_h) & (th0 <= hi_h)):
-            return None  # another entry starts outside its bounds
-        try:
-            v0, Sp, lb, ub, scale = self._start(p_base, S, th0, lo_h, hi_h, free.delta, name)
-            held = self._bounded(v0, Sp, lb, ub, scale, S, p_base, None, name, max_iter, False)
-        except SolverError:
-            return None
-        if not np.all((held.theta >= lo) & (held.theta <= hi)):
-            return None
-        r, J = held.extra["r"], held.extra["J"]
-        g = float(np.ravel(J[:, [i]].T @ r)[0])  # dF/dtheta_i at the bound
-        return held if (g >= 0.0 if below[i] else g <= 0.0) else None
+        inside = np.all((fit.theta >= lo) & (fit.theta <= hi))
+        return fit if inside else None  # level "warning" is used as a bounded fit would be
 
     # ------------------------------------------------------------------ after a fit
     def covariance(self, fit: Fit, k: int, *, rate: float = 1.0, att: float = 1.0,
