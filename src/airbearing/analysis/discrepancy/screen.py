@@ -28,7 +28,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 import scipy.sparse as sp
 
-from airbearing.analysis.discrepancy.candidates import smoothed
+from airbearing.analysis.discrepancy.lag_score import lag_regressor, linked_lag_bound
 from airbearing.analysis.discrepancy.trial import (
     CandidateResult,
     chi2_threshold,
@@ -279,19 +279,35 @@ def screened_lag(problem, current, cand, datas, ln_n, k_added, before):
     ``ceil(3 tau / dt)`` samples (more than they can take). When even that stays below
     ``SCREEN_FRACTION`` of what naming a lag needs (it counts the free starts too), the lag
     Model (more states, another compiled structure) is neither built nor fitted.
+
+    On linked pieces (``problem.penalty`` set) the bound is :func:`.lag_score.linked_lag_bound`:
+    the window states and the chosen effects refitted with the lag through the current fit's
+    whole stacked Jacobian (the defects of the attitude and rate are the lag-free ones, those
+    of the lagged rate dropped), the head rows of every window left out for every lag from 0
+    to its physical bound. Its likelihood ratio is an upper bound of the linearised lag
+    fit's: below ``SCREEN_FRACTION`` of ``max(chi2, k BIC)`` the IPOPT fit could only reach
+    it with a likelihood ratio twice the linearised one, so it could not have been named.
     """
-    if problem.outputs[0] != "rate" or problem.n_lag or problem.penalty is not None:
-        return None  # (linked pieces: the lag is fitted by IPOPT)
+    if problem.outputs[0] != "rate" or problem.n_lag:
+        return None
+    need = max(chi2_threshold(k_added), k_added * ln_n)
+    if problem.penalty is not None:
+        bound = linked_lag_bound(problem, current, datas, float(cand.upper[0]))
+        if bound is None:
+            return None
+        tau, std, rss, e = bound.tau, bound.std, bound.rss, bound.e
+        lr = lr_of(current, rss)
+        if lr >= SCREEN_FRACTION * need:
+            return None
+        how = (
+            f"the lag's first-order term, every piece's start of the lagged rate free over "
+            f"its first {bound.reach} samples, the lagged rate's defects unpenalised"
+        )
+        return _lag_result(problem, current, cand, (tau, std, rss, e, lr), need, k_added,
+                           ln_n, before, how)  # fmt: skip
     w, nd, nw, n = problem.windows, problem.n_delta, problem.windows.n, problem.n_win_res
-    L, na = w.length, problem.n_rate
-    wdots = [smoothed(d)[1:] for d in datas]
-    x = np.zeros(problem.n_win_res * nw)
-    for j in range(nw):
-        w_dot, ok = wdots[int(w.source[j])]
-        rows = w.rows[j]
-        good = ok[rows] & (w.weight[j] > 0)
-        vals = np.where(good[:, None], w_dot[rows], 0.0) / problem.sigma_rate
-        x[j * n : j * n + L * na] = vals.reshape(-1)  # rate group first, sample-major
+    na = problem.n_rate
+    x = lag_regressor(problem, datas)
     r, J = current.extra["r"], current.extra["J"].tocsc()
     k0 = J.shape[1] - nd * nw
     xp = np.zeros_like(x)  # the regressor with every window's initial state eliminated
@@ -308,11 +324,19 @@ def screened_lag(problem, current, cand, datas, ln_n, k_added, before):
     starts = sum(float(np.sum(e[j * n : j * n + reach * na] ** 2)) for j in range(nw))
     rss = max(float(e @ e) - starts, 1e-300)
     lr = lr_of(current, rss)
-    need = max(chi2_threshold(k_added), k_added * ln_n)
     if lr >= SCREEN_FRACTION * need:
         return None
     s2 = current.rss / max(current.n_res - current.n_free, 1)
     std = math.sqrt(s2 / xx)
+    how = "the lag's first-order term and every window's free start"
+    return _lag_result(problem, current, cand, (tau, std, rss, e, lr), need, k_added, ln_n,
+                       before, how)  # fmt: skip
+
+
+def _lag_result(problem, current, cand, at, need, k_added, ln_n, before, how):
+    """The :class:`CandidateResult` of a lag the score test screened; ``at`` is
+    ``(tau, std, rss, e, lr)`` of its bound, ``how`` what the bound credits."""
+    tau, std, rss, e, lr = at
     dbic = -lr + k_added * ln_n
     at_bound = tau == 0.0
     reason = (
@@ -344,7 +368,7 @@ def screened_lag(problem, current, cand, datas, ln_n, k_added, before):
         start=cand.value(np.array([tau])),
         note=(
             f"screened by the score test in the lag-free model: a likelihood ratio of at most "
-            f"{lr:.3g} (the lag's first-order term and every window's free start), under "
+            f"{lr:.3g} ({how}), under "
             f"{SCREEN_FRACTION:g} x the {need:.3g} naming needs; the lag model was not fitted"
         ),
         candidate=cand,
