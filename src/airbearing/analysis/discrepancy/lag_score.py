@@ -34,7 +34,10 @@ bound, and the bound is the smallest over them: every lag from 0 to its bound is
 The bound is conservative in what it credits (every head row free, no lag defect
 penalised, the effects and window states refitted jointly with the lag); it holds for the
 linearised problem. The screen that uses it keeps a factor ``1 / SCREEN_FRACTION`` (2) for
-the nonlinearity (:func:`.screen.screened_lag`), as on unlinked windows.
+the nonlinearity (:func:`.screen.screened_lag`), as on unlinked windows. Measured against
+the IPOPT fit of the lag Model: a 20 s platform oscillation without a lag, bound 6.6,
+IPOPT 7.0 (its window states refitted nonlinearly); the 60 s and 10 min seed-004 logs,
+bound 3.4e-4 and 5.4e-3, IPOPT 1.7e-4 and 4.3e-4, against the 186 and 2190 naming needs.
 """
 
 from __future__ import annotations
