@@ -31,7 +31,10 @@ from airbearing.errors import SolverError
 START_YAW = "start_yaw"
 
 
-def _try(search, cand, chosen, theta_chosen, current, current_lag, ln_n, starts, before, lin=None):
+def _try(search, cand, chosen, theta_chosen, current, current_lag, ln_n, starts, before, lin=None,
+         best=None):  # fmt: skip
+    """``cand`` judged at ``current`` (module doc); ``best``: the smallest delta-BIC of the
+    round's significant IPOPT fits so far (:func:`.screen.screened`), None when none."""
     lag = current_lag or cand.lag
     problem = search.problem(lag)
     model = search.models[lag]
@@ -88,8 +91,9 @@ def _try(search, cand, chosen, theta_chosen, current, current_lag, ln_n, starts,
                 if lin is not None:  # the screen also checks the residual at th_reg
                     th_reg = np.clip(th0, cand.lower, cand.upper)
                     res = screened(
-                        lin, cand, k_sel, lower, upper, current, ln_n, before, search.folds, th_reg
-                    )
+                        lin, cand, k_sel, lower, upper, current, ln_n, before, search.folds, th_reg,
+                        best,
+                    )  # fmt: skip
                     if res is not None:
                         how = "Gauss-Newton step from the current fit"
                         return replace(res, start=start_json("nominal", res.value, method=how))

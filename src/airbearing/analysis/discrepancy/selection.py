@@ -130,14 +130,23 @@ def _round(search, sel: _Selection, remaining, screen, workers, prog) -> list:
             [c for c in remaining if c.smooth and not c.lag],
         )
 
+    # the delta-BIC of the round's significant IPOPT fits so far: a step far above the best
+    # of them is judged on its own (.screen.FAR_FACTOR)
+    fitted = []
+
     def run(c, lin=lin):
-        return _try(search, c, chosen, theta, current, lag, sel.ln_n, sel.starts, before, lin)
+        best = min(fitted, default=None)
+        return _try(search, c, chosen, theta, current, lag, sel.ln_n, sel.starts, before, lin,
+                    best)  # fmt: skip
 
     def fit_all(group):
         out = []
 
         def told(res):  # each candidate counted as it finishes (the estimate follows them)
             out.append(res)
+            ipopt = res.fit is not None and res.fit.level in ("converged", "warning")
+            if ipopt and res.significant and not res.retry_failed:
+                fitted.append(res.delta_bic)
             prog.done += 1
             prog(f"{res.label}: gap {res.gap:.3g} {unit}, {res.status}")
 

@@ -14,7 +14,8 @@ __all__ = ["LATER_COMPILES", "STEP_FITS", "step_lengths"]
 
 
 #: Expected lengths of the search's steps, in nominal fits (the first step's fit, timed):
-#: a screened candidate (score test on the shared Jacobian), an IPOPT fit of a candidate
+#: a screened candidate (score test on the shared Jacobian; a sensor lag's on the lag-free
+#: fit, on fixed windows and linked pieces alike), an IPOPT fit of a candidate
 #: (one that reaches IPOPT's iteration limit takes several), the per-axis form of one
 #: (fitted only when its one-value form is significant), the round's own work
 #: (cross-validation, regression starts, the shared Jacobian), the horizon (the
@@ -69,8 +70,8 @@ def step_lengths(cands, rounds, screen, n_validate, step_s, compile_s) -> list[f
     ):
         if c.per_axis:
             slots.append(STEP_FITS["per axis"])
-        elif screen and c.smooth and not c.lag:
-            slots.append(STEP_FITS["screened"])
+        elif screen and c.smooth:  # a sensor lag too: its score test decides it unless the
+            slots.append(STEP_FITS["screened"])  # logs have one (.screen.screened_lag)
         else:
             slots.append(STEP_FITS["fit"])
     out = [step_s]
