@@ -163,3 +163,68 @@ def demo_run(tmp_path_factory):
         timeout=1800,
     )
     return cwd / "demo-out", proc
+
+
+@pytest.fixture(scope="session")
+def computed_once(tmp_path_factory):
+    """``computed_once(key, compute) -> compute()``, computed once per test run.
+
+    For an expensive library result that tests in several files read (e.g. a two-step
+    balancing run): the first caller computes it, the others get a copy. Under
+    pytest-xdist the copy is a pickle in the run's shared temporary folder, written under
+    a file lock, so the workers compute it once between them, not once each (the pattern
+    of pytest-xdist's docs, "Making session-scoped fixtures execute only once").
+    ``key`` names the computation completely (its inputs); ``compute`` takes no arguments.
+    """
+    import fcntl
+    import os
+    import pickle
+
+    root = tmp_path_factory.getbasetemp()
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        root = root.parent  # shared by the workers of this run
+    folder = root / "computed-once"
+    folder.mkdir(exist_ok=True)
+    here: dict = {}
+    computing: set = set()
+
+    def get(key: str, compute):
+        if key in computing:  # a compute that calls itself would wait on its own lock
+            raise RuntimeError(f"computed_once({key!r}) called while computing it")
+        if key not in here:
+            computing.add(key)
+            path = folder / f"{key}.pickle"
+            try:
+                with open(folder / f"{key}.lock", "w") as lock:
+                    fcntl.flock(lock, fcntl.LOCK_EX)
+                    if path.exists():
+                        here[key] = path.read_bytes()
+                    else:
+                        here[key] = pickle.dumps(compute())
+                        path.write_bytes(here[key])
+            finally:
+                computing.discard(key)
+        return pickle.loads(here[key])
+
+    return get
+
+
+@pytest.fixture(scope="session")
+def seed004_two_step(computed_once):
+    """``seed004_two_step(seed)``: ``two_step(load_testbed("seed004-platform"), seed=seed)``
+    (the library's defaults), computed once per test run: the paper's-reduction test reads
+    noise seeds 0-3, the command-line tests that only check what the command passes and
+    prints read seed 0 (one end-to-end command stays: tests/cli/test_cli_commands.py)."""
+
+    # bound here, at set-up: the command-line tests patch the module's two_step to this
+    # fixture, which must still reach the library's
+    from airbearing.analysis.balancing.two_step import two_step
+    from airbearing.io.testbed import load_testbed
+
+    def get(seed: int):
+        return computed_once(
+            f"two_step-seed004-platform-seed{seed}",
+            lambda: two_step(load_testbed("seed004-platform"), seed=seed),
+        )
+
+    return get
