@@ -228,3 +228,29 @@ def seed004_two_step(computed_once):
         )
 
     return get
+
+
+@pytest.fixture(scope="session")
+def tuned_once(computed_once):
+    """``tuned_once(testbed, loop, spec=None, split=None)``: ``airbearing.tune`` of those
+    arguments, computed once per test run (a tuning costs 8-11 s of CPU on cmg-yaw; the
+    tuner's own caches only help within one worker process). The key is the arguments'
+    values (the testbed's, the loop's, the specification's as a :class:`Spec`), so
+    ``Spec()`` and ``Spec(phase_margin_deg=45.0, gain_margin_db=6.0)`` share one run (an int
+    45 would not: its pickle differs)."""
+    import hashlib
+    import pickle
+
+    import airbearing as ab
+
+    # bound here, at set-up: a command-line test may patch the tuner to this fixture
+    tune, Spec = ab.tune, ab.Spec
+
+    def get(testbed, loop: str, spec=None, split=None):
+        full = spec if isinstance(spec, Spec) else Spec(**(spec or {}))
+        name = getattr(loop, "value", loop)  # the command line's enum or a str
+        digest = hashlib.sha1(pickle.dumps((testbed, name, full, split))).hexdigest()[:16]
+        key = f"tune-{name}-{digest}"
+        return computed_once(key, lambda: tune(testbed, loop, spec, split=split))
+
+    return get
