@@ -5,6 +5,10 @@ hidden viscous friction, the seed-001 CMG with a 14 % yaw-inertia error, a CMG w
 nothing hidden, three free oscillations for identification) are simulated here, once per
 test session, into a temporary folder laid out like the public examples:
 ``testbed.toml``, ``log.csv`` (or ``log1.csv``...), ``answer.json``.
+
+Expensive library results several test files read (a two-step balancing, a tuning, a
+stability report) are computed once per test run, across pytest-xdist workers too:
+``computed_once``, ``seed004_two_step``, ``tuned_once``, ``library_once``.
 """
 
 from __future__ import annotations
