@@ -260,14 +260,16 @@ def tuned_once(computed_once):
     return get
 
 
-@pytest.fixture
-def library_once(monkeypatch, tuned_once, computed_once):
-    """``airbearing.tune`` and ``airbearing.stability_report`` (where the package, its
-    command line and a page's script look them up) patched, for one test, to compute each
-    distinct call once per test run (:func:`tuned_once`; a report by the values of its
-    arguments). For tests of code that CALLS them (a notebook script, a page, a command's
-    table): the same arguments give the same result, computed by whichever test asks first.
-    A call with ``progress`` gets no progress calls when the result is already there."""
+@pytest.fixture(scope="session")
+def library_patches(tuned_once, computed_once):
+    """``library_patches(mp)``: patch, on the ``pytest.MonkeyPatch`` ``mp``,
+    ``airbearing.tune`` and ``airbearing.stability_report`` (where the package, its command
+    line and a page's script look them up) to compute each distinct call once per test run
+    (:func:`tuned_once`; a report by the values of its arguments, ``spec=None`` being
+    ``Spec()`` as in the library). For tests of code that CALLS them (a notebook script, a
+    page, a command's table or files): the same arguments give the same result, computed by
+    whichever test asks first. A call with ``progress`` gets no progress calls when the
+    result is already there. Function-scoped tests use :func:`library_once`."""
     import hashlib
     import pickle
 
@@ -275,20 +277,29 @@ def library_once(monkeypatch, tuned_once, computed_once):
     import airbearing.design.tuning as tuning
     import airbearing.reporting.stability as stability
 
-    real_report = stability.stability_report
+    real_report, Spec = stability.stability_report, ab.Spec
 
     def tune(testbed, loop, spec=None, *, split=None, progress=None):
         return tuned_once(testbed, loop, spec, split)
 
     def stability_report(testbed, loop, *, gains=None, split=None, spec=None, progress=None):
         name = getattr(loop, "value", loop)
-        args = (testbed, name, gains, split, spec)
+        args = (testbed, name, gains, split, Spec() if spec is None else spec)
         key = f"stability_report-{name}-{hashlib.sha1(pickle.dumps(args)).hexdigest()[:16]}"
         return computed_once(
             key, lambda: real_report(testbed, loop, gains=gains, split=split, spec=spec)
         )
 
-    for module in (ab, tuning):
-        monkeypatch.setattr(module, "tune", tune)
-    for module in (ab, stability):
-        monkeypatch.setattr(module, "stability_report", stability_report)
+    def apply(mp) -> None:
+        for module in (ab, tuning):
+            mp.setattr(module, "tune", tune)
+        for module in (ab, stability):
+            mp.setattr(module, "stability_report", stability_report)
+
+    return apply
+
+
+@pytest.fixture
+def library_once(monkeypatch, library_patches):
+    """:func:`library_patches` for one test."""
+    library_patches(monkeypatch)
