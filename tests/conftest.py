@@ -5,6 +5,10 @@ hidden viscous friction, the seed-001 CMG with a 14 % yaw-inertia error, a CMG w
 nothing hidden, three free oscillations for identification) are simulated here, once per
 test session, into a temporary folder laid out like the public examples:
 ``testbed.toml``, ``log.csv`` (or ``log1.csv``...), ``answer.json``.
+
+Expensive library results several test files read (a two-step balancing, a tuning, a
+stability report) are computed once per test run, across pytest-xdist workers too:
+``computed_once``, ``seed004_two_step``, ``tuned_once``, ``library_once``.
 """
 
 from __future__ import annotations
@@ -163,3 +167,139 @@ def demo_run(tmp_path_factory):
         timeout=1800,
     )
     return cwd / "demo-out", proc
+
+
+@pytest.fixture(scope="session")
+def computed_once(tmp_path_factory):
+    """``computed_once(key, compute) -> compute()``, computed once per test run.
+
+    For an expensive library result that tests in several files read (e.g. a two-step
+    balancing run): the first caller computes it, the others get a copy. Under
+    pytest-xdist the copy is a pickle in the run's shared temporary folder, written under
+    a file lock, so the workers compute it once between them, not once each (the pattern
+    of pytest-xdist's docs, "Making session-scoped fixtures execute only once").
+    ``key`` names the computation completely (its inputs); ``compute`` takes no arguments.
+    """
+    import fcntl
+    import os
+    import pickle
+
+    root = tmp_path_factory.getbasetemp()
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        root = root.parent  # shared by the workers of this run
+    folder = root / "computed-once"
+    folder.mkdir(exist_ok=True)
+    here: dict = {}
+    computing: set = set()
+
+    def get(key: str, compute):
+        if key in computing:  # a compute that calls itself would wait on its own lock
+            raise RuntimeError(f"computed_once({key!r}) called while computing it")
+        if key not in here:
+            computing.add(key)
+            path = folder / f"{key}.pickle"
+            try:
+                with open(folder / f"{key}.lock", "w") as lock:
+                    fcntl.flock(lock, fcntl.LOCK_EX)
+                    if path.exists():
+                        here[key] = path.read_bytes()
+                    else:
+                        here[key] = pickle.dumps(compute())
+                        path.write_bytes(here[key])
+            finally:
+                computing.discard(key)
+        return pickle.loads(here[key])
+
+    return get
+
+
+@pytest.fixture(scope="session")
+def seed004_two_step(computed_once):
+    """``seed004_two_step(seed)``: ``two_step(load_testbed("seed004-platform"), seed=seed)``
+    (the library's defaults), computed once per test run: the paper's-reduction test reads
+    noise seeds 0-3, the command-line tests that only check what the command passes and
+    prints read seed 0 (one end-to-end command stays: tests/cli/test_cli_commands.py)."""
+
+    # bound here, at set-up: the command-line tests patch the module's two_step to this
+    # fixture, which must still reach the library's
+    from airbearing.analysis.balancing.two_step import two_step
+    from airbearing.io.testbed import load_testbed
+
+    def get(seed: int):
+        return computed_once(
+            f"two_step-seed004-platform-seed{seed}",
+            lambda: two_step(load_testbed("seed004-platform"), seed=seed),
+        )
+
+    return get
+
+
+@pytest.fixture(scope="session")
+def tuned_once(computed_once):
+    """``tuned_once(testbed, loop, spec=None, split=None)``: ``airbearing.tune`` of those
+    arguments, computed once per test run (a tuning costs 8-11 s of CPU on cmg-yaw; the
+    tuner's own caches only help within one worker process). The key is the arguments'
+    values (the testbed's, the loop's, the specification's as a :class:`Spec`), so
+    ``Spec()`` and ``Spec(phase_margin_deg=45.0, gain_margin_db=6.0)`` share one run (an int
+    45 would not: its pickle differs)."""
+    import hashlib
+    import pickle
+
+    import airbearing as ab
+
+    # bound here, at set-up: a command-line test may patch the tuner to this fixture
+    tune, Spec = ab.tune, ab.Spec
+
+    def get(testbed, loop: str, spec=None, split=None):
+        full = spec if isinstance(spec, Spec) else Spec(**(spec or {}))
+        name = getattr(loop, "value", loop)  # the command line's enum or a str
+        digest = hashlib.sha1(pickle.dumps((testbed, name, full, split))).hexdigest()[:16]
+        key = f"tune-{name}-{digest}"
+        return computed_once(key, lambda: tune(testbed, loop, spec, split=split))
+
+    return get
+
+
+@pytest.fixture(scope="session")
+def library_patches(tuned_once, computed_once):
+    """``library_patches(mp)``: patch, on the ``pytest.MonkeyPatch`` ``mp``,
+    ``airbearing.tune`` and ``airbearing.stability_report`` (where the package, its command
+    line and a page's script look them up) to compute each distinct call once per test run
+    (:func:`tuned_once`; a report by the values of its arguments, ``spec=None`` being
+    ``Spec()`` as in the library). For tests of code that CALLS them (a notebook script, a
+    page, a command's table or files): the same arguments give the same result, computed by
+    whichever test asks first. A call with ``progress`` gets no progress calls when the
+    result is already there. Function-scoped tests use :func:`library_once`."""
+    import hashlib
+    import pickle
+
+    import airbearing as ab
+    import airbearing.design.tuning as tuning
+    import airbearing.reporting.stability as stability
+
+    real_report, Spec = stability.stability_report, ab.Spec
+
+    def tune(testbed, loop, spec=None, *, split=None, progress=None):
+        return tuned_once(testbed, loop, spec, split)
+
+    def stability_report(testbed, loop, *, gains=None, split=None, spec=None, progress=None):
+        name = getattr(loop, "value", loop)
+        args = (testbed, name, gains, split, Spec() if spec is None else spec)
+        key = f"stability_report-{name}-{hashlib.sha1(pickle.dumps(args)).hexdigest()[:16]}"
+        return computed_once(
+            key, lambda: real_report(testbed, loop, gains=gains, split=split, spec=spec)
+        )
+
+    def apply(mp) -> None:
+        for module in (ab, tuning):
+            mp.setattr(module, "tune", tune)
+        for module in (ab, stability):
+            mp.setattr(module, "stability_report", stability_report)
+
+    return apply
+
+
+@pytest.fixture
+def library_once(monkeypatch, library_patches):
+    """:func:`library_patches` for one test."""
+    library_patches(monkeypatch)

@@ -75,7 +75,7 @@ def test_bad_gains_are_input_errors(gains, argument):
 
 
 @pytest.mark.slow  # over 3 s of an idle core: CI runs it once (.ci/run)
-def test_dict_gains_run_as_the_same_sequence():
+def test_dict_gains_run_as_the_same_sequence(library_once):
     """The docstring's ``gains : dict (K_p, K_i, K_w)``: the dict and the tuple in that order
     give the same run, and tune()'s gains are accepted as they come."""
     as_dict = ab.slew(CY, gains={"K_w": 5.0, "K_p": 4.0, "K_i": 0.01}, duration=2.0, ideal=True)

@@ -159,7 +159,7 @@ def test_check_log_is_the_log_check_json(tmp_path):
 
 
 @pytest.mark.slow
-def test_notebook_script_raw_log_to_effect_inertia_gains_report(tmp_path):
+def test_notebook_script_raw_log_to_effect_inertia_gains_report(tmp_path, library_once):
     """The issue's notebook: only `ab.`, from a raw log (checked) to an identified inertia,
     tuned gains and a stability report; each result prints in a few lines."""
     from pathlib import Path
@@ -186,7 +186,7 @@ def test_notebook_script_raw_log_to_effect_inertia_gains_report(tmp_path):
     assert abs(inertia.inertia[0][0] / truth[0][0] - 1) < 0.02
 
     cmg = ab.load_testbed("cmg-yaw")
-    tuned = ab.tune(cmg, "attitude")
+    tuned = ab.tune(cmg, "attitude")  # with its report: once per test run (library_once)
     report, margins = ab.stability_report(cmg, "attitude", gains=tuned.gains)
     report.write(tmp_path / "report.html")
     analysis = ab.analyse_loop(ab.make_loop(cmg, "attitude", gains=tuned.gains))

@@ -83,24 +83,19 @@ def test_cli_two_step_json_keys(tmp_path, monkeypatch):
     assert data["ke_reduction"] >= 0.99  # seed 004: 99.75 % in simulation
 
 
-#: ``two_step(load_testbed("seed004-platform"), seed=s)`` by noise seed, run once per
-#: module (the paper's-reduction test and the command line's terminal test read seed 0).
-_PLATFORM_RUNS: dict[int, TwoStepResult] = {}
-
-
-def _two_step_seed004_platform(seed: int) -> TwoStepResult:
-    if seed not in _PLATFORM_RUNS:
-        _PLATFORM_RUNS[seed] = two_step(load_testbed("seed004-platform"), seed=seed)
-    return _PLATFORM_RUNS[seed]
+# ``two_step(load_testbed("seed004-platform"), seed=s)`` by noise seed: the session
+# fixture ``seed004_two_step`` (tests/conftest.py) runs each once per test run; the
+# paper's-reduction test, the command line's terminal test here and the command line's
+# table test (tests/cli/test_cli_help_and_defaults.py) read seed 0.
 
 
 @pytest.mark.slow
-def test_seed004_platform_two_step_reaches_the_papers_reduction():
+def test_seed004_platform_two_step_reaches_the_papers_reduction(seed004_two_step):
     """``balance seed004-platform --two-step``, 4 noise seeds: seed 004 Sec. "Simulation
     results" reports a kinetic-energy spread falling from 0.0011 to 2.7142e-6 J (99.75 %),
     from the true rates of its simulation (eqs. 52-54, "neglecting the air friction")."""
     tb = load_testbed("seed004-platform")
-    runs = [_two_step_seed004_platform(s) for s in range(4)]
+    runs = [seed004_two_step(s) for s in range(4)]
     assert np.median([r.ke_reduction for r in runs]) >= 0.9975, [r.ke_reduction for r in runs]
     step = tb.masses.step
     for r in runs:
@@ -141,7 +136,7 @@ def test_E_is_eq_53_as_written_twice_the_kinetic_energy():
 
 
 @pytest.mark.slow  # over 3 s of an idle core: CI runs it once (.ci/run)
-def test_cli_says_what_E_is(capsys, monkeypatch):
+def test_cli_says_what_E_is(capsys, monkeypatch, seed004_two_step):
     """The terminal names the number: E = w^T J w (seed 004 eq. 53), twice the kinetic
     energy, in J; the JSON keys stay (contract).
 
@@ -155,7 +150,7 @@ def test_cli_says_what_E_is(capsys, monkeypatch):
 
     def same_run(tb, *, seed=0, **options):
         calls.append((tb.name, seed, sorted(options)))
-        return _two_step_seed004_platform(seed)
+        return seed004_two_step(seed)
 
     monkeypatch.setattr(module, "two_step", same_run)
     assert run(["-q", "balance", "seed004-platform", "--two-step"]) == 0

@@ -368,7 +368,16 @@ def test_balance_table_of_a_loop_that_is_not_stable(tmp_path, capsys):
 
 
 @pytest.mark.slow  # over 3 s of an idle core: CI runs it once (.ci/run)
-def test_two_step_table_in_words(capsys):
+def test_two_step_table_in_words(capsys, monkeypatch, seed004_two_step):
+    # the command gets the run of the library's defaults the balancing tests make anyway
+    # (tests/conftest.py); its end-to-end run: tests/cli/test_cli_commands.py
+    from airbearing.analysis.balancing import two_step as module
+
+    def same_run(tb, *, seed=0, **options):  # the library's defaults, as the command passes
+        assert tb.name == "seed004-platform" and set(options) == {"progress"}, options
+        return seed004_two_step(seed)
+
+    monkeypatch.setattr(module, "two_step", same_run)
     assert run(["-q", "balance", "seed004-platform", "--two-step"]) == 0
     out = capsys.readouterr().out
     for raw in ("ke rates", "in plane known", "ke std", "sliders step1", "identify method"):

@@ -347,8 +347,9 @@ def test_report_help_says_the_output_is_required(capsys):
 
 
 @pytest.mark.slow  # over 3 s of an idle core: CI runs it once (.ci/run)
-def test_gains_table_has_units(capsys):
-    # the nominal inertia only (one corner, not three): the table is the same
+def test_gains_table_has_units(capsys, library_once):
+    # the nominal inertia only (one corner, not three): the table is the same; the tuning
+    # is the API tests' (tests/conftest.py library_once), what is tested is the table
     assert run(["--quiet", "gains", "cmg-yaw", "--inertia-uncertainty", "0"]) == 0
     lines = [line.split() for line in capsys.readouterr().out.splitlines()[:5] if line.strip()]
     rows = {line[0]: line[1:] for line in lines}

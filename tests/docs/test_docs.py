@@ -70,10 +70,12 @@ def _python_blocks(text: str) -> list[str]:
 
 @pytest.mark.slow
 @pytest.mark.parametrize("page", RUN_PAGES)
-def test_page_python_blocks_run(page, tmp_path, monkeypatch):
+def test_page_python_blocks_run(page, tmp_path, monkeypatch, library_once):
     """Each block runs as a script (``__name__ == "__main__"``, a fresh namespace) in this
     interpreter: a new one per block paid ~3 s of imports and model building each; the
-    README's blocks (test_readme_commands.py) are the ones run in a new interpreter."""
+    README's blocks (test_readme_commands.py) are the ones run in a new interpreter. A
+    tuning or stability report a page asks for with the arguments another test asked for
+    is that test's (``library_once``, tests/conftest.py: once per test run)."""
     blocks = _python_blocks((DOCS / page).read_text())
     assert blocks, f"{page}: no python block"
     shutil.copytree(ROOT / "examples", tmp_path / "examples")

@@ -38,10 +38,16 @@ def _in(folder, commands):
 
 
 @pytest.fixture(scope="module")
-def attitude_report(tmp_path_factory):
-    """The README's ``gains`` and ``report`` commands on cmg-yaw: (folder, exit statuses)."""
+def attitude_report(tmp_path_factory, library_patches):
+    """The README's ``gains`` and ``report`` commands on cmg-yaw: (folder, exit statuses).
+
+    Their tuning and analysis are the library calls of the same arguments other tests make
+    (tests/conftest.py ``library_patches``: once per test run); the commands' parsing,
+    files and rendering are theirs. The balancing pair below runs its own end to end."""
     d = tmp_path_factory.mktemp("report")
-    return d, _in(d, [README_GAINS_ARGS, README_REPORT_ARGS])
+    with pytest.MonkeyPatch.context() as mp:
+        library_patches(mp)
+        return d, _in(d, [README_GAINS_ARGS, README_REPORT_ARGS])
 
 
 @pytest.fixture(scope="module")
