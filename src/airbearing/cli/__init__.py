@@ -292,6 +292,10 @@ def main(argv: list[str] | None = None) -> None:
         typer.echo(help_text)
         return
     verbose = any(a in ("--verbose", "-v") for a in args[: max(start - len(_path), 0)])
+    if _path[:1] in (("discrepancy",), ("replay",)):
+        from airbearing.cli.process_settings import one_blas_thread
+
+        one_blas_thread()  # before anything loads numpy (the callback's CasADi does)
     try:
         with chatter_to_debug_log(verbose, fds=console):
             if console:

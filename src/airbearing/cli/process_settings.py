@@ -1,7 +1,9 @@
 """Process-wide settings of short-lived CLI processes (BLAS threads, malloc).
 
-Each is called by a command before its heavy imports; none changes a result, only
-where the time goes. Kept here so every command that needs one calls the same code.
+Each is called for a command before its heavy imports (:func:`one_blas_thread` by
+:func:`airbearing.cli.main`, before the global callback loads numpy with CasADi); none
+changes a result, only where the time goes. Kept here so every command that needs one
+calls the same code.
 """
 
 from __future__ import annotations
