@@ -28,9 +28,11 @@ print(json.dumps(seen))
 """
 
 
-@pytest.mark.parametrize(("command", "threads"), [("discrepancy", "1"), ("replay", "1"),
-                                                  ("identify", None)])  # fmt: skip
-def test_numpy_loads_with_one_blas_thread_for_the_search_commands(command, threads, tmp_path):
+CASES = [("discrepancy", "1"), ("replay", "1"), ("identify", "1"), ("simulate", None)]
+
+
+@pytest.mark.parametrize(("command", "threads"), CASES)
+def test_numpy_loads_with_one_blas_thread_for_the_fitting_commands(command, threads, tmp_path):
     env = {k: v for k, v in os.environ.items() if k != "OPENBLAS_NUM_THREADS"}
     code = CODE.replace("ARGS", repr([command]))
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,

@@ -292,7 +292,7 @@ def main(argv: list[str] | None = None) -> None:
         typer.echo(help_text)
         return
     verbose = any(a in ("--verbose", "-v") for a in args[: max(start - len(_path), 0)])
-    if _path[:1] in (("discrepancy",), ("replay",)):
+    if _path[:1] in (("discrepancy",), ("replay",), ("identify",)):
         from airbearing.cli.process_settings import one_blas_thread
 
         one_blas_thread()  # before anything loads numpy (the callback's CasADi does)
