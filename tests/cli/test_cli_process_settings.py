@@ -1,5 +1,5 @@
-"""Process-wide settings reach the libraries before they load: one BLAS thread for
-``identify`` (airbearing.cli.process_settings)."""
+"""Process-wide settings reach the libraries before they load: one BLAS thread for the
+commands that run CasADi's window threads (airbearing.cli.process_settings)."""
 
 from __future__ import annotations
 
@@ -28,11 +28,11 @@ print(json.dumps(seen))
 """
 
 
-CASES = [("identify", "1"), ("simulate", None)]
+CASES = [("discrepancy", "1"), ("replay", "1"), ("identify", "1"), ("simulate", None)]
 
 
 @pytest.mark.parametrize(("command", "threads"), CASES)
-def test_numpy_loads_with_one_blas_thread_for_identify(command, threads, tmp_path):
+def test_numpy_loads_with_one_blas_thread_for_the_fitting_commands(command, threads, tmp_path):
     env = {k: v for k, v in os.environ.items() if k != "OPENBLAS_NUM_THREADS"}
     code = CODE.replace("ARGS", repr([command]))
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,

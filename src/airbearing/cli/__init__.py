@@ -293,7 +293,7 @@ def main(argv: list[str] | None = None) -> None:
 
     coerce_directly()  # parameters without pydantic: ~0.2 s of every command's start-up
     verbose = any(a in ("--verbose", "-v") for a in args[: max(start - len(_path), 0)])
-    if _path[:1] == ("identify",):
+    if _path[:1] in (("discrepancy",), ("replay",), ("identify",)):
         from airbearing.cli.process_settings import one_blas_thread
 
         one_blas_thread()  # before anything loads numpy (the callback's CasADi does)

@@ -1,12 +1,9 @@
 """Process-wide settings of short-lived CLI processes (BLAS threads, malloc).
 
-Each is called by a command before its heavy imports; none changes a result, only
-where the time goes. Kept here so every command that needs one calls the same code.
-:func:`one_blas_thread` must run before numpy loads: the global callback of
-:func:`airbearing.cli.main` loads it (with CasADi), so :func:`airbearing.cli.main` calls
-it for ``identify``; the calls in ``discrepancy`` and ``replay`` come after it and
-change nothing (a thread count changes the last digits of the search's numbers:
-whether to restore it there is a separate decision).
+Each is called for a command before its heavy imports (:func:`one_blas_thread` by
+:func:`airbearing.cli.main`, before the global callback loads numpy with CasADi); none
+changes a result, only where the time goes. Kept here so every command that needs one
+calls the same code.
 """
 
 from __future__ import annotations
@@ -20,8 +17,8 @@ def one_blas_thread() -> None:
     contend. Measured on the shared 2-core machine (load ~5): the reduced Fisher matrix of
     a 60 s platform fit 97 ms with OpenBLAS's threads against 3.5 ms with one; a whole
     ``airbearing discrepancy`` 6.4-6.6 s CPU against 4.6-6.0 s. A user's own
-    ``OPENBLAS_NUM_THREADS`` wins. ``identify`` (same JSON, load ~5): equation-error on
-    10^6 rows 6.2-6.4 s CPU against 5.6-5.8 s, output-error on 10^3 rows 9.2-10.2 s
+    ``OPENBLAS_NUM_THREADS`` wins. ``identify`` too (same JSON, load ~5): equation-error
+    on 10^6 rows 6.2-6.4 s CPU against 5.6-5.8 s, output-error on 10^3 rows 9.2-10.2 s
     against 8.1-8.9 s.
     """
     import os
