@@ -54,3 +54,54 @@ def test_command_help_loads_no_pydantic():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
     assert out.returncode == 0, out.stderr[-2000:]
     assert json.loads(out.stdout.strip().splitlines()[-1]) == []
+
+
+def _fresh(code: str) -> object:
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert out.returncode == 0, out.stderr[-2000:]
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+LISTING = (
+    "import json, typer.main\n"
+    "from airbearing.cli import app\n"
+    "print(json.dumps([sys.modules.get('airbearing.cli.balance') is not None,\n"
+    "                  list(typer.main.get_command(app).commands)]))\n"
+)
+
+
+def test_a_command_registers_its_own_module_only_and_the_listing_keeps_its_order():
+    # running `identify` builds only identify (the parser builds every registered
+    # command's parameters); a later full registration lists in the usual order
+    first = "import sys\nfrom airbearing.cli import _register\n_register()\n"
+    one = (
+        "import sys\nfrom airbearing.cli import _register, _register_for\n"
+        "_register_for(['--quiet', 'identify', 'LOG'])\n"
+        "assert 'airbearing.cli.balance' not in sys.modules\n"
+        "_register()\n"
+    )
+    loaded, usual = _fresh(first + LISTING)
+    assert loaded and usual[:2] == ["balance", "demo"] and usual[-3:] == ["cmg", "testbed", "log"]
+    assert _fresh(one + LISTING) == [True, usual]
+
+
+@pytest.mark.parametrize(
+    ("args", "said"),
+    [(["identfy", "X"], "Did you mean 'identify'?"), (["common", "X"], "No such command")],
+)
+def test_an_unknown_command_is_told_among_all_of_them(args, said):
+    # a word that is no command (a typo, or one of the CLI's own helper modules): the
+    # parser sees every command, so its message suggests the right one
+    code = (
+        "import sys, json, contextlib, io\n"
+        "from airbearing.cli import main\n"
+        "err = io.StringIO()\n"
+        "with contextlib.redirect_stderr(err):\n"
+        "    try:\n"
+        f"        main({args!r})\n"
+        "    except SystemExit as e:\n"
+        "        code = e.code\n"
+        "print(json.dumps([code, err.getvalue()]))\n"
+    )
+    code_, text = _fresh(code)
+    assert code_ == 2 and said in text

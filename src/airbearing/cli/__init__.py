@@ -193,27 +193,66 @@ def chatter_to_debug_log(verbose: bool, *, fds: bool = False) -> Iterator[Path |
                 path.unlink()
 
 
+#: The command modules, in the order ``airbearing --help`` lists their commands.
+_MODULES = ("balance", "cmg", "demo", "discrepancy", "export", "gains", "identify", "simulate",
+            "testbed", "log", "replay", "campaign")  # fmt: skip
+_LATER = ("log", "replay", "campaign")  # commands that land later: absent is no error
+
+
+def _import_commands(module: str) -> bool:
+    """Import ``airbearing.cli.<module>`` (its commands add themselves to `app`); False
+    when there is no such module."""
+    try:
+        __import__(f"airbearing.cli.{module}")
+    except ModuleNotFoundError as e:
+        if e.name != f"airbearing.cli.{module}":
+            raise
+        return False
+    return True
+
+
+def _module_of(info) -> str:
+    """The module of a registered command or group (a group's: its commands')."""
+    sub = getattr(info, "typer_instance", None)
+    if sub is not None:  # a group
+        cmds = sub.registered_commands
+        return cmds[0].callback.__module__ if cmds and cmds[0].callback is not None else ""
+    return info.callback.__module__ if info.callback is not None else ""
+
+
 def _register() -> None:
     # each command module adds its commands to `app` on import; modules import only
     # light things at module level (tests/cli/test_cli_edges.py checks the start-up)
-    from airbearing.cli import (  # noqa: F401
-        balance,
-        cmg,
-        demo,
-        discrepancy,
-        export,
-        gains,
-        identify,
-        simulate,
-        testbed,
-    )
+    for module in _MODULES:
+        if not _import_commands(module) and module not in _LATER:
+            raise ModuleNotFoundError(f"airbearing.cli.{module}")
+    # listed in the order of _MODULES, whichever module was imported first (_register_for)
+    rank = {f"airbearing.cli.{m}": i for i, m in enumerate(_MODULES)}
+    for infos in (app.registered_commands, app.registered_groups):
+        infos.sort(key=lambda info: rank.get(_module_of(info), len(rank)))
 
-    for name in ("log", "replay", "campaign"):  # commands that land later
-        try:
-            __import__(f"airbearing.cli.{name}")
-        except ModuleNotFoundError as e:
-            if e.name != f"airbearing.cli.{name}":
-                raise
+
+def _registered(name: str) -> bool:
+    from typer.main import get_command_name
+
+    names = {i.name or get_command_name(i.callback.__name__) for i in app.registered_commands}
+    return name in names | {g.name for g in app.registered_groups}
+
+
+def _register_for(args: list[str]) -> None:
+    """Register the command ``args`` runs, and only it when its module is found: the
+    parser builds every registered command's parameters from its signature, and the
+    other command modules are imported for nothing (~0.1 s of CPU of every command).
+    Everything when ``args`` names no command or an unknown one (the parser's message
+    then suggests the right one)."""
+    from airbearing.cli.grammar import command_path
+
+    path, _ = command_path(args)
+    if path and path[0].isidentifier():
+        name = path[0]
+        if _import_commands(_MODULE_OF.get(name, name)) and _registered(name):
+            return
+    _register()
 
 
 def one_line(text: object) -> str:
@@ -250,7 +289,14 @@ def main(argv: list[str] | None = None) -> None:
     if help_text is not None:
         typer.echo(help_text)
         return
+    from airbearing.cli.coercion import install as coerce_directly
+
+    coerce_directly()  # parameters without pydantic: ~0.2 s of every command's start-up
     verbose = any(a in ("--verbose", "-v") for a in args[: max(start - len(_path), 0)])
+    if _path[:1] in (("discrepancy",), ("replay",), ("identify",)):
+        from airbearing.cli.process_settings import one_blas_thread
+
+        one_blas_thread()  # before anything loads numpy (the callback's CasADi does)
     try:
         with chatter_to_debug_log(verbose, fds=console):
             if console:
@@ -411,7 +457,7 @@ def _run_app(args: list[str]) -> None:
     from airbearing import interrupt
 
     try:
-        _register()
+        _register_for(args)
         app(args=args, prog_name="airbearing", standalone_mode=False)
     except InputError as e:
         interrupt.check()

@@ -61,9 +61,6 @@ def discrepancy(
     from airbearing.cli.common import number
 
     number("--window", window, lo=0, lo_open=True, unit="s")
-    from airbearing.cli.process_settings import one_blas_thread
-
-    one_blas_thread()
     from airbearing.analysis.discrepancy.search import discrepancy as run
     from airbearing.cli.common import only_as_flag, testbed_arg
     from airbearing.cli.show_progress import progress_display

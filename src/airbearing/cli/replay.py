@@ -37,9 +37,6 @@ def replay(
     from airbearing.cli.common import number
 
     number("--window", window, lo=0, lo_open=True, unit="s")
-    from airbearing.cli.process_settings import one_blas_thread
-
-    one_blas_thread()
     from airbearing.analysis.discrepancy.replay import replay as run
     from airbearing.cli.common import testbed_arg
     from airbearing.cli.show_progress import progress_display
