@@ -276,10 +276,12 @@ def main(argv: list[str] | None = None) -> None:
     GLOBAL["interrupt_said"] = False
     if not args:
         args = ["--help"]  # a bare `airbearing` is a request for help, not an error
+    from airbearing.cli.coercion import install as coerce_directly
     from airbearing.cli.grammar import command_path, rewrite
     from airbearing.cli.help_types import install
 
     install()
+    coerce_directly()  # parameters without pydantic: ~0.2 s of every command's start-up
     args, notes = rewrite(args)
     GLOBAL["argv"] = list(args)
     for note in notes:
@@ -289,9 +291,6 @@ def main(argv: list[str] | None = None) -> None:
     if help_text is not None:
         typer.echo(help_text)
         return
-    from airbearing.cli.coercion import install as coerce_directly
-
-    coerce_directly()  # parameters without pydantic: ~0.2 s of every command's start-up
     verbose = any(a in ("--verbose", "-v") for a in args[: max(start - len(_path), 0)])
     if _path[:1] in (("discrepancy",), ("replay",), ("identify",)):
         from airbearing.cli.process_settings import one_blas_thread
