@@ -276,12 +276,10 @@ def main(argv: list[str] | None = None) -> None:
     GLOBAL["interrupt_said"] = False
     if not args:
         args = ["--help"]  # a bare `airbearing` is a request for help, not an error
-    from airbearing.cli.coercion import install as coerce_directly
     from airbearing.cli.grammar import command_path, rewrite
     from airbearing.cli.help_types import install
 
     install()
-    coerce_directly()  # parameters without pydantic: ~0.2 s of every command's start-up
     args, notes = rewrite(args)
     GLOBAL["argv"] = list(args)
     for note in notes:
