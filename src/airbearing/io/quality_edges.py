@@ -10,8 +10,7 @@ row), where they fail a test of white noise at :data:`EDGE_LEVEL`. The rule is t
 :mod:`airbearing.io.quality`'s docstring (step 3); the scorer (``_Scorer`` of
 :mod:`airbearing.io.quality_outliers`) provides the residuals and the scales.
 
-The tests' chi-square quantiles are scipy's (:func:`chi2_isf`, stored on disk by
-:mod:`airbearing.io.stored_quantiles`).
+The tests' chi-square quantiles are scipy's (:func:`chi2_isf`).
 """
 
 from __future__ import annotations
@@ -21,7 +20,6 @@ from functools import lru_cache
 import numpy as np
 
 from airbearing.io.local_fits import noise_gain, residual_correlation
-from airbearing.io.stored_quantiles import chdtri
 
 __all__ = ["EDGE_LEVEL", "chi2_isf", "edge_factor", "edge_fits"]
 
@@ -40,10 +38,10 @@ def gains(k: int, p: int) -> np.ndarray:
 def chi2_isf(level: float, dof: float) -> float:
     """The chi-square quantile ``scipy.stats.chi2.isf(level, dof)``, by the function it
     calls (``scipy.special.chdtri``): importing scipy.stats costs 1-3 s of CPU, and
-    identify's equation-error path loads no scipy.stats. Stored on disk after its first
-    computation (:mod:`airbearing.io.stored_quantiles`: no scipy.special import, 0.3-0.6
-    s, in the next process)."""
-    return chdtri(dof, level)
+    identify's equation-error path loads no scipy.stats."""
+    from scipy.special import chdtri  # 0.3-0.6 s to import: only when a test needs it
+
+    return float(chdtri(dof, level))
 
 
 def edge_fits(scorer, rows, good, d, scale, candidates):
