@@ -133,11 +133,14 @@ def _round(search, sel: _Selection, remaining, screen, workers, prog) -> list:
     # the delta-BIC of the round's significant IPOPT fits so far: a step far above the best
     # of them is judged on its own (.screen.FAR_FACTOR)
     fitted = []
+    # the one-value forms' IPOPT fits: a per-axis form's step is also tried from its own
+    ones: dict = {}
 
     def run(c, lin=lin):
         best = min(fitted, default=None)
+        one = ones.get(c.name) if c.per_axis else None
         return _try(search, c, chosen, theta, current, lag, sel.ln_n, sel.starts, before, lin,
-                    best)  # fmt: skip
+                    best, one)  # fmt: skip
 
     def fit_all(group):
         out = []
@@ -164,6 +167,11 @@ def _round(search, sel: _Selection, remaining, screen, workers, prog) -> list:
     # one value can cancel (a gyro bias of [2e-4, -1e-4, 5e-5] rad/s is 5e-5 on average: its
     # one-value form was not significant on a 60 s dof-3 oscillation): always per axis too
     results = fit_all([c for c in remaining if not c.per_axis])
+    ones.update(
+        (r.name, r.fit)
+        for r in results
+        if r.fit is not None and r.fit.level in ("converged", "warning") and not r.retry_failed
+    )
     seen = {r.name for r in results if r.significant}
     seen |= {c.name for c in remaining if c.per_axis and c.signed}
     # ... or when it has none (a correction of axes whose nominals differ)
