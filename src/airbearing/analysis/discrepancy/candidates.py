@@ -78,6 +78,7 @@ __all__ = [
     "SPRING_MAX_SPAN",
     "Candidate",
     "candidates_for",
+    "forget_torque_terms",
     "not_physical",
     "unphysical_candidates",
     "regression_start",
@@ -575,12 +576,20 @@ def residual_torque(model: Model, datas, p: np.ndarray, S: np.ndarray | None = N
     return np.concatenate(taus), np.concatenate(phis)
 
 
-#: (Model, log, parameters) whose torque terms are kept (:func:`_torque_terms`): a round's
-#: point, then the next round's or the final fit's. About 0.7 kB per row (30 parameters).
-TERMS_KEPT = 2
+#: (Model, log, parameters) whose torque terms are kept (:func:`_torque_terms`): the round's
+#: point (every candidate's regressor), then the next round's, the final fit's (the
+#: confounding checks). About 0.7 kB per row (30 parameters); a search lets them go at its
+#: end (:func:`forget_torque_terms`).
+TERMS_KEPT = 1
 _TERMS: OrderedDict = OrderedDict()
 _FUNCTIONS: OrderedDict = OrderedDict()
 _LOCK = threading.Lock()
+
+
+def forget_torque_terms() -> None:
+    """Let the kept torque terms go (:func:`_torque_terms`; the end of a search)."""
+    with _LOCK:
+        _TERMS.clear()
 
 
 def _acceleration_function(model: Model, rate_names: tuple):

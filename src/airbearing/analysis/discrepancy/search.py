@@ -43,6 +43,7 @@ from collections.abc import Iterable
 from airbearing.analysis.discrepancy.candidates import (
     Candidate,
     candidates_for,
+    forget_torque_terms,
     unphysical_candidates,
 )
 from airbearing.analysis.discrepancy.horizon import _named
@@ -182,6 +183,7 @@ def discrepancy(
     judged = _judge(search, sel, named, logs, validate, window_s, jit, prog)
     judged = (*judged[:4], judged[4] + _unwrapped_words(logs))
     loc = localise(datas, base_problem, nominal, floor)
+    forget_torque_terms()
     prog("done", prog.total)
     return _result(search, refused, base_problem, sel, named, judged, loc)
 
