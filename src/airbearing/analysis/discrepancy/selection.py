@@ -3,9 +3,10 @@ then one round per effect added, up to ``max_effects``.
 
 Each round (:func:`_round`) judges every remaining candidate at the current fit
 (:mod:`.candidate_fit`): first on the round's shared Jacobian, the per-axis forms after the
-one-value ones, then refits by IPOPT every screened candidate that could be named near the
-round's best. :func:`_add_best` adds the nameable candidate with the lowest BIC; candidates
-within ``CONFOUND_BIC`` of it are reported as confounded.
+one-value ones (also on their step from the one-value form's IPOPT fit,
+:func:`.screen.one_value_linearisation`), then refits by IPOPT every screened candidate
+that could be named near the round's best. :func:`_add_best` adds the nameable candidate
+with the lowest BIC; candidates within ``CONFOUND_BIC`` of it are reported as confounded.
 """
 
 from __future__ import annotations
