@@ -143,14 +143,17 @@ def substeps_for(
     # not: one check per windows, whichever Model asks first
     key = (model.nx, model.nu, floor.rate, floor.attitude is None)
     cache = _ACCURATE.setdefault(windows, {})
+    tol_key = ("tolerance", floor.rate, floor.attitude is None)  # the logs', once
+    if tol_key not in cache:
+        cache[tol_key] = _integration_tolerance(windows, floor)
+    tol = cache[tol_key]
     if key not in cache:
-        cache[key] = _accurate_substeps(model, windows, n, _integration_tolerance(windows, floor))
+        cache[key] = _accurate_substeps(model, windows, n, tol)
     if p is None:
         return cache[key]
     p = np.asarray(p, dtype=float).ravel()
     at = (*key, p.tobytes())  # the parameters checked are part of the answer
     if at not in cache:
-        tol = _integration_tolerance(windows, floor)
         cache[at] = _accurate_substeps(model, windows, cache[key], tol, p)
     return cache[at]
 
