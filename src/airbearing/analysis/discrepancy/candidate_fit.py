@@ -13,7 +13,12 @@ from dataclasses import replace
 
 import numpy as np
 
-from airbearing.analysis.discrepancy.screen import screened, screened_lag, screened_scan
+from airbearing.analysis.discrepancy.screen import (
+    one_value_linearisation,
+    screened,
+    screened_lag,
+    screened_scan,
+)
 from airbearing.analysis.discrepancy.starts import continuation_fit, needs_retry, start_json
 from airbearing.analysis.discrepancy.trial import (
     MIN_SIGMAS,
@@ -32,9 +37,12 @@ START_YAW = "start_yaw"
 
 
 def _try(search, cand, chosen, theta_chosen, current, current_lag, ln_n, starts, before, lin=None,
-         best=None):  # fmt: skip
+         best=None, one=None):  # fmt: skip
     """``cand`` judged at ``current`` (module doc); ``best``: the smallest delta-BIC of the
-    round's significant IPOPT fits so far (:func:`.screen.screened`), None when none."""
+    round's significant IPOPT fits so far (:func:`.screen.screened`), None when none;
+    ``one``: for a per-axis form, its one-value form's IPOPT fit this round (None: none),
+    from which its step is tried when the shared Jacobian's cannot decide it
+    (:func:`.screen.one_value_linearisation`)."""
     lag = current_lag or cand.lag
     problem = search.problem(lag)
     model = search.models[lag]
@@ -97,6 +105,13 @@ def _try(search, cand, chosen, theta_chosen, current, current_lag, ln_n, starts,
                     if res is not None:
                         how = "Gauss-Newton step from the current fit"
                         return replace(res, start=start_json("nominal", res.value, method=how))
+                    at = (current, ln_n, before)
+                    res = _from_one_value(
+                        search, problem, cand, one, S_all[:, :k_sel], (lower, upper), at, th_reg,
+                        best,
+                    )  # fmt: skip
+                    if res is not None:
+                        return res
             th0 = np.clip(th0, cand.lower, cand.upper)
             if not cand.lag:
                 start = start_json(source, cand.value(th0))
@@ -140,6 +155,23 @@ def _try(search, cand, chosen, theta_chosen, current, current_lag, ln_n, starts,
         # that ends at the best gap is a candidate whatever IPOPT's status)
         res = replace(res, retried=True, retry_reason=retried, retry_failed=bool(left))
     return res
+
+
+def _from_one_value(search, problem, cand, one, S_sel, bounds, at, th_reg, best):
+    """The per-axis ``cand`` judged on its Gauss-Newton step from its one-value form's IPOPT
+    fit ``one`` (:func:`.screen.one_value_linearisation`), or None (IPOPT decides)."""
+    if one is None or not cand.per_axis:
+        return None
+    lin = one_value_linearisation(problem, at[0], one, cand, S_sel)
+    if lin is None:
+        return None
+    current, ln_n, before = at
+    k_sel = S_sel.shape[1]
+    res = screened(lin, cand, k_sel, *bounds, current, ln_n, before, search.folds, th_reg, best)
+    if res is None:
+        return None
+    how = "Gauss-Newton step from the one-value form's fit"
+    return replace(res, start=start_json("one value", res.value, method=how))
 
 
 def _on_fitted_yaw(search, lag, cand, fit, args, k_sel):

@@ -48,6 +48,8 @@ derivative are those of the same Savitzky-Golay filter applied to the yaw
 from __future__ import annotations
 
 import math
+import threading
+from collections import OrderedDict
 from collections.abc import Iterable
 from dataclasses import dataclass
 
@@ -56,6 +58,7 @@ import numpy as np
 
 from airbearing import quaternion as quat
 from airbearing.analysis.filters import savgol, savgol_weights
+from airbearing.analysis.shooting.buffers import evaluate
 from airbearing.analysis.shooting.logs import ReplayData
 from airbearing.errors import InputError
 from airbearing.io.testbed import Testbed
@@ -75,6 +78,7 @@ __all__ = [
     "SPRING_MAX_SPAN",
     "Candidate",
     "candidates_for",
+    "forget_torque_terms",
     "not_physical",
     "unphysical_candidates",
     "regression_start",
@@ -534,6 +538,10 @@ def _smoothed_attitude(data: ReplayData, w_s, w_dot, ok):
 def residual_torque(model: Model, datas, p: np.ndarray, S: np.ndarray | None = None):
     """Residual torque of the logs under ``model`` and its regressors (module doc).
 
+    The Model's acceleration and its derivative in every parameter it depends on are
+    evaluated once per log and parameter point (:func:`_torque_terms`): a round's
+    candidates (each its own ``S``) and the confounding check's share them.
+
     Returns
     -------
     tau : ndarray (M, n_axes)
@@ -543,34 +551,97 @@ def residual_torque(model: Model, datas, p: np.ndarray, S: np.ndarray | None = N
     datas = [datas] if isinstance(datas, ReplayData) else list(datas)
     S = np.zeros((model.n_p, 0)) if S is None else np.asarray(S, dtype=float)
     d0 = datas[0]
-    xs, us, ps = ca.SX.sym("x", model.nx), ca.SX.sym("u", model.nu), ca.SX.sym("p", model.n_p)
-    rows = model.index(list(d0.rate_names), "x")
-    a = model.f(xs, us, ps)[rows]
-    fn = ca.Function("acc", [xs, us, ps], [a, ca.mtimes(ca.jacobian(a, ps), ca.DM(S))])
     taus, phis = [], []
     for d in datas:
-        w_s, w_dot, ok = smoothed(d)
-        idx = np.flatnonzero(ok)
-        if idx.size == 0:
+        terms = _torque_terms(model, d, np.asarray(p, dtype=float))
+        if terms is None:
             continue
-        x = np.hstack([d.att, w_s, d.extra_x])[idx]
-        if model.lag_index:
-            x = np.hstack([x, w_s[idx]])
-        A, G = fn.map(idx.size)(x.T, d.u[idx].T, p)
-        A = np.asarray(A).T
-        # map() puts the calls' (axes, k) blocks side by side: column n k + j
-        G = np.asarray(G).reshape(len(rows), S.shape[1], idx.size, order="F").transpose(2, 0, 1)
+        w_dot, A, dA, cols = terms
+        # the regressor of the parameters S moves (n, axes, k), summed over the derivative's
+        # columns in their order, S's zeros left out (as the symbolic product did)
+        G = np.zeros((A.shape[0], A.shape[1], S.shape[1]))
+        for j, pj in enumerate(cols):
+            for m in np.flatnonzero(S[pj]):
+                G[:, :, m] += dA[:, :, j] * S[pj, m]
         if model.dof == 3:
             J = d.testbed.body.inertia_matrix
-            taus.append((w_dot[idx] - A) @ J.T)
+            taus.append((w_dot - A) @ J.T)
             phis.append(np.einsum("ij,njk->nik", J, G))
         else:
             J = d.testbed.body.yaw_inertia
-            taus.append(J * (w_dot[idx] - A))
+            taus.append(J * (w_dot - A))
             phis.append(J * G)
     if not taus:
         return np.zeros((0, d0.n_axes)), np.zeros((0, d0.n_axes, S.shape[1]))
     return np.concatenate(taus), np.concatenate(phis)
+
+
+#: (Model, log, parameters) whose torque terms are kept (:func:`_torque_terms`): the round's
+#: point (every candidate's regressor), then the next round's, the final fit's (the
+#: confounding checks). About 0.7 kB per row (30 parameters); a search lets them go at its
+#: end (:func:`forget_torque_terms`).
+TERMS_KEPT = 1
+_TERMS: OrderedDict = OrderedDict()
+_FUNCTIONS: OrderedDict = OrderedDict()
+_LOCK = threading.Lock()
+
+
+def forget_torque_terms() -> None:
+    """Let the kept torque terms go (:func:`_torque_terms`; the end of a search)."""
+    with _LOCK:
+        _TERMS.clear()
+
+
+def _acceleration_function(model: Model, rate_names: tuple):
+    """``(x, u, p) -> (w', dw'/dp[:, cols])`` of ``model``'s rate states (dense) and ``cols``,
+    the parameters the rate derivative depends on (structurally); kept per Model."""
+    key = (id(model), rate_names)
+    with _LOCK:
+        if key in _FUNCTIONS:
+            _FUNCTIONS.move_to_end(key)
+            return _FUNCTIONS[key][1:]
+    xs, us, ps = ca.SX.sym("x", model.nx), ca.SX.sym("u", model.nu), ca.SX.sym("p", model.n_p)
+    a = model.f(xs, us, ps)[model.index(list(rate_names), "x")]
+    jac = ca.jacobian(a, ps)
+    cols = np.unique(np.asarray(jac.sparsity().get_col(), dtype=int))
+    fn = ca.Function("acc", [xs, us, ps], [ca.densify(a), ca.densify(jac[:, cols.tolist()])])
+    with _LOCK:
+        _FUNCTIONS[key] = (model, fn, cols)  # the Model kept: its id names it
+        while len(_FUNCTIONS) > 8:
+            _FUNCTIONS.popitem(last=False)
+    return fn, cols
+
+
+def _torque_terms(model: Model, data: ReplayData, p: np.ndarray):
+    """``(w_dot, A, dA, cols)`` at the trusted rows of ``data`` (:func:`smoothed`): the
+    measured rate derivative, the Model's at the smoothed rate and ``p`` (n, axes) and its
+    derivative in the parameters ``cols`` (n, axes, len(cols)); None without trusted rows.
+    The last ``TERMS_KEPT`` are kept."""
+    key = (id(model), id(data), p.tobytes())
+    with _LOCK:
+        if key in _TERMS:
+            _TERMS.move_to_end(key)
+            return _TERMS[key][2]
+    w_s, w_dot, ok = smoothed(data)
+    idx = np.flatnonzero(ok)
+    terms = None
+    if idx.size:
+        fn, cols = _acceleration_function(model, tuple(data.rate_names))
+        x = np.hstack([data.att, w_s, data.extra_x])[idx]
+        if model.lag_index:
+            x = np.hstack([x, w_s[idx]])
+        # every row's call in one serial map, the parameters shared, the outputs written
+        # straight into arrays (a DM's conversion cost as much as the evaluation)
+        A, G = evaluate(fn.map("acc_rows", "serial", idx.size, [2], []), x.T, data.u[idx].T, p)
+        n_axes = fn.size1_out(0)
+        # the calls' (axes, cols) blocks side by side, column-major: column n cols + j
+        dA = G.reshape(n_axes, cols.size, idx.size, order="F").transpose(2, 0, 1)
+        terms = (w_dot[idx], A.reshape(n_axes, idx.size, order="F").T, dA, cols)
+    with _LOCK:
+        _TERMS[key] = (model, data, terms)  # the Model and the log kept: their ids name them
+        while len(_TERMS) > TERMS_KEPT:
+            _TERMS.popitem(last=False)
+    return terms
 
 
 def lsq(A: np.ndarray, b: np.ndarray) -> np.ndarray:

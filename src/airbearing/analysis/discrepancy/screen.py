@@ -50,6 +50,7 @@ __all__ = [
     "Linearisation",
     "Step",
     "linearise",
+    "one_value_linearisation",
     "screened",
     "screened_lag",
     "screened_scan",
@@ -104,10 +105,23 @@ class Linearisation:
         The chosen effects' columns (``p = p_base + S theta``).
     raw : sequence of int
         The Model parameters (indices of ``p``) any candidate moves.
+    cand0 : ndarray (k_c,), optional
+        The one candidate's ``theta`` at ``current`` (its parameters are in ``current.p``):
+        a linearisation at a fit that holds it (:func:`one_value_linearisation`). None: every
+        candidate at zero.
+    null : Fit, optional
+        The fit likelihood ratios are taken against (default ``current``).
+    where : str
+        Words for the point, in the notes of the candidates judged on it.
     """
 
-    def __init__(self, problem: ShootingProblem, current: Fit, S_sel: np.ndarray, raw) -> None:
+    def __init__(self, problem: ShootingProblem, current: Fit, S_sel: np.ndarray, raw, *,
+                 cand0=None, null: Fit | None = None,
+                 where: str = "the current fit (shared Jacobian)") -> None:  # fmt: skip
         self.problem, self.current = problem, current
+        self.cand0 = None if cand0 is None else np.asarray(cand0, dtype=float)
+        self.null = current if null is None else null
+        self.where = where
         self.S_sel = np.asarray(S_sel, dtype=float)
         self.k_sel = k_sel = self.S_sel.shape[1]
         self.raw = list(raw)
@@ -162,7 +176,8 @@ class Linearisation:
         k_sel = self.k_sel
         Gc, gc = E.T @ self.G @ E, E.T @ self.g
         k = Gc.shape[0]
-        th0 = np.r_[self.current.theta, np.zeros(k - k_sel)]
+        c0 = np.zeros(k - k_sel) if self.cand0 is None else self.cand0
+        th0 = np.r_[self.current.theta, c0]
         lo = np.r_[np.full(k_sel, -np.inf), np.asarray(lower_c, dtype=float)] - th0
         hi = np.r_[np.full(k_sel, np.inf), np.asarray(upper_c, dtype=float)] - th0
         d, q = _box_min(Gc, gc, lo, hi)
@@ -179,6 +194,8 @@ class Linearisation:
             delta[:, j] -= P @ (Dj.T @ e[R])
         S_sel_c = self.S_all(E)
         p_base = self.current.p - (self.S_sel @ self.current.theta if k_sel else 0.0)
+        if self.cand0 is not None:  # the candidate's part of the point, out of the base too
+            p_base = p_base - S_sel_c[:, k_sel:] @ self.cand0
         p = p_base + S_sel_c @ theta
         r = pb.residual(delta.reshape(nd, nw), p)
         J = sp.hstack([sp.csc_matrix(self.A @ E), self.Jd]).tocsc()
@@ -192,11 +209,12 @@ class Linearisation:
         if not np.all(np.isfinite(th_c)) or not np.any(th_c):
             return 0.0
         S = self.S_all(E)
-        r = self.problem.residual(self.current.delta, self.current.p + S[:, self.k_sel :] @ th_c)
+        move = th_c if self.cand0 is None else th_c - self.cand0
+        r = self.problem.residual(self.current.delta, self.current.p + S[:, self.k_sel :] @ move)
         e = r.copy()
         for R, Dj, P in self.blocks:
             e[R] -= Dj @ (P @ (Dj.T @ r[R]))
-        return lr_of(self.current, float(e @ e))
+        return lr_of(self.null, float(e @ e))
 
     def S_all(self, E: np.ndarray) -> np.ndarray:
         """``S`` of the chosen and the candidate's parameters (n_p, k)."""
@@ -274,7 +292,7 @@ def screened(lin, cand, k_sel, lower, upper, current, ln_n, before, folds, th_re
     fit = lin.fit_of(st, k)
     heldout = cross_validate(lin.problem, fit, k, folds)
     note = (
-        f"one Gauss-Newton step from the current fit (shared Jacobian): likelihood ratio "
+        f"one Gauss-Newton step from {lin.where}: likelihood ratio "
         f"{lr_step:.4g} (predicted {lr_model:.4g}); IPOPT not run: "
         + (
             f"its BIC, even with {FAR_FACTOR:g} x the step's disagreement with the quadratic "
@@ -485,6 +503,46 @@ def linearise(problem, current, S_sel, cands) -> Linearisation | None:
     idx = problem.model.index
     raw = list(dict.fromkeys(i for c in cands for i in idx(list(c.params), "p")))
     return Linearisation(problem, current, S_sel, raw)
+
+
+def one_value_linearisation(problem, current, one, cand, S_sel) -> Linearisation | None:
+    """The :class:`Linearisation` of the per-axis ``cand`` at its one-value form's IPOPT fit
+    ``one`` (a :class:`Fit` of the chosen effects and the one value), or None.
+
+    The one-value form is the per-axis form with its axes tied, so its fit is a point of
+    the per-axis problem: every axis at the one value, the chosen effects and the window
+    states as fitted. One Jacobian there in the per-axis parameters makes the per-axis
+    form's Gauss-Newton step from that point, which :func:`screened` judges as it judges
+    every step (likelihood ratios against the round's ``current`` fit): the quadratic
+    model's fall checked by the residual at the step, the far-from-the-best rule, and a
+    step whose BIC comes within ``MATTER_BIC`` of the round's best refitted by IPOPT. The
+    per-axis form can only add to the one value's likelihood ratio; it adds ``2 ln n`` to
+    its BIC penalty (24 on the 10 min seed-004 log), so where the axes agree the step is far
+    from mattering. Where they differ (a friction whose axes differ 10-fold) the step from
+    the one value is long, the quadratic model less sure, and IPOPT decides as before.
+
+    None when ``one`` keeps no Jacobian, fitted its windows' start yaw (another layout), or
+    is not a point of the per-axis form (its parameters are not tied the same way).
+    """
+    k_sel = S_sel.shape[1]
+    if one is None or "J" not in one.extra or one.extra.get("start_yaw"):
+        return None
+    if k_sel + cand.k > THETA_SLOTS or one.theta.size <= k_sel:
+        return None
+    n_p = problem.model.n_p
+    idx = problem.model.index(list(cand.params), "p")
+    S_c = np.zeros((n_p, cand.k))
+    S_c[idx] = cand.tie
+    # the one value's parameter offsets from the chosen effects' point, in the per-axis form
+    dp = one.p - (problem.model.p0 + (S_sel @ one.theta[:k_sel] if k_sel else 0.0))
+    th_c0 = np.linalg.lstsq(S_c, dp, rcond=None)[0]
+    if not np.allclose(S_c @ th_c0, dp, rtol=0.0, atol=1e-12 * float(np.max(np.abs(dp)))):
+        return None
+    base = replace(one, theta=np.asarray(one.theta[:k_sel], dtype=float))
+    return Linearisation(
+        problem, base, S_sel, list(dict.fromkeys(idx)), cand0=th_c0, null=current,
+        where="the one-value form's IPOPT fit (its axes tied)",
+    )  # fmt: skip
 
 
 def _box_min(G: np.ndarray, g: np.ndarray, lo: np.ndarray, hi: np.ndarray):

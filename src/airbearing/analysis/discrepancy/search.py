@@ -14,7 +14,8 @@ The workflow:
    (:mod:`.trial`): first on its Gauss-Newton step from one Jacobian shared by the
    round (:mod:`.screen`), then by IPOPT when it could be named near the round's
    best (the named effect is always an IPOPT fit); on dof 3 the per-axis form of an
-   effect is tried only when its one-value form is significant, and a candidate the
+   effect is tried only when its one-value form is significant (first on its step from
+   that form's IPOPT fit, when the shared Jacobian's cannot decide it), and a candidate the
    logs cannot identify or that the fit pins at its physical bound is not refitted in
    later rounds. Forward selection adds the nameable candidate with the
    lowest BIC, refits, and looks again, up to ``max_effects``. Nameable
@@ -43,6 +44,7 @@ from collections.abc import Iterable
 from airbearing.analysis.discrepancy.candidates import (
     Candidate,
     candidates_for,
+    forget_torque_terms,
     unphysical_candidates,
 )
 from airbearing.analysis.discrepancy.horizon import _named
@@ -182,6 +184,7 @@ def discrepancy(
     judged = _judge(search, sel, named, logs, validate, window_s, jit, prog)
     judged = (*judged[:4], judged[4] + _unwrapped_words(logs))
     loc = localise(datas, base_problem, nominal, floor)
+    forget_torque_terms()
     prog("done", prog.total)
     return _result(search, refused, base_problem, sel, named, judged, loc)
 

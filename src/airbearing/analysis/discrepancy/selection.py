@@ -3,9 +3,10 @@ then one round per effect added, up to ``max_effects``.
 
 Each round (:func:`_round`) judges every remaining candidate at the current fit
 (:mod:`.candidate_fit`): first on the round's shared Jacobian, the per-axis forms after the
-one-value ones, then refits by IPOPT every screened candidate that could be named near the
-round's best. :func:`_add_best` adds the nameable candidate with the lowest BIC; candidates
-within ``CONFOUND_BIC`` of it are reported as confounded.
+one-value ones (also on their step from the one-value form's IPOPT fit,
+:func:`.screen.one_value_linearisation`), then refits by IPOPT every screened candidate
+that could be named near the round's best. :func:`_add_best` adds the nameable candidate
+with the lowest BIC; candidates within ``CONFOUND_BIC`` of it are reported as confounded.
 """
 
 from __future__ import annotations
@@ -133,11 +134,14 @@ def _round(search, sel: _Selection, remaining, screen, workers, prog) -> list:
     # the delta-BIC of the round's significant IPOPT fits so far: a step far above the best
     # of them is judged on its own (.screen.FAR_FACTOR)
     fitted = []
+    # the one-value forms' IPOPT fits: a per-axis form's step is also tried from its own
+    ones: dict = {}
 
     def run(c, lin=lin):
         best = min(fitted, default=None)
+        one = ones.get(c.name) if c.per_axis else None
         return _try(search, c, chosen, theta, current, lag, sel.ln_n, sel.starts, before, lin,
-                    best)  # fmt: skip
+                    best, one)  # fmt: skip
 
     def fit_all(group):
         out = []
@@ -164,6 +168,11 @@ def _round(search, sel: _Selection, remaining, screen, workers, prog) -> list:
     # one value can cancel (a gyro bias of [2e-4, -1e-4, 5e-5] rad/s is 5e-5 on average: its
     # one-value form was not significant on a 60 s dof-3 oscillation): always per axis too
     results = fit_all([c for c in remaining if not c.per_axis])
+    ones.update(
+        (r.name, r.fit)
+        for r in results
+        if r.fit is not None and r.fit.level in ("converged", "warning") and not r.retry_failed
+    )
     seen = {r.name for r in results if r.significant}
     seen |= {c.name for c in remaining if c.per_axis and c.signed}
     # ... or when it has none (a correction of axes whose nominals differ)

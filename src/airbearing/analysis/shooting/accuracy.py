@@ -143,14 +143,17 @@ def substeps_for(
     # not: one check per windows, whichever Model asks first
     key = (model.nx, model.nu, floor.rate, floor.attitude is None)
     cache = _ACCURATE.setdefault(windows, {})
+    tol_key = ("tolerance", floor.rate, floor.attitude is None)  # the logs', once
+    if tol_key not in cache:
+        cache[tol_key] = _integration_tolerance(windows, floor)
+    tol = cache[tol_key]
     if key not in cache:
-        cache[key] = _accurate_substeps(model, windows, n, _integration_tolerance(windows, floor))
+        cache[key] = _accurate_substeps(model, windows, n, tol)
     if p is None:
         return cache[key]
     p = np.asarray(p, dtype=float).ravel()
     at = (*key, p.tobytes())  # the parameters checked are part of the answer
     if at not in cache:
-        tol = _integration_tolerance(windows, floor)
         cache[at] = _accurate_substeps(model, windows, cache[key], tol, p)
     return cache[at]
 
@@ -244,9 +247,10 @@ def _accurate_substeps(model: Model, windows: WindowSet, n: int, tol, p=None) ->
     """The fewest sub-steps from ``n`` on (doubling, at most :data:`MAX_SUBSTEPS`) whose
     integration error over each segment (:func:`integration_error`, at ``p``) is within
     ``tol``."""
-    start = n
+    start, fine = n, None
     while n < MAX_SUBSTEPS:
-        att, rate = integration_error(model, windows, n, p)
+        # the finer rollout of one check is the coarser of the next (integrated once)
+        att, rate, fine = _integration_error(model, windows, n, p, fine)
         if att <= tol[0] and rate <= tol[1]:
             break
         n *= 2
@@ -280,6 +284,12 @@ def integration_error(model: Model, windows: WindowSet, substeps: int, p: np.nda
         ``(rad, rad/s)``: the attitude error (the small rotation) and the largest rate
         error of any axis, the largest over segments.
     """
+    return _integration_error(model, windows, substeps, p)[:2]
+
+
+def _integration_error(model, windows, substeps, p=None, coarse=None):
+    """:func:`integration_error` and the states at ``2 substeps`` (windows, samples,
+    states); ``coarse``: the states at ``substeps`` when already integrated."""
     L, n = windows.length, windows.n
     # every window in one call of each rollout (map: the windows side by side)
     args = (
@@ -294,7 +304,8 @@ def integration_error(model: Model, windows: WindowSet, substeps: int, p: np.nda
         X = np.asarray(rollout.map(n)(*args))
         return X.reshape(model.nx, n, L - 1).transpose(1, 2, 0)
 
-    a, b = states(substeps), states(2 * substeps)
+    a = states(substeps) if coarse is None else coarse
+    b = states(2 * substeps)
     keep = windows.weight[:, 1:] > 0
     e = quat.qmul(quat.qconj(a[..., :4]), b[..., :4])
     # the largest error over each window's usable rows, of the coarser step (Richardson)
@@ -303,4 +314,4 @@ def integration_error(model: Model, windows: WindowSet, substeps: int, p: np.nda
     rate = gain * np.max(np.where(keep, np.max(np.abs(a[..., 4:7] - b[..., 4:7]), -1), 0.0), 1)
     seg = windows.segments()
     per_seg = [(att[seg == s].sum(), rate[seg == s].sum()) for s in np.unique(seg)]
-    return max(p[0] for p in per_seg), max(p[1] for p in per_seg)
+    return max(p[0] for p in per_seg), max(p[1] for p in per_seg), b
