@@ -298,6 +298,13 @@ def _descend(problem, fit_at, grid, theta0, delta0, start, k: int, bounds) -> di
                     break  # a lower intensity the fit cannot reach
         th, d = out[kappa][0].theta, out[kappa][0].delta
     best = max(out, key=lambda a: out[a][1])
+    if lin is not None and not isinstance(out[best][0], LinearisedFit):
+        # a decade either side of the best from the best's linearisation, not the last
+        # IPOPT fit's: when the best is far up the grid (a large unexplained torque) the
+        # last is at its bottom, whose linearisation holds nowhere near the best
+        lin = None  # (one linearisation held at a time: 100s of MB on an hour of samples)
+        set_intensity(problem, best)
+        lin = Linearisation.of(problem, out[best][0], k, bounds)
     for kappa in (best * 10.0, best / 10.0):
         if not (min(grid) < kappa < max(grid)) or kappa in out or len(out) < 2:
             continue
