@@ -269,8 +269,9 @@ def _descend(problem, fit_at, grid, theta0, delta0, start, k: int, bounds) -> di
     An intensity's fit is the last IPOPT fit's Gauss-Newton linearisation solved at that
     intensity (:class:`Linearisation`, a :class:`LinearisedFit`) when that linearisation
     holds there; else an IPOPT fit from the last intensity's answer (the continuation),
-    linearised in its turn. The most likely intensity's fit is always IPOPT's (refitted
-    from its point)."""
+    linearised in its turn. The decade either side of the best is tried on the best's own
+    linearisation when the best is an IPOPT fit. The most likely intensity's fit is always
+    IPOPT's (refitted from its point)."""
     out: dict = {}
     lin = None
     th, d = theta0, delta0
