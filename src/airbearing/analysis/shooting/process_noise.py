@@ -269,8 +269,9 @@ def _descend(problem, fit_at, grid, theta0, delta0, start, k: int, bounds) -> di
     An intensity's fit is the last IPOPT fit's Gauss-Newton linearisation solved at that
     intensity (:class:`Linearisation`, a :class:`LinearisedFit`) when that linearisation
     holds there; else an IPOPT fit from the last intensity's answer (the continuation),
-    linearised in its turn. The most likely intensity's fit is always IPOPT's (refitted
-    from its point)."""
+    linearised in its turn. The decade either side of the best is tried on the best's own
+    linearisation when the best is an IPOPT fit. The most likely intensity's fit is always
+    IPOPT's (refitted from its point)."""
     out: dict = {}
     lin = None
     th, d = theta0, delta0
@@ -298,6 +299,13 @@ def _descend(problem, fit_at, grid, theta0, delta0, start, k: int, bounds) -> di
                     break  # a lower intensity the fit cannot reach
         th, d = out[kappa][0].theta, out[kappa][0].delta
     best = max(out, key=lambda a: out[a][1])
+    if lin is not None and not isinstance(out[best][0], LinearisedFit):
+        # a decade either side of the best from the best's linearisation, not the last
+        # IPOPT fit's: when the best is far up the grid (a large unexplained torque) the
+        # last is at its bottom, whose linearisation holds nowhere near the best
+        lin = None  # (one linearisation held at a time: 100s of MB on an hour of samples)
+        set_intensity(problem, best)
+        lin = Linearisation.of(problem, out[best][0], k, bounds)
     for kappa in (best * 10.0, best / 10.0):
         if not (min(grid) < kappa < max(grid)) or kappa in out or len(out) < 2:
             continue
