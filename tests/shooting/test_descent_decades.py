@@ -9,6 +9,7 @@ by one more IPOPT fit.
 
 from __future__ import annotations
 
+import pytest
 from rigs import jittered_platform
 
 import airbearing as ab
@@ -18,6 +19,7 @@ from airbearing.analysis.shooting.process_noise import KAPPA_GRID
 PLATFORM = ab.load_testbed("platform-3dof")
 
 
+@pytest.mark.slow  # a 25 s three-axis replay's whole descent: about 6 s
 def test_the_decade_below_a_best_at_the_top_is_no_ipopt_fit(monkeypatch):
     log = jittered_platform(PLATFORM, 3, duration=25.0, effects={"viscous_friction": 3e-3})
     names = []
