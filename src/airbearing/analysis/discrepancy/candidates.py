@@ -59,6 +59,7 @@ import numpy as np
 from airbearing import quaternion as quat
 from airbearing.analysis.filters import savgol, savgol_weights
 from airbearing.analysis.shooting.buffers import evaluate
+from airbearing.analysis.shooting.function_cache import cached
 from airbearing.analysis.shooting.logs import ReplayData
 from airbearing.errors import InputError
 from airbearing.io.testbed import Testbed
@@ -70,6 +71,7 @@ from airbearing.models.effects import (
     effect_param_names,
 )
 from airbearing.models.model import Model
+from airbearing.models.structure_cache import structure_key
 
 __all__ = [
     "NOT_CORRECTED",
@@ -582,7 +584,6 @@ def residual_torque(model: Model, datas, p: np.ndarray, S: np.ndarray | None = N
 #: end (:func:`forget_torque_terms`).
 TERMS_KEPT = 1
 _TERMS: OrderedDict = OrderedDict()
-_FUNCTIONS: OrderedDict = OrderedDict()
 _LOCK = threading.Lock()
 
 
@@ -594,22 +595,19 @@ def forget_torque_terms() -> None:
 
 def _acceleration_function(model: Model, rate_names: tuple):
     """``(x, u, p) -> (w', dw'/dp[:, cols])`` of ``model``'s rate states (dense) and ``cols``,
-    the parameters the rate derivative depends on (structurally); kept per Model."""
-    key = (id(model), rate_names)
-    with _LOCK:
-        if key in _FUNCTIONS:
-            _FUNCTIONS.move_to_end(key)
-            return _FUNCTIONS[key][1:]
-    xs, us, ps = ca.SX.sym("x", model.nx), ca.SX.sym("u", model.nu), ca.SX.sym("p", model.n_p)
-    a = model.f(xs, us, ps)[model.index(list(rate_names), "x")]
-    jac = ca.jacobian(a, ps)
-    cols = np.unique(np.asarray(jac.sparsity().get_col(), dtype=int))
-    fn = ca.Function("acc", [xs, us, ps], [ca.densify(a), ca.densify(jac[:, cols.tolist()])])
-    with _LOCK:
-        _FUNCTIONS[key] = (model, fn, cols)  # the Model kept: its id names it
-        while len(_FUNCTIONS) > 8:
-            _FUNCTIONS.popitem(last=False)
-    return fn, cols
+    the parameters the rate derivative depends on (structurally); kept in the engine's one
+    function cache by the Model's structure."""
+
+    def build():
+        xs, us = ca.SX.sym("x", model.nx), ca.SX.sym("u", model.nu)
+        ps = ca.SX.sym("p", model.n_p)
+        a = model.f(xs, us, ps)[model.index(list(rate_names), "x")]
+        jac = ca.jacobian(a, ps)
+        cols = np.unique(np.asarray(jac.sparsity().get_col(), dtype=int))
+        outs = [ca.densify(a), ca.densify(jac[:, cols.tolist()])]
+        return ca.Function("acc", [xs, us, ps], outs), cols
+
+    return cached(("torque acceleration", structure_key(model), rate_names), build)
 
 
 def _torque_terms(model: Model, data: ReplayData, p: np.ndarray):

@@ -25,9 +25,9 @@ import scipy.sparse as sp
 from scipy.sparse.linalg import splu
 
 from airbearing.analysis.shooting.functions import (
-    _cached,
     _Call,
     _problem_functions,
+    cached,
     delta_layout,
     evaluate,
     ipopt_options,
@@ -235,7 +235,7 @@ def linked_solver(model, L, nw, K, outputs, substeps, jit, link, rows, n_ineq, m
     rows = np.asarray(rows, dtype=int)
     key = ("linked", layout_key(model, outputs), L, nw, K, outputs, substeps, jit, link,
            hashlib.sha1(rows.tobytes()).hexdigest(), rows.size, n_ineq, max_iter)  # fmt: skip
-    return _cached(
+    return cached(
         key,
         lambda: _build_linked_solver(
             model, L, nw, K, outputs, substeps, jit, link, rows, n_ineq, max_iter

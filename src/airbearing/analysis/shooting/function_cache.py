@@ -1,6 +1,6 @@
 """The one bounded cache of the shooting engine's compiled functions, and their compilation.
 
-``_cached(key, build)`` keeps up to ``CACHE_SIZE`` function sets per process, keyed by the
+``cached(key, build)`` keeps up to ``CACHE_SIZE`` function sets per process, keyed by the
 Model's STRUCTURE (:func:`airbearing.models.structure_cache.structure_key`) and what else
 shapes a function (window length, slots, outputs, linking); :func:`compiled` sends a
 Function through the on-disk cache of :mod:`airbearing.models.compiled` (a new process loads
@@ -28,7 +28,7 @@ def jit_available() -> bool:
 _CACHE: OrderedDict = OrderedDict()
 
 
-def _cached(key, build):
+def cached(key, build):
     """Bounded LRU of compiled functions (``CACHE_SIZE`` entries)."""
     if key in _CACHE:
         _CACHE.move_to_end(key)

@@ -10,7 +10,7 @@ over them; a small one (dof 1) as whole windows (``CHAIN_MIN_INSTRUCTIONS``). Th
 
 The work lives in modules named by what they hold, each below this one:
 
-- :mod:`.function_cache`: the one bounded cache (``_cached``, ``CACHE_SIZE``), ``compiled``
+- :mod:`.function_cache`: the one bounded cache (``cached``, ``CACHE_SIZE``), ``compiled``
   (the on-disk cache) and ``jit_available``;
 - :mod:`.window_functions`: one window's functions (the step, the start state, the window
   compiled whole or chained over the step, ``delta_layout``, ``DEFAULT_SUBSTEPS``);
@@ -32,7 +32,7 @@ from airbearing.analysis.shooting.buffers import evaluate, function_buffer  # no
 from airbearing.analysis.shooting.function_cache import (  # noqa: F401 (re-exported)
     _CACHE,
     CACHE_SIZE,
-    _cached,
+    cached,
     compiled,
     jit_available,
 )

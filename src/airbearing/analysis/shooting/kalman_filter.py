@@ -11,7 +11,7 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from airbearing.analysis.shooting.functions import _cached, compiled, evaluate, step_function
+from airbearing.analysis.shooting.functions import cached, compiled, evaluate, step_function
 from airbearing.models.model import Model
 from airbearing.models.structure_cache import structure_key
 
@@ -124,14 +124,14 @@ def _block_functions(model, y_rows, K, substeps, jit, n_rows: int):
     compiled; order 2 (the Hessian, evaluated twice per fit) compiled from
     :data:`HESSIAN_COMPILE_ROWS` rows on, below that in CasADi's virtual machine."""
     key = ("kalman", structure_key(model), y_rows, K, substeps, jit)
-    low = _cached(
+    low = cached(
         key,
         lambda: tuple(
             compiled(_block_function(model, y_rows, substeps, K, o), jit=jit) for o in (0, 1)
         ),
     )
     hess_jit = False if n_rows < HESSIAN_COMPILE_ROWS else jit
-    hess = _cached(
+    hess = cached(
         (*key, "hessian", hess_jit),
         lambda: compiled(_block_function(model, y_rows, substeps, K, 2), jit=hess_jit),
     )

@@ -18,9 +18,9 @@ import scipy.sparse as sp
 
 from airbearing.analysis.shooting.fit import PINV_RCOND
 from airbearing.analysis.shooting.functions import (
-    _cached,
     _Call,
     _problem_functions,
+    cached,
     delta_layout,
     evaluate,
     ipopt_options,
@@ -301,7 +301,7 @@ def penalised_solver(model, L, nw, K, outputs, substeps, jit, max_iter, objectiv
     ``objective_stop`` as :func:`.solver.ipopt_options`."""
     args = (model, L, nw, K, outputs, substeps, jit, max_iter, objective_stop)
     key = ("penalised", layout_key(model, outputs), *args[1:])
-    return _cached(key, lambda: _build_penalised(*args))
+    return cached(key, lambda: _build_penalised(*args))
 
 
 def set_intensity(problem, kappa: float | None) -> None:

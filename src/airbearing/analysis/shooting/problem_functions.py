@@ -14,7 +14,7 @@ import scipy.sparse as sp
 
 from airbearing import quaternion as quat
 from airbearing.analysis.shooting.buffers import evaluate, function_buffer
-from airbearing.analysis.shooting.function_cache import _cached
+from airbearing.analysis.shooting.function_cache import cached
 from airbearing.analysis.shooting.sparse import csc_of
 from airbearing.analysis.shooting.window_functions import (
     _window_functions,
@@ -81,7 +81,7 @@ def _data_shapes(model: Model, L: int, nw: int, na: int, link: bool = False) -> 
 def _problem_functions(model, L, nw, K, outputs, substeps, jit, link=False):
     """``(fr, fj, fy)`` of :func:`_build_problem`, from the one bounded cache."""
     key = ("problem", layout_key(model, outputs), L, nw, K, outputs, substeps, jit, link)
-    return _cached(key, lambda: _build_problem(model, L, nw, K, outputs, substeps, jit, link))
+    return cached(key, lambda: _build_problem(model, L, nw, K, outputs, substeps, jit, link))
 
 
 def window_jacobian(model, L, nw, K, outputs, substeps, jit, link=False) -> WindowJacobian:

@@ -17,7 +17,7 @@ import casadi as ca
 import numpy as np
 
 from airbearing import quaternion as quat
-from airbearing.analysis.shooting.function_cache import _cached, compiled
+from airbearing.analysis.shooting.function_cache import cached, compiled
 from airbearing.models.model import Model
 from airbearing.models.structure_cache import structure_key
 
@@ -138,13 +138,13 @@ def _window_functions(
     model: Model, L: int, K: int, outputs: tuple, substeps: int, jit, link: bool = False
 ):
     key = ("window", layout_key(model, outputs), L, K, outputs, substeps, jit, link)
-    return _cached(key, lambda: _build_window(model, L, K, outputs, substeps, jit, link))
+    return cached(key, lambda: _build_window(model, L, K, outputs, substeps, jit, link))
 
 
 def start_function(model: Model, outputs: tuple) -> ca.Function:
     """``(delta, x_meas) -> x0``: a window's initial state from its estimate (module doc)."""
     key = ("start", layout_key(model, outputs), tuple(outputs))
-    return _cached(key, lambda: _build_start(model, tuple(outputs)))
+    return cached(key, lambda: _build_start(model, tuple(outputs)))
 
 
 def _build_start(model: Model, outputs: tuple) -> ca.Function:
@@ -182,7 +182,7 @@ def _step_functions(model: Model, substeps: int, jit) -> tuple:
         )  # fmt: skip
         return compiled(step, jit=jit), compiled(jac, jit=jit)
 
-    return _cached(key, build)
+    return cached(key, build)
 
 
 def _sample_functions(model: Model, outputs: tuple, jit) -> tuple:
@@ -212,7 +212,7 @@ def _sample_functions(model: Model, outputs: tuple, jit) -> tuple:
         frj = ca.Function("sample_rj", ins, [*res, *[ca.jacobian(g, xp) for g in res]])
         return compiled(fr, jit=jit), compiled(frj, jit=jit)
 
-    return _cached(key, build)
+    return cached(key, build)
 
 
 def _build_window(
