@@ -28,6 +28,7 @@ def _row(c) -> tuple:
     return (c.label, c.status, c.nameable, c.significant, c.delta_bic, c.gap, c.note)
 
 
+# two searches of a 12 s log: about 3.5 s of CPU (the second reuses the first's functions)
 def test_two_workers_give_the_answer_of_one():
     d = testbeds.testbed_to_dict(testbeds.load_testbed("seed004-platform"))
     d["sensors"]["rate"] = 50.0
