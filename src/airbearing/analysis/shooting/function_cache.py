@@ -10,7 +10,7 @@ it). Every builder of :mod:`.window_functions`, :mod:`.problem_functions`, :mod:
 Threads may share it (the discrepancy search's ``workers``): each key is built once, by
 the first thread that asks; the others wait for it. A solver keeps its last iterate in its
 oracle and IPOPT calls back into Python: :func:`borrowed` lends one to one caller at a
-time (a second thread that fits the same structure meanwhile gets a copy of its own).
+time (a second thread that fits the same structure meanwhile gets one of its own).
 """
 
 from __future__ import annotations
