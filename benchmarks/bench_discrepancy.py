@@ -26,7 +26,8 @@ a first one): the interpreter's start, the CLI's imports (typer), the search's m
 the statistical libraries its later stages import (scipy.stats, statsmodels; imported
 here first so that they are counted apart), reading and checking the log, each step of
 the search (the ``progress`` callback), the part of it spent building the CasADi functions
-and loading them from the disk cache (``function_cache.cached``, outermost calls), the
+and loading them from the disk cache (the builders given to ``function_cache.cached`` and
+``borrowed``, outermost calls), the
 JSON, and the interpreter's tear-down (the child's CPU after its last line, from the
 parent). It runs the command's steps itself, not ``airbearing.cli.main``: the CLI's
 process settings (collector paused during imports, no tear-down) are not in it.
@@ -201,20 +202,29 @@ import statsmodels.tsa.stattools
 mark("statistical libraries of the later stages (scipy.stats, statsmodels)")
 import airbearing.analysis.shooting.function_cache as fc
 built = {"s": 0.0, "depth": 0}
-inner = fc.cached
-def cached(key, build):
-    built["depth"] += 1
-    c = time.process_time()
-    try:
-        return inner(key, build)
-    finally:
-        built["depth"] -= 1
-        if built["depth"] == 0:
-            built["s"] += time.process_time() - c
-for mod in list(sys.modules.values()):
-    name = getattr(mod, "__name__", "")
-    if name.startswith("airbearing") and getattr(mod, "cached", None) is inner:
-        mod.cached = cached
+def timed(build):
+    def run():
+        built["depth"] += 1
+        c = time.process_time()
+        try:
+            return build()
+        finally:
+            built["depth"] -= 1
+            if built["depth"] == 0:
+                built["s"] += time.process_time() - c
+    return run
+def patch(attr):
+    inner = getattr(fc, attr, None)
+    if inner is None:
+        return
+    def outer(key, build):
+        return inner(key, timed(build))
+    for mod in list(sys.modules.values()):
+        name = getattr(mod, "__name__", "")
+        if name.startswith("airbearing") and getattr(mod, attr, None) is inner:
+            setattr(mod, attr, outer)
+patch("cached")
+patch("borrowed")
 tb = load_testbed("platform-3dof")
 log = read_log(sys.argv[1], tb)
 mark("reading and checking the log")
