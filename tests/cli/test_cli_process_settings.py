@@ -50,6 +50,7 @@ def _console(args, cwd):
 
     src = str(Path(airbearing.__file__).resolve().parents[1])
     env = dict(os.environ, PYTHONPATH=os.pathsep.join([src, os.environ.get("PYTHONPATH", "")]))
+    env["AIRBEARING_COMPILE"] = "0"  # CasADi's virtual machine: no compiling on a cold cache
     return subprocess.run([sys.executable, "-m", "airbearing", *args], capture_output=True,
                           text=True, env=env, cwd=cwd, timeout=300)  # fmt: skip
 
