@@ -330,7 +330,7 @@ def _end_process(code: int) -> NoReturn:
     tear-down.
 
     After a discrepancy search the tear-down (clearing ~1700 modules, collecting every
-    object left) is 0.3-0.45 s CPU (measured on the shared 2-core machine, load ~6) and
+    object left) is 0.4-0.6 s CPU (measured on the shared 2-core machine, load 6-7) and
     does nothing a finished run needs: its outputs are committed and closed, the debug
     log is closed (or removed). The exit handlers this path has (``logging.shutdown``;
     Arrow's S3 finaliser, unused: logs are local files) are replaced by flushing the log

@@ -73,11 +73,12 @@ def pause_collection() -> None:
 
     Importing makes objects that live until the process ends (modules, classes,
     functions), never garbage, yet every few hundred of them start a collection that
-    walks all the older ones: importing the discrepancy search's libraries (scipy, pandas,
-    statsmodels, ~1700 modules) ran ~400 collections, 0.2-0.3 s CPU of a 60 s search's
-    process (measured on the shared 2-core machine, load ~6).
-    :func:`collect_after_imports` resumes it. Only in a console process
-    (:func:`airbearing.cli.main` without ``argv``): it ends after the command.
+    walks all the older ones: a 60 s discrepancy search's process (~1700 modules) ran ~400
+    collections, 0.31 s CPU; paused during the command's imports 0.10 s (measured on the
+    shared 2-core machine, load ~6; what is left is during the search's later imports of
+    scipy.stats and statsmodels, with the collector on). :func:`collect_after_imports`
+    resumes it. Only in a console process (:func:`airbearing.cli.main` without ``argv``):
+    it ends after the command.
     """
     if gc.isenabled():
         gc.disable()
