@@ -142,8 +142,17 @@ def _float_columns(table, src: str, testbed: Testbed | None):
     for column in table.columns:
         if not pa.types.is_float64(column.type) or column.null_count:
             return None
-    arrays = {name: table.column(i).to_numpy() for i, name in enumerate(names)}
+    arrays = {name: _float64(table.column(i)) for i, name in enumerate(names)}
     return validated_arrays(names, arrays, src, testbed)
+
+
+def _float64(column) -> np.ndarray:
+    """A float64 Arrow column without missing cells as a NumPy array on Arrow's memory
+    (read-only); Arrow's own ``to_numpy`` imports pandas (0.4-0.5 s CPU)."""
+    array = column.combine_chunks() if column.num_chunks != 1 else column.chunk(0)
+    if len(array) == 0:
+        return np.zeros(0)
+    return np.frombuffer(array.buffers()[1], np.float64, len(array), array.offset * 8)
 
 
 def _validated_table(table, src: str, testbed: Testbed | None, lines=None) -> pd.DataFrame:
@@ -254,7 +263,8 @@ def read_table(
         else:
             names = pq.read_schema(p).names
             keep = None if wanted is None else [c for c in names if c in wanted]
-            table = pq.read_table(p, columns=keep)
+            # (one file: pq.read_table's dataset layer would import pandas, 0.4-0.5 s CPU)
+            table = pq.ParquetFile(p).read(columns=keep)
     except InputError:
         raise
     except Exception as e:  # pyarrow's errors (ArrowInvalid, OSError) on a bad file
