@@ -2,7 +2,11 @@
 
 A :class:`Log` holds one run's samples as a validated :class:`pandas.DataFrame`:
 one row per sample, the columns of FORMATS.md (SI units) as float64, and any
-other columns kept untouched. :func:`read_log` reads one (:mod:`airbearing.io.log_read`:
+other columns kept untouched. A log read from a file whose columns are all float64
+without a missing cell holds them as NumPy arrays instead and builds the DataFrame
+(``Log.data``) on first use: reading, checking and identifying such a log loads no
+pandas (0.4-0.5 s of CPU of a new process).
+:func:`read_log` reads one (:mod:`airbearing.io.log_read`:
 CSV and Parquet by pyarrow), :func:`validate_log` checks a table
 (:mod:`airbearing.io.log_validate`: nothing is filled or dropped; a bad cell, a missing
 column, time that does not increase, a log that is all gaps or a non-unit quaternion

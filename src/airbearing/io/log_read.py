@@ -1,8 +1,11 @@
 """Reading a log file (CSV or Parquet, FORMATS.md) into validated samples.
 
-Files are read with pyarrow (``pyarrow.csv``, ``pyarrow.parquet``); a CSV that the fast
-reader refuses, or whose content is not valid, is read again cell by cell as text so that
-the error names the row, the line and the column (:mod:`airbearing.io.log_validate`). The
+Files are read with pyarrow (``pyarrow.csv``, ``pyarrow.parquet``). A table whose every
+column is float64 without a missing cell (the usual log) is checked on its arrays
+(:mod:`airbearing.io.log_checks`, no pandas); any other goes through a DataFrame
+(:mod:`airbearing.io.log_validate`). A CSV that the fast reader refuses, or whose content
+is not valid, is read again cell by cell as text so that the error names the row, the
+line and the column. The
 front door is :func:`airbearing.io.log.read_log`, which wraps the samples in a
 :class:`~airbearing.io.log.Log`.
 """
