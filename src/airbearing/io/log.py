@@ -329,7 +329,7 @@ class Log:
     @property
     def n(self) -> int:
         """Number of samples (rows)."""
-        return len(self._values("t"))
+        return len(self._frame) if self._arrays is None else len(self._arrays[0]["t"])
 
     @property
     def t(self) -> np.ndarray:
