@@ -20,6 +20,7 @@ from airbearing.analysis.discrepancy.confounding import (
     constant_torque_inflation,
     steady_axes,
     structural_confounding,
+    wheel_friction_constant_torque,
 )
 from airbearing.analysis.discrepancy.consistency import consistency, per_log_fits
 from airbearing.analysis.discrepancy.horizon import _as_value
@@ -125,6 +126,10 @@ def _confounding(search: _Search, sel: _Selection, named: _Named) -> None:
                 )
                 for c in const
             ]  # fmt: skip
+    if search.testbed.wheels is not None:  # whatever the table's rate does (a fact too)
+        const += wheel_friction_constant_torque(
+            model, search.datas, p, named_th, S_of, skip=axes
+        )  # fmt: skip
     for c in const:
         pair = c.effects
         if pair not in sel.confounded:
