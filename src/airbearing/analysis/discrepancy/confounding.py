@@ -300,9 +300,10 @@ def wheel_friction_constant_torque(model, datas, p, named, S_of, skip=()) -> lis
                 continue
             kind = "exact" if sine < EXACT_SINE else "near"
             ax = AXES[i] if model.dof == 3 else "z"
+            how = "exactly" if kind == "exact" else f"to {100 * sine:.2g} %"
             text = (
                 f"{a.name} makes a torque on the table about {ax} that is constant over the "
-                f"logs to {100 * sine:.0f} % (the wheel speeds keep their sign and nearly "
+                f"logs {how} (the wheel speeds keep their sign and nearly "
                 "their size), as would a torque the model does not hold (the bearing's own "
                 "air-flow torque, a slow drift), and the wheel speeds that would tell them "
                 "apart are not fitted; run the wheels through zero and at other speeds and "
