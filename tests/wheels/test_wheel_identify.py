@@ -8,6 +8,8 @@ squared z-scores is a chi-square with 20 degrees of freedom, tested at the 0.1 %
 and the refusals of logs that cannot tell.
 """
 
+import dataclasses
+
 import numpy as np
 import pandas as pd
 import pytest
@@ -71,6 +73,22 @@ def test_yaw_inertia_within_one_percent_and_three_std(truth):
     assert abs(found.inertia - J_true) < 3 * found.std_inertia
     assert found.details["wheel_inertia"] == [tb.wheels.inertia_vec[0]]
     assert not found.warnings  # a white residual at the gyro and wheel-speed noise
+
+
+def test_the_wheel_inertia_sets_the_scale_and_the_answer_says_so(truth):
+    # the momentum balance J_z w_z + Iw W = H is homogeneous in (J_z, Iw): a data sheet's
+    # wheel inertia 10 % high gives a J_z 10 % high on the same log (to round-off), and
+    # the +- (from the residual) cannot know it, so the answer says what sets the scale
+    tb, J_true, t, X, wc = truth
+    log = _log(tb, t, X, wc, seed=1)
+    found = ab.identify(tb, [log])
+    high = tb.replace(wheels=dataclasses.replace(tb.wheels, inertia=1.1 * tb.wheels.inertia_vec[0]))
+    again = ab.identify(high, [log])
+    assert again.inertia / found.inertia == pytest.approx(1.1, rel=1e-9)
+    assert again.inertia - found.inertia > 100 * found.std_inertia  # far outside the +-
+    scale = found.details["scale"]
+    assert "spin-axis inertia" in scale and f"{tb.wheels.inertia_vec[0]:.4g}" in scale
+    assert "does not include it" in scale
 
 
 @pytest.mark.parametrize("ar", [0.0, 0.9])

@@ -165,9 +165,11 @@ def _echo_estimates(tb, result) -> None:
         for k, v in result.friction.items():
             s = result.std_friction[k]
             typer.echo(f"{k} = {_fmt(v, float('nan') if s is None else s)}")
+        _echo_scale(result)
     elif tb.body.dof == 1:
         unit = "" if result.inertia != result.inertia else " kg m^2"
         typer.echo(f"J_z = {_fmt(result.inertia, result.std_inertia)}{unit} ({result.method})")
+        _echo_scale(result)
     elif not getattr(result, "identifiable", True):
         _echo_scale_free(result)
     else:
@@ -190,6 +192,14 @@ def _echo_estimates(tb, result) -> None:
         for name, why in result.std_status.items():
             if why != "estimated":
                 typer.echo(f"{name}: {why}")
+
+
+def _echo_scale(result) -> None:
+    """What sets a momentum-exchange J_z's scale (the actuator's data-sheet inertia), which
+    its +- cannot know."""
+    scale = (getattr(result, "details", None) or {}).get("scale")
+    if scale:
+        typer.echo(f"scale: {scale}")
 
 
 def _echo_scale_free(result) -> None:

@@ -44,6 +44,7 @@ __all__ = [
     "constant_torque_confounding",
     "constant_torque_inflation",
     "steady_axes",
+    "wheel_friction_constant_torque",
     "structural_confounding",
 ]
 
@@ -262,6 +263,55 @@ def constant_torque_confounding(model, datas, p, named, S_of, axes, rates) -> li
             )
             corr = float(np.sqrt(max(1.0 - sine**2, 0.0)))
             out.append(Confounding((a.name, what), kind, corr, text, {}))
+    return out
+
+
+#: The wheels' bearing friction: its torque on the table follows the wheel speeds, not the
+#: table's rate, so it is a constant torque on the table whenever the wheel speeds keep
+#: their sign (Coulomb) or nearly their size (viscous), however the table moves.
+WHEEL_FRICTION = ("wheel_viscous_friction", "wheel_coulomb_friction")
+
+
+def wheel_friction_constant_torque(model, datas, p, named, S_of, skip=()) -> list:
+    """Named wheel bearing frictions whose torque on the table is nearly constant.
+
+    The test of :func:`constant_torque_confounding` on every body axis (``skip``: axes
+    already tested there), for the named :data:`WHEEL_FRICTION` effects: the table's rate
+    sees a wheel's friction only through its reaction, and the wheel speeds, whose slope
+    would show it, are not fitted; a wheel spinning one way the whole log makes a Coulomb
+    friction one constant torque on the table, as the bearing's own air-flow torque would.
+
+    Returns
+    -------
+    list of Confounding
+        One per (named wheel friction, axis) within :data:`STEADY_AXIS` of a constant.
+    """
+    out = []
+    for a, _ in named:
+        if a.name not in WHEEL_FRICTION or not a.smooth:
+            continue
+        _, phi = residual_torque(model, datas, p, S_of(a))
+        for i in range(phi.shape[1]):
+            col = phi[:, i, :]
+            if i in skip or not np.any(col):
+                continue
+            sine = _largest_sine_one(col, np.ones((col.shape[0], 1)))
+            if sine >= STEADY_AXIS:
+                continue
+            kind = "exact" if sine < EXACT_SINE else "near"
+            ax = AXES[i] if model.dof == 3 else "z"
+            how = "exactly" if kind == "exact" else f"to {100 * sine:.2g} %"
+            text = (
+                f"{a.name} makes a torque on the table about {ax} that is constant over the "
+                f"logs {how} (the wheel speeds keep their sign and nearly "
+                "their size), as would a torque the model does not hold (the bearing's own "
+                "air-flow torque, a slow drift), and the wheel speeds that would tell them "
+                "apart are not fitted; run the wheels through zero and at other speeds and "
+                "fit the logs together (a wheel's friction follows its speed, a torque on "
+                "the table does not), or compare a wheel speed's own slope with its command"
+            )
+            corr = float(np.sqrt(max(1.0 - sine**2, 0.0)))
+            out.append(Confounding((a.name, f"constant torque about {ax}"), kind, corr, text, {}))
     return out
 
 

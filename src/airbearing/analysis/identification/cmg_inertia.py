@@ -264,7 +264,16 @@ def identify_cmg_inertia(
     h0, beta = testbed.cmg.h0, testbed.cmg.skew
     pieces, entries = _momentum_pieces(testbed, logs)
     fields = fit_momentum_exchange(testbed, pieces, entries, friction)
-    fields["details"] = {"h0": float(h0), "beta_rad": float(beta), **fields["details"]}
+    fields["details"] = {
+        "h0": float(h0),
+        "beta_rad": float(beta),
+        "scale": (
+            "J_z is in proportion to the flywheels' momentum h0 taken from the testbed file "
+            f"({h0:.4g} N m s, flywheel inertia x speed): an error of x % there moves J_z by "
+            "x %, and the +- does not include it"
+        ),
+        **fields["details"],
+    }
     return CMGIdentification(**fields)
 
 
