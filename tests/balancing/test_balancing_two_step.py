@@ -34,10 +34,11 @@ def _two_step_seed004_masses(seed: int) -> TwoStepResult:
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("seed", [0, 1], ids=["noise-seed-0", "noise-seed-1"])
-def test_two_step_reduces_kinetic_energy_spread(seed):
+def test_two_step_reduces_kinetic_energy_spread():
+    # one noise seed: the procedure's spread over noise seeds is the paper's-reduction
+    # test's (seed004-platform, seeds 0-3); here the other rig's identified offsets
     tb = _seed004_masses()
-    out = _two_step_seed004_masses(seed)
+    out = _two_step_seed004_masses(0)
     assert isinstance(out, TwoStepResult)
     assert len(repr(out)) < 300 and "spread of E = w^T J w" in str(out)
     # seed 004: 99.75 % in simulation (true rates, as ke_reduction now is)
