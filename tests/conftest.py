@@ -217,7 +217,7 @@ def computed_once(tmp_path_factory):
 def seed004_two_step(computed_once):
     """``seed004_two_step(seed)``: ``two_step(load_testbed("seed004-platform"), seed=seed)``
     (the library's defaults), computed once per test run: the paper's-reduction test reads
-    noise seeds 0-3, the command-line tests that only check what the command passes and
+    noise seeds 0-2, the command-line tests that only check what the command passes and
     prints read seed 0 (one end-to-end command stays: tests/cli/test_cli_commands.py)."""
 
     # bound here, at set-up: the command-line tests patch the module's two_step to this

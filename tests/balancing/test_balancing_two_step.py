@@ -34,10 +34,11 @@ def _two_step_seed004_masses(seed: int) -> TwoStepResult:
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("seed", [0, 1], ids=["noise-seed-0", "noise-seed-1"])
-def test_two_step_reduces_kinetic_energy_spread(seed):
+def test_two_step_reduces_kinetic_energy_spread():
+    # one noise seed: the procedure's spread over noise seeds is the paper's-reduction
+    # test's (seed004-platform, seeds 0-2); here the other rig's identified offsets
     tb = _seed004_masses()
-    out = _two_step_seed004_masses(seed)
+    out = _two_step_seed004_masses(0)
     assert isinstance(out, TwoStepResult)
     assert len(repr(out)) < 300 and "spread of E = w^T J w" in str(out)
     # seed 004: 99.75 % in simulation (true rates, as ke_reduction now is)
@@ -91,11 +92,13 @@ def test_cli_two_step_json_keys(tmp_path, monkeypatch):
 
 @pytest.mark.slow
 def test_seed004_platform_two_step_reaches_the_papers_reduction(seed004_two_step):
-    """``balance seed004-platform --two-step``, 4 noise seeds: seed 004 Sec. "Simulation
+    """``balance seed004-platform --two-step``, 3 noise seeds: seed 004 Sec. "Simulation
     results" reports a kinetic-energy spread falling from 0.0011 to 2.7142e-6 J (99.75 %),
-    from the true rates of its simulation (eqs. 52-54, "neglecting the air friction")."""
+    from the true rates of its simulation (eqs. 52-54, "neglecting the air friction").
+    The median of 3 seeds, like that of 4, lets one seed fall short of the paper's one
+    simulation; every other claim holds for each seed."""
     tb = load_testbed("seed004-platform")
-    runs = [seed004_two_step(s) for s in range(4)]
+    runs = [seed004_two_step(s) for s in range(3)]
     assert np.median([r.ke_reduction for r in runs]) >= 0.9975, [r.ke_reduction for r in runs]
     step = tb.masses.step
     for r in runs:
