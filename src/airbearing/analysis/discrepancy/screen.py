@@ -89,8 +89,16 @@ class Step:
     rss_model: float  # predicted weighted RSS
     rss: float  # weighted RSS of the residual evaluated at the step
     r: np.ndarray
-    J: sp.csc_matrix  # Jacobian at the current fit in [theta; vec(delta)]
+    # the Jacobian at the current fit in [theta; vec(delta)] is [At, Jd]: the step's
+    # parameter columns (dense) and the window states' columns, shared by the round
+    At: np.ndarray
+    Jd: sp.csc_matrix
     feasible: bool  # the chosen parameters stay inside their bounds
+
+    @property
+    def J(self) -> sp.csc_matrix:
+        """The Jacobian at the current fit in ``[theta; vec(delta)]`` (made on each call)."""
+        return sp.hstack([sp.csc_matrix(self.At), self.Jd]).tocsc()
 
 
 class Linearisation:
@@ -198,8 +206,7 @@ class Linearisation:
             p_base = p_base - S_sel_c[:, k_sel:] @ self.cand0
         p = p_base + S_sel_c @ theta
         r = pb.residual(delta.reshape(nd, nw), p)
-        J = sp.hstack([sp.csc_matrix(self.A @ E), self.Jd]).tocsc()
-        return Step(theta, delta, p, self.rss0 + q, float(r @ r), r, J, feasible)
+        return Step(theta, delta, p, self.rss0 + q, float(r @ r), r, self.A @ E, self.Jd, feasible)
 
     def lr_at(self, E: np.ndarray, th_c: np.ndarray) -> float:
         """Likelihood ratio with the candidate at ``th_c``, the chosen effects held and every
@@ -243,7 +250,8 @@ class Linearisation:
             level="screened",
             not_identifiable=reasons,
             cov=cov,
-            extra={"r": st.r, "J": st.J},
+            # the window states' columns shared with the round (:func:`.fit_jacobian`)
+            extra={"r": st.r, "J_blocks": (st.At, st.Jd)},
         )
 
 

@@ -42,7 +42,7 @@ import scipy.sparse as sp
 
 from airbearing.analysis.discrepancy.candidates import Candidate, smoothed
 from airbearing.analysis.discrepancy.replay import primary_series
-from airbearing.analysis.shooting import Fit, ShootingProblem
+from airbearing.analysis.shooting import Fit, ShootingProblem, fit_jacobian
 from airbearing.errors import SolverError
 
 __all__ = ["CandidateResult", "HeldOut", "MIN_SIGMAS", "SIGNIFICANCE", "cross_validate"]
@@ -288,7 +288,7 @@ def cross_validate(problem: ShootingProblem, fit: Fit, k: int, folds: np.ndarray
     refit, the neighbours' starts held): a held-out piece then cannot absorb an effect the
     process noise says the trajectory must show.
     """
-    r, J = np.asarray(fit.extra["r"]), fit.extra["J"].tocsc()
+    r, J = np.asarray(fit.extra["r"]), fit_jacobian(fit).tocsc()
     nd, nw, n = problem.n_delta, problem.windows.n, problem.n_win_res
     sel0 = problem.primary & problem.usable
     sel = np.zeros(r.size, dtype=bool)
