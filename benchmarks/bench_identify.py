@@ -20,8 +20,9 @@ of a git revision too (``git archive``, same interpreter), run for run alternate
 the work tree. ``--keep DIR`` writes the logs there (and reuses them on the next run)
 instead of a temporary folder. ``--stages`` prints, instead, the CPU time of each stage of
 one identification in a new process per run (interpreter and the CLI's imports, numpy,
-pandas and CasADi, the identification modules, reading the logs, their quality, the
-identification itself; :data:`STAGES`), for the 10^4-row CSV and 10^6-row Parquet logs,
+CasADi and pyarrow, the identification modules, reading the logs, their quality, the
+identification itself; :data:`STAGES`; a tree whose logs hold pandas DataFrames loads
+pandas with its modules or its first read), for the 10^4-row CSV and 10^6-row Parquet logs,
 each tree alternately.
 
 The processes run as after an install (``bench_end_to_end.Tree.env``): Python's bytecode
@@ -101,7 +102,7 @@ import sys, time
 c = [time.process_time()]  # the interpreter's start
 import airbearing.cli  # the CLI, typer
 c.append(time.process_time())
-import numpy, pandas, casadi  # what a command loads (the CLI's callback loads CasADi)
+import numpy, casadi, pyarrow  # what a command loads (the CLI's callback loads CasADi)
 c.append(time.process_time())
 from airbearing.analysis.identification.equation_error import identify_equation_error
 from airbearing.analysis.identification.options import columns_used
@@ -118,7 +119,7 @@ identify_equation_error(tb, logs, known_offset_xy=(float(sys.argv[1]), float(sys
 c.append(time.process_time())
 print(" ".join(f"{b - a:.3f}" for a, b in zip([0.0, *c], c)))
 """
-STAGE_NAMES = ("start", "CLI, typer", "np/pd/ca", "id modules", "read", "quality", "identify")
+STAGE_NAMES = ("start", "CLI, typer", "np/ca/pa", "id modules", "read", "quality", "identify")
 
 
 def stages(paths: list[Path], tree: Tree, scratch: Path) -> list[float]:

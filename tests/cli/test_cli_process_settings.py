@@ -7,6 +7,7 @@ import json
 import os
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 
@@ -41,3 +42,60 @@ def test_numpy_loads_with_one_blas_thread_for_the_fitting_commands(command, thre
     seen = json.loads(out.stdout.strip().splitlines()[-1])
     # the missing log is refused (status 2) after the global callback loaded numpy
     assert seen == {"numpy": threads, "status": 2}
+
+
+def _console(args, cwd):
+    """``python -m airbearing ARGS`` in a new process running THIS tree's airbearing."""
+    import airbearing
+
+    src = str(Path(airbearing.__file__).resolve().parents[1])
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([src, os.environ.get("PYTHONPATH", "")]))
+    env["AIRBEARING_COMPILE"] = "0"  # CasADi's virtual machine: no compiling on a cold cache
+    return subprocess.run([sys.executable, "-m", "airbearing", *args], capture_output=True,
+                          text=True, env=env, cwd=cwd, timeout=300)  # fmt: skip
+
+
+def test_a_console_discrepancy_ends_with_its_status_and_every_line(tmp_path):
+    # the console run leaves by os._exit (cli._end_process): what it printed and wrote
+    # must all be there, and its status the command's
+    from airbearing.analysis.simulation.scenarios import slew
+    from airbearing.io.log import write_log
+    from airbearing.io.testbed import load_testbed
+
+    run = slew(load_testbed("cmg-yaw"), angle_deg=30.0, duration=3.0,
+               effects={"viscous_friction": 2e-4})  # fmt: skip
+    write_log(run.log, tmp_path / "short.csv")
+    args = ["--quiet", "discrepancy", "cmg-yaw", "short.csv", "--only", "viscous_friction"]
+    out = _console([*args, "--json", "d.json"], tmp_path)
+    assert out.returncode == 0, out.stderr[-2000:]
+    lines = out.stdout.splitlines()
+    assert lines[0].startswith("missing effect: viscous_friction")
+    assert lines[-1] == "wrote d.json"
+    # the value simulated (the doctest of airbearing.discrepancy: noise-free 3 s slew)
+    (found,) = json.loads((tmp_path / "d.json").read_text())["effects"]
+    assert found["name"] == "viscous_friction"
+    assert found["value"] == pytest.approx(2e-4, rel=1e-3)
+    bad = _console([*args, "missing.csv"], tmp_path)
+    assert bad.returncode == 2
+    assert bad.stderr.splitlines() == [bad.stderr.strip()]  # one line
+    assert bad.stderr.startswith("airbearing: error: ") and "missing.csv" in bad.stderr
+    assert bad.stdout == ""
+
+
+def test_the_collector_is_paused_only_for_a_console_commands_imports():
+    import gc
+
+    from airbearing.cli import process_settings
+
+    frozen = gc.get_freeze_count()
+    process_settings.collect_after_imports()  # not paused (a test, the API): nothing
+    assert gc.isenabled() and gc.get_freeze_count() == frozen
+    process_settings.pause_collection()
+    try:
+        assert not gc.isenabled()
+        import airbearing.cli.discrepancy  # noqa: F401
+    finally:
+        process_settings.collect_after_imports()
+    assert gc.isenabled()
+    assert gc.get_freeze_count() > frozen
+    gc.unfreeze()  # (this test process lives on: its objects back in the collector's view)

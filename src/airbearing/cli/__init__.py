@@ -36,7 +36,7 @@ import traceback
 import warnings
 from collections.abc import Iterator
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, NoReturn
 
 import typer
 
@@ -294,6 +294,11 @@ def main(argv: list[str] | None = None) -> None:
         from airbearing.cli.process_settings import one_blas_thread
 
         one_blas_thread()  # before anything loads numpy (the callback's CasADi does)
+    quick = console and _path[:1] in _QUICK_EXIT
+    if quick:
+        from airbearing.cli.process_settings import pause_collection
+
+        pause_collection()  # resumed by the command after its imports
     try:
         with chatter_to_debug_log(verbose, fds=console):
             if console:
@@ -307,7 +312,35 @@ def main(argv: list[str] | None = None) -> None:
     except SystemExit as e:
         if e.code == 130:
             _leave_interrupted(console)
+        if quick and (e.code is None or isinstance(e.code, int)):
+            _end_process(e.code or 0)
         raise
+    if quick:
+        _end_process(0)
+
+
+#: Console commands that pause the garbage collector during their imports
+#: (:func:`airbearing.cli.process_settings.pause_collection`) and leave without tearing the
+#: interpreter down (:func:`_end_process`).
+_QUICK_EXIT = (("discrepancy",),)
+
+
+def _end_process(code: int) -> NoReturn:
+    """End a finished console run now, with status ``code``, skipping the interpreter's
+    tear-down.
+
+    After a discrepancy search the tear-down (clearing ~1700 modules, collecting every
+    object left) is 0.4-0.6 s CPU (measured on the shared 2-core machine, load 6-7) and
+    does nothing a finished run needs: its outputs are committed and closed, the debug
+    log is closed (or removed). The exit handlers this path has (``logging.shutdown``;
+    Arrow's S3 finaliser, unused: logs are local files) are replaced by flushing the log
+    handlers and the standard streams here.
+    """
+    logging.shutdown()
+    for stream in (sys.stdout, sys.stderr):
+        with contextlib.suppress(Exception):
+            stream.flush()
+    os._exit(code)
 
 
 #: Command modules not named by their command (``airbearing report`` lives in gains.py).

@@ -63,10 +63,12 @@ def discrepancy(
     number("--window", window, lo=0, lo_open=True, unit="s")
     from airbearing.analysis.discrepancy.search import discrepancy as run
     from airbearing.cli.common import only_as_flag, testbed_arg
+    from airbearing.cli.process_settings import collect_after_imports
     from airbearing.cli.show_progress import progress_display
     from airbearing.io.log import read_log
     from airbearing.io.testbed import write_testbed
 
+    collect_after_imports()  # paused by `main` for these imports
     tb = testbed_arg(testbed)
     fitted = [read_log(p, tb) for p in logs]
     held = [read_log(p, tb) for p in validate or []]

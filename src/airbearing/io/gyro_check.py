@@ -74,7 +74,7 @@ def _ends(k: np.ndarray, n: int):
 
 def _attitude_rates(log, k: np.ndarray) -> tuple[np.ndarray, tuple[str, ...]] | None:
     """Body rates the attitude shows over the intervals ``k`` (rad/s), and their axes."""
-    t = log.data["t"].to_numpy(dtype=float)
+    t = log.t
     k0, k1 = _ends(k, t.size)
     h = t[k1] - t[k0]
     q = log.quaternions()
@@ -122,7 +122,7 @@ def gyro_disagreement(log, segments, usable, attitude_noise: float) -> tuple[str
     if w_gyro.shape[1] != w_att.shape[1]:
         w_gyro = w_gyro[:, -w_att.shape[1] :]
         cols = cols[-w_att.shape[1] :]
-    t = log.data["t"].to_numpy(dtype=float)
+    t = log.t
     h = float(np.median(t[k1] - t[k0]))
     noise = np.sqrt(2.0) * max(float(attitude_noise), 1e-12) / h  # of one interval's rate
     out = []

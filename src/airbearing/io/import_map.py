@@ -31,6 +31,7 @@ import pyarrow.parquet as pq
 
 from airbearing.errors import InputError
 from airbearing.io.columns import LOG_COLUMNS, bad_mask, row_ranges
+from airbearing.io.unwrap import unwrap
 
 __all__ = [
     "COLUMN_QUANTITY",
@@ -50,7 +51,6 @@ __all__ = [
 
 _MEMORY = "<memory>"
 _ROTATION_TOL = 1e-6  # |C C^T - I| and |det C - 1| allowed for [frames] body
-_SEGMENT_BREAK = 1.5  # x the file's median interval (FORMATS.md)
 
 #: Units a raw column may have, by quantity: unit -> factor to the SI unit (FORMATS.md).
 UNITS: dict[str, dict[str, float]] = {
@@ -587,56 +587,6 @@ def _check_sub_unit(t: np.ndarray, src: str, header: str, unit: str, map_src: st
         f"faster than {FASTEST_RATE:g} Hz, which no air-bearing logger samples at: is the "
         f'time column in s? set [units] t = "s" (or the unit the file really uses)'
     )
-
-
-def _wrap(a: np.ndarray) -> np.ndarray:
-    return np.mod(a + np.pi, 2.0 * np.pi) - np.pi
-
-
-def unwrap(angle: np.ndarray, t: np.ndarray) -> np.ndarray:
-    """Unwrap an angle, each segment on its own, keeping the branch across isolated jumps.
-
-    Parameters
-    ----------
-    angle : numpy.ndarray
-        rad, shape (n,), e.g. a raw yaw in [-pi, pi).
-    t : numpy.ndarray
-        s, shape (n,), strictly increasing.
-
-    Returns
-    -------
-    numpy.ndarray
-        ``angle + 2 pi k`` (k integer per sample). A segment starts afresh (as
-        logged) after an interval longer than 1.5 x the median interval. Within a
-        segment each sample takes the branch nearest the previous sample, except
-        after an isolated sample that jumps away and back (more than pi/3 from both
-        neighbours while they are within pi/3 of each other): the sample after it
-        takes the branch nearest the sample before it, so an occluded frame
-        exported as 0 or a jump of more than pi and back does not change the branch.
-    """
-    y = np.asarray(angle, dtype=float)
-    t = np.asarray(t, dtype=float)
-    out = y.copy()
-    if y.size < 2:
-        return out
-    dt = np.diff(t)
-    breaks = np.flatnonzero(dt > _SEGMENT_BREAK * np.median(dt)) + 1
-    for seg in np.split(np.arange(y.size), breaks):
-        if seg.size < 2:
-            continue
-        s = y[seg]
-        step = _wrap(np.diff(s))  # step[i]: s[i] -> s[i+1]
-        inc = step.copy()
-        if s.size >= 3:
-            big = np.pi / 3
-            skip = _wrap(s[2:] - s[:-2])  # s[j-1] -> s[j+1], j = 1..m-2
-            spike = (np.abs(step[:-1]) > big) & (np.abs(step[1:]) > big) & (np.abs(skip) < big)
-            j = np.flatnonzero(spike)  # sample j + 1 is the isolated jump
-            inc[j + 1] = skip[j] - step[j]
-        u = s[0] + np.concatenate([[0.0], np.cumsum(inc)])
-        k = np.round((u - s) / (2.0 * np.pi))
-        out[seg] = s + 2.0 * np.pi * k
-    return out
 
 
 def check_wheel_units(import_map: ImportMap, testbed) -> None:

@@ -2,7 +2,11 @@
 
 A :class:`Log` holds one run's samples as a validated :class:`pandas.DataFrame`:
 one row per sample, the columns of FORMATS.md (SI units) as float64, and any
-other columns kept untouched. :func:`read_log` reads one (:mod:`airbearing.io.log_read`:
+other columns kept untouched. A log read from a file whose columns are all float64
+without a missing cell holds them as NumPy arrays instead and builds the DataFrame
+(``Log.data``) on first use: reading, checking and identifying such a log loads no
+pandas (0.4-0.5 s of CPU of a new process).
+:func:`read_log` reads one (:mod:`airbearing.io.log_read`:
 CSV and Parquet by pyarrow), :func:`validate_log` checks a table
 (:mod:`airbearing.io.log_validate`: nothing is filled or dropped; a bad cell, a missing
 column, time that does not increase, a log that is all gaps or a non-unit quaternion
@@ -35,9 +39,9 @@ from __future__ import annotations
 import os
 from collections.abc import Iterable, Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
-import pandas as pd
 
 from airbearing.errors import InputError
 from airbearing.io.coerce import as_testbed
@@ -67,22 +71,22 @@ from airbearing.io.columns import (  # noqa: F401 (re-exported: the log module's
     time_text,
     wheel_columns,
 )
-from airbearing.io.log_read import log_format, read_table
-from airbearing.io.log_validate import (  # noqa: F401 (re-exported: the log module's names)
+from airbearing.io.log_checks import (  # noqa: F401 (re-exported: the log module's names)
     MEMORY_SOURCE,
     BadCellsError,
     column_list,
-    numeric_column,
     quaternion_norm_hint,
     restarts_at,
-    validate_log,
-    validated,
 )
+from airbearing.io.log_read import log_format, read_table
 from airbearing.io.log_write import log_bytes
 from airbearing.io.log_yaw import YAW_UNWRAPPED, yaw_unwrapped_words
 from airbearing.io.quality import LogQuality, assess
 from airbearing.io.testbed import Testbed
 from airbearing.io.testbed_write import _atomic_write_bytes
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 __all__ = [
     "BadCellsError",
@@ -105,11 +109,30 @@ __all__ = [
     "restarts_at",
     "segments_of",
     "yaw_unwrapped_words",
-    "validate_log",
+    "validate_log",  # noqa: F822 (module __getattr__: from log_validate on first use)
     "wheel_columns",
     "wheel_saturation",
     "write_log",
 ]
+
+#: The names of :mod:`airbearing.io.log_validate` (a pandas table's checks) this module
+#: gives, imported on first use (:func:`_tables`).
+_TABLE_NAMES = ("numeric_column", "validate_log", "validated")
+
+
+def _tables():
+    """:mod:`airbearing.io.log_validate`, the checks of a pandas table, on first use."""
+    # pandas: 0.4-0.5 s CPU to import, which a log of float64 columns read from a file
+    # does not need (`airbearing identify` of a 10^4-row log: its whole budget is 1 s)
+    from airbearing.io import log_validate
+
+    return log_validate
+
+
+def __getattr__(name: str):
+    if name in _TABLE_NAMES:
+        return getattr(_tables(), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def wheel_saturation(log: Log) -> tuple[dict, ...]:
@@ -140,7 +163,7 @@ def wheel_saturation(log: Log) -> tuple[dict, ...]:
     unit, key = ("N m", "max_torque") if torque else ("rad/s", "max_speed")
     out = []
     for column in wheel_columns(wheels.n)[1]:
-        if column not in log.data.columns:
+        if not log.has(column):
             continue
         values = log.column(column)
         beyond = np.flatnonzero(np.abs(values) > limit)
@@ -210,13 +233,41 @@ class Log:
     ) -> None:
         self.source = str(source)
         self.testbed = testbed
-        self.data = validated(data, self.source, testbed)
+        self._frame = _tables().validated(data, self.source, testbed)
+        self._arrays = None
 
     @classmethod
-    def _from_validated(cls, data: pd.DataFrame, source: str, testbed: Testbed | None) -> Log:
+    def _from_validated(cls, data, source: str, testbed: Testbed | None) -> Log:
+        """A Log of validated samples: a DataFrame, or ``(arrays, attrs)`` (float64 columns
+        by name and the table's ``attrs``, :func:`~airbearing.io.log_read.read_table`)."""
         log = cls.__new__(cls)
-        log.source, log.testbed, log.data = source, testbed, data
+        log.source, log.testbed = source, testbed
+        if isinstance(data, tuple):
+            log._frame, log._arrays = None, data
+        else:
+            log._frame, log._arrays = data, None
         return log
+
+    @property
+    def data(self) -> pd.DataFrame:
+        """The samples as a :class:`pandas.DataFrame` (a log read from a file of float64
+        columns holds arrays until this is asked for: no pandas otherwise)."""
+        if self._frame is None:
+            arrays, attrs = self._arrays
+            self._frame = _tables().table_of(arrays, attrs)
+            self._arrays = None
+        return self._frame
+
+    def _names(self):
+        """The column names (a container: ``in`` is a hash lookup)."""
+        return self._arrays[0].keys() if self._arrays is not None else self._frame.columns
+
+    def _values(self, name: str) -> np.ndarray:
+        """A column's values without a copy (read-only where they are Arrow's or the
+        DataFrame's own)."""
+        if self._arrays is not None:
+            return self._arrays[0][name]
+        return self._frame[name].to_numpy()
 
     # -- sampling and quality (FORMATS.md, "Real logs are not perfect")
 
@@ -234,7 +285,7 @@ class Log:
         """
         cached = self.__dict__.get("_segments")
         if cached is None:
-            cached = segments_of(self.data["t"].to_numpy(dtype=float), self.period)
+            cached = segments_of(np.asarray(self._values("t"), dtype=float), self.period)
             self.__dict__["_segments"] = cached
         return cached
 
@@ -269,7 +320,7 @@ class Log:
         return (
             f"Log(source={self.source!r}, n={self.n}, "
             f"t=[{self.t[0]:g}, {self.t[-1]:g}] s, testbed={tb}, "
-            f"columns=[{column_list(self.data.columns)}])"
+            f"columns=[{column_list(self._names())}])"
         )
 
     def __len__(self) -> int:
@@ -278,17 +329,17 @@ class Log:
     @property
     def n(self) -> int:
         """Number of samples (rows)."""
-        return len(self.data)
+        return len(self._frame) if self._arrays is None else len(self._arrays[0]["t"])
 
     @property
     def t(self) -> np.ndarray:
         """Sample times, s, shape (n,)."""
-        return self.data["t"].to_numpy(dtype=float, copy=True)
+        return np.array(self._values("t"), dtype=float)
 
     @property
     def dt(self) -> float:
         """Median sample interval, s."""
-        return float(np.median(np.diff(self.data["t"].to_numpy(dtype=float))))
+        return float(np.median(np.diff(np.asarray(self._values("t"), dtype=float))))
 
     def has(self, *names: str) -> bool:
         """Whether every named column is present.
@@ -302,7 +353,8 @@ class Log:
         -------
         bool
         """
-        return all(name in self.data.columns for name in names)
+        present = self._names()
+        return all(name in present for name in names)
 
     def column(self, name: str) -> np.ndarray:
         """One column as a float array.
@@ -322,10 +374,14 @@ class Log:
         InputError
             If the column is absent or (for an extra column) not numeric.
         """
-        if name not in self.data.columns:
-            present = column_list(self.data.columns)
+        if not self.has(name):
+            present = column_list(self._names())
             raise InputError(f"{self.source}: no column {name!r}; columns present: {present}")
-        return numeric_column(self.data[name], name, self.source, None).copy()
+        if self._arrays is not None:
+            values = self._arrays[0][name]  # float64
+            if not bad_mask(values).any():
+                return values.copy()
+        return _tables().numeric_column(self.data[name], name, self.source, None).copy()
 
     def columns(self, names: Sequence[str]) -> np.ndarray:
         """Several columns as a float array.
@@ -347,8 +403,8 @@ class Log:
         """
         out = np.empty((self.n, len(names)))
         for i, name in enumerate(names):
-            if name in LOG_COLUMNS and name in self.data.columns and self.data[name].dtype == float:
-                out[:, i] = self.data[name].to_numpy()  # validated: finite float64
+            if name in LOG_COLUMNS and self.has(name) and self._values(name).dtype == float:
+                out[:, i] = self._values(name)  # validated: finite float64
             else:
                 out[:, i] = self.column(name)
         return out
@@ -461,7 +517,8 @@ class Log:
         if self.testbed is not None:
             n = 0 if self.testbed.wheels is None else self.testbed.wheels.n
         else:
-            n = sum(1 for c in family if c in self.data.columns)
+            present = self._names()
+            n = sum(1 for c in family if c in present)
         return self._optional(family[:n]) if n else None
 
     def wheel_speeds(self) -> np.ndarray | None:
@@ -585,8 +642,8 @@ def write_log(log: Log | pd.DataFrame, path: str | os.PathLike[str]) -> Path:
     kind = log_format(p)
     if isinstance(log, Log):
         data = log.data
-    elif isinstance(log, pd.DataFrame):
-        data = validated(log, str(path), None, unwrap_yaw=False)
+    elif _tables().is_table(log):
+        data = _tables().validated(log, str(path), None, unwrap_yaw=False)
     else:
         raise InputError(f"{path}: expected a Log or a pandas DataFrame, got {type(log).__name__}")
     return _atomic_write_bytes(p, log_bytes(data, kind))

@@ -1,8 +1,11 @@
 """Reading a log file (CSV or Parquet, FORMATS.md) into validated samples.
 
-Files are read with pyarrow (``pyarrow.csv``, ``pyarrow.parquet``); a CSV that the fast
-reader refuses, or whose content is not valid, is read again cell by cell as text so that
-the error names the row, the line and the column (:mod:`airbearing.io.log_validate`). The
+Files are read with pyarrow (``pyarrow.csv``, ``pyarrow.parquet``). A table whose every
+column is float64 without a missing cell (the usual log) is checked on its arrays
+(:mod:`airbearing.io.log_checks`, no pandas); any other goes through a DataFrame
+(:mod:`airbearing.io.log_validate`). A CSV that the fast reader refuses, or whose content
+is not valid, is read again cell by cell as text so that the error names the row, the
+line and the column. The
 front door is :func:`airbearing.io.log.read_log`, which wraps the samples in a
 :class:`~airbearing.io.log.Log`.
 """
@@ -14,9 +17,9 @@ import io
 import os
 from collections.abc import Iterable
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
-import pandas as pd
 import pyarrow as pa
 import pyarrow.csv as pacsv
 import pyarrow.parquet as pq
@@ -29,8 +32,11 @@ from airbearing.io.columns import (
     REQUIRED_COLUMNS,
     wheel_columns,
 )
-from airbearing.io.log_validate import validated
+from airbearing.io.log_checks import validated_arrays
 from airbearing.io.testbed import Testbed
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 __all__ = ["LOG_SUFFIXES", "log_format", "read_table"]
 
@@ -69,6 +75,8 @@ def log_format(path: Path) -> str:
 
 
 def _read_csv(path: Path, src: str) -> tuple[pd.DataFrame, list[int] | None]:
+    import pandas as pd  # 0.4-0.5 s CPU to import: only a CSV the fast reader refuses
+
     try:
         # utf-8-sig: a byte-order mark (Excel's "CSV UTF-8") is not part of the first name
         text = path.read_text(encoding="utf-8-sig")
@@ -121,11 +129,45 @@ def _check_separator(header: str, src: str, line: int) -> None:
 def _to_pandas(table) -> pd.DataFrame:
     """An Arrow table as a DataFrame: one block per column (no consolidating copy) where
     pandas copies on write (pandas >= 3), so the arrays may stay Arrow's own."""
+    import pandas as pd  # 0.4-0.5 s CPU to import: only a log with other than float64 columns
+
     split = int(pd.__version__.split(".")[0]) >= 3
     return table.to_pandas(split_blocks=split)
 
 
-def _read_csv_fast(path: Path, wanted: set[str] | None) -> pd.DataFrame:
+def _float_columns(table, src: str, testbed: Testbed | None):
+    """A table whose every column is float64 without a missing cell, checked as
+    :func:`~airbearing.io.log_validate.validated` checks it but on its arrays (no pandas):
+    ``(arrays, attrs)``; None for any other table (the table's validation decides)."""
+    names = table.column_names
+    if len(set(names)) != len(names):
+        return None
+    for column in table.columns:
+        if not pa.types.is_float64(column.type) or column.null_count:
+            return None
+    arrays = {name: _float64(table.column(i)) for i, name in enumerate(names)}
+    return validated_arrays(names, arrays, src, testbed)
+
+
+def _float64(column) -> np.ndarray:
+    """A float64 Arrow column without missing cells as a NumPy array on Arrow's memory
+    (read-only); Arrow's own ``to_numpy`` imports pandas (0.4-0.5 s CPU)."""
+    array = column.combine_chunks() if column.num_chunks != 1 else column.chunk(0)
+    if len(array) == 0:
+        return np.zeros(0)
+    return np.frombuffer(array.buffers()[1], np.float64, len(array), array.offset * 8)
+
+
+def _validated_table(table, src: str, testbed: Testbed | None, lines=None) -> pd.DataFrame:
+    """:func:`~airbearing.io.log_validate.validated` of an Arrow table (as a DataFrame)."""
+    # pandas (0.4-0.5 s CPU to import): only a log with other than float64 columns
+    from airbearing.io.log_validate import validated
+
+    df = _to_pandas(table) if isinstance(table, pa.Table) else table
+    return validated(df, src, testbed, lines, fresh=True)
+
+
+def _read_csv_fast(path: Path, wanted: set[str] | None) -> pa.Table:
     """pyarrow's CSV reader: known columns as float64, others inferred (raises on any doubt)."""
     with path.open("rb") as fh:
         first = fh.readline()
@@ -148,7 +190,7 @@ def _read_csv_fast(path: Path, wanted: set[str] | None) -> pd.DataFrame:
     )
     if table.num_rows == 0 or any(table.column(n).null_count for n in types):
         raise ValueError("empty or missing cells need the careful reader")
-    return _to_pandas(table)
+    return table
 
 
 def _wanted(columns: Iterable[str] | None, testbed: Testbed | None) -> set[str] | None:
@@ -171,7 +213,7 @@ def read_table(
     path: str | os.PathLike[str],
     testbed: Testbed | None = None,
     columns: Iterable[str] | None = None,
-) -> pd.DataFrame:
+) -> tuple[dict[str, np.ndarray], dict] | pd.DataFrame:
     """A log file's samples, read and validated (:func:`airbearing.io.log.read_log`'s work).
 
     Parameters
@@ -187,8 +229,11 @@ def read_table(
 
     Returns
     -------
-    pandas.DataFrame
-        The samples as :func:`~airbearing.io.log_validate.validate_log` returns them.
+    (dict, dict) or pandas.DataFrame
+        When every column read is float64 without a missing cell (the usual log): its
+        arrays by name in the file's order and the table's ``attrs``, checked by
+        :func:`~airbearing.io.log_checks.validated_arrays` (no pandas); else the samples
+        as :func:`~airbearing.io.log_validate.validate_log` returns them.
 
     Raises
     ------
@@ -210,7 +255,7 @@ def read_table(
             fast = None
         if fast is not None:
             try:
-                return validated(fast, src, testbed, fresh=True)
+                return _float_columns(fast, src, testbed) or _validated_table(fast, src, testbed)
             except InputError:
                 pass  # read again below, to name the line too
     try:
@@ -221,9 +266,12 @@ def read_table(
         else:
             names = pq.read_schema(p).names
             keep = None if wanted is None else [c for c in names if c in wanted]
-            df, lines = _to_pandas(pq.read_table(p, columns=keep)), None
+            # (one file: pq.read_table's dataset layer would import pandas, 0.4-0.5 s CPU)
+            table = pq.ParquetFile(p).read(columns=keep)
     except InputError:
         raise
     except Exception as e:  # pyarrow's errors (ArrowInvalid, OSError) on a bad file
         raise InputError(f"{src}: cannot read the {kind} log: {e}") from e
-    return validated(df, src, testbed, lines, fresh=True)
+    if kind == "csv":
+        return _validated_table(df, src, testbed, lines)
+    return _float_columns(table, src, testbed) or _validated_table(table, src, testbed)

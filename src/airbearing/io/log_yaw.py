@@ -12,15 +12,18 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
-import pandas as pd
 
 from airbearing.io.columns import GAP_FACTORS, row_ranges
-from airbearing.io.import_map import unwrap
 from airbearing.io.testbed import Testbed
+from airbearing.io.unwrap import unwrap
 
-__all__ = ["YAW_UNWRAPPED", "unwrap_wrapped_yaw", "yaw_unwrapped_words"]
+if TYPE_CHECKING:
+    import pandas as pd
+
+__all__ = ["YAW_UNWRAPPED", "unwrap_wrapped_yaw", "wrapped_yaw", "yaw_unwrapped_words"]
 
 #: rad: a step of the logged yaw between two samples larger than this, which is within
 #: :data:`_WRAP_SLACK` of a whole turn, in a yaw that stays within one turn, is the angle
@@ -38,14 +41,9 @@ YAW_UNWRAPPED = "yaw_unwrapped_rows"
 def unwrap_wrapped_yaw(out: pd.DataFrame, testbed: Testbed | None) -> None:
     """A logged ``yaw`` written wrapped is unwrapped on read, and said (in place).
 
-    The signature of a wrapped yaw: it stays within one turn (its range is at most 2 pi),
-    moves smoothly (median step below :data:`_SMOOTH_STEP`) and jumps by about a whole turn
-    (more than pi, within pi/2 of 2 pi k) between two samples of a segment. Such a yaw is
-    unwrapped as the import map does (:func:`airbearing.io.import_map.unwrap`: each segment
-    on its own, an isolated jump keeping the branch), and the rows where its branch changes
-    are kept in ``out.attrs[YAW_UNWRAPPED]`` for ``log check`` and the tools to say. A
-    glitch (a frame exported as 0) on a spinning yaw is not one: the yaw spans more than a
-    turn.
+    :func:`wrapped_yaw` on the table's ``yaw``: when it finds the yaw written wrapped, the
+    column is replaced by the unwrapped yaw and the rows where its branch changes are kept
+    in ``out.attrs[YAW_UNWRAPPED]`` for ``log check`` and the tools to say.
 
     Parameters
     ----------
@@ -54,27 +52,57 @@ def unwrap_wrapped_yaw(out: pd.DataFrame, testbed: Testbed | None) -> None:
     testbed : Testbed or None
         Its ``sensors.rate`` says what a gap is (without one: the median interval).
     """
-    if "yaw" not in out.columns or len(out) < 3:
+    if "yaw" not in out.columns:
         return
-    yaw = out["yaw"].to_numpy()
+    found = wrapped_yaw(out["yaw"].to_numpy(), out["t"].to_numpy(), testbed)
+    if found is not None:
+        out["yaw"] = found[0]
+        out.attrs[YAW_UNWRAPPED] = found[1]
+
+
+def wrapped_yaw(
+    yaw: np.ndarray, t: np.ndarray, testbed: Testbed | None
+) -> tuple[np.ndarray, list[int]] | None:
+    """A logged yaw written wrapped, unwrapped: the new yaw and the rows where its branch
+    changes; None when the yaw is not written wrapped.
+
+    The signature of a wrapped yaw: it stays within one turn (its range is at most 2 pi),
+    moves smoothly (median step below :data:`_SMOOTH_STEP`) and jumps by about a whole turn
+    (more than pi, within pi/2 of 2 pi k) between two samples of a segment. Such a yaw is
+    unwrapped as the import map does (:func:`airbearing.io.import_map.unwrap`: each segment
+    on its own, an isolated jump keeping the branch). A glitch (a frame exported as 0) on a
+    spinning yaw is not one: the yaw spans more than a turn.
+
+    Parameters
+    ----------
+    yaw : numpy.ndarray
+        rad, shape (n,), finite.
+    t : numpy.ndarray
+        s, shape (n,), increasing.
+    testbed : Testbed or None
+        Its ``sensors.rate`` says what a gap is (without one: the median interval).
+
+    Returns
+    -------
+    (numpy.ndarray, list of int) or None
+    """
+    if len(yaw) < 3:
+        return None
     if not float(np.ptp(yaw)) <= 2 * math.pi + 1e-9:
-        return
-    t = out["t"].to_numpy()
+        return None
     period = testbed.sensors.dt if testbed is not None else float(np.median(np.diff(t)))
     step = np.diff(yaw)
     wrapped = np.abs(np.mod(step + math.pi, 2 * math.pi) - math.pi)
     inside = np.diff(t) <= GAP_FACTORS[1] * period
     jump = (np.abs(step) > _WRAP_STEP) & (wrapped < _WRAP_SLACK) & inside
     if not jump.any() or not np.median(wrapped[inside]) < _SMOOTH_STEP:
-        return
-
+        return None
     new = unwrap(yaw, t)
     turns = np.round((new - yaw) / (2 * math.pi))
     rows = [int(r) for r in np.flatnonzero(np.diff(turns) != 0) + 1]
     if not rows:
-        return
-    out["yaw"] = new
-    out.attrs[YAW_UNWRAPPED] = rows
+        return None
+    return new, rows
 
 
 def yaw_unwrapped_words(rows: Sequence[int]) -> str:

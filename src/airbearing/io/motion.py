@@ -212,7 +212,7 @@ def no_motion(log: Log, testbed: Testbed | None) -> str:
         against its noise.
     """
     period = testbed.sensors.dt if testbed is not None else log.dt
-    segments = segments_of(log.data["t"].to_numpy(dtype=float), period)
+    segments = segments_of(log.t, period)
     channels = _channels(log, testbed, segments)
     if not channels:
         return ""

@@ -244,7 +244,7 @@ def assess(log: Log, testbed: Testbed | None) -> LogQuality:
     """
     if testbed is not None and not isinstance(testbed, Testbed):
         raise InputError(f"{log.source}: assess needs a Testbed, got {type(testbed).__name__}")
-    t = log.data["t"].to_numpy(dtype=float)
+    t = log.t
     n = t.size
     period = testbed.sensors.dt if testbed is not None else float(np.median(np.diff(t)))
     segments = segments_of(t, period)
@@ -274,7 +274,7 @@ def assess(log: Log, testbed: Testbed | None) -> LogQuality:
         for i in (int(i) for i in np.flatnonzero(res.flagged)):
             cols = tuple(c for c, o in zip(group.columns, res.over[i], strict=True) if o)
             cols = cols or group.columns
-            zero = bool(np.all(log.data.loc[i, list(cols)].to_numpy(dtype=float) == 0))
+            zero = all(float(log._values(c)[i]) == 0 for c in cols)
             flagged_cols.setdefault(i, []).extend(cols)
             reasons.setdefault(i, []).append(_reason(group, cols, float(res.score[i]), zero))
             scores[i] = max(scores.get(i, 0.0), float(res.score[i]))

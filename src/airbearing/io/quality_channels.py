@@ -21,10 +21,10 @@ from airbearing.io.columns import (
     _SLIDERS,
     WHEEL_COMMAND_COLUMNS,
 )
-from airbearing.io.import_map import unwrap
 from airbearing.io.motion import column_spans, signed_quaternions
 from airbearing.io.quality_outliers import ABSOLUTE_FLOOR, _Group
 from airbearing.io.testbed import Sensors, Testbed
+from airbearing.io.unwrap import unwrap
 
 if TYPE_CHECKING:
     from airbearing.io.log import Log
@@ -36,7 +36,7 @@ _RELATIVE_FLOOR = 1e-9  # scale floor relative to the channel's magnitude
 
 def _groups(log: Log, testbed: Testbed | None, segments, switch: np.ndarray | None) -> list[_Group]:
     """The channel groups of a log; ``switch``: :func:`_switch_rows` on the same segments."""
-    t = log.data["t"].to_numpy(dtype=float)
+    t = log.t
     groups = []
     sensors = testbed.sensors if testbed is not None else Sensors(gyro_noise=0.0)
     rates = log.rates()
@@ -86,10 +86,10 @@ def _switch_rows(log: Log, segments, k: int) -> np.ndarray | None:
     there (its rate) or a change of curvature (its attitude), which a centred smooth fit
     cannot follow.
     """
-    n = len(log.data)
+    n = log.n
     out = np.zeros(n, dtype=bool)
 
-    wc = tuple(c for c in WHEEL_COMMAND_COLUMNS if c in log.data.columns)
+    wc = tuple(c for c in WHEEL_COMMAND_COLUMNS if log.has(c))
     for cols, order in ((_GIMBAL_RATES, 1), (_DIPOLES, 1), (_SLIDERS, 2), (wc, 1)):
         if not cols:
             continue

@@ -39,7 +39,8 @@ START_YAW = "start_yaw"
 def _try(search, cand, chosen, theta_chosen, current, current_lag, ln_n, starts, before, lin=None,
          best=None, one=None):  # fmt: skip
     """``cand`` judged at ``current`` (module doc); ``best``: the smallest delta-BIC of the
-    round's significant IPOPT fits so far (:func:`.screen.screened`), None when none;
+    round's significant IPOPT fits before it, None when none, or a callable that returns
+    it (:func:`.screen.screened`);
     ``one``: for a per-axis form, its one-value form's IPOPT fit this round (None: none),
     from which its step is tried when the shared Jacobian's cannot decide it
     (:func:`.screen.one_value_linearisation`)."""

@@ -261,11 +261,12 @@ def screened(lin, cand, k_sel, lower, upper, current, ln_n, before, folds, th_re
 
     None (fit it by IPOPT) when the step leaves the chosen effects' bounds or the residual
     at the step does not confirm the quadratic model, unless the step is far from ``best``
-    (the smallest delta-BIC of the round's significant IPOPT fits so far, None when there
-    is none yet): even ``FAR_FACTOR`` times the disagreement more would leave its BIC more
-    than ``MATTER_BIC`` above it. A step that can be named (its likelihood ratio at least
-    ``SCREEN_FRACTION`` of what naming needs) is provisional: the search fits it by IPOPT
-    when its BIC comes near the best (``MATTER_BIC``).
+    (the smallest delta-BIC of the round's significant IPOPT fits before this candidate,
+    None when there is none; or a callable that returns it, called only when needed:
+    :class:`.selection._Before`): even ``FAR_FACTOR`` times the disagreement more would
+    leave its BIC more than ``MATTER_BIC`` above it. A step that can be named (its
+    likelihood ratio at least ``SCREEN_FRACTION`` of what naming needs) is provisional:
+    the search fits it by IPOPT when its BIC comes near the best (``MATTER_BIC``).
 
     (Module doc.) Measured: starting IPOPT from the step instead of the regression start
     took more iterations (7 against 4 for a bounded friction: the barrier starts again), so
@@ -275,8 +276,12 @@ def screened(lin, cand, k_sel, lower, upper, current, ln_n, before, folds, th_re
     need = max(chi2_threshold(cand.k), cand.k * ln_n)
     lr_model, lr_step = lr_of(current, st.rss_model), lr_of(current, st.rss)
     agree = abs(lr_step - lr_model) < AGREE_FRACTION * need
-    if not st.feasible or not (agree or best is not None):
+    if not st.feasible:
         return None
+    if not agree:
+        best = best() if callable(best) else best
+        if best is None:
+            return None
     # away from the current fit: the regression start, and for one number PROBE_SIGMAS
     # standard errors either side within bounds (Coulomb friction's tanh makes the output
     # far from linear once it changes when the rate crosses zero: on a slew with a spring

@@ -84,8 +84,9 @@ __all__ = [
     "localise",
 ]
 
-#: Threads fitting candidates of one round side by side. 1: a CasADi nlpsol keeps the stats of
-#: its last call on the shared solver object, so two threads on one solver would mix them.
+#: Threads fitting candidates of one round side by side (default of ``workers``). 1: on a
+#: loaded 2-core machine a second thread gained nothing measurable (docs/benchmarks.md,
+#: "Candidates on two threads"); the answer is the same for any number.
 WORKERS = 1
 
 
@@ -126,7 +127,17 @@ def discrepancy(
     jit : bool, optional
         Compile the Model to C (default: when a compiler is available).
     workers : int
-        (>= 1) Threads fitting the candidates of a round side by side (1: one after the other).
+        (>= 1) Threads that fit the candidates of a round side by side (1: one after the
+        other). The answer is the same for any number, whichever thread finishes first:
+        each thread fits on an IPOPT solver of its own (made once per thread and problem
+        structure; the compiled model functions are shared), and a candidate the screen
+        judges against the round's best IPOPT fit (far from it: not fitted) takes the best
+        of the candidates before it in the round's order, waiting for them if they are
+        still running, as one thread would. Costs: each extra thread holds one more fit in
+        progress (its window Jacobian: on an hour-long log hundreds of MB), and wall time
+        falls only where the round's IPOPT fits dominate and spare cores exist (IPOPT's
+        linear solver runs one thread at a time; the candidate rounds are about 40 % of
+        the CPU of a 25 s three-axis search).
     screen : bool
         Screen the candidates of each round by the score test of :mod:`.screen` (one shared
         Jacobian) and fit by IPOPT only those that can be named; False fits every candidate.

@@ -12,6 +12,7 @@ with the lowest BIC; candidates within ``CONFOUND_BIC`` of it are reported as co
 from __future__ import annotations
 
 import math
+import threading
 import time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import replace
@@ -131,36 +132,40 @@ def _round(search, sel: _Selection, remaining, screen, workers, prog) -> list:
             [c for c in remaining if c.smooth and not c.lag],
         )
 
-    # the delta-BIC of the round's significant IPOPT fits so far: a step far above the best
-    # of them is judged on its own (.screen.FAR_FACTOR)
-    fitted = []
+    # a step far above the best significant IPOPT fit of the candidates before it in the
+    # round is judged on its own (.screen.FAR_FACTOR): _Before gives it that best
+    before_it = _Before()
     # the one-value forms' IPOPT fits: a per-axis form's step is also tried from its own
     ones: dict = {}
 
-    def run(c, lin=lin):
-        best = min(fitted, default=None)
+    def run(c, i):
         one = ones.get(c.name) if c.per_axis else None
-        return _try(search, c, chosen, theta, current, lag, sel.ln_n, sel.starts, before, lin,
-                    best, one)  # fmt: skip
+        res = None
+        try:
+            res = _try(search, c, chosen, theta, current, lag, sel.ln_n, sel.starts, before, lin,
+                       lambda: before_it.best(i), one)  # fmt: skip
+            return res
+        finally:  # (also when it raised: the candidates after it must not wait for ever)
+            before_it.finished(i, res)
 
     def fit_all(group):
         out = []
 
         def told(res):  # each candidate counted as it finishes (the estimate follows them)
             out.append(res)
-            ipopt = res.fit is not None and res.fit.level in ("converged", "warning")
-            if ipopt and res.significant and not res.retry_failed:
-                fitted.append(res.delta_bic)
             prog.done += 1
             prog(f"{res.label}: gap {res.gap:.3g} {unit}, {res.status}")
 
+        first = before_it.number(len(group))
         if workers > 1 and len(group) > 1:
             with ThreadPoolExecutor(max_workers=workers) as pool:
-                for res in pool.map(run, group):
+                # started in the group's order (the pool's queue is first in, first out): a
+                # candidate waits only for ones started before it (no deadlock)
+                for res in pool.map(run, group, range(first, first + len(group))):
                     told(res)
         else:
-            for c in group:
-                told(run(c))
+            for i, c in enumerate(group, start=first):
+                told(run(c, i))
         return out
 
     # the per-axis form of an effect only when its one-value form is significant: a friction
@@ -199,11 +204,48 @@ def _round(search, sel: _Selection, remaining, screen, workers, prog) -> list:
         if not again:
             break
         for i in again:
-            results[i] = run(results[i].candidate, lin=None)
+            results[i] = _try(search, results[i].candidate, chosen, theta, current, lag,
+                              sel.ln_n, sel.starts, before)  # fmt: skip
             prog(f"{results[i].label}: fitted by IPOPT, {results[i].status}")
     results = _at_best_gap(results)
     results.sort(key=lambda c: (not np.isfinite(c.delta_bic), c.delta_bic))
     return results
+
+
+class _Before:
+    """The best (smallest) delta-BIC of the round's significant IPOPT fits among the
+    candidates before a given one, in the round's order (:func:`.screen.screened`'s
+    ``best``): the same whether the candidates are fitted one after the other or side by
+    side (``workers``), and whichever thread finishes first. A candidate that needs it
+    (a step its quadratic model does not confirm) waits for every candidate before it."""
+
+    def __init__(self) -> None:
+        self._cond = threading.Condition()
+        self._next = 0  # number of the next candidate
+        self._done: set = set()
+        self._fitted: dict = {}  # candidate number -> its delta-BIC
+
+    def number(self, n: int) -> int:
+        """Number the next ``n`` candidates; the first's number."""
+        first, self._next = self._next, self._next + n
+        return first
+
+    def finished(self, i: int, res) -> None:
+        """Candidate ``i`` is done (``res`` None: it raised)."""
+        ipopt = (
+            res is not None and res.fit is not None and res.fit.level in ("converged", "warning")
+        )
+        with self._cond:
+            if ipopt and res.significant and not res.retry_failed:
+                self._fitted[i] = res.delta_bic
+            self._done.add(i)
+            self._cond.notify_all()
+
+    def best(self, i: int) -> float | None:
+        """The best delta-BIC before candidate ``i`` (None: none), once they are all done."""
+        with self._cond:
+            self._cond.wait_for(lambda: self._done.issuperset(range(i)))
+            return min((b for j, b in self._fitted.items() if j < i), default=None)
 
 
 def _at_best_gap(results: list) -> list:

@@ -93,7 +93,7 @@ def platform_inputs(model, d: PlatformData) -> np.ndarray:
     U = np.zeros((d.n, model.nu))
     U[:, model.index(["s1", "s2", "s3"], "u")] = d.s
     U[:, model.index(["mx", "my", "mz"], "u")] = d.dipole
-    U[:, model.index(["bx_lab", "by_lab", "bz_lab"], "u")] = d.b_lab
+    U[:, model.index(["bx_lab", "by_lab", "bz_lab"], "u")] = d.lab_field()
     if d.wc is not None:
         U[:, model.index([f"wc{i}" for i in range(1, d.wc.shape[1] + 1)], "u")] = d.wc
     return U

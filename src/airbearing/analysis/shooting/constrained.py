@@ -24,10 +24,10 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.linalg import splu
 
+from airbearing.analysis.shooting.function_cache import borrowed
 from airbearing.analysis.shooting.functions import (
     _Call,
     _problem_functions,
-    cached,
     delta_layout,
     evaluate,
     ipopt_options,
@@ -229,13 +229,13 @@ def _build_linked_solver(model, L, nw, K, outputs, substeps, jit, link, rows, n_
 
 
 def linked_solver(model, L, nw, K, outputs, substeps, jit, link, rows, n_ineq, max_iter):
-    """``(solver, keep)`` of :func:`_build_linked_solver`, from the one bounded cache
-    (``rows``: the continuity rows, part of the key since they set the constraints'
-    sparsity)."""
+    """``with linked_solver(...) as (solver, keep)``: :func:`_build_linked_solver`'s, lent
+    by the one bounded cache (:func:`.function_cache.borrowed`; ``rows``: the continuity
+    rows, part of the key since they set the constraints' sparsity)."""
     rows = np.asarray(rows, dtype=int)
     key = ("linked", layout_key(model, outputs), L, nw, K, outputs, substeps, jit, link,
            hashlib.sha1(rows.tobytes()).hexdigest(), rows.size, n_ineq, max_iter)  # fmt: skip
-    return cached(
+    return borrowed(
         key,
         lambda: _build_linked_solver(
             model, L, nw, K, outputs, substeps, jit, link, rows, n_ineq, max_iter

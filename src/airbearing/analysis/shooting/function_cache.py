@@ -6,11 +6,18 @@ shapes a function (window length, slots, outputs, linking); :func:`compiled` sen
 Function through the on-disk cache of :mod:`airbearing.models.compiled` (a new process loads
 it). Every builder of :mod:`.window_functions`, :mod:`.problem_functions`, :mod:`.solver`,
 :mod:`.constrained` and :mod:`.penalty` caches here.
+
+Threads may share it (the discrepancy search's ``workers``): each key is built once, by
+the first thread that asks; the others wait for it. A solver keeps its last iterate in its
+oracle and IPOPT calls back into Python: :func:`borrowed` lends one to one caller at a
+time (a second thread that fits the same structure meanwhile gets one of its own).
 """
 
 from __future__ import annotations
 
+import threading
 from collections import OrderedDict
+from contextlib import contextmanager
 
 import casadi as ca
 
@@ -26,18 +33,61 @@ def jit_available() -> bool:
 
 
 _CACHE: OrderedDict = OrderedDict()
+_LOCK = threading.Lock()  # guards _CACHE and _BUILDING (held for dict operations only)
+_BUILDING: dict = {}  # key -> the lock its builder holds
+
+
+def _lookup(key):
+    """``(True, value)`` when ``key`` is cached (made the most recent), else ``(False, None)``."""
+    with _LOCK:
+        if key in _CACHE:
+            _CACHE.move_to_end(key)
+            return True, _CACHE[key]
+    return False, None
 
 
 def cached(key, build):
-    """Bounded LRU of compiled functions (``CACHE_SIZE`` entries)."""
-    if key in _CACHE:
-        _CACHE.move_to_end(key)
-        return _CACHE[key]
-    value = build()
-    _CACHE[key] = value
-    while len(_CACHE) > CACHE_SIZE:
-        _CACHE.popitem(last=False)
+    """Bounded LRU of compiled functions (``CACHE_SIZE`` entries), ``build()`` once per key
+    even when threads ask for it at once."""
+    hit, value = _lookup(key)
+    if hit:
+        return value
+    with _LOCK:
+        building = _BUILDING.setdefault(key, threading.Lock())
+    with building:  # a builder may ask for other keys (never its own)
+        hit, value = _lookup(key)
+        if hit:
+            return value
+        try:
+            value = build()
+            with _LOCK:
+                _CACHE[key] = value
+                while len(_CACHE) > CACHE_SIZE:
+                    _CACHE.popitem(last=False)
+        finally:
+            with _LOCK:
+                _BUILDING.pop(key, None)
     return value
+
+
+@contextmanager
+def borrowed(key, build):
+    """``with borrowed(key, build) as value``: a value of ``build()`` no other caller uses
+    until the block ends (an IPOPT solver and its oracle, which hold the fit in progress).
+
+    The values of ``key`` are kept in the one cache (one per caller at a time: one when
+    the fits run one after the other, as many as the threads that fit side by side).
+    """
+    free = cached(("borrowed", key), list)
+    with _LOCK:
+        value = free.pop() if free else None
+    if value is None:
+        value = build()
+    try:
+        yield value
+    finally:
+        with _LOCK:
+            free.append(value)
 
 
 def compiled(fn: ca.Function, *, jit: bool | None = None, progress=None) -> ca.Function:

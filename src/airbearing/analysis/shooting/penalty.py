@@ -17,10 +17,10 @@ import numpy as np
 import scipy.sparse as sp
 
 from airbearing.analysis.shooting.fit import PINV_RCOND
+from airbearing.analysis.shooting.function_cache import borrowed
 from airbearing.analysis.shooting.functions import (
     _Call,
     _problem_functions,
-    cached,
     delta_layout,
     evaluate,
     ipopt_options,
@@ -297,11 +297,12 @@ def _build_penalised(model, L, nw, K, outputs, substeps, jit, max_iter, objectiv
 
 
 def penalised_solver(model, L, nw, K, outputs, substeps, jit, max_iter, objective_stop=False):
-    """``(solver, keep)``: IPOPT on the stacked residual ``[r; W c]`` (:mod:`.process_noise`);
-    ``objective_stop`` as :func:`.solver.ipopt_options`."""
+    """``with penalised_solver(...) as (solver, keep)``: IPOPT on the stacked residual
+    ``[r; W c]`` (:mod:`.process_noise`), lent by the one bounded cache
+    (:func:`.function_cache.borrowed`); ``objective_stop`` as :func:`.solver.ipopt_options`."""
     args = (model, L, nw, K, outputs, substeps, jit, max_iter, objective_stop)
     key = ("penalised", layout_key(model, outputs), *args[1:])
-    return cached(key, lambda: _build_penalised(*args))
+    return borrowed(key, lambda: _build_penalised(*args))
 
 
 def set_intensity(problem, kappa: float | None) -> None:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import itertools
+import threading
 
 import numpy as np
 import scipy.sparse as sp
@@ -54,6 +55,25 @@ def pinned_null_space(N: np.ndarray, rows: np.ndarray, k: int) -> np.ndarray:
     return N @ T
 
 
+class _PerThread:
+    """An attribute of the fit in progress, one per thread: threads may fit one problem
+    side by side (the discrepancy search's ``workers``)."""
+
+    def __init__(self, default) -> None:
+        self.default = default
+
+    def __set_name__(self, owner, name: str) -> None:
+        self.name = name
+
+    def __get__(self, obj, owner=None):
+        if obj is None:
+            return self
+        return getattr(obj._fitting, self.name, self.default)
+
+    def __set__(self, obj, value) -> None:
+        setattr(obj._fitting, self.name, value)
+
+
 def unscale_columns(J: sp.csc_matrix, scale: np.ndarray) -> sp.csc_matrix:
     """``J @ diag(1 / scale)`` in place: the Jacobian in the unscaled variables."""
     return scale_columns(sp.csc_matrix(J), 1.0 / np.asarray(scale, dtype=float))
@@ -83,6 +103,12 @@ class ShootingProblem:
     Residual layout: window after window; within a window each output group in the
     order of ``outputs``, sample-major.
     """
+
+    # the fit in progress (:meth:`fit`), each thread's own
+    _held = _PerThread(np.zeros(0, dtype=int))  # the entries of vec(delta) it holds
+    _start_raw = _PerThread(None)  # the window Jacobian at its start, for its first iterate
+    _keep_start = _PerThread(False)  # keep the next start's (a free fit's) for the bounded fit
+    _start_kept = _PerThread(None)
 
     def __init__(
         self,
@@ -131,9 +157,7 @@ class ShootingProblem:
         #: ended, so its column scaling costs no evaluation)
         self.reuse_last = False
         self._last = None  # ((v, p_base, S, data), (rm, Jm, c, Jc)) of that answer
-        self._start_raw = None  # the same at a fit's start, for its solver's first iterate
-        self._keep_start = False  # keep the next start's (a free fit's) for the bounded fit
-        self._start_kept = None
+        self._fitting = threading.local()  # the fit in progress (_PerThread attributes)
         self.sample = np.tile(wrow, nw) + np.repeat(np.arange(nw) * L, group.size)
         self.usable = windows.weight.reshape(-1)[self.sample] > 0
         self.n_res = int(self.usable.sum())
@@ -150,8 +174,14 @@ class ShootingProblem:
         #: entries of ``vec(delta)`` a fit may hold at zero (:meth:`pin`)
         self.pinned = np.zeros(0, dtype=int)
         self.pin_rule = None
-        self._held = self.pinned  # those the current fit holds
         self._serial = next(_SERIALS)  # names this problem in its fits (Fit.extra)
+
+    def __getstate__(self) -> dict:  # a fit in progress is not part of a copy
+        return {k: v for k, v in self.__dict__.items() if k != "_fitting"}
+
+    def __setstate__(self, state: dict) -> None:
+        self.__dict__.update(state)
+        self._fitting = threading.local()
 
     def pin(self, entries, rule=None) -> None:
         """Hold the entries ``entries`` of ``vec(delta)`` (window ``j``'s entry ``i`` is
@@ -459,57 +489,64 @@ class ShootingProblem:
         if self.penalty is not None and self.link:
             if ineq is not None:  # pragma: no cover - programming error
                 raise ValueError("process noise and inequality constraints together")
-            solver, _keep = penalised_solver(*self._key(K), mi, self.objective_stop)
-            oracle = _keep[-1]
-            oracle.set(p_base, Sp, scale, self._data, self.penalty, self.meas_whitening,
-                       keep_raw=self.reuse_last)  # fmt: skip
-            raw0, self._start_raw = self._start_raw, None
-            if raw0 is not None:
-                oracle.prime(x0, raw0)
-            del raw0
-            if (
-                self.objective_stop
-                and oracle.z is not None
-                and start_meets_objective_stop(oracle.r, oracle.J, x0, lbx, ubx)
-            ):
-                # started at its optimum (the horizon's answer from its linearisation):
-                # IPOPT's acceptable stop, met here, without its two iterations
-                z, stats = x0, {"return_status": _ACCEPTABLE, "iter_count": 0}
-            else:
-                z = solver(x0=x0, lbx=lbx, ubx=ubx)["x"].full().ravel()
-                stats = solver.stats()
-            r, J = oracle.rj_at(z)
-            C = oracle.C  # the defects' Jacobian at the answer (unscaled), for the errors
-            if self.reuse_last and oracle.raw is not None:
-                at = (z * scale, p_base.copy(), Sp.copy(), self._data.copy())
-                self._last = (at, oracle.raw)
-            oracle.release()
-            return z, stats, r, unscale_columns(J, scale), C
+            with penalised_solver(*self._key(K), mi, self.objective_stop) as (solver, keep):
+                return self._solve_penalised(solver, keep[-1], x0, lbx, ubx, scale, p_base, Sp)
         if n_link or n_ineq:
-            solver, _keep = linked_solver(*self._key(K), self.link, self.link_rows, n_ineq, mi)
-            oracle = _keep[-1]
-            oracle.set(p_base, Sp, scale, self._data, self.link_rows, ineq)
-            lbg = np.zeros(n_link + n_ineq)
-            ubg = np.r_[np.zeros(n_link), np.full(n_ineq, np.inf)]
-            z = solver(x0=x0, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)["x"].full().ravel()
-            oracle.derivatives(z)  # memoised when IPOPT's last iterate had them
-            r, J, Jc = oracle.r, oracle.J, oracle.Jc
+            with linked_solver(*self._key(K), self.link, self.link_rows, n_ineq, mi) as (
+                solver,
+                keep,
+            ):
+                oracle = keep[-1]
+                oracle.set(p_base, Sp, scale, self._data, self.link_rows, ineq)
+                lbg = np.zeros(n_link + n_ineq)
+                ubg = np.r_[np.zeros(n_link), np.full(n_ineq, np.inf)]
+                z = solver(x0=x0, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg)["x"].full().ravel()
+                oracle.derivatives(z)  # memoised when IPOPT's last iterate had them
+                r, J, Jc = oracle.r, oracle.J, oracle.Jc
+                oracle.release()
+                Jc = unscale_columns(Jc, scale) if n_link else None
+                return z, solver.stats(), r, unscale_columns(J, scale), Jc
+        with _problem_solver(*self._key(K), mi) as (solver, keep):
+            par = np.concatenate([p_base, Sp.reshape(-1, order="F"), scale, self._data])
+            oracle = keep[-1]
+            oracle.set(par)
+            z = solver(x0=x0, lbx=lbx, ubx=ubx)["x"].full().ravel()
+            stats = solver.stats()
+            if oracle.J is not None and oracle._same(z, par):
+                # IPOPT's last iterate was evaluated with its Jacobian: reuse it
+                r, J = oracle.r, oracle.J
+                oracle.release()
+                return z, stats, r, unscale_columns(J, scale), None
             oracle.release()
-            Jc = unscale_columns(Jc, scale) if n_link else None
-            return z, solver.stats(), r, unscale_columns(J, scale), Jc
-        solver, _keep = _problem_solver(*self._key(K), mi)
-        par = np.concatenate([p_base, Sp.reshape(-1, order="F"), scale, self._data])
-        oracle = _keep[-1]
-        oracle.set(par)
-        z = solver(x0=x0, lbx=lbx, ubx=ubx)["x"].full().ravel()
-        if oracle.J is not None and oracle._same(z, par):
-            # IPOPT's last iterate was evaluated with its Jacobian: reuse it
-            r, J = oracle.r, oracle.J
-            oracle.release()
-            return z, solver.stats(), r, unscale_columns(J, scale), None
-        oracle.release()
         r, J = self._eval(1, z * scale, p_base, Sp)
-        return z, solver.stats(), r, J, None
+        return z, stats, r, J, None
+
+    def _solve_penalised(self, solver, oracle, x0, lbx, ubx, scale, p_base, Sp):
+        """:meth:`_solve` with process noise (linked windows), on a lent solver."""
+        oracle.set(p_base, Sp, scale, self._data, self.penalty, self.meas_whitening,
+                   keep_raw=self.reuse_last)  # fmt: skip
+        raw0, self._start_raw = self._start_raw, None
+        if raw0 is not None:
+            oracle.prime(x0, raw0)
+        del raw0
+        if (
+            self.objective_stop
+            and oracle.z is not None
+            and start_meets_objective_stop(oracle.r, oracle.J, x0, lbx, ubx)
+        ):
+            # started at its optimum (the horizon's answer from its linearisation):
+            # IPOPT's acceptable stop, met here, without its two iterations
+            z, stats = x0, {"return_status": _ACCEPTABLE, "iter_count": 0}
+        else:
+            z = solver(x0=x0, lbx=lbx, ubx=ubx)["x"].full().ravel()
+            stats = solver.stats()
+        r, J = oracle.rj_at(z)
+        C = oracle.C  # the defects' Jacobian at the answer (unscaled), for the errors
+        if self.reuse_last and oracle.raw is not None:
+            at = (z * scale, p_base.copy(), Sp.copy(), self._data.copy())
+            self._last = (at, oracle.raw)
+        oracle.release()
+        return z, stats, r, unscale_columns(J, scale), C
 
     def _result(self, v, K, S, p_base, r, J, Jc, stats, status, level) -> Fit:
         """The :class:`Fit` at ``v`` with its errors (module doc)."""

@@ -14,7 +14,7 @@ import scipy.sparse as sp
 from scipy.sparse.linalg import splu
 
 from airbearing.analysis.shooting.buffers import evaluate
-from airbearing.analysis.shooting.function_cache import cached
+from airbearing.analysis.shooting.function_cache import borrowed
 from airbearing.analysis.shooting.problem_functions import _problem_functions
 from airbearing.analysis.shooting.sparse import scale_columns
 from airbearing.analysis.shooting.window_functions import delta_layout, layout_key
@@ -76,9 +76,11 @@ def start_meets_objective_stop(r, J, x0, lbx, ubx) -> bool:
 
 
 def _problem_solver(model, L, nw, K, outputs, substeps, jit, max_iter=IPOPT_MAX_ITER):
-    """``(solver, keep)``: the IPOPT solver and the Python objects it calls (kept alive)."""
+    """``with _problem_solver(...) as (solver, keep)``: the IPOPT solver and the Python
+    objects it calls (kept alive), lent by the one bounded cache
+    (:func:`.function_cache.borrowed`: its oracle holds the fit in progress)."""
     key = ("solver", layout_key(model, outputs), L, nw, K, outputs, substeps, jit, max_iter)
-    return cached(key, lambda: _build_solver(model, L, nw, K, outputs, substeps, jit, max_iter))
+    return borrowed(key, lambda: _build_solver(model, L, nw, K, outputs, substeps, jit, max_iter))
 
 
 class _Oracle:
