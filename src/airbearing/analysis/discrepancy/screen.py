@@ -230,12 +230,13 @@ class Linearisation:
         S_raw[self.raw, np.arange(len(self.raw))] = 1.0
         return np.hstack([self.S_sel, S_raw]) @ E
 
-    def fit_of(self, st: Step, k: int) -> Fit:
-        """The step as a :class:`Fit` (errors from the Jacobian at the current fit)."""
+    def fit_of(self, st: Step, k: int, J: sp.csc_matrix | None = None) -> Fit:
+        """The step as a :class:`Fit` (errors from the Jacobian at the current fit, ``J``:
+        ``st.J`` when already made)."""
         pb = self.problem
         n_free = k + st.delta.size
         s2 = st.rss / max(pb.n_res - n_free, 1)
-        std, cov, reasons = theta_errors(st.J, k, s2)
+        std, cov, reasons = theta_errors(st.J if J is None else J, k, s2)
         return Fit(
             theta=st.theta,
             theta_std=std,
@@ -302,8 +303,10 @@ def screened(lin, cand, k_sel, lower, upper, current, ln_n, before, folds, th_re
         if not far:
             return None
     k = k_sel + cand.k
-    fit = lin.fit_of(st, k)
-    heldout = cross_validate(lin.problem, fit, k, folds)
+    J = st.J  # made once for the errors and the held-out check, then let go
+    fit = lin.fit_of(st, k, J)
+    heldout = cross_validate(lin.problem, fit, k, folds, J=J)
+    del J
     note = (
         f"one Gauss-Newton step from {lin.where}: likelihood ratio "
         f"{lr_step:.4g} (predicted {lr_model:.4g}); IPOPT not run: "

@@ -277,7 +277,9 @@ class HeldOut:
         return (a >= need) & (b >= need)
 
 
-def cross_validate(problem: ShootingProblem, fit: Fit, k: int, folds: np.ndarray) -> HeldOut:
+def cross_validate(
+    problem: ShootingProblem, fit: Fit, k: int, folds: np.ndarray, J=None
+) -> HeldOut:
     """Held-out weighted RSS and gap of ``fit``, K-fold over the windows (module doc).
 
     The Gauss-Newton step of a fold eliminates each training window's initial state from
@@ -286,9 +288,11 @@ def cross_validate(problem: ShootingProblem, fit: Fit, k: int, folds: np.ndarray
     pieces with process noise, the whitened continuity defects of a piece with its
     neighbours enter its blocks (each pair's once in training; both in the held-out
     refit, the neighbours' starts held): a held-out piece then cannot absorb an effect the
-    process noise says the trajectory must show.
+    process noise says the trajectory must show. ``J``: the fit's Jacobian when the caller
+    has it made (:func:`~airbearing.analysis.shooting.fit_jacobian` otherwise).
     """
-    r, J = np.asarray(fit.extra["r"]), fit_jacobian(fit).tocsc()
+    r = np.asarray(fit.extra["r"])
+    J = (fit_jacobian(fit) if J is None else J).tocsc()
     nd, nw, n = problem.n_delta, problem.windows.n, problem.n_win_res
     sel0 = problem.primary & problem.usable
     sel = np.zeros(r.size, dtype=bool)
