@@ -610,6 +610,21 @@ def _acceleration_function(model: Model, rate_names: tuple):
     return cached(("torque acceleration", structure_key(model), rate_names), build)
 
 
+#: Rows per call of the acceleration function (:func:`_torque_terms`): one serial map over
+#: every row of a 33 min three-axis log held 0.4 GB of CasADi patterns and work vectors
+#: while it ran (the peak of the search's memory); a map of this many rows, built once per
+#: structure, is called chunk after chunk (the same numbers: each row is its own call).
+TERMS_CHUNK = 4096
+
+
+def _acceleration_rows(model: Model, rate_names: tuple):
+    """``(map, cols)``: :func:`_acceleration_function` mapped over :data:`TERMS_CHUNK` rows
+    (the parameters shared), and its ``cols``."""
+    fn, cols = _acceleration_function(model, rate_names)
+    key = ("torque acceleration rows", structure_key(model), rate_names, TERMS_CHUNK)
+    return cached(key, lambda: fn.map("acc_rows", "serial", TERMS_CHUNK, [2], [])), cols
+
+
 def _torque_terms(model: Model, data: ReplayData, p: np.ndarray):
     """``(w_dot, A, dA, cols)`` at the trusted rows of ``data`` (:func:`smoothed`): the
     measured rate derivative, the Model's at the smoothed rate and ``p`` (n, axes) and its
@@ -624,17 +639,24 @@ def _torque_terms(model: Model, data: ReplayData, p: np.ndarray):
     idx = np.flatnonzero(ok)
     terms = None
     if idx.size:
-        fn, cols = _acceleration_function(model, tuple(data.rate_names))
+        fn, cols = _acceleration_rows(model, tuple(data.rate_names))
         x = np.hstack([data.att, w_s, data.extra_x])[idx]
         if model.lag_index:
             x = np.hstack([x, w_s[idx]])
-        # every row's call in one serial map, the parameters shared, the outputs written
-        # straight into arrays (a DM's conversion cost as much as the evaluation)
-        A, G = evaluate(fn.map("acc_rows", "serial", idx.size, [2], []), x.T, data.u[idx].T, p)
-        n_axes = fn.size1_out(0)
-        # the calls' (axes, cols) blocks side by side, column-major: column n cols + j
-        dA = G.reshape(n_axes, cols.size, idx.size, order="F").transpose(2, 0, 1)
-        terms = (w_dot[idx], A.reshape(n_axes, idx.size, order="F").T, dA, cols)
+        u = data.u[idx]
+        n, n_axes, c = idx.size, fn.size1_out(0), TERMS_CHUNK
+        A, dA = np.empty((n, n_axes)), np.empty((n, n_axes, cols.size))
+        # the rows in chunks of one serial map, the parameters shared, the outputs written
+        # straight into arrays (a DM's conversion cost as much as the evaluation); the last
+        # chunk padded with its last row
+        for lo in range(0, n, c):
+            rows = np.minimum(np.arange(lo, lo + c), n - 1)
+            a, g = evaluate(fn, x[rows].T, u[rows].T, p)
+            m = min(c, n - lo)
+            A[lo : lo + m] = a.reshape(n_axes, c, order="F").T[:m]
+            # the calls' (axes, cols) blocks side by side, column-major: column n cols + j
+            dA[lo : lo + m] = g.reshape(n_axes, cols.size, c, order="F").transpose(2, 0, 1)[:m]
+        terms = (w_dot[idx], A, dA, cols)
     with _LOCK:
         _TERMS[key] = (model, data, terms)  # the Model and the log kept: their ids name them
         while len(_TERMS) > TERMS_KEPT:

@@ -89,8 +89,16 @@ class Step:
     rss_model: float  # predicted weighted RSS
     rss: float  # weighted RSS of the residual evaluated at the step
     r: np.ndarray
-    J: sp.csc_matrix  # Jacobian at the current fit in [theta; vec(delta)]
+    # the Jacobian at the current fit in [theta; vec(delta)] is [At, Jd]: the step's
+    # parameter columns (dense) and the window states' columns, shared by the round
+    At: np.ndarray
+    Jd: sp.csc_matrix
     feasible: bool  # the chosen parameters stay inside their bounds
+
+    @property
+    def J(self) -> sp.csc_matrix:
+        """The Jacobian at the current fit in ``[theta; vec(delta)]`` (made on each call)."""
+        return sp.hstack([sp.csc_matrix(self.At), self.Jd]).tocsc()
 
 
 class Linearisation:
@@ -198,8 +206,7 @@ class Linearisation:
             p_base = p_base - S_sel_c[:, k_sel:] @ self.cand0
         p = p_base + S_sel_c @ theta
         r = pb.residual(delta.reshape(nd, nw), p)
-        J = sp.hstack([sp.csc_matrix(self.A @ E), self.Jd]).tocsc()
-        return Step(theta, delta, p, self.rss0 + q, float(r @ r), r, J, feasible)
+        return Step(theta, delta, p, self.rss0 + q, float(r @ r), r, self.A @ E, self.Jd, feasible)
 
     def lr_at(self, E: np.ndarray, th_c: np.ndarray) -> float:
         """Likelihood ratio with the candidate at ``th_c``, the chosen effects held and every
@@ -223,12 +230,13 @@ class Linearisation:
         S_raw[self.raw, np.arange(len(self.raw))] = 1.0
         return np.hstack([self.S_sel, S_raw]) @ E
 
-    def fit_of(self, st: Step, k: int) -> Fit:
-        """The step as a :class:`Fit` (errors from the Jacobian at the current fit)."""
+    def fit_of(self, st: Step, k: int, J: sp.csc_matrix | None = None) -> Fit:
+        """The step as a :class:`Fit` (errors from the Jacobian at the current fit, ``J``:
+        ``st.J`` when already made)."""
         pb = self.problem
         n_free = k + st.delta.size
         s2 = st.rss / max(pb.n_res - n_free, 1)
-        std, cov, reasons = theta_errors(st.J, k, s2)
+        std, cov, reasons = theta_errors(st.J if J is None else J, k, s2)
         return Fit(
             theta=st.theta,
             theta_std=std,
@@ -243,7 +251,8 @@ class Linearisation:
             level="screened",
             not_identifiable=reasons,
             cov=cov,
-            extra={"r": st.r, "J": st.J},
+            # the window states' columns shared with the round (:func:`.fit_jacobian`)
+            extra={"r": st.r, "J_blocks": (st.At, st.Jd)},
         )
 
 
@@ -294,8 +303,10 @@ def screened(lin, cand, k_sel, lower, upper, current, ln_n, before, folds, th_re
         if not far:
             return None
     k = k_sel + cand.k
-    fit = lin.fit_of(st, k)
-    heldout = cross_validate(lin.problem, fit, k, folds)
+    J = st.J  # made once for the errors and the held-out check, then let go
+    fit = lin.fit_of(st, k, J)
+    heldout = cross_validate(lin.problem, fit, k, folds, J=J)
+    del J
     note = (
         f"one Gauss-Newton step from {lin.where}: likelihood ratio "
         f"{lr_step:.4g} (predicted {lr_model:.4g}); IPOPT not run: "

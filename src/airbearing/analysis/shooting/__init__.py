@@ -65,7 +65,7 @@ Standard errors
 """
 
 from airbearing.analysis.shooting.constrained import Inequality, null_space_basis
-from airbearing.analysis.shooting.fit import Fit, classify_status, theta_errors
+from airbearing.analysis.shooting.fit import Fit, classify_status, fit_jacobian, theta_errors
 from airbearing.analysis.shooting.functions import (
     DEFAULT_SUBSTEPS,
     THETA_SLOTS,
@@ -90,6 +90,7 @@ __all__ = [
     "classify_status",
     "compiled",
     "delta_layout",
+    "fit_jacobian",
     "fitting_start_yaw",
     "jit_available",
     "null_space_basis",

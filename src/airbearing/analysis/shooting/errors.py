@@ -62,7 +62,7 @@ import scipy.sparse as sp
 from scipy.sparse.linalg import splu
 
 from airbearing.analysis.shooting.autoregressive import AR
-from airbearing.analysis.shooting.fit import information_inverse, solve_gram
+from airbearing.analysis.shooting.fit import fit_jacobian, information_inverse, solve_gram
 from airbearing.analysis.shooting.functions import _problem_functions
 from airbearing.analysis.shooting.penalty import KAPPA_GRID, piece_durations
 
@@ -358,7 +358,7 @@ def honest_errors(problem, fit, k: int) -> HonestErrors:
     if k == 0:
         z = np.zeros(0)
         return HonestErrors(z, z, np.zeros((0, 0)), np.zeros((0, 0)), z, tau, 0)
-    J, r = fit.extra["J"], np.asarray(fit.extra["r"])
+    J, r = fit_jacobian(fit), np.asarray(fit.extra["r"])
     n_meas = problem.n_meas
     pn = fit.extra.get("process_noise") or {}
     lin = _linearised(problem, fit, k)
