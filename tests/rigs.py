@@ -11,6 +11,8 @@
 - ``SIM_SUBSTEPS``: the simulator's RK4 sub-steps per sample (``simulate``'s default).
 - :func:`noisy_gyro`: a testbed whose gyro has the public CMG examples' white noise,
   its low-pass kept.
+- :func:`spinning_seed004_50hz`: the seed-004 platform logged at 50 Hz, spinning at -1.5
+  rad/s about z with viscous friction 1e-5 N m s: the screen's far-from-the-best rig.
 - :func:`rotor_viscous_problem`: the shooting problem of ``ROTOR`` logs with a viscous
   friction to fit, on linked pieces.
 """
@@ -25,7 +27,8 @@ from airbearing.analysis.discrepancy.replay import model_for, problem_for
 from airbearing.analysis.shooting.logs import make_windows, noise_floor, replay_data
 from airbearing.analysis.simulation.artefacts import sample_times, with_gap, with_jitter
 from airbearing.analysis.simulation.on_times import simulate_on_times
-from airbearing.io.testbed import Sensors, testbed_from_dict
+from airbearing.analysis.simulation.scenarios import free_oscillation
+from airbearing.io.testbed import Sensors, load_testbed, testbed_from_dict, testbed_to_dict
 
 W0 = (0.3676, 0.1265, -1.4835)  # rad/s
 Q0 = (0.99458, 0.024955, -0.014973, 0.099819)
@@ -95,6 +98,20 @@ def jittered_platform(tb, seed, *, gap=None, duration=30.0, effects=None):
         attitude_noise=1e-3,
         effects=effects,
     )
+
+
+def spinning_seed004_50hz(duration: float, effects=None):
+    """``(testbed, log)``: the built-in seed-004 platform with a 50 Hz gyro and attitude,
+    in a ``duration`` s (s) free oscillation spinning at -1.5 rad/s about z (seed 1) with
+    ``effects`` (default: viscous friction 1e-5 N m s) hidden."""
+    d = testbed_to_dict(load_testbed("seed004-platform"))
+    d["sensors"]["rate"] = 50.0
+    tb = testbed_from_dict(d)
+    log = free_oscillation(
+        tb, initial_rate=(-0.307, 0.189, -1.5), sliders=(0.012, -0.018, 0.010),
+        duration=duration, seed=1, effects=effects or {"viscous_friction": 1e-5},
+    ).log  # fmt: skip
+    return tb, log
 
 
 def rotor_viscous_problem(logs, window_s: float = 10.0):

@@ -14,11 +14,10 @@ from __future__ import annotations
 import threading
 
 import pytest
+from rigs import spinning_seed004_50hz
 
 from airbearing.analysis.discrepancy.search import discrepancy
 from airbearing.analysis.shooting.function_cache import borrowed
-from airbearing.analysis.simulation.scenarios import free_oscillation
-from airbearing.io import testbed as testbeds
 
 ONLY = ["viscous_friction", "coulomb_friction", "aero_drag", "gyro_bias"]
 FAR = "not within MATTER_BIC of the best IPOPT fit"
@@ -30,13 +29,7 @@ def _row(c) -> tuple:
 
 # two searches of a 12 s log: about 3.5 s of CPU (the second reuses the first's functions)
 def test_two_workers_give_the_answer_of_one():
-    d = testbeds.testbed_to_dict(testbeds.load_testbed("seed004-platform"))
-    d["sensors"]["rate"] = 50.0
-    tb = testbeds.testbed_from_dict(d)
-    log = free_oscillation(
-        tb, initial_rate=(-0.307, 0.189, -1.5), sliders=(0.012, -0.018, 0.010), duration=12.0,
-        seed=1, effects={"viscous_friction": 1e-5},
-    ).log  # fmt: skip
+    tb, log = spinning_seed004_50hz(12.0)
     one = discrepancy(tb, log, max_effects=1, only=ONLY)
     two = discrepancy(tb, log, max_effects=1, only=ONLY, workers=2)
     assert list(one.effects) == list(two.effects) == ["viscous_friction"]

@@ -12,27 +12,16 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from rigs import spinning_seed004_50hz
 
 from airbearing.analysis.discrepancy.screen import MATTER_BIC
 from airbearing.analysis.discrepancy.search import discrepancy
-from airbearing.analysis.simulation.scenarios import free_oscillation
-from airbearing.io import testbed as testbeds
 
 ONE_VALUE_STEP = "one Gauss-Newton step from the one-value form's IPOPT fit"
 
 
-def _testbed():
-    d = testbeds.testbed_to_dict(testbeds.load_testbed("seed004-platform"))
-    d["sensors"]["rate"] = 50.0
-    return testbeds.testbed_from_dict(d)
-
-
 def test_the_per_axis_step_from_the_one_value_fit_is_what_ipopt_gives():
-    tb = _testbed()
-    log = free_oscillation(
-        tb, initial_rate=(-0.307, 0.189, -1.5), sliders=(0.012, -0.018, 0.010), duration=6.0,
-        seed=1, effects={"viscous_friction": 1e-5},
-    ).log  # fmt: skip
+    tb, log = spinning_seed004_50hz(6.0)
     fast = discrepancy(tb, log, max_effects=1, only="viscous_friction")
     full = discrepancy(tb, log, max_effects=1, only="viscous_friction", screen=False)
     # the named effect is the same IPOPT fit (the one value) in both

@@ -11,29 +11,18 @@ named, not confounded), and the search's answer the same.
 from __future__ import annotations
 
 import pytest
+from rigs import spinning_seed004_50hz
 
 from airbearing.analysis.discrepancy.screen import MATTER_BIC
 from airbearing.analysis.discrepancy.search import discrepancy
-from airbearing.analysis.simulation.scenarios import free_oscillation
-from airbearing.io import testbed as testbeds
 
 ONLY = ["viscous_friction", "coulomb_friction", "aero_drag", "gyro_bias"]
 FAR = "not within MATTER_BIC of the best IPOPT fit"
 
 
-def _testbed():
-    d = testbeds.testbed_to_dict(testbeds.load_testbed("seed004-platform"))
-    d["sensors"]["rate"] = 50.0
-    return testbeds.testbed_from_dict(d)
-
-
 @pytest.mark.slow  # two searches, with and without the screen: about 6 s
 def test_a_candidate_far_from_the_best_is_judged_on_its_step():
-    tb = _testbed()
-    log = free_oscillation(
-        tb, initial_rate=(-0.307, 0.189, -1.5), sliders=(0.012, -0.018, 0.010), duration=12.0,
-        seed=1, effects={"viscous_friction": 1e-5},
-    ).log  # fmt: skip
+    tb, log = spinning_seed004_50hz(12.0)
     fast = discrepancy(tb, log, max_effects=1, only=ONLY)
     full = discrepancy(tb, log, max_effects=1, only=ONLY, screen=False)
     assert list(fast.effects) == list(full.effects) == ["viscous_friction"]

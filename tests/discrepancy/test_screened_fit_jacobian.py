@@ -13,6 +13,7 @@ from dataclasses import replace
 
 import numpy as np
 import scipy.sparse as sp
+from rigs import spinning_seed004_50hz
 
 from airbearing.analysis.discrepancy.candidates import candidates_for
 from airbearing.analysis.discrepancy.replay import prepare
@@ -20,18 +21,10 @@ from airbearing.analysis.discrepancy.screen import linearise
 from airbearing.analysis.discrepancy.search_state import _Search
 from airbearing.analysis.shooting import fit_jacobian
 from airbearing.analysis.shooting.errors import honest_errors
-from airbearing.analysis.simulation.scenarios import free_oscillation
-from airbearing.io import testbed as testbeds
 
 
 def test_a_screened_fit_shares_the_window_state_columns():
-    d = testbeds.testbed_to_dict(testbeds.load_testbed("seed004-platform"))
-    d["sensors"]["rate"] = 50.0
-    tb = testbeds.testbed_from_dict(d)
-    log = free_oscillation(
-        tb, initial_rate=(-0.307, 0.189, -1.5), sliders=(0.012, -0.018, 0.010), duration=3.0,
-        seed=1, effects={"viscous_friction": 1e-5},
-    ).log  # fmt: skip
+    tb, log = spinning_seed004_50hz(3.0)
     datas, windows, floor = prepare(tb, [log])
     cands = candidates_for(tb, datas, ["viscous_friction", "aero_drag"])
     search = _Search(tb, datas, windows, floor, cands, 0, None)
