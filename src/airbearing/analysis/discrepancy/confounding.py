@@ -236,34 +236,46 @@ def constant_torque_confounding(model, datas, p, named, S_of, axes, rates) -> li
         One per (named effect, axis) whose regressor on that axis makes a torque within
         :data:`STEADY_AXIS` (sine of the angle) of a constant.
     """
+    rate_of = dict(zip(axes, rates, strict=True))
     out = []
+    for a, i, sine in _near_constant(model, datas, p, named, S_of, lambda a: not a.lag, axes):
+        ax = AXES[i] if model.dof == 3 else "z"  # a dof-1 rate is the yaw rate
+        text = (
+            f"the rate about {ax} stays near {rate_of[i]:.3g} rad/s over the logs (within "
+            f"{100 * sine:.0f} %), so {a.name} about {ax} makes a nearly constant "
+            "torque there, as would a torque the model does not hold (the bearing's "
+            "own air-flow torque, a slow drift); repeat the run at another "
+            f"rate about {ax} (or let it coast down, or slew it) and fit the logs "
+            "together: a friction or drag scales with the rate, the unexplained torque "
+            "does not"
+        )
+        out.append(_with_constant(a.name, ax, sine, text))
+    return out
+
+
+def _near_constant(model, datas, p, named, S_of, keep, axes=None):
+    """``(effect, axis, sine)`` for each named smooth effect ``keep(effect)`` accepts whose
+    regressor on a body axis (``axes``; None: every axis) makes a torque within
+    :data:`STEADY_AXIS` (sine of the angle) of a constant over the logs."""
     for a, _ in named:
-        if not a.smooth or a.lag:
+        if not a.smooth or not keep(a):
             continue
         _, phi = residual_torque(model, datas, p, S_of(a))
-        for i, w in zip(axes, rates, strict=True):
+        for i in range(phi.shape[1]) if axes is None else axes:
             col = phi[:, i, :]
             if not np.any(col):
                 continue
-            ones = np.ones((col.shape[0], 1))
-            sine = _largest_sine_one(col, ones)
-            if sine >= STEADY_AXIS:
-                continue
-            kind = "exact" if sine < EXACT_SINE else "near"
-            ax = AXES[i] if model.dof == 3 else "z"  # a dof-1 rate is the yaw rate
-            what = f"constant torque about {ax}"
-            text = (
-                f"the rate about {ax} stays near {w:.3g} rad/s over the logs (within "
-                f"{100 * sine:.0f} %), so {a.name} about {ax} makes a nearly constant "
-                "torque there, as would a torque the model does not hold (the bearing's "
-                "own air-flow torque, a slow drift); repeat the run at another "
-                f"rate about {ax} (or let it coast down, or slew it) and fit the logs "
-                "together: a friction or drag scales with the rate, the unexplained torque "
-                "does not"
-            )
-            corr = float(np.sqrt(max(1.0 - sine**2, 0.0)))
-            out.append(Confounding((a.name, what), kind, corr, text, {}))
-    return out
+            sine = _largest_sine_one(col, np.ones((col.shape[0], 1)))
+            if sine < STEADY_AXIS:
+                yield a, i, sine
+
+
+def _with_constant(name: str, ax: str, sine: float, text: str) -> Confounding:
+    """Effect ``name`` confounded with a constant torque about ``ax`` (the sine of their
+    angle ``sine``), with the words ``text``."""
+    kind = "exact" if sine < EXACT_SINE else "near"
+    corr = float(np.sqrt(max(1.0 - sine**2, 0.0)))
+    return Confounding((name, f"constant torque about {ax}"), kind, corr, text, {})
 
 
 #: The wheels' bearing friction: its torque on the table follows the wheel speeds, not the
@@ -287,31 +299,22 @@ def wheel_friction_constant_torque(model, datas, p, named, S_of, skip=()) -> lis
         One per (named wheel friction, axis) within :data:`STEADY_AXIS` of a constant.
     """
     out = []
-    for a, _ in named:
-        if a.name not in WHEEL_FRICTION or not a.smooth:
+    wheel = [(a, k) for a, k in named if a.name in WHEEL_FRICTION]
+    for a, i, sine in _near_constant(model, datas, p, wheel, S_of, lambda a: True):
+        if i in skip:
             continue
-        _, phi = residual_torque(model, datas, p, S_of(a))
-        for i in range(phi.shape[1]):
-            col = phi[:, i, :]
-            if i in skip or not np.any(col):
-                continue
-            sine = _largest_sine_one(col, np.ones((col.shape[0], 1)))
-            if sine >= STEADY_AXIS:
-                continue
-            kind = "exact" if sine < EXACT_SINE else "near"
-            ax = AXES[i] if model.dof == 3 else "z"
-            how = "exactly" if kind == "exact" else f"to {100 * sine:.2g} %"
-            text = (
-                f"{a.name} makes a torque on the table about {ax} that is constant over the "
-                f"logs {how} (the wheel speeds keep their sign and nearly "
-                "their size), as would a torque the model does not hold (the bearing's own "
-                "air-flow torque, a slow drift), and the wheel speeds that would tell them "
-                "apart are not fitted; run the wheels through zero and at other speeds and "
-                "fit the logs together (a wheel's friction follows its speed, a torque on "
-                "the table does not), or compare a wheel speed's own slope with its command"
-            )
-            corr = float(np.sqrt(max(1.0 - sine**2, 0.0)))
-            out.append(Confounding((a.name, f"constant torque about {ax}"), kind, corr, text, {}))
+        ax = AXES[i] if model.dof == 3 else "z"
+        how = "exactly" if sine < EXACT_SINE else f"to {100 * sine:.2g} %"
+        text = (
+            f"{a.name} makes a torque on the table about {ax} that is constant over the "
+            f"logs {how} (the wheel speeds keep their sign and nearly "
+            "their size), as would a torque the model does not hold (the bearing's own "
+            "air-flow torque, a slow drift), and the wheel speeds that would tell them "
+            "apart are not fitted; run the wheels through zero and at other speeds and "
+            "fit the logs together (a wheel's friction follows its speed, a torque on "
+            "the table does not), or compare a wheel speed's own slope with its command"
+        )
+        out.append(_with_constant(a.name, ax, sine, text))
     return out
 
 
