@@ -217,8 +217,8 @@ def patch(attr):
     inner = getattr(fc, attr, None)
     if inner is None:
         return
-    def outer(key, build):
-        return inner(key, timed(build))
+    def outer(key, build, **kw):
+        return inner(key, timed(build), **kw)
     for mod in list(sys.modules.values()):
         name = getattr(mod, "__name__", "")
         if name.startswith("airbearing") and getattr(mod, attr, None) is inner:

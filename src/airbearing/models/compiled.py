@@ -71,6 +71,8 @@ __all__ = [
     "compiled",
     "compiler",
     "compile_seconds",
+    "library_of",
+    "load_library",
 ]
 
 #: Environment variable naming the airbearing cache folder.
@@ -113,6 +115,8 @@ _told_ids: set[int] = set()
 #: Wall time spent compiling in this process: finished builds, and the start of a running one.
 _compile_time = {"done": 0.0, "running_since": None}
 _counts = {"memory_hits": 0, "disk_hits": 0, "compiled": 0, "rebuilt": 0, "uncompiled": 0}
+#: The library behind each loaded Function: id -> (weak reference, library, its SHA-256).
+_libraries: dict[int, tuple] = {}
 
 
 @dataclass(frozen=True)
@@ -200,7 +204,7 @@ def cache_dir() -> Path:
     return Path(root).expanduser() / "compiled"
 
 
-_FILES = (".so", ".dll", ".dylib", ".sha256", ".lock", ".tmp", ".ref")
+_FILES = (".so", ".dll", ".dylib", ".sha256", ".lock", ".tmp", ".ref", ".idx")
 
 
 def clear_cache() -> int:
@@ -339,6 +343,48 @@ def _load(name: str, lib: Path, fn):
     f = ca.external(name, str(lib))
     if not _matches(f, fn):
         raise RuntimeError(f"{lib} does not hold {name} with the expected inputs and outputs")
+    _remember(f, lib)
+    return f
+
+
+def _remember(f, lib: Path) -> None:
+    """Note ``lib`` (and the digest its sidecar holds) as the library of ``f``."""
+    try:
+        digest = lib.with_name(lib.name + ".sha256").read_text().strip()
+    except OSError:
+        return
+    key = id(f)
+    with _lock:
+        _libraries[key] = (weakref.ref(f, lambda _: _libraries.pop(key, None)), lib, digest)
+
+
+def library_of(fn) -> tuple[Path, str] | None:
+    """The shared library a Function returned by :func:`compiled` (or :func:`load_library`)
+    was loaded from, and the SHA-256 of its content; None for any other Function."""
+    with _lock:
+        got = _libraries.get(id(fn))
+    if got is None or got[0]() is not fn:
+        return None
+    return got[1], got[2]
+
+
+def load_library(name: str, lib: Path, digest: str):
+    """The Function ``name`` of the cached library ``lib``, or None when ``lib`` is not there
+    whole with the SHA-256 ``digest`` (its sidecar and its content both say so).
+
+    For an index that names the library of a Function without building the Function
+    (:mod:`airbearing.models.compiled_index`): the digest stands for the inputs and outputs
+    :func:`compiled` checked when it loaded the library first.
+    """
+    side = lib.with_name(lib.name + ".sha256")
+    try:
+        if side.read_text().strip() != digest or not _valid(lib, side):
+            return None
+        f = ca.external(name, str(lib))
+    except (OSError, RuntimeError):
+        return None
+    _remember(f, lib)
+    _count("disk")
     return f
 
 

@@ -7,6 +7,12 @@ Function through the on-disk cache of :mod:`airbearing.models.compiled` (a new p
 it). Every builder of :mod:`.window_functions`, :mod:`.problem_functions`, :mod:`.solver`,
 :mod:`.constrained` and :mod:`.penalty` caches here.
 
+A set of compiled Functions cached with ``disk=True`` is also found by its key in a new
+process, without building it (:mod:`airbearing.models.compiled_index`): the key is what
+decides the set (the Model's structure key, shapes, options), the index adds the package's
+code, the libraries' versions and the compiler. Building the symbolic expressions and
+hashing them to find their libraries took 30-60 ms per set in a new process.
+
 Threads may share it (the discrepancy search's ``workers``): each key is built once, by
 the first thread that asks; the others wait for it. A solver keeps its last iterate in its
 oracle and IPOPT calls back into Python: :func:`borrowed` lends one to one caller at a
@@ -22,9 +28,12 @@ from contextlib import contextmanager
 import casadi as ca
 
 import airbearing.models.compiled as disk_cache
+from airbearing.models import compiled_index
 
 #: Largest number of compiled function sets kept per process.
 CACHE_SIZE = 48
+#: Mixed into the keys of compiled functions (the index's and the libraries').
+INDEX_TAG = "airbearing.analysis.shooting v1"
 
 
 def jit_available() -> bool:
@@ -46,9 +55,16 @@ def _lookup(key):
     return False, None
 
 
-def cached(key, build):
+def cached(key, build, *, disk: bool = False):
     """Bounded LRU of compiled functions (``CACHE_SIZE`` entries), ``build()`` once per key
-    even when threads ask for it at once."""
+    even when threads ask for it at once.
+
+    With ``disk``, ``build()`` returns a tuple of compiled Functions (and JSON values such
+    as an instruction count), which a new process loads from the index of compiled
+    libraries under ``key`` instead of building them (module doc); a set holding a Function
+    that is not a library (CasADi's virtual machine) is not stored and built every time.
+    ``key`` must then decide the set, whatever process asks: JSON-able parts only.
+    """
     hit, value = _lookup(key)
     if hit:
         return value
@@ -59,7 +75,7 @@ def cached(key, build):
         if hit:
             return value
         try:
-            value = build()
+            value = _from_index(key, build) if disk else build()
             with _LOCK:
                 _CACHE[key] = value
                 while len(_CACHE) > CACHE_SIZE:
@@ -67,6 +83,17 @@ def cached(key, build):
         finally:
             with _LOCK:
                 _BUILDING.pop(key, None)
+    return value
+
+
+def _from_index(key, build) -> tuple:
+    """``build()``'s tuple, from the index of compiled libraries when it holds ``key``'s."""
+    ikey = compiled_index.key_of([INDEX_TAG, key])
+    items = compiled_index.load(ikey)
+    if items is not None:
+        return tuple(items)
+    value = build()
+    compiled_index.store(ikey, list(value))
     return value
 
 
@@ -105,4 +132,4 @@ def compiled(fn: ca.Function, *, jit: bool | None = None, progress=None) -> ca.F
     """
     if jit is False:
         return fn
-    return disk_cache.compiled(fn, key="airbearing.analysis.shooting v1", progress=progress)
+    return disk_cache.compiled(fn, key=INDEX_TAG, progress=progress)

@@ -129,13 +129,15 @@ def _block_functions(model, y_rows, K, substeps, jit, n_rows: int):
         lambda: tuple(
             compiled(_block_function(model, y_rows, substeps, K, o), jit=jit) for o in (0, 1)
         ),
+        disk=jit is not False,
     )
     hess_jit = False if n_rows < HESSIAN_COMPILE_ROWS else jit
     hess = cached(
         (*key, "hessian", hess_jit),
-        lambda: compiled(_block_function(model, y_rows, substeps, K, 2), jit=hess_jit),
+        lambda: (compiled(_block_function(model, y_rows, substeps, K, 2), jit=hess_jit),),
+        disk=hess_jit is not False,
     )
-    return (*low, hess)
+    return (*low, *hess)
 
 
 @dataclass(frozen=True, eq=False)

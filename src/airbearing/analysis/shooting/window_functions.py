@@ -138,7 +138,19 @@ def _window_functions(
     model: Model, L: int, K: int, outputs: tuple, substeps: int, jit, link: bool = False
 ):
     key = ("window", layout_key(model, outputs), L, K, outputs, substeps, jit, link)
-    return cached(key, lambda: _build_window(model, L, K, outputs, substeps, jit, link))
+    # whole windows are compiled (linked ones but their outputs): a new process loads them
+    whole = step_instructions(model, substeps) < CHAIN_MIN_INSTRUCTIONS
+    return cached(
+        key,
+        lambda: _build_window(model, L, K, outputs, substeps, jit, link),
+        disk=whole and not link and jit is not False,
+    )
+
+
+def step_instructions(model: Model, substeps: int) -> int:
+    """Instructions of :func:`step_function` (known to a new process without building it)."""
+    key = ("step size", structure_key(model), substeps)
+    return cached(key, lambda: (step_function(model, substeps).n_instructions(),), disk=True)[0]
 
 
 def start_function(model: Model, outputs: tuple) -> ca.Function:
@@ -182,7 +194,7 @@ def _step_functions(model: Model, substeps: int, jit) -> tuple:
         )  # fmt: skip
         return compiled(step, jit=jit), compiled(jac, jit=jit)
 
-    return cached(key, build)
+    return cached(key, build, disk=jit is not False)
 
 
 def _sample_functions(model: Model, outputs: tuple, jit) -> tuple:
@@ -212,7 +224,7 @@ def _sample_functions(model: Model, outputs: tuple, jit) -> tuple:
         frj = ca.Function("sample_rj", ins, [*res, *[ca.jacobian(g, xp) for g in res]])
         return compiled(fr, jit=jit), compiled(frj, jit=jit)
 
-    return cached(key, build)
+    return cached(key, build, disk=jit is not False)
 
 
 def _build_window(
@@ -221,7 +233,7 @@ def _build_window(
     """``(window_r, window_rj, window_y)`` of one window of ``L`` rows: chained over the
     step compiled once per structure (:func:`_build_chained_window`) when the step is large,
     else whole windows compiled to C (:func:`_build_whole_window`)."""
-    if step_function(model, substeps).n_instructions() >= CHAIN_MIN_INSTRUCTIONS:
+    if step_instructions(model, substeps) >= CHAIN_MIN_INSTRUCTIONS:
         return _build_chained_window(model, L, K, outputs, substeps, jit, link)
     return _build_whole_window(model, L, K, outputs, substeps, jit, link)
 
