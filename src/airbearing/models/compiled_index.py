@@ -187,8 +187,10 @@ def store(key: str | None, items: list) -> bool:
         body = json.dumps({"key": key, "items": doc}, allow_nan=False)
     except (TypeError, ValueError):
         return False
+    path = _path(key)
     try:
-        write_atomic(_path(key), hashlib.sha256(body.encode()).hexdigest() + "\n" + body)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        write_atomic(path, hashlib.sha256(body.encode()).hexdigest() + "\n" + body)
     except OSError:
         return False
     _count("stored")
