@@ -27,7 +27,8 @@ the statistical libraries its later stages import (scipy.stats, statsmodels; imp
 here first so that they are counted apart), reading and checking the log, each step of
 the search (the ``progress`` callback), the part of it spent building the CasADi functions
 and loading them from the disk cache (the builders given to ``function_cache.cached`` and
-``borrowed``, outermost calls), the
+``borrowed``, outermost calls; the sets of compiled functions found through the index of
+``airbearing.models.compiled_index`` without building them are counted apart), the
 JSON, and the interpreter's tear-down (the child's CPU after its last line, from the
 parent). It runs the command's steps itself, not ``airbearing.cli.main``: the CLI's
 process settings (collector paused during imports, no tear-down) are not in it.
@@ -234,7 +235,13 @@ mark("the search")
 with open(sys.argv[2], "w") as f:
     json.dump(res.to_json(), f)
 mark("JSON")
-got = {"marks": marks, "steps": steps, "built": built["s"], "search_from": marks[-3][1]}
+try:  # (code before the index of compiled functions has none)
+    from airbearing.models.compiled_index import index_info
+    index = index_info()
+except ImportError:
+    index = None
+got = {"marks": marks, "steps": steps, "built": built["s"], "search_from": marks[-3][1],
+       "index": index}
 print(json.dumps(got))
 """
 
@@ -264,6 +271,9 @@ def split() -> None:
             print(
                 f"           ({got['built']:.2f} s of it building and loading compiled functions)"
             )
+            if got["index"] is not None:
+                hits = got["index"]["hits"]
+                print(f"           ({hits} compiled sets found by their key, nothing built)")
     print(f"  {cpu - marks[-1][1]:5.2f} s  interpreter tear-down")
     print(f"  {cpu:5.2f} s  CPU of the process  ({_load()})")
 
