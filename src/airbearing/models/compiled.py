@@ -22,6 +22,10 @@ compiling again (seconds):
   ``Function.serialize()`` (the structure, not ``id()``). The same hash names a
   small ``.ref`` file pointing at the library, so a new process finds it without
   generating the C source again (10-50 ms per window function).
+- before building: a caller that knows what decides a set of Functions (a Model's
+  structure, shapes, options) finds their libraries through
+  :mod:`airbearing.models.compiled_index` (``.idx`` files) without building them;
+  :func:`library_of` and :func:`load_library` serve it.
 
 With no C compiler (or ``AIRBEARING_COMPILE=0``) the Function is returned
 unchanged and runs in CasADi's virtual machine: compiling changes how fast a
