@@ -99,3 +99,38 @@ def test_the_collector_is_paused_only_for_a_console_commands_imports():
     assert gc.isenabled()
     assert gc.get_freeze_count() > frozen
     gc.unfreeze()  # (this test process lives on: its objects back in the collector's view)
+
+
+def test_a_console_identify_ends_with_its_status_and_every_line(tmp_path):
+    # identify leaves by os._exit too (cli._end_process, the collector paused for its
+    # imports): the same lines and the same JSON, to the byte, as the run in this process
+    from airbearing.analysis.identification.platform import SEED004_TRUTH, seed004_testbed
+    from airbearing.analysis.simulation.scenarios import free_oscillation
+    from airbearing.cli import main
+    from airbearing.io.log import write_log
+
+    tb = seed004_testbed()
+    names = []
+    for i, (w, s) in enumerate([((-0.307, 0.189, -1.5), (0.012, -0.018, 0.010)),
+                                ((0.15, 0.45, 1.4), (0.004, 0.022, -0.016))]):  # fmt: skip
+        run = free_oscillation(tb, initial_rate=w, sliders=s, duration=10.0, seed=i)
+        write_log(run.log, tmp_path / f"free{i}.csv")
+        names.append(f"free{i}.csv")
+    xy = [str(SEED004_TRUTH[6]), str(SEED004_TRUTH[7])]
+    args = ["--quiet", "identify", "platform-3dof", *names, "--method", "equation-error",
+            "--known-offset-xy", *xy]  # fmt: skip
+    out = _console([*args, "--json", "console.json"], tmp_path)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert out.stdout.splitlines()[-1] == "wrote console.json"
+    cwd = os.getcwd()
+    os.chdir(tmp_path)
+    try:
+        main([*args, "--json", "here.json"])
+    finally:
+        os.chdir(cwd)
+    assert (tmp_path / "console.json").read_bytes() == (tmp_path / "here.json").read_bytes()
+    bad = _console([*args, "missing.csv"], tmp_path)
+    assert bad.returncode == 2
+    assert bad.stderr.splitlines() == [bad.stderr.strip()]  # one line
+    assert bad.stderr.startswith("airbearing: error: ") and "missing.csv" in bad.stderr
+    assert bad.stdout == ""

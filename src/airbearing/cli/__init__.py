@@ -322,7 +322,7 @@ def main(argv: list[str] | None = None) -> None:
 #: Console commands that pause the garbage collector during their imports
 #: (:func:`airbearing.cli.process_settings.pause_collection`) and leave without tearing the
 #: interpreter down (:func:`_end_process`).
-_QUICK_EXIT = (("discrepancy",),)
+_QUICK_EXIT = (("discrepancy",), ("identify",))
 
 
 def _end_process(code: int) -> NoReturn:
@@ -334,7 +334,9 @@ def _end_process(code: int) -> NoReturn:
     does nothing a finished run needs: its outputs are committed and closed, the debug
     log is closed (or removed). The exit handlers this path has (``logging.shutdown``;
     Arrow's S3 finaliser, unused: logs are local files) are replaced by flushing the log
-    handlers and the standard streams here.
+    handlers and the standard streams here. ``identify``: the tear-down ~0.05 s and the
+    collections during its imports ~0.03 s of a 0.5 s process (10^4 rows; measured on
+    the shared 2-core machine, load ~3).
     """
     logging.shutdown()
     for stream in (sys.stdout, sys.stderr):

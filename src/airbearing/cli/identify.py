@@ -80,10 +80,11 @@ def identify(
     if form not in ("integrated", "acceleration"):
         raise InputError(f"--form {form}: expected integrated or acceleration")
     from airbearing.analysis.identification.options import columns_used
-    from airbearing.cli.process_settings import reuse_freed_memory
+    from airbearing.cli.process_settings import collect_after_imports, reuse_freed_memory
     from airbearing.io.log import read_log
     from airbearing.io.testbed import write_testbed
 
+    collect_after_imports()  # paused by `main` for these imports (not for the logs read)
     number("--known-mass", known_mass, lo=0, lo_open=True, unit="kg")
     reuse_freed_memory()
     tb = testbed_arg(testbed)

@@ -93,7 +93,7 @@ def _switch_rows(log: Log, segments, k: int) -> np.ndarray | None:
     for cols, order in ((_GIMBAL_RATES, 1), (_DIPOLES, 1), (_SLIDERS, 2), (wc, 1)):
         if not cols:
             continue
-        if not log.has(*cols):
+        if not log.has(*cols) or _held(log, cols, segments, order):
             continue
         u = log.columns(cols)  # (a new float array, as np.stack of the columns)
         tiny = 1e-12 * np.max(np.abs(u), axis=0)  # once per log, not per segment
@@ -113,6 +113,22 @@ def _switch_rows(log: Log, segments, k: int) -> np.ndarray | None:
             for j in np.flatnonzero(big.any(axis=1)) + start + order:
                 out[max(j - k, start) : min(j + k + 1, stop)] = True
     return out if out.any() else None
+
+
+def _held(log: Log, cols, segments, order: int) -> bool:
+    """True when each of ``cols`` (float64, read without a copy) holds one value within
+    every segment :func:`_switch_rows` looks at: parked sliders, unlogged dipoles written
+    as zeros. It finds no switch in them (every difference is 0), and the copy, the
+    scales and the per-segment checks of the columns are not made (~0.03 s per 10^6-row
+    log and group)."""
+    for c in cols:
+        v = log._values(c)
+        if v.dtype != np.float64:
+            return False  # as log.columns reads it: converted, or refused with its message
+        for start, stop in segments:
+            if stop - start > order + 1 and not np.all(v[start:stop] == v[start]):
+                return False
+    return True
 
 
 def _changing(values: np.ndarray, segments) -> np.ndarray:
