@@ -136,8 +136,6 @@ def test_exceeds_is_the_comparison_with_scipys_quantile(dof):
         stats.chi2.rvs(dof, size=(40, 3), random_state=rng),  # mostly below
         q * np.array([0.0, 0.5, 0.99, 1 - 1e-9, 1.0, 1 + 1e-9, 1.01, 2.0, 10.0]),
         3.0 * q + stats.chi2.rvs(dof, size=(7, 1), random_state=rng),  # all over
-        rng.permutation(np.r_[0.3 * q * rng.random(500), q * (3 + rng.random(500))]),  # both
-        np.linspace(0.0, 3.0 * q, 1001),  # through the quantile
         np.array([[0.5 * q, np.nan]]),
         np.zeros((0, 1)),
     ]

@@ -64,23 +64,14 @@ def exceeds(x: np.ndarray, level: float, dof: float) -> np.ndarray:
     not loaded. Otherwise the comparison is the quantile's own.
     """
     x = np.asarray(x, dtype=float)
-    values = np.unique(x)  # sorted, NaN last
-    if values.size == 0 or _beyond(float(values[-1]), level, dof) is False:  # all within
-        return np.zeros(x.shape, dtype=bool)
-    if np.isnan(values[-1]):
-        return x > chi2_isf(level, dof)
-    # S falls with x: a value decided within puts every smaller one within, one decided
-    # beyond puts every larger one beyond; the first value not decided within, by bisection
-    lo, hi = 0, values.size - 1  # values[hi] is not decided within
-    while lo < hi:
-        mid = (lo + hi) // 2
-        if _beyond(float(values[mid]), level, dof) is False:
-            lo = mid + 1
-        else:
-            hi = mid
-    if _beyond(float(values[lo]), level, dof) is not True:
-        return x > chi2_isf(level, dof)
-    return x >= values[lo]
+    out = np.zeros(x.shape, dtype=bool)
+    flat = out.reshape(-1)
+    for i, v in enumerate(x.reshape(-1).tolist()):
+        side = _beyond(v, level, float(dof))
+        if side is None:
+            return x > chi2_isf(level, dof)
+        flat[i] = side
+    return out
 
 
 def _beyond(x: float, level: float, dof: float) -> bool | None:
@@ -96,7 +87,6 @@ def _beyond(x: float, level: float, dof: float) -> bool | None:
     - any ``dof``, from above, for ``x > dof``: Chernoff's ``S(x) <= (x / dof)^(dof / 2)
       exp((dof - x) / 2)``.
     """
-    dof = float(dof)
     if not (x == x and 0.0 < level < 1.0):
         return None
     if x <= 0.0:  # S(x) = 1
