@@ -60,7 +60,7 @@ def exceeds(x: np.ndarray, level: float, dof: float) -> np.ndarray:
     times over it where the motion's misfit is real); there the tail probability at the
     statistic, or a bound of it, is on one side of ``level`` by more than
     :data:`_MARGIN`, which decides the comparison as the quantile would, and
-    scipy.special (0.1 s of CPU to import, a quarter of a small ``identify`` process) is
+    scipy.special (0.1 s of CPU to import, a fifth of a small ``identify`` process) is
     not loaded. Otherwise the comparison is the quantile's own.
     """
     x = np.asarray(x, dtype=float)
