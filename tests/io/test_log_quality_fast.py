@@ -26,7 +26,6 @@ from airbearing import quaternion as quat
 from airbearing.io import Log
 from airbearing.io import local_fits as F
 from airbearing.io import quality as Q
-from airbearing.io import quality_edges as QE
 from airbearing.io import quality_outliers as QO
 
 # ----------------------------------------------------------------------------
@@ -74,8 +73,6 @@ def reference_quality(monkeypatch, log: Log) -> Q.LogQuality:
         m.setattr(QO, "_window_median", _median_by_pandas)
         m.setattr(S, "_signs_along_parents", _signs_by_pointer_doubling)
         m.setattr(Q._Scorer, "__call__", always_exact)
-        # every edge test against scipy's quantile (not decided by the tail's bounds)
-        m.setattr(QE, "exceeds", lambda x, level, dof: x > QE.chi2_isf(level, dof))
         return Q.assess(log, log.testbed)
 
 

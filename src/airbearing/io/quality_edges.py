@@ -10,20 +10,18 @@ row), where they fail a test of white noise at :data:`EDGE_LEVEL`. The rule is t
 :mod:`airbearing.io.quality`'s docstring (step 3); the scorer (``_Scorer`` of
 :mod:`airbearing.io.quality_outliers`) provides the residuals and the scales.
 
-The tests' chi-square quantiles are scipy's (:func:`chi2_isf`), asked for only when a
-statistic may reach one (:func:`exceeds`).
+The tests' chi-square quantiles are scipy's (:func:`chi2_isf`).
 """
 
 from __future__ import annotations
 
-import math
 from functools import lru_cache
 
 import numpy as np
 
 from airbearing.io.local_fits import noise_gain, residual_correlation
 
-__all__ = ["EDGE_LEVEL", "chi2_isf", "edge_factor", "edge_fits", "exceeds"]
+__all__ = ["EDGE_LEVEL", "chi2_isf", "edge_factor", "edge_fits"]
 
 #: Level of the test that an edge's inward rows are rougher than the log-wide scale
 #: (:func:`edge_factor`): a false alarm only lowers the sensitivity at that edge.
@@ -44,71 +42,6 @@ def chi2_isf(level: float, dof: float) -> float:
     from scipy.special import chdtri  # 0.3-0.6 s to import: only when a test needs it
 
     return float(chdtri(dof, level))
-
-
-#: Relative margin by which a bound of the tail probability must clear the level for
-#: :func:`exceeds` to decide without the quantile (the rounding of erfc, exp and the
-#: logarithms below is ~1e-15 relative).
-_MARGIN = 1e-6
-
-
-def exceeds(x: np.ndarray, level: float, dof: float) -> np.ndarray:
-    """``x > chi2_isf(level, dof)``, element by element, the quantile asked of scipy only
-    where the chi-square tail's bounds (:func:`_beyond`) leave a statistic undecided.
-
-    An edge statistic is far from its quantile nearly always (below it, or several
-    times over it where the motion's misfit is real); there the tail probability at the
-    statistic, or a bound of it, is on one side of ``level`` by more than
-    :data:`_MARGIN`, which decides the comparison as the quantile would, and
-    scipy.special (0.1 s of CPU to import, a fifth of a small ``identify`` process) is
-    not loaded. Otherwise the comparison is the quantile's own.
-    """
-    x = np.asarray(x, dtype=float)
-    out = np.zeros(x.shape, dtype=bool)
-    flat = out.reshape(-1)
-    for i, v in enumerate(x.reshape(-1).tolist()):
-        side = _beyond(v, level, float(dof))
-        if side is None:
-            return x > chi2_isf(level, dof)
-        flat[i] = side
-    return out
-
-
-def _beyond(x: float, level: float, dof: float) -> bool | None:
-    """Whether ``x > chi2.isf(level, dof)``, when a bound of the survival function ``S``
-    at ``x`` decides it: False when ``S(x) >= level (1 + m)``, True when ``S(x) < level
-    (1 - m)`` (``m`` = :data:`_MARGIN`), None when neither bound does (or ``x`` is NaN).
-
-    - ``dof`` 1 and 3: ``S`` itself, a squared standard normal's ``erfc(sqrt(x / 2))``
-      and, for three, plus ``sqrt(2 x / pi) exp(-x / 2)``.
-    - ``dof >= 2``, from below: a gamma of shape ``dof / 2 >= 1`` (scale 2) has an
-      increasing failure rate ``f / S`` that tends to 1/2 (Barlow and Proschan), so
-      ``S(c) >= 2 f(c)``; with ``c = max(x, dof)``, ``S(x) >= S(c) >= 2 f(c)``.
-    - any ``dof``, from above, for ``x > dof``: Chernoff's ``S(x) <= (x / dof)^(dof / 2)
-      exp((dof - x) / 2)``.
-    """
-    if not (x == x and 0.0 < level < 1.0):
-        return None
-    if x <= 0.0:  # S(x) = 1
-        return False
-    if dof in (1.0, 3.0):
-        s = math.erfc(math.sqrt(0.5 * x))
-        if dof == 3.0:
-            s += math.sqrt(2.0 * x / math.pi) * math.exp(-0.5 * x)
-        low = high = s
-    else:
-        low = high = None
-        a = 0.5 * dof
-        if dof >= 2.0:
-            c = max(x, dof)
-            low = math.exp((a - 1.0) * (math.log(c) - math.log(2.0)) - 0.5 * c - math.lgamma(a))
-        if x > dof:
-            high = math.exp(a * math.log(x / dof) + 0.5 * (dof - x))
-    if low is not None and low >= level * (1.0 + _MARGIN):
-        return False
-    if high is not None and high < level * (1.0 - _MARGIN):
-        return True
-    return None
 
 
 def edge_fits(scorer, rows, good, d, scale, candidates):
@@ -218,8 +151,8 @@ def edge_factor(scorer, rows, good, fit_k, fit_p, shapes, d) -> np.ndarray:
             if g.vector:
                 ss = np.sum(ss, axis=1, keepdims=True)
                 bias = np.sum(bias, axis=1, keepdims=True)
-            failed = exceeds(ss * tr / tr2, EDGE_LEVEL / 2, tr * tr / tr2)
-            failed |= exceeds(bias, EDGE_LEVEL / 2, dof)
+            failed = ss * tr / tr2 > chi2_isf(EDGE_LEVEL / 2, tr * tr / tr2)
+            failed |= bias > chi2_isf(EDGE_LEVEL / 2, dof)
             rms = np.sqrt(ss / tr)
             out[mine[these]] = np.where(failed, np.maximum(rms, 1.0), 1.0)
     return out
