@@ -44,6 +44,9 @@ __all__ = [
 #: are practically free (the old fixed-window fit); 1e-8: one trajectory per segment (a
 #: defect of 1e-4 noise sigma; lower intensities only make the solve ill-conditioned).
 KAPPA_GRID = (1e4, 1e2, 1.0, 1e-2, 1e-4, 1e-6, 1e-8)
+#: Weight of a wheel's absolute-speed defect (noise units) at every intensity: the bottom of
+#: :data:`KAPPA_GRID`'s (a defect of 1e-4 noise sigma), :func:`defect_whitening`.
+WHEEL_STIFFNESS = 1e4
 
 # ----------------------------------------------------------------------------
 # the whitening of the defects
@@ -63,6 +66,15 @@ def _sigma_of_kappa(problem, kappa: float) -> float:
     if problem.attitude_measured:
         return math.sqrt(kappa * problem.sigma_att**2 * 3.0 / T**3)
     return math.sqrt(kappa * problem.sigma_rate**2 / T)
+
+
+def wheel_axes_on_rate(problem) -> np.ndarray:
+    """``(n_ws, n_rate)``: each compared wheel's spin axis on the fitted rate axes (body
+    axes; dof 1: ``+-1`` on ``wz``); no rows when the wheel speeds are not compared."""
+    if not problem.n_ws:
+        return np.zeros((0, problem.n_rate))
+    axes = np.asarray(problem.model.testbed.wheels.axes, dtype=float)
+    return axes if problem.n_rate == 3 else axes[:, 2:3]
 
 
 def defect_whitening(problem, sigma_w: float):
@@ -88,6 +100,8 @@ def defect_whitening(problem, sigma_w: float):
     T = piece_durations(problem)
     link = np.asarray(w.link, dtype=bool)
     sa, sr = problem.sigma_att, problem.sigma_rate
+    ws_rows = wheel_axes_on_rate(problem)
+    sw = problem.sigma_ws if len(ws_rows) else 1.0
     rows, cols, vals = [], [], []
     logdet = 0.0
     eps = 1e-12  # keeps a block positive definite at any intensity
@@ -124,7 +138,23 @@ def defect_whitening(problem, sigma_w: float):
                 cols.append(ir)
                 vals.append(1.0 / math.sqrt(vr))
                 logdet -= 0.5 * math.log(vr)
-        for i in range(n_att + n_rate, nd):  # lagged gyro states: like the rate
+        for i, coef in enumerate(ws_rows):
+            # a wheel's ABSOLUTE speed W_i + a_i . w: a torque on the body (the process
+            # noise) turns body and wheel together and leaves it alone (FORMATS.md: only the
+            # wheel's own torques change it), so it is held continuous whatever the
+            # intensity, as stiffly as the bottom of the grid holds the rate (one absolute
+            # wheel-speed trajectory per segment: what acts on a wheel must be in the Model)
+            iw = base + n_att + n_rate + i
+            rows.append(iw)
+            cols.append(iw)
+            vals.append(WHEEL_STIFFNESS)
+            logdet += math.log(WHEEL_STIFFNESS)
+            for a in range(n_rate):
+                if coef[a] != 0.0:
+                    rows.append(iw)
+                    cols.append(base + n_att + a)
+                    vals.append(WHEEL_STIFFNESS * coef[a] * sr / sw)
+        for i in range(n_att + n_rate + len(ws_rows), nd):  # lagged gyro states: like the rate
             vr = q * t / sr**2 + eps
             rows.append(base + i)
             cols.append(base + i)
