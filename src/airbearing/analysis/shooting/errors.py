@@ -327,9 +327,9 @@ def _free_shares(problem, r: np.ndarray, n_free: int):
 def _resolution(problem) -> np.ndarray:
     """:data:`RESOLUTION` of each output group as a variance in the problem's noise units
     (at most 1: a weight at the resolution is a noise-free output)."""
-    res = np.array(
-        [(RESOLUTION[o] / max(problem.sigma_of(o), 1e-300)) ** 2 for o in problem.outputs]
-    )
+    sigma = {"rate": problem.sigma_rate, "quat": problem.sigma_att, "yaw": problem.sigma_att,
+             "ws": getattr(problem, "sigma_ws", None)}  # fmt: skip
+    res = np.array([(RESOLUTION[o] / max(sigma[o], 1e-300)) ** 2 for o in problem.outputs])
     return np.minimum(res, 1.0)
 
 
