@@ -10,9 +10,9 @@ restarts from an estimate of the state at its first row, ``x_meas_j``,
 corrected by a small perturbation ``delta_j`` (a rotation vector on the
 attitude for dof 3, an offset on the yaw when the yaw is fitted, an offset on
 each rate, on each compared wheel speed, and on each lagged rate of a
-``sensor_lag``). The Model is rolled over the window sample to sample with the LOGGED intervals (``dt`` is an input
-of every step, so jittered times are integrated as logged) and its measurement
-is compared with the logged one:
+``sensor_lag``). The Model is rolled over the window sample to sample with the
+LOGGED intervals (``dt`` is an input of every step, so jittered times are
+integrated as logged) and its measurement is compared with the logged one:
 
 - ``rate``: the measured angular rate (a gyro), residual ``(w_meas - w_model) / sigma_rate``;
 - ``quat``: the attitude quaternion, residual ``2 vec(conj(q_model) (x) q_meas) / sigma_att``
