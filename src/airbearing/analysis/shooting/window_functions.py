@@ -215,7 +215,9 @@ def _step_functions(model: Model, substeps: int, jit) -> tuple:
 def _sample_functions(model: Model, outputs: tuple, jit) -> tuple:
     """``(res, res_jac)`` of one sample, compiled once per structure and output groups:
     ``(x, u, p, weight, w, q, yaw, sigma) -> r_g`` per group ``g`` of ``outputs`` (the
-    window's residual, module doc), and the same followed by each ``d r_g / d[x; p]``."""
+    window's residual, module doc), and the same followed by each ``d r_g / d[x; p]``.
+    ``w`` holds the measured rates, then the measured wheel speeds when ``ws`` is
+    compared (``sigma`` then has their level third)."""
     key = ("sample", structure_key(model), outputs, jit)
 
     def build():
