@@ -20,8 +20,9 @@ integrated as logged) and its measurement is compared with the logged one:
 - ``yaw``: the yaw of a dof-1 platform, residual ``(yaw_meas - yaw_model) / sigma_att``;
 - ``ws``: the wheel speeds of a reaction-wheel testbed (FORMATS.md ``ws_i``: ``W_i``
   relative to the body), residual ``(ws_meas - W_model) / sigma_ws`` with their own noise
-  level; each window also fits its start wheel speeds (``delta``), and linked windows hold
-  each wheel's absolute speed ``W_i + a_i . w`` continuous (:mod:`.penalty`).
+  level; each window also fits its start wheel speeds (``delta``), and the defects of
+  linked windows are those of each wheel's absolute speed ``W_i + a_i . w``
+  (:mod:`.penalty`).
 
 Each residual is multiplied by the row's weight ``m`` (0 for an outlier row and
 for the padding of a short window at the end of a segment, else 1), so a row

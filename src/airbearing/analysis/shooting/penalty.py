@@ -44,9 +44,6 @@ __all__ = [
 #: are practically free (the old fixed-window fit); 1e-8: one trajectory per segment (a
 #: defect of 1e-4 noise sigma; lower intensities only make the solve ill-conditioned).
 KAPPA_GRID = (1e4, 1e2, 1.0, 1e-2, 1e-4, 1e-6, 1e-8)
-#: Weight of a wheel's absolute-speed defect (noise units) at every intensity: the bottom of
-#: :data:`KAPPA_GRID`'s (a defect of 1e-4 noise sigma), :func:`defect_whitening`.
-WHEEL_STIFFNESS = 1e4
 
 # ----------------------------------------------------------------------------
 # the whitening of the defects
@@ -139,21 +136,23 @@ def defect_whitening(problem, sigma_w: float):
                 vals.append(1.0 / math.sqrt(vr))
                 logdet -= 0.5 * math.log(vr)
         for i, coef in enumerate(ws_rows):
-            # a wheel's ABSOLUTE speed W_i + a_i . w: a torque on the body (the process
-            # noise) turns body and wheel together and leaves it alone (FORMATS.md: only the
-            # wheel's own torques change it), so it is held continuous whatever the
-            # intensity, as stiffly as the bottom of the grid holds the rate (one absolute
-            # wheel-speed trajectory per segment: what acts on a wheel must be in the Model)
+            # a wheel's ABSOLUTE speed W_i + a_i . w: a torque on the body turns body and
+            # wheel together and leaves it alone (FORMATS.md: only the wheel's own torques
+            # change it), so its defect is the wheel's own unexplained torque, a random walk
+            # of the same dimensionless intensity as the rate's (defect variance over the
+            # wheel speeds' noise variance): nearly free pieces at the top of the grid, one
+            # absolute wheel-speed trajectory per segment at its bottom
             iw = base + n_att + n_rate + i
+            vw = q * t / sr**2 + eps
             rows.append(iw)
             cols.append(iw)
-            vals.append(WHEEL_STIFFNESS)
-            logdet += math.log(WHEEL_STIFFNESS)
+            vals.append(1.0 / math.sqrt(vw))
+            logdet -= 0.5 * math.log(vw)
             for a in range(n_rate):
                 if coef[a] != 0.0:
                     rows.append(iw)
                     cols.append(base + n_att + a)
-                    vals.append(WHEEL_STIFFNESS * coef[a] * sr / sw)
+                    vals.append(coef[a] * sr / sw / math.sqrt(vw))
         for i in range(n_att + n_rate + len(ws_rows), nd):  # lagged gyro states: like the rate
             vr = q * t / sr**2 + eps
             rows.append(base + i)
