@@ -16,11 +16,13 @@ squares in noise units) with the chi-square(1) threshold of p = 1e-3
 """
 
 import numpy as np
+import pandas as pd
 import pytest
 from scipy.stats import chi2
 
 import airbearing as ab
 from airbearing.analysis.discrepancy.replay import model_for, prepare, problem_for
+from airbearing.io.log import Log
 from airbearing.io.testbed import load_testbed
 
 SPEED_NOISE = 0.01  # rad/s, the built-in rw-yaw's wheels.speed_noise
@@ -86,3 +88,29 @@ def test_nothing_hidden_gives_no_wheel_effect_and_a_wheel_residual_at_the_noise(
     # the chi-square(1) law: passed with probability 1e-3 when nothing is hidden
     assert lr < THRESHOLD
     assert problem.noise_rms(fit.extra["r"])["ws"] == pytest.approx(SPEED_NOISE, rel=0.15)
+
+
+def test_the_wheel_speed_floor_is_the_sensor_not_the_commands_noise():
+    # open-loop commands drawn afresh every sample (+-0.5 mN m, white): the wheel's slope
+    # jumps by up to 0.5e-3 / 2.865e-5 = 17 rad/s^2 each sample, 0.9 rad/s per sample,
+    # 90 times the sensor's noise; the floor takes the commanded torque's integral out of
+    # the wheel's absolute speed and sees the sensor alone
+    tb = load_testbed("rw-yaw")
+    model = model_for(tb)
+    n, dt = 400, tb.sensors.dt
+    rng = np.random.default_rng(3)
+    U = np.zeros((model.nu, n))
+    U[model.index("wc1", "u")[0]] = rng.uniform(-5e-4, 5e-4, n)
+    x0 = model.x0(wheels=[200.0])
+    X = np.vstack([x0, np.asarray(model.rollout(n - 1, dt)(x0, U[:, :-1], model.p0)).T])
+    cols = {
+        "t": np.arange(n) * dt,
+        "yaw": X[:, 0] + tb.sensors.attitude_noise * rng.standard_normal(n),
+        "wz": X[:, 1] + tb.sensors.gyro_noise * rng.standard_normal(n),
+        "ws1": X[:, 2] + SPEED_NOISE * rng.standard_normal(n),
+        "wc1": U[model.index("wc1", "u")[0]],
+    }
+    log = Log(pd.DataFrame(cols), source="<white commands>", testbed=tb)
+    _, _, floor = prepare(tb, [log], window_s=WINDOW_S)
+    # about 400 fourth differences: the MAD's 7.5 % at one sigma, so 15 % is two
+    assert floor.wheel == pytest.approx(SPEED_NOISE, rel=0.15)

@@ -55,7 +55,8 @@ Noise floor (from the data alone, per segment, outlier rows left out)
     command's own sample-to-sample noise divided by the small ``Iw``, which the fourth
     difference would take for measurement noise. The differences are taken of the
     wheel's absolute speed less the commanded torque's integral,
-    ``A_k = W_k + a . w_k - sum_{j<k} dt_j clip(wc_j) / Iw``, whose motion is only what the
+    ``A_k = W_k + a . w_k - sum_{j<k} dt_j clip(wc_j) / Iw`` (with the testbed's known
+    ``wheel_torque_error`` and ``wheel_inertia_error``), whose motion is only what the
     nominal model misses (friction, a torque error: slow), then the gyro's part
     ``|a|^2 sigma_rate^2`` is taken out of its variance; a speed-commanded wheel (its
     driver's loop follows the noisy speed) takes the fourth differences of ``W`` itself.
@@ -747,7 +748,13 @@ def _absolute_wheel_speed(d: ReplayData, a_rate: np.ndarray) -> np.ndarray:
     segment's cumulative commanded speed change restarts at its first row."""
     wh = d.testbed.wheels
     wc = np.column_stack([d.input(f"wc{i}") for i in range(1, wh.n + 1)])
-    tau = np.clip(wc, -wh.max_torque, wh.max_torque) / wh.inertia_vec[None, :]
+    # the testbed's known torque-constant and inertia errors (FORMATS.md effects), if any
+    eff = d.testbed.effects
+    gain = 1.0 + np.broadcast_to(np.asarray(eff.get("wheel_torque_error", 0.0), float), wh.n)
+    inertia = wh.inertia_vec * (
+        1.0 + np.broadcast_to(np.asarray(eff.get("wheel_inertia_error", 0.0), float), wh.n)
+    )
+    tau = gain * np.clip(wc, -wh.max_torque, wh.max_torque) / inertia[None, :]
     A = d.ws.copy()
     if d.w is not None:
         A += d.w @ a_rate.T
