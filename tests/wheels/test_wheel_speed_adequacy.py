@@ -66,3 +66,6 @@ def test_a_speed_loop_wheel_friction_is_named_from_the_wheel_speed():
     std = float(np.ravel(found.effect_std["wheel_coulomb_friction"])[0])
     # the reaction-wheel issue's bounds: within 10 % and 3 std
     assert abs(value / friction - 1) < 0.10 and abs(value - friction) < 3 * std, str(found)
+    # the wheel speeds' own noise level, from the data: the simulated 0.01 rad/s within 15 %
+    # (a speed-commanded wheel: the fourth differences of its speed itself)
+    assert found.to_json()["wheel_speed_noise"] == pytest.approx(SPEED_NOISE, rel=0.15)
