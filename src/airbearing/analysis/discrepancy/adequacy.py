@@ -22,10 +22,16 @@ Every discrepancy fit is judged on its residual:
     ``(whiteness_p < WHITENESS_ALPHA and gap_over_noise > GAP_ABOVE)`` or the fit's
     process-noise intensity is significant (``fit.extra["process_noise"]["significant"]``,
     when the estimator provides it), or ``gap_over_floor > GAP_CLEAR`` (2: whatever the
-    whiteness test says, twice the floor is not the noise). Both conditions are needed
+    whiteness test says, twice the floor is not the noise), or, on a reaction-wheel log,
+    ``wheel_gap_over_floor > GAP_CLEAR``. Both conditions are needed
     for the first arm: a residual at the floor may be slightly correlated by the fit
     itself, and a residual just above a floor that the difference estimator
     underestimates may still be white.
+``wheel_gap_over_floor``
+    Reaction-wheel logs (output group ``ws``): the RMS wheel-speed residual over the wheel
+    speeds' own noise floor (:class:`~airbearing.analysis.shooting.logs.NoiseFloor`
+    ``wheel``): what acts on a wheel alone and the Model misses shows there, not in the
+    gap.
 ``correlation_time_s``
     Where the autocorrelation of the normalised residual (pooled over segments and axes,
     each segment weighted by its length) first falls below ``1/e``, linearly
@@ -307,6 +313,7 @@ class Adequacy:
     acf: np.ndarray = field(repr=False, default_factory=lambda: np.ones(1))
     dt: float = 0.0
     series: dict = field(repr=False, default_factory=dict)
+    wheel_gap_over_floor: float | None = None
 
     @property
     def noise_over_floor(self) -> float:
@@ -340,6 +347,9 @@ class Adequacy:
         if not self.structure_remains:
             return ""
         parts = []
+        w = self.wheel_gap_over_floor
+        if w is not None and w > GAP_CLEAR:
+            parts.append(f"the wheel speeds' residual is {w:.3g} x their noise floor")
         if named and self.explained_fraction is not None:
             parts.append(
                 f"the named effects explain {100 * self.explained_fraction:.0f} % of the gap's "
@@ -413,6 +423,8 @@ class Adequacy:
                 else {k: num(v) for k, v in self.measurement_noise.items()}
             ),
         }
+        if self.wheel_gap_over_floor is not None:
+            out["wheel_gap_over_floor"] = num(self.wheel_gap_over_floor)
         if self.process_noise is not None:
             out["process_noise"] = {
                 k: (num(v) if isinstance(v, float) else v)
@@ -560,6 +572,10 @@ def adequacy(problem, fit, floor, datas, *, gap_before: float | None = None) -> 
     mnoise = _measurement_noise(problem, fit, floor)
     level = mnoise["noise_over_floor"] if mnoise else 1.0
     remains = structure_rule(p, ratio, significant_noise, ratio / level)
+    wheel = None
+    if "ws" in problem.outputs:
+        wheel = problem.noise_rms(fit.extra["r"])["ws"] / max(floor.wheel_weight, 1e-300)
+        remains = remains or wheel > GAP_CLEAR
     explained = None
     if gap_before is not None:
         # both over whole segments when the estimator reached them (the search passes the
@@ -582,6 +598,7 @@ def adequacy(problem, fit, floor, datas, *, gap_before: float | None = None) -> 
         acf=acf,
         dt=dt,
         series={"residual": res, "yaw": yaw, "rate": rate, "t": t, "source": src},
+        wheel_gap_over_floor=wheel,
     )
     if remains:
         note = a.words(named=explained is not None)

@@ -34,7 +34,12 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.linalg import subspace_angles
 
-from airbearing.analysis.discrepancy.candidates import lsq, residual_torque, smoothed
+from airbearing.analysis.discrepancy.candidates import (
+    _acceleration_function,
+    lsq,
+    residual_torque,
+    smoothed,
+)
 
 __all__ = [
     "EXACT_SINE",
@@ -112,9 +117,45 @@ def _plain(v):
 
 
 def _columns(model, datas, p, S) -> np.ndarray:
-    """The torque regressor stacked over rows and axes, ``(M * n_axes, k)``, N m per unit."""
+    """The torque regressor stacked over rows and axes, ``(M * n_axes, k)``, N m per unit;
+    when the logs' wheel speeds are compared (output ``ws``), each wheel's own torque
+    regressor ``Iw_i d(dW_i/dt)/d theta`` follows (:func:`_wheel_columns`)."""
     _, phi = residual_torque(model, datas, p, S)
-    return phi.reshape(-1, phi.shape[2])
+    body = phi.reshape(-1, phi.shape[2])
+    wheels = _wheel_columns(model, datas, p, S)
+    return body if wheels is None else np.vstack([body, wheels])
+
+
+def _wheel_columns(model, datas, p, S) -> np.ndarray | None:
+    """``(M * n_wheels, k)``: the wheels' torque regressors, N m per unit, at the trusted rows
+    of every log (those of :func:`.candidates.smoothed`), or None when the wheel speeds are
+    not compared.
+
+    A fitted wheel speed shows what acts on the wheel itself: an effect that turns the
+    wheel and the table alike (a torque-constant error) is told from one that changes only
+    the wheel's own slope (its inertia) or only the table (the table's inertia).
+    """
+    if datas[0].ws is None:
+        return None
+    S = np.asarray(S, dtype=float)
+    names = tuple(f"W{i}" for i in range(1, datas[0].ws.shape[1] + 1))
+    fn, cols = _acceleration_function(model, names)
+    Iw = datas[0].testbed.wheels.inertia_vec
+    out = []
+    for d in datas:
+        w_s, _, ok = smoothed(d)
+        idx = np.flatnonzero(ok)
+        if not idx.size:
+            continue
+        x = np.hstack([d.att, w_s, d.extra_x])[idx]
+        if model.lag_index:
+            x = np.hstack([x, w_s[idx]])
+        n = idx.size
+        jac = np.asarray(fn.map(n)(x.T, d.u[idx].T, np.asarray(p, dtype=float))[1])
+        G = jac.reshape(len(names), n, cols.size).transpose(1, 0, 2) @ S[cols]  # (n, wheels, k)
+        out.append((Iw[None, :, None] * G).reshape(-1, S.shape[1]))
+    k = S.shape[1]
+    return np.concatenate(out) if out else np.zeros((0, k))
 
 
 def structural_confounding(model, datas, p, named, others, S_of, experiment_for) -> list:
@@ -299,6 +340,10 @@ def wheel_friction_constant_torque(model, datas, p, named, S_of, skip=()) -> lis
         One per (named wheel friction, axis) within :data:`STEADY_AXIS` of a constant.
     """
     out = []
+    if datas[0].ws is not None:
+        # the wheel speeds are fitted: a wheel's friction shows in its own slope, which a
+        # torque on the table leaves alone
+        return out
     wheel = [(a, k) for a, k in named if a.name in WHEEL_FRICTION]
     for a, i, sine in _near_constant(model, datas, p, wheel, S_of, lambda a: True):
         if i in skip:

@@ -170,14 +170,17 @@ def _judge(search, sel, named, logs, validate, window_s, jit, prog) -> tuple:
 def _wheel_inertia_unseen(search, sel, text: str) -> str:
     """What the verdict adds when wheel_inertia_error was searched, is not named and the
     verdict does not already say why (a pin at a bound): with torque-commanded wheels the
-    body outputs see a wheel's inertia only through ``J - Iw`` and the logged wheel speeds,
-    which would show it (the wheel's own acceleration), only start each window, so "no
-    missing effect" says nothing about it (a 10 % wheel inertia error on rw-yaw's 60 s
-    slew moved the likelihood ratio to 3.4, below the chi-square threshold 10.8). Nothing
-    when the verdict names the effect already (named, an alternative, confounded, pinned)."""
+    body outputs see a wheel's inertia only through ``J - Iw``; when the logged wheel speeds
+    only start each window (not compared), "no missing effect" says nothing about it (a
+    10 % wheel inertia error on rw-yaw's 60 s slew moved the likelihood ratio to 3.4, below
+    the chi-square threshold 10.8). Nothing when the wheel speeds are fitted (output
+    ``ws``: their slope is the wheel's own acceleration) or when the verdict names the
+    effect already (named, an alternative, confounded, pinned)."""
     wheels = search.testbed.wheels
     if wheels is None or wheels.command != "torque" or "wheel_inertia_error" in text:
         return ""  # (named, an alternative, confounded or pinned: the verdict says so)
+    if search.datas[0].ws is not None:
+        return ""  # the wheel speeds are fitted: their slope shows the wheel's inertia
     if "wheel_inertia_error" not in {r.name for rnd in sel.rounds for r in rnd}:
         return ""
     return (

@@ -132,6 +132,7 @@ def problem_for(
         substeps=substeps_for(model, windows, floor) if substeps is None else substeps,
         jit=jit,
         theta_slots=theta_slots,
+        sigma_ws=floor.wheel_weight,
     )
     if problem.n_att and not problem.attitude_measured:
         # a gyro log's start yaws are fitted (the logged yaw is the testbed's estimate); one
@@ -452,17 +453,23 @@ class Replay:
         dict
             ``testbed``, ``effects``, ``gap``, the noise floor's keys, ``ratio``,
             ``segments``, ``outlier_rows``, ``windows``, ``solver``, ``logs`` (gap,
-            segments, outliers per log) and ``process_noise``.
+            segments, outliers per log) and ``process_noise``; on a reaction-wheel log
+            also ``wheel_gap`` (the wheel speeds' RMS residual, rad/s) beside the floor's
+            ``wheel_speed_noise``.
         """
         per = []
         for d, g in zip(self.datas, self.log_gaps(), strict=True):
             per.append({"log": d.log.source, "gap": g, **d.segment_json()})
+        wheels = {}
+        if "ws" in self.problem.outputs:  # the wheel speeds' own RMS residual, rad/s
+            wheels["wheel_gap"] = self.problem.noise_rms(self.fit.extra["r"])["ws"]
         return {
             "testbed": self.data.testbed.name,
             "effects": {k: v for k, v in self.data.testbed.effects.items()},
             "gap": self.gap,
             **self.floor.to_json(),
             "ratio": self.gap / max(self.floor.value, 1e-300),
+            **wheels,
             "segments": sum(len(d.segments) for d in self.datas),
             "outlier_rows": sum(len(d.outlier_rows) for d in self.datas),
             "windows": {"count": self.windows.n, "length_s": self.windows.length * self.data.dt},

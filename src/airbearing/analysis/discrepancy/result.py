@@ -364,6 +364,8 @@ class Discrepancy:
             "attitude_noise": self.floor.attitude,
             "rate_noise": self.floor.rate,
             "testbed_attitude_noise": fl["testbed_attitude_noise"],
+            # reaction-wheel logs only: the fitted wheel speeds' noise (rad/s)
+            **({"wheel_speed_noise": fl["wheel_speed_noise"]} if "wheel_speed_noise" in fl else {}),
             "logs": logs,
             "validation": [v.to_json() for v in self.validation],
             "localisation": list(self.localisation.words),

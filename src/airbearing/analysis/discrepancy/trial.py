@@ -227,8 +227,9 @@ class HeldOut:
     Attributes
     ----------
     rss, ss, cnt : ndarray (n_folds,)
-        Held-out weighted RSS, sum of squares of the primary output's usable residuals and
-        their count, per fold.
+        Held-out weighted RSS, sum of squares of the primary output's usable residuals (and
+        of the wheel speeds' when they are compared, in noise units) and their count, per
+        fold.
     info_train, info_test : ndarray (n_folds, k, k)
         Fisher information of the parameters (initial states eliminated) in the training and
         in the held-out windows of each fold.
@@ -295,6 +296,10 @@ def cross_validate(
     J = (fit_jacobian(fit) if J is None else J).tocsc()
     nd, nw, n = problem.n_delta, problem.windows.n, problem.n_win_res
     sel0 = problem.primary & problem.usable
+    if "ws" in problem.outputs:
+        # the fitted wheel speeds are where a wheel's own effects show (in noise units, the
+        # gap then stands for the rate-and-wheel residual at the primary output's level)
+        sel0 = sel0 | ((problem.group == problem.outputs.index("ws")) & problem.usable)
     sel = np.zeros(r.size, dtype=bool)
     sel[: sel0.size] = sel0
     Jt_all = J[:, :k].toarray() if k else np.zeros((J.shape[0], 0))

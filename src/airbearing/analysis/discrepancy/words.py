@@ -307,15 +307,19 @@ def why(problem: ShootingProblem, res: CandidateResult) -> CandidateResult:
         and "yaw" not in problem.outputs
     ):
         return replace(res, reason=GYRO_BIAS_DOF1)
-    if res.name == "wheel_inertia_error" and res.status == "at its physical bound":
+    if (
+        res.name == "wheel_inertia_error"
+        and res.status == "at its physical bound"
+        and "ws" not in problem.outputs
+    ):
         head, colon, rest = (res.reason or "").partition(":")
         return replace(res, reason=f"{head} ({WHEEL_INERTIA_UNSEEN})" + colon + rest)
     return res
 
 
-#: Why a wheel's inertia error sits at a bound rather than at its value: the discrepancy
-#: search compares the body's outputs, and the body sees the wheel's inertia only through
-#: ``J - Iw`` (the wheel's own acceleration is in the wheel speeds, which start each window).
+#: Why a wheel's inertia error sits at a bound rather than at its value when the wheel
+#: speeds are not compared: the body sees the wheel's inertia only through ``J - Iw`` (the
+#: wheel's own acceleration is in the wheel speeds, which then only start each window).
 WHEEL_INERTIA_UNSEEN = (
     "the body sees a wheel's inertia only through J - Iw, and the wheel speeds are not fitted"
 )

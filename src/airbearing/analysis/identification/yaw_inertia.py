@@ -397,7 +397,10 @@ def _output_error(testbed: Testbed, logs, J_start: float) -> dict:
     sens = testbed.sensors
     sig_rate = sens.gyro_noise if sens.gyro_noise > 0 else 1e-4
     sig_att = sens.attitude_noise if sens.attitude_noise > 0 else 1e-3
-    prob = ShootingProblem(model, windows, datas[0].outputs, sig_rate, sig_att)
+    # the body's outputs only: J_z is what they see (the wheel speeds, when logged, start
+    # each window as measured)
+    outputs = tuple(o for o in datas[0].outputs if o != "ws")
+    prob = ShootingProblem(model, windows, outputs, sig_rate, sig_att)
     S = np.zeros((model.n_p, 1))
     S[model.index("J_zz", "p")[0], 0] = 1.0
     fit = prob.fit(model.p0, S, np.zeros(1), lower=np.array([-0.9 * J_start]),

@@ -9,15 +9,20 @@ A log is cut into windows of ``L`` rows that never span a gap. Window ``j``
 restarts from an estimate of the state at its first row, ``x_meas_j``,
 corrected by a small perturbation ``delta_j`` (a rotation vector on the
 attitude for dof 3, an offset on the yaw when the yaw is fitted, an offset on
-each rate, and on each lagged rate of a ``sensor_lag``). The Model is rolled
-over the window sample to sample with the LOGGED intervals (``dt`` is an input
-of every step, so jittered times are integrated as logged) and its measurement
-is compared with the logged one:
+each rate, on each compared wheel speed, and on each lagged rate of a
+``sensor_lag``). The Model is rolled over the window sample to sample with the
+LOGGED intervals (``dt`` is an input of every step, so jittered times are
+integrated as logged) and its measurement is compared with the logged one:
 
 - ``rate``: the measured angular rate (a gyro), residual ``(w_meas - w_model) / sigma_rate``;
 - ``quat``: the attitude quaternion, residual ``2 vec(conj(q_model) (x) q_meas) / sigma_att``
   (the small rotation, rad, that takes the model attitude to the measured one);
-- ``yaw``: the yaw of a dof-1 platform, residual ``(yaw_meas - yaw_model) / sigma_att``.
+- ``yaw``: the yaw of a dof-1 platform, residual ``(yaw_meas - yaw_model) / sigma_att``;
+- ``ws``: the wheel speeds of a reaction-wheel testbed (FORMATS.md ``ws_i``: ``W_i``
+  relative to the body), residual ``(ws_meas - W_model) / sigma_ws`` with their own noise
+  level; each window also fits its start wheel speeds (``delta``), and the defects of
+  linked windows are those of each wheel's absolute speed ``W_i + a_i . w``
+  (:mod:`.penalty`).
 
 Each residual is multiplied by the row's weight ``m`` (0 for an outlier row and
 for the padding of a short window at the end of a segment, else 1), so a row

@@ -141,9 +141,9 @@ def substeps_for(
         return n
     # the motion the logs record sets the error; the candidate effects (small torques) do
     # not: one check per windows, whichever Model asks first
-    key = (model.nx, model.nu, floor.rate, floor.attitude is None)
+    key = (model.nx, model.nu, floor.rate, floor.attitude is None, floor.wheel)
     cache = _ACCURATE.setdefault(windows, {})
-    tol_key = ("tolerance", floor.rate, floor.attitude is None)  # the logs', once
+    tol_key = ("tolerance", floor.rate, floor.attitude is None, floor.wheel)  # the logs', once
     if tol_key not in cache:
         cache[tol_key] = _integration_tolerance(windows, floor)
     tol = cache[tol_key]
@@ -184,13 +184,14 @@ ATTITUDE_NOISE_ORDERS = (4, 6, 8)
 
 
 def _integration_tolerance(windows: WindowSet, floor: NoiseFloor):
-    """``(rad, rad/s)``: the largest integration error over a segment of the attitude and
-    of the rates: the noise each is weighted at, never below the resolution, over the
-    square root of the longest segment's usable samples (inf for a quantity the log does
-    not measure). The rates' noise is the floor's; the attitude's is
-    :func:`attitude_noise` (the floor of an attitude beside a gyro comes from the gyro's
-    integral: 3.3e-5 rad on seed 004's noise-free attitude under AR(1) gyro noise, whose
-    8th differences show 8e-10)."""
+    """``(rad, rad/s, rad/s)``: the largest integration error over a segment of the attitude,
+    of the rates and of the wheel speeds: the noise each is weighted at, never below the
+    resolution, over the square root of the longest segment's usable samples (inf for a
+    quantity the log does not measure or compare). A wheel speed of hundreds of rad/s
+    read to 0.01 rad/s asks for a relative accuracy the rates do not. The rates' noise is
+    the floor's; the attitude's is :func:`attitude_noise` (the floor of an attitude beside
+    a gyro comes from the gyro's integral: 3.3e-5 rad on seed 004's noise-free attitude
+    under AR(1) gyro noise, whose 8th differences show 8e-10)."""
     seg = windows.segments()
     usable = (windows.weight > 0).sum(axis=1)
     n = max(int(usable[seg == s].sum()) for s in np.unique(seg))
@@ -199,7 +200,8 @@ def _integration_tolerance(windows: WindowSet, floor: NoiseFloor):
     if floor.attitude is not None:
         att = max(attitude_noise(windows) or 0.0, ATTITUDE_SIGMA_MIN) / root
     rate = max(floor.rate, RATE_SIGMA_MIN) / root if floor.rate is not None else math.inf
-    return att, rate
+    wheel = floor.wheel_weight / root if windows.ws is not None else math.inf
+    return att, rate, wheel
 
 
 def attitude_noise(windows: WindowSet) -> float | None:
@@ -250,8 +252,8 @@ def _accurate_substeps(model: Model, windows: WindowSet, n: int, tol, p=None) ->
     start, fine = n, None
     while n < MAX_SUBSTEPS:
         # the finer rollout of one check is the coarser of the next (integrated once)
-        att, rate, fine = _integration_error(model, windows, n, p, fine)
-        if att <= tol[0] and rate <= tol[1]:
+        att, rate, wheel, fine = _integration_error(model, windows, n, p, fine)
+        if att <= tol[0] and rate <= tol[1] and wheel <= tol[2]:
             break
         n *= 2
     return min(n, max(MAX_SUBSTEPS, start))
@@ -288,8 +290,9 @@ def integration_error(model: Model, windows: WindowSet, substeps: int, p: np.nda
 
 
 def _integration_error(model, windows, substeps, p=None, coarse=None):
-    """:func:`integration_error` and the states at ``2 substeps`` (windows, samples,
-    states); ``coarse``: the states at ``substeps`` when already integrated."""
+    """:func:`integration_error`, the wheel speeds' error (rad/s, 0 without wheel speeds in
+    the windows) and the states at ``2 substeps`` (windows, samples, states); ``coarse``:
+    the states at ``substeps`` when already integrated."""
     L, n = windows.length, windows.n
     # every window in one call of each rollout (map: the windows side by side)
     args = (
@@ -312,6 +315,13 @@ def _integration_error(model, windows, substeps, p=None, coarse=None):
     gain = 2 ** replay_order(model) / (2 ** replay_order(model) - 1)
     att = gain * np.max(np.where(keep, np.linalg.norm(2 * e[..., 1:], axis=-1), 0.0), axis=1)
     rate = gain * np.max(np.where(keep, np.max(np.abs(a[..., 4:7] - b[..., 4:7]), -1), 0.0), 1)
+    wheel = np.zeros(n)
+    if windows.ws is not None:
+        iw = model.index([f"W{i}" for i in range(1, windows.ws.shape[2] + 1)])
+        err = np.max(np.abs(a[..., iw] - b[..., iw]), -1)
+        wheel = gain * np.max(np.where(keep, err, 0.0), 1)
     seg = windows.segments()
-    per_seg = [(att[seg == s].sum(), rate[seg == s].sum()) for s in np.unique(seg)]
-    return max(p[0] for p in per_seg), max(p[1] for p in per_seg), b
+    per_seg = [
+        (att[seg == s].sum(), rate[seg == s].sum(), wheel[seg == s].sum()) for s in np.unique(seg)
+    ]
+    return (*(max(q[i] for q in per_seg) for i in range(3)), b)

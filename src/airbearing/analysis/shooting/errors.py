@@ -88,7 +88,7 @@ MAX_RHO = 0.97
 #: rad/s, rad: the replay's resolution per output group, the smallest noise level a bound
 #: is computed at (a noise-free log's residual is the integration's own error; the
 #: discrepancy's weights never go below it either).
-RESOLUTION = {"rate": 1e-7, "quat": 1e-6, "yaw": 1e-6}
+RESOLUTION = {"rate": 1e-7, "quat": 1e-6, "yaw": 1e-6, "ws": 1e-6}
 
 
 @dataclass(frozen=True)
@@ -157,7 +157,7 @@ def _series(problem):
         return cached
     w = problem.windows
     L = w.length
-    sizes = {"rate": problem.n_rate, "quat": 3, "yaw": 1}
+    sizes = problem.group_sizes
     offsets, off = [], 0
     for o in problem.outputs:
         offsets.append(off)
@@ -327,7 +327,8 @@ def _free_shares(problem, r: np.ndarray, n_free: int):
 def _resolution(problem) -> np.ndarray:
     """:data:`RESOLUTION` of each output group as a variance in the problem's noise units
     (at most 1: a weight at the resolution is a noise-free output)."""
-    sigma = {"rate": problem.sigma_rate, "quat": problem.sigma_att, "yaw": problem.sigma_att}
+    sigma = {"rate": problem.sigma_rate, "quat": problem.sigma_att, "yaw": problem.sigma_att,
+             "ws": getattr(problem, "sigma_ws", None)}  # fmt: skip
     res = np.array([(RESOLUTION[o] / max(sigma[o], 1e-300)) ** 2 for o in problem.outputs])
     return np.minimum(res, 1.0)
 
@@ -644,7 +645,7 @@ def _made_here(problem, fit, k: int) -> bool:
         serial == problem._serial
         and same
         and P is problem.meas_whitening
-        and np.array_equal(sigma, problem._data[-2:])
+        and np.array_equal(sigma, problem._data[-len(problem._sigmas()) :])
         and C.shape[1] == J.shape[1]
     )
 

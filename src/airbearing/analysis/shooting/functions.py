@@ -94,4 +94,4 @@ FISHER_RCOND = 1e-10
 
 
 #: Output groups a window can compare.
-OUTPUTS = ("rate", "quat", "yaw")
+OUTPUTS = ("rate", "quat", "yaw", "ws")

@@ -17,7 +17,12 @@ Measurements (the output groups of :mod:`airbearing.analysis.shooting`)
     with a gyro (``sensors.gyro = true``): the rates (and, for dof 3, the attitude
     quaternion); attitude only (``sensors.gyro = false``): the quaternion (dof 3)
     or the yaw (dof 1). The gap is the RMS residual of the first group: rad/s with
-    a gyro, rad without (``gap_unit``).
+    a gyro, rad without (``gap_unit``). A reaction-wheel testbed's logged wheel speeds
+    ``ws1..wsn`` (FORMATS.md: ``W_i`` relative to the body, rad/s) are one more group,
+    ``ws``, last, with its own noise level: they start every window (fitted like the
+    rate) and are compared at every sample, so an effect that shows mainly in the wheels'
+    own motion (their inertia, their motor's torque constant, their bearing friction) is
+    seen where it shows.
 
 Segments and outliers
     From the log's quality (:func:`airbearing.io.quality.assess`): segments are
@@ -40,11 +45,21 @@ Noise floor (from the data alone, per segment, outlier rows left out)
     motion to ``O(h^4)`` even on a jittered grid and passes white noise of standard
     deviation ``sigma`` unchanged; a median absolute deviation (times 1.4826) makes
     it robust. On a uniform grid it is the fourth difference divided by ``sqrt(70)``.
-    Applied to the rates, to the yaw, or (dof 3 without a gyro) to the rotation
+    Applied to the rates, to the yaw, to the wheel speeds, or (dof 3 without a gyro) to the rotation
     vectors of each 5-sample stencil from its first sample. A dof-3 attitude with a
     gyro: the body-frame increments ``2 vec(conj(q_k) (x) q_{k+1})`` minus the
     trapezoidal integral of the logged rate (var ``2 sa^2 + dt^2 sw^2 / 2``).
     The testbed's ``sensors.attitude_noise`` is reported beside it, not used.
+    Wheel speeds (output ``ws``): a torque-commanded wheel's speed jumps in slope at every
+    sample (``dW/dt = tau_m / Iw - a . dw/dt`` with the command held, FORMATS.md), by the
+    command's own sample-to-sample noise divided by the small ``Iw``, which the fourth
+    difference would take for measurement noise. The differences are taken of the
+    wheel's absolute speed less the commanded torque's integral,
+    ``A_k = W_k + a . w_k - sum_{j<k} dt_j clip(wc_j) / Iw`` (with the testbed's known
+    ``wheel_torque_error`` and ``wheel_inertia_error``), whose motion is only what the
+    nominal model misses (friction, a torque error: slow), then the gyro's part
+    ``|a|^2 sigma_rate^2`` is taken out of its variance; a speed-commanded wheel (its
+    driver's loop follows the noisy speed) takes the fourth differences of ``W`` itself.
 """
 
 from __future__ import annotations
@@ -97,6 +112,9 @@ MAD_TO_SIGMA = 1.482602218505602
 #: rad/s and rad: smallest noise level used as a weight (a noise-free log stays well scaled).
 RATE_SIGMA_MIN = 1e-7
 ATTITUDE_SIGMA_MIN = 1e-6
+#: rad/s: smallest wheel-speed noise level used as a weight (a part in 1e9 of a wheel's
+#: hundreds of rad/s: the digits a log keeps).
+WS_SIGMA_MIN = 1e-6
 #: Usable rows of the local quadratic fit that starts a window's rate from the attitude.
 RATE_FIT_ROWS = 7
 #: Interval of a padding row (times the nominal period): tiny, finite, weight zero.
@@ -129,7 +147,8 @@ class ReplayData:
     gyro : bool
         The testbed has a rate sensor.
     outputs : tuple of str
-        Output groups compared (``rate``, ``quat``, ``yaw``); the first one is the gap's.
+        Output groups compared (``rate``, ``quat``, ``yaw``, then ``ws`` with ``[wheels]``);
+        the first one is the gap's.
     segments : tuple of (int, int)
         Row ranges between gaps (stop exclusive).
     outlier_rows : tuple of int
@@ -174,6 +193,11 @@ class ReplayData:
     def gap_unit(self) -> str:
         """Unit of the gap and of the noise floor: ``rad/s`` (gyro) or ``rad``."""
         return "rad/s" if self.outputs[0] == "rate" else "rad"
+
+    @property
+    def ws(self) -> np.ndarray | None:
+        """Measured wheel speeds relative to the body (N, n_wheels), rad/s, when compared."""
+        return self.extra_x if "ws" in self.outputs else None
 
     @property
     def yaw(self) -> np.ndarray | None:
@@ -340,6 +364,7 @@ def replay_data(testbed: Testbed, log: Log) -> ReplayData:
         _platform_inputs(testbed, log, q_att, u, ui, notes)
         if testbed.wheels is not None:
             extra = _wheel_inputs(testbed, log, u, ui, notes)
+            outputs = (*outputs, "ws")
     else:
         extra = _cmg_inputs(log, u, ui, notes)
     segments, outliers, qjson = _quality(log)
@@ -488,6 +513,7 @@ def _window_set(datas, cuts, linked: bool = False) -> WindowSet:
     rate = np.zeros((nw, L, d0.n_axes)) if "rate" in d0.outputs else None
     qq = np.zeros((nw, L, 4)) if "quat" in d0.outputs else None
     yw = np.zeros((nw, L)) if "yaw" in d0.outputs else None
+    ws = np.zeros((nw, L, d0.extra_x.shape[1])) if "ws" in d0.outputs else None
     for j, (i, s, e, _) in enumerate(cuts):
         d = datas[i]
         m = hand[j][0]
@@ -503,6 +529,8 @@ def _window_set(datas, cuts, linked: bool = False) -> WindowSet:
             qq[j] = d.q[r]
         if yw is not None:
             yw[j] = d.att[r, 0]
+        if ws is not None:
+            ws[j] = d.ws[r]
     return WindowSet(
         x0=np.array(x0),
         u=U,
@@ -511,6 +539,7 @@ def _window_set(datas, cuts, linked: bool = False) -> WindowSet:
         rate=rate,
         quat=qq,
         yaw=yw,
+        ws=ws,
         rows=rows,
         source=np.array([c[0] for c in cuts], dtype=int),
         link=np.array([h for _, h in hand[:-1]], dtype=bool) if linked else None,
@@ -539,6 +568,10 @@ class NoiseFloor:
         ``rad/s`` or ``rad``: the unit of :attr:`value`.
     testbed_attitude : float
         rad, the testbed's ``sensors.attitude_noise`` (0 when not given), for comparison.
+    wheel_axes : ndarray or None
+        rad/s, 1-sigma noise of each logged wheel speed (None without ``ws``).
+    wheel : float or None
+        rad/s, RMS over the wheels (None without ``ws``).
     """
 
     rate_axes: np.ndarray | None
@@ -546,6 +579,14 @@ class NoiseFloor:
     attitude: float | None
     gap_unit: str = "rad/s"
     testbed_attitude: float = 0.0
+    wheel_axes: np.ndarray | None = None
+    wheel: float | None = None
+
+    @property
+    def wheel_weight(self) -> float | None:
+        """rad/s, the wheel speeds' weight: :attr:`wheel`, never below
+        :data:`WS_SIGMA_MIN` (None without ``ws``)."""
+        return None if self.wheel is None else max(self.wheel, WS_SIGMA_MIN)
 
     @property
     def measured(self) -> float:
@@ -583,7 +624,7 @@ class NoiseFloor:
         )
 
     def to_json(self) -> dict:
-        return {
+        out = {
             "noise_floor": self.value,
             "gap_unit": self.gap_unit,
             "noise_floor_source": self.source,
@@ -591,6 +632,9 @@ class NoiseFloor:
             "attitude_noise": self.attitude,
             "testbed_attitude_noise": self.testbed_attitude or None,
         }
+        if self.wheel is not None:
+            out["wheel_speed_noise"] = self.wheel
+        return out
 
 
 def _pieces(d: ReplayData, k: int):
@@ -684,10 +728,58 @@ def noise_floor(datas) -> NoiseFloor:
     elif not d0.gyro:
         parts = [_diff_at(d.att[:, 0], d.t, _pieces(d, k), k) for d in datas]
         att = float(_mad(np.concatenate(parts))[0])
+    wheel_axes = wheel = None
+    if d0.ws is not None:
+        wheel_axes = _wheel_noise(datas, k, rate_axes)
+        wheel = float(np.sqrt(np.mean(wheel_axes**2)))
     return NoiseFloor(
         rate_axes=rate_axes,
         rate=rate,
         attitude=att,
         gap_unit=d0.gap_unit,
         testbed_attitude=float(getattr(d0.testbed.sensors, "attitude_noise", 0.0) or 0.0),
+        wheel_axes=wheel_axes,
+        wheel=wheel,
     )
+
+
+def _absolute_wheel_speed(d: ReplayData, a_rate: np.ndarray) -> np.ndarray:
+    """``A_k`` of the module doc (N, n_wheels), rad/s, for a torque-commanded wheel: each
+    segment's cumulative commanded speed change restarts at its first row."""
+    wh = d.testbed.wheels
+    wc = np.column_stack([d.input(f"wc{i}") for i in range(1, wh.n + 1)])
+    # the testbed's known torque-constant and inertia errors (FORMATS.md effects), if any
+    eff = d.testbed.effects
+    gain = 1.0 + np.broadcast_to(np.asarray(eff.get("wheel_torque_error", 0.0), float), wh.n)
+    inertia = wh.inertia_vec * (
+        1.0 + np.broadcast_to(np.asarray(eff.get("wheel_inertia_error", 0.0), float), wh.n)
+    )
+    tau = gain * np.clip(wc, -wh.max_torque, wh.max_torque) / inertia[None, :]
+    A = d.ws.copy()
+    if d.w is not None:
+        A += d.w @ a_rate.T
+    step = np.r_[np.diff(d.t), 0.0][:, None] * tau
+    for a, b in d.segments:
+        A[a:b] -= np.r_[np.zeros((1, wh.n)), np.cumsum(step[a : b - 1], axis=0)]
+    return A
+
+
+def _wheel_noise(datas, k: int, rate_axes) -> np.ndarray:
+    """rad/s, the noise of each logged wheel speed (module doc)."""
+    d0 = datas[0]
+    wh = d0.testbed.wheels
+    axes = wh.axes_matrix
+    a_rate = axes if d0.n_axes == 3 else axes[:, 2:3]
+    torque = wh.command == "torque"
+    parts = []
+    for d in datas:
+        x = _absolute_wheel_speed(d, a_rate) if torque else d.ws
+        parts.append(_diff_at(x, d.t, _pieces(d, k), k))
+    D = np.concatenate(parts) if parts else np.zeros((0, wh.n))
+    if len(D) < 2:
+        raise InputError(f"{d0.log.source}: too few consecutive usable rows for a noise floor")
+    var = _mad(D) ** 2
+    if torque and rate_axes is not None:
+        # the gyro's noise in a . w (independent axes)
+        var = var - (a_rate**2) @ (np.asarray(rate_axes) ** 2)
+    return np.sqrt(np.maximum(var, 0.0))

@@ -65,6 +65,15 @@ def _sigma_of_kappa(problem, kappa: float) -> float:
     return math.sqrt(kappa * problem.sigma_rate**2 / T)
 
 
+def wheel_axes_on_rate(problem) -> np.ndarray:
+    """``(n_ws, n_rate)``: each compared wheel's spin axis on the fitted rate axes (body
+    axes; dof 1: ``+-1`` on ``wz``); no rows when the wheel speeds are not compared."""
+    if not problem.n_ws:
+        return np.zeros((0, problem.n_rate))
+    axes = np.asarray(problem.model.testbed.wheels.axes, dtype=float)
+    return axes if problem.n_rate == 3 else axes[:, 2:3]
+
+
 def defect_whitening(problem, sigma_w: float):
     """``(W, logdet_W)``: the whitening of every consecutive pair's defects (:mod:`.process_noise`).
 
@@ -88,6 +97,8 @@ def defect_whitening(problem, sigma_w: float):
     T = piece_durations(problem)
     link = np.asarray(w.link, dtype=bool)
     sa, sr = problem.sigma_att, problem.sigma_rate
+    ws_rows = wheel_axes_on_rate(problem)
+    sw = problem.sigma_ws if len(ws_rows) else 1.0
     rows, cols, vals = [], [], []
     logdet = 0.0
     eps = 1e-12  # keeps a block positive definite at any intensity
@@ -124,7 +135,25 @@ def defect_whitening(problem, sigma_w: float):
                 cols.append(ir)
                 vals.append(1.0 / math.sqrt(vr))
                 logdet -= 0.5 * math.log(vr)
-        for i in range(n_att + n_rate, nd):  # lagged gyro states: like the rate
+        for i, coef in enumerate(ws_rows):
+            # a wheel's ABSOLUTE speed W_i + a_i . w: a torque on the body turns body and
+            # wheel together and leaves it alone (FORMATS.md: only the wheel's own torques
+            # change it), so its defect is the wheel's own unexplained torque, a random walk
+            # of the same dimensionless intensity as the rate's (defect variance over the
+            # wheel speeds' noise variance): nearly free pieces at the top of the grid, one
+            # absolute wheel-speed trajectory per segment at its bottom
+            iw = base + n_att + n_rate + i
+            vw = q * t / sr**2 + eps
+            rows.append(iw)
+            cols.append(iw)
+            vals.append(1.0 / math.sqrt(vw))
+            logdet -= 0.5 * math.log(vw)
+            for a in range(n_rate):
+                if coef[a] != 0.0:
+                    rows.append(iw)
+                    cols.append(base + n_att + a)
+                    vals.append(coef[a] * sr / sw / math.sqrt(vw))
+        for i in range(n_att + n_rate + len(ws_rows), nd):  # lagged gyro states: like the rate
             vr = q * t / sr**2 + eps
             rows.append(base + i)
             cols.append(base + i)

@@ -87,10 +87,13 @@ class ShootingProblem:
     model : Model
     windows : WindowSet
     outputs : tuple of str
-        Output groups compared (``rate``, ``quat``, ``yaw``; module doc); the first is
-        the primary one, whose RMS residual is the gap.
+        Output groups compared (``rate``, ``quat``, ``yaw``, ``ws``; module doc); the
+        first is the primary one, whose RMS residual is the gap.
     sigma_rate, sigma_att : float
         Noise levels (rad/s, rad) that weight the residuals.
+    sigma_ws : float, optional
+        Noise level of the logged wheel speeds (rad/s), weighting the ``ws`` group;
+        needed when ``ws`` is compared.
     substeps : int
         RK4 sub-steps per sample.
     jit : bool, optional
@@ -121,20 +124,24 @@ class ShootingProblem:
         substeps: int = DEFAULT_SUBSTEPS,
         jit: bool | None = None,
         theta_slots: int = THETA_SLOTS,
+        sigma_ws: float | None = None,
     ) -> None:
         for o in outputs:
             if o not in OUTPUTS:  # pragma: no cover - programming error
                 raise ValueError(f"unknown output group {o!r}")
+        if "ws" in outputs and sigma_ws is None:  # pragma: no cover - programming error
+            raise ValueError("the wheel speeds are compared: give their noise level sigma_ws")
         self.model, self.windows, self.outputs = model, windows, tuple(outputs)
         self.substeps, self.jit, self.theta_slots = int(substeps), jit, int(theta_slots)
         self.sigma_rate, self.sigma_att = float(sigma_rate), float(sigma_att)
-        self.n_att, self.n_rate, self.n_lag = delta_layout(model, self.outputs)
+        self.sigma_ws = None if sigma_ws is None else float(sigma_ws)
+        self.n_att, self.n_rate, self.n_ws, self.n_lag = delta_layout(model, self.outputs)
         #: the attitude is compared (not only fitted at the window starts: a dof-1 gyro
         #: log's yaw, :func:`.delta_layout`); the process noise is scaled by it then
         self.attitude_measured = "quat" in self.outputs or "yaw" in self.outputs
-        self.n_delta = self.n_att + self.n_rate + self.n_lag
+        self.n_delta = self.n_att + self.n_rate + self.n_ws + self.n_lag
         nw, L = windows.n, windows.length
-        sizes = {"rate": self.n_rate, "quat": 3, "yaw": 1}
+        sizes = self.group_sizes
         group = np.concatenate([np.full(sizes[o] * L, i) for i, o in enumerate(self.outputs)])
         wrow = np.concatenate([np.repeat(np.arange(L), sizes[o]) for o in self.outputs])
         self.n_win_res = group.size
@@ -175,6 +182,23 @@ class ShootingProblem:
         self.pinned = np.zeros(0, dtype=int)
         self.pin_rule = None
         self._serial = next(_SERIALS)  # names this problem in its fits (Fit.extra)
+
+    @property
+    def group_sizes(self) -> dict:
+        """Residual rows per sample of each output group."""
+        return {"rate": self.n_rate, "quat": 3, "yaw": 1, "ws": self.n_ws}
+
+    def sigma_of(self, group: str) -> float:
+        """The noise level weighting output group ``group`` (rad/s or rad)."""
+        if group == "rate":
+            return self.sigma_rate
+        return self.sigma_ws if group == "ws" else self.sigma_att
+
+    def _sigmas(self) -> list:
+        out = [self.sigma_rate, self.sigma_att]
+        if "ws" in self.outputs:
+            out.append(self.sigma_ws)
+        return [max(s, 1e-300) for s in out]
 
     def __getstate__(self) -> dict:  # a fit in progress is not part of a copy
         return {k: v for k, v in self.__dict__.items() if k != "_fitting"}
@@ -223,7 +247,9 @@ class ShootingProblem:
             w.u.reshape(nw * L, -1).T,
             w.dt.reshape(1, -1),
             w.weight.reshape(1, -1),
-            cols(w.rate, na),
+            cols(w.rate, na)
+            if not self.n_ws
+            else np.vstack([cols(w.rate, na), cols(w.ws, self.n_ws)]),
             cols(w.quat, 4),
             np.zeros((1, L * nw)) if w.yaw is None else w.yaw.reshape(1, -1),
         )
@@ -231,13 +257,17 @@ class ShootingProblem:
             E = np.zeros((nw, L))
             E[np.arange(nw), np.asarray(w.end, dtype=int)] = 1.0
             parts = (*parts, E.reshape(1, -1))
-        parts = (*parts, np.array([[max(self.sigma_rate, 1e-300)], [max(self.sigma_att, 1e-300)]]))
+        parts = (*parts, np.array(self._sigmas())[:, None])
         return np.concatenate([np.asarray(a, dtype=float).reshape(-1, order="F") for a in parts])
 
-    def set_noise(self, sigma_rate: float, sigma_att: float) -> None:
-        """New noise levels (rad/s, rad) weighting the residuals (a re-weighted fit)."""
+    def set_noise(self, sigma_rate: float, sigma_att: float, sigma_ws: float | None = None) -> None:
+        """New noise levels (rad/s, rad; the wheel speeds', rad/s, when given) weighting the
+        residuals (a re-weighted fit)."""
         self.sigma_rate, self.sigma_att = float(sigma_rate), float(sigma_att)
-        self._data[-2:] = [max(self.sigma_rate, 1e-300), max(self.sigma_att, 1e-300)]
+        if sigma_ws is not None:
+            self.sigma_ws = float(sigma_ws)
+        sig = self._sigmas()
+        self._data[-len(sig) :] = sig
 
     def _key(self, K: int) -> tuple:
         return (
@@ -577,7 +607,8 @@ class ShootingProblem:
             # what it was evaluated at and on (the point, the problem, its whitening and
             # noise levels)
             C = sp.csc_matrix(Jc)[:, keep]
-            at = (theta.copy(), delta.copy(), p.copy(), self.meas_whitening, self._data[-2:].copy())
+            at = (theta.copy(), delta.copy(), p.copy(), self.meas_whitening,
+                  self._data[-len(self._sigmas()) :].copy())  # fmt: skip
             extra["linearised"] = (self._serial, at, C)
         n_obs = self.n_res + (self.penalty.getnnz(axis=1) > 0).sum() if penalised else self.n_res
         std, cov, reasons = theta_errors(Jr, k, rss / max(n_obs - n_free, 1))
@@ -618,7 +649,8 @@ class ShootingProblem:
                    s2: float = 1.0):  # fmt: skip
         """Errors of ``fit``'s first ``k`` parameters with each output group's information
         scaled: ``rate`` for the rate residuals, ``att`` for the attitude (or yaw) ones
-        (e.g. ``(sigma_used / sigma_other)^2`` for another noise level), times ``s2``.
+        (e.g. ``(sigma_used / sigma_other)^2`` for another noise level), times ``s2``; the
+        wheel speeds' keep theirs.
 
         Returns ``(std, cov, reasons)`` as :func:`theta_errors`.
         """
@@ -627,7 +659,8 @@ class ShootingProblem:
     def _weighted_jacobian(self, fit: Fit, rate: float, att: float):
         """The fit's Jacobian with each group's rows scaled by sqrt(weight), restricted to
         the continuity's null space when windows are linked."""
-        w = np.array([rate if o == "rate" else att for o in self.outputs])[self.group]
+        scale = {"rate": rate, "quat": att, "yaw": att, "ws": 1.0}
+        w = np.array([scale[o] for o in self.outputs])[self.group]
         J = fit.extra["J"]
         w = np.r_[w, np.ones(J.shape[0] - w.size)]  # process-noise rows keep their weight
         J = sp.diags(np.sqrt(w)) @ J
@@ -652,7 +685,7 @@ class ShootingProblem:
         r = self.raw_measurement(r)
         for i, o in enumerate(self.outputs):
             sel = (self.group == i) & self.usable
-            sigma = self.sigma_rate if o == "rate" else self.sigma_att
+            sigma = self.sigma_of(o)
             out[o] = float(sigma * np.sqrt(np.mean(r[sel] ** 2))) if sel.any() else float("nan")
         return out
 

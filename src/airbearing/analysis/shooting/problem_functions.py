@@ -20,6 +20,7 @@ from airbearing.analysis.shooting.window_functions import (
     _window_functions,
     delta_layout,
     layout_key,
+    sigma_size,
     start_function,
 )
 from airbearing.models.model import Model
@@ -32,16 +33,17 @@ def _link_function(model: Model, K: int, outputs: tuple) -> ca.Function:
     with ``dx_end`` the end state's Jacobian in ``[theta; delta]`` of its own window. One
     entry per entry of ``delta`` (the states a window's ``delta`` sets): the small rotation
     ``2 vec(conj(q_end) (x) q_next)`` (dof 3) or the yaw difference, over ``sigma_att``; the
-    rate and lagged-rate differences over ``sigma_rate`` (defects in noise units).
+    rate and lagged-rate differences over ``sigma_rate``, the wheel speeds' over their own
+    ``sigma`` (defects in noise units).
     """
-    n_att, n_rate, n_lag = delta_layout(model, outputs)
-    nd = n_att + n_rate + n_lag
+    n_att, n_rate, n_ws, n_lag = delta_layout(model, outputs)
+    nd = n_att + n_rate + n_ws + n_lag
     nx = model.nx
     xe = ca.SX.sym("x_end", nx)
     dxe = ca.SX.sym("dx_end", nx, K + nd)
     dn = ca.SX.sym("delta_next", nd)
     xm = ca.SX.sym("x_meas_next", nx - n_lag)
-    sig = ca.SX.sym("sigma", 2)
+    sig = ca.SX.sym("sigma", sigma_size(outputs))
     xn = start_function(model, outputs)(dn, xm)
     rate = list(range(4, 7)) if model.dof == 3 else [1]
     parts = []
@@ -51,6 +53,9 @@ def _link_function(model: Model, K: int, outputs: tuple) -> ca.Function:
     elif n_att:
         parts.append((xn[0] - xe[0]) / sig[1])
     parts.append((xn[rate] - xe[rate]) / sig[0])
+    if n_ws:  # the wheel speeds over their own noise level
+        ws = list(range(nx - n_lag - n_ws, nx - n_lag))
+        parts.append((xn[ws] - xe[ws]) / sig[2])
     if n_lag:
         lag = list(model.lag_index)
         parts.append((xn[lag] - xe[lag]) / sig[0])
@@ -62,8 +67,12 @@ def _link_function(model: Model, K: int, outputs: tuple) -> ca.Function:
     )
 
 
-def _data_shapes(model: Model, L: int, nw: int, na: int, link: bool = False) -> list:
-    """Pieces of the data vector; ``sigma`` (2) is always the last one."""
+def _data_shapes(
+    model: Model, L: int, nw: int, na: int, link: bool = False, n_sigma: int = 2
+) -> list:
+    """Pieces of the data vector; ``sigma`` (``n_sigma``: 2, or 3 with the wheel speeds
+    compared) is always the last one. ``na``: the rows of the measured rates, then the
+    measured wheel speeds when they are compared."""
     nx_plant = model.nx - len(model.lag_index)
     return [
         (nx_plant, nw),
@@ -74,7 +83,7 @@ def _data_shapes(model: Model, L: int, nw: int, na: int, link: bool = False) -> 
         (4, L * nw),
         (1, L * nw),
         *([(1, L * nw)] if link else []),  # end-row selector of each window
-        (2, 1),
+        (n_sigma, 1),
     ]
 
 
@@ -252,12 +261,12 @@ def _build_problem(model, L, nw, K, outputs, substeps, jit, link=False):
     pair of windows), the outputs; ``fj`` the :class:`WindowJacobian` (the same and their
     Jacobians in ``v = [theta; vec(delta)]``, NumPy and scipy CSC)."""
     win_r, win_rj, win_y = _window_functions(model, L, K, outputs, substeps, jit, link)
-    n_att, n_rate, n_lag = delta_layout(model, outputs)
-    nd = n_att + n_rate + n_lag
+    n_att, n_rate, n_ws, n_lag = delta_layout(model, outputs)
+    nd = n_att + n_rate + n_ws + n_lag
     v = ca.MX.sym("v", K + nd * nw)
     pb = ca.MX.sym("p_base", model.n_p)
     S = ca.MX.sym("S", model.n_p, K)
-    shapes = _data_shapes(model, L, nw, n_rate, link)
+    shapes = _data_shapes(model, L, nw, n_rate + n_ws, link, sigma_size(outputs))
     data = ca.MX.sym("data", sum(a * b for a, b in shapes))
     pieces, i = [], 0
     for a, b in shapes:

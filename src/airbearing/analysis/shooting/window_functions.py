@@ -59,8 +59,12 @@ def step_function(model: Model, substeps: int = DEFAULT_SUBSTEPS) -> ca.Function
     return model.step_dt(substeps, order=replay_order(model))
 
 
-def delta_layout(model: Model, outputs: tuple) -> tuple[int, int, int]:
-    """Entries of ``delta``: (attitude, rate, lag).
+def delta_layout(model: Model, outputs: tuple) -> tuple[int, int, int, int]:
+    """Entries of ``delta``, in this order: (attitude, rate, wheel speeds, lag).
+
+    The wheel speeds' start is fitted when they are compared (output group ``ws``): a
+    logged wheel speed is noisy like a logged rate, and a window started exactly at it
+    would carry that sample's noise as an offset through the whole window.
 
     A dof-1 window fits its start yaw when the yaw is compared (attitude-only logs) or when
     a torque of the Model depends on it (:func:`yaw_acts`): a gyro log's ``yaw`` is the
@@ -73,7 +77,20 @@ def delta_layout(model: Model, outputs: tuple) -> tuple[int, int, int]:
     else:
         n_att = 1 if "yaw" in outputs or yaw_acts(model) or model in _START_YAW else 0
     n_rate = 3 if model.dof == 3 else 1
-    return n_att, n_rate, len(model.lag_index)
+    return n_att, n_rate, n_wheel_speeds(model, outputs), len(model.lag_index)
+
+
+def n_wheel_speeds(model: Model, outputs: tuple) -> int:
+    """Wheel speeds compared (output group ``ws``): every wheel of ``[wheels]``, else 0."""
+    if "ws" not in outputs:
+        return 0
+    return sum(1 for name in model.y_names if name.startswith("ws"))
+
+
+def sigma_size(outputs: tuple) -> int:
+    """Entries of a window's ``sigma`` input: ``(rate, attitude)``, then the wheel speeds'
+    when they are compared."""
+    return 3 if "ws" in outputs else 2
 
 
 def layout_key(model: Model, outputs: tuple) -> tuple:
@@ -160,8 +177,8 @@ def start_function(model: Model, outputs: tuple) -> ca.Function:
 
 
 def _build_start(model: Model, outputs: tuple) -> ca.Function:
-    n_att, n_rate, n_lag = delta_layout(model, outputs)
-    nd = n_att + n_rate + n_lag
+    n_att, n_rate, n_ws, n_lag = delta_layout(model, outputs)
+    nd = n_att + n_rate + n_ws + n_lag
     d = ca.SX.sym("delta", nd)
     xm = ca.SX.sym("x_meas", model.nx - n_lag)
     if model.dof == 3:
@@ -171,10 +188,20 @@ def _build_start(model: Model, outputs: tuple) -> ca.Function:
         yaw0 = xm[0] + d[0] if n_att else xm[0]
         rate0 = xm[1] + d[n_att]
         parts = [yaw0, rate0, xm[2:]]
+    if n_ws:
+        # the wheel speeds (the last plant states, FORMATS.md) start near their logged ones
+        nxp, i0 = model.nx - n_lag, n_att + n_rate
+        other = xm[n_att_states(model) + n_rate : nxp - n_ws]
+        parts[-1] = ca.vertcat(other, xm[nxp - n_ws :] + d[i0 : i0 + n_ws])
     if n_lag:
         # the lagged gyro starts near the start rate, free per window
-        parts.append(rate0 + d[n_att + n_rate :])
+        parts.append(rate0 + d[n_att + n_rate + n_ws :])
     return ca.Function("x0", [d, xm], [ca.vertcat(*parts)])
+
+
+def n_att_states(model: Model) -> int:
+    """Attitude entries of the state: the quaternion (dof 3) or the yaw (dof 1)."""
+    return 4 if model.dof == 3 else 1
 
 
 def _step_functions(model: Model, substeps: int, jit) -> tuple:
@@ -200,24 +227,30 @@ def _step_functions(model: Model, substeps: int, jit) -> tuple:
 def _sample_functions(model: Model, outputs: tuple, jit) -> tuple:
     """``(res, res_jac)`` of one sample, compiled once per structure and output groups:
     ``(x, u, p, weight, w, q, yaw, sigma) -> r_g`` per group ``g`` of ``outputs`` (the
-    window's residual, module doc), and the same followed by each ``d r_g / d[x; p]``."""
+    window's residual, module doc), and the same followed by each ``d r_g / d[x; p]``.
+    ``w`` holds the measured rates, then the measured wheel speeds when ``ws`` is
+    compared (``sigma`` then has their level third)."""
     key = ("sample", structure_key(model), outputs, jit)
 
     def build():
         dof, na = model.dof, delta_layout(model, outputs)[1]
+        n_ws = n_wheel_speeds(model, outputs)
         x, u, p = ca.SX.sym("x", model.nx), ca.SX.sym("u", model.nu), ca.SX.sym("p", model.n_p)
-        m, w, q = ca.SX.sym("weight"), ca.SX.sym("w", na), ca.SX.sym("q", 4)
-        yw, sig = ca.SX.sym("yaw"), ca.SX.sym("sigma", 2)
+        m, w, q = ca.SX.sym("weight"), ca.SX.sym("w", na + n_ws), ca.SX.sym("q", 4)
+        yw, sig = ca.SX.sym("yaw"), ca.SX.sym("sigma", sigma_size(outputs))
         y = model.h(x, u, p)
         res = []
         if "rate" in outputs:
             rows = model.index(["wx", "wy", "wz"] if dof == 3 else ["wz"], "y")
-            res.append(m * (w - y[rows]) / sig[0])
+            res.append(m * (w[:na] - y[rows]) / sig[0])
         if "quat" in outputs:
             e = quat.qmul(quat.qconj(y[model.index(["qw", "qx", "qy", "qz"], "y")]), q)
             res.append(m * 2 * ca.sign(e[0] + 1e-300) * e[1:4] / sig[1])
         if "yaw" in outputs:
             res.append(m * (yw - y[model.index(["yaw"], "y")[0]]) / sig[1])
+        if n_ws:
+            rows = model.index([f"ws{i}" for i in range(1, n_ws + 1)], "y")
+            res.append(m * (w[na:] - y[rows]) / sig[2])
         ins = [x, u, p, m, w, q, yw, sig]
         xp = ca.vertcat(x, p)
         fr = ca.Function("sample_r", ins, res)
@@ -244,8 +277,8 @@ def _build_whole_window(
     """The window functions compiled to C as whole windows (the derivatives inside), for a
     small step (:data:`CHAIN_MIN_INSTRUCTIONS`)."""
     dof = model.dof
-    n_att, n_rate, n_lag = delta_layout(model, outputs)
-    nd = n_att + n_rate + n_lag
+    n_att, n_rate, n_ws, n_lag = delta_layout(model, outputs)
+    nd = n_att + n_rate + n_ws + n_lag
     nx_plant = model.nx - n_lag
     na = n_rate
     x0_fn = start_function(model, outputs)
@@ -258,13 +291,13 @@ def _build_whole_window(
     U = ca.MX.sym("U", model.nu, L)
     DT = ca.MX.sym("dt", 1, L - 1)
     M = ca.MX.sym("weight", 1, L)
-    W = ca.MX.sym("W_meas", na, L)
+    W = ca.MX.sym("W_meas", na + n_ws, L)
     Q = ca.MX.sym("Q_meas", 4, L)
     YW = ca.MX.sym("yaw_meas", 1, L)
     PB = ca.MX.sym("p_base", model.n_p)
     S = ca.MX.sym("S", model.n_p, K)
     TH = ca.MX.sym("theta", K)
-    SIG = ca.MX.sym("sigma", 2)
+    SIG = ca.MX.sym("sigma", sigma_size(outputs))
     P = PB + ca.mtimes(S, TH) if K else PB
     X0 = x0_fn(D, XM)
     step = step_function(model, substeps)
@@ -274,13 +307,16 @@ def _build_whole_window(
     res = []
     if "rate" in outputs:
         rows = model.index(["wx", "wy", "wz"] if dof == 3 else ["wz"], "y")
-        res.append(ca.vec(ca.repmat(M, na, 1) * (W - Y[rows, :]) / SIG[0]))
+        res.append(ca.vec(ca.repmat(M, na, 1) * (W[:na, :] - Y[rows, :]) / SIG[0]))
     if "quat" in outputs:
         rows = model.index(["qw", "qx", "qy", "qz"], "y")
         res.append(ca.vec(ca.repmat(M, 3, 1) * att_fn.map(L)(Y[rows, :], Q) / SIG[1]))
     if "yaw" in outputs:
         row = model.index(["yaw"], "y")[0]
         res.append(ca.vec(M * (YW - Y[row, :]) / SIG[1]))
+    if n_ws:
+        rows = model.index([f"ws{i}" for i in range(1, n_ws + 1)], "y")
+        res.append(ca.vec(ca.repmat(M, n_ws, 1) * (W[na:, :] - Y[rows, :]) / SIG[2]))
     r = ca.vertcat(*res)
     ins = [D, XM, U, DT, M, W, Q, YW, PB, S, TH, SIG]
     names = [
@@ -340,9 +376,9 @@ def _build_chained_window(
     forward derivative in 12 directions: 117,000 lines of C for dof 3) took minutes for
     every new window length.
     """
-    n_att, n_rate, n_lag = delta_layout(model, outputs)
-    nd = n_att + n_rate + n_lag
-    nx, n_p, na = model.nx, model.n_p, n_rate
+    n_att, n_rate, n_ws, n_lag = delta_layout(model, outputs)
+    nd = n_att + n_rate + n_ws + n_lag
+    nx, n_p, na = model.nx, model.n_p, n_rate + n_ws
     nv = K + nd
     step, step_jac = _step_functions(model, substeps, jit)
     sample_r, sample_rj = _sample_functions(model, outputs, jit)
@@ -355,7 +391,7 @@ def _build_chained_window(
     xn, A = step_jac(x, u, p, dt)
     sens = ca.Function("step_sens", [x, Sx, u, p, Sp, dt], [xn, ca.mtimes(A, ca.vertcat(Sx, Sp))])
     sm, sw, sq = ca.MX.sym("weight"), ca.MX.sym("w", na), ca.MX.sym("q", 4)
-    syw, ssig = ca.MX.sym("yaw"), ca.MX.sym("sigma", 2)
+    syw, ssig = ca.MX.sym("yaw"), ca.MX.sym("sigma", sigma_size(outputs))
     sins = [x, u, p, sm, sw, sq, syw, ssig]
     out = sample_rj(*sins)
     # each group's rows transposed: a map puts the samples side by side
@@ -374,7 +410,7 @@ def _build_chained_window(
     PB = ca.MX.sym("p_base", n_p)
     S = ca.MX.sym("S", n_p, K)
     TH = ca.MX.sym("theta", K)
-    SIG = ca.MX.sym("sigma", 2)
+    SIG = ca.MX.sym("sigma", sigma_size(outputs))
     P = PB + ca.mtimes(S, TH) if K else PB
     X0 = x0_fn(D, XM)
     data = [M, W, Q, YW, SIG]

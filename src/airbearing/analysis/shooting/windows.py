@@ -27,6 +27,8 @@ class WindowSet:
         Measured attitude quaternion (output ``quat``).
     yaw : ndarray (n, L) or None
         Measured yaw (output ``yaw``), rad.
+    ws : ndarray (n, L, n_wheels) or None
+        Measured wheel speeds relative to the body (output ``ws``), rad/s.
     rows : ndarray (n, L) of int
         The log row of each window sample (padding repeats the last row).
     source : ndarray (n,) of int
@@ -54,6 +56,7 @@ class WindowSet:
     link: np.ndarray | None = None
     end: np.ndarray | None = None
     segment: np.ndarray | None = None
+    ws: np.ndarray | None = None
 
     def segments(self) -> np.ndarray:
         """Segment number of each window (``segment`` when given, else a new number at every
@@ -93,6 +96,7 @@ class WindowSet:
             rate=pick(self.rate),
             quat=pick(self.quat),
             yaw=pick(self.yaw),
+            ws=pick(self.ws),
             rows=self.rows[which],
             source=self.source[which],
             segment=self.segments()[which],
