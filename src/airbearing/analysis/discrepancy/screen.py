@@ -89,11 +89,18 @@ class Step:
     rss_model: float  # predicted weighted RSS
     rss: float  # weighted RSS of the residual evaluated at the step
     r: np.ndarray
-    # the Jacobian at the current fit in [theta; vec(delta)] is [At, Jd]: the step's
-    # parameter columns (dense) and the window states' columns, shared by the round
-    At: np.ndarray
+    # the Jacobian at the current fit in [theta; vec(delta)] is [A E, Jd]: the round's
+    # parameter columns A (dense) and the window states' columns Jd, both shared by every
+    # candidate of the round, and this step's map E of its parameters to A's columns
+    A: np.ndarray
+    E: np.ndarray
     Jd: sp.csc_matrix
     feasible: bool  # the chosen parameters stay inside their bounds
+
+    @property
+    def At(self) -> np.ndarray:
+        """The step's parameter columns ``A E`` (made on each call, not kept)."""
+        return self.A @ self.E
 
     @property
     def J(self) -> sp.csc_matrix:
@@ -206,7 +213,7 @@ class Linearisation:
             p_base = p_base - S_sel_c[:, k_sel:] @ self.cand0
         p = p_base + S_sel_c @ theta
         r = pb.residual(delta.reshape(nd, nw), p)
-        return Step(theta, delta, p, self.rss0 + q, float(r @ r), r, self.A @ E, self.Jd, feasible)
+        return Step(theta, delta, p, self.rss0 + q, float(r @ r), r, self.A, E, self.Jd, feasible)
 
     def lr_at(self, E: np.ndarray, th_c: np.ndarray) -> float:
         """Likelihood ratio with the candidate at ``th_c``, the chosen effects held and every
@@ -251,8 +258,9 @@ class Linearisation:
             level="screened",
             not_identifiable=reasons,
             cov=cov,
-            # the window states' columns shared with the round (:func:`.fit_jacobian`)
-            extra={"r": st.r, "J_blocks": (st.At, st.Jd)},
+            # the parameter and window states' columns shared with the round, the step's
+            # columns made when asked (:func:`.fit_jacobian`)
+            extra={"r": st.r, "J_blocks": (st.A, st.E, st.Jd)},
         )
 
 

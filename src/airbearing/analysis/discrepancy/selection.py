@@ -98,6 +98,7 @@ def _select(search, nominal, max_effects, screen, workers, prog) -> _Selection:
         if not _add_best(sel, results, prog):
             break
         _follow_layout(search, sel)
+        del results  # (the round's fits are let go before the next round: _let_go)
     else:
         sel.stop_reason = (
             sel.stop_reason
@@ -288,6 +289,7 @@ def _add_best(sel: _Selection, results, prog) -> bool:
         sel.stop_reason = (
             "no further candidate may be named" if sel.chosen else "no candidate may be named"
         )
+        _let_go(sel)
         return False
     best_bic = min(c.delta_bic for c in good)
     group = [c for c in good if c.delta_bic - best_bic < CONFOUND_BIC]
@@ -308,4 +310,32 @@ def _add_best(sel: _Selection, results, prog) -> bool:
     sel.current = pick.fit
     sel.lag = sel.lag or pick.candidate.lag
     prog(f"added {pick.candidate.label} = {format_value(pick.value)}")
+    _let_go(sel)
     return True
+
+
+#: ``Fit.extra`` entries of a candidate's fit that hold a value per residual row: its
+#: residual and Jacobian (or the blocks it is made from), the continuity's null space and
+#: the linearised defects. Only the round itself and the honest errors of the first round's
+#: candidates (:func:`.horizon._with_honest`) use them.
+ROW_ARRAYS = ("r", "J", "J_blocks", "N", "linearised")
+
+
+def _let_go(sel: _Selection) -> None:
+    """The last round's fits without their :data:`ROW_ARRAYS`, once it is decided, except
+    the fit the search goes on from (``sel.current``); the first round's are kept (their
+    honest errors are taken at the end). Scores, values and errors stay: the report and the
+    JSON are the same. On an hour of 50 Hz three-axis samples a later round kept some
+    300 MB this way: each step-judged candidate's residual and parameter columns, and with
+    them the round's shared window-state columns."""
+    if len(sel.rounds) < 2:
+        return
+    sel.rounds[-1] = tuple(
+        r
+        if r.fit is None or r.fit is sel.current
+        else replace(
+            r,
+            fit=replace(r.fit, extra={k: v for k, v in r.fit.extra.items() if k not in ROW_ARRAYS}),
+        )
+        for r in sel.rounds[-1]
+    )

@@ -80,11 +80,13 @@ class Fit:
 def fit_jacobian(fit: Fit):
     """The Jacobian of ``fit``'s weighted residual in ``[theta; vec(delta)]`` (scipy sparse).
 
-    ``fit.extra["J"]`` as it is, or, for a fit that keeps ``extra["J_blocks"] = (At, Jd)`` (the
-    discrepancy search's Gauss-Newton steps, :mod:`airbearing.analysis.discrepancy.screen`:
-    every candidate of a round shares the window states' columns ``Jd``), the matrix
-    ``[At, Jd]`` made now: the same numbers, without a copy of ``Jd`` per candidate (on an
-    hour of 50 Hz three-axis samples some 45 MB each).
+    ``fit.extra["J"]`` as it is, or, for a fit that keeps ``extra["J_blocks"] = (A, E, Jd)``
+    (the discrepancy search's Gauss-Newton steps, :mod:`airbearing.analysis.discrepancy.screen`:
+    every candidate of a round shares the round's parameter columns ``A`` and the window
+    states' columns ``Jd``; ``E`` maps the fit's parameters to ``A``'s columns), the matrix
+    ``[A E, Jd]`` made now: the same numbers, without a copy of ``Jd`` and of the parameter
+    columns per candidate (on an hour of 50 Hz three-axis samples some 45 MB and 9 MB per
+    parameter each). A 2-tuple ``(At, Jd)`` is taken as ``[At, Jd]``.
 
     Parameters
     ----------
@@ -96,7 +98,8 @@ def fit_jacobian(fit: Fit):
     """
     if "J" in fit.extra:
         return fit.extra["J"]
-    At, Jd = fit.extra["J_blocks"]
+    *At, Jd = fit.extra["J_blocks"]
+    At = At[0] @ At[1] if len(At) == 2 else At[0]
     return sp.hstack([sp.csc_matrix(At), Jd]).tocsc()
 
 
