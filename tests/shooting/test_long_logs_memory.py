@@ -56,3 +56,17 @@ def test_theta_errors_are_those_of_the_whole_product():
     F = D.T @ D
     Fr = F[:k, :k] - F[:k, k:] @ np.linalg.solve(F[k:, k:], F[k:, :k])
     np.testing.assert_allclose(std, np.sqrt(np.diag(np.linalg.inv(Fr))), rtol=1e-8)
+
+
+def test_a_small_block_stacked_below_keeps_32_bit_indices():
+    from airbearing.analysis.shooting.sparse import vstack_csc
+
+    J = _window_jacobian(nw=5, n=30, seed=7)
+    B = sp.random(4, J.shape[1], density=0.3, random_state=2, format="csc")
+    got = vstack_csc(J, B)
+    ref = sp.vstack([J, B]).tocsc()
+    ref.sort_indices()
+    assert got.indices.dtype == np.int32 and got.indptr.dtype == np.int32
+    np.testing.assert_array_equal(got.indptr, ref.indptr)
+    np.testing.assert_array_equal(got.indices, ref.indices)
+    np.testing.assert_array_equal(got.data, ref.data)

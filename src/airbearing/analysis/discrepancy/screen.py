@@ -157,6 +157,7 @@ class Linearisation:
                 r, Jd = r_i, J[:, k_sel + len(chunk) :].tocsc()
                 A_sel = J[:, :k_sel].toarray()
             cols.append(J[:, k_sel : k_sel + len(chunk)].toarray())
+            del J  # (the whole matrix let go before the next chunk's and the blocks below)
         self.r = r
         self.A = np.hstack([A_sel, *cols])  # (n_res_all, k_sel + len(raw))
         self.Jd = Jd

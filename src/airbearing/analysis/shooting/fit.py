@@ -130,7 +130,7 @@ def solve_gram(G, B: np.ndarray) -> np.ndarray:
 
 
 #: Column blocks in which :func:`gram` forms a sparse Gram matrix.
-GRAM_BLOCKS = 8
+GRAM_BLOCKS = 4
 
 
 def gram(Js):
