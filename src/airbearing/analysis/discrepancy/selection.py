@@ -54,9 +54,14 @@ def _nominal_replay(search: _Search, prog: _Progress) -> tuple[ShootingProblem, 
 
 
 def _select(search, nominal, max_effects, screen, workers, prog) -> _Selection:
-    """Stage 3: forward selection, one round per effect added, up to ``max_effects``."""
+    """Stage 3: forward selection, one round per effect added, up to ``max_effects``.
+
+    ``nominal``: the nominal replay's fit, or a list holding it (handed over: the caller
+    keeps no reference, so :func:`_let_go` can let go of its Jacobian)."""
     unit = search.datas[0].gap_unit
+    nominal = nominal.pop() if isinstance(nominal, list) else nominal
     sel = _Selection(nominal=nominal, current=nominal, ln_n=math.log(nominal.n_res))
+    del nominal
     sel.max_effects = max_effects
     sel.stop_reason = "max_effects = 0" if max_effects == 0 else ""
     # a noise-free log: below the smallest noise level the replay weighs with, what is left is
@@ -324,18 +329,23 @@ ROW_ARRAYS = ("r", "J", "J_blocks", "N", "linearised")
 def _let_go(sel: _Selection) -> None:
     """The last round's fits without their :data:`ROW_ARRAYS`, once it is decided, except
     the fit the search goes on from (``sel.current``); the first round's are kept (their
-    honest errors are taken at the end). Scores, values and errors stay: the report and the
+    honest errors are taken at the end). The nominal fit lets go of its Jacobian once the
+    search goes on from another fit. Scores, values and errors stay: the report and the
     JSON are the same. On an hour of 50 Hz three-axis samples a later round kept some
     300 MB this way: each step-judged candidate's residual and parameter columns, and with
     them the round's shared window-state columns."""
+    if sel.current is not sel.nominal and "J" in sel.nominal.extra:
+        # the nominal fit's residual stays (the logs' gaps before); its Jacobian served
+        # the first round (the lag's score test)
+        sel.nominal = _without(sel.nominal, tuple(k for k in ROW_ARRAYS if k != "r"))
     if len(sel.rounds) < 2:
         return
     sel.rounds[-1] = tuple(
-        r
-        if r.fit is None or r.fit is sel.current
-        else replace(
-            r,
-            fit=replace(r.fit, extra={k: v for k, v in r.fit.extra.items() if k not in ROW_ARRAYS}),
-        )
+        r if r.fit is None or r.fit is sel.current else replace(r, fit=_without(r.fit, ROW_ARRAYS))
         for r in sel.rounds[-1]
     )
+
+
+def _without(fit: Fit, keys: tuple) -> Fit:
+    """``fit`` without the ``keys`` of its ``extra``."""
+    return replace(fit, extra={k: v for k, v in fit.extra.items() if k not in keys})
