@@ -312,10 +312,10 @@ def screened(lin, cand, k_sel, lower, upper, current, ln_n, before, folds, th_re
         if not far:
             return None
     k = k_sel + cand.k
-    J = st.J  # made once for the errors and the held-out check, then let go
-    fit = lin.fit_of(st, k, J)
-    heldout = cross_validate(lin.problem, fit, k, folds, J=J)
-    del J
+    # the whole Jacobian made for the errors and let go; the held-out check reads the
+    # step's blocks (:func:`.trial.cross_validate`)
+    fit = lin.fit_of(st, k)
+    heldout = cross_validate(lin.problem, fit, k, folds)
     note = (
         f"one Gauss-Newton step from {lin.where}: likelihood ratio "
         f"{lr_step:.4g} (predicted {lr_model:.4g}); IPOPT not run: "
