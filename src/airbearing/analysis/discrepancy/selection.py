@@ -338,12 +338,38 @@ def _let_go(sel: _Selection) -> None:
         # the nominal fit's residual stays (the logs' gaps before); its Jacobian served
         # the first round (the lag's score test)
         sel.nominal = _without(sel.nominal, tuple(k for k in ROW_ARRAYS if k != "r"))
+    if len(sel.rounds) == 1:
+        sel.rounds[0] = _own_columns(sel.rounds[0])
     if len(sel.rounds) < 2:
         return
     sel.rounds[-1] = tuple(
         r if r.fit is None or r.fit is sel.current else replace(r, fit=_without(r.fit, ROW_ARRAYS))
         for r in sel.rounds[-1]
     )
+
+
+def _own_columns(results: tuple) -> tuple:
+    """The first round's step-judged fits with their own parameter columns ``A E`` where
+    these are fewer than the columns of the linearisation they share (``A``: every
+    candidate parameter of the round, some 30 on a three-axis platform): kept until the
+    honest errors at the end, ``A`` would outweigh them. The same numbers either way
+    (:func:`~airbearing.analysis.shooting.fit_jacobian`)."""
+    shared: dict = {}
+    for r in results:
+        blocks = r.fit.extra.get("J_blocks") if r.fit is not None else None
+        if blocks is not None and len(blocks) == 3:
+            A, E, _ = blocks
+            shared.setdefault(id(A), [A.shape[1], 0])[1] += E.shape[1]
+    out = []
+    for r in results:
+        blocks = r.fit.extra.get("J_blocks") if r.fit is not None else None
+        if blocks is not None and len(blocks) == 3:
+            A, E, Jd = blocks
+            width, used = shared[id(A)]
+            if used < width:
+                r = replace(r, fit=replace(r.fit, extra={**r.fit.extra, "J_blocks": (A @ E, Jd)}))
+        out.append(r)
+    return tuple(out)
 
 
 def _without(fit: Fit, keys: tuple) -> Fit:

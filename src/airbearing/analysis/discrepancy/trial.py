@@ -297,11 +297,11 @@ def cross_validate(
     sel = np.zeros(r.size, dtype=bool)
     sel[: sel0.size] = sel0
     blocks = fit.extra.get("J_blocks") if J is None and "J" not in fit.extra else None
-    if blocks is not None and len(blocks) == 3:
+    if blocks is not None:
         # a step-judged fit: its parameter columns and the round's window-state columns
         # as they are (the whole matrix, its CSR copy: two Jacobians on long logs)
-        A, E, Jds = blocks
-        Jt_all = A @ E
+        *At, Jds = blocks
+        Jt_all = At[0] @ At[1] if len(At) == 2 else np.array(At[0], dtype=float)
         Jt_all[Jt_all == 0] = 0.0  # (+0, as the dense copy of a sparse matrix gives it)
         Jds = sp.csc_matrix(Jds)
 
