@@ -145,7 +145,8 @@ class Linearisation:
         # built once per problem): THETA_SLOTS at a time evaluated the same window states'
         # columns once per chunk (3 evaluations on seed 004's platform)
         room = max(THETA_SLOTS - k_sel, len(self.raw), 1)
-        r, A_sel, Jd, cols = None, None, None, []
+        r, A, Jd = None, None, None
+        sizes = [len(self.raw[i : i + room]) for i in range(0, len(self.raw), room)]
         for i in range(0, len(self.raw), room):
             chunk = self.raw[i : i + room]
             S_raw = np.zeros((n_p, len(chunk)))
@@ -153,13 +154,19 @@ class Linearisation:
             S = np.hstack([self.S_sel, S_raw])
             at = replace(current, theta=np.r_[current.theta, np.zeros(len(chunk))])
             r_i, J = problem.jacobian(at, S)
+            J = sp.csc_matrix(J)
             if r is None:
                 r, Jd = r_i, J[:, k_sel + len(chunk) :].tocsc()
-                A_sel = J[:, :k_sel].toarray()
-            cols.append(J[:, k_sel : k_sel + len(chunk)].toarray())
+                # (n_res_all, k_sel + len(raw)): the chosen and every candidate parameter's
+                # columns written straight in (no dense copy of each chunk, then stacked)
+                A = np.zeros(
+                    (J.shape[0], k_sel + len(self.raw)), order=_stacked_order(k_sel, sizes)
+                )
+                _dense_columns(J, 0, k_sel, A, 0)
+            _dense_columns(J, k_sel, k_sel + len(chunk), A, k_sel + i)
             del J  # (the whole matrix let go before the next chunk's and the blocks below)
         self.r = r
-        self.A = np.hstack([A_sel, *cols])  # (n_res_all, k_sel + len(raw))
+        self.A = A
         self.Jd = Jd
         nd, nw, n = problem.n_delta, problem.windows.n, problem.n_win_res
         m = self.A.shape[1]
@@ -568,6 +575,22 @@ def one_value_linearisation(problem, current, one, cand, S_sel) -> Linearisation
         problem, base, S_sel, list(dict.fromkeys(idx)), cand0=th_c0, null=current,
         where="the one-value form's IPOPT fit (its axes tied)",
     )  # fmt: skip
+
+
+def _stacked_order(k_sel: int, sizes: list) -> str:
+    """The memory order NumPy gives ``np.hstack`` of the dense copies of a CSC matrix's
+    ``k_sel`` columns and chunks of ``sizes`` columns (as the screen stacked them before it
+    wrote them in place): BLAS's products round alike only on the same layout."""
+    probe = np.hstack([sp.csc_matrix((2, c)).toarray() for c in (k_sel, *sizes)])
+    return "C" if probe.flags.c_contiguous else "F"
+
+
+def _dense_columns(J: sp.csc_matrix, c0: int, c1: int, out: np.ndarray, o0: int) -> None:
+    """Columns ``c0:c1`` of ``J`` added into the zeros of ``out[:, o0:]``: the numbers of
+    ``J[:, c0:c1].toarray()`` (which adds each entry to a zero), without that copy."""
+    for c in range(c0, c1):
+        a, b = J.indptr[c], J.indptr[c + 1]
+        out[J.indices[a:b], o0 + c - c0] += J.data[a:b]
 
 
 def _box_min(G: np.ndarray, g: np.ndarray, lo: np.ndarray, hi: np.ndarray):
