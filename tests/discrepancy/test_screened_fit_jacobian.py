@@ -36,7 +36,8 @@ def test_a_screened_fit_shares_the_window_state_columns():
         st = lin.step(E, [], [], c.lower, c.upper)
         fit = lin.fit_of(st, c.k)
         assert "J" not in fit.extra, c.label
-        assert fit.extra["J_blocks"][1] is lin.Jd, c.label  # shared, not copied
+        assert fit.extra["J_blocks"][-1] is lin.Jd, c.label  # shared, not copied
+        assert fit.extra["J_blocks"][0] is lin.A, c.label
         J = fit_jacobian(fit)
         _, J_ref = pb.jacobian(replace(nominal, theta=np.zeros(c.k)), search.S(False, [c]))
         assert J.shape == J_ref.shape, c.label

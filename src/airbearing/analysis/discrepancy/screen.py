@@ -89,11 +89,18 @@ class Step:
     rss_model: float  # predicted weighted RSS
     rss: float  # weighted RSS of the residual evaluated at the step
     r: np.ndarray
-    # the Jacobian at the current fit in [theta; vec(delta)] is [At, Jd]: the step's
-    # parameter columns (dense) and the window states' columns, shared by the round
-    At: np.ndarray
+    # the Jacobian at the current fit in [theta; vec(delta)] is [A E, Jd]: the round's
+    # parameter columns A (dense) and the window states' columns Jd, both shared by every
+    # candidate of the round, and this step's map E of its parameters to A's columns
+    A: np.ndarray
+    E: np.ndarray
     Jd: sp.csc_matrix
     feasible: bool  # the chosen parameters stay inside their bounds
+
+    @property
+    def At(self) -> np.ndarray:
+        """The step's parameter columns ``A E`` (made on each call, not kept)."""
+        return self.A @ self.E
 
     @property
     def J(self) -> sp.csc_matrix:
@@ -138,7 +145,8 @@ class Linearisation:
         # built once per problem): THETA_SLOTS at a time evaluated the same window states'
         # columns once per chunk (3 evaluations on seed 004's platform)
         room = max(THETA_SLOTS - k_sel, len(self.raw), 1)
-        r, A_sel, Jd, cols = None, None, None, []
+        r, A, Jd = None, None, None
+        sizes = [len(self.raw[i : i + room]) for i in range(0, len(self.raw), room)]
         for i in range(0, len(self.raw), room):
             chunk = self.raw[i : i + room]
             S_raw = np.zeros((n_p, len(chunk)))
@@ -146,12 +154,19 @@ class Linearisation:
             S = np.hstack([self.S_sel, S_raw])
             at = replace(current, theta=np.r_[current.theta, np.zeros(len(chunk))])
             r_i, J = problem.jacobian(at, S)
+            J = sp.csc_matrix(J)
             if r is None:
                 r, Jd = r_i, J[:, k_sel + len(chunk) :].tocsc()
-                A_sel = J[:, :k_sel].toarray()
-            cols.append(J[:, k_sel : k_sel + len(chunk)].toarray())
+                # (n_res_all, k_sel + len(raw)): the chosen and every candidate parameter's
+                # columns written straight in (no dense copy of each chunk, then stacked)
+                A = np.zeros(
+                    (J.shape[0], k_sel + len(self.raw)), order=_stacked_order(k_sel, sizes)
+                )
+                _dense_columns(J, 0, k_sel, A, 0)
+            _dense_columns(J, k_sel, k_sel + len(chunk), A, k_sel + i)
+            del J  # (the whole matrix let go before the next chunk's and the blocks below)
         self.r = r
-        self.A = np.hstack([A_sel, *cols])  # (n_res_all, k_sel + len(raw))
+        self.A = A
         self.Jd = Jd
         nd, nw, n = problem.n_delta, problem.windows.n, problem.n_win_res
         m = self.A.shape[1]
@@ -206,7 +221,7 @@ class Linearisation:
             p_base = p_base - S_sel_c[:, k_sel:] @ self.cand0
         p = p_base + S_sel_c @ theta
         r = pb.residual(delta.reshape(nd, nw), p)
-        return Step(theta, delta, p, self.rss0 + q, float(r @ r), r, self.A @ E, self.Jd, feasible)
+        return Step(theta, delta, p, self.rss0 + q, float(r @ r), r, self.A, E, self.Jd, feasible)
 
     def lr_at(self, E: np.ndarray, th_c: np.ndarray) -> float:
         """Likelihood ratio with the candidate at ``th_c``, the chosen effects held and every
@@ -251,8 +266,9 @@ class Linearisation:
             level="screened",
             not_identifiable=reasons,
             cov=cov,
-            # the window states' columns shared with the round (:func:`.fit_jacobian`)
-            extra={"r": st.r, "J_blocks": (st.At, st.Jd)},
+            # the parameter and window states' columns shared with the round, the step's
+            # columns made when asked (:func:`.fit_jacobian`)
+            extra={"r": st.r, "J_blocks": (st.A, st.E, st.Jd)},
         )
 
 
@@ -303,10 +319,10 @@ def screened(lin, cand, k_sel, lower, upper, current, ln_n, before, folds, th_re
         if not far:
             return None
     k = k_sel + cand.k
-    J = st.J  # made once for the errors and the held-out check, then let go
-    fit = lin.fit_of(st, k, J)
-    heldout = cross_validate(lin.problem, fit, k, folds, J=J)
-    del J
+    # the whole Jacobian made for the errors and let go; the held-out check reads the
+    # step's blocks (:func:`.trial.cross_validate`)
+    fit = lin.fit_of(st, k)
+    heldout = cross_validate(lin.problem, fit, k, folds)
     note = (
         f"one Gauss-Newton step from {lin.where}: likelihood ratio "
         f"{lr_step:.4g} (predicted {lr_model:.4g}); IPOPT not run: "
@@ -559,6 +575,22 @@ def one_value_linearisation(problem, current, one, cand, S_sel) -> Linearisation
         problem, base, S_sel, list(dict.fromkeys(idx)), cand0=th_c0, null=current,
         where="the one-value form's IPOPT fit (its axes tied)",
     )  # fmt: skip
+
+
+def _stacked_order(k_sel: int, sizes: list) -> str:
+    """The memory order NumPy gives ``np.hstack`` of the dense copies of a CSC matrix's
+    ``k_sel`` columns and chunks of ``sizes`` columns (as the screen stacked them before it
+    wrote them in place): BLAS's products round alike only on the same layout."""
+    probe = np.hstack([sp.csc_matrix((2, c)).toarray() for c in (k_sel, *sizes)])
+    return "C" if probe.flags.c_contiguous else "F"
+
+
+def _dense_columns(J: sp.csc_matrix, c0: int, c1: int, out: np.ndarray, o0: int) -> None:
+    """Columns ``c0:c1`` of ``J`` added into the zeros of ``out[:, o0:]``: the numbers of
+    ``J[:, c0:c1].toarray()`` (which adds each entry to a zero), without that copy."""
+    for c in range(c0, c1):
+        a, b = J.indptr[c], J.indptr[c + 1]
+        out[J.indices[a:b], o0 + c - c0] += J.data[a:b]
 
 
 def _box_min(G: np.ndarray, g: np.ndarray, lo: np.ndarray, hi: np.ndarray):

@@ -187,14 +187,17 @@ def discrepancy(
         search.cands, max(max_effects, 1), screen, len(validate), step_s, compile_s
     )
     base_problem, nominal = _nominal_replay(search, prog)
-    sel = _select(search, nominal, max_effects, screen, workers, prog)
+    # handed over (no reference kept here): the selection lets go of the nominal fit's
+    # Jacobian once the search goes on from another fit (selection._let_go)
+    sel = _select(search, [nominal], max_effects, screen, workers, prog)
+    del nominal
     prog.done, prog.cap = 1 + rounds, 1 + rounds  # rounds not run: their steps are skipped
     named = _named(search, sel, prog, screen, workers)
     prog.done, prog.cap = 2 + rounds, None
     _confounding(search, sel, named)
     judged = _judge(search, sel, named, logs, validate, window_s, jit, prog)
     judged = (*judged[:4], judged[4] + _unwrapped_words(logs))
-    loc = localise(datas, base_problem, nominal, floor)
+    loc = localise(datas, base_problem, sel.nominal, floor)
     forget_torque_terms()
     prog("done", prog.total)
     return _result(search, refused, base_problem, sel, named, judged, loc)

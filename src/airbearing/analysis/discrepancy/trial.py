@@ -293,7 +293,6 @@ def cross_validate(
     has it made (:func:`~airbearing.analysis.shooting.fit_jacobian` otherwise).
     """
     r = np.asarray(fit.extra["r"])
-    J = (fit_jacobian(fit) if J is None else J).tocsc()
     nd, nw, n = problem.n_delta, problem.windows.n, problem.n_win_res
     sel0 = problem.primary & problem.usable
     if "ws" in problem.outputs:
@@ -302,7 +301,30 @@ def cross_validate(
         sel0 = sel0 | ((problem.group == problem.outputs.index("ws")) & problem.usable)
     sel = np.zeros(r.size, dtype=bool)
     sel[: sel0.size] = sel0
-    Jt_all = J[:, :k].toarray() if k else np.zeros((J.shape[0], 0))
+    blocks = fit.extra.get("J_blocks") if J is None and "J" not in fit.extra else None
+    if blocks is not None:
+        # a step-judged fit: its parameter columns and the round's window-state columns
+        # as they are (the whole matrix, its CSR copy: two Jacobians on long logs)
+        *At, Jds = blocks
+        Jt_all = At[0] @ At[1] if len(At) == 2 else np.array(At[0], dtype=float)
+        Jt_all[Jt_all == 0] = 0.0  # (+0, as the dense copy of a sparse matrix gives it)
+        Jds = sp.csc_matrix(Jds)
+
+        def d_block(rows, j):
+            return _dense_rows(Jds, rows, j * nd, (j + 1) * nd)
+    else:
+        J = (fit_jacobian(fit) if J is None else J).tocsc()
+        Jt_all = J[:, :k].toarray() if k else np.zeros((J.shape[0], 0))
+        # rows picked from a CSC matrix map every row of it per pick (quadratic in the
+        # windows: 1.1 s per pass on an hour of 50 Hz three-axis pieces); from CSR, only
+        # the rows picked
+        Jr = J.tocsr()
+        del J
+
+        def d_block(rows, j):
+            # column-major, as a CSC pick gives it (BLAS's products then round alike)
+            return Jr[rows][:, k + j * nd : k + (j + 1) * nd].toarray(order="F")
+
     # linked pieces with process noise: the whitened defects follow the measurement rows,
     # nd per consecutive pair; a piece's start is tied to its neighbours by them
     n_meas = int(getattr(problem, "n_meas", r.size))
@@ -313,28 +335,25 @@ def cross_validate(
             return []
         return [np.arange(n_meas + q * nd, n_meas + (q + 1) * nd) for q in pairs if 0 <= q < nw - 1]
 
-    # rows picked from a CSC matrix map every row of it per pick (quadratic in the windows:
-    # 1.1 s per pass on an hour of 50 Hz three-axis pieces); from CSR, only the rows picked
-    Jr = J.tocsr()
-
     def block(rows, j):
-        Jt, rj = Jt_all[rows], r[rows]
-        # column-major, as a CSC pick gives it (BLAS's products then round alike)
-        Jd = Jr[rows][:, k + j * nd : k + (j + 1) * nd].toarray(order="F")
+        Jt, rj, Jd = Jt_all[rows], r[rows], d_block(rows, j)
         return Jt, Jd, rj, np.linalg.pinv(Jd.T @ Jd, hermitian=True)
 
-    pre = []
+    def held_out(j):
+        # the piece's start refitted with its neighbours' starts held, so under process
+        # noise it cannot absorb what it could as a free piece
+        Rt = np.concatenate([np.arange(j * n, (j + 1) * n), *links(j - 1, j)])
+        return (*block(Rt, j), sel[Rt])
+
+    # each window's training blocks (its Gram blocks kept, not its rows); its held-out
+    # blocks are made when its fold is tested (each window is in one fold)
+    train_blocks = []
     for j in range(nw):
         R = np.arange(j * n, (j + 1) * n)
         # training: each pair's defect rows counted once (with the later piece)
         Jt, Jd, rj, P = block(np.concatenate([R, *links(j - 1)]), j)
         Gtd = Jt.T @ Jd
-        S_j, g_j = Jt.T @ Jt - Gtd @ P @ Gtd.T, Jt.T @ rj - Gtd @ P @ (Jd.T @ rj)
-        # held out: the piece's start refitted with its neighbours' starts held, so under
-        # process noise it cannot absorb what it could as a free piece
-        Rt = np.concatenate([R, *links(j - 1, j)])
-        Jt, Jd, rj, P = block(Rt, j)
-        pre.append((Jt, Jd, rj, P, S_j, g_j, sel[Rt]))
+        train_blocks.append((Jt.T @ Jt - Gtd @ P @ Gtd.T, Jt.T @ rj - Gtd @ P @ (Jd.T @ rj)))
     fold_ids = np.unique(folds)
     nf = fold_ids.size
     rss, ss, cnt = np.zeros(nf), np.zeros(nf), np.zeros(nf, dtype=int)
@@ -344,15 +363,15 @@ def cross_validate(
         test = np.flatnonzero(folds == f)
         d_theta = np.zeros(k)
         if k and len(train):
-            S = sum(pre[j][4] for j in train)
-            g = sum(pre[j][5] for j in train)
+            S = sum(train_blocks[j][0] for j in train)
+            g = sum(train_blocks[j][1] for j in train)
             info_train[i] = S
             c = np.sqrt(np.maximum(np.diag(S), 0.0))
             c = np.where(c > 0, c, 1.0)
             d_theta = -(np.linalg.pinv(S / np.outer(c, c), hermitian=True) @ (g / c)) / c
         for j in test:
-            Jt, Jd, rj, P, Sj, _, m = pre[j]
-            info_test[i] += Sj
+            Jt, Jd, rj, P, m = held_out(j)
+            info_test[i] += train_blocks[j][0]
             e = rj + (Jt @ d_theta if k else 0.0)
             e = e - Jd @ (P @ (Jd.T @ e))
             rss[i] += float(e @ e)
@@ -360,6 +379,20 @@ def cross_validate(
             cnt[i] += int(m.sum())
     sigma = problem.sigma_rate if problem.outputs[0] == "rate" else problem.sigma_att
     return HeldOut(rss, ss, cnt, info_train, info_test, sigma)
+
+
+def _dense_rows(M: sp.csc_matrix, rows: np.ndarray, c0: int, c1: int) -> np.ndarray:
+    """``M[rows][:, c0:c1]`` as a dense column-major array, read from ``M``'s columns
+    (``rows`` ascending, ``M`` without duplicate entries): the same entries a CSR pick
+    gives, without a row-major copy of ``M``."""
+    out = np.zeros((rows.size, c1 - c0), order="F")
+    for c in range(c0, c1):
+        a, b = M.indptr[c], M.indptr[c + 1]
+        ri = M.indices[a:b]
+        pos = np.minimum(np.searchsorted(rows, ri), rows.size - 1)
+        hit = rows[pos] == ri
+        out[pos[hit], c - c0] = M.data[a:b][hit]
+    return out
 
 
 def failed(cand: Candidate, status: str, reason: str, start=None, before=math.nan):

@@ -9,15 +9,26 @@ import threading
 import casadi as ca
 import numpy as np
 
+#: Bytes of work vectors above which a Function's buffer is made for each call and let go
+#: with it instead of kept (:func:`function_buffer`).
+KEPT_WORK_BYTES = 16 * 2**20
+
 
 def function_buffer(fn: ca.Function):
-    """``fn.buffer()`` made once per Function and thread, then reused.
+    """``fn.buffer()`` made once per Function and thread, then reused; made anew for each
+    call when its work vectors exceed :data:`KEPT_WORK_BYTES`.
 
     Making a buffer allocates the Function's work vectors: for a window Jacobian of 50 Hz
     pieces about 10 ms, as much as a residual evaluation, and IPOPT's line search evaluates
     thousands of times per search. The caller sets every argument and result pointer
-    before each run, so a reused buffer holds nothing of the last call.
+    before each run, so a reused buffer holds nothing of the last call. The functions of
+    all the windows of a long log have work vectors of some 0.4 kB per row (the residual,
+    the continuity defects: 40-70 MB each on 100,001 rows, one per slot count), and a
+    long search evaluates them tens of times, not thousands: kept, they held a few hundred
+    MB at the search's peak.
     """
+    if 8 * fn.sz_w() + 8 * fn.sz_iw() > KEPT_WORK_BYTES:
+        return fn.buffer()
     cache = getattr(fn, "_airbearing_buffers", None)
     if cache is None:
         cache = {}

@@ -80,11 +80,13 @@ class Fit:
 def fit_jacobian(fit: Fit):
     """The Jacobian of ``fit``'s weighted residual in ``[theta; vec(delta)]`` (scipy sparse).
 
-    ``fit.extra["J"]`` as it is, or, for a fit that keeps ``extra["J_blocks"] = (At, Jd)`` (the
-    discrepancy search's Gauss-Newton steps, :mod:`airbearing.analysis.discrepancy.screen`:
-    every candidate of a round shares the window states' columns ``Jd``), the matrix
-    ``[At, Jd]`` made now: the same numbers, without a copy of ``Jd`` per candidate (on an
-    hour of 50 Hz three-axis samples some 45 MB each).
+    ``fit.extra["J"]`` as it is, or, for a fit that keeps ``extra["J_blocks"] = (A, E, Jd)``
+    (the discrepancy search's Gauss-Newton steps, :mod:`airbearing.analysis.discrepancy.screen`:
+    every candidate of a round shares the round's parameter columns ``A`` and the window
+    states' columns ``Jd``; ``E`` maps the fit's parameters to ``A``'s columns), the matrix
+    ``[A E, Jd]`` made now: the same numbers, without a copy of ``Jd`` and of the parameter
+    columns per candidate (on an hour of 50 Hz three-axis samples some 45 MB and 9 MB per
+    parameter each). A 2-tuple ``(At, Jd)`` is taken as ``[At, Jd]``.
 
     Parameters
     ----------
@@ -96,7 +98,8 @@ def fit_jacobian(fit: Fit):
     """
     if "J" in fit.extra:
         return fit.extra["J"]
-    At, Jd = fit.extra["J_blocks"]
+    *At, Jd = fit.extra["J_blocks"]
+    At = At[0] @ At[1] if len(At) == 2 else At[0]
     return sp.hstack([sp.csc_matrix(At), Jd]).tocsc()
 
 
@@ -126,10 +129,38 @@ def solve_gram(G, B: np.ndarray) -> np.ndarray:
     return np.linalg.pinv(Gd, rcond=1e-12, hermitian=True) @ B
 
 
+#: Column blocks in which :func:`gram` forms a sparse Gram matrix.
+GRAM_BLOCKS = 4
+
+
+def gram(Js):
+    """``Js^T Js``; for a scipy sparse ``Js`` a CSC matrix made block of columns by block.
+
+    scipy multiplies ``Js^T`` (CSR) by a CSR copy of ``Js``: on an hour of 50 Hz three-axis
+    samples a fit's Jacobian is some 100 MB, so the whole product held a second copy. A
+    block of columns is copied at a time instead. Every entry is the same sum in the same
+    order (scipy's product accumulates entry ``(i, j)`` over the rows of column ``i`` of
+    ``Js`` in turn, whatever columns the other factor holds), so the matrix is the same to
+    the bit, its row indices sorted in each column as the CSC copy of the whole product.
+    """
+    if not sp.issparse(Js):
+        return Js.T @ Js
+    Js = sp.csc_matrix(Js)
+    n = Js.shape[1]
+    if n <= GRAM_BLOCKS:
+        return sp.csc_matrix(Js.T @ Js)
+    # column blocks of about equal numbers of entries
+    cuts = np.searchsorted(Js.indptr, np.linspace(0, Js.nnz, GRAM_BLOCKS + 1)[1:-1])
+    edges = np.unique(np.r_[0, np.clip(cuts, 1, n - 1), n])
+    At = Js.T
+    parts = [sp.csc_matrix(At @ Js[:, a:b]) for a, b in zip(edges[:-1], edges[1:], strict=True)]
+    return sp.hstack(parts, format="csc")
+
+
 def _reduced(Js, k: int):
     """Schur complement of the nuisance block of ``Js^T Js`` (columns ``k:`` eliminated),
     symmetrised, and the parameters' own block."""
-    F = Js.T @ Js
+    F = gram(Js)
     if sp.issparse(F):
         F = sp.csc_matrix(F)
         Ftt, Ftd, Fdd = F[:k, :k].toarray(), F[:k, k:].toarray(), F[k:, k:]

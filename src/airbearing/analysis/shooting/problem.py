@@ -390,7 +390,9 @@ class ShootingProblem:
         r, J = self._eval(1, v, p_base, Sp)
         keep = np.r_[np.arange(k), np.arange(K, J.shape[1])]
         held = self.held(fit.p, S)
-        return r, self._unpinned(J[:, keep], k, held)
+        # more parameters than slots: every column kept, J itself (its own index arrays,
+        # problem_functions.KEPT_INDEX_SLOTS), not a copy
+        return r, self._unpinned(J if k > self.theta_slots else J[:, keep], k, held)
 
     def fit(
         self,

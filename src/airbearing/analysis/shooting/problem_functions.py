@@ -117,19 +117,12 @@ class WindowJacobian:
         self.pair = win_rj.map(THREADS, "thread", THREADS) if nw >= THREADS else None
         block = win_rj.sparsity_out(1)
         m = block.size1()
-        row = np.asarray(block.row(), dtype=np.int64)
-        self._colind = col = np.asarray(block.colind(), dtype=np.int64)
-        counts = np.diff(col)
+        self._colind = np.asarray(block.colind(), dtype=np.int64)
         self.shape = (m * nw, K + (block.size2() - K) * nw)
-        big = max(m * nw, int(col[-1]) * nw) >= np.iinfo(np.int32).max
-        itype = np.int64 if big else np.int32
-        off = (np.arange(nw, dtype=np.int64) * m)[:, None]
-        # theta columns: every window's rows in turn; then each window's own columns
-        parts = [(row[col[c] : col[c + 1]][None, :] + off).ravel() for c in range(K)]
-        parts.append((row[col[K] :][None, :] + off).ravel())
-        self._indices = np.concatenate(parts).astype(itype)
-        sizes = np.r_[counts[:K] * nw, np.tile(counts[K:], nw)]
-        self._indptr = np.r_[0, np.cumsum(sizes)].astype(itype)
+        # the CSC index arrays are kept for the slot count of every fit (the same arrays for
+        # each evaluation); a wider Jacobian (the discrepancy screen's, one per round: 0.5 kB
+        # per row of an hour of 50 Hz three-axis samples) makes them per call
+        self._index = self._index_arrays() if K <= KEPT_INDEX_SLOTS else None
         # where each input of the window function lives: (source, offset, entries per
         # window or None when shared); sources 0 v, 1 p_base, 2 S, 3 data
         nd = win_rj.size1_in(0)
@@ -156,10 +149,33 @@ class WindowJacobian:
         if len(rest) == 2:  # the hand-over row selector of linked windows
             self._where.append((3, *rest[0]))  # fmt: skip
 
+    def _index_arrays(self) -> tuple:
+        """``(indices, indptr)`` of the Jacobian's CSC matrix."""
+        if getattr(self, "_index", None) is not None:
+            return self._index
+        block, nw, K = self.win_rj.sparsity_out(1), self.nw, self.K
+        m, col = block.size1(), self._colind
+        row = np.asarray(block.row(), dtype=np.int64)
+        counts = np.diff(col)
+        big = max(m * nw, int(col[-1]) * nw) >= np.iinfo(np.int32).max
+        itype = np.int64 if big else np.int32
+        off = (np.arange(nw, dtype=itype) * itype(m))[:, None]
+        row = row.astype(itype)
+        # theta columns: every window's rows in turn; then each window's own columns,
+        # written in place (no 64-bit pieces and their concatenation: 20 bytes an entry)
+        indices = np.empty(int(col[-1]) * nw, dtype=itype)
+        at = 0
+        for a, b in [(col[c], col[c + 1]) for c in range(K)] + [(col[K], col[-1])]:
+            piece = indices[at : at + (b - a) * nw].reshape(nw, b - a)
+            np.add(row[a:b][None, :], off, out=piece)
+            at += (b - a) * nw
+        sizes = np.r_[counts[:K] * nw, np.tile(counts[K:], nw)]
+        return indices, np.r_[0, np.cumsum(sizes)].astype(itype)
+
     def pattern(self) -> sp.csc_matrix:
         """The Jacobian's structure: a CSC matrix of ones."""
-        ones = np.ones(self._indices.size)
-        return sp.csc_matrix((ones, self._indices, self._indptr), shape=self.shape)
+        indices, indptr = self._index_arrays()
+        return sp.csc_matrix((np.ones(indices.size), indices, indptr), shape=self.shape)
 
     def defect_sparsity(self) -> ca.Sparsity:
         """The structure of the defects' Jacobian (linked windows)."""
@@ -168,12 +184,15 @@ class WindowJacobian:
     def matrix(self, blocks: np.ndarray) -> sp.csc_matrix:
         """The Jacobian (CSC) from the nonzeros of the window blocks, window after window."""
         B = np.asarray(blocks).reshape(self.nw, -1)
-        col = self._colind
-        parts = [B[:, col[c] : col[c + 1]].ravel() for c in range(self.K)]
-        parts.append(B[:, col[self.K] :].ravel())
-        return sp.csc_matrix(
-            (np.concatenate(parts), self._indices, self._indptr), shape=self.shape, copy=False
-        )
+        col, nw = self._colind, self.nw
+        # each column's entries copied in place (no pieces and their concatenation)
+        data = np.empty(B.size)
+        at = 0
+        for a, b in [(col[c], col[c + 1]) for c in range(self.K)] + [(col[self.K], col[-1])]:
+            data[at : at + (b - a) * nw].reshape(nw, b - a)[...] = B[:, a:b]
+            at += (b - a) * nw
+        indices, indptr = self._index_arrays()
+        return sp.csc_matrix((data, indices, indptr), shape=self.shape, copy=False)
 
     def _windows(self, src: list) -> list:
         """Every output of the window function for all windows, window after window."""
@@ -224,6 +243,10 @@ class WindowJacobian:
         c, Jc = evaluate(self.defects, out[2], out[3], *src)
         return out[0], J, c, csc_of(Jc, self.defects.sparsity_out(1))
 
+
+#: Parameter slots up to which a :class:`WindowJacobian` keeps its CSC index arrays:
+#: ``functions.THETA_SLOTS`` (which imports this module), the slots of every fit.
+KEPT_INDEX_SLOTS = 6
 
 #: Threads evaluating the windows side by side.
 THREADS = 2

@@ -59,8 +59,14 @@ def vstack_csc(A: sp.csc_matrix, B: sp.csc_matrix) -> sp.csc_matrix:
     col = np.repeat(np.arange(B.shape[1]), np.diff(B.indptr))
     at = A.indptr[col + 1]
     data = np.insert(A.data, at, B.data)
-    indices = np.insert(A.indices.astype(np.int64), at, B.indices.astype(np.int64) + A.shape[0])
+    # 32-bit indices while they fit (as A's): 64-bit ones held a third more of a long log's
+    # Jacobian, and their copy of A's indices as much again while it was stacked
+    big = max(A.shape[0] + B.shape[0], A.nnz + B.nnz) >= np.iinfo(np.int32).max
+    itype = np.int64 if big else np.int32
+    indices = np.insert(
+        A.indices.astype(itype, copy=False), at, B.indices.astype(itype) + itype(A.shape[0])
+    )
     return sp.csc_matrix(
-        (data, indices, A.indptr.astype(np.int64) + B.indptr),
+        (data, indices, A.indptr.astype(itype) + B.indptr.astype(itype)),
         shape=(A.shape[0] + B.shape[0], A.shape[1]),
     )

@@ -1,0 +1,72 @@
+"""What a long discrepancy search keeps in memory, and that keeping less changes nothing.
+
+- The screen's Jacobian (a slot per candidate parameter, wider than any fit's) makes its
+  CSC index arrays per call instead of keeping them in the cached window function
+  (``problem_functions.KEPT_INDEX_SLOTS``): its columns must be those of a fit's Jacobian.
+- A later round's candidates let go of their per-row arrays once the round is decided
+  (``selection.ROW_ARRAYS``), the first round's keep them (their honest errors are taken at
+  the end), and the fit the search goes on from keeps them.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from rigs import spinning_seed004_50hz
+
+from airbearing.analysis.discrepancy.candidates import candidates_for
+from airbearing.analysis.discrepancy.replay import prepare
+from airbearing.analysis.discrepancy.search import discrepancy
+from airbearing.analysis.discrepancy.search_state import _Search
+from airbearing.analysis.discrepancy.selection import ROW_ARRAYS
+from airbearing.analysis.shooting import THETA_SLOTS
+from airbearing.analysis.shooting.problem_functions import KEPT_INDEX_SLOTS, window_jacobian
+
+
+def test_a_wide_jacobian_makes_its_index_arrays_per_call():
+    assert KEPT_INDEX_SLOTS == THETA_SLOTS  # (functions.py imports problem_functions)
+    tb, log = spinning_seed004_50hz(2.0)
+    datas, windows, floor = prepare(tb, [log])
+    cands = candidates_for(tb, datas, ["viscous_friction", "aero_drag", "gyro_bias"])
+    search = _Search(tb, datas, windows, floor, cands, 0, None)
+    pb = search.problem(False)
+    nominal = pb.fit(search.models[False].p0.copy(), name="nominal")
+    S = search.S(False, cands)  # every candidate's columns
+    S = np.hstack([S, S[:, :2]])  # wider than the slots of a fit
+    k = S.shape[1]
+    assert k > THETA_SLOTS
+    at = replace(nominal, theta=np.zeros(k))
+    _, J_wide = pb.jacobian(at, S)
+    wide = window_jacobian(*pb._key(k), pb.link)
+    narrow = window_jacobian(*pb._key(THETA_SLOTS), pb.link)
+    assert wide._index is None and narrow._index is not None
+    # the first columns are a fit's (the same window function's derivatives, exactly)
+    _, J_fit = pb.jacobian(replace(nominal, theta=np.zeros(2)), S[:, :2])
+    assert J_wide.shape[0] == J_fit.shape[0]
+    np.testing.assert_array_equal(J_wide[:, :2].toarray(), J_fit[:, :2].toarray())
+    np.testing.assert_array_equal(J_wide[:, k:].toarray(), J_fit[:, 2:].toarray())
+    P = wide.pattern()
+    assert P.shape == wide.shape and P.nnz == wide._index_arrays()[0].size
+
+
+@pytest.mark.slow  # one search of two rounds on a 6 s log: about 3 s (16 s compiling)
+def test_a_decided_later_round_lets_go_of_its_per_row_arrays():
+    tb, log = spinning_seed004_50hz(6.0, {"viscous_friction": 1e-5, "aero_drag": 3e-5})
+    res = discrepancy(tb, log, max_effects=2, only=["viscous_friction", "aero_drag",
+                                                    "coulomb_friction"])  # fmt: skip
+    assert len(res.rounds) >= 2
+    first = [c.fit for c in res.rounds[0] if c.fit is not None]
+    assert first and all("r" in f.extra for f in first)
+    assert all("J" in f.extra or "J_blocks" in f.extra for f in first)
+    stripped = 0
+    for rnd in res.rounds[1:]:
+        keeping = [
+            c for c in rnd if c.fit is not None and any(k in c.fit.extra for k in ROW_ARRAYS)
+        ]
+        # only the round's pick (an IPOPT fit the search went on from) keeps them
+        assert len(keeping) <= 1, [c.label for c in keeping]
+        assert all(c.nameable and c.status != "screened" for c in keeping)
+        stripped += sum(1 for c in rnd if c.fit is not None) - len(keeping)
+    assert stripped > 0
