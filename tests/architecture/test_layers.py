@@ -115,7 +115,7 @@ FUNCTION_IMPORTS = {
     "analysis.campaign.results": 2,
     "analysis.campaign.runner": 3,
     "analysis.campaign.studies": 4,
-    "analysis.discrepancy.adequacy": 3,  # statsmodels acovf + scipy.stats: ljung_box_p
+    "analysis.discrepancy.adequacy": 2,  # statsmodels acovf, q_stat: ljung_box_p
     "analysis.discrepancy.consistency": 1,
     "analysis.discrepancy.honest": 1,
     "analysis.discrepancy.trial": 1,
