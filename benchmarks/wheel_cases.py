@@ -182,16 +182,26 @@ def _within(truth, value) -> bool:
 def judge(case: Case, result: dict) -> dict:
     """The issue's acceptance on one case's discrepancy JSON."""
     named = {e["name"]: e["value"] for e in result.get("effects", [])}
-    confounded = [set(p) for p in result.get("confounded", [])]
+    # a pair (a, b) of "confounded"; either side may be several effects "b + c" together
+    confounded = [
+        {n for side in p for n in side.split(" + ")} for p in result.get("confounded", [])
+    ]
+    # the value each of them would take instead of the named one, when the search says it
+    equivalent = {}
+    for c in result.get("confounding", []):
+        equivalent.update(c.get("equivalent") or {})
     rows = []
     for name, truth in case.effects.items():
         if name in named:
             ok = _within(truth, named[name])
+        elif name in equivalent:
+            ok = any(name in p for p in confounded) and _within(truth, equivalent[name])
         else:
-            ok = any(name in p and len(p & set(case.effects)) >= 1 for p in confounded)
+            ok = any(name in p for p in confounded)
         rows.append((name, ok))
+    hidden = set(case.effects)
     false = sorted(
-        n for n in named if n not in case.effects and not any(n in p for p in confounded)
+        n for n in named if n not in hidden and not any(n in p and p & hidden for p in confounded)
     )
     return {"hits": rows, "false": false, "pass": all(ok for _, ok in rows) and not false}
 
