@@ -33,7 +33,6 @@ from pathlib import Path
 
 import numpy as np
 
-from airbearing.analysis.simulation.attitude_only import attitude_only
 from airbearing.analysis.simulation.scenarios import free_oscillation, slew
 from airbearing.io.log import Log, write_log
 from airbearing.io.testbed import load_testbed, testbed_from_dict, testbed_to_dict, write_testbed
@@ -55,6 +54,9 @@ class Case:
     attitude_only: bool = False
     seed: int = 1
     rate0: tuple = (0.0, 0.0, 0.0)  # rad/s, a coast's initial body rate
+    # rad/s per wheel: white noise added to the logged wheel speeds (tachometers of
+    # different quality; the testbed file keeps its one speed_noise)
+    tach: tuple = ()
 
 
 SPEED = {"command": "speed", "speed_loop_tau": 0.05}
@@ -157,6 +159,12 @@ def simulate_case(case: Case, naive_attitude: bool = False):
         log = free_oscillation(
             tb, initial_rate=case.rate0, effects=case.effects, duration=COAST_S, seed=case.seed
         ).log
+    if case.tach:
+        data = log.data.copy()
+        rng = np.random.default_rng(case.seed + 200)
+        for i, sig in enumerate(case.tach, start=1):
+            data[f"ws{i}"] += sig * rng.standard_normal(len(data))
+        log = Log(data, source=log.source, testbed=tb)
     if not case.attitude_only:
         return tb, log
     if naive_attitude:  # the gyro columns dropped: a dof-1 yaw stays the gyro's integral
@@ -164,6 +172,8 @@ def simulate_case(case: Case, naive_attitude: bool = False):
         tb = testbed_from_dict(d)
         rates = [c for c in ("wx", "wy", "wz", "gx", "gy", "gz") if c in log.data.columns]
         return tb, Log(log.data.drop(columns=rates), source=log.source, testbed=tb)
+    from airbearing.analysis.simulation.attitude_only import attitude_only  # (not in old code)
+
     return attitude_only(log, seed=case.seed + 100)
 
 
