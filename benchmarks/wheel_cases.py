@@ -144,6 +144,16 @@ CASES = (
         rate0=(0.02, -0.01, 0.05),
         seed=11,
     ),
+    # wheel 4's tachometer 20 x noisier than the others (0.2 rad/s against 0.01)
+    Case("3ax-slew-null-mixed-tach", "rw-3axis", "slew", seed=12, tach=(0.0, 0.0, 0.0, 0.2)),
+    Case(
+        "3ax-slew-wcoul-mixed-tach",
+        "rw-3axis",
+        "slew",
+        {"wheel_coulomb_friction": 3e-5},
+        seed=13,
+        tach=(0.0, 0.0, 0.0, 0.2),
+    ),
 )
 
 
