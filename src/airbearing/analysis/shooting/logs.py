@@ -589,6 +589,12 @@ class NoiseFloor:
         return None if self.wheel is None else max(self.wheel, WS_SIGMA_MIN)
 
     @property
+    def wheel_weights(self) -> np.ndarray | None:
+        """rad/s, each wheel speed's own weight: :attr:`wheel_axes`, never below
+        :data:`WS_SIGMA_MIN` (None without ``ws``): a rig's tachometers need not be alike."""
+        return None if self.wheel_axes is None else np.maximum(self.wheel_axes, WS_SIGMA_MIN)
+
+    @property
     def measured(self) -> float:
         """The noise the data show, in :attr:`gap_unit`."""
         return float(self.rate if self.gap_unit == "rad/s" else self.attitude)
