@@ -19,7 +19,7 @@ Measurements (the output groups of :mod:`airbearing.analysis.shooting`)
     or the yaw (dof 1). The gap is the RMS residual of the first group: rad/s with
     a gyro, rad without (``gap_unit``). A reaction-wheel testbed's logged wheel speeds
     ``ws1..wsn`` (FORMATS.md: ``W_i`` relative to the body, rad/s) are one more group,
-    ``ws``, last, with its own noise level: they start every window (fitted like the
+    ``ws``, last, each wheel with its own noise level: they start every window (fitted like the
     rate) and are compared at every sample, so an effect that shows mainly in the wheels'
     own motion (their inertia, their motor's torque constant, their bearing friction) is
     seen where it shows.
