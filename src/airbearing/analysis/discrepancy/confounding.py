@@ -261,8 +261,15 @@ def scale_confounding(model, datas, p, named, others, S_of, experiment: str) -> 
     names = [n for n in SCALE_EFFECTS if n not in {a.name for a, _ in chosen}]
     forms = [[c for c in rest if c.name == n] for n in names]
     best = None
+    memo: dict = {}
+
+    def col(c):
+        if c.label not in memo:
+            memo[c.label] = _columns(model, datas, p, S_of(c))
+        return memo[c.label]
+
     for combo in _product(forms):
-        cols = [_columns(model, datas, p, S_of(c)) for c in combo]
+        cols = [col(c) for c in combo]
         if not all(np.any(B) for B in cols):
             continue
         sine, th = _sine_in_span(tau, np.hstack(cols))
