@@ -22,6 +22,7 @@ from scipy.stats import chi2
 
 import airbearing as ab
 from airbearing.analysis.discrepancy.replay import model_for, prepare, problem_for
+from airbearing.io import testbed as testbed_io
 from airbearing.io.log import Log
 from airbearing.io.testbed import load_testbed
 
@@ -114,3 +115,33 @@ def test_the_wheel_speed_floor_is_the_sensor_not_the_commands_noise():
     _, _, floor = prepare(tb, [log], window_s=WINDOW_S)
     # about 400 fourth differences: the MAD's 7.5 % at one sigma, so 15 % is two
     assert floor.wheel == pytest.approx(SPEED_NOISE, rel=0.15)
+
+
+def test_each_wheel_speed_is_weighted_by_its_own_tachometer():
+    # two wheels on a yaw table (spin axes +z and -z), wheel 2's tachometer 20 x noisier
+    # than wheel 1's (0.2 rad/s against the built-in's 0.01): one level for the group (their
+    # RMS, 0.14 rad/s) would weight wheel 1 fourteen times too lightly and wheel 2 at 1.4 x
+    # its noise; each wheel over its own level leaves both residuals at the noise
+    d = testbed_io.testbed_to_dict(load_testbed("rw-yaw"))
+    d["wheels"].update(
+        axes=[[0.0, 0.0, 1.0], [0.0, 0.0, -1.0]], speeds=[0.0, 0.0], inertia=2.865e-5
+    )
+    tb = testbed_io.testbed_from_dict(d)
+    log = ab.slew(tb, angle_deg=60.0, duration=DURATION, seed=7).log
+    data = log.data.copy()
+    extra = 0.2  # rad/s
+    data["ws2"] += extra * np.random.default_rng(8).standard_normal(len(data))
+    log = Log(data, source="two-tachometers.csv", testbed=tb)
+    datas, windows, floor = prepare(tb, [log], window_s=WINDOW_S)
+    problem = problem_for(model_for(tb, {}), datas, windows, floor, jit=False)
+    truth = np.array([SPEED_NOISE, np.hypot(SPEED_NOISE, extra)])
+    # each level estimated within 15 % (the MAD of about 400 fourth differences, as above)
+    np.testing.assert_allclose(problem.sigma_ws_axes, truth, rtol=0.15)
+    fit = problem.fit(problem.model.p0, name="nominal")
+    r = problem.raw_measurement(fit.extra["r"])
+    sel = (problem.group == problem.outputs.index("ws")) & problem.usable
+    for i in range(2):
+        rows = sel & (problem.component == i)
+        # noise units: RMS 1 within 15 % (about 400 rows: 3.5 % at one sigma, and the level's
+        # own 7.5 %)
+        assert np.sqrt(np.mean(r[rows] ** 2)) == pytest.approx(1.0, rel=0.15), i

@@ -587,7 +587,7 @@ def adequacy(problem, fit, floor, datas, *, gap_before: float | None = None) -> 
     remains = structure_rule(p, ratio, significant_noise, ratio / level)
     wheel = None
     if "ws" in problem.outputs:
-        wheel = problem.noise_rms(fit.extra["r"])["ws"] / max(floor.wheel_weight, 1e-300)
+        wheel = _wheel_gap_over_floor(problem, fit, floor)
         remains = remains or wheel > GAP_CLEAR
     explained = None
     if gap_before is not None:
@@ -631,3 +631,15 @@ def adequacy(problem, fit, floor, datas, *, gap_before: float | None = None) -> 
 
 def _with_note(a: Adequacy, note: str) -> Adequacy:
     return replace(a, note=note)
+
+
+def _wheel_gap_over_floor(problem, fit, floor) -> float:
+    """The wheel speeds' RMS residual over their noise floor: each wheel's residual over its
+    own level (a rig's tachometers need not be alike), RMS over wheels and rows."""
+    w = floor.wheel_weights
+    if np.ptp(w) == 0 and np.ptp(problem.sigma_ws_axes) == 0:
+        return problem.noise_rms(fit.extra["r"])["ws"] / max(floor.wheel_weight, 1e-300)
+    r = problem.raw_measurement(fit.extra["r"])
+    sel = (problem.group == problem.outputs.index("ws")) & problem.usable
+    c = problem.component[sel]
+    return float(np.sqrt(np.mean((problem.sigma_ws_axes[c] * r[sel] / w[c]) ** 2)))

@@ -51,6 +51,8 @@ __all__ = [
     "steady_axes",
     "wheel_friction_constant_torque",
     "structural_confounding",
+    "SCALE_EFFECTS",
+    "scale_confounding",
 ]
 
 #: The sine of the largest principal angle below which two torque forms are one and the
@@ -215,6 +217,83 @@ def structural_confounding(model, datas, p, named, others, S_of, experiment_for)
             eq = {b.name: b.value(eq_theta)}
             found[key] = Confounding(key, kind, corr, experiment_for(*key), eq)
     return list(found.values())
+
+
+#: The effects that scale the rig's inertias and its wheels' motor torques. Every motion of a
+#: rig on which only the wheels' motors act is the same when every inertia (the body's and
+#: the wheels') and every motor torque are scaled by one factor s (``J w' = tau`` and
+#: ``Iw W' = tau_m`` hold with ``s J``, ``s Iw``, ``s tau_m``): a body ``inertia_error`` e is
+#: a ``wheel_torque_error`` and a ``wheel_inertia_error`` of ``1 / (1 + e) - 1`` together,
+#: and a ``wheel_torque_error`` k alone is an ``inertia_error`` and a ``wheel_inertia_error``
+#: of ``1 / (1 + k) - 1`` together. A torque that does not scale (a friction, gravity, the
+#: magnetorquers in the cage field, each at its known value) breaks it, and the span test
+#: then says so.
+SCALE_EFFECTS = ("inertia_error", "wheel_torque_error", "wheel_inertia_error")
+
+
+def scale_confounding(model, datas, p, named, others, S_of, experiment: str) -> list:
+    """Named scale effects (:data:`SCALE_EFFECTS`) whose fitted torque the other two make
+    together: the test of :func:`structural_confounding` against the span of both.
+
+    Parameters
+    ----------
+    model, datas, p, named, others, S_of
+        As :func:`structural_confounding`.
+    experiment : str
+        What separates the three.
+
+    Returns
+    -------
+    list of Confounding
+        ``effects = (named, "b + c")`` (the two others, in :data:`SCALE_EFFECTS` order),
+        ``equivalent`` the value of each of them that makes the named torque; or, with two
+        of the three named, ``effects = ("a + b", c)``.
+    """
+    chosen = [(a, th) for a, th in named if a.name in SCALE_EFFECTS and a.smooth and not a.lag]
+    rest = [c for c in others if c.name in SCALE_EFFECTS and c.smooth and not c.lag]
+    rest = [c for c in rest if c.name not in {a.name for a, _ in chosen}]
+    if not chosen or len(chosen) + len({c.name for c in rest}) < len(SCALE_EFFECTS):
+        return []
+    tau = sum(
+        _columns(model, datas, p, S_of(a)) @ np.atleast_1d(np.asarray(th, float))
+        for a, th in chosen
+    )
+    names = [n for n in SCALE_EFFECTS if n not in {a.name for a, _ in chosen}]
+    forms = [[c for c in rest if c.name == n] for n in names]
+    best = None
+    memo: dict = {}
+
+    def col(c):
+        if c.label not in memo:
+            memo[c.label] = _columns(model, datas, p, S_of(c))
+        return memo[c.label]
+
+    for combo in _product(forms):
+        cols = [col(c) for c in combo]
+        if not all(np.any(B) for B in cols):
+            continue
+        sine, th = _sine_in_span(tau, np.hstack(cols))
+        if sine < NEAR_SINE and (best is None or sine < best[0]):
+            best = (sine, th, combo)
+    if best is None:
+        return []
+    sine, th, combo = best
+    eq, i = {}, 0
+    for c in combo:
+        eq[c.name] = c.value(th[i : i + c.k])
+        i += c.k
+    kind = "exact" if sine < EXACT_SINE else "near"
+    corr = float(np.sqrt(max(1.0 - sine**2, 0.0)))
+    a = " + ".join(x.name for x, _ in chosen)
+    return [Confounding((a, " + ".join(eq)), kind, corr, experiment, eq)]
+
+
+def _product(forms):
+    """Every choice of one candidate form per effect name (shared or per wheel)."""
+    out = [()]
+    for f in forms:
+        out = [o + (c,) for o in out for c in f]
+    return out
 
 
 def _sine_in_span(tau: np.ndarray, B: np.ndarray) -> tuple[float, np.ndarray]:

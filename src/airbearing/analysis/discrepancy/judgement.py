@@ -18,6 +18,7 @@ from airbearing.analysis.discrepancy.adequacy import adequacy
 from airbearing.analysis.discrepancy.confounding import (
     constant_torque_confounding,
     constant_torque_inflation,
+    scale_confounding,
     steady_axes,
     structural_confounding,
     wheel_friction_constant_torque,
@@ -28,6 +29,7 @@ from airbearing.analysis.discrepancy.replay import model_for, prepare, problem_f
 from airbearing.analysis.discrepancy.result import Validation
 from airbearing.analysis.discrepancy.search_state import _Named, _Search, _Selection
 from airbearing.analysis.discrepancy.words import (
+    SCALE_EXPERIMENT,
     WHEEL_INERTIA_UNSEEN,
     experiment_for,
     failure_words,
@@ -88,6 +90,10 @@ def _confounding(search: _Search, sel: _Selection, named: _Named) -> None:
     found = structural_confounding(
         model, search.datas, p, named_th, others, S_of, experiment_for
     )  # fmt: skip
+    if search.testbed.wheels is not None:  # inertias and motor torques scaled together
+        found += scale_confounding(
+            model, search.datas, p, named_th, others, S_of, SCALE_EXPERIMENT
+        )  # fmt: skip
     for c in found:
         pair = c.effects
         if pair not in sel.confounded and pair[::-1] not in sel.confounded:

@@ -132,7 +132,7 @@ def problem_for(
         substeps=substeps_for(model, windows, floor) if substeps is None else substeps,
         jit=jit,
         theta_slots=theta_slots,
-        sigma_ws=floor.wheel_weight,
+        sigma_ws=floor.wheel_weights,
     )
     if problem.n_att and not problem.attitude_measured:
         # a gyro log's start yaws are fitted (the logged yaw is the testbed's estimate); one

@@ -119,6 +119,16 @@ EXPERIMENTS: dict[frozenset, str] = {
         "the motor torque from its current and torque constant)"
     ),
 }
+#: What separates the three scale effects (:data:`.confounding.SCALE_EFFECTS`).
+SCALE_EXPERIMENT = (
+    "only the wheels' motors act here, so scaling every inertia (the body's and the wheels') "
+    "and every motor torque by one factor gives the same motion: a body inertia error e is "
+    "a torque-constant error and a wheel inertia error of 1 / (1 + e) - 1 together; apply a "
+    "known external torque (a calibrated mass offset, a spring, the magnetorquers in a known "
+    "field), or measure one of the three on its own (the body's inertia with a known added "
+    "inertia, the wheel's on a torsion pendulum, the motor torque from its current and "
+    "torque constant)"
+)
 GENERIC_EXPERIMENT = (
     "excite the testbed over a wider range of the states the two torques depend on "
     "(rates, attitude, inputs), so that their regressors stop being proportional"
@@ -222,8 +232,8 @@ def verdict(
     efficiency, nominal = efficiency or {}, nominal or {}
     twins: dict = {}
     for c in confounding:
-        if c.equivalent and c.effects[0] in effects:
-            twins.setdefault(c.effects[0], []).append(c)
+        if c.equivalent and _head(c) in effects:
+            twins.setdefault(_head(c), []).append(c)
     remains = adequacy is not None and adequacy.structure_remains
     if effects:
         parts = [
@@ -236,7 +246,7 @@ def verdict(
         what = "corrected effect" if set(effects) <= set(nominal) else "missing effect"
         text = what + ("s" if len(effects) > 1 else "") + ": " + "; ".join(parts)
         for c in confounding:
-            if c.effects[0] in effects:
+            if _head(c) in effects:
                 text += "; " + _separate_words(c)
         if remains:
             text += "; " + adequacy.words(named=True)
@@ -267,16 +277,24 @@ def verdict(
     return text
 
 
+def _head(c) -> str:
+    """The named effect a confounding belongs to (the first of several named together)."""
+    return c.effects[0].split(" + ")[0]
+
+
 def _twin_words(c) -> str:
     """`` or, equally, b = value (...)`` after a named effect ``a`` the logs cannot tell
     from ``b``."""
     b = c.effects[1]
     sine = math.sqrt(max(1.0 - c.correlation**2, 0.0))
+    value = " with ".join(f"{n} = {format_value(v)}" for n, v in c.equivalent.items())
     how = (
         "one torque form on these logs"
         if c.kind == "exact"
         else (f"one torque form on these logs to {sine:.1g} of a torque")
     )
+    if b not in c.equivalent:  # several effects together make the named one's torque
+        return f" OR, equally, {value} ({how}: neither is preferred)"
     return f" OR, equally, {b} = {format_value(c.equivalent[b])} ({how}: neither is preferred)"
 
 

@@ -200,7 +200,8 @@ def _integration_tolerance(windows: WindowSet, floor: NoiseFloor):
     if floor.attitude is not None:
         att = max(attitude_noise(windows) or 0.0, ATTITUDE_SIGMA_MIN) / root
     rate = max(floor.rate, RATE_SIGMA_MIN) / root if floor.rate is not None else math.inf
-    wheel = floor.wheel_weight / root if windows.ws is not None else math.inf
+    # the finest tachometer's level: every wheel's integration error stays below its own
+    wheel = float(np.min(floor.wheel_weights)) / root if windows.ws is not None else math.inf
     return att, rate, wheel
 
 

@@ -19,7 +19,7 @@ Measurements (the output groups of :mod:`airbearing.analysis.shooting`)
     or the yaw (dof 1). The gap is the RMS residual of the first group: rad/s with
     a gyro, rad without (``gap_unit``). A reaction-wheel testbed's logged wheel speeds
     ``ws1..wsn`` (FORMATS.md: ``W_i`` relative to the body, rad/s) are one more group,
-    ``ws``, last, with its own noise level: they start every window (fitted like the
+    ``ws``, last, each wheel with its own noise level: they start every window (fitted like the
     rate) and are compared at every sample, so an effect that shows mainly in the wheels'
     own motion (their inertia, their motor's torque constant, their bearing friction) is
     seen where it shows.
@@ -587,6 +587,12 @@ class NoiseFloor:
         """rad/s, the wheel speeds' weight: :attr:`wheel`, never below
         :data:`WS_SIGMA_MIN` (None without ``ws``)."""
         return None if self.wheel is None else max(self.wheel, WS_SIGMA_MIN)
+
+    @property
+    def wheel_weights(self) -> np.ndarray | None:
+        """rad/s, each wheel speed's own weight: :attr:`wheel_axes`, never below
+        :data:`WS_SIGMA_MIN` (None without ``ws``): a rig's tachometers need not be alike."""
+        return None if self.wheel_axes is None else np.maximum(self.wheel_axes, WS_SIGMA_MIN)
 
     @property
     def measured(self) -> float:

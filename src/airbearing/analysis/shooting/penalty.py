@@ -98,7 +98,7 @@ def defect_whitening(problem, sigma_w: float):
     link = np.asarray(w.link, dtype=bool)
     sa, sr = problem.sigma_att, problem.sigma_rate
     ws_rows = wheel_axes_on_rate(problem)
-    sw = problem.sigma_ws if len(ws_rows) else 1.0
+    sw = problem.sigma_ws_axes if len(ws_rows) else None  # each wheel's own level
     rows, cols, vals = [], [], []
     logdet = 0.0
     eps = 1e-12  # keeps a block positive definite at any intensity
@@ -152,7 +152,7 @@ def defect_whitening(problem, sigma_w: float):
                 if coef[a] != 0.0:
                     rows.append(iw)
                     cols.append(base + n_att + a)
-                    vals.append(coef[a] * sr / sw / math.sqrt(vw))
+                    vals.append(coef[a] * sr / sw[i] / math.sqrt(vw))
         for i in range(n_att + n_rate + len(ws_rows), nd):  # lagged gyro states: like the rate
             vr = q * t / sr**2 + eps
             rows.append(base + i)

@@ -91,9 +91,10 @@ class ShootingProblem:
         first is the primary one, whose RMS residual is the gap.
     sigma_rate, sigma_att : float
         Noise levels (rad/s, rad) that weight the residuals.
-    sigma_ws : float, optional
-        Noise level of the logged wheel speeds (rad/s), weighting the ``ws`` group;
-        needed when ``ws`` is compared.
+    sigma_ws : float or sequence of float, optional
+        Noise level of the logged wheel speeds (rad/s), one for every wheel or one per
+        wheel, each weighting its own wheel's rows of the ``ws`` group; needed when ``ws``
+        is compared.
     substeps : int
         RK4 sub-steps per sample.
     jit : bool, optional
@@ -124,7 +125,7 @@ class ShootingProblem:
         substeps: int = DEFAULT_SUBSTEPS,
         jit: bool | None = None,
         theta_slots: int = THETA_SLOTS,
-        sigma_ws: float | None = None,
+        sigma_ws=None,
     ) -> None:
         for o in outputs:
             if o not in OUTPUTS:  # pragma: no cover - programming error
@@ -134,8 +135,10 @@ class ShootingProblem:
         self.model, self.windows, self.outputs = model, windows, tuple(outputs)
         self.substeps, self.jit, self.theta_slots = int(substeps), jit, int(theta_slots)
         self.sigma_rate, self.sigma_att = float(sigma_rate), float(sigma_att)
-        self.sigma_ws = None if sigma_ws is None else float(sigma_ws)
         self.n_att, self.n_rate, self.n_ws, self.n_lag = delta_layout(model, self.outputs)
+        self.sigma_ws = self.sigma_ws_axes = None
+        if sigma_ws is not None:
+            self._set_sigma_ws(sigma_ws)
         #: the attitude is compared (not only fitted at the window starts: a dof-1 gyro
         #: log's yaw, :func:`.delta_layout`); the process noise is scaled by it then
         self.attitude_measured = "quat" in self.outputs or "yaw" in self.outputs
@@ -146,6 +149,9 @@ class ShootingProblem:
         wrow = np.concatenate([np.repeat(np.arange(L), sizes[o]) for o in self.outputs])
         self.n_win_res = group.size
         self.group = np.tile(group, nw)  # output group of each residual
+        # each residual's component within its group (a wheel of ``ws``: its own level)
+        comp = np.concatenate([np.tile(np.arange(sizes[o]), L) for o in self.outputs])
+        self.component = np.tile(comp, nw)
         self.n_meas = self.group.size  # measurement residuals; process-noise rows follow them
         # process noise (:mod:`.process_noise`): whitening of the continuity defects, or None
         self.penalty = None
@@ -188,8 +194,16 @@ class ShootingProblem:
         """Residual rows per sample of each output group."""
         return {"rate": self.n_rate, "quat": 3, "yaw": 1, "ws": self.n_ws}
 
+    def _set_sigma_ws(self, sigma_ws) -> None:
+        """The wheel speeds' levels (rad/s): one per compared wheel, and their RMS."""
+        axes = np.broadcast_to(np.asarray(sigma_ws, dtype=float), (max(self.n_ws, 1),))
+        self.sigma_ws_axes = axes[: self.n_ws].copy()
+        same = np.ptp(axes) == 0  # one level: itself (not a rounded RMS)
+        self.sigma_ws = float(axes[0]) if same else float(np.sqrt(np.mean(axes**2)))
+
     def sigma_of(self, group: str) -> float:
-        """The noise level weighting output group ``group`` (rad/s or rad)."""
+        """The noise level weighting output group ``group`` (rad/s or rad; the wheel
+        speeds': the RMS over the wheels of their own levels)."""
         if group == "rate":
             return self.sigma_rate
         return self.sigma_ws if group == "ws" else self.sigma_att
@@ -197,7 +211,7 @@ class ShootingProblem:
     def _sigmas(self) -> list:
         out = [self.sigma_rate, self.sigma_att]
         if "ws" in self.outputs:
-            out.append(self.sigma_ws)
+            out.extend(float(x) for x in self.sigma_ws_axes)
         return [max(s, 1e-300) for s in out]
 
     def __getstate__(self) -> dict:  # a fit in progress is not part of a copy
@@ -260,12 +274,12 @@ class ShootingProblem:
         parts = (*parts, np.array(self._sigmas())[:, None])
         return np.concatenate([np.asarray(a, dtype=float).reshape(-1, order="F") for a in parts])
 
-    def set_noise(self, sigma_rate: float, sigma_att: float, sigma_ws: float | None = None) -> None:
-        """New noise levels (rad/s, rad; the wheel speeds', rad/s, when given) weighting the
-        residuals (a re-weighted fit)."""
+    def set_noise(self, sigma_rate: float, sigma_att: float, sigma_ws=None) -> None:
+        """New noise levels (rad/s, rad; the wheel speeds', rad/s, one or one per wheel,
+        when given) weighting the residuals (a re-weighted fit)."""
         self.sigma_rate, self.sigma_att = float(sigma_rate), float(sigma_att)
         if sigma_ws is not None:
-            self.sigma_ws = float(sigma_ws)
+            self._set_sigma_ws(sigma_ws)
         sig = self._sigmas()
         self._data[-len(sig) :] = sig
 
@@ -687,8 +701,13 @@ class ShootingProblem:
         r = self.raw_measurement(r)
         for i, o in enumerate(self.outputs):
             sel = (self.group == i) & self.usable
-            sigma = self.sigma_of(o)
-            out[o] = float(sigma * np.sqrt(np.mean(r[sel] ** 2))) if sel.any() else float("nan")
+            if not sel.any():
+                out[o] = float("nan")
+            elif o == "ws" and np.ptp(self.sigma_ws_axes) > 0:  # each wheel its own level
+                raw = self.sigma_ws_axes[self.component[sel]] * r[sel]
+                out[o] = float(np.sqrt(np.mean(raw**2)))
+            else:
+                out[o] = float(self.sigma_of(o) * np.sqrt(np.mean(r[sel] ** 2)))
         return out
 
     def start_states(self, delta: np.ndarray) -> np.ndarray:

@@ -33,7 +33,7 @@ def _link_function(model: Model, K: int, outputs: tuple) -> ca.Function:
     with ``dx_end`` the end state's Jacobian in ``[theta; delta]`` of its own window. One
     entry per entry of ``delta`` (the states a window's ``delta`` sets): the small rotation
     ``2 vec(conj(q_end) (x) q_next)`` (dof 3) or the yaw difference, over ``sigma_att``; the
-    rate and lagged-rate differences over ``sigma_rate``, the wheel speeds' over their own
+    rate and lagged-rate differences over ``sigma_rate``, each wheel speed's over its own
     ``sigma`` (defects in noise units).
     """
     n_att, n_rate, n_ws, n_lag = delta_layout(model, outputs)
@@ -43,7 +43,7 @@ def _link_function(model: Model, K: int, outputs: tuple) -> ca.Function:
     dxe = ca.SX.sym("dx_end", nx, K + nd)
     dn = ca.SX.sym("delta_next", nd)
     xm = ca.SX.sym("x_meas_next", nx - n_lag)
-    sig = ca.SX.sym("sigma", sigma_size(outputs))
+    sig = ca.SX.sym("sigma", sigma_size(model, outputs))
     xn = start_function(model, outputs)(dn, xm)
     rate = list(range(4, 7)) if model.dof == 3 else [1]
     parts = []
@@ -55,7 +55,7 @@ def _link_function(model: Model, K: int, outputs: tuple) -> ca.Function:
     parts.append((xn[rate] - xe[rate]) / sig[0])
     if n_ws:  # the wheel speeds over their own noise level
         ws = list(range(nx - n_lag - n_ws, nx - n_lag))
-        parts.append((xn[ws] - xe[ws]) / sig[2])
+        parts.append((xn[ws] - xe[ws]) / sig[2:])
     if n_lag:
         lag = list(model.lag_index)
         parts.append((xn[lag] - xe[lag]) / sig[0])
@@ -70,8 +70,8 @@ def _link_function(model: Model, K: int, outputs: tuple) -> ca.Function:
 def _data_shapes(
     model: Model, L: int, nw: int, na: int, link: bool = False, n_sigma: int = 2
 ) -> list:
-    """Pieces of the data vector; ``sigma`` (``n_sigma``: 2, or 3 with the wheel speeds
-    compared) is always the last one. ``na``: the rows of the measured rates, then the
+    """Pieces of the data vector; ``sigma`` (``n_sigma``: 2, or 2 + one per wheel with the
+    wheel speeds compared) is always the last one. ``na``: the rows of the measured rates, then the
     measured wheel speeds when they are compared."""
     nx_plant = model.nx - len(model.lag_index)
     return [
@@ -289,7 +289,7 @@ def _build_problem(model, L, nw, K, outputs, substeps, jit, link=False):
     v = ca.MX.sym("v", K + nd * nw)
     pb = ca.MX.sym("p_base", model.n_p)
     S = ca.MX.sym("S", model.n_p, K)
-    shapes = _data_shapes(model, L, nw, n_rate + n_ws, link, sigma_size(outputs))
+    shapes = _data_shapes(model, L, nw, n_rate + n_ws, link, sigma_size(model, outputs))
     data = ca.MX.sym("data", sum(a * b for a, b in shapes))
     pieces, i = [], 0
     for a, b in shapes:

@@ -87,10 +87,10 @@ def n_wheel_speeds(model: Model, outputs: tuple) -> int:
     return sum(1 for name in model.y_names if name.startswith("ws"))
 
 
-def sigma_size(outputs: tuple) -> int:
-    """Entries of a window's ``sigma`` input: ``(rate, attitude)``, then the wheel speeds'
-    when they are compared."""
-    return 3 if "ws" in outputs else 2
+def sigma_size(model: Model, outputs: tuple) -> int:
+    """Entries of a window's ``sigma`` input: ``(rate, attitude)``, then each wheel speed's
+    own noise level when they are compared (a rig's tachometers need not be alike)."""
+    return 2 + n_wheel_speeds(model, outputs)
 
 
 def layout_key(model: Model, outputs: tuple) -> tuple:
@@ -229,7 +229,7 @@ def _sample_functions(model: Model, outputs: tuple, jit) -> tuple:
     ``(x, u, p, weight, w, q, yaw, sigma) -> r_g`` per group ``g`` of ``outputs`` (the
     window's residual, module doc), and the same followed by each ``d r_g / d[x; p]``.
     ``w`` holds the measured rates, then the measured wheel speeds when ``ws`` is
-    compared (``sigma`` then has their level third)."""
+    compared (``sigma`` then has their levels, one per wheel, from its third entry)."""
     key = ("sample", structure_key(model), outputs, jit)
 
     def build():
@@ -237,7 +237,7 @@ def _sample_functions(model: Model, outputs: tuple, jit) -> tuple:
         n_ws = n_wheel_speeds(model, outputs)
         x, u, p = ca.SX.sym("x", model.nx), ca.SX.sym("u", model.nu), ca.SX.sym("p", model.n_p)
         m, w, q = ca.SX.sym("weight"), ca.SX.sym("w", na + n_ws), ca.SX.sym("q", 4)
-        yw, sig = ca.SX.sym("yaw"), ca.SX.sym("sigma", sigma_size(outputs))
+        yw, sig = ca.SX.sym("yaw"), ca.SX.sym("sigma", sigma_size(model, outputs))
         y = model.h(x, u, p)
         res = []
         if "rate" in outputs:
@@ -250,7 +250,7 @@ def _sample_functions(model: Model, outputs: tuple, jit) -> tuple:
             res.append(m * (yw - y[model.index(["yaw"], "y")[0]]) / sig[1])
         if n_ws:
             rows = model.index([f"ws{i}" for i in range(1, n_ws + 1)], "y")
-            res.append(m * (w[na:] - y[rows]) / sig[2])
+            res.append(m * (w[na:] - y[rows]) / sig[2:])  # each wheel its own level
         ins = [x, u, p, m, w, q, yw, sig]
         xp = ca.vertcat(x, p)
         fr = ca.Function("sample_r", ins, res)
@@ -297,7 +297,7 @@ def _build_whole_window(
     PB = ca.MX.sym("p_base", model.n_p)
     S = ca.MX.sym("S", model.n_p, K)
     TH = ca.MX.sym("theta", K)
-    SIG = ca.MX.sym("sigma", sigma_size(outputs))
+    SIG = ca.MX.sym("sigma", sigma_size(model, outputs))
     P = PB + ca.mtimes(S, TH) if K else PB
     X0 = x0_fn(D, XM)
     step = step_function(model, substeps)
@@ -316,7 +316,8 @@ def _build_whole_window(
         res.append(ca.vec(M * (YW - Y[row, :]) / SIG[1]))
     if n_ws:
         rows = model.index([f"ws{i}" for i in range(1, n_ws + 1)], "y")
-        res.append(ca.vec(ca.repmat(M, n_ws, 1) * (W[na:, :] - Y[rows, :]) / SIG[2]))
+        sw = ca.repmat(SIG[2:], 1, L)  # each wheel over its own noise level
+        res.append(ca.vec(ca.repmat(M, n_ws, 1) * (W[na:, :] - Y[rows, :]) / sw))
     r = ca.vertcat(*res)
     ins = [D, XM, U, DT, M, W, Q, YW, PB, S, TH, SIG]
     names = [
@@ -391,7 +392,7 @@ def _build_chained_window(
     xn, A = step_jac(x, u, p, dt)
     sens = ca.Function("step_sens", [x, Sx, u, p, Sp, dt], [xn, ca.mtimes(A, ca.vertcat(Sx, Sp))])
     sm, sw, sq = ca.MX.sym("weight"), ca.MX.sym("w", na), ca.MX.sym("q", 4)
-    syw, ssig = ca.MX.sym("yaw"), ca.MX.sym("sigma", sigma_size(outputs))
+    syw, ssig = ca.MX.sym("yaw"), ca.MX.sym("sigma", sigma_size(model, outputs))
     sins = [x, u, p, sm, sw, sq, syw, ssig]
     out = sample_rj(*sins)
     # each group's rows transposed: a map puts the samples side by side
@@ -410,7 +411,7 @@ def _build_chained_window(
     PB = ca.MX.sym("p_base", n_p)
     S = ca.MX.sym("S", n_p, K)
     TH = ca.MX.sym("theta", K)
-    SIG = ca.MX.sym("sigma", sigma_size(outputs))
+    SIG = ca.MX.sym("sigma", sigma_size(model, outputs))
     P = PB + ca.mtimes(S, TH) if K else PB
     X0 = x0_fn(D, XM)
     data = [M, W, Q, YW, SIG]
