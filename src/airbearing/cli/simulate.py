@@ -71,6 +71,14 @@ def simulate(
         ),
     ] = "scale",
     ideal: Annotated[bool, typer.Option(help="No noise, no low-pass.")] = False,
+    attitude_only: Annotated[
+        bool,
+        typer.Option(
+            "--attitude-only",
+            help="Slew: fly the loop on the gyro, log what motion capture sees: the true "
+            "attitude plus --attitude-noise, no rate columns.",
+        ),
+    ] = False,
     gains: Annotated[
         Path | None,
         typer.Option(
@@ -96,7 +104,8 @@ def simulate(
     attitude_noise: Annotated[
         float | None,
         typer.Option(
-            help="Free/spindown: attitude noise, rad (1 sigma); default sensors.attitude_noise."
+            help="Free/spindown, slew with --attitude-only: attitude noise, rad (1 sigma); "
+            "default sensors.attitude_noise."
         ),
     ] = None,
     jitter: Annotated[
@@ -121,6 +130,14 @@ def simulate(
         Path | None, typer.Option("-o", "--out", help="Log, .csv or .parquet.")
     ] = None,
     json_out: Annotated[Path | None, typer.Option("--json", help="Summary JSON.")] = None,
+    write_tb: Annotated[
+        Path | None,
+        typer.Option(
+            "--write-testbed",
+            help="With --attitude-only: the testbed the log is read with (sensors.gyro = "
+            "false), .toml.",
+        ),
+    ] = None,
     force: Force = False,
 ) -> None:
     """Simulate a testbed and write the log (FORMATS.md) and a summary JSON."""
@@ -130,10 +147,12 @@ def simulate(
     out.input(gains, "the --gains file")
     log_path = out.plan(output, "-o", (".csv", ".parquet"))
     json_path = out.plan(json_out, "--json", (".json",))
+    tb_path = out.plan(write_tb, "--write-testbed", (".toml",))
     tb = testbed_arg(testbed)
     wheels = getattr(tb, "wheels", None) is not None
     scenario = scenario or ("slew" if tb.kind == "cmg" or wheels else "free")
-    _refuse_what_does_not_apply(scenario)
+    _refuse_what_does_not_apply(scenario, attitude_only)
+    tb = _loop_testbed(tb, scenario, attitude_only)
     if wheels:
         refuse_given(("steering",), f"a CMG steering law; testbed '{tb.name}' turns on wheels")
     _check_numbers(yaw_deg, axis, duration, initial_rate, initial_quaternion, sliders,
@@ -166,8 +185,13 @@ def simulate(
             )  # fmt: skip
     if tuned is not None:
         summary = {**summary, "gains": tuned}
-    _write(out, log_path, json_path, result,
-           {"testbed": tb.name, "scenario": scenario, "seed": seed, **summary})  # fmt: skip
+    log, written_tb = result.log, None
+    if attitude_only:
+        log, summary = _motion_capture(log, summary, attitude_noise, seed, ideal)
+        written_tb = log.testbed
+    _write(out, log_path, json_path, log,
+           {"testbed": tb.name, "scenario": scenario, "seed": seed, **summary},
+           tb_path, written_tb)  # fmt: skip
 
 
 #: Largest | |q| - 1 | of --initial-quaternion: four components typed to 4 decimals are off
@@ -179,13 +203,14 @@ QUATERNION_TOLERANCE = 1e-3
 _SCENARIO_OPTIONS = (
     (("yaw_deg", "axis", "steering", "rate_limit", "gains"), ("slew",)),
     (("initial_rate",), ("free",)),
-    (("initial_quaternion", "attitude_noise"), ("free", "spindown")),
+    (("initial_quaternion",), ("free", "spindown")),
+    (("attitude_only", "write_tb"), ("slew",)),
     (("sliders",), ("free",)),
     (("spin_rate",), ("spindown",)),
 )
 
 
-def _refuse_what_does_not_apply(scenario: str) -> None:
+def _refuse_what_does_not_apply(scenario: str, attitude_only: bool) -> None:
     """An option given that ``scenario`` would ignore: one line naming it."""
     for names, used in _SCENARIO_OPTIONS:
         if scenario not in used:
@@ -193,6 +218,67 @@ def _refuse_what_does_not_apply(scenario: str) -> None:
                 names,
                 f"not used by --scenario {scenario} (only by --scenario {' and '.join(used)})",
             )
+    if scenario == "slew" and not attitude_only:
+        refuse_given(
+            ("attitude_noise",),
+            "the slew logs the loop's own attitude; the camera noise of a motion-capture "
+            "log is for --scenario slew --attitude-only, free and spindown",
+        )
+        refuse_given(
+            ("write_tb",),
+            "writes the gyro-less testbed an --attitude-only log is read with; give "
+            "--attitude-only",
+        )
+
+
+def _loop_testbed(tb, scenario: str, attitude_only: bool):
+    """The testbed the slew's loop flies: with ``--attitude-only`` a testbed file without a
+    gyro (``sensors.gyro = false``, motion capture) flies on the gyro its loop needs, of the
+    file's ``gyro_noise``; without it, such a file is refused naming the option."""
+    if scenario != "slew" or tb.sensors.gyro:
+        return tb
+    if not attitude_only:
+        raise InputError(
+            f"{tb.source}: testbed '{tb.name}' has no rate gyro (sensors.gyro = false) and "
+            "the seed-001 slew loop feeds one back (eqs. 3, 19); for a rig that flies on a "
+            "gyro and logs motion capture give --attitude-only (the loop flies on a gyro of "
+            "sensors.gyro_noise, the log has the attitude only)"
+        )
+    import dataclasses
+
+    return tb.replace(sensors=dataclasses.replace(tb.sensors, gyro=True))
+
+
+#: Stream of ``--noise-seed`` the camera's noise of ``--attitude-only`` is drawn from: not
+#: the loop's (stream 0, the gyro's noise), which would make the two noises one sequence.
+CAMERA_STREAM = 1
+
+
+def _motion_capture(log, summary: dict, attitude_noise, seed: int, ideal: bool):
+    """The slew's log as motion capture records it
+    (:func:`~airbearing.analysis.simulation.attitude_only.attitude_only`) and the summary
+    saying so: ``log`` ``"attitude_only"``, ``attitude_noise`` (rad, the camera's) and
+    ``loop_gyro_noise`` (rad/s, the gyro the loop flew on)."""
+    import numpy as np
+
+    from airbearing.analysis.simulation.attitude_only import attitude_only
+
+    sig = 0.0 if ideal else attitude_noise
+    camera_seed = int(np.random.SeedSequence([seed, CAMERA_STREAM]).generate_state(1)[0])
+    gyro_noise = 0.0 if ideal else float(log.testbed.sensors.gyro_noise)
+    tb_att, att = attitude_only(log, attitude_noise=sig, seed=camera_seed)
+    warnings = list(summary.get("warnings") or ())
+    if not ideal and gyro_noise == 0:
+        warnings.append(
+            "the loop flew on a noise-free gyro: the testbed gives no sensors.gyro_noise"
+        )
+    return att, {
+        **summary,
+        **({"warnings": warnings} if warnings else {}),
+        "log": "attitude_only",
+        "attitude_noise": tb_att.sensors.attitude_noise,
+        "loop_gyro_noise": gyro_noise,
+    }
 
 
 def _check_numbers(yaw_deg, axis, duration, initial_rate, initial_quaternion, sliders,
@@ -308,16 +394,20 @@ def _scenario(tb, scenario, length, *, yaw_deg, axis, steering, rate_limit, effe
     return result, free_summary(result)
 
 
-def _write(out, log_path, json_path, result, summary: dict) -> None:
-    """The log and the summary JSON written together, then the summary printed."""
+def _write(out, log_path, json_path, log, summary: dict, tb_path=None, testbed=None) -> None:
+    """The log, the summary JSON and the testbed (``--write-testbed``) written together,
+    then the summary printed."""
     from airbearing.io.output import to_jsonable
 
     summary = to_jsonable(summary)
     if log_path is not None:
         from airbearing.io.log import write_log
 
-        log = result.log
         out.file(log_path, lambda tmp: write_log(log, tmp))
+    if tb_path is not None:
+        from airbearing.io.testbed import write_testbed
+
+        out.file(tb_path, lambda tmp: write_testbed(testbed, tmp))
     out.json(json_path, summary)
     out.commit()
     echo_summary(_episodes_in_words(summary), skip=("warnings", "tilt_note"))
@@ -325,7 +415,7 @@ def _write(out, log_path, json_path, result, summary: dict) -> None:
         typer.echo(f"warning: {w}")
     if summary.get("tilt_note"):
         typer.echo(f"note: {summary['tilt_note']}")
-    for p in (log_path, json_path):
+    for p in (log_path, json_path, tb_path):
         if p is not None:
             typer.echo(f"wrote {p}")
 
