@@ -366,6 +366,12 @@ class Discrepancy:
             "testbed_attitude_noise": fl["testbed_attitude_noise"],
             # reaction-wheel logs only: the fitted wheel speeds' noise (rad/s)
             **({"wheel_speed_noise": fl["wheel_speed_noise"]} if "wheel_speed_noise" in fl else {}),
+            # ... and each wheel's own level, in wheel order (rad/s), its residual's weight
+            **(
+                {"wheel_speed_noise_per_wheel": [float(v) for v in self.floor.wheel_axes]}
+                if self.floor.wheel_axes is not None
+                else {}
+            ),
             "logs": logs,
             "validation": [v.to_json() for v in self.validation],
             "localisation": list(self.localisation.words),
