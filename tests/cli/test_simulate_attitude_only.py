@@ -19,6 +19,7 @@ from cli_run import run
 from scipy import stats
 from statsmodels.stats.diagnostic import acorr_ljungbox
 
+from airbearing import quaternion as quat
 from airbearing.io.testbed import load_testbed, read_testbed, write_testbed
 
 LEVEL = 0.001  # test level of the noise checks: a correct log fails one in a thousand runs
@@ -56,6 +57,21 @@ def test_the_log_has_the_camera_s_attitude_and_no_rate(tmp_path, monkeypatch, no
     assert not tb.sensors.gyro and tb.sensors.attitude_noise == sigma
 
 
+def test_a_three_axis_log_turns_the_true_attitude_by_the_camera_s_noise(tmp_path, monkeypatch):
+    # cmg-3dof (CMGs, dof 3): the attitude is q_true (x) exp(n), n white of --attitude-noise
+    monkeypatch.chdir(tmp_path)
+    args = ["simulate", "cmg-3dof", "--attitude-only", "--yaw-deg", "30", "--duration", "10"]
+    assert run([*args, "--attitude-noise", "2e-3", "-o", "m.csv"]) == 0
+    d = pd.read_csv("m.csv")
+    assert not RATES & set(d.columns)
+    q = d[["qw", "qx", "qy", "qz"]].to_numpy()
+    q_true = d[[f"true_{k}" for k in ("qw", "qx", "qy", "qz")]].to_numpy()
+    dq = quat.qmul(quat.qconj(q_true), q)
+    n = 2 * dq[:, 1:] * np.sign(dq[:, :1])  # the vector part of exp(n) is n / 2, |n| << 1
+    p_var, p_lb = _white_at(n.ravel(), 2e-3)
+    assert p_var > LEVEL and p_lb > LEVEL, (p_var, p_lb)
+
+
 def _gyroless(tmp_path):
     tb = load_testbed("rw-yaw")
     path = tmp_path / "rig.toml"
@@ -72,6 +88,22 @@ def test_a_gyroless_testbed_slews_only_with_the_option(tmp_path, monkeypatch, ca
     assert not (tmp_path / "a.csv").exists()
     assert run(["simulate", str(rig), "--attitude-only", "--duration", "2", "-o", "a.csv"]) == 0
     assert not RATES & set(pd.read_csv("a.csv").columns)
+
+
+def test_a_gyroless_file_without_gyro_noise_flies_a_noise_free_gyro_and_says_so(
+    tmp_path, monkeypatch
+):
+    tb = load_testbed("rw-yaw")
+    rig = tmp_path / "rig.toml"
+    write_testbed(
+        tb.replace(sensors=dataclasses.replace(tb.sensors, gyro=False, gyro_noise=0.0)), rig
+    )
+    monkeypatch.chdir(tmp_path)
+    args = ["simulate", str(rig), "--attitude-only", "--duration", "2", "--json", "s.json"]
+    assert run(args) == 0
+    summary = json.loads((tmp_path / "s.json").read_text())
+    assert summary["loop_gyro_noise"] == 0.0
+    assert any("noise-free gyro" in w for w in summary["warnings"]), summary
 
 
 BAD = [
