@@ -290,6 +290,7 @@ def _descend(problem, fit_at, grid, theta0, delta0, start, k: int, bounds, stop=
     def real(kappa, fit):
         nonlocal lin
         out[kappa] = (fit, loglik(problem, fit, k))
+        lin = None  # (the last one freed before the next is made: each holds a Jacobian)
         lin = Linearisation.of(problem, fit, k, bounds)
         _keep_best_jacobian(out, start)
 
@@ -453,7 +454,8 @@ class Linearisation:
         set_intensity(problem, kappa)
         W = problem.penalty
         A = sp.csc_matrix(sp.vstack([self.Jm, W @ self.C], format="csc"))
-        Af = A[:, self.free]
+        # (no copy when nothing is pinned: 100s of MB on an hour of samples)
+        Af = A if self.free.size == A.shape[1] else A[:, self.free]
         G = sp.csc_matrix(Af.T @ Af)
         sc = np.sqrt(np.maximum(G.diagonal(), 1e-300))
         Ds = sp.diags(1.0 / sc)
