@@ -4,7 +4,8 @@ A friction the nominal three-axis Model lacks, far above the noise, puts the mos
 intensity at the top of the grid while the descent's last IPOPT fit sits at its bottom
 (nearly one trajectory per piece), whose linearisation holds nowhere near the top: the
 decade below the best is solved on the best's own Gauss-Newton linearisation instead of
-by one more IPOPT fit.
+by one more IPOPT fit. The whole descent (the discrepancy search's; ``replay`` ends it once
+the likelihood has clearly peaked) on the replay's problem.
 """
 
 from __future__ import annotations
@@ -13,8 +14,9 @@ import pytest
 from rigs import jittered_platform
 
 import airbearing as ab
+from airbearing.analysis.discrepancy.replay import model_for, prepare, problem_for
 from airbearing.analysis.shooting.problem import ShootingProblem
-from airbearing.analysis.shooting.process_noise import KAPPA_GRID
+from airbearing.analysis.shooting.process_noise import KAPPA_GRID, estimate_process_noise
 
 PLATFORM = ab.load_testbed("platform-3dof")
 
@@ -30,8 +32,11 @@ def test_the_decade_below_a_best_at_the_top_is_no_ipopt_fit(monkeypatch):
         return fit(self, *args, **kwargs)
 
     monkeypatch.setattr(ShootingProblem, "fit", counted)
-    out = ab.replay(PLATFORM, log)
-    pn = out.process_noise
+    datas, windows, floor = prepare(PLATFORM, [log])
+    model = model_for(PLATFORM)
+    problem = problem_for(model, datas, windows, floor, theta_slots=0)
+    start = problem.fit(model.p0)
+    pn = estimate_process_noise(problem, model.p0, start=start).extra["process_noise"]
     best = pn["kappa"]
     assert best == KAPPA_GRID[0] and pn["significant"], pn
     # the descent reached the bottom of the grid by IPOPT fits (the linearisation of the

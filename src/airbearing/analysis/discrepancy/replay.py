@@ -318,7 +318,9 @@ class Replay:
         The unexplained torque estimated on linked pieces
         (:mod:`airbearing.analysis.shooting.process_noise`): its intensity, significance,
         the horizon over which the Model predicts to the noise, and ``gap_whole``, the gap
-        of one trajectory per segment. None on fixed windows.
+        of the most continuous fit reached (``kappa_whole``: one trajectory per segment at
+        the bottom of the grid; higher when the likelihood clearly peaked above it, where
+        the descent ends). None on fixed windows.
 
     Printing one gives the verdict a person reads (``str``); its ``repr`` is one short line.
 
@@ -599,7 +601,11 @@ def replay(
     pn = None
     if windows.linked:  # the horizon from the data: the unexplained torque's intensity
         say("replay: estimating the unexplained torque (the horizon)", 0, 1)
-        long = estimate_process_noise(problem, model.p0, name=f"replay of {names}", start=fit)
+        # the descent ends once the likelihood has clearly peaked: below a torque the model
+        # misses, each lower intensity's fit is a longer trajectory ever further from the data
+        # (the costliest fits of a replay, more iterations the longer the log)
+        long = estimate_process_noise(problem, model.p0, name=f"replay of {names}", start=fit,
+                                      stop_when_peaked=True)  # fmt: skip
         pn = long.extra["process_noise"]
     say("replay: done", 1, 1)
     return Replay(model, tuple(datas), windows, floor, fit, problem, pn)

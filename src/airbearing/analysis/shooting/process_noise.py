@@ -65,6 +65,7 @@ __all__ = [
     "defect_whitening",
     "estimate_process_noise",
     "loglik",
+    "peaked",
     "penalised_solver",
     "set_intensity",
 ]
@@ -180,6 +181,7 @@ def estimate_process_noise(
     grid=KAPPA_GRID,
     start=None,
     measurement: bool = True,
+    stop_when_peaked: bool = False,
 ):
     """Fit at each intensity of ``grid`` (top down, warm-started) and keep the most likely.
 
@@ -196,6 +198,12 @@ def estimate_process_noise(
     measurement : bool
         First estimate an AR(1) model of coloured measurement noise on the top of the grid
         (:mod:`.measurement_noise`) when the problem has none yet; ``problem`` keeps it.
+    stop_when_peaked : bool
+        End the descent once the likelihood has clearly peaked (:func:`peaked`): the
+        lower intensities, whose fits of a model that misses a torque are the costliest
+        (long trajectories far from the data), are not fitted. The test's ``lr`` and the
+        ``gap_whole`` are then those of the smallest intensity reached (``kappa_whole``);
+        the most likely intensity, its fit and ``p`` are the same.
 
     Returns
     -------
@@ -207,13 +215,15 @@ def estimate_process_noise(
     problem.reuse_last = True
     try:
         return _estimate(problem, p_base, S, theta0, lower, upper, delta0, name, grid, start,
-                         measurement)  # fmt: skip
+                         measurement, stop_when_peaked)  # fmt: skip
     finally:
         problem.reuse_last = False
         problem.forget_last()
 
 
-def _estimate(problem, p_base, S, theta0, lower, upper, delta0, name, grid, start, measurement):
+def _estimate(
+    problem, p_base, S, theta0, lower, upper, delta0, name, grid, start, measurement, stop
+):
     """:func:`estimate_process_noise` (its arguments in order)."""
     k = 0 if S is None else np.asarray(S).shape[1]
 
@@ -241,7 +251,7 @@ def _estimate(problem, p_base, S, theta0, lower, upper, delta0, name, grid, star
             set_measurement_noise(problem, noise)
             start = fit_at(grid[0], start.theta, start.delta)
     bounds = (np.asarray(p_base, dtype=float), S, lower, upper)
-    fits = _descend(problem, fit_at, grid, theta0, delta0, start, k, bounds)
+    fits = _descend(problem, fit_at, grid, theta0, delta0, start, k, bounds, stop)
     ll = {kappa: v[1] for kappa, v in fits.items()}
     fits = {kappa: v[0] for kappa, v in fits.items()}
     best = max(ll, key=ll.get)
@@ -262,9 +272,10 @@ def _estimate(problem, p_base, S, theta0, lower, upper, delta0, name, grid, star
     return fit
 
 
-def _descend(problem, fit_at, grid, theta0, delta0, start, k: int, bounds) -> dict:
+def _descend(problem, fit_at, grid, theta0, delta0, start, k: int, bounds, stop=False) -> dict:
     """``kappa -> (fit, log-likelihood)`` down the grid (warm-started), then one decade
-    either side of the best; a solve that fails ends the descent (keeps what was found).
+    either side of the best; a solve that fails ends the descent (keeps what was found), and
+    so does, with ``stop``, a likelihood that has clearly peaked (:func:`peaked`).
 
     An intensity's fit is the last IPOPT fit's Gauss-Newton linearisation solved at that
     intensity (:class:`Linearisation`, a :class:`LinearisedFit`) when that linearisation
@@ -279,6 +290,7 @@ def _descend(problem, fit_at, grid, theta0, delta0, start, k: int, bounds) -> di
     def real(kappa, fit):
         nonlocal lin
         out[kappa] = (fit, loglik(problem, fit, k))
+        lin = None  # (the last one freed before the next is made: each holds a Jacobian)
         lin = Linearisation.of(problem, fit, k, bounds)
         _keep_best_jacobian(out, start)
 
@@ -298,6 +310,8 @@ def _descend(problem, fit_at, grid, theta0, delta0, start, k: int, bounds) -> di
                         raise
                     break  # a lower intensity the fit cannot reach
         th, d = out[kappa][0].theta, out[kappa][0].delta
+        if stop and peaked([out[a][1] for a in grid[: i + 1]]):
+            break
     best = max(out, key=lambda a: out[a][1])
     if lin is not None and not isinstance(out[best][0], LinearisedFit):
         # a decade either side of the best from the best's linearisation, not the last
@@ -325,6 +339,32 @@ def _descend(problem, fit_at, grid, theta0, delta0, start, k: int, bounds) -> di
         except SolverError:  # (the start is IPOPT's: the loop ends)
             continue
     return out
+
+
+#: nats: a log-likelihood this far below the best settles the test against it (module doc)
+#: to double precision: its p-value ``0.5 chi2.sf(2 x 750, 1) = 0.5 erfc(sqrt(750))``, about
+#: ``e^-750 / 97``, is below the smallest double (``e^-744.4``): 0, as any lower one would give.
+PEAK_DROP = 750.0
+#: Successive grid intensities (factors of 100 apart) at which the likelihood must fall.
+PEAK_FALLS = 2
+
+
+def peaked(lls) -> bool:
+    """Whether a descent's log-likelihoods (nats, down the grid in order) have clearly peaked.
+
+    True when the last :data:`PEAK_FALLS` intensities each fell below the one before and
+    the last is more than :data:`PEAK_DROP` below the best: the best is significant
+    against it at any level a double can state, and the likelihood (unimodal along the grid
+    in practice: each lower intensity ties the pieces closer to one trajectory of a model
+    that does not follow the data) keeps falling. A model that explains the data leaves a
+    likelihood that flattens at the bottom of the grid: the descent goes on there.
+    """
+    lls = [float(v) for v in lls]
+    if len(lls) < PEAK_FALLS + 1:
+        return False
+    tail = lls[-(PEAK_FALLS + 1) :]
+    falling = all(b < a for a, b in zip(tail[:-1], tail[1:], strict=True))
+    return falling and max(lls) - lls[-1] > PEAK_DROP
 
 
 def _keep_best_jacobian(out: dict, start) -> None:
@@ -414,7 +454,8 @@ class Linearisation:
         set_intensity(problem, kappa)
         W = problem.penalty
         A = sp.csc_matrix(sp.vstack([self.Jm, W @ self.C], format="csc"))
-        Af = A[:, self.free]
+        # (no copy when nothing is pinned: 100s of MB on an hour of samples)
+        Af = A if self.free.size == A.shape[1] else A[:, self.free]
         G = sp.csc_matrix(Af.T @ Af)
         sc = np.sqrt(np.maximum(G.diagonal(), 1e-300))
         Ds = sp.diags(1.0 / sc)
