@@ -246,3 +246,13 @@ def test_missing_gimbal_rates_are_differenced(cmg):
     )
     assert any("forward differences" in n for n in data.notes)
     assert build_model(cmg).nu == data.u.shape[1]
+
+
+def test_a_single_log_gap_is_the_replay_gap_after_coloured_noise_is_estimated(platform):
+    # the replay's fit is white; its process-noise estimate then sets a coloured measurement
+    # noise on the problem: a log's gap must still unwhiten the fit's residual as it was made
+    res = _free(platform, seed=3, attitude_noise=1e-3, effects={"viscous_friction": 2e-4})
+    rp = replay(platform, res.log)
+    assert rp.problem.measurement_noise is not None  # the case this test is about
+    assert rp.log_gaps() == [rp.gap]
+    assert rp.to_json()["logs"][0]["gap"] == rp.gap

@@ -464,7 +464,8 @@ class Replay:
             per.append({"log": d.log.source, "gap": g, **d.segment_json()})
         wheels = {}
         if "ws" in self.problem.outputs:  # the wheel speeds' own RMS residual, rad/s
-            wheels["wheel_gap"] = self.problem.noise_rms(self.fit.extra["r"])["ws"]
+            w = self.fit.extra.get("meas_whitening", "problem")
+            wheels["wheel_gap"] = self.problem.noise_rms(self.fit.extra["r"], whitening=w)["ws"]
         return {
             "testbed": self.data.testbed.name,
             "effects": {k: v for k, v in self.data.testbed.effects.items()},
@@ -491,7 +492,10 @@ def log_gaps(problem: ShootingProblem, fit: Fit) -> list[float]:
     win = np.repeat(np.arange(problem.windows.n), problem.n_win_res)
     src = problem.windows.source[win]
     n_logs = int(problem.windows.source.max()) + 1
-    return [problem.gap_of_residual(r, src == i) for i in range(n_logs)]
+    # the whitening the fit was made under: the process-noise estimate may have set a
+    # coloured measurement noise on the problem since (replay's fit is white)
+    w = fit.extra.get("meas_whitening", "problem")
+    return [problem.gap_of_residual(r, src == i, whitening=w) for i in range(n_logs)]
 
 
 def prepare(testbed: Testbed, logs, *, window_s: float | None = None, piece_s: float | None = None):
@@ -598,6 +602,7 @@ def replay(
                           theta_slots=0)  # fmt: skip
     names = ", ".join(d.log.source for d in datas)
     fit = problem.fit(model.p0, name=f"replay of {names}: initial states of the windows")
+    fit.extra["meas_whitening"] = problem.meas_whitening  # what its residual is made under
     pn = None
     if windows.linked:  # the horizon from the data: the unexplained torque's intensity
         say("replay: estimating the unexplained torque (the horizon)", 0, 1)

@@ -361,22 +361,29 @@ class ShootingProblem:
         v, Sp = self._v(delta, None)
         return self._eval(0, v, np.asarray(p, dtype=float), Sp)
 
-    def gap_of_residual(self, r: np.ndarray, mask: np.ndarray | None = None) -> float:
-        """RMS of the primary output's residual over usable rows (its unit)."""
+    def gap_of_residual(
+        self, r: np.ndarray, mask: np.ndarray | None = None, *, whitening="problem"
+    ) -> float:
+        """RMS of the primary output's residual over usable rows (its unit).
+
+        ``whitening``: the measurement whitening ``r`` was made under (default the
+        problem's present one; ``None`` for white noise).
+        """
         sel = self.primary & self.usable
         if mask is not None:
             sel &= mask
         sigma = self.sigma_rate if self.outputs[0] == "rate" else self.sigma_att
         if not sel.any():
             return float("nan")
-        r = self.raw_measurement(r)
+        r = self.raw_measurement(r, whitening=whitening)
         return float(sigma * np.sqrt(np.mean(r[sel] ** 2)))
 
-    def raw_measurement(self, r: np.ndarray) -> np.ndarray:
+    def raw_measurement(self, r: np.ndarray, *, whitening="problem") -> np.ndarray:
         """The measurement rows of a residual ``r`` in noise units, unwhitened when the
-        measurement noise is coloured (:mod:`.measurement_noise`): what gaps are made of."""
+        measurement noise is coloured (:mod:`.measurement_noise`): what gaps are made of.
+        ``whitening``: the one ``r`` was made under (default the problem's present one)."""
         r = np.asarray(r, dtype=float)[: self.n_meas]
-        P = self.meas_whitening
+        P = self.meas_whitening if isinstance(whitening, str) else whitening
         if P is None:
             return r
         if self._meas_lu is None or self._meas_lu[0] is not P:
@@ -695,10 +702,11 @@ class ShootingProblem:
         c = np.where(col > 0, col, 1.0)
         return _reduced(Jd / c, k)[0] * np.outer(c[:k], c[:k])
 
-    def noise_rms(self, r: np.ndarray) -> dict:
-        """RMS of each output group's UNWEIGHTED residual over usable rows (rad/s, rad)."""
+    def noise_rms(self, r: np.ndarray, *, whitening="problem") -> dict:
+        """RMS of each output group's UNWEIGHTED residual over usable rows (rad/s, rad);
+        ``whitening`` as :meth:`gap_of_residual`'s."""
         out = {}
-        r = self.raw_measurement(r)
+        r = self.raw_measurement(r, whitening=whitening)
         for i, o in enumerate(self.outputs):
             sel = (self.group == i) & self.usable
             if not sel.any():
