@@ -303,3 +303,50 @@ def library_patches(tuned_once, computed_once):
 def library_once(monkeypatch, library_patches):
     """:func:`library_patches` for one test."""
     library_patches(monkeypatch)
+
+
+#: Set to a file name: each pytest process (every xdist worker, and the controller) appends
+#: one JSON line of what it cost (benchmarks/suite_costs.py --workers reads them).
+COSTS_ENV = "AIRBEARING_SUITE_COSTS"
+_started = {}
+
+
+def pytest_configure(config):
+    import os
+    import time
+
+    _started.update(wall=time.monotonic(), cpu=os.times())
+
+
+def pytest_collection_finish(session):
+    import os
+
+    _started["collected_cpu"] = os.times()
+
+
+def pytest_sessionfinish(session):
+    """One JSON line per process in ``$AIRBEARING_SUITE_COSTS``: its CPU (its own, and its
+    children's: the C compiler, the commands tests run), the part of it before the first test
+    (imports and collection), and the compiled-function cache's counters and compile time."""
+    import os
+    import time
+
+    path = os.environ.get(COSTS_ENV)
+    if not path or "wall" not in _started:
+        return
+    now, t0 = os.times(), _started["cpu"]
+    t1 = _started.get("collected_cpu", now)
+    row = {
+        "worker": os.environ.get("PYTEST_XDIST_WORKER", "main"),
+        "wall": time.monotonic() - _started["wall"],
+        "cpu": now.user + now.system - t0.user - t0.system,
+        "cpu_to_collected": t1.user + t1.system - t0.user - t0.system,
+        "children_cpu": now.children_user + now.children_system
+        - t0.children_user - t0.children_system,
+    }  # fmt: skip
+    compiled = sys.modules.get("airbearing.models.compiled")
+    if compiled is not None:
+        row["compile_seconds"] = compiled.compile_seconds()
+        row["cache"] = compiled.cache_info().to_json()
+    with open(path, "a") as f:  # one short append per process: lines do not interleave
+        f.write(json.dumps(row) + "\n")
