@@ -305,6 +305,10 @@ def library_once(monkeypatch, library_patches):
     library_patches(monkeypatch)
 
 
+#: Set to a file name: the test run creates it when its session starts, after everything it
+#: needs is installed (.ci/run starts the slow studies beside the suite then, not while the
+#: README's `pip install` still replaces the package).
+STARTED_ENV = "AIRBEARING_SESSION_STARTED"
 #: Set to a file name: each pytest process (every xdist worker, and the controller) appends
 #: one JSON line of what it cost (benchmarks/suite_costs.py --workers reads them).
 COSTS_ENV = "AIRBEARING_SUITE_COSTS"
@@ -316,6 +320,14 @@ def pytest_configure(config):
     import time
 
     _started.update(wall=time.monotonic(), cpu=os.times())
+
+
+def pytest_sessionstart(session):
+    import os
+
+    started = os.environ.get(STARTED_ENV)
+    if started and "PYTEST_XDIST_WORKER" not in os.environ:
+        Path(started).touch()
 
 
 def pytest_collection_finish(session):
@@ -338,6 +350,7 @@ def pytest_sessionfinish(session):
     t1 = _started.get("collected_cpu", now)
     row = {
         "worker": os.environ.get("PYTEST_XDIST_WORKER", "main"),
+        "markers": session.config.option.markexpr,
         "wall": time.monotonic() - _started["wall"],
         "cpu": now.user + now.system - t0.user - t0.system,
         "cpu_to_collected": t1.user + t1.system - t0.user - t0.system,
