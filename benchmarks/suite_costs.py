@@ -64,7 +64,8 @@ def print_workers(rows: list[dict]) -> None:
         vals = [r.get(k, 0.0) for k in keys]
         for k, v in zip(keys, vals, strict=True):
             total[k] += v
-        print(f"{r['worker'] + ('' if r.get('markers') != 'slow' else '(s)'):>8} " + " ".join(f"{v:7.1f}" for v in vals[:3])
+        name = r["worker"] + ("(s)" if r.get("markers") == "slow" else "")
+        print(f"{name:>8} " + " ".join(f"{v:7.1f}" for v in vals[:3])
               + f" {vals[3]:8.1f} {vals[4]:8.1f} {cache.get('compiled', 0):8d}"
               f" {cache.get('disk_hits', 0):5d}")  # fmt: skip
     print(f"{'sum':>8} " + " ".join(f"{total[k]:7.1f}" for k in keys[:3])
