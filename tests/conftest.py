@@ -169,6 +169,10 @@ def demo_run(tmp_path_factory):
     return cwd / "demo-out", proc
 
 
+#: A folder for :func:`computed_once`'s results shared by several test runs (see there).
+SHARED_ENV = "AIRBEARING_COMPUTED_ONCE_DIR"
+
+
 @pytest.fixture(scope="session")
 def computed_once(tmp_path_factory):
     """``computed_once(key, compute) -> compute()``, computed once per test run.
@@ -179,6 +183,9 @@ def computed_once(tmp_path_factory):
     a file lock, so the workers compute it once between them, not once each (the pattern
     of pytest-xdist's docs, "Making session-scoped fixtures execute only once").
     ``key`` names the computation completely (its inputs); ``compute`` takes no arguments.
+    With ``$AIRBEARING_COMPUTED_ONCE_DIR`` set, the pickles are in that folder, shared by
+    every test run that sets it (.ci/run's suite and slow studies, side by side, on the same
+    code: a key computed by one is read by the other).
     """
     import fcntl
     import os
@@ -187,8 +194,8 @@ def computed_once(tmp_path_factory):
     root = tmp_path_factory.getbasetemp()
     if os.environ.get("PYTEST_XDIST_WORKER"):
         root = root.parent  # shared by the workers of this run
-    folder = root / "computed-once"
-    folder.mkdir(exist_ok=True)
+    folder = Path(os.environ.get(SHARED_ENV) or root / "computed-once")
+    folder.mkdir(parents=True, exist_ok=True)
     here: dict = {}
     computing: set = set()
 
@@ -204,7 +211,10 @@ def computed_once(tmp_path_factory):
                     if path.exists():
                         here[key] = path.read_bytes()
                     else:
+                        t0 = os.times()
                         here[key] = pickle.dumps(compute())
+                        t1 = os.times()
+                        _computed[key] = t1.user + t1.system - t0.user - t0.system
                         path.write_bytes(here[key])
             finally:
                 computing.discard(key)
@@ -313,6 +323,8 @@ STARTED_ENV = "AIRBEARING_SESSION_STARTED"
 #: one JSON line of what it cost (benchmarks/suite_costs.py --workers reads them).
 COSTS_ENV = "AIRBEARING_SUITE_COSTS"
 _started = {}
+#: CPU seconds of each ``computed_once`` computation this process made (for the costs row).
+_computed: dict[str, float] = {}
 
 
 def pytest_configure(config):
@@ -361,5 +373,7 @@ def pytest_sessionfinish(session):
     if compiled is not None:
         row["compile_seconds"] = compiled.compile_seconds()
         row["cache"] = compiled.cache_info().to_json()
+    if _computed:
+        row["computed_once"] = _computed
     with open(path, "a") as f:  # one short append per process: lines do not interleave
         f.write(json.dumps(row) + "\n")
