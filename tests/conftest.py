@@ -169,10 +169,6 @@ def demo_run(tmp_path_factory):
     return cwd / "demo-out", proc
 
 
-#: A folder for :func:`computed_once`'s results shared by several test runs (see there).
-SHARED_ENV = "AIRBEARING_COMPUTED_ONCE_DIR"
-
-
 @pytest.fixture(scope="session")
 def computed_once(tmp_path_factory):
     """``computed_once(key, compute) -> compute()``, computed once per test run.
@@ -183,9 +179,6 @@ def computed_once(tmp_path_factory):
     a file lock, so the workers compute it once between them, not once each (the pattern
     of pytest-xdist's docs, "Making session-scoped fixtures execute only once").
     ``key`` names the computation completely (its inputs); ``compute`` takes no arguments.
-    With ``$AIRBEARING_COMPUTED_ONCE_DIR`` set, the pickles are in that folder, shared by
-    every test run that sets it (.ci/run's suite and slow studies, side by side, on the same
-    code: a key computed by one is read by the other).
     """
     import fcntl
     import os
@@ -194,8 +187,8 @@ def computed_once(tmp_path_factory):
     root = tmp_path_factory.getbasetemp()
     if os.environ.get("PYTEST_XDIST_WORKER"):
         root = root.parent  # shared by the workers of this run
-    folder = Path(os.environ.get(SHARED_ENV) or root / "computed-once")
-    folder.mkdir(parents=True, exist_ok=True)
+    folder = root / "computed-once"
+    folder.mkdir(exist_ok=True)
     here: dict = {}
     computing: set = set()
 
