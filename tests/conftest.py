@@ -308,9 +308,11 @@ def library_once(monkeypatch, library_patches):
     library_patches(monkeypatch)
 
 
-#: Set to a file name: the test run creates it when its session starts, after everything it
-#: needs is installed (.ci/run starts the slow studies beside the suite then, not while the
-#: README's `pip install` still replaces the package).
+#: Set to a file name: a test process creates it once it has collected the tests (so the
+#: package is installed, and its modules and the test modules are imported, their bytecode
+#: cached). .ci/run starts the slow studies beside the suite then: not while the README's
+#: `pip install` still replaces the package, nor while the suite's workers compile the same
+#: bytecode (four processes compiling it at once cost ~5 s of CPU more each).
 STARTED_ENV = "AIRBEARING_SESSION_STARTED"
 #: Set to a file name: each pytest process (every xdist worker, and the controller) appends
 #: one JSON line of what it cost (benchmarks/suite_costs.py --workers reads them).
@@ -327,18 +329,13 @@ def pytest_configure(config):
     _started.update(wall=time.monotonic(), cpu=os.times())
 
 
-def pytest_sessionstart(session):
-    import os
-
-    started = os.environ.get(STARTED_ENV)
-    if started and "PYTEST_XDIST_WORKER" not in os.environ:
-        Path(started).touch()
-
-
 def pytest_collection_finish(session):
     import os
 
     _started["collected_cpu"] = os.times()
+    started = os.environ.get(STARTED_ENV)
+    if started:  # (under xdist the workers collect, the controller does not)
+        Path(started).touch()
 
 
 def pytest_sessionfinish(session):
