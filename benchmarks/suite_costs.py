@@ -10,6 +10,13 @@ included: a module's or the session's shared fixture is charged to the first tes
 asks for it). Files are named from the report's ``classname`` (``tests.discrepancy.test_replay``
 -> ``tests/discrepancy/test_replay.py``). The sum over files is the suite's work; with
 ``-n 2 --dist loadfile`` its wall time is at least half of it and at least the longest file.
+
+What each process cost (its CPU, its children's: the C compiler and the commands tests run,
+the part before the first test: imports and collection, and the compiled-function cache's
+counters) is written by ``tests/conftest.py`` when ``AIRBEARING_SUITE_COSTS`` names a file::
+
+    AIRBEARING_SUITE_COSTS=/tmp/costs.jsonl .venv/bin/python -m pytest
+    .venv/bin/python benchmarks/suite_costs.py --workers /tmp/costs.jsonl
 """
 
 from __future__ import annotations
@@ -38,11 +45,42 @@ def costs(path: str) -> tuple[dict[str, float], list[tuple[float, str]]]:
     return dict(per_file), sorted(per_test, reverse=True)
 
 
+def workers(path: str) -> list[dict]:
+    """The rows ``tests/conftest.py`` appended to ``path`` (one JSON object a line)."""
+    import json
+
+    with open(path) as f:
+        return [json.loads(line) for line in f if line.strip()]
+
+
+def print_workers(rows: list[dict]) -> None:
+    """A table of the processes' costs, s, and their sum."""
+    print(f"{'process':>8} {'wall':>7} {'cpu':>7} {'before':>7} {'children':>8} "
+          f"{'compile':>8} {'compiled':>8} {'disk':>5}")  # fmt: skip
+    keys = ("wall", "cpu", "cpu_to_collected", "children_cpu", "compile_seconds")
+    total = dict.fromkeys(keys, 0.0)
+    for r in rows:
+        cache = r.get("cache", {})
+        vals = [r.get(k, 0.0) for k in keys]
+        for k, v in zip(keys, vals, strict=True):
+            total[k] += v
+        name = r["worker"] + ("(s)" if r.get("markers") == "slow" else "")
+        print(f"{name:>8} " + " ".join(f"{v:7.1f}" for v in vals[:3])
+              + f" {vals[3]:8.1f} {vals[4]:8.1f} {cache.get('compiled', 0):8d}"
+              f" {cache.get('disk_hits', 0):5d}")  # fmt: skip
+    print(f"{'sum':>8} " + " ".join(f"{total[k]:7.1f}" for k in keys[:3])
+          + f" {total[keys[3]]:8.1f} {total[keys[4]]:8.1f}")  # fmt: skip
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("junit", help="a pytest --junitxml report")
+    parser.add_argument("junit", help="a pytest --junitxml report (or, with --workers, costs)")
+    parser.add_argument("--workers", action="store_true", help="read $AIRBEARING_SUITE_COSTS")
     parser.add_argument("--top", type=int, default=25, help="tests and files shown")
     args = parser.parse_args()
+    if args.workers:
+        print_workers(workers(args.junit))
+        return
     per_file, per_test = costs(args.junit)
     total = sum(per_file.values())
     print(f"{len(per_test)} tests, {total:.0f} s of work in {len(per_file)} files\n")

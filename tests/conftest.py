@@ -204,7 +204,10 @@ def computed_once(tmp_path_factory):
                     if path.exists():
                         here[key] = path.read_bytes()
                     else:
+                        t0 = os.times()
                         here[key] = pickle.dumps(compute())
+                        t1 = os.times()
+                        _computed[key] = t1.user + t1.system - t0.user - t0.system
                         path.write_bytes(here[key])
             finally:
                 computing.discard(key)
@@ -303,3 +306,64 @@ def library_patches(tuned_once, computed_once):
 def library_once(monkeypatch, library_patches):
     """:func:`library_patches` for one test."""
     library_patches(monkeypatch)
+
+
+#: Set to a file name: a test process creates it once it has collected the tests (so the
+#: package is installed, and its modules and the test modules are imported, their bytecode
+#: cached). .ci/run starts the slow studies beside the suite then: not while the README's
+#: `pip install` still replaces the package, nor while the suite's workers compile the same
+#: bytecode (four processes compiling it at once cost ~5 s of CPU more each).
+STARTED_ENV = "AIRBEARING_SESSION_STARTED"
+#: Set to a file name: each pytest process (every xdist worker, and the controller) appends
+#: one JSON line of what it cost (benchmarks/suite_costs.py --workers reads them).
+COSTS_ENV = "AIRBEARING_SUITE_COSTS"
+_started = {}
+#: CPU seconds of each ``computed_once`` computation this process made (for the costs row).
+_computed: dict[str, float] = {}
+
+
+def pytest_configure(config):
+    import os
+    import time
+
+    _started.update(wall=time.monotonic(), cpu=os.times())
+
+
+def pytest_collection_finish(session):
+    import os
+
+    _started["collected_cpu"] = os.times()
+    started = os.environ.get(STARTED_ENV)
+    if started:  # (under xdist the workers collect, the controller does not)
+        Path(started).touch()
+
+
+def pytest_sessionfinish(session):
+    """One JSON line per process in ``$AIRBEARING_SUITE_COSTS``: its CPU (its own, and its
+    children's: the C compiler, the commands tests run), the part of it before the first test
+    (imports and collection), and the compiled-function cache's counters and compile time."""
+    import os
+    import time
+
+    path = os.environ.get(COSTS_ENV)
+    if not path or "wall" not in _started:
+        return
+    now, t0 = os.times(), _started["cpu"]
+    t1 = _started.get("collected_cpu", now)
+    row = {
+        "worker": os.environ.get("PYTEST_XDIST_WORKER", "main"),
+        "markers": session.config.option.markexpr,
+        "wall": time.monotonic() - _started["wall"],
+        "cpu": now.user + now.system - t0.user - t0.system,
+        "cpu_to_collected": t1.user + t1.system - t0.user - t0.system,
+        "children_cpu": now.children_user + now.children_system
+        - t0.children_user - t0.children_system,
+    }  # fmt: skip
+    compiled = sys.modules.get("airbearing.models.compiled")
+    if compiled is not None:
+        row["compile_seconds"] = compiled.compile_seconds()
+        row["cache"] = compiled.cache_info().to_json()
+    if _computed:
+        row["computed_once"] = _computed
+    with open(path, "a") as f:  # one short append per process: lines do not interleave
+        f.write(json.dumps(row) + "\n")
