@@ -134,6 +134,11 @@ def worktree() -> Tree:
     return Tree("work tree", ROOT / "src", ROOT)
 
 
+def trees(rev: str | None, scratch: Path) -> list[Tree]:
+    """The code to time: ``rev``'s snapshot (under ``scratch``) when given, then the work tree."""
+    return ([snapshot(rev, scratch / "rev")] if rev else []) + [worktree()]
+
+
 def timed(
     cmd: list[str],
     tree: Tree,

@@ -44,7 +44,8 @@ import tempfile
 import time
 from pathlib import Path
 
-from bench_end_to_end import Tree, snapshot, worktree
+from bench_end_to_end import Tree
+from bench_end_to_end import trees as code_trees
 
 from airbearing.analysis.identification.platform import SEED004_TRUTH, seed004_testbed
 from airbearing.analysis.simulation.scenarios import free_oscillation
@@ -147,9 +148,7 @@ def main() -> None:
         cases.append((10**4, "csv", "output-error", float("nan")))
     with contextlib.ExitStack() as stack:
         scratch = Path(stack.enter_context(tempfile.TemporaryDirectory(prefix="bench-id-")))
-        trees = [worktree()]
-        if args.rev:
-            trees.insert(0, snapshot(args.rev, scratch / "rev"))
+        trees = code_trees(args.rev, scratch)
         for tree in trees:
             tree.precompile(scratch / "cache")
         if args.keep is None:

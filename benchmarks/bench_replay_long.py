@@ -31,7 +31,8 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).parent))
-from bench_end_to_end import Tree, snapshot, worktree  # noqa: E402
+from bench_end_to_end import Tree  # noqa: E402
+from bench_end_to_end import trees as code_trees  # noqa: E402
 from bench_scaling import make_inputs, run  # noqa: E402
 
 
@@ -72,9 +73,7 @@ def compare(args) -> None:
     rows = json.loads(args.json.read_text()) if args.json and args.json.exists() else []
     with contextlib.ExitStack() as stack:
         scratch = Path(stack.enter_context(tempfile.TemporaryDirectory(prefix="bench-rl-")))
-        trees = [worktree()]
-        if args.rev:
-            trees.insert(0, snapshot(args.rev, scratch / "rev"))
+        trees = code_trees(args.rev, scratch)
         for tree in trees:
             tree.precompile(scratch / f"cache-{abs(hash(tree.label))}")
         folder = args.keep or scratch / "logs"
