@@ -3,6 +3,7 @@ of a platform."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from pathlib import Path
 from typing import Annotated, Literal, get_args
@@ -244,8 +245,6 @@ def _loop_testbed(tb, scenario: str, attitude_only: bool):
             "gyro and logs motion capture give --attitude-only (the loop flies on a gyro of "
             "sensors.gyro_noise, the log has the attitude only)"
         )
-    import dataclasses
-
     return tb.replace(sensors=dataclasses.replace(tb.sensors, gyro=True))
 
 

@@ -29,6 +29,7 @@ torque regression).
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass
 
 import numpy as np
@@ -268,7 +269,7 @@ def scale_confounding(model, datas, p, named, others, S_of, experiment: str) -> 
             memo[c.label] = _columns(model, datas, p, S_of(c))
         return memo[c.label]
 
-    for combo in _product(forms):
+    for combo in itertools.product(*forms):  # one form per name (shared or per wheel)
         cols = [col(c) for c in combo]
         if not all(np.any(B) for B in cols):
             continue
@@ -286,14 +287,6 @@ def scale_confounding(model, datas, p, named, others, S_of, experiment: str) -> 
     corr = float(np.sqrt(max(1.0 - sine**2, 0.0)))
     a = " + ".join(x.name for x, _ in chosen)
     return [Confounding((a, " + ".join(eq)), kind, corr, experiment, eq)]
-
-
-def _product(forms):
-    """Every choice of one candidate form per effect name (shared or per wheel)."""
-    out = [()]
-    for f in forms:
-        out = [o + (c,) for o in out for c in f]
-    return out
 
 
 def _sine_in_span(tau: np.ndarray, B: np.ndarray) -> tuple[float, np.ndarray]:

@@ -19,7 +19,7 @@ import numpy as np
 
 from airbearing import quaternion as quat
 from airbearing.analysis.shooting.functions import DEFAULT_SUBSTEPS, replay_order, step_function
-from airbearing.analysis.shooting.logs import (
+from airbearing.analysis.shooting.noise_floor import (
     ATTITUDE_SIGMA_MIN,
     MAD_TO_SIGMA,
     RATE_SIGMA_MIN,

@@ -22,12 +22,14 @@ import numpy as np
 
 from airbearing import quaternion as quat
 from airbearing.errors import InputError
+from airbearing.io.columns import RATE_COLUMNS
 from airbearing.io.log import Log
 from airbearing.io.testbed import Testbed
 
 __all__ = ["attitude_only"]
 
-_RATES = ("wx", "wy", "wz", "gx", "gy", "gz")
+#: The gyro's columns: the rates and the gravity direction it measures with them.
+_RATES = (*RATE_COLUMNS, "gx", "gy", "gz")
 _QUAT = ("qw", "qx", "qy", "qz")
 
 
