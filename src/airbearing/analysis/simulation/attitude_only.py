@@ -11,7 +11,12 @@ gyro"), whose error is a random walk of the gyro noise (about 5e-4 rad after 40 
 sees coloured noise at tens of times the floor its differences suggest and names effects
 that are not there (``inertia_error`` and ``yaw_imbalance`` on a null ``rw-yaw`` slew).
 :func:`attitude_only` writes the camera's attitude instead: the true attitude with white
-noise of the testbed's ``sensors.attitude_noise``.
+noise of the testbed's ``sensors.attitude_noise``. The loop's own estimates of the state
+(``yaw_est``, the attitude estimate ``qe_*``, the low-passed rate ``G_*``) go with the rate
+columns: they are the gyro read through the loop (``yaw_est`` is that same random walk,
+``G_*`` the rate itself), which a camera's export does not hold and which would hand a
+tool or a reader the gyro the testbed says the log lacks. The loop's commands (``Tc_*``,
+``wsat``) stay, as a lab that films its loop also logs what the loop asked for.
 """
 
 from __future__ import annotations
@@ -31,6 +36,9 @@ __all__ = ["attitude_only"]
 #: The gyro's columns: the rates and the gravity direction it measures with them.
 _RATES = (*RATE_COLUMNS, "gx", "gy", "gz")
 _QUAT = ("qw", "qx", "qy", "qz")
+#: The loop's state estimates (airbearing.design.attitude.EXTRA_NAMES and
+#: airbearing.design.wheels.WHEEL_EXTRA_NAMES): the gyro read through the loop.
+_LOOP_ESTIMATES = ("yaw_est", "qe_w", "qe_x", "qe_y", "qe_z", "G_x", "G_y", "G_z")
 
 
 def attitude_only(
@@ -52,11 +60,12 @@ def attitude_only(
     -------
     (Testbed, Log)
         The testbed with ``sensors.gyro = false`` and that attitude noise, and the log
-        without rate (``wx wy wz``) or gravity-direction (``gx gy gz``) columns whose
+        without rate (``wx wy wz``), gravity-direction (``gx gy gz``) or loop-estimate
+        (``yaw_est``, ``qe_*``, ``G_*``: module doc) columns whose
         attitude (``yaw``, or ``qw qx qy qz`` turned on the body side by the small
         rotation ``exp(n)``, as :func:`~airbearing.analysis.simulation.simulate.add_noise`)
         is the true one plus that noise. Every other column (wheel speeds and commands,
-        sliders, dipoles, ``true_*``) is kept as it was.
+        sliders, dipoles, the loop's commands ``Tc_*``, ``true_*``) is kept as it was.
 
     Raises
     ------
@@ -70,7 +79,8 @@ def attitude_only(
     sig = tb.sensors.attitude_noise if attitude_noise is None else float(attitude_noise)
     if not (np.isfinite(sig) and sig >= 0):
         raise InputError(f"attitude_noise={attitude_noise}: expected a 1-sigma angle >= 0 in rad")
-    data = log.data.drop(columns=[c for c in _RATES if c in log.data.columns])
+    gone = (*_RATES, *_LOOP_ESTIMATES)
+    data = log.data.drop(columns=[c for c in gone if c in log.data.columns])
     rng = np.random.default_rng(seed)
     n = len(data)
     if tb.body.dof == 1:
