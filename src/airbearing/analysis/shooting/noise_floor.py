@@ -17,9 +17,11 @@ Noise floor (from the data alone, per segment, outlier rows left out)
     command's own sample-to-sample noise divided by the small ``Iw``, which the fourth
     difference would take for measurement noise. The differences are taken of the
     wheel's absolute speed less the commanded torque's integral,
-    ``A_k = W_k + a . w_k - sum_{j<k} dt_j clip(wc_j) / Iw`` (with the testbed's known
-    ``wheel_torque_error`` and ``wheel_inertia_error``), whose motion is only what the
-    nominal model misses (friction, a torque error: slow), then the gyro's part
+    ``A_k = W_k + a . w_k - sum_{j<k} dt_j tau_m(wc_j, W_j) / Iw`` (the simulator's motor
+    torque, :func:`airbearing.models.wheels.motor_torque`: the command clipped at
+    ``max_torque``, faded to none that would speed the wheel past ``max_speed``; with
+    the testbed's known ``wheel_torque_error`` and ``wheel_inertia_error``), whose motion
+    is only what the nominal model misses (friction, a torque error: slow), then the gyro's part
     ``|a|^2 sigma_rate^2`` is taken out of its variance; a speed-commanded wheel (its
     driver's loop follows the noisy speed) takes the fourth differences of ``W`` itself.
 """
@@ -30,10 +32,12 @@ import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
+import casadi as ca
 import numpy as np
 
 from airbearing import quaternion as quat
 from airbearing.errors import InputError
+from airbearing.models.wheels import motor_torque
 
 if TYPE_CHECKING:
     from airbearing.analysis.shooting.logs import ReplayData
@@ -268,7 +272,15 @@ def _absolute_wheel_speed(d: ReplayData, a_rate: np.ndarray) -> np.ndarray:
     inertia = wh.inertia_vec * (
         1.0 + np.broadcast_to(np.asarray(eff.get("wheel_inertia_error", 0.0), float), wh.n)
     )
-    tau = gain * np.clip(wc, -wh.max_torque, wh.max_torque) / inertia[None, :]
+    # the simulator's own motor torque (FORMATS.md [wheels]): clipped at max_torque, and
+    # none that speeds the wheel past max_speed (a saturated wheel's command is not
+    # integrated), evaluated at each sample's logged speed
+    shape = wc.shape
+    tau_m = motor_torque(ca.DM(wc), ca.DM(d.ws), ca.DM(np.broadcast_to(inertia, shape)),
+                         ca.DM(np.broadcast_to(gain, shape)), mode="torque",
+                         max_torque=wh.max_torque, max_speed=wh.max_speed,
+                         speed_loop_tau=None)  # fmt: skip
+    tau = np.asarray(tau_m, dtype=float).reshape(shape) / inertia[None, :]
     A = d.ws.copy()
     if d.w is not None:
         A += d.w @ a_rate.T
