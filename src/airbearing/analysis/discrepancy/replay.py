@@ -457,7 +457,8 @@ class Replay:
             ``segments``, ``outlier_rows``, ``windows``, ``solver``, ``logs`` (gap,
             segments, outliers per log) and ``process_noise``; on a reaction-wheel log
             also ``wheel_gap`` (the wheel speeds' RMS residual, rad/s) beside the floor's
-            ``wheel_speed_noise``.
+            ``wheel_speed_noise`` and ``wheel_speed_noise_per_wheel`` (each wheel's level,
+            rad/s, in wheel order: the weights of its residual).
         """
         per = []
         for d, g in zip(self.datas, self.log_gaps(), strict=True):
@@ -466,6 +467,8 @@ class Replay:
         if "ws" in self.problem.outputs:  # the wheel speeds' own RMS residual, rad/s
             w = self.fit.extra.get("meas_whitening", "problem")
             wheels["wheel_gap"] = self.problem.noise_rms(self.fit.extra["r"], whitening=w)["ws"]
+        if self.floor.wheel_axes is not None:  # each wheel's level, wheel order, as discrepancy
+            wheels["wheel_speed_noise_per_wheel"] = [float(v) for v in self.floor.wheel_axes]
         return {
             "testbed": self.data.testbed.name,
             "effects": {k: v for k, v in self.data.testbed.effects.items()},
