@@ -52,147 +52,81 @@ class Case:
     keys: dict = field(default_factory=dict)  # testbed keys changed: {"sensors": {...}}
 
 
-# Lab-like sensors: a MEMS gyro (2-4e-4 rad/s per sample), a camera (0.5-1 mrad)
+# Lab-like sensors: a MEMS gyro (2-4e-4 rad/s per sample), a camera (0.5-1 mrad), and the
+# attitude an IMU's own filter logs beside its gyro on a three-axis platform (0.03 deg;
+# the built-in files give none, and a noise-free attitude makes every fit exact)
 GYRO = {"gyro_noise": 2.5e-4}
+AHRS = {"attitude_noise": 5e-4}
 CAM = {"gyro": False, "attitude_noise": 8e-4}
 HORIZONTAL = {"lab": [3.0e-4, 1.0e-4, 0.0]}  # T, a cage field turned horizontal
 SWING = ("--scenario", "free", "--initial-rate", "0.04", "-0.06", "0.03")
+SPIN = ("--scenario", "spindown", "--duration", "300", "--spin-rate")
+
+
+def _slew(deg, seconds, seed, *more):
+    return (
+        "--scenario",
+        "slew",
+        "--yaw-deg",
+        str(deg),
+        "--duration",
+        str(seconds),
+        "--noise-seed",
+        str(seed),
+        *more,
+    )
+
+
+def _mocap(noise):
+    return ("--attitude-only", "--attitude-noise", str(noise))
+
+
+# fmt: off
 CASES = (
     # --- yaw rigs (cmg-yaw, J_z = 0.00283 kg m^2) ---
-    Case(
-        "yaw-slew-null",
-        "cmg-yaw",
-        ("--scenario", "slew", "--yaw-deg", "120", "--duration", "40", "--noise-seed", "1"),
-        keys={"sensors": GYRO},
-    ),  # fmt: skip
-    Case(
-        "yaw-slew-visc",
-        "cmg-yaw",
-        ("--scenario", "slew", "--yaw-deg", "150", "--duration", "40", "--noise-seed", "2"),
-        {"viscous_friction": 1.2e-5},
-        keys={"sensors": GYRO},
-    ),  # fmt: skip
-    Case(
-        "yaw-slew-inertia+coul-50Hz",
-        "cmg-yaw",
-        ("--scenario", "slew", "--yaw-deg", "-90", "--duration", "30", "--noise-seed", "3"),
-        {"inertia_error": -0.08, "coulomb_friction": 6e-6},
-        keys={"sensors": {**GYRO, "rate": 50.0}},
-    ),  # fmt: skip
-    Case(
-        "yaw-mocap-slew-aero",
-        "cmg-yaw",
-        (
-            "--scenario",
-            "slew",
-            "--yaw-deg",
-            "180",
-            "--duration",
-            "40",
-            "--noise-seed",
-            "4",
-            "--attitude-only",
-            "--attitude-noise",
-            "8e-4",
-        ),
-        {"aero_drag": 3e-5},
-        keys={"sensors": GYRO},
-    ),  # fmt: skip
-    Case(
-        "yaw-mocap-slew-null-50Hz",
-        "cmg-yaw",
-        (
-            "--scenario",
-            "slew",
-            "--yaw-deg",
-            "90",
-            "--duration",
-            "30",
-            "--noise-seed",
-            "5",
-            "--attitude-only",
-            "--attitude-noise",
-            "5e-4",
-        ),
-        keys={"sensors": {**GYRO, "rate": 50.0}},
-    ),  # fmt: skip
-    Case(
-        "yaw-spindown-visc+coul-5min",
-        "cmg-yaw",
-        ("--scenario", "spindown", "--spin-rate", "1.5", "--duration", "300", "--noise-seed", "6"),
-        {"viscous_friction": 6e-6, "coulomb_friction": 2e-6},
-        keys={"sensors": GYRO},
-    ),  # fmt: skip
+    Case("yaw-slew-null", "cmg-yaw", _slew(120, 40, 1), keys={"sensors": GYRO}),
+    Case("yaw-slew-visc", "cmg-yaw", _slew(150, 40, 2), {"viscous_friction": 1.2e-5},
+         keys={"sensors": GYRO}),
+    Case("yaw-slew-inertia+coul-50Hz", "cmg-yaw", _slew(-90, 30, 3),
+         {"inertia_error": -0.08, "coulomb_friction": 6e-6},
+         keys={"sensors": {**GYRO, "rate": 50.0}}),
+    Case("yaw-mocap-slew-aero", "cmg-yaw", _slew(180, 40, 4, *_mocap(8e-4)),
+         {"aero_drag": 3e-5}, keys={"sensors": GYRO}),
+    Case("yaw-mocap-slew-null-50Hz", "cmg-yaw", _slew(90, 30, 5, *_mocap(5e-4)),
+         keys={"sensors": {**GYRO, "rate": 50.0}}),
+    Case("yaw-spindown-visc+coul-5min", "cmg-yaw", (*SPIN, "1.5", "--noise-seed", "6"),
+         {"viscous_friction": 6e-6, "coulomb_friction": 2e-6}, keys={"sensors": GYRO}),
     # --- three-axis platforms (seed 004's, seed 000's tabletop, the CMG cluster) ---
-    Case(
-        "s004-free-null", "seed004-platform", (*SWING, "--duration", "60", "--noise-seed", "7")
-    ),  # fmt: skip
-    Case(
-        "s004-free-cm-30s-50Hz",
-        "seed004-platform",
-        (*SWING, "--duration", "30", "--noise-seed", "8"),
-        {"cm_offset_error": [3e-5, -2e-5, 1e-5]},
-        keys={"sensors": {"rate": 50.0}},
-    ),  # fmt: skip
-    Case(
-        "s004-free-visc+cm-5min",
-        "seed004-platform",
-        (*SWING, "--duration", "300", "--noise-seed", "9"),
-        {"viscous_friction": 3e-5, "cm_offset_error": [0.0, 0.0, -4e-5]},
-    ),  # fmt: skip
+    Case("s004-free-null", "seed004-platform", (*SWING, "--duration", "60", "--noise-seed", "7"),
+         keys={"sensors": AHRS}),
+    Case("s004-free-cm-30s-50Hz", "seed004-platform",
+         (*SWING, "--duration", "30", "--noise-seed", "8"),
+         {"cm_offset_error": [3e-5, -2e-5, 1e-5]}, keys={"sensors": {**AHRS, "rate": 50.0}}),
+    Case("s004-free-visc+cm-5min", "seed004-platform",
+         (*SWING, "--duration", "300", "--noise-seed", "9"),
+         {"viscous_friction": 3e-5, "cm_offset_error": [0.0, 0.0, -4e-5]},
+         keys={"sensors": AHRS}),
     # free oscillation, sliders still: an inertia error is a CM-offset scale (no input)
-    Case(
-        "s004-free-inertia",
-        "seed004-platform",
-        (*SWING, "--duration", "60", "--noise-seed", "10"),
-        {"inertia_error": 0.06},
-    ),  # fmt: skip
-    Case(
-        "s000-free-dipole-hfield",
-        "seed000-tabletop",
-        (*SWING, "--duration", "60", "--noise-seed", "11"),
-        {"residual_dipole": [0.02, -0.03, 0.01]},
-        keys={"field": HORIZONTAL},
-    ),  # fmt: skip
-    Case(
-        "s000-mocap-free-dipole+cm-hfield",
-        "seed000-tabletop",
-        (*SWING, "--duration", "120", "--noise-seed", "12"),
-        {"residual_dipole": [0.03, 0.0, -0.02], "cm_offset_error": [2e-5, 2e-5, 0.0]},
-        keys={"field": HORIZONTAL, "sensors": CAM},
-    ),  # fmt: skip
-    Case(
-        "s000-spindown-aero+coul-5min",
-        "seed000-tabletop",
-        ("--scenario", "spindown", "--spin-rate", "2.0", "--duration", "300", "--noise-seed", "13"),
-        {"aero_drag": 2e-5, "coulomb_friction": 3e-5},
-    ),  # fmt: skip
-    Case(
-        "s004-mocap-free-null-40Hz",
-        "seed004-platform",
-        (*SWING, "--duration", "60", "--noise-seed", "14"),
-        keys={"sensors": {**CAM, "rate": 40.0}},
-    ),  # fmt: skip
-    Case(
-        "cmg3-mocap-slew-visc",
-        "cmg-3dof",
-        (
-            "--scenario",
-            "slew",
-            "--yaw-deg",
-            "60",
-            "--duration",
-            "40",
-            "--noise-seed",
-            "15",
-            "--attitude-only",
-            "--attitude-noise",
-            "6e-4",
-        ),
-        {"viscous_friction": 8e-6},
-        keys={"sensors": GYRO},
-    ),  # fmt: skip
+    Case("s004-free-inertia", "seed004-platform",
+         (*SWING, "--duration", "60", "--noise-seed", "10"), {"inertia_error": 0.06},
+         keys={"sensors": AHRS}),
+    Case("s000-free-dipole-hfield", "seed000-tabletop",
+         (*SWING, "--duration", "60", "--noise-seed", "11"),
+         {"residual_dipole": [0.02, -0.03, 0.01]},
+         keys={"field": HORIZONTAL, "sensors": AHRS}),
+    Case("s000-mocap-free-dipole+cm-hfield", "seed000-tabletop",
+         (*SWING, "--duration", "120", "--noise-seed", "12"),
+         {"residual_dipole": [0.03, 0.0, -0.02], "cm_offset_error": [2e-5, 2e-5, 0.0]},
+         keys={"field": HORIZONTAL, "sensors": CAM}),
+    Case("s000-spindown-aero+coul-5min", "seed000-tabletop", (*SPIN, "2.0", "--noise-seed", "13"),
+         {"aero_drag": 2e-5, "coulomb_friction": 3e-5}, keys={"sensors": AHRS}),
+    Case("s004-mocap-free-null-40Hz", "seed004-platform",
+         (*SWING, "--duration", "60", "--noise-seed", "14"),
+         keys={"sensors": {**CAM, "rate": 40.0}}),
+    Case("cmg3-mocap-slew-visc", "cmg-3dof", _slew(60, 40, 15, *_mocap(6e-4)),
+         {"viscous_friction": 8e-6}, keys={"sensors": GYRO}),
 )
+# fmt: on
 
 
 def _flat(v) -> np.ndarray:
