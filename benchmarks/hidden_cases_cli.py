@@ -1,11 +1,13 @@
 """Benchmark: an outside check of the discrepancy search on three-axis and yaw rigs, CLI only.
 
 Run by hand: ``PYTHONPATH=src .venv/bin/python benchmarks/hidden_cases_cli.py [--only NAME ...]
-[--out DIR]``.
+[--out DIR] [--exact-attitude]``.
 
 Simulated cases as a new user makes them: a built-in testbed (``airbearing testbed list``:
 ``seed004-platform``, ``seed000-tabletop``, ``cmg-yaw``, ``cmg-3dof``) with the few keys a
-lab changes (sensor rate 20-50 Hz, gyro and camera noise, a cage field) written as a
+lab changes (sensor rate 20-50 Hz, gyro, IMU-attitude and camera noise, a cage field;
+``--exact-attitude``: the platforms' gyro logs with the built-in files' noise-free
+attitude) written as a
 testbed file, a log made by ``airbearing simulate TB --effect NAME=VALUE ...`` (free
 oscillations, spin-downs and slews, 30 s to 5 min; ``--attitude-only`` for a slew filmed by
 motion capture, ``sensors.gyro = false`` for a passive one), and the search run as
@@ -192,17 +194,20 @@ def _cli(args: list[str]) -> subprocess.CompletedProcess:
     )
 
 
-def testbed_file(case: Case, path: Path) -> Path:
-    """The lab's testbed file: the built-in one with the case's keys changed."""
+def testbed_file(case: Case, path: Path, exact_attitude: bool = False) -> Path:
+    """The lab's testbed file: the built-in one with the case's keys changed
+    (``exact_attitude``: without the :data:`AHRS` attitude noise, as the built-in files)."""
     d = testbed_to_dict(load_testbed(case.rig))
     for section, keys in case.keys.items():
+        if exact_attitude and section == "sensors" and keys.get("gyro", True):
+            keys = {k: v for k, v in keys.items() if k not in AHRS}
         d.setdefault(section, {}).update(keys)
     write_testbed(testbed_from_dict(d), path)
     return path
 
 
-def run_case(case: Case, out: Path) -> dict:
-    tb = testbed_file(case, out / f"{case.name}.toml")
+def run_case(case: Case, out: Path, exact_attitude: bool = False) -> dict:
+    tb = testbed_file(case, out / f"{case.name}.toml", exact_attitude)
     log, js = out / f"{case.name}.csv", out / f"{case.name}.json"
     sim = ["simulate", str(tb), *case.args, "-o", str(log), "--force"]
     for name, value in case.effects.items():
@@ -259,6 +264,9 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--only", action="append", help="run only this case (repeatable)")
     ap.add_argument("--out", type=Path, help="directory for the testbeds, logs and JSON")
+    ap.add_argument("--exact-attitude", action="store_true",
+                    help="platform gyro logs without the IMU's attitude noise (the built-in "
+                    "files' default: a noise-free quaternion)")  # fmt: skip
     args = ap.parse_args(argv)
     out = args.out or Path(tempfile.mkdtemp(prefix="hidden-cases-"))
     out.mkdir(parents=True, exist_ok=True)
@@ -268,7 +276,7 @@ def main(argv=None) -> int:
     print("|---|---|---|---|---|---|---|")
     failed = 0
     for case in cases:
-        r = run_case(case, out)
+        r = run_case(case, out, args.exact_attitude)
         print_row(r)
         failed += "error" in r or not r["judged"]["pass"]
     print(f"{len(cases) - failed} of {len(cases)} pass "
