@@ -1,0 +1,257 @@
+"""A slow torque about a steady axis, as a nuisance the fit tests and marginalises.
+
+A platform spinning about a nearly constant axis makes a friction or drag about that
+axis a nearly constant torque (:func:`.confounding.constant_torque_confounding`), and a
+torque the Model does not hold that varies slowly against the log (a bearing's air-flow
+torque, a drift correlated over tens of seconds) is nearly constant over it too. The
+named effect then takes that torque's mean: its value is biased by ``mean(tau) /
+rate``, and no covariance of the residual sees a bias.
+
+Here the slow torque is a nuisance: on each steady axis and log segment, a torque that
+is a polynomial of low order in time (Legendre polynomials on the segment: a constant
+and a linear drift by default). Its columns of the weighted residual's Jacobian are the
+exact response of the shooting residual to the Model's disturbance-torque input
+``tau_<axis>`` (central differences of the compiled residual; the residual is linear in a
+torque to the rounding level over a log), at the fitted parameters and window states.
+Linearised at the fit (one Gauss-Newton step, the shooting problem's own weighting,
+process-noise defects included), the nuisance is
+
+- **tested**: an F test (``scipy.stats.f``) of the residual sum of squares the nuisance
+  takes, over ``m`` nuisance columns, against the fit's residual variance (robust to a
+  noise level off by a few per cent, as a chi-square test would not be);
+- **marginalised** when the test says it is there: the named parameters move by the
+  joint step (the bias of the slow torque's constant and drift removed) and their errors
+  grow by the factor their variance grows when the nuisance is free,
+  ``sqrt(inv(F_joint)_jj / inv(F)_jj)`` with the Fisher information ``F`` of the
+  parameters after the window states are projected off.
+
+A friction about the steady axis is then known only from how its torque follows the
+rate's small changes (nutation) and from the other axes, which is all a log can say when
+a slow torque is present. Where the test does not find it, nothing changes: the nuisance
+costs the answer nothing where it is absent.
+"""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+from scipy import stats
+
+from airbearing.analysis.shooting.fit import fit_jacobian, solve_gram
+
+__all__ = ["SLOW_TORQUE_P", "SLOW_TORQUE_ORDER", "SlowTorque", "slow_torque"]
+
+#: p-value of the F test below which the slow torque is fitted as a nuisance (the
+#: coloured-noise model's level: a false alarm widens one run's errors in a thousand).
+SLOW_TORQUE_P = 1e-3
+#: Highest Legendre order in time of the nuisance torque per axis and segment: a
+#: constant and a linear drift (a torque correlated over tens of seconds is mostly these
+#: over a log of that length; higher orders take the friction's information too).
+SLOW_TORQUE_ORDER = 1
+#: Torque step of the central differences: this angular acceleration (rad/s^2) times the
+#: axis inertia. The residual is linear in the torque well beyond it.
+_STEP_ACCEL = 1e-6
+
+AXES = "xyz"
+
+
+@dataclass(frozen=True, eq=False)
+class SlowTorque:
+    """The slow-torque nuisance at a fit.
+
+    Attributes
+    ----------
+    axes : tuple of str
+        The steady axes it acts on (``"z"`` ...).
+    order : int
+        Highest Legendre order in time per axis and segment.
+    n_columns : int
+        Nuisance parameters (axes times segments times ``order + 1``).
+    statistic : float
+        The F statistic of the residual sum of squares it takes.
+    p : float
+        Its p-value (``scipy.stats.f``, ``n_columns`` and the fit's residual degrees of
+        freedom).
+    significant : bool
+        ``p < SLOW_TORQUE_P``.
+    coefficients : ndarray
+        The fitted Legendre coefficients, N m (axis, segment, order, in that nesting).
+    step : ndarray (k,)
+        Change of the named parameters when the nuisance is fitted jointly.
+    factor : ndarray (k,)
+        Growth of each named parameter's standard error with the nuisance free (>= 1).
+    """
+
+    axes: tuple
+    order: int
+    n_columns: int
+    statistic: float
+    p: float
+    significant: bool
+    coefficients: np.ndarray
+    step: np.ndarray
+    factor: np.ndarray
+
+    def to_json(self) -> dict:
+        return {
+            "axes": list(self.axes),
+            "order": int(self.order),
+            "F": float(self.statistic),
+            "p": float(self.p),
+            "significant": bool(self.significant),
+            "torque_mean": [float(x) for x in self.means()],
+        }
+
+    def means(self) -> np.ndarray:
+        """The fitted mean torque (N m) per axis and segment (the order-0 coefficients)."""
+        return np.asarray(self.coefficients)[:: self.order + 1]
+
+    def words(self) -> str:
+        """One phrase for the verdict."""
+        ax = ", ".join(self.axes)
+        return (
+            f"a slow torque about {ax} is significant (F test p {self.p:.2g}; a constant"
+            + (" and a linear drift" if self.order >= 1 else "")
+            + " per segment, mean "
+            + ", ".join(f"{m:.2g}" for m in self.means())
+            + " N m): the value and error are with it fitted"
+        )
+
+
+def _torque_input(model, axis: int) -> int | None:
+    name = f"tau_{AXES[axis]}" if model.dof == 3 else "tau_z"
+    if name not in model.u_names:
+        return None
+    return model.index(name, "u")[0]
+
+
+def _inertia(model, axis: int) -> float:
+    ax = AXES[axis] if model.dof == 3 else "z"
+    return float(np.asarray(model.p0)[model.index(f"J_{ax}{ax}", "p")[0]])
+
+
+def nuisance_columns(problem, fit, datas, axes, order: int = SLOW_TORQUE_ORDER):
+    """The weighted residual's Jacobian in the slow torque's coefficients, ``(n_r, m)``.
+
+    One column per (steady axis, segment, Legendre order), N m^-1 (module doc); None
+    when the Model has no disturbance-torque input for an axis.
+    """
+    w = problem.windows
+    model = problem.model
+    t = np.array([datas[s].t[rows] for s, rows in zip(w.source, w.rows, strict=True)])
+    seg = w.segments()
+    cols = []
+    for a in axes:
+        iu = _torque_input(model, a)
+        if iu is None:
+            return None
+        h = _STEP_ACCEL * _inertia(model, a)
+        for g in np.unique(seg):
+            on = seg == g
+            t0, t1 = float(t[on].min()), float(t[on].max())
+            x = 2.0 * (t - t0) / max(t1 - t0, 1e-12) - 1.0
+            for deg in range(order + 1):
+                basis = np.where(on[:, None], np.polynomial.legendre.legval(x, [0] * deg + [1]), 0)
+                out = []
+                for sign in (1.0, -1.0):
+                    U = w.u.copy()
+                    U[:, :, iu] += sign * h * basis
+                    out.append(_with_inputs(problem, w, U).residual(fit.delta, fit.p))
+                cols.append((out[0] - out[1]) / (2.0 * h))
+    return np.column_stack(cols)
+
+
+def _with_inputs(problem, windows, U):
+    """A shallow copy of ``problem`` whose windows hold the inputs ``U``."""
+    p2 = copy.copy(problem)
+    p2.windows = dataclasses.replace(windows, u=U)
+    p2._data = p2._data_vector()
+    p2._last = None
+    return p2
+
+
+def slow_torque(problem, fit, datas, axes, *, order: int = SLOW_TORQUE_ORDER):
+    """The slow-torque nuisance on the steady ``axes`` at ``fit`` (module doc).
+
+    Parameters
+    ----------
+    problem : ShootingProblem
+        The problem ``fit`` was made on (its weighting, process noise and whitening).
+    fit : Fit
+        The named effects' fit (the first ``k`` parameters the named ones).
+    datas : sequence of ReplayData
+        The logs (their times).
+    axes : sequence of int
+        Steady body axes (:func:`.confounding.steady_axes`).
+    order : int
+        Highest Legendre order in time.
+
+    Returns
+    -------
+    SlowTorque or None
+        None when it cannot be formed: no axis, no parameter, a fit under hard continuity
+        constraints (its window states move together with a torque), no ``tau`` input.
+    """
+    k = len(fit.theta)
+    if not len(axes) or k == 0 or "N" in fit.extra or "r" not in fit.extra:
+        return None
+    G = nuisance_columns(problem, fit, datas, axes, order)
+    if G is None or not np.all(np.isfinite(G)):
+        return None
+    r = np.asarray(fit.extra["r"], dtype=float)
+    J = sp.csc_matrix(fit_jacobian(fit))
+    if J.shape[0] != r.size or G.shape[0] != r.size:
+        return None
+    m = G.shape[1]
+    # the window states projected off the named parameters, the nuisance and the residual
+    Z, rz = _off_states(J, k, G, r)
+    scale = np.linalg.norm(Z, axis=0)
+    if np.any(scale == 0):
+        return None
+    Zs = Z / scale
+    coef, *_ = np.linalg.lstsq(Zs, -rz, rcond=None)
+    coef0, *_ = np.linalg.lstsq(Zs[:, :k], -rz, rcond=None)
+    rss = float(r @ r)
+    taken = float(np.sum((Zs @ coef) ** 2) - np.sum((Zs[:, :k] @ coef0) ** 2))
+    dof = fit.n_res - fit.n_free - m
+    if dof <= 0:
+        return None
+    F = (max(taken, 0.0) / m) / max((rss - taken) / dof, 1e-300)
+    p = float(stats.f.sf(F, m, dof))
+    info = Zs.T @ Zs
+    joint = np.linalg.pinv(info, rcond=1e-12, hermitian=True)
+    alone = np.linalg.pinv(info[:k, :k], rcond=1e-12, hermitian=True)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        factor = np.sqrt(np.diag(joint)[:k] / np.diag(alone))
+    factor = np.where(np.isfinite(factor), np.maximum(factor, 1.0), 1.0)
+    step = (coef[:k] - coef0) / scale[:k]
+    return SlowTorque(
+        axes=tuple(AXES[a] if problem.model.dof == 3 else "z" for a in axes),
+        order=int(order),
+        n_columns=int(m),
+        statistic=float(F),
+        p=p,
+        significant=bool(p < SLOW_TORQUE_P),
+        coefficients=coef[k:] / scale[k:],
+        step=step,
+        factor=factor,
+    )
+
+
+def _off_states(J, k: int, G: np.ndarray, r: np.ndarray):
+    """``([J_theta, G], r)`` with the window-state columns ``J[:, k:]`` projected off (dense)."""
+    At = np.hstack([J[:, :k].toarray(), G])
+    An = J[:, k:]
+    if An.shape[1] == 0:
+        return At, r
+    Gm = sp.csc_matrix(An.T @ An)
+    c = np.sqrt(np.maximum(Gm.diagonal(), 1e-300))
+    Dc = sp.diags(1.0 / c)
+    B = np.column_stack([np.asarray(An.T @ At), np.asarray(An.T @ r)])
+    X = solve_gram(Dc @ Gm @ Dc, B / c[:, None]) / c[:, None]
+    P = np.column_stack([At, r]) - An @ X
+    return P[:, :-1], P[:, -1]
