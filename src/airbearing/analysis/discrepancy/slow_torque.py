@@ -19,16 +19,19 @@ process-noise defects included), the nuisance is
 - **tested**: an F test (``scipy.stats.f``) of the residual sum of squares the nuisance
   takes, over ``m`` nuisance columns, against the fit's residual variance (robust to a
   noise level off by a few per cent, as a chi-square test would not be);
-- **marginalised** when the test says it is there: the named parameters move by the
-  joint step (the bias of the slow torque's constant and drift removed) and their errors
-  grow by the factor their variance grows when the nuisance is free,
+- **marginalised** when the test says it is there, or when the process noise already says
+  an unexplained torque acts (its slow part about the steady axis is then what a named
+  effect about that axis cannot be told from, seen or not by the test): the named
+  parameters move by the joint step (the bias of the slow torque's constant and drift
+  removed) and their errors grow by the factor their variance grows when the nuisance is free,
   ``sqrt(inv(F_joint)_jj / inv(F)_jj)`` with the Fisher information ``F`` of the
   parameters after the window states are projected off.
 
 A friction about the steady axis is then known only from how its torque follows the
 rate's small changes (nutation) and from the other axes, which is all a log can say when
-a slow torque is present. Where the test does not find it, nothing changes: the nuisance
-costs the answer nothing where it is absent.
+a slow torque is present. Where neither the test nor the process noise finds an
+unexplained torque, nothing changes: the nuisance costs the answer nothing where it is
+absent.
 """
 
 from __future__ import annotations
@@ -113,12 +116,17 @@ class SlowTorque:
     def words(self) -> str:
         """One phrase for the verdict."""
         ax = ", ".join(self.axes)
+        form = "a constant" + (" and a linear drift" if self.order >= 1 else "")
+        mean = ", ".join(f"{m:.2g}" for m in self.means())
+        if self.significant:
+            return (
+                f"a slow torque about {ax} is significant (F test p {self.p:.2g}; {form} "
+                f"per segment, mean {mean} N m): the value and error are with it fitted"
+            )
         return (
-            f"a slow torque about {ax} is significant (F test p {self.p:.2g}; a constant"
-            + (" and a linear drift" if self.order >= 1 else "")
-            + " per segment, mean "
-            + ", ".join(f"{m:.2g}" for m in self.means())
-            + " N m): the value and error are with it fitted"
+            f"an unexplained torque is significant, so its slow part about {ax} ({form} "
+            f"per segment, mean {mean} N m; F test p {self.p:.2g} alone) is fitted with the "
+            "named effects: the value and error are with it"
         )
 
 
