@@ -110,7 +110,7 @@ def _confounding(search: _Search, sel: _Selection, named: _Named) -> None:
     slow = None
     if const:  # a slow torque about a steady axis, tested and, when there, marginalised
         slow = slow_torque(named.problem, named.fit, search.datas, axes)
-    if slow is not None and (slow.significant or pn.get("significant")):
+    if slow is not None and slow.identifiable and (slow.significant or pn.get("significant")):
         _with_slow_torque(sel, named, slow)
         const = [_slow_words(sel, c, slow) for c in const]
     elif const and pn.get("significant"):  # widened when the logs show an unexplained torque

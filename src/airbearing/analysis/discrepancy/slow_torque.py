@@ -46,7 +46,7 @@ from scipy import stats
 
 from airbearing.analysis.shooting.fit import fit_jacobian, solve_gram
 
-__all__ = ["SLOW_TORQUE_P", "SLOW_TORQUE_ORDER", "SlowTorque", "slow_torque"]
+__all__ = ["MAX_FACTOR", "SLOW_TORQUE_P", "SLOW_TORQUE_ORDER", "SlowTorque", "slow_torque"]
 
 #: p-value of the F test below which the slow torque is fitted as a nuisance (the
 #: coloured-noise model's level: a false alarm widens one run's errors in a thousand).
@@ -55,6 +55,13 @@ SLOW_TORQUE_P = 1e-3
 #: constant and a linear drift (a torque correlated over tens of seconds is mostly these
 #: over a log of that length; higher orders take the friction's information too).
 SLOW_TORQUE_ORDER = 1
+#: Largest growth of a named parameter's error with the nuisance free for which the
+#: nuisance is fitted. Beyond it the parameter keeps less than 1e-8 of its information,
+#: the level of the central differences' own error (relative, in the nuisance columns):
+#: it is the slow torque itself there (a Coulomb friction on a coast-down that never
+#: reverses, about 1.4e5; a per-axis z friction of seed 004's spinning platform keeps
+#: 1/50 to 1/130 of its information and is fitted).
+MAX_FACTOR = 1e4
 #: Torque step of the central differences: this angular acceleration (rad/s^2) times the
 #: axis inertia. The residual is linear in the torque well beyond it.
 _STEP_ACCEL = 1e-6
@@ -87,6 +94,11 @@ class SlowTorque:
         Change of the named parameters when the nuisance is fitted jointly.
     factor : ndarray (k,)
         Growth of each named parameter's standard error with the nuisance free (>= 1).
+    identifiable : bool
+        Every factor at most :data:`MAX_FACTOR`: no named parameter is (nearly) the
+        nuisance itself. A Coulomb friction on a coast-down that never reverses is exactly
+        a constant torque; beside the nuisance it has no information left, and the joint
+        step along that direction is arbitrary, so the nuisance is not fitted then.
     """
 
     axes: tuple
@@ -98,6 +110,7 @@ class SlowTorque:
     coefficients: np.ndarray
     step: np.ndarray
     factor: np.ndarray
+    identifiable: bool = True
 
     def to_json(self) -> dict:
         return {
@@ -231,10 +244,8 @@ def slow_torque(problem, fit, datas, axes, *, order: int = SLOW_TORQUE_ORDER):
     F = (max(taken, 0.0) / m) / max((rss - taken) / dof, 1e-300)
     p = float(stats.f.sf(F, m, dof))
     info = Zs.T @ Zs
-    joint = np.linalg.pinv(info, rcond=1e-12, hermitian=True)
-    alone = np.linalg.pinv(info[:k, :k], rcond=1e-12, hermitian=True)
     with np.errstate(invalid="ignore", divide="ignore"):
-        factor = np.sqrt(np.diag(joint)[:k] / np.diag(alone))
+        factor = np.sqrt(_inverse_diagonal(info)[:k] / _inverse_diagonal(info[:k, :k]))
     factor = np.where(np.isfinite(factor), np.maximum(factor, 1.0), 1.0)
     step = (coef[:k] - coef0) / scale[:k]
     return SlowTorque(
@@ -247,7 +258,17 @@ def slow_torque(problem, fit, datas, axes, *, order: int = SLOW_TORQUE_ORDER):
         coefficients=coef[k:] / scale[k:],
         step=step,
         factor=factor,
+        identifiable=bool(np.max(factor) <= MAX_FACTOR),
     )
+
+
+def _inverse_diagonal(info: np.ndarray) -> np.ndarray:
+    """The diagonal of ``inv(info)``, a direction without information at the rounding
+    level (``1e-12`` of the largest eigenvalue: a named effect the nuisance makes exactly,
+    its factor then about 1e6)."""
+    w, V = np.linalg.eigh(info)
+    w = np.maximum(w, 1e-12 * max(float(np.max(np.abs(w))), 1e-300))
+    return (V**2) @ (1.0 / w)
 
 
 def _off_states(J, k: int, G: np.ndarray, r: np.ndarray):
