@@ -10,9 +10,15 @@ rate``, and no covariance of the residual sees a bias.
 Here the slow torque is a nuisance: on each steady axis and log segment, a torque that
 is a polynomial of low order in time (Legendre polynomials on the segment: a constant
 and a linear drift by default). Its columns of the weighted residual's Jacobian are the
-exact response of the shooting residual to the Model's disturbance-torque input
-``tau_<axis>`` (central differences of the compiled residual; the residual is linear in a
-torque to the rounding level over a log), at the fitted parameters and window states.
+response of the shooting residual to the Model's disturbance-torque input ``tau_<axis>``
+at the fitted parameters and window states, by **central differences** of the compiled
+residual, not CasADi's derivatives: the residual calls the compiled sample step
+(``step_dt``, an external C function) that carries derivatives in the window states and
+parameters only, so CasADi cannot differentiate it in an input; an exact column would
+need a second compiled window function per window shape with the torque basis as a
+parameter (seconds of C compilation for a few columns). The differences are accurate to
+about 2e-9 of a column (steps of 1e-7 to 1e-5 rad/s^2 times the inertia agree to 2-3e-9
+on seed 004's platform; 1e-4 to 3e-7): the residual is linear in a torque of that size.
 Linearised at the fit (one Gauss-Newton step, the shooting problem's own weighting,
 process-noise defects included), the nuisance is
 
@@ -56,14 +62,15 @@ SLOW_TORQUE_P = 1e-3
 #: over a log of that length; higher orders take the friction's information too).
 SLOW_TORQUE_ORDER = 1
 #: Largest growth of a named parameter's error with the nuisance free for which the
-#: nuisance is fitted. Beyond it the parameter keeps less than 1e-8 of its information,
-#: the level of the central differences' own error (relative, in the nuisance columns):
-#: it is the slow torque itself there (a Coulomb friction on a coast-down that never
-#: reverses, about 1.4e5; a per-axis z friction of seed 004's spinning platform keeps
-#: 1/50 to 1/130 of its information and is fitted).
+#: nuisance is fitted. Beyond it the named effect's torque lies within 1e-4 (sine of the
+#: angle) of the nuisance's span over the logs: it is the slow torque itself up to details
+#: of its form (a Coulomb friction on a coast-down that never reverses: its smoothed sign,
+#: a factor of about 1.4e5), and the joint step along it is set by those details, not by
+#: the data. A per-axis z friction of seed 004's spinning platform keeps 1/50 to 1/130 of
+#: its information (the nutation) and is fitted.
 MAX_FACTOR = 1e4
 #: Torque step of the central differences: this angular acceleration (rad/s^2) times the
-#: axis inertia. The residual is linear in the torque well beyond it.
+#: axis inertia (module doc: the columns agree to 2e-9 from 1e-7 to 1e-5).
 _STEP_ACCEL = 1e-6
 
 AXES = "xyz"
