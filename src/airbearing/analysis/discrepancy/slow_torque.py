@@ -24,7 +24,9 @@ process-noise defects included), the nuisance is
 
 - **tested**: an F test (``scipy.stats.f``) of the residual sum of squares the nuisance
   takes, over ``m`` nuisance columns, against the fit's residual variance (robust to a
-  noise level off by a few per cent, as a chi-square test would not be);
+  noise level off by a few per cent, as a chi-square test would not be), never below the
+  level the residual is weighted at (a noise-free log's residual, the integration's own
+  error below the replay's resolution, is no noise to test against);
 - **marginalised** when the test says it is there, or when the process noise already says
   an unexplained torque acts (its slow part about the steady axis is then what a named
   effect about that axis cannot be told from, seen or not by the test): the named
@@ -48,7 +50,6 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
-from scipy import stats
 
 from airbearing.analysis.shooting.fit import fit_jacobian, solve_gram
 
@@ -248,7 +249,11 @@ def slow_torque(problem, fit, datas, axes, *, order: int = SLOW_TORQUE_ORDER):
     dof = fit.n_res - fit.n_free - m
     if dof <= 0:
         return None
-    F = (max(taken, 0.0) / m) / max((rss - taken) / dof, 1e-300)
+    from scipy import stats  # here: the search modules do not import scipy.stats
+
+    # the residual's variance, never below the level its weights assume (1: at the noise
+    # floor): a noise-free log's residual is the integration's own error, not noise
+    F = (max(taken, 0.0) / m) / max((rss - taken) / dof, 1.0)
     p = float(stats.f.sf(F, m, dof))
     info = Zs.T @ Zs
     with np.errstate(invalid="ignore", divide="ignore"):
