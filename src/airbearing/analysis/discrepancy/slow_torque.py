@@ -9,16 +9,14 @@ rate``, and no covariance of the residual sees a bias.
 
 Here the slow torque is a nuisance: on each steady axis and log segment, a torque that
 is a polynomial of low order in time (Legendre polynomials on the segment: a constant
-and a linear drift by default). Its columns of the weighted residual's Jacobian are the
-response of the shooting residual to the Model's disturbance-torque input ``tau_<axis>``
-at the fitted parameters and window states, by **central differences** of the compiled
-residual, not CasADi's derivatives: the residual calls the compiled sample step
-(``step_dt``, an external C function) that carries derivatives in the window states and
-parameters only, so CasADi cannot differentiate it in an input; an exact column would
-need a second compiled window function per window shape with the torque basis as a
-parameter (seconds of C compilation for a few columns). The differences are accurate to
-about 2e-9 of a column (steps of 1e-7 to 1e-5 rad/s^2 times the inertia agree to 2-3e-9
-on seed 004's platform; 1e-4 to 3e-7): the residual is linear in a torque of that size.
+and a linear drift by default). Its columns of the weighted residual's Jacobian are
+exact: CasADi's forward derivative of the shooting problem's residual function in its
+data, along the Model's disturbance-torque input ``tau_<axis>`` that each coefficient
+makes, at the fitted parameters and window states. That function is built without the
+compiled C sample step (its library carries derivatives in the states and parameters
+only, not in an input) and evaluated once, by CasADi's virtual machine (0.05 s on a
+30 s log of seed 004's platform; the central differences of the compiled residual it
+replaces agreed with it to 2.4e-10 of a column).
 Linearised at the fit (one Gauss-Newton step, the shooting problem's own weighting,
 process-noise defects included), the nuisance is
 
@@ -50,8 +48,10 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
+from numpy.polynomial.legendre import legval
 
 from airbearing.analysis.shooting.fit import fit_jacobian, solve_gram
+from airbearing.analysis.shooting.problem_functions import _problem_functions
 
 __all__ = ["MAX_FACTOR", "SLOW_TORQUE_P", "SLOW_TORQUE_ORDER", "SlowTorque", "slow_torque"]
 
@@ -70,10 +70,6 @@ SLOW_TORQUE_ORDER = 1
 #: the data. A per-axis z friction of seed 004's spinning platform keeps 1/50 to 1/130 of
 #: its information (the nutation) and is fitted.
 MAX_FACTOR = 1e4
-#: Torque step of the central differences: this angular acceleration (rad/s^2) times the
-#: axis inertia (module doc: the columns agree to 2e-9 from 1e-7 to 1e-5).
-_STEP_ACCEL = 1e-6
-
 AXES = "xyz"
 
 
@@ -158,40 +154,64 @@ def _torque_input(model, axis: int) -> int | None:
     return model.index(name, "u")[0]
 
 
-def _inertia(model, axis: int) -> float:
-    ax = AXES[axis] if model.dof == 3 else "z"
-    return float(np.asarray(model.p0)[model.index(f"J_{ax}{ax}", "p")[0]])
-
-
 def nuisance_columns(problem, fit, datas, axes, order: int = SLOW_TORQUE_ORDER):
     """The weighted residual's Jacobian in the slow torque's coefficients, ``(n_r, m)``.
 
-    One column per (steady axis, segment, Legendre order), N m^-1 (module doc); None
-    when the Model has no disturbance-torque input for an axis.
+    One column per (steady axis, segment, Legendre order), N m^-1 (module doc): CasADi's
+    forward derivative of the problem's residual function in its data, along the torque
+    inputs each coefficient makes; None when the Model has no disturbance-torque input for
+    an axis.
     """
     w = problem.windows
     model = problem.model
     t = np.array([datas[s].t[rows] for s, rows in zip(w.source, w.rows, strict=True)])
     seg = w.segments()
-    cols = []
+    bases = []
     for a in axes:
         iu = _torque_input(model, a)
         if iu is None:
             return None
-        h = _STEP_ACCEL * _inertia(model, a)
         for g in np.unique(seg):
             on = seg == g
             t0, t1 = float(t[on].min()), float(t[on].max())
             x = 2.0 * (t - t0) / max(t1 - t0, 1e-12) - 1.0
             for deg in range(order + 1):
-                basis = np.where(on[:, None], np.polynomial.legendre.legval(x, [0] * deg + [1]), 0)
-                out = []
-                for sign in (1.0, -1.0):
-                    U = w.u.copy()
-                    U[:, :, iu] += sign * h * basis
-                    out.append(_with_inputs(problem, w, U).residual(fit.delta, fit.p))
-                cols.append((out[0] - out[1]) / (2.0 * h))
-    return np.column_stack(cols)
+                U = np.zeros_like(w.u)
+                U[:, :, iu] = np.where(on[:, None], legval(x, [0] * deg + [1]), 0.0)
+                bases.append(U)
+    return _forward(problem, fit, bases)
+
+
+def _forward(problem, fit, bases) -> np.ndarray:
+    """The residual's directional derivatives along the input samples ``bases`` (each
+    ``windows.u``-shaped), exact: CasADi's forward mode through the problem's residual
+    function built without the compiled C step (whose library carries derivatives in the
+    states and parameters only), the residual assembled as the problem does
+    (:meth:`ShootingProblem.residual`: the whitened measurement rows, then the weighted
+    continuity defects under process noise)."""
+    w = problem.windows
+    zero = _with_inputs(problem, w, np.zeros_like(w.u))._data
+    seeds = np.column_stack([_with_inputs(problem, w, U)._data - zero for U in bases])
+    m = seeds.shape[1]
+    symbolic = copy.copy(problem)
+    symbolic.jit = False
+    v, Sp = problem._v(fit.delta, None)
+    fr = _problem_functions(*symbolic._key(Sp.shape[1]), problem.link)[0]
+    p = np.asarray(fit.p, dtype=float)
+    nominal = fr(v, p, Sp, problem._data)
+    nominal = list(nominal) if isinstance(nominal, (list, tuple)) else [nominal]
+    out = fr.forward(m)(
+        v, p, Sp, problem._data, *nominal,
+        np.zeros((v.size, m)), np.zeros((p.size, m)), np.zeros((Sp.shape[0], Sp.shape[1] * m)),
+        seeds,
+    )  # fmt: skip
+    out = list(out) if isinstance(out, (list, tuple)) else [out]
+    dR = np.asarray(out[0], dtype=float)
+    if not (problem.link and problem.penalty is not None):
+        return dR
+    P = problem.meas_whitening
+    dC = np.asarray(out[1], dtype=float)
+    return np.vstack([dR if P is None else P @ dR, problem.penalty @ dC])
 
 
 def _with_inputs(problem, windows, U):
