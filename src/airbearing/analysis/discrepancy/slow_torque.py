@@ -51,7 +51,7 @@ import scipy.sparse as sp
 from numpy.polynomial.legendre import legval
 
 from airbearing.analysis.shooting.fit import fit_jacobian, solve_gram
-from airbearing.analysis.shooting.problem_functions import _problem_functions
+from airbearing.analysis.shooting.problem_functions import residual_function
 
 __all__ = ["MAX_FACTOR", "SLOW_TORQUE_P", "SLOW_TORQUE_ORDER", "SlowTorque", "slow_torque"]
 
@@ -196,7 +196,7 @@ def _forward(problem, fit, bases) -> np.ndarray:
     symbolic = copy.copy(problem)
     symbolic.jit = False
     v, Sp = problem._v(fit.delta, None)
-    fr = _problem_functions(*symbolic._key(Sp.shape[1]), problem.link)[0]
+    fr = residual_function(*symbolic._key(Sp.shape[1]), problem.link)
     p = np.asarray(fit.p, dtype=float)
     nominal = fr(v, p, Sp, problem._data)
     nominal = list(nominal) if isinstance(nominal, (list, tuple)) else [nominal]
