@@ -118,6 +118,7 @@ FUNCTION_IMPORTS = {
     "analysis.discrepancy.adequacy": 2,  # statsmodels acovf, q_stat: ljung_box_p
     "analysis.discrepancy.consistency": 1,
     "analysis.discrepancy.honest": 1,
+    "analysis.discrepancy.slow_torque": 1,  # scipy.stats: the F test
     "analysis.discrepancy.trial": 1,
     "analysis.identification.cmg_inertia": 2,
     "analysis.identification.convex": 1,

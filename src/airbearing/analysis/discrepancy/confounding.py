@@ -93,7 +93,11 @@ class Confounding:
         the named one (least squares over the logs; only for pairs of effects).
     std_factor : float, tuple or None
         For a constant torque: the factor the named effect's error was widened by (a free
-        constant torque about the axis left in the fit); None otherwise.
+        constant torque about the axis left in the fit, or the slow torque fitted as a
+        nuisance); None otherwise.
+    slow_torque : dict or None
+        The slow torque's test (:meth:`.slow_torque.SlowTorque.to_json`) when it was found
+        significant and fitted as a nuisance; None otherwise (and no JSON key).
     """
 
     effects: tuple
@@ -102,9 +106,10 @@ class Confounding:
     experiment: str
     equivalent: dict
     std_factor: object = None
+    slow_torque: dict | None = None
 
     def to_json(self) -> dict:
-        return {
+        out = {
             "effects": list(self.effects),
             "kind": self.kind,
             "correlation": float(self.correlation),
@@ -112,6 +117,9 @@ class Confounding:
             "equivalent": {k: _plain(v) for k, v in self.equivalent.items()},
             "std_factor": None if self.std_factor is None else _plain(self.std_factor),
         }
+        if self.slow_torque is not None:
+            out["slow_torque"] = dict(self.slow_torque)
+        return out
 
 
 def _plain(v):

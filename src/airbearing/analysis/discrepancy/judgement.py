@@ -28,6 +28,7 @@ from airbearing.analysis.discrepancy.horizon import _as_value
 from airbearing.analysis.discrepancy.replay import model_for, prepare, problem_for
 from airbearing.analysis.discrepancy.result import Validation
 from airbearing.analysis.discrepancy.search_state import _Named, _Search, _Selection
+from airbearing.analysis.discrepancy.slow_torque import slow_torque
 from airbearing.analysis.discrepancy.words import (
     SCALE_EXPERIMENT,
     WHEEL_INERTIA_UNSEEN,
@@ -106,20 +107,15 @@ def _confounding(search: _Search, sel: _Selection, named: _Named) -> None:
         const = constant_torque_confounding(
             model, search.datas, p, named_th, S_of, axes, rates
         )  # fmt: skip
-    if const and pn.get("significant"):  # widened when the logs show an unexplained torque
+    slow = None
+    if const:  # a slow torque about a steady axis, tested and, when there, marginalised
+        slow = slow_torque(named.problem, named.fit, search.datas, axes)
+    if slow is not None and slow.identifiable and (slow.significant or pn.get("significant")):
+        _with_slow_torque(sel, named, slow)
+        const = [_slow_words(sel, c, slow) for c in const]
+    elif const and pn.get("significant"):  # widened when the logs show an unexplained torque
         f = constant_torque_inflation(model, search.datas, p, named_th, S_of, axes)
-        i = 0
-        for c in sel.chosen:
-            fc = f[i : i + c.k]
-            if np.any(fc > 1.0):
-                sd = np.atleast_1d(np.asarray(named.std[c.name], float))
-                named.std_within.setdefault(c.name, named.std[c.name])
-                named.std[c.name] = _as_value(c, sd * fc)
-                if named.efficiency.get(c.name) is not None:
-                    with np.errstate(invalid="ignore", divide="ignore"):
-                        e = np.atleast_1d(np.asarray(named.efficiency[c.name], float)) * fc
-                    named.efficiency[c.name] = _as_value(c, e)
-            i += c.k
+        _widen(sel, named, f)
         factors = {c.name: f for c, f in _split(sel.chosen, f)}
         const = [
                 replace(
@@ -142,6 +138,49 @@ def _confounding(search: _Search, sel: _Selection, named: _Named) -> None:
             sel.confounded.append(pair)
         sel.experiments[f"{pair[0]} + {pair[1]}"] = c.experiment
     sel.confounding = found + const
+
+
+def _widen(sel, named, f) -> None:
+    """Each named effect's ``std`` (and efficiency) times its factors ``f`` (theta order);
+    the error before kept in ``std_within``."""
+    for c, fc in _split(sel.chosen, f):
+        if np.any(fc > 1.0):
+            sd = np.atleast_1d(np.asarray(named.std[c.name], float))
+            named.std_within.setdefault(c.name, named.std[c.name])
+            named.std[c.name] = _as_value(c, sd * fc)
+            if named.efficiency.get(c.name) is not None:
+                with np.errstate(invalid="ignore", divide="ignore"):
+                    e = np.atleast_1d(np.asarray(named.efficiency[c.name], float)) * fc
+                named.efficiency[c.name] = _as_value(c, e)
+
+
+def _with_slow_torque(sel, named, slow) -> None:
+    """The named values moved by the joint step with the slow torque (inside each effect's
+    bounds) and their errors widened by its factors (:mod:`.slow_torque`)."""
+    i = 0
+    theta = np.asarray(named.fit.theta, float)
+    for c in sel.chosen:
+        th = theta[i : i + c.k] + slow.step[i : i + c.k]
+        th = np.clip(th, np.asarray(c.lower, float), np.asarray(c.upper, float))
+        named.effects[c.name] = c.value(th)
+        i += c.k
+    _widen(sel, named, slow.factor)
+
+
+def _slow_words(sel, conf, slow):
+    """A constant-torque confounding entry with the slow torque's test and factor."""
+    f = dict(_split_named(sel, slow.factor))
+    return replace(
+        conf,
+        std_factor=_as_value(_cand(sel, conf), f[conf.effects[0]]),
+        experiment=conf.experiment + "; " + slow.words(),
+        slow_torque=slow.to_json(),
+    )
+
+
+def _split_named(sel, x):
+    for c, xc in _split(sel.chosen, x):
+        yield c.name, xc
 
 
 def _split(chosen, x):

@@ -93,6 +93,14 @@ def _problem_functions(model, L, nw, K, outputs, substeps, jit, link=False):
     return cached(key, lambda: _build_problem(model, L, nw, K, outputs, substeps, jit, link))
 
 
+def residual_function(model, L, nw, K, outputs, substeps, jit, link=False) -> ca.Function:
+    """The CasADi Function ``fr`` of :func:`_problem_functions`: ``(v, p_base, S, data) ->``
+    the residual (and with ``link`` the continuity defects). With ``jit=False`` it is built
+    on the symbolic sample step, so CasADi differentiates it in every input (the data
+    too)."""
+    return _problem_functions(model, L, nw, K, outputs, substeps, jit, link)[0]
+
+
 def window_jacobian(model, L, nw, K, outputs, substeps, jit, link=False) -> WindowJacobian:
     """The :class:`WindowJacobian` ``fj`` of :func:`_problem_functions`."""
     return _problem_functions(model, L, nw, K, outputs, substeps, jit, link)[1]
