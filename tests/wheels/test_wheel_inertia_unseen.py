@@ -85,4 +85,4 @@ def test_a_wheel_friction_at_one_speed_is_told_from_a_table_torque_by_the_wheel_
     assert abs(value / 2e-5 - 1) < 0.10 and abs(value - 2e-5) < 3 * std, str(found)
     assert set(found.effects) == {"wheel_coulomb_friction"}, str(found)
     assert not found.confounded, str(found)
-    assert "cannot be told from a constant torque" not in found.verdict
+    assert "told from a constant torque" not in found.verdict

@@ -362,9 +362,10 @@ def constant_torque_confounding(model, datas, p, named, S_of, axes, rates) -> li
     for a, i, sine in _near_constant(model, datas, p, named, S_of, lambda a: not a.lag, axes):
         ax = AXES[i] if model.dof == 3 else "z"  # a dof-1 rate is the yaw rate
         text = (
-            f"the rate about {ax} stays near {rate_of[i]:.3g} rad/s over the logs (within "
-            f"{100 * sine:.0f} %), so {a.name} about {ax} makes a nearly constant "
-            "torque there, as would a torque the model does not hold (the bearing's "
+            f"the rate about {ax} stays near {rate_of[i]:.3g} rad/s over the logs, so "
+            f"{a.name} about {ax} makes a torque within {100 * sine:.0f} % of a constant "
+            "there (the sine of their angle), as would a torque the model does not hold "
+            "(the bearing's "
             "own air-flow torque, a slow drift); repeat the run at another "
             f"rate about {ax} (or let it coast down, or slew it) and fit the logs "
             "together: a friction or drag scales with the rate, the unexplained torque "

@@ -302,7 +302,8 @@ def _separate_words(c) -> str:
     """What separates a confounded pair, in words."""
     a, b = c.effects
     if not c.equivalent:  # a constant torque about a steady axis
-        return f"{a} cannot be told from a {b} on these logs: {c.experiment}"
+        verb = "cannot be told" if c.kind == "exact" else "can hardly be told"
+        return f"{a} {verb} from a {b} on these logs: {c.experiment}"
     return f"to tell {a} from {b}: {c.experiment}"
 
 
