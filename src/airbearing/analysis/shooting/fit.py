@@ -245,12 +245,37 @@ def theta_errors(J, k: int, s2: float, names=None):
         if sp.issparse(Jd)
         else np.linalg.norm(Jd, axis=0)
     )
+    c = np.where(col > 0, col, 1.0)
+    Fr, Ftt = _reduced(Jd @ sp.diags(1.0 / c) if sp.issparse(Jd) else Jd / c, k)
+    return reduced_errors(Fr, Ftt, col[:k], s2)
+
+
+def reduced_errors(Fr: np.ndarray, Ftt: np.ndarray, col: np.ndarray, s2: float):
+    """:func:`theta_errors` from the reduced Fisher matrix of the column-scaled Jacobian.
+
+    Parameters
+    ----------
+    Fr : ndarray (k, k)
+        Schur complement of the nuisance block of ``Js^T Js`` (symmetric), ``Js`` the
+        Jacobian with each column divided by its norm (a zero column left as it is).
+    Ftt : ndarray (k, k)
+        The parameters' own block of ``Js^T Js``.
+    col : ndarray (k,)
+        The parameters' column norms of the unscaled Jacobian (their units' inverse).
+    s2 : float
+        Residual variance factor (reduced chi-square).
+
+    Returns
+    -------
+    std, cov, reasons
+        As :func:`theta_errors`.
+    """
+    k = col.size
     reasons = ["" for _ in range(k)]
     for i in range(k):
         if not col[i] > 0:
             reasons[i] = "no usable sample is sensitive to it (nothing in the log excites it)"
     c = np.where(col > 0, col, 1.0)
-    Fr, Ftt = _reduced(Jd @ sp.diags(1.0 / c) if sp.issparse(Jd) else Jd / c, k)
     ev, V = np.linalg.eigh(Fr)
     ok = np.array([not r for r in reasons])
     good = ev > FISHER_RCOND * max(float(np.max(np.diag(Ftt))), 1e-300)
@@ -266,7 +291,7 @@ def theta_errors(J, k: int, s2: float, names=None):
             )
             ok[i] = False
     cov_s = (V[:, good] / ev[good]) @ V[:, good].T * s2
-    cov = cov_s / np.outer(c[:k], c[:k])
+    cov = cov_s / np.outer(c, c)
     std = np.sqrt(np.maximum(np.diag(cov), 0.0))
     for i in range(k):
         if not ok[i] or not std[i] > 0:
