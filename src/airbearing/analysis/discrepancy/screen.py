@@ -170,22 +170,31 @@ class Linearisation:
         self.r = r
         self.A = A
         self.Jd = Jd
-        nd, nw, n = problem.n_delta, problem.windows.n, problem.n_win_res
+        nw, n = problem.windows.n, problem.n_win_res
         m = self.A.shape[1]
         G, g = np.zeros((m, m)), np.zeros(m)
+        # per window: its rows, the pseudo-inverse of its states' Gram block, and the
+        # products the step needs (D^T A and D^T r: nd x m and nd numbers, where D itself,
+        # n x nd dense per window, was some 50 MB on an hour of 50 Hz three-axis samples)
         self.blocks = []
         for j in range(nw):
             R = slice(j * n, (j + 1) * n)
             Aj, rj = self.A[R], r[R]
-            Dj = Jd[R, j * nd : (j + 1) * nd].toarray()
+            Dj = self._window(j)
             P = np.linalg.pinv(Dj.T @ Dj, hermitian=True)
             B = Aj.T @ Dj
+            Dr = Dj.T @ rj
             G += Aj.T @ Aj - B @ P @ B.T
-            g += Aj.T @ rj - B @ P @ (Dj.T @ rj)
-            self.blocks.append((R, Dj, P))
+            g += Aj.T @ rj - B @ P @ Dr
+            self.blocks.append((R, P, B.T, Dr))
         self.G, self.g = G, g
         self.rss0 = float(r @ r)
         self._gram, self._lock = None, threading.Lock()
+
+    def _window(self, j: int) -> np.ndarray:
+        """Window ``j``'s initial-state columns on its own rows (dense, n x nd)."""
+        nd, n = self.problem.n_delta, self.problem.n_win_res
+        return self.Jd[j * n : (j + 1) * n, j * nd : (j + 1) * nd].toarray()
 
     def columns(self, params: tuple, tie: np.ndarray) -> np.ndarray:
         """``E`` (k_sel + len(raw), k_sel + k_c): chosen and candidate parameters -> columns."""
@@ -214,10 +223,10 @@ class Linearisation:
         )
         pb = self.problem
         nd, nw = pb.n_delta, pb.windows.n
-        e = self.r + self.A @ (E @ d)
+        Ed = E @ d
         delta = self.current.delta.copy()
-        for j, (R, Dj, P) in enumerate(self.blocks):
-            delta[:, j] -= P @ (Dj.T @ e[R])
+        for j, (_, P, DA, Dr) in enumerate(self.blocks):  # D^T e, e = r + A E d
+            delta[:, j] -= P @ (Dr + DA @ Ed)
         S_sel_c = self.S_all(E)
         p_base = self.current.p - (self.S_sel @ self.current.theta if k_sel else 0.0)
         if self.cand0 is not None:  # the candidate's part of the point, out of the base too
@@ -237,7 +246,8 @@ class Linearisation:
         move = th_c if self.cand0 is None else th_c - self.cand0
         r = self.problem.residual(self.current.delta, self.current.p + S[:, self.k_sel :] @ move)
         e = r.copy()
-        for R, Dj, P in self.blocks:
+        for j, (R, P, _, _) in enumerate(self.blocks):
+            Dj = self._window(j)
             e[R] -= Dj @ (P @ (Dj.T @ r[R]))
         return lr_of(self.null, float(e @ e))
 
