@@ -215,7 +215,7 @@ def information_inverse(F: np.ndarray, rcond: float = PINV_RCOND) -> tuple[np.nd
     return inv / np.outer(c, c), int(np.count_nonzero(good))
 
 
-def theta_errors(J, k: int, s2: float, names=None):
+def theta_errors(J, k: int, s2: float, names=None, drop=None):
     """Standard errors of the first ``k`` columns of ``J`` with the others eliminated.
 
     Parameters
@@ -226,6 +226,10 @@ def theta_errors(J, k: int, s2: float, names=None):
         Number of parameters (the leading columns); the rest are nuisance (initial states).
     s2 : float
         Residual variance factor (reduced chi-square).
+    drop : array of int, optional
+        Nuisance columns (indices ``>= k``) left out, as if ``J`` had not held them (a
+        pinned window state): taken out in the column scaling's product, without a copy
+        of ``J`` less those columns.
 
     Returns
     -------
@@ -245,8 +249,17 @@ def theta_errors(J, k: int, s2: float, names=None):
         if sp.issparse(Jd)
         else np.linalg.norm(Jd, axis=0)
     )
+    n = Jd.shape[1]
+    keep = np.arange(n) if drop is None or not len(drop) else np.setdiff1d(np.arange(n), drop)
+    col = col[keep]
     c = np.where(col > 0, col, 1.0)
-    Fr, Ftt = _reduced(Jd @ sp.diags(1.0 / c) if sp.issparse(Jd) else Jd / c, k)
+    if sp.issparse(Jd):  # the kept columns, each divided by its norm, in one product
+        pick = sp.csc_matrix((1.0 / c, (keep, np.arange(keep.size))), shape=(n, keep.size))
+        Js = Jd @ (sp.diags(1.0 / c) if keep.size == n else pick)
+    else:
+        Js = (Jd if keep.size == n else Jd[:, keep]) / c
+    Fr, Ftt = _reduced(Js, k)
+    del Js
     return reduced_errors(Fr, Ftt, col[:k], s2)
 
 
