@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import itertools
 import math
+import threading
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -40,7 +41,8 @@ from airbearing.analysis.discrepancy.trial import (
     scan_grid,
 )
 from airbearing.analysis.discrepancy.words import why
-from airbearing.analysis.shooting import THETA_SLOTS, Fit, ShootingProblem, theta_errors
+from airbearing.analysis.shooting import THETA_SLOTS, Fit, ShootingProblem
+from airbearing.analysis.shooting.fit import gram, reduced_errors, solve_gram
 
 __all__ = [
     "AGREE_FRACTION",
@@ -168,21 +170,31 @@ class Linearisation:
         self.r = r
         self.A = A
         self.Jd = Jd
-        nd, nw, n = problem.n_delta, problem.windows.n, problem.n_win_res
+        nw, n = problem.windows.n, problem.n_win_res
         m = self.A.shape[1]
         G, g = np.zeros((m, m)), np.zeros(m)
+        # per window: its rows, the pseudo-inverse of its states' Gram block, and the
+        # products the step needs (D^T A and D^T r: nd x m and nd numbers, where D itself,
+        # n x nd dense per window, was some 50 MB on an hour of 50 Hz three-axis samples)
         self.blocks = []
         for j in range(nw):
             R = slice(j * n, (j + 1) * n)
             Aj, rj = self.A[R], r[R]
-            Dj = Jd[R, j * nd : (j + 1) * nd].toarray()
+            Dj = self._window(j)
             P = np.linalg.pinv(Dj.T @ Dj, hermitian=True)
             B = Aj.T @ Dj
+            Dr = Dj.T @ rj
             G += Aj.T @ Aj - B @ P @ B.T
-            g += Aj.T @ rj - B @ P @ (Dj.T @ rj)
-            self.blocks.append((R, Dj, P))
+            g += Aj.T @ rj - B @ P @ Dr
+            self.blocks.append((R, P, B.T, Dr))
         self.G, self.g = G, g
         self.rss0 = float(r @ r)
+        self._gram, self._lock = None, threading.Lock()
+
+    def _window(self, j: int) -> np.ndarray:
+        """Window ``j``'s initial-state columns on its own rows (dense, n x nd)."""
+        nd, n = self.problem.n_delta, self.problem.n_win_res
+        return self.Jd[j * n : (j + 1) * n, j * nd : (j + 1) * nd].toarray()
 
     def columns(self, params: tuple, tie: np.ndarray) -> np.ndarray:
         """``E`` (k_sel + len(raw), k_sel + k_c): chosen and candidate parameters -> columns."""
@@ -211,10 +223,10 @@ class Linearisation:
         )
         pb = self.problem
         nd, nw = pb.n_delta, pb.windows.n
-        e = self.r + self.A @ (E @ d)
+        Ed = E @ d
         delta = self.current.delta.copy()
-        for j, (R, Dj, P) in enumerate(self.blocks):
-            delta[:, j] -= P @ (Dj.T @ e[R])
+        for j, (_, P, DA, Dr) in enumerate(self.blocks):  # D^T e, e = r + A E d
+            delta[:, j] -= P @ (Dr + DA @ Ed)
         S_sel_c = self.S_all(E)
         p_base = self.current.p - (self.S_sel @ self.current.theta if k_sel else 0.0)
         if self.cand0 is not None:  # the candidate's part of the point, out of the base too
@@ -234,7 +246,8 @@ class Linearisation:
         move = th_c if self.cand0 is None else th_c - self.cand0
         r = self.problem.residual(self.current.delta, self.current.p + S[:, self.k_sel :] @ move)
         e = r.copy()
-        for R, Dj, P in self.blocks:
+        for j, (R, P, _, _) in enumerate(self.blocks):
+            Dj = self._window(j)
             e[R] -= Dj @ (P @ (Dj.T @ r[R]))
         return lr_of(self.null, float(e @ e))
 
@@ -245,13 +258,47 @@ class Linearisation:
         S_raw[self.raw, np.arange(len(self.raw))] = 1.0
         return np.hstack([self.S_sel, S_raw]) @ E
 
-    def fit_of(self, st: Step, k: int, J: sp.csc_matrix | None = None) -> Fit:
-        """The step as a :class:`Fit` (errors from the Jacobian at the current fit, ``J``:
-        ``st.J`` when already made)."""
+    def _shared_gram(self):
+        """``(A^T A, M)``: the Gram matrix of the round's parameter columns, and what
+        eliminating the window states takes from it, ``M = A^T Jd (Jd^T Jd)^+ Jd^T A``
+        with ``Jd``'s columns scaled by their norms as :func:`.theta_errors` scales them
+        (made once per linearisation, on the first step judged; every candidate's is
+        ``E^T (.) E``)."""
+        with self._lock:
+            if self._gram is None:
+                Jd = sp.csc_matrix(self.Jd)
+                cd = np.sqrt(np.asarray(Jd.power(2).sum(axis=0)).ravel())
+                cd = np.where(cd > 0, cd, 1.0)
+                Dinv = sp.diags(1.0 / cd)
+                Fdd = sp.csc_matrix(Dinv @ gram(Jd) @ Dinv)
+                AtJd = np.asarray(Jd.T @ self.A).T / cd  # (m, n_delta nw), scaled
+                AA = self.A.T @ self.A
+                M = AtJd @ solve_gram(Fdd, AtJd.T) if Fdd.shape[0] else np.zeros_like(AA)
+                self._gram = (AA, M)
+            return self._gram
+
+    def errors(self, E: np.ndarray, k: int, s2: float):
+        """:func:`.theta_errors` of the step's Jacobian ``[A E, Jd]`` (its first ``k``
+        columns the parameters) from :meth:`_shared_gram`, without that matrix: on an
+        hour of 50 Hz three-axis samples it and its column-scaled copy and Gram pieces were
+        some 400 MB per candidate. The same numbers to rounding (the sums taken in
+        another order)."""
+        AA, M = self._shared_gram()
+        Gt = E.T @ AA @ E
+        col = np.sqrt(np.maximum(np.diag(Gt), 0.0))
+        c = np.where(col > 0, col, 1.0)
+        cc = np.outer(c, c)
+        Ftt = Gt / cc
+        Fr = Ftt - (E.T @ M @ E) / cc
+        return reduced_errors(0.5 * (Fr + Fr.T), Ftt, col[:k], s2)
+
+    def fit_of(self, st: Step, k: int) -> Fit:
+        """The step as a :class:`Fit` (errors from the Jacobian at the current fit:
+        :meth:`errors`)."""
         pb = self.problem
         n_free = k + st.delta.size
         s2 = st.rss / max(pb.n_res - n_free, 1)
-        std, cov, reasons = theta_errors(st.J if J is None else J, k, s2)
+        std, cov, reasons = self.errors(st.E, k, s2)
         return Fit(
             theta=st.theta,
             theta_std=std,

@@ -20,7 +20,11 @@ from dataclasses import replace
 import numpy as np
 
 from airbearing.analysis.discrepancy.candidate_fit import START_YAW, _try
-from airbearing.analysis.discrepancy.candidates import regression_start, residual_torque
+from airbearing.analysis.discrepancy.candidates import (
+    forget_torque_terms,
+    regression_start,
+    residual_torque,
+)
 from airbearing.analysis.discrepancy.screen import MATTER_BIC, linearise
 from airbearing.analysis.discrepancy.search_state import _Progress, _Search, _Selection
 from airbearing.analysis.discrepancy.starts import explained_fraction
@@ -125,6 +129,12 @@ def _round(search, sel: _Selection, remaining, screen, workers, prog) -> list:
             tau, phi = residual_torque(model, search.datas, p_cur, search.S(lag, [c]))
             th, sd = regression_start(tau, phi)
             sel.starts[(c.label, len(chosen))] = (th, sd, explained_fraction(tau, phi, th))
+            del tau, phi
+    # the torque terms served the round's starts; kept through its fits they were the
+    # largest array of the round but two (about 0.7 kB per row: 120 MB on an hour of 50 Hz
+    # three-axis samples). The next use is at another point (the next round's, the named
+    # effects' revision), except when this round names nothing: then evaluated again
+    forget_torque_terms()
     # the lag problem (more states) is built before the threads share it
     for c in remaining:
         search.problem(lag or c.lag)

@@ -215,7 +215,7 @@ def information_inverse(F: np.ndarray, rcond: float = PINV_RCOND) -> tuple[np.nd
     return inv / np.outer(c, c), int(np.count_nonzero(good))
 
 
-def theta_errors(J, k: int, s2: float, names=None):
+def theta_errors(J, k: int, s2: float, names=None, drop=None):
     """Standard errors of the first ``k`` columns of ``J`` with the others eliminated.
 
     Parameters
@@ -226,6 +226,10 @@ def theta_errors(J, k: int, s2: float, names=None):
         Number of parameters (the leading columns); the rest are nuisance (initial states).
     s2 : float
         Residual variance factor (reduced chi-square).
+    drop : array of int, optional
+        Nuisance columns (indices ``>= k``) left out, as if ``J`` had not held them (a
+        pinned window state): taken out in the column scaling's product, without a copy
+        of ``J`` less those columns.
 
     Returns
     -------
@@ -245,12 +249,46 @@ def theta_errors(J, k: int, s2: float, names=None):
         if sp.issparse(Jd)
         else np.linalg.norm(Jd, axis=0)
     )
+    n = Jd.shape[1]
+    keep = np.arange(n) if drop is None or not len(drop) else np.setdiff1d(np.arange(n), drop)
+    col = col[keep]
+    c = np.where(col > 0, col, 1.0)
+    if sp.issparse(Jd):  # the kept columns, each divided by its norm, in one product
+        pick = sp.csc_matrix((1.0 / c, (keep, np.arange(keep.size))), shape=(n, keep.size))
+        Js = Jd @ (sp.diags(1.0 / c) if keep.size == n else pick)
+    else:
+        Js = (Jd if keep.size == n else Jd[:, keep]) / c
+    Fr, Ftt = _reduced(Js, k)
+    del Js
+    return reduced_errors(Fr, Ftt, col[:k], s2)
+
+
+def reduced_errors(Fr: np.ndarray, Ftt: np.ndarray, col: np.ndarray, s2: float):
+    """:func:`theta_errors` from the reduced Fisher matrix of the column-scaled Jacobian.
+
+    Parameters
+    ----------
+    Fr : ndarray (k, k)
+        Schur complement of the nuisance block of ``Js^T Js`` (symmetric), ``Js`` the
+        Jacobian with each column divided by its norm (a zero column left as it is).
+    Ftt : ndarray (k, k)
+        The parameters' own block of ``Js^T Js``.
+    col : ndarray (k,)
+        The parameters' column norms of the unscaled Jacobian (their units' inverse).
+    s2 : float
+        Residual variance factor (reduced chi-square).
+
+    Returns
+    -------
+    std, cov, reasons
+        As :func:`theta_errors`.
+    """
+    k = col.size
     reasons = ["" for _ in range(k)]
     for i in range(k):
         if not col[i] > 0:
             reasons[i] = "no usable sample is sensitive to it (nothing in the log excites it)"
     c = np.where(col > 0, col, 1.0)
-    Fr, Ftt = _reduced(Jd @ sp.diags(1.0 / c) if sp.issparse(Jd) else Jd / c, k)
     ev, V = np.linalg.eigh(Fr)
     ok = np.array([not r for r in reasons])
     good = ev > FISHER_RCOND * max(float(np.max(np.diag(Ftt))), 1e-300)
@@ -266,7 +304,7 @@ def theta_errors(J, k: int, s2: float, names=None):
             )
             ok[i] = False
     cov_s = (V[:, good] / ev[good]) @ V[:, good].T * s2
-    cov = cov_s / np.outer(c[:k], c[:k])
+    cov = cov_s / np.outer(c, c)
     std = np.sqrt(np.maximum(np.diag(cov), 0.0))
     for i in range(k):
         if not ok[i] or not std[i] > 0:

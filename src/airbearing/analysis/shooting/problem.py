@@ -619,9 +619,10 @@ class ShootingProblem:
             N = pinned_null_space(N, k + held, k)
             extra["N"] = N
             n_free = N.shape[1]
-            Jr = J @ N
-        else:  # a pinned entry is no nuisance direction (its column is zero)
-            Jr = J[:, np.setdiff1d(np.arange(J.shape[1]), k + held)] if held.size else J
+            Jr, drop = J @ N, None
+        else:  # a pinned entry is no nuisance direction (its column is zero): left out
+            # of the errors' product (theta_errors's drop), not by a copy of J without it
+            Jr, drop = J, k + held
         p = p_base + S @ theta if k else p_base.copy()
         delta = v[k:].reshape(nd, nw, order="F")
         if Jc is not None and penalised:
@@ -634,7 +635,7 @@ class ShootingProblem:
                   self._data[-len(self._sigmas()) :].copy())  # fmt: skip
             extra["linearised"] = (self._serial, at, C)
         n_obs = self.n_res + (self.penalty.getnnz(axis=1) > 0).sum() if penalised else self.n_res
-        std, cov, reasons = theta_errors(Jr, k, rss / max(n_obs - n_free, 1))
+        std, cov, reasons = theta_errors(Jr, k, rss / max(n_obs - n_free, 1), drop=drop)
         return Fit(
             theta=theta,
             theta_std=std,
