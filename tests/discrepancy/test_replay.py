@@ -42,10 +42,6 @@ def cmg():
     return tb.replace(sensors=Sensors(rate=tb.sensors.rate, gyro_noise=5e-4, lowpass=1.0))
 
 
-#: rad/s, a MEMS gyro's bias per axis (the XSens MTi-1's in-run bias is ~5e-5 rad/s)
-GYRO_BIAS = (2e-4, -1e-4, 5e-5)
-
-
 def _free(tb, **kw):
     kw.setdefault("duration", 20.0)
     return free_oscillation(tb, initial_rate=W0, q0=Q0, sliders=SLIDERS, **kw)
@@ -141,11 +137,7 @@ def test_noise_floor_of_an_attitude_only_log(tb):
 @pytest.mark.parametrize("kind", ["platform", "cmg"])
 def test_correct_model_replays_to_the_noise_floor(platform, cmg, kind):
     if kind == "platform":
-        # a gyro bias in the truth and the testbed (the correct model): the Model of
-        # test_lag_screen_linked.py's lag-free search on this rig, whose compiled step
-        # Jacobian the replay shares; its residual is still the gyro noise alone
-        tb = platform.with_effects({"gyro_bias": GYRO_BIAS})
-        res = _free(tb, seed=3, attitude_noise=1e-3, duration=20.0)
+        tb, res = platform, _free(platform, seed=3, attitude_noise=1e-3, duration=20.0)
     else:
         tb, res = cmg, slew(cmg, seed=3)
     rp = replay(tb, res.log)
@@ -259,11 +251,8 @@ def test_missing_gimbal_rates_are_differenced(cmg):
 def test_a_single_log_gap_is_the_replay_gap_after_coloured_noise_is_estimated(platform):
     # the replay's fit is white; its process-noise estimate then sets a coloured measurement
     # noise on the problem: a log's gap must still unwhiten the fit's residual as it was made
-    # (the gyro bias known, as in test_correct_model_replays_to_the_noise_floor: the same
-    # compiled Model; the friction is the misfit)
-    tb = platform.with_effects({"gyro_bias": GYRO_BIAS})
-    res = _free(tb, seed=3, attitude_noise=1e-3, effects={"viscous_friction": 2e-4})
-    rp = replay(tb, res.log)
+    res = _free(platform, seed=3, attitude_noise=1e-3, effects={"viscous_friction": 2e-4})
+    rp = replay(platform, res.log)
     assert rp.problem.measurement_noise is not None  # the case this test is about
     assert rp.log_gaps() == [rp.gap]
     assert rp.to_json()["logs"][0]["gap"] == rp.gap
