@@ -17,6 +17,9 @@ counters) is written by ``tests/conftest.py`` when ``AIRBEARING_SUITE_COSTS`` na
 
     AIRBEARING_SUITE_COSTS=/tmp/costs.jsonl .venv/bin/python -m pytest
     .venv/bin/python benchmarks/suite_costs.py --workers /tmp/costs.jsonl
+
+With ``--workers`` it also ranks the test files by CPU (each test's, its fixtures' set-up
+included, and its children's: gcc and the commands it runs), summed over the processes.
 """
 
 from __future__ import annotations
@@ -72,6 +75,21 @@ def print_workers(rows: list[dict]) -> None:
           + f" {total[keys[3]]:8.1f} {total[keys[4]]:8.1f}")  # fmt: skip
 
 
+def print_files(rows: list[dict], top: int) -> None:
+    """The test files by CPU (theirs and their children's, summed over the processes), s."""
+    per_file: dict[str, float] = defaultdict(float)
+    for r in rows:
+        for name, cpu in r.get("files_cpu", {}).items():
+            per_file[name] += cpu
+    if not per_file:
+        return
+    total = sum(per_file.values())
+    print(f"\n{total:.0f} s of CPU in {len(per_file)} test files (gcc and commands included)")
+    print(f"{'cpu':>8}  {'share':>6}  file")
+    for name, cpu in sorted(per_file.items(), key=lambda kv: -kv[1])[:top]:
+        print(f"{cpu:8.1f}  {cpu / total:6.1%}  {name}")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("junit", help="a pytest --junitxml report (or, with --workers, costs)")
@@ -79,7 +97,9 @@ def main() -> None:
     parser.add_argument("--top", type=int, default=25, help="tests and files shown")
     args = parser.parse_args()
     if args.workers:
-        print_workers(workers(args.junit))
+        rows = workers(args.junit)
+        print_workers(rows)
+        print_files(rows, args.top)
         return
     per_file, per_test = costs(args.junit)
     total = sum(per_file.values())

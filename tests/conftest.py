@@ -320,6 +320,24 @@ COSTS_ENV = "AIRBEARING_SUITE_COSTS"
 _started = {}
 #: CPU seconds of each ``computed_once`` computation this process made (for the costs row).
 _computed: dict[str, float] = {}
+#: CPU seconds (the process's and its children's: the C compiler, commands) of each test
+#: file's tests in this process, their fixtures' set-up and tear-down included (costs row).
+_file_cpu: dict[str, float] = {}
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_protocol(item, nextitem):
+    import os
+
+    if not os.environ.get(COSTS_ENV):
+        yield
+        return
+    t0 = os.times()
+    yield
+    t1 = os.times()
+    cpu = sum(t1[:4]) - sum(t0[:4])  # user, system, children's user and system
+    path = item.location[0]
+    _file_cpu[path] = _file_cpu.get(path, 0.0) + cpu
 
 
 def pytest_configure(config):
@@ -365,5 +383,7 @@ def pytest_sessionfinish(session):
         row["cache"] = compiled.cache_info().to_json()
     if _computed:
         row["computed_once"] = _computed
+    if _file_cpu:
+        row["files_cpu"] = {k: round(v, 3) for k, v in sorted(_file_cpu.items())}
     with open(path, "a") as f:  # one short append per process: lines do not interleave
         f.write(json.dumps(row) + "\n")

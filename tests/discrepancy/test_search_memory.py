@@ -24,12 +24,18 @@ from airbearing.analysis.discrepancy.selection import ROW_ARRAYS
 from airbearing.analysis.shooting import THETA_SLOTS
 from airbearing.analysis.shooting.problem_functions import KEPT_INDEX_SLOTS, window_jacobian
 
+#: The candidates of the searches on this rig in test_discrepancy_workers.py and
+#: test_screen_far_candidates.py: one Model (every candidate at zero), so one compiled step
+#: Jacobian for all of them; what is checked here does not depend on which candidates
+ONLY = ["viscous_friction", "coulomb_friction", "aero_drag", "gyro_bias"]
+
 
 def test_a_wide_jacobian_makes_its_index_arrays_per_call():
     assert KEPT_INDEX_SLOTS == THETA_SLOTS  # (functions.py imports problem_functions)
     tb, log = spinning_seed004_50hz(2.0)
     datas, windows, floor = prepare(tb, [log])
-    cands = candidates_for(tb, datas, ["viscous_friction", "aero_drag", "gyro_bias"])
+    # the candidates of test_discrepancy_workers.py's search (its compiled Model is shared)
+    cands = candidates_for(tb, datas, ONLY)
     search = _Search(tb, datas, windows, floor, cands, 0, None)
     pb = search.problem(False)
     nominal = pb.fit(search.models[False].p0.copy(), name="nominal")
@@ -54,8 +60,7 @@ def test_a_wide_jacobian_makes_its_index_arrays_per_call():
 @pytest.mark.slow  # one search of two rounds on a 6 s log: about 3 s (16 s compiling)
 def test_a_decided_later_round_lets_go_of_its_per_row_arrays():
     tb, log = spinning_seed004_50hz(6.0, {"viscous_friction": 1e-5, "aero_drag": 3e-5})
-    res = discrepancy(tb, log, max_effects=2, only=["viscous_friction", "aero_drag",
-                                                    "coulomb_friction"])  # fmt: skip
+    res = discrepancy(tb, log, max_effects=2, only=ONLY)
     assert len(res.rounds) >= 2
     first = [c.fit for c in res.rounds[0] if c.fit is not None]
     assert first and all("r" in f.extra for f in first)
