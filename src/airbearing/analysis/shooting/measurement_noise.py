@@ -55,9 +55,9 @@ from scipy.sparse.linalg import splu
 
 from airbearing.analysis.shooting.autoregressive import AR
 from airbearing.analysis.shooting.errors import _series
-from airbearing.analysis.shooting.fit import gram, solve_gram
+from airbearing.analysis.shooting.fit import solve_gram
 from airbearing.analysis.shooting.penalty import piece_durations, start_yaw_profiled
-from airbearing.analysis.shooting.sparse import cross_gram
+from airbearing.analysis.shooting.sparse import cross_gram, gram
 
 __all__ = [
     "MeasurementNoise",
@@ -193,7 +193,9 @@ def _whitening_pattern(problem, groups: tuple):
         c = np.concatenate([np.arange(n), *cols_o]).astype(np.int64)
         order = np.lexsort((r, c))
         indptr = np.r_[0, np.cumsum(np.bincount(c, minlength=n))]
-        cache[groups] = (order, r[order], indptr)
+        # 32-bit while they fit (as P's own indices): the cache lives with the problem
+        it = np.int32 if r.size < np.iinfo(np.int32).max else np.int64
+        cache[groups] = (order.astype(it), r[order].astype(it), indptr.astype(it))
     return cache[groups]
 
 

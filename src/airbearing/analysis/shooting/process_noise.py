@@ -42,7 +42,6 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.linalg import splu
 
-from airbearing.analysis.shooting.fit import gram
 from airbearing.analysis.shooting.measurement_noise import (
     estimate_measurement_noise,
     set_measurement_noise,
@@ -56,7 +55,13 @@ from airbearing.analysis.shooting.penalty import (  # noqa: F401 - also this mod
     set_intensity,
     start_yaw_profiled,
 )
-from airbearing.analysis.shooting.sparse import add_row_products, column_abs_sums, gram_rows
+from airbearing.analysis.shooting.sparse import (
+    add_row_products,
+    column_abs_sums,
+    gram,
+    gram_rows,
+    release_free_memory,
+)
 from airbearing.errors import SolverError
 
 __all__ = [
@@ -153,7 +158,7 @@ def _laplace(problem, J, rss: float, k: int, penalty_logdet: float) -> float:
     """:func:`loglik` of a residual ``rss`` and its Jacobian ``J`` (the defect rows whitened
     at the intensity whose ``log det W`` is ``penalty_logdet``)."""
     J = sp.csc_matrix(J)
-    # the Gram matrix block of columns by block (fit.gram): scipy's product would copy J
+    # the Gram matrix block of columns by block (sparse.gram): scipy's product copies J
     return _laplace_of(problem, gram(J if k == 0 else J[:, k:]), rss, penalty_logdet)
 
 
@@ -252,7 +257,9 @@ def _estimate(
             start = fit_at(grid[0], theta0, delta0)
         else:
             set_intensity(problem, grid[0])
+        release_free_memory()  # (what the fits freed: the estimate's peak is on top of it)
         noise = estimate_measurement_noise(problem, start, k)
+        release_free_memory()
         if noise is not None:
             set_measurement_noise(problem, noise)
             start = fit_at(grid[0], start.theta, start.delta)
@@ -297,6 +304,7 @@ def _descend(problem, fit_at, grid, theta0, delta0, start, k: int, bounds, stop=
         nonlocal lin
         out[kappa] = (fit, loglik(problem, fit, k))
         lin = None  # (the last one freed before the next is made: each holds a Jacobian)
+        release_free_memory()
         lin = Linearisation.of(problem, fit, k, bounds)
         _keep_best_jacobian(out, start)
 

@@ -72,15 +72,27 @@ def vstack_csc(A: sp.csc_matrix, B: sp.csc_matrix) -> sp.csc_matrix:
     )
 
 
-#: Column blocks in which the Gram matrices below are formed (as ``fit.gram``).
+#: Fewest column blocks in which the Gram matrices below are formed (as ``fit.gram``) ...
 GRAM_BLOCKS = 4
+#: ... and most entries of a block (more blocks for a larger matrix): a block and its CSR
+#: copy, some 25 MB, are what a Gram matrix holds beyond its factors.
+GRAM_BLOCK_ENTRIES = 1 << 20
 
 
 def _column_blocks(J: sp.csc_matrix) -> np.ndarray:
-    """Edges of :data:`GRAM_BLOCKS` blocks of columns of about equal numbers of entries."""
+    """Edges of blocks of columns of about equal numbers of entries (at least
+    :data:`GRAM_BLOCKS`, at most :data:`GRAM_BLOCK_ENTRIES` entries each where columns
+    allow)."""
     n = J.shape[1]
-    cuts = np.searchsorted(J.indptr, np.linspace(0, J.nnz, GRAM_BLOCKS + 1)[1:-1])
+    m = max(GRAM_BLOCKS, -(-J.nnz // GRAM_BLOCK_ENTRIES))
+    cuts = np.searchsorted(J.indptr, np.linspace(0, J.nnz, m + 1)[1:-1])
     return np.unique(np.r_[0, np.clip(cuts, 1, max(n - 1, 1)), n])
+
+
+def gram(J) -> sp.csc_matrix:
+    """``J^T J`` of a sparse ``J`` (:func:`cross_gram`): the same matrix to the bit as
+    ``fit.gram`` (scipy's ``J.T @ J``), in blocks of at most :data:`GRAM_BLOCK_ENTRIES`."""
+    return cross_gram(J, J)
 
 
 def cross_gram(X, Y, stop: int | None = None) -> sp.csc_matrix:
@@ -152,3 +164,29 @@ def column_abs_sums(J) -> np.ndarray:
             for a, b in zip(edges[:-1], edges[1:], strict=True)
         ]
     )
+
+
+_LIBC: object = None
+
+
+def release_free_memory() -> None:
+    """Give the free pages of the C heap back to the system (glibc's ``malloc_trim``; a
+    no-op where there is none).
+
+    glibc keeps what a phase frees for the next allocations; after the fits of an hour of
+    samples that was some 70 MB of free pages in the middle of the heap, resident all
+    through the process-noise estimate that followed (its peak is the process's).
+    """
+    global _LIBC
+    if _LIBC is None:
+        try:
+            import ctypes
+            import ctypes.util
+
+            libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")
+            _LIBC = libc.malloc_trim
+            _LIBC.argtypes, _LIBC.restype = [ctypes.c_size_t], ctypes.c_int
+        except (OSError, AttributeError):  # not glibc: the allocator's own policy
+            _LIBC = False
+    if _LIBC:
+        _LIBC(0)
