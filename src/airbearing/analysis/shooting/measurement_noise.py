@@ -397,17 +397,21 @@ class _Linearised:
             cd = np.delete(cd, np.arange(self.problem.windows.n) * self.problem.n_delta)
         return ld + 2.0 * float(np.log(cd).sum())
 
-    def exact(self, ar: dict, dt: float) -> float:
-        """:meth:`loglik` row by row; keeps the whitened measurement rows after the step
-        (``innovations``)."""
+    def _whitened(self, ar: dict, dt: float):
+        """``(P J_m, P r_m, log det P)`` of the whitening by ``ar`` (P let go of after)."""
         P, logdet = whitening(self.problem, ar, dt)
+        b = P @ self.rm
         # P on the measurement rows of J in place (P's columns padded with none to J's
         # rows): the whitened rows, the same products as P @ J[:n]
-        b = P @ self.rm
         N = self.J.shape[0]
         P = sp.csc_matrix((P.data, P.indices, np.r_[P.indptr, np.full(N - P.shape[1], P.nnz)]),
                           shape=(P.shape[0], N))  # fmt: skip
-        A = sp.csc_matrix(P @ self.J)  # the whitened measurement rows
+        return sp.csc_matrix(P @ self.J), b, logdet
+
+    def exact(self, ar: dict, dt: float) -> float:
+        """:meth:`loglik` row by row; keeps the whitened measurement rows after the step
+        (``innovations``)."""
+        A, b, logdet = self._whitened(ar, dt)
         G = sp.csc_matrix(gram(A) + self.Gp)
         c = np.sqrt(np.maximum(G.diagonal(), 1e-300))
         Dc = sp.diags(1.0 / c)
