@@ -491,7 +491,8 @@ class Linearisation:
                 step = -lu.solve(self._rmatvec(WC, r)[self.free] / sc) / sc
                 full = np.zeros(G.shape[1])
                 full[self.free] = step
-                drop = 0.5 * float(np.sum(self._matvec(WC, full) ** 2))
+                y = self._matvec(WC, full)
+                drop = 0.5 * float(np.sum(np.square(y, out=y)))
             if not np.isfinite(drop):
                 return None
             if i and drop <= LINEAR_TOL:
@@ -527,7 +528,11 @@ class Linearisation:
 
     def _matvec(self, WC: sp.csc_matrix, x: np.ndarray) -> np.ndarray:
         """``A x`` (``A = [J_m; W C]``, ``x`` zero off the free columns)."""
-        return np.r_[(self.J @ x)[: self.n], WC @ x]
+        y = self.J @ x
+        if y.size != self.n + WC.shape[0]:  # pragma: no cover - J's defect rows are W C's
+            return np.r_[y[: self.n], WC @ x]
+        y[self.n :] = WC @ x  # (in place of the fit's own defect rows: no concatenation)
+        return y
 
 
 def _verdict(problem, ll: dict, best: float, bottom: float) -> ProcessNoise:

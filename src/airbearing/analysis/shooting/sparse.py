@@ -5,6 +5,8 @@ converted once (:func:`to_csc`, :func:`csc_of`), columns scaled in place
 
 from __future__ import annotations
 
+import ctypes
+import ctypes.util
 from collections import OrderedDict
 
 import casadi as ca
@@ -75,8 +77,8 @@ def vstack_csc(A: sp.csc_matrix, B: sp.csc_matrix) -> sp.csc_matrix:
 #: Fewest column blocks in which the Gram matrices below are formed (as ``fit.gram``) ...
 GRAM_BLOCKS = 4
 #: ... and most entries of a block (more blocks for a larger matrix): a block and its CSR
-#: copy, some 25 MB, are what a Gram matrix holds beyond its factors.
-GRAM_BLOCK_ENTRIES = 1 << 20
+#: copy, some 12 MB, are what a Gram matrix holds beyond its factors.
+GRAM_BLOCK_ENTRIES = 1 << 19
 
 
 def _column_blocks(J: sp.csc_matrix) -> np.ndarray:
@@ -180,9 +182,6 @@ def release_free_memory() -> None:
     global _LIBC
     if _LIBC is None:
         try:
-            import ctypes
-            import ctypes.util
-
             libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")
             _LIBC = libc.malloc_trim
             _LIBC.argtypes, _LIBC.restype = [ctypes.c_size_t], ctypes.c_int
