@@ -57,6 +57,7 @@ from airbearing.analysis.shooting.autoregressive import AR
 from airbearing.analysis.shooting.errors import _series
 from airbearing.analysis.shooting.fit import solve_gram
 from airbearing.analysis.shooting.penalty import piece_durations, start_yaw_profiled
+from airbearing.analysis.shooting.sparse import cross_gram, gram
 
 __all__ = [
     "MeasurementNoise",
@@ -192,7 +193,9 @@ def _whitening_pattern(problem, groups: tuple):
         c = np.concatenate([np.arange(n), *cols_o]).astype(np.int64)
         order = np.lexsort((r, c))
         indptr = np.r_[0, np.cumsum(np.bincount(c, minlength=n))]
-        cache[groups] = (order, r[order], indptr)
+        # 32-bit while they fit (as P's own indices): the cache lives with the problem
+        it = np.int32 if r.size < np.iinfo(np.int32).max else np.int64
+        cache[groups] = (order.astype(it), r[order].astype(it), indptr.astype(it))
     return cache[groups]
 
 
@@ -230,9 +233,11 @@ class _Linearised:
         if P0 is not None:  # back to the raw residual
             lu = splu(sp.csc_matrix(P0))
             self.rm = lu.solve(r[:n])
-            self.Jm = sp.csc_matrix(lu.solve(J[:n].toarray()))
+            self.J = sp.csc_matrix(lu.solve(J[:n].toarray()))
         else:
-            self.rm, self.Jm = r[:n], J[:n]
+            # the measurement rows are the first n of the fit's Jacobian, used in place (a
+            # copy of them held 100s of MB on an hour of samples)
+            self.rm, self.J = r[:n], J
         self.rp, self.Jp = r[n:], sp.csc_matrix(J[n:])
         # the defect rows do not depend on the measurement noise: their part of the Gram
         # matrix and of the gradient once
@@ -245,15 +250,24 @@ class _Linearised:
     def _moments(self, rows, prev=None) -> tuple:
         """``(S0, S1, S2, g0, g1, g2, q0, q1, q2)``: the sums a whitened row ``d x_t + e
         x_(t-1)`` makes of its Gram matrix (``d^2 S0 + d e S1 + e^2 S2``), its gradient and
-        its sum of squares, over ``rows`` (``prev``: the rows before them)."""
-        Jm = self._csr
-        A, a = Jm[rows], self.rm[rows]
+        its sum of squares, over ``rows`` (``prev``: the rows before them).
+
+        The rows are taken from the fit's CSC Jacobian (no CSR copy of it) and the products
+        made block of columns by block: scipy's sums of the same rows' ``A.T @ A``, ``A.T @
+        B`` in their order (:func:`.sparse.cross_gram`)."""
+        A, a = self._rows(rows), self.rm[rows]
         if prev is None:
-            return (A.T @ A, None, None, A.T @ a, None, None, float(a @ a), 0.0, 0.0)
-        B, b = Jm[prev], self.rm[prev]
-        AB = A.T @ B
-        return (A.T @ A, AB + AB.T, B.T @ B, A.T @ a, A.T @ b + B.T @ a, B.T @ b,
+            return (gram(A), None, None, A.T @ a, None, None, float(a @ a), 0.0, 0.0)
+        B, b = self._rows(prev), self.rm[prev]
+        BA = cross_gram(B, A)  # (A^T B)^T
+        return (gram(A), BA.T + BA, gram(B), A.T @ a, A.T @ b + B.T @ a, B.T @ b,
                 float(a @ a), 2.0 * float(a @ b), float(b @ b))  # fmt: skip
+
+    def _rows(self, rows) -> sp.csc_matrix:
+        """The measurement rows ``rows`` (in that order) as CSC, row indices sorted."""
+        A = sp.csc_matrix(self.J[rows])
+        A.sort_indices()
+        return A
 
     def _split(self, dt: float):
         """The rows grouped by interval: ``(groups, M, Mg, mq, diag)``, or None when a
@@ -268,7 +282,6 @@ class _Linearised:
         each diagonal entry lies in the pattern (-1: none)."""
         if dt in self._parts:
             return self._parts[dt]
-        self._csr = sp.csr_matrix(self.Jm)
         series = _series(self.problem)
         covered = np.zeros(self.rm.size, dtype=bool)
         terms: list = [None]  # (G, g, q) per column; the first filled last
@@ -384,13 +397,22 @@ class _Linearised:
             cd = np.delete(cd, np.arange(self.problem.windows.n) * self.problem.n_delta)
         return ld + 2.0 * float(np.log(cd).sum())
 
+    def _whitened(self, ar: dict, dt: float):
+        """``(P J_m, P r_m, log det P)`` of the whitening by ``ar`` (P let go of after)."""
+        P, logdet = whitening(self.problem, ar, dt)
+        b = P @ self.rm
+        # P on the measurement rows of J in place (P's columns padded with none to J's
+        # rows): the whitened rows, the same products as P @ J[:n]
+        N = self.J.shape[0]
+        P = sp.csc_matrix((P.data, P.indices, np.r_[P.indptr, np.full(N - P.shape[1], P.nnz)]),
+                          shape=(P.shape[0], N))  # fmt: skip
+        return sp.csc_matrix(P @ self.J), b, logdet
+
     def exact(self, ar: dict, dt: float) -> float:
         """:meth:`loglik` row by row; keeps the whitened measurement rows after the step
         (``innovations``)."""
-        P, logdet = whitening(self.problem, ar, dt)
-        A = sp.csc_matrix(P @ self.Jm)  # the whitened measurement rows
-        b = P @ self.rm
-        G = sp.csc_matrix(A.T @ A + self.Gp)
+        A, b, logdet = self._whitened(ar, dt)
+        G = sp.csc_matrix(gram(A) + self.Gp)
         c = np.sqrt(np.maximum(G.diagonal(), 1e-300))
         Dc = sp.diags(1.0 / c)
         Gs = sp.csc_matrix(Dc @ G @ Dc)

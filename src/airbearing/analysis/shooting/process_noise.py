@@ -55,6 +55,13 @@ from airbearing.analysis.shooting.penalty import (  # noqa: F401 - also this mod
     set_intensity,
     start_yaw_profiled,
 )
+from airbearing.analysis.shooting.sparse import (
+    add_row_products,
+    column_abs_sums,
+    gram,
+    gram_rows,
+    release_free_memory,
+)
 from airbearing.errors import SolverError
 
 __all__ = [
@@ -151,9 +158,13 @@ def _laplace(problem, J, rss: float, k: int, penalty_logdet: float) -> float:
     """:func:`loglik` of a residual ``rss`` and its Jacobian ``J`` (the defect rows whitened
     at the intensity whose ``log det W`` is ``penalty_logdet``)."""
     J = sp.csc_matrix(J)
-    Jd = J[:, k:]
-    G = sp.csc_matrix(Jd.T @ Jd)
-    G = start_yaw_profiled(problem, G)
+    # the Gram matrix block of columns by block (sparse.gram): scipy's product copies J
+    return _laplace_of(problem, gram(J if k == 0 else J[:, k:]), rss, penalty_logdet)
+
+
+def _laplace_of(problem, G, rss: float, penalty_logdet: float) -> float:
+    """:func:`_laplace` from the window states' Gram matrix ``G = J_d^T J_d``."""
+    G = start_yaw_profiled(problem, sp.csc_matrix(G))
     # column scaling keeps the determinant well conditioned (its log is added back)
     c = np.sqrt(np.maximum(G.diagonal(), 1e-300))
     Dc = sp.diags(1.0 / c)
@@ -246,7 +257,9 @@ def _estimate(
             start = fit_at(grid[0], theta0, delta0)
         else:
             set_intensity(problem, grid[0])
+        release_free_memory()  # (what the fits freed: the estimate's peak is on top of it)
         noise = estimate_measurement_noise(problem, start, k)
+        release_free_memory()
         if noise is not None:
             set_measurement_noise(problem, noise)
             start = fit_at(grid[0], start.theta, start.delta)
@@ -291,6 +304,7 @@ def _descend(problem, fit_at, grid, theta0, delta0, start, k: int, bounds, stop=
         nonlocal lin
         out[kappa] = (fit, loglik(problem, fit, k))
         lin = None  # (the last one freed before the next is made: each holds a Jacobian)
+        release_free_memory()
         lin = Linearisation.of(problem, fit, k, bounds)
         _keep_best_jacobian(out, start)
 
@@ -416,9 +430,12 @@ class Linearisation:
         J = sp.csc_matrix(fit.extra["J"])
         r = np.asarray(fit.extra["r"], dtype=float)
         n = problem.n_meas
-        self.Jm, self.rm = J[:n], r[:n]
+        # the fit's Jacobian itself (no copy of its measurement rows: 100s of MB on an hour
+        # of samples) and the Gram matrix of those rows, which no intensity changes
+        self.J, self.n, self.rm = J, n, r[:n]
+        self.Gm = gram_rows(J, n)
         C = sp.csc_matrix(fit.extra["linearised"][2])
-        keep = np.asarray(np.abs(J).sum(axis=0)).ravel() > 0  # pinned states: zero columns
+        keep = column_abs_sums(J) > 0  # pinned states: zero columns
         self.C = C @ sp.diags(keep.astype(float))
         self.free = np.flatnonzero(keep)
         W0 = sp.csr_matrix(problem.penalty)
@@ -453,23 +470,29 @@ class Linearisation:
         problem, k = self.problem, self.k
         set_intensity(problem, kappa)
         W = problem.penalty
-        A = sp.csc_matrix(sp.vstack([self.Jm, W @ self.C], format="csc"))
-        # (no copy when nothing is pinned: 100s of MB on an hour of samples)
-        Af = A if self.free.size == A.shape[1] else A[:, self.free]
-        G = sp.csc_matrix(Af.T @ Af)
-        sc = np.sqrt(np.maximum(G.diagonal(), 1e-300))
+        # the stacked Jacobian A = [J_m; W C] is never made (a copy of J_m, 100s of MB on an
+        # hour of samples): its Gram matrix is J_m's carried on over the rows of W C, its
+        # products are J_m's and W C's; the same sums in the same order as A's
+        WC = W @ self.C
+        G = add_row_products(self.Gm, WC)
+        WC = sp.csc_matrix(WC)
+        Gf = G if self.free.size == G.shape[1] else G[self.free][:, self.free]
+        sc = np.sqrt(np.maximum(Gf.diagonal(), 1e-300))
         Ds = sp.diags(1.0 / sc)
         try:
             with np.errstate(all="ignore"):
-                lu = splu(sp.csc_matrix(Ds @ G @ Ds))
+                lu = splu(sp.csc_matrix(Ds @ Gf @ Ds))
         except RuntimeError:  # singular: IPOPT's to handle
             return None
-        dz = np.zeros(A.shape[1])
+        dz = np.zeros(G.shape[1])
         r = np.r_[self.rm, W @ self.c]  # the residual at the linearisation's point
         for i in range(CHORD_STEPS + 1):
             with np.errstate(all="ignore"):
-                step = -lu.solve((Af.T @ r) / sc) / sc
-                drop = 0.5 * float(np.sum((Af @ step) ** 2))
+                step = -lu.solve(self._rmatvec(WC, r)[self.free] / sc) / sc
+                full = np.zeros(G.shape[1])
+                full[self.free] = step
+                y = self._matvec(WC, full)
+                drop = 0.5 * float(np.sum(np.square(y, out=y)))
             if not np.isfinite(drop):
                 return None
             if i and drop <= LINEAR_TOL:
@@ -490,7 +513,26 @@ class Linearisation:
                 return None
         rss = float(r @ r)
         point = LinearisedFit(theta, delta, rss, problem.gap_of_residual(r))
-        return point, _laplace(problem, A, rss, k, problem.penalty_logdet)
+        return point, _laplace_of(problem, G[k:, k:], rss, problem.penalty_logdet)
+
+    def _rmatvec(self, WC: sp.csc_matrix, r: np.ndarray) -> np.ndarray:
+        """``A^T r`` (``A = [J_m; W C]``): each column's sum over J_m's rows, carried on over
+        W C's in turn (as scipy's ``A.T @ r``; the fit's own defect rows of ``J`` take a
+        zero)."""
+        n, J = self.n, self.J
+        out = J.T @ np.r_[r[:n], np.zeros(J.shape[0] - n)]
+        R = sp.csr_matrix(WC)
+        rows = np.repeat(np.arange(R.shape[0]), np.diff(R.indptr))
+        np.add.at(out, R.indices, R.data * r[n:][rows])
+        return out
+
+    def _matvec(self, WC: sp.csc_matrix, x: np.ndarray) -> np.ndarray:
+        """``A x`` (``A = [J_m; W C]``, ``x`` zero off the free columns)."""
+        y = self.J @ x
+        if y.size != self.n + WC.shape[0]:  # pragma: no cover - J's defect rows are W C's
+            return np.r_[y[: self.n], WC @ x]
+        y[self.n :] = WC @ x  # (in place of the fit's own defect rows: no concatenation)
+        return y
 
 
 def _verdict(problem, ll: dict, best: float, bottom: float) -> ProcessNoise:

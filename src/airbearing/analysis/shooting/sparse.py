@@ -5,6 +5,8 @@ converted once (:func:`to_csc`, :func:`csc_of`), columns scaled in place
 
 from __future__ import annotations
 
+import ctypes
+import ctypes.util
 from collections import OrderedDict
 
 import casadi as ca
@@ -70,3 +72,120 @@ def vstack_csc(A: sp.csc_matrix, B: sp.csc_matrix) -> sp.csc_matrix:
         (data, indices, A.indptr.astype(itype) + B.indptr.astype(itype)),
         shape=(A.shape[0] + B.shape[0], A.shape[1]),
     )
+
+
+#: Fewest column blocks in which the Gram matrices below are formed (as ``fit.gram``) ...
+GRAM_BLOCKS = 4
+#: ... and most entries of a block (more blocks for a larger matrix): a block and its CSR
+#: copy, some 12 MB, are what a Gram matrix holds beyond its factors.
+GRAM_BLOCK_ENTRIES = 1 << 19
+
+
+def _column_blocks(J: sp.csc_matrix) -> np.ndarray:
+    """Edges of blocks of columns of about equal numbers of entries (at least
+    :data:`GRAM_BLOCKS`, at most :data:`GRAM_BLOCK_ENTRIES` entries each where columns
+    allow)."""
+    n = J.shape[1]
+    m = max(GRAM_BLOCKS, -(-J.nnz // GRAM_BLOCK_ENTRIES))
+    cuts = np.searchsorted(J.indptr, np.linspace(0, J.nnz, m + 1)[1:-1])
+    return np.unique(np.r_[0, np.clip(cuts, 1, max(n - 1, 1)), n])
+
+
+def gram(J) -> sp.csc_matrix:
+    """``J^T J`` of a sparse ``J`` (:func:`cross_gram`): the same matrix to the bit as
+    ``fit.gram`` (scipy's ``J.T @ J``), in blocks of at most :data:`GRAM_BLOCK_ENTRIES`."""
+    return cross_gram(J, J)
+
+
+def cross_gram(X, Y, stop: int | None = None) -> sp.csc_matrix:
+    """``X[:stop]^T Y[:stop]`` for CSC ``X`` and ``Y`` of the same rows, made block of
+    columns of ``Y`` by block (a copy of one block at a time, not of ``Y`` whole, nor of
+    the first ``stop`` rows of either).
+
+    Every entry is scipy's sum of ``X.T @ Y``, in its order: entry ``(i, j)`` accumulates
+    over the stored entries of column ``i`` of ``X`` in turn (a row from ``stop`` on takes
+    part in no sum: its partner in ``Y``'s block is empty). The result's row indices are
+    sorted in each column.
+    """
+    X, Y = sp.csc_matrix(X), sp.csc_matrix(Y)
+    rows = Y.shape[0] if stop is None else min(stop, Y.shape[0])
+    Xt = X.T
+    parts = []
+    edges = _column_blocks(Y)
+    for a, b in zip(edges[:-1], edges[1:], strict=True):
+        B = Y[:rows, a:b] if rows < Y.shape[0] else Y[:, a:b]
+        B = sp.csc_matrix((B.data, B.indices, B.indptr), shape=(X.shape[0], b - a))
+        parts.append(sp.csc_matrix(Xt @ B))
+    return parts[0] if len(parts) == 1 else sp.hstack(parts, format="csc")
+
+
+def gram_rows(J, stop: int) -> sp.csc_matrix:
+    """``J[:stop]^T J[:stop]`` of a CSC ``J`` without a copy of its rows (:func:`cross_gram`):
+    scipy's sums of ``J[:stop].T @ J[:stop]`` in their order."""
+    return cross_gram(J, J, stop)
+
+
+def add_row_products(G: sp.csc_matrix, R) -> sp.csc_matrix:
+    """``G + R^T R`` with each entry's sum carried on from ``G``'s value over the rows of
+    ``R`` in turn: scipy's Gram matrix of ``[A; R]`` to the bit when ``G`` is ``A``'s
+    (its entries sum the rows of ``A``, then those of ``R`` in order, each product
+    ``R[d, i] R[d, j]``; sums exactly 0 left out as scipy does). For a small ``R``: the
+    rows a fit's intensity changes, added to the Gram matrix of those it does not."""
+    G = sp.csc_matrix(G)
+    G.sort_indices()
+    R = sp.csr_matrix(R)
+    nr, nc = G.shape
+    per = np.diff(R.indptr)
+    pairs = per.astype(np.int64) ** 2
+    start = np.repeat(R.indptr[:-1].astype(np.int64), pairs)  # each pair's row start
+    size = np.repeat(per.astype(np.int64), pairs)
+    local = np.arange(int(pairs.sum()), dtype=np.int64) - np.repeat(np.cumsum(pairs) - pairs, pairs)
+    p = start + local // np.maximum(size, 1)
+    q = start + local % np.maximum(size, 1)
+    new_keys = R.indices[q].astype(np.int64) * nr + R.indices[p]
+    col = np.repeat(np.arange(nc, dtype=np.int64), np.diff(G.indptr))
+    old_keys = col * nr + G.indices
+    keys = np.union1d(old_keys, new_keys)
+    data = np.zeros(keys.size)
+    data[np.searchsorted(keys, old_keys)] = G.data
+    np.add.at(data, np.searchsorted(keys, new_keys), R.data[p] * R.data[q])  # rows in turn
+    kept = data != 0
+    keys, data = keys[kept], data[kept]
+    indptr = np.r_[0, np.cumsum(np.bincount(keys // nr, minlength=nc))]
+    return sp.csc_matrix((data, keys % nr, indptr), shape=(nr, nc))
+
+
+def column_abs_sums(J) -> np.ndarray:
+    """``abs(J).sum(axis=0)`` of a CSC ``J`` (the same sums), block of columns by block:
+    no copy of ``J``'s values."""
+    J = sp.csc_matrix(J)
+    edges = _column_blocks(J)
+    return np.concatenate(
+        [
+            np.asarray(abs(J[:, a:b]).sum(axis=0)).ravel()
+            for a, b in zip(edges[:-1], edges[1:], strict=True)
+        ]
+    )
+
+
+_LIBC: object = None
+
+
+def release_free_memory() -> None:
+    """Give the free pages of the C heap back to the system (glibc's ``malloc_trim``; a
+    no-op where there is none).
+
+    glibc keeps what a phase frees for the next allocations; after the fits of an hour of
+    samples that was some 70 MB of free pages in the middle of the heap, resident all
+    through the process-noise estimate that followed (its peak is the process's).
+    """
+    global _LIBC
+    if _LIBC is None:
+        try:
+            libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")
+            _LIBC = libc.malloc_trim
+            _LIBC.argtypes, _LIBC.restype = [ctypes.c_size_t], ctypes.c_int
+        except (OSError, AttributeError):  # not glibc: the allocator's own policy
+            _LIBC = False
+    if _LIBC:
+        _LIBC(0)
