@@ -28,8 +28,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
-import resource
 import subprocess
 import sys
 import tempfile
@@ -37,10 +35,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+from case_judging import cpu_children, flat, fmt, run_table, within
 
 from airbearing.io.testbed import load_testbed, testbed_from_dict, testbed_to_dict, write_testbed
-
-TOLERANCE = 0.20  # the acceptance: within 20 % of the truth
 
 
 @dataclass(frozen=True)
@@ -131,20 +128,8 @@ CASES = (
 # fmt: on
 
 
-def _flat(v) -> np.ndarray:
-    return np.atleast_1d(np.asarray(v, dtype=float)).ravel()
-
-
-def _within(truth, value) -> bool:
-    t, v = _flat(truth), _flat(value)
-    if t.size != v.size:  # one value for every axis against a per-axis truth, or back
-        t = np.full(v.size, t.mean()) if t.size == 1 else t
-        v = np.full(t.size, v.mean()) if v.size == 1 else v
-    return bool(np.linalg.norm(v - t) <= TOLERANCE * np.linalg.norm(t))
-
-
 def _z(truth, value, std) -> float:
-    t, v, s = _flat(truth), _flat(value), _flat(std)
+    t, v, s = flat(truth), flat(value), flat(std)
     if t.size != v.size:
         t = np.full(v.size, t.mean()) if t.size == 1 else t
         v = np.full(t.size, v.mean()) if v.size == 1 else v
@@ -167,10 +152,10 @@ def judge(case: Case, result: dict) -> dict:
     rows = []
     for name, truth in case.effects.items():
         if name in named:
-            ok = _within(truth, named[name]["value"])
+            ok = within(truth, named[name]["value"])
             how = "named"
         elif any(name in p for p in confounded):
-            ok = name not in equivalent or _within(truth, equivalent[name])
+            ok = name not in equivalent or within(truth, equivalent[name])
             ok = ok and len(experiments) > 0
             how = "confounded"
         else:
@@ -181,11 +166,6 @@ def judge(case: Case, result: dict) -> dict:
         n for n in named if n not in hidden and not any(n in p and p & hidden for p in confounded)
     )
     return {"hits": rows, "false": false, "pass": all(ok for *_, ok in rows) and not false}
-
-
-def _cpu_children() -> float:
-    c = resource.getrusage(resource.RUSAGE_CHILDREN)
-    return c.ru_utime + c.ru_stime
 
 
 def _cli(args: list[str]) -> subprocess.CompletedProcess:
@@ -211,19 +191,19 @@ def run_case(case: Case, out: Path, exact_attitude: bool = False) -> dict:
     log, js = out / f"{case.name}.csv", out / f"{case.name}.json"
     sim = ["simulate", str(tb), *case.args, "-o", str(log), "--force"]
     for name, value in case.effects.items():
-        sim += ["--effect", f"{name}={','.join(f'{x:g}' for x in _flat(value))}"]
+        sim += ["--effect", f"{name}={','.join(f'{x:g}' for x in flat(value))}"]
     read_tb = tb
     if "--attitude-only" in case.args:  # the testbed the camera's log is read with
         read_tb = out / f"{case.name}-mocap.toml"
         sim += ["--write-testbed", str(read_tb)]
-    c0 = _cpu_children()
+    c0 = cpu_children()
     proc = _cli(sim)
-    sim_cpu = _cpu_children() - c0
+    sim_cpu = cpu_children() - c0
     if proc.returncode != 0:
         return {"case": case, "error": "simulate: " + (proc.stderr or proc.stdout)[-400:]}
-    c0 = _cpu_children()
+    c0 = cpu_children()
     proc = _cli(["discrepancy", str(read_tb), str(log), "--json", str(js), "--force"])
-    cpu = _cpu_children() - c0
+    cpu = cpu_children() - c0
     if proc.returncode != 0:
         return {"case": case, "error": "discrepancy: " + (proc.stderr or proc.stdout)[-400:]}
     result = json.loads(js.read_text())
@@ -231,13 +211,9 @@ def run_case(case: Case, out: Path, exact_attitude: bool = False) -> dict:
             "sim_cpu": sim_cpu}  # fmt: skip
 
 
-def _fmt(v) -> str:
-    return "[" + ", ".join(f"{x:.3g}" for x in _flat(v)) + "]" if np.ndim(v) else f"{v:.3g}"
-
-
 def print_row(r: dict) -> None:
     case = r["case"]
-    truth = "; ".join(f"{k}={_fmt(v)}" for k, v in case.effects.items()) or "null"
+    truth = "; ".join(f"{k}={fmt(v)}" for k, v in case.effects.items()) or "null"
     if "error" in r:
         print(f"| {case.name} | {truth} | ERROR {r['error']!r} | | | | FAIL |", flush=True)
         return
@@ -246,7 +222,7 @@ def print_row(r: dict) -> None:
     for e in res.get("effects", []):
         z = _z(case.effects[e["name"]], e["value"], e["std"]) if e["name"] in case.effects else None
         zs = f", z {z:+.1f}" if z is not None else ""
-        named.append(f"{e['name']} = {_fmt(e['value'])} +- {_fmt(e['std'])}{zs}")
+        named.append(f"{e['name']} = {fmt(e['value'])} +- {fmt(e['std'])}{zs}")
     conf = "; ".join(" + ".join(p) for p in res.get("confounded", []))
     verdict = str(res.get("verdict", "")).split(";")[0][:70]
     mark = "PASS" if j["pass"] else "FAIL"
@@ -271,16 +247,9 @@ def main(argv=None) -> int:
     out = args.out or Path(tempfile.mkdtemp(prefix="hidden-cases-"))
     out.mkdir(parents=True, exist_ok=True)
     cases = [c for c in CASES if not args.only or c.name in args.only]
-    print(f"hidden cases in {out} (load average {' '.join(f'{x:.2f}' for x in os.getloadavg())})")
-    print("| case | truth | named (value +- std, z) | confounded | verdict | CPU s | |")
-    print("|---|---|---|---|---|---|---|")
-    failed = 0
-    for case in cases:
-        r = run_case(case, out, args.exact_attitude)
-        print_row(r)
-        failed += "error" in r or not r["judged"]["pass"]
-    print(f"{len(cases) - failed} of {len(cases)} pass "
-          f"(load average {' '.join(f'{x:.2f}' for x in os.getloadavg())})")  # fmt: skip
+    run_table(f"hidden cases in {out}",
+              ["case", "truth", "named (value +- std, z)", "confounded", "verdict", "CPU s", ""],
+              cases, lambda c: run_case(c, out, args.exact_attitude), print_row)  # fmt: skip
     return 0
 
 

@@ -23,8 +23,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
-import resource
 import subprocess
 import sys
 import tempfile
@@ -32,12 +30,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+from case_judging import cpu_children, fmt, run_table, within
 
 from airbearing.analysis.simulation.scenarios import free_oscillation, slew
 from airbearing.io.log import Log, write_log
 from airbearing.io.testbed import load_testbed, testbed_from_dict, testbed_to_dict, write_testbed
 
-TOLERANCE = 0.20  # the issue's acceptance: within 20 % of the truth
 SLEW_S = 40.0  # s, slews
 COAST_S = 60.0  # s, free coasts
 
@@ -187,18 +185,6 @@ def simulate_case(case: Case, naive_attitude: bool = False):
     return attitude_only(log, seed=case.seed + 100)
 
 
-def _flat(v) -> np.ndarray:
-    return np.atleast_1d(np.asarray(v, dtype=float)).ravel()
-
-
-def _within(truth, value) -> bool:
-    t, v = _flat(truth), _flat(value)
-    if t.size != v.size:  # one value fitted for every wheel against a per-wheel truth
-        t = np.full(v.size, t.mean()) if t.size == 1 else t
-        v = np.full(t.size, v.mean()) if v.size == 1 else v
-    return bool(np.linalg.norm(v - t) <= TOLERANCE * np.linalg.norm(t))
-
-
 def judge(case: Case, result: dict) -> dict:
     """The issue's acceptance on one case's discrepancy JSON."""
     named = {e["name"]: e["value"] for e in result.get("effects", [])}
@@ -213,9 +199,9 @@ def judge(case: Case, result: dict) -> dict:
     rows = []
     for name, truth in case.effects.items():
         if name in named:
-            ok = _within(truth, named[name])
+            ok = within(truth, named[name])
         elif name in equivalent:
-            ok = any(name in p for p in confounded) and _within(truth, equivalent[name])
+            ok = any(name in p for p in confounded) and within(truth, equivalent[name])
         else:
             ok = any(name in p for p in confounded)
         rows.append((name, ok))
@@ -224,11 +210,6 @@ def judge(case: Case, result: dict) -> dict:
         n for n in named if n not in hidden and not any(n in p and p & hidden for p in confounded)
     )
     return {"hits": rows, "false": false, "pass": all(ok for _, ok in rows) and not false}
-
-
-def _cpu_children() -> float:
-    c = resource.getrusage(resource.RUSAGE_CHILDREN)
-    return c.ru_utime + c.ru_stime
 
 
 def run_case(case: Case, out: Path, naive_attitude: bool) -> dict:
@@ -240,24 +221,20 @@ def run_case(case: Case, out: Path, naive_attitude: bool) -> dict:
     )
     write_testbed(tb, tb_path)
     write_log(log, log_path)
-    c0 = _cpu_children()
+    c0 = cpu_children()
     cmd = [sys.executable, "-m", "airbearing", "discrepancy", str(tb_path), str(log_path),
            "--json", str(js), "--force"]  # fmt: skip
     proc = subprocess.run(cmd, capture_output=True, text=True)
-    cpu = _cpu_children() - c0
+    cpu = cpu_children() - c0
     if proc.returncode != 0:
         return {"case": case, "error": (proc.stderr or proc.stdout).strip()[-300:], "cpu": cpu}
     result = json.loads(js.read_text())
     return {"case": case, "result": result, "judged": judge(case, result), "cpu": cpu}
 
 
-def _fmt(v) -> str:
-    return "[" + ", ".join(f"{x:.3g}" for x in _flat(v)) + "]" if np.ndim(v) else f"{v:.3g}"
-
-
 def print_row(r: dict) -> None:
     case = r["case"]
-    truth = "; ".join(f"{k}={_fmt(v)}" for k, v in case.effects.items()) or "null"
+    truth = "; ".join(f"{k}={fmt(v)}" for k, v in case.effects.items()) or "null"
     if "error" in r:
         print(f"| {case.name} | {truth} | ERROR {r['error']!r} |", flush=True)
         return
@@ -265,8 +242,8 @@ def print_row(r: dict) -> None:
     eff = {e["name"]: e["value"] for e in res.get("effects", [])}
     std = {e["name"]: e["std"] for e in res.get("effects", [])}
     named = ", ".join(eff) or "-"
-    values = "; ".join(_fmt(v) for v in eff.values()) or "-"
-    stds = "; ".join(_fmt(std.get(k, np.nan)) for k in eff) or "-"
+    values = "; ".join(fmt(v) for v in eff.values()) or "-"
+    stds = "; ".join(fmt(std.get(k, np.nan)) for k in eff) or "-"
     within = ", ".join(f"{n}:{'yes' if ok else 'NO'}" for n, ok in j["hits"]) or "-"
     conf = "; ".join(" + ".join(p) for p in res.get("confounded", []))
     verdict = str(res.get("verdict", "")).split(";")[0][:60]
@@ -288,16 +265,10 @@ def main(argv=None) -> int:
     out = args.out or Path(tempfile.mkdtemp(prefix="wheel-cases-"))
     out.mkdir(parents=True, exist_ok=True)
     cases = [c for c in CASES if not args.only or c.name in args.only]
-    print(f"wheel cases in {out} (load average {' '.join(f'{x:.2f}' for x in os.getloadavg())})")
-    print("| case | truth | named | value | std | within 20 % | false names | confounded "
-          "| verdict | CPU | |")  # fmt: skip
-    print("|---|---|---|---|---|---|---|---|---|---|---|")
-    failed = 0
-    for case in cases:
-        r = run_case(case, out, args.naive_attitude)
-        print_row(r)
-        failed += "error" in r or not r["judged"]["pass"]
-    print(f"{len(cases) - failed} of {len(cases)} pass")
+    run_table(f"wheel cases in {out}",
+              ["case", "truth", "named", "value", "std", "within 20 %", "false names",
+               "confounded", "verdict", "CPU", ""],
+              cases, lambda c: run_case(c, out, args.naive_attitude), print_row)  # fmt: skip
     return 0
 
 

@@ -18,14 +18,9 @@ import pytest
 
 
 def _study():
-    import importlib.util
-    from pathlib import Path
+    from bench_scripts import load
 
-    path = Path(__file__).resolve().parents[2] / "benchmarks" / "coverage_study.py"
-    spec = importlib.util.spec_from_file_location("coverage_study", path)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return load("coverage_study")
 
 
 TWO = {"viscous_friction": 6e-6, "aero_drag": 8e-6}

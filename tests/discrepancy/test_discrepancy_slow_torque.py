@@ -13,20 +13,14 @@ torque, must keep its answer: the nuisance enters only when its test finds it.
 
 from __future__ import annotations
 
-import importlib.util
-from pathlib import Path
-
 import numpy as np
+from bench_scripts import load
 
 TRUTH = 2e-4  # N m s, the study's PLATFORM_TRUTH
 
 
 def _study():
-    path = Path(__file__).resolve().parents[2] / "benchmarks" / "coverage_study.py"
-    spec = importlib.util.spec_from_file_location("coverage_study", path)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return load("coverage_study")
 
 
 def _fit(case: str, seed: int):
