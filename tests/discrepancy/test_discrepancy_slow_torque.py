@@ -14,6 +14,7 @@ torque, must keep its answer: the nuisance enters only when its test finds it.
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from bench_scripts import load
 
 TRUTH = 2e-4  # N m s, the study's PLATFORM_TRUTH
@@ -59,3 +60,35 @@ def test_without_a_slow_torque_nothing_changes():
     assert np.all(np.abs(value - TRUTH) <= 3 * std)
     # the study's goal for white noise within the model: std / crlb within 0.8-1.25
     assert np.all((eff >= 0.8) & (eff <= 1.25)), eff
+
+
+def test_a_joint_step_past_a_physical_bound_is_held_there_and_said():
+    # a friction fitted at 1e-6 N m s whose joint step with the slow torque is -3e-6: the
+    # value would turn negative (no physical friction); it is held at its bound 0, and the
+    # confounding's words say so, never silently clipped
+    from dataclasses import replace as dc_replace
+    from types import SimpleNamespace
+
+    from airbearing.analysis.discrepancy import judgement
+    from airbearing.analysis.discrepancy.confounding import Confounding
+
+    cand = SimpleNamespace(name="viscous_friction", k=1, lower=[0.0], upper=[1.0],
+                           value=lambda th: float(th[0]))  # fmt: skip
+    sel = SimpleNamespace(chosen=[cand])
+    named = SimpleNamespace(
+        fit=SimpleNamespace(theta=np.array([1e-6])), effects={},
+        std={"viscous_friction": 1e-7}, std_within={}, efficiency={},
+    )  # fmt: skip
+    slow = SimpleNamespace(step=np.array([-3e-6]), factor=np.array([1.0]),
+                           words=lambda: "a slow torque about z is significant",
+                           to_json=lambda: {})  # fmt: skip
+    at_bound = judgement._with_slow_torque(sel, named, slow)
+    assert named.effects["viscous_friction"] == 0.0
+    assert at_bound == {"viscous_friction": 0.0}
+    conf = Confounding(("viscous_friction", "constant torque about z"), "near", 0.99, "", {})
+    said = judgement._slow_words(sel, dc_replace(conf, experiment="x"), slow, at_bound)
+    assert "viscous_friction would cross its physical bound: held at 0" in said.experiment
+    # a step inside the bounds moves the value and says nothing more
+    slow.step = np.array([2e-7])
+    assert judgement._with_slow_torque(sel, named, slow) == {}
+    assert named.effects["viscous_friction"] == pytest.approx(1.2e-6, rel=1e-12)

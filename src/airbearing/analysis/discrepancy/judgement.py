@@ -34,6 +34,7 @@ from airbearing.analysis.discrepancy.words import (
     WHEEL_INERTIA_UNSEEN,
     experiment_for,
     failure_words,
+    format_value,
     verdict,
 )
 from airbearing.analysis.shooting import Fit
@@ -111,8 +112,8 @@ def _confounding(search: _Search, sel: _Selection, named: _Named) -> None:
     if const:  # a slow torque about a steady axis, tested and, when there, marginalised
         slow = slow_torque(named.problem, named.fit, search.datas, axes)
     if slow is not None and slow.identifiable and (slow.significant or pn.get("significant")):
-        _with_slow_torque(sel, named, slow)
-        const = [_slow_words(sel, c, slow) for c in const]
+        at_bound = _with_slow_torque(sel, named, slow)
+        const = [_slow_words(sel, c, slow, at_bound) for c in const]
     elif const and pn.get("significant"):  # widened when the logs show an unexplained torque
         f = constant_torque_inflation(model, search.datas, p, named_th, S_of, axes)
         _widen(sel, named, f)
@@ -154,26 +155,38 @@ def _widen(sel, named, f) -> None:
                 named.efficiency[c.name] = _as_value(c, e)
 
 
-def _with_slow_torque(sel, named, slow) -> None:
-    """The named values moved by the joint step with the slow torque (inside each effect's
-    bounds) and their errors widened by its factors (:mod:`.slow_torque`)."""
+def _with_slow_torque(sel, named, slow) -> dict:
+    """The named values moved by the joint step with the slow torque and their errors
+    widened by its factors (:mod:`.slow_torque`); ``name -> bound`` of each effect the step
+    would take past its physical bound, which is then held at that bound (and said)."""
     i = 0
     theta = np.asarray(named.fit.theta, float)
+    at_bound = {}
     for c in sel.chosen:
         th = theta[i : i + c.k] + slow.step[i : i + c.k]
-        th = np.clip(th, np.asarray(c.lower, float), np.asarray(c.upper, float))
-        named.effects[c.name] = c.value(th)
+        lo, hi = np.asarray(c.lower, float), np.asarray(c.upper, float)
+        held = np.clip(th, lo, hi)
+        if np.any(held != th):
+            at_bound[c.name] = c.value(held)
+        named.effects[c.name] = c.value(held)
         i += c.k
     _widen(sel, named, slow.factor)
+    return at_bound
 
 
-def _slow_words(sel, conf, slow):
-    """A constant-torque confounding entry with the slow torque's test and factor."""
+def _slow_words(sel, conf, slow, at_bound: dict):
+    """A constant-torque confounding entry with the slow torque's test and factor (and the
+    effects its joint step held at a physical bound)."""
     f = dict(_split_named(sel, slow.factor))
+    held = "".join(
+        f"; with the slow torque free, {n} would cross its physical bound: held at "
+        f"{format_value(b)}"
+        for n, b in at_bound.items()
+    )
     return replace(
         conf,
         std_factor=_as_value(_cand(sel, conf), f[conf.effects[0]]),
-        experiment=conf.experiment + "; " + slow.words(),
+        experiment=conf.experiment + "; " + slow.words() + held,
         slow_torque=slow.to_json(),
     )
 
