@@ -12,7 +12,8 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from airbearing.analysis.shooting.fit import GRAM_BLOCKS, gram, theta_errors
+from airbearing.analysis.shooting.fit import gram, theta_errors
+from airbearing.analysis.shooting.sparse import GRAM_BLOCKS
 
 
 def _window_jacobian(nw=40, n=120, nd=6, k=3, seed=0):

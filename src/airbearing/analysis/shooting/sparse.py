@@ -74,7 +74,7 @@ def vstack_csc(A: sp.csc_matrix, B: sp.csc_matrix) -> sp.csc_matrix:
     )
 
 
-#: Fewest column blocks in which the Gram matrices below are formed (as ``fit.gram``) ...
+#: Fewest column blocks in which the Gram matrices below are formed ...
 GRAM_BLOCKS = 4
 #: ... and most entries of a block (more blocks for a larger matrix): a block and its CSR
 #: copy, some 12 MB, are what a Gram matrix holds beyond its factors.
@@ -93,7 +93,7 @@ def _column_blocks(J: sp.csc_matrix) -> np.ndarray:
 
 def gram(J) -> sp.csc_matrix:
     """``J^T J`` of a sparse ``J`` (:func:`cross_gram`): the same matrix to the bit as
-    ``fit.gram`` (scipy's ``J.T @ J``), in blocks of at most :data:`GRAM_BLOCK_ENTRIES`."""
+    scipy's ``J.T @ J``, in blocks of at most :data:`GRAM_BLOCK_ENTRIES` entries."""
     return cross_gram(J, J)
 
 
