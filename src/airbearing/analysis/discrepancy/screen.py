@@ -155,10 +155,12 @@ class Linearisation:
             S_raw[chunk, np.arange(len(chunk))] = 1.0
             S = np.hstack([self.S_sel, S_raw])
             at = replace(current, theta=np.r_[current.theta, np.zeros(len(chunk))])
-            r_i, J = problem.jacobian(at, S)
+            # the parameters' columns and (once) the window states' (not the whole matrix)
+            r_i, J, Jd_i = problem.jacobian_parts(at, S, k_sel + len(chunk), right=r is None)
             J = sp.csc_matrix(J)
             if r is None:
-                r, Jd = r_i, J[:, k_sel + len(chunk) :].tocsc()
+                r, Jd = r_i, sp.csc_matrix(Jd_i)
+                del Jd_i
                 # (n_res_all, k_sel + len(raw)): the chosen and every candidate parameter's
                 # columns written straight in (no dense copy of each chunk, then stacked)
                 A = np.zeros(

@@ -169,7 +169,7 @@ class ShootingProblem:
         #: there (set by the process-noise descent: each intensity starts where the last
         #: ended, so its column scaling costs no evaluation)
         self.reuse_last = False
-        self._last = None  # ((v, p_base, S, data), (rm, Jm, c, Jc)) of that answer
+        self._last = None  # ((v, p_base, S, data mark), (rm, Jm, c, Jc)) of that answer
         self._fitting = threading.local()  # the fit in progress (_PerThread attributes)
         self.sample = np.tile(wrow, nw) + np.repeat(np.arange(nw) * L, group.size)
         self.usable = windows.weight.reshape(-1)[self.sample] > 0
@@ -331,17 +331,33 @@ class ShootingProblem:
         one kept at the last penalised fit's answer (:attr:`reuse_last`), or at a free fit's
         start for the bounded fit after it, when ``v`` is that point, with the same
         parameters and data; else evaluated."""
-        here = (v, p_base, S, self._data)
+        here = (v, p_base, S)
         for kept in (self._last, self._start_kept):
-            if kept is not None and all(
-                a.shape == b.shape and np.array_equal(a, b)
-                for a, b in zip(kept[0], here, strict=True)
+            if (
+                kept is not None
+                and self._same_data(kept[0][3])
+                and all(
+                    a.shape == b.shape and np.array_equal(a, b)
+                    for a, b in zip(kept[0][:3], here, strict=True)
+                )
             ):
                 return kept[1]
         raw = window_jacobian(*self._key(S.shape[1]), True)(v, p_base, S, self._data)
         if self._keep_start:
-            self._start_kept = ((v.copy(), p_base.copy(), S.copy(), self._data.copy()), raw)
+            self._start_kept = ((v.copy(), p_base.copy(), S.copy(), self._data_mark()), raw)
         return raw
+
+    def _data_mark(self) -> tuple:
+        """What says the data vector is the one of now (:meth:`_same_data`): the vector
+        itself and a copy of its noise levels, the only entries changed in place
+        (:meth:`set_noise`). Not a copy of the vector (an hour of samples: 33 MB)."""
+        return self._data, self._data[-len(self._sigmas()) :].copy()
+
+    def _same_data(self, mark: tuple) -> bool:
+        """Whether ``mark`` (:meth:`_data_mark`) was made of the data vector as it is now."""
+        data, sigma = mark
+        tail = self._data[-sigma.size :]
+        return data is self._data and np.array_equal(sigma, tail)
 
     def forget_last(self) -> None:
         """Drop the window Jacobian kept at the last answer (:attr:`reuse_last`)."""
@@ -414,6 +430,50 @@ class ShootingProblem:
         # more parameters than slots: every column kept, J itself (its own index arrays,
         # problem_functions.KEPT_INDEX_SLOTS), not a copy
         return r, self._unpinned(J if k > self.theta_slots else J[:, keep], k, held)
+
+    def jacobian_parts(self, fit: Fit, S: np.ndarray, cut: int, right: bool = True):
+        """``(r, J[:, :cut], J[:, cut:])`` of :meth:`jacobian` (the second None without
+        ``right``), ``cut`` at most the number of parameters: the same numbers as those
+        slices of its Jacobian, without the whole matrix (nor the window function's blocks
+        of every window, nor, with process noise, the measurement rows before the defects'
+        are stacked below them: on an hour of 50 Hz three-axis samples and the screen's 16
+        parameters each some 260 MB)."""
+        S = np.asarray(S, dtype=float)
+        k = S.shape[1]
+        if not 0 <= cut <= k:  # pragma: no cover - programming error
+            raise ValueError("jacobian_parts: cut past the parameters")
+        v, Sp = self._v(fit.delta, S, fit.theta)
+        K = Sp.shape[1]
+        p_base = fit.p - S @ fit.theta if k else fit.p
+        # the parameter slots kept (:meth:`jacobian`: the unused ones dropped), then the
+        # window states' columns
+        parts = [(np.arange(cut), False)] + ([(np.arange(cut, k), True)] if right else [])
+        fj = window_jacobian(*self._key(K), self.link)
+        out = fj(v, p_base, Sp, self._data, parts=parts)
+        held = self.held(fit.p, S)
+        r, mats = out[0], out[1]
+        if self.link and self.penalty is not None:
+            P = self.meas_whitening
+            c, Jc = out[2], out[3]
+            WJc = self.penalty @ Jc
+            full = [np.arange(cut), np.r_[np.arange(cut, k), np.arange(K, Jc.shape[1])]]
+            r = np.r_[r if P is None else P @ r, self.penalty @ c]
+            mats = [
+                vstack_csc(Jm if P is None else P @ Jm, WJc[:, cols])
+                for Jm, cols in zip(mats, full, strict=False)
+            ]
+        left = self._unpinned_part(mats[0], 0, k, held)
+        return r, left, (self._unpinned_part(mats[1], cut, k, held) if right else None)
+
+    @staticmethod
+    def _unpinned_part(J, first: int, k: int, held):
+        """:meth:`_unpinned` of the columns from ``first`` on of a Jacobian (``J``: those)."""
+        if not len(held):
+            return J
+        keep = np.ones(J.shape[1])
+        at = k + np.asarray(held) - first
+        keep[at[(at >= 0) & (at < J.shape[1])]] = 0.0
+        return sp.csc_matrix(J) @ sp.diags(keep)
 
     def fit(
         self,
@@ -596,7 +656,7 @@ class ShootingProblem:
         r, J = oracle.rj_at(z)
         C = oracle.C  # the defects' Jacobian at the answer (unscaled), for the errors
         if self.reuse_last and oracle.raw is not None:
-            at = (z * scale, p_base.copy(), Sp.copy(), self._data.copy())
+            at = (z * scale, p_base.copy(), Sp.copy(), self._data_mark())
             self._last = (at, oracle.raw)
         oracle.release()
         return z, stats, r, unscale_columns(J, scale), C

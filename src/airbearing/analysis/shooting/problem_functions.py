@@ -157,28 +157,41 @@ class WindowJacobian:
         if len(rest) == 2:  # the hand-over row selector of linked windows
             self._where.append((3, *rest[0]))  # fmt: skip
 
-    def _index_arrays(self) -> tuple:
-        """``(indices, indptr)`` of the Jacobian's CSC matrix."""
-        if getattr(self, "_index", None) is not None:
+    def _index_arrays(self, theta=None, windows: bool = True) -> tuple:
+        """``(indices, indptr)`` of the Jacobian's CSC matrix, or of its part of the
+        parameter columns ``theta`` (sorted slots; default all) and, with ``windows``, every
+        window's own columns (:meth:`part_matrix`)."""
+        whole = theta is None and windows
+        if whole and getattr(self, "_index", None) is not None:
             return self._index
         block, nw, K = self.win_rj.sparsity_out(1), self.nw, self.K
+        theta = np.arange(K) if theta is None else np.asarray(theta, dtype=int)
         m, col = block.size1(), self._colind
         row = np.asarray(block.row(), dtype=np.int64)
         counts = np.diff(col)
-        big = max(m * nw, int(col[-1]) * nw) >= np.iinfo(np.int32).max
+        spans = self._spans(theta, windows)
+        total = sum(b - a for a, b in spans) * nw
+        big = max(m * nw, total) >= np.iinfo(np.int32).max
         itype = np.int64 if big else np.int32
         off = (np.arange(nw, dtype=itype) * itype(m))[:, None]
         row = row.astype(itype)
         # theta columns: every window's rows in turn; then each window's own columns,
         # written in place (no 64-bit pieces and their concatenation: 20 bytes an entry)
-        indices = np.empty(int(col[-1]) * nw, dtype=itype)
+        indices = np.empty(total, dtype=itype)
         at = 0
-        for a, b in [(col[c], col[c + 1]) for c in range(K)] + [(col[K], col[-1])]:
+        for a, b in spans:
             piece = indices[at : at + (b - a) * nw].reshape(nw, b - a)
             np.add(row[a:b][None, :], off, out=piece)
             at += (b - a) * nw
-        sizes = np.r_[counts[:K] * nw, np.tile(counts[K:], nw)]
+        sizes = np.r_[counts[theta] * nw, np.tile(counts[K:], nw) if windows else []]
         return indices, np.r_[0, np.cumsum(sizes)].astype(itype)
+
+    def _spans(self, theta, windows: bool) -> list:
+        """``(a, b)`` of each part's column group within a window block's nonzeros: each
+        parameter column of ``theta``, then (``windows``) the window's own columns."""
+        col, K = self._colind, self.K
+        spans = [(int(col[c]), int(col[c + 1])) for c in theta]
+        return spans + ([(int(col[K]), int(col[-1]))] if windows else [])
 
     def pattern(self) -> sp.csc_matrix:
         """The Jacobian's structure: a CSC matrix of ones."""
@@ -191,21 +204,33 @@ class WindowJacobian:
 
     def matrix(self, blocks: np.ndarray) -> sp.csc_matrix:
         """The Jacobian (CSC) from the nonzeros of the window blocks, window after window."""
-        B = np.asarray(blocks).reshape(self.nw, -1)
-        col, nw = self._colind, self.nw
-        # each column's entries copied in place (no pieces and their concatenation)
-        data = np.empty(B.size)
-        at = 0
-        for a, b in [(col[c], col[c + 1]) for c in range(self.K)] + [(col[self.K], col[-1])]:
-            data[at : at + (b - a) * nw].reshape(nw, b - a)[...] = B[:, a:b]
-            at += (b - a) * nw
-        indices, indptr = self._index_arrays()
-        return sp.csc_matrix((data, indices, indptr), shape=self.shape, copy=False)
+        part = self._part(None, True)
+        part.fill(np.asarray(blocks).reshape(self.nw, -1), 0)
+        return part.matrix()
 
-    def _windows(self, src: list) -> list:
-        """Every output of the window function for all windows, window after window."""
+    def _part(self, theta, windows: bool) -> _Part:
+        """An empty :class:`_Part` of the Jacobian (:meth:`_index_arrays`)."""
+        K = self.K
+        th = np.arange(K) if theta is None else np.asarray(theta, dtype=int)
+        indices, indptr = self._index_arrays(theta, windows)
+        n_cols = th.size + ((self.shape[1] - K) if windows else 0)
+        spans = self._spans(th, windows)
+        return _Part(spans, self.nw, indices, indptr, (self.shape[0], n_cols))
+
+    def _windows(self, src: list, sink=None) -> list:
+        """Every output of the window function for all windows, window after window.
+
+        ``sink``: called ``sink(j0, j1, blocks)`` with the Jacobian blocks' nonzeros of
+        windows ``j0:j1`` (``(j1 - j0, nnz)``), :data:`CHUNK_WINDOWS` windows at a time,
+        instead of that output kept for all windows (its place in the result: None)."""
         f = self.win_rj
-        out = [np.empty(f.nnz_out(i) * self.nw) for i in range(f.n_out())]
+        out = [
+            None if (i == 1 and sink is not None) else np.empty(f.nnz_out(i) * self.nw)
+            for i in range(f.n_out())
+        ]
+        n1 = f.nnz_out(1)
+        chunk = np.empty(n1 * min(CHUNK_WINDOWS, self.nw)) if sink is not None else None
+        c0 = 0  # first window of the chunk in progress
         buffers: dict = {}
         # shared inputs (parameters, noise levels) once per mapped window
         shared = {
@@ -224,12 +249,21 @@ class WindowJacobian:
                 else:
                     piece = src[s][off + j0 * per : off + (j0 + count) * per]
                 buf.set_arg(i, memoryview(piece))
+            if sink is not None and (j0 + count - c0) * n1 > chunk.size:
+                sink(c0, j0, chunk[: (j0 - c0) * n1].reshape(j0 - c0, n1))
+                c0 = j0
             for i, o in enumerate(out):
                 n = f.nnz_out(i)
-                buf.set_res(i, memoryview(o[j0 * n : (j0 + count) * n]))
+                if o is None:
+                    o, at = chunk, j0 - c0
+                else:
+                    at = j0
+                buf.set_res(i, memoryview(o[at * n : (at + count) * n]))
             run()
             if buf.ret() != 0:
                 raise RuntimeError(f"{f.name()}: evaluation failed (return code {buf.ret()})")
+        if sink is not None and self.nw > c0:
+            sink(c0, self.nw, chunk[: (self.nw - c0) * n1].reshape(self.nw - c0, n1))
         return out
 
     def _calls(self):
@@ -240,17 +274,60 @@ class WindowJacobian:
         for j0 in range(m, self.nw):
             yield self.win_rj, j0, 1
 
-    def __call__(self, v, p_base, S, data) -> tuple:
-        """``(r, J)``, and on linked windows ``(r, J, c, Jc)`` (``J``, ``Jc`` scipy CSC)."""
+    def __call__(self, v, p_base, S, data, parts=None) -> tuple:
+        """``(r, J)``, and on linked windows ``(r, J, c, Jc)`` (``J``, ``Jc`` scipy CSC).
+
+        ``parts``: ``[(theta, windows), ...]``, each a part of ``J``'s columns (the
+        parameter slots ``theta``, sorted, and with ``windows`` every window's own columns,
+        in ``J``'s order); ``J`` is then the list of these parts, each the same numbers as
+        that slice of ``J``, without ``J`` itself. The window blocks are written into the
+        matrices :data:`CHUNK_WINDOWS` windows at a time (not all windows' blocks, then the
+        matrix: on an hour of 50 Hz samples a second copy of ``J``'s values while it was
+        made)."""
         src = [np.ascontiguousarray(np.asarray(a, dtype=float).reshape(-1, order="F"))
                for a in (v, p_base, S, data)]  # fmt: skip
-        out = self._windows(src)
-        J = self.matrix(out[1])
+        made = [self._part(None, True)] if parts is None else [self._part(*p) for p in parts]
+
+        def sink(j0, j1, blocks):
+            for part in made:
+                part.fill(blocks, j0)
+
+        out = self._windows(src, sink)
+        mats = [part.matrix() for part in made]
+        J = mats[0] if parts is None else mats
         if self.defects is None:
             return out[0], J
         c, Jc = evaluate(self.defects, out[2], out[3], *src)
         return out[0], J, c, csc_of(Jc, self.defects.sparsity_out(1))
 
+
+class _Part:
+    """A part of a :class:`WindowJacobian`'s columns filled window block by block."""
+
+    def __init__(self, spans, nw: int, indices, indptr, shape) -> None:
+        self.spans, self.nw, self.shape = spans, nw, shape
+        self.indices, self.indptr = indices, indptr
+        self.data = np.empty(indices.size)
+        # where each column group's entries start in ``data`` (window 0)
+        sizes = [(b - a) * nw for a, b in spans]
+        self.starts = np.r_[0, np.cumsum(sizes)[:-1]].astype(np.int64) if sizes else []
+
+    def fill(self, blocks: np.ndarray, j0: int) -> None:
+        """Windows ``j0 : j0 + len(blocks)`` from their blocks' nonzeros (one row each)."""
+        j1 = j0 + blocks.shape[0]
+        for (a, b), at in zip(self.spans, self.starts, strict=True):
+            w = b - a
+            self.data[at + j0 * w : at + j1 * w].reshape(j1 - j0, w)[...] = blocks[:, a:b]
+
+    def matrix(self) -> sp.csc_matrix:
+        """The filled part as a CSC matrix (sharing this part's arrays)."""
+        return sp.csc_matrix((self.data, self.indices, self.indptr), shape=self.shape, copy=False)
+
+
+#: Windows whose Jacobian blocks are held at once while a Jacobian is made
+#: (:meth:`WindowJacobian.__call__`): on an hour of 50 Hz three-axis pieces about 0.7 MB
+#: per window and parameter slot.
+CHUNK_WINDOWS = 16
 
 #: Parameter slots up to which a :class:`WindowJacobian` keeps its CSC index arrays:
 #: ``functions.THETA_SLOTS`` (which imports this module), the slots of every fit.
