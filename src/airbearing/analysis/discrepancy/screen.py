@@ -147,28 +147,34 @@ class Linearisation:
         # built once per problem): THETA_SLOTS at a time evaluated the same window states'
         # columns once per chunk (3 evaluations on seed 004's platform)
         room = max(THETA_SLOTS - k_sel, len(self.raw), 1)
-        r, A, Jd = None, None, None
+        r, Jd = None, None
         sizes = [len(self.raw[i : i + room]) for i in range(0, len(self.raw), room)]
+        penalised = problem.link and problem.penalty is not None
+        rows = problem.n_meas + (problem.penalty.shape[0] if penalised else 0)
+        # (n_res_all, k_sel + len(raw)): the chosen and every candidate parameter's columns
+        # written straight in (no sparse copy of the columns, nor a dense one of each
+        # chunk, then stacked)
+        A = np.zeros((rows, k_sel + len(self.raw)), order=_stacked_order(k_sel, sizes))
         for i in range(0, len(self.raw), room):
             chunk = self.raw[i : i + room]
             S_raw = np.zeros((n_p, len(chunk)))
             S_raw[chunk, np.arange(len(chunk))] = 1.0
             S = np.hstack([self.S_sel, S_raw])
             at = replace(current, theta=np.r_[current.theta, np.zeros(len(chunk))])
-            # the parameters' columns and (once) the window states' (not the whole matrix)
-            r_i, J, Jd_i = problem.jacobian_parts(at, S, k_sel + len(chunk), right=r is None)
-            J = sp.csc_matrix(J)
-            if r is None:
+            # the parameters' columns (dense, into A) and (once) the window states'
+            first = r is None
+            cols = np.arange(0 if first else k_sel, k_sel + len(chunk))
+            r_i, J, Jd_i = problem.jacobian_parts(
+                at, S, k_sel + len(chunk), right=first, dense=(A, cols, 0 if first else k_sel + i)
+            )
+            if J is not None:  # (coloured noise with process noise: sparse, then dense)
+                J = sp.csc_matrix(J)
+                if first:
+                    _dense_columns(J, 0, k_sel, A, 0)
+                _dense_columns(J, k_sel, k_sel + len(chunk), A, k_sel + i)
+            if first:
                 r, Jd = r_i, sp.csc_matrix(Jd_i)
-                del Jd_i
-                # (n_res_all, k_sel + len(raw)): the chosen and every candidate parameter's
-                # columns written straight in (no dense copy of each chunk, then stacked)
-                A = np.zeros(
-                    (J.shape[0], k_sel + len(self.raw)), order=_stacked_order(k_sel, sizes)
-                )
-                _dense_columns(J, 0, k_sel, A, 0)
-            _dense_columns(J, k_sel, k_sel + len(chunk), A, k_sel + i)
-            del J  # (the whole matrix let go before the next chunk's and the blocks below)
+            del J, Jd_i  # (let go before the next chunk's and the blocks below)
         self.r = r
         self.A = A
         self.Jd = Jd

@@ -431,13 +431,21 @@ class ShootingProblem:
         # problem_functions.KEPT_INDEX_SLOTS), not a copy
         return r, self._unpinned(J if k > self.theta_slots else J[:, keep], k, held)
 
-    def jacobian_parts(self, fit: Fit, S: np.ndarray, cut: int, right: bool = True):
+    def jacobian_parts(self, fit: Fit, S: np.ndarray, cut: int, right: bool = True,
+                       dense=None):  # fmt: skip
         """``(r, J[:, :cut], J[:, cut:])`` of :meth:`jacobian` (the second None without
         ``right``), ``cut`` at most the number of parameters: the same numbers as those
         slices of its Jacobian, without the whole matrix (nor the window function's blocks
         of every window, nor, with process noise, the measurement rows before the defects'
         are stacked below them: on an hour of 50 Hz three-axis samples and the screen's 16
-        parameters each some 260 MB)."""
+        parameters each some 260 MB).
+
+        ``dense``: ``(out, cols, col0)``: the parameter columns ``cols`` (of the first
+        ``cut``) added into the zeros of ``out[:, col0:]`` (``out`` has ``J``'s rows; the
+        numbers of ``J[:, cols].toarray()``) instead of made sparse; the first part is
+        then None, except with coloured measurement noise and process noise, where it is
+        ``J[:, :cut]`` (sparse) and ``out`` is left to the caller.
+        """
         S = np.asarray(S, dtype=float)
         k = S.shape[1]
         if not 0 <= cut <= k:  # pragma: no cover - programming error
@@ -445,24 +453,36 @@ class ShootingProblem:
         v, Sp = self._v(fit.delta, S, fit.theta)
         K = Sp.shape[1]
         p_base = fit.p - S @ fit.theta if k else fit.p
+        penalised = self.link and self.penalty is not None
+        P = self.meas_whitening if penalised else None
+        if dense is not None and P is not None:
+            dense = None  # (the whitening mixes rows: the caller densifies J[:, :cut])
         # the parameter slots kept (:meth:`jacobian`: the unused ones dropped), then the
         # window states' columns
-        parts = [(np.arange(cut), False)] + ([(np.arange(cut, k), True)] if right else [])
+        if dense is None:
+            first = (np.arange(cut), False)
+        else:
+            first = ("dense", np.asarray(dense[1], dtype=int), dense[0], dense[2])
+        parts = [first] + ([(np.arange(cut, k), True)] if right else [])
         fj = window_jacobian(*self._key(K), self.link)
         out = fj(v, p_base, Sp, self._data, parts=parts)
         held = self.held(fit.p, S)
         r, mats = out[0], out[1]
-        if self.link and self.penalty is not None:
-            P = self.meas_whitening
+        if penalised:
             c, Jc = out[2], out[3]
-            WJc = self.penalty @ Jc
+            WJc = sp.csc_matrix(self.penalty @ Jc)
             full = [np.arange(cut), np.r_[np.arange(cut, k), np.arange(K, Jc.shape[1])]]
             r = np.r_[r if P is None else P @ r, self.penalty @ c]
+            if dense is not None:  # the defects' rows of the dense columns, after J's
+                out_d, cols, col0 = dense
+                for i, col in enumerate(np.asarray(cols, dtype=int)):
+                    a, b = WJc.indptr[col], WJc.indptr[col + 1]
+                    out_d[self.n_meas + WJc.indices[a:b], col0 + i] += WJc.data[a:b]
             mats = [
-                vstack_csc(Jm if P is None else P @ Jm, WJc[:, cols])
+                None if Jm is None else vstack_csc(Jm if P is None else P @ Jm, WJc[:, cols])
                 for Jm, cols in zip(mats, full, strict=False)
             ]
-        left = self._unpinned_part(mats[0], 0, k, held)
+        left = None if mats[0] is None else self._unpinned_part(mats[0], 0, k, held)
         return r, left, (self._unpinned_part(mats[1], cut, k, held) if right else None)
 
     @staticmethod

@@ -280,13 +280,22 @@ class WindowJacobian:
         ``parts``: ``[(theta, windows), ...]``, each a part of ``J``'s columns (the
         parameter slots ``theta``, sorted, and with ``windows`` every window's own columns,
         in ``J``'s order); ``J`` is then the list of these parts, each the same numbers as
-        that slice of ``J``, without ``J`` itself. The window blocks are written into the
+        that slice of ``J``, without ``J`` itself. A part ``("dense", theta, out, col0)``
+        adds the parameter columns ``theta`` into the zeros of ``out[:, col0:]`` (its
+        first rows: ``J``'s; the numbers of ``J[:, theta].toarray()``) and is None in
+        the list. The window blocks are written into the
         matrices :data:`CHUNK_WINDOWS` windows at a time (not all windows' blocks, then the
         matrix: on an hour of 50 Hz samples a second copy of ``J``'s values while it was
         made)."""
         src = [np.ascontiguousarray(np.asarray(a, dtype=float).reshape(-1, order="F"))
                for a in (v, p_base, S, data)]  # fmt: skip
-        made = [self._part(None, True)] if parts is None else [self._part(*p) for p in parts]
+        made = (
+            [self._part(None, True)]
+            if parts is None
+            else [
+                _DensePart(self, *p[1:]) if isinstance(p[0], str) else self._part(*p) for p in parts
+            ]
+        )
 
         def sink(j0, j1, blocks):
             for part in made:
@@ -322,6 +331,30 @@ class _Part:
     def matrix(self) -> sp.csc_matrix:
         """The filled part as a CSC matrix (sharing this part's arrays)."""
         return sp.csc_matrix((self.data, self.indices, self.indptr), shape=self.shape, copy=False)
+
+
+class _DensePart:
+    """Parameter columns of a :class:`WindowJacobian` added into a dense array's zeros
+    window block by block (:meth:`WindowJacobian.__call__`)."""
+
+    def __init__(self, fj: WindowJacobian, theta, out: np.ndarray, col0: int) -> None:
+        block = fj.win_rj.sparsity_out(1)
+        self.m = block.size1()
+        self.row = np.asarray(block.row(), dtype=np.int64)
+        self.spans = fj._spans(np.asarray(theta, dtype=int), False)
+        self.out, self.col0 = out, int(col0)
+
+    def fill(self, blocks: np.ndarray, j0: int) -> None:
+        """Windows ``j0 : j0 + len(blocks)`` from their blocks' nonzeros (one row each)."""
+        n = blocks.shape[0]
+        off = (np.arange(j0, j0 + n, dtype=np.int64) * self.m)[:, None]
+        for i, (a, b) in enumerate(self.spans):
+            rows = (self.row[a:b][None, :] + off).ravel()
+            self.out[rows, self.col0 + i] += blocks[:, a:b].ravel()
+
+    def matrix(self) -> None:
+        """Nothing: the columns are in the caller's array."""
+        return None
 
 
 #: Windows whose Jacobian blocks are held at once while a Jacobian is made
