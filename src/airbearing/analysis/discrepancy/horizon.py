@@ -18,6 +18,7 @@ from airbearing.analysis.discrepancy.candidate_fit import START_YAW
 from airbearing.analysis.discrepancy.honest import effect_errors, honest
 from airbearing.analysis.discrepancy.replay import problem_for
 from airbearing.analysis.discrepancy.revise import close_alternatives, model_averaged_std, revise
+from airbearing.analysis.discrepancy.screen import forget_columns
 from airbearing.analysis.discrepancy.search_state import _Named, _Progress, _Search, _Selection
 from airbearing.analysis.discrepancy.selection import (
     CONFOUND_BIC,
@@ -72,6 +73,7 @@ def _named(search: _Search, sel: _Selection, prog: _Progress, screen=True, worke
         i += c.k
     if sel.rounds:
         sel.rounds[0] = tuple(_with_honest(search, r) for r in sel.rounds[0])
+        forget_columns()  # (the step-judged fits' columns made again for their errors)
     return _Named(current, problem, errs, effects, effect_std, white, crlb, eff, within)
 
 

@@ -49,8 +49,10 @@ __all__ = [
     "FAR_FACTOR",
     "MATTER_BIC",
     "SCREEN_FRACTION",
+    "Columns",
     "Linearisation",
     "Step",
+    "forget_columns",
     "linearise",
     "one_value_linearisation",
     "screened",
@@ -140,41 +142,11 @@ class Linearisation:
         self.null = current if null is None else null
         self.where = where
         self.S_sel = np.asarray(S_sel, dtype=float)
-        self.k_sel = k_sel = self.S_sel.shape[1]
+        self.k_sel = self.S_sel.shape[1]
         self.raw = list(raw)
-        n_p = problem.model.n_p
-        # every candidate parameter in ONE evaluation (a window function of that many slots,
-        # built once per problem): THETA_SLOTS at a time evaluated the same window states'
-        # columns once per chunk (3 evaluations on seed 004's platform)
-        room = max(THETA_SLOTS - k_sel, len(self.raw), 1)
-        r, Jd = None, None
-        sizes = [len(self.raw[i : i + room]) for i in range(0, len(self.raw), room)]
-        penalised = problem.link and problem.penalty is not None
-        rows = problem.n_meas + (problem.penalty.shape[0] if penalised else 0)
-        # (n_res_all, k_sel + len(raw)): the chosen and every candidate parameter's columns
-        # written straight in (no sparse copy of the columns, nor a dense one of each
-        # chunk, then stacked)
-        A = np.zeros((rows, k_sel + len(self.raw)), order=_stacked_order(k_sel, sizes))
-        for i in range(0, len(self.raw), room):
-            chunk = self.raw[i : i + room]
-            S_raw = np.zeros((n_p, len(chunk)))
-            S_raw[chunk, np.arange(len(chunk))] = 1.0
-            S = np.hstack([self.S_sel, S_raw])
-            at = replace(current, theta=np.r_[current.theta, np.zeros(len(chunk))])
-            # the parameters' columns (dense, into A) and (once) the window states'
-            first = r is None
-            cols = np.arange(0 if first else k_sel, k_sel + len(chunk))
-            r_i, J, Jd_i = problem.jacobian_parts(
-                at, S, k_sel + len(chunk), right=first, dense=(A, cols, 0 if first else k_sel + i)
-            )
-            if J is not None:  # (coloured noise with process noise: sparse, then dense)
-                J = sp.csc_matrix(J)
-                if first:
-                    _dense_columns(J, 0, k_sel, A, 0)
-                _dense_columns(J, k_sel, k_sel + len(chunk), A, k_sel + i)
-            if first:
-                r, Jd = r_i, sp.csc_matrix(Jd_i)
-            del J, Jd_i  # (let go before the next chunk's and the blocks below)
+        # what the columns are made of, to make them again once let go (:class:`Columns`)
+        self.made = Columns(problem, current, self.S_sel, self.raw)
+        r, A, Jd = self.made.make()
         self.r = r
         self.A = A
         self.Jd = Jd
@@ -323,8 +295,88 @@ class Linearisation:
             cov=cov,
             # the parameter and window states' columns shared with the round, the step's
             # columns made when asked (:func:`.fit_jacobian`)
-            extra={"r": st.r, "J_blocks": (st.A, st.E, st.Jd)},
+            extra={"r": st.r, "J_blocks": (st.A, st.E, st.Jd), "J_source": self.made},
         )
+
+
+class Columns:
+    """The round's parameter columns ``A`` and window-state columns ``Jd`` at a fit, made
+    (:meth:`make`) and made again when asked once let go (:meth:`columns`): a fit judged
+    on its step keeps this and its map ``E`` (``extra["J_made"]``,
+    :func:`~airbearing.analysis.shooting.fit_jacobian`) instead of the two, which on an
+    hour of 50 Hz three-axis samples are some 220 MB per linearisation, kept from the first
+    round to the honest errors at the end. The same numbers again: the same point, the
+    problem's weighting of then (:meth:`.ShootingProblem.weighting`) and the same
+    evaluation. The last made are kept (:data:`_KEPT`), one set at a time.
+    """
+
+    def __init__(self, problem, current: Fit, S_sel: np.ndarray, raw: list) -> None:
+        self.problem, self.S_sel, self.raw = problem, S_sel, list(raw)
+        # the point only (not the fit's own row arrays)
+        self.current = replace(current, extra={})
+        self.weighting = problem.weighting()
+
+    def make(self, weighting=None):
+        """``(r, A, Jd)`` at the fit (:class:`Linearisation`)."""
+        problem, k_sel = self.problem, self.S_sel.shape[1]
+        n_p = problem.model.n_p
+        # every candidate parameter in ONE evaluation (a window function of that many
+        # slots, built once per problem): THETA_SLOTS at a time evaluated the same window
+        # states' columns once per chunk (3 evaluations on seed 004's platform)
+        room = max(THETA_SLOTS - k_sel, len(self.raw), 1)
+        r, Jd = None, None
+        sizes = [len(self.raw[i : i + room]) for i in range(0, len(self.raw), room)]
+        W = self.weighting[0]
+        rows = problem.n_meas + (W.shape[0] if problem.link and W is not None else 0)
+        # (n_res_all, k_sel + len(raw)): the chosen and every candidate parameter's columns
+        # written straight in (no sparse copy of the columns, nor a dense one of each
+        # chunk, then stacked)
+        A = np.zeros((rows, k_sel + len(self.raw)), order=_stacked_order(k_sel, sizes))
+        current = self.current
+        for i in range(0, len(self.raw), room):
+            chunk = self.raw[i : i + room]
+            S_raw = np.zeros((n_p, len(chunk)))
+            S_raw[chunk, np.arange(len(chunk))] = 1.0
+            S = np.hstack([self.S_sel, S_raw])
+            at = replace(current, theta=np.r_[current.theta, np.zeros(len(chunk))])
+            # the parameters' columns (dense, into A) and (once) the window states'
+            first = r is None
+            cols = np.arange(0 if first else k_sel, k_sel + len(chunk))
+            dense = (A, cols, 0 if first else k_sel + i)
+            r_i, J, Jd_i = problem.jacobian_parts(
+                at, S, k_sel + len(chunk), right=first, dense=dense, made=self.weighting
+            )
+            if J is not None:  # (coloured noise with process noise: sparse, then dense)
+                J = sp.csc_matrix(J)
+                if first:
+                    _dense_columns(J, 0, k_sel, A, 0)
+                _dense_columns(J, k_sel, k_sel + len(chunk), A, k_sel + i)
+            if first:
+                r, Jd = r_i, sp.csc_matrix(Jd_i)
+            del J, Jd_i  # (let go before the next chunk's and the blocks below)
+        return r, A, Jd
+
+    def columns(self):
+        """``(A, Jd)``, made again unless they are the last made (:data:`_KEPT`)."""
+        with _KEPT_LOCK:
+            if _KEPT[0] is not None and _KEPT[0][0] is self:
+                return _KEPT[0][1]
+            _KEPT[0] = None  # (the last let go before these are made)
+            _, A, Jd = self.make()
+            _KEPT[0] = (self, (A, Jd))
+            return A, Jd
+
+
+#: The last :class:`Columns` made again and their ``(A, Jd)``: the honest errors at the end
+#: take the first round's candidates one after the other, several from one linearisation.
+_KEPT: list = [None]
+_KEPT_LOCK = threading.Lock()
+
+
+def forget_columns() -> None:
+    """Let go of the columns :meth:`Columns.columns` made last."""
+    with _KEPT_LOCK:
+        _KEPT[0] = None
 
 
 def screened(lin, cand, k_sel, lower, upper, current, ln_n, before, folds, th_reg=None,

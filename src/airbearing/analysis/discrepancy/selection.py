@@ -333,7 +333,7 @@ def _add_best(sel: _Selection, results, prog) -> bool:
 #: residual and Jacobian (or the blocks it is made from), the continuity's null space and
 #: the linearised defects. Only the round itself and the honest errors of the first round's
 #: candidates (:func:`.horizon._with_honest`) use them.
-ROW_ARRAYS = ("r", "J", "J_blocks", "N", "linearised")
+ROW_ARRAYS = ("r", "J", "J_blocks", "J_source", "J_made", "N", "linearised")
 
 
 def _let_go(sel: _Selection) -> None:
@@ -359,25 +359,20 @@ def _let_go(sel: _Selection) -> None:
 
 
 def _own_columns(results: tuple) -> tuple:
-    """The first round's step-judged fits with their own parameter columns ``A E`` where
-    these are fewer than the columns of the linearisation they share (``A``: every
-    candidate parameter of the round, some 30 on a three-axis platform): kept until the
-    honest errors at the end, ``A`` would outweigh them. The same numbers either way
+    """The first round's step-judged fits with what makes their columns again
+    (``extra["J_made"]``: the linearisation's :class:`.screen.Columns` and the fit's map
+    ``E``) instead of the columns it made (``A``, every candidate parameter of the round,
+    some 30 on a three-axis platform, and the window states' ``Jd``: some 220 MB per
+    linearisation on an hour of 50 Hz three-axis samples, kept until the honest errors at
+    the end). The same numbers either way
     (:func:`~airbearing.analysis.shooting.fit_jacobian`)."""
-    shared: dict = {}
-    for r in results:
-        blocks = r.fit.extra.get("J_blocks") if r.fit is not None else None
-        if blocks is not None and len(blocks) == 3:
-            A, E, _ = blocks
-            shared.setdefault(id(A), [A.shape[1], 0])[1] += E.shape[1]
     out = []
     for r in results:
-        blocks = r.fit.extra.get("J_blocks") if r.fit is not None else None
-        if blocks is not None and len(blocks) == 3:
-            A, E, Jd = blocks
-            width, used = shared[id(A)]
-            if used < width:
-                r = replace(r, fit=replace(r.fit, extra={**r.fit.extra, "J_blocks": (A @ E, Jd)}))
+        extra = r.fit.extra if r.fit is not None else {}
+        blocks, source = extra.get("J_blocks"), extra.get("J_source")
+        if blocks is not None and len(blocks) == 3 and source is not None:
+            rest = {k: v for k, v in extra.items() if k not in ("J_blocks", "J_source")}
+            r = replace(r, fit=replace(r.fit, extra={**rest, "J_made": (source, blocks[1])}))
         out.append(r)
     return tuple(out)
 

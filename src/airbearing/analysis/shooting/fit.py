@@ -87,7 +87,10 @@ def fit_jacobian(fit: Fit):
     states' columns ``Jd``; ``E`` maps the fit's parameters to ``A``'s columns), the matrix
     ``[A E, Jd]`` made now: the same numbers, without a copy of ``Jd`` and of the parameter
     columns per candidate (on an hour of 50 Hz three-axis samples some 45 MB and 9 MB per
-    parameter each). A 2-tuple ``(At, Jd)`` is taken as ``[At, Jd]``.
+    parameter each). A 2-tuple ``(At, Jd)`` is taken as ``[At, Jd]``. A fit that keeps
+    ``extra["J_made"] = (source, E)`` instead has ``source.columns()`` make ``(A, Jd)``
+    again (the first round's step-judged fits, kept to the honest errors at the end:
+    :class:`airbearing.analysis.discrepancy.screen.Columns`).
 
     Parameters
     ----------
@@ -99,6 +102,10 @@ def fit_jacobian(fit: Fit):
     """
     if "J" in fit.extra:
         return fit.extra["J"]
+    if "J_made" in fit.extra:  # the shared columns made again (their maker, the fit's E)
+        source, E = fit.extra["J_made"]
+        A, Jd = source.columns()
+        return sp.hstack([sp.csc_matrix(A @ E), Jd]).tocsc()
     *At, Jd = fit.extra["J_blocks"]
     At = At[0] @ At[1] if len(At) == 2 else At[0]
     return sp.hstack([sp.csc_matrix(At), Jd]).tocsc()

@@ -432,7 +432,7 @@ class ShootingProblem:
         return r, self._unpinned(J if k > self.theta_slots else J[:, keep], k, held)
 
     def jacobian_parts(self, fit: Fit, S: np.ndarray, cut: int, right: bool = True,
-                       dense=None):  # fmt: skip
+                       dense=None, made=None):  # fmt: skip
         """``(r, J[:, :cut], J[:, cut:])`` of :meth:`jacobian` (the second None without
         ``right``), ``cut`` at most the number of parameters: the same numbers as those
         slices of its Jacobian, without the whole matrix (nor the window function's blocks
@@ -445,6 +445,9 @@ class ShootingProblem:
         numbers of ``J[:, cols].toarray()``) instead of made sparse; the first part is
         then None, except with coloured measurement noise and process noise, where it is
         ``J[:, :cut]`` (sparse) and ``out`` is left to the caller.
+
+        ``made``: the problem's state these columns were made in before
+        (:meth:`weighting`), used instead of the present one: the same numbers again.
         """
         S = np.asarray(S, dtype=float)
         k = S.shape[1]
@@ -453,8 +456,10 @@ class ShootingProblem:
         v, Sp = self._v(fit.delta, S, fit.theta)
         K = Sp.shape[1]
         p_base = fit.p - S @ fit.theta if k else fit.p
-        penalised = self.link and self.penalty is not None
-        P = self.meas_whitening if penalised else None
+        W, P, data = self.weighting() if made is None else made
+        data = self._data_of(data)
+        penalised = self.link and W is not None
+        P = P if penalised else None
         if dense is not None and P is not None:
             dense = None  # (the whitening mixes rows: the caller densifies J[:, :cut])
         # the parameter slots kept (:meth:`jacobian`: the unused ones dropped), then the
@@ -465,14 +470,14 @@ class ShootingProblem:
             first = ("dense", np.asarray(dense[1], dtype=int), dense[0], dense[2])
         parts = [first] + ([(np.arange(cut, k), True)] if right else [])
         fj = window_jacobian(*self._key(K), self.link)
-        out = fj(v, p_base, Sp, self._data, parts=parts)
+        out = fj(v, p_base, Sp, data, parts=parts)
         held = self.held(fit.p, S)
         r, mats = out[0], out[1]
         if penalised:
             c, Jc = out[2], out[3]
-            WJc = sp.csc_matrix(self.penalty @ Jc)
+            WJc = sp.csc_matrix(W @ Jc)
             full = [np.arange(cut), np.r_[np.arange(cut, k), np.arange(K, Jc.shape[1])]]
-            r = np.r_[r if P is None else P @ r, self.penalty @ c]
+            r = np.r_[r if P is None else P @ r, W @ c]
             if dense is not None:  # the defects' rows of the dense columns, after J's
                 out_d, cols, col0 = dense
                 for i, col in enumerate(np.asarray(cols, dtype=int)):
@@ -484,6 +489,22 @@ class ShootingProblem:
             ]
         left = None if mats[0] is None else self._unpinned_part(mats[0], 0, k, held)
         return r, left, (self._unpinned_part(mats[1], cut, k, held) if right else None)
+
+    def weighting(self) -> tuple:
+        """``(penalty, meas_whitening, data mark)``: what weights the residual now (the
+        defects' whitening, the measurement rows' and the noise levels in the data
+        vector), for :meth:`jacobian_parts` to make the same columns again later."""
+        return self.penalty, self.meas_whitening, self._data_mark()
+
+    def _data_of(self, mark) -> np.ndarray:
+        """The data vector as it was when ``mark`` (:meth:`_data_mark`) was made: the
+        problem's own while its noise levels are the same, else a copy with those."""
+        if self._same_data(mark):
+            return self._data
+        data, sigma = mark
+        out = np.array(data, dtype=float)
+        out[-sigma.size :] = sigma
+        return out
 
     @staticmethod
     def _unpinned_part(J, first: int, k: int, held):
