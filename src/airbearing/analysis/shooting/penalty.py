@@ -207,10 +207,13 @@ class _PenalisedOracle:
     def __init__(self, fr, fj, n_v: int) -> None:
         self.fr, self.fj, self.n_v = fr, fj, n_v
         self.z = self.r = self.J = self.raw = self.C = None
-        self.keep_raw = False
+        self.keep_raw, self.used = False, None
 
-    def set(self, p_base, S, scale, data, W, P=None, keep_raw=False) -> None:
+    def set(self, p_base, S, scale, data, W, P=None, keep_raw=False, used=None) -> None:
+        """The next solve's point and weighting; ``used``: the parameter slots it frees
+        (the others' columns left empty: :class:`.problem_functions.WindowJacobian`)."""
         self.pb, self.S, self.scale, self.data, self.W = p_base, S, scale, data, W
+        self.used = used
         self.P = P  # whitening of the measurement rows (coloured noise), or None
         self.keep_raw = keep_raw
         self.z = self.raw = None
@@ -247,7 +250,7 @@ class _PenalisedOracle:
 
     def rj_at(self, z):
         if self.z is None or self.J is None or not np.array_equal(z, self.z):
-            raw = self.fj(z * self.scale, self.pb, self.S, self.data)
+            raw = self.fj(z * self.scale, self.pb, self.S, self.data, used=self.used)
             self.z = z.copy()
             self._stack(raw)
         return self.r, self.J

@@ -79,6 +79,20 @@ def unscale_columns(J: sp.csc_matrix, scale: np.ndarray) -> sp.csc_matrix:
     return scale_columns(sp.csc_matrix(J), 1.0 / np.asarray(scale, dtype=float))
 
 
+def _kept_columns(J: sp.csc_matrix, k: int, K: int) -> sp.csc_matrix:
+    """``J`` without its unused parameter slots ``k:K``: sharing ``J``'s arrays when those
+    columns are empty (a penalised fit's, :class:`.problem_functions.WindowJacobian`'s
+    ``used``), else a copy of the others."""
+    ptr = J.indptr
+    if ptr[k] == ptr[K]:
+        return sp.csc_matrix(
+            (J.data, J.indices, np.r_[ptr[: k + 1], ptr[K + 1 :]]),
+            shape=(J.shape[0], J.shape[1] - (K - k)),
+            copy=False,
+        )
+    return J[:, np.r_[np.arange(k), np.arange(K, J.shape[1])]]
+
+
 class ShootingProblem:
     """The multiple-shooting output error of one Model on a :class:`WindowSet`.
 
@@ -113,6 +127,7 @@ class ShootingProblem:
     _start_raw = _PerThread(None)  # the window Jacobian at its start, for its first iterate
     _keep_start = _PerThread(False)  # keep the next start's (a free fit's) for the bounded fit
     _start_kept = _PerThread(None)
+    _used = _PerThread(None)  # its parameter slots (the others' columns left empty)
 
     def __init__(
         self,
@@ -342,7 +357,10 @@ class ShootingProblem:
                 )
             ):
                 return kept[1]
-        raw = window_jacobian(*self._key(S.shape[1]), True)(v, p_base, S, self._data)
+        # the unused slots' columns left empty: no fit reads them (fixed at zero, IPOPT
+        # takes them out of the problem; the answer's Jacobian drops them, _result)
+        fj = window_jacobian(*self._key(S.shape[1]), True)
+        raw = fj(v, p_base, S, self._data, used=self._used)
         if self._keep_start:
             self._start_kept = ((v.copy(), p_base.copy(), S.copy(), self._data_mark()), raw)
         return raw
@@ -620,6 +638,7 @@ class ShootingProblem:
         lb[K + self._held] = ub[K + self._held] = 0.0
         v0 = np.clip(v0, lb, ub)
         raw = None
+        self._used = k
         if self.link and self.penalty is not None:
             # kept for the solver's first iterate (:meth:`_solve`): the same point
             raw = self._start_raw = self._linked_raw(v0, p_base, Sp)
@@ -678,7 +697,7 @@ class ShootingProblem:
     def _solve_penalised(self, solver, oracle, x0, lbx, ubx, scale, p_base, Sp):
         """:meth:`_solve` with process noise (linked windows), on a lent solver."""
         oracle.set(p_base, Sp, scale, self._data, self.penalty, self.meas_whitening,
-                   keep_raw=self.reuse_last)  # fmt: skip
+                   keep_raw=self.reuse_last, used=self._used)  # fmt: skip
         raw0, self._start_raw = self._start_raw, None
         if raw0 is not None:
             oracle.prime(x0, raw0)
@@ -710,7 +729,7 @@ class ShootingProblem:
         keep = np.r_[np.arange(k), np.arange(K, v.size)]
         v = v[keep]
         held = self._held
-        J = self._unpinned(sp.csc_matrix(J)[:, keep], k, held)
+        J = self._unpinned(_kept_columns(sp.csc_matrix(J), k, K), k, held)
         extra = {"r": r, "J": J, "S": S, "p_base": p_base, "held": held}
         rss = float(r @ r)
         n_free = v.size - held.size

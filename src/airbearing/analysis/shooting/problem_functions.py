@@ -217,6 +217,20 @@ class WindowJacobian:
         spans = self._spans(th, windows)
         return _Part(spans, self.nw, indices, indptr, (self.shape[0], n_cols))
 
+    def _used_part(self, used: int) -> _Part:
+        """An empty :class:`_Part` of the whole Jacobian's shape whose parameter slots from
+        ``used`` on have no entries (a fit's unused slots, fixed at zero); its index arrays
+        kept for the last ``used`` asked (every iterate of a fit asks the same)."""
+        K = self.K
+        kept = getattr(self, "_used_index", None)
+        if kept is None or kept[0] != used:
+            self._used_index = None  # (the last let go before these are made)
+            indices, ptr = self._index_arrays(np.arange(used), True)
+            indptr = np.r_[ptr[: used + 1], np.full(K - used, ptr[used]), ptr[used + 1 :]]
+            kept = self._used_index = (used, indices, indptr.astype(ptr.dtype))
+        spans = self._spans(np.arange(used), True)
+        return _Part(spans, self.nw, kept[1], kept[2], self.shape)
+
     def _windows(self, src: list, sink=None) -> list:
         """Every output of the window function for all windows, window after window.
 
@@ -274,7 +288,7 @@ class WindowJacobian:
         for j0 in range(m, self.nw):
             yield self.win_rj, j0, 1
 
-    def __call__(self, v, p_base, S, data, parts=None) -> tuple:
+    def __call__(self, v, p_base, S, data, parts=None, used=None) -> tuple:
         """``(r, J)``, and on linked windows ``(r, J, c, Jc)`` (``J``, ``Jc`` scipy CSC).
 
         ``parts``: ``[(theta, windows), ...]``, each a part of ``J``'s columns (the
@@ -283,14 +297,20 @@ class WindowJacobian:
         that slice of ``J``, without ``J`` itself. A part ``("dense", theta, out, col0)``
         adds the parameter columns ``theta`` into the zeros of ``out[:, col0:]`` (its
         first rows: ``J``'s; the numbers of ``J[:, theta].toarray()``) and is None in
-        the list. The window blocks are written into the
-        matrices :data:`CHUNK_WINDOWS` windows at a time (not all windows' blocks, then the
-        matrix: on an hour of 50 Hz samples a second copy of ``J``'s values while it was
-        made)."""
+        the list.
+
+        ``used``: the parameter slots from ``used`` on left empty in ``J`` (no entries; a
+        fit's unused slots, fixed at zero, whose columns no fit reads): on an hour of 50 Hz
+        three-axis samples each slot's column is 13 MB per copy of ``J``.
+
+        The window blocks are written into the matrices :data:`CHUNK_WINDOWS` windows at a
+        time (not all windows' blocks, then the matrix: on an hour of 50 Hz samples a
+        second copy of ``J``'s values while it was made)."""
         src = [np.ascontiguousarray(np.asarray(a, dtype=float).reshape(-1, order="F"))
                for a in (v, p_base, S, data)]  # fmt: skip
+        part = self._used_part if used is not None and used < self.K else None
         made = (
-            [self._part(None, True)]
+            [part(int(used)) if part else self._part(None, True)]
             if parts is None
             else [
                 _DensePart(self, *p[1:]) if isinstance(p[0], str) else self._part(*p) for p in parts
