@@ -159,7 +159,8 @@ def linked_lag_bound(problem, current, datas, tau_max: float) -> LagBound | None
     x = lag_regressor(problem, datas)
     P = problem.meas_whitening
     xs = np.r_[x if P is None else P @ x, np.zeros(r.size - n)]  # no defect moves with tau
-    A = J[:, np.flatnonzero(np.diff(J.indptr) > 0)]  # held states: zero columns
+    nonempty = np.diff(J.indptr) > 0  # held states: zero columns, left out
+    A = J if nonempty.all() else J[:, np.flatnonzero(nonempty)]  # (J itself: no copy)
     dt = float(np.median(problem.windows.dt[problem.windows.dt > 0]))
     s2 = current.rss / max(current.n_res - current.n_free, 1)
     r_top = min(max(1, math.ceil(3 * tau_max / dt)), problem.windows.length)
@@ -169,6 +170,7 @@ def linked_lag_bound(problem, current, datas, tau_max: float) -> LagBound | None
         r2 = min(max(1, 2 * (r1 - 1)), r_top)  # bands 1, 2, 3-4, 5-8, ...
         lo, hi = (r1 - 1) * dt / 3, min(r2 * dt / 3, tau_max)
         keep = np.r_[~_head_rows(problem, r2), np.ones(r.size - n, dtype=bool)]
+        proj = None  # (the last band's let go before this one's is made)
         try:
             proj = _Projection(A, keep)
         except RuntimeError:  # singular even with the ridge: IPOPT's to handle
