@@ -1,0 +1,80 @@
+"""A fit's Jacobian made in parts, in chunks of windows and without its unused slots
+(:mod:`airbearing.analysis.shooting.problem_functions`, :meth:`ShootingProblem.jacobian_parts`):
+the same numbers to the bit as the whole matrix they replace, which is the reference.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+from test_process_noise import _coast, _problem
+
+from airbearing.analysis.shooting import problem_functions as pf
+from airbearing.analysis.shooting import sparse as sps
+from airbearing.analysis.shooting.fit import Fit
+from airbearing.analysis.shooting.problem import _kept_columns
+from airbearing.analysis.shooting.process_noise import KAPPA_GRID, set_intensity
+
+
+def _same(got, ref) -> None:
+    got, ref = sp.csc_matrix(got), sp.csc_matrix(ref)
+    np.testing.assert_array_equal(got.indptr, ref.indptr)
+    np.testing.assert_array_equal(got.indices, ref.indices)
+    np.testing.assert_array_equal(got.data, ref.data)
+
+
+def _point(prob, model, S):
+    """A point of the problem away from zero (every entry of the Jacobian in play)."""
+    rng = np.random.default_rng(3)
+    delta = 1e-3 * rng.standard_normal((prob.n_delta, prob.windows.n))
+    theta = np.full(S.shape[1], 1e-4)
+    p = model.p0 + S @ theta
+    return Fit(theta, theta, p, delta, 0.0, 0, 0, 0.0, 0)
+
+
+def test_parts_chunks_and_empty_slots_are_the_whole_jacobians_numbers(monkeypatch):
+    prob, model, S1 = _problem([_coast(1.2, 2e-4, 30.0, 5)], piece_s=2.0)
+    set_intensity(prob, KAPPA_GRID[2])  # the defects whitened below the measurement rows
+    S = np.zeros((model.n_p, 2))
+    S[:, :1] = S1
+    S[next(i for i in range(model.n_p) if S1[i, 0] == 0), 1] = 1.0  # another parameter
+    at = _point(prob, model, S)
+    r, J = prob.jacobian(at, S)  # the reference: every window at once
+    monkeypatch.setattr(pf, "CHUNK_WINDOWS", 2)  # many chunks of windows
+    r2, left, right = prob.jacobian_parts(at, S, 1)
+    np.testing.assert_array_equal(r2, r)
+    _same(left, J[:, :1])
+    _same(right, J[:, 1:])
+    # the parameter columns added into a dense array, the defects' rows too
+    A = np.zeros((J.shape[0], 3))
+    _, none, _ = prob.jacobian_parts(at, S, 2, right=False, dense=(A, np.arange(2), 1))
+    assert none is None and not A[:, 0].any()
+    np.testing.assert_array_equal(A[:, 1:], J[:, :2].toarray())
+    # the whole matrix with its unused slots left empty, and without them
+    v, Sp = prob._v(at.delta, S, at.theta)
+    K = Sp.shape[1]
+    fj = pf.window_jacobian(*prob._key(K), True)
+    pb = at.p - S @ at.theta
+    whole = fj(v, pb, Sp, prob._data)[1]
+    used = fj(v, pb, Sp, prob._data, used=2)[1]
+    assert used.shape == whole.shape and not used[:, 2:K].nnz
+    keep = np.r_[np.arange(2), np.arange(K, whole.shape[1])]
+    _same(_kept_columns(used, 2, K), whole[:, keep])
+    _same(_kept_columns(whole, 2, K), whole[:, keep])
+
+
+def test_columns_scaled_block_by_block_are_the_products():
+    rng = np.random.default_rng(4)
+    J = sp.random(400, 30, density=0.3, random_state=rng, format="csc")
+    scale = 10.0 ** rng.uniform(-5, 5, 30)
+    # the whole matrix's factors repeated for every entry, as before the blocks
+    ref = J.copy()
+    ref.data = J.data * np.repeat(scale, np.diff(J.indptr))
+    old = sps.SCALE_BLOCK_ENTRIES
+    try:
+        for entries in (1, 7, 1 << 20):
+            sps.SCALE_BLOCK_ENTRIES = entries
+            got = sps.scale_columns(J.copy(), scale)
+            np.testing.assert_array_equal(got.data, ref.data)
+    finally:
+        sps.SCALE_BLOCK_ENTRIES = old
