@@ -48,7 +48,11 @@ def test_a_slow_torque_about_the_spin_is_fitted_as_a_nuisance_and_said():
     # the marginal factor: the friction keeps the x and y oscillations and the nutation
     # about z, a few times less information than with the spin's mean (6.2 on this seed)
     assert np.all(np.asarray(js["std_factor"]) > 2.0)
-    assert "slow torque about z is significant" in d.verdict
+    # the Ornstein-Uhlenbeck part: its correlation time (a 30 s log does not resolve a
+    # 20 s one: said so) and its level, in the JSON and the words
+    assert st["correlation_time_s"] > 0 and st["level"] > 0
+    assert "slow torque about z, correlated over" in d.verdict
+    assert "is significant (F test p" in d.verdict
 
 
 def test_without_a_slow_torque_nothing_changes():
