@@ -96,3 +96,41 @@ def test_a_joint_step_past_a_physical_bound_is_held_there_and_said():
     slow.step = np.array([2e-7])
     assert judgement._with_slow_torque(sel, named, slow) == {}
     assert named.effects["viscous_friction"] == pytest.approx(1.2e-6, rel=1e-12)
+
+
+def test_the_knot_columns_make_a_constant_and_a_drift_exactly(monkeypatch):
+    # the torque linear between knots makes a constant and a linear drift exactly, so the
+    # knot columns (K + 1 hat-shaped directions, split by windows) times the trend's knot
+    # values are the residual's response to those torques fed in directly (the Legendre
+    # polynomials at every sample, one forward direction each); both are CasADi's exact
+    # forward derivative, so they agree to rounding
+    from numpy.polynomial.legendre import legval
+
+    from airbearing.analysis.discrepancy import judgement
+    from airbearing.analysis.discrepancy import slow_torque as st
+
+    seen = {}
+
+    def capture(problem, fit, datas, axes, **kw):
+        seen.update(problem=problem, fit=fit, datas=datas, axes=axes)
+        return None
+
+    monkeypatch.setattr(judgement, "slow_torque", capture)
+    _fit("c", 5)
+    problem, fit, datas = seen["problem"], seen["fit"], seen["datas"]
+    G, blocks = st.knot_columns(problem, fit, datas, seen["axes"])
+    assert G.shape[1] == sum(b.size for b in blocks) >= st.KNOTS_PER_SEGMENT
+    w = problem.windows
+    t = np.array([datas[s].t[rows] for s, rows in zip(w.source, w.rows, strict=True)])
+    x = 2.0 * (t - t.min()) / (t.max() - t.min()) - 1.0
+    iu = problem.model.index("tau_z", "u")[0]
+    bases = []
+    for deg in (0, 1):
+        U = np.zeros_like(w.u)
+        U[:, :, iu] = legval(x, [0] * deg + [1])
+        bases.append(U)
+    direct = st.input_columns(problem, fit, bases)
+    via_knots = G @ st.trend_values(blocks, 1)
+    scale = np.linalg.norm(direct, axis=0)
+    assert np.all(scale > 0)
+    assert np.max(np.abs(via_knots - direct) / scale) < 1e-9

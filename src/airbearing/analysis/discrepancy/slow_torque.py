@@ -68,8 +68,10 @@ __all__ = [
     "SLOW_TORQUE_P",
     "SLOW_TORQUE_ORDER",
     "SlowTorque",
+    "input_columns",
     "knot_columns",
     "slow_torque",
+    "trend_values",
 ]
 
 #: p-value of the F test below which the slow torque is fitted as a nuisance (the
@@ -87,9 +89,10 @@ SLOW_TORQUE_ORDER = 1
 #: its information (the nutation) and is fitted.
 MAX_FACTOR = 1e4
 #: Knots at least per segment (each window cut into ``K`` equal intervals, ``K`` up to
-#: :data:`MAX_PER_WINDOW`): a 30 s segment of four 7.5 s pieces gets knots 3.75 s apart, so
-#: a correlation time of 20 s is resolved; pieces of 10 s on longer logs, 10 s.
-KNOTS_PER_SEGMENT = 8
+#: :data:`MAX_PER_WINDOW`): a 30 s segment of four 7.5 s pieces gets knots 1.9 s apart, a
+#: 90 s one 3.75 s, so correlation times of 10-20 s are resolved; pieces of 10 s on long
+#: logs, 10 s. ``K + 1`` forward directions per axis.
+KNOTS_PER_SEGMENT = 16
 MAX_PER_WINDOW = 8
 #: Knots at most per segment for ``K > 1`` (the dense algebra in them is cubic).
 MAX_KNOTS = 400
@@ -360,6 +363,17 @@ def _forward(problem, fit, bases):
     return dR, np.asarray(out[1], dtype=float)
 
 
+def input_columns(problem, fit, bases) -> np.ndarray:
+    """The weighted residual's directional derivatives along the input samples ``bases``
+    (each ``windows.u``-shaped), dense ``(n_r, len(bases))``: :func:`_forward` with the
+    problem's whitening and defect weights (as :meth:`ShootingProblem.residual`)."""
+    dR, dC = _forward(problem, fit, bases)
+    if dC is None:
+        return dR
+    P = problem.meas_whitening
+    return np.vstack([dR if P is None else P @ dR, problem.penalty @ dC])
+
+
 def _with_inputs(problem, windows, U):
     """A shallow copy of ``problem`` whose windows hold the inputs ``U``."""
     p2 = copy.copy(problem)
@@ -369,7 +383,7 @@ def _with_inputs(problem, windows, U):
     return p2
 
 
-def _trend(blocks, order: int) -> np.ndarray:
+def trend_values(blocks, order: int) -> np.ndarray:
     """Knot values of the constant (and linear drift) per block, ``(m, n_blocks (order+1))``:
     the Legendre polynomials of the segment, which the linear interpolation between knots
     makes exactly."""
@@ -417,7 +431,7 @@ def slow_torque(problem, fit, datas, axes, *, order: int = SLOW_TORQUE_ORDER):
     J = sp.csc_matrix(fit_jacobian(fit))
     if J.shape[0] != r.size or G.shape[0] != r.size or not np.all(np.isfinite(G.data)):
         return None
-    Lt = _trend(blocks, order)
+    Lt = trend_values(blocks, order)
     n_t = Lt.shape[1]
     dof = fit.n_res - fit.n_free - n_t
     if dof <= 0:
