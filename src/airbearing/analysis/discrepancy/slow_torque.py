@@ -527,7 +527,7 @@ def _fit_ou(H, k, G, Lt, blocks, rss, taken, fit, problem):
     S = np.r_[1.0 / sc, 1.0 / np.where(d > 0, d, 1.0)]
     bz = Hf[:-1, -1] * S
     sol = _solve_psd(Zall * S[:, None] * S[None, :], bz)
-    dof_all = fit.n_res - fit.n_free - n_t - m
+    dof_all = fit.n_res - fit.n_free - m  # the trend lies in the knots' span
     if dof_all <= 0:
         return None
     sigma2 = max((rss - float(bz @ sol)) / dof_all, 1.0)
