@@ -121,3 +121,21 @@ def test_a_correlation_time_far_beyond_the_log_is_the_constant_and_drift():
     # while a short correlation time moves the named value and widens its error
     beta, cov, _ = posterior(H, X.shape[1], [tk], s2, 5.0, 1.0)
     assert cov[0, 0] > 1.2 * cov_ls[0, 0]
+
+
+def test_coarser_knots_are_a_subset_whose_hats_make_the_fine_columns_exactly():
+    # a torque linear between every third knot, fed through the fine knots' columns, is the
+    # coarse knots' columns times its values there
+    import scipy.sparse as sp
+
+    from airbearing.analysis.discrepancy.slow_torque import coarsen
+
+    rng = np.random.default_rng(4)
+    tk = [np.arange(0.0, 61.0, 1.0), np.arange(100.0, 110.5, 0.5)]
+    G = sp.csc_matrix(rng.standard_normal((50, sum(t.size for t in tk))))
+    Gc, tc = coarsen(G, tk, 22)
+    assert [t.size for t in tc] == [21, 21]  # 61 knots -> every 3rd; 21 stay
+    assert np.all(np.isin(tc[0], tk[0])) and tc[0][-1] == tk[0][-1]
+    xc = [rng.standard_normal(t.size) for t in tc]
+    fine = np.concatenate([np.interp(t, c, x) for t, c, x in zip(tk, tc, xc, strict=True)])
+    assert np.allclose(Gc @ np.concatenate(xc), G @ fine, rtol=1e-12, atol=1e-12)

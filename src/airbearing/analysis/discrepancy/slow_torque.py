@@ -69,6 +69,7 @@ __all__ = [
     "SLOW_TORQUE_ORDER",
     "SlowTorque",
     "input_columns",
+    "coarsen",
     "knot_columns",
     "slow_torque",
     "trend_values",
@@ -100,6 +101,11 @@ MAX_KNOTS = 400
 #: verdict calls an estimate; wider, it says the logs do not resolve it (a 30 s log of a
 #: 20 s torque: the interval spans orders of magnitude).
 RESOLVED_RATIO = 100.0
+#: Knots at most per segment in the likelihood's algebra (dense, cubic in them): a longer
+#: segment keeps every ``s``-th knot (exactly: the torque is then linear between those), so
+#: on an hour of 10 s pieces the knots are 40 s apart and shorter correlation times are the
+#: process noise's.
+MAX_OU_KNOTS = 100
 #: Upper bound of the correlation time, in spans of the longest segment.
 OU_T_MAX_SPANS = 10.0
 AXES = "xyz"
@@ -324,6 +330,32 @@ def knot_columns(problem, fit, datas, axes):
     return G, blocks
 
 
+def coarsen(G, blocks, most: int):
+    """Knot columns ``G`` and knot times ``blocks`` with at most ``most`` knots per block:
+    every ``s``-th knot kept (and the last), ``s`` the smallest that fits. Exact: a torque
+    linear between the kept knots is linear between the others too, so each kept knot's
+    column is the sum of the fine columns weighted by its hat at their times."""
+    if all(b.size <= most for b in blocks):
+        return G, blocks
+    rows, cols, vals, out, j0, c0 = [], [], [], [], 0, 0
+    for b in blocks:
+        s = max(1, int(np.ceil((b.size - 1) / max(most - 1, 1))))
+        keep = np.unique(np.r_[np.arange(0, b.size, s), b.size - 1])
+        tc = b[keep]
+        for i, t in enumerate(b):  # the fine knot's value from its two coarse neighbours
+            k = min(int(np.searchsorted(tc, t, side="right")) - 1, tc.size - 2)
+            k = max(k, 0)
+            w = (t - tc[k]) / (tc[k + 1] - tc[k]) if tc.size > 1 else 0.0
+            rows += [j0 + i, j0 + i]
+            cols += [c0 + k, c0 + min(k + 1, tc.size - 1)]
+            vals += [1.0 - w, w]
+        out.append(tc)
+        j0 += b.size
+        c0 += tc.size
+    E = sp.csc_matrix((vals, (rows, cols)), shape=(j0, c0))
+    return sp.csc_matrix(G @ E), out
+
+
 def _scatter(D, entries, size, m):
     """Sparse ``(D.shape[0], m)``: for each ``(row0, direction, column)`` the rows
     ``row0:row0 + size`` of ``D[:, direction]`` added to ``column``."""
@@ -426,7 +458,7 @@ def slow_torque(problem, fit, datas, axes, *, order: int = SLOW_TORQUE_ORDER):
     cols = knot_columns(problem, fit, datas, axes)
     if cols is None:
         return None
-    G, blocks = cols
+    G, blocks = coarsen(*cols, MAX_OU_KNOTS)
     r = np.asarray(fit.extra["r"], dtype=float)
     J = sp.csc_matrix(fit_jacobian(fit))
     if J.shape[0] != r.size or G.shape[0] != r.size or not np.all(np.isfinite(G.data)):
