@@ -30,7 +30,9 @@ Cases
     (a) white measurement noise; (b) AR(1) measurement noise with coefficient 0.95 (the
     same marginal standard deviation); (c) white noise plus an Ornstein-Uhlenbeck
     disturbance torque about z (correlation time 20 s, ``OU_TORQUE`` N m), outside the
-    vocabulary.
+    vocabulary; (d), platform set-ups only (``--cases d``): the torque of (c) with a
+    correlation time of ``OU_TAU_LONG`` s over a log of ``PLATFORM_LONG_DURATION`` s, 7.5
+    correlation times, where a constant and a linear drift no longer describe it.
 
 Each run is fitted by ``discrepancy(testbed, logs, only=<the true effects>,
 max_effects=<their number>)`` and tabulated: the fraction of (effect, run) pairs whose
@@ -80,7 +82,12 @@ AR_PHI = 0.95
 #: s, correlation time, and N m, standard deviation of the OU torque of case (c).
 OU_TAU = 20.0
 OU_TORQUE = {"coast": 2e-6, "cmg": 3e-6, "platform": 3e-6}
-CASES = ("a", "b", "c")
+#: s, the platform's log and the OU torque's correlation time in case (d): the torque over
+#: 7.5 correlation times, where a constant and a drift no longer describe it, on a log short
+#: enough that the spin stays steady (150 s of it decay from 1.48 to 0.65 rad/s).
+PLATFORM_LONG_DURATION = 90.0
+OU_TAU_LONG = 12.0
+CASES = ("a", "b", "c", "d")
 
 
 def ar1(rng: np.random.Generator, n: int, phi: float, sigma: float) -> np.ndarray:
@@ -175,11 +182,12 @@ def platform_logs(seed: int, case: str, attitude_noise: float = 0.0):
     from airbearing.io.testbed import load_testbed
 
     tb = load_testbed("seed004-platform")
-    t = sample_times(tb, PLATFORM_DURATION)
+    t = sample_times(tb, PLATFORM_LONG_DURATION if case == "d" else PLATFORM_DURATION)
     rng = np.random.default_rng(3000 * seed + ord(case))
     inputs = {}
-    if case == "c":
-        inputs["tau_z"] = ou(rng, t, OU_TAU, OU_TORQUE["platform"])
+    if case in ("c", "d"):
+        tau = OU_TAU_LONG if case == "d" else OU_TAU
+        inputs["tau_z"] = ou(rng, t, tau, OU_TORQUE["platform"])
     lg = simulate_on_times(
         tb, t, initial_rate=PLATFORM_W0, q0=PLATFORM_Q0, effects=PLATFORM_TRUTH,
         inputs=inputs, noise=False, seed=seed,
@@ -231,6 +239,7 @@ def run_one(kind: str, case: str, seed: int, duration: float = 150.0) -> dict:
             rows[key] = {k: float(v[min(i, v.size - 1)]) for k, v in parts.items()}
             rows[key]["truth"] = true
     a = d.adequacy
+    slow = [c.slow_torque for c in d.confounding if getattr(c, "slow_torque", None)]
     return {
         "kind": kind,
         "case": case,
@@ -240,6 +249,7 @@ def run_one(kind: str, case: str, seed: int, duration: float = 150.0) -> dict:
         "gap_over_floor": a.gap_over_floor if a is not None else math.nan,
         "whiteness_p": a.whiteness_p if a is not None else math.nan,
         "seconds": time.perf_counter() - t0,
+        "slow_torque": slow[0] if slow else None,
     }
 
 

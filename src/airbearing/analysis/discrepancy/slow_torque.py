@@ -7,31 +7,40 @@ torque, a drift correlated over tens of seconds) is nearly constant over it too.
 named effect then takes that torque's mean: its value is biased by ``mean(tau) /
 rate``, and no covariance of the residual sees a bias.
 
-Here the slow torque is a nuisance: on each steady axis and log segment, a torque that
-is a polynomial of low order in time (Legendre polynomials on the segment: a constant
-and a linear drift by default). Its columns of the weighted residual's Jacobian are
-exact: CasADi's forward derivative of the shooting problem's residual function in its
-data, along the Model's disturbance-torque input ``tau_<axis>`` that each coefficient
-makes, at the fitted parameters and window states. That function is built without the
-compiled C sample step (its library carries derivatives in the states and parameters
-only, not in an input) and evaluated once, by CasADi's virtual machine (0.05 s on a
-30 s log of seed 004's platform; the central differences of the compiled residual it
-replaces agreed with it to 2.4e-10 of a column).
+Here the slow torque is a nuisance: on each steady axis and log segment, a torque
+``tau(t) = a + b t + x(t)``: a constant and a linear drift (free; Legendre polynomials on
+the segment) and an Ornstein-Uhlenbeck torque ``x`` (``dx = -x / T dt + s dW``) whose
+correlation time ``T`` and level ``q = s sqrt(T / 2)`` are estimated
+(:mod:`.ou_torque`). The torque is linear between knots: each window (piece) cut into
+``K`` equal intervals, at least :data:`KNOTS_PER_SEGMENT` per segment. Its columns of the
+weighted residual's Jacobian are exact: CasADi's forward derivative of the shooting
+problem's residual function in its data, along the Model's disturbance-torque input
+``tau_<axis>`` shaped as each knot's hat function, ``K + 1`` directions per axis (every
+window's rows are its own, so one direction gives every window's response), at the fitted
+parameters and window states. That function is built without the compiled C sample step
+(its library carries derivatives in the states and parameters only, not in an input) and
+evaluated once, by CasADi's virtual machine.
 Linearised at the fit (one Gauss-Newton step, the shooting problem's own weighting,
-process-noise defects included), the nuisance is
+process-noise defects included; the window states projected off through the Gram matrix,
+linear in the samples), the nuisance is
 
-- **tested**: an F test (``scipy.stats.f``) of the residual sum of squares the nuisance
-  takes, over ``m`` nuisance columns, against the fit's residual variance (robust to a
+- **tested**: an F test (``scipy.stats.f``) of the residual sum of squares the constant and
+  drift take, over their ``m`` columns, against the fit's residual variance (robust to a
   noise level off by a few per cent, as a chi-square test would not be), never below the
   level the residual is weighted at (a noise-free log's residual, the integration's own
   error below the replay's resolution, is no noise to test against);
+- **estimated**: ``T`` and ``q`` by restricted maximum likelihood (the named parameters and
+  the trend integrated out flat, the OU knots as Gaussian with their tridiagonal
+  precision), ``T`` between the knot spacing (below it the torque is the white process
+  noise's) and :data:`OU_T_MAX_SPANS` times the longest segment (beyond it the trend holds
+  it); a level at its lower bound leaves the constant and drift alone;
 - **marginalised** when the test says it is there, or when the process noise already says
   an unexplained torque acts (its slow part about the steady axis is then what a named
   effect about that axis cannot be told from, seen or not by the test): the named
-  parameters move by the joint step (the bias of the slow torque's constant and drift
-  removed) and their errors grow by the factor their variance grows when the nuisance is free,
-  ``sqrt(inv(F_joint)_jj / inv(F)_jj)`` with the Fisher information ``F`` of the
-  parameters after the window states are projected off.
+  parameters move to their posterior mean with the OU prior (generalised least squares:
+  the bias of the slow torque removed) and their errors grow by the factor their
+  posterior variance has over the fit's, ``sqrt(C_jj / inv(F)_jj)`` with the Fisher
+  information ``F`` of the parameters after the window states are projected off.
 
 A friction about the steady axis is then known only from how its torque follows the
 rate's small changes (nutation) and from the other axes, which is all a log can say when
@@ -50,26 +59,55 @@ import numpy as np
 import scipy.sparse as sp
 from numpy.polynomial.legendre import legval
 
+from airbearing.analysis.discrepancy.ou_torque import fit_ou
 from airbearing.analysis.shooting.fit import fit_jacobian, solve_gram
 from airbearing.analysis.shooting.problem_functions import residual_function
 
-__all__ = ["MAX_FACTOR", "SLOW_TORQUE_P", "SLOW_TORQUE_ORDER", "SlowTorque", "slow_torque"]
+__all__ = [
+    "MAX_FACTOR",
+    "SLOW_TORQUE_P",
+    "SLOW_TORQUE_ORDER",
+    "SlowTorque",
+    "input_columns",
+    "coarsen",
+    "knot_columns",
+    "slow_torque",
+    "trend_values",
+]
 
 #: p-value of the F test below which the slow torque is fitted as a nuisance (the
 #: coloured-noise model's level: a false alarm widens one run's errors in a thousand).
 SLOW_TORQUE_P = 1e-3
-#: Highest Legendre order in time of the nuisance torque per axis and segment: a
-#: constant and a linear drift (a torque correlated over tens of seconds is mostly these
-#: over a log of that length; higher orders take the friction's information too).
+#: Highest Legendre order in time of the free trend per axis and segment: a constant and
+#: a linear drift (a torque correlated over longer than the log is mostly these).
 SLOW_TORQUE_ORDER = 1
-#: Largest growth of a named parameter's error with the nuisance free for which the
+#: Largest growth of a named parameter's error with the trend free for which the
 #: nuisance is fitted. Beyond it the named effect's torque lies within 1e-4 (sine of the
-#: angle) of the nuisance's span over the logs: it is the slow torque itself up to details
+#: angle) of the trend's span over the logs: it is the slow torque itself up to details
 #: of its form (a Coulomb friction on a coast-down that never reverses: its smoothed sign,
 #: a factor of about 1.4e5), and the joint step along it is set by those details, not by
 #: the data. A per-axis z friction of seed 004's spinning platform keeps 1/50 to 1/130 of
 #: its information (the nutation) and is fitted.
 MAX_FACTOR = 1e4
+#: Knots at least per segment (each window cut into ``K`` equal intervals, ``K`` up to
+#: :data:`MAX_PER_WINDOW`): a 30 s segment of four 7.5 s pieces gets knots 1.9 s apart, a
+#: 90 s one 3.75 s, so correlation times of 10-20 s are resolved; pieces of 10 s on long
+#: logs, 10 s. ``K + 1`` forward directions per axis.
+KNOTS_PER_SEGMENT = 16
+MAX_PER_WINDOW = 8
+#: Knots at most per segment for ``K > 1`` (the dense algebra in them is cubic).
+MAX_KNOTS = 400
+#: Widest two-standard-error interval of the correlation time (high over low) that the
+#: verdict calls an estimate; wider, it says the logs do not resolve it (a 30 s log of a
+#: 20 s torque: the interval spans orders of magnitude).
+RESOLVED_RATIO = 100.0
+#: Knots at most per segment in the likelihood's algebra (dense, cubic in them): a longer
+#: segment keeps every ``s``-th knot (exactly: the torque is then linear between those), so
+#: on an hour of 10 s pieces the knots are 40 s apart and shorter correlation times are the
+#: process noise's.
+MAX_OU_KNOTS = 100
+#: Upper bound of the correlation time, in spans of the longest segment.
+OU_T_MAX_SPANS = 10.0
 AXES = "xyz"
 
 
@@ -82,27 +120,32 @@ class SlowTorque:
     axes : tuple of str
         The steady axes it acts on (``"z"`` ...).
     order : int
-        Highest Legendre order in time per axis and segment.
+        Highest Legendre order in time of the free trend per axis and segment.
     n_columns : int
-        Nuisance parameters (axes times segments times ``order + 1``).
+        Trend parameters (axes times segments times ``order + 1``), the F test's.
     statistic : float
-        The F statistic of the residual sum of squares it takes.
+        The F statistic of the residual sum of squares the trend takes.
     p : float
         Its p-value (``scipy.stats.f``, ``n_columns`` and the fit's residual degrees of
         freedom).
     significant : bool
         ``p < SLOW_TORQUE_P``.
     coefficients : ndarray
-        The fitted Legendre coefficients, N m (axis, segment, order, in that nesting).
+        The trend's Legendre coefficients, N m (axis, segment, order, in that nesting).
     step : ndarray (k,)
-        Change of the named parameters when the nuisance is fitted jointly.
+        Change of the named parameters when the nuisance is fitted jointly (the posterior
+        mean with the OU prior).
     factor : ndarray (k,)
-        Growth of each named parameter's standard error with the nuisance free (>= 1).
+        Growth of each named parameter's standard error with the nuisance (>= 1).
     identifiable : bool
-        Every factor at most :data:`MAX_FACTOR`: no named parameter is (nearly) the
-        nuisance itself. A Coulomb friction on a coast-down that never reverses is exactly
-        a constant torque; beside the nuisance it has no information left, and the joint
-        step along that direction is arbitrary, so the nuisance is not fitted then.
+        Every factor with the trend free at most :data:`MAX_FACTOR`: no named parameter is
+        (nearly) the nuisance itself. A Coulomb friction on a coast-down that never reverses
+        is exactly a constant torque; beside the nuisance it has no information left, and
+        the joint step along that direction is arbitrary, so the nuisance is not fitted then.
+    torque_means : ndarray or None
+        The fitted mean torque (N m) per axis and segment over its knots.
+    ou : OUFit or None
+        The OU part (:class:`.ou_torque.OUFit`): correlation time and level.
     """
 
     axes: tuple
@@ -115,9 +158,19 @@ class SlowTorque:
     step: np.ndarray
     factor: np.ndarray
     identifiable: bool = True
+    torque_means: np.ndarray | None = None
+    ou: object = None
+
+    def correlation_time(self) -> tuple[float, tuple[float, float]] | None:
+        """``(T, (low, high))`` s: the estimate and its two-standard-error interval in
+        ``log T``; None without an OU part (its level at the lower bound)."""
+        if self.ou is None or self.ou.at_lower:
+            return None
+        s = self.ou.log_T_std
+        return self.ou.T, (self.ou.T * np.exp(-2 * s), self.ou.T * np.exp(2 * s))
 
     def to_json(self) -> dict:
-        return {
+        out = {
             "axes": list(self.axes),
             "order": int(self.order),
             "F": float(self.statistic),
@@ -125,24 +178,48 @@ class SlowTorque:
             "significant": bool(self.significant),
             "torque_mean": [float(x) for x in self.means()],
         }
+        ct = self.correlation_time()
+        out["correlation_time_s"] = None if ct is None else float(ct[0])
+        out["correlation_time_interval_s"] = (
+            None if ct is None or not np.all(np.isfinite(ct[1])) else [float(x) for x in ct[1]]
+        )
+        out["level"] = None if ct is None else float(self.ou.q)
+        return out
 
     def means(self) -> np.ndarray:
-        """The fitted mean torque (N m) per axis and segment (the order-0 coefficients)."""
+        """The fitted mean torque (N m) per axis and segment."""
+        if self.torque_means is not None:
+            return np.asarray(self.torque_means)
         return np.asarray(self.coefficients)[:: self.order + 1]
 
     def words(self) -> str:
         """One phrase for the verdict."""
         ax = ", ".join(self.axes)
-        form = "a constant" + (" and a linear drift" if self.order >= 1 else "")
+        trend = "a constant" + (" and a linear drift" if self.order >= 1 else "")
+        ct = self.correlation_time()
+        if ct is None:
+            over = ""
+            form = f"{trend} per segment (no faster variation found)"
+        else:
+            lo, hi = ct[1]
+            level = f"level {self.ou.q:.2g} N m"
+            if hi / lo <= RESOLVED_RATIO:
+                over = f", correlated over ~{ct[0]:.2g} s ({lo:.2g}-{hi:.2g} s; {level}),"
+            else:
+                over = (
+                    f", correlated over a time these logs do not resolve (likeliest "
+                    f"~{ct[0]:.2g} s; {level}),"
+                )
+            form = f"{trend} per segment and an Ornstein-Uhlenbeck torque"
         mean = ", ".join(f"{m:.2g}" for m in self.means())
         if self.significant:
             return (
-                f"a slow torque about {ax} is significant (F test p {self.p:.2g}; {form} "
-                f"per segment, mean {mean} N m): the value and error are with it fitted"
+                f"a slow torque about {ax}{over} is significant (F test p {self.p:.2g}; "
+                f"{form}, mean {mean} N m): the value and error are with it fitted"
             )
         return (
-            f"an unexplained torque is significant, so its slow part about {ax} ({form} "
-            f"per segment, mean {mean} N m; F test p {self.p:.2g} alone) is fitted with the "
+            f"an unexplained torque is significant, so its slow part about {ax}{over} "
+            f"({form}, mean {mean} N m; F test p {self.p:.2g} alone) is fitted with the "
             "named effects: the value and error are with it"
         )
 
@@ -154,41 +231,146 @@ def _torque_input(model, axis: int) -> int | None:
     return model.index(name, "u")[0]
 
 
-def nuisance_columns(problem, fit, datas, axes, order: int = SLOW_TORQUE_ORDER):
-    """The weighted residual's Jacobian in the slow torque's coefficients, ``(n_r, m)``.
+def _window_times(problem, datas):
+    """Sample times ``(n_windows, L)`` and each window's span ``(start, end)`` (s): to its
+    hand-over row when linked, else to its last row of weight 1."""
+    w = problem.windows
+    t = np.array([datas[s].t[rows] for s, rows in zip(w.source, w.rows, strict=True)])
+    if w.end is not None:
+        last = np.asarray(w.end, dtype=int)
+    else:
+        used = np.asarray(w.weight) > 0
+        last = np.where(used.any(axis=1), used.shape[1] - 1 - np.argmax(used[:, ::-1], axis=1), 0)
+    return t, np.c_[t[:, 0], t[np.arange(w.n), last]]
 
-    One column per (steady axis, segment, Legendre order), N m^-1 (module doc): CasADi's
-    forward derivative of the problem's residual function in its data, along the torque
-    inputs each coefficient makes; None when the Model has no disturbance-torque input for
-    an axis.
+
+def knot_layout(problem, datas):
+    """The knots of the slow torque: ``(K, knots, where)``.
+
+    Each window is cut into ``K`` equal intervals (at least :data:`KNOTS_PER_SEGMENT` per
+    segment, at least one per window, the knots per segment capped so the dense algebra in
+    them stays small); the torque is linear between knots. ``knots``: per segment, the
+    sorted knot times (s; a window's end knot is the next one's start knot); ``where[w, i]``:
+    the index, within its segment's knots, of window ``w``'s ``i``-th local knot.
+    """
+    w = problem.windows
+    seg = w.segments()
+    _, span = _window_times(problem, datas)
+    per_seg = np.bincount(seg)
+    K = int(np.clip(np.ceil(KNOTS_PER_SEGMENT / per_seg.max()), 1, MAX_PER_WINDOW))
+    K = max(1, min(K, MAX_KNOTS // max(int(per_seg.max()), 1)))
+    knots, where = [], np.zeros((w.n, K + 1), dtype=int)
+    for g in range(per_seg.size):
+        ts = []
+        for j in np.flatnonzero(seg == g):
+            loc = np.linspace(span[j, 0], span[j, 1], K + 1)
+            if ts and abs(ts[-1] - loc[0]) <= 1e-9 * max(1.0, abs(loc[0])):
+                where[j, 0] = len(ts) - 1  # the previous window's end knot
+                loc = loc[1:]
+                where[j, 1:] = len(ts) + np.arange(K)
+            else:
+                where[j] = len(ts) + np.arange(K + 1)
+            ts.extend(loc)
+        knots.append(np.asarray(ts))
+    return K, knots, where
+
+
+def knot_columns(problem, fit, datas, axes):
+    """The weighted residual's Jacobian in the slow torque's knot values, ``(n_r, m)``
+    sparse, N m^-1, and the knots per block (axis, segment).
+
+    Exact: CasADi's forward derivative of the problem's residual function in its data,
+    along the torque input ``tau_<axis>`` shaped as each local knot's hat function in every
+    window at once (``K + 1`` directions per axis: the windows' rows are separate, so one
+    direction gives every window's response, split by rows). None when the Model has no
+    disturbance-torque input for an axis.
     """
     w = problem.windows
     model = problem.model
-    t = np.array([datas[s].t[rows] for s, rows in zip(w.source, w.rows, strict=True)])
+    t, span = _window_times(problem, datas)
+    K, knots, where = knot_layout(problem, datas)
     seg = w.segments()
+    inputs = [_torque_input(model, a) for a in axes]
+    if any(iu is None for iu in inputs):
+        return None
+    x = (t - span[:, :1]) / np.maximum(span[:, 1:] - span[:, :1], 1e-12) * K
     bases = []
-    for a in axes:
-        iu = _torque_input(model, a)
-        if iu is None:
-            return None
-        for g in np.unique(seg):
-            on = seg == g
-            t0, t1 = float(t[on].min()), float(t[on].max())
-            x = 2.0 * (t - t0) / max(t1 - t0, 1e-12) - 1.0
-            for deg in range(order + 1):
-                U = np.zeros_like(w.u)
-                U[:, :, iu] = np.where(on[:, None], legval(x, [0] * deg + [1]), 0.0)
-                bases.append(U)
-    return _forward(problem, fit, bases)
+    for iu in inputs:
+        for i in range(K + 1):
+            U = np.zeros_like(w.u)
+            U[:, :, iu] = np.clip(1.0 - np.abs(x - i), 0.0, 1.0)
+            if i == K:  # held past the hand-over row (padding)
+                U[:, :, iu] = np.where(x > K, 1.0, U[:, :, iu])
+            bases.append(U)
+    dR, dC = _forward(problem, fit, bases)
+    nm = dR.shape[0] // w.n
+    nd = 0 if dC is None else dC.shape[0] // max(w.n - 1, 1)
+    offset = np.cumsum([0] + [k.size for k in knots])
+    blocks, rows_m, rows_c = [], [], []
+    n_blocks = len(knots)
+    for ia in range(len(inputs)):
+        for g in range(n_blocks):
+            blocks.append(knots[g])
+        col0 = ia * offset[-1]
+        for j in range(w.n):
+            for i in range(K + 1):
+                col = col0 + offset[seg[j]] + where[j, i]
+                d = ia * (K + 1) + i
+                rows_m.append((j * nm, d, col))
+                if nd and j < w.n - 1:
+                    rows_c.append((j * nd, d, col))
+    m = len(inputs) * offset[-1]
+    Gm = _scatter(dR, rows_m, nm, m)
+    if dC is None:
+        G = Gm
+    else:
+        Gc = _scatter(dC, rows_c, nd, m)
+        P = problem.meas_whitening
+        G = sp.vstack([Gm if P is None else P @ Gm, problem.penalty @ Gc], format="csc")
+    return G, blocks
 
 
-def _forward(problem, fit, bases) -> np.ndarray:
+def coarsen(G, blocks, most: int):
+    """Knot columns ``G`` and knot times ``blocks`` with at most ``most`` knots per block:
+    every ``s``-th knot kept (and the last), ``s`` the smallest that fits. Exact: a torque
+    linear between the kept knots is linear between the others too, so each kept knot's
+    column is the sum of the fine columns weighted by its hat at their times."""
+    if all(b.size <= most for b in blocks):
+        return G, blocks
+    rows, cols, vals, out, j0, c0 = [], [], [], [], 0, 0
+    for b in blocks:
+        s = max(1, int(np.ceil((b.size - 1) / max(most - 1, 1))))
+        keep = np.unique(np.r_[np.arange(0, b.size, s), b.size - 1])
+        tc = b[keep]
+        for i, t in enumerate(b):  # the fine knot's value from its two coarse neighbours
+            k = min(int(np.searchsorted(tc, t, side="right")) - 1, tc.size - 2)
+            k = max(k, 0)
+            w = (t - tc[k]) / (tc[k + 1] - tc[k]) if tc.size > 1 else 0.0
+            rows += [j0 + i, j0 + i]
+            cols += [c0 + k, c0 + min(k + 1, tc.size - 1)]
+            vals += [1.0 - w, w]
+        out.append(tc)
+        j0 += b.size
+        c0 += tc.size
+    E = sp.csc_matrix((vals, (rows, cols)), shape=(j0, c0))
+    return sp.csc_matrix(G @ E), out
+
+
+def _scatter(D, entries, size, m):
+    """Sparse ``(D.shape[0], m)``: for each ``(row0, direction, column)`` the rows
+    ``row0:row0 + size`` of ``D[:, direction]`` added to ``column``."""
+    r = np.concatenate([np.arange(r0, r0 + size) for r0, _, _ in entries])
+    d = np.concatenate([np.full(size, di) for _, di, _ in entries])
+    c = np.concatenate([np.full(size, ci) for _, _, ci in entries])
+    return sp.csc_matrix((D[r, d], (r, c)), shape=(D.shape[0], m))
+
+
+def _forward(problem, fit, bases):
     """The residual's directional derivatives along the input samples ``bases`` (each
     ``windows.u``-shaped), exact: CasADi's forward mode through the problem's residual
     function built without the compiled C step (whose library carries derivatives in the
-    states and parameters only), the residual assembled as the problem does
-    (:meth:`ShootingProblem.residual`: the whitened measurement rows, then the weighted
-    continuity defects under process noise)."""
+    states and parameters only); ``(dR, dC)``, the raw measurement rows and continuity
+    defects (None without them), before the problem's whitening and weighting."""
     w = problem.windows
     zero = _with_inputs(problem, w, np.zeros_like(w.u))._data
     seeds = np.column_stack([_with_inputs(problem, w, U)._data - zero for U in bases])
@@ -198,8 +380,9 @@ def _forward(problem, fit, bases) -> np.ndarray:
     v, Sp = problem._v(fit.delta, None)
     fr = residual_function(*symbolic._key(Sp.shape[1]), problem.link)
     p = np.asarray(fit.p, dtype=float)
-    nominal = fr(v, p, Sp, problem._data)
-    nominal = list(nominal) if isinstance(nominal, (list, tuple)) else [nominal]
+    # the nominal outputs are inputs of the forward function that it does not read (the
+    # same derivatives to the bit with zeros there): no nominal evaluation
+    nominal = [np.zeros(fr.size_out(i)) for i in range(fr.n_out())]
     out = fr.forward(m)(
         v, p, Sp, problem._data, *nominal,
         np.zeros((v.size, m)), np.zeros((p.size, m)), np.zeros((Sp.shape[0], Sp.shape[1] * m)),
@@ -207,10 +390,19 @@ def _forward(problem, fit, bases) -> np.ndarray:
     )  # fmt: skip
     out = list(out) if isinstance(out, (list, tuple)) else [out]
     dR = np.asarray(out[0], dtype=float)
-    if not (problem.link and problem.penalty is not None):
+    if not (problem.link and problem.penalty is not None):  # as ShootingProblem.residual
+        return dR, None
+    return dR, np.asarray(out[1], dtype=float)
+
+
+def input_columns(problem, fit, bases) -> np.ndarray:
+    """The weighted residual's directional derivatives along the input samples ``bases``
+    (each ``windows.u``-shaped), dense ``(n_r, len(bases))``: :func:`_forward` with the
+    problem's whitening and defect weights (as :meth:`ShootingProblem.residual`)."""
+    dR, dC = _forward(problem, fit, bases)
+    if dC is None:
         return dR
     P = problem.meas_whitening
-    dC = np.asarray(out[1], dtype=float)
     return np.vstack([dR if P is None else P @ dR, problem.penalty @ dC])
 
 
@@ -221,6 +413,21 @@ def _with_inputs(problem, windows, U):
     p2._data = p2._data_vector()
     p2._last = None
     return p2
+
+
+def trend_values(blocks, order: int) -> np.ndarray:
+    """Knot values of the constant (and linear drift) per block, ``(m, n_blocks (order+1))``:
+    the Legendre polynomials of the segment, which the linear interpolation between knots
+    makes exactly."""
+    m = sum(b.size for b in blocks)
+    L = np.zeros((m, len(blocks) * (order + 1)))
+    i = 0
+    for j, tb in enumerate(blocks):
+        x = 2.0 * (tb - tb[0]) / max(tb[-1] - tb[0], 1e-12) - 1.0
+        for deg in range(order + 1):
+            L[i : i + tb.size, j * (order + 1) + deg] = legval(x, [0] * deg + [1])
+        i += tb.size
+    return L
 
 
 def slow_torque(problem, fit, datas, axes, *, order: int = SLOW_TORQUE_ORDER):
@@ -237,7 +444,7 @@ def slow_torque(problem, fit, datas, axes, *, order: int = SLOW_TORQUE_ORDER):
     axes : sequence of int
         Steady body axes (:func:`.confounding.steady_axes`).
     order : int
-        Highest Legendre order in time.
+        Highest Legendre order in time of the free trend (0 or 1).
 
     Returns
     -------
@@ -248,50 +455,151 @@ def slow_torque(problem, fit, datas, axes, *, order: int = SLOW_TORQUE_ORDER):
     k = len(fit.theta)
     if not len(axes) or k == 0 or "N" in fit.extra or "r" not in fit.extra:
         return None
-    G = nuisance_columns(problem, fit, datas, axes, order)
-    if G is None or not np.all(np.isfinite(G)):
+    cols = knot_columns(problem, fit, datas, axes)
+    if cols is None:
         return None
+    G, blocks = coarsen(*cols, MAX_OU_KNOTS)
     r = np.asarray(fit.extra["r"], dtype=float)
     J = sp.csc_matrix(fit_jacobian(fit))
-    if J.shape[0] != r.size or G.shape[0] != r.size:
+    if J.shape[0] != r.size or G.shape[0] != r.size or not np.all(np.isfinite(G.data)):
         return None
-    m = G.shape[1]
-    # the window states projected off the named parameters, the nuisance and the residual
-    Z, rz = _off_states(J, k, G, r)
-    scale = np.linalg.norm(Z, axis=0)
-    if np.any(scale == 0):
-        return None
-    Zs = Z / scale
-    coef, *_ = np.linalg.lstsq(Zs, -rz, rcond=None)
-    coef0, *_ = np.linalg.lstsq(Zs[:, :k], -rz, rcond=None)
-    rss = float(r @ r)
-    taken = float(np.sum((Zs @ coef) ** 2) - np.sum((Zs[:, :k] @ coef0) ** 2))
-    dof = fit.n_res - fit.n_free - m
+    Lt = trend_values(blocks, order)
+    n_t = Lt.shape[1]
+    dof = fit.n_res - fit.n_free - n_t
     if dof <= 0:
         return None
+    # the Gram matrix of [J_theta, G, r] with the window states projected off, and of the
+    # named parameters with the trend: [J_theta, G Lt, r]
+    H = _projected_gram(J, k, G, r)
+    m = G.shape[1]
+    E = np.zeros((k + m + 1, k + n_t + 1))
+    E[:k, :k] = np.eye(k)
+    E[k : k + m, k : k + n_t] = Lt
+    E[-1, -1] = 1.0
+    Ht = E.T @ H @ E
+    scale = np.sqrt(np.diag(Ht)[:-1])
+    if np.any(scale == 0):
+        return None
+    D = np.r_[1.0 / scale, 1.0]
+    Hs = Ht * D[:, None] * D[None, :]
+    info, b = Hs[:-1, :-1], -Hs[:-1, -1]
+    coef = _solve_psd(info, b)
+    coef0 = _solve_psd(info[:k, :k], b[:k])
+    rss = float(r @ r)
+    taken = float(b @ coef - b[:k] @ coef0)
     from scipy import stats  # here: the search modules do not import scipy.stats
 
     # the residual's variance, never below the level its weights assume (1: at the noise
     # floor): a noise-free log's residual is the integration's own error, not noise
-    F = (max(taken, 0.0) / m) / max((rss - taken) / dof, 1.0)
-    p = float(stats.f.sf(F, m, dof))
-    info = Zs.T @ Zs
+    F = (max(taken, 0.0) / n_t) / max((rss - taken) / dof, 1.0)
+    p = float(stats.f.sf(F, n_t, dof))
     with np.errstate(invalid="ignore", divide="ignore"):
-        factor = np.sqrt(_inverse_diagonal(info)[:k] / _inverse_diagonal(info[:k, :k]))
-    factor = np.where(np.isfinite(factor), np.maximum(factor, 1.0), 1.0)
+        factor_trend = np.sqrt(_inverse_diagonal(info)[:k] / _inverse_diagonal(info[:k, :k]))
+    factor_trend = np.where(np.isfinite(factor_trend), np.maximum(factor_trend, 1.0), 1.0)
+    identifiable = bool(np.max(factor_trend) <= MAX_FACTOR)
+    trend_coef = coef[k:] / scale[k:]
+    ou = None
     step = (coef[:k] - coef0) / scale[:k]
+    factor = factor_trend
+    if identifiable:
+        ou = _fit_ou(H, k, G, Lt, blocks, rss, taken, fit, problem)
+    if ou is not None:
+        base_var = _inverse_diagonal(info[:k, :k]) / scale[:k] ** 2
+        with np.errstate(invalid="ignore", divide="ignore"):
+            f_ou = np.sqrt(np.diag(ou.cov_beta)[:k] / ou.sigma2 / base_var)
+        factor = np.where(np.isfinite(f_ou), np.maximum(f_ou, 1.0), factor_trend)
+        step = -ou.beta[:k] - coef0 / scale[:k]
+        trend_coef = -ou.beta[k : k + n_t]
+    means = _means(blocks, Lt, trend_coef, None if ou is None else -ou.x)
     return SlowTorque(
         axes=tuple(AXES[a] if problem.model.dof == 3 else "z" for a in axes),
         order=int(order),
-        n_columns=int(m),
+        n_columns=int(n_t),
         statistic=float(F),
         p=p,
         significant=bool(p < SLOW_TORQUE_P),
-        coefficients=coef[k:] / scale[k:],
+        coefficients=trend_coef,
         step=step,
         factor=factor,
-        identifiable=bool(np.max(factor) <= MAX_FACTOR),
+        identifiable=identifiable,
+        torque_means=means,
+        ou=None if ou is None else ou.ou,
     )
+
+
+@dataclass(frozen=True)
+class _OUAnswer:
+    ou: object
+    beta: np.ndarray
+    cov_beta: np.ndarray
+    x: np.ndarray
+    sigma2: float
+
+
+def _fit_ou(H, k, G, Lt, blocks, rss, taken, fit, problem):
+    """The OU part by restricted maximum likelihood (:func:`.ou_torque.fit_ou`) on the Gram
+    matrix of ``[J_theta, G Lt, G, r]`` (the named parameters and the trend fixed, the knots
+    the OU's), columns scaled to unit norm; the white part's variance is that of the
+    residual with every knot free (never below 1, as the F test's)."""
+    m, n_t = G.shape[1], Lt.shape[1]
+    E = np.zeros((k + m + 1, k + n_t + m + 1))
+    E[:k, :k] = np.eye(k)
+    E[k : k + m, k : k + n_t] = Lt
+    E[k : k + m, k + n_t : k + n_t + m] = np.eye(m)
+    E[-1, -1] = 1.0
+    Hf = E.T @ H @ E
+    kf = k + n_t
+    fixed = Hf[:kf, :kf]
+    sc = np.sqrt(np.diag(fixed))
+    d = np.sqrt(np.maximum(np.diag(Hf)[kf:-1], 0.0))
+    if np.any(sc == 0) or not np.any(d > 0):
+        return None
+    # the white part's variance: the residual with the trend and every knot free
+    Zall = Hf[:-1, :-1]
+    S = np.r_[1.0 / sc, 1.0 / np.where(d > 0, d, 1.0)]
+    bz = Hf[:-1, -1] * S
+    sol = _solve_psd(Zall * S[:, None] * S[None, :], bz)
+    dof_all = fit.n_res - fit.n_free - m  # the trend lies in the knots' span
+    if dof_all <= 0:
+        return None
+    sigma2 = max((rss - float(bz @ sol)) / dof_all, 1.0)
+    # the fixed effects' columns of unit norm, the knots in N m
+    u = np.r_[S[:kf], np.ones(m + 1)]
+    Hs = Hf * u[:, None] * u[None, :]
+    span = max(float(tb[-1] - tb[0]) for tb in blocks)
+    h = min(float(np.min(np.diff(tb))) for tb in blocks if tb.size > 1)
+    dpos = d[d > 0]
+    q0 = np.sqrt(sigma2) / float(np.median(dpos))  # a knot torque the noise just shows
+    res = fit_ou(
+        Hs, kf, blocks, sigma2,
+        T_bounds=(h, OU_T_MAX_SPANS * span), q_bounds=(q0 * 1e-4, q0 * 1e4),
+    )  # fmt: skip
+    beta = res.beta * S[:kf]
+    cov = res.cov_beta * S[:kf, None] * S[None, :kf]
+    return _OUAnswer(ou=res, beta=beta, cov_beta=cov, x=res.x, sigma2=sigma2)
+
+
+def _means(blocks, Lt, trend, x):
+    """Mean torque (N m) per block over its knots' span (trapezoid): the trend's constant
+    plus the OU part's mean."""
+    out = []
+    i = 0
+    for tb in blocks:
+        tau = Lt[i : i + tb.size] @ trend
+        if x is not None:
+            tau = tau + x[i : i + tb.size]
+        out.append(float(np.trapezoid(tau, tb) / max(tb[-1] - tb[0], 1e-12)) if tb.size > 1
+                   else float(tau[0]))  # fmt: skip
+        i += tb.size
+    return np.asarray(out)
+
+
+def _solve_psd(A, b):
+    """``A^+ b`` for a symmetric positive semi-definite ``A`` (eigenvalues below ``1e-12``
+    of the largest dropped: a direction without information)."""
+    w, V = np.linalg.eigh(A)
+    keep = w > 1e-12 * max(float(np.max(np.abs(w))), 1e-300)
+    return V[:, keep] @ ((V[:, keep].T @ b) / w[keep])
 
 
 def _inverse_diagonal(info: np.ndarray) -> np.ndarray:
@@ -303,16 +611,31 @@ def _inverse_diagonal(info: np.ndarray) -> np.ndarray:
     return (V**2) @ (1.0 / w)
 
 
-def _off_states(J, k: int, G: np.ndarray, r: np.ndarray):
-    """``([J_theta, G], r)`` with the window-state columns ``J[:, k:]`` projected off (dense)."""
-    At = np.hstack([J[:, :k].toarray(), G])
+def _projected_gram(J, k: int, G, r: np.ndarray, refine: int = 2) -> np.ndarray:
+    """The Gram matrix of ``[J_theta, G, r]`` with the window-state columns ``An = J[:, k:]``
+    projected off, ``(k + m + 1)^2`` dense: ``A'A - A'An X`` with ``X = (An'An)^+ An'A``,
+    sparse products and solves only (linear in the samples; the projected columns
+    themselves, dense, would cost the samples times the columns squared: a minute on an
+    hour of 50 Hz samples).
+
+    The window states take all but 1e-3 to 1e-4 of a knot's column, so the difference
+    cancels six to eight digits: ``X`` from the normal equations (the states' Gram matrix
+    has a condition number near 1e9) left 30 % errors in it. ``refine`` steps of iterative
+    refinement of ``X`` bring it to 1e-7 of the explicitly projected columns' Gram matrix
+    (``tests/discrepancy/test_discrepancy_slow_torque.py``)."""
+    A = sp.hstack([J[:, :k], sp.csc_matrix(G), sp.csc_matrix(r[:, None])], format="csc")
+    H = (A.T @ A).toarray()
     An = J[:, k:]
     if An.shape[1] == 0:
-        return At, r
+        return H
     Gm = sp.csc_matrix(An.T @ An)
     c = np.sqrt(np.maximum(Gm.diagonal(), 1e-300))
     Dc = sp.diags(1.0 / c)
-    B = np.column_stack([np.asarray(An.T @ At), np.asarray(An.T @ r)])
-    X = solve_gram(Dc @ Gm @ Dc, B / c[:, None]) / c[:, None]
-    P = np.column_stack([At, r]) - An @ X
-    return P[:, :-1], P[:, -1]
+    Gs = sp.csc_matrix(Dc @ Gm @ Dc)
+    B = np.asarray((An.T @ A).toarray())
+    Bs = B / c[:, None]
+    Xs = solve_gram(Gs, Bs)
+    for _ in range(refine):
+        Xs = Xs + solve_gram(Gs, Bs - Gs @ Xs)
+    H = H - B.T @ (Xs / c[:, None])
+    return 0.5 * (H + H.T)
