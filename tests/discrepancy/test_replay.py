@@ -16,6 +16,7 @@ from rigs import Q0, ROTOR, SLIDERS, SPHERE, W0
 from rigs import jittered_platform as _jittered_platform
 
 from airbearing.analysis.discrepancy.replay import open_loop, replay
+from airbearing.analysis.shooting import logs
 from airbearing.analysis.shooting.logs import make_windows, noise_floor, replay_data
 from airbearing.analysis.simulation.artefacts import (
     sample_times,
@@ -225,6 +226,21 @@ def test_windows_and_too_short_logs(cmg):
     short = Log(res.log.data.iloc[:15].reset_index(drop=True), "short.csv", cmg)
     with pytest.raises(InputError, match="too short"):
         make_windows(replay_data(cmg, short))
+
+
+def test_linked_pieces_keep_their_length_on_long_logs(platform, cmg, monkeypatch):
+    # logs.MAX_PIECES: pieces stay PIECE_S long where the attitude is measured however long
+    # the log; a dof-1 gyro log (its start yaws profiled densely) keeps at most MAX_PIECES.
+    # The cap lowered to 4 stands for a log longer than MAX_PIECES pieces (40 min).
+    monkeypatch.setattr(logs, "MAX_PIECES", 4)
+    osc = replay_data(platform, _free(platform, duration=60.0, seed=0).log)
+    w = make_windows(osc, linked=True)
+    # (a linked window also holds the next one's first row, where it hands over: ``end``)
+    assert w.n == 6 and w.end[0] == round(logs.PIECE_S * platform.sensors.rate)
+    gyro = replay_data(cmg, slew(cmg, seed=0, duration=60.0).log)
+    assert gyro.outputs == ("rate",)
+    w = make_windows(gyro, linked=True)
+    assert w.n == 4 and w.end[0] == round(15.0 * cmg.sensors.rate)
 
 
 def test_log_that_does_not_fit_the_testbed_kind(platform, cmg):

@@ -65,6 +65,10 @@ def test_gram_and_cross_gram_of_selected_rows_are_scipys():
         Ac.sort_indices()
         Bc.sort_indices()
         assert sps._column_blocks(Ac).size > sps.GRAM_BLOCKS + 1
+        # never more than GRAM_MAX_BLOCKS (a block's product passes over all of the other
+        # factor: more blocks on longer logs made the Gram matrix quadratic in them)
+        assert sps._column_blocks(Ac).size - 1 <= sps.GRAM_MAX_BLOCKS
+        assert -(-Ac.nnz // sps.GRAM_BLOCK_ENTRIES) > sps.GRAM_MAX_BLOCKS  # (the cap acts)
         _same(sps.gram(Ac), A.T @ A)
         AB = A.T @ B
         BA = sps.cross_gram(Bc, Ac)

@@ -85,7 +85,13 @@ DEFAULT_WINDOW_S = 10.0
 #: of the unexplained torque in time, and the short horizon on which effects are named (the
 #: old fixed windows, whose naming the detection study calibrated).
 PIECE_S = DEFAULT_WINDOW_S
-#: Most linked pieces by default (longer logs get longer pieces: the solve stays small).
+#: Most linked pieces by default where the start attitudes are fitted but not measured (a
+#: dof-1 gyro log: its start yaws are profiled out of the likelihood's determinant by a
+#: dense Schur complement, cubic in the pieces; longer logs get longer pieces there). Where
+#: the attitude is measured the pieces are ``PIECE_S`` long whatever the log's length: a
+#: cap made an hour's pieces 15 s and 5.5 h's 83 s, fits of a model that misses a torque
+#: ever further from the data (more IPOPT iterations per sample) and a top of the intensity
+#: grid that was no longer the short pieces the naming was calibrated on.
 MAX_PIECES = 240
 #: Fewest windows the logs must give (the held-out test needs two).
 MIN_WINDOWS = 2
@@ -394,6 +400,11 @@ def _usable_rows(datas) -> int:
     return sum(int(d.mask[a:b].sum()) for d in datas for a, b in d.segments)
 
 
+def _attitude_measured(data: ReplayData) -> bool:
+    """Whether the fits compare the logged attitude (a quaternion or an attitude-only yaw)."""
+    return "quat" in data.outputs or "yaw" in data.outputs
+
+
 def make_windows(datas, *, window_s: float | None = None, linked: bool = False) -> WindowSet:
     """Cut the segments of one or more logs into multiple-shooting windows (module doc).
 
@@ -403,7 +414,9 @@ def make_windows(datas, *, window_s: float | None = None, linked: bool = False) 
         Logs of one testbed.
     window_s : float, optional
         Longest window, s. Default ``min(DEFAULT_WINDOW_S, T / 4)`` with ``T`` the
-        usable duration of all logs, at least ``MIN_WINDOW_SAMPLES`` samples.
+        usable duration of all logs, at least ``MIN_WINDOW_SAMPLES`` samples (linked:
+        ``min(PIECE_S, T / 4)``, and at least ``T / MAX_PIECES`` where the attitude is not
+        measured).
     linked : bool
         Consecutive windows of a segment also hold the next window's first row (weight
         zero), where their state hands over (``link``, ``end``): the pieces of the
@@ -431,7 +444,9 @@ def make_windows(datas, *, window_s: float | None = None, linked: bool = False) 
             f"least {MIN_WINDOWS} windows of {MIN_WINDOW_SAMPLES} samples ({need} samples)"
         )
     if window_s is None and linked:
-        window_s = max(min(PIECE_S, n_use * dt / 4), n_use * dt / MAX_PIECES)
+        window_s = min(PIECE_S, n_use * dt / 4)
+        if not _attitude_measured(datas[0]):  # (MAX_PIECES)
+            window_s = max(window_s, n_use * dt / MAX_PIECES)
     elif window_s is None:
         window_s = min(DEFAULT_WINDOW_S, n_use * dt / 4)
     if not (window_s > 0 and math.isfinite(window_s)):
