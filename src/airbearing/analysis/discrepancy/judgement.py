@@ -27,6 +27,7 @@ from airbearing.analysis.discrepancy.consistency import consistency, per_log_fit
 from airbearing.analysis.discrepancy.horizon import _as_value
 from airbearing.analysis.discrepancy.replay import model_for, prepare, problem_for
 from airbearing.analysis.discrepancy.result import Validation
+from airbearing.analysis.discrepancy.revise import averaged_pairs
 from airbearing.analysis.discrepancy.search_state import _Named, _Search, _Selection
 from airbearing.analysis.discrepancy.slow_torque import slow_torque
 from airbearing.analysis.discrepancy.words import (
@@ -309,14 +310,19 @@ def _verdict_text(sel: _Selection, named: _Named, adq, agree, validation) -> str
     if sel.revisions:
         text += "; revised over whole segments: " + ", ".join(m.words() for m in sel.revisions)
     constant = {c.effects for c in sel.confounding if not c.equivalent}
+    # the named errors include a choice only where its model shares the weight (.revise)
+    averaged = averaged_pairs(sel.neighbours, sel.chosen)
     for a, b in sel.confounded:
         if (a, b) in constant:  # said by the verdict with its experiment
             continue
         if a in named.effects or b in named.effects:
-            text += (
-                f"; {a} and {b} explain these logs about equally well (the errors include "
-                "the choice between them)"
+            errors = (
+                "the errors include the choice between them"
+                if frozenset((a, b)) in averaged
+                else "the errors are those of the named effects alone: they do not include "
+                "the choice between them"
             )
+            text += f"; {a} and {b} explain these logs about equally well ({errors})"
     if validation and named.effects:
         bad = [v.log for v in validation if not v.shrinks]
         text += (

@@ -29,6 +29,16 @@ The moves of the final model that were not taken are its :class:`Neighbour` mode
 inside Occam's window (:func:`occams_window`) share its weight, ``exp(-dBIC / 2)``, and
 the named values' errors include the choice among them (:func:`model_averaged_std`);
 swaps within ``CONFOUND_BIC`` of it are confounded pairs (:func:`close_alternatives`).
+
+With no slot left, a search that named a wrong effect first and then a minor one beside
+it (a CM offset that absorbs the misfit of a viscous friction named for a drag and a
+Coulomb friction) has no move of these that helps: the minor effect lies many errors
+from zero, its torque is not the shape of any candidate's, and no addition is allowed.
+So when no move lowers the BIC at the cap, a named effect making less than
+:data:`MINOR_TORQUE` of the largest named torque may be swapped for any of ``targets``
+(:func:`_minor_swaps`): fewest parameters first (the BIC's own preference), and the first
+that lowers the BIC by more than :data:`MOVE_BIC` is taken without scoring the rest (each
+is a horizon fit; scoring them all cost that coast-down 128 s of CPU against 29 s).
 """
 
 from __future__ import annotations
@@ -52,9 +62,11 @@ from airbearing.errors import SolverError
 
 __all__ = [
     "MAX_MOVES",
+    "MINOR_TORQUE",
     "MOVE_BIC",
     "Move",
     "Neighbour",
+    "averaged_pairs",
     "best_loglik",
     "close_alternatives",
     "model_averaged_std",
@@ -78,6 +90,13 @@ DROP_Z = 10.0
 #: A named effect is swapped only for a candidate whose regressors make at least this
 #: fraction of its torque on the logs (R^2): effects the logs can mistake for one another.
 SWAP_R2 = 0.5
+#: ... or, when no slot is left and no such move lowers the BIC, for any candidate when it
+#: makes less than this fraction of the largest named effect's torque (root mean square
+#: over the logs): a minor effect named beside one that leaves a significant torque
+#: unexplained may only be absorbing that one's misfit, and with no slot left no addition
+#: can show what it hides (a CM offset of 5e-8 m beside a viscous friction named for a
+#: drag and a Coulomb friction: 4 % of its torque).
+MINOR_TORQUE = 0.1
 
 
 @dataclass(frozen=True)
@@ -219,6 +238,37 @@ def _moves(search, lag, chosen, theta, std, slots: int, targets: set, partners: 
     return out
 
 
+def _minor_swaps(search, lag, chosen, theta, targets: set, done) -> list:
+    """``("swap", index, candidate)`` of the named effects making less than
+    :data:`MINOR_TORQUE` of the largest named effect's torque (root mean square of the
+    regressors at the named values over the logs; an effect that makes none, a measurement
+    effect, is not minor) to any of ``targets`` not among ``done`` (the moves already
+    scored); fewest parameters first, then by label."""
+    taken = {c.name for c in chosen}
+    by_label = {c.label: c for c in search.cands if c.smooth and not c.lag and c.name not in taken}
+    targets_in = [by_label[lb] for lb in sorted(targets) if lb in by_label]
+    swappable = [m for m in chosen if not m.lag]
+    if not targets_in or len(swappable) < 2:
+        return []
+    phi = _regressors(search, lag, chosen, theta, swappable + targets_in)
+    parts = _split(chosen, theta)
+    rms = {
+        i: float(np.sqrt(np.mean((phi[m.label] @ parts[i]) ** 2)))
+        for i, m in enumerate(chosen)
+        if not m.lag
+    }
+    top = max(rms.values())
+    seen = {(kind, i, c.label) for kind, i, c in done if c is not None}
+    out = [
+        ("swap", i, c)
+        for i, r in rms.items()
+        if 0.0 < r < MINOR_TORQUE * top
+        for c in targets_in
+        if ("swap", i, c.label) not in seen
+    ]
+    return sorted(out, key=lambda m: (m[2].k, m[2].label, m[1]))
+
+
 def _regressors(search, lag, chosen, theta, cands) -> dict:
     """``label -> `` the torque regressors (rows, axes, k) of each of ``cands`` at the
     current model (one residual-torque evaluation for all of them)."""
@@ -300,46 +350,20 @@ def revise(search, sel, current, problem, *, max_effects: int, targets=(), partn
     neighbours: list[Neighbour] = []
     ll0 = best_loglik(current)
     for it in range(MAX_MOVES + 1):
-        k0 = len(theta)
         if not np.isfinite(ll0):
             break
         best, scored = None, []
         std = np.asarray(fit.theta_std, float)
-        for kind, i, cand in _moves(
-            search, lag, chosen, theta, std, max_effects - len(chosen), set(targets),
-            partners or {},
-        ):  # fmt: skip
-            new = list(chosen)
-            th_parts = _split(chosen, theta)
-            removed = None
-            if kind in ("drop", "swap"):
-                removed = new.pop(i)
-                th_parts.pop(i)
-            if cand is not None:
-                start = _start(search, lag, new, _join(th_parts), cand)
-                new.append(cand)
-                th_parts.append(start)
-            try:
-                f, ll, q = _refit(search, problem, lag, new, _join(th_parts), kappa, fit.delta,
-                                  up=kind == "drop")  # fmt: skip
-            except SolverError as e:
-                _log.debug("revision %s %s: %s", kind, cand and cand.label, e)
-                continue
-            if cand is not None and _at_bound(cand, f.theta[-cand.k :], f.theta_std[-cand.k :]):
-                continue
-            dbic = -2.0 * (ll - ll0) + (len(f.theta) - k0) * ln_n
-            scored.append(
-                Neighbour(
-                    dbic,
-                    kind,
-                    dict(zip([c.label for c in new], _split(new, f.theta), strict=True)),
-                    dict(zip([c.label for c in new], _split(new, f.theta_std), strict=True)),
-                    frozenset(c.name for c in new),
-                )
-            )
-            need = 0.0 if kind == "drop" else -MOVE_BIC
-            if dbic < need and (best is None or dbic < best[0]):
-                best = (dbic, kind, removed, cand, new, f, ll, q)
+        slots = max_effects - len(chosen)
+        state = (chosen, theta, fit, kappa, ll0, ln_n)
+        regular = _moves(search, lag, chosen, theta, std, slots, set(targets), partners or {})
+        for move in regular:
+            best = _score(search, problem, lag, state, move, scored, best)
+        if best is None and slots <= 0 and it < MAX_MOVES:  # (module doc)
+            for move in _minor_swaps(search, lag, chosen, theta, set(targets), regular):
+                best = _score(search, problem, lag, state, move, scored, best)
+                if best is not None:  # the first that pays for itself
+                    break
         if best is None or it == MAX_MOVES:
             neighbours = scored
             break
@@ -355,6 +379,49 @@ def revise(search, sel, current, problem, *, max_effects: int, targets=(), partn
             )  # fmt: skip
             prog(f"on the horizon: {move.words()}" + (f"; now {what}" if what else ""))
     return chosen, theta, fit, moves, neighbours
+
+
+def _score(search, problem, lag, state, move, scored: list, best):
+    """Score one ``move`` (``(kind, index, candidate)``) of the model ``state`` (``(chosen,
+    theta, fit, kappa, log-likelihood, ln n)``) on the horizon: its :class:`Neighbour`
+    appended to ``scored``; the new best ``(dBIC, kind, removed, candidate, chosen, fit,
+    log-likelihood, kappa)`` when it lowers the BIC enough and beats ``best``, else
+    ``best``."""
+    chosen, theta, fit, kappa, ll0, ln_n = state
+    kind, i, cand = move
+    k0 = len(theta)
+    new = list(chosen)
+    th_parts = _split(chosen, theta)
+    removed = None
+    if kind in ("drop", "swap"):
+        removed = new.pop(i)
+        th_parts.pop(i)
+    if cand is not None:
+        start = _start(search, lag, new, _join(th_parts), cand)
+        new.append(cand)
+        th_parts.append(start)
+    try:
+        f, ll, q = _refit(search, problem, lag, new, _join(th_parts), kappa, fit.delta,
+                          up=kind == "drop")  # fmt: skip
+    except SolverError as e:
+        _log.debug("revision %s %s: %s", kind, cand and cand.label, e)
+        return best
+    if cand is not None and _at_bound(cand, f.theta[-cand.k :], f.theta_std[-cand.k :]):
+        return best
+    dbic = -2.0 * (ll - ll0) + (len(f.theta) - k0) * ln_n
+    scored.append(
+        Neighbour(
+            dbic,
+            kind,
+            dict(zip([c.label for c in new], _split(new, f.theta), strict=True)),
+            dict(zip([c.label for c in new], _split(new, f.theta_std), strict=True)),
+            frozenset(c.name for c in new),
+        )
+    )
+    need = 0.0 if kind == "drop" else -MOVE_BIC
+    if dbic < need and (best is None or dbic < best[0]):
+        return (dbic, kind, removed, cand, new, f, ll, q)
+    return best
 
 
 def model_averaged_std(cand, theta, std, neighbours) -> np.ndarray:
@@ -390,6 +457,21 @@ def occams_window(neighbours) -> list:
         nb for nb in neighbours
         if nb.delta_bic < WINDOW_BIC and not (nb.kind == "add" and nb.delta_bic >= 0)
     ]  # fmt: skip
+
+
+def averaged_pairs(neighbours, chosen) -> set:
+    """``frozenset({named name, other name})`` of the swaps whose models share the named
+    model's weight (:func:`occams_window`): the choices the named effects' errors include
+    (:func:`model_averaged_std`). A pair the logs cannot tell apart that is not among them
+    (the swap not scored on the horizon, or its model at a bound there) is not in the
+    errors."""
+    named = {c.name for c in chosen}
+    out = set()
+    for nb in occams_window(neighbours):
+        gone, new = named - nb.names, nb.names - named
+        if nb.kind == "swap" and len(gone) == 1 and len(new) == 1:
+            out.add(frozenset(gone | new))
+    return out
 
 
 def close_alternatives(neighbours, chosen, within: float) -> list[tuple[str, str]]:
