@@ -9,6 +9,7 @@ import numpy as np
 import scipy.sparse as sp
 from test_process_noise import _coast, _problem
 
+from airbearing.analysis.shooting import errors
 from airbearing.analysis.shooting import problem_functions as pf
 from airbearing.analysis.shooting import sparse as sps
 from airbearing.analysis.shooting.fit import Fit
@@ -78,3 +79,23 @@ def test_columns_scaled_block_by_block_are_the_products():
             np.testing.assert_array_equal(got.data, ref.data)
     finally:
         sps.SCALE_BLOCK_ENTRIES = old
+
+
+def test_trailing_columns_are_the_slice_without_a_copy():
+    """The honest errors' nuisance columns (``errors._trailing_columns``) are ``J[:, k:]``
+    to the bit and share ``J``'s entries; the projection made from them is the one made
+    from the slice (a random sparse matrix with empty and full columns)."""
+    rng = np.random.default_rng(5)
+    J = sp.random(400, 40, density=0.3, format="csc", random_state=rng)
+    J = sp.hstack([J[:, :3], sp.csc_matrix((400, 1)), J[:, 3:]], format="csc")
+    for k in (1, 3, 4):
+        got = errors._trailing_columns(J, k)
+        _same(got, J[:, k:])
+        assert np.shares_memory(got.data, J.data)
+    k = 3
+    At, An = J[:, :k].toarray(), J[:, k:]
+    G = sp.csc_matrix(An.T @ An)
+    c = np.sqrt(np.maximum(G.diagonal(), 1e-300))
+    Dc = sp.diags(1.0 / c)
+    coef = errors.solve_gram(Dc @ G @ Dc, np.asarray(An.T @ At) / c[:, None])
+    np.testing.assert_array_equal(errors._projected(J, k), At - An @ (coef / c[:, None]))

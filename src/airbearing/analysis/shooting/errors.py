@@ -266,15 +266,28 @@ def _projected(J, k: int, N=None) -> np.ndarray:
         J = sp.csc_matrix(J @ N) if not sp.issparse(J @ N) else (J @ N).tocsc()
     J = sp.csc_matrix(J)
     At = J[:, :k].toarray()
-    An = J[:, k:]
-    if An.shape[1] == 0:
+    if J.shape[1] == k:
         return At
+    An = _trailing_columns(J, k)
     G = sp.csc_matrix(An.T @ An)
     c = np.sqrt(np.maximum(G.diagonal(), 1e-300))
     Dc = sp.diags(1.0 / c)
     B = np.asarray(An.T @ At)
     coef = solve_gram(Dc @ G @ Dc, B / c[:, None])
     return At - An @ (coef / c[:, None])
+
+
+def _trailing_columns(J: sp.csc_matrix, k: int) -> sp.csc_matrix:
+    """``J[:, k:]`` sharing ``J``'s arrays (a CSC matrix's trailing columns are one
+    contiguous run of its entries): the same matrix as the slice, without its copy (on an
+    hour of 50 Hz three-axis samples about the size of ``J``, some 120 MB)."""
+    ptr = J.indptr
+    lo, hi = ptr[k], ptr[-1]
+    return sp.csc_matrix(
+        (J.data[lo:hi], J.indices[lo:hi], ptr[k:] - lo),
+        shape=(J.shape[0], J.shape[1] - k),
+        copy=False,
+    )
 
 
 def group_variances(problem, r: np.ndarray, n_free: int) -> np.ndarray:
