@@ -62,7 +62,12 @@ import scipy.sparse as sp
 from scipy.sparse.linalg import splu
 
 from airbearing.analysis.shooting.autoregressive import AR
-from airbearing.analysis.shooting.fit import fit_jacobian, information_inverse, solve_gram
+from airbearing.analysis.shooting.fit import (
+    fit_jacobian,
+    fit_jacobian_split,
+    information_inverse,
+    solve_gram,
+)
 from airbearing.analysis.shooting.functions import _problem_functions
 from airbearing.analysis.shooting.penalty import KAPPA_GRID, piece_durations
 
@@ -260,15 +265,30 @@ def _n_segments(problem) -> int:
     return int(np.unique(problem.windows.segments()).size)
 
 
+def _projected_of(fit, k: int) -> np.ndarray:
+    """:func:`_projected` of ``fit``'s Jacobian, from the blocks it keeps when it keeps
+    them (:func:`~airbearing.analysis.shooting.fit.fit_jacobian_split`: the whole matrix
+    not made), else from the matrix."""
+    N = fit.extra.get("N")
+    split = None if N is not None else fit_jacobian_split(fit, k)
+    if split is None:
+        return _projected(fit_jacobian(fit), k, N)
+    return _projected_split(*split)
+
+
 def _projected(J, k: int, N=None) -> np.ndarray:
     """The parameters' Jacobian columns with the nuisance columns projected off (dense)."""
     if N is not None:
         J = sp.csc_matrix(J @ N) if not sp.issparse(J @ N) else (J @ N).tocsc()
     J = sp.csc_matrix(J)
-    At = J[:, :k].toarray()
-    if J.shape[1] == k:
+    return _projected_split(J[:, :k].toarray(), _trailing_columns(J, k))
+
+
+def _projected_split(At: np.ndarray, An) -> np.ndarray:
+    """:func:`_projected` of the parameters' columns ``At`` (dense) and the nuisance
+    columns ``An`` (CSC)."""
+    if An.shape[1] == 0:
         return At
-    An = _trailing_columns(J, k)
     G = sp.csc_matrix(An.T @ An)
     c = np.sqrt(np.maximum(G.diagonal(), 1e-300))
     Dc = sp.diags(1.0 / c)
@@ -372,7 +392,7 @@ def honest_errors(problem, fit, k: int) -> HonestErrors:
     if k == 0:
         z = np.zeros(0)
         return HonestErrors(z, z, np.zeros((0, 0)), np.zeros((0, 0)), z, tau, 0)
-    J, r = fit_jacobian(fit), np.asarray(fit.extra["r"])
+    r = np.asarray(fit.extra["r"])
     n_meas = problem.n_meas
     pn = fit.extra.get("process_noise") or {}
     lin = _linearised(problem, fit, k)
@@ -397,7 +417,7 @@ def honest_errors(problem, fit, k: int) -> HonestErrors:
         G = np.vstack([M.T, np.zeros((r.size - n_meas, k))])
         A = None
     else:
-        A = G = _projected(J, k, fit.extra.get("N"))
+        A = G = _projected_of(fit, k)
         Binv = _bread_inverse(A)
         cov_w = Binv @ ((A * s2[group][:, None]).T @ A) @ Binv
     cov_w = 0.5 * (cov_w + cov_w.T)
