@@ -65,6 +65,7 @@ from airbearing.analysis.shooting.autoregressive import AR
 from airbearing.analysis.shooting.fit import (
     fit_jacobian,
     fit_jacobian_split,
+    gram,
     information_inverse,
     solve_gram,
 )
@@ -289,7 +290,8 @@ def _projected_split(At: np.ndarray, An) -> np.ndarray:
     columns ``An`` (CSC)."""
     if An.shape[1] == 0:
         return At
-    G = sp.csc_matrix(An.T @ An)
+    # scipy's sums, without its CSR copy of An (about J's size)
+    G = gram(An)
     c = np.sqrt(np.maximum(G.diagonal(), 1e-300))
     Dc = sp.diags(1.0 / c)
     B = np.asarray(An.T @ At)
