@@ -9,9 +9,10 @@ import numpy as np
 import scipy.sparse as sp
 from test_process_noise import _coast, _problem
 
+from airbearing.analysis.shooting import errors
 from airbearing.analysis.shooting import problem_functions as pf
 from airbearing.analysis.shooting import sparse as sps
-from airbearing.analysis.shooting.fit import Fit
+from airbearing.analysis.shooting.fit import Fit, fit_jacobian, fit_jacobian_split
 from airbearing.analysis.shooting.problem import _kept_columns
 from airbearing.analysis.shooting.process_noise import KAPPA_GRID, set_intensity
 
@@ -78,3 +79,57 @@ def test_columns_scaled_block_by_block_are_the_products():
             np.testing.assert_array_equal(got.data, ref.data)
     finally:
         sps.SCALE_BLOCK_ENTRIES = old
+
+
+def test_trailing_columns_are_the_slice_without_a_copy():
+    """The honest errors' nuisance columns (``errors._trailing_columns``) are ``J[:, k:]``
+    to the bit and share ``J``'s entries; the projection made from them is the one made
+    from the slice (a random sparse matrix with empty and full columns)."""
+    rng = np.random.default_rng(5)
+    J = sp.random(400, 40, density=0.3, format="csc", random_state=rng)
+    J = sp.hstack([J[:, :3], sp.csc_matrix((400, 1)), J[:, 3:]], format="csc")
+    for k in (1, 3, 4):
+        got = errors._trailing_columns(J, k)
+        _same(got, J[:, k:])
+        assert np.shares_memory(got.data, J.data)
+    k = 3
+    At, An = J[:, :k].toarray(), J[:, k:]
+    G = sp.csc_matrix(An.T @ An)
+    c = np.sqrt(np.maximum(G.diagonal(), 1e-300))
+    Dc = sp.diags(1.0 / c)
+    coef = errors.solve_gram(Dc @ G @ Dc, np.asarray(An.T @ At) / c[:, None])
+    np.testing.assert_array_equal(errors._projected(J, k), At - An @ (coef / c[:, None]))
+
+
+def test_honest_errors_split_of_kept_blocks_is_the_whole_jacobians():
+    """A fit that keeps its Jacobian's blocks (``J_made``: the round's columns made again,
+    and its map ``E``; ``J_blocks``) has its parameter columns and window-state block
+    handed to the honest errors without the whole matrix: the same numbers to the bit as
+    :func:`fit_jacobian`'s columns, exact zeros of the product as +0.0, and the same
+    projection; a fit keeping ``J`` whole, or another split, takes the matrix."""
+    rng = np.random.default_rng(7)
+    A = rng.standard_normal((300, 5))
+    A[:40, 1] = 0.0
+    A[40:60, 1] = -0.0
+    E = np.zeros((5, 2))
+    E[1, 0], E[3, 1] = -1.0, 2.0
+    Jd = sp.random(300, 30, density=0.2, format="csc", random_state=rng)
+
+    class Source:
+        def columns(self):
+            return A, Jd
+
+    theta = np.zeros(2)
+    At0 = A @ E
+    At0[:10, 0] = -0.0  # (a product's zero may carry either sign)
+    for extra in ({"J_made": (Source(), E)}, {"J_blocks": (A, E, Jd)}, {"J_blocks": (At0, Jd)}):
+        fit = Fit(theta, theta, theta, np.zeros((1, 1)), 0.0, 0, 0, 0.0, 0, extra=extra)
+        J = fit_jacobian(fit)
+        At, An = fit_jacobian_split(fit, 2)
+        assert np.array_equal(np.signbit(At), np.signbit(J[:, :2].toarray()))
+        np.testing.assert_array_equal(At, J[:, :2].toarray())
+        _same(An, J[:, 2:])
+        np.testing.assert_array_equal(errors._projected_of(fit, 2), errors._projected(J, 2))
+        assert fit_jacobian_split(fit, 3) is None
+    whole = Fit(theta, theta, theta, np.zeros((1, 1)), 0.0, 0, 0, 0.0, 0, extra={"J": J})
+    assert fit_jacobian_split(whole, 2) is None

@@ -62,7 +62,13 @@ import scipy.sparse as sp
 from scipy.sparse.linalg import splu
 
 from airbearing.analysis.shooting.autoregressive import AR
-from airbearing.analysis.shooting.fit import fit_jacobian, information_inverse, solve_gram
+from airbearing.analysis.shooting.fit import (
+    fit_jacobian,
+    fit_jacobian_split,
+    gram,
+    information_inverse,
+    solve_gram,
+)
 from airbearing.analysis.shooting.functions import _problem_functions
 from airbearing.analysis.shooting.penalty import KAPPA_GRID, piece_durations
 
@@ -260,21 +266,50 @@ def _n_segments(problem) -> int:
     return int(np.unique(problem.windows.segments()).size)
 
 
+def _projected_of(fit, k: int) -> np.ndarray:
+    """:func:`_projected` of ``fit``'s Jacobian, from the blocks it keeps when it keeps
+    them (:func:`~airbearing.analysis.shooting.fit.fit_jacobian_split`: the whole matrix
+    not made), else from the matrix."""
+    N = fit.extra.get("N")
+    split = None if N is not None else fit_jacobian_split(fit, k)
+    if split is None:
+        return _projected(fit_jacobian(fit), k, N)
+    return _projected_split(*split)
+
+
 def _projected(J, k: int, N=None) -> np.ndarray:
     """The parameters' Jacobian columns with the nuisance columns projected off (dense)."""
     if N is not None:
         J = sp.csc_matrix(J @ N) if not sp.issparse(J @ N) else (J @ N).tocsc()
     J = sp.csc_matrix(J)
-    At = J[:, :k].toarray()
-    An = J[:, k:]
+    return _projected_split(J[:, :k].toarray(), _trailing_columns(J, k))
+
+
+def _projected_split(At: np.ndarray, An) -> np.ndarray:
+    """:func:`_projected` of the parameters' columns ``At`` (dense) and the nuisance
+    columns ``An`` (CSC)."""
     if An.shape[1] == 0:
         return At
-    G = sp.csc_matrix(An.T @ An)
+    # scipy's sums, without its CSR copy of An (about J's size)
+    G = gram(An)
     c = np.sqrt(np.maximum(G.diagonal(), 1e-300))
     Dc = sp.diags(1.0 / c)
     B = np.asarray(An.T @ At)
     coef = solve_gram(Dc @ G @ Dc, B / c[:, None])
     return At - An @ (coef / c[:, None])
+
+
+def _trailing_columns(J: sp.csc_matrix, k: int) -> sp.csc_matrix:
+    """``J[:, k:]`` sharing ``J``'s arrays (a CSC matrix's trailing columns are one
+    contiguous run of its entries): the same matrix as the slice, without its copy (on an
+    hour of 50 Hz three-axis samples about the size of ``J``, some 120 MB)."""
+    ptr = J.indptr
+    lo, hi = ptr[k], ptr[-1]
+    return sp.csc_matrix(
+        (J.data[lo:hi], J.indices[lo:hi], ptr[k:] - lo),
+        shape=(J.shape[0], J.shape[1] - k),
+        copy=False,
+    )
 
 
 def group_variances(problem, r: np.ndarray, n_free: int) -> np.ndarray:
@@ -359,7 +394,7 @@ def honest_errors(problem, fit, k: int) -> HonestErrors:
     if k == 0:
         z = np.zeros(0)
         return HonestErrors(z, z, np.zeros((0, 0)), np.zeros((0, 0)), z, tau, 0)
-    J, r = fit_jacobian(fit), np.asarray(fit.extra["r"])
+    r = np.asarray(fit.extra["r"])
     n_meas = problem.n_meas
     pn = fit.extra.get("process_noise") or {}
     lin = _linearised(problem, fit, k)
@@ -384,7 +419,7 @@ def honest_errors(problem, fit, k: int) -> HonestErrors:
         G = np.vstack([M.T, np.zeros((r.size - n_meas, k))])
         A = None
     else:
-        A = G = _projected(J, k, fit.extra.get("N"))
+        A = G = _projected_of(fit, k)
         Binv = _bread_inverse(A)
         cov_w = Binv @ ((A * s2[group][:, None]).T @ A) @ Binv
     cov_w = 0.5 * (cov_w + cov_w.T)
