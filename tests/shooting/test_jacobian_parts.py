@@ -82,14 +82,14 @@ def test_columns_scaled_block_by_block_are_the_products():
 
 
 def test_trailing_columns_are_the_slice_without_a_copy():
-    """The honest errors' nuisance columns (``errors._trailing_columns``) are ``J[:, k:]``
+    """The honest errors' nuisance columns (``sparse.trailing_columns``) are ``J[:, k:]``
     to the bit and share ``J``'s entries; the projection made from them is the one made
     from the slice (a random sparse matrix with empty and full columns)."""
     rng = np.random.default_rng(5)
     J = sp.random(400, 40, density=0.3, format="csc", random_state=rng)
     J = sp.hstack([J[:, :3], sp.csc_matrix((400, 1)), J[:, 3:]], format="csc")
     for k in (1, 3, 4):
-        got = errors._trailing_columns(J, k)
+        got = sps.trailing_columns(J, k)
         _same(got, J[:, k:])
         assert np.shares_memory(got.data, J.data)
     k = 3

@@ -60,8 +60,9 @@ import scipy.sparse as sp
 from numpy.polynomial.legendre import legval
 
 from airbearing.analysis.discrepancy.ou_torque import fit_ou
-from airbearing.analysis.shooting.fit import fit_jacobian, solve_gram
+from airbearing.analysis.shooting.fit import fit_jacobian, gram, solve_gram
 from airbearing.analysis.shooting.problem_functions import residual_function
+from airbearing.analysis.shooting.sparse import trailing_columns
 
 __all__ = [
     "MAX_FACTOR",
@@ -636,10 +637,10 @@ def _projected_gram(J, k: int, G, r: np.ndarray, refine: int = 2) -> np.ndarray:
     (``tests/discrepancy/test_discrepancy_slow_torque.py``)."""
     A = sp.hstack([J[:, :k], sp.csc_matrix(G), sp.csc_matrix(r[:, None])], format="csc")
     H = (A.T @ A).toarray()
-    An = J[:, k:]
+    An = trailing_columns(J, k)  # J[:, k:] without its copy
     if An.shape[1] == 0:
         return H
-    Gm = sp.csc_matrix(An.T @ An)
+    Gm = gram(An)  # scipy's sums, without its CSR copy of An
     c = np.sqrt(np.maximum(Gm.diagonal(), 1e-300))
     Dc = sp.diags(1.0 / c)
     Gs = sp.csc_matrix(Dc @ Gm @ Dc)

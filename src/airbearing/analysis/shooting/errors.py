@@ -71,6 +71,7 @@ from airbearing.analysis.shooting.fit import (
 )
 from airbearing.analysis.shooting.functions import _problem_functions
 from airbearing.analysis.shooting.penalty import KAPPA_GRID, piece_durations
+from airbearing.analysis.shooting.sparse import trailing_columns
 
 __all__ = [
     "RESOLUTION",
@@ -282,7 +283,7 @@ def _projected(J, k: int, N=None) -> np.ndarray:
     if N is not None:
         J = sp.csc_matrix(J @ N) if not sp.issparse(J @ N) else (J @ N).tocsc()
     J = sp.csc_matrix(J)
-    return _projected_split(J[:, :k].toarray(), _trailing_columns(J, k))
+    return _projected_split(J[:, :k].toarray(), trailing_columns(J, k))
 
 
 def _projected_split(At: np.ndarray, An) -> np.ndarray:
@@ -297,19 +298,6 @@ def _projected_split(At: np.ndarray, An) -> np.ndarray:
     B = np.asarray(An.T @ At)
     coef = solve_gram(Dc @ G @ Dc, B / c[:, None])
     return At - An @ (coef / c[:, None])
-
-
-def _trailing_columns(J: sp.csc_matrix, k: int) -> sp.csc_matrix:
-    """``J[:, k:]`` sharing ``J``'s arrays (a CSC matrix's trailing columns are one
-    contiguous run of its entries): the same matrix as the slice, without its copy (on an
-    hour of 50 Hz three-axis samples about the size of ``J``, some 120 MB)."""
-    ptr = J.indptr
-    lo, hi = ptr[k], ptr[-1]
-    return sp.csc_matrix(
-        (J.data[lo:hi], J.indices[lo:hi], ptr[k:] - lo),
-        shape=(J.shape[0], J.shape[1] - k),
-        copy=False,
-    )
 
 
 def group_variances(problem, r: np.ndarray, n_free: int) -> np.ndarray:
