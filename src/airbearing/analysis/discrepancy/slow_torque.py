@@ -51,8 +51,6 @@ absent.
 
 from __future__ import annotations
 
-import copy
-import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -61,7 +59,6 @@ from numpy.polynomial.legendre import legval
 
 from airbearing.analysis.discrepancy.ou_torque import fit_ou
 from airbearing.analysis.shooting.fit import fit_jacobian, gram, solve_gram
-from airbearing.analysis.shooting.problem_functions import residual_function
 from airbearing.analysis.shooting.sparse import trailing_columns
 
 __all__ = [
@@ -389,32 +386,10 @@ def _scatter(D, entries, size, m):
 
 def _forward(problem, fit, bases):
     """The residual's directional derivatives along the input samples ``bases`` (each
-    ``windows.u``-shaped), exact: CasADi's forward mode through the problem's residual
-    function built without the compiled C step (whose library carries derivatives in the
-    states and parameters only); ``(dR, dC)``, the raw measurement rows and continuity
-    defects (None without them), before the problem's whitening and weighting."""
-    w = problem.windows
-    zero = _with_inputs(problem, w, np.zeros_like(w.u))._data
-    seeds = np.column_stack([_with_inputs(problem, w, U)._data - zero for U in bases])
-    m = seeds.shape[1]
-    symbolic = copy.copy(problem)
-    symbolic.jit = False
-    v, Sp = problem._v(fit.delta, None)
-    fr = residual_function(*symbolic._key(Sp.shape[1]), problem.link)
-    p = np.asarray(fit.p, dtype=float)
-    # the nominal outputs are inputs of the forward function that it does not read (the
-    # same derivatives to the bit with zeros there): no nominal evaluation
-    nominal = [np.zeros(fr.size_out(i)) for i in range(fr.n_out())]
-    out = fr.forward(m)(
-        v, p, Sp, problem._data, *nominal,
-        np.zeros((v.size, m)), np.zeros((p.size, m)), np.zeros((Sp.shape[0], Sp.shape[1] * m)),
-        seeds,
-    )  # fmt: skip
-    out = list(out) if isinstance(out, (list, tuple)) else [out]
-    dR = np.asarray(out[0], dtype=float)
-    if not (problem.link and problem.penalty is not None):  # as ShootingProblem.residual
-        return dR, None
-    return dR, np.asarray(out[1], dtype=float)
+    ``windows.u``-shaped), exact, at the fit: ``(dR, dC)``, the raw measurement rows and
+    continuity defects (None without them), before the problem's whitening and weighting
+    (:meth:`.ShootingProblem.input_derivatives`)."""
+    return problem.input_derivatives(fit.delta, fit.p, bases)
 
 
 def input_columns(problem, fit, bases) -> np.ndarray:
@@ -426,15 +401,6 @@ def input_columns(problem, fit, bases) -> np.ndarray:
         return dR
     P = problem.meas_whitening
     return np.vstack([dR if P is None else P @ dR, problem.penalty @ dC])
-
-
-def _with_inputs(problem, windows, U):
-    """A shallow copy of ``problem`` whose windows hold the inputs ``U``."""
-    p2 = copy.copy(problem)
-    p2.windows = dataclasses.replace(windows, u=U)
-    p2._data = p2._data_vector()
-    p2._last = None
-    return p2
 
 
 def trend_values(blocks, order: int) -> np.ndarray:
