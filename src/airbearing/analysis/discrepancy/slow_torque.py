@@ -40,7 +40,9 @@ linear in the samples), the nuisance is
   parameters move to their posterior mean with the OU prior (generalised least squares:
   the bias of the slow torque removed) and their errors grow by the factor their
   posterior variance has over the fit's, ``sqrt(C_jj / inv(F)_jj)`` with the Fisher
-  information ``F`` of the parameters after the window states are projected off.
+  information ``F`` of the parameters after the window states are projected off; mean and
+  variance mixed over ``T`` and ``q`` (:func:`.ou_torque.integrated_posterior`: their
+  uncertainty counted, not taken as known at the maximum).
 
 A friction about the steady axis is then known only from how its torque follows the
 rate's small changes (nutation) and from the other axes, which is all a log can say when
