@@ -51,6 +51,8 @@ def test_a_slow_torque_about_the_spin_is_fitted_as_a_nuisance_and_said():
     # the Ornstein-Uhlenbeck part: its correlation time (a 30 s log does not resolve a
     # 20 s one: said so) and its level, in the JSON and the words
     assert st["correlation_time_s"] > 0 and st["level"] > 0
+    assert st["ou"] == "fitted" and st["ou_reason"] is None
+    assert "not fitted" not in d.verdict
     assert "slow torque about z, correlated over" in d.verdict
     assert "is significant (F test p" in d.verdict
 
@@ -190,14 +192,6 @@ def test_an_ou_part_not_fitted_is_said_in_the_json_and_the_verdict(monkeypatch):
     assert s["correlation_time_s"] is None and s["level"] is None
     assert "the Ornstein-Uhlenbeck part of the slow torque is not fitted" in d.verdict
     assert st.NOT_POSITIVE_DEFINITE in d.verdict
-
-
-def test_a_fitted_ou_part_says_so():
-    d = _fit("c", 5)
-    conf = [c for c in d.confounding if c.effects[1] == "constant torque about z"]
-    s = conf[0].to_json()["slow_torque"]
-    assert s["ou"] == "fitted" and s["ou_reason"] is None
-    assert "not fitted" not in d.verdict
 
 
 def test_a_fixed_effects_block_not_positive_definite_raises_in_the_ou_fit():
