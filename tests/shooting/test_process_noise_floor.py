@@ -96,7 +96,8 @@ def test_at_eight_sub_steps_the_floor_holds_the_integrator_and_not_a_real_torque
     # 8 sub-steps (the nominal model's number on this spin): the integration error alone
     # still fires (LR 17, kappa 1e-3) under a floor of 4.8e-3 (the log's 4.6e-3 and the
     # integrator's 1.5e-4); a white torque of 1e-7 N m per axis (kappa 0.1: the model
-    # predicts to the noise over 22 s of the 60 s log) stays significant above it (LR 106)
+    # predicts to the noise over 22 s of the 60 s log) stays significant above it (LR 106
+    # against the floor; the test against the bottom of the grid, LR 1408, stands)
     problem, fit, bounds = _spin(8)
     assert fit.extra["process_noise"]["significant"]
     floor = intensity_floor(problem, fit)

@@ -667,7 +667,10 @@ def above_floor(problem, fit, k: int, bounds, floor: float):
     it). At the floor a one-sided null has the same 50:50 mixture of chi2(0) and chi2(1)
     (the most likely intensity falls below it half the time, the statistic then 0), so the
     p-value and the threshold :data:`SIGNIFICANCE` are the module's. Only a significant
-    intensity above the floor is judged again: a floor can only lower the statistic.
+    intensity is judged again (a floor can only lower the statistic), and the floor can
+    only withdraw its significance: a significance it does not explain stands with the
+    test against the bottom of the grid (its ``lr`` and ``p``, the words and JSON as
+    before).
 
     Parameters
     ----------
@@ -685,10 +688,11 @@ def above_floor(problem, fit, k: int, bounds, floor: float):
     Returns
     -------
     Fit
-        ``fit`` (unchanged when nothing is to judge), else a copy whose
-        ``extra["process_noise"]`` has the new ``lr``, ``p``, ``significant`` and
-        ``horizon_s`` and the ``floor_kappa`` and ``lr_bottom`` (the statistic against the
-        bottom of the grid) they came from.
+        ``fit`` (unchanged when nothing is to judge or the intensity stays significant
+        against the floor), else a copy whose ``extra["process_noise"]`` is not
+        significant, with the test's ``lr`` and ``p`` against the floor, ``horizon_s``
+        None, and the ``floor_kappa`` and ``lr_bottom`` (the statistic against the bottom
+        of the grid) it came from.
     """
     pn = fit.extra.get("process_noise") or {}
     ll = {float(a): float(b) for a, b in (pn.get("loglik") or {}).items()}
@@ -705,13 +709,14 @@ def above_floor(problem, fit, k: int, bounds, floor: float):
     from scipy import stats
 
     p = 0.5 * float(stats.chi2.sf(lr, 1)) if lr > 0 else 1.0
-    significant = p < SIGNIFICANCE
+    if p < SIGNIFICANCE:  # the floor does not explain it: the test stands as it was
+        return fit
     out = {
         **pn,
         "lr": float(lr),
         "p": float(p),
-        "significant": bool(significant),
-        "horizon_s": pn.get("horizon_s") if significant else None,
+        "significant": False,
+        "horizon_s": None,
         "floor_kappa": float(floor),
         "lr_bottom": float(pn.get("lr", 0.0)),
     }
