@@ -544,12 +544,18 @@ class Linearisation:
         return y
 
 
+def _mixture_p(lr: float) -> float:
+    """The p-value of a likelihood-ratio statistic ``lr`` under the 50:50 mixture of
+    chi2(0) and chi2(1) (module doc)."""
+    from scipy import stats  # (lazy: a light ``import airbearing``)
+
+    return 0.5 * float(stats.chi2.sf(lr, 1)) if lr > 0 else 1.0
+
+
 def _verdict(problem, ll: dict, best: float, bottom: float) -> ProcessNoise:
     """The :class:`ProcessNoise` of the most likely intensity (the problem is left at it)."""
-    from scipy import stats
-
     lr = max(0.0, 2.0 * (ll[best] - ll[bottom]))
-    p = 0.5 * float(stats.chi2.sf(lr, 1)) if lr > 0 else 1.0
+    p = _mixture_p(lr)
     significant = p < SIGNIFICANCE
     set_intensity(problem, best)
     sigma_w = problem.process_noise[1]
@@ -706,9 +712,7 @@ def above_floor(problem, fit, k: int, bounds, floor: float):
         lr = max(0.0, 2.0 * (ll[best] - max(null)))
     else:
         lr = 0.0
-    from scipy import stats
-
-    p = 0.5 * float(stats.chi2.sf(lr, 1)) if lr > 0 else 1.0
+    p = _mixture_p(lr)
     if p < SIGNIFICANCE:  # the floor does not explain it: the test stands as it was
         return fit
     out = {
