@@ -9,11 +9,13 @@ sub-steps the friction's sign turning within a sub-step makes defects no torque 
 from __future__ import annotations
 
 from dataclasses import replace
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
 import airbearing as ab
+from airbearing.analysis.discrepancy.horizon import _floored
 from airbearing.analysis.discrepancy.replay import model_for, prepare, problem_for
 from airbearing.analysis.shooting.penalty import _sigma_of_kappa, piece_durations
 from airbearing.analysis.shooting.process_noise import (
@@ -89,6 +91,16 @@ def test_a_process_noise_not_significant_is_left_alone(coarse):
     assert above_floor(problem, quiet, 0, bounds, 1e3) is quiet
     # nor is a floor below every intensity tried (the test against the bottom is the same)
     assert above_floor(problem, fit, 0, bounds, 1e-9) is fit
+
+
+def test_the_search_judges_its_process_noise_against_the_floor(coarse):
+    # the discrepancy search's last step (nothing named here: the truth is the nominal)
+    problem, fit, _ = coarse
+    nothing = {"S": None, "theta0": None, "lower": None, "upper": None}
+    search = SimpleNamespace(free=lambda lag, chosen, theta: nothing)
+    out = _floored(search, SimpleNamespace(lag=False, chosen=[]), problem, fit)
+    assert not out.extra["process_noise"]["significant"]
+    assert fit.extra["process_noise"]["significant"]  # (the fit itself is not changed)
 
 
 @pytest.mark.slow

@@ -126,7 +126,7 @@ def _retested(search: _Search, sel: _Selection, accurate: ShootingProblem, refit
     fitted effects' integration error (a Coulomb friction's sign turning within a sub-step)
     makes defects no torque made. Seed 000's tabletop coasting down from 2 rad/s for 5 min
     with an exact attitude, drag and Coulomb friction named at the truth: ``kappa`` 100 and
-    a likelihood ratio of 7.5e4 at 2 sub-steps, the bottom of the grid and 0 at 32.
+    a likelihood ratio of 1.0e5 at 2 sub-steps, the bottom of the grid and 0 at 32.
     ``refit`` itself otherwise (the horizon's test not significant, or unlinked windows);
     the measurement noise model is the horizon's, and ``gap_short`` stays the horizon's
     (the shortest pieces' gap, :meth:`.search_state._Search._shorter`)."""
