@@ -4,8 +4,11 @@ Effects are named on short pieces; :func:`_named` estimates the process noise wi
 (:meth:`.search_state._Search.horizon`), tries again at that horizon the candidates the
 short pieces held at a bound or found too weak (:func:`_retry_at_horizon`), revises the
 named effects over whole segments when the horizon doubts them (:func:`_revise_on_horizon`,
-:mod:`.revise`), and gives their values with honest errors (:mod:`.honest`), widened by the
-choice among models the horizon scores alike.
+:mod:`.revise`), refits them at the sub-steps their values need (:func:`_accurate_at_fit`),
+where a significant process noise is estimated again (:func:`_retested`) and judged
+against what the integrator's error and the weights' noise explain (:func:`_floored`), and
+gives their values with honest errors (:mod:`.honest`), widened by the choice among models
+the horizon scores alike.
 """
 
 from __future__ import annotations
