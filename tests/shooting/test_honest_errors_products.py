@@ -1,8 +1,10 @@
-"""The honest errors' and the lag score's products without copies of the Jacobian
-(:func:`airbearing.analysis.shooting.errors._kkt_solve`, ``_influence``,
-``_weighted_rows``; :func:`airbearing.analysis.discrepancy.lag_score._nonempty_columns`):
-the same numbers to the bit as scipy's products on the copies they replace (the rows of
-the measurements, the weighted rows, the column-scaled matrix, the non-empty columns).
+"""The honest errors', the lag score's and the screen's products without copies of the
+Jacobian (:func:`airbearing.analysis.shooting.errors._kkt_solve`, ``_influence``,
+``_weighted_rows``; :func:`airbearing.analysis.discrepancy.lag_score._nonempty_columns`;
+``screen._column_square_sums`` and ``_transposed_product``): the same numbers to the bit
+as scipy's products on the copies they replace (the rows of the measurements, the weighted
+rows, the column-scaled matrix, the non-empty columns, the squared entries, the row-major
+copy of dense columns).
 
 The reference is the bordered (KKT) solve as it was written with those copies:
 ``F = Jm' Jm`` of ``Jm = J[:n]`` (or of ``diag(w) Jm``), ``M = ((Jm Dc) X)' / c``.
@@ -85,6 +87,10 @@ def test_the_weighted_bordered_solve_is_scipys(seed):
 def test_the_weighted_rows_are_scipys_product():
     rng = np.random.default_rng(7)
     J, _, n, _ = _jacobian(rng)
+    # empty columns (first, inside, last) and a column of the defect rows only
+    E = sp.csc_matrix((J.shape[0], 1))
+    D = sp.csc_matrix(([1.0], ([J.shape[0] - 1], [0])), shape=(J.shape[0], 1))
+    J = sp.hstack([E, J[:, :5], E, D, J[:, 5:], E]).tocsc()
     w = rng.uniform(0.5, 3.0, n)
     w[:5] = 0.0  # rows weighted to zero: their entries left out, as scipy leaves them
     ref = sp.csc_matrix(sp.diags(w) @ J[:n])
@@ -117,3 +123,15 @@ def test_the_screens_column_norms_are_scipys():
     ref = np.asarray(J.power(2).sum(axis=0)).ravel()
     np.testing.assert_array_equal(_column_square_sums(J), ref)
     np.testing.assert_array_equal(_column_square_sums(J, blocks=7), ref)
+
+
+def test_the_screens_product_with_column_major_columns_is_scipys():
+    from airbearing.analysis.discrepancy.screen import _transposed_product
+
+    rng = np.random.default_rng(11)
+    J, _, _, _ = _jacobian(rng)
+    A = np.asfortranarray(rng.standard_normal((J.shape[0], 7)) * 10.0 ** rng.uniform(-7, 7, 7))
+    ref = np.asarray(J.T @ A)
+    got = _transposed_product(J, A)
+    np.testing.assert_array_equal(got, ref)
+    assert got.flags.c_contiguous == ref.flags.c_contiguous

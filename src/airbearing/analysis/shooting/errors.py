@@ -741,16 +741,29 @@ def _kkt_solve(J, C, n: int, k: int, level: np.ndarray | None = None):
 
 def _weighted_rows(J: sp.csc_matrix, n: int, w: np.ndarray) -> sp.csc_matrix:
     """``diag(w) J[:n]`` as scipy's product makes it (CSC, its row indices sorted, entries
-    whose product is exactly 0 left out), in one copy of the entries kept."""
+    whose product is exactly 0 left out), written a block of columns at a time into one
+    copy of the entries (scipy's product made two, and its CSC copy of them a third)."""
     J = sp.csc_matrix(J)
-    keep = J.indices < n if n < J.shape[0] else slice(None)
-    rows = J.indices[keep]
-    data = J.data[keep] * w[rows]
-    cols = np.repeat(np.arange(J.shape[1]), np.diff(J.indptr))[keep]
-    nz = data != 0
-    rows, data, cols = rows[nz], data[nz], cols[nz]
-    indptr = np.r_[0, np.cumsum(np.bincount(cols, minlength=J.shape[1]))]
-    out = sp.csc_matrix((data, rows, indptr), shape=(n, J.shape[1]))
+    wf = np.zeros(J.shape[0])
+    wf[:n] = w  # (rows from n on weighted 0: left out as the products 0 are)
+    data = np.empty(J.nnz)
+    rows = np.empty(J.nnz, dtype=J.indices.dtype)
+    indptr = np.zeros(J.shape[1] + 1, dtype=J.indptr.dtype)
+    nc = J.shape[1]
+    edges = np.unique(np.r_[np.arange(0, nc, max(1, -(-nc // 16))), nc])
+    m = 0
+    for a, b in zip(edges[:-1], edges[1:], strict=True):
+        p0, p1 = J.indptr[a], J.indptr[b]
+        idx = J.indices[p0:p1]
+        d = J.data[p0:p1] * wf[idx]
+        nz = d != 0
+        kept = int(nz.sum())
+        data[m : m + kept] = d[nz]
+        rows[m : m + kept] = idx[nz]
+        before = np.r_[0, np.cumsum(nz)]  # entries kept before each of the block's
+        indptr[a + 1 : b + 1] = m + before[J.indptr[a + 1 : b + 1] - p0]
+        m += kept
+    out = sp.csc_matrix((data[:m], rows[:m], indptr), shape=(n, nc))
     out.sort_indices()
     return out
 
