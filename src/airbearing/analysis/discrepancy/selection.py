@@ -392,6 +392,18 @@ def _let_go(sel: _Selection) -> None:
     )
 
 
+def honest_first_round(sel: _Selection, honest_of) -> None:
+    """The first round's results replaced by ``honest_of(result)`` (their honest errors,
+    :func:`.horizon._with_honest`) one after the other, each then without its fit's
+    :data:`ROW_ARRAYS`: its honest errors are the last to read them. The round lets go of
+    each as it goes (on an hour of 50 Hz three-axis samples an IPOPT fit's Jacobian is
+    some 90 MB, held through the later candidates' errors, whose columns are made again)."""
+    rows, sel.rounds[0] = list(sel.rounds[0]), ()
+    for i in range(len(rows)):
+        rows[i] = _stripped(honest_of(rows[i]))
+    sel.rounds[0] = tuple(rows)
+
+
 def _own_columns(results: tuple) -> tuple:
     """The first round's step-judged fits with what makes their columns again
     (``extra["J_made"]``: the linearisation's :class:`.screen.Columns` and the fit's map
