@@ -28,6 +28,7 @@ from airbearing.analysis.discrepancy.selection import (
     _add_best,
     _follow_layout,
     _round,
+    honest_first_round,
 )
 from airbearing.analysis.discrepancy.trial import MIN_SIGMAS, CandidateResult
 from airbearing.analysis.discrepancy.words import experiment_for
@@ -82,7 +83,7 @@ def _named(search: _Search, sel: _Selection, prog: _Progress, screen=True, worke
                 eff[c.name] = _as_value(c, sd / errs.crlb[i : i + c.k])
         i += c.k
     if sel.rounds:
-        sel.rounds[0] = tuple(_with_honest(search, r) for r in sel.rounds[0])
+        honest_first_round(sel, lambda r: _with_honest(search, r))
         forget_columns()  # (the step-judged fits' columns made again for their errors)
     return _Named(current, problem, errs, effects, effect_std, white, crlb, eff, within)
 
