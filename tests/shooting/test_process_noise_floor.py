@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 
 import airbearing as ab
+from airbearing.analysis.discrepancy.adequacy import PROCESS_NOISE_KEYS
 from airbearing.analysis.discrepancy.horizon import _floored
 from airbearing.analysis.discrepancy.replay import model_for, prepare, problem_for
 from airbearing.analysis.shooting.penalty import _sigma_of_kappa, piece_durations
@@ -101,6 +102,10 @@ def test_the_search_judges_its_process_noise_against_the_floor(coarse):
     out = _floored(search, SimpleNamespace(lag=False, chosen=[]), problem, fit)
     assert not out.extra["process_noise"]["significant"]
     assert fit.extra["process_noise"]["significant"]  # (the fit itself is not changed)
+    # the JSON says which floor withdrew which statistic
+    pn = out.extra["process_noise"]
+    assert {"floor_kappa", "lr_bottom"} <= set(PROCESS_NOISE_KEYS)
+    assert pn["lr_bottom"] == fit.extra["process_noise"]["lr"] and pn["floor_kappa"] > 0
 
 
 @pytest.mark.slow
