@@ -61,6 +61,7 @@ import numpy as np
 import scipy.sparse as sp
 from numpy.polynomial.legendre import legval
 
+from airbearing.analysis.discrepancy.honest import honest
 from airbearing.analysis.discrepancy.ou_torque import fit_ou
 from airbearing.analysis.shooting.fit import fit_jacobian, gram, solve_gram
 from airbearing.analysis.shooting.sparse import trailing_columns
@@ -570,8 +571,6 @@ def _honest_std(problem, fit, k: int) -> np.ndarray:
     """The fit's honest (sandwich) std of its first ``k`` parameters, the error the caller
     multiplies by the factor (:func:`.honest.honest`; about 0.01-0.02 s of CPU on the
     coverage study's platform fits); NaN where it gives none."""
-    from airbearing.analysis.discrepancy.honest import honest
-
     try:
         return np.asarray(honest(problem, fit, k).std, dtype=float)
     except (np.linalg.LinAlgError, ValueError):
