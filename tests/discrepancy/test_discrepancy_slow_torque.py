@@ -161,16 +161,30 @@ def test_a_torque_wandering_over_the_log_is_covered_with_its_correlation_time():
     # the coverage study's case (d): a 12 s OU torque over 90 s of the gyro platform. With
     # a constant and a drift alone (the code before) seeds 11, 13 and 16 put the per-axis
     # frictions 3.9, 4.8 and 6.6 std off; with the OU every value is within 3 std (a
-    # Gaussian error: 99.7 %), and over 7.5 correlation times the correlation time is
-    # resolved (its interval within a factor 100) and holds the truth
+    # Gaussian error: 99.7 %), and over 7.5 correlation times the correlation time's
+    # two-standard-error interval holds the truth (20 of seeds 0-19) and is resolved
+    # (within a factor 100) in 11 of 20: seeds 11 and 16 (9.5, 15.2), not 13 (1.3-225 s).
+    # With knots 1.24 s apart the likelihood weighs correlation times down to 1.24 s, so
+    # the interval is wider than with knots 5 s apart (16 of 20 resolved), which biased
+    # the estimate short instead (median 8.1 s, now 13.4 s).
+    # The z friction's error is the OU posterior's, not the sandwich times its growth: the
+    # z friction's values spread 5.2e-7 N m s over seeds 0-19 (docs, honest answers: "the
+    # slow torque's errors, counted once"), and an honest error lies within 3 times that
+    # (1.6e-6; 7.5-8.2e-7 on these seeds). Counted twice it was 2.1-3.9e-5, and with knots
+    # 5 s apart seed 16's z friction lay 6.9e-6 off.
     cs = _study()
+    resolved = 0
     for seed in (11, 13, 16):
         r = cs.run_one("platform", "d", seed)
         for name, e in r["effects"].items():
             assert abs(e["value"] - e["truth"]) <= 3 * e["std"], (seed, name, e)
+        z = r["effects"]["viscous_friction[2]"]
+        assert z["std"] <= 3 * 5.2e-7, (seed, z)
         st = r["slow_torque"]
         lo, hi = st["correlation_time_interval_s"]
-        assert hi / lo <= 100 and lo <= cs.OU_TAU_LONG <= hi, (seed, st)
+        assert lo <= cs.OU_TAU_LONG <= hi, (seed, st)
+        resolved += hi / lo <= 100
+    assert resolved >= 2
 
 
 def test_an_ou_part_not_fitted_is_said_in_the_json_and_the_verdict(monkeypatch):

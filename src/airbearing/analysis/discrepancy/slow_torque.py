@@ -38,11 +38,13 @@ linear in the samples), the nuisance is
   an unexplained torque acts (its slow part about the steady axis is then what a named
   effect about that axis cannot be told from, seen or not by the test): the named
   parameters move to their posterior mean with the OU prior (generalised least squares:
-  the bias of the slow torque removed) and their errors grow by the factor their
-  posterior variance has over the fit's, ``sqrt(C_jj / inv(F)_jj)`` with the Fisher
-  information ``F`` of the parameters after the window states are projected off; mean and
-  variance mixed over ``T`` and ``q`` (:func:`.ou_torque.integrated_posterior`: their
-  uncertainty counted, not taken as known at the maximum).
+  the bias of the slow torque removed) and their errors become the posterior ones,
+  ``sqrt(C_jj)``, where wider than the fit's honest (sandwich) error: the factor is their
+  ratio, never the posterior's growth over the Fisher value applied on top of the
+  sandwich, which counted the slow torque twice (in the sandwich's meat and in the
+  information lost to it); mean and variance mixed over ``T`` and ``q``
+  (:func:`.ou_torque.integrated_posterior`: their uncertainty counted, not taken as known
+  at the maximum).
 
 A friction about the steady axis is then known only from how its torque follows the
 rate's small changes (nutation) and from the other axes, which is all a log can say when
@@ -59,6 +61,7 @@ import numpy as np
 import scipy.sparse as sp
 from numpy.polynomial.legendre import legval
 
+from airbearing.analysis.discrepancy.honest import honest
 from airbearing.analysis.discrepancy.ou_torque import fit_ou
 from airbearing.analysis.shooting.fit import fit_jacobian, gram, solve_gram
 from airbearing.analysis.shooting.sparse import trailing_columns
@@ -90,9 +93,11 @@ SLOW_TORQUE_ORDER = 1
 #: its information (the nutation) and is fitted.
 MAX_FACTOR = 1e4
 #: Knots at least per segment (each window cut into ``K`` equal intervals, ``K`` up to
-#: :data:`MAX_PER_WINDOW`): a 30 s segment of four 7.5 s pieces gets knots 1.9 s apart, a
-#: 90 s one 3.75 s, so correlation times of 10-20 s are resolved; pieces of 10 s on long
-#: logs, 10 s. ``K + 1`` forward directions per axis.
+#: :data:`MAX_PER_WINDOW`, as many as keep a segment within :data:`MAX_OU_KNOTS`): a 30 s
+#: segment of four 7.5 s pieces gets knots 0.94 s apart, 90 s of nine 10 s pieces 1.24 s;
+#: pieces of 10 s on long logs, 10 s. ``K + 1`` forward directions per axis. Knots 5 s apart
+#: on the 90 s (16 per segment) left out the faster part of a 12 s torque: the z friction
+#: spread 5.9 times its posterior std on the coverage study's case (d) with a gyro.
 KNOTS_PER_SEGMENT = 16
 MAX_PER_WINDOW = 8
 #: Knots at most per segment for ``K > 1`` (the dense algebra in them is cubic).
@@ -142,7 +147,11 @@ class SlowTorque:
         Change of the named parameters when the nuisance is fitted jointly (the posterior
         mean with the OU prior).
     factor : ndarray (k,)
-        Growth of each named parameter's standard error with the nuisance (>= 1).
+        Growth of each named parameter's honest standard error with the nuisance (>= 1).
+        With the OU part fitted: :attr:`posterior_factor` where it is above 1, so the
+        product is the posterior std alone; else 1 (the sandwich kept: the caller only
+        widens). With the constant and drift alone: the growth of the error in the fit's
+        Fisher information.
     identifiable : bool
         Every factor with the trend free at most :data:`MAX_FACTOR`: no named parameter is
         (nearly) the nuisance itself. A Coulomb friction on a coast-down that never reverses
@@ -155,6 +164,13 @@ class SlowTorque:
     ou_skipped : str or None
         Why the OU part was not fitted (the constant and drift's answer stands), in words;
         None when it was fitted (or not asked: no named parameter identifiable).
+    std : ndarray (k,) or None
+        The named parameters' posterior std with the OU part fitted (mixed over ``T`` and
+        ``q``), in their own units; None without it.
+    posterior_factor : ndarray (k,) or None
+        With the OU part fitted, ``std`` over the fit's honest (sandwich) std: what the
+        honest std is multiplied by to be the posterior's alone (below 1 where the sandwich
+        already held the slow torque, as it does on x and y with a gyro); None without it.
     """
 
     axes: tuple
@@ -170,6 +186,8 @@ class SlowTorque:
     torque_means: np.ndarray | None = None
     ou: object = None
     ou_skipped: str | None = None
+    std: np.ndarray | None = None
+    posterior_factor: np.ndarray | None = None
 
     def correlation_time(self) -> tuple[float, tuple[float, float]] | None:
         """``(T, (low, high))`` s: the estimate and its two-standard-error interval in
@@ -278,7 +296,12 @@ def knot_layout(problem, datas):
     seg = w.segments()
     _, span = _window_times(problem, datas)
     per_seg = np.bincount(seg)
-    K = int(np.clip(np.ceil(KNOTS_PER_SEGMENT / per_seg.max()), 1, MAX_PER_WINDOW))
+    # as fine as the likelihood's dense algebra allows (MAX_OU_KNOTS per segment), at least
+    # KNOTS_PER_SEGMENT: a torque linear between knots 3.75-5 s apart misses the faster part
+    # of a 12 s one, which the posterior then does not know of (module doc)
+    n = int(per_seg.max())
+    K = max(int(np.ceil(KNOTS_PER_SEGMENT / n)), MAX_OU_KNOTS // n)
+    K = int(np.clip(K, 1, MAX_PER_WINDOW))
     K = max(1, min(K, MAX_KNOTS // max(int(per_seg.max()), 1)))
     knots, where = [], np.zeros((w.n, K + 1), dtype=int)
     for g in range(per_seg.size):
@@ -498,11 +521,30 @@ def slow_torque(problem, fit, datas, axes, *, order: int = SLOW_TORQUE_ORDER):
     factor = factor_trend
     if identifiable:
         ou, skipped = _fit_ou(H, k, G, Lt, blocks, rss, taken, fit, problem)
+    post, posterior_factor = None, None
     if ou is not None:
+        # The named error becomes the OU posterior's alone: the factor is its std over the
+        # fit's honest (sandwich) std, which the caller multiplies. The sandwich is the
+        # spread of the fit's own estimate with the slow torque left in the residual (its
+        # meat holds the torque's correlated scores); the posterior is the covariance of
+        # the estimate reported, the posterior mean, with the torque a term of the model
+        # (its residual white at sigma2 by construction: the level of the residual with
+        # every knot free). Before, the factor was the posterior over the white Fisher
+        # value and multiplied the sandwich: the slow torque counted twice, once in the
+        # sandwich's meat and once in the posterior's information lost to it (std 13-550
+        # times the real spread on the coverage study's cases (c) and (d) with a gyro).
+        post = np.sqrt(np.maximum(np.diag(ou.cov_beta)[:k], 0.0))
+        sandwich = _honest_std(problem, fit, k)
         base_var = _inverse_diagonal(info[:k, :k]) / scale[:k] ** 2
         with np.errstate(invalid="ignore", divide="ignore"):
             f_ou = np.sqrt(np.diag(ou.cov_beta)[:k] / ou.sigma2 / base_var)
-        factor = np.where(np.isfinite(f_ou), np.maximum(f_ou, 1.0), factor_trend)
+            f_post = post / sandwich
+        ok = np.isfinite(f_post) & (f_post > 0)
+        f_old = np.where(np.isfinite(f_ou), np.maximum(f_ou, 1.0), factor_trend)
+        posterior_factor = np.where(ok, f_post, f_old)
+        # the caller only widens (judgement._widen): a posterior std below the sandwich
+        # keeps the sandwich until it may narrow too (changes/ougyro.md)
+        factor = np.maximum(posterior_factor, 1.0)
         step = -ou.beta[:k] - coef0 / scale[:k]
         trend_coef = -ou.beta[k : k + n_t]
     means = _means(blocks, Lt, trend_coef, None if ou is None else -ou.x)
@@ -520,7 +562,19 @@ def slow_torque(problem, fit, datas, axes, *, order: int = SLOW_TORQUE_ORDER):
         torque_means=means,
         ou=None if ou is None else ou.ou,
         ou_skipped=skipped,
+        std=post,
+        posterior_factor=posterior_factor,
     )
+
+
+def _honest_std(problem, fit, k: int) -> np.ndarray:
+    """The fit's honest (sandwich) std of its first ``k`` parameters, the error the caller
+    multiplies by the factor (:func:`.honest.honest`; about 0.01-0.02 s of CPU on the
+    coverage study's platform fits); NaN where it gives none."""
+    try:
+        return np.asarray(honest(problem, fit, k).std, dtype=float)
+    except (np.linalg.LinAlgError, ValueError):
+        return np.full(k, np.nan)
 
 
 @dataclass(frozen=True)
