@@ -163,10 +163,12 @@ class ShootingProblem:
         group = np.concatenate([np.full(sizes[o] * L, i) for i, o in enumerate(self.outputs)])
         wrow = np.concatenate([np.repeat(np.arange(L), sizes[o]) for o in self.outputs])
         self.n_win_res = group.size
-        self.group = np.tile(group, nw)  # output group of each residual
+        # one entry per residual row (an hour of 50 Hz three-axis samples: 10^6 rows), so
+        # the narrowest integers that hold them: 8 MB each as int64, kept by every problem
+        self.group = np.tile(group.astype(np.int8), nw)  # output group of each residual
         # each residual's component within its group (a wheel of ``ws``: its own level)
         comp = np.concatenate([np.tile(np.arange(sizes[o]), L) for o in self.outputs])
-        self.component = np.tile(comp, nw)
+        self.component = np.tile(comp.astype(np.int8), nw)
         self.n_meas = self.group.size  # measurement residuals; process-noise rows follow them
         # process noise (:mod:`.process_noise`): whitening of the continuity defects, or None
         self.penalty = None
@@ -186,7 +188,10 @@ class ShootingProblem:
         self.reuse_last = False
         self._last = None  # ((v, p_base, S, data mark), (rm, Jm, c, Jc)) of that answer
         self._fitting = threading.local()  # the fit in progress (_PerThread attributes)
-        self.sample = np.tile(wrow, nw) + np.repeat(np.arange(nw) * L, group.size)
+        itype = np.int32 if nw * L < np.iinfo(np.int32).max else np.int64
+        self.sample = np.tile(wrow.astype(itype), nw) + np.repeat(
+            np.arange(nw, dtype=itype) * itype(L), group.size
+        )  # the log row (window sample) of each residual row
         self.usable = windows.weight.reshape(-1)[self.sample] > 0
         self.n_res = int(self.usable.sum())
         self.primary = self.group == 0
