@@ -275,10 +275,15 @@ class WindowJacobian(_WindowCalls):
         m = block.size1()
         self._colind = np.asarray(block.colind(), dtype=np.int64)
         self.shape = (m * nw, K + (block.size2() - K) * nw)
-        # the CSC index arrays are kept for the slot count of every fit (the same arrays for
-        # each evaluation); a wider Jacobian (the discrepancy screen's, one per round: 0.5 kB
-        # per row of an hour of 50 Hz three-axis samples) makes them per call
-        self._index = self._index_arrays() if K <= KEPT_INDEX_SLOTS else None
+        # the whole Jacobian's CSC index arrays are kept for the slot count of every fit
+        # once an evaluation asks for them (the same arrays for each evaluation); a wider
+        # Jacobian (the discrepancy screen's, one per round: 0.5 kB per row of an hour of 50
+        # Hz three-axis samples) makes them per call. Not made before: the penalised fits
+        # evaluate their used slots' part only (:meth:`_used_part`), and the structure
+        # IPOPT's Hessian is made of (:meth:`pattern`) is made once per solver; kept from
+        # the start, the arrays held 50 MB per Model on an hour of samples that no fit read
+        self._keep_index = K <= KEPT_INDEX_SLOTS
+        self._index = None
 
     def _index_arrays(self, theta=None, windows: bool = True) -> tuple:
         """``(indices, indptr)`` of the Jacobian's CSC matrix, or of its part of the
@@ -336,6 +341,8 @@ class WindowJacobian(_WindowCalls):
         K = self.K
         th = np.arange(K) if theta is None else np.asarray(theta, dtype=int)
         indices, indptr = self._index_arrays(theta, windows)
+        if theta is None and windows and self._keep_index:
+            self._index = (indices, indptr)
         n_cols = th.size + ((self.shape[1] - K) if windows else 0)
         spans = self._spans(th, windows)
         return _Part(spans, self.nw, indices, indptr, (self.shape[0], n_cols))
