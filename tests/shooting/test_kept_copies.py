@@ -73,3 +73,22 @@ def test_a_problems_row_bookkeeping_is_narrow():
     L = windows.length
     assert pb.sample.min() >= 0 and pb.sample.max() < windows.n * L
     assert np.all(np.diff(pb.sample[:: pb.n_win_res]) == L)
+
+
+def test_a_fits_column_norms_are_those_of_the_stacked_matrix_to_the_bit():
+    """A penalised fit's column scaling from the window Jacobian and the weighted defects'
+    Jacobian without stacking them: scipy's norms of the stacked matrix, to the bit."""
+    import scipy.sparse as sp
+
+    from airbearing.analysis.shooting.sparse import stacked_column_norms, vstack_csc
+
+    rng = np.random.default_rng(1)
+    for _ in range(30):
+        m, n = int(rng.integers(1, 400)), int(rng.integers(1, 60))
+        density = rng.uniform(0, 0.9)
+        A = sp.random(m, n, density=density, random_state=rng, format="csc")
+        A = A * rng.lognormal(0, 5)
+        B = sp.random(int(rng.integers(1, 30)), n, density=rng.uniform(0, 0.5),
+                      random_state=rng, format="csc")  # fmt: skip
+        want = np.sqrt(np.asarray(vstack_csc(A, B).power(2).sum(axis=0)).ravel())
+        np.testing.assert_array_equal(stacked_column_norms(A, B), want)

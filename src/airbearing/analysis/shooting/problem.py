@@ -33,6 +33,7 @@ from airbearing.analysis.shooting.functions import (
 )
 from airbearing.analysis.shooting.penalty import penalised_solver
 from airbearing.analysis.shooting.solver import start_meets_objective_stop
+from airbearing.analysis.shooting.sparse import stacked_column_norms
 from airbearing.analysis.shooting.windows import WindowSet  # noqa: F401
 from airbearing.errors import SolverError
 from airbearing.models.model import Model
@@ -647,13 +648,23 @@ class ShootingProblem:
         if self.link and self.penalty is not None:
             # kept for the solver's first iterate (:meth:`_solve`): the same point
             raw = self._start_raw = self._linked_raw(v0, p_base, Sp)
-        r0, J0 = self._eval(1, v0, p_base, Sp, raw)
-        del raw
+        if raw is not None and self.meas_whitening is None:
+            # the stacked residual's column norms from the window Jacobian's own output
+            # (the numbers of the stacked matrix's, which is not made: an hour of samples,
+            # it and its square held some 300 MB beside the Jacobian)
+            rm, Jm, c, Jc = raw
+            r0, J0 = np.r_[rm, self.penalty @ c], None
+        else:
+            r0, J0 = self._eval(1, v0, p_base, Sp, raw)
         if not np.all(np.isfinite(r0)):
             self._start_raw = None
             raise SolverError(f"{name}: the replay is not finite at the starting point")
-        col = np.sqrt(np.asarray(J0.power(2).sum(axis=0)).ravel())
-        del J0  # an hour of samples: the Jacobian is 100s of MB
+        if J0 is None:
+            col = stacked_column_norms(Jm, self.penalty @ Jc)
+            del Jm, Jc
+        else:
+            col = np.sqrt(np.asarray(J0.power(2).sum(axis=0)).ravel())
+        del J0, raw  # an hour of samples: the Jacobian is 100s of MB
         scale = np.where(col > 0, 1.0 / np.maximum(col, 1e-300), 1.0)
         return v0, Sp, lb, ub, scale
 
