@@ -139,3 +139,49 @@ def test_coarser_knots_are_a_subset_whose_hats_make_the_fine_columns_exactly():
     xc = [rng.standard_normal(t.size) for t in tc]
     fine = np.concatenate([np.interp(t, c, x) for t, c, x in zip(tk, tc, xc, strict=True)])
     assert np.allclose(Gc @ np.concatenate(xc), G @ fine, rtol=1e-12, atol=1e-12)
+
+
+def test_the_answer_mixed_over_the_correlation_time_and_level_is_the_posterior_one():
+    # a log of 5 correlation times leaves T and q uncertain: the answer mixed over them by
+    # the Gauss-Hermite rule (7 x 7 nodes, weighted by the restricted likelihood) against
+    # the same mixture on a fine grid of (log T, log q) (flat prior inside the bounds,
+    # 121 x 121 points over the rule's reach, 6 Fisher standard errors either side): the
+    # laws of total expectation and variance on both. Agreement within 3 % of the named
+    # value's error (the rule is exact for a conditional answer polynomial of degree 13 in
+    # the nodes' coordinates; these are smooth, not polynomial)
+    from airbearing.analysis.discrepancy.ou_torque import integrated_posterior
+
+    for seed in (2, 5):
+        H, X, Z, y, tk, s2 = _problem(seed=seed, span=100.0, h=4.0, dt=1.0)
+        k = X.shape[1]
+        Tb, qb = (4.0, 1000.0), (1e-3, 1e3)
+        r = fit_ou(H, k, [tk], s2, T_bounds=Tb, q_bounds=qb)
+        assert r.nodes > 1 and r.cov_beta_at_max is not None
+        z = np.log([r.T, r.q])
+        ll_max, _, F = restricted_loglik(H, k, [tk], s2, r.T, r.q, grad=True, fisher=True)
+        Fi = np.linalg.inv(F)
+        lo, hi = np.log([Tb[0], qb[0]]), np.log([Tb[1], qb[1]])
+        sd = np.minimum(np.sqrt(np.diag(Fi)), (hi - lo) / 4.0)
+        gT = np.linspace(max(lo[0], z[0] - 6 * sd[0]), min(hi[0], z[0] + 6 * sd[0]), 121)
+        gq = np.linspace(max(lo[1], z[1] - 6 * sd[1]), min(hi[1], z[1] + 6 * sd[1]), 121)
+        lls, means, covs = [], [], []
+        for a in gT:
+            for b in gq:
+                lls.append(restricted_loglik(H, k, [tk], s2, np.exp(a), np.exp(b)))
+                beta, cov, _ = posterior(H, k, [tk], s2, np.exp(a), np.exp(b))
+                means.append(beta)
+                covs.append(cov)
+        w = np.exp(np.array(lls) - np.max(lls))
+        w /= w.sum()
+        mean = w @ np.array(means)
+        d = np.array(means) - mean
+        cov = np.einsum("i,ijk->jk", w, np.array(covs)) + (d * w[:, None]).T @ d
+        s = np.sqrt(cov[0, 0])
+        assert abs(r.beta[0] - mean[0]) < 0.03 * s, (seed, r.beta[0], mean[0], s)
+        assert np.sqrt(r.cov_beta[0, 0]) == pytest.approx(s, rel=0.03), seed
+        # the function alone, from the same maximum: the same answer
+        b2, c2, _, _ = integrated_posterior(H, k, [tk], s2, z, Fi, (lo, hi), ll_max)
+        assert np.allclose(b2, r.beta) and np.allclose(c2, r.cov_beta)
+        # and T's uncertainty widens the named value's error here (by the spread of the
+        # conditional means at least)
+        assert r.cov_beta[0, 0] > r.cov_beta_at_max[0, 0]

@@ -6,8 +6,10 @@
   A fit's slot count keeps them once a whole Jacobian is asked for, not before (the fits
   evaluate their used slots' part).
 - A later round's candidates let go of their per-row arrays once the round is decided
-  (``selection.ROW_ARRAYS``), the first round's keep them (their honest errors are taken at
-  the end), and the fit the search goes on from keeps them.
+  (``selection.ROW_ARRAYS``), one that cannot be named as soon as it ends; the first
+  round's keep them until their honest errors are taken at the end (a step-judged one
+  what makes its columns, from when it ends), each then letting go; the fit the search
+  goes on from keeps them.
 """
 
 from __future__ import annotations
@@ -18,6 +20,7 @@ import numpy as np
 import pytest
 from rigs import spinning_seed004_50hz
 
+from airbearing.analysis.discrepancy import selection
 from airbearing.analysis.discrepancy.candidates import candidates_for
 from airbearing.analysis.discrepancy.replay import prepare
 from airbearing.analysis.discrepancy.search import discrepancy
@@ -62,14 +65,39 @@ def test_a_wide_jacobian_makes_its_index_arrays_per_call():
 
 
 @pytest.mark.slow  # one search of two rounds on a 6 s log: about 3 s (16 s compiling)
-def test_a_decided_later_round_lets_go_of_its_per_row_arrays():
+def test_a_decided_later_round_lets_go_of_its_per_row_arrays(monkeypatch):
     tb, log = spinning_seed004_50hz(6.0, {"viscous_friction": 1e-5, "aero_drag": 3e-5})
+    # each round's results as the round hands them over, before it is decided
+    handed = []
+    add_best = selection._add_best
+
+    def spy(sel, results, prog):
+        handed.append(tuple(results))
+        return add_best(sel, results, prog)
+
+    monkeypatch.setattr(selection, "_add_best", spy)
     res = discrepancy(tb, log, max_effects=2, only=ONLY)
+    assert len(handed) >= 2
+    # the first round's step-judged fits keep what makes their columns, not the columns,
+    # and every first-round fit keeps its residual and Jacobian (or what makes it) for its
+    # honest errors
+    first = [c.fit for c in handed[0] if c.fit is not None]
+    assert first and not any("J_blocks" in f.extra for f in first)
+    assert all("r" in f.extra for f in first)
+    assert all(any(k in f.extra for k in ("J", "J_made")) for f in first)
+    # a later round's candidate that cannot be named (e.g. pinned at its bound) let go of
+    # its per-row arrays when it ended, before the round was decided
+    for rnd in handed[1:]:
+        for c in rnd:
+            if c.fit is not None and not c.nameable:
+                assert not any(k in c.fit.extra for k in ROW_ARRAYS), c.label
+    assert any(c.fit is not None and not c.nameable for rnd in handed[1:] for c in rnd)
     assert len(res.rounds) >= 2
-    first = [c.fit for c in res.rounds[0] if c.fit is not None]
-    assert first and all("r" in f.extra for f in first)
-    # each keeps its Jacobian, its blocks, or what makes its blocks again (``J_made``)
-    assert all(any(k in f.extra for k in ("J", "J_blocks", "J_made")) for f in first)
+    # ... which, the last to read them, let them go: the search's first round keeps none
+    # (its values and honest errors stay)
+    done = [c for c in res.rounds[0] if c.fit is not None]
+    assert done and not any(k in c.fit.extra for c in done for k in ROW_ARRAYS)
+    assert all(c.std is not None for c in done if c.value is not None)
     stripped = 0
     for rnd in res.rounds[1:]:
         keeping = [

@@ -128,6 +128,8 @@ def test_honest_errors_split_of_kept_blocks_is_the_whole_jacobians():
         At, An = fit_jacobian_split(fit, 2)
         assert np.array_equal(np.signbit(At), np.signbit(J[:, :2].toarray()))
         np.testing.assert_array_equal(At, J[:, :2].toarray())
+        # (its memory order too: BLAS's products with it round alike only on the same one)
+        assert At.flags.f_contiguous == J[:, :2].toarray().flags.f_contiguous
         _same(An, J[:, 2:])
         np.testing.assert_array_equal(errors._projected_of(fit, 2), errors._projected(J, 2))
         assert fit_jacobian_split(fit, 3) is None

@@ -18,8 +18,10 @@ from airbearing.analysis.shooting.errors import honest_errors, normalised_residu
 from airbearing.analysis.shooting.logs import make_windows, noise_floor, replay_data
 from airbearing.analysis.shooting.process_noise import (
     KAPPA_GRID,
+    above_floor,
     defect_whitening,
     estimate_process_noise,
+    intensity_floor,
     set_intensity,
 )
 from airbearing.io.log import Log
@@ -137,6 +139,11 @@ def test_a_random_walk_torque_makes_the_intensity_significant_and_the_errors_hon
     pn = fit.extra["process_noise"]
     assert pn["significant"] and pn["kappa"] > KAPPA_GRID[-1], pn
     assert np.isfinite(pn["horizon_s"]) and pn["horizon_s"] > 0
+    # a real torque: above what the integrator and the noise over the log explain
+    floor = intensity_floor(prob, fit)
+    assert floor < pn["kappa"]
+    floored = above_floor(prob, fit, 1, (model.p0, S, None, None), floor).extra["process_noise"]
+    assert floored["significant"] and floored["p"] < 1e-16, floored
     he = honest_errors(prob, fit, 1)
     # the errors widen beyond the bound of a correct model, and cover the truth
     assert he.std[0] > 2 * he.crlb[0]

@@ -92,6 +92,8 @@ PROCESS_NOISE_KEYS = (
     "horizon_s",
     "kappa",
     "piece_s",
+    "floor_kappa",
+    "lr_bottom",
 )
 #: Smallest R^2 with which the residual is said to follow the angle, the rate or time.
 FOLLOWS_MIN = 0.05

@@ -4,8 +4,11 @@ Effects are named on short pieces; :func:`_named` estimates the process noise wi
 (:meth:`.search_state._Search.horizon`), tries again at that horizon the candidates the
 short pieces held at a bound or found too weak (:func:`_retry_at_horizon`), revises the
 named effects over whole segments when the horizon doubts them (:func:`_revise_on_horizon`,
-:mod:`.revise`), and gives their values with honest errors (:mod:`.honest`), widened by the
-choice among models the horizon scores alike.
+:mod:`.revise`), refits them at the sub-steps their values need (:func:`_accurate_at_fit`),
+where a significant process noise is estimated again (:func:`_retested`) and judged
+against what the integrator's error and the weights' noise explain (:func:`_floored`), and
+gives their values with honest errors (:mod:`.honest`), widened by the choice among models
+the horizon scores alike.
 """
 
 from __future__ import annotations
@@ -25,13 +28,20 @@ from airbearing.analysis.discrepancy.selection import (
     _add_best,
     _follow_layout,
     _round,
+    honest_first_round,
 )
 from airbearing.analysis.discrepancy.trial import MIN_SIGMAS, CandidateResult
 from airbearing.analysis.discrepancy.words import experiment_for
 from airbearing.analysis.shooting import Fit, ShootingProblem
 from airbearing.analysis.shooting.accuracy import substeps_for
 from airbearing.analysis.shooting.measurement_noise import set_measurement_noise
-from airbearing.analysis.shooting.process_noise import KAPPA_GRID, set_intensity
+from airbearing.analysis.shooting.process_noise import (
+    KAPPA_GRID,
+    above_floor,
+    estimate_process_noise,
+    intensity_floor,
+    set_intensity,
+)
 
 
 def _named(search: _Search, sel: _Selection, prog: _Progress, screen=True, workers=1) -> _Named:
@@ -53,6 +63,7 @@ def _named(search: _Search, sel: _Selection, prog: _Progress, screen=True, worke
         current = _revise_on_horizon(search, sel, current, prog)
     problem = search.final_problem or search.problem(sel.lag)
     problem, current = _accurate_at_fit(search, sel, problem, current)
+    current = _floored(search, sel, problem, current)
     noise_free = search.floor.measured < search.floor.resolution
     errs = honest(problem, current, len(current.theta), noise_free=noise_free)
     effects, effect_std, white, crlb, eff, within = {}, {}, {}, {}, {}, {}
@@ -72,7 +83,7 @@ def _named(search: _Search, sel: _Selection, prog: _Progress, screen=True, worke
                 eff[c.name] = _as_value(c, sd / errs.crlb[i : i + c.k])
         i += c.k
     if sel.rounds:
-        sel.rounds[0] = tuple(_with_honest(search, r) for r in sel.rounds[0])
+        honest_first_round(sel, lambda r: _with_honest(search, r))
         forget_columns()  # (the step-judged fits' columns made again for their errors)
     return _Named(current, problem, errs, effects, effect_std, white, crlb, eff, within)
 
@@ -108,7 +119,48 @@ def _accurate_at_fit(search: _Search, sel: _Selection, problem: ShootingProblem,
         delta0=current.delta,
         name=f"the named effects at {need} steps per sample",
     )
-    return accurate, replace(refit, extra={**current.extra, **refit.extra})
+    refit = replace(refit, extra={**current.extra, **refit.extra})
+    return accurate, _retested(search, sel, accurate, refit)
+
+
+def _retested(search: _Search, sel: _Selection, accurate: ShootingProblem, refit: Fit) -> Fit:
+    """``refit`` (made on the ``accurate`` problem at the horizon's intensity) at the most
+    likely intensity at or below that one on ``accurate``, when the horizon found it
+    significant: the intensity was estimated at the nominal model's sub-steps, where the
+    fitted effects' integration error (a Coulomb friction's sign turning within a sub-step)
+    makes defects no torque made. Seed 000's tabletop coasting down from 2 rad/s for 5 min
+    with an exact attitude, drag and Coulomb friction named at the truth: ``kappa`` 100 and
+    a likelihood ratio of 1.0e5 at 2 sub-steps, the bottom of the grid and 0 at 32.
+    ``refit`` itself otherwise (the horizon's test not significant, or unlinked windows);
+    the measurement noise model is the horizon's, and ``gap_short`` stays the horizon's
+    (the shortest pieces' gap, :meth:`.search_state._Search._shorter`)."""
+    pn = refit.extra.get("process_noise") or {}
+    if not (accurate.windows.linked and pn.get("significant")):
+        return refit
+    top = float(pn["kappa"])
+    grid = [top, *(a for a in KAPPA_GRID if a < top)]
+    again = estimate_process_noise(
+        accurate, accurate.model.p0.copy(), **search.free(sel.lag, sel.chosen, refit.theta),
+        delta0=refit.delta, grid=grid, start=refit, measurement=False,
+        name="process noise of the logs at the named effects' sub-steps",
+    )  # fmt: skip
+    again.extra["process_noise"]["gap_short"] = pn.get("gap_short")
+    return replace(again, extra={**refit.extra, **again.extra})
+
+
+def _floored(search: _Search, sel: _Selection, problem: ShootingProblem, current: Fit) -> Fit:
+    """``current`` with a significant process noise judged again against the intensity
+    the replay's integration error and the weights' noise explain
+    (:func:`.process_noise.intensity_floor`, :func:`.process_noise.above_floor`): neither
+    is a torque the named effects miss. ``current`` unchanged when its process noise is
+    not significant (a floor only lowers the statistic) or the windows are not linked."""
+    pn = current.extra.get("process_noise") or {}
+    if not (problem.windows.linked and pn.get("significant")):
+        return current
+    floor = intensity_floor(problem, current)
+    free = search.free(sel.lag, sel.chosen, current.theta)
+    bounds = (problem.model.p0.copy(), free["S"], free["lower"], free["upper"])
+    return above_floor(problem, current, len(current.theta), bounds, floor)
 
 
 def _as_value(cand, x: np.ndarray):

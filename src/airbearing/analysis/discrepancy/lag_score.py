@@ -50,6 +50,7 @@ import scipy.sparse as sp
 from scipy.sparse.linalg import splu
 
 from airbearing.analysis.discrepancy.candidates import smoothed
+from airbearing.analysis.shooting.sparse import gram
 
 __all__ = ["LagBound", "lag_regressor", "linked_lag_bound"]
 
@@ -119,7 +120,7 @@ class _Projection:
 
     def __init__(self, A: sp.csc_matrix, keep: np.ndarray) -> None:
         self.A = sp.csc_matrix(A[keep])
-        G = sp.csc_matrix(self.A.T @ self.A)
+        G = sp.csc_matrix(gram(self.A))  # (scipy's sums, without its CSR copy of A)
         c = np.sqrt(np.maximum(G.diagonal(), 0.0))
         self.c = np.where(c > 0, c, 1.0)
         Dc = sp.diags(1.0 / self.c)
@@ -128,6 +129,14 @@ class _Projection:
     def coef(self, v: np.ndarray) -> np.ndarray:
         """The least-squares coefficients of ``v`` (kept rows) in ``A``."""
         return self.lu.solve((self.A.T @ v) / self.c) / self.c
+
+
+def _nonempty_columns(J: sp.csc_matrix, cols: np.ndarray) -> sp.csc_matrix:
+    """``J[:, cols]`` for the columns ``cols`` (ascending) holding every entry of ``J``,
+    sharing ``J``'s arrays: the columns left out are empty, so the others' entries are
+    ``J``'s in their order (a copy of them was about the size of the fit's Jacobian)."""
+    indptr = np.r_[J.indptr[cols], J.indptr[-1]].astype(J.indptr.dtype)
+    return sp.csc_matrix((J.data, J.indices, indptr), shape=(J.shape[0], cols.size))
 
 
 def linked_lag_bound(problem, current, datas, tau_max: float) -> LagBound | None:
@@ -160,7 +169,7 @@ def linked_lag_bound(problem, current, datas, tau_max: float) -> LagBound | None
     P = problem.meas_whitening
     xs = np.r_[x if P is None else P @ x, np.zeros(r.size - n)]  # no defect moves with tau
     nonempty = np.diff(J.indptr) > 0  # held states: zero columns, left out
-    A = J if nonempty.all() else J[:, np.flatnonzero(nonempty)]  # (J itself: no copy)
+    A = J if nonempty.all() else _nonempty_columns(J, np.flatnonzero(nonempty))
     dt = float(np.median(problem.windows.dt[problem.windows.dt > 0]))
     s2 = current.rss / max(current.n_res - current.n_free, 1)
     r_top = min(max(1, math.ceil(3 * tau_max / dt)), problem.windows.length)

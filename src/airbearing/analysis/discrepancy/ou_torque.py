@@ -20,6 +20,16 @@ gradient and Fisher information in ``(log T, log q)`` are exact (the standard RE
 expressions, ``1/2 tr(M Q_i M Q_j)`` with ``M = Z^T P Z``, in the knots' space). At the
 maximum, the named parameters' estimate and covariance are the posterior ones (generalised
 least squares with the OU prior): the errors marginalised over the slow torque.
+
+The correlation time and level are not known, only estimated, so the named parameters'
+answer is the posterior mixed over them (:func:`integrated_posterior`): a Gauss-Hermite
+rule in ``(log T, log q)`` about the maximum, scaled by the inverse Fisher information,
+each node weighted by the restricted likelihood there over the Gaussian the rule assumes
+(flat prior in ``log T`` and ``log q`` between the search bounds; the quadrature of the
+"grid" strategy of Rue, Martino & Chopin 2009, J. R. Stat. Soc. B 71, 319, sec. 3.1), and
+the mixture's mean and covariance by the laws of total expectation and variance: the
+weighted mean of the conditional means, and the weighted mean of the conditional
+covariances plus the covariance of the conditional means.
 """
 
 from __future__ import annotations
@@ -29,11 +39,14 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.linalg as sla
 import scipy.sparse as sp
+from numpy.polynomial.hermite_e import hermegauss
 from scipy.optimize import minimize_scalar
+from scipy.special import logsumexp
 
 __all__ = [
     "OUFit",
     "fit_ou",
+    "integrated_posterior",
     "ou_covariance",
     "ou_precision",
     "posterior",
@@ -203,9 +216,15 @@ class OUFit:
     beta : ndarray (k,)
         Posterior mean of the fixed effects.
     cov_beta : ndarray (k, k)
-        Their posterior covariance (the marginal one: the OU integrated out).
+        Their posterior covariance (the marginal one: the OU integrated out, and its
+        correlation time and level too when ``nodes`` > 1).
     x : ndarray (m,)
         Posterior mean of the knot values, N m.
+    cov_beta_at_max : ndarray (k, k) or None
+        The posterior covariance at the maximum alone (``T`` and ``q`` taken as known).
+    nodes : int
+        Quadrature nodes in ``(log T, log q)`` that carry weight (1: at the maximum alone,
+        as when the level is at its lower bound or the Fisher information is not finite).
     """
 
     T: float
@@ -217,6 +236,13 @@ class OUFit:
     beta: np.ndarray
     cov_beta: np.ndarray
     x: np.ndarray
+    cov_beta_at_max: np.ndarray | None = None
+    nodes: int = 1
+
+
+#: Gauss-Hermite nodes per dimension of ``(log T, log q)`` (:func:`integrated_posterior`):
+#: exact for a conditional answer polynomial of degree 13 in them.
+GH_NODES = 7
 
 
 def fit_ou(H: np.ndarray, k: int, times, sigma2: float, *, T_bounds, q_bounds) -> OUFit:
@@ -263,6 +289,9 @@ def fit_ou(H: np.ndarray, k: int, times, sigma2: float, *, T_bounds, q_bounds) -
     log_T_std = float(np.sqrt(Fi[0, 0])) if not at_lower and Fi[0, 0] > 0 else np.inf
     ll0 = restricted_loglik(H, k, blocks, sigma2, T, q_bounds[0] * 1e-3)
     beta, cov, x = posterior(H, k, blocks, sigma2, T, q)
+    cov_at_max, nodes = cov, 1
+    if not at_lower and np.all(np.isfinite(Fi)):
+        beta, cov, x, nodes = integrated_posterior(H, k, blocks, sigma2, z, Fi, (lo, hi), ll)
     return OUFit(
         T=float(T),
         q=float(q),
@@ -273,7 +302,80 @@ def fit_ou(H: np.ndarray, k: int, times, sigma2: float, *, T_bounds, q_bounds) -
         beta=beta,
         cov_beta=cov,
         x=x,
+        cov_beta_at_max=cov_at_max,
+        nodes=int(nodes),
     )
+
+
+def integrated_posterior(H, k, times, sigma2, z, cov_z, bounds, ll_max, *, n=GH_NODES):
+    """The fixed effects' and knots' posterior mixed over ``z = (log T, log q)``.
+
+    Parameters
+    ----------
+    H, k, times, sigma2
+        As :func:`posterior`.
+    z : ndarray (2,)
+        The restricted likelihood's maximum in ``(log T, log q)`` (T in s, q in N m).
+    cov_z : ndarray (2, 2)
+        Its inverse Fisher information there: the scale of the rule.
+    bounds : (ndarray (2,), ndarray (2,))
+        Lower and upper bounds of ``z`` (the search's): the prior's support, flat inside.
+    ll_max : float
+        The restricted log-likelihood at ``z``.
+    n : int
+        Nodes per dimension.
+
+    Returns
+    -------
+    (ndarray (k,), ndarray (k, k), ndarray (m,), int)
+        Mean and covariance of the fixed effects, mean of the knots (N m), and the number
+        of nodes that carry weight. Gauss-Hermite in ``z = z_max + L xi`` (``L L' =
+        cov_z``, each coordinate's spread at most a quarter of its bounds' range), each
+        node's weight times ``exp(ll(z) - ll_max + |xi|^2 / 2)``, the
+        restricted likelihood over the Gaussian the rule integrates against (module doc);
+        nodes outside ``bounds`` or where the fixed effects are not identified carry none.
+    """
+    blocks = times if isinstance(times, _Blocks) else _Blocks(tuple(map(np.asarray, times)))
+    xi, w = hermegauss(n)
+    logw = np.log(w / np.sqrt(2.0 * np.pi))
+    ev, V = np.linalg.eigh(0.5 * (cov_z + cov_z.T))
+    L = V * np.sqrt(np.maximum(ev, 0.0))
+    lo, hi = bounds
+    # a Fisher scale wider than the bounds (a correlation time the logs do not resolve:
+    # log T's std in the hundreds) would leave every node but the maximum outside them; the
+    # rule's Gaussian is only where the likelihood is sampled (the weights correct for it),
+    # so each coordinate's spread is capped at a quarter of its bounds' range: the outer
+    # nodes (3.75 std) then reach across the whole range from either bound
+    sd = np.sqrt(np.sum(L**2, axis=1))
+    cap = (np.asarray(hi) - np.asarray(lo)) / 4.0
+    L = L * np.minimum(1.0, cap / np.where(sd > 0, sd, 1.0))[:, None]
+    logs, answers = [], []
+    for i in range(n):
+        for j in range(n):
+            e = np.array([xi[i], xi[j]])
+            zn = np.asarray(z, dtype=float) + L @ e
+            if np.any(zn < lo) or np.any(zn > hi):
+                continue
+            T, q = np.exp(zn)
+            ll = restricted_loglik(H, k, blocks, sigma2, T, q)
+            if not np.isfinite(ll):
+                continue
+            try:
+                answers.append(posterior(H, k, blocks, sigma2, T, q))
+            except np.linalg.LinAlgError:
+                continue
+            logs.append(logw[i] + logw[j] + (ll - ll_max) + 0.5 * float(e @ e))
+    if not answers:  # pragma: no cover - the maximum itself is a node (n odd)
+        beta, cov, x = posterior(H, k, blocks, sigma2, *np.exp(z))
+        return beta, cov, x, 1
+    wt = np.exp(np.asarray(logs) - logsumexp(logs))
+    B = np.array([a[0] for a in answers])
+    X = np.array([a[2] for a in answers])
+    beta = wt @ B
+    dB = B - beta
+    cov = np.einsum("i,ijk->jk", wt, np.array([a[1] for a in answers]))
+    cov = cov + (dB * wt[:, None]).T @ dB  # the law of total variance
+    return beta, 0.5 * (cov + cov.T), wt @ X, int(np.sum(wt > 1e-12))
 
 
 def posterior(H: np.ndarray, k: int, times, sigma2: float, T: float, q: float):

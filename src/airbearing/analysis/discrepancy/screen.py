@@ -247,11 +247,11 @@ class Linearisation:
         with self._lock:
             if self._gram is None:
                 Jd = sp.csc_matrix(self.Jd)
-                cd = np.sqrt(np.asarray(Jd.power(2).sum(axis=0)).ravel())
+                cd = np.sqrt(_column_square_sums(Jd))
                 cd = np.where(cd > 0, cd, 1.0)
                 Dinv = sp.diags(1.0 / cd)
                 Fdd = sp.csc_matrix(Dinv @ gram(Jd) @ Dinv)
-                AtJd = np.asarray(Jd.T @ self.A).T / cd  # (m, n_delta nw), scaled
+                AtJd = _transposed_product(Jd, self.A).T / cd  # (m, n_delta nw), scaled
                 AA = self.A.T @ self.A
                 M = AtJd @ solve_gram(Fdd, AtJd.T) if Fdd.shape[0] else np.zeros_like(AA)
                 self._gram = (AA, M)
@@ -682,6 +682,35 @@ def one_value_linearisation(problem, current, one, cand, S_sel) -> Linearisation
         problem, base, S_sel, list(dict.fromkeys(idx)), cand0=th_c0, null=current,
         where="the one-value form's IPOPT fit (its axes tied)",
     )  # fmt: skip
+
+
+def _transposed_product(J: sp.csc_matrix, A: np.ndarray, width: int = 2) -> np.ndarray:
+    """``np.asarray(J.T @ A)`` for a dense ``A`` of ``J``'s rows, ``width`` of ``A``'s
+    columns at a time: scipy's product makes a row-major copy of a column-major ``A``
+    whole (the screen's parameter columns of a later round: some 120 MB on an hour of
+    50 Hz three-axis samples), of a block only this way. Each entry is scipy's sum over
+    the same entries in the same order (its product of several columns at once takes each
+    column's sums alone)."""
+    if A.flags.c_contiguous or A.shape[1] <= width:
+        return np.asarray(J.T @ A)
+    Jt = J.T
+    return np.hstack([np.asarray(Jt @ A[:, a : a + width]) for a in range(0, A.shape[1], width)])
+
+
+def _column_square_sums(J: sp.csc_matrix, blocks: int = 16) -> np.ndarray:
+    """``J.power(2).sum(axis=0)`` of a CSC ``J`` (each column's sum of its own entries, in
+    their order: the same numbers), a block of columns at a time instead of a squared copy
+    of the whole matrix (some 100 MB for the window states' columns on an hour of 50 Hz
+    three-axis samples)."""
+    n = J.shape[1]
+    edges = np.unique(np.r_[np.arange(0, n, max(1, -(-n // blocks))), n])
+    return np.concatenate(
+        [np.zeros(0)]
+        + [
+            np.asarray(J[:, a:b].power(2).sum(axis=0)).ravel()
+            for a, b in zip(edges[:-1], edges[1:], strict=True)
+        ]
+    )
 
 
 def _stacked_order(k_sel: int, sizes: list) -> str:

@@ -154,12 +154,24 @@ def _round(search, sel: _Selection, remaining, screen, workers, prog) -> list:
     # the one-value forms' IPOPT fits: a per-axis form's step is also tried from its own
     ones: dict = {}
 
+    # a later round's fits keep their row arrays only until the round is decided (_let_go);
+    # one that cannot be named cannot be the pick: it lets go of them when it ends. A first
+    # round's step-judged fit keeps what makes its columns again from when it ends, not from
+    # the round's end (_own_columns): a per-axis form judged from its one-value form's fit
+    # held that point's window-state columns (some 40 MB each on an hour of 50 Hz
+    # three-axis samples) through the rest of the round
+    later = bool(sel.rounds)
+
     def run(c, i):
         one = ones.get(c.name) if c.per_axis else None
         res = None
         try:
             res = _try(search, c, chosen, theta, current, lag, sel.ln_n, sel.starts, before, lin,
                        lambda: before_it.best(i), one)  # fmt: skip
+            if later and not res.nameable and not _serves_per_axis(res, remaining):
+                res = _stripped(res)
+            elif not later:
+                res = _own_columns((res,))[0]
             return res
         finally:  # (also when it raised: the candidates after it must not wait for ever)
             before_it.finished(i, res)
@@ -202,6 +214,7 @@ def _round(search, sel: _Selection, remaining, screen, workers, prog) -> list:
     per_axis = [c for c in remaining if c.per_axis and c.name in seen]
     prog.done += sum(1 for c in remaining if c.per_axis and c.name not in seen)
     results += fit_all(per_axis)
+    ones.clear()  # (the one-value fits served their per-axis forms)
     # IPOPT where it can matter: a candidate judged on its Gauss-Newton step that could be
     # named and whose BIC comes within MATTER_BIC of the best is fitted by IPOPT
     while True:  # each pass refits at least one step, which is then an IPOPT fit
@@ -224,8 +237,29 @@ def _round(search, sel: _Selection, remaining, screen, workers, prog) -> list:
                               sel.ln_n, sel.starts, before)  # fmt: skip
             prog(f"{results[i].label}: fitted by IPOPT, {results[i].status}")
     results = _at_best_gap(results)
+    if later:
+        results = [r if r.nameable else _stripped(r) for r in results]
     results.sort(key=lambda c: (not np.isfinite(c.delta_bic), c.delta_bic))
     return results
+
+
+def _serves_per_axis(res, remaining) -> bool:
+    """Whether ``res``, a one-value form's result, may serve its per-axis form's step
+    (:func:`.screen.one_value_linearisation`, which takes only a fit that keeps its
+    Jacobian): a per-axis form of its name is to be tried this round (:func:`_round`:
+    when the one value is significant, or the effect is signed)."""
+    c = res.candidate
+    if c is None or c.per_axis:
+        return False
+    return any(d.per_axis and d.name == c.name and (res.significant or d.signed) for d in remaining)
+
+
+def _stripped(res):
+    """``res`` with its fit's :data:`ROW_ARRAYS` let go (a later round's result that cannot
+    be the pick: the report and the JSON read none of them)."""
+    if res.fit is None or not any(k in res.fit.extra for k in ROW_ARRAYS):
+        return res
+    return replace(res, fit=_without(res.fit, ROW_ARRAYS))
 
 
 class _Before:
@@ -356,6 +390,18 @@ def _let_go(sel: _Selection) -> None:
         r if r.fit is None or r.fit is sel.current else replace(r, fit=_without(r.fit, ROW_ARRAYS))
         for r in sel.rounds[-1]
     )
+
+
+def honest_first_round(sel: _Selection, honest_of) -> None:
+    """The first round's results replaced by ``honest_of(result)`` (their honest errors,
+    :func:`.horizon._with_honest`) one after the other, each then without its fit's
+    :data:`ROW_ARRAYS`: its honest errors are the last to read them. The round lets go of
+    each as it goes (on an hour of 50 Hz three-axis samples an IPOPT fit's Jacobian is
+    some 90 MB, held through the later candidates' errors, whose columns are made again)."""
+    rows, sel.rounds[0] = list(sel.rounds[0]), ()
+    for i in range(len(rows)):
+        rows[i] = _stripped(honest_of(rows[i]))
+    sel.rounds[0] = tuple(rows)
 
 
 def _own_columns(results: tuple) -> tuple:

@@ -40,7 +40,9 @@ linear in the samples), the nuisance is
   parameters move to their posterior mean with the OU prior (generalised least squares:
   the bias of the slow torque removed) and their errors grow by the factor their
   posterior variance has over the fit's, ``sqrt(C_jj / inv(F)_jj)`` with the Fisher
-  information ``F`` of the parameters after the window states are projected off.
+  information ``F`` of the parameters after the window states are projected off; mean and
+  variance mixed over ``T`` and ``q`` (:func:`.ou_torque.integrated_posterior`: their
+  uncertainty counted, not taken as known at the maximum).
 
 A friction about the steady axis is then known only from how its torque follows the
 rate's small changes (nutation) and from the other axes, which is all a log can say when
@@ -51,8 +53,6 @@ absent.
 
 from __future__ import annotations
 
-import copy
-import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -61,7 +61,6 @@ from numpy.polynomial.legendre import legval
 
 from airbearing.analysis.discrepancy.ou_torque import fit_ou
 from airbearing.analysis.shooting.fit import fit_jacobian, gram, solve_gram
-from airbearing.analysis.shooting.problem_functions import residual_function
 from airbearing.analysis.shooting.sparse import trailing_columns
 
 __all__ = [
@@ -109,6 +108,12 @@ RESOLVED_RATIO = 100.0
 MAX_OU_KNOTS = 100
 #: Upper bound of the correlation time, in spans of the longest segment.
 OU_T_MAX_SPANS = 10.0
+#: Why the OU part is not fitted when the named effects' posterior with the knots is not
+#: positive definite in floating point (nearly confounded frictions on a narrow speed range).
+NOT_POSITIVE_DEFINITE = (
+    "the named effects are too nearly confounded with one another (their posterior with "
+    "the knots is not positive definite in floating point)"
+)
 AXES = "xyz"
 
 
@@ -147,6 +152,9 @@ class SlowTorque:
         The fitted mean torque (N m) per axis and segment over its knots.
     ou : OUFit or None
         The OU part (:class:`.ou_torque.OUFit`): correlation time and level.
+    ou_skipped : str or None
+        Why the OU part was not fitted (the constant and drift's answer stands), in words;
+        None when it was fitted (or not asked: no named parameter identifiable).
     """
 
     axes: tuple
@@ -161,6 +169,7 @@ class SlowTorque:
     identifiable: bool = True
     torque_means: np.ndarray | None = None
     ou: object = None
+    ou_skipped: str | None = None
 
     def correlation_time(self) -> tuple[float, tuple[float, float]] | None:
         """``(T, (low, high))`` s: the estimate and its two-standard-error interval in
@@ -185,6 +194,8 @@ class SlowTorque:
             None if ct is None or not np.all(np.isfinite(ct[1])) else [float(x) for x in ct[1]]
         )
         out["level"] = None if ct is None else float(self.ou.q)
+        out["ou"] = "not fitted" if self.ou_skipped is not None else "fitted"
+        out["ou_reason"] = self.ou_skipped
         return out
 
     def means(self) -> np.ndarray:
@@ -198,7 +209,16 @@ class SlowTorque:
         ax = ", ".join(self.axes)
         trend = "a constant" + (" and a linear drift" if self.order >= 1 else "")
         ct = self.correlation_time()
-        if ct is None:
+        skipped = ""
+        if self.ou_skipped is not None:  # said: the errors hold no faster variation then
+            over = ""
+            form = f"{trend} per segment"
+            skipped = (
+                f"; the Ornstein-Uhlenbeck part of the slow torque is not fitted "
+                f"({self.ou_skipped}), so the value and error hold only its constant and "
+                "drift, none of its faster variation"
+            )
+        elif ct is None:
             over = ""
             form = f"{trend} per segment (no faster variation found)"
         else:
@@ -216,12 +236,12 @@ class SlowTorque:
         if self.significant:
             return (
                 f"a slow torque about {ax}{over} is significant (F test p {self.p:.2g}; "
-                f"{form}, mean {mean} N m): the value and error are with it fitted"
+                f"{form}, mean {mean} N m): the value and error are with it fitted{skipped}"
             )
         return (
             f"an unexplained torque is significant, so its slow part about {ax}{over} "
             f"({form}, mean {mean} N m; F test p {self.p:.2g} alone) is fitted with the "
-            "named effects: the value and error are with it"
+            f"named effects: the value and error are with it{skipped}"
         )
 
 
@@ -368,32 +388,10 @@ def _scatter(D, entries, size, m):
 
 def _forward(problem, fit, bases):
     """The residual's directional derivatives along the input samples ``bases`` (each
-    ``windows.u``-shaped), exact: CasADi's forward mode through the problem's residual
-    function built without the compiled C step (whose library carries derivatives in the
-    states and parameters only); ``(dR, dC)``, the raw measurement rows and continuity
-    defects (None without them), before the problem's whitening and weighting."""
-    w = problem.windows
-    zero = _with_inputs(problem, w, np.zeros_like(w.u))._data
-    seeds = np.column_stack([_with_inputs(problem, w, U)._data - zero for U in bases])
-    m = seeds.shape[1]
-    symbolic = copy.copy(problem)
-    symbolic.jit = False
-    v, Sp = problem._v(fit.delta, None)
-    fr = residual_function(*symbolic._key(Sp.shape[1]), problem.link)
-    p = np.asarray(fit.p, dtype=float)
-    # the nominal outputs are inputs of the forward function that it does not read (the
-    # same derivatives to the bit with zeros there): no nominal evaluation
-    nominal = [np.zeros(fr.size_out(i)) for i in range(fr.n_out())]
-    out = fr.forward(m)(
-        v, p, Sp, problem._data, *nominal,
-        np.zeros((v.size, m)), np.zeros((p.size, m)), np.zeros((Sp.shape[0], Sp.shape[1] * m)),
-        seeds,
-    )  # fmt: skip
-    out = list(out) if isinstance(out, (list, tuple)) else [out]
-    dR = np.asarray(out[0], dtype=float)
-    if not (problem.link and problem.penalty is not None):  # as ShootingProblem.residual
-        return dR, None
-    return dR, np.asarray(out[1], dtype=float)
+    ``windows.u``-shaped), exact, at the fit: ``(dR, dC)``, the raw measurement rows and
+    continuity defects (None without them), before the problem's whitening and weighting
+    (:meth:`.ShootingProblem.input_derivatives`)."""
+    return problem.input_derivatives(fit.delta, fit.p, bases)
 
 
 def input_columns(problem, fit, bases) -> np.ndarray:
@@ -405,15 +403,6 @@ def input_columns(problem, fit, bases) -> np.ndarray:
         return dR
     P = problem.meas_whitening
     return np.vstack([dR if P is None else P @ dR, problem.penalty @ dC])
-
-
-def _with_inputs(problem, windows, U):
-    """A shallow copy of ``problem`` whose windows hold the inputs ``U``."""
-    p2 = copy.copy(problem)
-    p2.windows = dataclasses.replace(windows, u=U)
-    p2._data = p2._data_vector()
-    p2._last = None
-    return p2
 
 
 def trend_values(blocks, order: int) -> np.ndarray:
@@ -504,11 +493,11 @@ def slow_torque(problem, fit, datas, axes, *, order: int = SLOW_TORQUE_ORDER):
     factor_trend = np.where(np.isfinite(factor_trend), np.maximum(factor_trend, 1.0), 1.0)
     identifiable = bool(np.max(factor_trend) <= MAX_FACTOR)
     trend_coef = coef[k:] / scale[k:]
-    ou = None
+    ou, skipped = None, None
     step = (coef[:k] - coef0) / scale[:k]
     factor = factor_trend
     if identifiable:
-        ou = _fit_ou(H, k, G, Lt, blocks, rss, taken, fit, problem)
+        ou, skipped = _fit_ou(H, k, G, Lt, blocks, rss, taken, fit, problem)
     if ou is not None:
         base_var = _inverse_diagonal(info[:k, :k]) / scale[:k] ** 2
         with np.errstate(invalid="ignore", divide="ignore"):
@@ -530,6 +519,7 @@ def slow_torque(problem, fit, datas, axes, *, order: int = SLOW_TORQUE_ORDER):
         identifiable=identifiable,
         torque_means=means,
         ou=None if ou is None else ou.ou,
+        ou_skipped=skipped,
     )
 
 
@@ -546,7 +536,10 @@ def _fit_ou(H, k, G, Lt, blocks, rss, taken, fit, problem):
     """The OU part by restricted maximum likelihood (:func:`.ou_torque.fit_ou`) on the Gram
     matrix of ``[J_theta, G Lt, G, r]`` (the named parameters and the trend fixed, the knots
     the OU's), columns scaled to unit norm; the white part's variance is that of the
-    residual with every knot free (never below 1, as the F test's)."""
+    residual with every knot free (never below 1, as the F test's).
+
+    Returns ``(answer, None)``, or ``(None, why)`` when it cannot be fitted (``why`` in
+    words, for the JSON and the verdict: the constant and drift's answer then stands)."""
     m, n_t = G.shape[1], Lt.shape[1]
     E = np.zeros((k + m + 1, k + n_t + m + 1))
     E[:k, :k] = np.eye(k)
@@ -558,8 +551,10 @@ def _fit_ou(H, k, G, Lt, blocks, rss, taken, fit, problem):
     fixed = Hf[:kf, :kf]
     sc = np.sqrt(np.diag(fixed))
     d = np.sqrt(np.maximum(np.diag(Hf)[kf:-1], 0.0))
-    if np.any(sc == 0) or not np.any(d > 0):
-        return None
+    if np.any(sc == 0):
+        return None, "a named effect or the trend has no column left beside the window states"
+    if not np.any(d > 0):
+        return None, "the knots' torque leaves no trace in the residual"
     # the white part's variance: the residual with the trend and every knot free
     Zall = Hf[:-1, :-1]
     S = np.r_[1.0 / sc, 1.0 / np.where(d > 0, d, 1.0)]
@@ -567,7 +562,7 @@ def _fit_ou(H, k, G, Lt, blocks, rss, taken, fit, problem):
     sol = _solve_psd(Zall * S[:, None] * S[None, :], bz)
     dof_all = fit.n_res - fit.n_free - m  # the trend lies in the knots' span
     if dof_all <= 0:
-        return None
+        return None, "fewer residuals than the named effects, window states and knots"
     sigma2 = max((rss - float(bz @ sol)) / dof_all, 1.0)
     # the fixed effects' columns of unit norm, the knots in N m
     u = np.r_[S[:kf], np.ones(m + 1)]
@@ -585,10 +580,10 @@ def _fit_ou(H, k, G, Lt, blocks, rss, taken, fit, problem):
         # the named effects and the trend nearly confounded with one another (frictions on
         # a narrow speed range): their posterior with the knots is not positive definite in
         # floating point, and the constant and drift's answer (the F test's) stands
-        return None
+        return None, NOT_POSITIVE_DEFINITE
     beta = res.beta * S[:kf]
     cov = res.cov_beta * S[:kf, None] * S[None, :kf]
-    return _OUAnswer(ou=res, beta=beta, cov_beta=cov, x=res.x, sigma2=sigma2)
+    return _OUAnswer(ou=res, beta=beta, cov_beta=cov, x=res.x, sigma2=sigma2), None
 
 
 def _means(blocks, Lt, trend, x):

@@ -59,6 +59,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
+from scipy.sparse import _sparsetools
 from scipy.sparse.linalg import splu
 
 from airbearing.analysis.shooting.autoregressive import AR
@@ -71,7 +72,7 @@ from airbearing.analysis.shooting.fit import (
 )
 from airbearing.analysis.shooting.functions import _problem_functions
 from airbearing.analysis.shooting.penalty import KAPPA_GRID, piece_durations
-from airbearing.analysis.shooting.sparse import trailing_columns
+from airbearing.analysis.shooting.sparse import gram_rows, trailing_columns
 
 __all__ = [
     "RESOLUTION",
@@ -386,7 +387,7 @@ def honest_errors(problem, fit, k: int) -> HonestErrors:
     n_meas = problem.n_meas
     pn = fit.extra.get("process_noise") or {}
     lin = _linearised(problem, fit, k)
-    con = None if lin is None else _kkt(*lin, k)
+    con = None if lin is None else _kkt_solve(*lin, k)
     # in-model (the intensity at the bottom of the grid): the fit is one trajectory per
     # segment, and its errors are those of the constrained problem (the stiff penalties of
     # the bottom intensity make the stacked Gram matrix lose the parameters' information)
@@ -400,8 +401,17 @@ def honest_errors(problem, fit, k: int) -> HonestErrors:
     n_free = k + problem.n_delta * _n_segments(problem) if whole else fit.n_free
     r_fit = r[:n_meas] if whole else r  # in-model, the defects are no part of the model
     s2 = group_variances(problem, r_fit, n_free)
+    bound = np.full(k, np.nan)
+    if con is not None:
+        level = np.minimum(s2[: len(problem.outputs)], 1.0)  # never above the floor
+        cov_b = con[0] if np.all(level == 1.0) else _kkt_solve(*lin, k, level[problem.group])[0]
+        bound = np.sqrt(np.maximum(np.diag(cov_b), 0.0))
+    # the measurement Jacobian (about the size of the fit's) let go before the projected
+    # columns are made: on an hour of 50 Hz three-axis samples both at once were the
+    # honest errors' peak
+    M = _influence(lin[0], lin[2], con, k) if whole else None
+    del lin, con
     if whole:
-        M = con[1]
         # theta - theta_true ~ -M r: per group, its rows' share at the group's variance
         cov_w = (M * s2[problem.group][None, :]) @ M.T
         G = np.vstack([M.T, np.zeros((r.size - n_meas, k))])
@@ -416,11 +426,6 @@ def honest_errors(problem, fit, k: int) -> HonestErrors:
     # constrained problem decides (its stiff penalties are what the Gram matrix loses)
     ok = (var > 0) & (whole | np.isfinite(fit_std))
     std_w = np.where(ok, np.sqrt(np.abs(var)), np.nan)
-    bound = np.full(k, np.nan)
-    if con is not None:
-        level = np.minimum(s2[: len(problem.outputs)], 1.0)  # never above the floor
-        cov_b = con[0] if np.all(level == 1.0) else _kkt(*lin, k, level[problem.group])[0]
-        bound = np.sqrt(np.maximum(np.diag(cov_b), 0.0))
     bound = np.where(bound > 0, bound, np.nan)
     w = problem.windows
     if not whole and r.size > n_meas and w.link is not None:
@@ -606,11 +611,14 @@ def _piece_meat(problem, scores: np.ndarray):
 
 
 def _linearised(problem, fit, k: int):
-    """The linearised problem of ONE trajectory per segment at ``fit``: ``(Jm, C)``, or None.
+    """The linearised problem of ONE trajectory per segment at ``fit``: ``(J, C, n)``, or
+    None.
 
-    ``Jm`` is the measurement Jacobian in noise units (whitened when the measurement noise
-    is coloured), ``C`` the continuity Jacobian of every linked pair, both in ``[theta;
-    initial states]``. None when the windows are not linked or the fit has no parameter map.
+    ``J[:n]`` is the measurement Jacobian in noise units (whitened when the measurement
+    noise is coloured; ``J`` may be the fit's whole Jacobian, its rows from ``n`` on the
+    defects', not copied), ``C`` the continuity Jacobian of every linked pair, both in
+    ``[theta; initial states]``. None when the windows are not linked or the fit has no
+    parameter map.
     """
     w = problem.windows
     S_fit = fit.extra.get("S")
@@ -623,19 +631,21 @@ def _linearised(problem, fit, k: int):
         # a penalised fit of this problem under its measurement whitening and noise levels:
         # its Jacobian's measurement rows and the defects' Jacobian it kept are the same
         # numbers (to round-off) as the window Jacobian evaluated again at its answer
-        Jm = sp.csc_matrix(fit.extra["J"])[: problem.n_meas]
-        return Jm, _held_fixed(fit, k, fit.extra["linearised"][2][rows])
+        # the measurement rows are read from the whole matrix (no copy of them)
+        J = sp.csc_matrix(fit.extra["J"])
+        return J, _held_fixed(fit, k, fit.extra["linearised"][2][rows]), problem.n_meas
     Sp, K = problem._pad(np.asarray(S_fit, dtype=float))
     fn = _problem_functions(*problem._key(K), True)[1]
     delta = np.asarray(fit.delta).reshape(-1, order="F")
     v = np.concatenate([fit.theta[:k], np.zeros(K - k), delta])
     p_base = fit.p - np.asarray(S_fit) @ fit.theta[:k]
-    out = fn(v, p_base, Sp, problem._data)  # r, J, c, Jc (NumPy, scipy CSC)
+    _, J, _, Jc = fn(v, p_base, Sp, problem._data)  # r, J, c, Jc (NumPy, scipy CSC)
     keep = np.r_[np.arange(k), np.arange(K, v.size)]
-    Jm = out[1][:, keep]
+    Jm = J[:, keep]
+    del J  # (the padded matrix let go before any other copy is made)
     if problem.meas_whitening is not None:  # coloured measurement noise: its innovations
         Jm = sp.csc_matrix(problem.meas_whitening @ Jm)
-    return Jm, _held_fixed(fit, k, out[3][rows][:, keep])
+    return Jm, _held_fixed(fit, k, Jc[rows][:, keep]), Jm.shape[0]
 
 
 def _held_fixed(fit, k: int, C):
@@ -685,9 +695,32 @@ def _kkt(Jm, C, k: int, level: np.ndarray | None = None):
     Column-scaled, sparse (a null-space basis would need a dense SVD). None when the data
     cannot fix some direction.
     """
+    Jm = sp.csc_matrix(Jm)
+    sol = _kkt_solve(Jm, C, Jm.shape[0], k, level)
+    if sol is None:
+        return None
+    if level is not None:  # (M of the weighted rows: the rows' weights in its columns)
+        Jm = _weighted_rows(Jm, Jm.shape[0], 1.0 / np.sqrt(level))
+    return sol[0], _influence(Jm, Jm.shape[0], sol, k)
+
+
+def _kkt_solve(J, C, n: int, k: int, level: np.ndarray | None = None):
+    """:func:`_kkt`'s ``(cov0, X, c)`` for the measurement Jacobian ``J[:n]``, or None:
+    the bordered matrix's solution ``X`` for the parameters' unit vectors and the column
+    scales ``c`` (:func:`_influence` makes ``M`` of them).
+
+    The same numbers as scipy's products on ``J[:n]`` (its Gram matrix, the weighted rows'
+    copy), without a copy of ``J``'s rows nor scipy's CSR copy for the Gram matrix: on an
+    hour of 50 Hz three-axis samples each was about the size of the fit's Jacobian.
+    """
+    J = sp.csc_matrix(J)
     if level is not None:
-        Jm = sp.csc_matrix(sp.diags(1.0 / np.sqrt(level)) @ Jm)
-    F = sp.csc_matrix(Jm.T @ Jm)
+        Jw = _weighted_rows(J, n, 1.0 / np.sqrt(level))
+        F = gram(Jw)
+        del Jw
+    else:
+        F = gram(J) if n >= J.shape[0] else gram_rows(J, n)
+    F = sp.csc_matrix(F)
     c = np.sqrt(np.maximum(F.diagonal(), 0.0))
     if not np.all(c[:k] > 0):
         return None
@@ -702,10 +735,59 @@ def _kkt(Jm, C, k: int, level: np.ndarray | None = None):
         return None
     if not np.all(np.isfinite(X)):
         return None
-    n_v = Jm.shape[1]
     cov0 = X[:k] / np.outer(c[:k], c[:k])
-    M = ((Jm @ Dc) @ X[:n_v]).T / c[:k, None]
-    return 0.5 * (cov0 + cov0.T), np.asarray(M)
+    return 0.5 * (cov0 + cov0.T), X, c
+
+
+def _weighted_rows(J: sp.csc_matrix, n: int, w: np.ndarray) -> sp.csc_matrix:
+    """``diag(w) J[:n]`` as scipy's product makes it (CSC, its row indices sorted, entries
+    whose product is exactly 0 left out), written a block of columns at a time into one
+    copy of the entries (scipy's product made two, and its CSC copy of them a third)."""
+    J = sp.csc_matrix(J)
+    wf = np.zeros(J.shape[0])
+    wf[:n] = w  # (rows from n on weighted 0: left out as the products 0 are)
+    data = np.empty(J.nnz)
+    rows = np.empty(J.nnz, dtype=J.indices.dtype)
+    indptr = np.zeros(J.shape[1] + 1, dtype=J.indptr.dtype)
+    nc = J.shape[1]
+    edges = np.unique(np.r_[np.arange(0, nc, max(1, -(-nc // 16))), nc])
+    m = 0
+    for a, b in zip(edges[:-1], edges[1:], strict=True):
+        p0, p1 = J.indptr[a], J.indptr[b]
+        idx = J.indices[p0:p1]
+        d = J.data[p0:p1] * wf[idx]
+        nz = d != 0
+        kept = int(nz.sum())
+        data[m : m + kept] = d[nz]
+        rows[m : m + kept] = idx[nz]
+        before = np.r_[0, np.cumsum(nz)]  # entries kept before each of the block's
+        indptr[a + 1 : b + 1] = m + before[J.indptr[a + 1 : b + 1] - p0]
+        m += kept
+    out = sp.csc_matrix((data[:m], rows[:m], indptr), shape=(n, nc))
+    out.sort_indices()
+    return out
+
+
+def _influence(J: sp.csc_matrix, n: int, sol, k: int) -> np.ndarray:
+    """:func:`_kkt`'s ``M`` (k, n) from :func:`_kkt_solve`'s ``sol`` and the measurement
+    Jacobian ``J[:n]``: scipy's ``((J Dc) X).T / c`` to the bit, ``J Dc`` made a block of
+    columns at a time (each entry ``J_ij / c_j`` summed into the rows in column order, as
+    scipy's product sums them) instead of whole."""
+    _, X, c = sol
+    J = sp.csc_matrix(J)
+    n_r, n_v = J.shape
+    d = 1.0 / c
+    Xv = X[:n_v]
+    Y = np.zeros((n_r, Xv.shape[1]))
+    edges = np.unique(np.r_[np.arange(0, n_v, max(1, -(-n_v // 16))), n_v])
+    for a, b in zip(edges[:-1], edges[1:], strict=True):
+        p0, p1 = J.indptr[a], J.indptr[b]
+        data = J.data[p0:p1] * np.repeat(d[a:b], np.diff(J.indptr[a : b + 1]))
+        _sparsetools.csc_matvecs(
+            n_r, b - a, Xv.shape[1], J.indptr[a : b + 1] - p0, J.indices[p0:p1], data,
+            np.ascontiguousarray(Xv[a:b]).ravel(), Y.ravel(),
+        )  # fmt: skip
+    return np.asarray(Y[:n].T / c[:k, None])
 
 
 def crlb(problem, fit, k: int) -> np.ndarray:

@@ -859,3 +859,51 @@ class ShootingProblem:
         """Each window's initial state (n_windows, nx) at ``delta`` (n_delta, n_windows)."""
         fn = start_function(self.model, self.outputs).map(self.windows.n)
         return np.asarray(fn(np.asarray(delta, dtype=float), self.windows.x0.T)).T
+
+    def input_derivatives(self, delta: np.ndarray, p: np.ndarray, bases) -> tuple:
+        """The residual's directional derivatives along changes of the inputs, exact.
+
+        Parameters
+        ----------
+        delta : ndarray (n_delta, n_windows)
+            The window states at which they are taken.
+        p : ndarray (n_p,)
+            The parameters (SI units of each).
+        bases : sequence of ndarray
+            The directions: changes of the windows' inputs, each ``windows.u``-shaped (in
+            the inputs' units).
+
+        Returns
+        -------
+        (ndarray, ndarray or None)
+            ``(dR, dC)``, one column per direction: the measurement rows and, on linked
+            windows with process noise, the continuity defects (else None), raw: before the
+            whitening and weighting of :meth:`residual`. CasADi's forward mode through the
+            residual function built on the symbolic sample step (the compiled C step
+            carries derivatives in the states and parameters only), in its virtual machine.
+        """
+        w = self.windows
+        m = len(bases)
+        # the inputs enter the data vector right after the start states, sample-major
+        # (:meth:`_data_vector`); nothing else in it moves with them
+        i0 = w.x0.size
+        seeds = np.zeros((self._data.size, m))
+        for j, U in enumerate(bases):
+            seeds[i0 : i0 + w.u.size, j] = np.asarray(U, dtype=float).reshape(-1)
+        v, Sp = self._v(delta, None)
+        key = self._key(Sp.shape[1])[:-1] + (False,)  # jit off: the symbolic step
+        fr = _problem_functions(*key, self.link)[0]
+        p = np.asarray(p, dtype=float)
+        # the nominal outputs are inputs of the forward function that it does not read (the
+        # same derivatives to the bit with zeros there): no nominal evaluation
+        nominal = [np.zeros(fr.size_out(i)) for i in range(fr.n_out())]
+        out = fr.forward(m)(
+            v, p, Sp, self._data, *nominal,
+            np.zeros((v.size, m)), np.zeros((p.size, m)), np.zeros((Sp.shape[0], Sp.shape[1] * m)),
+            seeds,
+        )  # fmt: skip
+        out = list(out) if isinstance(out, (list, tuple)) else [out]
+        dR = np.asarray(out[0], dtype=float)
+        if not (self.link and self.penalty is not None):  # as :meth:`residual`
+            return dR, None
+        return dR, np.asarray(out[1], dtype=float)
