@@ -32,6 +32,7 @@ from airbearing.analysis.shooting.functions import (
     window_jacobian,
 )
 from airbearing.analysis.shooting.penalty import penalised_solver
+from airbearing.analysis.shooting.problem_functions import residual_function
 from airbearing.analysis.shooting.solver import start_meets_objective_stop
 from airbearing.analysis.shooting.sparse import stacked_column_norms
 from airbearing.analysis.shooting.windows import WindowSet  # noqa: F401
@@ -892,7 +893,7 @@ class ShootingProblem:
             seeds[i0 : i0 + w.u.size, j] = np.asarray(U, dtype=float).reshape(-1)
         v, Sp = self._v(delta, None)
         key = self._key(Sp.shape[1])[:-1] + (False,)  # jit off: the symbolic step
-        fr = _problem_functions(*key, self.link)[0]
+        fr = residual_function(*key, self.link)  # (the windows mapped in one Function)
         p = np.asarray(p, dtype=float)
         # the nominal outputs are inputs of the forward function that it does not read (the
         # same derivatives to the bit with zeros there): no nominal evaluation
