@@ -3,6 +3,8 @@
 - The screen's Jacobian (a slot per candidate parameter, wider than any fit's) makes its
   CSC index arrays per call instead of keeping them in the cached window function
   (``problem_functions.KEPT_INDEX_SLOTS``): its columns must be those of a fit's Jacobian.
+  A fit's slot count keeps them once a whole Jacobian is asked for, not before (the fits
+  evaluate their used slots' part).
 - A later round's candidates let go of their per-row arrays once the round is decided
   (``selection.ROW_ARRAYS``), one that cannot be named as soon as it ends; the first
   round's keep them until their honest errors are taken at the end (a step-judged one
@@ -50,9 +52,11 @@ def test_a_wide_jacobian_makes_its_index_arrays_per_call():
     _, J_wide = pb.jacobian(at, S)
     wide = window_jacobian(*pb._key(k), pb.link)
     narrow = window_jacobian(*pb._key(THETA_SLOTS), pb.link)
-    assert wide._index is None and narrow._index is not None
+    # a fit evaluates its used slots' part only: the whole arrays are not made for it
+    assert wide._index is None and narrow._index is None
     # the first columns are a fit's (the same window function's derivatives, exactly)
     _, J_fit = pb.jacobian(replace(nominal, theta=np.zeros(2)), S[:, :2])
+    assert wide._index is None and narrow._index is not None  # kept once asked for
     assert J_wide.shape[0] == J_fit.shape[0]
     np.testing.assert_array_equal(J_wide[:, :2].toarray(), J_fit[:, :2].toarray())
     np.testing.assert_array_equal(J_wide[:, k:].toarray(), J_fit[:, 2:].toarray())

@@ -28,6 +28,8 @@ from airbearing.analysis.shooting.functions import (
     map_windows,
     vstack_csc,
 )
+from airbearing.analysis.shooting.problem_functions import _data_shapes, residual_function
+from airbearing.analysis.shooting.window_functions import _window_functions
 from airbearing.analysis.simulation.scenarios import free_oscillation
 from airbearing.models.model import build_model
 
@@ -66,7 +68,8 @@ def test_window_blocks_are_casadis_jacobian(linked):
     """The window blocks placed by NumPy are CasADi's exact Jacobian of the whole residual
     and of the defects (AD of the same expressions: 1e-12 relative)."""
     problem, model, v, Sp = linked
-    fr, fj, _ = _problem_functions(*problem._key(Sp.shape[1]), True)
+    _, fj, _ = _problem_functions(*problem._key(Sp.shape[1]), True)
+    fr = residual_function(*problem._key(Sp.shape[1]), True)
     vs = ca.MX.sym("v", v.size)
     r, c = fr(vs, model.p0, Sp, problem._data)
     oracle = ca.Function("whole_jacobian", [vs], [ca.jacobian(r, vs), ca.jacobian(c, vs)])
@@ -83,11 +86,63 @@ def test_window_blocks_are_casadis_jacobian(linked):
 def test_zero_copy_evaluation_is_the_call(linked):
     """``evaluate`` writes exactly what CasADi's call returns."""
     problem, model, v, Sp = linked
-    fr = _problem_functions(*problem._key(Sp.shape[1]), True)[0]
+    fr = residual_function(*problem._key(Sp.shape[1]), True)
     got = evaluate(fr, v, model.p0, Sp, problem._data)
     want = fr(v, model.p0, Sp, problem._data)
     for a, b in zip(got, want, strict=True):
         np.testing.assert_array_equal(a, np.asarray(b).ravel())
+
+
+@pytest.mark.parametrize("link", [True, False])
+@pytest.mark.parametrize("nw", [None, 1])
+def test_the_windows_run_from_numpy_are_the_mapped_functions_to_the_bit(linked, link, nw):
+    """The residual (and the defects) and the outputs of all windows run window by window
+    from NumPy (``WindowResidual``, ``WindowOutputs``: no CasADi expression of all the
+    windows) are those of the windows mapped in one CasADi Function, to the bit; on an odd
+    window count (a pair at a time, the last alone), on free windows and on one window."""
+    problem, model, v, Sp = linked
+    key = list(problem._key(Sp.shape[1]))
+    data = problem._data
+    if nw == 1:  # the first window alone: its entries of v and of the data vector
+        nw0, L, K = key[2], key[1], Sp.shape[1]
+        key[2] = 1
+        v = v[: K + problem.n_delta]
+        shapes = _data_shapes(model, L, nw0, problem.n_rate, True, 2)
+        pieces, at = [], 0
+        for a, b in shapes:
+            cols = b // nw0 if b % nw0 == 0 and b >= nw0 else b
+            pieces.append(data[at : at + a * b].reshape(a, b, order="F")[:, :cols])
+            at += a * b
+        if not link:
+            pieces.pop(-2)  # no hand-over row selector
+        data = np.concatenate([p.reshape(-1, order="F") for p in pieces])
+    elif not link:
+        pytest.skip("the problem's data vector is that of linked windows")
+    fr, _, fy = _problem_functions(*key, link)
+    want = residual_function(*key, link).call([v, model.p0, Sp, data])
+    got = evaluate(fr, v, model.p0, Sp, data)
+    assert len(got) == len(want) == (2 if link else 1)
+    for a, b in zip(got, want, strict=True):
+        np.testing.assert_array_equal(a, np.asarray(b).ravel())
+    # the outputs: the window output function mapped over the windows
+    win_y = _window_functions(*key[:1], key[1], key[3], *key[4:7], link)[2]
+    nd, K = problem.n_delta, Sp.shape[1]
+    D = v[K:].reshape(nd, key[2], order="F")
+    shapes = _data_shapes(model, key[1], key[2], problem.n_rate, link, 2)
+    x0, U, dt = (data[a : a + n] for a, n in _offsets(shapes)[:3])
+    Y = win_y.map(key[2])(D, x0.reshape(shapes[0], order="F"), U.reshape(shapes[1], order="F"),
+                          dt.reshape(shapes[2], order="F"), model.p0, Sp, v[:K])  # fmt: skip
+    got_y = evaluate(fy, v, model.p0, Sp, data)[0].reshape(fy.size_out(0), order="F")
+    np.testing.assert_array_equal(got_y, np.asarray(Y))
+
+
+def _offsets(shapes) -> list:
+    """``(offset, entries)`` of each piece of a data vector (``_data_shapes``)."""
+    out, at = [], 0
+    for a, b in shapes:
+        out.append((at, a * b))
+        at += a * b
+    return out
 
 
 def test_windows_mapped_a_few_at_a_time_equal_one_map():

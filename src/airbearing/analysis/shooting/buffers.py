@@ -53,8 +53,9 @@ def evaluate(fn: ca.Function, *args) -> list:
 
     Parameters
     ----------
-    fn : casadi.Function
-        Dense inputs.
+    fn : casadi.Function or object
+        Dense inputs; or an object with its own ``evaluate(*args)`` (the functions of all
+        windows run window by window, :class:`~.problem_functions.WindowResidual`).
     *args : array-like
         One per input, its entries in column-major (Fortran) order.
 
@@ -64,6 +65,8 @@ def evaluate(fn: ca.Function, *args) -> list:
         Per output, its nonzeros in CasADi's column-major order (:func:`csc_of` makes a
         sparse one a matrix).
     """
+    if not isinstance(fn, ca.Function):
+        return fn.evaluate(*args)
     buf, run = function_buffer(fn)
     keep = []
     for i, a in enumerate(args):

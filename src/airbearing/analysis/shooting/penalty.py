@@ -250,6 +250,9 @@ class _PenalisedOracle:
 
     def rj_at(self, z):
         if self.z is None or self.J is None or not np.array_equal(z, self.z):
+            # the last iterate's Jacobian let go before this one is made (it was held
+            # beside the window Jacobian and its stacked copy while they were made)
+            self.z = self.r = self.J = self.raw = self.C = None
             raw = self.fj(z * self.scale, self.pb, self.S, self.data, used=self.used)
             self.z = z.copy()
             self._stack(raw)

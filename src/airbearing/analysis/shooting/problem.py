@@ -32,7 +32,9 @@ from airbearing.analysis.shooting.functions import (
     window_jacobian,
 )
 from airbearing.analysis.shooting.penalty import penalised_solver
+from airbearing.analysis.shooting.problem_functions import residual_function
 from airbearing.analysis.shooting.solver import start_meets_objective_stop
+from airbearing.analysis.shooting.sparse import stacked_column_norms
 from airbearing.analysis.shooting.windows import WindowSet  # noqa: F401
 from airbearing.errors import SolverError
 from airbearing.models.model import Model
@@ -163,10 +165,12 @@ class ShootingProblem:
         group = np.concatenate([np.full(sizes[o] * L, i) for i, o in enumerate(self.outputs)])
         wrow = np.concatenate([np.repeat(np.arange(L), sizes[o]) for o in self.outputs])
         self.n_win_res = group.size
-        self.group = np.tile(group, nw)  # output group of each residual
+        # one entry per residual row (an hour of 50 Hz three-axis samples: 10^6 rows), so
+        # the narrowest integers that hold them: 8 MB each as int64, kept by every problem
+        self.group = np.tile(group.astype(np.int8), nw)  # output group of each residual
         # each residual's component within its group (a wheel of ``ws``: its own level)
         comp = np.concatenate([np.tile(np.arange(sizes[o]), L) for o in self.outputs])
-        self.component = np.tile(comp, nw)
+        self.component = np.tile(comp.astype(np.int8), nw)
         self.n_meas = self.group.size  # measurement residuals; process-noise rows follow them
         # process noise (:mod:`.process_noise`): whitening of the continuity defects, or None
         self.penalty = None
@@ -186,7 +190,10 @@ class ShootingProblem:
         self.reuse_last = False
         self._last = None  # ((v, p_base, S, data mark), (rm, Jm, c, Jc)) of that answer
         self._fitting = threading.local()  # the fit in progress (_PerThread attributes)
-        self.sample = np.tile(wrow, nw) + np.repeat(np.arange(nw) * L, group.size)
+        itype = np.int32 if nw * L < np.iinfo(np.int32).max else np.int64
+        self.sample = np.tile(wrow.astype(itype), nw) + np.repeat(
+            np.arange(nw, dtype=itype) * itype(L), group.size
+        )  # the log row (window sample) of each residual row
         self.usable = windows.weight.reshape(-1)[self.sample] > 0
         self.n_res = int(self.usable.sum())
         self.primary = self.group == 0
@@ -642,13 +649,23 @@ class ShootingProblem:
         if self.link and self.penalty is not None:
             # kept for the solver's first iterate (:meth:`_solve`): the same point
             raw = self._start_raw = self._linked_raw(v0, p_base, Sp)
-        r0, J0 = self._eval(1, v0, p_base, Sp, raw)
-        del raw
+        if raw is not None and self.meas_whitening is None:
+            # the stacked residual's column norms from the window Jacobian's own output
+            # (the numbers of the stacked matrix's, which is not made: an hour of samples,
+            # it and its square held some 300 MB beside the Jacobian)
+            rm, Jm, c, Jc = raw
+            r0, J0 = np.r_[rm, self.penalty @ c], None
+        else:
+            r0, J0 = self._eval(1, v0, p_base, Sp, raw)
         if not np.all(np.isfinite(r0)):
             self._start_raw = None
             raise SolverError(f"{name}: the replay is not finite at the starting point")
-        col = np.sqrt(np.asarray(J0.power(2).sum(axis=0)).ravel())
-        del J0  # an hour of samples: the Jacobian is 100s of MB
+        if J0 is None:
+            col = stacked_column_norms(Jm, self.penalty @ Jc)
+            del Jm, Jc
+        else:
+            col = np.sqrt(np.asarray(J0.power(2).sum(axis=0)).ravel())
+        del J0, raw  # an hour of samples: the Jacobian is 100s of MB
         scale = np.where(col > 0, 1.0 / np.maximum(col, 1e-300), 1.0)
         return v0, Sp, lb, ub, scale
 
@@ -876,7 +893,7 @@ class ShootingProblem:
             seeds[i0 : i0 + w.u.size, j] = np.asarray(U, dtype=float).reshape(-1)
         v, Sp = self._v(delta, None)
         key = self._key(Sp.shape[1])[:-1] + (False,)  # jit off: the symbolic step
-        fr = _problem_functions(*key, self.link)[0]
+        fr = residual_function(*key, self.link)  # (the windows mapped in one Function)
         p = np.asarray(p, dtype=float)
         # the nominal outputs are inputs of the forward function that it does not read (the
         # same derivatives to the bit with zeros there): no nominal evaluation

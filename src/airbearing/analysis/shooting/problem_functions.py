@@ -94,11 +94,13 @@ def _problem_functions(model, L, nw, K, outputs, substeps, jit, link=False):
 
 
 def residual_function(model, L, nw, K, outputs, substeps, jit, link=False) -> ca.Function:
-    """The CasADi Function ``fr`` of :func:`_problem_functions`: ``(v, p_base, S, data) ->``
-    the residual (and with ``link`` the continuity defects). With ``jit=False`` it is built
+    """The :class:`WindowResidual` ``fr`` of :func:`_problem_functions` as one CasADi
+    Function of all windows (:func:`_residual_graph`): ``(v, p_base, S, data) ->`` the
+    residual (and with ``link`` the continuity defects). With ``jit=False`` it is built
     on the symbolic sample step, so CasADi differentiates it in every input (the data
     too)."""
-    return _problem_functions(model, L, nw, K, outputs, substeps, jit, link)[0]
+    key = ("residual graph", layout_key(model, outputs), L, nw, K, outputs, substeps, jit, link)
+    return cached(key, lambda: _residual_graph(model, L, nw, K, outputs, substeps, jit, link))
 
 
 def window_jacobian(model, L, nw, K, outputs, substeps, jit, link=False) -> WindowJacobian:
@@ -106,7 +108,153 @@ def window_jacobian(model, L, nw, K, outputs, substeps, jit, link=False) -> Wind
     return _problem_functions(model, L, nw, K, outputs, substeps, jit, link)[1]
 
 
-class WindowJacobian:
+def _where_of(nd: int, K: int, shapes: list, nw: int) -> list:
+    """Where each input of a window function (``win_r``, ``win_rj``: :func:`_build_problem`'s
+    ``args``) lives: ``(source, offset, entries per window or None when shared)``; sources
+    0 ``v``, 1 ``p_base``, 2 ``S``, 3 the data vector (its pieces: :func:`_data_shapes`)."""
+    pieces, off = [], 0
+    for a, b in shapes:
+        pieces.append((off, a * b // nw if b % nw == 0 and b >= nw else None))
+        off += a * b
+    x0, U, dt, wt, W, Q, YW, *rest = pieces
+    sigma = rest[-1]
+    where = [
+        (0, K, nd),
+        (3, *x0),
+        (3, *U),
+        (3, *dt),
+        (3, *wt),
+        (3, *W),
+        (3, *Q),
+        (3, *YW),
+        (1, 0, None),
+        (2, 0, None),
+        (0, 0, None),
+        (3, sigma[0], None),
+    ]
+    if len(rest) == 2:  # the hand-over row selector of linked windows
+        where.append((3, *rest[0]))  # fmt: skip
+    return where
+
+
+def _sources(v, p_base, S, data) -> list:
+    """The four inputs of the functions of all windows as flat float64 arrays (Fortran
+    order), what :meth:`_WindowCalls._windows` slices."""
+    return [np.ascontiguousarray(np.asarray(a, dtype=float).reshape(-1, order="F"))
+            for a in (v, p_base, S, data)]  # fmt: skip
+
+
+class _WindowCalls:
+    """A window function run on all windows from NumPy: ``THREADS`` windows at a time (a
+    threaded map of ``THREADS``), each call writing straight into its windows' slices of
+    the outputs (:meth:`casadi.Function.buffer`).
+
+    No CasADi expression of all the windows: on an hour of 50 Hz three-axis samples the
+    mapped residual and outputs of all windows held ~150 MB of patterns (the data vector's
+    and its pieces', one entry each) per slot count and Model, and their evaluations work
+    vectors of 65-75 MB each, made for every call."""
+
+    def __init__(self, fn: ca.Function, nw: int, where: list) -> None:
+        self.fn, self.nw, self._where = fn, nw, where
+        self.pair = fn.map(THREADS, "thread", THREADS) if nw >= THREADS else None
+
+    def _windows(self, src: list, sink=None) -> list:
+        """Every output of the window function for all windows, window after window.
+
+        ``sink``: called ``sink(j0, j1, blocks)`` with the Jacobian blocks' nonzeros of
+        windows ``j0:j1`` (``(j1 - j0, nnz)``), :data:`CHUNK_WINDOWS` windows at a time,
+        instead of that output kept for all windows (its place in the result: None)."""
+        f = self.fn
+        out = [
+            None if (i == 1 and sink is not None) else np.empty(f.nnz_out(i) * self.nw)
+            for i in range(f.n_out())
+        ]
+        n1 = f.nnz_out(1) if f.n_out() > 1 else 0
+        chunk = np.empty(n1 * min(CHUNK_WINDOWS, self.nw)) if sink is not None else None
+        c0 = 0  # first window of the chunk in progress
+        buffers: dict = {}
+        # shared inputs (parameters, noise levels) once per mapped window
+        shared = {
+            i: src[s][off : off + f.nnz_in(i)]
+            for i, (s, off, per) in enumerate(self._where)
+            if per is None
+        }
+        for fn, j0, count in self._calls():
+            if count not in buffers:
+                tiled = {i: np.tile(a, count) for i, a in shared.items()}
+                buffers[count] = (*function_buffer(fn), tiled)
+            buf, run, tiled = buffers[count]
+            for i, (s, off, per) in enumerate(self._where):
+                if per is None:
+                    piece = tiled[i]
+                else:
+                    piece = src[s][off + j0 * per : off + (j0 + count) * per]
+                buf.set_arg(i, memoryview(piece))
+            if sink is not None and (j0 + count - c0) * n1 > chunk.size:
+                sink(c0, j0, chunk[: (j0 - c0) * n1].reshape(j0 - c0, n1))
+                c0 = j0
+            for i, o in enumerate(out):
+                n = f.nnz_out(i)
+                if o is None:
+                    o, at = chunk, j0 - c0
+                else:
+                    at = j0
+                buf.set_res(i, memoryview(o[at * n : (at + count) * n]))
+            run()
+            if buf.ret() != 0:
+                raise RuntimeError(f"{f.name()}: evaluation failed (return code {buf.ret()})")
+        if sink is not None and self.nw > c0:
+            sink(c0, self.nw, chunk[: (self.nw - c0) * n1].reshape(self.nw - c0, n1))
+        return out
+
+    def _x0_sigma(self, src: list) -> tuple:
+        """The windows' measured starts and the noise levels: the data vector's first and
+        last pieces (:func:`_data_shapes`), what the continuity defects take of it."""
+        (_, x0, per), (_, sigma, _) = self._where[1], self._where[11]
+        return src[3][x0 : x0 + per * self.nw], src[3][sigma:]
+
+    def _calls(self):
+        """``(function, first window, windows)`` of each evaluation."""
+        m = (self.nw // THREADS) * THREADS if self.pair is not None else 0
+        for j0 in range(0, m, THREADS):
+            yield self.pair, j0, THREADS
+        for j0 in range(m, self.nw):
+            yield self.fn, j0, 1
+
+
+class WindowResidual(_WindowCalls):
+    """The residual of all windows (and on linked windows the continuity defects of every
+    consecutive pair), from the window residual function run window by window
+    (:class:`_WindowCalls`): what :func:`residual_function`'s CasADi Function gives, to
+    the bit. ``evaluate(v, p_base, S, data)`` returns what
+    :func:`~.buffers.evaluate` returns of that Function: ``[r]``, linked ``[r, c]``."""
+
+    def __init__(self, win_r: ca.Function, nw: int, where: list, link: bool, defects=None):
+        super().__init__(win_r, nw, where)
+        self.link, self.defects = link, defects
+
+    def evaluate(self, v, p_base, S, data) -> list:
+        src = _sources(v, p_base, S, data)
+        out = self._windows(src)
+        if not self.link:
+            return [out[0]]
+        x0, sigma = self._x0_sigma(src)
+        return [out[0], evaluate(self.defects, out[1], src[0], x0, sigma)[0]]
+
+
+class WindowOutputs(_WindowCalls):
+    """The outputs ``(ny, L n_windows)`` of all windows from the window output function run
+    window by window (:class:`_WindowCalls`); ``evaluate`` as :class:`WindowResidual`'s."""
+
+    def size_out(self, i: int) -> tuple:
+        """The shape of output ``i`` (all windows side by side)."""
+        return (self.fn.size1_out(i), self.fn.size2_out(i) * self.nw)
+
+    def evaluate(self, v, p_base, S, data) -> list:
+        return [self._windows(_sources(v, p_base, S, data))[0]]
+
+
+class WindowJacobian(_WindowCalls):
     """The residual and its Jacobian in ``v = [theta; vec(delta)]`` from the windows' own
     blocks: the compiled window function runs on ``THREADS`` windows at a time, each call
     writing straight into its windows' slices of the result (:meth:`casadi.Function.buffer`),
@@ -121,41 +269,21 @@ class WindowJacobian:
     """
 
     def __init__(self, win_rj: ca.Function, nw: int, K: int, shapes: list, defects=None):
-        self.win_rj, self.nw, self.K, self.defects = win_rj, nw, K, defects
-        self.pair = win_rj.map(THREADS, "thread", THREADS) if nw >= THREADS else None
+        super().__init__(win_rj, nw, _where_of(win_rj.size1_in(0), K, shapes, nw))
+        self.win_rj, self.K, self.defects = win_rj, K, defects
         block = win_rj.sparsity_out(1)
         m = block.size1()
         self._colind = np.asarray(block.colind(), dtype=np.int64)
         self.shape = (m * nw, K + (block.size2() - K) * nw)
-        # the CSC index arrays are kept for the slot count of every fit (the same arrays for
-        # each evaluation); a wider Jacobian (the discrepancy screen's, one per round: 0.5 kB
-        # per row of an hour of 50 Hz three-axis samples) makes them per call
-        self._index = self._index_arrays() if K <= KEPT_INDEX_SLOTS else None
-        # where each input of the window function lives: (source, offset, entries per
-        # window or None when shared); sources 0 v, 1 p_base, 2 S, 3 data
-        nd = win_rj.size1_in(0)
-        pieces, off = [], 0
-        for a, b in shapes:
-            pieces.append((off, a * b // nw if b % nw == 0 and b >= nw else None))
-            off += a * b
-        x0, U, dt, wt, W, Q, YW, *rest = pieces
-        sigma = rest[-1]
-        self._where = [
-            (0, K, nd),
-            (3, *x0),
-            (3, *U),
-            (3, *dt),
-            (3, *wt),
-            (3, *W),
-            (3, *Q),
-            (3, *YW),
-            (1, 0, None),
-            (2, 0, None),
-            (0, 0, None),
-            (3, sigma[0], None),
-        ]
-        if len(rest) == 2:  # the hand-over row selector of linked windows
-            self._where.append((3, *rest[0]))  # fmt: skip
+        # the whole Jacobian's CSC index arrays are kept for the slot count of every fit
+        # once an evaluation asks for them (the same arrays for each evaluation); a wider
+        # Jacobian (the discrepancy screen's, one per round: 0.5 kB per row of an hour of 50
+        # Hz three-axis samples) makes them per call. Not made before: the penalised fits
+        # evaluate their used slots' part only (:meth:`_used_part`), and the structure
+        # IPOPT's Hessian is made of (:meth:`pattern`) is made once per solver; kept from
+        # the start, the arrays held 50 MB per Model on an hour of samples that no fit read
+        self._keep_index = K <= KEPT_INDEX_SLOTS
+        self._index = None
 
     def _index_arrays(self, theta=None, windows: bool = True) -> tuple:
         """``(indices, indptr)`` of the Jacobian's CSC matrix, or of its part of the
@@ -213,6 +341,8 @@ class WindowJacobian:
         K = self.K
         th = np.arange(K) if theta is None else np.asarray(theta, dtype=int)
         indices, indptr = self._index_arrays(theta, windows)
+        if theta is None and windows and self._keep_index:
+            self._index = (indices, indptr)
         n_cols = th.size + ((self.shape[1] - K) if windows else 0)
         spans = self._spans(th, windows)
         return _Part(spans, self.nw, indices, indptr, (self.shape[0], n_cols))
@@ -230,63 +360,6 @@ class WindowJacobian:
             kept = self._used_index = (used, indices, indptr.astype(ptr.dtype))
         spans = self._spans(np.arange(used), True)
         return _Part(spans, self.nw, kept[1], kept[2], self.shape)
-
-    def _windows(self, src: list, sink=None) -> list:
-        """Every output of the window function for all windows, window after window.
-
-        ``sink``: called ``sink(j0, j1, blocks)`` with the Jacobian blocks' nonzeros of
-        windows ``j0:j1`` (``(j1 - j0, nnz)``), :data:`CHUNK_WINDOWS` windows at a time,
-        instead of that output kept for all windows (its place in the result: None)."""
-        f = self.win_rj
-        out = [
-            None if (i == 1 and sink is not None) else np.empty(f.nnz_out(i) * self.nw)
-            for i in range(f.n_out())
-        ]
-        n1 = f.nnz_out(1)
-        chunk = np.empty(n1 * min(CHUNK_WINDOWS, self.nw)) if sink is not None else None
-        c0 = 0  # first window of the chunk in progress
-        buffers: dict = {}
-        # shared inputs (parameters, noise levels) once per mapped window
-        shared = {
-            i: src[s][off : off + f.nnz_in(i)]
-            for i, (s, off, per) in enumerate(self._where)
-            if per is None
-        }
-        for fn, j0, count in self._calls():
-            if count not in buffers:
-                tiled = {i: np.tile(a, count) for i, a in shared.items()}
-                buffers[count] = (*function_buffer(fn), tiled)
-            buf, run, tiled = buffers[count]
-            for i, (s, off, per) in enumerate(self._where):
-                if per is None:
-                    piece = tiled[i]
-                else:
-                    piece = src[s][off + j0 * per : off + (j0 + count) * per]
-                buf.set_arg(i, memoryview(piece))
-            if sink is not None and (j0 + count - c0) * n1 > chunk.size:
-                sink(c0, j0, chunk[: (j0 - c0) * n1].reshape(j0 - c0, n1))
-                c0 = j0
-            for i, o in enumerate(out):
-                n = f.nnz_out(i)
-                if o is None:
-                    o, at = chunk, j0 - c0
-                else:
-                    at = j0
-                buf.set_res(i, memoryview(o[at * n : (at + count) * n]))
-            run()
-            if buf.ret() != 0:
-                raise RuntimeError(f"{f.name()}: evaluation failed (return code {buf.ret()})")
-        if sink is not None and self.nw > c0:
-            sink(c0, self.nw, chunk[: (self.nw - c0) * n1].reshape(self.nw - c0, n1))
-        return out
-
-    def _calls(self):
-        """``(function, first window, windows)`` of each evaluation."""
-        m = (self.nw // THREADS) * THREADS if self.pair is not None else 0
-        for j0 in range(0, m, THREADS):
-            yield self.pair, j0, THREADS
-        for j0 in range(m, self.nw):
-            yield self.win_rj, j0, 1
 
     def __call__(self, v, p_base, S, data, parts=None, used=None) -> tuple:
         """``(r, J)``, and on linked windows ``(r, J, c, Jc)`` (``J``, ``Jc`` scipy CSC).
@@ -326,7 +399,8 @@ class WindowJacobian:
         J = mats[0] if parts is None else mats
         if self.defects is None:
             return out[0], J
-        c, Jc = evaluate(self.defects, out[2], out[3], *src)
+        x0, sigma = self._x0_sigma(src)
+        c, Jc = evaluate(self.defects, out[2], out[3], src[0], x0, sigma)
         return out[0], J, c, csc_of(Jc, self.defects.sparsity_out(1))
 
 
@@ -417,11 +491,66 @@ def map_windows(fn: ca.Function, nw: int, args: list) -> list:
 
 
 def _build_problem(model, L, nw, K, outputs, substeps, jit, link=False):
-    """``fr, fj, fy`` of all windows: ``fr`` and ``fy`` CasADi Functions ``(v, p_base, S,
-    data) -> `` the residual (and with ``link`` the continuity defects of every consecutive
-    pair of windows), the outputs; ``fj`` the :class:`WindowJacobian` (the same and their
-    Jacobians in ``v = [theta; vec(delta)]``, NumPy and scipy CSC)."""
+    """``fr, fj, fy`` of all windows, run window by window from NumPy
+    (:class:`_WindowCalls`): ``fr`` the :class:`WindowResidual` (with ``link`` the
+    continuity defects of every consecutive pair of windows too), ``fj`` the
+    :class:`WindowJacobian` (the same and their Jacobians in ``v = [theta; vec(delta)]``,
+    NumPy and scipy CSC), ``fy`` the :class:`WindowOutputs`; each takes ``(v, p_base, S,
+    data)``. :func:`residual_function` is ``fr`` as one CasADi Function."""
     win_r, win_rj, win_y = _window_functions(model, L, K, outputs, substeps, jit, link)
+    n_att, n_rate, n_ws, n_lag = delta_layout(model, outputs)
+    nd = n_att + n_rate + n_ws + n_lag
+    shapes = _data_shapes(model, L, nw, n_rate + n_ws, link, sigma_size(model, outputs))
+    where = _where_of(nd, K, shapes, nw)
+    defects = defects_j = None
+    if link:
+        defects, defects_j = _defect_functions(model, K, outputs, nd, nw, shapes, win_rj)
+    fr = WindowResidual(win_r, nw, where, link, defects)
+    # the outputs' function takes (delta, x0, U, dt, p_base, S, theta): those inputs' places
+    fy = WindowOutputs(win_y, nw, [where[i] for i in (0, 1, 2, 3, 8, 9, 10)])
+    return fr, WindowJacobian(win_rj, nw, K, shapes, defects_j), fy
+
+
+def _defect_functions(model, K, outputs, nd, nw, shapes, win_rj) -> tuple:
+    """The continuity defects of every consecutive pair of ``nw`` linked windows, from the
+    windows' end states: ``(x_end, v, x0, sigma) -> c`` and ``(x_end, dx_end, v, x0,
+    sigma) -> (c, dc/dv)`` (``x0`` the windows' measured starts, ``sigma`` the noise
+    levels: the data vector's first and last pieces, :func:`_data_shapes`)."""
+    (nx0, _), (n_sigma, _) = shapes[0], shapes[-1]
+    v = ca.MX.sym("v", K + nd * nw)
+    X0 = ca.MX.sym("x0", nx0, nw)
+    SIG = ca.MX.sym("sigma", n_sigma, 1)
+    D = ca.reshape(v[K:], nd, nw)
+    XE = ca.MX.sym("x_end", model.nx, nw)
+    DX = ca.MX.sym("dx_end", ca.repmat(win_rj.sparsity_out(3), 1, nw))
+    if nw == 1:  # one window: nothing to join
+        return (
+            ca.Function("defects_r", [XE, v, X0, SIG], [ca.MX(0, 1)]),
+            ca.Function("defects", [XE, DX, v, X0, SIG], [ca.MX(0, 1), ca.MX(0, v.shape[0])]),
+        )
+    lf = _link_function(model, K, outputs).map(nw - 1)
+    sig = ca.repmat(SIG, 1, nw - 1)
+    C = ca.vec(lf(XE[:, :-1], ca.DM.zeros(model.nx, (K + nd) * (nw - 1)), D[:, 1:],
+                  X0[:, 1:], sig)[0])  # fmt: skip
+    Cj, A, B = lf(XE[:, :-1], DX[:, : (K + nd) * (nw - 1)], D[:, 1:], X0[:, 1:], sig)
+    m = nd * (nw - 1)
+    a_blocks = [A[:, j * (K + nd) : (j + 1) * (K + nd)] for j in range(nw - 1)]
+    b_blocks = [B[:, j * nd : (j + 1) * nd] for j in range(nw - 1)]
+    JC_th = ca.vertcat(*[blk[:, :K] for blk in a_blocks]) if K else ca.MX(m, 0)
+    JC_d = ca.horzcat(ca.diagcat(*[blk[:, K:] for blk in a_blocks]), ca.MX(m, nd))
+    JC_d = JC_d + ca.horzcat(ca.MX(m, nd), ca.diagcat(*b_blocks))
+    JC = ca.horzcat(JC_th, JC_d)
+    return (
+        ca.Function("defects_r", [XE, v, X0, SIG], [C]),
+        ca.Function("defects", [XE, DX, v, X0, SIG], [ca.vec(Cj), JC]),
+    )
+
+
+def _residual_graph(model, L, nw, K, outputs, substeps, jit, link=False) -> ca.Function:
+    """:class:`WindowResidual` as one CasADi Function of all windows (an expression CasADi
+    can differentiate in every input, :func:`residual_function`): the windows mapped
+    ``THREADS`` at a time (:func:`map_windows`)."""
+    win_r = _window_functions(model, L, K, outputs, substeps, jit, link)[0]
     n_att, n_rate, n_ws, n_lag = delta_layout(model, outputs)
     nd = n_att + n_rate + n_ws + n_lag
     v = ca.MX.sym("v", K + nd * nw)
@@ -437,33 +566,12 @@ def _build_problem(model, L, nw, K, outputs, substeps, jit, link=False):
     args = [D, *pieces[:7], pb, S, th, pieces[-1], *(pieces[7:8] if link else [])]
     out_r = map_windows(win_r, nw, args)
     R = out_r[0]
-    Y = map_windows(win_y, nw, [D, pieces[0], pieces[1], pieces[2], pb, S, th])[0]
-    defects = None
-    if link:
-        # the defects and their Jacobian from every window's end state and its Jacobian
-        XE = ca.MX.sym("x_end", model.nx, nw)
-        DX = ca.MX.sym("dx_end", ca.repmat(win_rj.sparsity_out(3), 1, nw))
-        if nw > 1:
-            lf = _link_function(model, K, outputs).map(nw - 1)
-            sig = ca.repmat(pieces[-1], 1, nw - 1)
-            C = ca.vec(lf(out_r[1][:, :-1], ca.DM.zeros(model.nx, (K + nd) * (nw - 1)),
-                          D[:, 1:], pieces[0][:, 1:], sig)[0])  # fmt: skip
-            Cj, A, B = lf(XE[:, :-1], DX[:, : (K + nd) * (nw - 1)], D[:, 1:],
-                          pieces[0][:, 1:], sig)  # fmt: skip
-            m = nd * (nw - 1)
-            a_blocks = [A[:, j * (K + nd) : (j + 1) * (K + nd)] for j in range(nw - 1)]
-            b_blocks = [B[:, j * nd : (j + 1) * nd] for j in range(nw - 1)]
-            JC_th = ca.vertcat(*[blk[:, :K] for blk in a_blocks]) if K else ca.MX(m, 0)
-            JC_d = ca.horzcat(ca.diagcat(*[blk[:, K:] for blk in a_blocks]), ca.MX(m, nd))
-            JC_d = JC_d + ca.horzcat(ca.MX(m, nd), ca.diagcat(*b_blocks))
-            JC = ca.horzcat(JC_th, JC_d)
-            fr = ca.Function("r", [v, pb, S, data], [ca.vec(R), C])
-            outs = [ca.vec(Cj), JC]
-        else:  # one window: nothing to join
-            fr = ca.Function("r", [v, pb, S, data], [ca.vec(R), ca.MX(0, 1)])
-            outs = [ca.MX(0, 1), ca.MX(0, v.shape[0])]
-        defects = ca.Function("defects", [XE, DX, v, pb, S, data], outs)
-    else:
-        fr = ca.Function("r", [v, pb, S, data], [ca.vec(R)])
-    fy = ca.Function("y", [v, pb, S, data], [Y])
-    return fr, WindowJacobian(win_rj, nw, K, shapes, defects), fy
+    if not link:
+        return ca.Function("r", [v, pb, S, data], [ca.vec(R)])
+    if nw == 1:  # one window: nothing to join
+        return ca.Function("r", [v, pb, S, data], [ca.vec(R), ca.MX(0, 1)])
+    lf = _link_function(model, K, outputs).map(nw - 1)
+    sig = ca.repmat(pieces[-1], 1, nw - 1)
+    C = ca.vec(lf(out_r[1][:, :-1], ca.DM.zeros(model.nx, (K + nd) * (nw - 1)),
+                  D[:, 1:], pieces[0][:, 1:], sig)[0])  # fmt: skip
+    return ca.Function("r", [v, pb, S, data], [ca.vec(R), C])
