@@ -65,17 +65,23 @@ def scale_columns(J: sp.csc_matrix, scale: np.ndarray) -> sp.csc_matrix:
     return J
 
 
+def _stacking(A, B, what: str) -> tuple[sp.csc_matrix, sp.csc_matrix, np.ndarray]:
+    """``A`` and ``B`` as CSC with sorted indices, and where each of ``B``'s entries goes
+    in ``A``'s arrays when ``B`` is stacked below ``A`` (after its column's entries)."""
+    A, B = sp.csc_matrix(A), sp.csc_matrix(B)
+    if A.shape[1] != B.shape[1]:  # pragma: no cover - programming error
+        raise ValueError(f"{what}: the matrices have different numbers of columns")
+    A.sort_indices()
+    B.sort_indices()
+    col = np.repeat(np.arange(B.shape[1]), np.diff(B.indptr))
+    return A, B, A.indptr[col + 1]
+
+
 def vstack_csc(A: sp.csc_matrix, B: sp.csc_matrix) -> sp.csc_matrix:
     """``[A; B]`` as CSC for a small ``B`` (each column: ``A``'s entries, then ``B``'s): the
     entries of ``B`` inserted into ``A``'s arrays, without scipy's detour through COO and a
     sort of every entry (a few hundred MB and most of a second on an hour of samples)."""
-    A, B = sp.csc_matrix(A), sp.csc_matrix(B)
-    if A.shape[1] != B.shape[1]:  # pragma: no cover - programming error
-        raise ValueError("vstack_csc: the matrices have different numbers of columns")
-    A.sort_indices()
-    B.sort_indices()
-    col = np.repeat(np.arange(B.shape[1]), np.diff(B.indptr))
-    at = A.indptr[col + 1]
+    A, B, at = _stacking(A, B, "vstack_csc")
     data = np.insert(A.data, at, B.data)
     # 32-bit indices while they fit (as A's): 64-bit ones held a third more of a long log's
     # Jacobian, and their copy of A's indices as much again while it was stacked
@@ -96,13 +102,8 @@ def stacked_column_norms(A: sp.csc_matrix, B: sp.csc_matrix) -> np.ndarray:
     each column's squares in its stored order, ``np.add.reduceat``), without the stacked
     matrix and its square, only the stacked entries squared (on an hour of samples the
     two held some 300 MB at every fit's start, beside the Jacobian itself)."""
-    A, B = sp.csc_matrix(A), sp.csc_matrix(B)
-    if A.shape[1] != B.shape[1]:  # pragma: no cover - programming error
-        raise ValueError("stacked_column_norms: the matrices have different numbers of columns")
-    A.sort_indices()
-    B.sort_indices()
-    col = np.repeat(np.arange(B.shape[1]), np.diff(B.indptr))
-    squares = np.insert(A.data, A.indptr[col + 1], B.data)
+    A, B, at = _stacking(A, B, "stacked_column_norms")
+    squares = np.insert(A.data, at, B.data)
     np.square(squares, out=squares)
     indptr = A.indptr.astype(np.intp) + B.indptr.astype(np.intp)
     sums = np.zeros(A.shape[1])
