@@ -18,12 +18,11 @@ from airbearing.analysis.shooting.errors import honest_errors, normalised_residu
 from airbearing.analysis.shooting.logs import make_windows, noise_floor, replay_data
 from airbearing.analysis.shooting.process_noise import (
     KAPPA_GRID,
-    above_floor,
     defect_whitening,
     estimate_process_noise,
-    intensity_floor,
     set_intensity,
 )
+from airbearing.analysis.shooting.process_noise_floor import above_floor, intensity_floor
 from airbearing.io.log import Log
 
 J_ZZ = 0.05  # kg m^2, the rig's yaw inertia (rigs.MOCAP_RIG_TOML)

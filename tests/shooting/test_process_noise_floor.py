@@ -1,5 +1,5 @@
 """The process noise's floor: what the replay's integration error and the weights' noise
-explain is no missing torque (:func:`.process_noise.intensity_floor`, :func:`.above_floor`).
+explain is no missing torque (:func:`.process_noise_floor.intensity_floor`, :func:`.above_floor`).
 
 Seed 000's tabletop coasting down from 2 rad/s with drag and Coulomb friction and an exact
 attitude, replayed with the truth as its nominal model: nothing is missing, but at too few
@@ -19,12 +19,8 @@ from airbearing.analysis.discrepancy.adequacy import PROCESS_NOISE_KEYS
 from airbearing.analysis.discrepancy.horizon import _floored
 from airbearing.analysis.discrepancy.replay import model_for, prepare, problem_for
 from airbearing.analysis.shooting.penalty import _sigma_of_kappa, piece_durations
-from airbearing.analysis.shooting.process_noise import (
-    SIGNIFICANCE,
-    above_floor,
-    estimate_process_noise,
-    intensity_floor,
-)
+from airbearing.analysis.shooting.process_noise import SIGNIFICANCE, estimate_process_noise
+from airbearing.analysis.shooting.process_noise_floor import above_floor, intensity_floor
 from airbearing.io import testbed as tb_io  # (its names start with test)
 
 TRUTH = {"coulomb_friction": 3e-5, "aero_drag": 2e-5}  # N m, N m s^2 (hidden_cases_cli's)

@@ -37,11 +37,10 @@ from airbearing.analysis.shooting.accuracy import substeps_for
 from airbearing.analysis.shooting.measurement_noise import set_measurement_noise
 from airbearing.analysis.shooting.process_noise import (
     KAPPA_GRID,
-    above_floor,
     estimate_process_noise,
-    intensity_floor,
     set_intensity,
 )
+from airbearing.analysis.shooting.process_noise_floor import above_floor, intensity_floor
 
 
 def _named(search: _Search, sel: _Selection, prog: _Progress, screen=True, workers=1) -> _Named:
@@ -151,9 +150,10 @@ def _retested(search: _Search, sel: _Selection, accurate: ShootingProblem, refit
 def _floored(search: _Search, sel: _Selection, problem: ShootingProblem, current: Fit) -> Fit:
     """``current`` with a significant process noise judged again against the intensity
     the replay's integration error and the weights' noise explain
-    (:func:`.process_noise.intensity_floor`, :func:`.process_noise.above_floor`): neither
-    is a torque the named effects miss. ``current`` unchanged when its process noise is
-    not significant (a floor only lowers the statistic) or the windows are not linked."""
+    (:func:`.process_noise_floor.intensity_floor`,
+    :func:`.process_noise_floor.above_floor`): neither is a torque the named effects miss.
+    ``current`` unchanged when its process noise is not significant (a floor only lowers
+    the statistic) or the windows are not linked."""
     pn = current.extra.get("process_noise") or {}
     if not (problem.windows.linked and pn.get("significant")):
         return current
