@@ -6,8 +6,12 @@ per-row bookkeeping in the narrowest integers (structural checks, not sizes).
 - The replay's data keep the log they were given when it was read or made with the very
   testbed replayed (validated against it already), not a second, validated copy of its
   samples (and no pandas table made of its arrays).
+- The log lets go of the sign-continuous quaternions its quality checks shared once they
+  are done.
 - A shooting problem's group, component and sample index of every residual row are 8 and
   32 bit integers (one entry per residual row: 10^6 on an hour of samples).
+- The windows' arrays are views of the data vector their problems read, and the problems
+  of one WindowSet share it and their per-row indices (the same numbers to the bit).
 """
 
 from __future__ import annotations
@@ -62,6 +66,21 @@ def test_the_replay_keeps_the_log_read_with_its_testbed(tmp_path):
     assert d2.log is not other and d2.log.testbed is tb
     for name in ("t", "u", "att", "w", "mask"):
         np.testing.assert_array_equal(getattr(d, name), getattr(d2, name))
+
+
+def test_the_log_keeps_no_signed_quaternions_once_assessed(tmp_path):
+    from airbearing.io.motion import no_motion, signed_quaternions
+    from airbearing.quaternion import continuous_signs
+
+    tb, path = _written(tmp_path)
+    log = read_log(path, tb)
+    no_motion(log, tb)  # (the search's check of a still log, before the replay's data)
+    assert "_signed_quaternions" in log.__dict__
+    segments = log.quality.segments
+    assert "_signed_quaternions" not in log.__dict__
+    # asked again: the same numbers
+    want = continuous_signs(log.quaternions(), segments)
+    np.testing.assert_array_equal(signed_quaternions(log, segments), want)
 
 
 def test_a_problems_row_bookkeeping_is_narrow():
