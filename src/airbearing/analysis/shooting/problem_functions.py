@@ -361,7 +361,8 @@ class WindowJacobian(_WindowCalls):
     def _used_part(self, used: int) -> _Part:
         """An empty :class:`_Part` of the whole Jacobian's shape whose parameter slots from
         ``used`` on have no entries (a fit's unused slots, fixed at zero); its index arrays
-        kept for the last ``used`` asked (every iterate of a fit asks the same)."""
+        kept for the last ``used`` asked (every iterate of a fit asks the same) while a
+        matrix made of them is alive (:class:`_KeptIndex`)."""
         K = self.K
         kept = getattr(self, "_used_index", None)
         arrays = _KeptIndex.get(kept[1]) if kept is not None and kept[0] == used else None
