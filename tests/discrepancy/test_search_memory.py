@@ -4,7 +4,7 @@
   CSC index arrays per call instead of keeping them in the cached window function
   (``problem_functions.KEPT_INDEX_SLOTS``): its columns must be those of a fit's Jacobian.
   A fit's slot count keeps them once a whole Jacobian is asked for, not before (the fits
-  evaluate their used slots' part).
+  evaluate their used slots' part), and only while a matrix made of them is alive.
 - A later round's candidates let go of their per-row arrays once the round is decided
   (``selection.ROW_ARRAYS``), one that cannot be named as soon as it ends; the first
   round's keep them until their honest errors are taken at the end (a step-judged one
@@ -27,7 +27,11 @@ from airbearing.analysis.discrepancy.search import discrepancy
 from airbearing.analysis.discrepancy.search_state import _Search
 from airbearing.analysis.discrepancy.selection import ROW_ARRAYS
 from airbearing.analysis.shooting import THETA_SLOTS
-from airbearing.analysis.shooting.problem_functions import KEPT_INDEX_SLOTS, window_jacobian
+from airbearing.analysis.shooting.problem_functions import (
+    KEPT_INDEX_SLOTS,
+    _KeptIndex,
+    window_jacobian,
+)
 
 #: The candidates of the searches on this rig in test_discrepancy_workers.py and
 #: test_screen_far_candidates.py: one Model (every candidate at zero), so one compiled step
@@ -57,6 +61,14 @@ def test_a_wide_jacobian_makes_its_index_arrays_per_call():
     # the first columns are a fit's (the same window function's derivatives, exactly)
     _, J_fit = pb.jacobian(replace(nominal, theta=np.zeros(2)), S[:, :2])
     assert wide._index is None and narrow._index is not None  # kept once asked for
+    # ... while a matrix made of them is alive (the fit's J above was a copy of columns)
+    assert _KeptIndex.get(narrow._index) is None
+    v, Sp = pb._v(nominal.delta, S[:, :2], np.zeros(2))
+    J = narrow(v, nominal.p, Sp, pb._data)[1]
+    kept = _KeptIndex.get(narrow._index)
+    assert np.shares_memory(kept[0], J.indices) and np.shares_memory(kept[1], J.indptr)
+    del J, kept
+    assert _KeptIndex.get(narrow._index) is None
     assert J_wide.shape[0] == J_fit.shape[0]
     np.testing.assert_array_equal(J_wide[:, :2].toarray(), J_fit[:, :2].toarray())
     np.testing.assert_array_equal(J_wide[:, k:].toarray(), J_fit[:, 2:].toarray())

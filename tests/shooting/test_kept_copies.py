@@ -6,18 +6,25 @@ per-row bookkeeping in the narrowest integers (structural checks, not sizes).
 - The replay's data keep the log they were given when it was read or made with the very
   testbed replayed (validated against it already), not a second, validated copy of its
   samples (and no pandas table made of its arrays).
+- The log lets go of the sign-continuous quaternions its quality checks shared once they
+  are done.
 - A shooting problem's group, component and sample index of every residual row are 8 and
   32 bit integers (one entry per residual row: 10^6 on an hour of samples).
+- The windows' arrays are views of the data vector their problems read, and the problems
+  of one WindowSet share it and their per-row indices (the same numbers to the bit).
 """
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pyarrow as pa
+import pytest
 from rigs import spinning_seed004_50hz
 
-from airbearing.analysis.discrepancy.replay import prepare, problem_for
-from airbearing.analysis.shooting.logs import replay_data
+from airbearing.analysis.discrepancy.replay import model_for, prepare, problem_for
+from airbearing.analysis.shooting.logs import make_windows, noise_floor, replay_data
 from airbearing.io.log import Log, read_log, write_log
 from airbearing.models.model import build_model
 
@@ -61,6 +68,21 @@ def test_the_replay_keeps_the_log_read_with_its_testbed(tmp_path):
         np.testing.assert_array_equal(getattr(d, name), getattr(d2, name))
 
 
+def test_the_log_keeps_no_signed_quaternions_once_assessed(tmp_path):
+    from airbearing.io.motion import no_motion, signed_quaternions
+    from airbearing.quaternion import continuous_signs
+
+    tb, path = _written(tmp_path)
+    log = read_log(path, tb)
+    no_motion(log, tb)  # (the search's check of a still log, before the replay's data)
+    assert "_signed_quaternions" in log.__dict__
+    segments = log.quality.segments
+    assert "_signed_quaternions" not in log.__dict__
+    # asked again: the same numbers
+    want = continuous_signs(log.quaternions(), segments)
+    np.testing.assert_array_equal(signed_quaternions(log, segments), want)
+
+
 def test_a_problems_row_bookkeeping_is_narrow():
     tb, log = spinning_seed004_50hz(2.0)
     datas, windows, floor = prepare(tb, [Log(log.data, log.source, tb)])
@@ -92,3 +114,50 @@ def test_a_fits_column_norms_are_those_of_the_stacked_matrix_to_the_bit():
                       random_state=rng, format="csc")  # fmt: skip
         want = np.sqrt(np.asarray(vstack_csc(A, B).power(2).sum(axis=0)).ravel())
         np.testing.assert_array_equal(stacked_column_norms(A, B), want)
+
+
+def _rotor_datas():
+    from rigs import ROTOR
+
+    from airbearing.analysis.simulation.scenarios import spindown
+
+    return ROTOR, [replay_data(ROTOR, spindown(ROTOR, duration=20.0, seed=3).log)]
+
+
+@pytest.mark.parametrize("rig", ["platform", "rotor"])
+@pytest.mark.parametrize("linked", [True, False])
+def test_the_problems_of_one_windowset_share_its_data_vector(rig, linked):
+    """The windows' arrays are views of the data vector the compiled functions read, the
+    same numbers as a vector made from those arrays; the problems of the windows (with
+    and without a sensor lag) share it and their per-row indices; a problem given other
+    noise levels writes them in its own copy."""
+    if rig == "platform":
+        tb, log = spinning_seed004_50hz(2.0)
+        datas = [replay_data(tb, Log(log.data, log.source, tb))]
+    else:
+        tb, datas = _rotor_datas()
+    windows = make_windows(datas, window_s=0.5 if rig == "platform" else 2.0, linked=linked)
+    floor = noise_floor(datas)
+    pb = problem_for(model_for(tb, {}), datas, windows, floor)
+    other = {"sensor_lag": 0.0} if rig == "platform" else {"viscous_friction": 0.0}
+    lag = problem_for(model_for(tb, other), datas, windows, floor)
+    assert pb._data is windows.data and lag._data is windows.data
+    for name in ("x0", "u", "dt", "weight", "rate", "quat", "yaw"):
+        a = getattr(windows, name)
+        assert a is None or np.shares_memory(a, windows.data), name
+    alone = problem_for(model_for(tb, {}), datas, replace(windows, data=None), floor)
+    assert alone._data is not windows.data
+    np.testing.assert_array_equal(alone._data, windows.data)  # to the bit
+    # windows whose arrays are not all views of their vector: a vector of their own
+    other_weight = replace(windows, weight=windows.weight.copy())
+    assert problem_for(model_for(tb, {}), datas, other_weight, floor)._data is not windows.data
+    for name in ("group", "component", "sample", "usable", "primary"):
+        assert getattr(lag, name) is getattr(pb, name)
+        assert not getattr(pb, name).flags.writeable
+    before = windows.data.copy()
+    lag.set_noise(2 * lag.sigma_rate, 3 * lag.sigma_att)
+    assert lag._data is not windows.data
+    np.testing.assert_array_equal(windows.data, before)
+    r = pb.residual(np.zeros((pb.n_delta, windows.n)), pb.model.p0)
+    d = np.zeros((pb.n_delta, windows.n))
+    np.testing.assert_array_equal(r, alone.residual(d, pb.model.p0))

@@ -301,6 +301,9 @@ class Log:
         if cached is None:
             cached = assess(self, self.testbed)
             self.__dict__["_quality"] = cached
+            # the sign-continuous quaternions its checks shared (motion.signed_quaternions):
+            # not kept with the log through a whole search (an hour of 50 Hz samples: 5.8 MB)
+            self.__dict__.pop("_signed_quaternions", None)
         return cached
 
     def usable_mask(self) -> np.ndarray:

@@ -42,7 +42,7 @@ def function_buffer(fn: ca.Function):
     return cache[key]
 
 
-def evaluate(fn: ca.Function, *args) -> list:
+def evaluate(fn: ca.Function, *args, keep: bool = True) -> list:
     """The nonzeros of every output of ``fn(*args)``, written by CasADi straight into new
     NumPy arrays (:meth:`casadi.Function.buffer`).
 
@@ -58,6 +58,9 @@ def evaluate(fn: ca.Function, *args) -> list:
         windows run window by window, :class:`~.problem_functions.WindowResidual`).
     *args : array-like
         One per input, its entries in column-major (Fortran) order.
+    keep : bool
+        Run in the buffer kept with ``fn`` (:func:`function_buffer`); False: in one made
+        for this call and let go with it (a function evaluated seldom, on many rows).
 
     Returns
     -------
@@ -67,13 +70,13 @@ def evaluate(fn: ca.Function, *args) -> list:
     """
     if not isinstance(fn, ca.Function):
         return fn.evaluate(*args)
-    buf, run = function_buffer(fn)
-    keep = []
+    buf, run = function_buffer(fn) if keep else fn.buffer()
+    held = []
     for i, a in enumerate(args):
         x = np.ascontiguousarray(np.asarray(a, dtype=float).reshape(-1, order="F"))
         if x.size != fn.nnz_in(i):  # pragma: no cover - programming error
             raise ValueError(f"{fn.name()}: input {i} has {x.size} entries, not {fn.nnz_in(i)}")
-        keep.append(x)
+        held.append(x)
         buf.set_arg(i, memoryview(x))
     out = [np.empty(fn.nnz_out(i)) for i in range(fn.n_out())]
     for i, o in enumerate(out):

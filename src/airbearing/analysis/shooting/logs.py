@@ -510,22 +510,18 @@ def _window_set(datas, cuts, linked: bool = False) -> WindowSet:
     # as long as the longest window cut (a window asked longer than every segment would
     # otherwise allocate and integrate its padding: 2e7 rows for --window 1e6 at 20 Hz)
     L = max(m for m, _ in hand)
-    nu = d0.u.shape[1]
-    x0 = []
-    U = np.zeros((nw, L, nu))
-    DT = np.full((nw, L - 1), PAD_DT * d0.dt)
-    M = np.zeros((nw, L))
+    x0 = [d.start_state(s, e) for i, s, e, _ in cuts for d in (datas[i],)]
+    # the arrays are views of the problems' data vector (:func:`_window_data`)
+    views = _window_data(d0, nw, L, len(x0[0]), linked and any(h for _, h in hand[:-1]))
+    data, X0, U, DT, M, rate, qq, yw, ws, E = views
+    X0[...] = x0
+    DT[...] = PAD_DT * d0.dt
     rows = np.zeros((nw, L), dtype=int)
-    rate = np.zeros((nw, L, d0.n_axes)) if "rate" in d0.outputs else None
-    qq = np.zeros((nw, L, 4)) if "quat" in d0.outputs else None
-    yw = np.zeros((nw, L)) if "yaw" in d0.outputs else None
-    ws = np.zeros((nw, L, d0.extra_x.shape[1])) if "ws" in d0.outputs else None
     for j, (i, s, e, _) in enumerate(cuts):
         d = datas[i]
         m = hand[j][0]
         r = np.r_[np.arange(s, s + m), np.full(L - m, s + m - 1)]
         rows[j] = r
-        x0.append(d.start_state(s, e))
         U[j] = d.u[r]
         DT[j, : m - 1] = np.diff(d.t[s : s + m])
         M[j, : e - s] = d.mask[s:e]  # the hand-over row (the next window's) weighs zero
@@ -537,8 +533,10 @@ def _window_set(datas, cuts, linked: bool = False) -> WindowSet:
             yw[j] = d.att[r, 0]
         if ws is not None:
             ws[j] = d.ws[r]
+        if E is not None:
+            E[j, m - 1] = 1.0  # the row each window hands over at (its ``end``)
     return WindowSet(
-        x0=np.array(x0),
+        x0=X0,
         u=U,
         dt=DT,
         weight=M,
@@ -551,7 +549,35 @@ def _window_set(datas, cuts, linked: bool = False) -> WindowSet:
         link=np.array([h for _, h in hand[:-1]], dtype=bool) if linked else None,
         end=np.array([m - 1 for m, _ in hand], dtype=int) if linked else None,
         segment=np.array([c[3] for c in cuts], dtype=int),
+        data=data,
     )
+
+
+def _window_data(d0: ReplayData, nw: int, L: int, nx: int, link: bool) -> tuple:
+    """The data vector of the shooting problems on ``nw`` windows of ``L`` rows of logs like
+    ``d0`` (:meth:`~.problem.ShootingProblem._data_vector`'s layout, its noise levels NaN),
+    and the windows' arrays as views of it: ``(data, x0, u, dt, weight, rate, quat, yaw,
+    ws, end)``, each None where ``d0`` has no such output (its part of the vector zero;
+    ``end``: the one-hot row each linked window hands over at, with ``link``).
+
+    On an hour of 50 Hz three-axis samples the windows' arrays and each problem's vector
+    were 29 and 32 MB, the same numbers twice through the whole search."""
+    na = d0.n_axes
+    nws = d0.extra_x.shape[1] if "ws" in d0.outputs else 0
+    shapes = [(nw, nx), (nw, L, d0.u.shape[1]), (nw, L - 1), (nw, L), (nw, L, na + nws),
+              (nw, L, 4), (nw, L), *([(nw, L)] if link else []), (2 + nws,)]  # fmt: skip
+    sizes = [math.prod(s) for s in shapes]
+    data = np.zeros(sum(sizes))
+    ends = np.cumsum(sizes)
+    parts = [data[e - k : e].reshape(s) for s, k, e in zip(shapes, sizes, ends, strict=True)]
+    x0, u, dt, weight, meas, quat_, yaw = parts[:7]
+    parts[-1][...] = np.nan  # the noise levels: a problem sets them
+    rate = meas[..., :na] if "rate" in d0.outputs else None
+    ws = meas[..., na:] if nws else None
+    quat_ = quat_ if "quat" in d0.outputs else None
+    yaw = yaw if "yaw" in d0.outputs else None
+    end = parts[7] if link else None
+    return data, x0, u, dt, weight, rate, quat_, yaw, ws, end
 
 
 # ----------------------------------------------------------------------------

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import itertools
 import threading
+import weakref
 
 import numpy as np
 import scipy.sparse as sp
@@ -95,6 +96,39 @@ def _kept_columns(J: sp.csc_matrix, k: int, K: int) -> sp.csc_matrix:
     return J[:, np.r_[np.arange(k), np.arange(K, J.shape[1])]]
 
 
+#: The arrays the problems of one WindowSet share (:func:`_shared`), by their key.
+_SHARED: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
+def _shared(windows: WindowSet, key: tuple, make, *, read_only: bool = True) -> np.ndarray:
+    """``make()``, or the array it made for another problem of ``windows`` with the same
+    ``key`` while that array is alive (held weakly: it goes with its last problem).
+
+    Every problem of a search is built on the same windows (with and without a sensor
+    lag, a more accurate one for the horizon): their data vector and per-row indices are
+    the same numbers, made once. Never written in place: ``read_only`` marks it so (the
+    data vector's noise levels, :meth:`ShootingProblem.set_noise`, are written in a copy)."""
+    made = _SHARED.setdefault(windows, {})
+    ref = made.get(key)
+    out = None if ref is None else ref()
+    if out is None:
+        out = make()
+        if read_only:
+            out.flags.writeable = False
+        made[key] = weakref.ref(out)
+    return out
+
+
+def _samples(layout: tuple, nw: int, L: int) -> np.ndarray:
+    """The window sample (row of the windows' arrays, window after window) of each residual
+    row: ``layout`` the output groups and their rows per sample (module doc's order)."""
+    wrow = np.concatenate([np.repeat(np.arange(L), n) for _, n in layout])
+    itype = np.int32 if nw * L < np.iinfo(np.int32).max else np.int64
+    return np.tile(wrow.astype(itype), nw) + np.repeat(
+        np.arange(nw, dtype=itype) * itype(L), wrow.size
+    )
+
+
 class ShootingProblem:
     """The multiple-shooting output error of one Model on a :class:`WindowSet`.
 
@@ -162,15 +196,19 @@ class ShootingProblem:
         self.n_delta = self.n_att + self.n_rate + self.n_ws + self.n_lag
         nw, L = windows.n, windows.length
         sizes = self.group_sizes
-        group = np.concatenate([np.full(sizes[o] * L, i) for i, o in enumerate(self.outputs)])
-        wrow = np.concatenate([np.repeat(np.arange(L), sizes[o]) for o in self.outputs])
+        layout = tuple((o, sizes[o]) for o in self.outputs)
+        group = np.concatenate([np.full(n * L, i) for i, (_, n) in enumerate(layout)])
         self.n_win_res = group.size
         # one entry per residual row (an hour of 50 Hz three-axis samples: 10^6 rows), so
-        # the narrowest integers that hold them: 8 MB each as int64, kept by every problem
-        self.group = np.tile(group.astype(np.int8), nw)  # output group of each residual
+        # the narrowest integers that hold them, and one copy for every problem of these
+        # windows with these output groups (:func:`_shared`: never written)
+        self.group = _shared(  # output group of each residual
+            windows, ("group", layout), lambda: np.tile(group.astype(np.int8), nw)
+        )
         # each residual's component within its group (a wheel of ``ws``: its own level)
-        comp = np.concatenate([np.tile(np.arange(sizes[o]), L) for o in self.outputs])
-        self.component = np.tile(comp.astype(np.int8), nw)
+        self.component = _shared(windows, ("component", layout), lambda: np.tile(
+            np.concatenate([np.tile(np.arange(n), L) for _, n in layout]).astype(np.int8), nw
+        ))  # fmt: skip
         self.n_meas = self.group.size  # measurement residuals; process-noise rows follow them
         # process noise (:mod:`.process_noise`): whitening of the continuity defects, or None
         self.penalty = None
@@ -190,13 +228,13 @@ class ShootingProblem:
         self.reuse_last = False
         self._last = None  # ((v, p_base, S, data mark), (rm, Jm, c, Jc)) of that answer
         self._fitting = threading.local()  # the fit in progress (_PerThread attributes)
-        itype = np.int32 if nw * L < np.iinfo(np.int32).max else np.int64
-        self.sample = np.tile(wrow.astype(itype), nw) + np.repeat(
-            np.arange(nw, dtype=itype) * itype(L), group.size
-        )  # the log row (window sample) of each residual row
-        self.usable = windows.weight.reshape(-1)[self.sample] > 0
+        # the log row (window sample) of each residual row
+        self.sample = _shared(windows, ("sample", layout), lambda: _samples(layout, nw, L))
+        self.usable = _shared(
+            windows, ("usable", layout), lambda: windows.weight.reshape(-1)[self.sample] > 0
+        )
         self.n_res = int(self.usable.sum())
-        self.primary = self.group == 0
+        self.primary = _shared(windows, ("primary", layout), lambda: self.group == 0)
         self.link = windows.linked
         if self.link and windows.end is None:  # pragma: no cover - programming error
             raise ValueError("linked windows need `end`, the row each hands over at")
@@ -206,6 +244,7 @@ class ShootingProblem:
         else:
             self.link_rows = np.zeros(0, dtype=int)
         self._data = self._data_vector()
+        self._data_shared = True  # (:func:`_shared`: copied before set_noise writes)
         #: entries of ``vec(delta)`` a fit may hold at zero (:meth:`pin`)
         self.pinned = np.zeros(0, dtype=int)
         self.pin_rule = None
@@ -271,9 +310,24 @@ class ShootingProblem:
 
     # ------------------------------------------------------------------ plumbing
     def _data_vector(self) -> np.ndarray:
+        """The windows' data, one vector the compiled functions read: one for every problem
+        of these windows with the same layout and noise levels (:func:`_shared`; an hour
+        of 50 Hz three-axis samples: 32 MB each, the search's problems with and without a
+        sensor lag, the horizon's more accurate one)."""
+        key = ("data", self.n_rate, self.n_ws, self.link, tuple(self._sigmas()))
+        return _shared(self.windows, key, self._data_made, read_only=False)
+
+    def _data_made(self) -> np.ndarray:
         w = self.windows
         nw, L = w.n, w.length
         na = self.n_rate
+        sig = np.array(self._sigmas())
+        if self._windows_data(sig.size):  # the windows' own: their arrays are views of it
+            tail = w.data[w.data.size - sig.size :]
+            if np.isnan(tail).all():
+                tail[...] = sig
+            if np.array_equal(tail, sig):
+                return w.data
 
         def cols(a, rows):  # (nw, L, rows) -> (rows, L nw)
             return np.zeros((rows, L * nw)) if a is None else a.reshape(nw * L, rows).T
@@ -293,8 +347,26 @@ class ShootingProblem:
             E = np.zeros((nw, L))
             E[np.arange(nw), np.asarray(w.end, dtype=int)] = 1.0
             parts = (*parts, E.reshape(1, -1))
-        parts = (*parts, np.array(self._sigmas())[:, None])
+        parts = (*parts, sig[:, None])
         return np.concatenate([np.asarray(a, dtype=float).reshape(-1, order="F") for a in parts])
+
+    def _windows_data(self, n_sigma: int) -> bool:
+        """Whether the windows' ``data`` (:func:`.logs._window_data`) is this problem's data
+        vector but for its noise levels: its size, and each array of the windows a view of
+        it where :meth:`_data_made` puts that array."""
+        w = self.windows
+        if w.data is None:
+            return False
+        n, na, nws = w.n * w.length, self.n_rate, self.n_ws
+        at = np.cumsum([0, w.x0.size, w.u.size, w.dt.size, n, (na + nws) * n, 4 * n, n])
+        if w.data.size != at[-1] + self.link * n + n_sigma:
+            return False
+        base = w.data.__array_interface__["data"][0]
+        where = [(w.x0, at[0]), (w.u, at[1]), (w.dt, at[2]), (w.weight, at[3]), (w.rate, at[4]),
+                 (w.ws, at[4] + na), (w.quat, at[5]), (w.yaw, at[6])]  # fmt: skip
+        return all(
+            a is None or a.__array_interface__["data"][0] == base + 8 * int(i) for a, i in where
+        )
 
     def set_noise(self, sigma_rate: float, sigma_att: float, sigma_ws=None) -> None:
         """New noise levels (rad/s, rad; the wheel speeds', rad/s, one or one per wheel,
@@ -303,6 +375,10 @@ class ShootingProblem:
         if sigma_ws is not None:
             self._set_sigma_ws(sigma_ws)
         sig = self._sigmas()
+        if np.array_equal(self._data[-len(sig) :], sig):
+            return
+        if self._data_shared:  # other problems read it: this one's own copy from now on
+            self._data, self._data_shared = self._data.copy(), False
         self._data[-len(sig) :] = sig
 
     def _key(self, K: int) -> tuple:

@@ -8,6 +8,8 @@ a scipy CSC matrix. Cached in the one bounded cache (:mod:`.function_cache`).
 
 from __future__ import annotations
 
+import weakref
+
 import casadi as ca
 import numpy as np
 import scipy.sparse as sp
@@ -157,6 +159,9 @@ class _WindowCalls:
     def __init__(self, fn: ca.Function, nw: int, where: list) -> None:
         self.fn, self.nw, self._where = fn, nw, where
         self.pair = fn.map(THREADS, "thread", THREADS) if nw >= THREADS else None
+        #: the functions' buffers kept between evaluations (:func:`.buffers.function_buffer`)
+        #: for few windows; made for each evaluation of many (:data:`KEPT_BUFFER_WINDOWS`)
+        self.keeps_buffers = nw < KEPT_BUFFER_WINDOWS
 
     def _windows(self, src: list, sink=None) -> list:
         """Every output of the window function for all windows, window after window.
@@ -179,10 +184,11 @@ class _WindowCalls:
             for i, (s, off, per) in enumerate(self._where)
             if per is None
         }
+        buffer = function_buffer if self.keeps_buffers else ca.Function.buffer
         for fn, j0, count in self._calls():
             if count not in buffers:
                 tiled = {i: np.tile(a, count) for i, a in shared.items()}
-                buffers[count] = (*function_buffer(fn), tiled)
+                buffers[count] = (*buffer(fn), tiled)
             buf, run, tiled = buffers[count]
             for i, (s, off, per) in enumerate(self._where):
                 if per is None:
@@ -239,7 +245,8 @@ class WindowResidual(_WindowCalls):
         if not self.link:
             return [out[0]]
         x0, sigma = self._x0_sigma(src)
-        return [out[0], evaluate(self.defects, out[1], src[0], x0, sigma)[0]]
+        c = evaluate(self.defects, out[1], src[0], x0, sigma, keep=self.keeps_buffers)
+        return [out[0], c[0]]
 
 
 class WindowOutputs(_WindowCalls):
@@ -281,7 +288,10 @@ class WindowJacobian(_WindowCalls):
         # Hz three-axis samples) makes them per call. Not made before: the penalised fits
         # evaluate their used slots' part only (:meth:`_used_part`), and the structure
         # IPOPT's Hessian is made of (:meth:`pattern`) is made once per solver; kept from
-        # the start, the arrays held 50 MB per Model on an hour of samples that no fit read
+        # the start, the arrays held 50 MB per Model on an hour of samples that no fit read.
+        # Kept weakly (:class:`_KeptIndex`): the Jacobians made of them hold them; once the
+        # last is let go they go too (25-29 MB each on that hour, one pair per Model and
+        # slot count, held to the end of a search by Jacobians no longer in use)
         self._keep_index = K <= KEPT_INDEX_SLOTS
         self._index = None
 
@@ -290,8 +300,9 @@ class WindowJacobian(_WindowCalls):
         parameter columns ``theta`` (sorted slots; default all) and, with ``windows``, every
         window's own columns (:meth:`part_matrix`)."""
         whole = theta is None and windows
-        if whole and getattr(self, "_index", None) is not None:
-            return self._index
+        kept = None if not whole else _KeptIndex.get(getattr(self, "_index", None))
+        if kept is not None:
+            return kept
         block, nw, K = self.win_rj.sparsity_out(1), self.nw, self.K
         theta = np.arange(K) if theta is None else np.asarray(theta, dtype=int)
         m, col = block.size1(), self._colind
@@ -342,7 +353,7 @@ class WindowJacobian(_WindowCalls):
         th = np.arange(K) if theta is None else np.asarray(theta, dtype=int)
         indices, indptr = self._index_arrays(theta, windows)
         if theta is None and windows and self._keep_index:
-            self._index = (indices, indptr)
+            self._index = _KeptIndex(indices, indptr)
         n_cols = th.size + ((self.shape[1] - K) if windows else 0)
         spans = self._spans(th, windows)
         return _Part(spans, self.nw, indices, indptr, (self.shape[0], n_cols))
@@ -350,16 +361,19 @@ class WindowJacobian(_WindowCalls):
     def _used_part(self, used: int) -> _Part:
         """An empty :class:`_Part` of the whole Jacobian's shape whose parameter slots from
         ``used`` on have no entries (a fit's unused slots, fixed at zero); its index arrays
-        kept for the last ``used`` asked (every iterate of a fit asks the same)."""
+        kept for the last ``used`` asked (every iterate of a fit asks the same) while a
+        matrix made of them is alive (:class:`_KeptIndex`)."""
         K = self.K
         kept = getattr(self, "_used_index", None)
-        if kept is None or kept[0] != used:
+        arrays = _KeptIndex.get(kept[1]) if kept is not None and kept[0] == used else None
+        if arrays is None:
             self._used_index = None  # (the last let go before these are made)
             indices, ptr = self._index_arrays(np.arange(used), True)
             indptr = np.r_[ptr[: used + 1], np.full(K - used, ptr[used]), ptr[used + 1 :]]
-            kept = self._used_index = (used, indices, indptr.astype(ptr.dtype))
+            arrays = (indices, indptr.astype(ptr.dtype))
+            self._used_index = (used, _KeptIndex(*arrays))
         spans = self._spans(np.arange(used), True)
-        return _Part(spans, self.nw, kept[1], kept[2], self.shape)
+        return _Part(spans, self.nw, *arrays, self.shape)
 
     def __call__(self, v, p_base, S, data, parts=None, used=None) -> tuple:
         """``(r, J)``, and on linked windows ``(r, J, c, Jc)`` (``J``, ``Jc`` scipy CSC).
@@ -400,8 +414,24 @@ class WindowJacobian(_WindowCalls):
         if self.defects is None:
             return out[0], J
         x0, sigma = self._x0_sigma(src)
-        c, Jc = evaluate(self.defects, out[2], out[3], src[0], x0, sigma)
+        c, Jc = evaluate(self.defects, out[2], out[3], src[0], x0, sigma, keep=self.keeps_buffers)
         return out[0], J, c, csc_of(Jc, self.defects.sparsity_out(1))
+
+
+class _KeptIndex:
+    """A Jacobian's CSC ``(indices, indptr)`` held weakly: alive while a matrix made of them
+    (:meth:`_Part.matrix` shares them) is; :meth:`get` gives them back, or None once let go."""
+
+    def __init__(self, indices: np.ndarray, indptr: np.ndarray) -> None:
+        self.refs = (weakref.ref(indices), weakref.ref(indptr))
+
+    @staticmethod
+    def get(kept) -> tuple | None:
+        """``(indices, indptr)`` of ``kept`` (a :class:`_KeptIndex` or None) while alive."""
+        if kept is None:
+            return None
+        arrays = tuple(r() for r in kept.refs)
+        return None if any(a is None for a in arrays) else arrays
 
 
 class _Part:
@@ -462,6 +492,15 @@ KEPT_INDEX_SLOTS = 6
 
 #: Threads evaluating the windows side by side.
 THREADS = 2
+
+#: Windows from which the window functions' buffers (their work vectors) are made for each
+#: evaluation of all windows and let go with it, not kept with the cached function
+#: (:class:`_WindowCalls`): made once for the ``nw / THREADS`` runs of an evaluation. On an
+#: hour of 50 Hz three-axis pieces (360) the Jacobian's is 14 MB, made in 0.2 ms against
+#: 3 s for the evaluation, and the defects' 5 MB; kept, one of each per Model and slot
+#: count stayed resident through the whole search. Few windows (a short log's fits, many
+#: cheap evaluations) keep theirs.
+KEPT_BUFFER_WINDOWS = 64
 
 
 def map_windows(fn: ca.Function, nw: int, args: list) -> list:

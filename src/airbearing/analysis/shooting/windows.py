@@ -42,6 +42,12 @@ class WindowSet:
     segment : ndarray (n,) of int, optional
         The log segment (between gaps) of each window, numbered over all logs; None: windows
         are grouped by ``source`` and ``link`` (:meth:`segments`).
+    data : ndarray, optional
+        The data vector of the shooting problems on these windows
+        (:meth:`~.problem.ShootingProblem._data_vector`), of which ``x0``, ``u``, ``dt``,
+        ``weight``, ``rate``, ``quat``, ``yaw`` and ``ws`` are views, its noise levels' last
+        entries NaN until a problem sets them: the windows' numbers held once, not again in
+        each problem's vector. None: each problem makes its own.
     """
 
     x0: np.ndarray
@@ -57,6 +63,7 @@ class WindowSet:
     end: np.ndarray | None = None
     segment: np.ndarray | None = None
     ws: np.ndarray | None = None
+    data: np.ndarray | None = None
 
     def segments(self) -> np.ndarray:
         """Segment number of each window (``segment`` when given, else a new number at every
