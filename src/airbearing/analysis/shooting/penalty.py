@@ -28,6 +28,7 @@ from airbearing.analysis.shooting.functions import (
     scale_columns,
     vstack_csc,
 )
+from airbearing.analysis.shooting.sparse import gram, let_go
 
 __all__ = [
     "KAPPA_GRID",
@@ -232,14 +233,21 @@ class _PenalisedOracle:
         if hasattr(self, "Jc"):
             self.c = self.Jc = None
 
-    def _stack(self, raw) -> None:
+    def _stack(self, raw, fresh: bool = False) -> None:
+        """``(r, J)`` of the window Jacobian's output ``raw``; ``fresh``: evaluated here for
+        this iterate only (not kept, nor a fit's start, which the problem may keep): its
+        measurement rows' arrays are let go as the stacked ones are made."""
         rm, Jm, c, Jc = raw
         self.raw = raw if self.keep_raw else None
+        own = fresh and not self.keep_raw
         self.C = Jc  # the defects' own Jacobian (small): the errors' linearised problem
         if self.P is not None:
-            rm, Jm = self.P @ rm, self.P @ Jm
+            rm, PJm = self.P @ rm, self.P @ Jm
+            if own:  # (its indices: the window Jacobian's own, kept for every iterate)
+                let_go(Jm, values_only=True)
+            Jm, own = PJm, True
         self.r = np.r_[rm, self.W @ c]
-        self.J = scale_columns(vstack_csc(Jm, self.W @ Jc), self.scale)
+        self.J = scale_columns(vstack_csc(Jm, self.W @ Jc, consume=own), self.scale)
 
     def r_at(self, z):
         if self.z is None or not np.array_equal(z, self.z):
@@ -255,7 +263,7 @@ class _PenalisedOracle:
             self.z = self.r = self.J = self.raw = self.C = None
             raw = self.fj(z * self.scale, self.pb, self.S, self.data, used=self.used)
             self.z = z.copy()
-            self._stack(raw)
+            self._stack(raw, fresh=True)
         return self.r, self.J
 
 
@@ -271,15 +279,37 @@ def hessian_pattern(fj, nd: int, nw: int) -> sp.csc_matrix:
     """Upper triangle of the structure of ``J^T J + Jc^T W^T W Jc`` (``fj`` the problem's
     :class:`~.problem_functions.WindowJacobian`; ``W`` dense within each pair's ``nd x nd`` block):
     fixed for a problem structure, so IPOPT gets a sparse Hessian (the window states couple
-    only their neighbours)."""
-    J = fj.pattern()
-    Jc = _pattern(fj.defect_sparsity())
-    m = nd * max(nw - 1, 0)
-    Wp = sp.block_diag([np.ones((nd, nd))] * max(nw - 1, 0), format="csc") if m else None
-    H = (J.T @ J) + ((Wp @ Jc).T @ (Wp @ Jc) if m else 0 * (J.T @ J))
-    H = sp.triu(H, format="csc")
-    H.data[:] = 1.0
-    H.sort_indices()
+    only their neighbours).
+
+    Made from one window's block (every window's rows have its structure, on the parameter
+    columns and on their own window's states), not from ``J``'s: the same CSC arrays as
+    ``triu(J^T J + ...)`` of ``J``'s pattern (sorted indices, ones), without that pattern
+    and its product (on an hour of 50 Hz three-axis samples 6.5 million entries, some
+    150 MB at each penalised solver's build).
+    """
+    K, n_v = fj.K, fj.shape[1]
+    B = _pattern(fj.win_rj.sparsity_out(1))  # one window's rows: (m, K + nd)
+    G = sp.coo_matrix(B.T @ B)  # a row's columns pair up in its window's block only
+    off = (np.arange(nw, dtype=np.int64) * nd)[:, None]
+    gr, gc = G.row.astype(np.int64), G.col.astype(np.int64)
+    rows = [np.where(gr < K, gr, gr + off).ravel()]  # window j's states at K + j nd
+    cols = [np.where(gc < K, gc, gc + off).ravel()]
+    if nw > 1:  # the defects: each pair's rows mixed by its block of W
+        Jc = _pattern(fj.defect_sparsity())
+        Wp = sp.block_diag([np.ones((nd, nd))] * (nw - 1), format="csc")
+        D = sp.coo_matrix((Wp @ Jc).T @ (Wp @ Jc))
+        rows.append(D.row.astype(np.int64))
+        cols.append(D.col.astype(np.int64))
+    row, col = np.concatenate(rows), np.concatenate(cols)
+    upper = row <= col
+    keys = np.unique(col[upper] * n_v + row[upper])  # column-major, rows sorted
+    indptr = np.r_[0, np.cumsum(np.bincount(keys // n_v, minlength=n_v))]
+    itype = np.int32 if max(n_v, keys.size) < np.iinfo(np.int32).max else np.int64
+    H = sp.csc_matrix(
+        (np.ones(keys.size), (keys % n_v).astype(itype), indptr.astype(itype)),
+        shape=(n_v, n_v),
+    )
+    H.has_sorted_indices = True
     return H
 
 
@@ -307,7 +337,9 @@ def _build_penalised(model, L, nw, K, outputs, substeps, jit, max_iter, objectiv
 
     def hess(z, _par, lam_f, _lam_g):
         _, J = o.rj_at(z)
-        H = (J.T @ J).tocsr()
+        # scipy's J.T @ J made a CSR copy of the whole J first (on an hour of 50 Hz
+        # three-axis samples 87 MB at each Hessian); gram: the same sums, block by block
+        H = gram(J).tocsr()
         vals = float(lam_f[0]) * np.asarray(H[h_rows, h_cols]).ravel()
         return [ca.DM(h_spy, vals)]
 
