@@ -267,6 +267,128 @@ class _PenalisedOracle:
         return self.r, self.J
 
 
+class StackedPart:
+    """The parameter columns ``theta`` and every window's own columns of a
+    :class:`~.problem_functions.WindowJacobian` on linked windows written straight into the
+    arrays of their stack over the whitened defects' rows ``B = (W Jc)[:, those columns]``
+    (:func:`.sparse.vstack_csc`'s layout), room left for ``B``'s entries by the structure
+    of ``|W|`` times that of ``Jc`` (a superset of ``B``'s): no copy of the part to stack it
+    (on an hour of 50 Hz three-axis samples the part and the stacked values, 130 MB, were
+    held at once). A part of the window Jacobian's call (``parts``), filled window block by
+    window block; :meth:`stacked` then puts ``B``'s values in (the same arrays as
+    ``vstack_csc(part, B)``)."""
+
+    def __init__(self, fj, theta, W) -> None:
+        th = np.asarray(theta, dtype=int)
+        nw, K, m = fj.nw, fj.K, fj.shape[0]
+        Bp = sp.csc_matrix(abs(sp.csr_matrix(W)) @ _pattern(fj.defect_sparsity()))
+        Bp = Bp[:, np.r_[th, np.arange(K, fj.shape[1])]]
+        Bp.sort_indices()
+        n_cols = Bp.shape[1]
+        ind, ptr = fj._index_arrays(th, True)
+        self.spans = fj._spans(th, True)
+        col = np.repeat(np.arange(n_cols), np.diff(Bp.indptr))
+        self.places = ptr[col + 1].astype(np.int64) + np.arange(Bp.nnz, dtype=np.int64)
+        total = ind.size + Bp.nnz
+        big = max(m + Bp.shape[0], total) >= np.iinfo(np.int32).max
+        itype = np.int64 if big else np.int32
+        rest = np.ones(total, dtype=bool)
+        rest[self.places] = False
+        self.indices = np.empty(total, dtype=itype)
+        self.indices[self.places] = Bp.indices.astype(itype) + itype(m)
+        self.indices[rest] = ind
+        del ind, rest
+        self.indptr = ptr.astype(itype) + Bp.indptr.astype(itype)
+        self.data = np.empty(total)
+        self.shape = (m + Bp.shape[0], n_cols)
+        self.Bp = Bp
+        # where each span's entries start without B's (as in the part alone), and how far
+        # B's entries before a column move that column's: each parameter column's alike,
+        # each window's own columns by their own (t: the column of each block entry)
+        sizes = [(b - a) * nw for a, b in self.spans]
+        self.starts = np.r_[0, np.cumsum(sizes)[:-1]].astype(np.int64)
+        shift = Bp.indptr.astype(np.int64)
+        self.shift_theta = shift[: th.size]
+        nd = (fj.shape[1] - K) // nw
+        self.shift_windows = shift[th.size : th.size + nd * nw].reshape(nw, nd)
+        self.t = np.repeat(np.arange(nd), np.diff(fj._colind)[K:])
+        self.e = np.arange(self.t.size, dtype=np.int64)
+
+    def fill(self, blocks: np.ndarray, j0: int) -> None:
+        """Windows ``j0 : j0 + len(blocks)`` from their blocks' nonzeros (one row each)."""
+        n = blocks.shape[0]
+        last = len(self.spans) - 1
+        for i, ((a, b), at) in enumerate(zip(self.spans, self.starts, strict=True)):
+            w = b - a
+            if i < last:  # a parameter column: every window's rows in turn
+                o = at + self.shift_theta[i] + j0 * w
+                self.data[o : o + n * w].reshape(n, w)[...] = blocks[:, a:b]
+            else:
+                j = np.arange(j0, j0 + n, dtype=np.int64)
+                dest = (at + j * w)[:, None] + self.e[None, :]
+                dest += self.shift_windows[j0 : j0 + n][:, self.t]
+                self.data[dest] = blocks[:, a:b]
+
+    def matrix(self) -> None:
+        """Nothing yet: :meth:`stacked` once ``B`` is known."""
+        return None
+
+    def stacked(self, B: sp.csc_matrix) -> sp.csc_matrix:
+        """``[part; B]`` in this part's arrays, ``B`` the defects' rows of its columns (the
+        slots left for entries ``B`` has not, exact zeros its product dropped, taken out);
+        stacked anew if ``B`` has entries outside the room left (a NaN's product)."""
+        B = sp.csc_matrix(B)
+        B.sort_indices()
+        Bp, n_r = self.Bp, self.Bp.shape[0]
+        if B.shape != Bp.shape:  # pragma: no cover - programming error
+            raise ValueError("StackedPart: the defects' rows have another shape")
+        cols = np.arange(Bp.shape[1], dtype=np.int64)
+        key_p = np.repeat(cols, np.diff(Bp.indptr)) * n_r + Bp.indices
+        key_b = np.repeat(cols, np.diff(B.indptr)) * n_r + B.indices
+        present = np.isin(key_p, key_b)
+        if int(present.sum()) != B.nnz:  # (a NaN's product): the part alone, stacked anew
+            rest = np.ones(self.data.size, dtype=bool)
+            rest[self.places] = False
+            part = sp.csc_matrix(
+                (self.data[rest], self.indices[rest], self.indptr - Bp.indptr),
+                shape=(self.shape[0] - n_r, self.shape[1]),
+            )
+            self.data = self.indices = None
+            return vstack_csc(part, B, consume=True)
+        self.data[self.places[present]] = B.data
+        n = self.data.size
+        gone = self.places[~present]
+        if gone.size:  # each later entry moves left by the slots before it
+            per_col = np.bincount(
+                np.repeat(cols, np.diff(Bp.indptr))[~present], minlength=cols.size
+            )
+            for arr in (self.data, self.indices):
+                _drop_slots(arr, gone)
+            self.indptr = self.indptr - np.r_[0, np.cumsum(per_col)].astype(self.indptr.dtype)
+            n -= gone.size
+        data, indices = self.data[:n], self.indices[:n]
+        self.data = self.indices = None
+        return sp.csc_matrix((data, indices, self.indptr), shape=self.shape, copy=False)
+
+
+#: Most entries moved at once by :func:`_drop_slots` (its temporary copy: 8 MB).
+DROP_BLOCK_ENTRIES = 1 << 20
+
+
+def _drop_slots(arr: np.ndarray, gone: np.ndarray) -> None:
+    """Take the entries at the sorted positions ``gone`` out of ``arr`` in place: the others
+    moved left (in order) to its first ``arr.size - gone.size`` entries."""
+    bounds = np.r_[gone, arr.size]
+    start = 0
+    for i, end in enumerate(bounds):  # entries start:end move left by i
+        a = int(start)
+        while i and a < end:
+            b = min(a + DROP_BLOCK_ENTRIES, int(end))
+            arr[a - i : b - i] = arr[a:b].copy()
+            a = b
+        start = end + 1
+
+
 def _pattern(spy: ca.Sparsity) -> sp.csc_matrix:
     """A CasADi sparsity as a scipy CSC matrix of ones."""
     return sp.csc_matrix(

@@ -31,7 +31,7 @@ from airbearing.analysis.shooting.functions import (
     vstack_csc,
     window_jacobian,
 )
-from airbearing.analysis.shooting.penalty import penalised_solver
+from airbearing.analysis.shooting.penalty import StackedPart, penalised_solver
 from airbearing.analysis.shooting.problem_functions import residual_function
 from airbearing.analysis.shooting.solver import start_meets_objective_stop
 from airbearing.analysis.shooting.sparse import let_go, stacked_column_norms
@@ -495,7 +495,13 @@ class ShootingProblem:
             first = ("dense", np.asarray(dense[1], dtype=int), dense[0], dense[2])
         parts = [first] + ([(np.arange(cut, k), True)] if right else [])
         fj = window_jacobian(*self._key(K), self.link)
+        stacked = None
+        if penalised and P is None and right:
+            # the window states' columns written straight into their stack over the
+            # defects' rows (room left by the structure of W Jc): no copy to stack them
+            stacked = parts[-1] = StackedPart(fj, np.arange(cut, k), W)
         out = fj(v, p_base, Sp, data, parts=parts)
+        del parts
         held = self.held(fit.p, S)
         r, mats = out[0], out[1]
         if penalised:
@@ -514,7 +520,10 @@ class ShootingProblem:
             # window states' part, its whitened copy and the stacked one were held at once
             for i, cols in enumerate(full[: len(mats)]):
                 Jm, mats[i] = mats[i], None
-                if Jm is not None:
+                if i == 1 and stacked is not None:
+                    mats[i] = stacked.stacked(WJc[:, cols])
+                    stacked = None
+                elif Jm is not None:
                     if P is not None:
                         PJm = P @ Jm
                         let_go(Jm)
