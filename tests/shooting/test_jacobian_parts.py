@@ -135,3 +135,36 @@ def test_honest_errors_split_of_kept_blocks_is_the_whole_jacobians():
         assert fit_jacobian_split(fit, 3) is None
     whole = Fit(theta, theta, theta, np.zeros((1, 1)), 0.0, 0, 0, 0.0, 0, extra={"J": J})
     assert fit_jacobian_split(whole, 2) is None
+
+
+def test_stacked_part_takes_out_dropped_slots_and_restacks_entries_outside(monkeypatch):
+    """The window states' columns written into their stack over the defects' rows
+    (:class:`.penalty.StackedPart`) are ``vstack_csc`` of the part and those rows to the
+    bit: when the rows have every slot left for them, fewer (exact zeros a product
+    dropped: the slots taken out) and one outside (stacked anew)."""
+    from airbearing.analysis.shooting import penalty
+    from airbearing.analysis.shooting.penalty import StackedPart
+
+    monkeypatch.setattr(penalty, "DROP_BLOCK_ENTRIES", 5)  # slots taken out in many blocks
+    prob, model, S = _problem([_coast(1.2, 2e-4, 30.0, 5)], piece_s=2.0)
+    set_intensity(prob, KAPPA_GRID[2])
+    at = _point(prob, model, S)
+    v, Sp = prob._v(at.delta, S, at.theta)
+    K = Sp.shape[1]
+    fj = pf.window_jacobian(*prob._key(K), True)
+    pb = at.p - S @ at.theta
+    theta = np.arange(1, 2)  # one parameter slot, then the window states' columns
+    _, (part,), _, Jc = fj(v, pb, Sp, prob._data, parts=[(theta, True)])
+    cols = np.r_[theta, np.arange(K, fj.shape[1])]
+    B = sp.csc_matrix(prob.penalty @ Jc)[:, cols]
+    fewer = B.copy()
+    fewer.data[::3] = 0.0
+    fewer.eliminate_zeros()
+    outside = B.tolil()
+    outside[0, B.shape[1] - 1] = 7.0  # the first pair's defects never see the last window
+    outside = sp.csc_matrix(outside)
+    for rows in (B, fewer, outside):
+        stacked = StackedPart(fj, theta, prob.penalty)
+        _, (none,), _, _ = fj(v, pb, Sp, prob._data, parts=[stacked])
+        assert none is None
+        _same(stacked.stacked(rows), sps.vstack_csc(part, rows))

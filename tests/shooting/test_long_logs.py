@@ -166,6 +166,18 @@ def test_row_stacking_is_scipys():
     want = sp.vstack([A, B]).tocsc()
     np.testing.assert_array_equal(got.toarray(), want.toarray())
     assert got.has_sorted_indices or np.all(np.diff(got.indices[: got.indptr[1]]) > 0)
+    # stacked in place of the given matrix (its arrays let go as they are copied): the
+    # same arrays, some columns of B empty, some of A too
+    A.data[A.indptr[3] : A.indptr[4]] = 0.0
+    A.eliminate_zeros()
+    B = sp.random(3, 12, density=0.3, random_state=rng, format="csc")
+    ref = vstack_csc(A, B)
+    given = A.copy()
+    got = vstack_csc(given, B, consume=True)
+    for name in ("data", "indices", "indptr"):
+        np.testing.assert_array_equal(getattr(got, name), getattr(ref, name))
+    np.testing.assert_array_equal(got.toarray(), sp.vstack([A, B]).toarray())
+    assert given.data is None and given.indices is None  # nothing of it held any more
 
 
 def test_sparse_null_space_gives_the_dense_errors(linked):

@@ -28,6 +28,7 @@ from airbearing.analysis.shooting.functions import (
     scale_columns,
     vstack_csc,
 )
+from airbearing.analysis.shooting.sparse import let_go
 
 __all__ = [
     "KAPPA_GRID",
@@ -232,14 +233,21 @@ class _PenalisedOracle:
         if hasattr(self, "Jc"):
             self.c = self.Jc = None
 
-    def _stack(self, raw) -> None:
+    def _stack(self, raw, fresh: bool = False) -> None:
+        """``(r, J)`` of the window Jacobian's output ``raw``; ``fresh``: evaluated here for
+        this iterate only (not kept, nor a fit's start, which the problem may keep): its
+        measurement rows' arrays are let go as the stacked ones are made."""
         rm, Jm, c, Jc = raw
         self.raw = raw if self.keep_raw else None
+        own = fresh and not self.keep_raw
         self.C = Jc  # the defects' own Jacobian (small): the errors' linearised problem
         if self.P is not None:
-            rm, Jm = self.P @ rm, self.P @ Jm
+            rm, PJm = self.P @ rm, self.P @ Jm
+            if own:  # (its indices: the window Jacobian's own, kept for every iterate)
+                let_go(Jm, values_only=True)
+            Jm, own = PJm, True
         self.r = np.r_[rm, self.W @ c]
-        self.J = scale_columns(vstack_csc(Jm, self.W @ Jc), self.scale)
+        self.J = scale_columns(vstack_csc(Jm, self.W @ Jc, consume=own), self.scale)
 
     def r_at(self, z):
         if self.z is None or not np.array_equal(z, self.z):
@@ -255,8 +263,130 @@ class _PenalisedOracle:
             self.z = self.r = self.J = self.raw = self.C = None
             raw = self.fj(z * self.scale, self.pb, self.S, self.data, used=self.used)
             self.z = z.copy()
-            self._stack(raw)
+            self._stack(raw, fresh=True)
         return self.r, self.J
+
+
+class StackedPart:
+    """The parameter columns ``theta`` and every window's own columns of a
+    :class:`~.problem_functions.WindowJacobian` on linked windows written straight into the
+    arrays of their stack over the whitened defects' rows ``B = (W Jc)[:, those columns]``
+    (:func:`.sparse.vstack_csc`'s layout), room left for ``B``'s entries by the structure
+    of ``|W|`` times that of ``Jc`` (a superset of ``B``'s): no copy of the part to stack it
+    (on an hour of 50 Hz three-axis samples the part and the stacked values, 130 MB, were
+    held at once). A part of the window Jacobian's call (``parts``), filled window block by
+    window block; :meth:`stacked` then puts ``B``'s values in (the same arrays as
+    ``vstack_csc(part, B)``)."""
+
+    def __init__(self, fj, theta, W) -> None:
+        th = np.asarray(theta, dtype=int)
+        nw, K, m = fj.nw, fj.K, fj.shape[0]
+        Bp = sp.csc_matrix(abs(sp.csr_matrix(W)) @ _pattern(fj.defect_sparsity()))
+        Bp = Bp[:, np.r_[th, np.arange(K, fj.shape[1])]]
+        Bp.sort_indices()
+        n_cols = Bp.shape[1]
+        ind, ptr = fj._index_arrays(th, True)
+        self.spans = fj._spans(th, True)
+        col = np.repeat(np.arange(n_cols), np.diff(Bp.indptr))
+        self.places = ptr[col + 1].astype(np.int64) + np.arange(Bp.nnz, dtype=np.int64)
+        total = ind.size + Bp.nnz
+        big = max(m + Bp.shape[0], total) >= np.iinfo(np.int32).max
+        itype = np.int64 if big else np.int32
+        rest = np.ones(total, dtype=bool)
+        rest[self.places] = False
+        self.indices = np.empty(total, dtype=itype)
+        self.indices[self.places] = Bp.indices.astype(itype) + itype(m)
+        self.indices[rest] = ind
+        del ind, rest
+        self.indptr = ptr.astype(itype) + Bp.indptr.astype(itype)
+        self.data = np.empty(total)
+        self.shape = (m + Bp.shape[0], n_cols)
+        self.Bp = Bp
+        # where each span's entries start without B's (as in the part alone), and how far
+        # B's entries before a column move that column's: each parameter column's alike,
+        # each window's own columns by their own (t: the column of each block entry)
+        sizes = [(b - a) * nw for a, b in self.spans]
+        self.starts = np.r_[0, np.cumsum(sizes)[:-1]].astype(np.int64)
+        shift = Bp.indptr.astype(np.int64)
+        self.shift_theta = shift[: th.size]
+        nd = (fj.shape[1] - K) // nw
+        self.shift_windows = shift[th.size : th.size + nd * nw].reshape(nw, nd)
+        self.t = np.repeat(np.arange(nd), np.diff(fj._colind)[K:])
+        self.e = np.arange(self.t.size, dtype=np.int64)
+
+    def fill(self, blocks: np.ndarray, j0: int) -> None:
+        """Windows ``j0 : j0 + len(blocks)`` from their blocks' nonzeros (one row each)."""
+        n = blocks.shape[0]
+        last = len(self.spans) - 1
+        for i, ((a, b), at) in enumerate(zip(self.spans, self.starts, strict=True)):
+            w = b - a
+            if i < last:  # a parameter column: every window's rows in turn
+                o = at + self.shift_theta[i] + j0 * w
+                self.data[o : o + n * w].reshape(n, w)[...] = blocks[:, a:b]
+            else:
+                j = np.arange(j0, j0 + n, dtype=np.int64)
+                dest = (at + j * w)[:, None] + self.e[None, :]
+                dest += self.shift_windows[j0 : j0 + n][:, self.t]
+                self.data[dest] = blocks[:, a:b]
+
+    def matrix(self) -> None:
+        """Nothing yet: :meth:`stacked` once ``B`` is known."""
+        return None
+
+    def stacked(self, B: sp.csc_matrix) -> sp.csc_matrix:
+        """``[part; B]`` in this part's arrays, ``B`` the defects' rows of its columns (the
+        slots left for entries ``B`` has not, exact zeros its product dropped, taken out);
+        stacked anew if ``B`` has entries outside the room left (a NaN's product)."""
+        B = sp.csc_matrix(B)
+        B.sort_indices()
+        Bp, n_r = self.Bp, self.Bp.shape[0]
+        if B.shape != Bp.shape:  # pragma: no cover - programming error
+            raise ValueError("StackedPart: the defects' rows have another shape")
+        cols = np.arange(Bp.shape[1], dtype=np.int64)
+        key_p = np.repeat(cols, np.diff(Bp.indptr)) * n_r + Bp.indices
+        key_b = np.repeat(cols, np.diff(B.indptr)) * n_r + B.indices
+        present = np.isin(key_p, key_b)
+        if int(present.sum()) != B.nnz:  # (a NaN's product): the part alone, stacked anew
+            rest = np.ones(self.data.size, dtype=bool)
+            rest[self.places] = False
+            part = sp.csc_matrix(
+                (self.data[rest], self.indices[rest], self.indptr - Bp.indptr),
+                shape=(self.shape[0] - n_r, self.shape[1]),
+            )
+            self.data = self.indices = None
+            return vstack_csc(part, B, consume=True)
+        self.data[self.places[present]] = B.data
+        n = self.data.size
+        gone = self.places[~present]
+        if gone.size:  # each later entry moves left by the slots before it
+            per_col = np.bincount(
+                np.repeat(cols, np.diff(Bp.indptr))[~present], minlength=cols.size
+            )
+            for arr in (self.data, self.indices):
+                _drop_slots(arr, gone)
+            self.indptr = self.indptr - np.r_[0, np.cumsum(per_col)].astype(self.indptr.dtype)
+            n -= gone.size
+        data, indices = self.data[:n], self.indices[:n]
+        self.data = self.indices = None
+        return sp.csc_matrix((data, indices, self.indptr), shape=self.shape, copy=False)
+
+
+#: Most entries moved at once by :func:`_drop_slots` (its temporary copy: 8 MB).
+DROP_BLOCK_ENTRIES = 1 << 20
+
+
+def _drop_slots(arr: np.ndarray, gone: np.ndarray) -> None:
+    """Take the entries at the sorted positions ``gone`` out of ``arr`` in place: the others
+    moved left (in order) to its first ``arr.size - gone.size`` entries."""
+    bounds = np.r_[gone, arr.size]
+    start = 0
+    for i, end in enumerate(bounds):  # entries start:end move left by i
+        a = int(start)
+        while i and a < end:
+            b = min(a + DROP_BLOCK_ENTRIES, int(end))
+            arr[a - i : b - i] = arr[a:b].copy()
+            a = b
+        start = end + 1
 
 
 def _pattern(spy: ca.Sparsity) -> sp.csc_matrix:
@@ -271,15 +401,37 @@ def hessian_pattern(fj, nd: int, nw: int) -> sp.csc_matrix:
     """Upper triangle of the structure of ``J^T J + Jc^T W^T W Jc`` (``fj`` the problem's
     :class:`~.problem_functions.WindowJacobian`; ``W`` dense within each pair's ``nd x nd`` block):
     fixed for a problem structure, so IPOPT gets a sparse Hessian (the window states couple
-    only their neighbours)."""
-    J = fj.pattern()
-    Jc = _pattern(fj.defect_sparsity())
-    m = nd * max(nw - 1, 0)
-    Wp = sp.block_diag([np.ones((nd, nd))] * max(nw - 1, 0), format="csc") if m else None
-    H = (J.T @ J) + ((Wp @ Jc).T @ (Wp @ Jc) if m else 0 * (J.T @ J))
-    H = sp.triu(H, format="csc")
-    H.data[:] = 1.0
-    H.sort_indices()
+    only their neighbours).
+
+    Made from one window's block (every window's rows have its structure, on the parameter
+    columns and on their own window's states), not from ``J``'s: the same CSC arrays as
+    ``triu(J^T J + ...)`` of ``J``'s pattern (sorted indices, ones), without that pattern
+    and its product (on an hour of 50 Hz three-axis samples 6.5 million entries, some
+    150 MB at each penalised solver's build).
+    """
+    K, n_v = fj.K, fj.shape[1]
+    B = _pattern(fj.win_rj.sparsity_out(1))  # one window's rows: (m, K + nd)
+    G = sp.coo_matrix(B.T @ B)  # a row's columns pair up in its window's block only
+    off = (np.arange(nw, dtype=np.int64) * nd)[:, None]
+    gr, gc = G.row.astype(np.int64), G.col.astype(np.int64)
+    rows = [np.where(gr < K, gr, gr + off).ravel()]  # window j's states at K + j nd
+    cols = [np.where(gc < K, gc, gc + off).ravel()]
+    if nw > 1:  # the defects: each pair's rows mixed by its block of W
+        Jc = _pattern(fj.defect_sparsity())
+        Wp = sp.block_diag([np.ones((nd, nd))] * (nw - 1), format="csc")
+        D = sp.coo_matrix((Wp @ Jc).T @ (Wp @ Jc))
+        rows.append(D.row.astype(np.int64))
+        cols.append(D.col.astype(np.int64))
+    row, col = np.concatenate(rows), np.concatenate(cols)
+    upper = row <= col
+    keys = np.unique(col[upper] * n_v + row[upper])  # column-major, rows sorted
+    indptr = np.r_[0, np.cumsum(np.bincount(keys // n_v, minlength=n_v))]
+    itype = np.int32 if max(n_v, keys.size) < np.iinfo(np.int32).max else np.int64
+    H = sp.csc_matrix(
+        (np.ones(keys.size), (keys % n_v).astype(itype), indptr.astype(itype)),
+        shape=(n_v, n_v),
+    )
+    H.has_sorted_indices = True
     return H
 
 

@@ -32,10 +32,10 @@ from airbearing.analysis.shooting.functions import (
     vstack_csc,
     window_jacobian,
 )
-from airbearing.analysis.shooting.penalty import penalised_solver
+from airbearing.analysis.shooting.penalty import StackedPart, penalised_solver
 from airbearing.analysis.shooting.problem_functions import residual_function
 from airbearing.analysis.shooting.solver import start_meets_objective_stop
-from airbearing.analysis.shooting.sparse import stacked_column_norms
+from airbearing.analysis.shooting.sparse import let_go, stacked_column_norms
 from airbearing.analysis.shooting.windows import WindowSet  # noqa: F401
 from airbearing.errors import SolverError
 from airbearing.models.model import Model
@@ -571,11 +571,18 @@ class ShootingProblem:
             first = ("dense", np.asarray(dense[1], dtype=int), dense[0], dense[2])
         parts = [first] + ([(np.arange(cut, k), True)] if right else [])
         fj = window_jacobian(*self._key(K), self.link)
+        stacked = None
+        if penalised and P is None and right:
+            # the window states' columns written straight into their stack over the
+            # defects' rows (room left by the structure of W Jc): no copy to stack them
+            stacked = parts[-1] = StackedPart(fj, np.arange(cut, k), W)
         out = fj(v, p_base, Sp, data, parts=parts)
+        del parts
         held = self.held(fit.p, S)
         r, mats = out[0], out[1]
         if penalised:
             c, Jc = out[2], out[3]
+            del out  # (its parts are let go as they are stacked below)
             WJc = sp.csc_matrix(W @ Jc)
             full = [np.arange(cut), np.r_[np.arange(cut, k), np.arange(K, Jc.shape[1])]]
             r = np.r_[r if P is None else P @ r, W @ c]
@@ -584,10 +591,22 @@ class ShootingProblem:
                 for i, col in enumerate(np.asarray(cols, dtype=int)):
                     a, b = WJc.indptr[col], WJc.indptr[col + 1]
                     out_d[self.n_meas + WJc.indices[a:b], col0 + i] += WJc.data[a:b]
-            mats = [
-                None if Jm is None else vstack_csc(Jm if P is None else P @ Jm, WJc[:, cols])
-                for Jm, cols in zip(mats, full, strict=False)
-            ]
+            # each part stacked over its defects' rows, its arrays let go as the stacked
+            # ones are made (the parts are this call's own): on an hour of samples the
+            # window states' part, its whitened copy and the stacked one were held at once
+            for i, cols in enumerate(full[: len(mats)]):
+                Jm, mats[i] = mats[i], None
+                if i == 1 and stacked is not None:
+                    mats[i] = stacked.stacked(WJc[:, cols])
+                    stacked = None
+                elif Jm is not None:
+                    if P is not None:
+                        PJm = P @ Jm
+                        let_go(Jm)
+                        Jm = PJm
+                        del PJm
+                    mats[i] = vstack_csc(Jm, WJc[:, cols], consume=True)
+                del Jm
         left = None if mats[0] is None else self._unpinned_part(mats[0], 0, k, held)
         return r, left, (self._unpinned_part(mats[1], cut, k, held) if right else None)
 

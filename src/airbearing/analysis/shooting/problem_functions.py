@@ -384,7 +384,8 @@ class WindowJacobian(_WindowCalls):
         that slice of ``J``, without ``J`` itself. A part ``("dense", theta, out, col0)``
         adds the parameter columns ``theta`` into the zeros of ``out[:, col0:]`` (its
         first rows: ``J``'s; the numbers of ``J[:, theta].toarray()``) and is None in
-        the list.
+        the list; a part object (``fill``, ``matrix``: :class:`.penalty.StackedPart`) is
+        filled as it is and its ``matrix()`` is in the list.
 
         ``used``: the parameter slots from ``used`` on left empty in ``J`` (no entries; a
         fit's unused slots, fixed at zero, whose columns no fit reads): on an hour of 50 Hz
@@ -400,7 +401,12 @@ class WindowJacobian(_WindowCalls):
             [part(int(used)) if part else self._part(None, True)]
             if parts is None
             else [
-                _DensePart(self, *p[1:]) if isinstance(p[0], str) else self._part(*p) for p in parts
+                p
+                if hasattr(p, "fill")  # a part made by the caller (penalty.StackedPart)
+                else _DensePart(self, *p[1:])
+                if isinstance(p[0], str)
+                else self._part(*p)
+                for p in parts
             ]
         )
 
