@@ -109,6 +109,26 @@ def test_columns_made_again_are_the_rounds_to_the_bit(monkeypatch):
     assert tied, "no one-value form among the candidates"
     # the window states' columns made once per linearisation
     assert [s for _, s in made].count(True) == 1
+    # the columns of the fits still expected (their maps E held) are made with a fit's
+    # within KEPT_COLUMNS; those of a fit let go are not
+    screen.forget_columns()
+    forms = {}
+    for c in search.cands:
+        E = lin.columns(c.params, c.tie)
+        forms.setdefault(tuple(np.flatnonzero(np.any(E != 0, axis=1))), (c.params, c.tie))
+    (u1, f1), (u2, f2), (u3, f3) = list(forms.items())[:3]
+    E1, E2, E3 = (lin.columns(*f) for f in (f1, f2, f3))
+    monkeypatch.setattr(screen, "KEPT_COLUMNS", len(set(u1) | set(u2) | set(u3)))
+    src.expect(E2)
+    src.expect(E3)
+    del E3  # (let go: no longer asks)
+    made.clear()
+    At, _ = src.columns_of(E1)
+    assert made == [(sorted(set(u1) | set(u2)), True)]
+    At2, _ = src.columns_of(E2)
+    assert len(made) == 1
+    np.testing.assert_array_equal(At + 0.0, lin.A @ E1 + 0.0)
+    np.testing.assert_array_equal(At2 + 0.0, lin.A @ E2 + 0.0)
     screen.forget_columns()
     assert screen._KEPT[0] is None
 

@@ -24,6 +24,7 @@ from __future__ import annotations
 import itertools
 import math
 import threading
+import weakref
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -279,6 +280,7 @@ class Linearisation:
         n_free = k + st.delta.size
         s2 = st.rss / max(pb.n_res - n_free, 1)
         std, cov, reasons = self.errors(st.E, k, s2)
+        self.made.expect(st.E)
         return Fit(
             theta=st.theta,
             theta_std=std,
@@ -319,6 +321,26 @@ class Columns:
         # A's width and memory order (as the screen stacked it before it wrote it in place)
         self.width = S_sel.shape[1] + len(self.raw)
         self.order = _stacked_order(S_sel.shape[1], [len(self.raw)] if self.raw else [])
+        # the maps E of the fits made from these columns (:meth:`expect`), weakly: a fit
+        # let go (refitted by IPOPT, or its honest errors taken) no longer asks
+        self._expected: list = []
+
+    def expect(self, E: np.ndarray) -> None:
+        """A fit made from these columns keeps ``E`` (and may ask :meth:`columns_of` for
+        it): its columns are made with another's when they fit in :data:`KEPT_COLUMNS`."""
+        self._expected.append(weakref.ref(E))
+
+    def _wanted(self, used: np.ndarray) -> np.ndarray:
+        """``used`` and the columns of the fits still expected (:meth:`expect`, in their
+        order) while the whole stays within :data:`KEPT_COLUMNS`."""
+        want = set(used.tolist())
+        alive = [E for E in (ref() for ref in self._expected) if E is not None]
+        self._expected = [weakref.ref(E) for E in alive]
+        for E in alive:
+            more = want | set(np.flatnonzero(np.any(E != 0, axis=1)).tolist())
+            if len(more) <= KEPT_COLUMNS:
+                want = more
+        return np.array(sorted(want), dtype=int)
 
     def make(self, keep=None, states: bool = True):
         """``(r, A, Jd)`` at the fit (:class:`Linearisation`).
@@ -356,11 +378,12 @@ class Columns:
         """``(A @ E, Jd)``: a fit's parameter columns (the same numbers to the bit as the
         product with the whole ``A``, :func:`_product`) and the window states' columns.
 
-        Only ``A``'s columns ``E`` reads (its rows not all zero) are made: the others (on
-        an hour of 50 Hz three-axis samples some 17 of 20, 9 MB each) are not. ``Jd`` and
-        the columns made are kept (:data:`_KEPT`) for the next fit of this linearisation;
-        columns it reads that were not made are made again (one more evaluation of the
-        window function), ``Jd`` not.
+        Only ``A``'s columns ``E`` reads (its rows not all zero) are made, with those of
+        the other fits expected (:meth:`expect`) while they fit in :data:`KEPT_COLUMNS`:
+        not every column (on an hour of 50 Hz three-axis samples 16, 9 MB each). ``Jd``
+        and the columns made are kept (:data:`_KEPT`) for the next fit of this
+        linearisation; columns it reads that were not made are made again (one more
+        evaluation of the window function: 4.7 s of CPU on that hour), ``Jd`` not.
         """
         E = np.asarray(E, dtype=float)
         used = np.flatnonzero(np.any(E != 0, axis=1))
@@ -369,8 +392,9 @@ class Columns:
             if kept is None or not np.all(np.isin(used, kept[2])):
                 Jd = None if kept is None else kept[1]
                 _KEPT[0] = kept = None  # (the last let go before these are made)
-                _, A, Jd_made = self.make(keep=used, states=Jd is None)
-                kept = _KEPT[0] = (self, Jd if Jd is not None else Jd_made, used, A)
+                keep = self._wanted(used)
+                _, A, Jd_made = self.make(keep=keep, states=Jd is None)
+                kept = _KEPT[0] = (self, Jd if Jd is not None else Jd_made, keep, A)
             _, Jd, have, A = kept
             return _product(A, have, self.width, E, self.order), Jd
 
@@ -380,6 +404,15 @@ class Columns:
 #: from one linearisation.
 _KEPT: list = [None]
 _KEPT_LOCK = threading.Lock()
+
+#: Parameter columns :meth:`Columns.columns_of` makes at most at once (more only when one
+#: fit reads more): a three-axis effect's and one more. Each column is 9 MB held through
+#: the honest errors on an hour of 50 Hz three-axis samples, each evaluation of the window
+#: function 4.7 s of CPU there. Measured on that hour (16 columns, the first round's
+#: step-judged fits reading 13 in 5 sets): 7 made its columns in 2 evaluations but held
+#: the stage's peak some 45 MB higher; 3 or 4 hold no more than the step-judged fit of
+#: three columns made on its own linearisation (5 and 4 evaluations).
+KEPT_COLUMNS = 4
 
 #: Rows of ``A`` at a time in :func:`_product` (5 MB for 20 columns).
 PRODUCT_ROWS = 1 << 15
@@ -405,7 +438,7 @@ def _product(A_have, have, width: int, E, order: str, rows: int = PRODUCT_ROWS) 
     """
     E = np.asarray(E, dtype=float)
     n = A_have.shape[0]
-    out = np.empty((n, E.shape[1]))
+    out = np.empty((n, E.shape[1]), order="F")  # (the honest errors' order: no copy)
     T = np.zeros((min(rows, n), width), order=order)
     for a in range(0, n, rows):
         b = min(a + rows, n)

@@ -133,11 +133,13 @@ def fit_jacobian_split(fit: Fit, k: int):
     """
     if "J" in fit.extra:
         return None
+    mine = False  # the parameter columns made for this call (no one else holds them)
     if "J_made" in fit.extra:
         source, E = fit.extra["J_made"]
         if np.shape(E)[1] != k:
             return None
         At, Jd = source.columns_of(E)
+        mine = True
     elif "J_blocks" in fit.extra:
         *At, Jd = fit.extra["J_blocks"]
         At = At[0] @ At[1] if len(At) == 2 else At[0]
@@ -147,7 +149,10 @@ def fit_jacobian_split(fit: Fit, k: int):
         return None
     # as fit_jacobian's CSC makes it (an exact zero +0.0, not -0.0; column-major, as
     # scipy's dense copy of a CSC matrix): adding +0.0 does both to the bit, without the
-    # sparse copy (about 90 MB for three columns on an hour of 50 Hz three-axis samples)
+    # sparse copy (about 90 MB for three columns on an hour of 50 Hz three-axis samples),
+    # in place when the columns were made column-major for this call
+    if mine and At.flags.f_contiguous:
+        return np.add(At, 0.0, out=At), Jd
     return np.add(At, 0.0, order="F"), Jd
 
 
