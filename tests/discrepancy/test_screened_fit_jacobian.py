@@ -69,9 +69,11 @@ def test_a_screened_fit_shares_the_window_state_columns():
 def test_columns_made_again_are_the_rounds_to_the_bit(monkeypatch):
     """A step-judged fit's parameter columns made again for its honest errors
     (:meth:`.screen.Columns.columns_of`) are the round's ``A E`` to the bit, though only
-    the columns of ``A`` that ``E`` reads are made, and the window states' columns are the
-    round's; both are kept for the next fit of the linearisation, which makes again only
-    the columns it reads that were not made (one-value forms tie three columns)."""
+    the columns of ``A`` that ``E`` reads are made (one-value forms tie three columns), and
+    the window states' columns are the round's. The columns of the fits still expected
+    (their maps ``E`` held) are made with them within ``KEPT_COLUMNS`` and kept with the
+    window states' for the next fit, which makes nothing again; those of a fit let go are
+    not made, and the last fit expected lets them all go."""
     tb, log = spinning_seed004_50hz(3.0)
     datas, windows, floor = prepare(tb, [log])
     search = _Search(tb, datas, windows, floor, candidates_for(tb, datas, ONLY), 0, None)
@@ -88,49 +90,36 @@ def test_columns_made_again_are_the_rounds_to_the_bit(monkeypatch):
 
     monkeypatch.setattr(screen.Columns, "make", counted)
     screen.forget_columns()
-    tied = 0
-    for c in sorted(search.cands, key=lambda c: c.params):  # (forms of one effect together)
+    tied, forms = 0, {}
+    for c in search.cands:
         E = lin.columns(c.params, c.tie)
         used = np.flatnonzero(np.any(E != 0, axis=1))
+        forms.setdefault(tuple(used), (c.params, c.tie))
         tied += bool(np.any(np.count_nonzero(E, axis=0) > 1))
-        n_made = len(made)
         At, Jd = src.columns_of(E)
         np.testing.assert_array_equal(At + 0.0, lin.A @ E + 0.0)  # (a zero of either sign)
         assert (Jd != lin.Jd).nnz == 0 and Jd.shape == lin.Jd.shape, c.label
-        # only E's columns are held (with those kept before when it reads no others)
-        kept = screen._KEPT[0]
-        assert kept[0] is src and set(used) <= set(kept[2]), c.label
-        if len(made) > n_made:
-            assert made[-1][0] == list(used), c.label
-            assert kept[3].shape[1] == used.size < lin.A.shape[1], c.label
-        # a second fit reading the same columns makes nothing again
-        src.columns_of(E)
-        assert len(made) == n_made + (len(made) > n_made), c.label
+        assert made[-1][0] == list(used) and used.size < lin.A.shape[1], c.label
+        assert screen._KEPT[0] is None, c.label  # (no other fit expected)
     assert tied, "no one-value form among the candidates"
-    # the window states' columns made once per linearisation
-    assert [s for _, s in made].count(True) == 1
-    # the columns of the fits still expected (their maps E held) are made with a fit's
-    # within KEPT_COLUMNS; those of a fit let go are not
-    screen.forget_columns()
-    forms = {}
-    for c in search.cands:
-        E = lin.columns(c.params, c.tie)
-        forms.setdefault(tuple(np.flatnonzero(np.any(E != 0, axis=1))), (c.params, c.tie))
     (u1, f1), (u2, f2), (u3, f3) = list(forms.items())[:3]
-    E1, E2, E3 = (lin.columns(*f) for f in (f1, f2, f3))
+    E1, E1b, E2, E3 = (lin.columns(*f) for f in (f1, f1, f2, f3))
     monkeypatch.setattr(screen, "KEPT_COLUMNS", len(set(u1) | set(u2) | set(u3)))
-    src.expect(E2)
-    src.expect(E3)
-    del E3  # (let go: no longer asks)
+    for E in (E1, E1b, E2, E3):
+        src.expect(E)
+    del E, E3  # (let go: no longer asks)
     made.clear()
     At, _ = src.columns_of(E1)
     assert made == [(sorted(set(u1) | set(u2)), True)]
+    kept = screen._KEPT[0]
+    assert kept[0] is src and list(kept[2]) == sorted(set(u1) | set(u2))
+    At1b, _ = src.columns_of(E1b)
+    del E1, E1b
     At2, _ = src.columns_of(E2)
-    assert len(made) == 1
-    np.testing.assert_array_equal(At + 0.0, lin.A @ E1 + 0.0)
-    np.testing.assert_array_equal(At2 + 0.0, lin.A @ E2 + 0.0)
-    screen.forget_columns()
-    assert screen._KEPT[0] is None
+    assert len(made) == 1  # (the window states' columns too: made once)
+    assert screen._KEPT[0] is None  # (E2 the last expected)
+    np.testing.assert_array_equal(At + 0.0, lin.A @ lin.columns(*f1) + 0.0)
+    np.testing.assert_array_equal(At2 + 0.0, lin.A @ lin.columns(*f2) + 0.0)
 
 
 def test_the_product_made_back_block_by_block_is_the_whole_products():

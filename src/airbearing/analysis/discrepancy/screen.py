@@ -382,8 +382,9 @@ class Columns:
         the other fits expected (:meth:`expect`) while they fit in :data:`KEPT_COLUMNS`:
         not every column (on an hour of 50 Hz three-axis samples 16, 9 MB each). ``Jd``
         and the columns made are kept (:data:`_KEPT`) for the next fit of this
-        linearisation; columns it reads that were not made are made again (one more
-        evaluation of the window function: 4.7 s of CPU on that hour), ``Jd`` not.
+        linearisation while one is expected; columns it reads that were not made are made
+        again (one more evaluation of the window function: 4.7 s of CPU on that hour),
+        ``Jd`` not.
         """
         E = np.asarray(E, dtype=float)
         used = np.flatnonzero(np.any(E != 0, axis=1))
@@ -396,7 +397,14 @@ class Columns:
                 _, A, Jd_made = self.make(keep=keep, states=Jd is None)
                 kept = _KEPT[0] = (self, Jd if Jd is not None else Jd_made, keep, A)
             _, Jd, have, A = kept
-            return _product(A, have, self.width, E, self.order), Jd
+            At = _product(A, have, self.width, E, self.order)
+            if not self._others(E):  # the last fit expected: let them go after its errors
+                _KEPT[0] = None
+            return At, Jd
+
+    def _others(self, E) -> bool:
+        """Whether a fit other than the one keeping ``E`` is still expected (:meth:`expect`)."""
+        return any(ref() is not None and ref() is not E for ref in self._expected)
 
 
 #: The last :class:`Columns` made again: ``(source, Jd, columns, A[:, columns])``. The
