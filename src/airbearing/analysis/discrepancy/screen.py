@@ -416,10 +416,10 @@ _KEPT_LOCK = threading.Lock()
 #: Parameter columns :meth:`Columns.columns_of` makes at most at once (more only when one
 #: fit reads more): a three-axis effect's and one more. Each column is 9 MB held through
 #: the honest errors on an hour of 50 Hz three-axis samples, each evaluation of the window
-#: function 4.7 s of CPU there. Measured on that hour (16 columns, the first round's
-#: step-judged fits reading 13 in 5 sets): 7 made its columns in 2 evaluations but held
-#: the stage's peak some 45 MB higher; 3 or 4 hold no more than the step-judged fit of
-#: three columns made on its own linearisation (5 and 4 evaluations).
+#: function 4.2-4.7 s of CPU there. Measured on that hour (16 columns; the first round's
+#: step-judged fits read 13 of them, in 5 sets): 7 made them in 2 evaluations, 4 in 4 and
+#: 1 (each fit's own) in 5, the honest errors' peak 188, 171-177 and 163 MB above their
+#: start (the whole ``A`` made once: some 240 MB).
 KEPT_COLUMNS = 4
 
 #: Rows of ``A`` at a time in :func:`_product` (5 MB for 20 columns).
