@@ -116,8 +116,8 @@ def test_honest_errors_split_of_kept_blocks_is_the_whole_jacobians():
     Jd = sp.random(300, 30, density=0.2, format="csc", random_state=rng)
 
     class Source:
-        def columns(self):
-            return A, Jd
+        def columns_of(self, E):
+            return A @ E, Jd
 
     theta = np.zeros(2)
     At0 = A @ E

@@ -24,6 +24,7 @@ from __future__ import annotations
 import itertools
 import math
 import threading
+import weakref
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -279,6 +280,7 @@ class Linearisation:
         n_free = k + st.delta.size
         s2 = st.rss / max(pb.n_res - n_free, 1)
         std, cov, reasons = self.errors(st.E, k, s2)
+        self.made.expect(st.E)
         return Fit(
             theta=st.theta,
             theta_std=std,
@@ -301,13 +303,14 @@ class Linearisation:
 
 class Columns:
     """The round's parameter columns ``A`` and window-state columns ``Jd`` at a fit, made
-    (:meth:`make`) and made again when asked once let go (:meth:`columns`): a fit judged
-    on its step keeps this and its map ``E`` (``extra["J_made"]``,
+    (:meth:`make`) and made again when asked once let go (:meth:`columns_of`): a fit
+    judged on its step keeps this and its map ``E`` (``extra["J_made"]``,
     :func:`~airbearing.analysis.shooting.fit_jacobian`) instead of the two, which on an
     hour of 50 Hz three-axis samples are some 220 MB per linearisation, kept from the first
     round to the honest errors at the end. The same numbers again: the same point, the
     problem's weighting of then (:meth:`.ShootingProblem.weighting`) and the same
-    evaluation. The last made are kept (:data:`_KEPT`), one set at a time.
+    evaluation. Made again, only the parameter columns a fit's ``E`` reads are kept; the
+    last made are kept with the window states' columns (:data:`_KEPT`), one set at a time.
     """
 
     def __init__(self, problem, current: Fit, S_sel: np.ndarray, raw: list) -> None:
@@ -315,66 +318,147 @@ class Columns:
         # the point only (not the fit's own row arrays)
         self.current = replace(current, extra={})
         self.weighting = problem.weighting()
+        # A's width and memory order (as the screen stacked it before it wrote it in place)
+        self.width = S_sel.shape[1] + len(self.raw)
+        self.order = _stacked_order(S_sel.shape[1], [len(self.raw)] if self.raw else [])
+        # the maps E of the fits made from these columns (:meth:`expect`), weakly: a fit
+        # let go (refitted by IPOPT, or its honest errors taken) no longer asks
+        self._expected: list = []
 
-    def make(self, weighting=None):
-        """``(r, A, Jd)`` at the fit (:class:`Linearisation`)."""
-        problem, k_sel = self.problem, self.S_sel.shape[1]
-        n_p = problem.model.n_p
-        # every candidate parameter in ONE evaluation (a window function of that many
-        # slots, built once per problem): THETA_SLOTS at a time evaluated the same window
-        # states' columns once per chunk (3 evaluations on seed 004's platform)
-        room = max(THETA_SLOTS - k_sel, len(self.raw), 1)
-        r, Jd = None, None
-        sizes = [len(self.raw[i : i + room]) for i in range(0, len(self.raw), room)]
+    def expect(self, E: np.ndarray) -> None:
+        """A fit made from these columns keeps ``E`` (and may ask :meth:`columns_of` for
+        it): its columns are made with another's when they fit in :data:`KEPT_COLUMNS`."""
+        self._expected.append(weakref.ref(E))
+
+    def _wanted(self, used: np.ndarray) -> np.ndarray:
+        """``used`` and the columns of the fits still expected (:meth:`expect`, in their
+        order) while the whole stays within :data:`KEPT_COLUMNS`."""
+        want = set(used.tolist())
+        alive = [E for E in (ref() for ref in self._expected) if E is not None]
+        self._expected = [weakref.ref(E) for E in alive]
+        for E in alive:
+            more = want | set(np.flatnonzero(np.any(E != 0, axis=1)).tolist())
+            if len(more) <= KEPT_COLUMNS:
+                want = more
+        return np.array(sorted(want), dtype=int)
+
+    def make(self, keep=None, states: bool = True):
+        """``(r, A, Jd)`` at the fit (:class:`Linearisation`).
+
+        Every candidate parameter in ONE evaluation (a window function of that many slots,
+        built once per problem), the chosen and every candidate parameter's columns written
+        straight into ``A`` (no sparse copy of them). ``keep``: only those of ``A``'s
+        columns (sorted indices; ``A`` is then ``(n_res, len(keep))``), from the same
+        evaluation: the same numbers. Without ``states``, ``Jd`` is None (not made).
+        """
+        problem = self.problem
+        n_p, m = problem.model.n_p, self.width
+        keep = np.arange(m) if keep is None else np.asarray(keep, dtype=int)
         W = self.weighting[0]
         rows = problem.n_meas + (W.shape[0] if problem.link and W is not None else 0)
-        # (n_res_all, k_sel + len(raw)): the chosen and every candidate parameter's columns
-        # written straight in (no sparse copy of the columns, nor a dense one of each
-        # chunk, then stacked)
-        A = np.zeros((rows, k_sel + len(self.raw)), order=_stacked_order(k_sel, sizes))
+        A = np.zeros((rows, keep.size), order=self.order)
+        if not self.raw:
+            return None, A, None
+        S_raw = np.zeros((n_p, len(self.raw)))
+        S_raw[self.raw, np.arange(len(self.raw))] = 1.0
+        S = np.hstack([self.S_sel, S_raw])
         current = self.current
-        for i in range(0, len(self.raw), room):
-            chunk = self.raw[i : i + room]
-            S_raw = np.zeros((n_p, len(chunk)))
-            S_raw[chunk, np.arange(len(chunk))] = 1.0
-            S = np.hstack([self.S_sel, S_raw])
-            at = replace(current, theta=np.r_[current.theta, np.zeros(len(chunk))])
-            # the parameters' columns (dense, into A) and (once) the window states'
-            first = r is None
-            cols = np.arange(0 if first else k_sel, k_sel + len(chunk))
-            dense = (A, cols, 0 if first else k_sel + i)
-            r_i, J, Jd_i = problem.jacobian_parts(
-                at, S, k_sel + len(chunk), right=first, dense=dense, made=self.weighting
-            )
-            if J is not None:  # (coloured noise with process noise: sparse, then dense)
-                J = sp.csc_matrix(J)
-                if first:
-                    _dense_columns(J, 0, k_sel, A, 0)
-                _dense_columns(J, k_sel, k_sel + len(chunk), A, k_sel + i)
-            if first:
-                r, Jd = r_i, sp.csc_matrix(Jd_i)
-            del J, Jd_i  # (let go before the next chunk's and the blocks below)
-        return r, A, Jd
+        at = replace(current, theta=np.r_[current.theta, np.zeros(len(self.raw))])
+        r, J, Jd = problem.jacobian_parts(
+            at, S, m, right=states, dense=(A, keep, 0), made=self.weighting
+        )
+        if J is not None:  # (coloured noise with process noise: sparse, then dense)
+            J = sp.csc_matrix(J)
+            for i, c in enumerate(keep):
+                _dense_columns(J, c, c + 1, A, i)
+        del J
+        return r, A, (sp.csc_matrix(Jd) if states else None)
 
-    def columns(self):
-        """``(A, Jd)``, made again unless they are the last made (:data:`_KEPT`)."""
+    def columns_of(self, E: np.ndarray):
+        """``(A @ E, Jd)``: a fit's parameter columns (the same numbers to the bit as the
+        product with the whole ``A``, :func:`_product`) and the window states' columns.
+
+        Only ``A``'s columns ``E`` reads (its rows not all zero) are made, with those of
+        the other fits expected (:meth:`expect`) while they fit in :data:`KEPT_COLUMNS`:
+        not every column (on an hour of 50 Hz three-axis samples 16, 9 MB each). ``Jd``
+        and the columns made are kept (:data:`_KEPT`) for the next fit of this
+        linearisation while one is expected; columns it reads that were not made are made
+        again (one more evaluation of the window function: 4.7 s of CPU on that hour),
+        ``Jd`` not.
+        """
+        E = np.asarray(E, dtype=float)
+        used = np.flatnonzero(np.any(E != 0, axis=1))
         with _KEPT_LOCK:
-            if _KEPT[0] is not None and _KEPT[0][0] is self:
-                return _KEPT[0][1]
-            _KEPT[0] = None  # (the last let go before these are made)
-            _, A, Jd = self.make()
-            _KEPT[0] = (self, (A, Jd))
-            return A, Jd
+            kept = _KEPT[0] if _KEPT[0] is not None and _KEPT[0][0] is self else None
+            if kept is None or not np.all(np.isin(used, kept[2])):
+                Jd = None if kept is None else kept[1]
+                _KEPT[0] = kept = None  # (the last let go before these are made)
+                keep = self._wanted(used)
+                _, A, Jd_made = self.make(keep=keep, states=Jd is None)
+                kept = _KEPT[0] = (self, Jd if Jd is not None else Jd_made, keep, A)
+            _, Jd, have, A = kept
+            At = _product(A, have, self.width, E, self.order)
+            if not self._others(E):  # the last fit expected: let them go after its errors
+                _KEPT[0] = None
+            return At, Jd
+
+    def _others(self, E) -> bool:
+        """Whether a fit other than the one keeping ``E`` is still expected (:meth:`expect`)."""
+        return any(ref() is not None and ref() is not E for ref in self._expected)
 
 
-#: The last :class:`Columns` made again and their ``(A, Jd)``: the honest errors at the end
-#: take the first round's candidates one after the other, several from one linearisation.
+#: The last :class:`Columns` made again: ``(source, Jd, columns, A[:, columns])``. The
+#: honest errors at the end take the first round's candidates one after the other, several
+#: from one linearisation.
 _KEPT: list = [None]
 _KEPT_LOCK = threading.Lock()
 
+#: Parameter columns :meth:`Columns.columns_of` makes at most at once (more only when one
+#: fit reads more): a three-axis effect's and one more. Each column is 9 MB held through
+#: the honest errors on an hour of 50 Hz three-axis samples, each evaluation of the window
+#: function 4.2-4.7 s of CPU there. Measured on that hour (16 columns; the first round's
+#: step-judged fits read 13 of them, in 5 sets): 7 made them in 2 evaluations, 4 in 4 and
+#: 1 (each fit's own) in 5, the honest errors' peak 188, 171-177 and 163 MB above their
+#: start (the whole ``A`` made once: some 240 MB).
+KEPT_COLUMNS = 4
+
+#: Rows of ``A`` at a time in :func:`_product` (5 MB for 20 columns).
+PRODUCT_ROWS = 1 << 15
+
+
+def _product(A_have, have, width: int, E, order: str, rows: int = PRODUCT_ROWS) -> np.ndarray:
+    """``A @ E`` for an ``A`` of ``width`` columns in memory ``order`` of which only the
+    columns ``have`` (``A_have``) are given, ``E`` zero in every other row.
+
+    NumPy's product goes to BLAS, whose sums over ``A``'s columns depend on where the
+    terms lie among them (the matrix-vector kernel adds them in SIMD lanes by column
+    position: ``A_have @ E[have]`` of a tied column differs in the last bit). So ``A`` is
+    made back ``rows`` rows at a time, of its width and order, zero in the columns not
+    given (each zero term ``0 * 0`` where ``A``'s was ``a * 0``: a zero either way), and
+    multiplied by the whole ``E``: the same kernel on the same positions. Measured on
+    random matrices of the hour's size (3 to 30 columns, 1 to 4 of ``E``'s, ties of up to
+    6 columns, chunks of 4096 to 32768 rows, C and F order): the same bits as the whole
+    product with single-threaded OpenBLAS (Haswell kernels, as the search is measured);
+    with 2 threads the whole product's own last bits depend on where BLAS splits the
+    rows (one row in a million differed). A zero of the product may come out with the
+    other sign; ``A``'s columns not given must be finite (a non-finite one would have made
+    the product NaN).
+    """
+    E = np.asarray(E, dtype=float)
+    n = A_have.shape[0]
+    out = np.empty((n, E.shape[1]), order="F")  # (the honest errors' order: no copy)
+    T = np.zeros((min(rows, n), width), order=order)
+    for a in range(0, n, rows):
+        b = min(a + rows, n)
+        if b - a < T.shape[0]:  # (the last, shorter block: its own contiguous array)
+            T = np.zeros((b - a, width), order=order)
+        T[:, have] = A_have[a:b]
+        out[a:b] = T @ E
+    return out
+
 
 def forget_columns() -> None:
-    """Let go of the columns :meth:`Columns.columns` made last."""
+    """Let go of the columns :meth:`Columns.columns_of` made last."""
     with _KEPT_LOCK:
         _KEPT[0] = None
 

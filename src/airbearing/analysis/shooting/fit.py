@@ -88,9 +88,10 @@ def fit_jacobian(fit: Fit):
     ``[A E, Jd]`` made now: the same numbers, without a copy of ``Jd`` and of the parameter
     columns per candidate (on an hour of 50 Hz three-axis samples some 45 MB and 9 MB per
     parameter each). A 2-tuple ``(At, Jd)`` is taken as ``[At, Jd]``. A fit that keeps
-    ``extra["J_made"] = (source, E)`` instead has ``source.columns()`` make ``(A, Jd)``
-    again (the first round's step-judged fits, kept to the honest errors at the end:
-    :class:`airbearing.analysis.discrepancy.screen.Columns`).
+    ``extra["J_made"] = (source, E)`` instead has ``source.columns_of(E)`` make
+    ``(A E, Jd)`` again (the first round's step-judged fits, kept to the honest errors at
+    the end: :class:`airbearing.analysis.discrepancy.screen.Columns`, which makes only
+    the columns of ``A`` that ``E`` reads).
 
     Parameters
     ----------
@@ -104,8 +105,8 @@ def fit_jacobian(fit: Fit):
         return fit.extra["J"]
     if "J_made" in fit.extra:  # the shared columns made again (their maker, the fit's E)
         source, E = fit.extra["J_made"]
-        A, Jd = source.columns()
-        return sp.hstack([sp.csc_matrix(A @ E), Jd]).tocsc()
+        At, Jd = source.columns_of(E)
+        return sp.hstack([sp.csc_matrix(At), Jd]).tocsc()
     *At, Jd = fit.extra["J_blocks"]
     At = At[0] @ At[1] if len(At) == 2 else At[0]
     return sp.hstack([sp.csc_matrix(At), Jd]).tocsc()
@@ -132,12 +133,13 @@ def fit_jacobian_split(fit: Fit, k: int):
     """
     if "J" in fit.extra:
         return None
+    mine = False  # the parameter columns made for this call (no one else holds them)
     if "J_made" in fit.extra:
         source, E = fit.extra["J_made"]
         if np.shape(E)[1] != k:
             return None
-        A, Jd = source.columns()
-        At = A @ E
+        At, Jd = source.columns_of(E)
+        mine = True
     elif "J_blocks" in fit.extra:
         *At, Jd = fit.extra["J_blocks"]
         At = At[0] @ At[1] if len(At) == 2 else At[0]
@@ -147,7 +149,10 @@ def fit_jacobian_split(fit: Fit, k: int):
         return None
     # as fit_jacobian's CSC makes it (an exact zero +0.0, not -0.0; column-major, as
     # scipy's dense copy of a CSC matrix): adding +0.0 does both to the bit, without the
-    # sparse copy (about 90 MB for three columns on an hour of 50 Hz three-axis samples)
+    # sparse copy (about 90 MB for three columns on an hour of 50 Hz three-axis samples),
+    # in place when the columns were made column-major for this call
+    if mine and At.flags.f_contiguous:
+        return np.add(At, 0.0, out=At), Jd
     return np.add(At, 0.0, order="F"), Jd
 
 
