@@ -83,6 +83,33 @@ def test_an_array_in_neither_order_stays_in_memory(tmp_path):
     assert away.extra["r"] is r and os.listdir(tmp_path) == []
 
 
+def test_a_disk_that_refuses_them_leaves_them_in_memory(tmp_path, monkeypatch):
+    r, J = np.ones(10), sp.eye(10, format="csc")
+    calls = []
+
+    def full(path, a, allow_pickle):  # the second file (J's data, after r) finds the disk full
+        calls.append(path)
+        if len(calls) == 2:
+            raise OSError(28, "No space left on device")
+        with open(path, "wb") as f:
+            f.write(b"x")
+
+    monkeypatch.setattr(np, "save", full)
+    away = fra.ArrayStore(tmp_path).set_aside(_fit({"J": J, "r": r}))
+    assert away.extra["J"] is J  # its partly written files removed
+    assert fra._written(away.extra["r"])
+    assert [p.name for p in tmp_path.iterdir()] == [calls[0].name]  # r's alone
+
+
+def test_without_a_temporary_directory_the_arrays_stay_in_memory(monkeypatch):
+    def none(*args, **kwargs):
+        raise FileNotFoundError("No usable temporary directory found")
+
+    monkeypatch.setattr(tempfile, "TemporaryDirectory", none)
+    with fra.search_files() as store:
+        assert store is None
+
+
 @pytest.mark.parametrize("error", [RuntimeError, KeyboardInterrupt])
 def test_the_directory_is_removed_however_the_block_ends(error):
     with pytest.raises(error), fra.search_files() as store:

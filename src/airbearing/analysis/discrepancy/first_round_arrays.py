@@ -99,23 +99,28 @@ class ArrayStore:
 
     def _write(self, value):
         """``value`` written (an :class:`_OnDisk`), or ``value`` itself when it is no
-        ndarray or compressed sparse matrix (kept in memory)."""
+        ndarray or compressed sparse matrix, or the disk refused it (full, not writable):
+        kept in memory then, as without a store."""
         if sp.issparse(value) and value.format in ("csc", "csr"):
-            paths = []
-            for a in (value.data, value.indices, value.indptr):
-                paths.append(self._path())
-                np.save(paths[-1], a, allow_pickle=False)
+            arrays, kind = (value.data, value.indices, value.indptr), type(value)
             flags = tuple((k, v) for k, v in value.__dict__.items() if k in _FLAGS)
-            return _OnDisk(tuple(paths), type(value), tuple(value.shape), flags)
-        # (an array in neither order is kept: read back it would be in C order)
-        contiguous = getattr(value, "flags", None) is not None and (
-            value.flags.c_contiguous or value.flags.f_contiguous
-        )
-        if type(value) is np.ndarray and value.dtype != object and contiguous:
-            path = self._path()
-            np.save(path, value, allow_pickle=False)
-            return _OnDisk((path,))
-        return value
+        elif (
+            type(value) is np.ndarray
+            and value.dtype != object
+            # (an array in neither order is kept: read back it would be in C order)
+            and (value.flags.c_contiguous or value.flags.f_contiguous)
+        ):
+            arrays, kind, flags = (value,), None, ()
+        else:
+            return value
+        written = _OnDisk(tuple(self._path() for _ in arrays), kind, np.shape(value), flags)
+        try:
+            for path, a in zip(written.paths, arrays, strict=True):
+                np.save(path, a, allow_pickle=False)
+        except OSError:
+            written.remove()
+            return value
+        return written
 
     def set_aside(self, fit: Fit) -> Fit:
         """``fit`` with its :data:`ON_DISK` arrays written to disk (a copy of ``fit``;
@@ -160,8 +165,14 @@ def _written(v) -> bool:
 @contextlib.contextmanager
 def search_files() -> Iterator[ArrayStore]:
     """An :class:`ArrayStore` in a new temporary directory, removed when the block ends,
-    however it ends (an error, a :class:`KeyboardInterrupt`)."""
-    with tempfile.TemporaryDirectory(prefix="airbearing-search-") as tmp:
+    however it ends (an error, a :class:`KeyboardInterrupt`); None (the arrays kept in
+    memory) when no temporary directory can be made."""
+    try:
+        made = tempfile.TemporaryDirectory(prefix="airbearing-search-", ignore_cleanup_errors=True)
+    except OSError:  # no writable temporary directory: the arrays stay in memory
+        yield None
+        return
+    with made as tmp:
         with _LIVE_LOCK:
             _LIVE.add(tmp)
         try:
