@@ -17,6 +17,7 @@ from rigs import spinning_seed004_50hz
 
 from airbearing.analysis.discrepancy import first_round_arrays as fra
 from airbearing.analysis.discrepancy import search as search_mod
+from airbearing.analysis.discrepancy import selection
 from airbearing.analysis.discrepancy.search import discrepancy
 from airbearing.analysis.shooting import Fit
 from airbearing.analysis.simulation.scenarios import slew
@@ -158,9 +159,21 @@ def test_the_first_rounds_honest_errors_are_the_same_bits_on_disk(monkeypatch):
         return set_aside(self, fit)
 
     monkeypatch.setattr(fra.ArrayStore, "set_aside", spy)
+    handed = []  # each round's results as the round hands them over, before it is decided
+    add_best = selection._add_best
+
+    def spy_add(sel, results, prog):
+        handed.append(tuple(results))
+        return add_best(sel, results, prog)
+
+    monkeypatch.setattr(selection, "_add_best", spy_add)
     on_disk = discrepancy(tb, log, max_effects=2, only=ONLY)
     # an IPOPT fit's Jacobian and linearisation and every candidate's residual were on disk
     assert {"r", "J", "linearised"} <= set(written)
+    # ... the first round's from when each candidate ended, before the round was decided
+    first = [c.fit for c in handed[0] if c.fit is not None]
+    assert first and all(fra._written(f.extra["r"]) for f in first)
+    assert any(fra._written(f.extra.get("J")) for f in first)
 
     @contextlib.contextmanager
     def in_memory():

@@ -5,10 +5,11 @@ residual (an IPOPT fit also its Jacobian, the defects' Jacobian of its linearisa
 null-space basis) for the honest errors taken at the end of the search
 (:func:`.selection.honest_first_round`). In between, the later rounds, the horizon and the
 named effects' errors run with them on disk: :meth:`ArrayStore.set_aside` writes a fit's
-into the search's temporary directory when the round is decided, and
-:meth:`ArrayStore.take_back` reads one candidate's back just before its errors, removing its
-files. On an hour of 50 Hz three-axis samples each residual is 8.3 MiB (about 80 MiB for the
-round), an IPOPT fit's Jacobian 87 MiB.
+into the search's temporary directory as soon as its candidate ends (the rest of the round
+does not read them), and :meth:`ArrayStore.take_back` reads the round's pick's back when the
+round is decided and every other candidate's just before its errors, removing its files. On
+an hour of 50 Hz three-axis samples each residual is 8.3 MiB, an IPOPT fit's Jacobian
+87 MiB: the directory holds up to 170 MiB during the first round, 75 MiB after it.
 
 A sparse matrix is written as its ``data``, ``indices`` and ``indptr`` and made again with
 the same class, shape, dtypes and index order (scipy's constructor would narrow 64-bit

@@ -161,7 +161,7 @@ def discrepancy(
     -----
     The first round's row arrays wait for their honest errors on disk, in a temporary
     directory of the search (``airbearing-search-*`` under :func:`tempfile.gettempdir`;
-    about 75 MiB on an hour of 50 Hz three-axis samples), removed when the call ends,
+    up to 170 MiB on an hour of 50 Hz three-axis samples), removed when the call ends,
     however it ends (:mod:`.first_round_arrays`).
 
     Examples

@@ -395,7 +395,8 @@ def _let_go(sel: _Selection) -> None:
     """The last round's fits without their :data:`ROW_ARRAYS`, once it is decided, except
     the fit the search goes on from (``sel.current``); the first round's are kept (their
     honest errors are taken at the end), on disk when the search has a store
-    (``sel.store``: every one but ``sel.current``). The nominal fit lets go of its Jacobian
+    (``sel.store``: every one but ``sel.current``, most from when their candidate ended,
+    :func:`_set_aside`). The nominal fit lets go of its Jacobian
     once the search goes on from another fit. Scores, values and errors stay: the report
     and the JSON are the same. On an hour of 50 Hz three-axis samples a later round kept
     some 300 MB this way: each step-judged candidate's residual and parameter columns, and
