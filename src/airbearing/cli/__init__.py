@@ -450,10 +450,15 @@ def _leave_interrupted(console: bool) -> None:
     the interpreter's shutdown delays the exit, and a late ``KeyboardInterrupt`` there
     would end the process by the signal instead of the status. Nothing is left to
     write (outputs are committed only at the end of a run), so the process leaves at
-    once. Called from a test (``argv`` given) it does nothing.
+    once; a running search's temporary files are removed first
+    (:func:`airbearing.analysis.discrepancy.first_round_arrays.remove_left`). Called from
+    a test (``argv`` given) it does nothing.
     """
     if not console:
         return
+    files = sys.modules.get("airbearing.analysis.discrepancy.first_round_arrays")
+    if files is not None:  # a running search's files on disk: its own clean-up never runs
+        files.remove_left()
     for stream in (sys.stdout, sys.stderr):
         with contextlib.suppress(Exception):
             stream.flush()

@@ -251,6 +251,7 @@ class _Selection:
     revisions: list = field(default_factory=list)  # .revise.Move, on the horizon
     neighbours: list = field(default_factory=list)  # .revise.Neighbour of the final model
     confounding: list = field(default_factory=list)  # .confounding.Confounding, structural
+    store: object = None  # .first_round_arrays.ArrayStore: the first round's on disk
 
 
 @dataclass

@@ -57,14 +57,17 @@ def _nominal_replay(search: _Search, prog: _Progress) -> tuple[ShootingProblem, 
     return base_problem, nominal
 
 
-def _select(search, nominal, max_effects, screen, workers, prog) -> _Selection:
+def _select(search, nominal, max_effects, screen, workers, prog, store=None) -> _Selection:
     """Stage 3: forward selection, one round per effect added, up to ``max_effects``.
 
     ``nominal``: the nominal replay's fit, or a list holding it (handed over: the caller
-    keeps no reference, so :func:`_let_go` can let go of its Jacobian)."""
+    keeps no reference, so :func:`_let_go` can let go of its Jacobian). ``store``: an
+    :class:`.first_round_arrays.ArrayStore` that holds the first round's row arrays on
+    disk until their honest errors (None: in memory)."""
     unit = search.datas[0].gap_unit
     nominal = nominal.pop() if isinstance(nominal, list) else nominal
     sel = _Selection(nominal=nominal, current=nominal, ln_n=math.log(nominal.n_res))
+    sel.store = store
     del nominal
     sel.max_effects = max_effects
     sel.stop_reason = "max_effects = 0" if max_effects == 0 else ""
@@ -171,7 +174,7 @@ def _round(search, sel: _Selection, remaining, screen, workers, prog) -> list:
             if later and not res.nameable and not _serves_per_axis(res, remaining):
                 res = _stripped(res)
             elif not later:
-                res = _own_columns((res,))[0]
+                res = _set_aside(sel, _own_columns((res,))[0])
             return res
         finally:  # (also when it raised: the candidates after it must not wait for ever)
             before_it.finished(i, res)
@@ -235,12 +238,26 @@ def _round(search, sel: _Selection, remaining, screen, workers, prog) -> list:
         for i in again:
             results[i] = _try(search, results[i].candidate, chosen, theta, current, lag,
                               sel.ln_n, sel.starts, before)  # fmt: skip
+            if not later:
+                results[i] = _set_aside(sel, results[i])
             prog(f"{results[i].label}: fitted by IPOPT, {results[i].status}")
     results = _at_best_gap(results)
     if later:
         results = [r if r.nameable else _stripped(r) for r in results]
     results.sort(key=lambda c: (not np.isfinite(c.delta_bic), c.delta_bic))
     return results
+
+
+def _set_aside(sel: _Selection, res):
+    """A first-round ``res`` with its fit's row arrays on disk (``sel.store``, when the
+    search has one) from when its candidate ends: nothing in the round reads them after
+    (:func:`.screen.one_value_linearisation` asks only whether a one-value fit keeps its
+    Jacobian), and the round's pick reads them back (:func:`_add_best`). An IPOPT fit's
+    Jacobian was held through the rest of the round (87 MiB on an hour of 50 Hz
+    three-axis samples, each residual 8.3 MiB)."""
+    if sel.store is None or res.fit is None:
+        return res
+    return replace(res, fit=sel.store.set_aside(res.fit))
 
 
 def _serves_per_axis(res, remaining) -> bool:
@@ -354,6 +371,10 @@ def _add_best(sel: _Selection, results, prog) -> bool:
         if pair not in sel.confounded:
             sel.confounded.append(pair)
             sel.experiments[f"{pick.name} + {other.name}"] = experiment_for(*pair)
+    if sel.store is not None:  # the first round's pick read back: the search goes on from it
+        back = replace(pick, fit=sel.store.take_back(pick.fit))
+        sel.rounds[-1] = tuple(back if r is pick else r for r in sel.rounds[-1])
+        pick = back
     sel.chosen.append(pick.candidate)
     sel.theta = pick.fit.theta.copy()
     sel.current = pick.fit
@@ -373,17 +394,28 @@ ROW_ARRAYS = ("r", "J", "J_blocks", "J_source", "J_made", "N", "linearised")
 def _let_go(sel: _Selection) -> None:
     """The last round's fits without their :data:`ROW_ARRAYS`, once it is decided, except
     the fit the search goes on from (``sel.current``); the first round's are kept (their
-    honest errors are taken at the end). The nominal fit lets go of its Jacobian once the
-    search goes on from another fit. Scores, values and errors stay: the report and the
-    JSON are the same. On an hour of 50 Hz three-axis samples a later round kept some
-    300 MB this way: each step-judged candidate's residual and parameter columns, and with
-    them the round's shared window-state columns."""
+    honest errors are taken at the end), on disk when the search has a store
+    (``sel.store``: every one but ``sel.current``, most from when their candidate ended,
+    :func:`_set_aside`). The nominal fit lets go of its Jacobian
+    once the search goes on from another fit. Scores, values and errors stay: the report
+    and the JSON are the same. On an hour of 50 Hz three-axis samples a later round kept
+    some 300 MB this way: each step-judged candidate's residual and parameter columns, and
+    with them the round's shared window-state columns; the first round's residuals on disk
+    are some 80 MiB (8.3 MiB each)."""
     if sel.current is not sel.nominal and "J" in sel.nominal.extra:
         # the nominal fit's residual stays (the logs' gaps before); its Jacobian served
         # the first round (the lag's score test)
         sel.nominal = _without(sel.nominal, tuple(k for k in ROW_ARRAYS if k != "r"))
     if len(sel.rounds) == 1:
         sel.rounds[0] = _own_columns(sel.rounds[0])
+    if sel.store is not None and sel.rounds:
+        # (a first round's pick is written once a later pick replaces it)
+        sel.rounds[0] = tuple(
+            r
+            if r.fit is None or r.fit is sel.current
+            else replace(r, fit=sel.store.set_aside(r.fit))
+            for r in sel.rounds[0]
+        )
     if len(sel.rounds) < 2:
         return
     sel.rounds[-1] = tuple(
@@ -397,10 +429,20 @@ def honest_first_round(sel: _Selection, honest_of) -> None:
     :func:`.horizon._with_honest`) one after the other, each then without its fit's
     :data:`ROW_ARRAYS`: its honest errors are the last to read them. The round lets go of
     each as it goes (on an hour of 50 Hz three-axis samples an IPOPT fit's Jacobian is
-    some 90 MB, held through the later candidates' errors, whose columns are made again)."""
+    some 90 MB, held through the later candidates' errors, whose columns are made again).
+    A fit whose arrays are on disk (``sel.store``, :func:`_let_go`) reads them back just
+    before its errors. The current fit (the first round's pick, when the search went on
+    from it) keeps only its residual then (:func:`.search._result` reads it)."""
     rows, sel.rounds[0] = list(sel.rounds[0]), ()
     for i in range(len(rows)):
-        rows[i] = _stripped(honest_of(rows[i]))
+        row = rows[i]
+        if row.fit is not None and sel.store is not None:
+            row = replace(row, fit=sel.store.take_back(row.fit))
+        was_current = row.fit is not None and row.fit is sel.current
+        rows[i] = _stripped(honest_of(row))
+        del row
+        if was_current:
+            sel.current = _without(sel.current, tuple(k for k in ROW_ARRAYS if k != "r"))
     sel.rounds[0] = tuple(rows)
 
 
