@@ -28,7 +28,7 @@ from airbearing.analysis.shooting.functions import (
     scale_columns,
     vstack_csc,
 )
-from airbearing.analysis.shooting.sparse import let_go
+from airbearing.analysis.shooting.sparse import gram, let_go
 
 __all__ = [
     "KAPPA_GRID",
@@ -459,7 +459,10 @@ def _build_penalised(model, L, nw, K, outputs, substeps, jit, max_iter, objectiv
 
     def hess(z, _par, lam_f, _lam_g):
         _, J = o.rj_at(z)
-        H = (J.T @ J).tocsr()
+        # scipy's J.T @ J makes a CSR copy of the whole J first (on an hour of 50 Hz
+        # three-axis samples 87 MB at each Hessian, the peak of a candidate's IPOPT fit);
+        # gram: the same sums, block of columns by block
+        H = gram(J).tocsr()
         vals = float(lam_f[0]) * np.asarray(H[h_rows, h_cols]).ravel()
         return [ca.DM(h_spy, vals)]
 
