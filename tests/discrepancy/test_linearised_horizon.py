@@ -45,9 +45,11 @@ def _problem(seed: int, phi: float = 0.0, seconds: float = 60.0):
 def test_grouped_noise_likelihood_is_the_row_by_row_one():
     prob, model, S = _problem(1, phi=0.9)
     # a hole: one usable row taken out (an outlier), so a second interval of 2 samples
-    prob.windows.weight[2, 5] = 0.0
-    # (the problem's own array: the one problems of these windows share is read-only)
-    prob.usable = prob.windows.weight.reshape(-1)[prob.sample] > 0
+    # (in the problem's own usable rows: the windows' arrays are views of the data
+    # vector the problems share, read-only)
+    weight = prob.windows.weight.copy()
+    weight[2, 5] = 0.0
+    prob.usable = weight.reshape(-1)[prob.sample] > 0
     set_intensity(prob, KAPPA_GRID[0])
     top = prob.fit(model.p0, S, np.zeros(1), name="top")
     lin = _Linearised(prob, top, 1)

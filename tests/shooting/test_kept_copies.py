@@ -145,6 +145,9 @@ def test_the_problems_of_one_windowset_share_its_data_vector(rig, linked):
     for name in ("x0", "u", "dt", "weight", "rate", "quat", "yaw"):
         a = getattr(windows, name)
         assert a is None or np.shares_memory(a, windows.data), name
+        if a is not None:  # (a write would change every problem's data behind its back)
+            with pytest.raises(ValueError, match="read-only"):
+                a[(0,) * a.ndim] = 1.0
     alone = problem_for(model_for(tb, {}), datas, replace(windows, data=None), floor)
     assert alone._data is not windows.data
     np.testing.assert_array_equal(alone._data, windows.data)  # to the bit

@@ -51,9 +51,11 @@ def _coast(seed, phi, seconds=120.0, w0=1.2):
 def test_whitening_inverts_the_ar1_covariance_across_pieces_and_holes():
     prob, _, _ = rotor_viscous_problem([_coast(1, 0.0, seconds=30.0)])
     # a hole: one usable row taken out of the second piece (an outlier)
-    prob.windows.weight[1, 7] = 0.0
-    # (the problem's own array: the one problems of these windows share is read-only)
-    prob.usable = prob.windows.weight.reshape(-1)[prob.sample] > 0
+    # (in the problem's own usable rows: the windows' arrays are views of the data
+    # vector the problems share, read-only)
+    weight = prob.windows.weight.copy()
+    weight[1, 7] = 0.0
+    prob.usable = weight.reshape(-1)[prob.sample] > 0
     phi, s, dt = 0.9, 1.7, 0.1
     P, logdet = whitening(prob, {"yaw": (phi, s)}, dt)
     from airbearing.analysis.shooting.errors import _segment_order

@@ -535,6 +535,11 @@ def _window_set(datas, cuts, linked: bool = False) -> WindowSet:
             ws[j] = d.ws[r]
         if E is not None:
             E[j, m - 1] = 1.0  # the row each window hands over at (its ``end``)
+    # views of the problems' data vector, written here only: a change afterwards would
+    # change the data of every problem built on them, behind its back
+    for a in (X0, U, DT, M, rate, qq, yw, ws, E):
+        if a is not None:
+            a.flags.writeable = False
     return WindowSet(
         x0=X0,
         u=U,
