@@ -17,7 +17,6 @@ from rigs import spinning_seed004_50hz
 
 from airbearing.analysis.discrepancy import first_round_arrays as fra
 from airbearing.analysis.discrepancy import search as search_mod
-from airbearing.analysis.discrepancy import selection
 from airbearing.analysis.discrepancy.search import discrepancy
 from airbearing.analysis.shooting import Fit
 from airbearing.analysis.simulation.scenarios import slew
@@ -149,7 +148,7 @@ def test_a_search_that_fails_leaves_no_files(monkeypatch, tmp_path, error):
 
 
 @pytest.mark.slow  # two searches of two rounds on a 6 s log: about 5 s (16 s compiling)
-def test_the_first_rounds_honest_errors_are_the_same_bits_on_disk(monkeypatch):
+def test_the_first_rounds_honest_errors_are_the_same_bits_on_disk(monkeypatch, handed_rounds):
     tb, log = spinning_seed004_50hz(6.0, {"viscous_friction": 1e-5, "aero_drag": 3e-5})
     written = []
     set_aside = fra.ArrayStore.set_aside
@@ -159,14 +158,7 @@ def test_the_first_rounds_honest_errors_are_the_same_bits_on_disk(monkeypatch):
         return set_aside(self, fit)
 
     monkeypatch.setattr(fra.ArrayStore, "set_aside", spy)
-    handed = []  # each round's results as the round hands them over, before it is decided
-    add_best = selection._add_best
-
-    def spy_add(sel, results, prog):
-        handed.append(tuple(results))
-        return add_best(sel, results, prog)
-
-    monkeypatch.setattr(selection, "_add_best", spy_add)
+    handed = handed_rounds  # each round's results as handed over, before it is decided
     on_disk = discrepancy(tb, log, max_effects=2, only=ONLY)
     # an IPOPT fit's Jacobian and linearisation and every candidate's residual were on disk
     assert {"r", "J", "linearised"} <= set(written)

@@ -20,7 +20,6 @@ import numpy as np
 import pytest
 from rigs import spinning_seed004_50hz
 
-from airbearing.analysis.discrepancy import selection
 from airbearing.analysis.discrepancy.candidates import candidates_for
 from airbearing.analysis.discrepancy.replay import prepare
 from airbearing.analysis.discrepancy.search import discrepancy
@@ -77,17 +76,10 @@ def test_a_wide_jacobian_makes_its_index_arrays_per_call():
 
 
 @pytest.mark.slow  # one search of two rounds on a 6 s log: about 3 s (16 s compiling)
-def test_a_decided_later_round_lets_go_of_its_per_row_arrays(monkeypatch):
+def test_a_decided_later_round_lets_go_of_its_per_row_arrays(handed_rounds):
     tb, log = spinning_seed004_50hz(6.0, {"viscous_friction": 1e-5, "aero_drag": 3e-5})
     # each round's results as the round hands them over, before it is decided
-    handed = []
-    add_best = selection._add_best
-
-    def spy(sel, results, prog):
-        handed.append(tuple(results))
-        return add_best(sel, results, prog)
-
-    monkeypatch.setattr(selection, "_add_best", spy)
+    handed = handed_rounds
     res = discrepancy(tb, log, max_effects=2, only=ONLY)
     assert len(handed) >= 2
     # the first round's step-judged fits keep what makes their columns, not the columns,
