@@ -308,6 +308,24 @@ def library_once(monkeypatch, library_patches):
     library_patches(monkeypatch)
 
 
+@pytest.fixture
+def handed_rounds(monkeypatch):
+    """Each round's results as the discrepancy search's round hands them over to
+    :func:`.selection._add_best`, before it is decided (a list, one tuple per round, filled
+    as the search runs)."""
+    from airbearing.analysis.discrepancy import selection
+
+    handed = []
+    add_best = selection._add_best
+
+    def spy(sel, results, prog):
+        handed.append(tuple(results))
+        return add_best(sel, results, prog)
+
+    monkeypatch.setattr(selection, "_add_best", spy)
+    return handed
+
+
 #: Set to a file name: a test process creates it once it has collected the tests (so the
 #: package is installed, and its modules and the test modules are imported, their bytecode
 #: cached). .ci/run starts the slow studies beside the suite then: not while the README's
