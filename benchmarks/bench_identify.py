@@ -13,7 +13,7 @@ hundreds of unexplained runs instead of a clean log). Each timing is the wall ti
 subprocess; the minimum and the median wall time of ``--repeat`` runs are printed, the
 minimum CPU time (user + system) of the process (on a shared, loaded machine the wall
 time follows the load; the CPU time is what the run costs) and its largest peak resident
-memory (``ru_maxrss`` of the process itself, from ``os.wait4``). With ``--output-error``,
+memory (the process's own ``ru_maxrss``, :mod:`child_cost`). With ``--output-error``,
 the default method is timed too on the 10^4-sample logs. ``--growth`` adds Parquet logs of
 10^3, 10^4 and 10^5 samples (time against rows, one format). ``--rev REV`` times the code
 of a git revision too (``git archive``, same interpreter), run for run alternately with
@@ -41,9 +41,9 @@ import statistics
 import subprocess
 import sys
 import tempfile
-import time
 from pathlib import Path
 
+import child_cost
 from bench_end_to_end import Tree
 from bench_end_to_end import trees as code_trees
 
@@ -81,20 +81,10 @@ def run(paths: list[Path], out: Path, method: str, tree: Tree, scratch: Path):
     cmd += [str(p) for p in paths]
     cmd += ["--method", method, "--known-offset-xy", str(SEED004_TRUTH[6]), str(SEED004_TRUTH[7])]
     cmd += ["--json", str(out), "--force"]
-    with tempfile.TemporaryFile() as err:
-        t0 = time.perf_counter()
-        proc = subprocess.Popen(
-            cmd, stdout=subprocess.DEVNULL, stderr=err, env=tree.env(scratch / "cache")
-        )
-        _, status, ru = os.wait4(proc.pid, 0)  # this child's own rusage
-        elapsed = time.perf_counter() - t0
-        proc.returncode = os.waitstatus_to_exitcode(status)
-        if proc.returncode != 0:
-            err.seek(0)
-            text = err.read().decode(errors="replace").strip()
-            raise SystemExit(f"identify failed ({proc.returncode}): {text}")
-    # ru_maxrss is in kB on Linux
-    return elapsed, ru.ru_utime + ru.ru_stime, ru.ru_maxrss / 1024
+    cost = child_cost.run(cmd, env=tree.env(scratch / "cache"))
+    if cost.returncode != 0:
+        raise SystemExit(f"identify failed ({cost.returncode}): {cost.stderr.strip()}")
+    return cost.wall, cost.cpu, cost.peak_mb
 
 
 #: What ``--stages`` runs in a new process: the CPU time (s) at the end of each stage.

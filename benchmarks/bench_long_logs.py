@@ -9,7 +9,7 @@ written as CSV: for ``replay`` and ``discrepancy`` with a viscous friction of 1e
 that the testbed does not have, for ``identify`` without (it fits the testbed's model); each
 command then runs as a NEW process (``python -m airbearing --quiet ...``, imports and the
 log's reading included), and the benchmark prints its wall time, CPU time (user + system)
-and peak resident memory (``ru_maxrss`` of the process itself, from ``os.wait4``).
+and peak resident memory (the process's own ``ru_maxrss``, :mod:`child_cost`).
 ``identify`` is the default output-error method of the dof-3 platform. ``--src`` runs the
 commands on another source tree (``PYTHONPATH``), e.g. a checkout of the code before.
 
@@ -22,11 +22,11 @@ from __future__ import annotations
 
 import argparse
 import os
-import subprocess
 import sys
 import tempfile
-import time
 from pathlib import Path
+
+import child_cost
 
 from airbearing.analysis.simulation.scenarios import free_oscillation
 from airbearing.io.log import write_log
@@ -65,16 +65,10 @@ def run(args: list[str], src: str | None) -> tuple[float, float, float]:
     if src:
         env["PYTHONPATH"] = src
     cmd = [sys.executable, "-m", "airbearing", "--quiet", *args]
-    with tempfile.TemporaryFile() as err:
-        t0 = time.perf_counter()
-        proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=err, env=env)
-        _, status, ru = os.wait4(proc.pid, 0)
-        wall = time.perf_counter() - t0
-        if os.waitstatus_to_exitcode(status) != 0:
-            err.seek(0)
-            text = err.read().decode(errors="replace").strip()
-            raise SystemExit(f"{' '.join(args)} failed: {text}")
-    return wall, ru.ru_utime + ru.ru_stime, ru.ru_maxrss / 1024  # kB on Linux
+    cost = child_cost.run(cmd, env=env)
+    if cost.returncode != 0:
+        raise SystemExit(f"{' '.join(args)} failed: {cost.stderr.strip()}")
+    return cost.wall, cost.cpu, cost.peak_mb
 
 
 def main() -> None:

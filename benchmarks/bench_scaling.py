@@ -6,7 +6,7 @@
 
 Every row is a NEW process (``python -m airbearing --quiet ...``, interpreter start, imports
 and the log's reading included) with its wall time, CPU time (user + system) and peak
-resident memory (``ru_maxrss`` of the process itself, from ``os.wait4``). The logs are
+resident memory (the process's own ``ru_maxrss``, :mod:`child_cost`). The logs are
 simulated once by the package at 50 Hz and written as CSV (``--keep`` reuses them):
 
 - ``disc1`` / ``replay1``: a passive yaw rig (dof 1, attitude only, 1.5e-3 rad noise)
@@ -34,12 +34,11 @@ import argparse
 import json
 import math
 import os
-import subprocess
 import sys
 import tempfile
-import time
 from pathlib import Path
 
+import child_cost
 import numpy as np
 
 RATE_HZ = 50.0
@@ -129,18 +128,10 @@ print(res.x[2], np.sqrt(cov[2, 2]), res.x[3], np.sqrt(cov[3, 3]))
 
 def run(cmd: list[str]) -> tuple[float, float, float, str]:
     """Wall and CPU time (s), peak resident memory (MB) and stdout of one new process."""
-    with tempfile.TemporaryFile() as err, tempfile.TemporaryFile() as out:
-        t0 = time.perf_counter()
-        proc = subprocess.Popen(cmd, stdout=out, stderr=err)
-        _, status, ru = os.wait4(proc.pid, 0)
-        wall = time.perf_counter() - t0
-        if os.waitstatus_to_exitcode(status) != 0:
-            err.seek(0)
-            text = err.read().decode(errors="replace").strip()[-2000:]
-            raise SystemExit(f"{' '.join(cmd)} failed: {text}")
-        out.seek(0)
-        text = out.read().decode(errors="replace")
-    return wall, ru.ru_utime + ru.ru_stime, ru.ru_maxrss / 1024, text
+    cost = child_cost.run(cmd, capture_stdout=True)
+    if cost.returncode != 0:
+        raise SystemExit(f"{' '.join(cmd)} failed: {cost.stderr.strip()[-2000:]}")
+    return cost.wall, cost.cpu, cost.peak_mb, cost.stdout
 
 
 def command(case: str, inputs: dict, out: Path) -> list[str]:
