@@ -72,7 +72,7 @@ def test_a_wide_jacobian_makes_its_index_arrays_per_call():
     np.testing.assert_array_equal(J_wide[:, :2].toarray(), J_fit[:, :2].toarray())
     np.testing.assert_array_equal(J_wide[:, k:].toarray(), J_fit[:, 2:].toarray())
     P = wide.pattern()
-    assert P.shape == wide.shape and P.nnz == wide._index_arrays()[0].size
+    assert P.shape == wide.shape and P.nnz == wide.index_arrays()[0].size
 
 
 @pytest.mark.slow  # one search of two rounds on a 6 s log: about 3 s (16 s compiling)

@@ -29,7 +29,7 @@ from airbearing.analysis.discrepancy.replay import (
 )
 from airbearing.analysis.discrepancy.search import discrepancy
 from airbearing.analysis.shooting import fitting_start_yaw
-from airbearing.analysis.shooting.problem import pinned_null_space
+from airbearing.analysis.shooting.problem_arrays import pinned_null_space
 from airbearing.analysis.simulation.scenarios import slew
 from airbearing.io.testbed import Field, load_testbed
 from airbearing.models.model import build_model

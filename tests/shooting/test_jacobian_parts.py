@@ -13,7 +13,7 @@ from airbearing.analysis.shooting import errors
 from airbearing.analysis.shooting import problem_functions as pf
 from airbearing.analysis.shooting import sparse as sps
 from airbearing.analysis.shooting.fit import Fit, fit_jacobian, fit_jacobian_split
-from airbearing.analysis.shooting.problem import _kept_columns
+from airbearing.analysis.shooting.problem_arrays import _kept_columns
 from airbearing.analysis.shooting.process_noise import KAPPA_GRID, set_intensity
 
 

@@ -285,8 +285,8 @@ class StackedPart:
         Bp = Bp[:, np.r_[th, np.arange(K, fj.shape[1])]]
         Bp.sort_indices()
         n_cols = Bp.shape[1]
-        ind, ptr = fj._index_arrays(th, True)
-        self.spans = fj._spans(th, True)
+        ind, ptr = fj.index_arrays(th, True)
+        self.spans = fj.block_spans(th, True)
         col = np.repeat(np.arange(n_cols), np.diff(Bp.indptr))
         self.places = ptr[col + 1].astype(np.int64) + np.arange(Bp.nnz, dtype=np.int64)
         total = ind.size + Bp.nnz
@@ -311,7 +311,7 @@ class StackedPart:
         self.shift_theta = shift[: th.size]
         nd = (fj.shape[1] - K) // nw
         self.shift_windows = shift[th.size : th.size + nd * nw].reshape(nw, nd)
-        self.t = np.repeat(np.arange(nd), np.diff(fj._colind)[K:])
+        self.t = np.repeat(np.arange(nd), fj.window_column_counts())
         self.e = np.arange(self.t.size, dtype=np.int64)
 
     def fill(self, blocks: np.ndarray, j0: int) -> None:

@@ -295,10 +295,10 @@ class WindowJacobian(_WindowCalls):
         self._keep_index = K <= KEPT_INDEX_SLOTS
         self._index = None
 
-    def _index_arrays(self, theta=None, windows: bool = True) -> tuple:
+    def index_arrays(self, theta=None, windows: bool = True) -> tuple:
         """``(indices, indptr)`` of the Jacobian's CSC matrix, or of its part of the
         parameter columns ``theta`` (sorted slots; default all) and, with ``windows``, every
-        window's own columns (:meth:`part_matrix`)."""
+        window's own columns (as :meth:`_part` lays them out)."""
         whole = theta is None and windows
         kept = None if not whole else _KeptIndex.get(getattr(self, "_index", None))
         if kept is not None:
@@ -308,7 +308,7 @@ class WindowJacobian(_WindowCalls):
         m, col = block.size1(), self._colind
         row = np.asarray(block.row(), dtype=np.int64)
         counts = np.diff(col)
-        spans = self._spans(theta, windows)
+        spans = self.block_spans(theta, windows)
         total = sum(b - a for a, b in spans) * nw
         big = max(m * nw, total) >= np.iinfo(np.int32).max
         itype = np.int64 if big else np.int32
@@ -325,16 +325,21 @@ class WindowJacobian(_WindowCalls):
         sizes = np.r_[counts[theta] * nw, np.tile(counts[K:], nw) if windows else []]
         return indices, np.r_[0, np.cumsum(sizes)].astype(itype)
 
-    def _spans(self, theta, windows: bool) -> list:
+    def block_spans(self, theta, windows: bool) -> list:
         """``(a, b)`` of each part's column group within a window block's nonzeros: each
         parameter column of ``theta``, then (``windows``) the window's own columns."""
         col, K = self._colind, self.K
         spans = [(int(col[c]), int(col[c + 1])) for c in theta]
         return spans + ([(int(col[K]), int(col[-1]))] if windows else [])
 
+    def window_column_counts(self) -> np.ndarray:
+        """The nonzeros of each of a window's own columns in its block (the columns after
+        the ``K`` parameter slots)."""
+        return np.diff(self._colind)[self.K :]
+
     def pattern(self) -> sp.csc_matrix:
         """The Jacobian's structure: a CSC matrix of ones."""
-        indices, indptr = self._index_arrays()
+        indices, indptr = self.index_arrays()
         return sp.csc_matrix((np.ones(indices.size), indices, indptr), shape=self.shape)
 
     def defect_sparsity(self) -> ca.Sparsity:
@@ -348,14 +353,14 @@ class WindowJacobian(_WindowCalls):
         return part.matrix()
 
     def _part(self, theta, windows: bool) -> _Part:
-        """An empty :class:`_Part` of the Jacobian (:meth:`_index_arrays`)."""
+        """An empty :class:`_Part` of the Jacobian (:meth:`index_arrays`)."""
         K = self.K
         th = np.arange(K) if theta is None else np.asarray(theta, dtype=int)
-        indices, indptr = self._index_arrays(theta, windows)
+        indices, indptr = self.index_arrays(theta, windows)
         if theta is None and windows and self._keep_index:
             self._index = _KeptIndex(indices, indptr)
         n_cols = th.size + ((self.shape[1] - K) if windows else 0)
-        spans = self._spans(th, windows)
+        spans = self.block_spans(th, windows)
         return _Part(spans, self.nw, indices, indptr, (self.shape[0], n_cols))
 
     def _used_part(self, used: int) -> _Part:
@@ -368,11 +373,11 @@ class WindowJacobian(_WindowCalls):
         arrays = _KeptIndex.get(kept[1]) if kept is not None and kept[0] == used else None
         if arrays is None:
             self._used_index = None  # (the last let go before these are made)
-            indices, ptr = self._index_arrays(np.arange(used), True)
+            indices, ptr = self.index_arrays(np.arange(used), True)
             indptr = np.r_[ptr[: used + 1], np.full(K - used, ptr[used]), ptr[used + 1 :]]
             arrays = (indices, indptr.astype(ptr.dtype))
             self._used_index = (used, _KeptIndex(*arrays))
-        spans = self._spans(np.arange(used), True)
+        spans = self.block_spans(np.arange(used), True)
         return _Part(spans, self.nw, *arrays, self.shape)
 
     def __call__(self, v, p_base, S, data, parts=None, used=None) -> tuple:
@@ -471,7 +476,7 @@ class _DensePart:
         block = fj.win_rj.sparsity_out(1)
         self.m = block.size1()
         self.row = np.asarray(block.row(), dtype=np.int64)
-        self.spans = fj._spans(np.asarray(theta, dtype=int), False)
+        self.spans = fj.block_spans(np.asarray(theta, dtype=int), False)
         self.out, self.col0 = out, int(col0)
 
     def fill(self, blocks: np.ndarray, j0: int) -> None:
