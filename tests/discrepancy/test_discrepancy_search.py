@@ -15,7 +15,8 @@ import math
 import numpy as np
 import pytest
 
-from airbearing.analysis.discrepancy.screen import AGREE_FRACTION, MATTER_BIC, _box_min
+from airbearing.analysis.discrepancy.linearisation import _box_min
+from airbearing.analysis.discrepancy.screen import AGREE_FRACTION, MATTER_BIC
 from airbearing.analysis.discrepancy.search import discrepancy
 from airbearing.analysis.discrepancy.trial import MIN_SIGMAS, HeldOut, chi2_threshold
 from airbearing.analysis.discrepancy.words import GYRO_BIAS_DOF1

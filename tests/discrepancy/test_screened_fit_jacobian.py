@@ -15,10 +15,10 @@ import numpy as np
 import scipy.sparse as sp
 from rigs import spinning_seed004_50hz
 
-from airbearing.analysis.discrepancy import screen
+from airbearing.analysis.discrepancy import linearisation
 from airbearing.analysis.discrepancy.candidates import candidates_for
+from airbearing.analysis.discrepancy.linearisation import linearise
 from airbearing.analysis.discrepancy.replay import prepare
-from airbearing.analysis.discrepancy.screen import linearise
 from airbearing.analysis.discrepancy.search_state import _Search
 from airbearing.analysis.shooting import fit_jacobian, theta_errors
 from airbearing.analysis.shooting.errors import honest_errors
@@ -68,7 +68,7 @@ def test_a_screened_fit_shares_the_window_state_columns():
 
 def test_columns_made_again_are_the_rounds_to_the_bit(monkeypatch):
     """A step-judged fit's parameter columns made again for its honest errors
-    (:meth:`.screen.Columns.columns_of`) are the round's ``A E`` to the bit, though only
+    (:meth:`.linearisation.Columns.columns_of`) are the round's ``A E`` to the bit, though only
     the columns of ``A`` that ``E`` reads are made (one-value forms tie three columns), and
     the window states' columns are the round's. The columns of the fits still expected
     (their maps ``E`` held) are made with them within ``KEPT_COLUMNS`` and kept with the
@@ -82,14 +82,14 @@ def test_columns_made_again_are_the_rounds_to_the_bit(monkeypatch):
     lin = linearise(pb, nominal, search.S(False, []), search.cands)
     src = lin.made
     made = []
-    make = screen.Columns.make
+    make = linearisation.Columns.make
 
     def counted(self, keep=None, states=True):
         made.append((None if keep is None else list(keep), states))
         return make(self, keep, states)
 
-    monkeypatch.setattr(screen.Columns, "make", counted)
-    screen.forget_columns()
+    monkeypatch.setattr(linearisation.Columns, "make", counted)
+    linearisation.forget_columns()
     tied, forms = 0, {}
     for c in search.cands:
         E = lin.columns(c.params, c.tie)
@@ -100,30 +100,30 @@ def test_columns_made_again_are_the_rounds_to_the_bit(monkeypatch):
         np.testing.assert_array_equal(At + 0.0, lin.A @ E + 0.0)  # (a zero of either sign)
         assert (Jd != lin.Jd).nnz == 0 and Jd.shape == lin.Jd.shape, c.label
         assert made[-1][0] == list(used) and used.size < lin.A.shape[1], c.label
-        assert screen._KEPT[0] is None, c.label  # (no other fit expected)
+        assert linearisation._KEPT[0] is None, c.label  # (no other fit expected)
     assert tied, "no one-value form among the candidates"
     (u1, f1), (u2, f2), (u3, f3) = list(forms.items())[:3]
     E1, E1b, E2, E3 = (lin.columns(*f) for f in (f1, f1, f2, f3))
-    monkeypatch.setattr(screen, "KEPT_COLUMNS", len(set(u1) | set(u2) | set(u3)))
+    monkeypatch.setattr(linearisation, "KEPT_COLUMNS", len(set(u1) | set(u2) | set(u3)))
     for E in (E1, E1b, E2, E3):
         src.expect(E)
     del E, E3  # (let go: no longer asks)
     made.clear()
     At, _ = src.columns_of(E1)
     assert made == [(sorted(set(u1) | set(u2)), True)]
-    kept = screen._KEPT[0]
+    kept = linearisation._KEPT[0]
     assert kept[0] is src and list(kept[2]) == sorted(set(u1) | set(u2))
     At1b, _ = src.columns_of(E1b)
     del E1, E1b
     At2, _ = src.columns_of(E2)
     assert len(made) == 1  # (the window states' columns too: made once)
-    assert screen._KEPT[0] is None  # (E2 the last expected)
+    assert linearisation._KEPT[0] is None  # (E2 the last expected)
     np.testing.assert_array_equal(At + 0.0, lin.A @ lin.columns(*f1) + 0.0)
     np.testing.assert_array_equal(At2 + 0.0, lin.A @ lin.columns(*f2) + 0.0)
 
 
 def test_the_product_made_back_block_by_block_is_the_whole_products():
-    """:func:`.screen._product`: ``A E`` from the columns of ``A`` that ``E`` reads, made
+    """:func:`.linearisation._product`: ``A E`` from the columns of ``A`` that ``E`` reads, made
     back a block of rows at a time in ``A``'s width and order, is the product with the
     whole ``A`` to the bit (BLAS adds a tied column's terms by their positions in ``A``:
     the product of the columns alone differs in the last bits). Sizes within one BLAS
@@ -139,5 +139,5 @@ def test_the_product_made_back_block_by_block_is_the_whole_products():
                 E[rng.choice(20, nz, replace=False), c] = rng.choice([1.0, -1.0, 0.5, 3.0], nz)
             have = np.flatnonzero(np.any(E != 0, axis=1))
             have = np.union1d(have, [19])  # (a column made but not read: zero in E)
-            got = screen._product(A[:, have], have, 20, E, order, rows=64)
+            got = linearisation._product(A[:, have], have, 20, E, order, rows=64)
             np.testing.assert_array_equal(got + 0.0, A @ E + 0.0)

@@ -1,7 +1,7 @@
 """The honest errors', the lag score's and the screen's products without copies of the
 Jacobian (:func:`airbearing.analysis.shooting.errors._kkt_solve`, ``_influence``,
 ``_weighted_rows``; :func:`airbearing.analysis.discrepancy.lag_score._nonempty_columns`;
-``screen._column_square_sums`` and ``_transposed_product``): the same numbers to the bit
+``linearisation._column_square_sums`` and ``_transposed_product``): the same numbers to the bit
 as scipy's products on the copies they replace (the rows of the measurements, the weighted
 rows, the column-scaled matrix, the non-empty columns, the squared entries, the row-major
 copy of dense columns).
@@ -115,7 +115,7 @@ def test_the_non_empty_columns_share_the_jacobians_entries():
 
 
 def test_the_screens_column_norms_are_scipys():
-    from airbearing.analysis.discrepancy.screen import _column_square_sums
+    from airbearing.analysis.discrepancy.linearisation import _column_square_sums
 
     rng = np.random.default_rng(5)
     J, _, _, _ = _jacobian(rng)
@@ -126,7 +126,7 @@ def test_the_screens_column_norms_are_scipys():
 
 
 def test_the_screens_product_with_column_major_columns_is_scipys():
-    from airbearing.analysis.discrepancy.screen import _transposed_product
+    from airbearing.analysis.discrepancy.linearisation import _transposed_product
 
     rng = np.random.default_rng(11)
     J, _, _, _ = _jacobian(rng)

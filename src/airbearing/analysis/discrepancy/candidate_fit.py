@@ -13,12 +13,8 @@ from dataclasses import replace
 
 import numpy as np
 
-from airbearing.analysis.discrepancy.screen import (
-    one_value_linearisation,
-    screened,
-    screened_lag,
-    screened_scan,
-)
+from airbearing.analysis.discrepancy.linearisation import one_value_linearisation
+from airbearing.analysis.discrepancy.screen import screened, screened_lag, screened_scan
 from airbearing.analysis.discrepancy.starts import continuation_fit, needs_retry, start_json
 from airbearing.analysis.discrepancy.trial import (
     MIN_SIGMAS,
@@ -43,7 +39,7 @@ def _try(search, cand, chosen, theta_chosen, current, current_lag, ln_n, starts,
     it (:func:`.screen.screened`);
     ``one``: for a per-axis form, its one-value form's IPOPT fit this round (None: none),
     from which its step is tried when the shared Jacobian's cannot decide it
-    (:func:`.screen.one_value_linearisation`)."""
+    (:func:`.linearisation.one_value_linearisation`)."""
     lag = current_lag or cand.lag
     problem = search.problem(lag)
     model = search.models[lag]
@@ -160,7 +156,7 @@ def _try(search, cand, chosen, theta_chosen, current, current_lag, ln_n, starts,
 
 def _from_one_value(search, problem, cand, one, S_sel, bounds, at, th_reg, best):
     """The per-axis ``cand`` judged on its Gauss-Newton step from its one-value form's IPOPT
-    fit ``one`` (:func:`.screen.one_value_linearisation`), or None (IPOPT decides)."""
+    fit ``one`` (:func:`.linearisation.one_value_linearisation`), or None (IPOPT decides)."""
     if one is None or not cand.per_axis:
         return None
     lin = one_value_linearisation(problem, at[0], one, cand, S_sel)

@@ -19,9 +19,9 @@ import numpy as np
 
 from airbearing.analysis.discrepancy.candidate_fit import START_YAW
 from airbearing.analysis.discrepancy.honest import effect_errors, honest
+from airbearing.analysis.discrepancy.linearisation import forget_columns
 from airbearing.analysis.discrepancy.replay import problem_for
 from airbearing.analysis.discrepancy.revise import close_alternatives, model_averaged_std, revise
-from airbearing.analysis.discrepancy.screen import forget_columns
 from airbearing.analysis.discrepancy.search_state import _Named, _Progress, _Search, _Selection
 from airbearing.analysis.discrepancy.selection import (
     CONFOUND_BIC,

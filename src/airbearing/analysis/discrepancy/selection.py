@@ -4,7 +4,7 @@ then one round per effect added, up to ``max_effects``.
 Each round (:func:`_round`) judges every remaining candidate at the current fit
 (:mod:`.candidate_fit`): first on the round's shared Jacobian, the per-axis forms after the
 one-value ones (also on their step from the one-value form's IPOPT fit,
-:func:`.screen.one_value_linearisation`), then refits by IPOPT every screened candidate
+:func:`.linearisation.one_value_linearisation`), then refits by IPOPT every screened candidate
 that could be named near the round's best. :func:`_add_best` adds the nameable candidate
 with the lowest BIC; candidates within ``CONFOUND_BIC`` of it are reported as confounded.
 """
@@ -25,7 +25,8 @@ from airbearing.analysis.discrepancy.candidates import (
     regression_start,
     residual_torque,
 )
-from airbearing.analysis.discrepancy.screen import MATTER_BIC, linearise
+from airbearing.analysis.discrepancy.linearisation import linearise
+from airbearing.analysis.discrepancy.screen import MATTER_BIC
 from airbearing.analysis.discrepancy.search_state import _Progress, _Search, _Selection
 from airbearing.analysis.discrepancy.starts import explained_fraction
 from airbearing.analysis.discrepancy.trial import cross_validate
@@ -251,7 +252,7 @@ def _round(search, sel: _Selection, remaining, screen, workers, prog) -> list:
 def _set_aside(sel: _Selection, res):
     """A first-round ``res`` with its fit's row arrays on disk (``sel.store``, when the
     search has one) from when its candidate ends: nothing in the round reads them after
-    (:func:`.screen.one_value_linearisation` asks only whether a one-value fit keeps its
+    (:func:`.linearisation.one_value_linearisation` asks only whether a one-value fit keeps its
     Jacobian), and the round's pick reads them back (:func:`_add_best`). An IPOPT fit's
     Jacobian was held through the rest of the round (87 MiB on an hour of 50 Hz
     three-axis samples, each residual 8.3 MiB)."""
@@ -262,7 +263,7 @@ def _set_aside(sel: _Selection, res):
 
 def _serves_per_axis(res, remaining) -> bool:
     """Whether ``res``, a one-value form's result, may serve its per-axis form's step
-    (:func:`.screen.one_value_linearisation`, which takes only a fit that keeps its
+    (:func:`.linearisation.one_value_linearisation`, which takes only a fit that keeps its
     Jacobian): a per-axis form of its name is to be tried this round (:func:`_round`:
     when the one value is significant, or the effect is signed)."""
     c = res.candidate
@@ -448,7 +449,7 @@ def honest_first_round(sel: _Selection, honest_of) -> None:
 
 def _own_columns(results: tuple) -> tuple:
     """The first round's step-judged fits with what makes their columns again
-    (``extra["J_made"]``: the linearisation's :class:`.screen.Columns` and the fit's map
+    (``extra["J_made"]``: the linearisation's :class:`.linearisation.Columns` and the fit's map
     ``E``) instead of the columns it made (``A``, every candidate parameter of the round,
     some 30 on a three-axis platform, and the window states' ``Jd``: some 220 MB per
     linearisation on an hour of 50 Hz three-axis samples, kept until the honest errors at

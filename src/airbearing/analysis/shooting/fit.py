@@ -90,7 +90,7 @@ def fit_jacobian(fit: Fit):
     parameter each). A 2-tuple ``(At, Jd)`` is taken as ``[At, Jd]``. A fit that keeps
     ``extra["J_made"] = (source, E)`` instead has ``source.columns_of(E)`` make
     ``(A E, Jd)`` again (the first round's step-judged fits, kept to the honest errors at
-    the end: :class:`airbearing.analysis.discrepancy.screen.Columns`, which makes only
+    the end: :class:`airbearing.analysis.discrepancy.linearisation.Columns`, which makes only
     the columns of ``A`` that ``E`` reads).
 
     Parameters
