@@ -1,5 +1,5 @@
 """The honest errors', the lag score's and the screen's products without copies of the
-Jacobian (:func:`airbearing.analysis.shooting.errors._kkt_solve`, ``_influence``,
+Jacobian (:func:`airbearing.analysis.shooting.one_trajectory._kkt_solve`, ``_influence``,
 ``_weighted_rows``; :func:`airbearing.analysis.discrepancy.lag_score._nonempty_columns`;
 ``linearisation._column_square_sums`` and ``_transposed_product``): the same numbers to the bit
 as scipy's products on the copies they replace (the rows of the measurements, the weighted
@@ -19,7 +19,7 @@ import scipy.sparse as sp
 from scipy.sparse.linalg import splu
 
 from airbearing.analysis.discrepancy.lag_score import _nonempty_columns
-from airbearing.analysis.shooting.errors import _influence, _kkt, _kkt_solve, _weighted_rows
+from airbearing.analysis.shooting.one_trajectory import _influence, _kkt, _kkt_solve, _weighted_rows
 
 
 def _jacobian(rng, nw=25, n=60, nd=6, k=3, n_defect=40):

@@ -44,7 +44,7 @@ __all__ = ["ON_DISK", "ArrayStore", "remove_left", "search_files"]
 
 #: ``Fit.extra`` entries written to disk. Of ``linearised`` (the problem's serial, the point
 #: and the measurement whitening it was taken at, the defects' Jacobian) only the Jacobian:
-#: the whitening is compared by identity (:func:`.shooting.errors._made_here`).
+#: the whitening is compared by identity (:func:`.shooting.one_trajectory._made_here`).
 ON_DISK = ("r", "J", "N", "linearised")
 
 #: Scipy's cached checks of a compressed matrix's indices, kept as the matrix had them.

@@ -2,12 +2,13 @@
 
 Before a round's IPOPT fits, the residual and its exact Jacobian at the current fit are
 evaluated once for every Model parameter a candidate moves (one evaluation of the window
-function with a slot per parameter, for all candidates together: :mod:`.linearisation`). With each window's initial
-state eliminated in its own small normal equations (as in the held-out test), every
-candidate's Gauss-Newton step from the current fit is a small least-squares problem
-(within its physical bounds: the box-constrained minimum of the quadratic model, by its
-active sets). Its predicted fall of the weighted RSS is Rao's score statistic (asymptotically
-the likelihood ratio, Rao 1948), and the residual evaluated at the step checks it.
+function with a slot per parameter, for all candidates together: :mod:`.linearisation`).
+With each window's initial state eliminated in its own small normal equations (as in the
+held-out test), every candidate's Gauss-Newton step from the current fit is a small
+least-squares problem (within its physical bounds: the box-constrained minimum of the
+quadratic model, by its active sets). Its predicted fall of the weighted RSS is Rao's
+score statistic (asymptotically the likelihood ratio, Rao 1948), and the residual
+evaluated at the step checks it.
 
 A candidate whose predicted and checked likelihood ratio both lie below
 ``SCREEN_FRACTION`` of what naming needs (the chi-square quantile and the BIC penalty of
