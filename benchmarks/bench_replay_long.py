@@ -6,13 +6,13 @@
 
 The log is ``bench_scaling``'s ``replay3`` case (``seed004-platform`` at 50 Hz, a free
 oscillation with a viscous friction of 1e-5 N m s the testbed lacks), made by its own
-generator. Every row is a NEW process (``python -m airbearing --quiet replay TB LOG --json``)
-with its CPU time (user + system, from ``os.wait4``) and peak resident memory; ``--rev REV``
-runs the code of that git revision too (``git archive``), run for run alternately with the
-work tree, each with its own compiled-code cache (warmed by a first run that is not
-reported), and says which keys of the two JSON documents differ. The growth exponent is the
-slope of log CPU against log samples between successive sizes. The machine may be shared:
-the load average is printed beside each row.
+generator. Every row is a NEW process (``python -m airbearing --quiet replay TB LOG
+--json``) with its CPU time (user + system) and its own peak resident memory
+(:mod:`child_cost`); ``--rev REV`` runs the code of that git revision too (``git archive``),
+run for run alternately with the work tree, each with its own compiled-code cache (warmed by
+a first run that is not reported), and says which keys of the two JSON documents differ. The
+growth exponent is the slope of log CPU against log samples between successive sizes. The
+machine may be shared: the load average is printed beside each row.
 
 ``--profile N``: one replay of N rows in this process, each IPOPT fit of the process-noise
 descent with its intensity, iterations and CPU time, and the likelihood of every intensity.
