@@ -209,7 +209,7 @@ def run_one(kind: str, case: str, seed: int, duration: float = 150.0) -> dict:
     """One fit of the study: per true effect, value, std, std_white, crlb; the adequacy."""
     from airbearing.analysis.discrepancy.search import discrepancy
 
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     if kind == "coast":
         tb, logs = coast_logs(seed, case, duration)
         truth = COAST_TRUTH
@@ -249,6 +249,7 @@ def run_one(kind: str, case: str, seed: int, duration: float = 150.0) -> dict:
         "gap_over_floor": a.gap_over_floor if a is not None else math.nan,
         "whiteness_p": a.whiteness_p if a is not None else math.nan,
         "seconds": time.perf_counter() - t0,
+        "cpu_seconds": time.process_time() - c0,
         "slow_torque": slow[0] if slow else None,
     }
 
@@ -288,6 +289,9 @@ def summarise(results: list[dict]) -> list[dict]:
                     "structure_remains": sum(sr) / max(len(sr), 1),
                     "median gap/floor": float(np.median([r["gap_over_floor"] for r in rs])),
                     "s per run": float(np.mean([r["seconds"] for r in rs])),
+                    "CPU s per run (median)": float(
+                        np.median([r.get("cpu_seconds", math.nan) for r in rs])
+                    ),
                 }
             )
     return out
