@@ -39,8 +39,9 @@ max_effects=<their number>)`` and tabulated: the fraction of (effect, run) pairs
 truth lies within 2 and within 3 reported ``std`` (an effect not named counts as a miss;
 a Gaussian error is within 2 std 95.4 % of the time, within 3 std 99.7 %), the median
 ``std / crlb``, the RMS ``std`` over the real spread (RMS) of the values about the truth
-(per effect, over the runs that named every effect; the range over the effects) and the
-fraction of runs with ``structure_remains``. Goals: truth within 3 std in >= 95 % of (a)
+(per effect, over the runs that named every effect; the range over the effects), the
+fraction of runs with ``structure_remains`` and the median CPU seconds per run (each run's
+``cpu_seconds`` in the ``--json`` output). Goals: truth within 3 std in >= 95 % of (a)
 and >= 90 % of (b), (c); std / crlb within 0.8-1.25 in (a), and never below 1; std within
 0.5-2x the real spread in (c); structure_remains in >= 90 % of (c) and in <= 10 % of (a).
 """
