@@ -39,8 +39,9 @@ max_effects=<their number>)`` and tabulated: the fraction of (effect, run) pairs
 truth lies within 2 and within 3 reported ``std`` (an effect not named counts as a miss;
 a Gaussian error is within 2 std 95.4 % of the time, within 3 std 99.7 %), the median
 ``std / crlb``, the RMS ``std`` over the real spread (RMS) of the values about the truth
-(per effect, over the runs that named every effect; the range over the effects) and the
-fraction of runs with ``structure_remains``. Goals: truth within 3 std in >= 95 % of (a)
+(per effect, over the runs that named every effect; the range over the effects), the
+fraction of runs with ``structure_remains`` and the median CPU seconds per run (each run's
+``cpu_seconds`` in the ``--json`` output). Goals: truth within 3 std in >= 95 % of (a)
 and >= 90 % of (b), (c); std / crlb within 0.8-1.25 in (a), and never below 1; std within
 0.5-2x the real spread in (c); structure_remains in >= 90 % of (c) and in <= 10 % of (a).
 """
@@ -209,7 +210,7 @@ def run_one(kind: str, case: str, seed: int, duration: float = 150.0) -> dict:
     """One fit of the study: per true effect, value, std, std_white, crlb; the adequacy."""
     from airbearing.analysis.discrepancy.search import discrepancy
 
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     if kind == "coast":
         tb, logs = coast_logs(seed, case, duration)
         truth = COAST_TRUTH
@@ -249,6 +250,7 @@ def run_one(kind: str, case: str, seed: int, duration: float = 150.0) -> dict:
         "gap_over_floor": a.gap_over_floor if a is not None else math.nan,
         "whiteness_p": a.whiteness_p if a is not None else math.nan,
         "seconds": time.perf_counter() - t0,
+        "cpu_seconds": time.process_time() - c0,
         "slow_torque": slow[0] if slow else None,
     }
 
@@ -288,6 +290,9 @@ def summarise(results: list[dict]) -> list[dict]:
                     "structure_remains": sum(sr) / max(len(sr), 1),
                     "median gap/floor": float(np.median([r["gap_over_floor"] for r in rs])),
                     "s per run": float(np.mean([r["seconds"] for r in rs])),
+                    "CPU s per run (median)": float(
+                        np.median([r.get("cpu_seconds", math.nan) for r in rs])
+                    ),
                 }
             )
     return out

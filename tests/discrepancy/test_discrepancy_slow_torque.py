@@ -100,6 +100,32 @@ def test_a_joint_step_past_a_physical_bound_is_held_there_and_said():
     assert named.effects["viscous_friction"] == pytest.approx(1.2e-6, rel=1e-12)
 
 
+def test_the_posterior_may_narrow_an_error_and_the_error_before_is_kept():
+    # where the sandwich is wider than the slow torque's posterior (x and y with a gyro on
+    # the coverage study: the sandwich 31-173 times their real spread, the posterior 4.6-11
+    # times) the posterior's std alone is the error: a factor below 1 narrows it (before,
+    # only a factor above 1 applied), and the error before stays in std_within (JSON:
+    # std_within_model)
+    from types import SimpleNamespace
+
+    from airbearing.analysis.discrepancy import judgement
+
+    cand = SimpleNamespace(name="viscous_friction", k=3, lower=[0.0] * 3, upper=[1.0] * 3,
+                           value=lambda th: tuple(float(x) for x in th))  # fmt: skip
+    sel = SimpleNamespace(chosen=[cand])
+    before = (4e-7, 6e-7, 3e-7)
+    named = SimpleNamespace(
+        fit=SimpleNamespace(theta=np.array([2e-4, 2e-4, 2e-4])), effects={},
+        std={"viscous_friction": before}, std_within={},
+        efficiency={"viscous_friction": (8.0, 6.0, 40.0)},
+    )  # fmt: skip
+    slow = SimpleNamespace(step=np.zeros(3), factor=np.array([0.025, 0.02, 0.5]))
+    assert judgement._with_slow_torque(sel, named, slow) == {}
+    assert named.std["viscous_friction"] == pytest.approx((1e-8, 1.2e-8, 1.5e-7), rel=1e-12)
+    assert named.efficiency["viscous_friction"] == pytest.approx((0.2, 0.12, 20.0), rel=1e-12)
+    assert named.std_within["viscous_friction"] == before
+
+
 def test_the_knot_columns_make_a_constant_and_a_drift_exactly(monkeypatch):
     # the torque linear between knots makes a constant and a linear drift exactly, so the
     # knot columns (K + 1 hat-shaped directions, split by windows) times the trend's knot
@@ -154,6 +180,15 @@ def test_the_knot_columns_make_a_constant_and_a_drift_exactly(monkeypatch):
     H_ref = P.T @ P
     d = np.sqrt(np.diag(H_ref))
     assert np.max(np.abs(H - H_ref) / np.outer(d, d)) < 1e-6
+    # the error the caller passes (its honest std, with any noise-free floor) is what the
+    # factor multiplies: the product is the posterior's std alone, whatever that error
+    # (narrower or wider than it)
+    post = st.slow_torque(problem, fit, datas, seen["axes"]).std
+    assert post is not None and np.all(post > 0)
+    for honest_std in (0.25 * post, 4.0 * post):
+        slow = st.slow_torque(problem, fit, datas, seen["axes"], honest_std=honest_std)
+        assert slow.std == pytest.approx(post, rel=1e-12)
+        assert slow.factor * honest_std == pytest.approx(post, rel=1e-12)
 
 
 @pytest.mark.slow  # four 90 s fits of the three-axis platform: about 40 s of a core

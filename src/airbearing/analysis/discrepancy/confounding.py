@@ -92,9 +92,10 @@ class Confounding:
         Effect name -> the value of the other effect's form that makes the same torque as
         the named one (least squares over the logs; only for pairs of effects).
     std_factor : float, tuple or None
-        For a constant torque: the factor the named effect's error was widened by (a free
-        constant torque about the axis left in the fit, or the slow torque fitted as a
-        nuisance); None otherwise.
+        For a constant torque: the factor the named effect's error was multiplied by (a
+        free constant torque about the axis left in the fit: >= 1; or the slow torque
+        fitted as a nuisance: its posterior std over the honest one, below 1 where the
+        posterior is the narrower); None otherwise.
     slow_torque : dict or None
         The slow torque's test (:meth:`.slow_torque.SlowTorque.to_json`) when it was found
         significant and fitted as a nuisance; None otherwise (and no JSON key).

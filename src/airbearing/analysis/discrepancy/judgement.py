@@ -111,7 +111,9 @@ def _confounding(search: _Search, sel: _Selection, named: _Named) -> None:
         )  # fmt: skip
     slow = None
     if const:  # a slow torque about a steady axis, tested and, when there, marginalised
-        slow = slow_torque(named.problem, named.fit, search.datas, axes)
+        slow = slow_torque(
+            named.problem, named.fit, search.datas, axes, honest_std=named.errors.std
+        )
     if slow is not None and slow.identifiable and (slow.significant or pn.get("significant")):
         at_bound = _with_slow_torque(sel, named, slow)
         const = [_slow_words(sel, c, slow, at_bound) for c in const]
@@ -143,10 +145,11 @@ def _confounding(search: _Search, sel: _Selection, named: _Named) -> None:
 
 
 def _widen(sel, named, f) -> None:
-    """Each named effect's ``std`` (and efficiency) times its factors ``f`` (theta order);
-    the error before kept in ``std_within``."""
+    """Each named effect's ``std`` (and efficiency) times its factors ``f`` (theta order;
+    above 1 a widening, below 1, from the slow torque's posterior, a narrowing); the error
+    before kept in ``std_within``."""
     for c, fc in _split(sel.chosen, f):
-        if np.any(fc > 1.0):
+        if np.any(fc != 1.0):
             sd = np.atleast_1d(np.asarray(named.std[c.name], float))
             named.std_within.setdefault(c.name, named.std[c.name])
             named.std[c.name] = _as_value(c, sd * fc)
@@ -158,7 +161,8 @@ def _widen(sel, named, f) -> None:
 
 def _with_slow_torque(sel, named, slow) -> dict:
     """The named values moved by the joint step with the slow torque and their errors
-    widened by its factors (:mod:`.slow_torque`); ``name -> bound`` of each effect the step
+    times its factors (:mod:`.slow_torque`: the posterior's std alone where its OU part is
+    fitted, narrower or wider); ``name -> bound`` of each effect the step
     would take past its physical bound, which is then held at that bound (and said)."""
     i = 0
     theta = np.asarray(named.fit.theta, float)

@@ -39,8 +39,8 @@ linear in the samples), the nuisance is
   effect about that axis cannot be told from, seen or not by the test): the named
   parameters move to their posterior mean with the OU prior (generalised least squares:
   the bias of the slow torque removed) and their errors become the posterior ones,
-  ``sqrt(C_jj)``, where wider than the fit's honest (sandwich) error: the factor is their
-  ratio, never the posterior's growth over the Fisher value applied on top of the
+  ``sqrt(C_jj)``, narrower or wider than the fit's honest (sandwich) error: the factor is
+  their ratio, never the posterior's growth over the Fisher value applied on top of the
   sandwich, which counted the slow torque twice (in the sandwich's meat and in the
   information lost to it); mean and variance mixed over ``T`` and ``q``
   (:func:`.ou_torque.integrated_posterior`: their uncertainty counted, not taken as known
@@ -147,11 +147,11 @@ class SlowTorque:
         Change of the named parameters when the nuisance is fitted jointly (the posterior
         mean with the OU prior).
     factor : ndarray (k,)
-        Growth of each named parameter's honest standard error with the nuisance (>= 1).
-        With the OU part fitted: :attr:`posterior_factor` where it is above 1, so the
-        product is the posterior std alone; else 1 (the sandwich kept: the caller only
-        widens). With the constant and drift alone: the growth of the error in the fit's
-        Fisher information.
+        What each named parameter's honest standard error is multiplied by with the
+        nuisance. With the OU part fitted: :attr:`posterior_factor`, so the product is the
+        posterior std alone (below 1 where the sandwich is the wider: the coverage study's
+        x and y frictions with a gyro; docs, honest answers). With the constant and drift
+        alone: the growth of the error in the fit's Fisher information (>= 1).
     identifiable : bool
         Every factor with the trend free at most :data:`MAX_FACTOR`: no named parameter is
         (nearly) the nuisance itself. A Coulomb friction on a coast-down that never reverses
@@ -443,7 +443,7 @@ def trend_values(blocks, order: int) -> np.ndarray:
     return L
 
 
-def slow_torque(problem, fit, datas, axes, *, order: int = SLOW_TORQUE_ORDER):
+def slow_torque(problem, fit, datas, axes, *, order: int = SLOW_TORQUE_ORDER, honest_std=None):
     """The slow-torque nuisance on the steady ``axes`` at ``fit`` (module doc).
 
     Parameters
@@ -458,6 +458,10 @@ def slow_torque(problem, fit, datas, axes, *, order: int = SLOW_TORQUE_ORDER):
         Steady body axes (:func:`.confounding.steady_axes`).
     order : int
         Highest Legendre order in time of the free trend (0 or 1).
+    honest_std : ndarray (k,), optional
+        The named parameters' honest errors the caller reports (their units; with the
+        noise-free floor of :func:`.honest.honest` where it applies), which the factor
+        multiplies; None: :func:`.honest.honest` of the fit, without that floor.
 
     Returns
     -------
@@ -533,8 +537,16 @@ def slow_torque(problem, fit, datas, axes, *, order: int = SLOW_TORQUE_ORDER):
         # value and multiplied the sandwich: the slow torque counted twice, once in the
         # sandwich's meat and once in the posterior's information lost to it (std 13-550
         # times the real spread on the coverage study's cases (c) and (d) with a gyro).
+        # The posterior alone may narrow the sandwich too: it kept the truth within 3 std
+        # wherever the sandwich did on the study's seeds 0-19 and brought every value's
+        # std closer to its spread (docs, honest answers: "the slow torque's errors,
+        # counted once").
         post = np.sqrt(np.maximum(np.diag(ou.cov_beta)[:k], 0.0))
-        sandwich = _honest_std(problem, fit, k)
+        sandwich = (
+            _honest_std(problem, fit, k)
+            if honest_std is None
+            else np.asarray(honest_std, dtype=float)[:k]
+        )
         base_var = _inverse_diagonal(info[:k, :k]) / scale[:k] ** 2
         with np.errstate(invalid="ignore", divide="ignore"):
             f_ou = np.sqrt(np.diag(ou.cov_beta)[:k] / ou.sigma2 / base_var)
@@ -542,9 +554,7 @@ def slow_torque(problem, fit, datas, axes, *, order: int = SLOW_TORQUE_ORDER):
         ok = np.isfinite(f_post) & (f_post > 0)
         f_old = np.where(np.isfinite(f_ou), np.maximum(f_ou, 1.0), factor_trend)
         posterior_factor = np.where(ok, f_post, f_old)
-        # the caller only widens (judgement._widen): a posterior std below the sandwich
-        # keeps the sandwich until it may narrow too (changes/ougyro.md)
-        factor = np.maximum(posterior_factor, 1.0)
+        factor = posterior_factor
         step = -ou.beta[:k] - coef0 / scale[:k]
         trend_coef = -ou.beta[k : k + n_t]
     means = _means(blocks, Lt, trend_coef, None if ou is None else -ou.x)
@@ -568,9 +578,9 @@ def slow_torque(problem, fit, datas, axes, *, order: int = SLOW_TORQUE_ORDER):
 
 
 def _honest_std(problem, fit, k: int) -> np.ndarray:
-    """The fit's honest (sandwich) std of its first ``k`` parameters, the error the caller
-    multiplies by the factor (:func:`.honest.honest`; about 0.01-0.02 s of CPU on the
-    coverage study's platform fits); NaN where it gives none."""
+    """The fit's honest (sandwich) std of its first ``k`` parameters (:func:`.honest.honest`,
+    without its noise-free floor), for a caller that does not pass the errors it multiplies
+    by the factor (the search passes its own); NaN where it gives none."""
     try:
         return np.asarray(honest(problem, fit, k).std, dtype=float)
     except (np.linalg.LinAlgError, ValueError):
