@@ -118,11 +118,14 @@ def test_the_posterior_may_narrow_an_error_and_the_error_before_is_kept():
         fit=SimpleNamespace(theta=np.array([2e-4, 2e-4, 2e-4])), effects={},
         std={"viscous_friction": before}, std_within={},
         efficiency={"viscous_friction": (8.0, 6.0, 40.0)},
+        crlb={"viscous_friction": (5e-8, 1e-7, 7.5e-9)},  # std / efficiency
     )  # fmt: skip
     slow = SimpleNamespace(step=np.zeros(3), factor=np.array([0.025, 0.02, 0.5]))
     assert judgement._with_slow_torque(sel, named, slow) == {}
-    assert named.std["viscous_friction"] == pytest.approx((1e-8, 1.2e-8, 1.5e-7), rel=1e-12)
-    assert named.efficiency["viscous_friction"] == pytest.approx((0.2, 0.12, 20.0), rel=1e-12)
+    # the third narrowed by its factor; the first two would fall below their bound (1e-8
+    # and 1.2e-8): a nuisance only takes information away, so they stop at it
+    assert named.std["viscous_friction"] == pytest.approx((5e-8, 1e-7, 1.5e-7), rel=1e-12)
+    assert named.efficiency["viscous_friction"] == pytest.approx((1.0, 1.0, 20.0), rel=1e-12)
     assert named.std_within["viscous_friction"] == before
 
 

@@ -146,16 +146,22 @@ def _confounding(search: _Search, sel: _Selection, named: _Named) -> None:
 
 def _widen(sel, named, f) -> None:
     """Each named effect's ``std`` (and efficiency) times its factors ``f`` (theta order;
-    above 1 a widening, below 1, from the slow torque's posterior, a narrowing); the error
-    before kept in ``std_within``."""
+    above 1 a widening, below 1, from the slow torque's posterior, a narrowing, never
+    below the effect's bound ``crlb``: a nuisance torque only takes information away);
+    the error before kept in ``std_within``."""
     for c, fc in _split(sel.chosen, f):
         if np.any(fc != 1.0):
             sd = np.atleast_1d(np.asarray(named.std[c.name], float))
+            new = sd * fc
+            bound = named.crlb.get(c.name)
+            if bound is not None:
+                bound = np.atleast_1d(np.asarray(bound, float))
+                new = np.where((fc < 1.0) & np.isfinite(bound), np.maximum(new, bound), new)
             named.std_within.setdefault(c.name, named.std[c.name])
-            named.std[c.name] = _as_value(c, sd * fc)
+            named.std[c.name] = _as_value(c, new)
             if named.efficiency.get(c.name) is not None:
                 with np.errstate(invalid="ignore", divide="ignore"):
-                    e = np.atleast_1d(np.asarray(named.efficiency[c.name], float)) * fc
+                    e = np.atleast_1d(np.asarray(named.efficiency[c.name], float)) * new / sd
                 named.efficiency[c.name] = _as_value(c, e)
 
 
