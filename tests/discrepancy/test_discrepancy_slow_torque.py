@@ -88,15 +88,15 @@ def test_a_joint_step_past_a_physical_bound_is_held_there_and_said():
     slow = SimpleNamespace(step=np.array([-3e-6]), factor=np.array([1.0]),
                            words=lambda: "a slow torque about z is significant",
                            to_json=lambda: {})  # fmt: skip
-    at_bound = judgement._with_slow_torque(sel, named, slow)
+    at_bound, applied = judgement._with_slow_torque(sel, named, slow)
     assert named.effects["viscous_friction"] == 0.0
     assert at_bound == {"viscous_friction": 0.0}
     conf = Confounding(("viscous_friction", "constant torque about z"), "near", 0.99, "", {})
-    said = judgement._slow_words(sel, dc_replace(conf, experiment="x"), slow, at_bound)
+    said = judgement._slow_words(sel, dc_replace(conf, experiment="x"), slow, at_bound, applied)
     assert "viscous_friction would cross its physical bound: held at 0" in said.experiment
     # a step inside the bounds moves the value and says nothing more
     slow.step = np.array([2e-7])
-    assert judgement._with_slow_torque(sel, named, slow) == {}
+    assert judgement._with_slow_torque(sel, named, slow)[0] == {}
     assert named.effects["viscous_friction"] == pytest.approx(1.2e-6, rel=1e-12)
 
 
@@ -121,12 +121,16 @@ def test_the_posterior_may_narrow_an_error_and_the_error_before_is_kept():
         crlb={"viscous_friction": (5e-8, 1e-7, 7.5e-9)},  # std / efficiency
     )  # fmt: skip
     slow = SimpleNamespace(step=np.zeros(3), factor=np.array([0.025, 0.02, 0.5]))
-    assert judgement._with_slow_torque(sel, named, slow) == {}
+    at_bound, applied = judgement._with_slow_torque(sel, named, slow)
+    assert at_bound == {}
     # the third narrowed by its factor; the first two would fall below their bound (1e-8
     # and 1.2e-8): a nuisance only takes information away, so they stop at it
     assert named.std["viscous_friction"] == pytest.approx((5e-8, 1e-7, 1.5e-7), rel=1e-12)
     assert named.efficiency["viscous_friction"] == pytest.approx((1.0, 1.0, 20.0), rel=1e-12)
     assert named.std_within["viscous_friction"] == before
+    # the factors applied (the JSON's std_factor): the bound's where it stopped the narrowing
+    np.testing.assert_allclose(applied, [0.125, 1 / 6, 0.5], rtol=1e-12)
+    assert applied[2] == 0.5  # a factor applied as it came, to the bit
 
 
 def test_the_knot_columns_make_a_constant_and_a_drift_exactly(monkeypatch):

@@ -115,8 +115,8 @@ def _confounding(search: _Search, sel: _Selection, named: _Named) -> None:
             named.problem, named.fit, search.datas, axes, honest_std=named.errors.std
         )
     if slow is not None and slow.identifiable and (slow.significant or pn.get("significant")):
-        at_bound = _with_slow_torque(sel, named, slow)
-        const = [_slow_words(sel, c, slow, at_bound) for c in const]
+        at_bound, applied = _with_slow_torque(sel, named, slow)
+        const = [_slow_words(sel, c, slow, at_bound, applied) for c in const]
     elif const and pn.get("significant"):  # widened when the logs show an unexplained torque
         f = constant_torque_inflation(model, search.datas, p, named_th, S_of, axes)
         _widen(sel, named, f)
@@ -144,32 +144,42 @@ def _confounding(search: _Search, sel: _Selection, named: _Named) -> None:
     sel.confounding = found + const
 
 
-def _widen(sel, named, f) -> None:
+def _widen(sel, named, f) -> np.ndarray:
     """Each named effect's ``std`` (and efficiency) times its factors ``f`` (theta order;
     above 1 a widening, below 1, from the slow torque's posterior, a narrowing, never
     below the effect's bound ``crlb``: a nuisance torque only takes information away);
-    the error before kept in ``std_within``."""
+    the error before kept in ``std_within``. Returns the factors applied (``f`` with each
+    narrowing that stopped at the bound made what it was)."""
+    applied = np.array(f, dtype=float, copy=True)
+    i = 0
     for c, fc in _split(sel.chosen, f):
+        i += c.k
         if np.any(fc != 1.0):
             sd = np.atleast_1d(np.asarray(named.std[c.name], float))
-            new = sd * fc
+            new, fa = sd * fc, np.asarray(fc, dtype=float)
             bound = named.crlb.get(c.name)
             if bound is not None:
                 bound = np.atleast_1d(np.asarray(bound, float))
-                new = np.where((fc < 1.0) & np.isfinite(bound), np.maximum(new, bound), new)
+                floored = (fc < 1.0) & np.isfinite(bound) & (new < bound)
+                new = np.where(floored, bound, new)
+                with np.errstate(invalid="ignore", divide="ignore"):
+                    fa = np.where(floored, bound / sd, fa)
+            applied[i - c.k : i] = fa
             named.std_within.setdefault(c.name, named.std[c.name])
             named.std[c.name] = _as_value(c, new)
             if named.efficiency.get(c.name) is not None:
                 with np.errstate(invalid="ignore", divide="ignore"):
-                    e = np.atleast_1d(np.asarray(named.efficiency[c.name], float)) * new / sd
+                    e = np.atleast_1d(np.asarray(named.efficiency[c.name], float)) * fa
                 named.efficiency[c.name] = _as_value(c, e)
+    return applied
 
 
-def _with_slow_torque(sel, named, slow) -> dict:
+def _with_slow_torque(sel, named, slow) -> tuple:
     """The named values moved by the joint step with the slow torque and their errors
     times its factors (:mod:`.slow_torque`: the posterior's std alone where its OU part is
     fitted, narrower or wider); ``name -> bound`` of each effect the step
-    would take past its physical bound, which is then held at that bound (and said)."""
+    would take past its physical bound, which is then held at that bound (and said), and
+    the factors applied (:func:`_widen`)."""
     i = 0
     theta = np.asarray(named.fit.theta, float)
     at_bound = {}
@@ -181,14 +191,14 @@ def _with_slow_torque(sel, named, slow) -> dict:
             at_bound[c.name] = c.value(held)
         named.effects[c.name] = c.value(held)
         i += c.k
-    _widen(sel, named, slow.factor)
-    return at_bound
+    return at_bound, _widen(sel, named, slow.factor)
 
 
-def _slow_words(sel, conf, slow, at_bound: dict):
-    """A constant-torque confounding entry with the slow torque's test and factor (and the
-    effects its joint step held at a physical bound)."""
-    f = dict(_split_named(sel, slow.factor))
+def _slow_words(sel, conf, slow, at_bound: dict, applied):
+    """A constant-torque confounding entry with the slow torque's test and the factor its
+    error was multiplied by (``applied``, :func:`_with_slow_torque`), and the effects its
+    joint step held at a physical bound."""
+    f = dict(_split_named(sel, applied))
     held = "".join(
         f"; with the slow torque free, {n} would cross its physical bound: held at "
         f"{format_value(b)}"
