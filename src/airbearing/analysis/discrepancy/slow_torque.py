@@ -195,7 +195,8 @@ class SlowTorque:
         if self.ou is None or self.ou.at_lower:
             return None
         s = self.ou.log_T_std
-        return self.ou.T, (self.ou.T * np.exp(-2 * s), self.ou.T * np.exp(2 * s))
+        with np.errstate(over="ignore"):  # T not resolved: the interval is (0, inf)
+            return self.ou.T, (self.ou.T * np.exp(-2 * s), self.ou.T * np.exp(2 * s))
 
     def to_json(self) -> dict:
         out = {
