@@ -142,7 +142,8 @@ def test_the_knot_columns_make_a_constant_and_a_drift_exactly(monkeypatch):
     from numpy.polynomial.legendre import legval
 
     from airbearing.analysis.discrepancy import judgement
-    from airbearing.analysis.discrepancy import slow_torque as st
+    from airbearing.analysis.discrepancy import slow_torque_basis as st
+    from airbearing.analysis.discrepancy.slow_torque import _projected_gram, slow_torque
 
     seen = {}
 
@@ -180,7 +181,7 @@ def test_the_knot_columns_make_a_constant_and_a_drift_exactly(monkeypatch):
     r = np.asarray(fit.extra["r"], dtype=float)
     J = sp.csc_matrix(fit_jacobian(fit))
     k = len(fit.theta)
-    H = st._projected_gram(J, k, G, r)
+    H = _projected_gram(J, k, G, r)
     A = np.hstack([J[:, :k].toarray(), G.toarray(), r[:, None]])
     Q, _ = np.linalg.qr(J[:, k:].toarray())
     P = A - Q @ (Q.T @ A)
@@ -190,10 +191,10 @@ def test_the_knot_columns_make_a_constant_and_a_drift_exactly(monkeypatch):
     # the error the caller passes (its honest std, with any noise-free floor) is what the
     # factor multiplies: the product is the posterior's std alone, whatever that error
     # (narrower or wider than it)
-    post = st.slow_torque(problem, fit, datas, seen["axes"]).std
+    post = slow_torque(problem, fit, datas, seen["axes"]).std
     assert post is not None and np.all(post > 0)
     for honest_std in (0.25 * post, 4.0 * post):
-        slow = st.slow_torque(problem, fit, datas, seen["axes"], honest_std=honest_std)
+        slow = slow_torque(problem, fit, datas, seen["axes"], honest_std=honest_std)
         assert slow.std == pytest.approx(post, rel=1e-12)
         assert slow.factor * honest_std == pytest.approx(post, rel=1e-12)
 

@@ -128,7 +128,7 @@ def test_coarser_knots_are_a_subset_whose_hats_make_the_fine_columns_exactly():
     # coarse knots' columns times its values there
     import scipy.sparse as sp
 
-    from airbearing.analysis.discrepancy.slow_torque import coarsen
+    from airbearing.analysis.discrepancy.slow_torque_basis import coarsen
 
     rng = np.random.default_rng(4)
     tk = [np.arange(0.0, 61.0, 1.0), np.arange(100.0, 110.5, 0.5)]
